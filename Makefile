@@ -1,0 +1,107 @@
+# rtp — top-level Makefile.  Targets: all test bench install uninstall clean
+# asan ubsan.  Honours CC, CFLAGS, LDFLAGS, PREFIX, DESTDIR; V=1 shows the
+# commands; THREADS=0 leaves POSIX threads out; WERROR=0 drops -Werror.
+
+CC      ?= cc
+PREFIX  ?= /usr/local
+DESTDIR ?=
+THREADS ?= 1
+WERROR  ?= 1
+BUILD   ?= build
+
+WARN = -std=c99 -pedantic -Wall -Wextra -Wshadow -Wstrict-prototypes \
+       -Wmissing-prototypes -Wcast-qual -Wpointer-arith -Wvla -Wformat=2 \
+       -Wundef -Wwrite-strings
+ifeq ($(WERROR),1)
+WARN += -Werror
+endif
+
+CFLAGS ?= -O2 -g
+PNG_CFLAGS := $(shell pkg-config --cflags libpng 2>/dev/null)
+PNG_LIBS   := $(shell pkg-config --libs libpng 2>/dev/null)
+ifneq ($(PNG_LIBS),)
+DEFS += -DRTP_HAVE_PNG=1
+endif
+ifeq ($(THREADS),1)
+DEFS += -DRTP_HAVE_THREADS=1
+THREAD_LIBS = -lpthread
+endif
+
+ALL_CFLAGS = $(WARN) $(CFLAGS) -D_POSIX_C_SOURCE=200809L $(DEFS) -Iinclude $(PNG_CFLAGS)
+LIBS = $(PNG_LIBS) $(THREAD_LIBS) -lm
+
+ifeq ($(V),1)
+Q =
+else
+Q = @
+endif
+
+LIB_SRC  = $(sort $(wildcard lib/*.c))
+LIB_OBJ  = $(LIB_SRC:%.c=$(BUILD)/%.o)
+LIB_PIC  = $(LIB_SRC:%.c=$(BUILD)/pic/%.o)
+TEST_SRC = $(sort $(wildcard test/test_*.c))
+TEST_BIN = $(TEST_SRC:%.c=$(BUILD)/%)
+BENCH_SRC = $(sort $(wildcard bench/*.c))
+BENCH_BIN = $(BENCH_SRC:%.c=$(BUILD)/%)
+
+.PHONY: all test bench install uninstall clean asan ubsan demo
+all: $(BUILD)/librtp.a $(BUILD)/librtp.so rtp
+
+$(BUILD)/%.o: %.c include/rtp.h lib/internal.h
+	@mkdir -p $(dir $@)
+	@$(if $(Q),echo "  CC      $<")
+	$(Q)$(CC) $(ALL_CFLAGS) -c $< -o $@
+
+$(BUILD)/pic/%.o: %.c include/rtp.h lib/internal.h
+	@mkdir -p $(dir $@)
+	$(Q)$(CC) $(ALL_CFLAGS) -fPIC -fvisibility=hidden -DRTP_BUILD_SHARED -c $< -o $@
+
+$(BUILD)/librtp.a: $(LIB_OBJ)
+	@$(if $(Q),echo "  AR      $@")
+	$(Q)rm -f $@ && ar rcs $@ $^
+
+$(BUILD)/librtp.so: $(LIB_PIC)
+	@$(if $(Q),echo "  LD      $@")
+	$(Q)$(CC) -shared -Wl,-soname,librtp.so.0 $(LDFLAGS) $^ -o $@ $(LIBS)
+
+rtp: cli/rtp.c include/rtp.h $(BUILD)/librtp.a
+	@$(if $(Q),echo "  CCLD    $@")
+	$(Q)$(CC) $(ALL_CFLAGS) $(LDFLAGS) cli/rtp.c $(BUILD)/librtp.a -o $@ $(LIBS)
+
+$(BUILD)/test/%: test/%.c test/check.h $(BUILD)/librtp.a
+	@mkdir -p $(dir $@)
+	@$(if $(Q),echo "  CCLD    $@")
+	$(Q)$(CC) $(ALL_CFLAGS) -Ilib $(LDFLAGS) $< $(BUILD)/librtp.a -o $@ $(LIBS)
+
+$(BUILD)/bench/%: bench/%.c $(BUILD)/librtp.a
+	@mkdir -p $(dir $@)
+	@$(if $(Q),echo "  CCLD    $@")
+	$(Q)$(CC) $(ALL_CFLAGS) -Ilib $(LDFLAGS) $< $(BUILD)/librtp.a -o $@ $(LIBS)
+
+test: all $(TEST_BIN)
+	$(Q)sh test/run.sh $(BUILD)/test
+
+bench: all $(BENCH_BIN)
+	$(Q)sh bench/run.sh $(BUILD)/bench
+
+asan:
+	$(MAKE) BUILD=build-asan CFLAGS="-O1 -g -fsanitize=address -fno-omit-frame-pointer" LDFLAGS="-fsanitize=address" test
+
+ubsan:
+	$(MAKE) BUILD=build-ubsan CFLAGS="-O1 -g -fsanitize=undefined -fno-sanitize-recover=undefined" LDFLAGS="-fsanitize=undefined" test
+
+install: all
+	install -d $(DESTDIR)$(PREFIX)/lib $(DESTDIR)$(PREFIX)/include $(DESTDIR)$(PREFIX)/bin
+	install -m 644 $(BUILD)/librtp.a $(DESTDIR)$(PREFIX)/lib/
+	install -m 755 $(BUILD)/librtp.so $(DESTDIR)$(PREFIX)/lib/librtp.so.0
+	ln -sf librtp.so.0 $(DESTDIR)$(PREFIX)/lib/librtp.so
+	install -m 644 include/rtp.h $(DESTDIR)$(PREFIX)/include/
+	install -m 755 rtp $(DESTDIR)$(PREFIX)/bin/
+
+uninstall:
+	rm -f $(DESTDIR)$(PREFIX)/lib/librtp.a $(DESTDIR)$(PREFIX)/lib/librtp.so \
+	      $(DESTDIR)$(PREFIX)/lib/librtp.so.0 $(DESTDIR)$(PREFIX)/include/rtp.h \
+	      $(DESTDIR)$(PREFIX)/bin/rtp
+
+clean:
+	rm -rf build build-asan build-ubsan rtp

@@ -1,0 +1,562 @@
+/* rtp.c — the command-line tool.  It uses only rtp.h and libc (plus
+ * isatty for progress), and chains the library's steps: trace, diff.
+ *
+ * Exit status: 0 ok, 1 failure (with a message), 2 usage error,
+ * 3 diff over its --fail-above threshold. */
+#define _POSIX_C_SOURCE 200809L
+#include "rtp.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#define EXIT_USAGE 2
+#define EXIT_OVER 3
+
+static int verbosity = 1; /* 0 quiet, 1 normal, 2 verbose; CLI-only state */
+
+static void msg(const char *fmt, ...)
+{
+    va_list ap;
+    fputs("rtp: ", stderr);
+    va_start(ap, fmt);
+    vfprintf(stderr, fmt, ap);
+    va_end(ap);
+    fputc('\n', stderr);
+}
+
+static int fail_err(const rtp_error *err)
+{
+    char buf[600];
+    fprintf(stderr, "rtp: %s\n", rtp_error_format(err, buf, sizeof buf));
+    return 1;
+}
+
+static double now_seconds(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+/* ------------------------------------------------------------- progress */
+
+typedef struct progress {
+    double start;
+    int shown;
+} progress;
+
+static void progress_cb(void *user, double done)
+{
+    progress *p = (progress *)user;
+    double el = now_seconds() - p->start;
+    if (done > 0.0 && done < 1.0) {
+        double left = el / done * (1.0 - done);
+        fprintf(stderr, "\r%5.1f%%  %.1f s left   ", 100.0 * done, left);
+    } else {
+        fprintf(stderr, "\r%5.1f%%  %.1f s        ", 100.0 * done, el);
+    }
+    p->shown = 1;
+}
+
+static void progress_end(progress *p)
+{
+    if (p->shown)
+        fputc('\n', stderr);
+}
+
+/* ------------------------------------------------------------ arguments */
+
+static int parse_int(const char *s, int lo, int hi, int *out)
+{
+    char *end;
+    long v;
+    errno = 0;
+    v = strtol(s, &end, 10);
+    if (end == s || *end || errno || v < lo || v > hi)
+        return -1;
+    *out = (int)v;
+    return 0;
+}
+
+static int parse_double(const char *s, double *out)
+{
+    char *end;
+    double v;
+    errno = 0;
+    v = strtod(s, &end);
+    if (end == s || *end || errno || !isfinite(v))
+        return -1;
+    *out = v;
+    return 0;
+}
+
+/* Returns the option's value: "--opt=value" or the next argument. */
+static const char *opt_value(int argc, char **argv, int *i, const char *name)
+{
+    size_t n = strlen(name);
+    if (strncmp(argv[*i], name, n) == 0 && argv[*i][n] == '=')
+        return argv[*i] + n + 1;
+    if (*i + 1 >= argc) {
+        msg("%s needs a value", name);
+        return NULL;
+    }
+    return argv[++*i];
+}
+
+static int is_opt(const char *arg, const char *name)
+{
+    size_t n = strlen(name);
+    return strncmp(arg, name, n) == 0 && (arg[n] == '\0' || arg[n] == '=');
+}
+
+/* ---------------------------------------------------------------- stats */
+
+static FILE *stats_open(const char *path)
+{
+    FILE *f;
+    if (strcmp(path, "-") == 0)
+        return stdout;
+    f = fopen(path, "w");
+    if (!f)
+        msg("%s: cannot write stats: %s", path, strerror(errno));
+    return f;
+}
+
+static int stats_close(FILE *f, const char *path)
+{
+    int bad;
+    if (f == stdout)
+        return fflush(f) != 0;
+    bad = ferror(f) != 0;
+    if (fclose(f) != 0 || bad) {
+        msg("%s: error writing stats", path);
+        return 1;
+    }
+    return 0;
+}
+
+/* ---------------------------------------------------------------- trace */
+
+static const char trace_help[] =
+    "usage: rtp trace SCENE [options]\n"
+    "Traces SCENE (NFF, or .obj) with a Whitted ray tracer and writes the image.\n"
+    "  -i, --image FILE     image to write (.png, .ppm, .pfm; '-' = PFM on stdout);\n"
+    "                       default: SCENE's name with .png\n"
+    "  --set KEY=VALUE      edit the scene first (repeatable): light.N.pos|color|on,\n"
+    "                       mat.N.color|kd|ks|kt|shine|ior, ambient, background;\n"
+    "                       N is a 0-based index or a name the scene gives\n"
+    "  --size WxH           image size (default: the scene's resolution)\n"
+    "  --spd                SPD testing procedure: 512x512 from 513x513 corner\n"
+    "                       rays, depth 5, no weight cut-off, one-sided opaque\n"
+    "  --depth N            maximum ray-tree depth, eye ray = 1 (default 5)\n"
+    "  --min-weight W       do not spawn rays weighing less than W (default 0)\n"
+    "  -j, --threads N      threads (default 1)\n"
+    "  --stats FILE         write statistics as one JSON object ('-' = stdout)\n"
+    "  -q, --quiet          no messages but errors;  -v, --verbose  more\n"
+    "  -h, --help           this help\n";
+
+static char *default_image_name(const char *scene)
+{
+    const char *base = strrchr(scene, '/');
+    const char *dot;
+    size_t n;
+    char *out;
+    base = base ? base + 1 : scene;
+    dot = strrchr(base, '.');
+    n = dot && dot != base ? (size_t)(dot - base) : strlen(base);
+    out = (char *)malloc(n + 5);
+    if (!out)
+        return NULL;
+    memcpy(out, base, n);
+    memcpy(out + n, ".png", 5);
+    return out;
+}
+
+static int cmd_trace(int argc, char **argv)
+{
+    const char *scene_path = NULL, *image_path = NULL, *stats_path = NULL;
+    char *default_image = NULL;
+    rtp_trace_options opt;
+    rtp_trace_stats st;
+    rtp_scene *scene = NULL;
+    rtp_image *img = NULL;
+    rtp_error err;
+    progress prog;
+    int i, rc = 1, nsets = 0;
+    const char **sets;
+    double t0, t_load, t_trace, t_write;
+
+    memset(&opt, 0, sizeof opt);
+    memset(&err, 0, sizeof err);
+    sets = (const char **)calloc((size_t)argc + 1, sizeof *sets);
+    if (!sets) {
+        msg("out of memory");
+        return 1;
+    }
+    for (i = 0; i < argc; i++) {
+        const char *a = argv[i], *v;
+        if (strcmp(a, "-h") == 0 || strcmp(a, "--help") == 0) {
+            fputs(trace_help, stdout);
+            free(sets);
+            return 0;
+        } else if (strcmp(a, "-q") == 0 || strcmp(a, "--quiet") == 0) {
+            verbosity = 0;
+        } else if (strcmp(a, "-v") == 0 || strcmp(a, "--verbose") == 0) {
+            verbosity = 2;
+        } else if (strcmp(a, "--spd") == 0) {
+            opt.spd = 1;
+        } else if (strcmp(a, "-i") == 0 || is_opt(a, "--image")) {
+            if (!(image_path = opt_value(argc, argv, &i, a[1] == 'i' ? "-i" : "--image")))
+                goto usage;
+        } else if (strcmp(a, "-o") == 0 || is_opt(a, "--output")) {
+            msg("-o TREE: ray-tree files are not implemented yet in this version");
+            goto usage;
+        } else if (is_opt(a, "--set")) {
+            if (!(v = opt_value(argc, argv, &i, "--set")))
+                goto usage;
+            if (!strchr(v, '=')) {
+                msg("--set %s: expected KEY=VALUE", v);
+                goto usage;
+            }
+            sets[nsets++] = v;
+        } else if (is_opt(a, "--size")) {
+            char *x;
+            if (!(v = opt_value(argc, argv, &i, "--size")))
+                goto usage;
+            x = strchr(v, 'x');
+            if (!x) {
+                msg("--size %s: expected WxH", v);
+                goto usage;
+            }
+            *x = '\0';
+            if (parse_int(v, 1, 1 << 20, &opt.width) ||
+                parse_int(x + 1, 1, 1 << 20, &opt.height)) {
+                *x = 'x';
+                msg("--size %s: expected WxH with positive integers", v);
+                goto usage;
+            }
+            *x = 'x';
+        } else if (is_opt(a, "--depth")) {
+            if (!(v = opt_value(argc, argv, &i, "--depth")) ||
+                parse_int(v, 1, 1000, &opt.max_depth)) {
+                msg("--depth: expected an integer from 1 to 1000");
+                goto usage;
+            }
+        } else if (is_opt(a, "--min-weight")) {
+            if (!(v = opt_value(argc, argv, &i, "--min-weight")) ||
+                parse_double(v, &opt.min_weight) || opt.min_weight < 0) {
+                msg("--min-weight: expected a number >= 0");
+                goto usage;
+            }
+        } else if (strcmp(a, "-j") == 0 || is_opt(a, "--threads")) {
+            if (!(v = opt_value(argc, argv, &i, a[1] == 'j' ? "-j" : "--threads")) ||
+                parse_int(v, 1, 256, &opt.threads)) {
+                msg("-j: expected a thread count from 1 to 256");
+                goto usage;
+            }
+        } else if (is_opt(a, "--stats")) {
+            if (!(stats_path = opt_value(argc, argv, &i, "--stats")))
+                goto usage;
+        } else if (a[0] == '-' && a[1] != '\0') {
+            msg("trace: unknown option '%s'", a);
+            goto usage;
+        } else if (!scene_path) {
+            scene_path = a;
+        } else {
+            msg("trace: more than one scene ('%s' and '%s')", scene_path, a);
+            goto usage;
+        }
+    }
+    if (!scene_path) {
+        msg("trace: no scene given");
+        goto usage;
+    }
+    if (!image_path) {
+        default_image = default_image_name(scene_path);
+        if (!default_image) {
+            msg("out of memory");
+            goto out;
+        }
+        image_path = default_image;
+    }
+
+    t0 = now_seconds();
+    if (rtp_scene_load(scene_path, NULL, &scene, &err) != RTP_OK) {
+        fail_err(&err);
+        goto out;
+    }
+    for (i = 0; i < nsets; i++) {
+        char key[256];
+        const char *eq = strchr(sets[i], '=');
+        size_t kn = (size_t)(eq - sets[i]);
+        if (kn >= sizeof key) {
+            msg("--set: key too long");
+            goto out;
+        }
+        memcpy(key, sets[i], kn);
+        key[kn] = '\0';
+        if (rtp_scene_set(scene, key, eq + 1, &err) != RTP_OK) {
+            fail_err(&err);
+            goto out;
+        }
+    }
+    t_load = now_seconds() - t0;
+    prog.start = now_seconds();
+    prog.shown = 0;
+    if (verbosity > 0 && isatty(2)) {
+        opt.progress = progress_cb;
+        opt.progress_user = &prog;
+    }
+    if (rtp_trace(scene, &opt, &img, &st, &err) != RTP_OK) {
+        progress_end(&prog);
+        fail_err(&err);
+        goto out;
+    }
+    progress_end(&prog);
+    t_trace = now_seconds() - prog.start;
+    t0 = now_seconds();
+    if (rtp_image_write(img, image_path, RTP_IMAGE_AUTO, &err) != RTP_OK) {
+        fail_err(&err);
+        goto out;
+    }
+    t_write = now_seconds() - t0;
+    if (verbosity > 1)
+        fprintf(stderr,
+                "rtp: %dx%d in %.3f s (load %.3f, build %.3f, trace %.3f, write %.3f); "
+                "%llu eye rays, %llu hits, %llu shadow, %llu reflected, %llu refracted\n",
+                st.width, st.height, t_load + t_trace + t_write, t_load,
+                st.build_seconds, st.trace_seconds, t_write, st.eye_rays,
+                st.eye_hits, st.shadow_rays, st.reflected_rays, st.refracted_rays);
+    if (stats_path) {
+        FILE *f = stats_open(stats_path);
+        if (!f)
+            goto out;
+        fprintf(f,
+                "{\"command\": \"trace\", \"scene\": \"%s\", \"width\": %d, \"height\": %d, "
+                "\"spd\": %s, \"threads\": %d, \"seconds\": %.6f, \"load_seconds\": %.6f, "
+                "\"build_seconds\": %.6f, \"trace_seconds\": %.6f, \"write_seconds\": %.6f, "
+                "\"eye_rays\": %llu, \"eye_hits\": %llu, \"shadow_rays\": %llu, "
+                "\"reflected_rays\": %llu, \"refracted_rays\": %llu, "
+                "\"kd_nodes\": %llu, \"kd_leaves\": %llu, \"kd_prim_refs\": %llu, "
+                "\"kd_depth\": %d}\n",
+                scene_path, st.width, st.height, opt.spd ? "true" : "false",
+                opt.threads > 1 ? opt.threads : 1, t_load + t_trace + t_write, t_load,
+                st.build_seconds, st.trace_seconds, t_write, st.eye_rays, st.eye_hits,
+                st.shadow_rays, st.reflected_rays, st.refracted_rays, st.kd_nodes,
+                st.kd_leaves, st.kd_prim_refs, st.kd_depth);
+        if (stats_close(f, stats_path))
+            goto out;
+    }
+    rc = 0;
+out:
+    rtp_image_destroy(img);
+    rtp_scene_destroy(scene);
+    free(default_image);
+    free(sets);
+    return rc;
+usage:
+    fputs(trace_help, stderr);
+    free(default_image);
+    free(sets);
+    return EXIT_USAGE;
+}
+
+/* ----------------------------------------------------------------- diff */
+
+static const char diff_help[] =
+    "usage: rtp diff A B [options]\n"
+    "Compares images A and B ('-' = stdin) and prints MAE, RMSE, PSNR, the\n"
+    "maximum absolute error and the share of pixels above the threshold.\n"
+    "  --threshold T           per-pixel error counted in 'above' (default 1/255)\n"
+    "  --heatmap PNG           write a heat map of the per-pixel error\n"
+    "  --fail-above METRIC=V   exit 3 when METRIC (mae, rmse, max_abs, above,\n"
+    "                          or psnr: below V) is worse than V\n"
+    "  --stats FILE            write the metrics as one JSON object ('-' = stdout)\n"
+    "  -q, --quiet             print nothing on success\n"
+    "  -h, --help              this help\n";
+
+static void json_number(FILE *f, const char *key, double v)
+{
+    if (isinf(v))
+        fprintf(f, "\"%s\": \"%s\"", key, v > 0 ? "inf" : "-inf");
+    else
+        fprintf(f, "\"%s\": %.9g", key, v);
+}
+
+static int cmd_diff(int argc, char **argv)
+{
+    const char *pa = NULL, *pb = NULL, *heat = NULL, *stats_path = NULL;
+    const char *fail_metric = NULL;
+    double fail_value = 0.0, threshold = 1.0 / 255.0, got = 0.0;
+    rtp_image *a = NULL, *b = NULL;
+    rtp_diff_stats d;
+    rtp_error err;
+    int i, rc = 1, over = 0;
+    char metric[32];
+
+    memset(&err, 0, sizeof err);
+    for (i = 0; i < argc; i++) {
+        const char *arg = argv[i], *v;
+        if (strcmp(arg, "-h") == 0 || strcmp(arg, "--help") == 0) {
+            fputs(diff_help, stdout);
+            return 0;
+        } else if (strcmp(arg, "-q") == 0 || strcmp(arg, "--quiet") == 0) {
+            verbosity = 0;
+        } else if (strcmp(arg, "-v") == 0 || strcmp(arg, "--verbose") == 0) {
+            verbosity = 2;
+        } else if (is_opt(arg, "--heatmap")) {
+            if (!(heat = opt_value(argc, argv, &i, "--heatmap")))
+                goto usage;
+        } else if (is_opt(arg, "--stats")) {
+            if (!(stats_path = opt_value(argc, argv, &i, "--stats")))
+                goto usage;
+        } else if (is_opt(arg, "--threshold")) {
+            if (!(v = opt_value(argc, argv, &i, "--threshold")) ||
+                parse_double(v, &threshold) || threshold < 0) {
+                msg("--threshold: expected a number >= 0");
+                goto usage;
+            }
+        } else if (is_opt(arg, "--fail-above")) {
+            const char *eq;
+            size_t n;
+            if (!(v = opt_value(argc, argv, &i, "--fail-above")))
+                goto usage;
+            eq = strchr(v, '=');
+            n = eq ? (size_t)(eq - v) : 0;
+            if (!eq || n >= sizeof metric || parse_double(eq + 1, &fail_value)) {
+                msg("--fail-above %s: expected METRIC=VALUE", v);
+                goto usage;
+            }
+            memcpy(metric, v, n);
+            metric[n] = '\0';
+            if (strcmp(metric, "mae") && strcmp(metric, "rmse") &&
+                strcmp(metric, "max_abs") && strcmp(metric, "psnr") &&
+                strcmp(metric, "above")) {
+                msg("--fail-above: unknown metric '%s' (mae, rmse, psnr, max_abs, above)",
+                    metric);
+                goto usage;
+            }
+            fail_metric = metric;
+        } else if (arg[0] == '-' && arg[1] != '\0') {
+            msg("diff: unknown option '%s'", arg);
+            goto usage;
+        } else if (!pa) {
+            pa = arg;
+        } else if (!pb) {
+            pb = arg;
+        } else {
+            msg("diff: more than two images");
+            goto usage;
+        }
+    }
+    if (!pa || !pb) {
+        msg("diff: two images needed");
+        goto usage;
+    }
+    if (strcmp(pa, "-") == 0 && strcmp(pb, "-") == 0) {
+        msg("diff: only one image can come from stdin");
+        goto usage;
+    }
+    if (rtp_image_read(pa, NULL, &a, &err) != RTP_OK ||
+        rtp_image_read(pb, NULL, &b, &err) != RTP_OK) {
+        fail_err(&err);
+        goto out;
+    }
+    if (rtp_image_diff(a, b, threshold, &d, &err) != RTP_OK) {
+        fail_err(&err);
+        goto out;
+    }
+    if (heat && rtp_diff_heatmap(a, b, 0.0, heat, &err) != RTP_OK) {
+        fail_err(&err);
+        goto out;
+    }
+    if (fail_metric) {
+        if (strcmp(fail_metric, "mae") == 0) got = d.mae;
+        else if (strcmp(fail_metric, "rmse") == 0) got = d.rmse;
+        else if (strcmp(fail_metric, "max_abs") == 0) got = d.max_abs;
+        else if (strcmp(fail_metric, "above") == 0) got = d.share_above;
+        else got = d.psnr;
+        over = strcmp(fail_metric, "psnr") == 0 ? got < fail_value : got > fail_value;
+    }
+    if (verbosity > 0 && !(stats_path && strcmp(stats_path, "-") == 0)) {
+        printf("pixels %zu  mae %.6g  rmse %.6g  psnr %s%.6g dB  max_abs %.6g  above %.4f%%\n",
+               d.pixels, d.mae, d.rmse, isinf(d.psnr) ? "" : "", d.psnr, d.max_abs,
+               100.0 * d.share_above);
+    }
+    if (stats_path) {
+        FILE *f = stats_open(stats_path);
+        if (!f)
+            goto out;
+        fprintf(f, "{\"command\": \"diff\", \"pixels\": %zu, ", d.pixels);
+        json_number(f, "mae", d.mae);
+        fputs(", ", f);
+        json_number(f, "rmse", d.rmse);
+        fputs(", ", f);
+        json_number(f, "psnr", d.psnr);
+        fputs(", ", f);
+        json_number(f, "max_abs", d.max_abs);
+        fputs(", ", f);
+        json_number(f, "above", d.share_above);
+        fprintf(f, ", \"threshold\": %.9g}\n", threshold);
+        if (stats_close(f, stats_path))
+            goto out;
+    }
+    if (over) {
+        if (verbosity > 0)
+            msg("diff: %s = %.6g is %s the limit %.6g", fail_metric, got,
+                strcmp(fail_metric, "psnr") == 0 ? "below" : "above", fail_value);
+        rc = EXIT_OVER;
+    } else {
+        rc = 0;
+    }
+out:
+    rtp_image_destroy(a);
+    rtp_image_destroy(b);
+    return rc;
+usage:
+    fputs(diff_help, stderr);
+    return EXIT_USAGE;
+}
+
+/* ----------------------------------------------------------------- main */
+
+static const char main_help[] =
+    "usage: rtp COMMAND [options]   (rtp COMMAND --help for each)\n"
+    "Parameterized ray tracing with geometric parameters.\n"
+    "  trace SCENE   trace a scene (NFF or OBJ) and write the image\n"
+    "  diff A B      compare two images: MAE, RMSE, PSNR, max error, heat map\n"
+    "  version       print the version\n"
+    "Exit status: 0 ok, 1 failure, 2 usage error, 3 diff over --fail-above.\n";
+
+int main(int argc, char **argv)
+{
+    if (argc < 2) {
+        fputs(main_help, stderr);
+        return EXIT_USAGE;
+    }
+    if (strcmp(argv[1], "-h") == 0 || strcmp(argv[1], "--help") == 0 ||
+        strcmp(argv[1], "help") == 0) {
+        fputs(main_help, stdout);
+        return 0;
+    }
+    if (strcmp(argv[1], "version") == 0 || strcmp(argv[1], "--version") == 0) {
+        printf("rtp %s (library %s)\n", RTP_VERSION_NUMBER == rtp_version_number()
+                                            ? rtp_version_string()
+                                            : "mismatch",
+               rtp_version_string());
+        return 0;
+    }
+    if (strcmp(argv[1], "trace") == 0)
+        return cmd_trace(argc - 2, argv + 2);
+    if (strcmp(argv[1], "diff") == 0)
+        return cmd_diff(argc - 2, argv + 2);
+    msg("unknown command '%s'", argv[1]);
+    fputs(main_help, stderr);
+    return EXIT_USAGE;
+}

@@ -1,0 +1,214 @@
+/*
+ * rtp.h — parameterized ray tracing with geometric parameters.
+ *
+ * rtp traces a scene once with a Whitted ray tracer (its own kd-tree), and
+ * keeps what later images need to be re-evaluated without tracing again.
+ * This header is the whole public interface of librtp; the command-line
+ * tool `rtp` uses nothing else.
+ *
+ * Conventions
+ *  - Every function that can fail returns an rtp_status; RTP_OK is 0.
+ *    Where an rtp_error* is taken (it may be NULL), it receives the status,
+ *    a message and, for parse errors, the file, line and column.
+ *  - Stateful objects (rtp_scene) are opaque handles; destroy functions
+ *    accept NULL.  Plain data (options, images, stats) are structs where a
+ *    zero-initialised value means "defaults".
+ *  - The library has no global mutable state, never prints and never exits.
+ *    A scene that is not being modified may be used from several threads at
+ *    once (rtp_trace only reads it).
+ *  - Memory comes from an rtp_allocator (NULL means malloc/realloc/free);
+ *    objects remember the allocator they were created with.
+ *  - Images are linear RGB floats, row-major, top row first.
+ */
+#ifndef RTP_H
+#define RTP_H
+
+#include <stddef.h>
+#include <stdio.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define RTP_VERSION_MAJOR 0
+#define RTP_VERSION_MINOR 1
+#define RTP_VERSION_PATCH 0
+#define RTP_VERSION_NUMBER \
+    (RTP_VERSION_MAJOR * 10000 + RTP_VERSION_MINOR * 100 + RTP_VERSION_PATCH)
+
+/** @return RTP_VERSION_NUMBER of the library actually linked. */
+unsigned rtp_version_number(void);
+/** @return the version as "MAJOR.MINOR.PATCH". */
+const char *rtp_version_string(void);
+
+/* ---------------------------------------------------------------- errors */
+
+/* Values are stable once released; new codes are added at the end. */
+typedef enum rtp_status {
+    RTP_OK = 0,
+    RTP_ERR_NOMEM = 1,       /* an allocation failed */
+    RTP_ERR_IO = 2,          /* a file could not be opened, read or written */
+    RTP_ERR_PARSE = 3,       /* malformed scene, parameter or key text */
+    RTP_ERR_ARGUMENT = 4,    /* an invalid argument or option value */
+    RTP_ERR_UNSUPPORTED = 5, /* valid, but not supported (e.g. no libpng) */
+    RTP_ERR_FORMAT = 6,      /* a binary file is corrupt, truncated or foreign */
+    RTP_ERR_LIMIT = 7,       /* a size or memory limit would be exceeded */
+    RTP_ERR_KEY = 8          /* unknown parameter key or index */
+} rtp_status;
+
+/** @return a short constant description of a status ("out of memory"). */
+const char *rtp_status_string(rtp_status status);
+
+typedef struct rtp_error {
+    rtp_status status;
+    char file[256];    /* file the error is in, "" if none */
+    int line, column;  /* 1-based; 0 when not applicable */
+    char message[256]; /* what went wrong, without the position */
+} rtp_error;
+
+/** Formats `err` as "file:line:col: message" (as much as is known) into
+ *  buf.  @return buf. */
+char *rtp_error_format(const rtp_error *err, char *buf, size_t size);
+
+/* ------------------------------------------------------------ allocation */
+
+typedef struct rtp_allocator {
+    void *(*malloc_fn)(void *user, size_t size);
+    void *(*realloc_fn)(void *user, void *ptr, size_t size);
+    void (*free_fn)(void *user, void *ptr);
+    void *user;
+} rtp_allocator;
+
+/* ----------------------------------------------------------------- scene */
+
+typedef struct rtp_scene rtp_scene;
+
+/** Loads a scene; the format follows the extension: ".obj" is Wavefront
+ *  OBJ (+MTL), anything else NFF with rtp's additions (see README.md).
+ *  `path` "-" reads NFF from stdin.  Relative paths inside the scene
+ *  (include, textures, mtllib) are resolved against the scene's folder.
+ *  @return RTP_OK, RTP_ERR_IO, RTP_ERR_PARSE (err has file:line:col) or
+ *  RTP_ERR_NOMEM. */
+rtp_status rtp_scene_load(const char *path, const rtp_allocator *alloc,
+                          rtp_scene **out, rtp_error *err);
+
+/** Like rtp_scene_load from text in memory.  `name` is used in error
+ *  messages and to resolve relative paths; `format` is "nff" or "obj". */
+rtp_status rtp_scene_load_memory(const char *text, size_t size,
+                                 const char *name, const char *format,
+                                 const rtp_allocator *alloc, rtp_scene **out,
+                                 rtp_error *err);
+
+void rtp_scene_destroy(rtp_scene *scene);
+
+/** Sets one parameter, e.g. key "light.0.pos" value "1,2,3".  Keys:
+ *  light.N.pos|color|on, mat.N.color|kd|ks|kt|shine|ior, ambient,
+ *  background; N is a 0-based index in file order or a name the scene
+ *  gives.  @return RTP_OK, RTP_ERR_KEY or RTP_ERR_PARSE. */
+rtp_status rtp_scene_set(rtp_scene *scene, const char *key,
+                         const char *value, rtp_error *err);
+
+typedef struct rtp_scene_info {
+    size_t triangles, spheres, cones; /* primitives after triangulation */
+    size_t materials, lights, textures;
+    int width, height;   /* resolution the scene asks for */
+} rtp_scene_info;
+
+void rtp_scene_get_info(const rtp_scene *scene, rtp_scene_info *info);
+
+/* ----------------------------------------------------------------- image */
+
+typedef struct rtp_image {
+    int width, height;
+    float *pixels;            /* width*height*3 floats, top row first */
+    rtp_allocator alloc;      /* what pixels came from */
+} rtp_image;
+
+/** Allocates a black image.  @return RTP_OK, RTP_ERR_ARGUMENT, RTP_ERR_LIMIT
+ *  or RTP_ERR_NOMEM. */
+rtp_status rtp_image_create(int width, int height, const rtp_allocator *alloc,
+                            rtp_image **out, rtp_error *err);
+void rtp_image_destroy(rtp_image *image);
+
+typedef enum rtp_image_format {
+    RTP_IMAGE_AUTO = 0, /* from the file extension; stdout "-" means PFM */
+    RTP_IMAGE_PNG = 1,  /* 8-bit sRGB-free: values clamped to [0,1], *255 */
+    RTP_IMAGE_PPM = 2,  /* binary P6, 8-bit, like PNG */
+    RTP_IMAGE_PFM = 3   /* float RGB, little-endian, exact */
+} rtp_image_format;
+
+/** @return the format named by path's extension, RTP_IMAGE_AUTO if none. */
+rtp_image_format rtp_image_format_from_path(const char *path);
+
+/** Writes an image; path "-" is stdout.  Nothing is left behind on
+ *  failure: files are written to a temporary name and renamed. */
+rtp_status rtp_image_write(const rtp_image *image, const char *path,
+                           rtp_image_format format, rtp_error *err);
+/** Writes to an open stream. */
+rtp_status rtp_image_write_stream(const rtp_image *image, FILE *stream,
+                                  rtp_image_format format, rtp_error *err);
+/** Reads a PNG, PPM (P3/P6) or PFM; path "-" is stdin (format sniffed). */
+rtp_status rtp_image_read(const char *path, const rtp_allocator *alloc,
+                          rtp_image **out, rtp_error *err);
+rtp_status rtp_image_read_stream(FILE *stream, const char *name,
+                                 const rtp_allocator *alloc, rtp_image **out,
+                                 rtp_error *err);
+/** @return nonzero if this build can read and write PNG (libpng). */
+int rtp_png_supported(void);
+
+/* ----------------------------------------------------------------- trace */
+
+typedef struct rtp_trace_options {
+    int width, height;  /* 0: the scene's resolution */
+    int spd;            /* SPD testing procedure: 512x512 from 513x513
+                           corner rays, depth 5, no cut-off, one-sided
+                           opaque objects */
+    int max_depth;      /* ray-tree depth, eye ray = 1; 0: 5 */
+    double min_weight;  /* rays weighing less are not spawned; 0: none */
+    int threads;        /* 0 or 1: the calling thread only */
+    /* Called now and then from the calling thread with done in [0,1];
+       NULL for none. */
+    void (*progress)(void *user, double done);
+    void *progress_user;
+} rtp_trace_options;
+
+typedef struct rtp_trace_stats {
+    double build_seconds;  /* kd-tree build */
+    double trace_seconds;  /* tracing and shading */
+    unsigned long long eye_rays, eye_hits, shadow_rays, reflected_rays,
+        refracted_rays;
+    unsigned long long kd_nodes, kd_leaves, kd_prim_refs;
+    int kd_depth;
+    int width, height;
+} rtp_trace_stats;
+
+/** Traces the scene into a new image.  stats may be NULL.
+ *  @return RTP_OK, RTP_ERR_ARGUMENT, RTP_ERR_LIMIT or RTP_ERR_NOMEM. */
+rtp_status rtp_trace(const rtp_scene *scene, const rtp_trace_options *opt,
+                     rtp_image **out, rtp_trace_stats *stats, rtp_error *err);
+
+/* ------------------------------------------------------------ image diff */
+
+typedef struct rtp_diff_stats {
+    double mae, rmse, psnr, max_abs; /* psnr: +HUGE_VAL when identical */
+    double share_above;              /* pixels whose max channel error
+                                        exceeds the threshold, in [0,1] */
+    size_t pixels;
+} rtp_diff_stats;
+
+/** Compares two images of equal size channel by channel (peak 1.0).
+ *  @return RTP_OK or RTP_ERR_ARGUMENT on a size mismatch. */
+rtp_status rtp_image_diff(const rtp_image *a, const rtp_image *b,
+                          double threshold, rtp_diff_stats *stats,
+                          rtp_error *err);
+
+/** Writes a heat map of the per-pixel error of a against b to a PNG with a
+ *  colour legend; `scale` is the error shown at full heat (0: max_abs). */
+rtp_status rtp_diff_heatmap(const rtp_image *a, const rtp_image *b,
+                            double scale, const char *png_path,
+                            rtp_error *err);
+
+#ifdef __cplusplus
+}
+#endif
+#endif /* RTP_H */

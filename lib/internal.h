@@ -1,0 +1,315 @@
+/*
+ * internal.h — what the files of librtp share and nothing else sees.
+ *
+ * Flow: readers (nff.c, obj.c, bezier.c) -> scene (scene.c) -> kd-tree
+ * (kdtree.c, intersect.c) -> trace (trace.c) -> shade (shade.c).
+ * Internal names use the rtpi_ prefix (or are static).
+ */
+#ifndef RTP_INTERNAL_H
+#define RTP_INTERNAL_H
+
+#include "rtp.h"
+
+#include <math.h>
+#include <stdint.h>
+#include <string.h>
+
+/* ------------------------------------------------------------ allocation */
+
+void *rtpi_malloc(const rtp_allocator *a, size_t size);
+void *rtpi_realloc(const rtp_allocator *a, void *p, size_t size);
+void rtpi_free(const rtp_allocator *a, void *p);
+/* count*size with overflow check; NULL on overflow or failure. */
+void *rtpi_malloc_array(const rtp_allocator *a, size_t count, size_t size);
+void *rtpi_calloc_array(const rtp_allocator *a, size_t count, size_t size);
+/* Grows *p (of *cap elements of `size`) to hold at least `need`; doubles.
+   @return 0 on success, -1 on overflow or allocation failure (*p kept). */
+int rtpi_grow(const rtp_allocator *a, void **p, size_t *cap, size_t need,
+              size_t size);
+char *rtpi_strdup(const rtp_allocator *a, const char *s);
+/* Fills `*out` with the default allocator when `in` is NULL. */
+void rtpi_allocator_init(rtp_allocator *out, const rtp_allocator *in);
+
+/* ---------------------------------------------------------------- errors */
+
+/* Sets err (if not NULL) and returns status.  file may be NULL. */
+rtp_status rtpi_error(rtp_error *err, rtp_status status, const char *file,
+                      int line, int col, const char *fmt, ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 6, 7)))
+#endif
+    ;
+
+/* ---------------------------------------------------------------- vectors */
+
+typedef struct rtpi_v3 {
+    double x, y, z;
+} rtpi_v3;
+
+static inline rtpi_v3 v3(double x, double y, double z)
+{
+    rtpi_v3 r;
+    r.x = x;
+    r.y = y;
+    r.z = z;
+    return r;
+}
+static inline rtpi_v3 v3_add(rtpi_v3 a, rtpi_v3 b) { return v3(a.x + b.x, a.y + b.y, a.z + b.z); }
+static inline rtpi_v3 v3_sub(rtpi_v3 a, rtpi_v3 b) { return v3(a.x - b.x, a.y - b.y, a.z - b.z); }
+static inline rtpi_v3 v3_mul(rtpi_v3 a, double s) { return v3(a.x * s, a.y * s, a.z * s); }
+static inline rtpi_v3 v3_madd(rtpi_v3 a, rtpi_v3 b, double s) { return v3(a.x + b.x * s, a.y + b.y * s, a.z + b.z * s); }
+static inline double v3_dot(rtpi_v3 a, rtpi_v3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+static inline rtpi_v3 v3_cross(rtpi_v3 a, rtpi_v3 b)
+{
+    return v3(a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x);
+}
+static inline double v3_len(rtpi_v3 a) { return sqrt(v3_dot(a, a)); }
+static inline rtpi_v3 v3_norm(rtpi_v3 a)
+{
+    double l = v3_len(a);
+    return l > 0.0 ? v3_mul(a, 1.0 / l) : a;
+}
+static inline double v3_get(rtpi_v3 a, int axis) { return axis == 0 ? a.x : axis == 1 ? a.y : a.z; }
+static inline rtpi_v3 v3_from_f(const float *f) { return v3(f[0], f[1], f[2]); }
+
+/* ----------------------------------------------------------------- scene */
+
+#define RTPI_NONE 0xffffffffu
+
+/* Triangle: indices into the scene's position/normal/uv arrays.  n[] and
+   t[] are RTPI_NONE when the triangle has no vertex normals / uvs.  The
+   geometric normal is (p1-p0)x(p2-p0), counter-clockwise = front. */
+typedef struct rtpi_tri {
+    uint32_t v[3], n[3], t[3];
+    uint32_t mat;
+} rtpi_tri;
+
+/* Sphere; r < 0: only the inside is visible (NFF negative radius). */
+typedef struct rtpi_sphere {
+    float c[3], r;
+    uint32_t mat;
+} rtpi_sphere;
+
+/* Open cone or cylinder (no caps) from base (radius rb) to apex (ra). */
+typedef struct rtpi_cone {
+    float base[3], rb, apex[3], ra;
+    uint32_t mat;
+} rtpi_cone;
+
+typedef enum rtpi_tex_kind {
+    RTPI_TEX_NONE = 0,
+    RTPI_TEX_CHECKER = 1, /* solid 3D checker: colour / color2, cell size */
+    RTPI_TEX_IMAGE = 2    /* image[tex_image] looked up by uv */
+} rtpi_tex_kind;
+
+typedef enum rtpi_bump_kind {
+    RTPI_BUMP_NONE = 0,
+    RTPI_BUMP_IMAGE = 1,  /* height map image[bump_image], by uv */
+    RTPI_BUMP_WAVES = 2,  /* procedural: sum of sines, period bump_scale */
+    RTPI_BUMP_NOISE = 3   /* procedural: value noise, cell bump_scale */
+} rtpi_bump_kind;
+
+typedef struct rtpi_material {
+    float color[3];
+    float kd, ks, shine, kt, ior;
+    char *name; /* NULL if unnamed */
+    rtpi_tex_kind tex;
+    float color2[3];   /* checker's second colour */
+    float tex_scale;   /* checker cell size (world units) */
+    uint32_t tex_image;
+    rtpi_bump_kind bump;
+    uint32_t bump_image;
+    float bump_strength, bump_scale;
+} rtpi_material;
+
+typedef struct rtpi_light {
+    double pos[3];
+    float color[3];
+    int on;
+    char *name; /* NULL if unnamed */
+} rtpi_light;
+
+typedef struct rtpi_camera {
+    double from[3], at[3], up[3];
+    double angle;  /* full field of view, degrees */
+    double hither;
+} rtpi_camera;
+
+typedef struct rtpi_texture {
+    char *path;
+    rtp_image *image;
+} rtpi_texture;
+
+struct rtp_scene {
+    rtp_allocator alloc;
+    rtpi_camera camera;
+    int width, height;
+    float background[3];
+    float ambient[3];
+    double light_scale; /* every light's colour is multiplied by this:
+                           1/sqrt(number of NFF lights), SPD's advice */
+    int has_camera;     /* 0: frame the bounds (an OBJ on its own) */
+
+    float *pos;  size_t npos, cap_pos;   /* xyz per vertex */
+    float *nrm;  size_t nnrm, cap_nrm;   /* xyz per normal */
+    float *uv;   size_t nuv, cap_uv;     /* uv per texture vertex */
+
+    /* Primitive ids: [0, ntris) triangles, then spheres, then cones. */
+    rtpi_tri *tris;       size_t ntris, cap_tris;
+    rtpi_sphere *spheres; size_t nspheres, cap_spheres;
+    rtpi_cone *cones;     size_t ncones, cap_cones;
+
+    rtpi_material *mats;  size_t nmats, cap_mats;
+    rtpi_light *lights;   size_t nlights, cap_lights;
+    rtpi_texture *texs;   size_t ntexs, cap_texs;
+};
+
+/* scene.c: creation and appending; each returns 0 or -1 (out of memory). */
+rtp_status rtpi_scene_create(const rtp_allocator *alloc, rtp_scene **out);
+int rtpi_scene_add_pos(rtp_scene *s, double x, double y, double z);
+int rtpi_scene_add_nrm(rtp_scene *s, double x, double y, double z);
+int rtpi_scene_add_uv(rtp_scene *s, double u, double v);
+int rtpi_scene_add_tri(rtp_scene *s, const rtpi_tri *t);
+int rtpi_scene_add_sphere(rtp_scene *s, const rtpi_sphere *sp);
+int rtpi_scene_add_cone(rtp_scene *s, const rtpi_cone *c);
+/* Adds a material with NFF defaults; returns its index or -1. */
+long rtpi_scene_add_material(rtp_scene *s, const rtpi_material *m);
+long rtpi_scene_add_light(rtp_scene *s, const rtpi_light *l);
+/* Loads (once per path) a PNG texture; returns its index via *index. */
+rtp_status rtpi_scene_add_texture(rtp_scene *s, const char *path,
+                                  uint32_t *index, rtp_error *err);
+/* A material with default values (white, kd 1). */
+void rtpi_material_default(rtpi_material *m);
+
+static inline size_t rtpi_scene_nprims(const rtp_scene *s)
+{
+    return s->ntris + s->nspheres + s->ncones;
+}
+
+/* Readers.  `text` need not be NUL-terminated; `name` is for messages and
+   relative paths.  They append to `s`. */
+rtp_status rtpi_read_nff(rtp_scene *s, const char *text, size_t size,
+                         const char *name, int include_depth, rtp_error *err);
+/* Reads an OBJ (and its mtllib).  `xform` (4x3 row-major affine: rows are
+   x' = m[0..2].p + m[3], ...; NULL = identity) is applied to positions and
+   (inverse-transposed) to normals.  `default_mat` is used for faces with no
+   usemtl (RTPI_NONE: add a default material). */
+rtp_status rtpi_read_obj(rtp_scene *s, const char *text, size_t size,
+                         const char *name, const double *xform,
+                         uint32_t default_mat, rtp_error *err);
+/* Tessellates Bezier patches in Newell's .bpt text into triangles with
+   vertex normals, `div` x `div` quads per patch. */
+rtp_status rtpi_read_bpt(rtp_scene *s, const char *text, size_t size,
+                         const char *name, int div, const double *xform,
+                         uint32_t mat, rtp_error *err);
+/* Reads a whole file into memory (path "-" = stdin). */
+rtp_status rtpi_read_file(const rtp_allocator *a, const char *path,
+                          char **text, size_t *size, rtp_error *err);
+
+/* Triangulates a planar polygon (concave allowed, as NFF `p`), keeping its
+   winding.  pts: n xyz doubles.  Writes up to n-2 index triples to tri.
+   @return the number of triangles written (0 for a degenerate polygon). */
+size_t rtpi_triangulate(const double *pts, size_t n, uint32_t *tri);
+
+/* ------------------------------------------------------ rays and geometry */
+
+typedef struct rtpi_ray {
+    rtpi_v3 o, d;     /* d need not be unit length */
+    double tmin, tmax;
+} rtpi_ray;
+
+typedef struct rtpi_hit {
+    double t;
+    uint32_t prim;
+    double u, v;      /* triangle barycentrics of p1, p2; other kinds: any */
+} rtpi_hit;
+
+/* Surface data at a hit.  ng is the geometric normal (unit, outward /
+   front-facing as the primitive defines it); ns the shading normal (unit;
+   interpolated vertex normals for triangles that have them, moved to ng's
+   side), uv texture coordinates (0,0 when the primitive has none). */
+typedef struct rtpi_surface {
+    rtpi_v3 p, ng, ns;
+    double uv[2];
+    uint32_t mat;
+} rtpi_surface;
+
+void rtpi_surface_at(const rtp_scene *s, const rtpi_ray *ray,
+                     const rtpi_hit *hit, rtpi_surface *out);
+
+/* A ray origin for a ray leaving surface point p, moved off the surface
+   along the geometric normal ng (unit) to the side `side` (+1: the side ng
+   points to, -1: the other) by an amount that scales with |p|, so that the
+   new ray cannot hit the surface it starts on at any scale or distance
+   from the origin, yet does not skip nearby geometry. */
+rtpi_v3 rtpi_offset_origin(rtpi_v3 p, rtpi_v3 ng, double side);
+
+/* Closest hit of ray with one primitive in [tmin, tmax]; 1 on hit. */
+int rtpi_intersect_prim(const rtp_scene *s, uint32_t prim,
+                        const rtpi_ray *ray, rtpi_hit *hit);
+
+/* Bounds of one primitive. */
+void rtpi_prim_bounds(const rtp_scene *s, uint32_t prim, double lo[3],
+                      double hi[3]);
+
+/* ---------------------------------------------------------------- kd-tree */
+
+typedef struct rtpi_kdtree rtpi_kdtree;
+
+typedef struct rtpi_kd_stats {
+    size_t nodes, leaves, prim_refs, empty_leaves;
+    int depth;
+} rtpi_kd_stats;
+
+/* Builds an SAH kd-tree over all primitives of s (which must outlive it and
+   not change geometry while it lives). */
+rtp_status rtpi_kd_build(const rtp_scene *s, const rtp_allocator *a,
+                         rtpi_kdtree **out, rtp_error *err);
+void rtpi_kd_destroy(rtpi_kdtree *kd);
+void rtpi_kd_get_stats(const rtpi_kdtree *kd, rtpi_kd_stats *st);
+/* Closest hit with t in [ray->tmin, ray->tmax].  @return 1 on hit. */
+int rtpi_kd_intersect(const rtpi_kdtree *kd, const rtpi_ray *ray,
+                      rtpi_hit *hit);
+/* Any hit with t in [ray->tmin, ray->tmax].  @return 1 if occluded. */
+int rtpi_kd_occluded(const rtpi_kdtree *kd, const rtpi_ray *ray);
+
+/* ------------------------------------------------------------- ray trees */
+
+/* Child links of a tree node besides a node index. */
+#define RTPI_CHILD_NONE (-1) /* no ray was spawned */
+#define RTPI_CHILD_MISS (-2) /* the ray left the scene: background */
+
+/* One hit of a pixel sample's ray tree, as trace records it and shading
+   evaluates it.  The shading routine reads only this, the scene's optical
+   parameters and the light visibility bits: it never casts a ray. */
+typedef struct rtpi_node {
+    rtpi_v3 p;       /* hit position */
+    rtpi_v3 n;       /* unit shading normal, facing the side shaded */
+    rtpi_v3 v;       /* unit vector towards where the ray came from */
+    double uv[2];    /* texture coordinates */
+    uint32_t prim, mat;
+    int32_t refl, refr; /* child nodes or RTPI_CHILD_*; on total internal
+                           reflection refr is the reflected subtree */
+    uint32_t vis;    /* offset of this node's light bits in the bit array */
+} rtpi_node;
+
+/* A pixel sample's tree: nodes[0] is the eye ray's hit (if root >= 0). */
+typedef struct rtpi_tree {
+    const rtpi_node *nodes;
+    const unsigned char *vis; /* light visibility bits, LSB first */
+    int32_t root;             /* 0 or RTPI_CHILD_MISS */
+} rtpi_tree;
+
+/* Evaluates the paper's shading equation over a ray tree (shade.c). */
+void rtpi_shade_tree(const rtp_scene *s, const rtpi_tree *tree, double rgb[3]);
+
+/* Object colour at a node: material colour or its texture (shade.c). */
+void rtpi_object_color(const rtp_scene *s, const rtpi_material *m,
+                       const rtpi_node *node, double rgb[3]);
+
+/* ----------------------------------------------------------------- images */
+
+/* Allocation-size check shared by everything that makes w*h*3 floats. */
+int rtpi_image_size_ok(int width, int height);
+
+#endif /* RTP_INTERNAL_H */

@@ -1,0 +1,491 @@
+/* scene.c — the scene object: creation, appending from readers, loading
+ * by file type, and the parameter keys of `--set`. */
+#include "internal.h"
+
+#include <ctype.h>
+#include <errno.h>
+#include <stdio.h>
+#include <stdlib.h>
+
+void rtpi_material_default(rtpi_material *m)
+{
+    memset(m, 0, sizeof *m);
+    m->color[0] = m->color[1] = m->color[2] = 1.0f;
+    m->kd = 1.0f;
+    m->shine = 100000.0f; /* SPD's "no highlight" */
+    m->ior = 1.0f;
+    m->tex_scale = 1.0f;
+    m->bump_scale = 1.0f;
+    m->tex_image = RTPI_NONE;
+    m->bump_image = RTPI_NONE;
+}
+
+rtp_status rtpi_scene_create(const rtp_allocator *alloc, rtp_scene **out)
+{
+    rtp_allocator a;
+    rtp_scene *s;
+    rtpi_allocator_init(&a, alloc);
+    s = (rtp_scene *)rtpi_malloc(&a, sizeof *s);
+    if (!s)
+        return RTP_ERR_NOMEM;
+    memset(s, 0, sizeof *s);
+    s->alloc = a;
+    /* NFF defaults: camera at +z looking at the origin, 45 degrees. */
+    s->camera.from[2] = 1.0;
+    s->camera.up[1] = 1.0;
+    s->camera.angle = 45.0;
+    s->width = s->height = 512;
+    s->light_scale = 1.0;
+    *out = s;
+    return RTP_OK;
+}
+
+void rtp_scene_destroy(rtp_scene *s)
+{
+    size_t i;
+    rtp_allocator a;
+    if (!s)
+        return;
+    a = s->alloc;
+    for (i = 0; i < s->nmats; i++)
+        rtpi_free(&a, s->mats[i].name);
+    for (i = 0; i < s->nlights; i++)
+        rtpi_free(&a, s->lights[i].name);
+    for (i = 0; i < s->ntexs; i++) {
+        rtpi_free(&a, s->texs[i].path);
+        rtp_image_destroy(s->texs[i].image);
+    }
+    rtpi_free(&a, s->pos);
+    rtpi_free(&a, s->nrm);
+    rtpi_free(&a, s->uv);
+    rtpi_free(&a, s->tris);
+    rtpi_free(&a, s->spheres);
+    rtpi_free(&a, s->cones);
+    rtpi_free(&a, s->mats);
+    rtpi_free(&a, s->lights);
+    rtpi_free(&a, s->texs);
+    rtpi_free(&a, s);
+}
+
+#define GROW(s, arr, n, cap)                                                 \
+    rtpi_grow(&(s)->alloc, (void **)&(s)->arr, &(s)->cap, (s)->n + 1,        \
+              sizeof *(s)->arr)
+
+int rtpi_scene_add_pos(rtp_scene *s, double x, double y, double z)
+{
+    float *p;
+    if (s->npos >= RTPI_NONE - 1 ||
+        rtpi_grow(&s->alloc, (void **)&s->pos, &s->cap_pos, (s->npos + 1) * 3,
+                  sizeof *s->pos))
+        return -1;
+    p = s->pos + 3 * s->npos++;
+    p[0] = (float)x;
+    p[1] = (float)y;
+    p[2] = (float)z;
+    return 0;
+}
+
+int rtpi_scene_add_nrm(rtp_scene *s, double x, double y, double z)
+{
+    float *p;
+    if (s->nnrm >= RTPI_NONE - 1 ||
+        rtpi_grow(&s->alloc, (void **)&s->nrm, &s->cap_nrm, (s->nnrm + 1) * 3,
+                  sizeof *s->nrm))
+        return -1;
+    p = s->nrm + 3 * s->nnrm++;
+    p[0] = (float)x;
+    p[1] = (float)y;
+    p[2] = (float)z;
+    return 0;
+}
+
+int rtpi_scene_add_uv(rtp_scene *s, double u, double v)
+{
+    float *p;
+    if (s->nuv >= RTPI_NONE - 1 ||
+        rtpi_grow(&s->alloc, (void **)&s->uv, &s->cap_uv, (s->nuv + 1) * 2,
+                  sizeof *s->uv))
+        return -1;
+    p = s->uv + 2 * s->nuv++;
+    p[0] = (float)u;
+    p[1] = (float)v;
+    return 0;
+}
+
+/* Primitive ids must stay below RTPI_NONE. */
+static int prim_room(const rtp_scene *s)
+{
+    return rtpi_scene_nprims(s) < (size_t)RTPI_NONE - 1;
+}
+
+int rtpi_scene_add_tri(rtp_scene *s, const rtpi_tri *t)
+{
+    if (!prim_room(s) || GROW(s, tris, ntris, cap_tris))
+        return -1;
+    s->tris[s->ntris++] = *t;
+    return 0;
+}
+
+int rtpi_scene_add_sphere(rtp_scene *s, const rtpi_sphere *sp)
+{
+    if (!prim_room(s) || GROW(s, spheres, nspheres, cap_spheres))
+        return -1;
+    s->spheres[s->nspheres++] = *sp;
+    return 0;
+}
+
+int rtpi_scene_add_cone(rtp_scene *s, const rtpi_cone *c)
+{
+    if (!prim_room(s) || GROW(s, cones, ncones, cap_cones))
+        return -1;
+    s->cones[s->ncones++] = *c;
+    return 0;
+}
+
+long rtpi_scene_add_material(rtp_scene *s, const rtpi_material *m)
+{
+    if (s->nmats >= 0x7fffffff || GROW(s, mats, nmats, cap_mats))
+        return -1;
+    s->mats[s->nmats] = *m;
+    return (long)s->nmats++;
+}
+
+long rtpi_scene_add_light(rtp_scene *s, const rtpi_light *l)
+{
+    if (s->nlights >= 0x7fffffff || GROW(s, lights, nlights, cap_lights))
+        return -1;
+    s->lights[s->nlights] = *l;
+    return (long)s->nlights++;
+}
+
+rtp_status rtpi_scene_add_texture(rtp_scene *s, const char *path,
+                                  uint32_t *index, rtp_error *err)
+{
+    size_t i;
+    rtp_image *img = NULL;
+    rtp_status st;
+    char *p;
+    for (i = 0; i < s->ntexs; i++) {
+        if (strcmp(s->texs[i].path, path) == 0) {
+            *index = (uint32_t)i;
+            return RTP_OK;
+        }
+    }
+    st = rtp_image_read(path, &s->alloc, &img, err);
+    if (st != RTP_OK)
+        return st;
+    p = rtpi_strdup(&s->alloc, path);
+    if (!p || GROW(s, texs, ntexs, cap_texs)) {
+        rtpi_free(&s->alloc, p);
+        rtp_image_destroy(img);
+        return rtpi_error(err, RTP_ERR_NOMEM, path, 0, 0, "out of memory");
+    }
+    s->texs[s->ntexs].path = p;
+    s->texs[s->ntexs].image = img;
+    *index = (uint32_t)s->ntexs++;
+    return RTP_OK;
+}
+
+/* ------------------------------------------------------------- loading */
+
+static int ends_with(const char *s, const char *suffix)
+{
+    size_t n = strlen(s), m = strlen(suffix), i;
+    if (m > n)
+        return 0;
+    for (i = 0; i < m; i++)
+        if (tolower((unsigned char)s[n - m + i]) != suffix[i])
+            return 0;
+    return 1;
+}
+
+/* An OBJ on its own has no camera or light: look at its bounds from the
+   front (+z, y up, OBJ's usual frame) with a light beside the camera. */
+static int frame_bounds(rtp_scene *s)
+{
+    double lo[3] = {HUGE_VAL, HUGE_VAL, HUGE_VAL};
+    double hi[3] = {-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
+    double c[3], r = 0.0, dir[3] = {0.35, 0.45, 1.0}, dl;
+    size_t i;
+    int k;
+    rtpi_light l;
+    for (i = 0; i < s->ntris; i++) {
+        for (k = 0; k < 3; k++) {
+            const float *p = s->pos + 3 * (size_t)s->tris[i].v[k];
+            int a;
+            for (a = 0; a < 3; a++) {
+                if (p[a] < lo[a]) lo[a] = p[a];
+                if (p[a] > hi[a]) hi[a] = p[a];
+            }
+        }
+    }
+    if (!s->ntris) {
+        for (k = 0; k < 3; k++)
+            lo[k] = hi[k] = 0.0;
+    }
+    for (k = 0; k < 3; k++) {
+        c[k] = 0.5 * (lo[k] + hi[k]);
+        r += 0.25 * (hi[k] - lo[k]) * (hi[k] - lo[k]);
+    }
+    r = sqrt(r);
+    if (!(r > 0.0))
+        r = 1.0;
+    dl = sqrt(dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]);
+    for (k = 0; k < 3; k++) {
+        /* 45 degrees sees a sphere of radius r whole from 2.7 r away. */
+        s->camera.from[k] = c[k] + dir[k] / dl * 2.7 * r;
+        s->camera.at[k] = c[k];
+        s->camera.up[k] = k == 1 ? 1.0 : 0.0;
+    }
+    s->camera.angle = 45.0;
+    s->camera.hither = 0.0;
+    s->has_camera = 0;
+    if (s->nlights == 0) {
+        memset(&l, 0, sizeof l);
+        for (k = 0; k < 3; k++) {
+            l.pos[k] = s->camera.from[k] + (k == 0 ? r : k == 1 ? 2.0 * r : 0.0);
+            l.color[k] = 1.0f;
+        }
+        l.on = 1;
+        if (rtpi_scene_add_light(s, &l) < 0)
+            return -1;
+    }
+    return 0;
+}
+
+rtp_status rtp_scene_load_memory(const char *text, size_t size,
+                                 const char *name, const char *format,
+                                 const rtp_allocator *alloc, rtp_scene **out,
+                                 rtp_error *err)
+{
+    rtp_scene *s = NULL;
+    rtp_status st;
+    if (!out || (!text && size))
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                          "rtp_scene_load_memory: NULL argument");
+    *out = NULL;
+    if (!name)
+        name = "<memory>";
+    st = rtpi_scene_create(alloc, &s);
+    if (st != RTP_OK)
+        return rtpi_error(err, st, name, 0, 0, "out of memory");
+    if (format && strcmp(format, "obj") == 0)
+        st = rtpi_read_obj(s, text, size, name, NULL, RTPI_NONE, err);
+    else if (!format || strcmp(format, "nff") == 0)
+        st = rtpi_read_nff(s, text, size, name, 0, err);
+    else
+        st = rtpi_error(err, RTP_ERR_ARGUMENT, name, 0, 0,
+                        "unknown scene format '%s' (nff or obj)", format);
+    if (st != RTP_OK) {
+        rtp_scene_destroy(s);
+        return st;
+    }
+    if (format && strcmp(format, "obj") == 0) {
+        if (frame_bounds(s) != 0) {
+            rtp_scene_destroy(s);
+            return rtpi_error(err, RTP_ERR_NOMEM, name, 0, 0, "out of memory");
+        }
+    } else {
+        s->has_camera = 1;
+    }
+    /* SPD's advice: each light shines with 1/sqrt(number of lights), so a
+       scene with many lights is not washed out. */
+    if (s->nlights > 0)
+        s->light_scale = 1.0 / sqrt((double)s->nlights);
+    *out = s;
+    return RTP_OK;
+}
+
+rtp_status rtp_scene_load(const char *path, const rtp_allocator *alloc,
+                          rtp_scene **out, rtp_error *err)
+{
+    rtp_allocator a;
+    char *text = NULL;
+    size_t size = 0;
+    rtp_status st;
+    if (!path || !out)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                          "rtp_scene_load: NULL argument");
+    rtpi_allocator_init(&a, alloc);
+    st = rtpi_read_file(&a, path, &text, &size, err);
+    if (st != RTP_OK)
+        return st;
+    st = rtp_scene_load_memory(text, size, path,
+                               ends_with(path, ".obj") ? "obj" : "nff", &a,
+                               out, err);
+    rtpi_free(&a, text);
+    return st;
+}
+
+void rtp_scene_get_info(const rtp_scene *s, rtp_scene_info *info)
+{
+    memset(info, 0, sizeof *info);
+    if (!s)
+        return;
+    info->triangles = s->ntris;
+    info->spheres = s->nspheres;
+    info->cones = s->ncones;
+    info->materials = s->nmats;
+    info->lights = s->nlights;
+    info->textures = s->ntexs;
+    info->width = s->width;
+    info->height = s->height;
+}
+
+/* ---------------------------------------------------------------- keys */
+
+/* Parses up to `max` comma-separated finite numbers; returns how many. */
+static int parse_numbers(const char *v, double *out, int max)
+{
+    int n = 0;
+    char *end;
+    for (;;) {
+        double d;
+        while (*v == ' ' || *v == '\t')
+            v++;
+        errno = 0;
+        d = strtod(v, &end);
+        if (end == v || errno == ERANGE || !isfinite(d))
+            return -1;
+        if (n == max)
+            return -1;
+        out[n++] = d;
+        v = end;
+        while (*v == ' ' || *v == '\t')
+            v++;
+        if (*v == '\0')
+            return n;
+        if (*v != ',')
+            return -1;
+        v++;
+    }
+}
+
+/* Resolves "N" or a name among n items; returns index or -1. */
+static long find_index(const char *tok, size_t toklen, size_t n,
+                       const char *(*name_of)(const rtp_scene *, size_t),
+                       const rtp_scene *s)
+{
+    size_t i;
+    int digits = toklen > 0;
+    for (i = 0; i < toklen; i++)
+        if (!isdigit((unsigned char)tok[i]))
+            digits = 0;
+    if (digits && toklen < 10) {
+        long idx = strtol(tok, NULL, 10);
+        return (size_t)idx < n ? idx : -1;
+    }
+    for (i = 0; i < n; i++) {
+        const char *nm = name_of(s, i);
+        if (nm && strlen(nm) == toklen && memcmp(nm, tok, toklen) == 0)
+            return (long)i;
+    }
+    return -1;
+}
+
+static const char *light_name(const rtp_scene *s, size_t i) { return s->lights[i].name; }
+static const char *mat_name(const rtp_scene *s, size_t i) { return s->mats[i].name; }
+
+static rtp_status want(rtp_error *err, const char *key, const char *value,
+                       int got, int need)
+{
+    if (got == need || (need == 3 && got == 1))
+        return RTP_OK;
+    return rtpi_error(err, RTP_ERR_PARSE, NULL, 0, 0,
+                      "%s: expected %d comma-separated number%s, got '%s'",
+                      key, need, need > 1 ? "s" : "", value);
+}
+
+static void set_rgb(float *dst, const double *v, int n)
+{
+    int i;
+    for (i = 0; i < 3; i++)
+        dst[i] = (float)v[n == 1 ? 0 : i];
+}
+
+rtp_status rtp_scene_set(rtp_scene *s, const char *key, const char *value,
+                         rtp_error *err)
+{
+    double v[4];
+    int n;
+    const char *dot1, *dot2, *field;
+    rtp_status st;
+    if (!s || !key || !value)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                          "rtp_scene_set: NULL argument");
+    n = parse_numbers(value, v, 4);
+    if (strcmp(key, "ambient") == 0 || strcmp(key, "background") == 0) {
+        if ((st = want(err, key, value, n, 3)) != RTP_OK)
+            return st;
+        set_rgb(key[0] == 'a' ? s->ambient : s->background, v, n);
+        return RTP_OK;
+    }
+    dot1 = strchr(key, '.');
+    dot2 = dot1 ? strchr(dot1 + 1, '.') : NULL;
+    if (!dot1 || !dot2)
+        return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0, "unknown key '%s'", key);
+    field = dot2 + 1;
+    if ((size_t)(dot1 - key) == 5 && memcmp(key, "light", 5) == 0) {
+        long i = find_index(dot1 + 1, (size_t)(dot2 - dot1 - 1), s->nlights,
+                            light_name, s);
+        rtpi_light *l;
+        if (i < 0)
+            return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0,
+                              "%s: no such light (the scene has %zu)", key,
+                              s->nlights);
+        l = &s->lights[i];
+        if (strcmp(field, "pos") == 0) {
+            if (n != 3)
+                return want(err, key, value, n, 4);
+            l->pos[0] = v[0];
+            l->pos[1] = v[1];
+            l->pos[2] = v[2];
+        } else if (strcmp(field, "color") == 0) {
+            if ((st = want(err, key, value, n, 3)) != RTP_OK)
+                return st;
+            set_rgb(l->color, v, n);
+        } else if (strcmp(field, "on") == 0) {
+            if ((st = want(err, key, value, n, 1)) != RTP_OK)
+                return st;
+            l->on = v[0] != 0.0;
+        } else {
+            return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0,
+                              "unknown key '%s' (light fields: pos, color, on)", key);
+        }
+        return RTP_OK;
+    }
+    if ((size_t)(dot1 - key) == 3 && memcmp(key, "mat", 3) == 0) {
+        long i = find_index(dot1 + 1, (size_t)(dot2 - dot1 - 1), s->nmats,
+                            mat_name, s);
+        rtpi_material *m;
+        float *dst = NULL;
+        if (i < 0)
+            return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0,
+                              "%s: no such material (the scene has %zu)", key,
+                              s->nmats);
+        m = &s->mats[i];
+        if (strcmp(field, "color") == 0) {
+            if ((st = want(err, key, value, n, 3)) != RTP_OK)
+                return st;
+            set_rgb(m->color, v, n);
+            return RTP_OK;
+        }
+        if (strcmp(field, "kd") == 0) dst = &m->kd;
+        else if (strcmp(field, "ks") == 0) dst = &m->ks;
+        else if (strcmp(field, "kt") == 0) dst = &m->kt;
+        else if (strcmp(field, "shine") == 0) dst = &m->shine;
+        else if (strcmp(field, "ior") == 0) dst = &m->ior;
+        if (!dst)
+            return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0,
+                              "unknown key '%s' (material fields: color, kd, ks, kt, shine, ior)",
+                              key);
+        if ((st = want(err, key, value, n, 1)) != RTP_OK)
+            return st;
+        if (v[0] < 0.0 || (dst == &m->ior && v[0] <= 0.0))
+            return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                              "%s: value %g out of range", key, v[0]);
+        *dst = (float)v[0];
+        return RTP_OK;
+    }
+    return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0, "unknown key '%s'", key);
+}

@@ -1,0 +1,213 @@
+/* util.c — allocation hooks, errors, version: what every file needs. */
+#include "internal.h"
+
+#include <errno.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+
+static void *default_malloc(void *user, size_t size)
+{
+    (void)user;
+    return malloc(size);
+}
+static void *default_realloc(void *user, void *p, size_t size)
+{
+    (void)user;
+    return realloc(p, size);
+}
+static void default_free(void *user, void *p)
+{
+    (void)user;
+    free(p);
+}
+
+void rtpi_allocator_init(rtp_allocator *out, const rtp_allocator *in)
+{
+    if (in && in->malloc_fn && in->realloc_fn && in->free_fn) {
+        *out = *in;
+    } else {
+        out->malloc_fn = default_malloc;
+        out->realloc_fn = default_realloc;
+        out->free_fn = default_free;
+        out->user = NULL;
+    }
+}
+
+void *rtpi_malloc(const rtp_allocator *a, size_t size)
+{
+    return a->malloc_fn(a->user, size ? size : 1);
+}
+
+void *rtpi_realloc(const rtp_allocator *a, void *p, size_t size)
+{
+    return a->realloc_fn(a->user, p, size ? size : 1);
+}
+
+void rtpi_free(const rtp_allocator *a, void *p)
+{
+    if (p)
+        a->free_fn(a->user, p);
+}
+
+void *rtpi_malloc_array(const rtp_allocator *a, size_t count, size_t size)
+{
+    if (size && count > (size_t)-1 / size)
+        return NULL;
+    return rtpi_malloc(a, count * size);
+}
+
+void *rtpi_calloc_array(const rtp_allocator *a, size_t count, size_t size)
+{
+    void *p = rtpi_malloc_array(a, count, size);
+    if (p)
+        memset(p, 0, count * size);
+    return p;
+}
+
+int rtpi_grow(const rtp_allocator *a, void **p, size_t *cap, size_t need,
+              size_t size)
+{
+    size_t ncap;
+    void *np;
+    if (need <= *cap)
+        return 0;
+    ncap = *cap ? *cap : 16;
+    while (ncap < need) {
+        if (ncap > (size_t)-1 / 2)
+            return -1;
+        ncap *= 2;
+    }
+    if (size && ncap > (size_t)-1 / size)
+        return -1;
+    np = rtpi_realloc(a, *p, ncap * size);
+    if (!np)
+        return -1;
+    *p = np;
+    *cap = ncap;
+    return 0;
+}
+
+char *rtpi_strdup(const rtp_allocator *a, const char *s)
+{
+    size_t n = strlen(s) + 1;
+    char *d = (char *)rtpi_malloc(a, n);
+    if (d)
+        memcpy(d, s, n);
+    return d;
+}
+
+rtp_status rtpi_error(rtp_error *err, rtp_status status, const char *file,
+                      int line, int col, const char *fmt, ...)
+{
+    va_list ap;
+    if (!err)
+        return status;
+    err->status = status;
+    err->file[0] = '\0';
+    if (file) {
+        strncpy(err->file, file, sizeof err->file - 1);
+        err->file[sizeof err->file - 1] = '\0';
+    }
+    err->line = line;
+    err->column = col;
+    va_start(ap, fmt);
+    vsnprintf(err->message, sizeof err->message, fmt, ap);
+    va_end(ap);
+    return status;
+}
+
+char *rtp_error_format(const rtp_error *err, char *buf, size_t size)
+{
+    if (!buf || !size)
+        return buf;
+    if (!err) {
+        snprintf(buf, size, "unknown error");
+    } else if (err->file[0] && err->line > 0 && err->column > 0) {
+        snprintf(buf, size, "%s:%d:%d: %s", err->file, err->line, err->column,
+                 err->message);
+    } else if (err->file[0] && err->line > 0) {
+        snprintf(buf, size, "%s:%d: %s", err->file, err->line, err->message);
+    } else if (err->file[0]) {
+        snprintf(buf, size, "%s: %s", err->file, err->message);
+    } else if (err->message[0]) {
+        snprintf(buf, size, "%s", err->message);
+    } else {
+        snprintf(buf, size, "%s", rtp_status_string(err->status));
+    }
+    return buf;
+}
+
+const char *rtp_status_string(rtp_status status)
+{
+    switch (status) {
+    case RTP_OK: return "ok";
+    case RTP_ERR_NOMEM: return "out of memory";
+    case RTP_ERR_IO: return "input/output error";
+    case RTP_ERR_PARSE: return "parse error";
+    case RTP_ERR_ARGUMENT: return "invalid argument";
+    case RTP_ERR_UNSUPPORTED: return "not supported by this build";
+    case RTP_ERR_FORMAT: return "corrupt, truncated or foreign file";
+    case RTP_ERR_LIMIT: return "size limit exceeded";
+    case RTP_ERR_KEY: return "unknown parameter key";
+    }
+    return "unknown status";
+}
+
+unsigned rtp_version_number(void) { return RTP_VERSION_NUMBER; }
+
+#define RTPI_STR2(x) #x
+#define RTPI_STR(x) RTPI_STR2(x)
+const char *rtp_version_string(void)
+{
+    return RTPI_STR(RTP_VERSION_MAJOR) "." RTPI_STR(RTP_VERSION_MINOR) "." RTPI_STR(RTP_VERSION_PATCH);
+}
+
+rtp_status rtpi_read_file(const rtp_allocator *a, const char *path,
+                          char **text, size_t *size, rtp_error *err)
+{
+    FILE *f;
+    char *buf = NULL, *nb;
+    size_t cap = 0, len = 0, n;
+    int is_stdin = strcmp(path, "-") == 0;
+    f = is_stdin ? stdin : fopen(path, "rb");
+    if (!f)
+        return rtpi_error(err, RTP_ERR_IO, path, 0, 0, "cannot open: %s",
+                          strerror(errno));
+    for (;;) {
+        if (len + 1 >= cap) {
+            size_t ncap = cap ? cap * 2 : 65536;
+            if (ncap < cap) {
+                rtpi_free(a, buf);
+                if (!is_stdin)
+                    fclose(f);
+                return rtpi_error(err, RTP_ERR_LIMIT, path, 0, 0, "file too large");
+            }
+            nb = (char *)rtpi_realloc(a, buf, ncap);
+            if (!nb) {
+                rtpi_free(a, buf);
+                if (!is_stdin)
+                    fclose(f);
+                return rtpi_error(err, RTP_ERR_NOMEM, path, 0, 0, "out of memory reading file");
+            }
+            buf = nb;
+            cap = ncap;
+        }
+        n = fread(buf + len, 1, cap - len - 1, f);
+        len += n;
+        if (n == 0)
+            break;
+    }
+    if (ferror(f)) {
+        rtpi_free(a, buf);
+        if (!is_stdin)
+            fclose(f);
+        return rtpi_error(err, RTP_ERR_IO, path, 0, 0, "read error");
+    }
+    if (!is_stdin)
+        fclose(f);
+    buf[len] = '\0';
+    *text = buf;
+    *size = len;
+    return RTP_OK;
+}

@@ -1,0 +1,82 @@
+/* check.h — the tests' tiny harness.  A test program defines functions,
+ * runs them with RUN(fn) and ends with return check_report(); each test
+ * function passes when none of its CHECKs fail.  SKIP(msg) marks the
+ * current test skipped (never counted as passed). */
+#ifndef RTP_CHECK_H
+#define RTP_CHECK_H
+#include <stdio.h>
+#include <stdlib.h>
+
+static int check_failed_now, check_skipped_now;
+static int check_passed, check_failed, check_skipped;
+
+#define CHECK(cond)                                                         \
+    do {                                                                    \
+        if (!(cond)) {                                                      \
+            fprintf(stderr, "%s:%d: CHECK(%s) failed\n", __FILE__,          \
+                    __LINE__, #cond);                                       \
+            check_failed_now = 1;                                           \
+        }                                                                   \
+    } while (0)
+
+#define CHECK_MSG(cond, ...)                                                \
+    do {                                                                    \
+        if (!(cond)) {                                                      \
+            fprintf(stderr, "%s:%d: CHECK(%s) failed: ", __FILE__,          \
+                    __LINE__, #cond);                                       \
+            fprintf(stderr, __VA_ARGS__);                                   \
+            fputc('\n', stderr);                                            \
+            check_failed_now = 1;                                           \
+        }                                                                   \
+    } while (0)
+
+#define SKIP(msg)                                                           \
+    do {                                                                    \
+        fprintf(stderr, "skip: %s: %s\n", __func__, msg);                   \
+        check_skipped_now = 1;                                              \
+        return;                                                             \
+    } while (0)
+
+#define RUN(fn)                                                             \
+    do {                                                                    \
+        check_failed_now = 0;                                               \
+        check_skipped_now = 0;                                              \
+        fn();                                                               \
+        if (check_failed_now) {                                             \
+            check_failed++;                                                 \
+            fprintf(stderr, "FAIL %s\n", #fn);                              \
+        } else if (check_skipped_now) {                                     \
+            check_skipped++;                                                \
+        } else {                                                            \
+            check_passed++;                                                 \
+        }                                                                   \
+    } while (0)
+
+static int check_report(void)
+{
+    printf("%d passed, %d failed, %d skipped\n", check_passed, check_failed,
+           check_skipped);
+    return check_failed ? 1 : 0;
+}
+
+/* The folder ../shared/scenes when present, else NULL (tests skip). */
+static const char *check_shared_scenes(void)
+{
+    const char *env = getenv("RTP_SHARED_SCENES");
+    static const char *cands[] = {"../shared/scenes", "../../shared/scenes"};
+    FILE *f;
+    size_t i;
+    char buf[512];
+    if (env && *env)
+        return env;
+    for (i = 0; i < sizeof cands / sizeof *cands; i++) {
+        snprintf(buf, sizeof buf, "%s/README.md", cands[i]);
+        f = fopen(buf, "r");
+        if (f) {
+            fclose(f);
+            return cands[i];
+        }
+    }
+    return NULL;
+}
+#endif

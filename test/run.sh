@@ -1,0 +1,30 @@
+#!/bin/sh
+# Runs every test program in $1 and every test/*.sh script, sums their
+# "N passed, N failed[, N skipped]" lines, and ends with the total.
+dir=${1:-build/test}
+pass=0; fail=0; skip=0
+tmp=${TMPDIR:-/tmp}/rtp-test.$$
+for t in "$dir"/test_* test/cli_*.sh; do
+    [ -e "$t" ] || continue
+    case "$t" in *.sh) cmd="sh $t";; *) cmd="$t";; esac
+    $cmd >"$tmp" 2>"$tmp.err"
+    rc=$?
+    line=$(grep -E '^[0-9]+ passed, [0-9]+ failed' "$tmp" | tail -n 1)
+    if [ -z "$line" ]; then
+        echo "FAIL $t: no result line (exit $rc)"
+        cat "$tmp.err" | tail -n 20
+        fail=$((fail + 1)); continue
+    fi
+    p=$(echo "$line" | sed -E 's/^([0-9]+) passed.*/\1/')
+    f=$(echo "$line" | sed -E 's/^[0-9]+ passed, ([0-9]+) failed.*/\1/')
+    s=$(echo "$line" | sed -nE 's/.*, ([0-9]+) skipped.*/\1/p')
+    s=${s:-0}
+    if [ "$rc" -ne 0 ] && [ "$f" -eq 0 ]; then f=1; fi
+    pass=$((pass + p)); fail=$((fail + f)); skip=$((skip + s))
+    printf '%-32s %s\n' "$(basename "$t")" "$line"
+    if [ "$f" -ne 0 ]; then tail -n 30 "$tmp.err"; fi
+    grep '^skip:' "$tmp.err" | sed 's/^/    /'
+done
+rm -f "$tmp" "$tmp.err"
+echo "$pass passed, $fail failed, $skip skipped"
+[ "$fail" -eq 0 ]
