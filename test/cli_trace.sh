@@ -1,0 +1,61 @@
+#!/bin/sh
+# CLI tests for rtp trace and rtp diff: exit codes, messages, pipes, stats,
+# and (when ../shared is present) every SPD scene and mesh renders.
+RTP=${RTP:-./rtp}
+T=${TMPDIR:-/tmp}/rtp-cli.$$
+mkdir -p "$T"
+pass=0; fail=0; skip=0
+ok()   { pass=$((pass + 1)); }
+bad()  { fail=$((fail + 1)); echo "FAIL: $*" >&2; }
+expect_rc() { # want cmd...
+    want=$1; shift
+    "$@" >"$T/out" 2>"$T/err"; rc=$?
+    if [ "$rc" -eq "$want" ]; then ok; else bad "exit $rc (want $want): $*"; cat "$T/err" >&2; fi
+}
+
+expect_rc 0 $RTP --help
+expect_rc 2 $RTP
+expect_rc 2 $RTP frobnicate
+expect_rc 0 $RTP trace --help
+expect_rc 2 $RTP trace
+expect_rc 2 $RTP trace scenes/spheres.nff --depth zero
+expect_rc 1 $RTP trace "$T/does-not-exist.nff" -i "$T/x.pfm"
+grep -q "does-not-exist.nff" "$T/err" && ok || bad "missing file not named"
+
+# A parse error names file:line:col and writes no image.
+printf 'v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 40\nhither 1\nresolution 8 8\ns 0 0 zero 1\n' > "$T/bad.nff"
+expect_rc 1 $RTP trace "$T/bad.nff" -i "$T/bad.pfm"
+grep -q "bad.nff:8:7:" "$T/err" && ok || { bad "parse error position"; cat "$T/err" >&2; }
+[ ! -e "$T/bad.pfm" ] && ok || bad "image written on failure"
+
+# Unknown --set key: exit 1 naming the key.
+expect_rc 1 $RTP trace scenes/spheres.nff --set light.99.pos=1,2,3 -i "$T/x.pfm"
+grep -q "light.99" "$T/err" && ok || bad "bad key not named"
+
+# Image to a file, to stdout, and diff between them; stats JSON.
+expect_rc 0 $RTP trace scenes/spheres.nff --size 40x30 -i "$T/a.pfm" --stats "$T/s.json"
+grep -q '"eye_rays": 1200' "$T/s.json" && ok || { bad "stats eye_rays"; cat "$T/s.json" >&2; }
+$RTP trace scenes/spheres.nff --size 40x30 -i - 2>"$T/err" | $RTP diff - "$T/a.pfm" --stats "$T/d.json" >/dev/null 2>&1
+[ $? -eq 0 ] && ok || bad "pipe trace | diff"
+grep -q '"psnr": "inf"' "$T/d.json" && ok || { bad "identical images not inf psnr"; cat "$T/d.json" >&2; }
+expect_rc 0 $RTP trace scenes/spheres.nff --size 40x30 -i "$T/b.png" --set mat.0.color=0,1,0
+expect_rc 3 $RTP diff "$T/a.pfm" "$T/b.png" --fail-above rmse=0.001
+expect_rc 0 $RTP diff "$T/a.pfm" "$T/b.png" --fail-above rmse=100
+expect_rc 1 $RTP diff "$T/a.pfm" scenes/spheres.nff
+
+# Every SPD scene and every mesh in ../shared renders (small, fast).
+shared=""
+for d in ../shared/scenes ../../shared/scenes; do [ -d "$d/spd" ] && shared=$d && break; done
+if [ -n "$shared" ]; then
+    for f in "$shared"/spd/*.nff "$shared"/meshes/*.obj; do
+        if $RTP trace "$f" --size 32x32 -j 2 -i "$T/spd.pfm" 2>"$T/err"; then ok
+        else bad "render $f"; cat "$T/err" >&2; fi
+    done
+else
+    echo "skip: ../shared/scenes absent: SPD scenes and meshes not rendered" >&2
+    skip=$((skip + 1))
+fi
+
+rm -rf "$T"
+echo "$pass passed, $fail failed, $skip skipped"
+[ "$fail" -eq 0 ]

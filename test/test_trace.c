@@ -1,0 +1,301 @@
+/* test_trace.c — the tracer and shading: analytic pixels, thread-count
+ * independence, the SPD procedure's ray counts, refraction that must
+ * vanish, total internal reflection, no NaN/Inf, and golden images of
+ * the project's scenes. */
+#include "check.h"
+#include "internal.h"
+
+#include <math.h>
+#include <string.h>
+
+static rtp_scene *load_text(const char *text)
+{
+    rtp_scene *s = NULL;
+    rtp_error err;
+    if (rtp_scene_load_memory(text, strlen(text), "test.nff", "nff", NULL, &s,
+                              &err) != RTP_OK) {
+        char buf[600];
+        fprintf(stderr, "load: %s\n", rtp_error_format(&err, buf, sizeof buf));
+        return NULL;
+    }
+    return s;
+}
+
+static rtp_image *trace(const rtp_scene *s, int w, int h, int threads, int spd,
+                        rtp_trace_stats *st)
+{
+    rtp_trace_options o;
+    rtp_image *img = NULL;
+    rtp_error err;
+    memset(&o, 0, sizeof o);
+    o.width = w;
+    o.height = h;
+    o.threads = threads;
+    o.spd = spd;
+    if (rtp_trace(s, &o, &img, st, &err) != RTP_OK) {
+        char buf[600];
+        fprintf(stderr, "trace: %s\n", rtp_error_format(&err, buf, sizeof buf));
+        return NULL;
+    }
+    return img;
+}
+
+static const float *px(const rtp_image *img, int x, int y)
+{
+    return img->pixels + 3 * ((size_t)y * img->width + x);
+}
+
+static int all_finite(const rtp_image *img)
+{
+    size_t i, n = (size_t)img->width * img->height * 3;
+    for (i = 0; i < n; i++)
+        if (!isfinite(img->pixels[i]))
+            return 0;
+    return 1;
+}
+
+/* A unit sphere seen head-on, light at the eye: the centre pixel's normal
+   points at the eye, so n.l = 1 and (r.v) = 1: I = kd c + ks + ambient. */
+static void test_analytic_sphere(void)
+{
+    const char *scene =
+        "v from 0 0 5 at 0 0 0 up 0 1 0 angle 30 hither 0.1 resolution 33 33\n"
+        "b 0.1 0.2 0.3\n"
+        "l 0 0 5 1 1 1\n"
+        "f 0.5 0.25 1 0.8 0 100000 0 1\n"
+        "s 0 0 0 1\n";
+    rtp_scene *s = load_text(scene);
+    rtp_image *img;
+    const float *c, *corner;
+    CHECK(s != NULL);
+    if (!s)
+        return;
+    img = trace(s, 33, 33, 1, 0, NULL);
+    CHECK(img != NULL);
+    if (img) {
+        c = px(img, 16, 16);
+        /* one light: scale 1/sqrt(1) = 1 */
+        CHECK_MSG(fabs(c[0] - 0.4) < 1e-6 && fabs(c[1] - 0.2) < 1e-6 &&
+                      fabs(c[2] - 0.8) < 1e-6,
+                  "centre %g %g %g", c[0], c[1], c[2]);
+        corner = px(img, 0, 0);
+        CHECK(corner[0] == 0.1f && corner[1] == 0.2f && corner[2] == 0.3f);
+        CHECK(all_finite(img));
+        rtp_image_destroy(img);
+    }
+    /* An off light contributes nothing; ambient adds kd*c*ambient. */
+    CHECK(rtp_scene_set(s, "light.0.on", "0", NULL) == RTP_OK);
+    CHECK(rtp_scene_set(s, "ambient", "0.5", NULL) == RTP_OK);
+    img = trace(s, 33, 33, 1, 0, NULL);
+    if (img) {
+        c = px(img, 16, 16);
+        CHECK_MSG(fabs(c[0] - 0.2) < 1e-6 && fabs(c[2] - 0.4) < 1e-6, "%g %g", c[0], c[2]);
+        rtp_image_destroy(img);
+    }
+    rtp_scene_destroy(s);
+}
+
+/* A glass sphere of ior 1 with no reflection or colour of its own must
+   vanish: every pixel equals the empty scene's.  Lit by ambient light
+   only, so that the sphere's (opaque) shadow cannot differ. */
+static void test_ior_one_vanishes(void)
+{
+    const char *with =
+        "v from 0 0 6 at 0 0 0 up 0 1 0 angle 40 hither 0.1 resolution 48 48\n"
+        "b 0.2 0.3 0.4\n"
+        "ambient 0.5 0.5 0.5\n"
+        "f 0.9 0.6 0.3 0.9 0 100000 0 1\n"
+        "checker 0.1 0.2 0.9 0.5\n"
+        "p 4 -3 -3 -2 3 -3 -2 3 3 -2 -3 3 -2\n"
+        "f 1 1 1 0 0 100000 1 1\n"
+        "s 0 0 0 1.2\n";
+    const char *without =
+        "v from 0 0 6 at 0 0 0 up 0 1 0 angle 40 hither 0.1 resolution 48 48\n"
+        "b 0.2 0.3 0.4\n"
+        "ambient 0.5 0.5 0.5\n"
+        "f 0.9 0.6 0.3 0.9 0 100000 0 1\n"
+        "checker 0.1 0.2 0.9 0.5\n"
+        "p 4 -3 -3 -2 3 -3 -2 3 3 -2 -3 3 -2\n";
+    rtp_scene *a = load_text(with), *b = load_text(without);
+    rtp_image *ia = NULL, *ib = NULL;
+    CHECK(a && b);
+    if (a && b) {
+        ia = trace(a, 48, 48, 1, 0, NULL);
+        ib = trace(b, 48, 48, 1, 0, NULL);
+    }
+    CHECK(ia && ib);
+    if (ia && ib) {
+        rtp_diff_stats d;
+        CHECK(rtp_image_diff(ia, ib, 1e-6, &d, NULL) == RTP_OK);
+        /* a few pixels whose ray meets a checker edge may flip cell */
+        CHECK_MSG(d.share_above < 0.01, "%g of pixels differ", d.share_above);
+        /* and the sphere is really there: with ior 1.5 it shows */
+        rtp_image_destroy(ia);
+        CHECK(rtp_scene_set(a, "mat.1.ior", "1.5", NULL) == RTP_OK);
+        ia = trace(a, 48, 48, 1, 0, NULL);
+        CHECK(ia && rtp_image_diff(ia, ib, 1e-6, &d, NULL) == RTP_OK && d.share_above > 0.1);
+    }
+    rtp_image_destroy(ia);
+    rtp_image_destroy(ib);
+    rtp_scene_destroy(a);
+    rtp_scene_destroy(b);
+}
+
+/* Every thread count gives the same image, bit for bit. */
+static void test_threads_identical(void)
+{
+    const char *scene =
+        "v from 3 -4 3 at 0 0 0 up 0 0 1 angle 40 hither 0.1 resolution 64 64\n"
+        "b 0.1 0.1 0.2\n"
+        "l 4 -2 6\nl -3 -3 5 0.5 0.5 1\n"
+        "f 0.8 0.8 0.8 0.7 0.3 20 0 1\n"
+        "p 4 -4 -4 -1 4 -4 -1 4 4 -1 -4 4 -1\n"
+        "f 1 0.3 0.3 0.5 0.5 50 0 1\n"
+        "s 0 0 0 1\n"
+        "f 0.9 0.9 1 0.1 0.2 100 0.7 1.5\n"
+        "s 1.2 -1.5 0.2 0.6\n"
+        "c -1.5 1 -1 0.4 -1.5 1 1 0.1\n";
+    rtp_scene *s = load_text(scene);
+    rtp_image *a, *b, *c;
+    rtp_trace_stats sa, sb;
+    if (!s) {
+        CHECK(s != NULL);
+        return;
+    }
+    a = trace(s, 64, 64, 1, 0, &sa);
+    b = trace(s, 64, 64, 2, 0, &sb);
+    c = trace(s, 64, 64, 7, 0, NULL);
+    CHECK(a && b && c);
+    if (a && b && c) {
+        size_t n = sizeof(float) * 3 * 64 * 64;
+        CHECK(memcmp(a->pixels, b->pixels, n) == 0);
+        CHECK(memcmp(a->pixels, c->pixels, n) == 0);
+        CHECK(sa.shadow_rays == sb.shadow_rays && sa.reflected_rays == sb.reflected_rays &&
+              sa.refracted_rays == sb.refracted_rays);
+        CHECK(sa.refracted_rays > 0 && sa.reflected_rays > 0);
+        CHECK(all_finite(a));
+    }
+    rtp_image_destroy(a);
+    rtp_image_destroy(b);
+    rtp_image_destroy(c);
+    rtp_scene_destroy(s);
+}
+
+/* SPD: 513x513 eye rays, pixels are corner averages; no shadow rays for
+   surfaces facing away from the light. */
+static void test_spd_counts(void)
+{
+    const char *scene =
+        "v from 0 0 5 at 0 0 0 up 0 1 0 angle 30 hither 0.1 resolution 8 8\n"
+        "l 0 0 -10\n"
+        "f 1 1 1 1 0 100000 0 1\n"
+        "p 4 -100 -100 0 100 -100 0 100 100 0 -100 100 0\n";
+    rtp_scene *s = load_text(scene);
+    rtp_image *img;
+    rtp_trace_stats st;
+    if (!s) {
+        CHECK(s != NULL);
+        return;
+    }
+    img = trace(s, 0, 0, 2, 1, &st);
+    CHECK(img != NULL);
+    if (img) {
+        CHECK(img->width == 512 && img->height == 512);
+        CHECK(st.eye_rays == 513ull * 513ull);
+        CHECK(st.eye_hits == 513ull * 513ull);
+        /* the light is behind the floor: no shadow rays at all */
+        CHECK(st.shadow_rays == 0);
+        CHECK(px(img, 100, 100)[0] == 0.0f);
+    }
+    rtp_image_destroy(img);
+    rtp_scene_destroy(s);
+}
+
+/* Light inside a glass slab at a steep angle: total internal reflection
+   sends the transmitted share along the reflected ray. */
+static void test_total_internal_reflection(void)
+{
+    const char *scene =
+        "v from 0 -0.2 0 at 0 1 0.02 up 0 0 1 angle 10 hither 0.001 resolution 5 5\n"
+        "b 0 0 0\n"
+        "l 0 0 5\n"
+        "f 1 1 1 0 0 100000 1 1.5\n"
+        "s 0 0 0 1\n";
+    rtp_scene *s = load_text(scene);
+    rtp_image *img;
+    rtp_trace_stats st;
+    if (!s) {
+        CHECK(s != NULL);
+        return;
+    }
+    /* The eye is inside the sphere looking out nearly tangentially at
+       the far wall: grazing, so most rays reflect totally. */
+    CHECK(rtp_scene_set(s, "mat.0.ior", "3", NULL) == RTP_OK);
+    img = trace(s, 5, 5, 1, 0, &st);
+    CHECK(img != NULL);
+    if (img) {
+        CHECK(all_finite(img));
+        CHECK(st.eye_hits == 25);
+        CHECK(st.reflected_rays > 0); /* TIR spawned reflections */
+    }
+    rtp_image_destroy(img);
+    rtp_scene_destroy(s);
+}
+
+/* Golden images of the project's scenes: a change in shading or
+   traversal shows as a difference above the tolerance.  Regenerate with
+   RTP_UPDATE_GOLDEN=1 after a deliberate change. */
+static void golden(const char *name)
+{
+    char scene_path[256], golden_path[256];
+    rtp_scene *s = NULL;
+    rtp_image *img = NULL, *ref = NULL;
+    rtp_error err;
+    rtp_diff_stats d;
+    const char *upd = getenv("RTP_UPDATE_GOLDEN");
+    snprintf(scene_path, sizeof scene_path, "scenes/%s.nff", name);
+    snprintf(golden_path, sizeof golden_path, "test/golden/%s.pfm", name);
+    if (rtp_scene_load(scene_path, NULL, &s, &err) != RTP_OK) {
+        char buf[600];
+        fprintf(stderr, "%s\n", rtp_error_format(&err, buf, sizeof buf));
+        CHECK(0);
+        return;
+    }
+    img = trace(s, 96, 96, 2, 0, NULL);
+    CHECK(img != NULL);
+    if (img) {
+        CHECK(all_finite(img));
+        if (upd && *upd == '1') {
+            CHECK(rtp_image_write(img, golden_path, RTP_IMAGE_PFM, &err) == RTP_OK);
+        } else if (rtp_image_read(golden_path, NULL, &ref, &err) != RTP_OK) {
+            fprintf(stderr, "missing golden %s\n", golden_path);
+            CHECK(0);
+        } else {
+            CHECK(rtp_image_diff(img, ref, 1e-3, &d, &err) == RTP_OK);
+            /* float rounding differs between compilers and flags; a
+               real change of shading moves many pixels by far more */
+            CHECK_MSG(d.max_abs < 1e-3 && d.share_above < 0.002,
+                      "%s: max_abs %g, above 1e-3: %g", name, d.max_abs, d.share_above);
+        }
+    }
+    rtp_image_destroy(ref);
+    rtp_image_destroy(img);
+    rtp_scene_destroy(s);
+}
+
+static void test_golden_spheres(void) { golden("spheres"); }
+static void test_golden_prims(void) { golden("prims"); }
+static void test_golden_checker(void) { golden("checker"); }
+
+int main(void)
+{
+    RUN(test_analytic_sphere);
+    RUN(test_ior_one_vanishes);
+    RUN(test_threads_identical);
+    RUN(test_spd_counts);
+    RUN(test_total_internal_reflection);
+    RUN(test_golden_spheres);
+    RUN(test_golden_prims);
+    RUN(test_golden_checker);
+    return check_report();
+}
