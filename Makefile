@@ -90,8 +90,11 @@ asan:
 ubsan:
 	$(MAKE) BUILD=build-ubsan CFLAGS="-O1 -g -fsanitize=undefined -fno-sanitize-recover=undefined" LDFLAGS="-fsanitize=undefined" test
 
+VERSION = $(shell sed -nE 's/^\#define RTP_VERSION_(MAJOR|MINOR|PATCH) ([0-9]+).*/\2/p' include/rtp.h | paste -sd.)
+
 install: all
-	install -d $(DESTDIR)$(PREFIX)/lib $(DESTDIR)$(PREFIX)/include $(DESTDIR)$(PREFIX)/bin
+	install -d $(DESTDIR)$(PREFIX)/lib/pkgconfig $(DESTDIR)$(PREFIX)/include $(DESTDIR)$(PREFIX)/bin
+	sed -e 's|@PREFIX@|$(PREFIX)|' -e 's|@VERSION@|$(VERSION)|' -e 's|@LIBS@|$(LIBS)|' rtp.pc.in > $(DESTDIR)$(PREFIX)/lib/pkgconfig/rtp.pc
 	install -m 644 $(BUILD)/librtp.a $(DESTDIR)$(PREFIX)/lib/
 	install -m 755 $(BUILD)/librtp.so $(DESTDIR)$(PREFIX)/lib/librtp.so.0
 	ln -sf librtp.so.0 $(DESTDIR)$(PREFIX)/lib/librtp.so
@@ -100,6 +103,7 @@ install: all
 
 uninstall:
 	rm -f $(DESTDIR)$(PREFIX)/lib/librtp.a $(DESTDIR)$(PREFIX)/lib/librtp.so \
+	      $(DESTDIR)$(PREFIX)/lib/pkgconfig/rtp.pc \
 	      $(DESTDIR)$(PREFIX)/lib/librtp.so.0 $(DESTDIR)$(PREFIX)/include/rtp.h \
 	      $(DESTDIR)$(PREFIX)/bin/rtp
 

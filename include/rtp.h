@@ -30,6 +30,11 @@
 extern "C" {
 #endif
 
+/* The shared library exports exactly the declarations in this header. */
+#if defined(__GNUC__) && __GNUC__ >= 4
+#pragma GCC visibility push(default)
+#endif
+
 #define RTP_VERSION_MAJOR 0
 #define RTP_VERSION_MINOR 1
 #define RTP_VERSION_PATCH 0
@@ -207,6 +212,10 @@ rtp_status rtp_image_diff(const rtp_image *a, const rtp_image *b,
 rtp_status rtp_diff_heatmap(const rtp_image *a, const rtp_image *b,
                             double scale, const char *png_path,
                             rtp_error *err);
+
+#if defined(__GNUC__) && __GNUC__ >= 4
+#pragma GCC visibility pop
+#endif
 
 #ifdef __cplusplus
 }
