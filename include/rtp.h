@@ -192,6 +192,70 @@ typedef struct rtp_trace_stats {
 rtp_status rtp_trace(const rtp_scene *scene, const rtp_trace_options *opt,
                      rtp_image **out, rtp_trace_stats *stats, rtp_error *err);
 
+/* ------------------------------------------------------------- ray trees */
+
+/* The ray trees of a traced image together with a copy of the scene they
+ * were traced in: enough to re-evaluate the image for new parameters
+ * without tracing.  A tree that is not being edited may be evaluated from
+ * several threads at once. */
+typedef struct rtp_tree rtp_tree;
+
+/** Traces like rtp_trace and also keeps every sample's ray tree.  The image
+ *  is the evaluation of those trees (rtp_tree_eval of the unedited tree
+ *  reproduces it bit for bit).  image and stats may be NULL. */
+rtp_status rtp_record(const rtp_scene *scene, const rtp_trace_options *opt,
+                      rtp_tree **tree, rtp_image **image,
+                      rtp_trace_stats *stats, rtp_error *err);
+
+void rtp_tree_destroy(rtp_tree *tree);
+
+/** Edits a parameter of the tree's scene (keys as rtp_scene_set).  Edits
+ *  the recorded trees cannot evaluate exactly — a moved light, a new ior,
+ *  ks or kt raised where no subtree was recorded — fail with
+ *  RTP_ERR_UNSUPPORTED and a message naming the remedy; the tree is then
+ *  unchanged. */
+rtp_status rtp_tree_set(rtp_tree *tree, const char *key, const char *value,
+                        rtp_error *err);
+
+typedef struct rtp_eval_options {
+    int threads; /* 0 or 1: the calling thread only */
+    void (*progress)(void *user, double done);
+    void *progress_user;
+} rtp_eval_options;
+
+typedef struct rtp_eval_stats {
+    double seconds;
+    unsigned long long samples, nodes;
+} rtp_eval_stats;
+
+/** Evaluates the trees with the current parameters into a new image. */
+rtp_status rtp_tree_eval(const rtp_tree *tree, const rtp_eval_options *opt,
+                         rtp_image **out, rtp_eval_stats *stats,
+                         rtp_error *err);
+
+typedef struct rtp_tree_info {
+    int width, height, spd, max_depth;
+    unsigned long long samples, nodes;
+    unsigned bytes_per_node;  /* size of one node record */
+    unsigned long long tree_bytes; /* nodes, visibility and sample index */
+    size_t lights, materials, triangles, spheres, cones;
+} rtp_tree_info;
+
+void rtp_tree_get_info(const rtp_tree *tree, rtp_tree_info *info);
+
+/** Writes the tree file (format: doc/tree-format.md); "-" is stdout.
+ *  Files are written to a temporary name and renamed: nothing half
+ *  written is left.  bytes (may be NULL) receives the file size. */
+rtp_status rtp_tree_write(const rtp_tree *tree, const char *path,
+                          unsigned long long *bytes, rtp_error *err);
+/** Reads and validates a tree file; "-" is stdin.  A truncated, corrupt,
+ *  foreign or newer file gives RTP_ERR_FORMAT naming what is wrong. */
+rtp_status rtp_tree_read(const char *path, const rtp_allocator *alloc,
+                         rtp_tree **out, rtp_error *err);
+rtp_status rtp_tree_read_memory(const void *data, size_t size,
+                                const char *name, const rtp_allocator *alloc,
+                                rtp_tree **out, rtp_error *err);
+
 /* ------------------------------------------------------------ image diff */
 
 typedef struct rtp_diff_stats {

@@ -147,7 +147,7 @@ struct rtp_scene {
     float background[3];
     float ambient[3];
     double light_scale; /* every light's colour is multiplied by this:
-                           1/sqrt(number of NFF lights), SPD's advice */
+                           sqrt(L)/(2L) for L lights, SPD's advice */
     int has_camera;     /* 0: frame the bounds (an OBJ on its own) */
 
     float *pos;  size_t npos, cap_pos;   /* xyz per vertex */
@@ -178,6 +178,8 @@ long rtpi_scene_add_light(rtp_scene *s, const rtpi_light *l);
 /* Loads (once per path) a PNG texture; returns its index via *index. */
 rtp_status rtpi_scene_add_texture(rtp_scene *s, const char *path,
                                   uint32_t *index, rtp_error *err);
+/* A deep copy of s with the same allocator. */
+rtp_status rtpi_scene_clone(const rtp_scene *s, rtp_scene **out);
 /* A material with default values (white, kd 1). */
 void rtpi_material_default(rtpi_material *m);
 
@@ -275,37 +277,100 @@ int rtpi_kd_occluded(const rtpi_kdtree *kd, const rtpi_ray *ray);
 
 /* ------------------------------------------------------------- ray trees */
 
-/* Child links of a tree node besides a node index. */
-#define RTPI_CHILD_NONE (-1) /* no ray was spawned */
-#define RTPI_CHILD_MISS (-2) /* the ray left the scene: background */
+/* One hit of a sample's ray tree: 24 bytes, all a hit needs.  The normal,
+   material and texture coordinates are derived from prim and p (with the
+   scene's geometry), the view vector from the parent hit (or the eye), so
+   the shading of a node depends only on this record, the scene's
+   parameters and the hit above it.  A sample's nodes are stored in
+   preorder: a node, its reflected subtree, its refracted subtree. */
+typedef struct rtpi_cnode {
+    float p[3];     /* hit position */
+    uint32_t prim;  /* primitive hit */
+    uint32_t vis;   /* bit i: light i seen (scenes with <= 32 lights; more
+                       lights keep their bits in a parallel word array) */
+    uint32_t link;  /* RTPI_L_* flags | refracted child offset << 8 */
+} rtpi_cnode;
 
-/* One hit of a pixel sample's ray tree, as trace records it and shading
-   evaluates it.  The shading routine reads only this, the scene's optical
-   parameters and the light visibility bits: it never casts a ray. */
-typedef struct rtpi_node {
-    rtpi_v3 p;       /* hit position */
-    rtpi_v3 n;       /* unit shading normal, facing the side shaded */
-    rtpi_v3 v;       /* unit vector towards where the ray came from */
-    double uv[2];    /* texture coordinates */
-    uint32_t prim, mat;
-    int32_t refl, refr; /* child nodes or RTPI_CHILD_*; on total internal
-                           reflection refr is the reflected subtree */
-    uint32_t vis;    /* offset of this node's light bits in the bit array */
-} rtpi_node;
+#define RTPI_L_BACK 0x01u      /* the ray hit the back of the surface */
+#define RTPI_L_REFL 0x02u      /* reflected subtree follows at +1 */
+#define RTPI_L_REFL_MISS 0x04u /* reflected ray left the scene */
+#define RTPI_L_REFR 0x08u      /* refracted subtree at + (link >> 8) */
+#define RTPI_L_REFR_MISS 0x10u /* refracted ray left the scene */
+#define RTPI_L_TIR 0x20u       /* total internal reflection: the
+                                  transmitted share follows the reflected
+                                  ray (REFL / REFL_MISS) */
+#define RTPI_L_SHIFT 8
+#define RTPI_MAX_SUBTREE (1u << 23) /* offsets must fit in 24 bits */
 
-/* A pixel sample's tree: nodes[0] is the eye ray's hit (if root >= 0). */
-typedef struct rtpi_tree {
-    const rtpi_node *nodes;
-    const unsigned char *vis; /* light visibility bits, LSB first */
-    int32_t root;             /* 0 or RTPI_CHILD_MISS */
-} rtpi_tree;
+/* Does a hit on the back of prim shade with its normal turned towards the
+   ray?  Transparent surfaces always; opaque ones too, except in SPD mode,
+   where opaque objects are one-sided but for smooth patches (SPD asks for
+   the teapot, its only patches, to be double-sided). */
+static inline int rtpi_two_sided(const rtp_scene *s, int spd, uint32_t prim,
+                                 const rtpi_material *m)
+{
+    return !spd || m->kt > 0.0f ||
+           (prim < s->ntris && s->tris[prim].n[0] != RTPI_NONE);
+}
 
-/* Evaluates the paper's shading equation over a ray tree (shade.c). */
-void rtpi_shade_tree(const rtp_scene *s, const rtpi_tree *tree, double rgb[3]);
+/* What shading needs besides the nodes. */
+typedef struct rtpi_shade_ctx {
+    const rtp_scene *s;
+    int one_sided;           /* SPD: opaque surfaces keep their normal */
+    size_t vis_words;        /* words per node in vis_ext (> 32 lights) */
+} rtpi_shade_ctx;
 
-/* Object colour at a node: material colour or its texture (shade.c). */
+/* Evaluates the paper's shading equation over one sample's tree of n nodes
+   (n = 0: the eye ray missed).  vis_ext: the nodes' visibility words when
+   the scene has more than 32 lights, else NULL.  eye: the eye position.
+   This is the one shading routine: trace and reeval both call it. */
+void rtpi_shade_sample(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
+                       size_t n, const uint32_t *vis_ext, rtpi_v3 eye,
+                       double rgb[3]);
+
+/* Surface data at a recorded hit position (normals, uv, material). */
+void rtpi_surface_from_point(const rtp_scene *s, uint32_t prim, rtpi_v3 p,
+                             rtpi_surface *out);
+
+/* Object colour at p/uv: material colour or its texture (shade.c). */
 void rtpi_object_color(const rtp_scene *s, const rtpi_material *m,
-                       const rtpi_node *node, double rgb[3]);
+                       rtpi_v3 p, const double uv[2], double rgb[3]);
+
+/* The ray trees of a whole image, with the scene they were traced in
+   (rtp_tree in rtp.h).  Sample k's nodes are nodes[start[k] .. start[k+1]). */
+struct rtp_tree {
+    rtp_allocator alloc;
+    rtp_scene *scene;      /* owned copy: parameters are edited here */
+    rtpi_material *mats0;  /* materials as traced (names not kept) */
+    rtpi_light *lights0;   /* lights as traced (names not kept) */
+    int width, height;     /* image */
+    int nx, ny;            /* sample grid: image, or corners + 1 (SPD) */
+    int spd, max_depth;
+    double min_weight;
+    rtpi_cnode *nodes;
+    size_t nnodes;
+    uint64_t *start;       /* nx*ny + 1 */
+    uint32_t *vis_ext;     /* nnodes * vis_words, when > 32 lights */
+    size_t vis_words;
+};
+
+/* Resolves samples (nx*ny RGB, from a grid of corners when spd) into
+   the image; one routine for trace and reeval so both round alike. */
+void rtpi_resolve_samples(const float *samples, int spd, rtp_image *img);
+
+/* -------------------------------------------------------------- threads */
+
+#define RTPI_MAX_THREADS 256
+
+/* Work on one row with a thread's context; nonzero stops the whole run. */
+typedef int (*rtpi_row_fn)(void *ctx, int row);
+
+/* Runs fn over rows [0, nrows) on nthreads threads (the calling thread is
+   one of them and the only one that calls progress); ctx[i] is thread i's
+   context.  @return nonzero if some call asked to stop. */
+int rtpi_parallel_rows(int nrows, int nthreads, void *const *ctx,
+                       rtpi_row_fn fn, void (*progress)(void *, double),
+                       void *progress_user);
 
 /* ----------------------------------------------------------------- images */
 

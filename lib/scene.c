@@ -36,6 +36,7 @@ rtp_status rtpi_scene_create(const rtp_allocator *alloc, rtp_scene **out)
     s->camera.angle = 45.0;
     s->width = s->height = 512;
     s->light_scale = 1.0;
+    s->ambient[0] = -1.0f; /* unset: a default follows the lights */
     *out = s;
     return RTP_OK;
 }
@@ -288,10 +289,11 @@ rtp_status rtp_scene_load_memory(const char *text, size_t size,
     } else {
         s->has_camera = 1;
     }
-    /* SPD's advice: each light shines with 1/sqrt(number of lights), so a
-       scene with many lights is not washed out. */
-    if (s->nlights > 0)
-        s->light_scale = 1.0 / sqrt((double)s->nlights);
+    /* SPD's advice: each light and the ambient light shine with
+       sqrt(L)/(2L) for L lights, so many lights do not wash a scene out. */
+    s->light_scale = 0.5 / sqrt((double)(s->nlights > 0 ? s->nlights : 1));
+    if (s->ambient[0] < 0.0f)
+        s->ambient[0] = s->ambient[1] = s->ambient[2] = (float)s->light_scale;
     *out = s;
     return RTP_OK;
 }
@@ -488,4 +490,118 @@ rtp_status rtp_scene_set(rtp_scene *s, const char *key, const char *value,
         return RTP_OK;
     }
     return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0, "unknown key '%s'", key);
+}
+
+/* ---------------------------------------------------------------- clone */
+
+static int dup_array(const rtp_allocator *a, void **dst, const void *src,
+                     size_t count, size_t size)
+{
+    *dst = NULL;
+    if (!count)
+        return 0;
+    *dst = rtpi_malloc_array(a, count, size);
+    if (!*dst)
+        return -1;
+    memcpy(*dst, src, count * size);
+    return 0;
+}
+
+static int dup_name(const rtp_allocator *a, char **name)
+{
+    if (!*name)
+        return 0;
+    *name = rtpi_strdup(a, *name);
+    return *name ? 0 : -1;
+}
+
+rtp_status rtpi_scene_clone(const rtp_scene *s, rtp_scene **out)
+{
+    rtp_scene *c;
+    const rtp_allocator *a = &s->alloc;
+    size_t i;
+    int bad = 0;
+    *out = NULL;
+    c = (rtp_scene *)rtpi_malloc(a, sizeof *c);
+    if (!c)
+        return RTP_ERR_NOMEM;
+    *c = *s;
+    c->pos = c->nrm = c->uv = NULL;
+    c->tris = NULL;
+    c->spheres = NULL;
+    c->cones = NULL;
+    c->mats = NULL;
+    c->lights = NULL;
+    c->texs = NULL;
+    c->nmats = c->nlights = c->ntexs = 0;
+    bad |= dup_array(a, (void **)&c->pos, s->pos, s->npos * 3, sizeof *s->pos);
+    bad |= dup_array(a, (void **)&c->nrm, s->nrm, s->nnrm * 3, sizeof *s->nrm);
+    bad |= dup_array(a, (void **)&c->uv, s->uv, s->nuv * 2, sizeof *s->uv);
+    bad |= dup_array(a, (void **)&c->tris, s->tris, s->ntris, sizeof *s->tris);
+    bad |= dup_array(a, (void **)&c->spheres, s->spheres, s->nspheres, sizeof *s->spheres);
+    bad |= dup_array(a, (void **)&c->cones, s->cones, s->ncones, sizeof *s->cones);
+    c->cap_pos = s->npos * 3;
+    c->cap_nrm = s->nnrm * 3;
+    c->cap_uv = s->nuv * 2;
+    c->cap_tris = s->ntris;
+    c->cap_spheres = s->nspheres;
+    c->cap_cones = s->ncones;
+    if (!bad && !dup_array(a, (void **)&c->mats, s->mats, s->nmats, sizeof *s->mats)) {
+        c->cap_mats = s->nmats;
+        for (i = 0; i < s->nmats; i++)
+            c->mats[i].name = NULL;
+        c->nmats = s->nmats;
+        for (i = 0; i < s->nmats; i++) {
+            c->mats[i].name = s->mats[i].name;
+            bad |= dup_name(a, &c->mats[i].name);
+            if (bad) {
+                for (; i < s->nmats; i++)
+                    c->mats[i].name = NULL;
+                break;
+            }
+        }
+    } else {
+        bad = 1;
+    }
+    if (!bad && !dup_array(a, (void **)&c->lights, s->lights, s->nlights, sizeof *s->lights)) {
+        c->cap_lights = s->nlights;
+        c->nlights = s->nlights;
+        for (i = 0; i < s->nlights; i++) {
+            if (bad) {
+                c->lights[i].name = NULL;
+                continue;
+            }
+            bad |= dup_name(a, &c->lights[i].name);
+            if (bad)
+                c->lights[i].name = NULL;
+        }
+    } else {
+        bad = 1;
+    }
+    if (!bad && s->ntexs) {
+        c->texs = (rtpi_texture *)rtpi_calloc_array(a, s->ntexs, sizeof *c->texs);
+        if (!c->texs) {
+            bad = 1;
+        } else {
+            c->cap_texs = s->ntexs;
+            c->ntexs = s->ntexs;
+            for (i = 0; i < s->ntexs && !bad; i++) {
+                const rtp_image *src = s->texs[i].image;
+                c->texs[i].path = rtpi_strdup(a, s->texs[i].path);
+                if (!c->texs[i].path ||
+                    rtp_image_create(src->width, src->height, a, &c->texs[i].image, NULL) != RTP_OK) {
+                    bad = 1;
+                    break;
+                }
+                memcpy(c->texs[i].image->pixels, src->pixels,
+                       sizeof(float) * 3 * (size_t)src->width * src->height);
+            }
+        }
+    }
+    if (bad) {
+        rtp_scene_destroy(c);
+        return RTP_ERR_NOMEM;
+    }
+    *out = c;
+    return RTP_OK;
 }

@@ -1,9 +1,10 @@
 /* shade.c — the one shading routine.  It evaluates the paper's equation
  *   I = kd c_obj sum_{i in Omega} (n.l_i) c_li + ks sum_{i in Omega} (r_i.v)^n c_li
  *       + ks I_r + kt I_t + I_a
- * over a recorded ray tree.  It never casts a ray: the tree holds where
- * each ray hit and which lights each hit saw; the scene holds every optical
- * parameter.  Conventions (README.md, "Shading"): c_li is the light colour
+ * over a recorded ray tree of compact nodes.  It never casts a ray: the
+ * tree holds where each ray hit and which lights each hit saw; normals,
+ * texture coordinates and view vectors are derived from the hit positions
+ * and the scene's geometry; the scene holds every optical parameter.  Conventions (README.md, "Shading"): c_li is the light colour
  * times the scene's light scale; I_a = ambient * kd * c_obj. */
 #include "internal.h"
 
@@ -34,21 +35,21 @@ static void image_lookup(const rtp_image *img, double u, double v,
 }
 
 void rtpi_object_color(const rtp_scene *s, const rtpi_material *m,
-                       const rtpi_node *node, double rgb[3])
+                       rtpi_v3 p, const double uv[2], double rgb[3])
 {
     int c;
     if (m->tex == RTPI_TEX_CHECKER && m->tex_scale > 0.0f) {
         double inv = 1.0 / m->tex_scale;
-        long parity = (long)floor(node->p.x * inv) + (long)floor(node->p.y * inv) +
-                      (long)floor(node->p.z * inv);
-        const float *src = (parity & 1) ? m->color2 : m->color;
+        /* fmod keeps the parity right for cells beyond long's range */
+        double cell = floor(p.x * inv) + floor(p.y * inv) + floor(p.z * inv);
+        const float *src = fmod(fabs(cell), 2.0) >= 1.0 ? m->color2 : m->color;
         for (c = 0; c < 3; c++)
             rgb[c] = src[c];
         return;
     }
     if (m->tex == RTPI_TEX_IMAGE && m->tex_image < s->ntexs &&
         s->texs[m->tex_image].image) {
-        image_lookup(s->texs[m->tex_image].image, node->uv[0], node->uv[1], rgb);
+        image_lookup(s->texs[m->tex_image].image, uv[0], uv[1], rgb);
         for (c = 0; c < 3; c++)
             rgb[c] *= m->color[c];
         return;
@@ -57,58 +58,128 @@ void rtpi_object_color(const rtp_scene *s, const rtpi_material *m,
         rgb[c] = m->color[c];
 }
 
-static void shade_node(const rtp_scene *s, const rtpi_tree *tree, int32_t idx,
+void rtpi_surface_from_point(const rtp_scene *s, uint32_t prim, rtpi_v3 p,
+                             rtpi_surface *out)
+{
+    rtpi_ray ray;
+    rtpi_hit hit;
+    hit.t = 0.0;
+    hit.prim = prim;
+    hit.u = hit.v = 0.0;
+    if (prim < s->ntris) {
+        const rtpi_tri *t = &s->tris[prim];
+        if (t->n[0] != RTPI_NONE || t->t[0] != RTPI_NONE) {
+            /* Barycentrics of p, only where normals or uvs need them. */
+            rtpi_v3 p0 = v3_from_f(s->pos + 3 * (size_t)t->v[0]);
+            rtpi_v3 e1 = v3_sub(v3_from_f(s->pos + 3 * (size_t)t->v[1]), p0);
+            rtpi_v3 e2 = v3_sub(v3_from_f(s->pos + 3 * (size_t)t->v[2]), p0);
+            rtpi_v3 w = v3_sub(p, p0);
+            double d11 = v3_dot(e1, e1), d12 = v3_dot(e1, e2), d22 = v3_dot(e2, e2);
+            double w1 = v3_dot(w, e1), w2 = v3_dot(w, e2);
+            double den = d11 * d22 - d12 * d12;
+            if (den > 0.0) {
+                hit.u = (d22 * w1 - d12 * w2) / den;
+                hit.v = (d11 * w2 - d12 * w1) / den;
+            }
+        }
+    }
+    ray.o = p;
+    ray.d = v3(0.0, 0.0, 1.0);
+    ray.tmin = 0.0;
+    ray.tmax = 0.0;
+    rtpi_surface_at(s, &ray, &hit, out);
+}
+
+static int seen(const rtpi_cnode *nd, const uint32_t *ext, size_t i)
+{
+    if (!ext)
+        return (int)((nd->vis >> i) & 1u);
+    return (int)((ext[i >> 5] >> (i & 31)) & 1u);
+}
+
+/* Shades node idx seen from `from`; returns nothing, adds into out. */
+static void shade_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
+                       size_t idx, const uint32_t *vis_ext, rtpi_v3 from,
                        double out[3])
 {
-    const rtpi_node *nd;
+    const rtp_scene *s = c->s;
+    const rtpi_cnode *nd = &nodes[idx];
+    const uint32_t *ext = vis_ext ? vis_ext + idx * c->vis_words : NULL;
     const rtpi_material *m;
+    rtpi_surface sf;
+    rtpi_v3 p = v3(nd->p[0], nd->p[1], nd->p[2]), n, v;
     double cobj[3], diff[3] = {0, 0, 0}, spec[3] = {0, 0, 0}, sub[3];
+    double wr, wt;
     size_t i;
-    int c;
+    int k;
 
-    if (idx < 0) {
-        for (c = 0; c < 3; c++)
-            out[c] = idx == RTPI_CHILD_MISS ? s->background[c] : 0.0;
-        return;
-    }
-    nd = &tree->nodes[idx];
-    m = &s->mats[nd->mat];
-    rtpi_object_color(s, m, nd, cobj);
+    rtpi_surface_from_point(s, nd->prim, p, &sf);
+    m = &s->mats[sf.mat];
+    n = sf.ns;
+    if ((nd->link & RTPI_L_BACK) && rtpi_two_sided(s, c->one_sided, nd->prim, m))
+        n = v3_mul(n, -1.0);
+    v = v3_norm(v3_sub(from, p));
+    rtpi_object_color(s, m, p, sf.uv, cobj);
 
     for (i = 0; i < s->nlights; i++) {
         const rtpi_light *L = &s->lights[i];
         rtpi_v3 l;
         double ndl, rv, w;
-        if (!L->on || !(tree->vis[(nd->vis + i) >> 3] & (1u << ((nd->vis + i) & 7))))
+        if (!L->on || !seen(nd, ext, i))
             continue;
-        l = v3_norm(v3_sub(v3(L->pos[0], L->pos[1], L->pos[2]), nd->p));
-        ndl = v3_dot(nd->n, l);
+        l = v3_norm(v3_sub(v3(L->pos[0], L->pos[1], L->pos[2]), p));
+        ndl = v3_dot(n, l);
         if (ndl <= 0.0)
             continue;
         /* r_i: l mirrored about n; the highlight is (r_i.v)^shine. */
-        rv = v3_dot(v3_sub(v3_mul(nd->n, 2.0 * ndl), l), nd->v);
+        rv = v3_dot(v3_sub(v3_mul(n, 2.0 * ndl), l), v);
         w = (rv > 0.0 && m->ks > 0.0f) ? pow(rv, m->shine) : 0.0;
-        for (c = 0; c < 3; c++) {
-            double cl = L->color[c] * s->light_scale;
-            diff[c] += ndl * cl;
-            spec[c] += w * cl;
+        for (k = 0; k < 3; k++) {
+            double cl = L->color[k] * s->light_scale;
+            diff[k] += ndl * cl;
+            spec[k] += w * cl;
         }
     }
-    for (c = 0; c < 3; c++)
-        out[c] = m->kd * cobj[c] * (diff[c] + s->ambient[c]) + m->ks * spec[c];
-    if (nd->refl != RTPI_CHILD_NONE && m->ks > 0.0f) {
-        shade_node(s, tree, nd->refl, sub);
-        for (c = 0; c < 3; c++)
-            out[c] += m->ks * sub[c];
+    for (k = 0; k < 3; k++)
+        out[k] = m->kd * cobj[k] * (diff[k] + s->ambient[k]) + m->ks * spec[k];
+
+    /* Global terms: ks I_r + kt I_t; on total internal reflection the
+       transmitted share rides on the reflected subtree. */
+    wr = m->ks;
+    wt = m->kt;
+    if (nd->link & RTPI_L_TIR) {
+        wr += wt;
+        wt = 0.0;
     }
-    if (nd->refr != RTPI_CHILD_NONE && m->kt > 0.0f) {
-        shade_node(s, tree, nd->refr, sub);
-        for (c = 0; c < 3; c++)
-            out[c] += m->kt * sub[c];
+    if (wr > 0.0 && (nd->link & (RTPI_L_REFL | RTPI_L_REFL_MISS))) {
+        if (nd->link & RTPI_L_REFL)
+            shade_node(c, nodes, idx + 1, vis_ext, p, sub);
+        else
+            for (k = 0; k < 3; k++)
+                sub[k] = s->background[k];
+        for (k = 0; k < 3; k++)
+            out[k] += wr * sub[k];
+    }
+    if (wt > 0.0 && (nd->link & (RTPI_L_REFR | RTPI_L_REFR_MISS))) {
+        if (nd->link & RTPI_L_REFR)
+            shade_node(c, nodes, idx + (nd->link >> RTPI_L_SHIFT), vis_ext, p, sub);
+        else
+            for (k = 0; k < 3; k++)
+                sub[k] = s->background[k];
+        for (k = 0; k < 3; k++)
+            out[k] += wt * sub[k];
     }
 }
 
-void rtpi_shade_tree(const rtp_scene *s, const rtpi_tree *tree, double rgb[3])
+void rtpi_shade_sample(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
+                       size_t n, const uint32_t *vis_ext, rtpi_v3 eye,
+                       double rgb[3])
 {
-    shade_node(s, tree, tree->root, rgb);
+    int k;
+    if (n == 0) {
+        for (k = 0; k < 3; k++)
+            rgb[k] = c->s->background[k];
+        return;
+    }
+    shade_node(c, nodes, 0, vis_ext, eye, rgb);
 }

@@ -6,13 +6,15 @@
 
 #include <stdlib.h>
 #include <time.h>
-#ifdef RTP_HAVE_THREADS
-#include <pthread.h>
-#endif
 
 /* Per-sample tree size cap: past it no further secondary rays are spawned
-   (depth 64 in a hall of mirrors and glass would otherwise grow 2^64). */
+   (depth 64 in a hall of mirrors and glass would otherwise grow 2^64);
+   it also keeps subtree offsets within the node's 24 bits. */
 #define MAX_NODES_PER_SAMPLE (1u << 20)
+
+/* What trace_ray returns besides a node index. */
+#define RTPI_CHILD_NONE (-1) /* nothing recorded (the node cap was hit) */
+#define RTPI_CHILD_MISS (-2) /* the ray left the scene */
 
 typedef struct camera {
     rtpi_v3 from, dir, right, up;
@@ -26,14 +28,23 @@ typedef struct counts {
         refracted_rays, capped;
 } counts;
 
+/* A finished row's trees, kept until the image is done. */
+typedef struct row_rec {
+    rtpi_cnode *nodes;
+    uint32_t *counts; /* nodes per sample */
+    uint32_t *vis;
+    size_t nnodes;
+} row_rec;
+
 typedef struct shared shared;
 
 typedef struct worker {
     shared *sh;
-    rtpi_node *nodes;
-    size_t nn, cap;
-    unsigned char *vis;
+    rtpi_cnode *nodes; /* the current row's trees, preorder per sample */
+    size_t nn, cap, sample_base;
+    uint32_t *vis;     /* visibility words when there are > 32 lights */
     size_t vis_cap;
+    uint32_t *counts;  /* nodes per sample of the current row */
     counts n;
     rtp_status status;
 } worker;
@@ -45,11 +56,8 @@ struct shared {
     int spd, max_depth;
     double min_weight;
     float *out;        /* nx*ny samples, RGB */
-    int next_row, rows_done;
-    const rtp_trace_options *opt;
-#ifdef RTP_HAVE_THREADS
-    pthread_mutex_t lock;
-#endif
+    row_rec *rows;     /* per row when recording, else NULL */
+    rtpi_shade_ctx shade;
 };
 
 static double now_seconds(void)
@@ -84,28 +92,32 @@ static void camera_init(camera *c, const rtp_scene *s, int nx, int ny)
     c->ny = ny;
 }
 
+/* Appends a node to the current sample; returns its index within the
+   sample, or -1. */
 static int32_t push_node(worker *w)
 {
-    size_t nl = w->sh->s->nlights, bytes;
-    if (w->nn >= MAX_NODES_PER_SAMPLE)
+    size_t words = w->sh->shade.vis_words;
+    if (w->nn - w->sample_base >= MAX_NODES_PER_SAMPLE)
         return -1;
     if (rtpi_grow(&w->sh->s->alloc, (void **)&w->nodes, &w->cap, w->nn + 1,
                   sizeof *w->nodes)) {
         w->status = RTP_ERR_NOMEM;
         return -1;
     }
-    bytes = ((w->nn + 1) * nl + 7) / 8;
-    if (rtpi_grow(&w->sh->s->alloc, (void **)&w->vis, &w->vis_cap, bytes, 1)) {
+    if (words && rtpi_grow(&w->sh->s->alloc, (void **)&w->vis, &w->vis_cap,
+                           (w->nn + 1) * words, sizeof *w->vis)) {
         w->status = RTP_ERR_NOMEM;
         return -1;
     }
-    return (int32_t)w->nn++;
+    if (words)
+        memset(w->vis + w->nn * words, 0, words * sizeof *w->vis);
+    return (int32_t)(w->nn++ - w->sample_base);
 }
 
 static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
                          double weight);
 
-/* Spawns a secondary ray from node idx at p leaving in unit direction dir. */
+/* Traces a secondary ray from p in unit direction dir. */
 static int32_t spawn(worker *w, rtpi_v3 p, rtpi_v3 ng, rtpi_v3 dir, int depth,
                      double weight)
 {
@@ -115,6 +127,13 @@ static int32_t spawn(worker *w, rtpi_v3 p, rtpi_v3 ng, rtpi_v3 dir, int depth,
     r.tmin = 0.0;
     r.tmax = HUGE_VAL;
     return trace_ray(w, &r, depth, weight);
+}
+
+/* Link flags for a child: traced subtree, miss, or nothing (capped). */
+static uint32_t child_flags(int32_t child, uint32_t node_flag,
+                            uint32_t miss_flag)
+{
+    return child >= 0 ? node_flag : child == RTPI_CHILD_MISS ? miss_flag : 0u;
 }
 
 static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
@@ -127,8 +146,9 @@ static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
     rtpi_surface sf;
     rtpi_v3 d = ray->d, ng, ns;
     int32_t idx, refl = RTPI_CHILD_NONE;
+    uint32_t link = 0, vis = 0;
     int front;
-    size_t i, nl = s->nlights;
+    size_t i, nl = s->nlights, words = sh->shade.vis_words;
 
     if (!rtpi_kd_intersect(sh->kd, ray, &hit))
         return RTPI_CHILD_MISS;
@@ -142,23 +162,11 @@ static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
     ng = sf.ng;
     ns = sf.ns;
     front = v3_dot(d, ng) < 0.0;
-    /* Transparent objects are two-sided always; opaque ones only outside
-       SPD mode (SPD: one-sided, back faces keep their normal). */
-    if (!front && (!sh->spd || m->kt > 0.0f)) {
+    if (!front)
+        link |= RTPI_L_BACK;
+    if (!front && rtpi_two_sided(s, sh->spd, hit.prim, m)) {
         ng = v3_mul(ng, -1.0);
         ns = v3_mul(ns, -1.0);
-    }
-    {
-        rtpi_node *nd = &w->nodes[idx];
-        nd->p = sf.p;
-        nd->n = ns;
-        nd->v = v3_mul(d, -1.0);
-        nd->uv[0] = sf.uv[0];
-        nd->uv[1] = sf.uv[1];
-        nd->prim = hit.prim;
-        nd->mat = sf.mat;
-        nd->refl = nd->refr = RTPI_CHILD_NONE;
-        nd->vis = (uint32_t)((size_t)idx * nl);
     }
 
     /* Shadows: no ray where the surface faces away from the light. */
@@ -166,10 +174,8 @@ static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
         const rtpi_light *L = &s->lights[i];
         rtpi_v3 lp = v3(L->pos[0], L->pos[1], L->pos[2]);
         rtpi_v3 l = v3_sub(lp, sf.p);
-        size_t bit = (size_t)idx * nl + i;
         rtpi_ray sr;
         double dist;
-        w->vis[bit >> 3] &= (unsigned char)~(1u << (bit & 7));
         if (v3_dot(ns, l) <= 0.0)
             continue;
         sr.o = rtpi_offset_origin(sf.p, ng, v3_dot(ng, l) >= 0.0 ? 1.0 : -1.0);
@@ -184,41 +190,59 @@ static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
            double rounding and far below any feature size). */
         sr.tmax = dist * (1.0 - 1e-9);
         w->n.shadow_rays++;
-        if (!rtpi_kd_occluded(sh->kd, &sr))
-            w->vis[bit >> 3] |= (unsigned char)(1u << (bit & 7));
+        if (rtpi_kd_occluded(sh->kd, &sr))
+            continue;
+        if (words)
+            w->vis[(w->sample_base + (size_t)idx) * words + (i >> 5)] |= 1u << (i & 31);
+        else
+            vis |= 1u << i;
     }
 
-    if (depth >= sh->max_depth)
-        return idx;
-    if (m->ks > 0.0f && weight * m->ks >= sh->min_weight) {
+    /* SPD: transmitting surfaces spawn reflection rays too, even with
+       ks 0 (SPD's statistics count them); the subtree then also serves a
+       later ks edit. */
+    if (depth < sh->max_depth &&
+        ((m->ks > 0.0f && weight * m->ks >= sh->min_weight) ||
+         (sh->spd && m->kt > 0.0f))) {
         rtpi_v3 r = v3_norm(v3_madd(d, ns, -2.0 * v3_dot(d, ns)));
         w->n.reflected_rays++;
         refl = spawn(w, sf.p, ng, r, depth + 1, weight * m->ks);
-        w->nodes[idx].refl = refl;
+        link |= child_flags(refl, RTPI_L_REFL, RTPI_L_REFL_MISS);
     }
-    if (m->kt > 0.0f && weight * m->kt >= sh->min_weight) {
+    if (depth < sh->max_depth && m->kt > 0.0f && weight * m->kt >= sh->min_weight) {
         double ior = m->ior > 0.0f ? m->ior : 1.0;
         double eta = front ? 1.0 / ior : ior;
         double cosi = -v3_dot(d, ns);
         double k = 1.0 - eta * eta * (1.0 - cosi * cosi);
-        int32_t refr;
         if (k < 0.0) {
             /* Total internal reflection: the transmitted share follows
-               the reflected ray; reuse it when it was traced. */
+               the reflected ray; trace it if ks did not already. */
             if (refl == RTPI_CHILD_NONE) {
                 rtpi_v3 r = v3_norm(v3_madd(d, ns, -2.0 * v3_dot(d, ns)));
                 w->n.reflected_rays++;
-                refr = spawn(w, sf.p, ng, r, depth + 1, weight * m->kt);
-            } else {
-                refr = refl;
+                refl = spawn(w, sf.p, ng, r, depth + 1, weight * m->kt);
+                link |= child_flags(refl, RTPI_L_REFL, RTPI_L_REFL_MISS);
             }
+            link |= RTPI_L_TIR;
         } else {
             rtpi_v3 t = v3_norm(v3_add(v3_mul(d, eta),
                                        v3_mul(ns, eta * cosi - sqrt(k))));
+            int32_t refr;
             w->n.refracted_rays++;
             refr = spawn(w, sf.p, ng, t, depth + 1, weight * m->kt);
+            link |= child_flags(refr, RTPI_L_REFR, RTPI_L_REFR_MISS);
+            if (refr >= 0)
+                link |= (uint32_t)(refr - idx) << RTPI_L_SHIFT;
         }
-        w->nodes[idx].refr = refr;
+    }
+    {
+        rtpi_cnode *nd = &w->nodes[w->sample_base + (size_t)idx];
+        nd->p[0] = (float)sf.p.x;
+        nd->p[1] = (float)sf.p.y;
+        nd->p[2] = (float)sf.p.z;
+        nd->prim = hit.prim;
+        nd->vis = vis;
+        nd->link = link;
     }
     return idx;
 }
@@ -228,10 +252,10 @@ static void trace_sample(worker *w, int x, int y, float *rgb)
     const camera *c = &w->sh->cam;
     rtpi_ray ray;
     rtpi_v3 d;
-    rtpi_tree tree;
     double len, col[3];
     double sx = ((double)x - 0.5 * (c->nx - 1)) * c->step;
     double sy = (0.5 * (c->ny - 1) - (double)y) * c->step;
+    size_t words = w->sh->shade.vis_words;
     d = v3_add(c->dir, v3_add(v3_mul(c->right, sx), v3_mul(c->up, sy)));
     len = v3_len(d);
     ray.o = c->from;
@@ -240,98 +264,173 @@ static void trace_sample(worker *w, int x, int y, float *rgb)
        it, so the same plane is at hither * |d| along the unit ray. */
     ray.tmin = c->hither * len;
     ray.tmax = HUGE_VAL;
-    w->nn = 0;
+    w->sample_base = w->nn;
     w->n.eye_rays++;
-    tree.root = trace_ray(w, &ray, 1, 1.0);
-    if (tree.root >= 0)
+    if (trace_ray(w, &ray, 1, 1.0) >= 0)
         w->n.eye_hits++;
-    tree.nodes = w->nodes;
-    tree.vis = w->vis;
-    rtpi_shade_tree(w->sh->s, &tree, col);
+    w->counts[x] = (uint32_t)(w->nn - w->sample_base);
+    /* The sample's colour is the evaluation of the tree just recorded. */
+    rtpi_shade_sample(&w->sh->shade, w->nodes + w->sample_base,
+                      w->nn - w->sample_base,
+                      words ? w->vis + w->sample_base * words : NULL,
+                      c->from, col);
     rgb[0] = (float)col[0];
     rgb[1] = (float)col[1];
     rgb[2] = (float)col[2];
+    if (!w->sh->rows)
+        w->nn = 0; /* not recording: only the current sample is kept */
 }
 
-static void lock(shared *sh)
+static int trace_row(void *ctx, int y)
 {
-#ifdef RTP_HAVE_THREADS
-    pthread_mutex_lock(&sh->lock);
-#else
-    (void)sh;
-#endif
-}
-static void unlock(shared *sh)
-{
-#ifdef RTP_HAVE_THREADS
-    pthread_mutex_unlock(&sh->lock);
-#else
-    (void)sh;
-#endif
-}
-
-static void work(worker *w, int is_main)
-{
+    worker *w = (worker *)ctx;
     shared *sh = w->sh;
-    for (;;) {
-        int y, x, done;
-        lock(sh);
-        y = sh->next_row++;
-        unlock(sh);
-        if (y >= sh->cam.ny || w->status != RTP_OK)
-            break;
-        for (x = 0; x < sh->cam.nx; x++)
-            trace_sample(w, x, y, sh->out + 3 * ((size_t)y * sh->cam.nx + x));
-        lock(sh);
-        done = ++sh->rows_done;
-        unlock(sh);
-        if (is_main && sh->opt->progress)
-            sh->opt->progress(sh->opt->progress_user, (double)done / sh->cam.ny);
+    int x;
+    if (w->status != RTP_OK)
+        return 1;
+    w->nn = 0;
+    for (x = 0; x < sh->cam.nx; x++)
+        trace_sample(w, x, y, sh->out + 3 * ((size_t)y * sh->cam.nx + x));
+    if (w->status != RTP_OK)
+        return 1;
+    if (sh->rows) {
+        /* Keep the row's trees at their exact size. */
+        row_rec *r = &sh->rows[y];
+        size_t words = sh->shade.vis_words;
+        r->nnodes = w->nn;
+        r->nodes = (rtpi_cnode *)rtpi_malloc_array(&sh->s->alloc, w->nn, sizeof *r->nodes);
+        r->counts = (uint32_t *)rtpi_malloc_array(&sh->s->alloc, (size_t)sh->cam.nx,
+                                                  sizeof *r->counts);
+        r->vis = words ? (uint32_t *)rtpi_malloc_array(&sh->s->alloc, w->nn * words,
+                                                       sizeof *r->vis)
+                       : NULL;
+        if (!r->nodes || !r->counts || (words && !r->vis)) {
+            w->status = RTP_ERR_NOMEM;
+            return 1;
+        }
+        memcpy(r->nodes, w->nodes, w->nn * sizeof *r->nodes);
+        memcpy(r->counts, w->counts, (size_t)sh->cam.nx * sizeof *r->counts);
+        if (words)
+            memcpy(r->vis, w->vis, w->nn * words * sizeof *r->vis);
     }
+    return 0;
 }
 
-#ifdef RTP_HAVE_THREADS
-static void *thread_main(void *arg)
+void rtpi_resolve_samples(const float *samples, int spd, rtp_image *img)
 {
-    work((worker *)arg, 0);
-    return NULL;
+    int w = img->width, h = img->height, x, y, c;
+    if (!spd) {
+        memcpy(img->pixels, samples, sizeof(float) * 3 * (size_t)w * h);
+        return;
+    }
+    for (y = 0; y < h; y++)
+        for (x = 0; x < w; x++)
+            for (c = 0; c < 3; c++) {
+                size_t a = 3 * ((size_t)y * (w + 1) + x) + c;
+                size_t b = a + 3 * (size_t)(w + 1);
+                img->pixels[3 * ((size_t)y * w + x) + c] =
+                    0.25f * (samples[a] + samples[a + 3] + samples[b] + samples[b + 3]);
+            }
 }
-#endif
 
-rtp_status rtp_trace(const rtp_scene *s, const rtp_trace_options *opt_in,
-                     rtp_image **out, rtp_trace_stats *stats, rtp_error *err)
+/* Moves the rows' trees into one tree object. */
+static rtp_status gather_tree(const shared *sh, const rtp_trace_options *opt,
+                              int w, int h, rtp_tree **out, rtp_error *err)
+{
+    const rtp_scene *s = sh->s;
+    const rtp_allocator *a = &s->alloc;
+    rtp_tree *t;
+    size_t total = 0, words = sh->shade.vis_words, k = 0, at = 0;
+    int y, x;
+    for (y = 0; y < sh->cam.ny; y++)
+        total += sh->rows[y].nnodes;
+    t = (rtp_tree *)rtpi_calloc_array(a, 1, sizeof *t);
+    if (!t)
+        return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+    t->alloc = *a;
+    t->width = w;
+    t->height = h;
+    t->nx = sh->cam.nx;
+    t->ny = sh->cam.ny;
+    t->spd = sh->spd;
+    t->max_depth = sh->max_depth;
+    t->min_weight = sh->min_weight;
+    t->vis_words = words;
+    t->nnodes = total;
+    (void)opt;
+    if (rtpi_scene_clone(s, &t->scene) != RTP_OK ||
+        !(t->mats0 = (rtpi_material *)rtpi_malloc_array(a, s->nmats ? s->nmats : 1,
+                                                         sizeof *t->mats0)) ||
+        !(t->lights0 = (rtpi_light *)rtpi_malloc_array(a, s->nlights ? s->nlights : 1,
+                                                        sizeof *t->lights0)) ||
+        !(t->nodes = (rtpi_cnode *)rtpi_malloc_array(a, total ? total : 1, sizeof *t->nodes)) ||
+        !(t->start = (uint64_t *)rtpi_malloc_array(a, (size_t)t->nx * t->ny + 1,
+                                                   sizeof *t->start)) ||
+        (words && !(t->vis_ext = (uint32_t *)rtpi_malloc_array(a, total * words,
+                                                                sizeof *t->vis_ext)))) {
+        rtp_tree_destroy(t);
+        return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory keeping ray trees");
+    }
+    if (s->nmats)
+        memcpy(t->mats0, s->mats, s->nmats * sizeof *t->mats0);
+    if (s->nlights)
+        memcpy(t->lights0, s->lights, s->nlights * sizeof *t->lights0);
+    for (k = 0; k < s->nmats; k++)
+        t->mats0[k].name = NULL;
+    for (k = 0; k < s->nlights; k++)
+        t->lights0[k].name = NULL;
+    k = 0;
+    for (y = 0; y < sh->cam.ny; y++) {
+        const row_rec *r = &sh->rows[y];
+        if (r->nnodes)
+            memcpy(t->nodes + at, r->nodes, r->nnodes * sizeof *t->nodes);
+        if (words && r->nnodes)
+            memcpy(t->vis_ext + at * words, r->vis, r->nnodes * words * sizeof *r->vis);
+        for (x = 0; x < sh->cam.nx; x++) {
+            t->start[k++] = at;
+            at += r->counts[x];
+        }
+    }
+    t->start[k] = at;
+    *out = t;
+    return RTP_OK;
+}
+
+static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in,
+                             rtp_tree **tree_out, rtp_image **out,
+                             rtp_trace_stats *stats, rtp_error *err)
 {
     rtp_trace_options opt;
     shared sh;
     worker *ws = NULL;
+    void *ctx[RTPI_MAX_THREADS];
     rtpi_kdtree *kd = NULL;
     rtp_image *img = NULL;
-    float *corners = NULL;
+    float *samples = NULL;
     rtp_status st;
-    int w, h, nthreads, i, started = 1;
+    int w, h, nthreads, i;
     double t0, t1, t2;
     rtpi_kd_stats ks;
 
     if (!s || !out)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_trace: NULL argument");
     *out = NULL;
+    if (tree_out)
+        *tree_out = NULL;
     memset(&opt, 0, sizeof opt);
     if (opt_in)
         opt = *opt_in;
-    w = opt.width > 0 ? opt.width : s->width;
-    h = opt.height > 0 ? opt.height : s->height;
-    if (opt.spd)
-        w = h = 512;
     if (opt.max_depth < 0 || opt.width < 0 || opt.height < 0 || opt.threads < 0 ||
         !(opt.min_weight >= 0.0))
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
                           "rtp_trace: negative option value");
+    w = opt.width > 0 ? opt.width : s->width;
+    h = opt.height > 0 ? opt.height : s->height;
+    if (opt.spd)
+        w = h = 512;
     nthreads = opt.threads > 1 ? opt.threads : 1;
-#ifndef RTP_HAVE_THREADS
-    nthreads = 1;
-#endif
-    if (nthreads > 256)
-        nthreads = 256;
+    if (nthreads > RTPI_MAX_THREADS)
+        nthreads = RTPI_MAX_THREADS;
     st = rtp_image_create(w, h, &s->alloc, &img, err);
     if (st != RTP_OK)
         return st;
@@ -341,76 +440,52 @@ rtp_status rtp_trace(const rtp_scene *s, const rtp_trace_options *opt_in,
     sh.spd = opt.spd;
     sh.max_depth = opt.max_depth > 0 ? opt.max_depth : 5;
     sh.min_weight = opt.spd ? 0.0 : opt.min_weight;
-    sh.opt = &opt;
-    if (opt.spd) {
-        /* SPD: rays through the (w+1)x(h+1) pixel corners, averaged. */
-        corners = (float *)rtpi_malloc_array(&s->alloc, (size_t)(w + 1) * (h + 1),
-                                             3 * sizeof(float));
-        if (!corners) {
-            rtp_image_destroy(img);
-            return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+    sh.shade.s = s;
+    sh.shade.one_sided = opt.spd;
+    sh.shade.vis_words = s->nlights > 32 ? (s->nlights + 31) / 32 : 0;
+    /* SPD: rays through the (w+1)x(h+1) pixel corners, averaged. */
+    camera_init(&sh.cam, s, opt.spd ? w + 1 : w, opt.spd ? h + 1 : h);
+    samples = (float *)rtpi_malloc_array(&s->alloc, (size_t)sh.cam.nx * sh.cam.ny,
+                                         3 * sizeof(float));
+    ws = (worker *)rtpi_calloc_array(&s->alloc, (size_t)nthreads, sizeof *ws);
+    if (tree_out)
+        sh.rows = (row_rec *)rtpi_calloc_array(&s->alloc, (size_t)sh.cam.ny, sizeof *sh.rows);
+    if (!samples || !ws || (tree_out && !sh.rows)) {
+        st = rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+        goto done;
+    }
+    sh.out = samples;
+    for (i = 0; i < nthreads; i++) {
+        ws[i].sh = &sh;
+        ws[i].status = RTP_OK;
+        ws[i].counts = (uint32_t *)rtpi_malloc_array(&s->alloc, (size_t)sh.cam.nx,
+                                                     sizeof *ws[i].counts);
+        if (!ws[i].counts) {
+            st = rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+            goto done;
         }
-        camera_init(&sh.cam, s, w + 1, h + 1);
-        sh.out = corners;
-    } else {
-        camera_init(&sh.cam, s, w, h);
-        sh.out = img->pixels;
+        ctx[i] = &ws[i];
     }
 
     t0 = now_seconds();
     st = rtpi_kd_build(s, &s->alloc, &kd, err);
-    if (st != RTP_OK) {
-        rtpi_free(&s->alloc, corners);
-        rtp_image_destroy(img);
-        return st;
-    }
+    if (st != RTP_OK)
+        goto done;
     sh.kd = kd;
     t1 = now_seconds();
-
-    ws = (worker *)rtpi_calloc_array(&s->alloc, (size_t)nthreads, sizeof *ws);
-    if (!ws) {
-        st = rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
-        goto done;
-    }
-    for (i = 0; i < nthreads; i++) {
-        ws[i].sh = &sh;
-        ws[i].status = RTP_OK;
-    }
-#ifdef RTP_HAVE_THREADS
-    if (nthreads > 1) {
-        pthread_t tid[256];
-        pthread_mutex_init(&sh.lock, NULL);
-        for (i = 1; i < nthreads; i++) {
-            if (pthread_create(&tid[i], NULL, thread_main, &ws[i]) != 0)
-                break;
-        }
-        started = i;
-        work(&ws[0], 1);
-        for (i = 1; i < started; i++)
-            pthread_join(tid[i], NULL);
-        pthread_mutex_destroy(&sh.lock);
-    } else {
-        work(&ws[0], 1);
-    }
-#else
-    work(&ws[0], 1);
-#endif
-    (void)started;
+    rtpi_parallel_rows(sh.cam.ny, nthreads, ctx, trace_row, opt.progress,
+                       opt.progress_user);
     t2 = now_seconds();
-    st = RTP_OK;
     for (i = 0; i < nthreads; i++)
-        if (ws[i].status != RTP_OK)
+        if (ws[i].status != RTP_OK) {
             st = rtpi_error(err, ws[i].status, NULL, 0, 0, "out of memory while tracing");
-    if (st == RTP_OK && corners) {
-        int x, y, c;
-        for (y = 0; y < h; y++)
-            for (x = 0; x < w; x++)
-                for (c = 0; c < 3; c++) {
-                    size_t a = 3 * ((size_t)y * (w + 1) + x) + c;
-                    size_t b = a + 3 * (size_t)(w + 1);
-                    img->pixels[3 * ((size_t)y * w + x) + c] =
-                        0.25f * (corners[a] + corners[a + 3] + corners[b] + corners[b + 3]);
-                }
+            goto done;
+        }
+    rtpi_resolve_samples(samples, opt.spd, img);
+    if (tree_out) {
+        st = gather_tree(&sh, &opt, w, h, tree_out, err);
+        if (st != RTP_OK)
+            goto done;
     }
     if (stats) {
         memset(stats, 0, sizeof *stats);
@@ -436,15 +511,39 @@ done:
         for (i = 0; i < nthreads; i++) {
             rtpi_free(&s->alloc, ws[i].nodes);
             rtpi_free(&s->alloc, ws[i].vis);
+            rtpi_free(&s->alloc, ws[i].counts);
         }
         rtpi_free(&s->alloc, ws);
     }
+    if (sh.rows) {
+        for (i = 0; i < sh.cam.ny; i++) {
+            rtpi_free(&s->alloc, sh.rows[i].nodes);
+            rtpi_free(&s->alloc, sh.rows[i].counts);
+            rtpi_free(&s->alloc, sh.rows[i].vis);
+        }
+        rtpi_free(&s->alloc, sh.rows);
+    }
     rtpi_kd_destroy(kd);
-    rtpi_free(&s->alloc, corners);
+    rtpi_free(&s->alloc, samples);
     if (st != RTP_OK) {
         rtp_image_destroy(img);
         return st;
     }
     *out = img;
     return RTP_OK;
+}
+
+rtp_status rtp_trace(const rtp_scene *s, const rtp_trace_options *opt,
+                     rtp_image **out, rtp_trace_stats *stats, rtp_error *err)
+{
+    return trace_impl(s, opt, NULL, out, stats, err);
+}
+
+rtp_status rtp_record(const rtp_scene *s, const rtp_trace_options *opt,
+                      rtp_tree **tree, rtp_image **image,
+                      rtp_trace_stats *stats, rtp_error *err)
+{
+    if (!tree)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_record: NULL tree");
+    return trace_impl(s, opt, tree, image, stats, err);
 }

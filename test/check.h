@@ -52,6 +52,12 @@ static int check_passed, check_failed, check_skipped;
         }                                                                   \
     } while (0)
 
+#if defined(__GNUC__)
+#define CHECK_UNUSED __attribute__((unused))
+#else
+#define CHECK_UNUSED
+#endif
+
 static int check_report(void)
 {
     printf("%d passed, %d failed, %d skipped\n", check_passed, check_failed,
@@ -60,7 +66,7 @@ static int check_report(void)
 }
 
 /* The folder ../shared/scenes when present, else NULL (tests skip). */
-static const char *check_shared_scenes(void)
+CHECK_UNUSED static const char *check_shared_scenes(void)
 {
     const char *env = getenv("RTP_SHARED_SCENES");
     static const char *cands[] = {"../shared/scenes", "../../shared/scenes"};

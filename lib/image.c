@@ -1,0 +1,1213 @@
+/*
+ * image.c — images in memory and on disk: PNG (libpng, 8-bit), PPM (P6
+ * out; P6 and P3 in) and PFM (float, exact).
+ *
+ * Readers sniff the format from the first bytes, never from the name, and
+ * treat every header field and length as hostile: a truncated, corrupt or
+ * foreign file gives RTP_ERR_FORMAT naming the file and what is wrong.
+ * Pixel memory grows with the data actually read, so a header that claims
+ * a huge image costs nothing until its pixels arrive.
+ *
+ * Writers go to a temporary file beside the target and rename it over the
+ * target, so a failed write leaves neither a half-written image nor a
+ * stray temporary behind.
+ */
+#include "internal.h"
+
+#include <errno.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <time.h>
+
+#if defined(__unix__) || defined(__APPLE__)
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+#define RTPI_POSIX_FILES 1
+#endif
+
+#if defined(RTP_HAVE_PNG)
+#if RTP_HAVE_PNG
+#define RTPI_PNG 1
+#include <png.h>
+#include <setjmp.h>
+#endif
+#endif
+
+/* Limits: 2^20 pixels a side and 2^27 pixels (1.5 GiB of floats) in all,
+   far beyond any image a ray tracer makes, small enough that w*h*3 floats
+   fit a size_t everywhere and a fuzzer's memory cap is not hit. */
+#define RTPI_IMAGE_MAX_DIM (1L << 20)
+#define RTPI_IMAGE_MAX_PIXELS (1UL << 27)
+
+typedef char rtpi_float_is_32_bits[sizeof(float) == 4 ? 1 : -1];
+
+int rtpi_image_size_ok(int width, int height)
+{
+    if (width <= 0 || height <= 0 || width > RTPI_IMAGE_MAX_DIM ||
+        height > RTPI_IMAGE_MAX_DIM)
+        return 0;
+    if ((unsigned long)width * (unsigned long)height > RTPI_IMAGE_MAX_PIXELS)
+        return 0;
+    /* Holds by the limits above; kept for 16-bit size_t paranoia. */
+    return (size_t)width * (size_t)height <= (size_t)-1 / (3 * sizeof(float));
+}
+
+static size_t row_floats(const rtp_image *img) { return (size_t)img->width * 3; }
+
+/* An image struct without pixels, for readers that grow them. */
+static rtp_status image_shell(int width, int height, const rtp_allocator *alloc,
+                              rtp_image **out)
+{
+    rtp_allocator a;
+    rtp_image *img;
+    rtpi_allocator_init(&a, alloc);
+    img = (rtp_image *)rtpi_malloc(&a, sizeof *img);
+    if (!img)
+        return RTP_ERR_NOMEM;
+    img->width = width;
+    img->height = height;
+    img->pixels = NULL;
+    img->alloc = a;
+    *out = img;
+    return RTP_OK;
+}
+
+rtp_status rtp_image_create(int width, int height, const rtp_allocator *alloc,
+                            rtp_image **out, rtp_error *err)
+{
+    rtp_image *img;
+    if (!out)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                          "rtp_image_create: out is NULL");
+    *out = NULL;
+    if (width <= 0 || height <= 0)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                          "image size %dx%d: both sides must be positive",
+                          width, height);
+    if (!rtpi_image_size_ok(width, height))
+        return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
+                          "image size %dx%d exceeds the limit (%ld a side, "
+                          "%lu pixels)", width, height, RTPI_IMAGE_MAX_DIM,
+                          RTPI_IMAGE_MAX_PIXELS);
+    if (image_shell(width, height, alloc, &img) != RTP_OK)
+        return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0,
+                          "out of memory for a %dx%d image", width, height);
+    img->pixels = (float *)rtpi_calloc_array(
+        &img->alloc, (size_t)width * (size_t)height * 3, sizeof(float));
+    if (!img->pixels) {
+        rtpi_free(&img->alloc, img);
+        return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0,
+                          "out of memory for a %dx%d image", width, height);
+    }
+    *out = img;
+    return RTP_OK;
+}
+
+void rtp_image_destroy(rtp_image *image)
+{
+    rtp_allocator a;
+    if (!image)
+        return;
+    a = image->alloc;
+    rtpi_free(&a, image->pixels);
+    rtpi_free(&a, image);
+}
+
+/* Makes img->pixels hold at least `rows` rows, doubling (up to the
+   image's height) so reading costs O(n) copies.  @return 0 or -1. */
+static int reserve_rows(rtp_image *img, int *cap_rows, int rows)
+{
+    size_t ncap;
+    float *np;
+    if (rows <= *cap_rows)
+        return 0;
+    if (*cap_rows == 0) {
+        /* Start near 1 MiB: small images are read in one allocation. */
+        ncap = ((size_t)1 << 20) / (row_floats(img) * sizeof(float));
+        if (ncap < 1)
+            ncap = 1;
+    } else {
+        ncap = (size_t)*cap_rows * 2;
+    }
+    if (ncap < (size_t)rows)
+        ncap = (size_t)rows;
+    if (ncap > (size_t)img->height)
+        ncap = (size_t)img->height;
+    np = (float *)rtpi_realloc(&img->alloc, img->pixels,
+                               ncap * row_floats(img) * sizeof(float));
+    if (!np)
+        return -1;
+    img->pixels = np;
+    *cap_rows = (int)ncap;
+    return 0;
+}
+
+static char ascii_lower(char c)
+{
+    return (c >= 'A' && c <= 'Z') ? (char)(c - 'A' + 'a') : c;
+}
+
+static int ext_is(const char *ext, const char *want)
+{
+    while (*ext && *want && ascii_lower(*ext) == *want) {
+        ext++;
+        want++;
+    }
+    return *ext == '\0' && *want == '\0';
+}
+
+rtp_image_format rtp_image_format_from_path(const char *path)
+{
+    const char *base, *dot = NULL, *p;
+    if (!path)
+        return RTP_IMAGE_AUTO;
+    base = path;
+    for (p = path; *p; p++)
+        if (*p == '/' || *p == '\\')
+            base = p + 1;
+    for (p = base; *p; p++)
+        if (*p == '.')
+            dot = p;
+    if (!dot || dot == base) /* no extension, or a dot file like ".png" */
+        return RTP_IMAGE_AUTO;
+    if (ext_is(dot + 1, "png"))
+        return RTP_IMAGE_PNG;
+    if (ext_is(dot + 1, "ppm"))
+        return RTP_IMAGE_PPM;
+    if (ext_is(dot + 1, "pfm"))
+        return RTP_IMAGE_PFM;
+    return RTP_IMAGE_AUTO;
+}
+
+int rtp_png_supported(void)
+{
+#ifdef RTPI_PNG
+    return 1;
+#else
+    return 0;
+#endif
+}
+
+#ifndef RTPI_PNG
+static rtp_status no_png(rtp_error *err, const char *name)
+{
+    return rtpi_error(err, RTP_ERR_UNSUPPORTED, name, 0, 0,
+                      "PNG is not supported by this build of rtp (libpng "
+                      "was not found when it was built); use .ppm or .pfm");
+}
+#endif
+
+/* 8-bit quantisation shared by PNG and PPM: clamp to [0,1], round half up;
+   NaN and infinities become 0 so that a bad pixel stands out as black. */
+static unsigned char quantize8(float x)
+{
+    if (isnan(x) || isinf(x) || !(x > 0.0f))
+        return 0;
+    if (x >= 1.0f)
+        return 255;
+    return (unsigned char)((double)x * 255.0 + 0.5);
+}
+
+/* ===================================================================
+ * Writing
+ * =================================================================== */
+
+static rtp_status write_failed(rtp_error *err, const char *name, int e)
+{
+    return rtpi_error(err, RTP_ERR_IO, name, 0, 0, "write failed: %s",
+                      e ? strerror(e) : "stream error");
+}
+
+static rtp_status write_pfm(const rtp_image *img, FILE *f,
+                            const rtp_allocator *a, const char *name,
+                            rtp_error *err)
+{
+    size_t n = row_floats(img), i;
+    unsigned char *buf;
+    int y;
+    buf = (unsigned char *)rtpi_malloc_array(a, n, 4);
+    if (!buf)
+        return rtpi_error(err, RTP_ERR_NOMEM, name, 0, 0,
+                          "out of memory writing PFM");
+    errno = 0;
+    if (fprintf(f, "PF\n%d %d\n-1.0\n", img->width, img->height) < 0) {
+        rtpi_free(a, buf);
+        return write_failed(err, name, errno);
+    }
+    /* PFM stores the bottom row first. */
+    for (y = img->height - 1; y >= 0; y--) {
+        const float *row = img->pixels + (size_t)y * n;
+        for (i = 0; i < n; i++) {
+            uint32_t u;
+            memcpy(&u, &row[i], 4);
+            buf[4 * i + 0] = (unsigned char)(u & 0xff);
+            buf[4 * i + 1] = (unsigned char)((u >> 8) & 0xff);
+            buf[4 * i + 2] = (unsigned char)((u >> 16) & 0xff);
+            buf[4 * i + 3] = (unsigned char)(u >> 24);
+        }
+        if (fwrite(buf, 4, n, f) != n) {
+            int e = errno;
+            rtpi_free(a, buf);
+            return write_failed(err, name, e);
+        }
+    }
+    rtpi_free(a, buf);
+    return RTP_OK;
+}
+
+static rtp_status write_ppm(const rtp_image *img, FILE *f,
+                            const rtp_allocator *a, const char *name,
+                            rtp_error *err)
+{
+    size_t n = row_floats(img), i;
+    unsigned char *buf;
+    int y;
+    buf = (unsigned char *)rtpi_malloc(a, n);
+    if (!buf)
+        return rtpi_error(err, RTP_ERR_NOMEM, name, 0, 0,
+                          "out of memory writing PPM");
+    errno = 0;
+    if (fprintf(f, "P6\n%d %d\n255\n", img->width, img->height) < 0) {
+        rtpi_free(a, buf);
+        return write_failed(err, name, errno);
+    }
+    for (y = 0; y < img->height; y++) {
+        const float *row = img->pixels + (size_t)y * n;
+        for (i = 0; i < n; i++)
+            buf[i] = quantize8(row[i]);
+        if (fwrite(buf, 1, n, f) != n) {
+            int e = errno;
+            rtpi_free(a, buf);
+            return write_failed(err, name, e);
+        }
+    }
+    rtpi_free(a, buf);
+    return RTP_OK;
+}
+
+#ifdef RTPI_PNG
+/* What libpng's callbacks share with us.  libpng reports errors by
+   longjmp; every resource lives in these structs (in the caller's frame,
+   not the frame that calls setjmp), so nothing a longjmp skips over is
+   lost or left indeterminate. */
+typedef struct png_io {
+    rtp_allocator alloc;
+    FILE *f;
+    char msg[160];
+    int nomem;    /* an allocation failed */
+    int io_errno; /* the stream failed (errno, or -1 if none) */
+    int eof;      /* the stream ended early */
+} png_io;
+
+static void png_io_init(png_io *io, const rtp_allocator *a, FILE *f)
+{
+    memset(io, 0, sizeof *io);
+    io->alloc = *a;
+    io->f = f;
+}
+
+static void png_err_fn(png_structp png, png_const_charp msg)
+{
+    png_io *io = (png_io *)png_get_error_ptr(png);
+    if (io) {
+        strncpy(io->msg, msg ? msg : "libpng error", sizeof io->msg - 1);
+        io->msg[sizeof io->msg - 1] = '\0';
+    }
+    png_longjmp(png, 1);
+}
+
+static void png_warn_fn(png_structp png, png_const_charp msg)
+{
+    (void)png; /* the library never prints */
+    (void)msg;
+}
+
+static png_voidp png_malloc_fn(png_structp png, png_alloc_size_t size)
+{
+    png_io *io = (png_io *)png_get_mem_ptr(png);
+    void *p = rtpi_malloc(&io->alloc, size);
+    if (!p)
+        io->nomem = 1;
+    return p;
+}
+
+static void png_free_fn(png_structp png, png_voidp p)
+{
+    png_io *io = (png_io *)png_get_mem_ptr(png);
+    rtpi_free(&io->alloc, p);
+}
+
+static void png_read_fn(png_structp png, png_bytep data, png_size_t len)
+{
+    png_io *io = (png_io *)png_get_io_ptr(png);
+    if (fread(data, 1, len, io->f) != len) {
+        if (ferror(io->f)) {
+            io->io_errno = errno ? errno : -1;
+            png_error(png, "read error");
+        }
+        io->eof = 1;
+        png_error(png, "file ends early");
+    }
+}
+
+static void png_write_fn(png_structp png, png_bytep data, png_size_t len)
+{
+    png_io *io = (png_io *)png_get_io_ptr(png);
+    errno = 0;
+    if (fwrite(data, 1, len, io->f) != len) {
+        io->io_errno = errno ? errno : -1;
+        png_error(png, "write error");
+    }
+}
+
+static void png_flush_fn(png_structp png)
+{
+    png_io *io = (png_io *)png_get_io_ptr(png);
+    errno = 0;
+    if (fflush(io->f) != 0) {
+        io->io_errno = errno ? errno : -1;
+        png_error(png, "write error");
+    }
+}
+
+typedef struct png_wctx {
+    png_io io;
+    png_structp png;
+    png_infop info;
+    const rtp_image *img;
+    unsigned char *row;
+} png_wctx;
+
+/* The only function that calls setjmp for writing.  Its locals are set
+   after setjmp and not used once it returns through longjmp. */
+static int png_write_body(png_wctx *c)
+{
+    int y;
+    size_t i, n;
+    if (setjmp(png_jmpbuf(c->png)))
+        return -1;
+    png_set_write_fn(c->png, &c->io, png_write_fn, png_flush_fn);
+    png_set_IHDR(c->png, c->info, (png_uint_32)c->img->width,
+                 (png_uint_32)c->img->height, 8, PNG_COLOR_TYPE_RGB,
+                 PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_DEFAULT,
+                 PNG_FILTER_TYPE_DEFAULT);
+    png_write_info(c->png, c->info);
+    n = row_floats(c->img);
+    for (y = 0; y < c->img->height; y++) {
+        const float *src = c->img->pixels + (size_t)y * n;
+        for (i = 0; i < n; i++)
+            c->row[i] = quantize8(src[i]);
+        png_write_row(c->png, c->row);
+    }
+    png_write_end(c->png, c->info);
+    return 0;
+}
+
+static rtp_status write_png(const rtp_image *img, FILE *f,
+                            const rtp_allocator *a, const char *name,
+                            rtp_error *err)
+{
+    png_wctx c;
+    rtp_status st = RTP_OK;
+    memset(&c, 0, sizeof c);
+    png_io_init(&c.io, a, f);
+    c.img = img;
+    c.row = (unsigned char *)rtpi_malloc(a, row_floats(img));
+#ifdef PNG_USER_MEM_SUPPORTED
+    c.png = png_create_write_struct_2(PNG_LIBPNG_VER_STRING, &c.io,
+                                      png_err_fn, png_warn_fn, &c.io,
+                                      png_malloc_fn, png_free_fn);
+#else
+    c.png = png_create_write_struct(PNG_LIBPNG_VER_STRING, &c.io,
+                                    png_err_fn, png_warn_fn);
+#endif
+    if (c.png)
+        c.info = png_create_info_struct(c.png);
+    if (!c.row || !c.png || !c.info) {
+        st = rtpi_error(err, RTP_ERR_NOMEM, name, 0, 0,
+                        "out of memory writing PNG");
+    } else if (png_write_body(&c) != 0) {
+        if (c.io.nomem)
+            st = rtpi_error(err, RTP_ERR_NOMEM, name, 0, 0,
+                            "out of memory writing PNG");
+        else if (c.io.io_errno)
+            st = write_failed(err, name,
+                              c.io.io_errno > 0 ? c.io.io_errno : 0);
+        else
+            st = rtpi_error(err, RTP_ERR_IO, name, 0, 0,
+                            "libpng cannot write the image: %s", c.io.msg);
+    }
+    if (c.png)
+        png_destroy_write_struct(&c.png, c.info ? &c.info : NULL);
+    rtpi_free(a, c.row);
+    return st;
+}
+#endif /* RTPI_PNG */
+
+/* Writes to f; `name` (may be NULL) is for messages. */
+static rtp_status write_to(const rtp_image *img, FILE *f,
+                           rtp_image_format format, const char *name,
+                           rtp_error *err)
+{
+    rtp_allocator a;
+    rtp_status st;
+    rtpi_allocator_init(&a, &img->alloc);
+    switch (format) {
+    case RTP_IMAGE_PFM:
+        st = write_pfm(img, f, &a, name, err);
+        break;
+    case RTP_IMAGE_PPM:
+        st = write_ppm(img, f, &a, name, err);
+        break;
+    case RTP_IMAGE_PNG:
+#ifdef RTPI_PNG
+        st = write_png(img, f, &a, name, err);
+        break;
+#else
+        return no_png(err, name);
+#endif
+    case RTP_IMAGE_AUTO:
+    default:
+        return rtpi_error(err, RTP_ERR_ARGUMENT, name, 0, 0,
+                          "unknown image format %d", (int)format);
+    }
+    if (st != RTP_OK)
+        return st;
+    errno = 0;
+    if (fflush(f) != 0 || ferror(f))
+        return write_failed(err, name, errno);
+    return RTP_OK;
+}
+
+static rtp_status check_image(const rtp_image *img, const char *name,
+                              rtp_error *err)
+{
+    if (!img || !img->pixels)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, name, 0, 0,
+                          "no image to write");
+    if (!rtpi_image_size_ok(img->width, img->height))
+        return rtpi_error(err, RTP_ERR_ARGUMENT, name, 0, 0,
+                          "invalid image size %dx%d", img->width,
+                          img->height);
+    return RTP_OK;
+}
+
+rtp_status rtp_image_write_stream(const rtp_image *image, FILE *stream,
+                                  rtp_image_format format, rtp_error *err)
+{
+    rtp_status st = check_image(image, NULL, err);
+    if (st != RTP_OK)
+        return st;
+    if (!stream)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                          "no stream to write to");
+    if (format == RTP_IMAGE_AUTO)
+        format = RTP_IMAGE_PFM;
+    return write_to(image, stream, format, NULL, err);
+}
+
+/* Opens a new, not yet existing file `tmp` beside `path` (tmp has room
+   for strlen(path) + 32).  Permissions are those of the file it will
+   replace, else the usual 0666 minus umask.
+   @return the stream, or NULL with errno set. */
+static FILE *open_temp(const char *path, char *tmp, size_t tmpsize)
+{
+#ifdef RTPI_POSIX_FILES
+    struct stat sb;
+    int keep = stat(path, &sb) == 0 && S_ISREG(sb.st_mode);
+#endif
+    unsigned long seed = (unsigned long)time(NULL) ^
+                         ((unsigned long)clock() << 12) ^
+                         (unsigned long)(uintptr_t)(void *)tmp;
+    int attempt;
+#ifdef RTPI_POSIX_FILES
+    seed ^= (unsigned long)getpid() << 16;
+#endif
+    for (attempt = 0; attempt < 64; attempt++) {
+        FILE *f;
+        /* A 32-bit LCG step: names differ between attempts and between
+           processes; O_EXCL settles any collision. */
+        seed = (seed * 1103515245UL + 12345UL) & 0xffffffffUL;
+        snprintf(tmp, tmpsize, "%s.%08lx.tmp", path, seed);
+#ifdef RTPI_POSIX_FILES
+        {
+            int fd = open(tmp, O_WRONLY | O_CREAT | O_EXCL, 0666);
+            if (fd < 0) {
+                if (errno == EEXIST)
+                    continue;
+                return NULL;
+            }
+            if (keep)
+                (void)fchmod(fd, sb.st_mode & 07777); /* best effort */
+            f = fdopen(fd, "wb");
+            if (!f) {
+                int e = errno;
+                close(fd);
+                remove(tmp);
+                errno = e;
+            }
+            return f;
+        }
+#else
+        f = fopen(tmp, "rb");
+        if (f) {
+            fclose(f);
+            continue;
+        }
+        return fopen(tmp, "wb");
+#endif
+    }
+    errno = EEXIST;
+    return NULL;
+}
+
+/* Whether path names something other than a regular file (a device, a
+   FIFO): those are written in place, never replaced by a rename. */
+static int is_special_file(const char *path)
+{
+#ifdef RTPI_POSIX_FILES
+    struct stat sb;
+    return stat(path, &sb) == 0 && !S_ISREG(sb.st_mode);
+#else
+    (void)path;
+    return 0;
+#endif
+}
+
+rtp_status rtp_image_write(const rtp_image *image, const char *path,
+                           rtp_image_format format, rtp_error *err)
+{
+    rtp_allocator a;
+    rtp_status st;
+    char *tmp;
+    size_t tmpsize;
+    FILE *f;
+    int e;
+    if (!path || !*path)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                          "no file name to write the image to");
+    st = check_image(image, path, err);
+    if (st != RTP_OK)
+        return st;
+    if (strcmp(path, "-") == 0) {
+        if (format == RTP_IMAGE_AUTO)
+            format = RTP_IMAGE_PFM;
+        return write_to(image, stdout, format, "<stdout>", err);
+    }
+    if (format == RTP_IMAGE_AUTO) {
+        format = rtp_image_format_from_path(path);
+        if (format == RTP_IMAGE_AUTO)
+            return rtpi_error(err, RTP_ERR_ARGUMENT, path, 0, 0,
+                              "cannot tell the image format from the "
+                              "name: use .png, .ppm or .pfm");
+    }
+    if (format != RTP_IMAGE_PNG && format != RTP_IMAGE_PPM &&
+        format != RTP_IMAGE_PFM)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, path, 0, 0,
+                          "unknown image format %d", (int)format);
+#ifndef RTPI_PNG
+    if (format == RTP_IMAGE_PNG)
+        return no_png(err, path);
+#endif
+    if (is_special_file(path)) {
+        f = fopen(path, "wb");
+        if (!f)
+            return rtpi_error(err, RTP_ERR_IO, path, 0, 0,
+                              "cannot open for writing: %s", strerror(errno));
+        st = write_to(image, f, format, path, err);
+        errno = 0;
+        if (fclose(f) != 0 && st == RTP_OK)
+            st = write_failed(err, path, errno);
+        return st;
+    }
+
+    rtpi_allocator_init(&a, &image->alloc);
+    tmpsize = strlen(path) + 32;
+    tmp = (char *)rtpi_malloc(&a, tmpsize);
+    if (!tmp)
+        return rtpi_error(err, RTP_ERR_NOMEM, path, 0, 0, "out of memory");
+    f = open_temp(path, tmp, tmpsize);
+    if (!f) {
+        e = errno;
+        rtpi_free(&a, tmp);
+        return rtpi_error(err, RTP_ERR_IO, path, 0, 0,
+                          "cannot create a temporary file beside it: %s",
+                          strerror(e));
+    }
+    st = write_to(image, f, format, path, err);
+    errno = 0;
+    if (fclose(f) != 0 && st == RTP_OK)
+        st = write_failed(err, path, errno);
+    if (st == RTP_OK && rename(tmp, path) != 0) {
+        e = errno;
+        st = rtpi_error(err, RTP_ERR_IO, path, 0, 0,
+                        "cannot rename the temporary file %s over it: %s",
+                        tmp, strerror(e));
+    }
+    if (st != RTP_OK)
+        remove(tmp);
+    rtpi_free(&a, tmp);
+    return st;
+}
+
+/* ===================================================================
+ * Reading
+ * =================================================================== */
+
+typedef struct reader {
+    FILE *f;
+    const char *name;
+    rtp_error *err;
+} reader;
+
+/* A format error in the file being read. */
+#define BAD(r, ...) rtpi_error((r)->err, RTP_ERR_FORMAT, (r)->name, 0, 0, \
+                               __VA_ARGS__)
+
+/* The stream stopped: an I/O error if it failed, else a truncated file. */
+static rtp_status ended(const reader *r, const char *what)
+{
+    if (ferror(r->f))
+        return rtpi_error(r->err, RTP_ERR_IO, r->name, 0, 0,
+                          "read error in the %s: %s", what,
+                          errno ? strerror(errno) : "stream error");
+    return BAD(r, "truncated: the file ends in the %s", what);
+}
+
+static int is_space(int c)
+{
+    return c == ' ' || c == '\t' || c == '\n' || c == '\r' || c == '\v' ||
+           c == '\f';
+}
+
+static int is_digit(int c) { return c >= '0' && c <= '9'; }
+
+/* Skips whitespace (and, if `comments`, '#' to end of line); @return the
+   first other character or EOF. */
+static int skip_space(FILE *f, int comments)
+{
+    int c;
+    for (;;) {
+        c = getc(f);
+        if (comments && c == '#') {
+            do
+                c = getc(f);
+            while (c != EOF && c != '\n' && c != '\r');
+            continue;
+        }
+        if (!is_space(c))
+            return c;
+    }
+}
+
+#define NUM_COMMENTS 1 /* '#' comments may come before the number */
+#define NUM_EOF_OK 2   /* the number may end the file (P3's last sample) */
+
+/* Reads a decimal number after optional whitespace.  It must end in one
+   whitespace character, which is consumed: netpbm and PFM headers end in
+   exactly one before the binary data.  Values above `max` give `over`
+   (RTP_ERR_LIMIT for sizes, RTP_ERR_FORMAT otherwise). */
+static rtp_status read_number(const reader *r, int flags, const char *what,
+                              long max, rtp_status over, long *out)
+{
+    int c = skip_space(r->f, flags & NUM_COMMENTS);
+    long v = 0;
+    int big = 0;
+    if (c == EOF)
+        return ended(r, what);
+    if (!is_digit(c))
+        return BAD(r, "expected a number for the %s", what);
+    while (is_digit(c)) {
+        if (v > (max - (c - '0')) / 10)
+            big = 1;
+        else
+            v = v * 10 + (c - '0');
+        c = getc(r->f);
+    }
+    if (big)
+        return rtpi_error(r->err, over, r->name, 0, 0,
+                          "the %s is too large (at most %ld)", what, max);
+    if (c == EOF && !((flags & NUM_EOF_OK) && !ferror(r->f)))
+        return ended(r, what);
+    if (c != EOF && !is_space(c))
+        return BAD(r, "unexpected character after the %s", what);
+    *out = v;
+    return RTP_OK;
+}
+
+static rtp_status read_size(const reader *r, int flags, const char *fmt,
+                            int *w, int *h)
+{
+    long lw, lh;
+    rtp_status st;
+    st = read_number(r, flags, "width", RTPI_IMAGE_MAX_DIM, RTP_ERR_LIMIT,
+                     &lw);
+    if (st == RTP_OK)
+        st = read_number(r, flags, "height", RTPI_IMAGE_MAX_DIM,
+                         RTP_ERR_LIMIT, &lh);
+    if (st != RTP_OK)
+        return st;
+    if (lw == 0 || lh == 0)
+        return rtpi_error(r->err, RTP_ERR_FORMAT, r->name, 0, 0,
+                          "%s: the image is empty (%ldx%ld)", fmt, lw, lh);
+    if (!rtpi_image_size_ok((int)lw, (int)lh))
+        return rtpi_error(r->err, RTP_ERR_LIMIT, r->name, 0, 0,
+                          "%s: image size %ldx%ld exceeds the limit of %lu "
+                          "pixels", fmt, lw, lh, RTPI_IMAGE_MAX_PIXELS);
+    *w = (int)lw;
+    *h = (int)lh;
+    return RTP_OK;
+}
+
+static rtp_status out_of_memory(const reader *r)
+{
+    return rtpi_error(r->err, RTP_ERR_NOMEM, r->name, 0, 0,
+                      "out of memory reading the image");
+}
+
+/* Netpbm P6 (binary) or P3 (ASCII) after the two magic bytes. */
+static rtp_status read_ppm(const reader *r, int ascii,
+                           const rtp_allocator *alloc, rtp_image **out)
+{
+    rtp_image *img = NULL;
+    unsigned char *buf = NULL;
+    long maxval;
+    int w, h, y, cap = 0;
+    size_t n, i, bps;
+    float scale, lut[256];
+    rtp_status st;
+    char what[64];
+
+    st = read_size(r, NUM_COMMENTS, "PPM", &w, &h);
+    if (st == RTP_OK)
+        st = read_number(r, NUM_COMMENTS, "maximum value", 65535, RTP_ERR_FORMAT,
+                         &maxval);
+    if (st != RTP_OK)
+        return st;
+    if (maxval == 0)
+        return BAD(r, "PPM: the maximum value is 0");
+    if (image_shell(w, h, alloc, &img) != RTP_OK)
+        return out_of_memory(r);
+    n = row_floats(img);
+    bps = maxval < 256 ? 1 : 2;
+    scale = (float)maxval;
+    /* The same values as v / scale, without a division per sample. */
+    for (i = 0; i < 256; i++)
+        lut[i] = (float)i / scale;
+    if (!ascii) {
+        buf = (unsigned char *)rtpi_malloc_array(&img->alloc, n, bps);
+        if (!buf) {
+            st = out_of_memory(r);
+            goto done;
+        }
+    }
+    for (y = 0; y < h; y++) {
+        float *row;
+        if (reserve_rows(img, &cap, y + 1) != 0) {
+            st = out_of_memory(r);
+            goto done;
+        }
+        row = img->pixels + (size_t)y * n;
+        snprintf(what, sizeof what, "pixel data (row %d of %d)", y + 1, h);
+        if (ascii) {
+            for (i = 0; i < n; i++) {
+                long v;
+                /* Comments are not netpbm's here, but harmless; the last
+                   sample may end the file without a newline. */
+                st = read_number(r,
+                                 NUM_COMMENTS | (y == h - 1 && i == n - 1
+                                                     ? NUM_EOF_OK
+                                                     : 0),
+                                 what, maxval, RTP_ERR_FORMAT, &v);
+                if (st != RTP_OK)
+                    goto done;
+                row[i] = (float)v / scale;
+            }
+        } else {
+            if (fread(buf, bps, n, r->f) != n) {
+                st = ended(r, what);
+                goto done;
+            }
+            if (maxval == 255) {
+                for (i = 0; i < n; i++)
+                    row[i] = lut[buf[i]];
+                continue;
+            }
+            for (i = 0; i < n; i++) {
+                unsigned v = bps == 1 ? buf[i]
+                                      : ((unsigned)buf[2 * i] << 8) |
+                                            buf[2 * i + 1];
+                if ((long)v > maxval) {
+                    st = rtpi_error(r->err, RTP_ERR_FORMAT, r->name, 0, 0,
+                                    "PPM: sample %u exceeds the maximum "
+                                    "value %ld (row %d)", v, maxval, y + 1);
+                    goto done;
+                }
+                row[i] = v < 256 ? lut[v] : (float)v / scale;
+            }
+        }
+    }
+done:
+    if (!ascii)
+        rtpi_free(&img->alloc, buf);
+    if (st != RTP_OK) {
+        rtp_image_destroy(img);
+        return st;
+    }
+    *out = img;
+    return RTP_OK;
+}
+
+/* PFM's scale: a decimal number whose sign gives the byte order (negative:
+   little-endian).  Parsed by hand because strtod follows the locale.
+   @return 0 and *little, or -1 if it is not a nonzero number. */
+static int parse_scale(const char *s, int *little)
+{
+    int neg = 0, digits = 0, nonzero = 0;
+    if (*s == '+' || *s == '-')
+        neg = *s++ == '-';
+    for (; is_digit(*s); s++, digits++)
+        nonzero |= *s != '0';
+    if (*s == '.')
+        for (s++; is_digit(*s); s++, digits++)
+            nonzero |= *s != '0';
+    if (!digits)
+        return -1;
+    if (*s == 'e' || *s == 'E') {
+        s++;
+        if (*s == '+' || *s == '-')
+            s++;
+        if (!is_digit(*s))
+            return -1;
+        while (is_digit(*s))
+            s++;
+    }
+    if (*s || !nonzero)
+        return -1;
+    *little = neg;
+    return 0;
+}
+
+/* PFM after "PF" (colour) or "Pf" (grey, expanded to RGB). */
+static rtp_status read_pfm(const reader *r, int grey,
+                           const rtp_allocator *alloc, rtp_image **out)
+{
+    rtp_image *img = NULL;
+    unsigned char *buf = NULL;
+    char tok[48], what[64];
+    int w, h, y, c, little, cap = 0;
+    size_t len = 0, n, nin, i;
+    rtp_status st;
+
+    st = read_size(r, 0, "PFM", &w, &h);
+    if (st != RTP_OK)
+        return st;
+    c = skip_space(r->f, 0);
+    while (c != EOF && !is_space(c)) {
+        if (len + 1 >= sizeof tok)
+            return BAD(r, "PFM: the scale is too long");
+        tok[len++] = (char)c;
+        c = getc(r->f);
+    }
+    tok[len] = '\0';
+    if (c == EOF)
+        return ended(r, "header");
+    if (parse_scale(tok, &little) != 0)
+        return BAD(r, "PFM: the scale \"%s\" is not a nonzero number", tok);
+    if (image_shell(w, h, alloc, &img) != RTP_OK)
+        return out_of_memory(r);
+    n = row_floats(img);
+    nin = grey ? (size_t)w : n;
+    buf = (unsigned char *)rtpi_malloc_array(&img->alloc, nin, 4);
+    if (!buf) {
+        st = out_of_memory(r);
+        goto done;
+    }
+    /* Rows arrive bottom first; they are stored in file order and the
+       image is flipped at the end, so memory grows with the data. */
+    for (y = 0; y < h; y++) {
+        float *row;
+        if (reserve_rows(img, &cap, y + 1) != 0) {
+            st = out_of_memory(r);
+            goto done;
+        }
+        row = img->pixels + (size_t)y * n;
+        if (fread(buf, 4, nin, r->f) != nin) {
+            snprintf(what, sizeof what,
+                     "pixel data (row %d of %d from the bottom)", y + 1, h);
+            st = ended(r, what);
+            goto done;
+        }
+        for (i = 0; i < nin; i++) {
+            const unsigned char *b = buf + 4 * i;
+            uint32_t u = little ? (uint32_t)b[0] | (uint32_t)b[1] << 8 |
+                                      (uint32_t)b[2] << 16 |
+                                      (uint32_t)b[3] << 24
+                                : (uint32_t)b[3] | (uint32_t)b[2] << 8 |
+                                      (uint32_t)b[1] << 16 |
+                                      (uint32_t)b[0] << 24;
+            float v;
+            memcpy(&v, &u, 4);
+            if (grey)
+                row[3 * i] = row[3 * i + 1] = row[3 * i + 2] = v;
+            else
+                row[i] = v;
+        }
+    }
+    for (y = 0; y < h / 2; y++) {
+        float *a = img->pixels + (size_t)y * n;
+        float *b = img->pixels + (size_t)(h - 1 - y) * n;
+        for (i = 0; i < n; i++) {
+            float t = a[i];
+            a[i] = b[i];
+            b[i] = t;
+        }
+    }
+done:
+    rtpi_free(&img->alloc, buf);
+    if (st != RTP_OK) {
+        rtp_image_destroy(img);
+        return st;
+    }
+    *out = img;
+    return RTP_OK;
+}
+
+#ifdef RTPI_PNG
+typedef struct png_rctx {
+    png_io io;
+    png_structp png;
+    png_infop info;
+    const rtp_allocator *alloc;
+    rtp_image *img;
+    int cap_rows;
+    unsigned char *bytes;  /* one row, or the whole image if interlaced */
+    png_bytep *rows;       /* row pointers into bytes (interlaced) */
+    int too_big;           /* the header asks for more than the limit */
+    png_uint_32 w, h;
+} png_rctx;
+
+static void png_convert_row(const png_rctx *c, const unsigned char *src,
+                            int wide, float *dst)
+{
+    size_t n = row_floats(c->img), i;
+    if (wide)
+        for (i = 0; i < n; i++)
+            dst[i] = (float)((unsigned)src[2 * i] << 8 | src[2 * i + 1]) /
+                     65535.0f;
+    else
+        for (i = 0; i < n; i++)
+            dst[i] = (float)src[i] / 255.0f;
+}
+
+/* The only function that calls setjmp for reading; see png_io. */
+static int png_read_body(png_rctx *c)
+{
+    int bit_depth, color_type, interlace, passes, wide;
+    size_t rowbytes, y;
+    if (setjmp(png_jmpbuf(c->png)))
+        return -1;
+    png_set_read_fn(c->png, &c->io, png_read_fn);
+    png_set_sig_bytes(c->png, 8);
+    png_read_info(c->png, c->info);
+    png_get_IHDR(c->png, c->info, &c->w, &c->h, &bit_depth, &color_type,
+                 &interlace, NULL, NULL);
+    if (!rtpi_image_size_ok((int)c->w, (int)c->h)) {
+        c->too_big = 1;
+        return -1;
+    }
+    /* To RGB, 8 or 16 bits: palette and low-bit grey expanded, tRNS and
+       alpha dropped (images are opaque RGB), grey copied to RGB.  No
+       gamma handling: values are stored as written, as rtp writes them. */
+    png_set_expand(c->png);
+    png_set_strip_alpha(c->png);
+    png_set_gray_to_rgb(c->png);
+    passes = png_set_interlace_handling(c->png);
+    png_read_update_info(c->png, c->info);
+    wide = png_get_bit_depth(c->png, c->info) == 16;
+    rowbytes = png_get_rowbytes(c->png, c->info);
+    if (png_get_channels(c->png, c->info) != 3 ||
+        rowbytes != (size_t)c->w * 3 * (wide ? 2 : 1))
+        png_error(c->png, "unexpected row layout after conversion to RGB");
+    if (image_shell((int)c->w, (int)c->h, c->alloc, &c->img) != RTP_OK) {
+        c->io.nomem = 1;
+        return -1;
+    }
+    if (passes == 1) {
+        c->bytes = (unsigned char *)rtpi_malloc(&c->io.alloc, rowbytes);
+        if (!c->bytes) {
+            c->io.nomem = 1;
+            return -1;
+        }
+        for (y = 0; y < c->h; y++) {
+            if (reserve_rows(c->img, &c->cap_rows, (int)y + 1) != 0) {
+                c->io.nomem = 1;
+                return -1;
+            }
+            png_read_row(c->png, c->bytes, NULL);
+            png_convert_row(c, c->bytes, wide,
+                            c->img->pixels + y * row_floats(c->img));
+        }
+    } else {
+        /* Every pass touches the whole image: it has to be in memory. */
+        c->bytes = (unsigned char *)rtpi_malloc_array(&c->io.alloc, c->h,
+                                                      rowbytes);
+        c->rows = (png_bytep *)rtpi_malloc_array(&c->io.alloc, c->h,
+                                                 sizeof *c->rows);
+        if (!c->bytes || !c->rows ||
+            reserve_rows(c->img, &c->cap_rows, (int)c->h) != 0) {
+            c->io.nomem = 1;
+            return -1;
+        }
+        for (y = 0; y < c->h; y++)
+            c->rows[y] = c->bytes + y * rowbytes;
+        png_read_image(c->png, c->rows);
+        for (y = 0; y < c->h; y++)
+            png_convert_row(c, c->rows[y], wide,
+                            c->img->pixels + y * row_floats(c->img));
+    }
+    /* Up to IEND, so a file cut in its last chunk is caught too. */
+    png_read_end(c->png, NULL);
+    return 0;
+}
+
+static rtp_status read_png(const reader *r, const rtp_allocator *alloc,
+                           rtp_image **out)
+{
+    png_rctx c;
+    rtp_allocator a;
+    rtp_status st = RTP_OK;
+    rtpi_allocator_init(&a, alloc);
+    memset(&c, 0, sizeof c);
+    png_io_init(&c.io, &a, r->f);
+    c.alloc = &a;
+#ifdef PNG_USER_MEM_SUPPORTED
+    c.png = png_create_read_struct_2(PNG_LIBPNG_VER_STRING, &c.io, png_err_fn,
+                                     png_warn_fn, &c.io, png_malloc_fn,
+                                     png_free_fn);
+#else
+    c.png = png_create_read_struct(PNG_LIBPNG_VER_STRING, &c.io, png_err_fn,
+                                   png_warn_fn);
+#endif
+    if (c.png)
+        c.info = png_create_info_struct(c.png);
+    if (!c.png || !c.info) {
+        st = out_of_memory(r);
+    } else if (png_read_body(&c) != 0) {
+        if (c.too_big)
+            st = rtpi_error(r->err, RTP_ERR_LIMIT, r->name, 0, 0,
+                            "PNG: image size %lux%lu exceeds the limit of "
+                            "%lu pixels", (unsigned long)c.w,
+                            (unsigned long)c.h, RTPI_IMAGE_MAX_PIXELS);
+        else if (c.io.nomem)
+            st = out_of_memory(r);
+        else if (c.io.io_errno)
+            st = rtpi_error(r->err, RTP_ERR_IO, r->name, 0, 0,
+                            "read error: %s",
+                            c.io.io_errno > 0 ? strerror(c.io.io_errno)
+                                              : "stream error");
+        else if (c.io.eof)
+            st = rtpi_error(r->err, RTP_ERR_FORMAT, r->name, 0, 0,
+                            "truncated: the PNG ends early");
+        else
+            st = rtpi_error(r->err, RTP_ERR_FORMAT, r->name, 0, 0,
+                            "corrupt PNG: %s", c.io.msg);
+    }
+    if (c.png)
+        png_destroy_read_struct(&c.png, c.info ? &c.info : NULL, NULL);
+    rtpi_free(&a, c.bytes);
+    rtpi_free(&a, c.rows);
+    if (st != RTP_OK) {
+        rtp_image_destroy(c.img);
+        return st;
+    }
+    *out = c.img;
+    return RTP_OK;
+}
+#endif /* RTPI_PNG */
+
+static const unsigned char png_signature[8] = {0x89, 'P',  'N',  'G',
+                                               '\r', '\n', 0x1a, '\n'};
+
+static rtp_status read_from(FILE *f, const char *name,
+                            const rtp_allocator *alloc, rtp_image **out,
+                            rtp_error *err)
+{
+    reader r;
+    unsigned char sig[8];
+    size_t got;
+    r.f = f;
+    r.name = name;
+    r.err = err;
+    errno = 0;
+    got = fread(sig, 1, 2, f);
+    if (got < 2) {
+        if (ferror(f))
+            return ended(&r, "header");
+        return rtpi_error(err, RTP_ERR_FORMAT, name, 0, 0,
+                          got ? "truncated: the file is 1 byte long"
+                              : "the file is empty");
+    }
+    if (sig[0] == 'P' && (sig[1] == '6' || sig[1] == '3'))
+        return read_ppm(&r, sig[1] == '3', alloc, out);
+    if (sig[0] == 'P' && (sig[1] == 'F' || sig[1] == 'f'))
+        return read_pfm(&r, sig[1] == 'f', alloc, out);
+    if (sig[0] == png_signature[0] && sig[1] == png_signature[1]) {
+        got = fread(sig + 2, 1, 6, f);
+        if (got < 6)
+            return ended(&r, "PNG signature");
+        if (memcmp(sig, png_signature, 8) != 0)
+            return rtpi_error(err, RTP_ERR_FORMAT, name, 0, 0,
+                              "corrupt PNG signature");
+#ifdef RTPI_PNG
+        return read_png(&r, alloc, out);
+#else
+        return no_png(err, name);
+#endif
+    }
+    if (sig[0] == 'P' && sig[1] >= '1' && sig[1] <= '7')
+        return rtpi_error(err, RTP_ERR_FORMAT, name, 0, 0,
+                          "netpbm type P%c is not supported: only P6 and "
+                          "P3 colour images", sig[1]);
+    return rtpi_error(err, RTP_ERR_FORMAT, name, 0, 0,
+                      "not a PNG, PPM or PFM image (starts with bytes "
+                      "0x%02x 0x%02x)", sig[0], sig[1]);
+}
+
+rtp_status rtp_image_read_stream(FILE *stream, const char *name,
+                                 const rtp_allocator *alloc, rtp_image **out,
+                                 rtp_error *err)
+{
+    if (!out)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, name, 0, 0,
+                          "rtp_image_read_stream: out is NULL");
+    *out = NULL;
+    if (!stream)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, name, 0, 0,
+                          "no stream to read from");
+    return read_from(stream, name ? name : "<stream>", alloc, out, err);
+}
+
+rtp_status rtp_image_read(const char *path, const rtp_allocator *alloc,
+                          rtp_image **out, rtp_error *err)
+{
+    FILE *f;
+    rtp_status st;
+    if (!out)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, path, 0, 0,
+                          "rtp_image_read: out is NULL");
+    *out = NULL;
+    if (!path || !*path)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                          "no image file name");
+    if (strcmp(path, "-") == 0)
+        return read_from(stdin, "<stdin>", alloc, out, err);
+    f = fopen(path, "rb");
+    if (!f)
+        return rtpi_error(err, RTP_ERR_IO, path, 0, 0, "cannot open: %s",
+                          strerror(errno));
+    st = read_from(f, path, alloc, out, err);
+    fclose(f);
+    return st;
+}

@@ -1,0 +1,351 @@
+/* intersect.c — ray/primitive intersection, surface data at a hit, bounds
+ * and the self-intersection offset.  Everything is computed in double from
+ * the scene's float geometry. */
+#include "kdtree.h"
+
+#define RTPI_PI 3.14159265358979323846
+
+/* ----------------------------------------------------------- triangles */
+
+static int hit_tri(const rtp_scene *s, const rtpi_tri *tr, const rtpi_ray *ray,
+                   rtpi_hit *hit)
+{
+    const float *p0 = s->pos + 3 * (size_t)tr->v[0];
+    const float *p1 = s->pos + 3 * (size_t)tr->v[1];
+    const float *p2 = s->pos + 3 * (size_t)tr->v[2];
+    rtpi_wt_ray w;
+    if (rtpi_tri_degenerate(p0, p1, p2) || !rtpi_wt_setup(&w, ray))
+        return 0;
+    return rtpi_wt_tri(&w, p0, p1, p2, ray->tmin, ray->tmax, &hit->t, &hit->u,
+                       &hit->v);
+}
+
+/* ------------------------------------------------------------- spheres */
+
+/* Roots of |o + t d - c|^2 = r^2, t0 <= t1.  The origin is first moved to
+ * the point of the ray closest to the centre (parameter tc), so the
+ * quadratic is solved with numbers of the size of r instead of the size of
+ * the distance (Ray Tracing Gems, ch. 7: the discriminant comes from the
+ * squared distance of the centre to the line, never from b^2 - ac), and tc
+ * is added back.  At distance/radius 1e5 this keeps ~1e-11 relative error
+ * in the hit point, where the textbook formula loses all digits. */
+static int sphere_roots(const rtpi_sphere *sp, const rtpi_ray *ray, double *t0,
+                        double *t1)
+{
+    rtpi_v3 c = v3_from_f(sp->c), o2, f, l;
+    double r = fabs((double)sp->r);
+    double a = v3_dot(ray->d, ray->d), tc, b, disc, half;
+    if (!(a > 0.0) || !(r > 0.0))
+        return 0;
+    tc = v3_dot(v3_sub(c, ray->o), ray->d) / a;
+    o2 = v3_madd(ray->o, ray->d, tc);
+    f = v3_sub(o2, c);
+    b = -v3_dot(f, ray->d); /* ~0 by construction; kept for exactness */
+    l = v3_madd(f, ray->d, b / a); /* centre -> closest point of the line */
+    disc = r * r - v3_dot(l, l);
+    if (!(disc >= 0.0))
+        return 0;
+    half = sqrt(disc / a);
+    *t0 = tc + b / a - half;
+    *t1 = tc + b / a + half;
+    return 1;
+}
+
+static int hit_sphere(const rtpi_sphere *sp, const rtpi_ray *ray,
+                      rtpi_hit *hit)
+{
+    double t0, t1;
+    if (!sphere_roots(sp, ray, &t0, &t1))
+        return 0;
+    /* r < 0: only the inside is visible, i.e. only where the ray leaves. */
+    if (sp->r > 0.0f && t0 >= ray->tmin && t0 <= ray->tmax) {
+        hit->t = t0;
+    } else if (t1 >= ray->tmin && t1 <= ray->tmax) {
+        hit->t = t1;
+    } else {
+        return 0;
+    }
+    hit->u = hit->v = 0.0;
+    return 1;
+}
+
+/* --------------------------------------------------- cones and cylinders */
+
+/* Axis frame of a cone: unit axis w from base to apex, height H, slope k
+   (radius change per unit height). */
+typedef struct cone_frame {
+    rtpi_v3 b, w;
+    double h, rb, ra, k;
+} cone_frame;
+
+static int cone_frame_of(const rtpi_cone *cn, cone_frame *f)
+{
+    rtpi_v3 ax;
+    f->b = v3_from_f(cn->base);
+    ax = v3_sub(v3_from_f(cn->apex), f->b);
+    f->h = v3_len(ax);
+    f->rb = fabs((double)cn->rb);
+    f->ra = fabs((double)cn->ra);
+    /* No height or no radius at all: a disc edge or a line, nothing to hit. */
+    if (!(f->h > 0.0) || !(f->rb + f->ra > 0.0) || !(f->h < 1e300))
+        return 0;
+    f->w = v3_mul(ax, 1.0 / f->h);
+    f->k = (f->ra - f->rb) / f->h;
+    return 1;
+}
+
+/* Orthonormal e1, e2 perpendicular to unit n (Duff et al. 2017). */
+static void basis(rtpi_v3 n, rtpi_v3 *e1, rtpi_v3 *e2)
+{
+    double sg = n.z >= 0.0 ? 1.0 : -1.0;
+    double a = -1.0 / (sg + n.z);
+    double b = n.x * n.y * a;
+    *e1 = v3(1.0 + sg * n.x * n.x * a, sg * b, -sg * n.x);
+    *e2 = v3(b, sg + n.y * n.y * a, -n.y);
+}
+
+static int hit_cone(const rtpi_cone *cn, const rtpi_ray *ray, rtpi_hit *hit)
+{
+    cone_frame cf;
+    rtpi_v3 mid, o2, f, q0, qd;
+    double a, tc, h0, hd, s0, sd, qa, qb, qc, disc, q, r[2];
+    int n = 0, i;
+    if (!cone_frame_of(cn, &cf))
+        return 0;
+    a = v3_dot(ray->d, ray->d);
+    if (!(a > 0.0))
+        return 0;
+    /* As for spheres: move the origin next to the cone's middle first so the
+       quadratic sees numbers of the cone's size, then add tc back. */
+    mid = v3_madd(cf.b, cf.w, 0.5 * cf.h);
+    tc = v3_dot(v3_sub(mid, ray->o), ray->d) / a;
+    o2 = v3_madd(ray->o, ray->d, tc);
+    f = v3_sub(o2, cf.b);
+    /* Point o2 + t d: height h0 + t hd, offset from the axis q0 + t qd,
+       cone radius there s0 + t sd.  Surface: |q|^2 = s^2. */
+    h0 = v3_dot(f, cf.w);
+    hd = v3_dot(ray->d, cf.w);
+    q0 = v3_madd(f, cf.w, -h0);
+    qd = v3_madd(ray->d, cf.w, -hd);
+    s0 = cf.rb + cf.k * h0;
+    sd = cf.k * hd;
+    qa = v3_dot(qd, qd) - sd * sd;
+    qb = v3_dot(q0, qd) - s0 * sd;
+    qc = v3_dot(q0, q0) - s0 * s0;
+    disc = qb * qb - qa * qc;
+    if (!(disc >= 0.0))
+        return 0;
+    /* Citardauq form: no cancellation in either root.  qa == 0 (a ray along
+       a generator line, or any ray parallel to a cylinder's axis) leaves
+       the single root qc/q; q == 0 then means the ray lies on the surface
+       or never meets it: a miss. */
+    q = -(qb + (qb >= 0.0 ? sqrt(disc) : -sqrt(disc)));
+    if (q != 0.0) {
+        r[n++] = qc / q;
+        if (qa != 0.0)
+            r[n++] = q / qa;
+    } else if (qa != 0.0) {
+        r[n++] = 0.0; /* qb == 0 and qc == 0: tangent at o2 */
+    }
+    if (n == 2 && r[1] < r[0]) {
+        double t = r[0];
+        r[0] = r[1];
+        r[1] = t;
+    }
+    for (i = 0; i < n; i++) {
+        double t = tc + r[i];
+        double hh = h0 + r[i] * hd;
+        /* Keeps to the nappe between base and apex (the quadratic also
+           describes the mirrored cone beyond the apex). */
+        if (t >= ray->tmin && t <= ray->tmax && hh >= 0.0 && hh <= cf.h) {
+            hit->t = t;
+            hit->u = hit->v = 0.0;
+            return 1;
+        }
+    }
+    return 0;
+}
+
+/* ------------------------------------------------------------ interface */
+
+int rtpi_intersect_prim(const rtp_scene *s, uint32_t prim, const rtpi_ray *ray,
+                        rtpi_hit *hit)
+{
+    size_t i = prim;
+    int r;
+    if (i < s->ntris) {
+        r = hit_tri(s, &s->tris[i], ray, hit);
+    } else if ((i -= s->ntris) < s->nspheres) {
+        r = hit_sphere(&s->spheres[i], ray, hit);
+    } else if ((i -= s->nspheres) < s->ncones) {
+        r = hit_cone(&s->cones[i], ray, hit);
+    } else {
+        return 0;
+    }
+    if (r)
+        hit->prim = prim;
+    return r;
+}
+
+static double wrap01(double x)
+{
+    x -= floor(x);
+    return x < 1.0 ? x : 0.0;
+}
+
+void rtpi_surface_at(const rtp_scene *s, const rtpi_ray *ray,
+                     const rtpi_hit *hit, rtpi_surface *out)
+{
+    size_t i = hit->prim;
+    out->p = v3_madd(ray->o, ray->d, hit->t);
+    out->uv[0] = out->uv[1] = 0.0;
+    out->mat = 0;
+    if (i < s->ntris) {
+        const rtpi_tri *tr = &s->tris[i];
+        rtpi_v3 p0 = v3_from_f(s->pos + 3 * (size_t)tr->v[0]);
+        rtpi_v3 p1 = v3_from_f(s->pos + 3 * (size_t)tr->v[1]);
+        rtpi_v3 p2 = v3_from_f(s->pos + 3 * (size_t)tr->v[2]);
+        double b0 = 1.0 - hit->u - hit->v;
+        out->mat = tr->mat;
+        out->ng = v3_norm(v3_cross(v3_sub(p1, p0), v3_sub(p2, p0)));
+        out->ns = out->ng;
+        if (tr->n[0] != RTPI_NONE && tr->n[1] != RTPI_NONE &&
+            tr->n[2] != RTPI_NONE) {
+            rtpi_v3 n = v3_mul(v3_from_f(s->nrm + 3 * (size_t)tr->n[0]), b0);
+            double dn;
+            n = v3_madd(n, v3_from_f(s->nrm + 3 * (size_t)tr->n[1]), hit->u);
+            n = v3_madd(n, v3_from_f(s->nrm + 3 * (size_t)tr->n[2]), hit->v);
+            dn = v3_dot(n, out->ng);
+            /* Vertex normals pointing away from their triangle (a few in
+               SPD's teapot) are mirrored at the triangle's plane: that
+               keeps their tangential lean and puts them on ng's side. */
+            if (dn < 0.0)
+                n = v3_madd(n, out->ng, -2.0 * dn);
+            if (v3_dot(n, n) > 0.0)
+                out->ns = v3_norm(n);
+        }
+        if (tr->t[0] != RTPI_NONE && tr->t[1] != RTPI_NONE &&
+            tr->t[2] != RTPI_NONE) {
+            const float *t0 = s->uv + 2 * (size_t)tr->t[0];
+            const float *t1 = s->uv + 2 * (size_t)tr->t[1];
+            const float *t2 = s->uv + 2 * (size_t)tr->t[2];
+            out->uv[0] = b0 * t0[0] + hit->u * t1[0] + hit->v * t2[0];
+            out->uv[1] = b0 * t0[1] + hit->u * t1[1] + hit->v * t2[1];
+        }
+        return;
+    }
+    if ((i -= s->ntris) < s->nspheres) {
+        const rtpi_sphere *sp = &s->spheres[i];
+        rtpi_v3 n = v3_norm(v3_sub(out->p, v3_from_f(sp->c)));
+        out->mat = sp->mat;
+        /* Longitude around z from +x, latitude from -z (0) to +z (1). */
+        out->uv[0] = wrap01(atan2(n.y, n.x) / (2.0 * RTPI_PI));
+        out->uv[1] = 0.5 + asin(n.z < -1.0 ? -1.0 : n.z > 1.0 ? 1.0 : n.z) /
+                               RTPI_PI;
+        if (sp->r < 0.0f)
+            n = v3_mul(n, -1.0); /* inside-only: the visible side faces in */
+        out->ng = out->ns = n;
+        return;
+    }
+    if ((i -= s->nspheres) < s->ncones) {
+        const rtpi_cone *cn = &s->cones[i];
+        cone_frame cf;
+        rtpi_v3 f, q, e1, e2, n;
+        double h, ql;
+        out->mat = cn->mat;
+        if (!cone_frame_of(cn, &cf)) { /* never hit; something sane */
+            out->ng = out->ns = v3(0.0, 0.0, 1.0);
+            return;
+        }
+        f = v3_sub(out->p, cf.b);
+        h = v3_dot(f, cf.w);
+        q = v3_madd(f, cf.w, -h);
+        ql = v3_len(q);
+        basis(cf.w, &e1, &e2);
+        if (!(ql > 0.0)) /* at a pointed apex: any direction across */
+            q = e1;
+        else
+            q = v3_mul(q, 1.0 / ql);
+        /* Gradient of |q|^2 - (rb + k h)^2 on the surface, outward. */
+        n = v3_norm(v3_madd(q, cf.w, -cf.k));
+        out->ng = out->ns = n;
+        out->uv[0] = wrap01(atan2(v3_dot(q, e2), v3_dot(q, e1)) /
+                            (2.0 * RTPI_PI));
+        out->uv[1] = h / cf.h < 0.0 ? 0.0 : h / cf.h > 1.0 ? 1.0 : h / cf.h;
+        return;
+    }
+    out->ng = out->ns = v3(0.0, 0.0, 1.0);
+}
+
+void rtpi_prim_bounds(const rtp_scene *s, uint32_t prim, double lo[3],
+                      double hi[3])
+{
+    size_t i = prim;
+    int k;
+    if (i < s->ntris) {
+        const rtpi_tri *tr = &s->tris[i];
+        int j;
+        for (k = 0; k < 3; k++)
+            lo[k] = hi[k] = s->pos[3 * (size_t)tr->v[0] + k];
+        for (j = 1; j < 3; j++) {
+            for (k = 0; k < 3; k++) {
+                double x = s->pos[3 * (size_t)tr->v[j] + k];
+                lo[k] = x < lo[k] ? x : lo[k];
+                hi[k] = x > hi[k] ? x : hi[k];
+            }
+        }
+        return;
+    }
+    if ((i -= s->ntris) < s->nspheres) {
+        const rtpi_sphere *sp = &s->spheres[i];
+        double r = fabs((double)sp->r);
+        for (k = 0; k < 3; k++) {
+            lo[k] = sp->c[k] - r;
+            hi[k] = sp->c[k] + r;
+        }
+        return;
+    }
+    if ((i -= s->nspheres) < s->ncones) {
+        /* Each end is a disc of radius r across the axis w: along axis k
+           it reaches r * sqrt(1 - w_k^2). */
+        const rtpi_cone *cn = &s->cones[i];
+        rtpi_v3 w = v3_norm(v3_sub(v3_from_f(cn->apex), v3_from_f(cn->base)));
+        double wk[3];
+        wk[0] = w.x;
+        wk[1] = w.y;
+        wk[2] = w.z;
+        for (k = 0; k < 3; k++) {
+            double e = 1.0 - wk[k] * wk[k];
+            double sk = e > 0.0 ? sqrt(e) : 0.0;
+            double rb = fabs((double)cn->rb) * sk, ra = fabs((double)cn->ra) * sk;
+            double b0 = cn->base[k] - rb, b1 = cn->base[k] + rb;
+            double a0 = cn->apex[k] - ra, a1 = cn->apex[k] + ra;
+            if (v3_dot(w, w) == 0.0) { /* zero height: never hit anyway */
+                b0 = a0 = cn->base[k];
+                b1 = a1 = cn->base[k];
+            }
+            lo[k] = b0 < a0 ? b0 : a0;
+            hi[k] = b1 > a1 ? b1 : a1;
+        }
+        return;
+    }
+    for (k = 0; k < 3; k++)
+        lo[k] = hi[k] = 0.0;
+}
+
+rtpi_v3 rtpi_offset_origin(rtpi_v3 p, rtpi_v3 ng, double side)
+{
+    double m = fmax(fabs(p.x), fmax(fabs(p.y), fabs(p.z)));
+    /* A hit point computed in double from float geometry is off the surface
+       by a few units of double rounding of the coordinates involved, ~1e-15
+       relative to max|p| (a bit more when the ray came from much farther
+       away).  1e-9 * max|p| is a million times that, so a ray leaving p
+       never finds the surface it starts on, even at grazing angles; yet it
+       is 60 times below float's own resolution (6e-8 relative), so no
+       other float surface can sit in the gap it jumps.  The absolute 1e-12
+       keeps the offset non-zero near the origin, where the rounding comes
+       from the vertices (scenes of unit size: ~1e-16) rather than from p;
+       it assumes scene features larger than ~1e-9 units. */
+    double eps = 1e-9 * m + 1e-12;
+    return v3_madd(p, ng, side >= 0.0 ? eps : -eps);
+}

@@ -1,0 +1,300 @@
+/* lex.c — the scene readers' tokenizer (line and column for every token),
+ * number conversion that rejects NaN and infinities, paths relative to the
+ * including file, and 4x3 affine transforms. */
+#include "readers.h"
+
+#include <errno.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+
+void rtpi_lex_init(rtpi_lex *lx, const char *text, size_t size,
+                   const char *name, rtp_error *err)
+{
+    memset(lx, 0, sizeof *lx);
+    lx->p = text ? text : "";
+    lx->end = lx->p + (text ? size : 0);
+    lx->line_start = lx->p;
+    lx->line = 1;
+    lx->name = name;
+    lx->err = err;
+}
+
+static int is_space(char c)
+{
+    return c == ' ' || c == '\t' || c == '\r' || c == '\f' || c == '\v';
+}
+
+static int is_sep(const rtpi_lex *lx, char c)
+{
+    return is_space(c) || c == '\n' || c == '#' || (lx->commas && c == ',');
+}
+
+static void newline(rtpi_lex *lx)
+{
+    lx->p++;
+    lx->line++;
+    lx->line_start = lx->p;
+}
+
+void rtpi_lex_here(const rtpi_lex *lx, rtpi_tok *t)
+{
+    t->s = lx->p;
+    t->n = 0;
+    t->line = lx->line;
+    t->col = (int)(lx->p - lx->line_start) + 1;
+}
+
+static void skip_comment(rtpi_lex *lx)
+{
+    const char *nl = (const char *)memchr(lx->p, '\n', (size_t)(lx->end - lx->p));
+    lx->p = nl ? nl : lx->end;
+}
+
+static void take(rtpi_lex *lx, rtpi_tok *t)
+{
+    rtpi_lex_here(lx, t);
+    while (lx->p < lx->end && !is_sep(lx, *lx->p))
+        lx->p++;
+    t->n = (size_t)(lx->p - t->s);
+}
+
+int rtpi_lex_next(rtpi_lex *lx, rtpi_tok *t)
+{
+    while (lx->p < lx->end) {
+        char c = *lx->p;
+        if (c == '\n')
+            newline(lx);
+        else if (is_space(c) || (lx->commas && c == ','))
+            lx->p++;
+        else if (c == '#')
+            skip_comment(lx);
+        else {
+            take(lx, t);
+            return 1;
+        }
+    }
+    rtpi_lex_here(lx, t);
+    return 0;
+}
+
+int rtpi_lex_next_inline(rtpi_lex *lx, rtpi_tok *t)
+{
+    while (lx->p < lx->end) {
+        char c = *lx->p;
+        if (c == '\n')
+            break;
+        if (is_space(c) || (lx->commas && c == ','))
+            lx->p++;
+        else if (c == '#')
+            skip_comment(lx);
+        else {
+            take(lx, t);
+            return 1;
+        }
+    }
+    rtpi_lex_here(lx, t);
+    return 0;
+}
+
+void rtpi_lex_skip_line(rtpi_lex *lx)
+{
+    skip_comment(lx);
+    if (lx->p < lx->end)
+        newline(lx);
+}
+
+int rtpi_tok_is(const rtpi_tok *t, const char *word)
+{
+    size_t n = strlen(word);
+    return t->n == n && memcmp(t->s, word, n) == 0;
+}
+
+int rtpi_tok_number(const rtpi_tok *t, double *out)
+{
+    char buf[RTPI_NUM_MAX + 1];
+    char *end;
+    double d;
+    size_t i;
+    if (t->n == 0 || t->n > RTPI_NUM_MAX)
+        return -1;
+    /* strtod also takes "nan", "inf" and hex; only decimal numbers are
+       scene numbers, so the first character must start one. */
+    if (!(t->s[0] == '-' || t->s[0] == '+' || t->s[0] == '.' ||
+          (t->s[0] >= '0' && t->s[0] <= '9')))
+        return -1;
+    for (i = 0; i < t->n; i++) {
+        char c = t->s[i];
+        if (c == 'x' || c == 'X' || c == 'n' || c == 'N' || c == 'i' ||
+            c == 'I' || c == '\0')
+            return -1;
+        buf[i] = c;
+    }
+    buf[t->n] = '\0';
+    d = strtod(buf, &end);
+    if (end != buf + t->n || !isfinite(d))
+        return -1;
+    *out = d;
+    return 0;
+}
+
+int rtpi_tok_int(const rtpi_tok *t, long *out)
+{
+    size_t i = 0;
+    long v = 0;
+    int neg = 0;
+    if (t->n && (t->s[0] == '-' || t->s[0] == '+')) {
+        neg = t->s[0] == '-';
+        i = 1;
+    }
+    if (i == t->n)
+        return -1;
+    for (; i < t->n; i++) {
+        char c = t->s[i];
+        if (c < '0' || c > '9')
+            return -1;
+        v = v * 10 + (c - '0');
+        if (v > 0x7fffffffL)
+            return -1;
+    }
+    *out = neg ? -v : v;
+    return 0;
+}
+
+const char *rtpi_tok_show(const rtpi_tok *t, char *buf, size_t size)
+{
+    size_t i, n = t->n, lim = size > 4 ? size - 4 : 0;
+    size_t o = 0;
+    if (!size)
+        return buf;
+    for (i = 0; i < n && o < lim; i++) {
+        unsigned char c = (unsigned char)t->s[i];
+        buf[o++] = (c >= 0x20 && c < 0x7f) ? (char)c : '?';
+    }
+    if (i < n && size >= 4) {
+        memcpy(buf + o, "...", 3);
+        o += 3;
+    }
+    buf[o < size ? o : size - 1] = '\0';
+    return buf;
+}
+
+rtp_status rtpi_lex_error(const rtpi_lex *lx, const rtpi_tok *t,
+                          const char *fmt, ...)
+{
+    char msg[256];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(msg, sizeof msg, fmt, ap);
+    va_end(ap);
+    return rtpi_error(lx->err, RTP_ERR_PARSE, lx->name, t->line, t->col,
+                      "%s", msg);
+}
+
+rtp_status rtpi_lex_wrap(const rtpi_lex *lx, const rtpi_tok *t,
+                         rtp_status st, const rtp_error *inner,
+                         const char *what)
+{
+    char show[128];
+    rtpi_tok_show(t, show, sizeof show);
+    if (st == RTP_ERR_NOMEM)
+        return rtpi_error(lx->err, st, lx->name, t->line, t->col,
+                          "out of memory");
+    return rtpi_error(lx->err, st, lx->name, t->line, t->col,
+                      "%s '%s': %s", what, show,
+                      inner && inner->message[0] ? inner->message
+                                                 : rtp_status_string(st));
+}
+
+char *rtpi_path_join(const rtp_allocator *a, const char *base,
+                     const char *rel, size_t rel_len)
+{
+    size_t dir = 0, i, n;
+    char *out;
+    if (base && !(rel_len && rel[0] == '/')) {
+        for (i = 0; base[i]; i++)
+            if (base[i] == '/')
+                dir = i + 1;
+    }
+    n = dir + rel_len;
+    if (n < rel_len)
+        return NULL;
+    out = (char *)rtpi_malloc(a, n + 1);
+    if (!out)
+        return NULL;
+    if (dir)
+        memcpy(out, base, dir);
+    memcpy(out + dir, rel, rel_len);
+    out[n] = '\0';
+    return out;
+}
+
+void rtpi_xform_identity(double m[12])
+{
+    memset(m, 0, 12 * sizeof *m);
+    m[0] = m[5] = m[10] = 1.0;
+}
+
+void rtpi_xform_mul(double m[12], const double b[12], const double a[12])
+{
+    double r[12];
+    int i, j;
+    for (i = 0; i < 3; i++) {
+        for (j = 0; j < 4; j++) {
+            r[4 * i + j] = b[4 * i] * a[j] + b[4 * i + 1] * a[4 + j] +
+                           b[4 * i + 2] * a[8 + j];
+        }
+        r[4 * i + 3] += b[4 * i + 3];
+    }
+    memcpy(m, r, sizeof r);
+}
+
+void rtpi_xform_point(const double *m, const double p[3], double out[3])
+{
+    double r[3];
+    int i;
+    if (!m) {
+        out[0] = p[0];
+        out[1] = p[1];
+        out[2] = p[2];
+        return;
+    }
+    for (i = 0; i < 3; i++)
+        r[i] = m[4 * i] * p[0] + m[4 * i + 1] * p[1] + m[4 * i + 2] * p[2] +
+               m[4 * i + 3];
+    out[0] = r[0];
+    out[1] = r[1];
+    out[2] = r[2];
+}
+
+int rtpi_xform_normal_matrix(const double *m, double nm[9])
+{
+    /* The inverse transpose is the cofactor matrix over the determinant;
+       the readers normalise normals afterwards, so only the sign of the
+       determinant matters, but a zero one means a flattened object. */
+    double a = m[0], b = m[1], c = m[2];
+    double d = m[4], e = m[5], f = m[6];
+    double g = m[8], h = m[9], k = m[10];
+    double det, scale = 0.0;
+    int i;
+    nm[0] = e * k - f * h;
+    nm[1] = f * g - d * k;
+    nm[2] = d * h - e * g;
+    nm[3] = c * h - b * k;
+    nm[4] = a * k - c * g;
+    nm[5] = b * g - a * h;
+    nm[6] = b * f - c * e;
+    nm[7] = c * d - a * f;
+    nm[8] = a * e - b * d;
+    det = a * nm[0] + b * nm[1] + c * nm[2];
+    for (i = 0; i < 9; i++)
+        if (fabs(m[i + i / 3]) > scale)
+            scale = fabs(m[i + i / 3]);
+    /* Relative test: a determinant this small against the largest entry
+       cubed is a transform that squashes a dimension to nothing. */
+    if (!isfinite(det) || fabs(det) <= 1e-12 * scale * scale * scale)
+        return -1;
+    for (i = 0; i < 9; i++)
+        nm[i] /= det;
+    return 0;
+}

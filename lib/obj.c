@@ -1,0 +1,566 @@
+/* obj.c — the Wavefront OBJ and MTL reader.
+ *
+ * OBJ: v, vn, vt, f (v, v/t, v//n, v/t/n; negative indices count back
+ * from the last vertex read; polygons of any size, concave ones too, are
+ * triangulated keeping their winding), usemtl, mtllib; o, g, s and the
+ * free-form statements are read past.  MTL: newmtl, Kd, Ks, Ns, Ni, d,
+ * Tr, map_Kd, bump/map_bump (-bm strength); Ka, Ke, illum and the other
+ * maps are read past.  How MTL values become rtp materials is written in
+ * doc/scene-format.md.  Positions are transformed by the 4x3 `xform`,
+ * normals by its inverse transpose. */
+#include "readers.h"
+
+#include <stdio.h>
+
+/* Largest magnitude accepted for a coordinate or MTL value. */
+#define NUM_LIMIT 1e18
+
+typedef struct obj {
+    rtp_scene *s;
+    rtpi_lex lx;
+    rtp_error *err;
+    const double *xf;
+    double nm[9];
+    uint32_t base_p, base_n, base_t; /* scene counts before this file */
+    size_t np, nn, nt;               /* vertices of each kind read so far */
+    uint32_t mat;                    /* current; RTPI_NONE: the default */
+    uint32_t default_mat;
+    size_t faces;
+    double *pts;     /* face scratch: xyz per corner */
+    size_t cap_pts;
+    uint32_t *crn;   /* v, t, n scene indices per corner */
+    size_t cap_crn;
+    uint32_t *tri;
+    size_t cap_tri;
+} obj;
+
+static rtp_status nomem(const rtpi_lex *lx, const rtpi_tok *t)
+{
+    return rtpi_error(lx->err, RTP_ERR_NOMEM, lx->name, t->line, t->col,
+                      "out of memory");
+}
+
+/* The next number on this line for `what` (e.g. "v (vertex)"), `field`. */
+static rtp_status line_num(rtpi_lex *lx, const char *what, const char *field,
+                           double *out, rtpi_tok *tok)
+{
+    rtpi_tok t;
+    char show[48];
+    if (!rtpi_lex_next_inline(lx, &t))
+        return rtpi_lex_error(lx, &t, "unexpected end of %s in %s, expected %s",
+                              lx->p < lx->end ? "line" : "file", what, field);
+    if (rtpi_tok_number(&t, out) != 0)
+        return rtpi_lex_error(lx, &t, "expected number for %s %s, got '%s'", what,
+                              field, rtpi_tok_show(&t, show, sizeof show));
+    if (fabs(*out) > NUM_LIMIT)
+        return rtpi_lex_error(lx, &t, "%s %s %s is out of range", what, field,
+                              rtpi_tok_show(&t, show, sizeof show));
+    if (tok)
+        *tok = t;
+    return RTP_OK;
+}
+
+/* Up to `max` more optional numbers, then the end of the line. */
+static rtp_status line_rest(rtpi_lex *lx, const char *what, int max)
+{
+    rtpi_tok t;
+    char show[48];
+    double d;
+    int n = 0;
+    while (rtpi_lex_next_inline(lx, &t)) {
+        if (rtpi_tok_number(&t, &d) != 0 || n++ >= max)
+            return rtpi_lex_error(lx, &t, "unexpected '%s' at the end of %s",
+                                  rtpi_tok_show(&t, show, sizeof show), what);
+    }
+    return RTP_OK;
+}
+
+/* The rest of the line as one string (a name or a file name that may
+   contain spaces); trailing white space dropped. */
+static rtp_status line_string(rtpi_lex *lx, const char *what, rtpi_tok *out)
+{
+    rtpi_tok t, more;
+    const char *last_end;
+    if (!rtpi_lex_next_inline(lx, &t))
+        return rtpi_lex_error(lx, &t, "unexpected end of line in %s, expected a name",
+                              what);
+    last_end = t.s + t.n;
+    while (rtpi_lex_next_inline(lx, &more))
+        last_end = more.s + more.n;
+    *out = t;
+    out->n = (size_t)(last_end - t.s);
+    return RTP_OK;
+}
+
+static const char *const ignored_obj[] = {
+    "o", "g", "s", "l", "p", "mg", "vp", "cstype", "deg", "bmat", "step",
+    "curv", "curv2", "surf", "parm", "trim", "hole", "scrv", "sp", "end",
+    "con", "lod", "usemap", "maplib", "shadow_obj", "trace_obj", "ctech",
+    "stech", "bevel", "c_interp", "d_interp", NULL};
+
+static const char *const ignored_mtl[] = {
+    "Ka", "Ke", "Tf", "illum", "sharpness", "disp", "decal", "refl", "Pr",
+    "Pm", "Ps", "Pc", "Pcr", "aniso", "anisor", "norm", NULL};
+
+static int in_list(const rtpi_tok *t, const char *const *list)
+{
+    for (; *list; list++)
+        if (rtpi_tok_is(t, *list))
+            return 1;
+    return 0;
+}
+
+static long find_material(const rtp_scene *s, const char *name, size_t n)
+{
+    size_t i;
+    for (i = 0; i < s->nmats; i++) {
+        const char *m = s->mats[i].name;
+        if (m && strlen(m) == n && memcmp(m, name, n) == 0)
+            return (long)i;
+    }
+    return -1;
+}
+
+/* ------------------------------------------------------------------ MTL */
+
+/* map_Kd / bump: options (-name args...) then the file name last; -bm
+   gives bump strength.  @return the image index via *index. */
+static rtp_status mtl_map(rtpi_lex *lx, rtp_scene *s, const char *what,
+                          uint32_t *index, double *bm)
+{
+    rtpi_tok t, file;
+    char *path;
+    rtp_error inner;
+    rtp_status st;
+    int have = 0;
+    while (rtpi_lex_next_inline(lx, &t)) {
+        if (bm && rtpi_tok_is(&t, "-bm")) {
+            if ((st = line_num(lx, what, "-bm strength", bm, NULL)) != RTP_OK)
+                return st;
+            continue;
+        }
+        file = t;
+        have = 1;
+    }
+    if (!have)
+        return rtpi_lex_error(lx, &t, "unexpected end of line in %s, expected a file name",
+                              what);
+    path = rtpi_path_join(&s->alloc, lx->name, file.s, file.n);
+    if (!path)
+        return nomem(lx, &file);
+    memset(&inner, 0, sizeof inner);
+    st = rtpi_scene_add_texture(s, path, index, &inner);
+    rtpi_free(&s->alloc, path);
+    if (st != RTP_OK)
+        return rtpi_lex_wrap(lx, &file, st, &inner, "cannot load image");
+    return RTP_OK;
+}
+
+static rtp_status read_mtl(rtp_scene *s, const char *text, size_t size,
+                           const char *name, rtp_error *err)
+{
+    rtpi_lex lx;
+    rtpi_tok kw;
+    char show[48];
+    long cur = -1;     /* material being defined */
+    int skipping = 0;  /* newmtl of a name the scene already has */
+    rtp_status st = RTP_OK;
+    rtpi_lex_init(&lx, text, size, name, err);
+    while (st == RTP_OK && rtpi_lex_next(&lx, &kw)) {
+        rtpi_material *m = cur >= 0 ? &s->mats[cur] : NULL;
+        double v[3];
+        rtpi_tok tk;
+        if (rtpi_tok_is(&kw, "newmtl")) {
+            rtpi_tok nt;
+            rtpi_material def;
+            char *nm;
+            if ((st = line_string(&lx, "newmtl", &nt)) != RTP_OK)
+                break;
+            if (nt.n > 255) {
+                st = rtpi_lex_error(&lx, &nt, "material name longer than 255 characters");
+                break;
+            }
+            /* A name the scene already has (an NFF material, or the same
+               MTL read twice) is that material: the first one wins. */
+            cur = find_material(s, nt.s, nt.n);
+            skipping = cur >= 0;
+            if (skipping)
+                continue;
+            nm = (char *)rtpi_malloc(&s->alloc, nt.n + 1);
+            if (!nm)
+                return nomem(&lx, &nt);
+            memcpy(nm, nt.s, nt.n);
+            nm[nt.n] = '\0';
+            rtpi_material_default(&def);
+            def.name = nm;
+            cur = rtpi_scene_add_material(s, &def);
+            if (cur < 0) {
+                rtpi_free(&s->alloc, nm);
+                return nomem(&lx, &nt);
+            }
+            continue;
+        }
+        if (in_list(&kw, ignored_mtl) ||
+            (kw.n > 4 && memcmp(kw.s, "map_", 4) == 0 &&
+             !rtpi_tok_is(&kw, "map_Kd") && !rtpi_tok_is(&kw, "map_bump"))) {
+            rtpi_lex_skip_line(&lx);
+            continue;
+        }
+        if (!(rtpi_tok_is(&kw, "Kd") || rtpi_tok_is(&kw, "Ks") ||
+              rtpi_tok_is(&kw, "Ns") || rtpi_tok_is(&kw, "Ni") ||
+              rtpi_tok_is(&kw, "d") || rtpi_tok_is(&kw, "Tr") ||
+              rtpi_tok_is(&kw, "map_Kd") || rtpi_tok_is(&kw, "bump") ||
+              rtpi_tok_is(&kw, "map_bump")))
+            return rtpi_lex_error(&lx, &kw, "unknown MTL keyword '%s'",
+                                  rtpi_tok_show(&kw, show, sizeof show));
+        if (!m)
+            return rtpi_lex_error(&lx, &kw, "%s before any newmtl",
+                                  rtpi_tok_show(&kw, show, sizeof show));
+        if (skipping) {
+            rtpi_lex_skip_line(&lx);
+            continue;
+        }
+        if (rtpi_tok_is(&kw, "Kd") || rtpi_tok_is(&kw, "Ks")) {
+            const char *what = kw.s[1] == 'd' ? "Kd" : "Ks";
+            int i;
+            if ((st = line_num(&lx, what, "red", &v[0], &tk)) != RTP_OK)
+                break;
+            v[1] = v[2] = v[0];
+            {
+                rtpi_lex save = lx;
+                rtpi_tok peek;
+                double d;
+                if (rtpi_lex_next_inline(&save, &peek) &&
+                    rtpi_tok_number(&peek, &d) == 0) {
+                    if ((st = line_num(&lx, what, "green", &v[1], NULL)) != RTP_OK ||
+                        (st = line_num(&lx, what, "blue", &v[2], NULL)) != RTP_OK)
+                        break;
+                }
+            }
+            for (i = 0; i < 3; i++)
+                if (v[i] < 0.0)
+                    return rtpi_lex_error(&lx, &tk, "%s must not be negative", what);
+            if ((st = line_rest(&lx, what, 0)) != RTP_OK)
+                break;
+            if (what[1] == 'd') {
+                /* kd carries the brightness, color the hue (max 1), so
+                   mat.N.kd scales an MTL material like an NFF one. */
+                double mx = v[0] > v[1] ? v[0] : v[1];
+                mx = mx > v[2] ? mx : v[2];
+                m->kd = (float)mx;
+                for (i = 0; i < 3; i++)
+                    m->color[i] = mx > 0.0 ? (float)(v[i] / mx) : 1.0f;
+            } else {
+                m->ks = (float)((v[0] + v[1] + v[2]) / 3.0);
+            }
+        } else if (rtpi_tok_is(&kw, "Ns") || rtpi_tok_is(&kw, "Ni") ||
+                   rtpi_tok_is(&kw, "d") || rtpi_tok_is(&kw, "Tr")) {
+            char what[8];
+            rtpi_tok_show(&kw, what, sizeof what);
+            if ((st = line_num(&lx, what, "value", &v[0], &tk)) != RTP_OK ||
+                (st = line_rest(&lx, what, 0)) != RTP_OK)
+                break;
+            if (v[0] < 0.0)
+                return rtpi_lex_error(&lx, &tk, "%s must not be negative", what);
+            if (what[0] == 'N' && what[1] == 's') {
+                m->shine = (float)v[0];
+            } else if (what[0] == 'N') {
+                m->ior = v[0] > 0.0 ? (float)v[0] : 1.0f;
+            } else {
+                /* d is opacity, Tr transparency; both in [0, 1]. */
+                double tr = what[0] == 'd' ? 1.0 - v[0] : v[0];
+                m->kt = (float)(tr < 0.0 ? 0.0 : tr > 1.0 ? 1.0 : tr);
+            }
+        } else if (rtpi_tok_is(&kw, "map_Kd")) {
+            uint32_t idx;
+            if ((st = mtl_map(&lx, s, "map_Kd", &idx, NULL)) != RTP_OK)
+                break;
+            m = &s->mats[cur];
+            m->tex = RTPI_TEX_IMAGE;
+            m->tex_image = idx;
+        } else { /* bump, map_bump */
+            uint32_t idx;
+            double bm = 1.0;
+            if ((st = mtl_map(&lx, s, "bump", &idx, &bm)) != RTP_OK)
+                break;
+            m = &s->mats[cur];
+            m->bump = RTPI_BUMP_IMAGE;
+            m->bump_image = idx;
+            m->bump_strength = (float)bm;
+        }
+    }
+    return st;
+}
+
+static rtp_status read_mtllib(obj *o)
+{
+    rtpi_tok t;
+    rtp_status st;
+    while (rtpi_lex_next_inline(&o->lx, &t)) {
+        char *path = rtpi_path_join(&o->s->alloc, o->lx.name, t.s, t.n);
+        char *text = NULL;
+        size_t size = 0;
+        rtp_error inner;
+        if (!path)
+            return nomem(&o->lx, &t);
+        memset(&inner, 0, sizeof inner);
+        st = rtpi_read_file(&o->s->alloc, path, &text, &size, &inner);
+        if (st != RTP_OK) {
+            rtpi_free(&o->s->alloc, path);
+            return rtpi_lex_wrap(&o->lx, &t, st, &inner, "cannot read mtllib");
+        }
+        st = read_mtl(o->s, text, size, path, o->err);
+        rtpi_free(&o->s->alloc, text);
+        rtpi_free(&o->s->alloc, path);
+        if (st != RTP_OK)
+            return st;
+    }
+    return RTP_OK;
+}
+
+/* ------------------------------------------------------------------ OBJ */
+
+static rtp_status read_vertex(obj *o, int kind)
+{
+    static const char *const xyz[] = {"x", "y", "z"};
+    const char *what = kind == 'v' ? "v (vertex)" : kind == 'n' ? "vn (normal)"
+                                                                 : "vt (texture vertex)";
+    double p[3] = {0.0, 0.0, 0.0}, q[3];
+    int i, need = kind == 't' ? 1 : 3;
+    rtp_status st;
+    rtpi_tok here;
+    for (i = 0; i < need; i++)
+        if ((st = line_num(&o->lx, what, kind == 't' ? "u" : xyz[i], &p[i],
+                           NULL)) != RTP_OK)
+            return st;
+    if (kind == 't') {
+        /* vt u [v [w]] */
+        rtpi_lex save = o->lx;
+        rtpi_tok peek;
+        double d;
+        if (rtpi_lex_next_inline(&save, &peek) && rtpi_tok_number(&peek, &d) == 0 &&
+            (st = line_num(&o->lx, what, "v", &p[1], NULL)) != RTP_OK)
+            return st;
+    }
+    /* v: optional w or r g b (read past); vt: optional w. */
+    if ((st = line_rest(&o->lx, what, kind == 'v' ? 4 : kind == 't' ? 1 : 0)) != RTP_OK)
+        return st;
+    rtpi_lex_here(&o->lx, &here);
+    if (kind == 'v') {
+        rtpi_xform_point(o->xf, p, q);
+        if (rtpi_scene_add_pos(o->s, q[0], q[1], q[2]))
+            return nomem(&o->lx, &here);
+        o->np++;
+    } else if (kind == 'n') {
+        if (o->xf) {
+            for (i = 0; i < 3; i++)
+                q[i] = o->nm[3 * i] * p[0] + o->nm[3 * i + 1] * p[1] +
+                       o->nm[3 * i + 2] * p[2];
+        } else {
+            memcpy(q, p, sizeof q);
+        }
+        {
+            rtpi_v3 n = v3_norm(v3(q[0], q[1], q[2]));
+            if (rtpi_scene_add_nrm(o->s, n.x, n.y, n.z))
+                return nomem(&o->lx, &here);
+        }
+        o->nn++;
+    } else {
+        if (rtpi_scene_add_uv(o->s, p[0], p[1]))
+            return nomem(&o->lx, &here);
+        o->nt++;
+    }
+    return RTP_OK;
+}
+
+/* One index of a face corner: s[0..n) relative to `count` read so far. */
+static rtp_status corner_index(obj *o, const rtpi_tok *corner, size_t off,
+                               size_t n, const char *kind, const char *kinds,
+                               size_t count,
+                               uint32_t base, uint32_t *out)
+{
+    rtpi_tok t = *corner;
+    long v;
+    char show[48];
+    t.s += off;
+    t.n = n;
+    t.col += (int)off;
+    if (rtpi_tok_int(&t, &v) != 0)
+        return rtpi_lex_error(&o->lx, &t, "expected %s index in face, got '%s'",
+                              kind, rtpi_tok_show(&t, show, sizeof show));
+    if (v == 0)
+        return rtpi_lex_error(&o->lx, &t, "%s index 0 is invalid (OBJ indices start at 1)",
+                              kind);
+    if (v > 0 ? (size_t)v > count : (size_t)(-v) > count)
+        return rtpi_lex_error(&o->lx, &t, "%s index %ld out of range (%zu %s so far)",
+                              kind, v, count, count == 1 ? kind : kinds);
+    *out = base + (uint32_t)(v > 0 ? (size_t)v - 1 : count - (size_t)(-v));
+    return RTP_OK;
+}
+
+static int zero_normal(const rtp_scene *s, uint32_t n)
+{
+    const float *f = s->nrm + 3 * (size_t)n;
+    return f[0] == 0.0f && f[1] == 0.0f && f[2] == 0.0f;
+}
+
+static rtp_status read_face(obj *o, const rtpi_tok *kw)
+{
+    rtpi_tok t;
+    size_t n = 0, i, k, ntri;
+    int has_t = 1, has_n = 1;
+    rtp_status st;
+    while (rtpi_lex_next_inline(&o->lx, &t)) {
+        size_t a, b;
+        uint32_t *c;
+        if (n >= RTPI_POLY_MAX)
+            return rtpi_lex_error(&o->lx, &t, "face has more than %d vertices",
+                                  RTPI_POLY_MAX);
+        if (rtpi_grow(&o->s->alloc, (void **)&o->crn, &o->cap_crn, 3 * (n + 1),
+                      sizeof *o->crn) ||
+            rtpi_grow(&o->s->alloc, (void **)&o->pts, &o->cap_pts, 3 * (n + 1),
+                      sizeof *o->pts))
+            return nomem(&o->lx, &t);
+        c = o->crn + 3 * n;
+        c[1] = c[2] = RTPI_NONE;
+        for (a = 0; a < t.n && t.s[a] != '/'; a++)
+            ;
+        if ((st = corner_index(o, &t, 0, a, "vertex", "vertices", o->np, o->base_p, &c[0])) != RTP_OK)
+            return st;
+        if (a < t.n) {
+            for (b = a + 1; b < t.n && t.s[b] != '/'; b++)
+                ;
+            if (b > a + 1 && (st = corner_index(o, &t, a + 1, b - a - 1, "texture vertex",
+                                                "texture vertices", o->nt, o->base_t, &c[1])) != RTP_OK)
+                return st;
+            if (b < t.n && (st = corner_index(o, &t, b + 1, t.n - b - 1, "normal",
+                                              "normals", o->nn, o->base_n, &c[2])) != RTP_OK)
+                return st;
+            if (b == a + 1 && b == t.n) {
+                char show[48];
+                return rtpi_lex_error(&o->lx, &t, "malformed face vertex '%s'",
+                                      rtpi_tok_show(&t, show, sizeof show));
+            }
+        }
+        has_t &= c[1] != RTPI_NONE;
+        has_n &= c[2] != RTPI_NONE && !zero_normal(o->s, c[2]);
+        for (k = 0; k < 3; k++)
+            o->pts[3 * n + k] = o->s->pos[3 * (size_t)c[0] + k];
+        n++;
+    }
+    if (n < 3)
+        return rtpi_lex_error(&o->lx, kw, "face has %zu vert%s, needs at least 3",
+                              n, n == 1 ? "ex" : "ices");
+    o->faces++;
+    if (o->mat == RTPI_NONE) {
+        if (o->default_mat == RTPI_NONE) {
+            rtpi_material def;
+            long m;
+            rtpi_material_default(&def);
+            m = rtpi_scene_add_material(o->s, &def);
+            if (m < 0)
+                return nomem(&o->lx, kw);
+            o->default_mat = (uint32_t)m;
+        }
+        o->mat = o->default_mat;
+    }
+    if (rtpi_grow(&o->s->alloc, (void **)&o->tri, &o->cap_tri, 3 * n,
+                  sizeof *o->tri))
+        return nomem(&o->lx, kw);
+    if (n == 3) {
+        o->tri[0] = 0;
+        o->tri[1] = 1;
+        o->tri[2] = 2;
+        ntri = 1;
+    } else {
+        ntri = rtpi_triangulate(o->pts, n, o->tri);
+    }
+    for (i = 0; i < ntri; i++) {
+        rtpi_tri tr;
+        for (k = 0; k < 3; k++) {
+            const uint32_t *c = o->crn + 3 * (size_t)o->tri[3 * i + k];
+            tr.v[k] = c[0];
+            tr.t[k] = has_t ? c[1] : RTPI_NONE;
+            tr.n[k] = has_n ? c[2] : RTPI_NONE;
+        }
+        tr.mat = o->mat;
+        if (rtpi_scene_add_tri(o->s, &tr))
+            return nomem(&o->lx, kw);
+    }
+    return RTP_OK;
+}
+
+static rtp_status read_usemtl(obj *o)
+{
+    rtpi_tok t;
+    long m;
+    char show[80];
+    rtp_status st = line_string(&o->lx, "usemtl", &t);
+    if (st != RTP_OK)
+        return st;
+    m = find_material(o->s, t.s, t.n);
+    if (m < 0)
+        return rtpi_lex_error(&o->lx, &t,
+                              "unknown material '%s' (no newmtl of that name in the mtllib files read so far)",
+                              rtpi_tok_show(&t, show, sizeof show));
+    o->mat = (uint32_t)m;
+    return RTP_OK;
+}
+
+rtp_status rtpi_read_obj_ex(rtp_scene *s, const char *text, size_t size,
+                            const char *name, const double *xform,
+                            uint32_t default_mat, size_t *faces,
+                            rtp_error *err)
+{
+    obj o;
+    rtpi_tok kw;
+    char show[48];
+    rtp_status st = RTP_OK;
+    memset(&o, 0, sizeof o);
+    o.s = s;
+    o.err = err;
+    rtpi_lex_init(&o.lx, text, size, name ? name : "<memory>", err);
+    if (xform) {
+        if (rtpi_xform_normal_matrix(xform, o.nm) != 0)
+            return rtpi_error(err, RTP_ERR_ARGUMENT, o.lx.name, 0, 0,
+                              "singular transform");
+        o.xf = xform;
+    }
+    o.base_p = (uint32_t)s->npos;
+    o.base_n = (uint32_t)s->nnrm;
+    o.base_t = (uint32_t)s->nuv;
+    o.mat = RTPI_NONE;
+    o.default_mat = default_mat;
+    while (st == RTP_OK && rtpi_lex_next(&o.lx, &kw)) {
+        if (rtpi_tok_is(&kw, "v"))
+            st = read_vertex(&o, 'v');
+        else if (rtpi_tok_is(&kw, "vn"))
+            st = read_vertex(&o, 'n');
+        else if (rtpi_tok_is(&kw, "vt"))
+            st = read_vertex(&o, 't');
+        else if (rtpi_tok_is(&kw, "f"))
+            st = read_face(&o, &kw);
+        else if (rtpi_tok_is(&kw, "usemtl"))
+            st = read_usemtl(&o);
+        else if (rtpi_tok_is(&kw, "mtllib"))
+            st = read_mtllib(&o);
+        else if (in_list(&kw, ignored_obj))
+            rtpi_lex_skip_line(&o.lx);
+        else
+            st = rtpi_lex_error(&o.lx, &kw, "unknown OBJ keyword '%s'",
+                                rtpi_tok_show(&kw, show, sizeof show));
+    }
+    rtpi_free(&s->alloc, o.pts);
+    rtpi_free(&s->alloc, o.crn);
+    rtpi_free(&s->alloc, o.tri);
+    if (faces)
+        *faces = o.faces;
+    return st;
+}
+
+rtp_status rtpi_read_obj(rtp_scene *s, const char *text, size_t size,
+                         const char *name, const double *xform,
+                         uint32_t default_mat, rtp_error *err)
+{
+    return rtpi_read_obj_ex(s, text, size, name, xform, default_mat, NULL, err);
+}

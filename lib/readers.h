@@ -1,0 +1,115 @@
+/*
+ * readers.h — what the scene readers (nff.c, obj.c, bezier.c, lex.c)
+ * share: a tokenizer that knows line and column, number and path helpers,
+ * and extended entry points that report what a file held.  Nothing
+ * outside the readers includes this.
+ */
+#ifndef RTP_READERS_H
+#define RTP_READERS_H
+
+#include "internal.h"
+
+/* Material index used by the NFF reader for primitives that come before
+   any `f` line.  It is replaced by a default material appended after the
+   whole file is read, so that material N stays the N-th `f` line. */
+#define RTPI_MAT_PENDING 0xfffffffeu
+
+/* Longest token copied for number conversion; longer is a parse error. */
+#define RTPI_NUM_MAX 63
+
+/* Include nesting allowed below the top-level file. */
+#define RTPI_INCLUDE_MAX 8
+
+/* Vertices per polygon/face; more is a parse error (ear clipping is
+   quadratic, and no real scene comes close). */
+#define RTPI_POLY_MAX 65536
+
+/* A token: bytes [s, s+n) starting at 1-based line and column. */
+typedef struct rtpi_tok {
+    const char *s;
+    size_t n;
+    int line, col;
+} rtpi_tok;
+
+typedef struct rtpi_lex {
+    const char *p, *end;
+    const char *line_start;
+    int line;
+    int commas;      /* ',' separates tokens too (Newell's .bpt) */
+    const char *name; /* file name for messages */
+    rtp_error *err;
+} rtpi_lex;
+
+void rtpi_lex_init(rtpi_lex *lx, const char *text, size_t size,
+                   const char *name, rtp_error *err);
+/* Next token, skipping white space, newlines and '#' comments.
+   @return 1, or 0 at end of text (t then holds the end position). */
+int rtpi_lex_next(rtpi_lex *lx, rtpi_tok *t);
+/* Next token on the current line only (OBJ/MTL).  @return 1, or 0 at the
+   end of the line or text (the newline is not consumed). */
+int rtpi_lex_next_inline(rtpi_lex *lx, rtpi_tok *t);
+/* Skips to the start of the next line. */
+void rtpi_lex_skip_line(rtpi_lex *lx);
+/* Current position as a zero-length token (for end-of-input errors). */
+void rtpi_lex_here(const rtpi_lex *lx, rtpi_tok *t);
+
+/* Token equals the NUL-terminated word. */
+int rtpi_tok_is(const rtpi_tok *t, const char *word);
+/* A finite number; @return 0 or -1 if the token is not one. */
+int rtpi_tok_number(const rtpi_tok *t, double *out);
+/* A decimal integer with an optional sign, |v| <= 2^31-1; @return 0/-1. */
+int rtpi_tok_int(const rtpi_tok *t, long *out);
+/* Copies the token into buf (at most size-1 bytes, non-printable bytes
+   shown as '?', long tokens cut with "...") for messages.  @return buf. */
+const char *rtpi_tok_show(const rtpi_tok *t, char *buf, size_t size);
+
+/* Parse error at a token: file = lx->name. */
+rtp_status rtpi_lex_error(const rtpi_lex *lx, const rtpi_tok *t,
+                          const char *fmt, ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 3, 4)))
+#endif
+    ;
+
+/* Resolves `rel` (a token) against the folder of `base`: absolute paths
+   are kept.  @return a new string from `a`, or NULL (out of memory). */
+char *rtpi_path_join(const rtp_allocator *a, const char *base,
+                     const char *rel, size_t rel_len);
+
+/* Re-labels an error from a nested file operation (read, texture) with
+   the position of the token that asked for it, keeping its status. */
+rtp_status rtpi_lex_wrap(const rtpi_lex *lx, const rtpi_tok *t,
+                         rtp_status st, const rtp_error *inner,
+                         const char *what);
+
+/* 4x3 affine transforms (rows: x' = m[0..2].p + m[3]), as rtpi_read_obj
+   takes them. */
+void rtpi_xform_identity(double m[12]);
+/* m = b * a (a applied first). */
+void rtpi_xform_mul(double m[12], const double b[12], const double a[12]);
+void rtpi_xform_point(const double *m, const double p[3], double out[3]);
+/* Normal matrix: inverse transpose of the linear part (9 doubles).
+   @return -1 if the transform is singular. */
+int rtpi_xform_normal_matrix(const double *m, double nm[9]);
+
+/* Counts of what the NFF source held, before triangulation. */
+typedef struct rtpi_nff_stats {
+    size_t polygons;     /* p */
+    size_t polypatches;  /* pp */
+    size_t spheres, cones;
+    size_t includes;
+} rtpi_nff_stats;
+
+/* rtpi_read_nff that also fills *stats (may be NULL). */
+rtp_status rtpi_read_nff_stats(rtp_scene *s, const char *text, size_t size,
+                               const char *name, int include_depth,
+                               rtpi_nff_stats *stats, rtp_error *err);
+
+/* rtpi_read_obj with a face count (faces as written, before
+   triangulation); `faces` may be NULL. */
+rtp_status rtpi_read_obj_ex(rtp_scene *s, const char *text, size_t size,
+                            const char *name, const double *xform,
+                            uint32_t default_mat, size_t *faces,
+                            rtp_error *err);
+
+#endif /* RTP_READERS_H */

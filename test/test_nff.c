@@ -1,0 +1,812 @@
+/* test_nff.c — the NFF reader, rtp's additions, polygon triangulation,
+ * broken inputs (position and message), truncation at every byte, and
+ * the SPD scenes' primitive counts when ../shared is present. */
+#include "check.h"
+#include "readers.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+/* ------------------------------------------------------------ helpers */
+
+static rtp_status load(const char *text, const char *name, rtp_scene **s,
+                       rtp_error *err)
+{
+    return rtp_scene_load_memory(text, strlen(text), name, "nff", NULL, s, err);
+}
+
+static char tmpdir[64];
+
+/* A fresh folder for files the tests write; "" if none could be made. */
+static const char *tmp_folder(void)
+{
+    if (!tmpdir[0]) {
+        strcpy(tmpdir, "/tmp/rtp-test-nff-XXXXXX");
+        if (!mkdtemp(tmpdir))
+            tmpdir[0] = '\0';
+    }
+    return tmpdir;
+}
+
+static int write_file(const char *dir, const char *name, const char *text)
+{
+    char path[512];
+    FILE *f;
+    snprintf(path, sizeof path, "%s/%s", dir, name);
+    f = fopen(path, "wb");
+    if (!f)
+        return -1;
+    fputs(text, f);
+    return fclose(f);
+}
+
+static void remove_file(const char *dir, const char *name)
+{
+    char path[512];
+    snprintf(path, sizeof path, "%s/%s", dir, name);
+    remove(path);
+}
+
+static int file_exists(const char *path)
+{
+    FILE *f = fopen(path, "rb");
+    if (f)
+        fclose(f);
+    return f != NULL;
+}
+
+static double tri_area(const rtp_scene *s, const rtpi_tri *t, rtpi_v3 *n)
+{
+    rtpi_v3 p0 = v3_from_f(s->pos + 3 * (size_t)t->v[0]);
+    rtpi_v3 p1 = v3_from_f(s->pos + 3 * (size_t)t->v[1]);
+    rtpi_v3 p2 = v3_from_f(s->pos + 3 * (size_t)t->v[2]);
+    rtpi_v3 c = v3_cross(v3_sub(p1, p0), v3_sub(p2, p0));
+    if (n)
+        *n = c;
+    return 0.5 * v3_len(c);
+}
+
+static int near(double a, double b, double tol) { return fabs(a - b) <= tol; }
+
+/* ----------------------------------------------------------- keywords */
+
+static const char every_keyword[] =
+    "# every NFF keyword, as SPD writes them\n"
+    "b 0.1 0.2 0.3\n"
+    "v\n"
+    "from 1 -5 2\n"
+    "at 0 0 0.5\n"
+    "up 0 0 1\n"
+    "angle 40\n"
+    "hither 0.25\n"
+    "resolution 64 48\n"
+    "l 1 2 3\n"
+    "l -1 -2 3 0.5 0.25 0.125   # with colour\n"
+    "s 5 5 5 1          # before any f: default material\n"
+    "f 0.9 0.8 0.7 0.6 0.5 40 0 0\n"
+    "p 4\n"
+    "0 0 0\n"
+    "2 0 0\n"
+    "2 2 0\n"
+    "0 2 0\n"
+    "f 1 1 1 0.1 0.2 100 0.7 1.5\n"
+    "c 0 0 0 1\n"
+    "  0 0 2 0.5\n"
+    "s 1 2 3 -4\n"
+    "pp 3\n"
+    "0 0 1 0 0 2\n"
+    "1 0 1 0 0 1\n"
+    "0 1 1 0 0 1\n";
+
+static void test_every_keyword(void)
+{
+    rtp_scene *s = NULL;
+    rtp_error err;
+    rtpi_v3 n;
+    CHECK(load(every_keyword, "k.nff", &s, &err) == RTP_OK);
+    if (!s)
+        return;
+    CHECK(s->background[0] == 0.1f && s->background[2] == 0.3f);
+    CHECK(s->camera.from[0] == 1 && s->camera.from[1] == -5 && s->camera.from[2] == 2);
+    CHECK(s->camera.at[2] == 0.5 && s->camera.up[2] == 1);
+    CHECK(s->camera.angle == 40 && s->camera.hither == 0.25);
+    CHECK(s->width == 64 && s->height == 48);
+    CHECK(s->nlights == 2);
+    CHECK(s->lights[0].color[0] == 1 && s->lights[0].color[2] == 1 && s->lights[0].on);
+    CHECK(s->lights[1].pos[0] == -1 && s->lights[1].color[1] == 0.25f);
+    /* materials: the two f lines, then the default for the first sphere */
+    CHECK(s->nmats == 3);
+    CHECK(s->mats[0].color[1] == 0.8f && s->mats[0].kd == 0.6f &&
+          s->mats[0].ks == 0.5f && s->mats[0].shine == 40 && s->mats[0].kt == 0 &&
+          s->mats[0].ior == 1.0f); /* SPD's ior 0 */
+    CHECK(s->mats[1].kt == 0.7f && s->mats[1].ior == 1.5f);
+    CHECK(s->mats[2].kd == 1 && s->mats[2].color[0] == 1);
+    CHECK(s->nspheres == 2);
+    CHECK(s->spheres[0].mat == 2 && s->spheres[0].r == 1);
+    CHECK(s->spheres[1].mat == 1 && s->spheres[1].r == -4);
+    CHECK(s->ncones == 1 && s->cones[0].rb == 1 && s->cones[0].ra == 0.5f &&
+          s->cones[0].apex[2] == 2 && s->cones[0].mat == 1);
+    CHECK(s->ntris == 3);
+    CHECK(s->tris[0].mat == 0 && s->tris[0].n[0] == RTPI_NONE);
+    CHECK(near(tri_area(s, &s->tris[0], &n) + tri_area(s, &s->tris[1], NULL), 4.0, 1e-6));
+    CHECK(n.z > 0);
+    /* pp: vertex normals referenced and normalised */
+    CHECK(s->tris[2].n[0] != RTPI_NONE && s->nnrm == 3);
+    CHECK(s->nrm[3 * s->tris[2].n[0] + 2] == 1.0f);
+    rtp_scene_destroy(s);
+}
+
+/* Tokens, not lines: the same scene with its numbers spread or packed. */
+static void test_token_based(void)
+{
+    rtp_scene *s = NULL;
+    rtp_error err;
+    const char *text =
+        "v from 0 0 5 at 0 0 0 up 0 1 0 angle 30 hither 1 resolution 8 8 "
+        "l 0 0 9 f 1 0 0 1 0 1 0 0 s 0 0 0 1 p 3 0 0 0 1 0 0 0 1 0\n"
+        "c\n0 0 0\n1\n0 0\n1 1 s\t1\t1\t1\t1\r\n";
+    CHECK(load(text, "t.nff", &s, &err) == RTP_OK);
+    if (!s)
+        return;
+    CHECK(s->width == 8 && s->camera.angle == 30);
+    CHECK(s->nspheres == 2 && s->ntris == 1 && s->ncones == 1 && s->nlights == 1);
+    CHECK(s->cones[0].apex[2] == 1 && s->cones[0].ra == 1);
+    rtp_scene_destroy(s);
+}
+
+/* --------------------------------------------------------- polygons */
+
+static double poly_area(const double *p, size_t n, double nrm[3])
+{
+    size_t i;
+    nrm[0] = nrm[1] = nrm[2] = 0;
+    for (i = 0; i < n; i++) {
+        const double *a = p + 3 * i, *b = p + 3 * ((i + 1) % n);
+        nrm[0] += (a[1] - b[1]) * (a[2] + b[2]);
+        nrm[1] += (a[2] - b[2]) * (a[0] + b[0]);
+        nrm[2] += (a[0] - b[0]) * (a[1] + b[1]);
+    }
+    return 0.5 * sqrt(nrm[0] * nrm[0] + nrm[1] * nrm[1] + nrm[2] * nrm[2]);
+}
+
+/* Triangulates, and checks the triangles' area equals the polygon's and
+   every triangle faces the polygon's way. */
+static void check_triangulation(const double *p, size_t n, const char *what)
+{
+    uint32_t *tri = (uint32_t *)malloc(3 * (n - 2) * sizeof *tri);
+    double nrm[3], area = poly_area(p, n, nrm), sum = 0;
+    size_t k, i, bad = 0;
+    if (!tri)
+        return;
+    k = rtpi_triangulate(p, n, tri);
+    CHECK_MSG(k <= n - 2, "%s: %zu triangles", what, k);
+    for (i = 0; i < k; i++) {
+        const double *a = p + 3 * tri[3 * i], *b = p + 3 * tri[3 * i + 1],
+                     *c = p + 3 * tri[3 * i + 2];
+        rtpi_v3 g = v3_cross(v3(b[0] - a[0], b[1] - a[1], b[2] - a[2]),
+                             v3(c[0] - a[0], c[1] - a[1], c[2] - a[2]));
+        sum += 0.5 * v3_len(g);
+        if (v3_dot(g, v3(nrm[0], nrm[1], nrm[2])) <= 0)
+            bad++;
+        CHECK(tri[3 * i] < n && tri[3 * i + 1] < n && tri[3 * i + 2] < n);
+    }
+    CHECK_MSG(near(sum, area, 1e-9 * (area + 1)), "%s: area %.12g, triangles %.12g",
+              what, area, sum);
+    CHECK_MSG(bad == 0, "%s: %zu triangles face the wrong way", what, bad);
+    free(tri);
+}
+
+/* Rotates 2D points into a tilted 3D plane (and optionally mirrors). */
+static void place(const double *xy, size_t n, double *out, int flip)
+{
+    size_t i;
+    for (i = 0; i < n; i++) {
+        double x = xy[2 * i], y = flip ? -xy[2 * i + 1] : xy[2 * i + 1];
+        out[3 * i] = 0.8 * x + 0.1 * y + 3;
+        out[3 * i + 1] = -0.36 * x + 0.6 * y - 1;
+        out[3 * i + 2] = 0.48 * x + 0.8 * y + 7;
+    }
+}
+
+static void test_triangulate(void)
+{
+    double xy[2 * 200], p[3 * 200];
+    size_t i, n;
+    uint32_t tri[3 * 8];
+    /* a star: concave at every other vertex */
+    for (i = 0; i < 20; i++) {
+        double a = 2 * 3.14159265358979 * i / 20, r = i % 2 ? 0.4 : 1.0;
+        xy[2 * i] = r * cos(a);
+        xy[2 * i + 1] = r * sin(a);
+    }
+    place(xy, 20, p, 0);
+    check_triangulation(p, 20, "star");
+    place(xy, 20, p, 1);
+    {
+        /* mirrored: clockwise in the plane, still consistent */
+        double q[3 * 20];
+        for (i = 0; i < 20; i++)
+            memcpy(q + 3 * i, p + 3 * (19 - i), 3 * sizeof *q);
+        check_triangulation(q, 20, "reversed star");
+    }
+    /* a comb (like a gear's teeth), 4 teeth */
+    n = 0;
+    for (i = 0; i < 4; i++) {
+        xy[2 * n] = 2.0 * i; xy[2 * n + 1] = 0; n++;
+        xy[2 * n] = 2.0 * i + 1; xy[2 * n + 1] = 0; n++;
+        xy[2 * n] = 2.0 * i + 1; xy[2 * n + 1] = -3; n++;
+        xy[2 * n] = 2.0 * i + 2; xy[2 * n + 1] = -3; n++;
+    }
+    xy[2 * n] = 8; xy[2 * n + 1] = 2; n++;
+    xy[2 * n] = 0; xy[2 * n + 1] = 2; n++;
+    place(xy, n, p, 0);
+    check_triangulation(p, n, "comb");
+    /* collinear vertices along the edges and a duplicate point */
+    {
+        static const double sq[] = {0, 0, 1, 0, 2, 0, 2, 0, 2, 1, 2, 2, 1, 2,
+                                    1, 1, 0.5, 1, 0, 1};
+        n = sizeof sq / sizeof *sq / 2;
+        place(sq, n, p, 0);
+        check_triangulation(p, n, "collinear and duplicate");
+    }
+    /* a 144-gon gear outline: 36 teeth of 4 vertices */
+    n = 0;
+    for (i = 0; i < 36; i++) {
+        double a0 = 2 * 3.14159265358979 * i / 36, da = 2 * 3.14159265358979 / 36;
+        double r[4] = {1.0, 1.0, 0.9, 0.9}, f[4] = {0, 0.3, 0.5, 0.8};
+        size_t k;
+        for (k = 0; k < 4; k++) {
+            xy[2 * n] = r[k] * cos(a0 + f[k] * da);
+            xy[2 * n + 1] = r[k] * sin(a0 + f[k] * da);
+            n++;
+        }
+    }
+    place(xy, n, p, 0);
+    check_triangulation(p, n, "gear 144-gon");
+    /* degenerate: all on a line, all the same point */
+    {
+        static const double line[] = {0, 0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3};
+        static const double pt[] = {1, 1, 1, 1, 1, 1, 1, 1, 1};
+        CHECK(rtpi_triangulate(line, 4, tri) == 0);
+        CHECK(rtpi_triangulate(pt, 3, tri) == 0);
+    }
+}
+
+/* A concave polygon through the reader: the first three vertices form a
+   convex corner, and the triangles keep the polygon's normal. */
+static void test_concave_polygon(void)
+{
+    rtp_scene *s = NULL;
+    rtp_error err;
+    size_t i;
+    double area = 0;
+    const char *text = "p 6\n-2 -1 0\n1 -1 0\n1 0 0\n-1 0 0\n-1 2 0\n-2 2 0\n"
+                       "p 6\n-2 -1 5\n-2 2 5\n-1 2 5\n-1 0 5\n1 0 5\n1 -1 5\n";
+    CHECK(load(text, "c.nff", &s, &err) == RTP_OK);
+    if (!s)
+        return;
+    CHECK(s->ntris == 8);
+    for (i = 0; i < s->ntris; i++) {
+        rtpi_v3 n;
+        area += tri_area(s, &s->tris[i], &n);
+        CHECK(i < 4 ? n.z > 0 : n.z < 0);
+    }
+    CHECK(near(area, 10.0, 1e-6));
+    rtp_scene_destroy(s);
+}
+
+/* ---------------------------------------------------------- additions */
+
+static void test_names_and_keys(void)
+{
+    rtp_scene *s = NULL;
+    rtp_error err;
+    const char *text =
+        "l 1 2 3\nname key\nl 4 5 6 0.5 0.5 0.5\nname lamp-2\noff\n"
+        "ambient 0.1 0.2 0.3\n"
+        "f 1 0 0 1 0 100 0 0\nname table\n"
+        "f 0 1 0 1 0 100 0 0\n"
+        "f 0 0 1 1 0 100 0 0\nname _teapot_2\n"
+        "s 0 0 0 1\n";
+    CHECK(load(text, "n.nff", &s, &err) == RTP_OK);
+    if (!s)
+        return;
+    CHECK(s->nmats == 3 && s->nlights == 2);
+    CHECK(s->mats[0].name && strcmp(s->mats[0].name, "table") == 0);
+    CHECK(s->mats[1].name == NULL);
+    CHECK(s->mats[2].name && strcmp(s->mats[2].name, "_teapot_2") == 0);
+    CHECK(strcmp(s->lights[1].name, "lamp-2") == 0 && s->lights[1].on == 0);
+    CHECK(s->lights[0].on == 1);
+    CHECK(s->ambient[1] == 0.2f);
+    CHECK(rtp_scene_set(s, "mat.table.color", "0.5,0.5,0.5", &err) == RTP_OK);
+    CHECK(s->mats[0].color[1] == 0.5f);
+    CHECK(rtp_scene_set(s, "light.lamp-2.on", "1", &err) == RTP_OK);
+    CHECK(s->lights[1].on == 1);
+    CHECK(rtp_scene_set(s, "mat.1.kd", "0.5", &err) == RTP_OK);
+    rtp_scene_destroy(s);
+}
+
+static void test_checker_bump(void)
+{
+    rtp_scene *s = NULL;
+    rtp_error err;
+    const char *text =
+        "f 1 1 1 1 0 100 0 0\nchecker 0.1 0.2 0.3 0.5\nbump waves 2 0.3\n"
+        "f 1 1 1 1 0 100 0 0\nbump noise 0.25 -1\n";
+    CHECK(load(text, "cb.nff", &s, &err) == RTP_OK);
+    if (!s)
+        return;
+    CHECK(s->mats[0].tex == RTPI_TEX_CHECKER && s->mats[0].color2[2] == 0.3f &&
+          s->mats[0].tex_scale == 0.5f);
+    CHECK(s->mats[0].bump == RTPI_BUMP_WAVES && s->mats[0].bump_scale == 2 &&
+          s->mats[0].bump_strength == 0.3f);
+    CHECK(s->mats[1].tex == RTPI_TEX_NONE && s->mats[1].bump == RTPI_BUMP_NOISE &&
+          s->mats[1].bump_strength == -1);
+    rtp_scene_destroy(s);
+}
+
+static const char quad_obj[] =
+    "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
+    "vn 0 0 1\nf 1/1/1 2/2/1 3/3/1 4/4/1\n";
+
+static void test_files(void)
+{
+    const char *dir = tmp_folder();
+    char name[512];
+    rtp_scene *s = NULL;
+    rtp_error err;
+    size_t i;
+    const char *text =
+        "f 1 1 1 1 0 100 0 0\nname pic\n"
+        "texture sub/tex.ppm\n"
+        "bump sub/tex.ppm 0.5\n"
+        "include sub/quad.obj scale 2 rotate z 90 translate 10 0 0\n"
+        "include sub/part.nff\n"
+        "s 0 0 0 1\n"
+        "bezier sub/flat.bpt 2 translate 0 0 3\n";
+    if (!dir[0])
+        SKIP("cannot make a temporary folder");
+    snprintf(name, sizeof name, "%s/sub", dir);
+    if (!file_exists(name)) {
+        char cmd[600];
+        snprintf(cmd, sizeof cmd, "mkdir -p '%s'", name);
+        if (system(cmd) != 0)
+            SKIP("cannot make a folder");
+    }
+    CHECK(write_file(dir, "sub/tex.ppm", "P3\n2 1\n255\n255 0 0 0 0 255\n") == 0);
+    CHECK(write_file(dir, "sub/quad.obj", quad_obj) == 0);
+    CHECK(write_file(dir, "sub/part.nff",
+                     "s 1 1 1 1\nf 0 1 0 1 0 100 0 0\nname inner\ns 2 2 2 1\n") == 0);
+    /* one flat patch: the unit square in z = 0, points on a 4x4 grid */
+    {
+        char bpt[2048];
+        size_t o = 0;
+        int k;
+        o += (size_t)snprintf(bpt + o, sizeof bpt - o, "1\n");
+        for (k = 1; k <= 16; k++)
+            o += (size_t)snprintf(bpt + o, sizeof bpt - o, "%d%s", k, k < 16 ? "," : "\n");
+        o += (size_t)snprintf(bpt + o, sizeof bpt - o, "16\n");
+        for (k = 0; k < 16; k++)
+            o += (size_t)snprintf(bpt + o, sizeof bpt - o, "%g,%g,0\n", (k / 4) / 3.0,
+                                  (k % 4) / 3.0);
+        CHECK(write_file(dir, "sub/flat.bpt", bpt) == 0);
+    }
+    snprintf(name, sizeof name, "%s/main.nff", dir);
+    CHECK(load(text, name, &s, &err) == RTP_OK);
+    if (!s) {
+        char buf[600];
+        fprintf(stderr, "%s\n", rtp_error_format(&err, buf, sizeof buf));
+        return;
+    }
+    /* texture and bump image */
+    CHECK(s->ntexs == 1);
+    CHECK(s->mats[0].tex == RTPI_TEX_IMAGE && s->mats[0].tex_image == 0);
+    CHECK(s->mats[0].bump == RTPI_BUMP_IMAGE && s->mats[0].bump_image == 0 &&
+          s->mats[0].bump_strength == 0.5f);
+    /* the OBJ: scale 2, then rotate 90 degrees about z, then translate:
+       (1,0,0) -> (2,0,0) -> (0,2,0) -> (10,2,0); normals stay +z; it uses
+       the current material and keeps its uvs */
+    CHECK(s->ntris >= 2);
+    CHECK(s->tris[0].mat == 0 && s->tris[0].t[0] != RTPI_NONE);
+    CHECK(near(s->pos[3], 10, 1e-5) && near(s->pos[4], 2, 1e-5) && near(s->pos[5], 0, 1e-6));
+    CHECK(near(s->nrm[2], 1, 1e-6));
+    /* the included NFF: its first sphere inherits "pic", then its own f */
+    CHECK(s->nspheres == 3);
+    CHECK(s->spheres[0].mat == 0 && s->spheres[1].mat == 1);
+    CHECK(s->mats[1].name && strcmp(s->mats[1].name, "inner") == 0);
+    CHECK(s->spheres[2].mat == 0); /* back in main.nff: "pic" again */
+    /* the Bezier patch: 2x2 quads = 8 triangles at z = 3, facing -z or +z
+       consistently with their vertex normals */
+    CHECK(s->ntris == 2 + 8);
+    for (i = 2; i < s->ntris; i++) {
+        rtpi_v3 g;
+        const rtpi_tri *t = &s->tris[i];
+        tri_area(s, t, &g);
+        CHECK(near(s->pos[3 * t->v[0] + 2], 3, 1e-6));
+        CHECK(t->n[0] != RTPI_NONE &&
+              v3_dot(g, v3_from_f(s->nrm + 3 * (size_t)t->n[0])) > 0);
+    }
+    rtp_scene_destroy(s);
+    s = NULL;
+
+    /* a file that includes itself stops at the nesting limit */
+    CHECK(write_file(dir, "self.nff", "s 0 0 0 1\ninclude self.nff\n") == 0);
+    snprintf(name, sizeof name, "%s/self.nff", dir);
+    CHECK(rtp_scene_load(name, NULL, &s, &err) == RTP_ERR_PARSE);
+    CHECK(strstr(err.message, "nested deeper") != NULL);
+    CHECK(err.line == 2 && err.column == 1);
+    rtp_scene_destroy(s);
+
+    remove_file(dir, "self.nff");
+    remove_file(dir, "sub/tex.ppm");
+    remove_file(dir, "sub/quad.obj");
+    remove_file(dir, "sub/part.nff");
+    remove_file(dir, "sub/flat.bpt");
+    snprintf(name, sizeof name, "%s/sub", dir);
+    rmdir(name);
+}
+
+/* --------------------------------------------------------- bad inputs */
+
+typedef struct bad_case {
+    const char *text;
+    rtp_status status;
+    int line, col;
+    const char *msg;
+} bad_case;
+
+static const bad_case bad_nff[] = {
+    {"s 1 2 3 abc\n", RTP_ERR_PARSE, 1, 9, "expected number for sphere radius, got 'abc'"},
+    {"p 2\n0 0 0\n1 1 1\n", RTP_ERR_PARSE, 1, 3, "polygon vertex count 2 < 3"},
+    {"q 1 2\n", RTP_ERR_PARSE, 1, 1, "unknown keyword 'q'"},
+    {"f 1 1 1 0.5 0.5 3 0", RTP_ERR_PARSE, 1, 20,
+     "unexpected end of file in f (material) line, expected ior"},
+    {"s 0 0 0 nan\n", RTP_ERR_PARSE, 1, 9, "expected number for sphere radius, got 'nan'"},
+    {"s 0 0 inf 1\n", RTP_ERR_PARSE, 1, 7, "expected number for sphere z, got 'inf'"},
+    {"s 0 0 0 1e999\n", RTP_ERR_PARSE, 1, 9, "expected number for sphere radius"},
+    {"s 0 0 0 0x10\n", RTP_ERR_PARSE, 1, 9, "expected number for sphere radius"},
+    {"s 0 0 0 1e30\n", RTP_ERR_PARSE, 1, 9, "out of range"},
+    {"p 999999999\n", RTP_ERR_PARSE, 1, 3, "exceeds the limit"},
+    {"p 99999999999999999999\n", RTP_ERR_PARSE, 1, 3, "expected vertex count for polygon"},
+    {"p 1000\n0 0 0\n", RTP_ERR_PARSE, 1, 3, "file ends before"},
+    {"p -3\n", RTP_ERR_PARSE, 1, 3, "polygon vertex count -3 < 3"},
+    {"p 3 0 0 0 1 0 0 0 1\n", RTP_ERR_PARSE, 2, 1,
+     "unexpected end of file in p (polygon) line, expected vertex 3 z"},
+    {"pp 3\n0 0 0 0 0 1\n1 0 0 0 0 1\n0 1 0 0 0\n", RTP_ERR_PARSE, 5, 1,
+     "expected vertex 3 normal z"},
+    {"pp 3\n0 0 0 0 0 0\n1 0 0 0 0 1\n0 1 0 0 0 1\n", RTP_ERR_PARSE, 2, 7,
+     "polygon patch vertex 1 normal is zero"},
+    {"l 1 2 3 0.5 x\n", RTP_ERR_PARSE, 1, 13, "expected number for light green, got 'x'"},
+    {"l 1 2 3 -1 1 1\n", RTP_ERR_PARSE, 1, 9, "light red must not be negative"},
+    {"b 1 1\n", RTP_ERR_PARSE, 2, 1,
+     "unexpected end of file in b (background) line, expected blue"},
+    {"v\nfrom 0 0 0\nat 0 0 0\n", RTP_ERR_PARSE, 3, 1, "view at equals view from"},
+    {"v\nup 0 0 0\n", RTP_ERR_PARSE, 2, 1, "view up is zero or parallel"},
+    {"v\nfrom 0 0 5\nup 0 0 1\n", RTP_ERR_PARSE, 3, 1, "parallel to the view direction"},
+    {"v\nresolution 0 5\n", RTP_ERR_PARSE, 2, 12, "resolution width 0 must be"},
+    {"v\nresolution 64 64.5\n", RTP_ERR_PARSE, 2, 15, "resolution height 64.5"},
+    {"v\nangle 180\n", RTP_ERR_PARSE, 2, 7, "view angle 180"},
+    {"v\nhither -1\n", RTP_ERR_PARSE, 2, 8, "view hither must not be negative"},
+    {"v\nfrom 1 2\nat 0 0 0\n", RTP_ERR_PARSE, 3, 1, "expected number for view from z, got 'at'"},
+    {"f 1 1 1 -1 0 0 0 0\n", RTP_ERR_PARSE, 1, 9, "material Kd must not be negative"},
+    {"f 1 1 1 1 0 0 0 -2\n", RTP_ERR_PARSE, 1, 17, "material ior must not be negative"},
+    {"c 0 0 0 1 0 0 0 1\n", RTP_ERR_PARSE, 1, 11, "cone apex equals its base"},
+    {"c 0 0 0 0 0 0 1 0\n", RTP_ERR_PARSE, 1, 17, "cone radii are both 0"},
+    {"c 0 0 0 -1 0 0 1 0\n", RTP_ERR_PARSE, 1, 9, "cone base radius must not be negative"},
+    {"s 0 0 0 0\n", RTP_ERR_PARSE, 1, 9, "sphere radius is 0"},
+    {"s 1 2 3 4 # comment\ns 1 2 3 x", RTP_ERR_PARSE, 2, 9, "got 'x'"},
+    {"s 1 2 3 4\r\ns 1 2\tabc 3 4\r\n", RTP_ERR_PARSE, 2, 7,
+     "expected number for sphere z, got 'abc'"},
+    {"name foo\n", RTP_ERR_PARSE, 1, 1, "must follow an f (material) or l (light) line"},
+    {"f 1 1 1 1 0 0 0 0\nname 9x\n", RTP_ERR_PARSE, 2, 6, "invalid name '9x'"},
+    {"f 1 1 1 1 0 0 0 0\nname a.b\n", RTP_ERR_PARSE, 2, 6, "invalid name 'a.b'"},
+    {"f 1 1 1 1 0 0 0 0\nname a\nf 1 1 1 1 0 0 0 0\nname a\n", RTP_ERR_PARSE, 4, 6,
+     "material name 'a' is already used by material 0"},
+    {"l 0 0 0\nname a\nl 0 0 0\nname a\n", RTP_ERR_PARSE, 4, 6,
+     "light name 'a' is already used by light 0"},
+    {"f 1 1 1 1 0 0 0 0\nname a\nname b\n", RTP_ERR_PARSE, 3, 6, "already named 'a'"},
+    {"f 1 1 1 1 0 0 0 0\nname\n", RTP_ERR_PARSE, 3, 1, "expected a name"},
+    {"off\n", RTP_ERR_PARSE, 1, 1, "off must follow an l (light) line"},
+    {"ambient 1 -1 1\n", RTP_ERR_PARSE, 1, 11, "ambient green must not be negative"},
+    {"checker 1 1 1 1\n", RTP_ERR_PARSE, 1, 1, "checker needs a material"},
+    {"f 1 1 1 1 0 0 0 0\nchecker 1 1 1 0\n", RTP_ERR_PARSE, 2, 15,
+     "checker scale must be positive"},
+    {"texture a.png\n", RTP_ERR_PARSE, 1, 1, "texture needs a material"},
+    {"f 1 1 1 1 0 0 0 0\ntexture\n", RTP_ERR_PARSE, 3, 1,
+     "unexpected end of file in texture line, expected a file name"},
+    {"f 1 1 1 1 0 0 0 0\ntexture no-such-file.png\n", RTP_ERR_IO, 2, 9,
+     "cannot load image 'no-such-file.png'"},
+    {"bump waves 1 1\n", RTP_ERR_PARSE, 1, 1, "bump needs a material"},
+    {"f 1 1 1 1 0 0 0 0\nbump waves -1 1\n", RTP_ERR_PARSE, 2, 12,
+     "bump scale must be positive"},
+    {"f 1 1 1 1 0 0 0 0\nbump noise 1\n", RTP_ERR_PARSE, 3, 1, "expected strength"},
+    {"include x.txt\n", RTP_ERR_PARSE, 1, 9, "unknown file type"},
+    {"include\n", RTP_ERR_PARSE, 2, 1, "expected a file name"},
+    {"include no-such-file.obj\n", RTP_ERR_IO, 1, 9, "cannot read include file"},
+    {"include a.nff translate 1 2 3\n", RTP_ERR_PARSE, 1, 9,
+     "transforms apply to .obj includes only"},
+    {"include a.obj scale 0\n", RTP_ERR_PARSE, 1, 21, "scale factor 0"},
+    {"include a.obj scale 1 0 1\n", RTP_ERR_PARSE, 1, 21, "scale factor 0"},
+    {"include a.obj rotate w 5\n", RTP_ERR_PARSE, 1, 22, "expected rotation axis x, y or z, got 'w'"},
+    {"include a.obj translate 1 2\n", RTP_ERR_PARSE, 2, 1,
+     "unexpected end of file in include line, expected z"},
+    {"bezier a.bpt 0\n", RTP_ERR_PARSE, 1, 14, "expected bezier subdivisions from 1 to"},
+    {"bezier a.bpt\n", RTP_ERR_PARSE, 2, 1, "expected subdivisions"},
+    {"bezier no-such-file.bpt 4\n", RTP_ERR_IO, 1, 8, "cannot read bezier file"},
+};
+
+static void test_bad_inputs(void)
+{
+    size_t i;
+    for (i = 0; i < sizeof bad_nff / sizeof *bad_nff; i++) {
+        const bad_case *b = &bad_nff[i];
+        rtp_scene *s = NULL;
+        rtp_error err;
+        rtp_status st;
+        memset(&err, 0, sizeof err);
+        st = load(b->text, "bad.nff", &s, &err);
+        CHECK_MSG(st == b->status && err.line == b->line && err.column == b->col &&
+                      strstr(err.message, b->msg) != NULL &&
+                      strcmp(err.file, "bad.nff") == 0 && s == NULL,
+                  "case %zu: got status %d at %d:%d '%s', expected %d at %d:%d '%s'", i,
+                  (int)st, err.line, err.column, err.message, (int)b->status, b->line,
+                  b->col, b->msg);
+        rtp_scene_destroy(s);
+    }
+    /* a NUL byte inside a number */
+    {
+        static const char text[] = "s 1 2\0 3 4\n";
+        rtp_scene *s = NULL;
+        rtp_error err;
+        CHECK(rtp_scene_load_memory(text, sizeof text - 1, "nul.nff", "nff", NULL, &s,
+                                    &err) == RTP_ERR_PARSE);
+        CHECK(err.line == 1 && err.column == 5 && strstr(err.message, "sphere y"));
+    }
+    /* the error formats as file:line:col: message */
+    {
+        rtp_scene *s = NULL;
+        rtp_error err;
+        char buf[512];
+        CHECK(load("s 1 2 3 abc\n", "x.nff", &s, &err) == RTP_ERR_PARSE);
+        rtp_error_format(&err, buf, sizeof buf);
+        CHECK(strcmp(buf, "x.nff:1:9: expected number for sphere radius, got 'abc'") == 0);
+    }
+}
+
+/* Every prefix of a valid scene: OK or a parse error, never a crash
+   (each prefix is copied to a buffer of exactly its length, so a read
+   past the end shows under the asan build). */
+static void test_truncation(void)
+{
+    static const char text[] =
+        "b 0.1 0.2 0.3\nv\nfrom 1 -5 2\nat 0 0 0.5\nup 0 0 1\nangle 40\n"
+        "hither 0.25\nresolution 64 48\nl 1 2 3\nname key\nl -1 -2 3 0.5 0.5 0.5\n"
+        "off\nambient 0.1 0.1 0.1\nf 0.9 0.8 0.7 0.6 0.5 40 0 0 # c\nname m\n"
+        "checker 0.1 0.1 0.1 2\nbump waves 1 0.5\n"
+        "p 5\n0 0 0\n2 0 0\n2 2 0\n1 1 0\n0 2 0\nc 0 0 0 1 0 0 2 0.5\n"
+        "s 1 2 3 -4\npp 3\n0 0 1 0 0 1\n1 0 1 0 0 1\n0 1 1 0 0 1\n";
+    size_t len, ok = 0, parse = 0, other = 0;
+    for (len = 0; len <= sizeof text - 1; len++) {
+        char *copy = (char *)malloc(len ? len : 1);
+        rtp_scene *s = NULL;
+        rtp_error err;
+        rtp_status st;
+        if (!copy)
+            return;
+        memcpy(copy, text, len);
+        st = rtp_scene_load_memory(copy, len, "trunc.nff", "nff", NULL, &s, &err);
+        if (st == RTP_OK)
+            ok++;
+        else if (st == RTP_ERR_PARSE && err.line >= 1 && err.column >= 1)
+            parse++;
+        else if (!(st == RTP_ERR_IO && strstr(err.message, "cannot load image 'w")))
+            other++; /* "bump wav" cut short names an image file: IO */
+        rtp_scene_destroy(s);
+        free(copy);
+    }
+    CHECK(ok > 10 && parse > 100);
+    CHECK_MSG(other == 0, "%zu prefixes gave neither OK nor a positioned parse error", other);
+}
+
+/* Random byte mutations of a valid scene: never a crash, and only OK or
+   a positioned parse error. */
+static void test_mutations(void)
+{
+    static const char text[] =
+        "v from 0 0 5 at 0 0 0 up 0 1 0 angle 30 hither 1 resolution 8 8\n"
+        "l 0 0 9\nname k\nf 1 0 0 1 0 1 0 0\nname m\nchecker 1 1 1 1\n"
+        "s 0 0 0 1\np 4 0 0 0 1 0 0 1 1 0 0 1 0\nc 0 0 0 1 0 0 1 1\n"
+        "pp 3 0 0 0 0 0 1 1 0 0 0 0 1 0 1 0 0 0 1\n";
+    static const char alphabet[] = " \n#-.0123456789eE+aflpscvbn\t,/";
+    unsigned long seed = 12345, x;
+    int round, other = 0;
+    char buf[sizeof text];
+    fprintf(stderr, "test_mutations: seed %lu\n", seed);
+    x = seed;
+    for (round = 0; round < 3000; round++) {
+        int k, nmut;
+        rtp_scene *s = NULL;
+        rtp_error err;
+        rtp_status st;
+        memcpy(buf, text, sizeof text);
+        x = x * 6364136223846793005UL + 1442695040888963407UL;
+        nmut = 1 + (int)((x >> 33) % 4);
+        for (k = 0; k < nmut; k++) {
+            size_t pos;
+            x = x * 6364136223846793005UL + 1442695040888963407UL;
+            pos = (size_t)((x >> 33) % (sizeof text - 1));
+            x = x * 6364136223846793005UL + 1442695040888963407UL;
+            buf[pos] = alphabet[(x >> 33) % (sizeof alphabet - 1)];
+        }
+        st = rtp_scene_load_memory(buf, sizeof text - 1, "mut.nff", "nff", NULL, &s, &err);
+        if (st != RTP_OK && !(st == RTP_ERR_PARSE && err.line >= 1 && err.column >= 1))
+            other++;
+        rtp_scene_destroy(s);
+    }
+    CHECK(other == 0);
+}
+
+/* ----------------------------------------------------- project scenes */
+
+static void test_project_scenes(void)
+{
+    static const char *const names[] = {"scenes/spheres.nff", "scenes/prims.nff",
+                                        "scenes/checker.nff", "scenes/textured.nff"};
+    size_t i;
+    for (i = 0; i < sizeof names / sizeof *names; i++) {
+        rtp_scene *s = NULL;
+        rtp_error err;
+        char buf[600];
+        rtp_status st = rtp_scene_load(names[i], NULL, &s, &err);
+        CHECK_MSG(st == RTP_OK, "%s", rtp_error_format(&err, buf, sizeof buf));
+        if (s) {
+            CHECK(s->width <= 128 && s->height <= 128);
+            CHECK(s->nmats >= 1 && s->nlights >= 1 && rtpi_scene_nprims(s) >= 1);
+        }
+        rtp_scene_destroy(s);
+    }
+}
+
+/* The paper's scene: its patches come from ../shared. */
+static void test_teapot_scene(void)
+{
+    rtp_scene *s = NULL;
+    rtp_error err;
+    char buf[600];
+    size_t i, bad = 0;
+    if (!file_exists("scenes/../../shared/scenes/meshes/newell-teapot.bpt"))
+        SKIP("../shared/scenes/meshes/newell-teapot.bpt not found");
+    CHECK_MSG(rtp_scene_load("scenes/teapot.nff", NULL, &s, &err) == RTP_OK, "%s",
+              rtp_error_format(&err, buf, sizeof buf));
+    if (!s)
+        return;
+    CHECK(s->nlights == 3 && strcmp(s->lights[2].name, "lamp") == 0 && !s->lights[2].on);
+    CHECK(rtp_scene_set(s, "light.lamp.on", "1", &err) == RTP_OK);
+    CHECK(rtp_scene_set(s, "mat.teapot.ks", "0.6", &err) == RTP_OK);
+    CHECK(rtp_scene_set(s, "light.key.pos", "-6,-9,9", &err) == RTP_OK);
+    CHECK(s->mats[1].tex == RTPI_TEX_CHECKER);
+    /* 32 patches of 8x8 quads, less the collapsed ones at the lid and
+       bottom centres; every triangle agrees with its vertex normals */
+    CHECK(s->ntris > 32 * 100 && s->ntris <= 32 * 128 + 16);
+    for (i = 0; i < s->ntris; i++) {
+        const rtpi_tri *t = &s->tris[i];
+        rtpi_v3 g;
+        int k;
+        if (t->n[0] == RTPI_NONE)
+            continue;
+        tri_area(s, t, &g);
+        for (k = 0; k < 3; k++)
+            if (v3_dot(g, v3_from_f(s->nrm + 3 * (size_t)t->n[k])) <= 0)
+                bad++;
+    }
+    CHECK_MSG(bad == 0, "%zu teapot vertex normals face away from their triangle", bad);
+    rtp_scene_destroy(s);
+}
+
+/* ------------------------------------------------------ shared scenes */
+
+static void test_spd_scenes(void)
+{
+    static const struct {
+        const char *name;
+        size_t prims;
+    } known[] = {{"balls_s4", 7382},   {"gears_s4", 9345},  {"mount_s6", 8196},
+                 {"rings_s7", 8401},   {"teapot_s12", 9264}, {"tetra_s6", 4096},
+                 {"tree_s11", 8191},   {"lattice_s12", 8281}};
+    static const char *const small[] = {
+        "balls_s1", "balls_s2", "balls_s2_tess", "balls_s3", "gears_s1", "gears_s2",
+        "gears_s3", "lattice_s1", "lattice_s2", "lattice_s3", "mount_s1", "mount_s2",
+        "mount_s3", "rings_s1", "rings_s2", "rings_s3", "teapot_s2", "teapot_s3",
+        "teapot_s6", "tetra_s1", "tetra_s2", "tetra_s3", "tree_s1", "tree_s2",
+        "tree_s3"};
+    const char *dir = check_shared_scenes();
+    size_t i;
+    if (!dir)
+        SKIP("../shared/scenes not found (set RTP_SHARED_SCENES)");
+    for (i = 0; i < sizeof known / sizeof *known + sizeof small / sizeof *small; i++) {
+        int is_known = i < sizeof known / sizeof *known;
+        const char *nm = is_known ? known[i].name : small[i - sizeof known / sizeof *known];
+        char path[512], buf[600];
+        char *text = NULL;
+        size_t size = 0;
+        rtp_scene *s = NULL;
+        rtp_error err;
+        rtpi_nff_stats st;
+        rtp_status rc;
+        snprintf(path, sizeof path, "%s/spd/%s.nff", dir, nm);
+        rtp_allocator a;
+        rtpi_allocator_init(&a, NULL);
+        if (rtpi_read_file(&a, path, &text, &size, &err) != RTP_OK) {
+            CHECK_MSG(0, "%s", rtp_error_format(&err, buf, sizeof buf));
+            continue;
+        }
+        rc = rtpi_scene_create(NULL, &s);
+        CHECK(rc == RTP_OK);
+        if (rc == RTP_OK)
+            rc = rtpi_read_nff_stats(s, text, size, path, 0, &st, &err);
+        CHECK_MSG(rc == RTP_OK, "%s", rtp_error_format(&err, buf, sizeof buf));
+        if (rc == RTP_OK && is_known) {
+            size_t prims = st.polygons + st.polypatches + st.spheres + st.cones;
+            CHECK_MSG(prims == known[i].prims, "%s: %zu primitives, expected %zu", nm,
+                      prims, known[i].prims);
+        }
+        rtp_scene_destroy(s);
+        free(text);
+    }
+}
+
+/* The gears' polygons, triangulated one by one: area and orientation. */
+static void test_spd_gears_triangulation(void)
+{
+    const char *dir = check_shared_scenes();
+    char path[512], line[256];
+    FILE *f;
+    double *p = NULL;
+    size_t n = 0, k = 0, polys = 0;
+    if (!dir)
+        SKIP("../shared/scenes not found (set RTP_SHARED_SCENES)");
+    snprintf(path, sizeof path, "%s/spd/gears_s2.nff", dir);
+    f = fopen(path, "r");
+    if (!f)
+        SKIP("gears_s2.nff not found");
+    while (fgets(line, sizeof line, f)) {
+        if (line[0] == 'p' && line[1] == ' ') {
+            n = (size_t)strtoul(line + 2, NULL, 10);
+            free(p);
+            p = (double *)malloc(3 * n * sizeof *p);
+            k = 0;
+        } else if (p && k < n && sscanf(line, "%lf %lf %lf", &p[3 * k], &p[3 * k + 1],
+                                        &p[3 * k + 2]) == 3) {
+            if (++k == n) {
+                check_triangulation(p, n, "gears_s2 polygon");
+                polys++;
+            }
+        }
+    }
+    fclose(f);
+    free(p);
+    CHECK(polys == 1169);
+}
+
+int main(void)
+{
+    RUN(test_every_keyword);
+    RUN(test_token_based);
+    RUN(test_triangulate);
+    RUN(test_concave_polygon);
+    RUN(test_names_and_keys);
+    RUN(test_checker_bump);
+    RUN(test_files);
+    RUN(test_bad_inputs);
+    RUN(test_truncation);
+    RUN(test_mutations);
+    RUN(test_project_scenes);
+    RUN(test_teapot_scene);
+    RUN(test_spd_scenes);
+    RUN(test_spd_gears_triangulation);
+    if (tmpdir[0])
+        rmdir(tmpdir);
+    return check_report();
+}

@@ -1,0 +1,345 @@
+/* test_obj.c — the OBJ/MTL reader: every face form, negative indices,
+ * polygons, materials, transforms, broken inputs, truncation, and the
+ * shared meshes when ../shared is present. */
+#include "check.h"
+#include "readers.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+static rtp_status load(const char *text, const char *name, rtp_scene **s,
+                       rtp_error *err)
+{
+    return rtp_scene_load_memory(text, strlen(text), name, "obj", NULL, s, err);
+}
+
+static int near(double a, double b, double tol) { return fabs(a - b) <= tol; }
+
+static char tmpdir[64];
+
+static const char *tmp_folder(void)
+{
+    if (!tmpdir[0]) {
+        strcpy(tmpdir, "/tmp/rtp-test-obj-XXXXXX");
+        if (!mkdtemp(tmpdir))
+            tmpdir[0] = '\0';
+    }
+    return tmpdir;
+}
+
+static int write_file(const char *dir, const char *name, const char *text)
+{
+    char path[512];
+    FILE *f;
+    snprintf(path, sizeof path, "%s/%s", dir, name);
+    f = fopen(path, "wb");
+    if (!f)
+        return -1;
+    fputs(text, f);
+    return fclose(f);
+}
+
+static void remove_file(const char *dir, const char *name)
+{
+    char path[512];
+    snprintf(path, sizeof path, "%s/%s", dir, name);
+    remove(path);
+}
+
+static rtpi_v3 tri_normal(const rtp_scene *s, const rtpi_tri *t)
+{
+    rtpi_v3 p0 = v3_from_f(s->pos + 3 * (size_t)t->v[0]);
+    rtpi_v3 p1 = v3_from_f(s->pos + 3 * (size_t)t->v[1]);
+    rtpi_v3 p2 = v3_from_f(s->pos + 3 * (size_t)t->v[2]);
+    return v3_cross(v3_sub(p1, p0), v3_sub(p2, p0));
+}
+
+static void test_faces(void)
+{
+    rtp_scene *s = NULL;
+    rtp_error err;
+    const char *text =
+        "# all face forms\no thing\ng group\ns 1\n"
+        "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0 1.0\n"
+        "vt 0 0\nvt 1 0 0\nvt 1 1\nvt 0.5\n"
+        "vn 0 0 2\n"
+        "f 1 2 3\n"
+        "f 1/1 2/2 3/3\n"
+        "f 1//1 2//1 3//1\n"
+        "f 1/1/1 2/2/1 3/3/1\n"
+        "f -4 -3 -2 -1\n"            /* negative: the last four vertices */
+        "f -4/-4/-1 -3/-3/-1 -2/-2/-1\n"
+        "s off\nusemtl_unknown_is_not_a_keyword_but_this_line_is_skipped_by_g\n";
+    /* that last line is not valid OBJ: test it separately below */
+    const char *ok_text = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0 1.0\n"
+                          "vt 0 0\nvt 1 0 0\nvt 1 1\nvt 0.5\nvn 0 0 2\n"
+                          "o a\ng b c\ns 1\nl 1 2\n"
+                          "f 1 2 3\nf 1/1 2/2 3/3\nf 1//1 2//1 3//1\nf 1/1/1 2/2/1 3/3/1\n"
+                          "f -4 -3 -2 -1\nf -4/-4/-1 -3/-3/-1 -2/-2/-1\n";
+    CHECK(load(text, "f.obj", &s, &err) == RTP_ERR_PARSE);
+    CHECK(err.line == 21 && err.column == 1);
+    rtp_scene_destroy(s);
+    s = NULL;
+    CHECK(load(ok_text, "f.obj", &s, &err) == RTP_OK);
+    if (!s)
+        return;
+    CHECK(s->npos == 4 && s->nuv == 4 && s->nnrm == 1);
+    CHECK(s->ntris == 7);
+    CHECK(s->tris[0].t[0] == RTPI_NONE && s->tris[0].n[0] == RTPI_NONE);
+    CHECK(s->tris[1].t[2] == 2 && s->tris[1].n[0] == RTPI_NONE);
+    CHECK(s->tris[2].t[0] == RTPI_NONE && s->tris[2].n[1] == 0);
+    CHECK(s->tris[3].t[1] == 1 && s->tris[3].n[2] == 0);
+    CHECK(s->nrm[2] == 1.0f); /* normalised */
+    CHECK(s->uv[7] == 0.0f && s->uv[6] == 0.5f); /* vt u alone: v = 0 */
+    /* the quad from negative indices: two triangles, area 1, facing +z */
+    CHECK(near(0.5 * (v3_len(tri_normal(s, &s->tris[4])) + v3_len(tri_normal(s, &s->tris[5]))),
+               1.0, 1e-6));
+    CHECK(tri_normal(s, &s->tris[4]).z > 0 && tri_normal(s, &s->tris[5]).z > 0);
+    CHECK(s->tris[6].v[0] == 0 && s->tris[6].t[0] == 0 && s->tris[6].n[0] == 0);
+    /* no usemtl: one default material */
+    CHECK(s->nmats == 1 && s->tris[0].mat == 0);
+    rtp_scene_destroy(s);
+}
+
+/* A concave n-gon and a face whose indices are relative to a vertex list
+   that keeps growing. */
+static void test_ngon(void)
+{
+    rtp_scene *s = NULL;
+    rtp_error err;
+    size_t faces = 0, i;
+    double area = 0;
+    const char *text = "v -2 -1 0\nv 1 -1 0\nv 1 0 0\nv -1 0 0\nv -1 2 0\nv -2 2 0\n"
+                       "f 1 2 3 4 5 6\n"
+                       "v 10 0 0\nv 11 0 0\nv 10 1 0\n"
+                       "f -3 -2 -1\n";
+    CHECK(rtpi_scene_create(NULL, &s) == RTP_OK);
+    if (!s)
+        return;
+    CHECK(rtpi_read_obj_ex(s, text, strlen(text), "n.obj", NULL, RTPI_NONE, &faces, &err) ==
+          RTP_OK);
+    CHECK(faces == 2);
+    CHECK(s->ntris == 5);
+    for (i = 0; i < 4; i++) {
+        rtpi_v3 n = tri_normal(s, &s->tris[i]);
+        area += 0.5 * v3_len(n);
+        CHECK(n.z > 0);
+    }
+    CHECK(near(area, 5.0, 1e-6));
+    CHECK(s->tris[4].v[0] == 6 && s->tris[4].v[2] == 8);
+    rtp_scene_destroy(s);
+}
+
+static void test_xform(void)
+{
+    rtp_scene *s = NULL;
+    rtp_error err;
+    /* x' = 2x + 1, y' = z, z' = -y (a rotation about x and a stretch) */
+    static const double m[12] = {2, 0, 0, 1, 0, 0, 1, 0, 0, -1, 0, 0};
+    const char *text = "v 1 2 3\nv 0 0 0\nv 0 1 0\nvn 1 1 0\nf 1//1 2//1 3//1\n";
+    CHECK(rtpi_scene_create(NULL, &s) == RTP_OK);
+    if (!s)
+        return;
+    CHECK(rtpi_read_obj(s, text, strlen(text), "x.obj", m, 7, &err) == RTP_OK);
+    CHECK(s->pos[0] == 3 && s->pos[1] == 3 && s->pos[2] == -2);
+    /* normal (1,1,0): inverse transpose gives (1/2, 0, -1), normalised */
+    CHECK(near(s->nrm[0], 0.5 / sqrt(1.25), 1e-6) && near(s->nrm[1], 0, 1e-6) &&
+          near(s->nrm[2], -1 / sqrt(1.25), 1e-6));
+    CHECK(s->tris[0].mat == 7); /* the default material given */
+    CHECK(s->nmats == 0);
+    rtp_scene_destroy(s);
+}
+
+static void test_mtl(void)
+{
+    const char *dir = tmp_folder();
+    char path[512];
+    rtp_scene *s = NULL;
+    rtp_error err;
+    char buf[600];
+    if (!dir[0])
+        SKIP("cannot make a temporary folder");
+    CHECK(write_file(dir, "t.ppm", "P3\n1 1\n255\n10 20 30\n") == 0);
+    CHECK(write_file(dir, "a.mtl",
+                     "# materials\nnewmtl red\n  Ka 1 0 0\n  Kd 0.8 0.4 0.2\n  Ks 0.3 0.6 0.9\n"
+                     "  Ns 50\n  Ni 1.4\n  d 0.25\n  illum 2\n  Ke 0 0 0\n"
+                     "newmtl glass\nKd 0 0 0\nTr 0.9\nmap_Kd -s 1 1 1 t.ppm\n"
+                     "bump -bm 0.3 t.ppm\nmap_Ks t.ppm\n"
+                     "newmtl grey\nKd 0.5\n") == 0);
+    CHECK(write_file(dir, "a.obj",
+                     "mtllib a.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"
+                     "f 1 2 3\nusemtl red\nf 1 2 3\nusemtl glass\nf 1 2 3\n"
+                     "usemtl grey\nf 1 2 3\n") == 0);
+    snprintf(path, sizeof path, "%s/a.obj", dir);
+    CHECK_MSG(rtp_scene_load(path, NULL, &s, &err) == RTP_OK, "%s",
+              rtp_error_format(&err, buf, sizeof buf));
+    if (s) {
+        const rtpi_material *r = &s->mats[0], *g = &s->mats[1];
+        CHECK(s->nmats == 4); /* red, glass, grey, then the default */
+        CHECK(strcmp(r->name, "red") == 0 && strcmp(g->name, "glass") == 0);
+        CHECK(near(r->kd, 0.8, 1e-6) && near(r->color[0], 1, 1e-6) &&
+              near(r->color[1], 0.5, 1e-6) && near(r->color[2], 0.25, 1e-6));
+        CHECK(near(r->ks, 0.6, 1e-6) && r->shine == 50 && near(r->ior, 1.4, 1e-6) &&
+              near(r->kt, 0.75, 1e-6));
+        CHECK(g->kd == 0 && g->color[0] == 1 && near(g->kt, 0.9, 1e-6));
+        CHECK(g->tex == RTPI_TEX_IMAGE && g->bump == RTPI_BUMP_IMAGE &&
+              near(g->bump_strength, 0.3, 1e-6) && g->tex_image == g->bump_image);
+        CHECK(near(s->mats[2].kd, 0.5, 1e-6) && s->mats[2].color[2] == 1);
+        CHECK(s->tris[0].mat == 3 && s->tris[1].mat == 0 && s->tris[2].mat == 1 &&
+              s->tris[3].mat == 2);
+        CHECK(rtp_scene_set(s, "mat.red.kd", "0.4", &err) == RTP_OK);
+    }
+    rtp_scene_destroy(s);
+    s = NULL;
+
+    /* errors inside the MTL carry the MTL's name and position */
+    CHECK(write_file(dir, "b.mtl", "newmtl x\nKd 1 1\nnewmtl y\n") == 0);
+    CHECK(write_file(dir, "b.obj", "mtllib b.mtl\n") == 0);
+    snprintf(path, sizeof path, "%s/b.obj", dir);
+    CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_PARSE);
+    CHECK(strstr(err.file, "b.mtl") && err.line == 2 && err.column == 7 &&
+          strstr(err.message, "blue"));
+    CHECK(write_file(dir, "b.mtl", "Kd 1 1 1\n") == 0);
+    CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_PARSE);
+    CHECK(err.line == 1 && err.column == 1 && strstr(err.message, "before any newmtl"));
+    CHECK(write_file(dir, "b.mtl", "newmtl x\nKd 1 1 1\nfoo 1\n") == 0);
+    CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_PARSE);
+    CHECK(err.line == 3 && strstr(err.message, "unknown MTL keyword 'foo'"));
+    CHECK(write_file(dir, "b.mtl", "newmtl x\nmap_Kd missing.png\n") == 0);
+    CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_IO);
+    CHECK(err.line == 2 && err.column == 8 && strstr(err.message, "missing.png"));
+    /* a missing mtllib is named */
+    CHECK(write_file(dir, "b.obj", "v 0 0 0\nmtllib nothere.mtl\n") == 0);
+    CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_IO);
+    CHECK(err.line == 2 && err.column == 8 && strstr(err.message, "nothere.mtl"));
+    rtp_scene_destroy(s);
+
+    remove_file(dir, "t.ppm");
+    remove_file(dir, "a.mtl");
+    remove_file(dir, "a.obj");
+    remove_file(dir, "b.mtl");
+    remove_file(dir, "b.obj");
+}
+
+typedef struct bad_case {
+    const char *text;
+    int line, col;
+    const char *msg;
+} bad_case;
+
+#define TRI "v 0 0 0\nv 1 0 0\nv 0 1 0\n"
+static const bad_case bad_obj[] = {
+    {"v 1 2\n", 1, 6, "unexpected end of line in v (vertex), expected z"},
+    {"v 1 2", 1, 6, "unexpected end of file in v (vertex), expected z"},
+    {"v 1 2 inf\n", 1, 7, "expected number for v (vertex) z, got 'inf'"},
+    {"v 1 2 nan\n", 1, 7, "got 'nan'"},
+    {"v 1 2 3 4 5 6 7 8\n", 1, 17, "unexpected '8'"},
+    {"v 1 2 3 w\n", 1, 9, "unexpected 'w'"},
+    {"vn 1 2 3 4\n", 1, 10, "unexpected '4'"},
+    {"vt\n", 1, 3, "expected u"},
+    {"v 0 0 0\nf 1 2 3\n", 2, 5, "vertex index 2 out of range (1 vertex so far)"},
+    {TRI "f 1 2 -4\n", 4, 7, "vertex index -4 out of range (3 vertices so far)"},
+    {TRI "f 0 1 2\n", 4, 3, "vertex index 0 is invalid"},
+    {TRI "f 1 2\n", 4, 1, "face has 2 vertices, needs at least 3"},
+    {TRI "f\n", 4, 1, "face has 0 vertices"},
+    {TRI "f 1/1 2/1 3/1\n", 4, 5, "texture vertex index 1 out of range (0 texture vertices so far)"},
+    {TRI "f 1//1 2 3\n", 4, 6, "normal index 1 out of range (0 normals so far)"},
+    {TRI "f 1/x 2 3\n", 4, 5, "expected texture vertex index in face, got 'x'"},
+    {TRI "f 1/ 2 3\n", 4, 3, "malformed face vertex '1/'"},
+    {TRI "f 1.5 2 3\n", 4, 3, "expected vertex index in face, got '1.5'"},
+    {TRI "f 1 2 99999999999\n", 4, 7, "expected vertex index"},
+    {"usemtl foo\n", 1, 8, "unknown material 'foo'"},
+    {"usemtl\n", 1, 7, "expected a name"},
+    {"bogus 1\n", 1, 1, "unknown OBJ keyword 'bogus'"},
+    {"v 0 0 0\r\nv 1 0 0\r\nv 0 1 0\r\nf 1 2 x\r\n", 4, 7, "got 'x'"},
+};
+
+static void test_bad_inputs(void)
+{
+    size_t i;
+    for (i = 0; i < sizeof bad_obj / sizeof *bad_obj; i++) {
+        const bad_case *b = &bad_obj[i];
+        rtp_scene *s = NULL;
+        rtp_error err;
+        rtp_status st;
+        memset(&err, 0, sizeof err);
+        st = load(b->text, "bad.obj", &s, &err);
+        CHECK_MSG(st == RTP_ERR_PARSE && err.line == b->line && err.column == b->col &&
+                      strstr(err.message, b->msg) != NULL && strcmp(err.file, "bad.obj") == 0,
+                  "case %zu: got status %d at %d:%d '%s', expected %d:%d '%s'", i, (int)st,
+                  err.line, err.column, err.message, b->line, b->col, b->msg);
+        rtp_scene_destroy(s);
+    }
+}
+
+static void test_truncation(void)
+{
+    static const char text[] =
+        "# a mesh\no a\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\n"
+        "vn 0 0 1\ng g\ns 1\nf 1/1/1 2/2/1 3/3/1\nf -4//-1 -3//-1 -2//-1 -1//-1\n"
+        "f 1/1 2/2 3/3\nf 4 3 2 1\n";
+    size_t len, ok = 0, other = 0;
+    for (len = 0; len <= sizeof text - 1; len++) {
+        char *copy = (char *)malloc(len ? len : 1);
+        rtp_scene *s = NULL;
+        rtp_error err;
+        rtp_status st;
+        if (!copy)
+            return;
+        memcpy(copy, text, len);
+        st = rtp_scene_load_memory(copy, len, "trunc.obj", "obj", NULL, &s, &err);
+        if (st == RTP_OK)
+            ok++;
+        else if (!(st == RTP_ERR_PARSE && err.line >= 1 && err.column >= 1))
+            other++;
+        rtp_scene_destroy(s);
+        free(copy);
+    }
+    CHECK(ok > 10);
+    CHECK(other == 0);
+}
+
+static void test_shared_meshes(void)
+{
+    static const struct {
+        const char *name;
+        size_t tris;
+    } meshes[] = {{"stanford-bunny.obj", 69451}, {"teapot.obj", 6320},
+                  {"spot_triangulated.obj", 5856}, {"spot_quadrangulated.obj", 5856},
+                  {"suzanne.obj", 968}, {"CornellBox-Original.obj", 36}};
+    const char *dir = check_shared_scenes();
+    size_t i;
+    if (!dir)
+        SKIP("../shared/scenes not found (set RTP_SHARED_SCENES)");
+    for (i = 0; i < sizeof meshes / sizeof *meshes; i++) {
+        char path[512], buf[600];
+        rtp_scene *s = NULL;
+        rtp_error err;
+        snprintf(path, sizeof path, "%s/meshes/%s", dir, meshes[i].name);
+        CHECK_MSG(rtp_scene_load(path, NULL, &s, &err) == RTP_OK, "%s",
+                  rtp_error_format(&err, buf, sizeof buf));
+        if (s)
+            CHECK_MSG(s->ntris == meshes[i].tris, "%s: %zu triangles, expected %zu",
+                      meshes[i].name, s->ntris, meshes[i].tris);
+        if (s && i == sizeof meshes / sizeof *meshes - 1)
+            CHECK(s->nmats >= 7 && rtp_scene_set(s, "mat.leftWall.color", "1,0,0", &err) ==
+                                       RTP_OK);
+        rtp_scene_destroy(s);
+    }
+}
+
+int main(void)
+{
+    RUN(test_faces);
+    RUN(test_ngon);
+    RUN(test_xform);
+    RUN(test_mtl);
+    RUN(test_bad_inputs);
+    RUN(test_truncation);
+    RUN(test_shared_meshes);
+    if (tmpdir[0])
+        rmdir(tmpdir);
+    return check_report();
+}
