@@ -47,12 +47,12 @@ BENCH_BIN = $(BENCH_SRC:%.c=$(BUILD)/%)
 .PHONY: all test bench install uninstall clean asan ubsan demo
 all: $(BUILD)/librtp.a $(BUILD)/librtp.so rtp
 
-$(BUILD)/%.o: %.c include/rtp.h lib/internal.h
+$(BUILD)/%.o: %.c include/rtp.h $(wildcard lib/*.h)
 	@mkdir -p $(dir $@)
 	@$(if $(Q),echo "  CC      $<")
 	$(Q)$(CC) $(ALL_CFLAGS) -c $< -o $@
 
-$(BUILD)/pic/%.o: %.c include/rtp.h lib/internal.h
+$(BUILD)/pic/%.o: %.c include/rtp.h $(wildcard lib/*.h)
 	@mkdir -p $(dir $@)
 	$(Q)$(CC) $(ALL_CFLAGS) -fPIC -fvisibility=hidden -DRTP_BUILD_SHARED -c $< -o $@
 

@@ -102,6 +102,8 @@ static const char *opt_value(int argc, char **argv, int *i, const char *name)
     size_t n = strlen(name);
     if (strncmp(argv[*i], name, n) == 0 && argv[*i][n] == '=')
         return argv[*i] + n + 1;
+    if (n == 2 && strncmp(argv[*i], name, 2) == 0 && argv[*i][2] != '\0')
+        return argv[*i] + 2; /* -j2 */
     if (*i + 1 >= argc) {
         msg("%s needs a value", name);
         return NULL;
@@ -141,16 +143,118 @@ static int stats_close(FILE *f, const char *path)
     return 0;
 }
 
+
+/* ------------------------------------------------------------ edits */
+
+/* Applies "KEY=VALUE" through set(); where/line name its origin. */
+typedef rtp_status (*set_fn)(void *obj, const char *key, const char *value,
+                             rtp_error *err);
+
+static rtp_status set_scene(void *obj, const char *k, const char *v, rtp_error *e)
+{
+    return rtp_scene_set((rtp_scene *)obj, k, v, e);
+}
+
+static rtp_status set_tree(void *obj, const char *k, const char *v, rtp_error *e)
+{
+    return rtp_tree_set((rtp_tree *)obj, k, v, e);
+}
+
+static int apply_kv(set_fn set, void *obj, const char *kv, const char *where, int line)
+{
+    char key[256];
+    const char *eq = strchr(kv, '=');
+    size_t kn;
+    rtp_error err;
+    memset(&err, 0, sizeof err);
+    if (!eq || eq == kv) {
+        if (line)
+            msg("%s:%d: expected KEY=VALUE, got '%s'", where, line, kv);
+        else
+            msg("%s %s: expected KEY=VALUE", where, kv);
+        return 1;
+    }
+    kn = (size_t)(eq - kv);
+    if (kn >= sizeof key) {
+        msg("%s: key too long", where);
+        return 1;
+    }
+    memcpy(key, kv, kn);
+    key[kn] = '\0';
+    if (set(obj, key, eq + 1, &err) != RTP_OK) {
+        char buf[600];
+        rtp_error_format(&err, buf, sizeof buf);
+        if (line)
+            fprintf(stderr, "rtp: %s:%d: %s\n", where, line, buf);
+        else
+            fprintf(stderr, "rtp: %s\n", buf);
+        return 1;
+    }
+    return 0;
+}
+
+/* Applies every KEY=VALUE of a line (separated by blanks); '#' starts a
+   comment.  Returns 0 or 1. */
+static int apply_line(set_fn set, void *obj, char *text, const char *where, int line)
+{
+    char *p = text, *hash = strchr(text, '#');
+    if (hash)
+        *hash = '\0';
+    for (;;) {
+        char *tok;
+        while (*p == ' ' || *p == '\t' || *p == '\r' || *p == '\n')
+            p++;
+        if (!*p)
+            return 0;
+        tok = p;
+        while (*p && *p != ' ' && *p != '\t' && *p != '\r' && *p != '\n')
+            p++;
+        if (*p)
+            *p++ = '\0';
+        if (apply_kv(set, obj, tok, where, line))
+            return 1;
+    }
+}
+
+static int apply_params_file(set_fn set, void *obj, const char *path)
+{
+    FILE *f = strcmp(path, "-") == 0 ? stdin : fopen(path, "r");
+    char line[4096];
+    int n = 0, rc = 0;
+    if (!f) {
+        msg("%s: cannot open: %s", path, strerror(errno));
+        return 1;
+    }
+    while (fgets(line, sizeof line, f)) {
+        n++;
+        if (!strchr(line, '\n') && !feof(f)) {
+            msg("%s:%d: line too long", path, n);
+            rc = 1;
+            break;
+        }
+        if (apply_line(set, obj, line, path, n)) {
+            rc = 1;
+            break;
+        }
+    }
+    if (f != stdin)
+        fclose(f);
+    return rc;
+}
+
 /* ---------------------------------------------------------------- trace */
 
 static const char trace_help[] =
     "usage: rtp trace SCENE [options]\n"
-    "Traces SCENE (NFF, or .obj) with a Whitted ray tracer and writes the image.\n"
+    "Traces SCENE (NFF, or .obj) with a Whitted ray tracer and writes the image\n"
+    "and, with -o, the ray trees that `rtp reeval` re-evaluates.\n"
+    "  -o, --output TREE    write the ray trees to TREE (.rtp; '-' = stdout)\n"
     "  -i, --image FILE     image to write (.png, .ppm, .pfm; '-' = PFM on stdout);\n"
     "                       default: SCENE's name with .png\n"
     "  --set KEY=VALUE      edit the scene first (repeatable): light.N.pos|color|on,\n"
     "                       mat.N.color|kd|ks|kt|shine|ior, ambient, background;\n"
     "                       N is a 0-based index or a name the scene gives\n"
+    "  --params FILE        edits from FILE: KEY=VALUE per line, '#' comments\n"
     "  --size WxH           image size (default: the scene's resolution)\n"
     "  --spd                SPD testing procedure: 512x512 from 513x513 corner\n"
     "                       rays, depth 5, no weight cut-off, one-sided opaque\n"
@@ -181,9 +285,13 @@ static char *default_image_name(const char *scene)
 static int cmd_trace(int argc, char **argv)
 {
     const char *scene_path = NULL, *image_path = NULL, *stats_path = NULL;
+    const char *tree_path = NULL, *params = NULL;
     char *default_image = NULL;
     rtp_trace_options opt;
     rtp_trace_stats st;
+    rtp_tree *tree = NULL;
+    rtp_tree_info ti;
+    unsigned long long file_bytes = 0;
     rtp_scene *scene = NULL;
     rtp_image *img = NULL;
     rtp_error err;
@@ -215,8 +323,8 @@ static int cmd_trace(int argc, char **argv)
             if (!(image_path = opt_value(argc, argv, &i, a[1] == 'i' ? "-i" : "--image")))
                 goto usage;
         } else if (strcmp(a, "-o") == 0 || is_opt(a, "--output")) {
-            msg("-o TREE: ray-tree files are not implemented yet in this version");
-            goto usage;
+            if (!(tree_path = opt_value(argc, argv, &i, a[1] == 'o' ? "-o" : "--output")))
+                goto usage;
         } else if (is_opt(a, "--set")) {
             if (!(v = opt_value(argc, argv, &i, "--set")))
                 goto usage;
@@ -225,6 +333,9 @@ static int cmd_trace(int argc, char **argv)
                 goto usage;
             }
             sets[nsets++] = v;
+        } else if (is_opt(a, "--params")) {
+            if (!(params = opt_value(argc, argv, &i, "--params")))
+                goto usage;
         } else if (is_opt(a, "--size")) {
             char *x;
             if (!(v = opt_value(argc, argv, &i, "--size")))
@@ -254,7 +365,7 @@ static int cmd_trace(int argc, char **argv)
                 msg("--min-weight: expected a number >= 0");
                 goto usage;
             }
-        } else if (strcmp(a, "-j") == 0 || is_opt(a, "--threads")) {
+        } else if (strncmp(a, "-j", 2) == 0 || is_opt(a, "--threads")) {
             if (!(v = opt_value(argc, argv, &i, a[1] == 'j' ? "-j" : "--threads")) ||
                 parse_int(v, 1, 256, &opt.threads)) {
                 msg("-j: expected a thread count from 1 to 256");
@@ -277,7 +388,11 @@ static int cmd_trace(int argc, char **argv)
         msg("trace: no scene given");
         goto usage;
     }
-    if (!image_path) {
+    if (tree_path && image_path && strcmp(tree_path, "-") == 0 && strcmp(image_path, "-") == 0) {
+        msg("trace: the tree and the image cannot both go to stdout");
+        goto usage;
+    }
+    if (!image_path && !tree_path) {
         default_image = default_image_name(scene_path);
         if (!default_image) {
             msg("out of memory");
@@ -291,21 +406,11 @@ static int cmd_trace(int argc, char **argv)
         fail_err(&err);
         goto out;
     }
-    for (i = 0; i < nsets; i++) {
-        char key[256];
-        const char *eq = strchr(sets[i], '=');
-        size_t kn = (size_t)(eq - sets[i]);
-        if (kn >= sizeof key) {
-            msg("--set: key too long");
+    if (params && apply_params_file(set_scene, scene, params))
+        goto out;
+    for (i = 0; i < nsets; i++)
+        if (apply_kv(set_scene, scene, sets[i], "--set", 0))
             goto out;
-        }
-        memcpy(key, sets[i], kn);
-        key[kn] = '\0';
-        if (rtp_scene_set(scene, key, eq + 1, &err) != RTP_OK) {
-            fail_err(&err);
-            goto out;
-        }
-    }
     t_load = now_seconds() - t0;
     prog.start = now_seconds();
     prog.shown = 0;
@@ -313,7 +418,8 @@ static int cmd_trace(int argc, char **argv)
         opt.progress = progress_cb;
         opt.progress_user = &prog;
     }
-    if (rtp_trace(scene, &opt, &img, &st, &err) != RTP_OK) {
+    if ((tree_path ? rtp_record(scene, &opt, &tree, &img, &st, &err)
+                   : rtp_trace(scene, &opt, &img, &st, &err)) != RTP_OK) {
         progress_end(&prog);
         fail_err(&err);
         goto out;
@@ -321,10 +427,15 @@ static int cmd_trace(int argc, char **argv)
     progress_end(&prog);
     t_trace = now_seconds() - prog.start;
     t0 = now_seconds();
-    if (rtp_image_write(img, image_path, RTP_IMAGE_AUTO, &err) != RTP_OK) {
+    if (tree_path && rtp_tree_write(tree, tree_path, &file_bytes, &err) != RTP_OK) {
         fail_err(&err);
         goto out;
     }
+    if (image_path && rtp_image_write(img, image_path, RTP_IMAGE_AUTO, &err) != RTP_OK) {
+        fail_err(&err);
+        goto out;
+    }
+    rtp_tree_get_info(tree, &ti);
     t_write = now_seconds() - t0;
     if (verbosity > 1)
         fprintf(stderr,
@@ -344,17 +455,24 @@ static int cmd_trace(int argc, char **argv)
                 "\"eye_rays\": %llu, \"eye_hits\": %llu, \"shadow_rays\": %llu, "
                 "\"reflected_rays\": %llu, \"refracted_rays\": %llu, "
                 "\"kd_nodes\": %llu, \"kd_leaves\": %llu, \"kd_prim_refs\": %llu, "
-                "\"kd_depth\": %d}\n",
+                "\"kd_depth\": %d",
                 scene_path, st.width, st.height, opt.spd ? "true" : "false",
                 opt.threads > 1 ? opt.threads : 1, t_load + t_trace + t_write, t_load,
                 st.build_seconds, st.trace_seconds, t_write, st.eye_rays, st.eye_hits,
                 st.shadow_rays, st.reflected_rays, st.refracted_rays, st.kd_nodes,
                 st.kd_leaves, st.kd_prim_refs, st.kd_depth);
+        if (tree)
+            fprintf(f, ", \"pixels\": %llu, \"samples\": %llu, \"nodes\": %llu, "
+                       "\"bytes_per_node\": %u, \"tree_bytes\": %llu, \"file_bytes\": %llu",
+                    (unsigned long long)st.width * (unsigned long long)st.height,
+                    ti.samples, ti.nodes, ti.bytes_per_node, ti.tree_bytes, file_bytes);
+        fputs("}\n", f);
         if (stats_close(f, stats_path))
             goto out;
     }
     rc = 0;
 out:
+    rtp_tree_destroy(tree);
     rtp_image_destroy(img);
     rtp_scene_destroy(scene);
     free(default_image);
@@ -524,12 +642,387 @@ usage:
     return EXIT_USAGE;
 }
 
+
+/* --------------------------------------------------------------- reeval */
+
+static const char reeval_help[] =
+    "usage: rtp reeval TREE [options]\n"
+    "Re-evaluates the ray trees in TREE ('-' = stdin) with edited parameters\n"
+    "and writes the image, without tracing a ray.\n"
+    "  -i, --image FILE     image to write (.png .ppm .pfm; '-' = PFM on stdout);\n"
+    "                       default: TREE's name with .png\n"
+    "  --set KEY=VALUE      edit a parameter (repeatable); keys as for trace\n"
+    "  --params FILE        edits from FILE: KEY=VALUE per line, '#' comments\n"
+    "  --stream             read edit sets from stdin, one line each (KEY=VALUE\n"
+    "                       pairs; edits persist), and write one image per line:\n"
+    "                       -i takes a pattern with %d (or %04d), or '-' for a\n"
+    "                       stream of PFM images on stdout\n"
+    "  --reference          also trace the edited scene in full and report both\n"
+    "                       times and the error of the re-evaluation\n"
+    "  -j, --threads N      threads (default 1)\n"
+    "  --stats FILE         write statistics as one JSON object ('-' = stdout)\n"
+    "  -q, --quiet / -v, --verbose / -h, --help\n"
+    "Edits the trees cannot evaluate exactly (a moved light, a new ior, ks or kt\n"
+    "raised from 0) fail with a message naming the remedy.\n";
+
+/* Expands a pattern with one %d or %0Nd; returns 0 or -1. */
+static int expand_pattern(const char *pat, int n, char *out, size_t size)
+{
+    const char *pc = strchr(pat, '%');
+    int width = 0;
+    const char *after;
+    if (!pc)
+        return snprintf(out, size, "%s", pat) < (int)size ? 0 : -1;
+    after = pc + 1;
+    if (*after == '0') {
+        after++;
+        while (*after >= '0' && *after <= '9')
+            width = width * 10 + (*after++ - '0');
+    }
+    if (*after != 'd' || strchr(after, '%') || width > 12)
+        return -1;
+    return snprintf(out, size, "%.*s%0*d%s", (int)(pc - pat), pat, width, n, after + 1) <
+                   (int)size
+               ? 0
+               : -1;
+}
+
+static long long file_size(const char *path)
+{
+    FILE *f;
+    long long n;
+    if (strcmp(path, "-") == 0 || !(f = fopen(path, "rb")))
+        return -1;
+    if (fseek(f, 0, SEEK_END) != 0) {
+        fclose(f);
+        return -1;
+    }
+    n = ftell(f);
+    fclose(f);
+    return n;
+}
+
+static int reeval_one(rtp_tree *tree, const rtp_eval_options *eo, const char *image_path,
+                      int reference, int threads, FILE *stats, const char *tree_path,
+                      double load_seconds)
+{
+    rtp_image *img = NULL, *ref = NULL;
+    rtp_eval_stats es;
+    rtp_trace_stats ts;
+    rtp_diff_stats d;
+    rtp_tree_info ti;
+    rtp_error err;
+    double t_ref = 0.0;
+    int rc = 1;
+    memset(&err, 0, sizeof err);
+    if (rtp_tree_eval(tree, eo, &img, &es, &err) != RTP_OK) {
+        fail_err(&err);
+        goto out;
+    }
+    if (image_path && rtp_image_write(img, image_path, RTP_IMAGE_AUTO, &err) != RTP_OK) {
+        fail_err(&err);
+        goto out;
+    }
+    if (reference) {
+        double t0 = now_seconds();
+        if (rtp_tree_trace(tree, threads, &ref, &ts, &err) != RTP_OK ||
+            rtp_image_diff(img, ref, 1.0 / 255.0, &d, &err) != RTP_OK) {
+            fail_err(&err);
+            goto out;
+        }
+        t_ref = now_seconds() - t0;
+        if (verbosity > 0)
+            fprintf(stderr,
+                    "rtp: reeval %.4f s, full trace %.4f s (%.1fx); error: rmse %.3g, "
+                    "psnr %.4g dB, max_abs %.3g\n",
+                    es.seconds, t_ref, es.seconds > 0 ? t_ref / es.seconds : 0.0, d.rmse,
+                    d.psnr, d.max_abs);
+    } else if (verbosity > 1) {
+        fprintf(stderr, "rtp: reeval %.4f s, %llu nodes\n", es.seconds, es.nodes);
+    }
+    if (stats) {
+        long long fb = file_size(tree_path);
+        rtp_tree_get_info(tree, &ti);
+        fprintf(stats,
+                "{\"command\": \"reeval\", \"seconds\": %.6f, \"load_seconds\": %.6f, "
+                "\"pixels\": %llu, \"samples\": %llu, \"nodes\": %llu, \"bytes_per_node\": %u, "
+                "\"tree_bytes\": %llu",
+                es.seconds, load_seconds, (unsigned long long)img->width * img->height,
+                ti.samples, ti.nodes, ti.bytes_per_node, ti.tree_bytes);
+        if (fb >= 0)
+            fprintf(stats, ", \"file_bytes\": %lld", fb);
+        if (reference) {
+            fprintf(stats, ", \"reference_seconds\": %.6f, \"speedup\": %.3f, ", t_ref,
+                    es.seconds > 0 ? t_ref / es.seconds : 0.0);
+            json_number(stats, "mae", d.mae);
+            fputs(", ", stats);
+            json_number(stats, "rmse", d.rmse);
+            fputs(", ", stats);
+            json_number(stats, "psnr", d.psnr);
+            fputs(", ", stats);
+            json_number(stats, "max_abs", d.max_abs);
+        }
+        fputs("}\n", stats);
+    }
+    rc = 0;
+out:
+    rtp_image_destroy(img);
+    rtp_image_destroy(ref);
+    return rc;
+}
+
+static int cmd_reeval(int argc, char **argv)
+{
+    const char *tree_path = NULL, *image_path = NULL, *stats_path = NULL;
+    const char *params = NULL;
+    char *default_image = NULL;
+    const char **sets;
+    int i, nsets = 0, rc = 1, stream = 0, reference = 0, threads = 1;
+    rtp_tree *tree = NULL;
+    rtp_error err;
+    rtp_eval_options eo;
+    progress prog;
+    FILE *stats = NULL;
+    double t0, t_load;
+
+    memset(&err, 0, sizeof err);
+    memset(&eo, 0, sizeof eo);
+    sets = (const char **)calloc((size_t)argc + 1, sizeof *sets);
+    if (!sets) {
+        msg("out of memory");
+        return 1;
+    }
+    for (i = 0; i < argc; i++) {
+        const char *a = argv[i], *v;
+        if (strcmp(a, "-h") == 0 || strcmp(a, "--help") == 0) {
+            fputs(reeval_help, stdout);
+            free(sets);
+            return 0;
+        } else if (strcmp(a, "-q") == 0 || strcmp(a, "--quiet") == 0) {
+            verbosity = 0;
+        } else if (strcmp(a, "-v") == 0 || strcmp(a, "--verbose") == 0) {
+            verbosity = 2;
+        } else if (strcmp(a, "--stream") == 0) {
+            stream = 1;
+        } else if (strcmp(a, "--reference") == 0) {
+            reference = 1;
+        } else if (strcmp(a, "-i") == 0 || is_opt(a, "--image")) {
+            if (!(image_path = opt_value(argc, argv, &i, a[1] == 'i' ? "-i" : "--image")))
+                goto usage;
+        } else if (is_opt(a, "--set")) {
+            if (!(v = opt_value(argc, argv, &i, "--set")))
+                goto usage;
+            sets[nsets++] = v;
+        } else if (is_opt(a, "--params")) {
+            if (!(params = opt_value(argc, argv, &i, "--params")))
+                goto usage;
+        } else if (is_opt(a, "--shadows")) {
+            if (!(v = opt_value(argc, argv, &i, "--shadows")))
+                goto usage;
+            if (strcmp(v, "exact") != 0) {
+                msg("--shadows %s: direction cubes (lightbuf, itembuf, osmesa) are not in "
+                    "this version; lights cannot move yet", v);
+                goto usage;
+            }
+        } else if (strncmp(a, "-j", 2) == 0 || is_opt(a, "--threads")) {
+            if (!(v = opt_value(argc, argv, &i, a[1] == 'j' ? "-j" : "--threads")) ||
+                parse_int(v, 1, 256, &threads)) {
+                msg("-j: expected a thread count from 1 to 256");
+                goto usage;
+            }
+        } else if (is_opt(a, "--stats")) {
+            if (!(stats_path = opt_value(argc, argv, &i, "--stats")))
+                goto usage;
+        } else if (a[0] == '-' && a[1] != '\0') {
+            msg("reeval: unknown option '%s'", a);
+            goto usage;
+        } else if (!tree_path) {
+            tree_path = a;
+        } else {
+            msg("reeval: more than one tree ('%s' and '%s')", tree_path, a);
+            goto usage;
+        }
+    }
+    if (!tree_path) {
+        msg("reeval: no tree file given");
+        goto usage;
+    }
+    if (stream && strcmp(tree_path, "-") == 0) {
+        msg("reeval: --stream reads edits from stdin, so the tree cannot come from it");
+        goto usage;
+    }
+    if (params && strcmp(params, "-") == 0 && (stream || strcmp(tree_path, "-") == 0)) {
+        msg("reeval: stdin can serve only one of the tree, --params and --stream");
+        goto usage;
+    }
+    if (!image_path) {
+        default_image = default_image_name(strcmp(tree_path, "-") ? tree_path : "reeval");
+        if (!default_image) {
+            msg("out of memory");
+            goto out;
+        }
+        image_path = default_image;
+    }
+    if (stream && strcmp(image_path, "-") != 0) {
+        char probe[4096];
+        if (expand_pattern(image_path, 0, probe, sizeof probe) != 0 || !strchr(image_path, '%')) {
+            msg("--stream: -i needs a pattern with one %%d (e.g. frame%%04d.png) or '-'");
+            goto usage;
+        }
+    }
+    eo.threads = threads;
+    prog.start = now_seconds();
+    prog.shown = 0;
+    if (verbosity > 0 && isatty(2) && !stream) {
+        eo.progress = progress_cb;
+        eo.progress_user = &prog;
+    }
+
+    t0 = now_seconds();
+    if (rtp_tree_read(tree_path, NULL, &tree, &err) != RTP_OK) {
+        fail_err(&err);
+        goto out;
+    }
+    t_load = now_seconds() - t0;
+    if (params && apply_params_file(set_tree, tree, params))
+        goto out;
+    for (i = 0; i < nsets; i++)
+        if (apply_kv(set_tree, tree, sets[i], "--set", 0))
+            goto out;
+    if (stats_path && !(stats = stats_open(stats_path)))
+        goto out;
+    if (!stream) {
+        rc = reeval_one(tree, &eo, image_path, reference, threads, stats, tree_path, t_load);
+        progress_end(&prog);
+    } else {
+        char line[8192], path[4096];
+        int n = 0;
+        rc = 0;
+        while (fgets(line, sizeof line, stdin)) {
+            n++;
+            if (apply_line(set_tree, tree, line, "stdin", n)) {
+                rc = 1;
+                break;
+            }
+            if (strcmp(image_path, "-") == 0) {
+                snprintf(path, sizeof path, "-");
+            } else if (expand_pattern(image_path, n - 1, path, sizeof path) != 0) {
+                msg("--stream: image name too long");
+                rc = 1;
+                break;
+            }
+            if (reeval_one(tree, &eo, path, reference, threads, stats, tree_path, t_load)) {
+                rc = 1;
+                break;
+            }
+            fflush(stdout);
+        }
+    }
+    if (stats && stats_close(stats, stats_path))
+        rc = 1;
+    stats = NULL;
+out:
+    if (stats && stats != stdout)
+        fclose(stats);
+    rtp_tree_destroy(tree);
+    free(default_image);
+    free(sets);
+    return rc;
+usage:
+    fputs(reeval_help, stderr);
+    free(default_image);
+    free(sets);
+    return EXIT_USAGE;
+}
+
+/* ----------------------------------------------------------------- info */
+
+static const char info_help[] =
+    "usage: rtp info TREE [--stats FILE]\n"
+    "Prints what a tree file holds: image and sample sizes, nodes, bytes per\n"
+    "node, file size, lights and materials (with their names).\n";
+
+static int cmd_info(int argc, char **argv)
+{
+    const char *tree_path = NULL, *stats_path = NULL;
+    rtp_tree *tree = NULL;
+    rtp_tree_info ti;
+    rtp_error err;
+    long long fb;
+    int i;
+    memset(&err, 0, sizeof err);
+    for (i = 0; i < argc; i++) {
+        if (strcmp(argv[i], "-h") == 0 || strcmp(argv[i], "--help") == 0) {
+            fputs(info_help, stdout);
+            return 0;
+        } else if (is_opt(argv[i], "--stats")) {
+            if (!(stats_path = opt_value(argc, argv, &i, "--stats"))) {
+                fputs(info_help, stderr);
+                return EXIT_USAGE;
+            }
+        } else if (argv[i][0] == '-' && argv[i][1] != '\0') {
+            msg("info: unknown option '%s'", argv[i]);
+            fputs(info_help, stderr);
+            return EXIT_USAGE;
+        } else if (!tree_path) {
+            tree_path = argv[i];
+        } else {
+            msg("info: one tree file at a time");
+            return EXIT_USAGE;
+        }
+    }
+    if (!tree_path) {
+        msg("info: no tree file given");
+        fputs(info_help, stderr);
+        return EXIT_USAGE;
+    }
+    if (rtp_tree_read(tree_path, NULL, &tree, &err) != RTP_OK)
+        return fail_err(&err);
+    rtp_tree_get_info(tree, &ti);
+    fb = file_size(tree_path);
+    if (!stats_path || strcmp(stats_path, "-") != 0) {
+        unsigned long long px = (unsigned long long)ti.width * ti.height;
+        printf("%s: %dx%d image%s, %llu samples, depth %d\n", tree_path, ti.width, ti.height,
+               ti.spd ? " (SPD: corner samples)" : "", ti.samples, ti.max_depth);
+        printf("nodes %llu (%.3f per sample), %u bytes per node, trees %llu bytes\n", ti.nodes,
+               ti.samples ? (double)ti.nodes / (double)ti.samples : 0.0, ti.bytes_per_node,
+               ti.tree_bytes);
+        if (fb >= 0)
+            printf("file %lld bytes = %.2f x the raw 8-bit RGB image (%llu bytes)\n", fb,
+                   px ? (double)fb / (3.0 * (double)px) : 0.0, 3 * px);
+        printf("scene: %zu triangles, %zu spheres, %zu cones; %zu materials, %zu lights\n",
+               ti.triangles, ti.spheres, ti.cones, ti.materials, ti.lights);
+    }
+    if (stats_path) {
+        FILE *f = stats_open(stats_path);
+        if (!f) {
+            rtp_tree_destroy(tree);
+            return 1;
+        }
+        fprintf(f,
+                "{\"command\": \"info\", \"width\": %d, \"height\": %d, \"spd\": %s, "
+                "\"pixels\": %llu, \"samples\": %llu, \"nodes\": %llu, \"bytes_per_node\": %u, "
+                "\"tree_bytes\": %llu, \"file_bytes\": %lld, \"lights\": %zu, \"materials\": %zu}\n",
+                ti.width, ti.height, ti.spd ? "true" : "false",
+                (unsigned long long)ti.width * ti.height, ti.samples, ti.nodes,
+                ti.bytes_per_node, ti.tree_bytes, fb, ti.lights, ti.materials);
+        if (stats_close(f, stats_path)) {
+            rtp_tree_destroy(tree);
+            return 1;
+        }
+    }
+    rtp_tree_destroy(tree);
+    return 0;
+}
+
 /* ----------------------------------------------------------------- main */
 
 static const char main_help[] =
     "usage: rtp COMMAND [options]   (rtp COMMAND --help for each)\n"
     "Parameterized ray tracing with geometric parameters.\n"
-    "  trace SCENE   trace a scene (NFF or OBJ) and write the image\n"
+    "  trace SCENE   trace a scene (NFF or OBJ); write the image and ray trees\n"
+    "  reeval TREE   re-evaluate ray trees with edited parameters, no tracing\n"
+    "  info TREE     what a tree file holds\n"
     "  diff A B      compare two images: MAE, RMSE, PSNR, max error, heat map\n"
     "  version       print the version\n"
     "Exit status: 0 ok, 1 failure, 2 usage error, 3 diff over --fail-above.\n";
@@ -556,6 +1049,10 @@ int main(int argc, char **argv)
         return cmd_trace(argc - 2, argv + 2);
     if (strcmp(argv[1], "diff") == 0)
         return cmd_diff(argc - 2, argv + 2);
+    if (strcmp(argv[1], "reeval") == 0)
+        return cmd_reeval(argc - 2, argv + 2);
+    if (strcmp(argv[1], "info") == 0)
+        return cmd_info(argc - 2, argv + 2);
     msg("unknown command '%s'", argv[1]);
     fputs(main_help, stderr);
     return EXIT_USAGE;

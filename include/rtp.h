@@ -233,6 +233,12 @@ rtp_status rtp_tree_eval(const rtp_tree *tree, const rtp_eval_options *opt,
                          rtp_image **out, rtp_eval_stats *stats,
                          rtp_error *err);
 
+/** Full-traces the tree's scene as it now is (with every edit), with the
+ *  options the tree was traced with: the exact reference a re-evaluation
+ *  is compared against.  threads as in rtp_trace_options. */
+rtp_status rtp_tree_trace(const rtp_tree *tree, int threads, rtp_image **out,
+                          rtp_trace_stats *stats, rtp_error *err);
+
 typedef struct rtp_tree_info {
     int width, height, spd, max_depth;
     unsigned long long samples, nodes;

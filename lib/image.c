@@ -983,7 +983,6 @@ typedef struct png_rctx {
     rtp_image *img;
     int cap_rows;
     unsigned char *bytes;  /* one row, or the whole image if interlaced */
-    png_bytep *rows;       /* row pointers into bytes (interlaced) */
     int too_big;           /* the header asks for more than the limit */
     png_uint_32 w, h;
 } png_rctx;
@@ -1050,22 +1049,38 @@ static int png_read_body(png_rctx *c)
                             c->img->pixels + y * row_floats(c->img));
         }
     } else {
-        /* Every pass touches the whole image: it has to be in memory. */
-        c->bytes = (unsigned char *)rtpi_malloc_array(&c->io.alloc, c->h,
-                                                      rowbytes);
-        c->rows = (png_bytep *)rtpi_malloc_array(&c->io.alloc, c->h,
-                                                 sizeof *c->rows);
-        if (!c->bytes || !c->rows ||
-            reserve_rows(c->img, &c->cap_rows, (int)c->h) != 0) {
-            c->io.nomem = 1;
-            return -1;
+        /* Every pass spans the whole image, so all of it stays in memory
+           as bytes until the last pass.  The first pass grows that buffer
+           row by row: a file that claims a huge image but ends early
+           costs at most about 64 times its own size. */
+        int pass;
+        size_t cap = 0;
+        for (pass = 0; pass < passes; pass++) {
+            for (y = 0; y < c->h; y++) {
+                if (y >= cap) {
+                    unsigned char *nb;
+                    cap = cap ? 2 * cap : 64;
+                    if (cap > c->h)
+                        cap = c->h;
+                    nb = (unsigned char *)rtpi_realloc(&c->io.alloc, c->bytes,
+                                                       cap * rowbytes);
+                    if (!nb) {
+                        c->io.nomem = 1;
+                        return -1;
+                    }
+                    c->bytes = nb;
+                }
+                png_read_row(c->png, c->bytes + y * rowbytes, NULL);
+            }
         }
-        for (y = 0; y < c->h; y++)
-            c->rows[y] = c->bytes + y * rowbytes;
-        png_read_image(c->png, c->rows);
-        for (y = 0; y < c->h; y++)
-            png_convert_row(c, c->rows[y], wide,
+        for (y = 0; y < c->h; y++) {
+            if (reserve_rows(c->img, &c->cap_rows, (int)y + 1) != 0) {
+                c->io.nomem = 1;
+                return -1;
+            }
+            png_convert_row(c, c->bytes + y * rowbytes, wide,
                             c->img->pixels + y * row_floats(c->img));
+        }
     }
     /* Up to IEND, so a file cut in its last chunk is caught too. */
     png_read_end(c->png, NULL);
@@ -1117,7 +1132,6 @@ static rtp_status read_png(const reader *r, const rtp_allocator *alloc,
     if (c.png)
         png_destroy_read_struct(&c.png, c.info ? &c.info : NULL, NULL);
     rtpi_free(&a, c.bytes);
-    rtpi_free(&a, c.rows);
     if (st != RTP_OK) {
         rtp_image_destroy(c.img);
         return st;

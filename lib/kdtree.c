@@ -32,9 +32,18 @@
 
 /* SAH costs (Wald & Havran): one traversal step, one intersection test,
    and the factor that makes cutting off empty space attractive. */
+#ifndef KD_COST_TRAV
 #define KD_COST_TRAV 1.0
+#endif
+#ifndef KD_COST_ISECT
 #define KD_COST_ISECT 1.5
+#endif
+#ifndef KD_EMPTY_MIN
+#define KD_EMPTY_MIN 0.0
+#endif
+#ifndef KD_EMPTY_BONUS
 #define KD_EMPTY_BONUS 0.8
+#endif
 /* Hard cap on the depth; the traversal stack holds one entry per level. */
 #define KD_DEPTH_CAP 60
 /* The largest primitive count: ids share a word with a 2-bit event type,
@@ -344,11 +353,12 @@ static double find_split(const kd_ev *const ev[3], const size_t n[3],
                 double pr = (cap + ((double)hi[k] - p) * perim) * inv;
                 double cl, cr;
                 size_t a1 = nl + pp, b1 = nr, a2 = nl, b2 = nr + pp;
+                double fl = ((double)p - lo[k]) / d[k], fr = 1.0 - fl;
                 cl = KD_COST_TRAV + KD_COST_ISECT * (pl * (double)a1 + pr * (double)b1);
-                if (a1 == 0 || b1 == 0)
+                if ((a1 == 0 && fl >= KD_EMPTY_MIN) || (b1 == 0 && fr >= KD_EMPTY_MIN))
                     cl *= KD_EMPTY_BONUS;
                 cr = KD_COST_TRAV + KD_COST_ISECT * (pl * (double)a2 + pr * (double)b2);
-                if (a2 == 0 || b2 == 0)
+                if ((a2 == 0 && fl >= KD_EMPTY_MIN) || (b2 == 0 && fr >= KD_EMPTY_MIN))
                     cr *= KD_EMPTY_BONUS;
                 if (cl < best) {
                     best = cl;
@@ -402,7 +412,10 @@ static int build_node(kd_build *b, const float *lo, const float *hi,
     ev[0] = b->ev + off;
     ev[1] = ev[0] + n[0];
     ev[2] = ev[1] + n[1];
-    cost = depth >= b->max_depth || nprim == 0
+#ifndef KD_MIN_SPLIT
+#define KD_MIN_SPLIT 1
+#endif
+    cost = depth >= b->max_depth || nprim < KD_MIN_SPLIT
                ? HUGE_VAL
                : find_split(ev, n, nprim, lo, hi, &axis, &pos, &planar_left);
     if (!(cost < KD_COST_ISECT * (double)nprim))
@@ -685,7 +698,10 @@ rtp_status rtpi_kd_build(const rtp_scene *s, const rtp_allocator *alloc,
     }
 
     lg = nvalid > 1 ? log((double)nvalid) / log(2.0) : 0.0;
-    b->max_depth = (int)(8.0 + 1.3 * lg);
+#ifndef KD_DEPTH_B
+#define KD_DEPTH_B 1.3
+#endif
+    b->max_depth = (int)(8.0 + KD_DEPTH_B * lg);
     if (b->max_depth > KD_DEPTH_CAP)
         b->max_depth = KD_DEPTH_CAP;
     if (build_node(b, lo, hi, 0, n, nvalid, 0))

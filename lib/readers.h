@@ -20,9 +20,10 @@
 /* Include nesting allowed below the top-level file. */
 #define RTPI_INCLUDE_MAX 8
 
-/* Vertices per polygon/face; more is a parse error (ear clipping is
-   quadratic, and no real scene comes close). */
-#define RTPI_POLY_MAX 65536
+/* Vertices per polygon/face; more is a parse error.  Ear clipping is
+   quadratic: a concave 8192-gon takes about 0.25 s, and no real scene
+   comes close (SPD's gears have 144). */
+#define RTPI_POLY_MAX 8192
 
 /* A token: bytes [s, s+n) starting at 1-based line and column. */
 typedef struct rtpi_tok {

@@ -466,10 +466,30 @@ rtp_status rtp_scene_set(rtp_scene *s, const char *key, const char *value,
                               "%s: no such material (the scene has %zu)", key,
                               s->nmats);
         m = &s->mats[i];
-        if (strcmp(field, "color") == 0) {
+        if (strcmp(field, "color") == 0 || strcmp(field, "color2") == 0) {
             if ((st = want(err, key, value, n, 3)) != RTP_OK)
                 return st;
-            set_rgb(m->color, v, n);
+            set_rgb(field[5] == '2' ? m->color2 : m->color, v, n);
+            return RTP_OK;
+        }
+        if (strcmp(field, "checker_scale") == 0) {
+            if ((st = want(err, key, value, n, 1)) != RTP_OK)
+                return st;
+            if (!(v[0] > 0.0))
+                return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                                  "%s: the checker cell size must be > 0", key);
+            m->tex_scale = (float)v[0];
+            return RTP_OK;
+        }
+        if (strcmp(field, "checker") == 0) {
+            /* turns the solid checker on (1) or off (0) */
+            if ((st = want(err, key, value, n, 1)) != RTP_OK)
+                return st;
+            if (v[0] != 0.0) {
+                m->tex = RTPI_TEX_CHECKER;
+            } else if (m->tex == RTPI_TEX_CHECKER) {
+                m->tex = RTPI_TEX_NONE;
+            }
             return RTP_OK;
         }
         if (strcmp(field, "kd") == 0) dst = &m->kd;
@@ -479,7 +499,8 @@ rtp_status rtp_scene_set(rtp_scene *s, const char *key, const char *value,
         else if (strcmp(field, "ior") == 0) dst = &m->ior;
         if (!dst)
             return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0,
-                              "unknown key '%s' (material fields: color, kd, ks, kt, shine, ior)",
+                              "unknown key '%s' (material fields: color, kd, ks, kt, shine, ior, "
+                              "checker, color2, checker_scale)",
                               key);
         if ((st = want(err, key, value, n, 1)) != RTP_OK)
             return st;

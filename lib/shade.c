@@ -40,8 +40,13 @@ void rtpi_object_color(const rtp_scene *s, const rtpi_material *m,
     int c;
     if (m->tex == RTPI_TEX_CHECKER && m->tex_scale > 0.0f) {
         double inv = 1.0 / m->tex_scale;
-        /* fmod keeps the parity right for cells beyond long's range */
-        double cell = floor(p.x * inv) + floor(p.y * inv) + floor(p.z * inv);
+        /* Planes often lie exactly on a cell boundary (a table top at
+           z = 0): a bias of 1e-4 cell puts hits within float noise of a
+           boundary consistently on one side instead of speckling.  fmod
+           keeps the parity right for cells beyond long's range. */
+        const double bias = 1e-4;
+        double cell = floor(p.x * inv + bias) + floor(p.y * inv + bias) +
+                      floor(p.z * inv + bias);
         const float *src = fmod(fabs(cell), 2.0) >= 1.0 ? m->color2 : m->color;
         for (c = 0; c < 3; c++)
             rgb[c] = src[c];

@@ -220,3 +220,19 @@ rtp_status rtp_tree_eval(const rtp_tree *t, const rtp_eval_options *opt,
     *out = img;
     return RTP_OK;
 }
+
+rtp_status rtp_tree_trace(const rtp_tree *t, int threads, rtp_image **out,
+                          rtp_trace_stats *stats, rtp_error *err)
+{
+    rtp_trace_options o;
+    if (!t)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_trace: NULL tree");
+    memset(&o, 0, sizeof o);
+    o.width = t->width;
+    o.height = t->height;
+    o.spd = t->spd;
+    o.max_depth = t->max_depth;
+    o.min_weight = t->min_weight;
+    o.threads = threads;
+    return rtp_trace(t->scene, &o, out, stats, err);
+}

@@ -566,10 +566,13 @@ static int write_png_raw(const char *path, int w, int h, int color_type,
     FILE *f = fopen(path, "wb");
     png_structp png;
     png_infop info;
-    png_bytep rows[64];
+    png_bytep rows[256];
     int y;
-    if (!f || h > 64)
+    if (!f || h > 256) {
+        if (f)
+            fclose(f);
         return -1;
+    }
     png = png_create_write_struct(PNG_LIBPNG_VER_STRING, NULL, t_png_error,
                                   NULL);
     info = png ? png_create_info_struct(png) : NULL;
@@ -670,6 +673,27 @@ static void test_png_kinds(void)
             ok = back->pixels[y * 27 + x] ==
                  (float)(unsigned char)(y * 31 + (x / 3 * 4 + x % 3) * 7) /
                      255.0f;
+    CHECK(ok);
+    rtp_image_destroy(back);
+    back = NULL;
+
+    /* Interlaced 16-bit RGB, taller than the first row allocation. */
+    for (y = 0; y < 150; y++)
+        for (x = 0; x < 7 * 3; x++) {
+            unsigned v = (unsigned)(y * 409 + x * 3001) & 0xffffu;
+            data[y * 42 + 2 * x] = (unsigned char)(v >> 8);
+            data[y * 42 + 2 * x + 1] = (unsigned char)v;
+        }
+    CHECK(write_png_raw(p, 7, 150, PNG_COLOR_TYPE_RGB, 16,
+                        PNG_INTERLACE_ADAM7, data, 42, NULL, 0, NULL,
+                        0) == 0);
+    CHECK(rtp_image_read(p, NULL, &back, NULL) == RTP_OK);
+    ok = back && back->width == 7 && back->height == 150;
+    for (y = 0; ok && y < 150; y++)
+        for (x = 0; ok && x < 7 * 3; x++)
+            ok = back->pixels[y * 21 + x] ==
+                 (float)((unsigned)(y * 409 + x * 3001) & 0xffffu) /
+                     65535.0f;
     CHECK(ok);
     rtp_image_destroy(back);
 }

@@ -469,6 +469,7 @@ static const bad_case bad_nff[] = {
     {"s 0 0 0 0x10\n", RTP_ERR_PARSE, 1, 9, "expected number for sphere radius"},
     {"s 0 0 0 1e30\n", RTP_ERR_PARSE, 1, 9, "out of range"},
     {"p 999999999\n", RTP_ERR_PARSE, 1, 3, "exceeds the limit"},
+    {"p 8193\n", RTP_ERR_PARSE, 1, 3, "vertex count 8193 exceeds the limit of 8192"},
     {"p 99999999999999999999\n", RTP_ERR_PARSE, 1, 3, "expected vertex count for polygon"},
     {"p 1000\n0 0 0\n", RTP_ERR_PARSE, 1, 3, "file ends before"},
     {"p -3\n", RTP_ERR_PARSE, 1, 3, "polygon vertex count -3 < 3"},

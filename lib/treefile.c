@@ -1,0 +1,1095 @@
+/* treefile.c — the tree file (.rtp): a traced image's ray trees with
+ * everything needed to re-evaluate them, little-endian, written and read
+ * byte by byte, every section checksummed and every length validated.
+ * The format is specified in doc/tree-format.md. */
+#include "internal.h"
+
+#include <errno.h>
+#include <stdio.h>
+#include <stdlib.h>
+
+#define FMT_MAJOR 1
+#define FMT_MINOR 0
+#define MAX_NAME 255
+/* Limits a file may not exceed; beyond them it is rejected before any
+   allocation, so a corrupt length cannot ask for absurd memory. */
+#define MAX_COUNT 0x7fffffffu
+#define MAX_DEPTH_FILE 1000
+
+static const unsigned char signature[8] = {0x89, 'R', 'T', 'P', '\r', '\n', 0x1a, '\n'};
+
+static const uint32_t crc_table[256] = {
+    0x00000000u, 0x77073096u, 0xee0e612cu, 0x990951bau, 0x076dc419u, 0x706af48fu,
+    0xe963a535u, 0x9e6495a3u, 0x0edb8832u, 0x79dcb8a4u, 0xe0d5e91eu, 0x97d2d988u,
+    0x09b64c2bu, 0x7eb17cbdu, 0xe7b82d07u, 0x90bf1d91u, 0x1db71064u, 0x6ab020f2u,
+    0xf3b97148u, 0x84be41deu, 0x1adad47du, 0x6ddde4ebu, 0xf4d4b551u, 0x83d385c7u,
+    0x136c9856u, 0x646ba8c0u, 0xfd62f97au, 0x8a65c9ecu, 0x14015c4fu, 0x63066cd9u,
+    0xfa0f3d63u, 0x8d080df5u, 0x3b6e20c8u, 0x4c69105eu, 0xd56041e4u, 0xa2677172u,
+    0x3c03e4d1u, 0x4b04d447u, 0xd20d85fdu, 0xa50ab56bu, 0x35b5a8fau, 0x42b2986cu,
+    0xdbbbc9d6u, 0xacbcf940u, 0x32d86ce3u, 0x45df5c75u, 0xdcd60dcfu, 0xabd13d59u,
+    0x26d930acu, 0x51de003au, 0xc8d75180u, 0xbfd06116u, 0x21b4f4b5u, 0x56b3c423u,
+    0xcfba9599u, 0xb8bda50fu, 0x2802b89eu, 0x5f058808u, 0xc60cd9b2u, 0xb10be924u,
+    0x2f6f7c87u, 0x58684c11u, 0xc1611dabu, 0xb6662d3du, 0x76dc4190u, 0x01db7106u,
+    0x98d220bcu, 0xefd5102au, 0x71b18589u, 0x06b6b51fu, 0x9fbfe4a5u, 0xe8b8d433u,
+    0x7807c9a2u, 0x0f00f934u, 0x9609a88eu, 0xe10e9818u, 0x7f6a0dbbu, 0x086d3d2du,
+    0x91646c97u, 0xe6635c01u, 0x6b6b51f4u, 0x1c6c6162u, 0x856530d8u, 0xf262004eu,
+    0x6c0695edu, 0x1b01a57bu, 0x8208f4c1u, 0xf50fc457u, 0x65b0d9c6u, 0x12b7e950u,
+    0x8bbeb8eau, 0xfcb9887cu, 0x62dd1ddfu, 0x15da2d49u, 0x8cd37cf3u, 0xfbd44c65u,
+    0x4db26158u, 0x3ab551ceu, 0xa3bc0074u, 0xd4bb30e2u, 0x4adfa541u, 0x3dd895d7u,
+    0xa4d1c46du, 0xd3d6f4fbu, 0x4369e96au, 0x346ed9fcu, 0xad678846u, 0xda60b8d0u,
+    0x44042d73u, 0x33031de5u, 0xaa0a4c5fu, 0xdd0d7cc9u, 0x5005713cu, 0x270241aau,
+    0xbe0b1010u, 0xc90c2086u, 0x5768b525u, 0x206f85b3u, 0xb966d409u, 0xce61e49fu,
+    0x5edef90eu, 0x29d9c998u, 0xb0d09822u, 0xc7d7a8b4u, 0x59b33d17u, 0x2eb40d81u,
+    0xb7bd5c3bu, 0xc0ba6cadu, 0xedb88320u, 0x9abfb3b6u, 0x03b6e20cu, 0x74b1d29au,
+    0xead54739u, 0x9dd277afu, 0x04db2615u, 0x73dc1683u, 0xe3630b12u, 0x94643b84u,
+    0x0d6d6a3eu, 0x7a6a5aa8u, 0xe40ecf0bu, 0x9309ff9du, 0x0a00ae27u, 0x7d079eb1u,
+    0xf00f9344u, 0x8708a3d2u, 0x1e01f268u, 0x6906c2feu, 0xf762575du, 0x806567cbu,
+    0x196c3671u, 0x6e6b06e7u, 0xfed41b76u, 0x89d32be0u, 0x10da7a5au, 0x67dd4accu,
+    0xf9b9df6fu, 0x8ebeeff9u, 0x17b7be43u, 0x60b08ed5u, 0xd6d6a3e8u, 0xa1d1937eu,
+    0x38d8c2c4u, 0x4fdff252u, 0xd1bb67f1u, 0xa6bc5767u, 0x3fb506ddu, 0x48b2364bu,
+    0xd80d2bdau, 0xaf0a1b4cu, 0x36034af6u, 0x41047a60u, 0xdf60efc3u, 0xa867df55u,
+    0x316e8eefu, 0x4669be79u, 0xcb61b38cu, 0xbc66831au, 0x256fd2a0u, 0x5268e236u,
+    0xcc0c7795u, 0xbb0b4703u, 0x220216b9u, 0x5505262fu, 0xc5ba3bbeu, 0xb2bd0b28u,
+    0x2bb45a92u, 0x5cb36a04u, 0xc2d7ffa7u, 0xb5d0cf31u, 0x2cd99e8bu, 0x5bdeae1du,
+    0x9b64c2b0u, 0xec63f226u, 0x756aa39cu, 0x026d930au, 0x9c0906a9u, 0xeb0e363fu,
+    0x72076785u, 0x05005713u, 0x95bf4a82u, 0xe2b87a14u, 0x7bb12baeu, 0x0cb61b38u,
+    0x92d28e9bu, 0xe5d5be0du, 0x7cdcefb7u, 0x0bdbdf21u, 0x86d3d2d4u, 0xf1d4e242u,
+    0x68ddb3f8u, 0x1fda836eu, 0x81be16cdu, 0xf6b9265bu, 0x6fb077e1u, 0x18b74777u,
+    0x88085ae6u, 0xff0f6a70u, 0x66063bcau, 0x11010b5cu, 0x8f659effu, 0xf862ae69u,
+    0x616bffd3u, 0x166ccf45u, 0xa00ae278u, 0xd70dd2eeu, 0x4e048354u, 0x3903b3c2u,
+    0xa7672661u, 0xd06016f7u, 0x4969474du, 0x3e6e77dbu, 0xaed16a4au, 0xd9d65adcu,
+    0x40df0b66u, 0x37d83bf0u, 0xa9bcae53u, 0xdebb9ec5u, 0x47b2cf7fu, 0x30b5ffe9u,
+    0xbdbdf21cu, 0xcabac28au, 0x53b39330u, 0x24b4a3a6u, 0xbad03605u, 0xcdd70693u,
+    0x54de5729u, 0x23d967bfu, 0xb3667a2eu, 0xc4614ab8u, 0x5d681b02u, 0x2a6f2b94u,
+    0xb40bbe37u, 0xc30c8ea1u, 0x5a05df1bu, 0x2d02ef8du,
+};
+
+static uint32_t crc32_update(uint32_t crc, const unsigned char *p, size_t n)
+{
+    crc = ~crc;
+    while (n--)
+        crc = crc_table[(crc ^ *p++) & 0xffu] ^ (crc >> 8);
+    return ~crc;
+}
+
+/* ------------------------------------------------------------ writing */
+
+typedef struct buf {
+    const rtp_allocator *a;
+    unsigned char *p;
+    size_t n, cap;
+    int bad;
+} buf;
+
+static void put(buf *b, const void *src, size_t n)
+{
+    if (b->bad)
+        return;
+    if (rtpi_grow(b->a, (void **)&b->p, &b->cap, b->n + n, 1)) {
+        b->bad = 1;
+        return;
+    }
+    memcpy(b->p + b->n, src, n);
+    b->n += n;
+}
+
+static void put_u8(buf *b, unsigned v)
+{
+    unsigned char c = (unsigned char)v;
+    put(b, &c, 1);
+}
+
+static void put_u32(buf *b, uint32_t v)
+{
+    unsigned char c[4];
+    c[0] = (unsigned char)v;
+    c[1] = (unsigned char)(v >> 8);
+    c[2] = (unsigned char)(v >> 16);
+    c[3] = (unsigned char)(v >> 24);
+    put(b, c, 4);
+}
+
+static void put_u64(buf *b, uint64_t v)
+{
+    put_u32(b, (uint32_t)v);
+    put_u32(b, (uint32_t)(v >> 32));
+}
+
+static void put_f32(buf *b, float f)
+{
+    uint32_t u;
+    memcpy(&u, &f, 4);
+    put_u32(b, u);
+}
+
+static void put_f64(buf *b, double d)
+{
+    uint64_t u;
+    memcpy(&u, &d, 8);
+    put_u64(b, u);
+}
+
+static void put_str(buf *b, const char *s)
+{
+    size_t n = s ? strlen(s) : 0;
+    if (n > MAX_NAME)
+        n = MAX_NAME;
+    put_u8(b, (unsigned)n);
+    if (n)
+        put(b, s, n);
+}
+
+static void put_varint(buf *b, uint64_t v)
+{
+    while (v >= 0x80) {
+        put_u8(b, (unsigned)(v & 0x7f) | 0x80u);
+        v >>= 7;
+    }
+    put_u8(b, (unsigned)v);
+}
+
+/* Appends section `tag` holding body to out: tag, length, body, CRC of
+   tag+length+body. */
+static void put_section(buf *out, const char *tag, const buf *body)
+{
+    size_t start = out->n;
+    put(out, tag, 4);
+    put_u64(out, body->n);
+    put(out, body->p, body->n);
+    if (!out->bad)
+        put_u32(out, crc32_update(0, out->p + start, out->n - start));
+    if (body->bad)
+        out->bad = 1;
+}
+
+static void body_reset(buf *b)
+{
+    b->n = 0;
+}
+
+/* Which node fields the file carries: what the scene can use. */
+#define NODE_VIS 1u      /* light bits (the scene has lights) */
+#define NODE_LINK32 2u   /* full link word (some surface reflects or
+                            transmits); else one byte of flags */
+
+static unsigned node_layout(const rtp_tree *t)
+{
+    unsigned layout = 0;
+    size_t i;
+    if (t->scene->nlights > 0 && t->vis_words == 0)
+        layout |= NODE_VIS;
+    for (i = 0; i < t->nnodes; i++)
+        if (t->nodes[i].link & ~0xffu) {
+            layout |= NODE_LINK32;
+            break;
+        }
+    return layout;
+}
+
+static rtp_status serialize(const rtp_tree *t, buf *out)
+{
+    const rtp_scene *s = t->scene;
+    buf b;
+    size_t i, k;
+    unsigned layout = node_layout(t);
+    memset(&b, 0, sizeof b);
+    b.a = out->a;
+
+    put(out, signature, 8);
+    /* header: version, then a fixed block with its own CRC */
+    body_reset(&b);
+    put_u32(&b, (uint32_t)FMT_MAJOR);
+    put_u32(&b, (uint32_t)FMT_MINOR);
+    put_u32(&b, (uint32_t)t->width);
+    put_u32(&b, (uint32_t)t->height);
+    put_u32(&b, (uint32_t)t->nx);
+    put_u32(&b, (uint32_t)t->ny);
+    put_u32(&b, (uint32_t)t->spd);
+    put_u32(&b, (uint32_t)t->max_depth);
+    put_f64(&b, t->min_weight);
+    put_section(out, "HEAD", &b);
+
+    body_reset(&b);
+    for (k = 0; k < 3; k++)
+        put_f64(&b, s->camera.from[k]);
+    for (k = 0; k < 3; k++)
+        put_f64(&b, s->camera.at[k]);
+    for (k = 0; k < 3; k++)
+        put_f64(&b, s->camera.up[k]);
+    put_f64(&b, s->camera.angle);
+    put_f64(&b, s->camera.hither);
+    for (k = 0; k < 3; k++)
+        put_f32(&b, s->background[k]);
+    for (k = 0; k < 3; k++)
+        put_f32(&b, s->ambient[k]);
+    put_f64(&b, s->light_scale);
+    put_section(out, "SCEN", &b);
+
+    body_reset(&b);
+    put_u32(&b, (uint32_t)s->nmats);
+    for (i = 0; i < s->nmats; i++) {
+        const rtpi_material *m = &s->mats[i], *m0 = &t->mats0[i];
+        for (k = 0; k < 3; k++)
+            put_f32(&b, m->color[k]);
+        put_f32(&b, m->kd);
+        put_f32(&b, m->ks);
+        put_f32(&b, m->shine);
+        put_f32(&b, m->kt);
+        put_f32(&b, m->ior);
+        put_u8(&b, (unsigned)m->tex);
+        for (k = 0; k < 3; k++)
+            put_f32(&b, m->color2[k]);
+        put_f32(&b, m->tex_scale);
+        put_u32(&b, m->tex_image);
+        put_u8(&b, (unsigned)m->bump);
+        put_u32(&b, m->bump_image);
+        put_f32(&b, m->bump_strength);
+        put_f32(&b, m->bump_scale);
+        put_str(&b, m->name);
+        /* as traced: what decides which edits the trees can evaluate */
+        put_f32(&b, m0->ks);
+        put_f32(&b, m0->kt);
+        put_f32(&b, m0->ior);
+    }
+    put_section(out, "MATL", &b);
+
+    body_reset(&b);
+    put_u32(&b, (uint32_t)s->nlights);
+    for (i = 0; i < s->nlights; i++) {
+        const rtpi_light *l = &s->lights[i];
+        for (k = 0; k < 3; k++)
+            put_f64(&b, l->pos[k]);
+        for (k = 0; k < 3; k++)
+            put_f32(&b, l->color[k]);
+        put_u8(&b, l->on ? 1u : 0u);
+        put_str(&b, l->name);
+        for (k = 0; k < 3; k++)
+            put_f64(&b, t->lights0[i].pos[k]);
+    }
+    put_section(out, "LITE", &b);
+
+    if (s->ntexs) {
+        body_reset(&b);
+        put_u32(&b, (uint32_t)s->ntexs);
+        for (i = 0; i < s->ntexs; i++) {
+            const rtp_image *img = s->texs[i].image;
+            size_t n = (size_t)img->width * img->height * 3;
+            put_str(&b, s->texs[i].path);
+            put_u32(&b, (uint32_t)img->width);
+            put_u32(&b, (uint32_t)img->height);
+            for (k = 0; k < n; k++)
+                put_f32(&b, img->pixels[k]);
+        }
+        put_section(out, "TEXR", &b);
+    }
+
+    body_reset(&b);
+    put_u32(&b, (uint32_t)s->npos);
+    for (i = 0; i < s->npos * 3; i++)
+        put_f32(&b, s->pos[i]);
+    put_u32(&b, (uint32_t)s->nnrm);
+    for (i = 0; i < s->nnrm * 3; i++)
+        put_f32(&b, s->nrm[i]);
+    put_u32(&b, (uint32_t)s->nuv);
+    for (i = 0; i < s->nuv * 2; i++)
+        put_f32(&b, s->uv[i]);
+    put_u32(&b, (uint32_t)s->ntris);
+    for (i = 0; i < s->ntris; i++) {
+        for (k = 0; k < 3; k++)
+            put_u32(&b, s->tris[i].v[k]);
+        for (k = 0; k < 3; k++)
+            put_u32(&b, s->tris[i].n[k]);
+        for (k = 0; k < 3; k++)
+            put_u32(&b, s->tris[i].t[k]);
+        put_u32(&b, s->tris[i].mat);
+    }
+    put_u32(&b, (uint32_t)s->nspheres);
+    for (i = 0; i < s->nspheres; i++) {
+        for (k = 0; k < 4; k++)
+            put_f32(&b, k < 3 ? s->spheres[i].c[k] : s->spheres[i].r);
+        put_u32(&b, s->spheres[i].mat);
+    }
+    put_u32(&b, (uint32_t)s->ncones);
+    for (i = 0; i < s->ncones; i++) {
+        const rtpi_cone *c = &s->cones[i];
+        for (k = 0; k < 3; k++)
+            put_f32(&b, c->base[k]);
+        put_f32(&b, c->rb);
+        for (k = 0; k < 3; k++)
+            put_f32(&b, c->apex[k]);
+        put_f32(&b, c->ra);
+        put_u32(&b, c->mat);
+    }
+    put_section(out, "GEOM", &b);
+
+    body_reset(&b);
+    put_u64(&b, (uint64_t)t->nx * (uint64_t)t->ny);
+    put_u64(&b, t->nnodes);
+    put_u32(&b, (uint32_t)t->vis_words);
+    put_u8(&b, layout);
+    for (k = 0; k < (size_t)t->nx * t->ny; k++)
+        put_varint(&b, t->start[k + 1] - t->start[k]);
+    for (i = 0; i < t->nnodes; i++) {
+        const rtpi_cnode *nd = &t->nodes[i];
+        put_f32(&b, nd->p[0]);
+        put_f32(&b, nd->p[1]);
+        put_f32(&b, nd->p[2]);
+        put_u32(&b, nd->prim);
+        if (layout & NODE_VIS)
+            put_u32(&b, nd->vis);
+        if (layout & NODE_LINK32)
+            put_u32(&b, nd->link);
+        else
+            put_u8(&b, nd->link & 0xffu);
+    }
+    for (i = 0; i < t->nnodes * t->vis_words; i++)
+        put_u32(&b, t->vis_ext[i]);
+    put_section(out, "TREE", &b);
+
+    body_reset(&b);
+    put_section(out, "END ", &b);
+    rtpi_free(b.a, b.p);
+    return out->bad ? RTP_ERR_NOMEM : RTP_OK;
+}
+
+rtp_status rtp_tree_write(const rtp_tree *t, const char *path,
+                          unsigned long long *bytes, rtp_error *err)
+{
+    buf out;
+    rtp_status st;
+    FILE *f;
+    char *tmp = NULL;
+    int to_stdout;
+    if (!t || !path)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_write: NULL argument");
+    memset(&out, 0, sizeof out);
+    out.a = &t->alloc;
+    st = serialize(t, &out);
+    if (st != RTP_OK) {
+        rtpi_free(out.a, out.p);
+        return rtpi_error(err, st, path, 0, 0, "out of memory writing tree file");
+    }
+    to_stdout = strcmp(path, "-") == 0;
+    if (to_stdout) {
+        f = stdout;
+    } else {
+        size_t n = strlen(path);
+        tmp = (char *)rtpi_malloc(out.a, n + 16);
+        if (!tmp) {
+            rtpi_free(out.a, out.p);
+            return rtpi_error(err, RTP_ERR_NOMEM, path, 0, 0, "out of memory");
+        }
+        memcpy(tmp, path, n);
+        memcpy(tmp + n, ".tmp-rtp", 9);
+        f = fopen(tmp, "wb");
+        if (!f) {
+            st = rtpi_error(err, RTP_ERR_IO, path, 0, 0, "cannot write: %s", strerror(errno));
+            rtpi_free(out.a, tmp);
+            rtpi_free(out.a, out.p);
+            return st;
+        }
+    }
+    if (fwrite(out.p, 1, out.n, f) != out.n || fflush(f) != 0)
+        st = rtpi_error(err, RTP_ERR_IO, path, 0, 0, "write failed: %s", strerror(errno));
+    if (!to_stdout) {
+        if (fclose(f) != 0 && st == RTP_OK)
+            st = rtpi_error(err, RTP_ERR_IO, path, 0, 0, "write failed: %s", strerror(errno));
+        if (st == RTP_OK && rename(tmp, path) != 0)
+            st = rtpi_error(err, RTP_ERR_IO, path, 0, 0, "cannot rename into place: %s",
+                            strerror(errno));
+        if (st != RTP_OK)
+            remove(tmp);
+        rtpi_free(out.a, tmp);
+    }
+    if (bytes)
+        *bytes = out.n;
+    rtpi_free(out.a, out.p);
+    return st;
+}
+
+/* ------------------------------------------------------------ reading */
+
+typedef struct rd {
+    const unsigned char *p;
+    size_t n, at;
+    int bad;
+} rd;
+
+static int need(rd *r, size_t n)
+{
+    if (r->bad || n > r->n - r->at) {
+        r->bad = 1;
+        return 0;
+    }
+    return 1;
+}
+
+static unsigned get_u8(rd *r)
+{
+    if (!need(r, 1))
+        return 0;
+    return r->p[r->at++];
+}
+
+static uint32_t get_u32(rd *r)
+{
+    const unsigned char *c;
+    if (!need(r, 4))
+        return 0;
+    c = r->p + r->at;
+    r->at += 4;
+    return (uint32_t)c[0] | (uint32_t)c[1] << 8 | (uint32_t)c[2] << 16 | (uint32_t)c[3] << 24;
+}
+
+static uint64_t get_u64(rd *r)
+{
+    uint64_t lo = get_u32(r);
+    return lo | (uint64_t)get_u32(r) << 32;
+}
+
+static float get_f32(rd *r)
+{
+    uint32_t u = get_u32(r);
+    float f;
+    memcpy(&f, &u, 4);
+    return f;
+}
+
+static double get_f64(rd *r)
+{
+    uint64_t u = get_u64(r);
+    double d;
+    memcpy(&d, &u, 8);
+    return d;
+}
+
+static uint64_t get_varint(rd *r)
+{
+    uint64_t v = 0;
+    int shift = 0;
+    for (;;) {
+        unsigned c = get_u8(r);
+        if (r->bad)
+            return 0;
+        if (shift >= 63 && (c & 0x7e)) {
+            r->bad = 1;
+            return 0;
+        }
+        v |= (uint64_t)(c & 0x7f) << shift;
+        if (!(c & 0x80))
+            return v;
+        shift += 7;
+        if (shift > 63) {
+            r->bad = 1;
+            return 0;
+        }
+    }
+}
+
+/* A name, or NULL when empty; *bad on allocation failure. */
+static char *get_str(rd *r, const rtp_allocator *a, int *nomem)
+{
+    unsigned n = get_u8(r);
+    char *s;
+    if (!n || !need(r, n))
+        return NULL;
+    s = (char *)rtpi_malloc(a, n + 1);
+    if (!s) {
+        *nomem = 1;
+        return NULL;
+    }
+    memcpy(s, r->p + r->at, n);
+    s[n] = '\0';
+    r->at += n;
+    return s;
+}
+
+static int finite3(const float *f)
+{
+    return isfinite(f[0]) && isfinite(f[1]) && isfinite(f[2]);
+}
+
+typedef struct loader {
+    const char *name;
+    rtp_error *err;
+    rtp_tree *t;
+    rtp_scene *s;
+    const rtp_allocator *a;
+    const char *section;
+} loader;
+
+/* what: the message; detail (may be NULL) follows it. */
+static rtp_status bad(loader *L, const char *what, const char *detail)
+{
+    return rtpi_error(L->err, RTP_ERR_FORMAT, L->name, 0, 0, "%s%s%s%s", what,
+                      detail ? detail : "", L->section ? " in section " : "",
+                      L->section ? L->section : "");
+}
+
+static rtp_status nomem(loader *L)
+{
+    return rtpi_error(L->err, RTP_ERR_NOMEM, L->name, 0, 0, "out of memory reading tree file");
+}
+
+/* Checks a count against what the remaining bytes can hold. */
+static int count_ok(const rd *r, uint64_t count, size_t min_bytes_each)
+{
+    return count <= MAX_COUNT && (min_bytes_each == 0 || count <= (r->n - r->at) / min_bytes_each);
+}
+
+static rtp_status read_head(loader *L, rd *r)
+{
+    rtp_tree *t = L->t;
+    uint32_t major = get_u32(r), minor = get_u32(r);
+    char ver[16];
+    (void)minor;
+    if (r->bad)
+        return bad(L, "header too short", NULL);
+    if (major != FMT_MAJOR) {
+        snprintf(ver, sizeof ver, "%u", (unsigned)major);
+        return bad(L, major > FMT_MAJOR ? "written by a newer rtp: format version "
+                                       : "unknown format version ", ver);
+    }
+    t->width = (int)get_u32(r);
+    t->height = (int)get_u32(r);
+    t->nx = (int)get_u32(r);
+    t->ny = (int)get_u32(r);
+    t->spd = (int)get_u32(r);
+    t->max_depth = (int)get_u32(r);
+    t->min_weight = get_f64(r);
+    if (r->bad)
+        return bad(L, "header too short", NULL);
+    if (!rtpi_image_size_ok(t->width, t->height) || t->spd < 0 || t->spd > 1 ||
+        t->nx != t->width + t->spd || t->ny != t->height + t->spd)
+        return bad(L, "invalid image or sample size", NULL);
+    if (t->max_depth < 1 || t->max_depth > MAX_DEPTH_FILE)
+        return bad(L, "invalid maximum depth", NULL);
+    if (!(t->min_weight >= 0.0) || !isfinite(t->min_weight))
+        return bad(L, "invalid weight cut-off", NULL);
+    return RTP_OK;
+}
+
+static rtp_status read_scen(loader *L, rd *r)
+{
+    rtp_scene *s = L->s;
+    int k;
+    for (k = 0; k < 3; k++)
+        s->camera.from[k] = get_f64(r);
+    for (k = 0; k < 3; k++)
+        s->camera.at[k] = get_f64(r);
+    for (k = 0; k < 3; k++)
+        s->camera.up[k] = get_f64(r);
+    s->camera.angle = get_f64(r);
+    s->camera.hither = get_f64(r);
+    for (k = 0; k < 3; k++)
+        s->background[k] = get_f32(r);
+    for (k = 0; k < 3; k++)
+        s->ambient[k] = get_f32(r);
+    s->light_scale = get_f64(r);
+    if (r->bad)
+        return bad(L, "section too short", NULL);
+    for (k = 0; k < 3; k++)
+        if (!isfinite(s->camera.from[k]) || !isfinite(s->camera.at[k]) || !isfinite(s->camera.up[k]))
+            return bad(L, "camera is not finite", NULL);
+    if (!finite3(s->background) || !finite3(s->ambient) || !isfinite(s->light_scale) ||
+        !isfinite(s->camera.angle) || !isfinite(s->camera.hither))
+        return bad(L, "scene values are not finite", NULL);
+    s->has_camera = 1;
+    return RTP_OK;
+}
+
+static rtp_status read_matl(loader *L, rd *r)
+{
+    rtp_scene *s = L->s;
+    rtp_tree *t = L->t;
+    uint32_t n = get_u32(r), i;
+    int k, oom = 0;
+    if (r->bad || !count_ok(r, n, 65))
+        return bad(L, "invalid material count", NULL);
+    s->mats = (rtpi_material *)rtpi_calloc_array(L->a, n ? n : 1, sizeof *s->mats);
+    t->mats0 = (rtpi_material *)rtpi_calloc_array(L->a, n ? n : 1, sizeof *t->mats0);
+    if (!s->mats || !t->mats0)
+        return nomem(L);
+    s->cap_mats = n;
+    for (i = 0; i < n; i++) {
+        rtpi_material *m = &s->mats[i];
+        for (k = 0; k < 3; k++)
+            m->color[k] = get_f32(r);
+        m->kd = get_f32(r);
+        m->ks = get_f32(r);
+        m->shine = get_f32(r);
+        m->kt = get_f32(r);
+        m->ior = get_f32(r);
+        m->tex = (rtpi_tex_kind)get_u8(r);
+        for (k = 0; k < 3; k++)
+            m->color2[k] = get_f32(r);
+        m->tex_scale = get_f32(r);
+        m->tex_image = get_u32(r);
+        m->bump = (rtpi_bump_kind)get_u8(r);
+        m->bump_image = get_u32(r);
+        m->bump_strength = get_f32(r);
+        m->bump_scale = get_f32(r);
+        m->name = get_str(r, L->a, &oom);
+        s->nmats = i + 1;
+        t->mats0[i] = *m;
+        t->mats0[i].name = NULL;
+        t->mats0[i].ks = get_f32(r);
+        t->mats0[i].kt = get_f32(r);
+        t->mats0[i].ior = get_f32(r);
+        if (oom)
+            return nomem(L);
+        if (r->bad)
+            return bad(L, "section too short", NULL);
+        if (!finite3(m->color) || !finite3(m->color2) || !isfinite(m->kd) || !isfinite(m->ks) ||
+            !isfinite(m->shine) || !isfinite(m->kt) || !isfinite(m->ior) ||
+            !isfinite(m->tex_scale) || !isfinite(m->bump_strength) ||
+            !isfinite(m->bump_scale) || !isfinite(t->mats0[i].ks) ||
+            !isfinite(t->mats0[i].kt) || !isfinite(t->mats0[i].ior))
+            return bad(L, "material value is not finite", NULL);
+        if ((unsigned)m->tex > RTPI_TEX_IMAGE || (unsigned)m->bump > RTPI_BUMP_NOISE)
+            return bad(L, "unknown texture or bump kind", NULL);
+    }
+    return RTP_OK;
+}
+
+static rtp_status read_lite(loader *L, rd *r)
+{
+    rtp_scene *s = L->s;
+    rtp_tree *t = L->t;
+    uint32_t n = get_u32(r), i;
+    int k, oom = 0;
+    if (r->bad || !count_ok(r, n, 62))
+        return bad(L, "invalid light count", NULL);
+    s->lights = (rtpi_light *)rtpi_calloc_array(L->a, n ? n : 1, sizeof *s->lights);
+    t->lights0 = (rtpi_light *)rtpi_calloc_array(L->a, n ? n : 1, sizeof *t->lights0);
+    if (!s->lights || !t->lights0)
+        return nomem(L);
+    s->cap_lights = n;
+    for (i = 0; i < n; i++) {
+        rtpi_light *l = &s->lights[i];
+        for (k = 0; k < 3; k++)
+            l->pos[k] = get_f64(r);
+        for (k = 0; k < 3; k++)
+            l->color[k] = get_f32(r);
+        l->on = get_u8(r) != 0;
+        l->name = get_str(r, L->a, &oom);
+        s->nlights = i + 1;
+        for (k = 0; k < 3; k++)
+            t->lights0[i].pos[k] = get_f64(r);
+        if (oom)
+            return nomem(L);
+        if (r->bad)
+            return bad(L, "section too short", NULL);
+        for (k = 0; k < 3; k++)
+            if (!isfinite(l->pos[k]) || !isfinite(t->lights0[i].pos[k]))
+                return bad(L, "light position is not finite", NULL);
+        if (!finite3(l->color))
+            return bad(L, "light colour is not finite", NULL);
+    }
+    return RTP_OK;
+}
+
+static rtp_status read_texr(loader *L, rd *r)
+{
+    rtp_scene *s = L->s;
+    uint32_t n = get_u32(r), i;
+    int oom = 0;
+    if (r->bad || !count_ok(r, n, 9))
+        return bad(L, "invalid texture count", NULL);
+    s->texs = (rtpi_texture *)rtpi_calloc_array(L->a, n ? n : 1, sizeof *s->texs);
+    if (!s->texs)
+        return nomem(L);
+    s->cap_texs = n;
+    for (i = 0; i < n; i++) {
+        uint32_t w, h;
+        size_t k, count;
+        rtpi_texture *tx = &s->texs[i];
+        s->ntexs = i + 1;
+        tx->path = get_str(r, L->a, &oom);
+        if (oom)
+            return nomem(L);
+        if (!tx->path)
+            tx->path = rtpi_strdup(L->a, "");
+        if (!tx->path)
+            return nomem(L);
+        w = get_u32(r);
+        h = get_u32(r);
+        if (r->bad || !rtpi_image_size_ok((int)w, (int)h) || w > 0x7fffffffu || h > 0x7fffffffu ||
+            !count_ok(r, (uint64_t)w * h, 12))
+            return bad(L, "invalid texture size", NULL);
+        if (rtp_image_create((int)w, (int)h, L->a, &tx->image, NULL) != RTP_OK)
+            return nomem(L);
+        count = (size_t)w * h * 3;
+        for (k = 0; k < count; k++) {
+            float f = get_f32(r);
+            if (!isfinite(f))
+                return bad(L, "texture value is not finite", NULL);
+            tx->image->pixels[k] = f;
+        }
+        if (r->bad)
+            return bad(L, "section too short", NULL);
+    }
+    return RTP_OK;
+}
+
+static rtp_status read_geom(loader *L, rd *r)
+{
+    rtp_scene *s = L->s;
+    uint32_t n, i;
+    int k;
+
+    n = get_u32(r);
+    if (r->bad || !count_ok(r, n, 12))
+        return bad(L, "invalid vertex count", NULL);
+    if (n && !(s->pos = (float *)rtpi_malloc_array(L->a, (size_t)n * 3, sizeof *s->pos)))
+        return nomem(L);
+    s->npos = s->cap_pos = n;
+    for (i = 0; i < n * 3u; i++)
+        if (!isfinite(s->pos[i] = get_f32(r)))
+            return bad(L, "vertex is not finite", NULL);
+
+    n = get_u32(r);
+    if (r->bad || !count_ok(r, n, 12))
+        return bad(L, "invalid normal count", NULL);
+    if (n && !(s->nrm = (float *)rtpi_malloc_array(L->a, (size_t)n * 3, sizeof *s->nrm)))
+        return nomem(L);
+    s->nnrm = s->cap_nrm = n;
+    for (i = 0; i < n * 3u; i++)
+        if (!isfinite(s->nrm[i] = get_f32(r)))
+            return bad(L, "normal is not finite", NULL);
+
+    n = get_u32(r);
+    if (r->bad || !count_ok(r, n, 8))
+        return bad(L, "invalid texture-coordinate count", NULL);
+    if (n && !(s->uv = (float *)rtpi_malloc_array(L->a, (size_t)n * 2, sizeof *s->uv)))
+        return nomem(L);
+    s->nuv = s->cap_uv = n;
+    for (i = 0; i < n * 2u; i++)
+        if (!isfinite(s->uv[i] = get_f32(r)))
+            return bad(L, "texture coordinate is not finite", NULL);
+
+    n = get_u32(r);
+    if (r->bad || !count_ok(r, n, 40))
+        return bad(L, "invalid triangle count", NULL);
+    if (n && !(s->tris = (rtpi_tri *)rtpi_malloc_array(L->a, n, sizeof *s->tris)))
+        return nomem(L);
+    s->ntris = s->cap_tris = n;
+    for (i = 0; i < n; i++) {
+        rtpi_tri *tr = &s->tris[i];
+        int has_n, has_t;
+        for (k = 0; k < 3; k++)
+            tr->v[k] = get_u32(r);
+        for (k = 0; k < 3; k++)
+            tr->n[k] = get_u32(r);
+        for (k = 0; k < 3; k++)
+            tr->t[k] = get_u32(r);
+        tr->mat = get_u32(r);
+        if (r->bad)
+            return bad(L, "section too short", NULL);
+        has_n = tr->n[0] != RTPI_NONE;
+        has_t = tr->t[0] != RTPI_NONE;
+        for (k = 0; k < 3; k++) {
+            if (tr->v[k] >= s->npos || (has_n ? tr->n[k] >= s->nnrm : tr->n[k] != RTPI_NONE) ||
+                (has_t ? tr->t[k] >= s->nuv : tr->t[k] != RTPI_NONE))
+                return bad(L, "triangle index out of range", NULL);
+        }
+        if (tr->mat >= s->nmats)
+            return bad(L, "triangle material out of range", NULL);
+    }
+
+    n = get_u32(r);
+    if (r->bad || !count_ok(r, n, 20))
+        return bad(L, "invalid sphere count", NULL);
+    if (n && !(s->spheres = (rtpi_sphere *)rtpi_malloc_array(L->a, n, sizeof *s->spheres)))
+        return nomem(L);
+    s->nspheres = s->cap_spheres = n;
+    for (i = 0; i < n; i++) {
+        rtpi_sphere *sp = &s->spheres[i];
+        for (k = 0; k < 3; k++)
+            sp->c[k] = get_f32(r);
+        sp->r = get_f32(r);
+        sp->mat = get_u32(r);
+        if (r->bad)
+            return bad(L, "section too short", NULL);
+        if (!finite3(sp->c) || !isfinite(sp->r) || sp->mat >= s->nmats)
+            return bad(L, "invalid sphere", NULL);
+    }
+
+    n = get_u32(r);
+    if (r->bad || !count_ok(r, n, 36))
+        return bad(L, "invalid cone count", NULL);
+    if (n && !(s->cones = (rtpi_cone *)rtpi_malloc_array(L->a, n, sizeof *s->cones)))
+        return nomem(L);
+    s->ncones = s->cap_cones = n;
+    for (i = 0; i < n; i++) {
+        rtpi_cone *c = &s->cones[i];
+        for (k = 0; k < 3; k++)
+            c->base[k] = get_f32(r);
+        c->rb = get_f32(r);
+        for (k = 0; k < 3; k++)
+            c->apex[k] = get_f32(r);
+        c->ra = get_f32(r);
+        c->mat = get_u32(r);
+        if (r->bad)
+            return bad(L, "section too short", NULL);
+        if (!finite3(c->base) || !finite3(c->apex) || !isfinite(c->rb) || !isfinite(c->ra) ||
+            c->mat >= s->nmats)
+            return bad(L, "invalid cone", NULL);
+    }
+    if (rtpi_scene_nprims(s) >= (size_t)RTPI_NONE)
+        return bad(L, "too many primitives", NULL);
+    return RTP_OK;
+}
+
+/* Validates one sample's preorder tree rooted at idx; returns the index
+   just past its subtree, or 0 on error (a subtree is never empty). */
+static size_t check_subtree(const rtpi_cnode *nodes, size_t idx, size_t n, int depth,
+                            int max_depth)
+{
+    uint32_t link;
+    size_t end;
+    if (idx >= n || depth > max_depth)
+        return 0;
+    link = nodes[idx].link;
+    if ((link & 0xc0u) || ((link & RTPI_L_REFL) && (link & RTPI_L_REFL_MISS)) ||
+        ((link & RTPI_L_REFR) && (link & RTPI_L_REFR_MISS)) ||
+        (!(link & RTPI_L_REFR) && (link >> RTPI_L_SHIFT)))
+        return 0;
+    end = idx + 1;
+    if (link & RTPI_L_REFL) {
+        end = check_subtree(nodes, idx + 1, n, depth + 1, max_depth);
+        if (!end)
+            return 0;
+    }
+    if (link & RTPI_L_REFR) {
+        if ((size_t)(link >> RTPI_L_SHIFT) != end - idx)
+            return 0;
+        end = check_subtree(nodes, end, n, depth + 1, max_depth);
+    }
+    return end;
+}
+
+static rtp_status read_tree(loader *L, rd *r)
+{
+    rtp_tree *t = L->t;
+    rtp_scene *s = L->s;
+    uint64_t nsamples = get_u64(r), nnodes = get_u64(r), k, at = 0;
+    uint32_t words = get_u32(r);
+    unsigned layout = get_u8(r);
+    size_t i, nprims = rtpi_scene_nprims(s), node_bytes;
+    uint32_t vis_mask;
+    if (r->bad)
+        return bad(L, "section too short", NULL);
+    if (nsamples != (uint64_t)t->nx * (uint64_t)t->ny)
+        return bad(L, "sample count does not match the image", NULL);
+    if (words != (s->nlights > 32 ? (s->nlights + 31) / 32 : 0) || (layout & ~3u) ||
+        ((layout & NODE_VIS) != 0) != (s->nlights > 0 && words == 0))
+        return bad(L, "node layout does not match the scene", NULL);
+    node_bytes = 16 + ((layout & NODE_VIS) ? 4 : 0) + ((layout & NODE_LINK32) ? 4 : 1);
+    if (!count_ok(r, nnodes, node_bytes) || nnodes > (uint64_t)((size_t)-1 / sizeof(rtpi_cnode)))
+        return bad(L, "invalid node count", NULL);
+    t->nnodes = (size_t)nnodes;
+    t->vis_words = words;
+    t->start = (uint64_t *)rtpi_malloc_array(L->a, (size_t)nsamples + 1, sizeof *t->start);
+    t->nodes = (rtpi_cnode *)rtpi_malloc_array(L->a, t->nnodes ? t->nnodes : 1, sizeof *t->nodes);
+    if (!t->start || !t->nodes)
+        return nomem(L);
+    for (k = 0; k < nsamples; k++) {
+        uint64_t c = get_varint(r);
+        if (r->bad || c > nnodes - at)
+            return bad(L, "sample node counts do not add up", NULL);
+        t->start[k] = at;
+        at += c;
+    }
+    t->start[nsamples] = at;
+    if (at != nnodes)
+        return bad(L, "sample node counts do not add up", NULL);
+    vis_mask = s->nlights >= 32 ? 0xffffffffu : ((1u << s->nlights) - 1u);
+    for (i = 0; i < t->nnodes; i++) {
+        rtpi_cnode *nd = &t->nodes[i];
+        nd->p[0] = get_f32(r);
+        nd->p[1] = get_f32(r);
+        nd->p[2] = get_f32(r);
+        nd->prim = get_u32(r);
+        nd->vis = (layout & NODE_VIS) ? get_u32(r) : 0;
+        nd->link = (layout & NODE_LINK32) ? get_u32(r) : get_u8(r);
+        if (r->bad)
+            return bad(L, "section too short", NULL);
+        if (!finite3(nd->p) || nd->prim >= nprims || (nd->vis & ~vis_mask))
+            return bad(L, "invalid node", NULL);
+    }
+    if (words) {
+        if (!count_ok(r, (uint64_t)t->nnodes * words, 4))
+            return bad(L, "section too short", NULL);
+        t->vis_ext = (uint32_t *)rtpi_malloc_array(L->a, t->nnodes * words, sizeof *t->vis_ext);
+        if (!t->vis_ext)
+            return nomem(L);
+        for (i = 0; i < t->nnodes * words; i++)
+            t->vis_ext[i] = get_u32(r);
+        if (s->nlights % 32)
+            for (i = 0; i < t->nnodes; i++)
+                if (t->vis_ext[i * words + words - 1] >> (s->nlights % 32))
+                    return bad(L, "invalid light bits", NULL);
+    }
+    /* Each sample's nodes must form exactly one preorder tree within the
+       recorded depth, so evaluation can trust every link. */
+    for (k = 0; k < nsamples; k++) {
+        size_t a = (size_t)t->start[k], n = (size_t)(t->start[k + 1] - t->start[k]);
+        if (n && check_subtree(t->nodes + a, 0, n, 1, t->max_depth) != n)
+            return bad(L, "malformed ray tree", NULL);
+    }
+    return RTP_OK;
+}
+
+rtp_status rtp_tree_read_memory(const void *data, size_t size, const char *name,
+                                const rtp_allocator *alloc, rtp_tree **out,
+                                rtp_error *err)
+{
+    rtp_allocator a;
+    loader L;
+    rd r;
+    rtp_tree *t;
+    rtp_status st = RTP_OK;
+    unsigned seen = 0;
+    static const char *const required[] = {"HEAD", "SCEN", "MATL", "LITE", "GEOM", "TREE"};
+    size_t i;
+
+    if (!out || (!data && size))
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_read: NULL argument");
+    *out = NULL;
+    if (!name)
+        name = "<memory>";
+    rtpi_allocator_init(&a, alloc);
+    memset(&L, 0, sizeof L);
+    L.name = name;
+    L.err = err;
+    r.p = (const unsigned char *)data;
+    r.n = size;
+    r.at = 0;
+    r.bad = 0;
+    if (size < 8 || memcmp(data, signature, 8) != 0) {
+        if (size >= 8 && memcmp(data, "\x89PNG", 4) == 0)
+            return bad(&L, "not an rtp tree file (it is a PNG image)", NULL);
+        if (size >= 4 && memcmp(data, signature, size < 8 ? size : 8) == 0)
+            return bad(&L, "truncated: the file ends inside its signature", NULL);
+        return bad(&L, "not an rtp tree file (wrong signature)", NULL);
+    }
+    r.at = 8;
+    t = (rtp_tree *)rtpi_calloc_array(&a, 1, sizeof *t);
+    if (!t)
+        return rtpi_error(err, RTP_ERR_NOMEM, name, 0, 0, "out of memory");
+    t->alloc = a;
+    L.t = t;
+    L.a = &t->alloc;
+    if (rtpi_scene_create(&a, &t->scene) != RTP_OK) {
+        rtp_tree_destroy(t);
+        return rtpi_error(err, RTP_ERR_NOMEM, name, 0, 0, "out of memory");
+    }
+    L.s = t->scene;
+    for (;;) {
+        char tag[5];
+        uint64_t len;
+        size_t start = r.at;
+        rd body;
+        int idx = -1;
+        L.section = NULL;
+        if (!need(&r, 12)) {
+            st = bad(&L, "truncated: missing sections or END", NULL);
+            break;
+        }
+        memcpy(tag, r.p + r.at, 4);
+        tag[4] = '\0';
+        r.at += 4;
+        len = get_u64(&r);
+        L.section = tag;
+        if (len > r.n - r.at || r.n - r.at - (size_t)len < 4) {
+            st = bad(&L, "truncated: section longer than the file", NULL);
+            break;
+        }
+        body.p = r.p + r.at;
+        body.n = (size_t)len;
+        body.at = 0;
+        body.bad = 0;
+        r.at += (size_t)len;
+        if (crc32_update(0, r.p + start, r.at - start) != get_u32(&r)) {
+            st = bad(&L, "checksum mismatch: the file is corrupt", NULL);
+            break;
+        }
+        if (strcmp(tag, "END ") == 0)
+            break;
+        for (i = 0; i < sizeof required / sizeof *required; i++)
+            if (strcmp(tag, required[i]) == 0)
+                idx = (int)i;
+        if (idx < 0 && strcmp(tag, "TEXR") == 0)
+            idx = 6;
+        if (idx < 0) {
+            /* lower-case first letter: an extension a reader may skip */
+            if (tag[0] >= 'a' && tag[0] <= 'z')
+                continue;
+            st = bad(&L, "unknown required section (written by a newer rtp?)", NULL);
+            break;
+        }
+        if (seen & (1u << idx)) {
+            st = bad(&L, "repeated section", NULL);
+            break;
+        }
+        /* sections come in order: each needs what the earlier ones hold */
+        if ((idx == 0 && seen) || (idx > 0 && !(seen & 1u)) ||
+            (idx == 4 && !(seen & (1u << 2))) || (idx == 5 && !(seen & (1u << 4))) ||
+            (idx == 5 && !(seen & (1u << 3))) || (idx == 6 && (seen & (1u << 5)))) {
+            st = bad(&L, "section out of order", NULL);
+            break;
+        }
+        seen |= 1u << idx;
+        switch (idx) {
+        case 0: st = read_head(&L, &body); break;
+        case 1: st = read_scen(&L, &body); break;
+        case 2: st = read_matl(&L, &body); break;
+        case 3: st = read_lite(&L, &body); break;
+        case 4: st = read_geom(&L, &body); break;
+        case 5: st = read_tree(&L, &body); break;
+        default: st = read_texr(&L, &body); break;
+        }
+        if (st == RTP_OK && body.at != body.n)
+            st = bad(&L, "unexpected bytes at the end", NULL);
+        if (st != RTP_OK)
+            break;
+    }
+    L.section = NULL;
+    if (st == RTP_OK && (seen & 0x3fu) != 0x3fu)
+        st = bad(&L, "a required section is missing", NULL);
+    if (st == RTP_OK) {
+        for (i = 0; i < t->scene->nmats; i++) {
+            const rtpi_material *m = &t->scene->mats[i];
+            if ((m->tex == RTPI_TEX_IMAGE && m->tex_image >= t->scene->ntexs) ||
+                (m->bump == RTPI_BUMP_IMAGE && m->bump_image >= t->scene->ntexs)) {
+                st = bad(&L, "a material names a missing texture", NULL);
+                break;
+            }
+        }
+    }
+    if (st != RTP_OK) {
+        rtp_tree_destroy(t);
+        return st;
+    }
+    *out = t;
+    return RTP_OK;
+}
+
+rtp_status rtp_tree_read(const char *path, const rtp_allocator *alloc, rtp_tree **out,
+                         rtp_error *err)
+{
+    rtp_allocator a;
+    char *text = NULL;
+    size_t size = 0;
+    rtp_status st;
+    if (!path || !out)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_read: NULL argument");
+    rtpi_allocator_init(&a, alloc);
+    st = rtpi_read_file(&a, path, &text, &size, err);
+    if (st != RTP_OK)
+        return st;
+    st = rtp_tree_read_memory(text, size, path, &a, out, err);
+    rtpi_free(&a, text);
+    return st;
+}
