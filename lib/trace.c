@@ -412,9 +412,10 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
     double t0, t1, t2;
     rtpi_kd_stats ks;
 
-    if (!s || !out)
+    if (!s || (!out && !tree_out))
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_trace: NULL argument");
-    *out = NULL;
+    if (out)
+        *out = NULL;
     if (tree_out)
         *tree_out = NULL;
     memset(&opt, 0, sizeof opt);
@@ -525,7 +526,7 @@ done:
     }
     rtpi_kd_destroy(kd);
     rtpi_free(&s->alloc, samples);
-    if (st != RTP_OK) {
+    if (st != RTP_OK || !out) {
         rtp_image_destroy(img);
         return st;
     }

@@ -1,0 +1,383 @@
+/* test_tree.c — ray trees: re-evaluation reproduces trace bit for bit,
+ * every class-A edit equals a full trace of the edited scene, edits the
+ * trees cannot evaluate are refused, and the tree file survives
+ * truncation, flipped bits, wrong magic, newer versions and foreign files
+ * with a named error. */
+#include "check.h"
+#include "internal.h"
+
+#include <math.h>
+#include <string.h>
+#include <unistd.h>
+
+static const char *tmpdir(void)
+{
+    const char *t = getenv("TMPDIR");
+    return t && *t ? t : "/tmp";
+}
+
+static rtp_scene *load(const char *path)
+{
+    rtp_scene *s = NULL;
+    rtp_error err;
+    if (rtp_scene_load(path, NULL, &s, &err) != RTP_OK) {
+        char buf[600];
+        fprintf(stderr, "%s\n", rtp_error_format(&err, buf, sizeof buf));
+        return NULL;
+    }
+    return s;
+}
+
+static int same_image(const rtp_image *a, const rtp_image *b)
+{
+    return a && b && a->width == b->width && a->height == b->height &&
+           memcmp(a->pixels, b->pixels, sizeof(float) * 3 * (size_t)a->width * a->height) == 0;
+}
+
+/* Traces with trees, writes and reads the file back, re-evaluates:
+   the image must be identical, bit for bit. */
+static int roundtrip_identical(const char *path, int w, int h, int spd)
+{
+    rtp_scene *s = load(path);
+    rtp_tree *t = NULL, *t2 = NULL;
+    rtp_image *img = NULL, *re = NULL, *re2 = NULL;
+    rtp_trace_options o;
+    rtp_eval_options eo;
+    rtp_tree_info ti;
+    char file[512];
+    int ok = 0;
+    if (!s)
+        return 0;
+    memset(&o, 0, sizeof o);
+    memset(&eo, 0, sizeof eo);
+    o.width = w;
+    o.height = h;
+    o.spd = spd;
+    o.threads = 2;
+    eo.threads = 2;
+    snprintf(file, sizeof file, "%s/rtp-test-%d.rtp", tmpdir(), (int)getpid());
+    if (rtp_record(s, &o, &t, &img, NULL, NULL) == RTP_OK &&
+        rtp_tree_eval(t, &eo, &re, NULL, NULL) == RTP_OK &&
+        rtp_tree_write(t, file, NULL, NULL) == RTP_OK &&
+        rtp_tree_read(file, NULL, &t2, NULL) == RTP_OK &&
+        rtp_tree_eval(t2, NULL, &re2, NULL, NULL) == RTP_OK) {
+        rtp_tree_get_info(t2, &ti);
+        ok = same_image(img, re) && same_image(img, re2) && ti.bytes_per_node <= 24;
+        if (!ok)
+            fprintf(stderr, "%s: re-evaluation differs from trace\n", path);
+    } else {
+        fprintf(stderr, "%s: record/eval/write/read failed\n", path);
+    }
+    remove(file);
+    rtp_image_destroy(img);
+    rtp_image_destroy(re);
+    rtp_image_destroy(re2);
+    rtp_tree_destroy(t);
+    rtp_tree_destroy(t2);
+    rtp_scene_destroy(s);
+    return ok;
+}
+
+static void test_identical_project_scenes(void)
+{
+    static const char *const scenes[] = {"scenes/spheres.nff", "scenes/prims.nff",
+                                         "scenes/checker.nff", "scenes/textured.nff"};
+    size_t i;
+    for (i = 0; i < sizeof scenes / sizeof *scenes; i++)
+        CHECK_MSG(roundtrip_identical(scenes[i], 64, 48, 0), "%s", scenes[i]);
+    CHECK(roundtrip_identical("scenes/spheres.nff", 0, 0, 1)); /* SPD corners */
+}
+
+static void test_identical_teapot(void)
+{
+    FILE *f = fopen("../shared/scenes/meshes/newell-teapot.bpt", "r");
+    if (!f)
+        SKIP("../shared/scenes absent: scenes/teapot.nff needs its patches");
+    fclose(f);
+    CHECK(roundtrip_identical("scenes/teapot.nff", 64, 64, 0));
+}
+
+static void test_identical_small_spd(void)
+{
+    static const char *const names[] = {"balls_s1", "balls_s2", "gears_s1", "mount_s1",
+                                        "mount_s2", "rings_s1", "rings_s2", "teapot_s2",
+                                        "tetra_s1", "tetra_s3", "tree_s1", "tree_s3",
+                                        "lattice_s1", "lattice_s2"};
+    const char *dir = check_shared_scenes();
+    char path[512];
+    size_t i;
+    if (!dir)
+        SKIP("../shared/scenes absent: small SPD scenes not checked");
+    for (i = 0; i < sizeof names / sizeof *names; i++) {
+        snprintf(path, sizeof path, "%s/spd/%s.nff", dir, names[i]);
+        CHECK_MSG(roundtrip_identical(path, 48, 48, 0), "%s", names[i]);
+    }
+    snprintf(path, sizeof path, "%s/spd/mount_s1.nff", dir);
+    CHECK(roundtrip_identical(path, 0, 0, 1));
+}
+
+/* Re-evaluating an edit equals a full trace of the edited scene. */
+static double edit_error(const char *scene, const char *const *kv, int spd)
+{
+    rtp_scene *s = load(scene);
+    rtp_tree *t = NULL;
+    rtp_image *re = NULL, *full = NULL;
+    rtp_trace_options o;
+    rtp_diff_stats d;
+    rtp_error err;
+    double e = HUGE_VAL;
+    int i;
+    if (!s)
+        return e;
+    memset(&o, 0, sizeof o);
+    o.width = 48;
+    o.height = 40;
+    o.spd = spd;
+    if (rtp_record(s, &o, &t, NULL, NULL, &err) != RTP_OK)
+        goto out;
+    for (i = 0; kv[i]; i += 2) {
+        if (rtp_tree_set(t, kv[i], kv[i + 1], &err) != RTP_OK ||
+            rtp_scene_set(s, kv[i], kv[i + 1], &err) != RTP_OK) {
+            char buf[600];
+            fprintf(stderr, "%s=%s: %s\n", kv[i], kv[i + 1], rtp_error_format(&err, buf, sizeof buf));
+            goto out;
+        }
+    }
+    if (rtp_tree_eval(t, NULL, &re, NULL, &err) != RTP_OK ||
+        rtp_trace(s, &o, &full, NULL, &err) != RTP_OK ||
+        rtp_image_diff(re, full, 1e-6, &d, &err) != RTP_OK)
+        goto out;
+    e = d.max_abs;
+out:
+    rtp_image_destroy(re);
+    rtp_image_destroy(full);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+    return e;
+}
+
+static void test_class_a_edits(void)
+{
+    /* scenes/spheres.nff: named materials and lights, mirror and glass */
+    static const char *const edits[][5] = {
+        {"mat.0.color", "0.2,0.9,0.1", NULL},
+        {"mat.1.kd", "0.1", NULL},
+        {"mat.1.ks", "0.05", NULL},
+        {"mat.1.shine", "3", NULL},
+        {"mat.3.kt", "0.3", NULL},
+        {"mat.2.ks", "0.9", NULL},
+        {"light.0.color", "0.3,0.2,1", NULL},
+        {"light.0.color", "4", NULL}, /* intensity */
+        {"light.1.on", "0", NULL},
+        {"ambient", "0.3,0.1,0.1", NULL},
+        {"background", "1,0,1", NULL},
+        {"mat.0.checker", "1", "mat.0.color2", "0,0,1"},
+    };
+    size_t i;
+    for (i = 0; i < sizeof edits / sizeof *edits; i++) {
+        const char *kv[6] = {0};
+        double e;
+        int k;
+        for (k = 0; k < 5 && edits[i][k]; k++)
+            kv[k] = edits[i][k];
+        e = edit_error("scenes/spheres.nff", kv, 0);
+        CHECK_MSG(e <= 1e-6, "%s=%s: max error %g", kv[0], kv[1], e);
+    }
+    {
+        const char *kv[] = {"mat.0.checker_scale", "0.37", "mat.0.color2", "0.1,0.2,0.3", NULL};
+        double e = edit_error("scenes/checker.nff", kv, 0);
+        CHECK_MSG(e <= 1e-6, "checker: %g", e);
+    }
+    {
+        const char *kv[] = {"light.0.color", "0.5,1,0.2", "mat.1.ks", "0.7", NULL};
+        double e = edit_error("scenes/spheres.nff", kv, 1);
+        CHECK_MSG(e <= 1e-6, "spd: %g", e);
+    }
+}
+
+/* What the trees cannot evaluate is refused, and the tree is unchanged. */
+static void test_refused_edits(void)
+{
+    rtp_scene *s = load("scenes/spheres.nff");
+    rtp_tree *t = NULL;
+    rtp_image *a = NULL, *b = NULL;
+    rtp_trace_options o;
+    rtp_error err;
+    size_t i;
+    if (!s) {
+        CHECK(s != NULL);
+        return;
+    }
+    memset(&o, 0, sizeof o);
+    o.width = 32;
+    o.height = 24;
+    CHECK(rtp_record(s, &o, &t, &a, NULL, NULL) == RTP_OK);
+    if (t) {
+        /* material 0 (floor) has ks 0, kt 0; material 3 is glass */
+        CHECK(s->mats[0].ks == 0.0f && s->mats[3].kt > 0.0f);
+        CHECK(rtp_tree_set(t, "light.0.pos", "1,2,3", &err) == RTP_ERR_UNSUPPORTED);
+        CHECK(strstr(err.message, "trace again") != NULL);
+        CHECK(rtp_tree_set(t, "mat.0.ks", "0.5", &err) == RTP_ERR_UNSUPPORTED);
+        CHECK(rtp_tree_set(t, "mat.0.kt", "0.5", &err) == RTP_ERR_UNSUPPORTED);
+        CHECK(rtp_tree_set(t, "mat.3.ior", "1.9", &err) == RTP_ERR_UNSUPPORTED);
+        CHECK(rtp_tree_set(t, "mat.99.kd", "1", &err) == RTP_ERR_KEY);
+        CHECK(rtp_tree_set(t, "mat.0.kd", "abc", &err) == RTP_ERR_PARSE);
+        CHECK(rtp_tree_eval(t, NULL, &b, NULL, NULL) == RTP_OK);
+        CHECK(same_image(a, b));
+        for (i = 0; i < t->scene->nlights; i++)
+            CHECK(t->scene->lights[i].pos[0] == s->lights[i].pos[0]);
+    }
+    rtp_image_destroy(a);
+    rtp_image_destroy(b);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+}
+
+/* ------------------------------------------------------------ bad files */
+
+static uint32_t crc32_ref(const unsigned char *p, size_t n)
+{
+    uint32_t c = 0xffffffffu;
+    size_t i;
+    int k;
+    for (i = 0; i < n; i++) {
+        c ^= p[i];
+        for (k = 0; k < 8; k++)
+            c = (c & 1u) ? 0xedb88320u ^ (c >> 1) : c >> 1;
+    }
+    return ~c;
+}
+
+static unsigned char *small_tree_file(size_t *size)
+{
+    const char *text =
+        "v from 0 -4 1 at 0 0 0.5 up 0 0 1 angle 40 hither 0.1 resolution 6 5\n"
+        "l 2 -3 4\nl -2 -2 3 0.5 0.5 1\n"
+        "f 0.8 0.8 0.8 0.7 0.3 20 0 1\nname floor\n"
+        "p 4 -3 -3 0 3 -3 0 3 3 0 -3 3 0\n"
+        "f 1 0.3 0.3 0.5 0.4 50 0.5 1.4\ns 0 0 0.7 0.6\n"
+        "f 0.3 1 0.3 0.6 0.2 10 0 1\nc 1.2 0.5 0 0.3 1.2 0.5 1 0.1\n";
+    rtp_scene *s = NULL;
+    rtp_tree *t = NULL;
+    rtp_trace_options o;
+    char file[512];
+    unsigned char *data = NULL;
+    size_t n = 0;
+    FILE *f;
+    memset(&o, 0, sizeof o);
+    snprintf(file, sizeof file, "%s/rtp-small-%d.rtp", tmpdir(), (int)getpid());
+    if (rtp_scene_load_memory(text, strlen(text), "small.nff", "nff", NULL, &s, NULL) ||
+        rtp_record(s, &o, &t, NULL, NULL, NULL) || rtp_tree_write(t, file, NULL, NULL))
+        goto out;
+    f = fopen(file, "rb");
+    if (!f)
+        goto out;
+    data = (unsigned char *)malloc(1 << 20);
+    if (data)
+        n = fread(data, 1, 1 << 20, f);
+    fclose(f);
+out:
+    remove(file);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+    *size = n;
+    return data;
+}
+
+static void test_truncated_every_length(void)
+{
+    size_t n, len, failures = 0;
+    unsigned char *data = small_tree_file(&n);
+    rtp_tree *t = NULL;
+    rtp_error err;
+    CHECK(data && n > 100);
+    if (!data)
+        return;
+    CHECK(rtp_tree_read_memory(data, n, "small.rtp", NULL, &t, &err) == RTP_OK);
+    rtp_tree_destroy(t);
+    for (len = 0; len < n; len++) {
+        t = NULL;
+        memset(&err, 0, sizeof err);
+        if (rtp_tree_read_memory(data, len, "small.rtp", NULL, &t, &err) != RTP_ERR_FORMAT ||
+            t != NULL || strcmp(err.file, "small.rtp") != 0 || !err.message[0])
+            failures++;
+        rtp_tree_destroy(t);
+    }
+    CHECK_MSG(failures == 0, "%zu truncations not refused cleanly", failures);
+    free(data);
+}
+
+static void test_flipped_bits(void)
+{
+    size_t n, i, failures = 0;
+    unsigned char *data = small_tree_file(&n);
+    rtp_tree *t;
+    rtp_error err;
+    int b;
+    if (!data) {
+        CHECK(data != NULL);
+        return;
+    }
+    for (i = 0; i < n; i++) {
+        for (b = 0; b < 8; b++) {
+            data[i] ^= (unsigned char)(1u << b);
+            t = NULL;
+            if (rtp_tree_read_memory(data, n, "flip.rtp", NULL, &t, &err) != RTP_ERR_FORMAT)
+                failures++;
+            rtp_tree_destroy(t);
+            data[i] ^= (unsigned char)(1u << b);
+        }
+    }
+    CHECK_MSG(failures == 0, "%zu bit flips not detected", failures);
+    free(data);
+}
+
+/* Rewrites the HEAD section's major version and fixes its checksum, so
+   only the version is wrong. */
+static void test_newer_version_and_foreign(void)
+{
+    size_t n, len;
+    unsigned char *data = small_tree_file(&n);
+    rtp_tree *t = NULL;
+    rtp_error err;
+    uint32_t crc;
+    static const unsigned char png[] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n', 0, 0, 0, 13};
+    static const char text[] = "v from 0 0 5 at 0 0 0 up 0 1 0 angle 40\n";
+    if (!data) {
+        CHECK(data != NULL);
+        return;
+    }
+    CHECK(memcmp(data + 8, "HEAD", 4) == 0);
+    len = (size_t)data[12] | (size_t)data[13] << 8;
+    data[20] = 2; /* major version 2 */
+    crc = crc32_ref(data + 8, 12 + len);
+    data[20 + len] = (unsigned char)crc;
+    data[21 + len] = (unsigned char)(crc >> 8);
+    data[22 + len] = (unsigned char)(crc >> 16);
+    data[23 + len] = (unsigned char)(crc >> 24);
+    CHECK(rtp_tree_read_memory(data, n, "new.rtp", NULL, &t, &err) == RTP_ERR_FORMAT);
+    CHECK_MSG(strstr(err.message, "newer") != NULL, "%s", err.message);
+    data[1] = 'X';
+    CHECK(rtp_tree_read_memory(data, n, "magic.rtp", NULL, &t, &err) == RTP_ERR_FORMAT);
+    CHECK(strstr(err.message, "signature") != NULL);
+    CHECK(rtp_tree_read_memory(png, sizeof png, "img.png", NULL, &t, &err) == RTP_ERR_FORMAT);
+    CHECK(strstr(err.message, "PNG") != NULL);
+    CHECK(rtp_tree_read_memory(text, sizeof text - 1, "scene.nff", NULL, &t, &err) == RTP_ERR_FORMAT);
+    CHECK(rtp_tree_read_memory("", 0, "empty", NULL, &t, &err) == RTP_ERR_FORMAT);
+    CHECK(rtp_tree_read("/nonexistent/x.rtp", NULL, &t, &err) == RTP_ERR_IO);
+    CHECK(t == NULL);
+    free(data);
+}
+
+int main(void)
+{
+    RUN(test_identical_project_scenes);
+    RUN(test_identical_teapot);
+    RUN(test_identical_small_spd);
+    RUN(test_class_a_edits);
+    RUN(test_refused_edits);
+    RUN(test_truncated_every_length);
+    RUN(test_flipped_bits);
+    RUN(test_newer_version_and_foreign);
+    return check_report();
+}
