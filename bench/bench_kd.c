@@ -257,8 +257,7 @@ int main(void)
         fprintf(stderr, "bench_kd: out of memory\n");
         return 1;
     }
-    if (getenv("BENCH_NOBIG")) { rtp_scene_destroy(big); return 0; }
-    kd = timed_build(big, "sphere-1M", 2);
+    kd = timed_build(big, "sphere-1M", 1);
     rtpi_kd_destroy(kd);
     rtp_scene_destroy(big);
     return 0;

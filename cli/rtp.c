@@ -12,6 +12,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/resource.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -128,6 +129,15 @@ static FILE *stats_open(const char *path)
     if (!f)
         msg("%s: cannot write stats: %s", path, strerror(errno));
     return f;
+}
+
+/* Peak resident memory of this process in KiB, or -1. */
+static long peak_rss_kb(void)
+{
+    struct rusage ru;
+    if (getrusage(RUSAGE_SELF, &ru) != 0)
+        return -1;
+    return (long)ru.ru_maxrss; /* Linux reports KiB */
 }
 
 static int stats_close(FILE *f, const char *path)
@@ -466,7 +476,7 @@ static int cmd_trace(int argc, char **argv)
                        "\"bytes_per_node\": %u, \"tree_bytes\": %llu, \"file_bytes\": %llu",
                     (unsigned long long)st.width * (unsigned long long)st.height,
                     ti.samples, ti.nodes, ti.bytes_per_node, ti.tree_bytes, file_bytes);
-        fputs("}\n", f);
+        fprintf(f, ", \"peak_rss_kb\": %ld}\n", peak_rss_kb());
         if (stats_close(f, stats_path))
             goto out;
     }
@@ -762,7 +772,7 @@ static int reeval_one(rtp_tree *tree, const rtp_eval_options *eo, const char *im
             fputs(", ", stats);
             json_number(stats, "max_abs", d.max_abs);
         }
-        fputs("}\n", stats);
+        fprintf(stats, ", \"peak_rss_kb\": %ld}\n", peak_rss_kb());
     }
     rc = 0;
 out:

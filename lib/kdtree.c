@@ -31,19 +31,23 @@
 #include <stdlib.h>
 
 /* SAH costs (Wald & Havran): one traversal step, one intersection test,
-   and the factor that makes cutting off empty space attractive. */
-#ifndef KD_COST_TRAV
+   and the factor that makes cutting off empty space attractive.  The bonus
+   is only given when the empty child is at least KD_EMPTY_MIN of the
+   node's extent: with these costs it would otherwise pay to shave off
+   slivers of empty space around every clipped triangle down to the depth
+   limit (measured on the bunny: 60% empty leaves, 5 references a
+   triangle), which makes the tree bigger, not faster. */
 #define KD_COST_TRAV 1.0
-#endif
-#ifndef KD_COST_ISECT
 #define KD_COST_ISECT 1.5
-#endif
-#ifndef KD_EMPTY_MIN
-#define KD_EMPTY_MIN 0.0
-#endif
-#ifndef KD_EMPTY_BONUS
 #define KD_EMPTY_BONUS 0.8
-#endif
+#define KD_EMPTY_MIN 0.1
+/* Nodes with fewer primitives are leaves whatever the SAH says: SAH does
+   not see that a deeper tree misses the cache more often, and on the bunny
+   stopping at 4 was faster for every kind of ray and builds faster. */
+#define KD_MIN_SPLIT 4
+/* Depth limit 8 + 1.3 log2(N) (Wald & Havran). */
+#define KD_DEPTH_A 8.0
+#define KD_DEPTH_B 1.3
 /* Hard cap on the depth; the traversal stack holds one entry per level. */
 #define KD_DEPTH_CAP 60
 /* The largest primitive count: ids share a word with a 2-bit event type,
@@ -412,9 +416,6 @@ static int build_node(kd_build *b, const float *lo, const float *hi,
     ev[0] = b->ev + off;
     ev[1] = ev[0] + n[0];
     ev[2] = ev[1] + n[1];
-#ifndef KD_MIN_SPLIT
-#define KD_MIN_SPLIT 1
-#endif
     cost = depth >= b->max_depth || nprim < KD_MIN_SPLIT
                ? HUGE_VAL
                : find_split(ev, n, nprim, lo, hi, &axis, &pos, &planar_left);
@@ -698,10 +699,7 @@ rtp_status rtpi_kd_build(const rtp_scene *s, const rtp_allocator *alloc,
     }
 
     lg = nvalid > 1 ? log((double)nvalid) / log(2.0) : 0.0;
-#ifndef KD_DEPTH_B
-#define KD_DEPTH_B 1.3
-#endif
-    b->max_depth = (int)(8.0 + KD_DEPTH_B * lg);
+    b->max_depth = (int)(KD_DEPTH_A + KD_DEPTH_B * lg);
     if (b->max_depth > KD_DEPTH_CAP)
         b->max_depth = KD_DEPTH_CAP;
     if (build_node(b, lo, hi, 0, n, nvalid, 0))

@@ -3,6 +3,7 @@
  * then evaluates that tree with rtpi_shade_tree: the image trace produces
  * is the evaluation of the trees it recorded. */
 #include "internal.h"
+#include "shadow.h"
 
 #include <stdlib.h>
 #include <time.h>
@@ -157,7 +158,13 @@ static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
         w->n.capped++;
         return RTPI_CHILD_NONE;
     }
-    rtpi_surface_at(s, ray, &hit, &sf);
+    {
+        /* Everything below starts from the float position the tree keeps,
+           with the surface derived from it exactly as shading derives it,
+           so a re-evaluation that casts rays again casts these very rays. */
+        rtpi_v3 pe = v3_madd(ray->o, ray->d, hit.t);
+        rtpi_surface_from_point(s, hit.prim, v3((float)pe.x, (float)pe.y, (float)pe.z), &sf);
+    }
     m = &s->mats[sf.mat];
     ng = sf.ng;
     ns = sf.ns;
@@ -175,20 +182,10 @@ static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
         rtpi_v3 lp = v3(L->pos[0], L->pos[1], L->pos[2]);
         rtpi_v3 l = v3_sub(lp, sf.p);
         rtpi_ray sr;
-        double dist;
         if (v3_dot(ns, l) <= 0.0)
             continue;
-        sr.o = rtpi_offset_origin(sf.p, ng, v3_dot(ng, l) >= 0.0 ? 1.0 : -1.0);
-        l = v3_sub(lp, sr.o);
-        dist = v3_len(l);
-        if (!(dist > 0.0))
-            continue;
-        sr.d = v3_mul(l, 1.0 / dist);
-        sr.tmin = 0.0;
-        /* Stop just short of the light: a surface passing through the
-           light itself must not shadow it (1e-9 relative is far above
-           double rounding and far below any feature size). */
-        sr.tmax = dist * (1.0 - 1e-9);
+        sr = rtpi_shadow_ray(
+            rtpi_offset_origin(sf.p, ng, v3_dot(ng, l) >= 0.0 ? 1.0 : -1.0), lp);
         w->n.shadow_rays++;
         if (rtpi_kd_occluded(sh->kd, &sr))
             continue;

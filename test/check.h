@@ -66,7 +66,7 @@ static int check_report(void)
 }
 
 /* The folder ../shared/scenes when present, else NULL (tests skip). */
-CHECK_UNUSED static const char *check_shared_scenes(void)
+CHECK_UNUSED static inline const char *check_shared_scenes(void)
 {
     const char *env = getenv("RTP_SHARED_SCENES");
     static const char *cands[] = {"../shared/scenes", "../../shared/scenes"};

@@ -876,9 +876,10 @@ static void test_stats(void)
                (unsigned long)st.prim_refs, st.depth);
         CHECK(st.leaves * 2 == st.nodes + 1);
         CHECK(st.prim_refs >= s->ntris);
-        /* SAH splits a closed surface finely: few references per leaf. */
-        CHECK(st.prim_refs < 4 * s->ntris);
-        CHECK(st.depth > 8 && st.depth < 60);
+        /* Clipped splits keep duplication bounded on a closed surface. */
+        CHECK(st.prim_refs < 8 * s->ntris);
+        CHECK(st.empty_leaves < st.leaves);
+        CHECK(st.depth > 8 && st.depth <= 8 + 1.3 * log((double)s->ntris) / log(2.0));
     }
     rtpi_kd_destroy(kd);
     rtp_scene_destroy(s);

@@ -1,0 +1,69 @@
+/*
+ * shadow.h — which recorded hits see a light that moved or was added
+ * (the paper's section 4).  One interface, four ways to answer:
+ *
+ *   RTPI_SHADOW_EXACT     shadow rays through the kd-tree: the reference,
+ *                         the very rays trace casts
+ *   RTPI_SHADOW_LIGHTBUF  light buffer (Haines & Greenberg): a direction
+ *                         cube around the light whose cells list the
+ *                         primitives projecting onto them, sorted by
+ *                         distance; the shadow ray is tested only against
+ *                         its cell's list, so the answer equals EXACT
+ *   RTPI_SHADOW_ITEMBUF   item buffer: each cube face rendered by a
+ *                         software scanline z-buffer, one primitive per
+ *                         cell; fast, approximate at shadow edges
+ *   RTPI_SHADOW_OSMESA    the same item buffer drawn by OpenGL (OSMesa);
+ *                         only in builds with OSMESA=1
+ *
+ * A built rtpi_shadow is immutable: queries may run on many threads.
+ */
+#ifndef RTP_SHADOW_H
+#define RTP_SHADOW_H
+
+#include "internal.h"
+
+typedef enum rtpi_shadow_mode {
+    RTPI_SHADOW_EXACT = 0,
+    RTPI_SHADOW_LIGHTBUF = 1,
+    RTPI_SHADOW_ITEMBUF = 2,
+    RTPI_SHADOW_OSMESA = 3
+} rtpi_shadow_mode;
+
+typedef struct rtpi_shadow rtpi_shadow;
+
+/* Prepares visibility queries for a point light at `light` in scene s.
+   kd is the scene's kd-tree (EXACT uses it; others may).  res: cells per
+   cube face edge (0: a default, 1024).  RTP_ERR_UNSUPPORTED for OSMESA in
+   builds without it. */
+rtp_status rtpi_shadow_create(const rtp_scene *s, const rtpi_kdtree *kd,
+                              rtpi_v3 light, rtpi_shadow_mode mode, int res,
+                              const rtp_allocator *a, rtpi_shadow **out,
+                              rtp_error *err);
+
+/* Does the recorded hit at p (a float position, as the tree keeps it) on
+   primitive prim, whose shadow ray trace would start at o (p moved off the
+   surface by rtpi_offset_origin), see the light?  The caller has already
+   checked that the surface faces the light. */
+int rtpi_shadow_visible(const rtpi_shadow *sh, rtpi_v3 p, rtpi_v3 o,
+                        uint32_t prim);
+
+void rtpi_shadow_destroy(rtpi_shadow *sh);
+
+/* The shadow ray trace casts from o to a light at lp: the one definition
+   EXACT, LIGHTBUF and trace share. */
+static inline rtpi_ray rtpi_shadow_ray(rtpi_v3 o, rtpi_v3 lp)
+{
+    rtpi_ray r;
+    rtpi_v3 l = v3_sub(lp, o);
+    double dist = v3_len(l);
+    r.o = o;
+    r.d = dist > 0.0 ? v3_mul(l, 1.0 / dist) : v3(0.0, 0.0, 1.0);
+    r.tmin = 0.0;
+    /* Stop just short of the light: a surface passing through the light
+       itself must not shadow it (1e-9 relative is far above double
+       rounding and far below any feature size). */
+    r.tmax = dist * (1.0 - 1e-9);
+    return r;
+}
+
+#endif
