@@ -667,13 +667,20 @@ static const char reeval_help[] =
     "                       pairs; edits persist), and write one image per line:\n"
     "                       -i takes a pattern with %d (or %04d), or '-' for a\n"
     "                       stream of PFM images on stdout\n"
+    "  --shadows MODE       shadows of moved or added lights: exact (shadow rays,\n"
+    "                       default), lightbuf[:RES] (light buffer, exact),\n"
+    "                       itembuf[:RES] (item buffer, approximate at shadow\n"
+    "                       edges), osmesa[:RES] (item buffer by OSMesa); RES:\n"
+    "                       direction-cube cells per face edge (default 1024)\n"
+    "  --add-light X,Y,Z    add a white light (repeatable); it is light N, after\n"
+    "                       the scene's lights, for --set light.N.*\n"
     "  --reference          also trace the edited scene in full and report both\n"
     "                       times and the error of the re-evaluation\n"
     "  -j, --threads N      threads (default 1)\n"
     "  --stats FILE         write statistics as one JSON object ('-' = stdout)\n"
     "  -q, --quiet / -v, --verbose / -h, --help\n"
-    "Edits the trees cannot evaluate exactly (a moved light, a new ior, ks or kt\n"
-    "raised from 0) fail with a message naming the remedy.\n";
+    "Edits the trees cannot evaluate exactly (a new ior, ks or kt raised from 0)\n"
+    "fail with a message naming the remedy.\n";
 
 /* Expands a pattern with one %d or %0Nd; returns 0 or -1. */
 static int expand_pattern(const char *pat, int n, char *out, size_t size)
@@ -755,9 +762,11 @@ static int reeval_one(rtp_tree *tree, const rtp_eval_options *eo, const char *im
         rtp_tree_get_info(tree, &ti);
         fprintf(stats,
                 "{\"command\": \"reeval\", \"seconds\": %.6f, \"load_seconds\": %.6f, "
+                "\"shadow_seconds\": %.6f, \"moved_lights\": %d, \"shadow_queries\": %llu, "
                 "\"pixels\": %llu, \"samples\": %llu, \"nodes\": %llu, \"bytes_per_node\": %u, "
                 "\"tree_bytes\": %llu",
-                es.seconds, load_seconds, (unsigned long long)img->width * img->height,
+                es.seconds, load_seconds, es.shadow_seconds, es.moved_lights,
+                es.shadow_queries, (unsigned long long)img->width * img->height,
                 ti.samples, ti.nodes, ti.bytes_per_node, ti.tree_bytes);
         if (fb >= 0)
             fprintf(stats, ", \"file_bytes\": %lld", fb);
@@ -786,8 +795,8 @@ static int cmd_reeval(int argc, char **argv)
     const char *tree_path = NULL, *image_path = NULL, *stats_path = NULL;
     const char *params = NULL;
     char *default_image = NULL;
-    const char **sets;
-    int i, nsets = 0, rc = 1, stream = 0, reference = 0, threads = 1;
+    const char **sets, **add_lights;
+    int i, nsets = 0, nadd = 0, rc = 1, stream = 0, reference = 0, threads = 1;
     rtp_tree *tree = NULL;
     rtp_error err;
     rtp_eval_options eo;
@@ -798,7 +807,10 @@ static int cmd_reeval(int argc, char **argv)
     memset(&err, 0, sizeof err);
     memset(&eo, 0, sizeof eo);
     sets = (const char **)calloc((size_t)argc + 1, sizeof *sets);
-    if (!sets) {
+    add_lights = (const char **)calloc((size_t)argc + 1, sizeof *add_lights);
+    if (!sets || !add_lights) {
+        free(sets);
+        free(add_lights);
         msg("out of memory");
         return 1;
     }
@@ -827,13 +839,26 @@ static int cmd_reeval(int argc, char **argv)
             if (!(params = opt_value(argc, argv, &i, "--params")))
                 goto usage;
         } else if (is_opt(a, "--shadows")) {
+            static const char *const modes[] = {"exact", "lightbuf", "itembuf", "osmesa"};
+            const char *colon;
+            size_t n, m;
             if (!(v = opt_value(argc, argv, &i, "--shadows")))
                 goto usage;
-            if (strcmp(v, "exact") != 0) {
-                msg("--shadows %s: direction cubes (lightbuf, itembuf, osmesa) are not in "
-                    "this version; lights cannot move yet", v);
+            colon = strchr(v, ':');
+            n = colon ? (size_t)(colon - v) : strlen(v);
+            for (m = 0; m < 4; m++)
+                if (strlen(modes[m]) == n && strncmp(v, modes[m], n) == 0)
+                    break;
+            if (m == 4 || (colon && (m < 1 || parse_int(colon + 1, 1, 16384, &eo.shadow_res)))) {
+                msg("--shadows %s: expected exact, lightbuf[:RES], itembuf[:RES] or osmesa[:RES]",
+                    v);
                 goto usage;
             }
+            eo.shadows = (rtp_shadow_mode)m;
+        } else if (is_opt(a, "--add-light")) {
+            if (!(v = opt_value(argc, argv, &i, "--add-light")))
+                goto usage;
+            add_lights[nadd++] = v;
         } else if (strncmp(a, "-j", 2) == 0 || is_opt(a, "--threads")) {
             if (!(v = opt_value(argc, argv, &i, a[1] == 'j' ? "-j" : "--threads")) ||
                 parse_int(v, 1, 256, &threads)) {
@@ -894,6 +919,26 @@ static int cmd_reeval(int argc, char **argv)
         goto out;
     }
     t_load = now_seconds() - t0;
+    for (i = 0; i < nadd; i++) {
+        double pos[3];
+        char *end;
+        const char *p = add_lights[i];
+        int k;
+        for (k = 0; k < 3; k++) {
+            pos[k] = strtod(p, &end);
+            if (end == p || (k < 2 && *end != ',') || (k == 2 && *end != '\0'))
+                break;
+            p = end + 1;
+        }
+        if (k < 3) {
+            msg("--add-light %s: expected X,Y,Z", add_lights[i]);
+            goto out;
+        }
+        if (rtp_tree_add_light(tree, pos, &err) != RTP_OK) {
+            fail_err(&err);
+            goto out;
+        }
+    }
     if (params && apply_params_file(set_tree, tree, params))
         goto out;
     for (i = 0; i < nsets; i++)
@@ -937,11 +982,13 @@ out:
     rtp_tree_destroy(tree);
     free(default_image);
     free(sets);
+    free(add_lights);
     return rc;
 usage:
     fputs(reeval_help, stderr);
     free(default_image);
     free(sets);
+    free(add_lights);
     return EXIT_USAGE;
 }
 

@@ -196,8 +196,8 @@ rtp_status rtp_trace(const rtp_scene *scene, const rtp_trace_options *opt,
 
 /* The ray trees of a traced image together with a copy of the scene they
  * were traced in: enough to re-evaluate the image for new parameters
- * without tracing.  A tree that is not being edited may be evaluated from
- * several threads at once. */
+ * without tracing.  A tree keeps caches for the next evaluation: use one
+ * tree from one thread at a time. */
 typedef struct rtp_tree rtp_tree;
 
 /** Traces like rtp_trace and also keeps every sample's ray tree.  The image
@@ -209,29 +209,54 @@ rtp_status rtp_record(const rtp_scene *scene, const rtp_trace_options *opt,
 
 void rtp_tree_destroy(rtp_tree *tree);
 
-/** Edits a parameter of the tree's scene (keys as rtp_scene_set).  Edits
- *  the recorded trees cannot evaluate exactly — a moved light, a new ior,
- *  ks or kt raised where no subtree was recorded — fail with
- *  RTP_ERR_UNSUPPORTED and a message naming the remedy; the tree is then
- *  unchanged. */
+/** Edits a parameter of the tree's scene (keys as rtp_scene_set).  A moved
+ *  light is re-evaluated with new shadows (see rtp_eval_options.shadows).
+ *  Edits the recorded trees cannot evaluate exactly — a new ior, ks or kt
+ *  raised where no subtree was recorded — fail with RTP_ERR_UNSUPPORTED
+ *  and a message naming the remedy; the tree is then unchanged. */
 rtp_status rtp_tree_set(rtp_tree *tree, const char *key, const char *value,
                         rtp_error *err);
 
+/* How a re-evaluation decides which hits see a light that moved. */
+typedef enum rtp_shadow_mode {
+    RTP_SHADOWS_EXACT = 0,    /* shadow rays through the kd-tree: exact */
+    RTP_SHADOWS_LIGHTBUF = 1, /* light buffer: direction cube with sorted
+                                 candidate lists per cell: exact, faster */
+    RTP_SHADOWS_ITEMBUF = 2,  /* item buffer from a software z-buffer:
+                                 fastest, approximate at shadow edges */
+    RTP_SHADOWS_OSMESA = 3    /* the item buffer drawn by OSMesa (builds
+                                 with OSMESA=1) */
+} rtp_shadow_mode;
+
 typedef struct rtp_eval_options {
-    int threads; /* 0 or 1: the calling thread only */
+    int threads;            /* 0 or 1: the calling thread only */
+    rtp_shadow_mode shadows;
+    int shadow_res;         /* direction-cube cells per face edge; 0: 1024 */
     void (*progress)(void *user, double done);
     void *progress_user;
 } rtp_eval_options;
 
 typedef struct rtp_eval_stats {
-    double seconds;
+    double seconds;          /* the whole evaluation */
+    double shadow_seconds;   /* of which: visibility of moved lights */
     unsigned long long samples, nodes;
+    unsigned long long shadow_queries; /* node-light pairs decided anew */
+    int moved_lights;        /* lights whose visibility was recomputed */
 } rtp_eval_stats;
 
-/** Evaluates the trees with the current parameters into a new image. */
-rtp_status rtp_tree_eval(const rtp_tree *tree, const rtp_eval_options *opt,
+/** Evaluates the trees with the current parameters into a new image.  Lights
+ *  that moved since the trace get their shadows decided anew (opt->shadows);
+ *  the tree keeps what it computes for the next evaluation, so one tree must
+ *  not be evaluated from two threads at once (opt->threads parallelises one
+ *  evaluation). */
+rtp_status rtp_tree_eval(rtp_tree *tree, const rtp_eval_options *opt,
                          rtp_image **out, rtp_eval_stats *stats,
                          rtp_error *err);
+
+/** Adds a light (white, on) at the given position; it gets the next index.
+ *  Its shadows are decided at evaluation like those of a moved light. */
+rtp_status rtp_tree_add_light(rtp_tree *tree, const double pos[3],
+                              rtp_error *err);
 
 /** Full-traces the tree's scene as it now is (with every edit), with the
  *  options the tree was traced with: the exact reference a re-evaluation

@@ -352,6 +352,16 @@ struct rtp_tree {
     uint64_t *start;       /* nx*ny + 1 */
     uint32_t *vis_ext;     /* nnodes * vis_words, when > 32 lights */
     size_t vis_words;
+
+    /* Caches for evaluation (rebuilt as edits need them). */
+    struct rtpi_kdtree *kd;   /* of scene, for shadows of moved lights */
+    uint32_t *cur_vis;     /* nnodes * cur_words: visibility now, when a
+                              light moved or was added; else NULL */
+    size_t cur_words;
+    double *cur_pos;       /* 3 per light: position cur_vis holds bits for
+                              (NaN: not computed) */
+    int cur_mode, cur_res; /* shadow mode and resolution they came from */
+    size_t nlights0;       /* lights traced; later ones were added */
 };
 
 /* Resolves samples (nx*ny RGB, from a grid of corners when spd) into

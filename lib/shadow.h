@@ -66,4 +66,18 @@ static inline rtpi_ray rtpi_shadow_ray(rtpi_v3 o, rtpi_v3 lp)
     return r;
 }
 
+/* Trace's decision for one hit and light: 0 where the (shading) normal ns
+   faces away from the light at lp, else 1 with *o the shadow ray's origin,
+   p moved off the surface (geometric normal ng) towards the light.  Trace
+   and re-evaluation both call this, so they cast identical rays. */
+static inline int rtpi_shadow_setup(rtpi_v3 p, rtpi_v3 ng, rtpi_v3 ns, rtpi_v3 lp,
+                                    rtpi_v3 *o)
+{
+    rtpi_v3 l = v3_sub(lp, p);
+    if (v3_dot(ns, l) <= 0.0)
+        return 0;
+    *o = rtpi_offset_origin(p, ng, v3_dot(ng, l) >= 0.0 ? 1.0 : -1.0);
+    return 1;
+}
+
 #endif

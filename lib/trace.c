@@ -179,13 +179,11 @@ static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
     /* Shadows: no ray where the surface faces away from the light. */
     for (i = 0; i < nl; i++) {
         const rtpi_light *L = &s->lights[i];
-        rtpi_v3 lp = v3(L->pos[0], L->pos[1], L->pos[2]);
-        rtpi_v3 l = v3_sub(lp, sf.p);
+        rtpi_v3 lp = v3(L->pos[0], L->pos[1], L->pos[2]), o;
         rtpi_ray sr;
-        if (v3_dot(ns, l) <= 0.0)
+        if (!rtpi_shadow_setup(sf.p, ng, ns, lp, &o))
             continue;
-        sr = rtpi_shadow_ray(
-            rtpi_offset_origin(sf.p, ng, v3_dot(ng, l) >= 0.0 ? 1.0 : -1.0), lp);
+        sr = rtpi_shadow_ray(o, lp);
         w->n.shadow_rays++;
         if (rtpi_kd_occluded(sh->kd, &sr))
             continue;
@@ -354,6 +352,7 @@ static rtp_status gather_tree(const shared *sh, const rtp_trace_options *opt,
     t->min_weight = sh->min_weight;
     t->vis_words = words;
     t->nnodes = total;
+    t->nlights0 = s->nlights;
     (void)opt;
     if (rtpi_scene_clone(s, &t->scene) != RTP_OK ||
         !(t->mats0 = (rtpi_material *)rtpi_malloc_array(a, s->nmats ? s->nmats : 1,

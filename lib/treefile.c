@@ -362,6 +362,10 @@ rtp_status rtp_tree_write(const rtp_tree *t, const char *path,
     int to_stdout;
     if (!t || !path)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_write: NULL argument");
+    if (t->scene->nlights != t->nlights0)
+        return rtpi_error(err, RTP_ERR_UNSUPPORTED, path, 0, 0,
+                          "a tree with added lights cannot be saved: its trees hold no "
+                          "shadows for them; trace again with the lights in the scene");
     memset(&out, 0, sizeof out);
     out.a = &t->alloc;
     st = serialize(t, &out);
@@ -1056,6 +1060,7 @@ rtp_status rtp_tree_read_memory(const void *data, size_t size, const char *name,
             break;
     }
     L.section = NULL;
+    t->nlights0 = t->scene->nlights;
     if (st == RTP_OK && (seen & 0x3fu) != 0x3fu)
         st = bad(&L, "a required section is missing", NULL);
     if (st == RTP_OK) {

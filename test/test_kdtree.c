@@ -548,10 +548,14 @@ static void self_case(rng *g, double sz, double off, int *self_hits,
             rtpi_v3 nq = v3_from_f(s->pos + 9), nb = v3_from_f(s->pos + 3), nc = v3_from_f(s->pos + 6);
             rtpi_v3 aim = v3_mul(v3_add(nq, v3_add(nb, nc)), 1.0 / 3.0);
             rtpi_ray r3 = mkray(rtpi_offset_origin(su.p, su.ng, side), v3_sub(aim, su.p));
-            rtpi_v3 nn = v3_cross(v3_sub(nb, nq), v3_sub(nc, nq));
-            /* Only when the neighbour's plane has the origin on one side and
-               the aim on the other: then it must be hit. */
-            if (fabs(v3_dot(v3_norm(nn), v3_norm(r3.d))) > 1e-3) {
+            rtpi_v3 nn = v3_norm(v3_cross(v3_sub(nb, nq), v3_sub(nc, nq)));
+            /* "Nearby" means farther than the offset itself: geometry
+               closer than that is what the offset is meant to jump.  So
+               only hit points at least 10 offsets from the neighbour's
+               plane count, and rays not too grazing to decide. */
+            double off_len = v3_len(v3_sub(r3.o, su.p));
+            double dplane = fabs(v3_dot(v3_sub(su.p, nq), nn));
+            if (dplane > 10.0 * off_len && fabs(v3_dot(nn, v3_norm(r3.d))) > 1e-3) {
                 (*tests)++;
                 if (!rtpi_kd_intersect(kd, &r3, &h2) || h2.prim != 1)
                     (*neighbour_misses)++;

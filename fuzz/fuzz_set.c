@@ -1,0 +1,116 @@
+/* fuzz_set.c — fuzzes parameter edits as a --params file holds them:
+ * KEY=VALUE items separated by blanks, one or more per line, '#' comments
+ * (cli/rtp.c's apply_line).  Each item goes to rtp_tree_set on the trees
+ * of a small recorded scene and, when the tree takes it, to rtp_scene_set
+ * on the scene, which must take it too.  Then the edited trees are
+ * evaluated and the edited scene traced: the brief promises the two
+ * images agree for every edit the tree accepts. */
+#include "fuzz_common.h"
+
+static const char scene_text[] =
+    "b 0.1 0.2 0.3\n"
+    "v from 0 -6 2 at 0 0 0.5 up 0 0 1 angle 40 hither 0.01 resolution 4 4\n"
+    "ambient 0.05 0.05 0.05\n"
+    "l 3 -4 6 0.8 0.7 0.6\nname lamp\n"
+    "l -3 -4 5\n"
+    "l 0 3 5\nname spare\noff\n"
+    "f 0.9 0.9 0.9 0.8 0.2 20 0 0\nname floor\nchecker 0.1 0.1 0.1 0.5\n"
+    "p 4 -4 -4 0 4 -4 0 4 4 0 -4 4 0\n"
+    "f 0.8 0.3 0.3 0.5 0.4 40 0.4 1.5\nname glass\n"
+    "s 0 0 1 0.8\n"
+    "f 0.3 0.8 0.3 0.9 0 100000 0 0\n"
+    "c 1.5 0 0 0.3 1.5 0 1.5 0.1\n"
+    "pp 3 -2 0 0 0 0 1 -1 0 1 0 0 1 -2 0 2 0 0 1\n";
+
+#define W 4
+#define H 4
+
+static void apply(rtp_tree *t, rtp_scene *s, char *item)
+{
+    char *eq = strchr(item, '=');
+    rtp_error err;
+    rtp_status st, st2;
+    if (!eq || eq == item)
+        return;
+    *eq = '\0';
+    memset(&err, 0, sizeof err);
+    st = rtp_tree_set(t, item, eq + 1, &err);
+    fuzz_check_error(&err, st);
+    if (st == RTP_OK) {
+        st2 = rtp_scene_set(s, item, eq + 1, &err);
+        fuzz_check_error(&err, st2);
+        FUZZ_ASSERT(st2 == RTP_OK);
+    }
+    *eq = '=';
+}
+
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
+{
+    rtp_scene *s = NULL;
+    rtp_tree *t = NULL;
+    rtp_image *re = NULL, *full = NULL;
+    rtp_trace_options o;
+    rtp_diff_stats d;
+    rtp_error err;
+    char *text, *p, *line;
+    if (size > 4096)
+        return 0;
+    text = (char *)malloc(size + 1);
+    if (!text)
+        return 0;
+    if (size)
+        memcpy(text, data, size);
+    text[size] = '\0';
+    memset(&err, 0, sizeof err);
+    memset(&o, 0, sizeof o);
+    o.width = W;
+    o.height = H;
+    o.threads = 1;
+    if (rtp_scene_load_memory(scene_text, sizeof scene_text - 1, "set.nff", "nff",
+                              &fuzz_alloc, &s, &err) != RTP_OK ||
+        rtp_record(s, &o, &t, NULL, NULL, &err) != RTP_OK) {
+        fprintf(stderr, "fuzz_set: setup failed: %s\n", err.message);
+        abort();
+    }
+    /* Lines as apply_params_file reads them, items as apply_line splits
+       them (a NUL ends the text as it ends a C string). */
+    for (line = text; line && *line; line = p) {
+        char *hash, *q;
+        p = strchr(line, '\n');
+        if (p)
+            *p++ = '\0';
+        hash = strchr(line, '#');
+        if (hash)
+            *hash = '\0';
+        q = line;
+        for (;;) {
+            char *tok;
+            while (*q == ' ' || *q == '\t' || *q == '\r')
+                q++;
+            if (!*q)
+                break;
+            tok = q;
+            while (*q && *q != ' ' && *q != '\t' && *q != '\r')
+                q++;
+            if (*q)
+                *q++ = '\0';
+            apply(t, s, tok);
+        }
+    }
+    if (rtp_tree_eval(t, NULL, &re, NULL, &err) == RTP_OK &&
+        rtp_trace(s, &o, &full, NULL, &err) == RTP_OK &&
+        rtp_image_diff(re, full, 1e-6, &d, &err) == RTP_OK) {
+        /* Edits take float parameters; allow float rounding only. */
+        if (!(d.max_abs <= 1e-4)) {
+            fprintf(stderr, "fuzz_set: re-evaluation differs from a full "
+                            "trace of the edited scene by %g\n", d.max_abs);
+            abort();
+        }
+    }
+    rtp_image_destroy(re);
+    rtp_image_destroy(full);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+    free(text);
+    return 0;
+}
