@@ -109,3 +109,41 @@ uninstall:
 
 clean:
 	rm -rf build build-asan build-ubsan rtp
+
+# ------------------------------------------------------------------ fuzzing
+# Every fuzz/fuzz_*.c is a libFuzzer target that, built without libFuzzer,
+# has a plain main replaying files and folders (fuzz/replay.h).  `make test`
+# builds those replay mains into $(BUILD)/fuzz/ and test/cli_fuzz_replay.sh
+# replays every checked-in corpus fuzz/corpus/<target>/ through them.
+#
+# `make fuzz` builds the libFuzzer binaries (clang, ASan+UBSan) into
+# build-fuzz/.  Run one from the top of the repository (inputs name files
+# in fuzz/data/), on a scratch copy of its corpus, then check in any crash:
+#   make fuzz
+#   mkdir -p /tmp/nff && build-fuzz/fuzz_nff -rss_limit_mb=2048 \
+#       -max_total_time=600 /tmp/nff fuzz/corpus/fuzz_nff
+#   build-fuzz/fuzz_nff -minimize_crash=1 -runs=10000 crash-...
+#   cp minimized-from-... fuzz/corpus/fuzz_nff/crash-<what>
+FUZZ_SRC = $(sort $(wildcard fuzz/fuzz_*.c))
+FUZZ_REPLAY_BIN = $(FUZZ_SRC:fuzz/%.c=$(BUILD)/fuzz/%)
+FUZZ_BIN = $(FUZZ_SRC:fuzz/%.c=build-fuzz/%)
+FUZZ_CC ?= clang
+FUZZ_FLAGS = -g -O1 -fno-omit-frame-pointer \
+	-fsanitize=fuzzer,address,undefined -fno-sanitize-recover=undefined \
+	-DRTP_LIBFUZZER
+
+.PHONY: fuzz
+fuzz: $(FUZZ_BIN)
+
+$(BUILD)/fuzz/%: fuzz/%.c fuzz/fuzz_common.h fuzz/replay.h $(BUILD)/librtp.a
+	@mkdir -p $(dir $@)
+	@$(if $(Q),echo "  CCLD    $@")
+	$(Q)$(CC) $(ALL_CFLAGS) -Ilib $(LDFLAGS) $< $(BUILD)/librtp.a -o $@ $(LIBS)
+
+build-fuzz/%: fuzz/%.c fuzz/fuzz_common.h fuzz/replay.h $(LIB_SRC) include/rtp.h $(wildcard lib/*.h)
+	@mkdir -p $(dir $@)
+	@$(if $(Q),echo "  FUZZ    $@")
+	$(Q)$(FUZZ_CC) $(WARN) $(FUZZ_FLAGS) -D_POSIX_C_SOURCE=200809L $(DEFS) \
+	    -Iinclude -Ilib $(PNG_CFLAGS) $< $(LIB_SRC) -o $@ $(LIBS)
+
+test: $(FUZZ_REPLAY_BIN)

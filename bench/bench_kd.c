@@ -11,6 +11,7 @@
 
 #include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
 #include <time.h>
 
 /* CPU time of this thread: the benchmark is single-threaded, and other
@@ -234,13 +235,18 @@ done:
     free(hit);
 }
 
-int main(void)
+int main(int argc, char **argv)
 {
+    /* --bunny: the bunny alone; --big: the generated mesh alone. */
+    int only_bunny = argc > 1 && strcmp(argv[1], "--bunny") == 0;
+    int only_big = argc > 1 && strcmp(argv[1], "--big") == 0;
     const char *path = find_bunny();
     rtp_scene *s = NULL, *big;
     rtpi_kdtree *kd;
     rtp_error err;
-    if (!path) {
+    if (only_big) {
+        /* the generated mesh alone */
+    } else if (!path) {
         printf("skip: ../shared/scenes/meshes/stanford-bunny.obj absent\n");
     } else if (rtp_scene_load(path, NULL, &s, &err) != RTP_OK) {
         char buf[600];
@@ -252,6 +258,8 @@ int main(void)
         rtpi_kd_destroy(kd);
         rtp_scene_destroy(s);
     }
+    if (only_bunny)
+        return 0;
     big = make_big(1000, 500);
     if (!big) {
         fprintf(stderr, "bench_kd: out of memory\n");

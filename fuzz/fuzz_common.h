@@ -16,11 +16,16 @@
 
 /* Largest single allocation a reader may make for a fuzz input: every
    input here is at most a few hundred kilobytes, and no reader should
-   need more than this for one (images are bounded by the 256 x 256 the
-   targets allow before they ask). */
+   need more than this for one. */
+#if defined(__GNUC__)
+#define FUZZ_UNUSED __attribute__((unused))
+#else
+#define FUZZ_UNUSED
+#endif
+
 #define FUZZ_ALLOC_MAX ((size_t)256 << 20)
 
-static void *fuzz_malloc(void *user, size_t size)
+static inline void *fuzz_malloc(void *user, size_t size)
 {
     (void)user;
     if (size > FUZZ_ALLOC_MAX) {
@@ -30,7 +35,7 @@ static void *fuzz_malloc(void *user, size_t size)
     return malloc(size);
 }
 
-static void *fuzz_realloc(void *user, void *p, size_t size)
+static inline void *fuzz_realloc(void *user, void *p, size_t size)
 {
     (void)user;
     if (size > FUZZ_ALLOC_MAX) {
@@ -40,13 +45,32 @@ static void *fuzz_realloc(void *user, void *p, size_t size)
     return realloc(p, size);
 }
 
-static void fuzz_free(void *user, void *p)
+static inline void fuzz_free(void *user, void *p)
 {
     (void)user;
     free(p);
 }
 
-static const rtp_allocator fuzz_alloc = {fuzz_malloc, fuzz_realloc, fuzz_free, NULL};
+FUZZ_UNUSED static const rtp_allocator fuzz_alloc = {fuzz_malloc, fuzz_realloc, fuzz_free, NULL};
+
+/* For readers of streams, which cannot know the data's length before
+   they allocate an image the header asks for: a request over the cap
+   fails (the reader must report RTP_ERR_NOMEM cleanly) instead of
+   aborting. */
+static inline void *fuzz_soft_malloc(void *user, size_t size)
+{
+    (void)user;
+    return size > FUZZ_ALLOC_MAX ? NULL : malloc(size);
+}
+
+static inline void *fuzz_soft_realloc(void *user, void *p, size_t size)
+{
+    (void)user;
+    return size > FUZZ_ALLOC_MAX ? NULL : realloc(p, size);
+}
+
+FUZZ_UNUSED static const rtp_allocator fuzz_soft_alloc = {fuzz_soft_malloc, fuzz_soft_realloc,
+                                              fuzz_free, NULL};
 
 /* Aborts (a finding) when cond is false. */
 #define FUZZ_ASSERT(cond)                                                   \
@@ -59,13 +83,13 @@ static const rtp_allocator fuzz_alloc = {fuzz_malloc, fuzz_realloc, fuzz_free, N
     } while (0)
 
 /* A status the documented contract allows for a failed call. */
-static int fuzz_status_ok(rtp_status st)
+static inline int fuzz_status_ok(rtp_status st)
 {
     return st >= RTP_OK && st <= RTP_ERR_KEY;
 }
 
 /* Error messages must be NUL-terminated and formattable. */
-static void fuzz_check_error(const rtp_error *err, rtp_status st)
+static inline void fuzz_check_error(const rtp_error *err, rtp_status st)
 {
     char buf[700];
     FUZZ_ASSERT(fuzz_status_ok(st));
@@ -82,7 +106,7 @@ static void fuzz_check_error(const rtp_error *err, rtp_status st)
 /* Traces a tiny image of the scene, records its trees and checks the
    brief's promise: evaluating the unedited trees reproduces the traced
    image bit for bit, and rtp_trace gives the same image as rtp_record. */
-static void fuzz_trace_scene(const rtp_scene *s, int w, int h)
+static inline void fuzz_trace_scene(const rtp_scene *s, int w, int h)
 {
     rtp_trace_options opt;
     rtp_image *img = NULL, *rec = NULL, *ev = NULL;
@@ -118,7 +142,7 @@ static void fuzz_trace_scene(const rtp_scene *s, int w, int h)
 
 /* Inputs that name device or process files could block or never end
    (a mtllib of /dev/zero); the targets skip them. */
-static int fuzz_names_special_file(const uint8_t *data, size_t size)
+static inline int fuzz_names_special_file(const uint8_t *data, size_t size)
 {
     static const char *const bad[] = {"/dev", "/proc", "/sys", "/run"};
     size_t i, k;

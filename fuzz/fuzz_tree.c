@@ -1,8 +1,8 @@
 /* fuzz_tree.c — fuzzes the tree-file reader (rtp_tree_read_memory).
  * Section checksums would stop almost every mutation at the first CRC, so
- * unless the input's first byte after the signature says otherwise the
- * target first recomputes each section's CRC in a copy (the reader must
- * survive whatever passes its checks, not only what fails them).  A file
+ * the target recomputes each section's CRC in a copy of even-sized inputs
+ * (the reader must survive whatever passes its checks, not only what
+ * fails them).  A file
  * it accepts is then evaluated, re-edited, inspected and, when small,
  * full-traced: validation must make every accepted file safe to use. */
 #include "fuzz_common.h"
@@ -87,9 +87,9 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         return 0;
     if (size)
         memcpy(copy, data, size);
-    /* Byte 8 is the first tag's 'H'; an odd-numbered mutation of the tag
-       area is not needed to test CRCs, so use size parity instead: even
-       sizes are fixed up, odd sizes read as they are. */
+    /* Even-sized inputs get their CRCs recomputed, odd-sized ones are
+       read as they are: both paths stay reachable, and the seeds stay
+       plain tree files (no mode byte in front). */
     if (size > 8 && size % 2 == 0)
         fix_crcs(copy, size);
     memset(&err, 0, sizeof err);

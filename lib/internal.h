@@ -188,6 +188,17 @@ static inline size_t rtpi_scene_nprims(const rtp_scene *s)
     return s->ntris + s->nspheres + s->ncones;
 }
 
+/* The material of a primitive. */
+static inline uint32_t rtpi_prim_material(const rtp_scene *s, uint32_t prim)
+{
+    if (prim < s->ntris)
+        return s->tris[prim].mat;
+    prim -= (uint32_t)s->ntris;
+    if (prim < s->nspheres)
+        return s->spheres[prim].mat;
+    return s->cones[prim - s->nspheres].mat;
+}
+
 /* Readers.  `text` need not be NUL-terminated; `name` is for messages and
    relative paths.  They append to `s`. */
 rtp_status rtpi_read_nff(rtp_scene *s, const char *text, size_t size,
@@ -320,21 +331,48 @@ typedef struct rtpi_shade_ctx {
     size_t vis_words;        /* words per node in vis_ext (> 32 lights) */
 } rtpi_shade_ctx;
 
-/* Evaluates the paper's shading equation over one sample's tree of n nodes
-   (n = 0: the eye ray missed).  vis_ext: the nodes' visibility words when
-   the scene has more than 32 lights, else NULL.  eye: the eye position.
-   This is the one shading routine: trace and reeval both call it. */
-void rtpi_shade_sample(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
+/* The one shading routine, in three steps that trace and reeval share so
+   that re-evaluation reproduces trace bit for bit:
+
+   1. rtpi_sample_terms: for each node of a sample, the object colour c_obj
+      and, per light, d = n.l and s = (r.v)^shine where the node sees the
+      light and faces it (0 elsewhere) — everything geometric, as floats;
+   2. rtpi_sample_coeffs: the sample's colour is linear in the light
+      colours, the ambient light and the background:
+         I = G (.) background + A (.) ambient + sum_i K_i (.) c_li
+      with G, A, K_i (RGB) gathered over the tree with the materials' kd,
+      ks, kt and the path weights;
+   3. rtpi_combine: I from G, A, K_i and the current light colours.
+
+   An edit of light colours, ambient or background redoes only step 3; a
+   material edit redoes step 2 for the samples that contain it. */
+#define RTPI_TERMS(nl) (3 + 2 * (size_t)(nl))
+#define RTPI_COEFFS(nl) (6 + 3 * (size_t)(nl))
+
+/* terms: n * RTPI_TERMS(nlights) floats.  vis_ext: the nodes' visibility
+   words (c->vis_words per node) or NULL for the nodes' own bits. */
+void rtpi_sample_terms(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
                        size_t n, const uint32_t *vis_ext, rtpi_v3 eye,
-                       double rgb[3]);
+                       float *terms);
+/* coeffs: RTPI_COEFFS(nlights) floats: G, A, then K_i; acc: as many
+   doubles of scratch (sums are kept in double, then rounded once). */
+void rtpi_sample_coeffs(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
+                        size_t n, const float *terms, double *acc,
+                        float *coeffs);
+/* cl: 3 per light: colour * light scale, 0 when off (rtpi_light_colors). */
+void rtpi_combine(const rtp_scene *s, const double *cl, const float *coeffs,
+                  float rgb[3]);
+void rtpi_light_colors(const rtp_scene *s, double *cl);
 
 /* Surface data at a recorded hit position (normals, uv, material). */
 void rtpi_surface_from_point(const rtp_scene *s, uint32_t prim, rtpi_v3 p,
                              rtpi_surface *out);
 
-/* Object colour at p/uv: material colour or its texture (shade.c). */
-void rtpi_object_color(const rtp_scene *s, const rtpi_material *m,
-                       rtpi_v3 p, const double uv[2], double rgb[3]);
+/* The texture's part of c_obj at p/uv: for an image texture the image's
+   colour (c_obj = colour * it), for a checker 1 in colour cells and 0 in
+   color2 cells, else 1 (shade.c). */
+void rtpi_texture_factor(const rtp_scene *s, const rtpi_material *m,
+                         rtpi_v3 p, const double uv[2], double f[3]);
 
 /* The ray trees of a whole image, with the scene they were traced in
    (rtp_tree in rtp.h).  Sample k's nodes are nodes[start[k] .. start[k+1]). */
@@ -362,6 +400,18 @@ struct rtp_tree {
                               (NaN: not computed) */
     int cur_mode, cur_res; /* shadow mode and resolution they came from */
     size_t nlights0;       /* lights traced; later ones were added */
+
+    /* Evaluation caches (tree.c): the shading steps' results, kept so an
+       edit redoes only what it touches. */
+    int ev_valid;          /* ev_terms/ev_coeffs hold the state below */
+    float *ev_terms;       /* nnodes * RTPI_TERMS(ev_nlights) */
+    float *ev_coeffs;      /* samples * RTPI_COEFFS(ev_nlights) */
+    size_t ev_nlights;
+    double *ev_pos;        /* 3 per light: positions the terms are for */
+    int ev_vis_mode, ev_vis_res;
+    rtpi_material *ev_mats; /* materials the caches were made with */
+    uint32_t *mat_start;   /* per material: its samples in mat_samples */
+    uint32_t *mat_samples; /* samples whose trees contain each material */
 };
 
 /* Resolves samples (nx*ny RGB, from a grid of corners when spd) into

@@ -37,17 +37,31 @@
    slivers of empty space around every clipped triangle down to the depth
    limit (measured on the bunny: 60% empty leaves, 5 references a
    triangle), which makes the tree bigger, not faster. */
+#ifndef KD_COST_TRAV
 #define KD_COST_TRAV 1.0
+#endif
+#ifndef KD_COST_ISECT
 #define KD_COST_ISECT 1.5
+#endif
+#ifndef KD_EMPTY_BONUS
 #define KD_EMPTY_BONUS 0.8
+#endif
+#ifndef KD_EMPTY_MIN
 #define KD_EMPTY_MIN 0.1
+#endif
 /* Nodes with fewer primitives are leaves whatever the SAH says: SAH does
    not see that a deeper tree misses the cache more often, and on the bunny
    stopping at 4 was faster for every kind of ray and builds faster. */
+#ifndef KD_MIN_SPLIT
 #define KD_MIN_SPLIT 4
+#endif
 /* Depth limit 8 + 1.3 log2(N) (Wald & Havran). */
+#ifndef KD_DEPTH_A
 #define KD_DEPTH_A 8.0
+#endif
+#ifndef KD_DEPTH_B
 #define KD_DEPTH_B 1.3
+#endif
 /* Hard cap on the depth; the traversal stack holds one entry per level. */
 #define KD_DEPTH_CAP 60
 /* The largest primitive count: ids share a word with a 2-bit event type,

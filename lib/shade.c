@@ -34,8 +34,8 @@ static void image_lookup(const rtp_image *img, double u, double v,
     }
 }
 
-void rtpi_object_color(const rtp_scene *s, const rtpi_material *m,
-                       rtpi_v3 p, const double uv[2], double rgb[3])
+void rtpi_texture_factor(const rtp_scene *s, const rtpi_material *m, rtpi_v3 p,
+                         const double uv[2], double f[3])
 {
     int c;
     if (m->tex == RTPI_TEX_CHECKER && m->tex_scale > 0.0f) {
@@ -47,20 +47,17 @@ void rtpi_object_color(const rtp_scene *s, const rtpi_material *m,
         const double bias = 1e-4;
         double cell = floor(p.x * inv + bias) + floor(p.y * inv + bias) +
                       floor(p.z * inv + bias);
-        const float *src = fmod(fabs(cell), 2.0) >= 1.0 ? m->color2 : m->color;
+        double sel = fmod(fabs(cell), 2.0) >= 1.0 ? 0.0 : 1.0;
         for (c = 0; c < 3; c++)
-            rgb[c] = src[c];
+            f[c] = sel; /* 1: colour, 0: color2 */
         return;
     }
-    if (m->tex == RTPI_TEX_IMAGE && m->tex_image < s->ntexs &&
-        s->texs[m->tex_image].image) {
-        image_lookup(s->texs[m->tex_image].image, uv[0], uv[1], rgb);
-        for (c = 0; c < 3; c++)
-            rgb[c] *= m->color[c];
+    if (m->tex == RTPI_TEX_IMAGE && m->tex_image < s->ntexs && s->texs[m->tex_image].image) {
+        image_lookup(s->texs[m->tex_image].image, uv[0], uv[1], f);
         return;
     }
     for (c = 0; c < 3; c++)
-        rgb[c] = m->color[c];
+        f[c] = 1.0;
 }
 
 void rtpi_surface_from_point(const rtp_scene *s, uint32_t prim, rtpi_v3 p,
@@ -102,21 +99,19 @@ static int seen(const rtpi_cnode *nd, const uint32_t *ext, size_t i)
     return (int)((ext[i >> 5] >> (i & 31)) & 1u);
 }
 
-/* Shades node idx seen from `from`; returns nothing, adds into out. */
-static void shade_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
-                       size_t idx, const uint32_t *vis_ext, rtpi_v3 from,
-                       double out[3])
+/* Step 1 for node idx seen from `from`; recurses into its subtrees. */
+static void terms_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t idx,
+                       const uint32_t *vis_ext, rtpi_v3 from, float *terms)
 {
     const rtp_scene *s = c->s;
     const rtpi_cnode *nd = &nodes[idx];
     const uint32_t *ext = vis_ext ? vis_ext + idx * c->vis_words : NULL;
+    size_t nl = s->nlights, i;
+    float *t = terms + idx * RTPI_TERMS(nl);
     const rtpi_material *m;
     rtpi_surface sf;
     rtpi_v3 p = v3(nd->p[0], nd->p[1], nd->p[2]), n, v;
-    double cobj[3], diff[3] = {0, 0, 0}, spec[3] = {0, 0, 0}, sub[3];
-    double wr, wt;
-    size_t i;
-    int k;
+    double tex[3];
 
     rtpi_surface_from_point(s, nd->prim, p, &sf);
     m = &s->mats[sf.mat];
@@ -124,13 +119,16 @@ static void shade_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
     if ((nd->link & RTPI_L_BACK) && rtpi_two_sided(s, c->one_sided, nd->prim, m))
         n = v3_mul(n, -1.0);
     v = v3_norm(v3_sub(from, p));
-    rtpi_object_color(s, m, p, sf.uv, cobj);
-
-    for (i = 0; i < s->nlights; i++) {
+    rtpi_texture_factor(s, m, p, sf.uv, tex);
+    t[0] = (float)tex[0];
+    t[1] = (float)tex[1];
+    t[2] = (float)tex[2];
+    for (i = 0; i < nl; i++) {
         const rtpi_light *L = &s->lights[i];
         rtpi_v3 l;
-        double ndl, rv, w;
-        if (!L->on || !seen(nd, ext, i))
+        double ndl, rv;
+        t[3 + 2 * i] = t[4 + 2 * i] = 0.0f;
+        if (!seen(nd, ext, i))
             continue;
         l = v3_norm(v3_sub(v3(L->pos[0], L->pos[1], L->pos[2]), p));
         ndl = v3_dot(n, l);
@@ -138,16 +136,48 @@ static void shade_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
             continue;
         /* r_i: l mirrored about n; the highlight is (r_i.v)^shine. */
         rv = v3_dot(v3_sub(v3_mul(n, 2.0 * ndl), l), v);
-        w = (rv > 0.0 && m->ks > 0.0f) ? pow(rv, m->shine) : 0.0;
-        for (k = 0; k < 3; k++) {
-            double cl = L->color[k] * s->light_scale;
-            diff[k] += ndl * cl;
-            spec[k] += w * cl;
-        }
+        t[3 + 2 * i] = (float)ndl;
+        t[4 + 2 * i] = rv > 0.0 ? (float)pow(rv, m->shine) : 0.0f;
     }
-    for (k = 0; k < 3; k++)
-        out[k] = m->kd * cobj[k] * (diff[k] + s->ambient[k]) + m->ks * spec[k];
+    if (nd->link & RTPI_L_REFL)
+        terms_node(c, nodes, idx + 1, vis_ext, p, terms);
+    if (nd->link & RTPI_L_REFR)
+        terms_node(c, nodes, idx + (nd->link >> RTPI_L_SHIFT), vis_ext, p, terms);
+}
 
+void rtpi_sample_terms(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t n,
+                       const uint32_t *vis_ext, rtpi_v3 eye, float *terms)
+{
+    if (n > 0)
+        terms_node(c, nodes, 0, vis_ext, eye, terms);
+}
+
+/* Step 2 for node idx reached with path weight w (accumulated in
+   double). */
+static void coeffs_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t idx,
+                        const float *terms, double w, double *acc)
+{
+    const rtp_scene *s = c->s;
+    const rtpi_cnode *nd = &nodes[idx];
+    size_t nl = s->nlights, i;
+    const float *t = terms + idx * RTPI_TERMS(nl);
+    const rtpi_material *m = &s->mats[rtpi_prim_material(s, nd->prim)];
+    double wr, wt, kd = w * m->kd, ks = w * m->ks, cobj[3];
+    int k;
+    /* c_obj from the texture factor and the material's colours now */
+    for (k = 0; k < 3; k++)
+        cobj[k] = m->tex == RTPI_TEX_CHECKER
+                      ? t[k] * (double)m->color[k] + (1.0 - t[k]) * (double)m->color2[k]
+                      : t[k] * (double)m->color[k];
+    for (k = 0; k < 3; k++)
+        acc[3 + k] += kd * cobj[k]; /* ambient: kd c_obj */
+    for (i = 0; i < nl; i++) {
+        double d = t[3 + 2 * i], sp = t[4 + 2 * i];
+        if (d == 0.0)
+            continue;
+        for (k = 0; k < 3; k++)
+            acc[6 + 3 * i + k] += kd * cobj[k] * d + ks * sp;
+    }
     /* Global terms: ks I_r + kt I_t; on total internal reflection the
        transmitted share rides on the reflected subtree. */
     wr = m->ks;
@@ -156,35 +186,53 @@ static void shade_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
         wr += wt;
         wt = 0.0;
     }
-    if (wr > 0.0 && (nd->link & (RTPI_L_REFL | RTPI_L_REFL_MISS))) {
+    if (wr > 0.0) {
         if (nd->link & RTPI_L_REFL)
-            shade_node(c, nodes, idx + 1, vis_ext, p, sub);
-        else
+            coeffs_node(c, nodes, idx + 1, terms, w * wr, acc);
+        else if (nd->link & RTPI_L_REFL_MISS)
             for (k = 0; k < 3; k++)
-                sub[k] = s->background[k];
-        for (k = 0; k < 3; k++)
-            out[k] += wr * sub[k];
+                acc[k] += w * wr;
     }
-    if (wt > 0.0 && (nd->link & (RTPI_L_REFR | RTPI_L_REFR_MISS))) {
+    if (wt > 0.0) {
         if (nd->link & RTPI_L_REFR)
-            shade_node(c, nodes, idx + (nd->link >> RTPI_L_SHIFT), vis_ext, p, sub);
-        else
+            coeffs_node(c, nodes, idx + (nd->link >> RTPI_L_SHIFT), terms, w * wt, acc);
+        else if (nd->link & RTPI_L_REFR_MISS)
             for (k = 0; k < 3; k++)
-                sub[k] = s->background[k];
-        for (k = 0; k < 3; k++)
-            out[k] += wt * sub[k];
+                acc[k] += w * wt;
     }
 }
 
-void rtpi_shade_sample(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
-                       size_t n, const uint32_t *vis_ext, rtpi_v3 eye,
-                       double rgb[3])
+void rtpi_sample_coeffs(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t n,
+                        const float *terms, double *acc, float *coeffs)
 {
+    size_t m = RTPI_COEFFS(c->s->nlights), i;
+    for (i = 0; i < m; i++)
+        acc[i] = 0.0;
+    if (n == 0)
+        acc[0] = acc[1] = acc[2] = 1.0; /* the eye ray saw the background */
+    else
+        coeffs_node(c, nodes, 0, terms, 1.0, acc);
+    for (i = 0; i < m; i++)
+        coeffs[i] = (float)acc[i];
+}
+
+void rtpi_light_colors(const rtp_scene *s, double *cl)
+{
+    size_t i;
     int k;
-    if (n == 0) {
+    for (i = 0; i < s->nlights; i++)
         for (k = 0; k < 3; k++)
-            rgb[k] = c->s->background[k];
-        return;
+            cl[3 * i + k] = s->lights[i].on ? s->lights[i].color[k] * s->light_scale : 0.0;
+}
+
+void rtpi_combine(const rtp_scene *s, const double *cl, const float *coeffs, float rgb[3])
+{
+    size_t i, nl = s->nlights;
+    int k;
+    for (k = 0; k < 3; k++) {
+        double v = coeffs[k] * (double)s->background[k] + coeffs[3 + k] * (double)s->ambient[k];
+        for (i = 0; i < nl; i++)
+            v += coeffs[6 + 3 * i + k] * cl[3 * i + k];
+        rgb[k] = (float)v;
     }
-    shade_node(c, nodes, 0, vis_ext, eye, rgb);
 }

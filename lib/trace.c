@@ -46,6 +46,10 @@ typedef struct worker {
     uint32_t *vis;     /* visibility words when there are > 32 lights */
     size_t vis_cap;
     uint32_t *counts;  /* nodes per sample of the current row */
+    float *terms;      /* shading terms of the current sample */
+    size_t terms_cap;
+    float *coeffs;     /* its linear coefficients */
+    double *acc;
     counts n;
     rtp_status status;
 } worker;
@@ -59,6 +63,7 @@ struct shared {
     float *out;        /* nx*ny samples, RGB */
     row_rec *rows;     /* per row when recording, else NULL */
     rtpi_shade_ctx shade;
+    double *cl;        /* light colours as shading sees them */
 };
 
 static double now_seconds(void)
@@ -247,7 +252,7 @@ static void trace_sample(worker *w, int x, int y, float *rgb)
     const camera *c = &w->sh->cam;
     rtpi_ray ray;
     rtpi_v3 d;
-    double len, col[3];
+    double len;
     double sx = ((double)x - 0.5 * (c->nx - 1)) * c->step;
     double sy = (0.5 * (c->ny - 1) - (double)y) * c->step;
     size_t words = w->sh->shade.vis_words;
@@ -264,14 +269,22 @@ static void trace_sample(worker *w, int x, int y, float *rgb)
     if (trace_ray(w, &ray, 1, 1.0) >= 0)
         w->n.eye_hits++;
     w->counts[x] = (uint32_t)(w->nn - w->sample_base);
-    /* The sample's colour is the evaluation of the tree just recorded. */
-    rtpi_shade_sample(&w->sh->shade, w->nodes + w->sample_base,
-                      w->nn - w->sample_base,
-                      words ? w->vis + w->sample_base * words : NULL,
-                      c->from, col);
-    rgb[0] = (float)col[0];
-    rgb[1] = (float)col[1];
-    rgb[2] = (float)col[2];
+    /* The sample's colour is the evaluation of the tree just recorded,
+       by the steps re-evaluation takes. */
+    {
+        const rtp_scene *s = w->sh->s;
+        size_t n = w->nn - w->sample_base, nt = RTPI_TERMS(s->nlights);
+        if (rtpi_grow(&s->alloc, (void **)&w->terms, &w->terms_cap, n * nt + 1,
+                      sizeof *w->terms)) {
+            w->status = RTP_ERR_NOMEM;
+            return;
+        }
+        rtpi_sample_terms(&w->sh->shade, w->nodes + w->sample_base, n,
+                          words ? w->vis + w->sample_base * words : NULL, c->from, w->terms);
+        rtpi_sample_coeffs(&w->sh->shade, w->nodes + w->sample_base, n, w->terms, w->acc,
+                           w->coeffs);
+        rtpi_combine(s, w->sh->cl, w->coeffs, rgb);
+    }
     if (!w->sh->rows)
         w->nn = 0; /* not recording: only the current sample is kept */
 }
@@ -444,10 +457,14 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
     camera_init(&sh.cam, s, opt.spd ? w + 1 : w, opt.spd ? h + 1 : h);
     samples = (float *)rtpi_malloc_array(&s->alloc, (size_t)sh.cam.nx * sh.cam.ny,
                                          3 * sizeof(float));
+    sh.cl = (double *)rtpi_malloc_array(&s->alloc, s->nlights ? 3 * s->nlights : 1,
+                                        sizeof *sh.cl);
+    if (sh.cl)
+        rtpi_light_colors(s, sh.cl);
     ws = (worker *)rtpi_calloc_array(&s->alloc, (size_t)nthreads, sizeof *ws);
     if (tree_out)
         sh.rows = (row_rec *)rtpi_calloc_array(&s->alloc, (size_t)sh.cam.ny, sizeof *sh.rows);
-    if (!samples || !ws || (tree_out && !sh.rows)) {
+    if (!samples || !ws || !sh.cl || (tree_out && !sh.rows)) {
         st = rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
         goto done;
     }
@@ -457,7 +474,11 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
         ws[i].status = RTP_OK;
         ws[i].counts = (uint32_t *)rtpi_malloc_array(&s->alloc, (size_t)sh.cam.nx,
                                                      sizeof *ws[i].counts);
-        if (!ws[i].counts) {
+        ws[i].coeffs = (float *)rtpi_malloc_array(&s->alloc, RTPI_COEFFS(s->nlights),
+                                                  sizeof *ws[i].coeffs);
+        ws[i].acc = (double *)rtpi_malloc_array(&s->alloc, RTPI_COEFFS(s->nlights),
+                                                sizeof *ws[i].acc);
+        if (!ws[i].counts || !ws[i].coeffs || !ws[i].acc) {
             st = rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
             goto done;
         }
@@ -509,6 +530,9 @@ done:
             rtpi_free(&s->alloc, ws[i].nodes);
             rtpi_free(&s->alloc, ws[i].vis);
             rtpi_free(&s->alloc, ws[i].counts);
+            rtpi_free(&s->alloc, ws[i].terms);
+            rtpi_free(&s->alloc, ws[i].coeffs);
+            rtpi_free(&s->alloc, ws[i].acc);
         }
         rtpi_free(&s->alloc, ws);
     }
@@ -522,6 +546,7 @@ done:
     }
     rtpi_kd_destroy(kd);
     rtpi_free(&s->alloc, samples);
+    rtpi_free(&s->alloc, sh.cl);
     if (st != RTP_OK || !out) {
         rtp_image_destroy(img);
         return st;

@@ -21,6 +21,12 @@ void rtp_tree_destroy(rtp_tree *t)
     rtpi_kd_destroy(t->kd);
     rtpi_free(&a, t->cur_vis);
     rtpi_free(&a, t->cur_pos);
+    rtpi_free(&a, t->ev_terms);
+    rtpi_free(&a, t->ev_coeffs);
+    rtpi_free(&a, t->ev_pos);
+    rtpi_free(&a, t->ev_mats);
+    rtpi_free(&a, t->mat_start);
+    rtpi_free(&a, t->mat_samples);
     rtpi_free(&a, t);
 }
 
@@ -309,31 +315,163 @@ static rtp_status update_visibility(rtp_tree *t, const rtp_eval_options *opt,
 
 /* ----------------------------------------------------------- evaluation */
 
+/* Caches are kept when they stay below this many floats per node and
+   sample: beyond (hundreds of lights) every evaluation works per sample
+   from scratch, as trace does. */
+#define EV_MAX_LIGHTS 64
+
 typedef struct eval_ctx {
-    const rtp_tree *t;
-    rtpi_shade_ctx shade;
-    const uint32_t *vis;  /* visibility words per node, or NULL */
+    rtp_tree *t;
+    const rtpi_shade_ctx *shade;
+    const uint32_t *vis;      /* visibility words per node, or NULL */
     rtpi_v3 eye;
+    const double *cl;         /* light colours */
     float *samples;
+    const uint32_t *list;     /* samples to redo (NULL: all) */
+    size_t nlist, chunk;
+    int redo_terms;           /* recompute terms too, not only coeffs */
+    int cached;               /* ev_terms / ev_coeffs in use */
+    /* per thread scratch (uncached path and coefficient sums) */
+    float *terms;
+    size_t terms_cap;
+    float *coeffs;
+    double *acc;
+    int nomem;
 } eval_ctx;
 
+/* Steps 1 and 2 for sample k, into the caches or the scratch. */
+static int sample_coeffs(eval_ctx *e, size_t k, int redo_terms, float **coeffs_out)
+{
+    rtp_tree *t = e->t;
+    size_t nl = t->scene->nlights, a = (size_t)t->start[k];
+    size_t n = (size_t)(t->start[k + 1] - t->start[k]), words = e->shade->vis_words;
+    float *terms, *coeffs;
+    if (e->cached) {
+        terms = t->ev_terms + a * RTPI_TERMS(nl);
+        coeffs = t->ev_coeffs + k * RTPI_COEFFS(nl);
+    } else {
+        if (rtpi_grow(&t->alloc, (void **)&e->terms, &e->terms_cap, n * RTPI_TERMS(nl) + 1,
+                      sizeof *e->terms)) {
+            e->nomem = 1;
+            return -1;
+        }
+        terms = e->terms;
+        coeffs = e->coeffs;
+        redo_terms = 1;
+    }
+    if (redo_terms)
+        rtpi_sample_terms(e->shade, t->nodes + a, n, e->vis ? e->vis + a * words : NULL, e->eye,
+                          terms);
+    rtpi_sample_coeffs(e->shade, t->nodes + a, n, terms, e->acc, coeffs);
+    *coeffs_out = coeffs;
+    return 0;
+}
+
+/* A row of samples, every step (first evaluation or uncached). */
 static int eval_row(void *ctx, int y)
 {
-    const eval_ctx *e = (const eval_ctx *)ctx;
+    eval_ctx *e = (eval_ctx *)ctx;
     const rtp_tree *t = e->t;
-    size_t k = (size_t)y * t->nx, words = e->shade.vis_words;
+    size_t k = (size_t)y * t->nx;
     int x;
     for (x = 0; x < t->nx; x++, k++) {
-        double col[3];
-        size_t a = (size_t)t->start[k], n = (size_t)(t->start[k + 1] - t->start[k]);
-        float *px = e->samples + 3 * k;
-        rtpi_shade_sample(&e->shade, t->nodes + a, n, e->vis ? e->vis + a * words : NULL,
-                          e->eye, col);
-        px[0] = (float)col[0];
-        px[1] = (float)col[1];
-        px[2] = (float)col[2];
+        float *coeffs;
+        if (sample_coeffs(e, k, 1, &coeffs))
+            return 1;
+        rtpi_combine(t->scene, e->cl, coeffs, e->samples + 3 * k);
     }
     return 0;
+}
+
+/* A chunk of a material's sample list: steps 1 (if needed) and 2. */
+static int redo_chunk(void *ctx, int chunk)
+{
+    eval_ctx *e = (eval_ctx *)ctx;
+    size_t i = (size_t)chunk * e->chunk, end = i + e->chunk;
+    if (end > e->nlist)
+        end = e->nlist;
+    for (; i < end; i++) {
+        float *coeffs;
+        if (sample_coeffs(e, e->list[i], e->redo_terms, &coeffs))
+            return 1;
+    }
+    return 0;
+}
+
+/* Step 3 only, from the cached coefficients. */
+static int combine_row(void *ctx, int y)
+{
+    eval_ctx *e = (eval_ctx *)ctx;
+    const rtp_tree *t = e->t;
+    size_t k = (size_t)y * t->nx, nc = RTPI_COEFFS(t->scene->nlights);
+    int x;
+    for (x = 0; x < t->nx; x++, k++)
+        rtpi_combine(t->scene, e->cl, t->ev_coeffs + k * nc, e->samples + 3 * k);
+    return 0;
+}
+
+/* For each material, the samples whose trees contain it (built once). */
+static rtp_status build_material_lists(rtp_tree *t)
+{
+    const rtp_scene *s = t->scene;
+    size_t nm = s->nmats, ns = (size_t)t->nx * t->ny, k, n, total = 0;
+    uint32_t *last, *fill;
+    last = (uint32_t *)rtpi_malloc_array(&t->alloc, nm ? nm : 1, sizeof *last);
+    t->mat_start = (uint32_t *)rtpi_calloc_array(&t->alloc, nm + 1, sizeof *t->mat_start);
+    if (!last || !t->mat_start) {
+        rtpi_free(&t->alloc, last);
+        return RTP_ERR_NOMEM;
+    }
+    for (k = 0; k < nm; k++)
+        last[k] = 0xffffffffu;
+    for (k = 0; k < ns; k++)
+        for (n = (size_t)t->start[k]; n < (size_t)t->start[k + 1]; n++) {
+            uint32_t m = rtpi_prim_material(s, t->nodes[n].prim);
+            if (last[m] != (uint32_t)k) {
+                last[m] = (uint32_t)k;
+                t->mat_start[m + 1]++;
+                total++;
+            }
+        }
+    for (k = 0; k < nm; k++)
+        t->mat_start[k + 1] += t->mat_start[k];
+    t->mat_samples = (uint32_t *)rtpi_malloc_array(&t->alloc, total ? total : 1,
+                                                   sizeof *t->mat_samples);
+    fill = (uint32_t *)rtpi_malloc_array(&t->alloc, nm ? nm : 1, sizeof *fill);
+    if (!t->mat_samples || !fill) {
+        rtpi_free(&t->alloc, last);
+        rtpi_free(&t->alloc, fill);
+        return RTP_ERR_NOMEM;
+    }
+    for (k = 0; k < nm; k++) {
+        last[k] = 0xffffffffu;
+        fill[k] = t->mat_start[k];
+    }
+    for (k = 0; k < ns; k++)
+        for (n = (size_t)t->start[k]; n < (size_t)t->start[k + 1]; n++) {
+            uint32_t m = rtpi_prim_material(s, t->nodes[n].prim);
+            if (last[m] != (uint32_t)k) {
+                last[m] = (uint32_t)k;
+                t->mat_samples[fill[m]++] = (uint32_t)k;
+            }
+        }
+    rtpi_free(&t->alloc, last);
+    rtpi_free(&t->alloc, fill);
+    return RTP_OK;
+}
+
+/* Does a material edit change step 1 (terms), or only step 2? */
+static int terms_changed(const rtpi_material *a, const rtpi_material *b)
+{
+    return a->shine != b->shine || a->tex != b->tex || a->tex_scale != b->tex_scale ||
+           a->tex_image != b->tex_image;
+}
+
+static int coeffs_changed(const rtpi_material *a, const rtpi_material *b)
+{
+    return terms_changed(a, b) || a->kd != b->kd || a->ks != b->ks || a->kt != b->kt ||
+           memcmp(a->color, b->color, sizeof a->color) != 0 ||
+           memcmp(a->color2, b->color2, sizeof a->color2) != 0;
 }
 
 static double seconds_now(void)
@@ -343,70 +481,187 @@ static double seconds_now(void)
     return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
 
+/* Drops the caches (after a failure, or when the lights change in number). */
+static void drop_caches(rtp_tree *t)
+{
+    rtpi_free(&t->alloc, t->ev_terms);
+    rtpi_free(&t->alloc, t->ev_coeffs);
+    rtpi_free(&t->alloc, t->ev_pos);
+    rtpi_free(&t->alloc, t->ev_mats);
+    t->ev_terms = NULL;
+    t->ev_coeffs = NULL;
+    t->ev_pos = NULL;
+    t->ev_mats = NULL;
+    t->ev_valid = 0;
+}
+
 rtp_status rtp_tree_eval(rtp_tree *t, const rtp_eval_options *opt, rtp_image **out,
                          rtp_eval_stats *stats, rtp_error *err)
 {
-    eval_ctx e;
+    rtpi_shade_ctx shade;
+    eval_ctx e[RTPI_MAX_THREADS];
     void *ctx[RTPI_MAX_THREADS];
     rtp_image *img = NULL;
     rtp_eval_stats st;
-    int i, nthreads = opt && opt->threads > 1 ? opt->threads : 1, any_moved = 0;
-    rtp_status rs;
-    size_t l;
+    rtp_scene *s;
+    int i, nthreads = opt && opt->threads > 1 ? opt->threads : 1, any_moved = 0, full;
+    int cached, mode, res;
+    rtp_status rs = RTP_OK;
+    size_t l, nl, ns, m;
+    double *cl = NULL;
+    float *samples = NULL;
     double t0 = seconds_now(), t1;
+    const uint32_t *vis;
     if (!t || !out)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_eval: NULL argument");
     *out = NULL;
     memset(&st, 0, sizeof st);
+    s = t->scene;
+    nl = s->nlights;
+    ns = (size_t)t->nx * t->ny;
     if (nthreads > RTPI_MAX_THREADS)
         nthreads = RTPI_MAX_THREADS;
     if (opt && ((unsigned)opt->shadows > RTP_SHADOWS_OSMESA || opt->shadow_res < 0 ||
                 opt->shadow_res > 16384))
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
                           "invalid shadow mode or resolution (1..16384)");
-    memset(&e, 0, sizeof e);
-    e.t = t;
-    e.shade.s = t->scene;
-    e.shade.one_sided = t->spd;
-    e.shade.vis_words = t->vis_words;
-    e.vis = t->vis_words ? t->vis_ext : NULL;
-    for (l = 0; l < t->scene->nlights; l++)
+    mode = opt ? (int)opt->shadows : 0;
+    res = opt && opt->shadow_res > 0 ? opt->shadow_res : 1024;
+    memset(&shade, 0, sizeof shade);
+    shade.s = s;
+    shade.one_sided = t->spd;
+    shade.vis_words = t->vis_words;
+    vis = t->vis_words ? t->vis_ext : NULL;
+    for (l = 0; l < nl; l++)
         any_moved |= light_moved(t, l);
     if (any_moved) {
         rs = update_visibility(t, opt, &st, err);
         if (rs != RTP_OK)
             return rs;
-        e.shade.vis_words = t->cur_words;
-        e.vis = t->cur_vis;
+        shade.vis_words = t->cur_words;
+        vis = t->cur_vis;
     }
     t1 = seconds_now();
+
+    /* What the caches hold versus what is asked now. */
+    cached = nl <= EV_MAX_LIGHTS;
+    if (t->ev_valid && t->ev_nlights != nl)
+        drop_caches(t);
+    if (cached && !t->ev_terms) {
+        t->ev_terms = (float *)rtpi_malloc_array(&t->alloc, t->nnodes * RTPI_TERMS(nl) + 1,
+                                                 sizeof *t->ev_terms);
+        t->ev_coeffs = (float *)rtpi_malloc_array(&t->alloc, ns * RTPI_COEFFS(nl),
+                                                  sizeof *t->ev_coeffs);
+        t->ev_pos = (double *)rtpi_malloc_array(&t->alloc, 3 * nl + 1, sizeof *t->ev_pos);
+        t->ev_mats = (rtpi_material *)rtpi_malloc_array(&t->alloc, s->nmats + 1,
+                                                        sizeof *t->ev_mats);
+        if (!t->ev_terms || !t->ev_coeffs || !t->ev_pos || !t->ev_mats)
+            drop_caches(t), cached = 0; /* evaluate without caches */
+        t->ev_valid = 0;
+    }
+    if (cached && !t->mat_start && build_material_lists(t) != RTP_OK)
+        return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+    full = !cached || !t->ev_valid;
+    if (cached && !full)
+        for (l = 0; l < nl && !full; l++)
+            full = memcmp(t->ev_pos + 3 * l, s->lights[l].pos, sizeof s->lights[l].pos) != 0 ||
+                   (light_moved(t, l) && (t->ev_vis_mode != mode || t->ev_vis_res != res));
+
+    cl = (double *)rtpi_malloc_array(&t->alloc, 3 * nl + 1, sizeof *cl);
     rs = rtp_image_create(t->width, t->height, &t->alloc, &img, err);
-    if (rs != RTP_OK)
-        return rs;
-    e.eye = v3(t->scene->camera.from[0], t->scene->camera.from[1], t->scene->camera.from[2]);
-    if (t->spd) {
-        e.samples = (float *)rtpi_malloc_array(&t->alloc, (size_t)t->nx * t->ny,
-                                               3 * sizeof(float));
-        if (!e.samples) {
-            rtp_image_destroy(img);
-            return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
-        }
-    } else {
-        e.samples = img->pixels;
+    if (rs != RTP_OK || !cl) {
+        rtpi_free(&t->alloc, cl);
+        rtp_image_destroy(img);
+        return rs != RTP_OK ? rs : rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+    }
+    rtpi_light_colors(s, cl);
+    samples = t->spd ? (float *)rtpi_malloc_array(&t->alloc, ns, 3 * sizeof(float)) : img->pixels;
+    memset(e, 0, sizeof e[0] * (size_t)nthreads);
+    for (i = 0; i < nthreads; i++) {
+        e[i].t = t;
+        e[i].shade = &shade;
+        e[i].vis = vis;
+        e[i].eye = v3(s->camera.from[0], s->camera.from[1], s->camera.from[2]);
+        e[i].cl = cl;
+        e[i].samples = samples;
+        e[i].cached = cached;
+        e[i].coeffs = (float *)rtpi_malloc_array(&t->alloc, RTPI_COEFFS(nl), sizeof(float));
+        e[i].acc = (double *)rtpi_malloc_array(&t->alloc, RTPI_COEFFS(nl), sizeof(double));
+        if (!e[i].coeffs || !e[i].acc)
+            e[i].nomem = 1;
+        ctx[i] = &e[i];
+    }
+    if (!samples || e[0].nomem || (nthreads > 1 && e[nthreads - 1].nomem)) {
+        rs = rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+        goto done;
     }
     for (i = 0; i < nthreads; i++)
-        ctx[i] = &e; /* shading keeps no per-thread state */
-    rtpi_parallel_rows(t->ny, nthreads, ctx, eval_row, opt ? opt->progress : NULL,
-                       opt ? opt->progress_user : NULL);
-    if (t->spd) {
-        rtpi_resolve_samples(e.samples, 1, img);
-        rtpi_free(&t->alloc, e.samples);
+        if (e[i].nomem) {
+            rs = rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+            goto done;
+        }
+
+    if (full) {
+        /* every step for every sample */
+        rtpi_parallel_rows(t->ny, nthreads, ctx, eval_row, opt ? opt->progress : NULL,
+                           opt ? opt->progress_user : NULL);
+        st.samples = ns;
+    } else {
+        /* steps 1-2 only for samples containing an edited material */
+        for (m = 0; m < s->nmats; m++) {
+            int redo;
+            size_t n;
+            if (!coeffs_changed(&s->mats[m], &t->ev_mats[m]))
+                continue;
+            redo = terms_changed(&s->mats[m], &t->ev_mats[m]);
+            n = t->mat_start[m + 1] - t->mat_start[m];
+            for (i = 0; i < nthreads; i++) {
+                e[i].list = t->mat_samples + t->mat_start[m];
+                e[i].nlist = n;
+                e[i].chunk = 256;
+                e[i].redo_terms = redo;
+            }
+            rtpi_parallel_rows((int)((n + 255) / 256), nthreads, ctx, redo_chunk, NULL, NULL);
+            st.samples += n;
+        }
+        /* step 3 for every sample */
+        rtpi_parallel_rows(t->ny, nthreads, ctx, combine_row, NULL, NULL);
+    }
+    for (i = 0; i < nthreads; i++)
+        if (e[i].nomem) {
+            rs = rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+            goto done;
+        }
+    if (cached) {
+        memcpy(t->ev_mats, s->mats, s->nmats * sizeof *t->ev_mats);
+        for (l = 0; l < nl; l++)
+            memcpy(t->ev_pos + 3 * l, s->lights[l].pos, sizeof s->lights[l].pos);
+        t->ev_nlights = nl;
+        t->ev_vis_mode = mode;
+        t->ev_vis_res = res;
+        t->ev_valid = 1;
+    }
+    if (t->spd)
+        rtpi_resolve_samples(samples, 1, img);
+done:
+    for (i = 0; i < nthreads; i++) {
+        rtpi_free(&t->alloc, e[i].terms);
+        rtpi_free(&t->alloc, e[i].coeffs);
+        rtpi_free(&t->alloc, e[i].acc);
+    }
+    if (t->spd)
+        rtpi_free(&t->alloc, samples);
+    rtpi_free(&t->alloc, cl);
+    if (rs != RTP_OK) {
+        /* a half-made cache must not be trusted next time */
+        t->ev_valid = 0;
+        rtp_image_destroy(img);
+        return rs;
     }
     if (stats) {
         *stats = st;
         stats->seconds = seconds_now() - t0;
         stats->shadow_seconds = t1 - t0;
-        stats->samples = (unsigned long long)t->nx * (unsigned long long)t->ny;
         stats->nodes = t->nnodes;
     }
     *out = img;

@@ -215,20 +215,156 @@ static void test_refused_edits(void)
     if (t) {
         /* material 0 (floor) has ks 0, kt 0; material 3 is glass */
         CHECK(s->mats[0].ks == 0.0f && s->mats[3].kt > 0.0f);
-        CHECK(rtp_tree_set(t, "light.0.pos", "1,2,3", &err) == RTP_ERR_UNSUPPORTED);
-        CHECK(strstr(err.message, "trace again") != NULL);
         CHECK(rtp_tree_set(t, "mat.0.ks", "0.5", &err) == RTP_ERR_UNSUPPORTED);
+        CHECK(strstr(err.message, "trace again") != NULL);
         CHECK(rtp_tree_set(t, "mat.0.kt", "0.5", &err) == RTP_ERR_UNSUPPORTED);
         CHECK(rtp_tree_set(t, "mat.3.ior", "1.9", &err) == RTP_ERR_UNSUPPORTED);
         CHECK(rtp_tree_set(t, "mat.99.kd", "1", &err) == RTP_ERR_KEY);
         CHECK(rtp_tree_set(t, "mat.0.kd", "abc", &err) == RTP_ERR_PARSE);
         CHECK(rtp_tree_eval(t, NULL, &b, NULL, NULL) == RTP_OK);
         CHECK(same_image(a, b));
-        for (i = 0; i < t->scene->nlights; i++)
-            CHECK(t->scene->lights[i].pos[0] == s->lights[i].pos[0]);
+        for (i = 0; i < t->scene->nmats; i++)
+            CHECK(t->scene->mats[i].ks == s->mats[i].ks && t->scene->mats[i].ior == s->mats[i].ior);
     }
     rtp_image_destroy(a);
     rtp_image_destroy(b);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+}
+
+/* A moved or added light, re-evaluated with the given shadow mode, against
+   a full trace of the scene with the light there. */
+static double moved_light_error(const char *scene, const char *key, const char *value,
+                                const double *add, rtp_shadow_mode mode, int spd)
+{
+    rtp_scene *s = load(scene);
+    rtp_tree *t = NULL;
+    rtp_image *re = NULL, *full = NULL, *again = NULL;
+    rtp_trace_options o;
+    rtp_eval_options eo;
+    rtp_diff_stats d;
+    rtp_error err;
+    double e = HUGE_VAL;
+    if (!s)
+        return e;
+    memset(&o, 0, sizeof o);
+    memset(&eo, 0, sizeof eo);
+    o.width = 56;
+    o.height = 44;
+    o.spd = spd;
+    eo.shadows = mode;
+    eo.threads = 2;
+    if (rtp_record(s, &o, &t, NULL, NULL, &err) != RTP_OK)
+        goto out;
+    /* evaluate once before the move so the caches exist */
+    if (rtp_tree_eval(t, &eo, &again, NULL, &err) != RTP_OK)
+        goto out;
+    if (key && (rtp_tree_set(t, key, value, &err) != RTP_OK ||
+                rtp_scene_set(s, key, value, &err) != RTP_OK))
+        goto out;
+    if (add) {
+        rtpi_light l;
+        memset(&l, 0, sizeof l);
+        l.pos[0] = add[0];
+        l.pos[1] = add[1];
+        l.pos[2] = add[2];
+        l.color[0] = l.color[1] = l.color[2] = 1.0f;
+        l.on = 1;
+        if (rtp_tree_add_light(t, add, &err) != RTP_OK || rtpi_scene_add_light(s, &l) < 0)
+            goto out;
+    }
+    if (rtp_tree_eval(t, &eo, &re, NULL, &err) != RTP_OK ||
+        rtp_trace(s, &o, &full, NULL, &err) != RTP_OK ||
+        rtp_image_diff(re, full, 1e-6, &d, &err) != RTP_OK)
+        goto out;
+    e = d.max_abs;
+out:
+    if (e == HUGE_VAL) {
+        char buf[600];
+        fprintf(stderr, "%s: %s\n", scene, rtp_error_format(&err, buf, sizeof buf));
+    }
+    rtp_image_destroy(re);
+    rtp_image_destroy(again);
+    rtp_image_destroy(full);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+    return e;
+}
+
+static void test_moved_light_exact(void)
+{
+    static const double add[3] = {-2.5, -3.0, 4.0};
+    double e;
+    e = moved_light_error("scenes/spheres.nff", "light.key.pos", "3,-6,5", NULL,
+                          RTP_SHADOWS_EXACT, 0);
+    CHECK_MSG(e <= 1e-6, "spheres: %g", e);
+    e = moved_light_error("scenes/prims.nff", "light.0.pos", "-2,-4,6", NULL,
+                          RTP_SHADOWS_EXACT, 0);
+    CHECK_MSG(e <= 1e-6, "prims: %g", e);
+    e = moved_light_error("scenes/prims.nff", "light.0.pos", "1,-3,2", NULL,
+                          RTP_SHADOWS_EXACT, 1);
+    CHECK_MSG(e <= 1e-6, "prims spd: %g", e);
+    e = moved_light_error("scenes/spheres.nff", NULL, NULL, add, RTP_SHADOWS_EXACT, 0);
+    CHECK_MSG(e <= 1e-6, "added light: %g", e);
+}
+
+static void test_moved_light_small_spd(void)
+{
+    static const char *const names[] = {"balls_s1", "gears_s1", "mount_s2", "rings_s1",
+                                        "teapot_s2", "tetra_s3", "tree_s3", "lattice_s1"};
+    const char *dir = check_shared_scenes();
+    char path[512];
+    size_t i;
+    if (!dir)
+        SKIP("../shared/scenes absent: small SPD scenes not checked");
+    for (i = 0; i < sizeof names / sizeof *names; i++) {
+        double e;
+        snprintf(path, sizeof path, "%s/spd/%s.nff", dir, names[i]);
+        e = moved_light_error(path, "light.0.pos", "1.5,-2.5,4", NULL, RTP_SHADOWS_EXACT, 0);
+        CHECK_MSG(e <= 1e-6, "%s: %g", names[i], e);
+    }
+}
+
+/* Editing materials, lights and the ambient one after another on one tree
+   (caches in play) equals a full trace of the final scene. */
+static void test_edit_sequence(void)
+{
+    static const char *const seq[][2] = {
+        {"light.0.color", "0.2,0.4,1"}, {"mat.red.kd", "0.3"},  {"mat.glass.kt", "0.5"},
+        {"ambient", "0.2"},             {"mat.mirror.shine", "5"}, {"light.1.on", "0"},
+        {"light.key.pos", "2,-5,6"},    {"mat.floor.color", "0.1,0.5,0.1"},
+        {"mat.floor.checker", "1"},     {"mat.floor.checker_scale", "0.8"},
+        {"background", "0.5,0.5,0"},    {"light.key.pos", "-4,-5,8"},
+    };
+    rtp_scene *s = load("scenes/spheres.nff");
+    rtp_tree *t = NULL;
+    rtp_trace_options o;
+    rtp_eval_options eo;
+    size_t i;
+    if (!s) {
+        CHECK(s != NULL);
+        return;
+    }
+    memset(&o, 0, sizeof o);
+    memset(&eo, 0, sizeof eo);
+    o.width = 40;
+    o.height = 30;
+    eo.threads = 2;
+    CHECK(rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
+    for (i = 0; t && i < sizeof seq / sizeof *seq; i++) {
+        rtp_image *re = NULL, *full = NULL;
+        rtp_diff_stats d;
+        CHECK(rtp_tree_set(t, seq[i][0], seq[i][1], NULL) == RTP_OK);
+        CHECK(rtp_scene_set(s, seq[i][0], seq[i][1], NULL) == RTP_OK);
+        if (rtp_tree_eval(t, &eo, &re, NULL, NULL) == RTP_OK &&
+            rtp_trace(s, &o, &full, NULL, NULL) == RTP_OK &&
+            rtp_image_diff(re, full, 1e-6, &d, NULL) == RTP_OK)
+            CHECK_MSG(d.max_abs <= 1e-6, "after %s=%s: %g", seq[i][0], seq[i][1], d.max_abs);
+        else
+            CHECK(0);
+        rtp_image_destroy(re);
+        rtp_image_destroy(full);
+    }
     rtp_tree_destroy(t);
     rtp_scene_destroy(s);
 }
@@ -376,6 +512,9 @@ int main(void)
     RUN(test_identical_small_spd);
     RUN(test_class_a_edits);
     RUN(test_refused_edits);
+    RUN(test_moved_light_exact);
+    RUN(test_moved_light_small_spd);
+    RUN(test_edit_sequence);
     RUN(test_truncated_every_length);
     RUN(test_flipped_bits);
     RUN(test_newer_version_and_foreign);

@@ -1,0 +1,146 @@
+/*
+ * dircube.h — direction cubes around a point light (the paper's 4.1-4.3),
+ * shared by shadow.c, osmesa.c and the tests.
+ *
+ * A direction q (from the light) belongs to face f = 2*a + (q[a] < 0) of
+ * the axis a where |q[a]| is largest (ties go to the lower axis).  On face
+ * f the local coordinates of q are x = q[(a+1)%3], y = q[(a+2)%3],
+ * z = +-q[a] (z > 0: the depth along the face's axis), and the face
+ * coordinates u = x/z, v = y/z run over [-1, 1].  Cell (i, j) of a face
+ * with res cells per edge covers u in [-1 + 2i/res, -1 + 2(i+1)/res] and v
+ * likewise with j; its index in a cube's arrays is (f*res + j)*res + i.
+ * OpenGL's viewport with the same face frame puts pixel (i, j) at the same
+ * place, so the OSMesa backend fills the very same layout.
+ *
+ * Two structures live on the cube:
+ *  - the light buffer: per cell the primitives whose conservative
+ *    projection touches it, in ascending order of a lower bound of their
+ *    distance from the light; a shadow ray is tested against its cell's
+ *    list only, with the same intersection routine the kd-tree uses, so
+ *    the answer equals the kd-tree's;
+ *  - the item buffer: per cell the nearest occluding primitive along the
+ *    ray through the cell's centre, and its depth z.
+ * Both are immutable once built: queries may run on many threads.
+ */
+#ifndef RTP_DIRCUBE_H
+#define RTP_DIRCUBE_H
+
+#include "internal.h"
+
+#define RTPI_DC_DEFAULT_RES 1024
+#define RTPI_DC_MAX_RES 8192
+
+/* The cell index along one face edge for face coordinate u; NaN and
+   values outside [-1, 1] are clamped to the edge cells. */
+static inline int rtpi_dc_coord(double u, int res)
+{
+    double x = (u + 1.0) * 0.5 * (double)res;
+    if (!(x > 0.0))
+        return 0;
+    if (!(x < (double)res))
+        return res - 1;
+    return (int)x;
+}
+
+/* The cell of direction d (from the light; any length). */
+static inline size_t rtpi_dc_cell(int res, rtpi_v3 d)
+{
+    double c[3];
+    double ax, ay, az, m, inv;
+    int a, f, i, j;
+    c[0] = d.x;
+    c[1] = d.y;
+    c[2] = d.z;
+    ax = fabs(c[0]);
+    ay = fabs(c[1]);
+    az = fabs(c[2]);
+    a = ax >= ay ? (ax >= az ? 0 : 2) : (ay >= az ? 1 : 2);
+    m = fabs(c[a]);
+    f = 2 * a + (c[a] < 0.0);
+    /* |c[other]| <= m, so u and v land in [-1, 1] exactly: a direction on
+       a cube edge or corner maps to this face's edge cell. */
+    inv = m > 0.0 ? 1.0 / m : 0.0;
+    i = rtpi_dc_coord(c[(a + 1) % 3] * inv, res);
+    j = rtpi_dc_coord(c[(a + 2) % 3] * inv, res);
+    return ((size_t)f * (size_t)res + (size_t)j) * (size_t)res + (size_t)i;
+}
+
+/* Depth of q (from the light) along the axis of the face holding cell. */
+static inline double rtpi_dc_depth(int res, size_t cell, rtpi_v3 q)
+{
+    int f = (int)(cell / ((size_t)res * (size_t)res));
+    double z = v3_get(q, f >> 1);
+    return (f & 1) ? -z : z;
+}
+
+/* World direction of local (x, y, z) on face f. */
+static inline rtpi_v3 rtpi_dc_world(int f, double x, double y, double z)
+{
+    double c[3];
+    int a = f >> 1;
+    c[(a + 1) % 3] = x;
+    c[(a + 2) % 3] = y;
+    c[a] = (f & 1) ? -z : z;
+    return v3(c[0], c[1], c[2]);
+}
+
+/* ------------------------------------------------------- light buffer */
+
+typedef struct rtpi_lb_cand {
+    double near;   /* lower bound of the primitive's distance from the light */
+    uint32_t prim;
+} rtpi_lb_cand;
+
+typedef struct rtpi_lightbuf {
+    int res;
+    rtpi_v3 light;
+    double slack;        /* absolute slack of the early stop (see build) */
+    uint32_t *off;       /* 6 res^2 + 1 list starts into ref */
+    uint32_t *ref;       /* candidate ranks, ascending within a cell */
+    rtpi_lb_cand *cand;  /* by rank: ascending near */
+    size_t nrefs, ncand;
+} rtpi_lightbuf;
+
+rtp_status rtpi_lightbuf_build(const rtp_scene *s, rtpi_v3 light, int res,
+                               const rtp_allocator *a, rtpi_lightbuf *lb,
+                               rtp_error *err);
+/* 1 when no candidate of ray's cell hits ray in [tmin, tmax]; ray must run
+   towards the light (rtpi_shadow_ray). */
+int rtpi_lightbuf_visible(const rtpi_lightbuf *lb, const rtp_scene *s,
+                          const rtpi_ray *ray);
+void rtpi_lightbuf_free(rtpi_lightbuf *lb, const rtp_allocator *a);
+
+/* -------------------------------------------------------- item buffer */
+
+typedef struct rtpi_itembuf {
+    int res;
+    rtpi_v3 light;
+    double cell_angle;   /* bound of the angle between a direction and
+                            the centre of its cell, radians */
+    uint32_t *id;        /* nearest occluder per cell, RTPI_NONE: none */
+    float *z;            /* its depth along the face axis */
+} rtpi_itembuf;
+
+/* The software scanline z-buffer. */
+rtp_status rtpi_itembuf_build(const rtp_scene *s, rtpi_v3 light, int res,
+                              const rtp_allocator *a, rtpi_itembuf *ib,
+                              rtp_error *err);
+/* The same buffer drawn by OSMesa (osmesa.c); RTP_ERR_UNSUPPORTED in
+   builds without it. */
+rtp_status rtpi_itembuf_build_osmesa(const rtp_scene *s, rtpi_v3 light,
+                                     int res, const rtp_allocator *a,
+                                     rtpi_itembuf *ib, rtp_error *err);
+/* Allocates the arrays, all cells empty (used by both builders). */
+rtp_status rtpi_itembuf_alloc(rtpi_itembuf *ib, rtpi_v3 light, int res,
+                              const rtp_allocator *a, rtp_error *err);
+/* The item-buffer decision for the hit at p on prim with shadow-ray
+   origin o (see dircube.c for the rule). */
+int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
+                         rtpi_v3 p, rtpi_v3 o, uint32_t prim);
+void rtpi_itembuf_free(rtpi_itembuf *ib, const rtp_allocator *a);
+
+/* Whether a primitive is rendered into the item buffer from light L:
+   inside-only spheres around the light occlude nothing and are left out. */
+int rtpi_itembuf_renders(const rtp_scene *s, uint32_t prim, rtpi_v3 L);
+
+#endif /* RTP_DIRCUBE_H */
