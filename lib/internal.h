@@ -249,6 +249,10 @@ typedef struct rtpi_surface {
 
 void rtpi_surface_at(const rtp_scene *s, const rtpi_ray *ray,
                      const rtpi_hit *hit, rtpi_surface *out);
+/* The same; want_uv 0 leaves uv at 0,0 (saves the trigonometry where no
+   image texture needs it). */
+void rtpi_surface_at_ex(const rtp_scene *s, const rtpi_ray *ray,
+                        const rtpi_hit *hit, int want_uv, rtpi_surface *out);
 
 /* A ray origin for a ray leaving surface point p, moved off the surface
    along the geometric normal ng (unit) to the side `side` (+1: the side ng
@@ -364,9 +368,10 @@ void rtpi_combine(const rtp_scene *s, const double *cl, const float *coeffs,
                   float rgb[3]);
 void rtpi_light_colors(const rtp_scene *s, double *cl);
 
-/* Surface data at a recorded hit position (normals, uv, material). */
+/* Surface data at a recorded hit position (normals, material, and uv when
+   want_uv). */
 void rtpi_surface_from_point(const rtp_scene *s, uint32_t prim, rtpi_v3 p,
-                             rtpi_surface *out);
+                             int want_uv, rtpi_surface *out);
 
 /* The texture's part of c_obj at p/uv: for an image texture the image's
    colour (c_obj = colour * it), for a checker 1 in colour cells and 0 in

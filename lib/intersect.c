@@ -196,6 +196,12 @@ static double wrap01(double x)
 void rtpi_surface_at(const rtp_scene *s, const rtpi_ray *ray,
                      const rtpi_hit *hit, rtpi_surface *out)
 {
+    rtpi_surface_at_ex(s, ray, hit, 1, out);
+}
+
+void rtpi_surface_at_ex(const rtp_scene *s, const rtpi_ray *ray,
+                        const rtpi_hit *hit, int want_uv, rtpi_surface *out)
+{
     size_t i = hit->prim;
     out->p = v3_madd(ray->o, ray->d, hit->t);
     out->uv[0] = out->uv[1] = 0.0;
@@ -224,7 +230,7 @@ void rtpi_surface_at(const rtp_scene *s, const rtpi_ray *ray,
             if (v3_dot(n, n) > 0.0)
                 out->ns = v3_norm(n);
         }
-        if (tr->t[0] != RTPI_NONE && tr->t[1] != RTPI_NONE &&
+        if (want_uv && tr->t[0] != RTPI_NONE && tr->t[1] != RTPI_NONE &&
             tr->t[2] != RTPI_NONE) {
             const float *t0 = s->uv + 2 * (size_t)tr->t[0];
             const float *t1 = s->uv + 2 * (size_t)tr->t[1];
@@ -239,9 +245,11 @@ void rtpi_surface_at(const rtp_scene *s, const rtpi_ray *ray,
         rtpi_v3 n = v3_norm(v3_sub(out->p, v3_from_f(sp->c)));
         out->mat = sp->mat;
         /* Longitude around z from +x, latitude from -z (0) to +z (1). */
-        out->uv[0] = wrap01(atan2(n.y, n.x) / (2.0 * RTPI_PI));
-        out->uv[1] = 0.5 + asin(n.z < -1.0 ? -1.0 : n.z > 1.0 ? 1.0 : n.z) /
-                               RTPI_PI;
+        if (want_uv) {
+            out->uv[0] = wrap01(atan2(n.y, n.x) / (2.0 * RTPI_PI));
+            out->uv[1] = 0.5 + asin(n.z < -1.0 ? -1.0 : n.z > 1.0 ? 1.0 : n.z) /
+                                   RTPI_PI;
+        }
         if (sp->r < 0.0f)
             n = v3_mul(n, -1.0); /* inside-only: the visible side faces in */
         out->ng = out->ns = n;
@@ -269,9 +277,11 @@ void rtpi_surface_at(const rtp_scene *s, const rtpi_ray *ray,
         /* Gradient of |q|^2 - (rb + k h)^2 on the surface, outward. */
         n = v3_norm(v3_madd(q, cf.w, -cf.k));
         out->ng = out->ns = n;
-        out->uv[0] = wrap01(atan2(v3_dot(q, e2), v3_dot(q, e1)) /
-                            (2.0 * RTPI_PI));
-        out->uv[1] = h / cf.h < 0.0 ? 0.0 : h / cf.h > 1.0 ? 1.0 : h / cf.h;
+        if (want_uv) {
+            out->uv[0] = wrap01(atan2(v3_dot(q, e2), v3_dot(q, e1)) /
+                                (2.0 * RTPI_PI));
+            out->uv[1] = h / cf.h < 0.0 ? 0.0 : h / cf.h > 1.0 ? 1.0 : h / cf.h;
+        }
         return;
     }
     out->ng = out->ns = v3(0.0, 0.0, 1.0);

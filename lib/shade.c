@@ -61,7 +61,7 @@ void rtpi_texture_factor(const rtp_scene *s, const rtpi_material *m, rtpi_v3 p,
 }
 
 void rtpi_surface_from_point(const rtp_scene *s, uint32_t prim, rtpi_v3 p,
-                             rtpi_surface *out)
+                             int want_uv, rtpi_surface *out)
 {
     rtpi_ray ray;
     rtpi_hit hit;
@@ -70,7 +70,7 @@ void rtpi_surface_from_point(const rtp_scene *s, uint32_t prim, rtpi_v3 p,
     hit.u = hit.v = 0.0;
     if (prim < s->ntris) {
         const rtpi_tri *t = &s->tris[prim];
-        if (t->n[0] != RTPI_NONE || t->t[0] != RTPI_NONE) {
+        if (t->n[0] != RTPI_NONE || (want_uv && t->t[0] != RTPI_NONE)) {
             /* Barycentrics of p, only where normals or uvs need them. */
             rtpi_v3 p0 = v3_from_f(s->pos + 3 * (size_t)t->v[0]);
             rtpi_v3 e1 = v3_sub(v3_from_f(s->pos + 3 * (size_t)t->v[1]), p0);
@@ -89,7 +89,7 @@ void rtpi_surface_from_point(const rtp_scene *s, uint32_t prim, rtpi_v3 p,
     ray.d = v3(0.0, 0.0, 1.0);
     ray.tmin = 0.0;
     ray.tmax = 0.0;
-    rtpi_surface_at(s, &ray, &hit, out);
+    rtpi_surface_at_ex(s, &ray, &hit, want_uv, out);
 }
 
 static int seen(const rtpi_cnode *nd, const uint32_t *ext, size_t i)
@@ -113,8 +113,8 @@ static void terms_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t 
     rtpi_v3 p = v3(nd->p[0], nd->p[1], nd->p[2]), n, v;
     double tex[3];
 
-    rtpi_surface_from_point(s, nd->prim, p, &sf);
-    m = &s->mats[sf.mat];
+    m = &s->mats[rtpi_prim_material(s, nd->prim)];
+    rtpi_surface_from_point(s, nd->prim, p, m->tex == RTPI_TEX_IMAGE, &sf);
     n = sf.ns;
     if ((nd->link & RTPI_L_BACK) && rtpi_two_sided(s, c->one_sided, nd->prim, m))
         n = v3_mul(n, -1.0);
@@ -137,7 +137,9 @@ static void terms_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t 
         /* r_i: l mirrored about n; the highlight is (r_i.v)^shine. */
         rv = v3_dot(v3_sub(v3_mul(n, 2.0 * ndl), l), v);
         t[3 + 2 * i] = (float)ndl;
-        t[4 + 2 * i] = rv > 0.0 ? (float)pow(rv, m->shine) : 0.0f;
+        /* no highlight to weigh where ks is 0 (an edit making it non-zero
+           recomputes these terms) */
+        t[4 + 2 * i] = rv > 0.0 && m->ks > 0.0f ? (float)pow(rv, m->shine) : 0.0f;
     }
     if (nd->link & RTPI_L_REFL)
         terms_node(c, nodes, idx + 1, vis_ext, p, terms);

@@ -168,7 +168,7 @@ static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
            with the surface derived from it exactly as shading derives it,
            so a re-evaluation that casts rays again casts these very rays. */
         rtpi_v3 pe = v3_madd(ray->o, ray->d, hit.t);
-        rtpi_surface_from_point(s, hit.prim, v3((float)pe.x, (float)pe.y, (float)pe.z), &sf);
+        rtpi_surface_from_point(s, hit.prim, v3((float)pe.x, (float)pe.y, (float)pe.z), 0, &sf);
     }
     m = &s->mats[sf.mat];
     ng = sf.ng;

@@ -207,7 +207,7 @@ static int vis_row(void *ctx, int y)
         rtpi_surface sf;
         rtpi_v3 ng, ns, o;
         uint32_t *w = &t->cur_vis[n * words + wi];
-        rtpi_surface_from_point(s, nd->prim, v3(nd->p[0], nd->p[1], nd->p[2]), &sf);
+        rtpi_surface_from_point(s, nd->prim, v3(nd->p[0], nd->p[1], nd->p[2]), 0, &sf);
         ng = sf.ng;
         ns = sf.ns;
         if ((nd->link & RTPI_L_BACK) &&
@@ -464,7 +464,7 @@ static rtp_status build_material_lists(rtp_tree *t)
 static int terms_changed(const rtpi_material *a, const rtpi_material *b)
 {
     return a->shine != b->shine || a->tex != b->tex || a->tex_scale != b->tex_scale ||
-           a->tex_image != b->tex_image;
+           a->tex_image != b->tex_image || (a->ks > 0.0f) != (b->ks > 0.0f);
 }
 
 static int coeffs_changed(const rtpi_material *a, const rtpi_material *b)

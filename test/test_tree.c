@@ -335,6 +335,8 @@ static void test_edit_sequence(void)
         {"light.key.pos", "2,-5,6"},    {"mat.floor.color", "0.1,0.5,0.1"},
         {"mat.floor.checker", "1"},     {"mat.floor.checker_scale", "0.8"},
         {"background", "0.5,0.5,0"},    {"light.key.pos", "-4,-5,8"},
+        {"mat.red.ks", "0"},            {"mat.red.ks", "0.4"},
+        {"mat.floor.checker", "0"},
     };
     rtp_scene *s = load("scenes/spheres.nff");
     rtp_tree *t = NULL;

@@ -1,0 +1,898 @@
+/* dircube.c — the direction cube around a light: conservative projection
+ * of primitives onto its faces, the light buffer (Haines & Greenberg) and
+ * the item buffer drawn by a software scanline z-buffer (see dircube.h).
+ *
+ * Every primitive is reduced, for projection, to a few convex polygons in
+ * light-relative coordinates whose projections cover its own: a triangle
+ * is itself; a sphere seen from outside is the pyramid over a polygon that
+ * circumscribes its cone of directions; a cone or cylinder lies inside the
+ * frustum over two polygons circumscribing its end circles (planar
+ * trapezoid sides, two caps).  Each polygon is clipped to a face's
+ * frustum, projected, and turned into a run of cells per row. */
+#include "dircube.h"
+#include "kdtree.h" /* rtpi_tri_degenerate */
+
+#include <float.h>
+#include <stdlib.h>
+
+#define DC_PI 3.14159265358979323846
+#define DC_N 16              /* sides of the polygons bounding round shapes */
+#define DC_MAXV (DC_N + 8)   /* a convex polygon gains <= 1 vertex per clip */
+#define DC_MAXP (2 + DC_N)   /* polygons per primitive (a cone: caps + sides) */
+
+typedef struct dc_poly {
+    int n;
+    double v[DC_MAXV][3];
+} dc_poly;
+
+typedef struct dc_bounds {
+    int full;   /* may be seen in any direction: every cell */
+    int npoly;
+    dc_poly poly[DC_MAXP];
+} dc_bounds;
+
+/* Receives runs of cells [cell, cell + count) of one face row. */
+typedef void (*dc_emit_fn)(void *user, size_t cell, int count);
+
+typedef struct dc_ctx {
+    const rtp_scene *s;
+    rtpi_v3 L;
+    int res;
+    int *rlo, *rhi; /* per row: first and last cell of the run (scratch) */
+    int jmin, jmax;
+    dc_bounds b;
+} dc_ctx;
+
+/* ------------------------------------------------------ face geometry */
+
+static void dc_local(int f, const double q[3], double out[3])
+{
+    int a = f >> 1;
+    out[0] = q[(a + 1) % 3];
+    out[1] = q[(a + 2) % 3];
+    out[2] = (f & 1) ? -q[a] : q[a];
+}
+
+/* Keeps the part of convex polygon `in` (local coordinates) inside the
+   face's frustum widened to |x|, |y| <= lim z.  Each crossing point is
+   computed from the inside endpoint towards the outside one, so two
+   triangles sharing an edge get the same point.  @return the vertex
+   count, or -1 if the polygon proved not convex (too many vertices). */
+static int dc_clip(const dc_poly *in, dc_poly *out, double lim)
+{
+    dc_poly tmp[2];
+    const dc_poly *src = in;
+    int p, i;
+    for (p = 0; p < 4; p++) {
+        int k = p >> 1, n = src->n, m = 0;
+        double sx = (p & 1) ? -1.0 : 1.0;
+        dc_poly *dst = p == 3 ? out : &tmp[p & 1];
+        for (i = 0; i < n; i++) {
+            const double *P = src->v[i], *Q = src->v[i + 1 < n ? i + 1 : 0];
+            double fp = lim * P[2] - sx * P[k], fq = lim * Q[2] - sx * Q[k];
+            if (m + 2 > DC_MAXV)
+                return -1;
+            if (fp >= 0.0) {
+                memcpy(dst->v[m++], P, sizeof dst->v[0]);
+            }
+            if ((fp >= 0.0) != (fq >= 0.0)) {
+                const double *I = fp >= 0.0 ? P : Q, *O = fp >= 0.0 ? Q : P;
+                double fi = fp >= 0.0 ? fp : fq, fo = fp >= 0.0 ? fq : fp;
+                double t = fi / (fi - fo);
+                dst->v[m][0] = I[0] + (O[0] - I[0]) * t;
+                dst->v[m][1] = I[1] + (O[1] - I[1]) * t;
+                dst->v[m][2] = I[2] + (O[2] - I[2]) * t;
+                m++;
+            }
+        }
+        dst->n = m;
+        if (m == 0) {
+            out->n = 0;
+            return 0;
+        }
+        src = dst;
+    }
+    return out->n;
+}
+
+/* Projects a clipped polygon to face coordinates.  @return 0 when a
+   vertex sits at the light itself (z == 0 after clipping), where the
+   projection is undefined. */
+static int dc_project(const dc_poly *p, double uv[][2])
+{
+    int i;
+    for (i = 0; i < p->n; i++) {
+        double z = p->v[i][2];
+        if (!(z > 0.0))
+            return 0;
+        uv[i][0] = p->v[i][0] / z;
+        uv[i][1] = p->v[i][1] / z;
+    }
+    return 1;
+}
+
+static void dc_rows_reset(dc_ctx *c)
+{
+    c->jmin = c->res;
+    c->jmax = -1;
+}
+
+static void dc_row_add(dc_ctx *c, int j, int i0, int i1)
+{
+    if (j < c->jmin || j > c->jmax) {
+        /* Rows outside the touched range hold stale values: clear them. */
+        int k, lo = j < c->jmin ? j : c->jmax + 1, hi = j > c->jmax ? j : c->jmin - 1;
+        if (c->jmax < c->jmin) {
+            lo = hi = j;
+        }
+        for (k = lo; k <= hi; k++) {
+            c->rlo[k] = c->res;
+            c->rhi[k] = -1;
+        }
+        if (j < c->jmin)
+            c->jmin = j;
+        if (j > c->jmax)
+            c->jmax = j;
+    }
+    if (i0 < c->rlo[j])
+        c->rlo[j] = i0;
+    if (i1 > c->rhi[j])
+        c->rhi[j] = i1;
+}
+
+/* Adds the cells that the convex polygon uv[0..n) grown by m (in face
+   coordinates, both axes) touches: per row, the polygon's extent within
+   the row's slab widened by m, found from the vertices inside the slab
+   and the edges' crossings of its borders. */
+static void dc_spans_conservative(dc_ctx *c, const double uv[][2], int n,
+                                  double m)
+{
+    int res = c->res, j, j0, j1, k;
+    double vmin = uv[0][1], vmax = uv[0][1], cw = 2.0 / (double)res;
+    for (k = 1; k < n; k++) {
+        vmin = uv[k][1] < vmin ? uv[k][1] : vmin;
+        vmax = uv[k][1] > vmax ? uv[k][1] : vmax;
+    }
+    j0 = rtpi_dc_coord(vmin - m, res);
+    j1 = rtpi_dc_coord(vmax + m, res);
+    for (j = j0; j <= j1; j++) {
+        double lo = -1.0 + cw * (double)j - m, hi = -1.0 + cw * (double)(j + 1) + m;
+        double umin = DBL_MAX, umax = -DBL_MAX;
+        for (k = 0; k < n; k++) {
+            const double *P = uv[k], *Q = uv[k + 1 < n ? k + 1 : 0];
+            int e;
+            if (P[1] >= lo && P[1] <= hi) {
+                umin = P[0] < umin ? P[0] : umin;
+                umax = P[0] > umax ? P[0] : umax;
+            }
+            for (e = 0; e < 2; e++) {
+                double b = e ? hi : lo;
+                if ((P[1] < b && Q[1] > b) || (P[1] > b && Q[1] < b)) {
+                    double u = P[0] + (Q[0] - P[0]) * ((b - P[1]) / (Q[1] - P[1]));
+                    umin = u < umin ? u : umin;
+                    umax = u > umax ? u : umax;
+                }
+            }
+        }
+        if (umin <= umax)
+            dc_row_add(c, j, rtpi_dc_coord(umin - m, res), rtpi_dc_coord(umax + m, res));
+    }
+}
+
+static void dc_emit_rows(dc_ctx *c, int f, dc_emit_fn fn, void *user)
+{
+    int j;
+    size_t res = (size_t)c->res;
+    for (j = c->jmin; j <= c->jmax; j++)
+        if (c->rlo[j] <= c->rhi[j])
+            fn(user, ((size_t)f * res + (size_t)j) * res + (size_t)c->rlo[j],
+               c->rhi[j] - c->rlo[j] + 1);
+}
+
+static void dc_emit_face(dc_ctx *c, int f, dc_emit_fn fn, void *user)
+{
+    int j;
+    size_t res = (size_t)c->res;
+    for (j = 0; j < c->res; j++)
+        fn(user, ((size_t)f * res + (size_t)j) * res, c->res);
+}
+
+/* ---------------------------------------------------- bounding polygons */
+
+/* Orthonormal e1, e2 perpendicular to unit n (Duff et al. 2017). */
+static void dc_basis(rtpi_v3 n, rtpi_v3 *e1, rtpi_v3 *e2)
+{
+    double sg = n.z >= 0.0 ? 1.0 : -1.0;
+    double a = -1.0 / (sg + n.z);
+    double b = n.x * n.y * a;
+    *e1 = v3(1.0 + sg * n.x * n.x * a, sg * b, -sg * n.x);
+    *e2 = v3(b, sg + n.y * n.y * a, -n.y);
+}
+
+static void dc_put(double dst[3], rtpi_v3 q)
+{
+    dst[0] = q.x;
+    dst[1] = q.y;
+    dst[2] = q.z;
+}
+
+/* Regular DC_N-gon around centre c (light-relative) across unit axis w,
+   circumscribing the circle of radius r. */
+static void dc_ngon(dc_poly *p, rtpi_v3 c, rtpi_v3 e1, rtpi_v3 e2, double r)
+{
+    int k;
+    double R = r / cos(DC_PI / DC_N);
+    p->n = DC_N;
+    for (k = 0; k < DC_N; k++) {
+        double a = 2.0 * DC_PI * (double)k / DC_N;
+        dc_put(p->v[k], v3_madd(v3_madd(c, e1, R * cos(a)), e2, R * sin(a)));
+    }
+}
+
+/* Can the primitive be hit at all (rtpi_intersect_prim)?  Degenerate
+   triangles, zero spheres and cones without height or radius never are. */
+static int dc_hittable(const rtp_scene *s, uint32_t prim)
+{
+    size_t i = prim;
+    if (i < s->ntris) {
+        const rtpi_tri *t = &s->tris[i];
+        return !rtpi_tri_degenerate(s->pos + 3 * (size_t)t->v[0],
+                                    s->pos + 3 * (size_t)t->v[1],
+                                    s->pos + 3 * (size_t)t->v[2]);
+    }
+    if ((i -= s->ntris) < s->nspheres)
+        return s->spheres[i].r != 0.0f;
+    if ((i -= s->nspheres) < s->ncones) {
+        const rtpi_cone *cn = &s->cones[i];
+        double h = v3_len(v3_sub(v3_from_f(cn->apex), v3_from_f(cn->base)));
+        return h > 0.0 && h < 1e300 && fabs((double)cn->rb) + fabs((double)cn->ra) > 0.0;
+    }
+    return 0;
+}
+
+/* Polygons (light-relative) whose projections from the light cover the
+   primitive's projection widened by the angle `ang`; b->full when that
+   cannot be bounded (the light inside or too close to it). */
+static void dc_bound_prim(dc_ctx *c, uint32_t prim, double ang)
+{
+    const rtp_scene *s = c->s;
+    dc_bounds *b = &c->b;
+    size_t i = prim;
+    b->full = 0;
+    b->npoly = 0;
+    if (i < s->ntris) {
+        const rtpi_tri *t = &s->tris[i];
+        int k;
+        b->npoly = 1;
+        b->poly[0].n = 3;
+        for (k = 0; k < 3; k++)
+            dc_put(b->poly[0].v[k], v3_sub(v3_from_f(s->pos + 3 * (size_t)t->v[k]), c->L));
+        return;
+    }
+    if ((i -= s->ntris) < s->nspheres) {
+        const rtpi_sphere *sp = &s->spheres[i];
+        rtpi_v3 cl = v3_sub(v3_from_f(sp->c), c->L), w, e1, e2;
+        double D = v3_len(cl), r = fabs((double)sp->r), alpha;
+        /* The sphere's directions form a cone of half-angle asin(r/D);
+           past ~89 degrees the bounding pyramid degenerates: take all. */
+        if (!(D > r))
+            goto full;
+        alpha = asin(r / D) + ang;
+        if (!(alpha < 1.55))
+            goto full;
+        w = v3_mul(cl, 1.0 / D);
+        dc_basis(w, &e1, &e2);
+        b->npoly = 1;
+        dc_ngon(&b->poly[0], w, e1, e2, tan(alpha));
+        return;
+    }
+    if ((i -= s->nspheres) < s->ncones) {
+        const rtpi_cone *cn = &s->cones[i];
+        rtpi_v3 base = v3_sub(v3_from_f(cn->base), c->L);
+        rtpi_v3 apex = v3_sub(v3_from_f(cn->apex), c->L);
+        rtpi_v3 w = v3_norm(v3_sub(apex, base)), e1, e2;
+        int k;
+        dc_basis(w, &e1, &e2);
+        dc_ngon(&b->poly[0], base, e1, e2, fabs((double)cn->rb));
+        dc_ngon(&b->poly[1], apex, e1, e2, fabs((double)cn->ra));
+        /* Corresponding edges of the two homothetic polygons are parallel,
+           so each side of their hull is a planar trapezoid. */
+        for (k = 0; k < DC_N; k++) {
+            dc_poly *q = &b->poly[2 + k];
+            int k1 = (k + 1) % DC_N;
+            q->n = 4;
+            memcpy(q->v[0], b->poly[0].v[k], sizeof q->v[0]);
+            memcpy(q->v[1], b->poly[0].v[k1], sizeof q->v[0]);
+            memcpy(q->v[2], b->poly[1].v[k1], sizeof q->v[0]);
+            memcpy(q->v[3], b->poly[1].v[k], sizeof q->v[0]);
+        }
+        b->npoly = 2 + DC_N;
+        return;
+    }
+full:
+    b->full = 1;
+}
+
+/* Emits every cell the primitive's projection widened by `ang` radians
+   may touch.  Face coordinates change by at most ~3x an angle change on
+   a face (du/dtheta <= 1 + u^2 + v^2), so the polygons are grown by 4 ang
+   in face coordinates and clipped to a frustum as much wider: a ray just
+   across a cube edge from the primitive still finds it listed. */
+static void dc_cover(dc_ctx *c, uint32_t prim, double ang, dc_emit_fn fn,
+                     void *user)
+{
+    double m = 4.0 * ang, lim = 1.0 + m;
+    double uv[DC_MAXV][2];
+    int f, k;
+    dc_bound_prim(c, prim, ang);
+    for (f = 0; f < 6; f++) {
+        int whole = c->b.full;
+        dc_rows_reset(c);
+        for (k = 0; k < c->b.npoly && !whole; k++) {
+            dc_poly loc, clipped;
+            int v, n;
+            loc.n = c->b.poly[k].n;
+            for (v = 0; v < loc.n; v++)
+                dc_local(f, c->b.poly[k].v[v], loc.v[v]);
+            n = dc_clip(&loc, &clipped, lim);
+            if (n < 0 || (n > 0 && !dc_project(&clipped, uv)))
+                whole = 1; /* not convex after rounding, or through the light */
+            else if (n > 0)
+                dc_spans_conservative(c, (const double(*)[2])uv, n, m);
+        }
+        if (whole)
+            dc_emit_face(c, f, fn, user);
+        else
+            dc_emit_rows(c, f, fn, user);
+    }
+}
+
+/* Lower bound of the distance from the light to the primitive. */
+static double dc_near(const rtp_scene *s, uint32_t prim, rtpi_v3 L)
+{
+    double lo[3], hi[3], d2 = 0.0, best;
+    size_t i = prim;
+    int k;
+    rtpi_prim_bounds(s, prim, lo, hi);
+    for (k = 0; k < 3; k++) {
+        double x = v3_get(L, k);
+        double e = x < lo[k] ? lo[k] - x : x > hi[k] ? x - hi[k] : 0.0;
+        d2 += e * e;
+    }
+    best = sqrt(d2); /* distance to the bounding box */
+    if (i < s->ntris) {
+        /* A big triangle's box may hold the light: its plane is a bound too. */
+        const rtpi_tri *t = &s->tris[i];
+        rtpi_v3 p0 = v3_from_f(s->pos + 3 * (size_t)t->v[0]);
+        rtpi_v3 n = v3_cross(v3_sub(v3_from_f(s->pos + 3 * (size_t)t->v[1]), p0),
+                             v3_sub(v3_from_f(s->pos + 3 * (size_t)t->v[2]), p0));
+        double nl = v3_len(n);
+        if (nl > 0.0) {
+            double dp = fabs(v3_dot(n, v3_sub(L, p0))) / nl;
+            best = dp > best ? dp : best;
+        }
+    } else if ((i -= s->ntris) < s->nspheres) {
+        const rtpi_sphere *sp = &s->spheres[i];
+        double ds = v3_len(v3_sub(v3_from_f(sp->c), L)) - fabs((double)sp->r);
+        best = ds > best ? ds : best;
+    }
+    return best;
+}
+
+/* Largest coordinate magnitude of the light and the scene's geometry:
+   the scale of the intersection routines' rounding. */
+static double dc_scale(const rtp_scene *s, rtpi_v3 L)
+{
+    double S = fmax(fabs(L.x), fmax(fabs(L.y), fabs(L.z)));
+    size_t i, n = rtpi_scene_nprims(s);
+    for (i = 0; i < n; i++) {
+        double lo[3], hi[3];
+        int k;
+        rtpi_prim_bounds(s, (uint32_t)i, lo, hi);
+        for (k = 0; k < 3; k++) {
+            S = fabs(lo[k]) > S ? fabs(lo[k]) : S;
+            S = fabs(hi[k]) > S ? fabs(hi[k]) : S;
+        }
+    }
+    return S;
+}
+
+static rtp_status dc_ctx_init(dc_ctx *c, const rtp_scene *s, rtpi_v3 L, int res,
+                              const rtp_allocator *a)
+{
+    c->s = s;
+    c->L = L;
+    c->res = res;
+    c->rlo = (int *)rtpi_malloc_array(a, (size_t)res, sizeof *c->rlo);
+    c->rhi = (int *)rtpi_malloc_array(a, (size_t)res, sizeof *c->rhi);
+    if (!c->rlo || !c->rhi) {
+        rtpi_free(a, c->rlo);
+        rtpi_free(a, c->rhi);
+        return RTP_ERR_NOMEM;
+    }
+    return RTP_OK;
+}
+
+static void dc_ctx_free(dc_ctx *c, const rtp_allocator *a)
+{
+    rtpi_free(a, c->rlo);
+    rtpi_free(a, c->rhi);
+}
+
+static int dc_res_ok(int res)
+{
+    return res >= 1 && res <= RTPI_DC_MAX_RES;
+}
+
+/* ------------------------------------------------------- light buffer */
+
+/* Why the lists are exact: if rtpi_intersect_prim reports a hit of prim
+   with the shadow ray, the exact line of the ray passes within
+   delta ~ 1e-15 S of prim (double rounding of coordinates of size <= S),
+   and that line passes within lambda ~ 1e-15 S of the light (the ray's
+   direction is (light - o)/dist, rounded).  The hit's direction from the
+   light therefore differs from the ray's by at most
+   (delta + lambda) / near(prim) radians.  Each primitive is projected
+   widened by ang = 1e-7 + 1e-13 S / near: the first term covers the
+   rounding of face coordinates (~1e-16), the second the above with a
+   hundredfold margin.  A primitive closer to the light than that bound
+   makes sense of (ang > 1e-3) is listed everywhere. */
+#define LB_ANG_BASE 1e-7
+#define LB_ANG_SCALE 1e-13
+#define LB_ANG_MAX 1e-3
+
+typedef struct lb_fill {
+    uint32_t *count; /* per cell; then write cursors */
+    uint32_t *ref;
+    uint32_t rank;
+    uint64_t total;
+} lb_fill;
+
+static void lb_count(void *user, size_t cell, int n)
+{
+    lb_fill *lf = (lb_fill *)user;
+    uint32_t *p = lf->count + cell;
+    int k;
+    for (k = 0; k < n; k++)
+        p[k]++;
+    lf->total += (uint64_t)n;
+}
+
+static void lb_put(void *user, size_t cell, int n)
+{
+    lb_fill *lf = (lb_fill *)user;
+    uint32_t *p = lf->count + cell;
+    int k;
+    for (k = 0; k < n; k++)
+        lf->ref[p[k]++] = lf->rank;
+}
+
+static int lb_cmp(const void *a, const void *b)
+{
+    const rtpi_lb_cand *x = (const rtpi_lb_cand *)a, *y = (const rtpi_lb_cand *)b;
+    if (x->near != y->near)
+        return x->near < y->near ? -1 : 1;
+    return x->prim < y->prim ? -1 : x->prim > y->prim;
+}
+
+static double lb_ang(double S, double near)
+{
+    return near > 0.0 ? LB_ANG_BASE + LB_ANG_SCALE * S / near : HUGE_VAL;
+}
+
+rtp_status rtpi_lightbuf_build(const rtp_scene *s, rtpi_v3 light, int res,
+                               const rtp_allocator *a, rtpi_lightbuf *lb,
+                               rtp_error *err)
+{
+    size_t n = rtpi_scene_nprims(s), ncells, i, nc = 0;
+    dc_ctx c;
+    lb_fill lf;
+    double S;
+    memset(lb, 0, sizeof *lb);
+    if (res <= 0)
+        res = RTPI_DC_DEFAULT_RES;
+    if (!dc_res_ok(res))
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                          "light buffer resolution %d outside 1..%d", res, RTPI_DC_MAX_RES);
+    lb->res = res;
+    lb->light = light;
+    ncells = 6 * (size_t)res * (size_t)res;
+    S = dc_scale(s, light);
+    /* Early stop: a primitive can be hit on the segment from o to the
+       light only if near <= dist + delta + lambda (see above); 1e-12 S
+       bounds delta + lambda with room to spare. */
+    lb->slack = 1e-12 * S;
+    memset(&lf, 0, sizeof lf);
+    lb->cand = (rtpi_lb_cand *)rtpi_malloc_array(a, n ? n : 1, sizeof *lb->cand);
+    lb->off = (uint32_t *)rtpi_calloc_array(a, ncells + 1, sizeof *lb->off);
+    if (!lb->cand || !lb->off || dc_ctx_init(&c, s, light, res, a) != RTP_OK) {
+        rtpi_lightbuf_free(lb, a);
+        return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory for the light buffer");
+    }
+    for (i = 0; i < n; i++) {
+        if (!dc_hittable(s, (uint32_t)i))
+            continue; /* never hit by any ray: cannot shadow */
+        lb->cand[nc].prim = (uint32_t)i;
+        lb->cand[nc].near = dc_near(s, (uint32_t)i, light);
+        nc++;
+    }
+    lb->ncand = nc;
+    /* Filling the cells in ascending near order sorts every list. */
+    qsort(lb->cand, nc, sizeof *lb->cand, lb_cmp);
+    lf.count = lb->off;
+    for (i = 0; i < nc; i++)
+        dc_cover(&c, lb->cand[i].prim, lb_ang(S, lb->cand[i].near), lb_count, &lf);
+    if (lf.total > 0xffffffffu) {
+        dc_ctx_free(&c, a);
+        rtpi_lightbuf_free(lb, a);
+        return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
+                          "light buffer would hold more than 2^32 entries; lower the resolution");
+    }
+    lb->nrefs = (size_t)lf.total;
+    lb->ref = (uint32_t *)rtpi_malloc_array(a, lb->nrefs ? lb->nrefs : 1, sizeof *lb->ref);
+    if (!lb->ref) {
+        dc_ctx_free(&c, a);
+        rtpi_lightbuf_free(lb, a);
+        return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory for the light buffer");
+    }
+    {
+        /* counts -> starts (exclusive prefix sum), used as write cursors */
+        uint32_t sum = 0;
+        for (i = 0; i < ncells; i++) {
+            uint32_t k = lb->off[i];
+            lb->off[i] = sum;
+            sum += k;
+        }
+        lb->off[ncells] = sum;
+    }
+    for (i = 0; i < nc; i++) {
+        lf.rank = (uint32_t)i;
+        dc_cover(&c, lb->cand[i].prim, lb_ang(S, lb->cand[i].near), lb_put, &lf);
+    }
+    /* Each cursor now stands at its cell's end = the next cell's start. */
+    memmove(lb->off + 1, lb->off, ncells * sizeof *lb->off);
+    lb->off[0] = 0;
+    dc_ctx_free(&c, a);
+    return RTP_OK;
+}
+
+int rtpi_lightbuf_visible(const rtpi_lightbuf *lb, const rtp_scene *s,
+                          const rtpi_ray *ray)
+{
+    size_t cell, k, end;
+    double lim;
+    rtpi_hit h;
+    if (!(ray->tmax > 0.0)) {
+        /* The origin is at the light: the direction means nothing; ask
+           every candidate (never happens with real hits). */
+        for (k = 0; k < lb->ncand; k++)
+            if (rtpi_intersect_prim(s, lb->cand[k].prim, ray, &h))
+                return 0;
+        return 1;
+    }
+    cell = rtpi_dc_cell(lb->res, v3_mul(ray->d, -1.0));
+    /* tmax = dist (1 - 1e-9): the segment reaches no farther than dist. */
+    lim = ray->tmax * (1.0 + 2e-9) + lb->slack;
+    end = lb->off[cell + 1];
+    for (k = lb->off[cell]; k < end; k++) {
+        const rtpi_lb_cand *cd = &lb->cand[lb->ref[k]];
+        if (cd->near > lim)
+            break; /* sorted: nothing farther on can reach the segment */
+        if (rtpi_intersect_prim(s, cd->prim, ray, &h))
+            return 0;
+    }
+    return 1;
+}
+
+void rtpi_lightbuf_free(rtpi_lightbuf *lb, const rtp_allocator *a)
+{
+    if (!lb)
+        return;
+    rtpi_free(a, lb->off);
+    rtpi_free(a, lb->ref);
+    rtpi_free(a, lb->cand);
+    lb->off = lb->ref = NULL;
+    lb->cand = NULL;
+}
+
+/* -------------------------------------------------------- item buffer */
+
+/* The ITEMBUF rule.  Cell c is the one the shadow ray pierces (direction
+   o - light, as LIGHTBUF).  The hit at p on prim sees the light when
+     - c is empty (nothing drawn there: the point itself fell between
+       cell centres), or
+     - c holds prim itself and prim cannot shadow itself (a triangle, a
+       sphere seen from outside): the paper's test, or
+     - c's depth zc is not meaningfully nearer than p's depth zp along the
+       face axis: zc >= zp - tol, tol = zp (IB_BIAS + cell_angle tan(theta))
+       with theta the angle between the surface normal and the light.
+       The ray through c's centre leaves p's ray by at most cell_angle, and
+       on a plane tilted by theta depth changes by ~zp cell_angle tan(theta)
+       over that angle: that term keeps the neighbouring triangles of one
+       NFF polygon, and the next primitive across a shared edge, from
+       shadowing each other; tan(theta) is capped at IB_TAN_MAX so that
+       grazing surfaces do not ignore real occluders.  IB_BIAS (1e-4)
+       covers the float depth of the buffer and OSMesa's 24-bit one.
+   Cones (open: the inside can be shadowed by the near wall) and
+   inside-only spheres may shadow themselves, so for them only the depth
+   test speaks.  The normal comes free: o - p is rtpi_offset_origin's step
+   along the geometric normal, towards the light (~1e-9 relative error).
+   The answer is approximate within a cell of shadow edges by design. */
+#define IB_BIAS 1e-4
+#define IB_TAN_MAX 8.0
+
+int rtpi_itembuf_renders(const rtp_scene *s, uint32_t prim, rtpi_v3 L)
+{
+    size_t i = prim;
+    if (!dc_hittable(s, prim))
+        return 0;
+    if (i >= s->ntris && (i -= s->ntris) < s->nspheres) {
+        const rtpi_sphere *sp = &s->spheres[i];
+        /* An inside-only sphere around the light never stops a shadow
+           ray: rays from outside enter it unseen and reach the light
+           before leaving it; rays from inside never leave it. */
+        if (sp->r < 0.0f && v3_len(v3_sub(v3_from_f(sp->c), L)) < -(double)sp->r)
+            return 0;
+    }
+    return 1;
+}
+
+/* Cannot shade itself: the paper's id test may be trusted. */
+static int ib_self_safe(const rtp_scene *s, uint32_t prim)
+{
+    size_t i = prim;
+    if (i < s->ntris)
+        return 1;
+    if ((i -= s->ntris) < s->nspheres)
+        return s->spheres[i].r > 0.0f;
+    return 0;
+}
+
+int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
+                         rtpi_v3 p, rtpi_v3 o, uint32_t prim)
+{
+    size_t cell = rtpi_dc_cell(ib->res, v3_sub(o, ib->light));
+    uint32_t id = ib->id[cell];
+    double zc, zp, tn, nl, cs;
+    rtpi_v3 n, l;
+    if (id == RTPI_NONE)
+        return 1;
+    if (id == prim && ib_self_safe(s, prim))
+        return 1;
+    zc = ib->z[cell];
+    zp = rtpi_dc_depth(ib->res, cell, v3_sub(p, ib->light));
+    n = v3_sub(o, p);
+    l = v3_sub(ib->light, p);
+    nl = v3_len(n) * v3_len(l);
+    cs = nl > 0.0 ? v3_dot(n, l) / nl : 0.0;
+    tn = cs * IB_TAN_MAX > 1.0 ? sqrt(fmax(0.0, 1.0 - cs * cs)) / cs : IB_TAN_MAX;
+    if (tn > IB_TAN_MAX)
+        tn = IB_TAN_MAX;
+    return zc >= zp - zp * (IB_BIAS + ib->cell_angle * tn);
+}
+
+rtp_status rtpi_itembuf_alloc(rtpi_itembuf *ib, rtpi_v3 light, int res,
+                              const rtp_allocator *a, rtp_error *err)
+{
+    size_t ncells, i;
+    memset(ib, 0, sizeof *ib);
+    if (res <= 0)
+        res = RTPI_DC_DEFAULT_RES;
+    if (!dc_res_ok(res))
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                          "item buffer resolution %d outside 1..%d", res, RTPI_DC_MAX_RES);
+    ncells = 6 * (size_t)res * (size_t)res;
+    ib->res = res;
+    ib->light = light;
+    /* A cell spans 2/res in face coordinates, at most 2/res radians; its
+       centre is within half a diagonal, sqrt(2)/res, of any of its
+       directions; 1.25 covers the sampling of clipped, rounded edges. */
+    ib->cell_angle = 1.25 * sqrt(2.0) / (double)res;
+    ib->id = (uint32_t *)rtpi_malloc_array(a, ncells, sizeof *ib->id);
+    ib->z = (float *)rtpi_malloc_array(a, ncells, sizeof *ib->z);
+    if (!ib->id || !ib->z) {
+        rtpi_itembuf_free(ib, a);
+        return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory for the item buffer");
+    }
+    for (i = 0; i < ncells; i++) {
+        ib->id[i] = RTPI_NONE;
+        ib->z[i] = FLT_MAX;
+    }
+    return RTP_OK;
+}
+
+void rtpi_itembuf_free(rtpi_itembuf *ib, const rtp_allocator *a)
+{
+    if (!ib)
+        return;
+    rtpi_free(a, ib->id);
+    rtpi_free(a, ib->z);
+    ib->id = NULL;
+    ib->z = NULL;
+}
+
+static void ib_store(rtpi_itembuf *ib, size_t cell, double z, uint32_t prim)
+{
+    /* Ties keep the first (lower id): deterministic. */
+    if (z < (double)ib->z[cell]) {
+        ib->z[cell] = (float)z;
+        ib->id[cell] = prim;
+    }
+}
+
+/* Scan-converts a triangle onto face f: cells whose centres lie in its
+   projection (edges inclusive, crossings computed from the lower end so
+   neighbours agree: no cracks), depth from the plane, exact at the centre
+   (1/z is linear in u, v: perspective-correct). */
+static void ib_tri(rtpi_itembuf *ib, const rtp_scene *s, int f, uint32_t prim)
+{
+    const rtpi_tri *t = &s->tris[prim];
+    int res = ib->res, k, j, j0, j1;
+    dc_poly loc, cl;
+    double uv[DC_MAXV][2], e1[3], e2[3], nn[3], kk, scale, vmin, vmax, cw = 2.0 / res;
+    loc.n = 3;
+    uv[0][0] = uv[0][1] = 0.0; /* (quiets a may-be-uninitialized warning) */
+    for (k = 0; k < 3; k++) {
+        double q[3];
+        const float *pp = s->pos + 3 * (size_t)t->v[k];
+        q[0] = pp[0] - ib->light.x;
+        q[1] = pp[1] - ib->light.y;
+        q[2] = pp[2] - ib->light.z;
+        dc_local(f, q, loc.v[k]);
+    }
+    for (k = 0; k < 3; k++) {
+        e1[k] = loc.v[1][k] - loc.v[0][k];
+        e2[k] = loc.v[2][k] - loc.v[0][k];
+    }
+    nn[0] = e1[1] * e2[2] - e1[2] * e2[1];
+    nn[1] = e1[2] * e2[0] - e1[0] * e2[2];
+    nn[2] = e1[0] * e2[1] - e1[1] * e2[0];
+    kk = nn[0] * loc.v[0][0] + nn[1] * loc.v[0][1] + nn[2] * loc.v[0][2];
+    scale = sqrt(nn[0] * nn[0] + nn[1] * nn[1] + nn[2] * nn[2]) *
+            fmax(fabs(loc.v[0][0]), fmax(fabs(loc.v[0][1]), fabs(loc.v[0][2])));
+    /* Plane through the light (to rounding): seen edge-on, covers no
+       cell centre; 1e-12 is far above double rounding of kk. */
+    if (!(fabs(kk) > 1e-12 * scale))
+        return;
+    /* 1e-9 wider than the face: centres are >= 1/res inside anyway. */
+    if (dc_clip(&loc, &cl, 1.0 + 1e-9) <= 0 || !dc_project(&cl, uv))
+        return;
+    vmin = vmax = uv[0][1];
+    for (k = 1; k < cl.n; k++) {
+        vmin = uv[k][1] < vmin ? uv[k][1] : vmin;
+        vmax = uv[k][1] > vmax ? uv[k][1] : vmax;
+    }
+    j0 = (int)ceil((vmin + 1.0) * 0.5 * res - 0.5);
+    j1 = (int)floor((vmax + 1.0) * 0.5 * res - 0.5);
+    j0 = j0 < 0 ? 0 : j0;
+    j1 = j1 > res - 1 ? res - 1 : j1;
+    for (j = j0; j <= j1; j++) {
+        double vc = -1.0 + cw * (j + 0.5), umin = DBL_MAX, umax = -DBL_MAX;
+        int i, i0, i1;
+        for (k = 0; k < cl.n; k++) {
+            const double *P = uv[k], *Q = uv[k + 1 < cl.n ? k + 1 : 0];
+            const double *A = P[1] <= Q[1] ? P : Q, *B = P[1] <= Q[1] ? Q : P;
+            double u;
+            if (!(A[1] <= vc && vc <= B[1]))
+                continue;
+            if (A[1] == B[1]) {
+                umin = fmin(umin, fmin(A[0], B[0]));
+                umax = fmax(umax, fmax(A[0], B[0]));
+                continue;
+            }
+            u = A[0] + (B[0] - A[0]) * ((vc - A[1]) / (B[1] - A[1]));
+            umin = u < umin ? u : umin;
+            umax = u > umax ? u : umax;
+        }
+        if (!(umin <= umax))
+            continue;
+        i0 = (int)ceil((umin + 1.0) * 0.5 * res - 0.5);
+        i1 = (int)floor((umax + 1.0) * 0.5 * res - 0.5);
+        i0 = i0 < 0 ? 0 : i0;
+        i1 = i1 > res - 1 ? res - 1 : i1;
+        for (i = i0; i <= i1; i++) {
+            double uc = -1.0 + cw * (i + 0.5);
+            /* Local point z (uc, vc, 1) on the plane nn.x = kk. */
+            double w = (nn[0] * uc + nn[1] * vc + nn[2]) / kk;
+            if (w > 0.0)
+                ib_store(ib, ((size_t)f * res + (size_t)j) * res + (size_t)i, 1.0 / w, prim);
+        }
+    }
+}
+
+/* Depth along the ray L + t d (d's face-axis component is 1, so t is the
+   depth) of a sphere's occluding surface, as rtpi_intersect_prim solves
+   it (origin moved next to the centre first).  From outside: where the
+   ray enters (an inside-only sphere too: a shadow ray from a point inside
+   it leaves through there, and that counts); from inside (r > 0 only,
+   see rtpi_itembuf_renders): where it leaves. */
+static int ib_sphere_t(const rtpi_sphere *sp, rtpi_v3 L, rtpi_v3 d, int inside,
+                       double *t)
+{
+    rtpi_v3 c = v3_from_f(sp->c), f, lv;
+    double r = fabs((double)sp->r), a = v3_dot(d, d), tc, disc, half;
+    tc = v3_dot(v3_sub(c, L), d) / a;
+    f = v3_sub(v3_madd(L, d, tc), c);
+    lv = v3_madd(f, d, -v3_dot(f, d) / a);
+    disc = r * r - v3_dot(lv, lv);
+    if (!(disc >= 0.0))
+        return 0;
+    half = sqrt(disc / a);
+    *t = inside ? tc + half : tc - half;
+    return *t > 0.0;
+}
+
+typedef struct ib_cast {
+    rtpi_itembuf *ib;
+    const rtp_scene *s;
+    uint32_t prim;
+    int sphere, inside;
+} ib_cast;
+
+/* Casts the ray through each cell's centre at a sphere or cone. */
+static void ib_cast_run(void *user, size_t cell, int count)
+{
+    ib_cast *ic = (ib_cast *)user;
+    rtpi_itembuf *ib = ic->ib;
+    size_t res = (size_t)ib->res, rem = cell % (res * res);
+    int f = (int)(cell / (res * res)), j = (int)(rem / res), i0 = (int)(rem % res), i;
+    double cw = 2.0 / (double)res, vc = -1.0 + cw * (j + 0.5);
+    for (i = i0; i < i0 + count; i++) {
+        rtpi_v3 d = rtpi_dc_world(f, -1.0 + cw * (i + 0.5), vc, 1.0);
+        size_t cc = cell + (size_t)(i - i0);
+        double t;
+        if (ic->sphere) {
+            if (ib_sphere_t(&ic->s->spheres[ic->prim - ic->s->ntris], ib->light, d,
+                            ic->inside, &t))
+                ib_store(ib, cc, t, ic->prim);
+        } else {
+            rtpi_ray r;
+            rtpi_hit h;
+            r.o = ib->light;
+            r.d = d;
+            r.tmin = 0.0;
+            r.tmax = ib->z[cc];
+            if (rtpi_intersect_prim(ic->s, ic->prim, &r, &h))
+                ib_store(ib, cc, h.t, ic->prim);
+        }
+    }
+}
+
+rtp_status rtpi_itembuf_build(const rtp_scene *s, rtpi_v3 light, int res,
+                              const rtp_allocator *a, rtpi_itembuf *ib,
+                              rtp_error *err)
+{
+    size_t n = rtpi_scene_nprims(s), i;
+    dc_ctx c;
+    rtp_status st = rtpi_itembuf_alloc(ib, light, res, a, err);
+    if (st != RTP_OK)
+        return st;
+    if (dc_ctx_init(&c, s, light, ib->res, a) != RTP_OK) {
+        rtpi_itembuf_free(ib, a);
+        return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory for the item buffer");
+    }
+    for (i = 0; i < n; i++) {
+        uint32_t prim = (uint32_t)i;
+        if (!rtpi_itembuf_renders(s, prim, light))
+            continue;
+        if (i < s->ntris) {
+            int f;
+            for (f = 0; f < 6; f++)
+                ib_tri(ib, s, f, prim);
+        } else {
+            /* Round shapes exactly: a ray per cell within their bounds
+               (1e-9: a hair wider than the bounds, for rounding). */
+            ib_cast ic;
+            ic.ib = ib;
+            ic.s = s;
+            ic.prim = prim;
+            ic.sphere = i < s->ntris + s->nspheres;
+            ic.inside = ic.sphere &&
+                        v3_len(v3_sub(v3_from_f(s->spheres[i - s->ntris].c), light)) <=
+                            fabs((double)s->spheres[i - s->ntris].r);
+            dc_cover(&c, prim, 1e-9, ib_cast_run, &ic);
+        }
+    }
+    dc_ctx_free(&c, a);
+    return RTP_OK;
+}

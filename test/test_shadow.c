@@ -1,0 +1,530 @@
+/* test_shadow.c — shadows for moved lights (lib/shadow.h, lib/dircube.h):
+ * the light buffer gives exactly the kd-tree's answers, the software item
+ * buffer is wrong on a small share of decisions only, OSMesa draws the
+ * same item buffer, and the direction cube maps every direction (edges,
+ * corners, zeros) to a cell.  Points come from random rays cast like
+ * trace casts them (float positions, surface derived from them). */
+#include "check.h"
+#include "dircube.h"
+#include "shadow.h"
+
+#include <time.h>
+
+static uint64_t rng_state;
+
+static double rnd(void)
+{
+    rng_state ^= rng_state >> 12;
+    rng_state ^= rng_state << 25;
+    rng_state ^= rng_state >> 27;
+    return (double)((rng_state * 2685821657736338717ull) >> 11) * (1.0 / 9007199254740992.0);
+}
+
+/* Triangles, a concave polygon, a floor whose corners lie on cube-corner
+   directions of a light at (0,0,5), spheres (one inside-only), a cone, a
+   pointed cone and cylinders (one along an axis). */
+static const char scene_text[] =
+    "v\nfrom 0 -9 4\nat 0 0 0.5\nup 0 0 1\nangle 50\nhither 0.01\nresolution 64 64\n"
+    "b 0.1 0.1 0.1\n"
+    "l 2 -2 6\n"
+    "f 0.8 0.8 0.8 1 0 0 0 1\n"
+    "p 4\n-5 -5 0\n5 -5 0\n5 5 0\n-5 5 0\n"
+    "f 0.9 0.2 0.2 0.7 0.3 20 0 1\n"
+    "s 0 0 1 0.8\n"
+    "s 1.5 1.5 0.6 0.6\n"
+    "s -2.5 2.5 1 -0.9\n"
+    "c\n-1.5 0.5 0 0.6\n-1.5 0.5 1.5 0.15\n"
+    "c\n2 -1.5 0.2 0.4\n2 -1.5 2.2 0.4\n"
+    "c\n-3 -2 0.5 0.3\n-1 -3 0.7 0.3\n"
+    "c\n3 2.5 0 0.5\n3 2.5 1.2 0\n"
+    "f 0.2 0.8 0.3 0.8 0.2 10 0 1\n"
+    /* concave: an L-shaped slab floating above, and a star */
+    "p 6\n-1 -1 2.5\n1 -1 2.5\n1 -0.5 2.5\n-0.5 -0.5 2.5\n-0.5 1 2.5\n-1 1 2.5\n"
+    "p 10\n2 0 3\n2.2 0.6 3.2\n2.8 0.6 3.2\n2.3 1 3.1\n2.5 1.6 3\n"
+    "2 1.2 2.9\n1.5 1.6 3\n1.7 1 3.1\n1.2 0.6 3.2\n1.8 0.6 3.2\n"
+    "p 3\n-4 3 0.01\n-3 4 2\n-4.5 4.5 1.5\n"
+    /* a wall of thin slanted triangles */
+    "p 3\n0.5 3 0\n0.6 3 3\n0.7 3.1 0\n"
+    "p 3\n-0.5 3 0\n-0.4 3.05 3\n-0.3 3.1 0\n";
+
+typedef struct light_case {
+    const char *name;
+    double pos[3];
+} light_case;
+
+static const light_case lights[] = {
+    {"above", {2, -2, 6}},
+    {"cube corners", {0, 0, 5}},
+    {"low, inside the bounds", {0.4, -1.3, 0.35}},
+    {"between objects", {-0.2, 1.2, 1.9}},
+    {"inside a sphere", {0.1, 0.05, 1.1}},
+    {"inside the inside-only sphere", {-2.4, 2.5, 1.2}},
+    {"inside the cylinder", {2, -1.5, 1.0}},
+    {"far away", {1e4, -2e4, 3e4}},
+};
+#define NLIGHTS (sizeof lights / sizeof *lights)
+
+typedef struct sample {
+    rtpi_v3 p, o;
+    uint32_t prim;
+} sample;
+
+/* Random rays (half from the camera, half from random points in the
+   bounds in random directions, which reach backs and insides); for each
+   hit that trace would ask about, the hit and its shadow-ray origin. */
+static size_t make_samples(const rtp_scene *s, const rtpi_kdtree *kd, rtpi_v3 lp,
+                           sample *out, size_t want)
+{
+    size_t n = 0, tries;
+    rtpi_v3 eye = v3(s->camera.from[0], s->camera.from[1], s->camera.from[2]);
+    rtpi_v3 at = v3(s->camera.at[0], s->camera.at[1], s->camera.at[2]);
+    for (tries = 0; n < want && tries < want * 20; tries++) {
+        rtpi_ray r;
+        rtpi_hit h;
+        rtpi_surface sf;
+        rtpi_v3 pe, ng, ns, o;
+        if (tries & 1) {
+            r.o = eye;
+            r.d = v3_norm(v3_add(v3_sub(at, eye),
+                                 v3(8 * (rnd() - 0.5), 8 * (rnd() - 0.5), 6 * (rnd() - 0.5))));
+        } else {
+            double z = 2 * rnd() - 1, ph = 6.283185307179586 * rnd(), rr = sqrt(1 - z * z);
+            r.o = v3(10 * (rnd() - 0.5), 10 * (rnd() - 0.5), 0.05 + 3.5 * rnd());
+            r.d = v3(rr * cos(ph), rr * sin(ph), z);
+        }
+        r.tmin = 0.0;
+        r.tmax = HUGE_VAL;
+        if (!rtpi_kd_intersect(kd, &r, &h))
+            continue;
+        pe = v3_madd(r.o, r.d, h.t);
+        rtpi_surface_from_point(s, h.prim, v3((float)pe.x, (float)pe.y, (float)pe.z), &sf);
+        ng = sf.ng;
+        ns = sf.ns;
+        if (v3_dot(r.d, ng) >= 0.0 && rtpi_two_sided(s, 0, h.prim, &s->mats[sf.mat])) {
+            ng = v3_mul(ng, -1.0);
+            ns = v3_mul(ns, -1.0);
+        }
+        if (!rtpi_shadow_setup(sf.p, ng, ns, lp, &o))
+            continue;
+        out[n].p = sf.p;
+        out[n].o = o;
+        out[n].prim = h.prim;
+        n++;
+    }
+    return n;
+}
+
+static rtp_scene *load(const char *text, size_t len)
+{
+    rtp_scene *s = NULL;
+    rtp_error err;
+    if (rtp_scene_load_memory(text, len, "test.nff", "nff", NULL, &s, &err) != RTP_OK) {
+        char buf[256];
+        fprintf(stderr, "load: %s\n", rtp_error_format(&err, buf, sizeof buf));
+        return NULL;
+    }
+    return s;
+}
+
+/* Compares a mode with EXACT at every sample; @return mismatches. */
+static size_t compare(const rtp_scene *s, const rtpi_kdtree *kd, rtpi_v3 lp,
+                      rtpi_shadow_mode mode, int res, const sample *sm, size_t n,
+                      size_t *lit)
+{
+    rtpi_shadow *ex = NULL, *sh = NULL;
+    rtp_allocator a;
+    size_t k, bad = 0;
+    rtpi_allocator_init(&a, NULL);
+    if (rtpi_shadow_create(s, kd, lp, RTPI_SHADOW_EXACT, 0, &a, &ex, NULL) != RTP_OK ||
+        rtpi_shadow_create(s, kd, lp, mode, res, &a, &sh, NULL) != RTP_OK) {
+        rtpi_shadow_destroy(ex);
+        return (size_t)-1;
+    }
+    if (lit)
+        *lit = 0;
+    for (k = 0; k < n; k++) {
+        int e = rtpi_shadow_visible(ex, sm[k].p, sm[k].o, sm[k].prim);
+        int v = rtpi_shadow_visible(sh, sm[k].p, sm[k].o, sm[k].prim);
+        bad += e != v;
+        if (lit)
+            *lit += (size_t)e;
+    }
+    rtpi_shadow_destroy(ex);
+    rtpi_shadow_destroy(sh);
+    return bad;
+}
+
+#define NSAMPLES 30000
+
+static void run_scene(const char *label, const char *text, size_t len, int check_ib)
+{
+    rtp_scene *s = load(text, len);
+    rtpi_kdtree *kd = NULL;
+    sample *sm = (sample *)malloc(NSAMPLES * sizeof *sm);
+    size_t li;
+    static const int lb_res[] = {1024, 64, 7, 1};
+    CHECK(s != NULL && sm != NULL);
+    if (!s || !sm || rtpi_kd_build(s, NULL, &kd, NULL) != RTP_OK) {
+        CHECK(0);
+        free(sm);
+        rtp_scene_destroy(s);
+        return;
+    }
+    for (li = 0; li < NLIGHTS; li++) {
+        rtpi_v3 lp = v3(lights[li].pos[0], lights[li].pos[1], lights[li].pos[2]);
+        size_t n = make_samples(s, kd, lp, sm, NSAMPLES), lit = 0, bad, r;
+        CHECK(n > NSAMPLES / 4);
+        for (r = 0; r < sizeof lb_res / sizeof *lb_res; r++) {
+            bad = compare(s, kd, lp, RTPI_SHADOW_LIGHTBUF, lb_res[r], sm, n, &lit);
+            CHECK_MSG(bad == 0, "%s, light %s, res %d: %lu of %lu light-buffer answers differ",
+                      label, lights[li].name, lb_res[r], (unsigned long)bad, (unsigned long)n);
+        }
+        if (check_ib) {
+            bad = compare(s, kd, lp, RTPI_SHADOW_ITEMBUF, 1024, sm, n, NULL);
+            printf("  %-10s light %-30s %6lu points, %5.1f%% lit: item buffer 1024 wrong %.3f%%\n",
+                   label, lights[li].name, (unsigned long)n, 100.0 * (double)lit / (double)n,
+                   100.0 * (double)bad / (double)n);
+            CHECK_MSG((double)bad < 0.01 * (double)n, "%s, light %s: item buffer wrong on %lu of %lu",
+                      label, lights[li].name, (unsigned long)bad, (unsigned long)n);
+        }
+    }
+    rtpi_kd_destroy(kd);
+    rtp_scene_destroy(s);
+    free(sm);
+}
+
+static void test_lightbuf_equals_exact(void)
+{
+    run_scene("scene", scene_text, sizeof scene_text - 1, 1);
+}
+
+/* The same scene moved far from the origin and shrunk: the rounding of
+   every routine grows relative to the geometry. */
+static void test_lightbuf_far_from_origin(void)
+{
+    /* Rewrites each number n of the geometry lines as 3000 + n/100 on x. */
+    char *buf = (char *)malloc(sizeof scene_text * 4);
+    const char *p = scene_text;
+    size_t m = 0;
+    int line_no = 0, in_geom = 0;
+    if (!buf) {
+        CHECK(0);
+        return;
+    }
+    while (*p) {
+        const char *e = strchr(p, '\n');
+        size_t L = e ? (size_t)(e - p) : strlen(p);
+        double x, y, z, w;
+        int k;
+        char tmp[128];
+        line_no++;
+        memcpy(tmp, p, L < 127 ? L : 127);
+        tmp[L < 127 ? L : 127] = 0;
+        in_geom = strncmp(tmp, "from", 4) && strncmp(tmp, "at", 2) && strncmp(tmp, "up", 2) &&
+                  strncmp(tmp, "angle", 5) && strncmp(tmp, "hither", 6) &&
+                  strncmp(tmp, "resolution", 10) && tmp[0] != 'b' && tmp[0] != 'f';
+        k = sscanf(tmp, "%lf %lf %lf %lf", &x, &y, &z, &w);
+        if (in_geom && k >= 3 && tmp[0] != 'l' && tmp[0] != 's' && tmp[0] != 'p' && tmp[0] != 'c') {
+            if (k == 4)
+                m += (size_t)sprintf(buf + m, "%.9g %.9g %.9g %.9g\n", 3000 + x / 100, y / 100,
+                                     z / 100, w / 100);
+            else
+                m += (size_t)sprintf(buf + m, "%.9g %.9g %.9g\n", 3000 + x / 100, y / 100, z / 100);
+        } else if (tmp[0] == 's' && tmp[1] == ' ' &&
+                   sscanf(tmp + 2, "%lf %lf %lf %lf", &x, &y, &z, &w) == 4) {
+            m += (size_t)sprintf(buf + m, "s %.9g %.9g %.9g %.9g\n", 3000 + x / 100, y / 100,
+                                 z / 100, w / 100);
+        } else if (!strncmp(tmp, "from", 4) || !strncmp(tmp, "at", 2)) {
+            sscanf(tmp + (tmp[0] == 'f' ? 4 : 2), "%lf %lf %lf", &x, &y, &z);
+            m += (size_t)sprintf(buf + m, "%s %.9g %.9g %.9g\n", tmp[0] == 'f' ? "from" : "at",
+                                 3000 + x / 100, y / 100, z / 100);
+        } else {
+            memcpy(buf + m, tmp, strlen(tmp));
+            m += strlen(tmp);
+            buf[m++] = '\n';
+        }
+        p += L + (e ? 1 : 0);
+    }
+    buf[m] = 0;
+    {
+        rtp_scene *s = load(buf, m);
+        rtpi_kdtree *kd = NULL;
+        sample *sm = (sample *)malloc(NSAMPLES * sizeof *sm);
+        size_t li;
+        CHECK(s != NULL);
+        if (s && sm && rtpi_kd_build(s, NULL, &kd, NULL) == RTP_OK) {
+            for (li = 0; li < NLIGHTS; li++) {
+                /* The sampler's box is for the original scene: scale the
+                   samples' scene instead by casting from the camera only. */
+                rtpi_v3 lp = v3(3000 + lights[li].pos[0] / 100, lights[li].pos[1] / 100,
+                                lights[li].pos[2] / 100);
+                size_t n = 0, bad, tries;
+                rtpi_v3 eye = v3(s->camera.from[0], s->camera.from[1], s->camera.from[2]);
+                rtpi_v3 at = v3(s->camera.at[0], s->camera.at[1], s->camera.at[2]);
+                for (tries = 0; n < NSAMPLES / 3 && tries < NSAMPLES; tries++) {
+                    rtpi_ray r;
+                    rtpi_hit h;
+                    rtpi_surface sf;
+                    rtpi_v3 pe, ng, ns, o;
+                    r.o = eye;
+                    r.d = v3_norm(v3_add(v3_sub(at, eye), v3(0.08 * (rnd() - 0.5),
+                                                            0.08 * (rnd() - 0.5),
+                                                            0.06 * (rnd() - 0.5))));
+                    r.tmin = 0.0;
+                    r.tmax = HUGE_VAL;
+                    if (!rtpi_kd_intersect(kd, &r, &h))
+                        continue;
+                    pe = v3_madd(r.o, r.d, h.t);
+                    rtpi_surface_from_point(s, h.prim, v3((float)pe.x, (float)pe.y, (float)pe.z), &sf);
+                    ng = sf.ng;
+                    ns = sf.ns;
+                    if (v3_dot(r.d, ng) >= 0.0) {
+                        ng = v3_mul(ng, -1.0);
+                        ns = v3_mul(ns, -1.0);
+                    }
+                    if (!rtpi_shadow_setup(sf.p, ng, ns, lp, &o))
+                        continue;
+                    sm[n].p = sf.p;
+                    sm[n].o = o;
+                    sm[n].prim = h.prim;
+                    n++;
+                }
+                bad = compare(s, kd, lp, RTPI_SHADOW_LIGHTBUF, 512, sm, n, NULL);
+                CHECK_MSG(bad == 0, "far scene, light %s: %lu of %lu differ", lights[li].name,
+                          (unsigned long)bad, (unsigned long)n);
+            }
+        } else {
+            CHECK(0);
+        }
+        rtpi_kd_destroy(kd);
+        rtp_scene_destroy(s);
+        free(sm);
+    }
+    free(buf);
+}
+
+/* A small SPD scene from ../shared/scenes, if present. */
+static void test_spd_scene(void)
+{
+    const char *dir = check_shared_scenes();
+    static const char *names[] = {"tetra_s2", "balls_s2", "rings_s2", "tree_s2"};
+    size_t k;
+    if (!dir)
+        SKIP("../shared/scenes absent");
+    for (k = 0; k < sizeof names / sizeof *names; k++) {
+        char path[512];
+        rtp_scene *s = NULL;
+        rtpi_kdtree *kd = NULL;
+        sample *sm;
+        size_t n, bad;
+        rtpi_v3 lp;
+        snprintf(path, sizeof path, "%s/spd/%s.nff", dir, names[k]);
+        if (rtp_scene_load(path, NULL, &s, NULL) != RTP_OK)
+            continue;
+        sm = (sample *)malloc(NSAMPLES * sizeof *sm);
+        if (!sm || rtpi_kd_build(s, NULL, &kd, NULL) != RTP_OK || !s->nlights) {
+            free(sm);
+            rtp_scene_destroy(s);
+            continue;
+        }
+        lp = v3(s->lights[0].pos[0] * 0.7 + 0.3, s->lights[0].pos[1] * 0.8 - 0.2,
+                s->lights[0].pos[2] * 0.9 + 0.1);
+        n = make_samples(s, kd, lp, sm, NSAMPLES / 2);
+        bad = compare(s, kd, lp, RTPI_SHADOW_LIGHTBUF, 256, sm, n, NULL);
+        CHECK_MSG(bad == 0, "%s: %lu of %lu light-buffer answers differ", names[k],
+                  (unsigned long)bad, (unsigned long)n);
+        bad = compare(s, kd, lp, RTPI_SHADOW_ITEMBUF, 1024, sm, n, NULL);
+        printf("  %-10s %6lu points: item buffer 1024 wrong %.3f%%\n", names[k], (unsigned long)n,
+               n ? 100.0 * (double)bad / (double)n : 0.0);
+        rtpi_kd_destroy(kd);
+        rtp_scene_destroy(s);
+        free(sm);
+    }
+}
+
+/* Edges, corners and zero components map to a cell on a face that
+   touches the direction; the cell's face coordinates hold it. */
+static void test_cell_mapping(void)
+{
+    static const double dirs[][3] = {
+        {1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1},
+        {1, 1, 0}, {1, -1, 0}, {-1, 1, 1}, {1, 1, 1}, {-1, -1, -1}, {0, -0.0, 1},
+        {-0.0, 0, -0.0001}, {1e-300, 1e-300, -1e-300}, {3, 3, -3}, {0.5, -0.5, 0.5}};
+    int res = 8, k;
+    for (k = 0; k < (int)(sizeof dirs / sizeof *dirs); k++) {
+        rtpi_v3 d = v3(dirs[k][0], dirs[k][1], dirs[k][2]);
+        size_t c = rtpi_dc_cell(res, d);
+        int f = (int)(c / 64), a = f >> 1;
+        double z = v3_get(d, a) * ((f & 1) ? -1 : 1);
+        CHECK(c < 6 * 64);
+        /* the face's axis is a largest component, with the right sign */
+        CHECK(z > 0.0);
+        CHECK(z >= fabs(d.x) && z >= fabs(d.y) && z >= fabs(d.z));
+        CHECK(rtpi_dc_depth(res, c, d) == z);
+    }
+    /* +x+y+z corner: ties go to x; u = y/x = 1 -> last column, last row */
+    CHECK(rtpi_dc_cell(res, v3(1, 1, 1)) == (size_t)((0 * res + 7) * res + 7));
+    CHECK(rtpi_dc_cell(res, v3(-1, -1, -1)) == (size_t)((1 * res + 0) * res + 0));
+    CHECK(rtpi_dc_cell(res, v3(0, 0, 1)) == (size_t)((4 * res + 4) * res + 4));
+    /* NaN lands somewhere valid */
+    CHECK(rtpi_dc_cell(res, v3(NAN, 1, 0)) < 6 * 64);
+}
+
+typedef struct counting {
+    long calls, fail_at, live;
+} counting;
+
+static void *c_malloc(void *u, size_t n)
+{
+    counting *c = (counting *)u;
+    if (c->calls++ == c->fail_at)
+        return NULL;
+    c->live++;
+    return malloc(n);
+}
+static void *c_realloc(void *u, void *p, size_t n)
+{
+    counting *c = (counting *)u;
+    void *q;
+    if (c->calls++ == c->fail_at)
+        return NULL;
+    q = realloc(p, n);
+    if (q && !p)
+        c->live++;
+    return q;
+}
+static void c_free(void *u, void *p)
+{
+    counting *c = (counting *)u;
+    if (p)
+        c->live--;
+    free(p);
+}
+
+/* Every allocation failing in turn: NOMEM, nothing leaked. */
+static void test_alloc_failures(void)
+{
+    rtp_scene *s = load(scene_text, sizeof scene_text - 1);
+    rtpi_kdtree *kd = NULL;
+    counting c;
+    rtp_allocator a;
+    int m, bad = 0;
+    static const rtpi_shadow_mode modes[] = {RTPI_SHADOW_EXACT, RTPI_SHADOW_LIGHTBUF,
+                                             RTPI_SHADOW_ITEMBUF};
+    if (!s || rtpi_kd_build(s, NULL, &kd, NULL) != RTP_OK) {
+        CHECK(0);
+        rtp_scene_destroy(s);
+        return;
+    }
+    a.malloc_fn = c_malloc;
+    a.realloc_fn = c_realloc;
+    a.free_fn = c_free;
+    a.user = &c;
+    for (m = 0; m < 3; m++) {
+        long fail;
+        for (fail = 0; fail < 100; fail++) {
+            rtpi_shadow *sh = NULL;
+            rtp_status st;
+            c.calls = 0;
+            c.live = 0;
+            c.fail_at = fail;
+            st = rtpi_shadow_create(s, kd, v3(1, 2, 3), modes[m], 32, &a, &sh, NULL);
+            if (c.calls <= fail) {
+                bad += st != RTP_OK;
+                rtpi_shadow_destroy(sh);
+                bad += c.live != 0;
+                break;
+            }
+            bad += st != RTP_ERR_NOMEM || sh != NULL || c.live != 0;
+        }
+    }
+    CHECK_MSG(bad == 0, "%d bad outcomes", bad);
+    rtpi_kd_destroy(kd);
+    rtp_scene_destroy(s);
+}
+
+static void test_bad_arguments(void)
+{
+    rtp_scene *s = load(scene_text, sizeof scene_text - 1);
+    rtpi_shadow *sh = NULL;
+    rtp_allocator a;
+    rtpi_allocator_init(&a, NULL);
+    if (!s) {
+        CHECK(0);
+        return;
+    }
+    CHECK(rtpi_shadow_create(s, NULL, v3(0, 0, 5), RTPI_SHADOW_ITEMBUF, -3, &a, &sh, NULL) == RTP_OK);
+    rtpi_shadow_destroy(sh);
+    CHECK(rtpi_shadow_create(s, NULL, v3(0, 0, 5), RTPI_SHADOW_ITEMBUF, 100000, &a, &sh, NULL) ==
+          RTP_ERR_ARGUMENT);
+    CHECK(sh == NULL);
+    CHECK(rtpi_shadow_create(s, NULL, v3(0, 0, 5), RTPI_SHADOW_EXACT, 0, &a, &sh, NULL) ==
+          RTP_ERR_ARGUMENT);
+    CHECK(rtpi_shadow_create(s, NULL, v3(0, 0, 5), (rtpi_shadow_mode)9, 0, &a, &sh, NULL) ==
+          RTP_ERR_ARGUMENT);
+    rtpi_shadow_destroy(NULL);
+    rtp_scene_destroy(s);
+}
+
+/* OSMesa draws the same item buffer as the software z-buffer. */
+static void test_osmesa(void)
+{
+    rtp_scene *s = load(scene_text, sizeof scene_text - 1);
+    rtp_allocator a;
+    rtpi_itembuf sw, gl;
+    rtp_error err;
+    size_t li;
+    rtpi_allocator_init(&a, NULL);
+    if (!s) {
+        CHECK(0);
+        return;
+    }
+    memset(&err, 0, sizeof err);
+    if (rtpi_itembuf_build_osmesa(s, v3(2, -2, 6), 64, &a, &gl, &err) == RTP_ERR_UNSUPPORTED) {
+        char buf[256];
+        rtp_scene_destroy(s);
+        CHECK(strstr(rtp_error_format(&err, buf, sizeof buf), "OSMESA=1") != NULL);
+        SKIP("not built with OSMESA=1");
+    }
+    rtpi_itembuf_free(&gl, &a);
+    for (li = 0; li < NLIGHTS; li++) {
+        rtpi_v3 lp = v3(lights[li].pos[0], lights[li].pos[1], lights[li].pos[2]);
+        size_t k, same = 0, ncells = 6 * 1024 * 1024;
+        if (rtpi_itembuf_build(s, lp, 1024, &a, &sw, NULL) != RTP_OK) {
+            CHECK(0);
+            continue;
+        }
+        if (rtpi_itembuf_build_osmesa(s, lp, 1024, &a, &gl, &err) != RTP_OK) {
+            char buf[256];
+            CHECK_MSG(0, "%s", rtp_error_format(&err, buf, sizeof buf));
+            rtpi_itembuf_free(&sw, &a);
+            continue;
+        }
+        for (k = 0; k < ncells; k++)
+            same += sw.id[k] == gl.id[k];
+        printf("  osmesa light %-30s cells agreeing with the software z-buffer: %.4f%%\n",
+               lights[li].name, 100.0 * (double)same / (double)ncells);
+        CHECK((double)same >= 0.999 * (double)ncells);
+        rtpi_itembuf_free(&sw, &a);
+        rtpi_itembuf_free(&gl, &a);
+    }
+    rtp_scene_destroy(s);
+}
+
+int main(void)
+{
+    const char *env = getenv("RTP_TEST_SEED");
+    unsigned seed = env ? (unsigned)strtoul(env, NULL, 10) : (unsigned)time(NULL);
+    printf("test_shadow: seed %u (RTP_TEST_SEED=%u repeats it)\n", seed, seed);
+    rng_state = 0x9e3779b97f4a7c15ull ^ ((uint64_t)seed * 0xbf58476d1ce4e5b9ull);
+    if (!rng_state)
+        rng_state = 1;
+    RUN(test_cell_mapping);
+    RUN(test_bad_arguments);
+    RUN(test_alloc_failures);
+    RUN(test_lightbuf_equals_exact);
+    RUN(test_lightbuf_far_from_origin);
+    RUN(test_spd_scene);
+    RUN(test_osmesa);
+    return check_report();
+}
