@@ -287,6 +287,58 @@ rtp_status rtp_tree_read_memory(const void *data, size_t size,
                                 const char *name, const rtp_allocator *alloc,
                                 rtp_tree **out, rtp_error *err);
 
+/* --------------------------------------------------------------- builder */
+
+/* For renderers that trace rays themselves: hand rtp the hits of every
+ * sample's ray tree, then use rtp's evaluation, edits and tree files.
+ *
+ *   rtp_builder_create(scene, w, h, 0, &b, &err);
+ *   for each sample (x, y), row by row or in any order:
+ *       root = rtp_builder_hit(b, x, y, RTP_NO_PARENT, RTP_RAY_EYE, &hit);
+ *       refl = rtp_builder_hit(b, x, y, root, RTP_RAY_REFLECTED, &hit2);
+ *       rtp_builder_miss(b, x, y, root, RTP_RAY_REFRACTED);   background
+ *   rtp_builder_finish(b, &tree, &err);
+ *
+ * A sample with no eye-ray hit shows the background.  The scene gives the
+ * materials, lights and geometry the hits refer to; the builder keeps its
+ * own copy. */
+typedef struct rtp_builder rtp_builder;
+
+#define RTP_NO_PARENT (-1)
+typedef enum rtp_ray_kind {
+    RTP_RAY_EYE = 0,       /* the sample's first hit (no parent) */
+    RTP_RAY_REFLECTED = 1, /* the parent's mirror ray */
+    RTP_RAY_REFRACTED = 2  /* the parent's transmitted ray */
+} rtp_ray_kind;
+
+typedef struct rtp_hit_record {
+    double pos[3];       /* where the ray hit */
+    unsigned prim;       /* primitive hit: triangles (after triangulation),
+                            then spheres, then cones, in scene order */
+    int back;            /* the ray hit the back of the surface */
+    int total_internal;  /* total internal reflection at this hit: the
+                            transmitted share follows the reflected ray */
+    const unsigned char *lights; /* bit i (LSB first): light i seen from
+                            here; NULL: none */
+} rtp_hit_record;
+
+/** Starts a tree of width x height samples (spd: corner samples of a
+ *  width x height image, i.e. (width+1) x (height+1), averaged). */
+rtp_status rtp_builder_create(const rtp_scene *scene, int width, int height,
+                              int spd, rtp_builder **out, rtp_error *err);
+/** Adds a hit to sample (x, y) as the given child of node `parent` (an
+ *  index returned earlier for the same sample).  @return the new node's
+ *  index (>= 0) or a negative rtp_status (see err). */
+int rtp_builder_hit(rtp_builder *b, int x, int y, int parent, rtp_ray_kind kind,
+                    const rtp_hit_record *hit, rtp_error *err);
+/** Records that the given child ray of `parent` left the scene. */
+rtp_status rtp_builder_miss(rtp_builder *b, int x, int y, int parent,
+                            rtp_ray_kind kind, rtp_error *err);
+/** Validates every sample's tree and makes the rtp_tree; the builder is
+ *  consumed (destroyed) either way. */
+rtp_status rtp_builder_finish(rtp_builder *b, rtp_tree **out, rtp_error *err);
+void rtp_builder_destroy(rtp_builder *b);
+
 /* ------------------------------------------------------------ image diff */
 
 typedef struct rtp_diff_stats {

@@ -545,6 +545,7 @@ rtp_status rtpi_lightbuf_build(const rtp_scene *s, rtpi_v3 light, int res,
         }
         lb->off[ncells] = sum;
     }
+    lf.ref = lb->ref;
     for (i = 0; i < nc; i++) {
         lf.rank = (uint32_t)i;
         dc_cover(&c, lb->cand[i].prim, lb_ang(S, lb->cand[i].near), lb_put, &lf);

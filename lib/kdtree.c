@@ -72,6 +72,14 @@
    relative, so 1e-11 is a wide margin, and it is still far too small to
    make a ray visit many extra nodes. */
 #define KD_SLACK 1e-11
+/* Nodes with up to this many references get the exact SAH sweep, larger
+   ones the binned one with KD_BINS planes per axis. */
+#ifndef KD_EXACT_MAX
+#define KD_EXACT_MAX 256
+#endif
+#ifndef KD_BINS
+#define KD_BINS 32
+#endif
 
 typedef struct kd_node {
     union {
@@ -101,30 +109,24 @@ struct rtpi_kdtree {
 
 /* ================================================================ build */
 
-enum { EV_END = 0, EV_PLANAR = 1, EV_START = 2 };
-enum { SIDE_BOTH = 0, SIDE_LEFT = 1, SIDE_RIGHT = 2 };
+/* A primitive reference in a node under construction: the primitive's
+   bounds clipped to the node (conservatively: rounded outward). */
+typedef struct kd_ref {
+    float lo[3], hi[3];
+    uint32_t prim;
+} kd_ref;
 
-typedef struct kd_ev {
-    float pos;
-    uint32_t pt; /* primitive id << 2 | event type */
-} kd_ev;
+enum { EV_END = 0, EV_PLANAR = 1, EV_START = 2 };
 
 typedef struct kd_build {
     const rtp_allocator *a;
     const rtp_scene *s;
     rtpi_kdtree *kd;
-    kd_ev *ev;        /* the arena of event lists */
-    size_t ev_cap;
-    kd_ev *tmp, *tmp2; /* new events of straddlers; sort scratch */
-    size_t tmp_cap, tmp2_cap;
-    float *pbox;      /* 6 floats per primitive: its bounds */
-    uint8_t *side;    /* per primitive, during one split */
-    uint32_t *both;   /* straddling primitives of one split */
-    float *cbox;      /* their boxes clipped to the children, 12 floats */
-    size_t both_cap;
+    kd_ref *ref;      /* the arena of reference lists, used as a stack */
+    size_t ref_cap;
+    uint64_t *key;    /* sorted events of one node, 3 x 2 KD_EXACT_MAX */
     size_t nodes_cap, refs_cap;
     int max_depth, depth_seen;
-    uint32_t hist[3][4096];
 } kd_build;
 
 static float f_down(double x)
@@ -143,160 +145,273 @@ static float f_up(double x)
     return f + 0.0f;
 }
 
-static uint32_t ev_key(float f)
+/* An event as one integer that sorts like (position, type): the float's
+   bits made order-preserving, then the 2-bit type. */
+static uint64_t ev_make(float f, unsigned type)
 {
     uint32_t u;
     memcpy(&u, &f, sizeof u);
-    return u & 0x80000000u ? ~u : u | 0x80000000u;
+    u = u & 0x80000000u ? ~u : u | 0x80000000u;
+    return (uint64_t)u << 2 | type;
 }
 
-static int ev_less(kd_ev x, kd_ev y)
+static float ev_pos(uint64_t k)
 {
-    return x.pos < y.pos || (x.pos == y.pos && (x.pt & 3) < (y.pt & 3));
+    uint32_t u = (uint32_t)(k >> 2);
+    float f;
+    u = u & 0x80000000u ? u & 0x7fffffffu : ~u;
+    memcpy(&f, &u, sizeof f);
+    return f;
 }
 
-/* Sorts by (pos, type): insertion sort when short, else a three-pass LSD
-   radix sort on the 34-bit key (order-preserving float bits, type). */
-static void ev_sort(kd_build *b, kd_ev *e, size_t n, kd_ev *scratch)
+static void sort_u64(uint64_t *a, size_t n)
 {
-    size_t i, j;
-    int pass;
-    if (n <= 32) {
+    while (n > 24) {
+        uint64_t p, x, y = a[0], z = a[n / 2], w = a[n - 1];
+        size_t i = 0, j = n - 1;
+        p = y < z ? (z < w ? z : (y < w ? w : y)) : (y < w ? y : (z < w ? w : z));
+        for (;;) { /* Hoare partition around the median of three */
+            while (a[i] < p)
+                i++;
+            while (a[j] > p)
+                j--;
+            if (i >= j)
+                break;
+            x = a[i];
+            a[i++] = a[j];
+            a[j--] = x;
+        }
+        /* [0, j] <= p <= [j+1, n): recurse into the smaller part. */
+        if (j + 1 < n - j - 1) {
+            sort_u64(a, j + 1);
+            a += j + 1;
+            n -= j + 1;
+        } else {
+            sort_u64(a + j + 1, n - j - 1);
+            n = j + 1;
+        }
+    }
+    {
+        size_t i, j;
         for (i = 1; i < n; i++) {
-            kd_ev x = e[i];
-            for (j = i; j > 0 && ev_less(x, e[j - 1]); j--)
-                e[j] = e[j - 1];
-            e[j] = x;
-        }
-        return;
-    }
-    memset(b->hist, 0, sizeof b->hist);
-    for (i = 0; i < n; i++) {
-        uint64_t k = (uint64_t)ev_key(e[i].pos) << 2 | (e[i].pt & 3);
-        b->hist[0][k & 4095]++;
-        b->hist[1][(k >> 12) & 4095]++;
-        b->hist[2][(k >> 24) & 4095]++;
-    }
-    for (pass = 0; pass < 3; pass++) {
-        uint32_t sum = 0, c;
-        kd_ev *src = pass == 1 ? scratch : e, *dst = pass == 1 ? e : scratch;
-        int sh = 12 * pass;
-        for (i = 0; i < 4096; i++) {
-            c = b->hist[pass][i];
-            b->hist[pass][i] = sum;
-            sum += c;
-        }
-        for (i = 0; i < n; i++) {
-            uint64_t k = (uint64_t)ev_key(src[i].pos) << 2 | (src[i].pt & 3);
-            dst[b->hist[pass][(k >> sh) & 4095]++] = src[i];
+            uint64_t x = a[i];
+            for (j = i; j > 0 && x < a[j - 1]; j--)
+                a[j] = a[j - 1];
+            a[j] = x;
         }
     }
-    memcpy(e, scratch, n * sizeof *e);
 }
 
-static int grow_ev(kd_build *b, kd_ev **p, size_t *cap, size_t need)
+/* The SAH cost of a split with nl and nr primitives on the two sides,
+   pl and pr the children's areas relative to the node's.  fl is the left
+   child's share of the node's extent on the split axis. */
+static double sah(double pl, double pr, size_t nl, size_t nr, double fl)
 {
-    size_t nc;
-    kd_ev *q;
-    if (need <= *cap)
-        return 0;
-    nc = *cap + *cap / 2;
-    if (nc < need)
-        nc = need;
-    if (nc > (size_t)-1 / sizeof **p)
-        return -1;
-    q = (kd_ev *)rtpi_realloc(b->a, *p, nc * sizeof **p);
-    if (!q)
-        return -1;
-    *p = q;
-    *cap = nc;
-    return 0;
+    double c = KD_COST_TRAV + KD_COST_ISECT * (pl * (double)nl + pr * (double)nr);
+    if ((nl == 0 && fl >= KD_EMPTY_MIN) || (nr == 0 && 1.0 - fl >= KD_EMPTY_MIN))
+        c *= KD_EMPTY_BONUS;
+    return c;
 }
 
-/* Clips triangle (p0,p1,p2) to the box [lo,hi] (Sutherland-Hodgman, in
-   double, crossing points snapped onto the plane they were cut at) and
-   returns the bounds of what is left, rounded outward to floats and kept
-   inside the box.  @return 0 if nothing is left. */
-static int clip_tri(const float *p0, const float *p1, const float *p2,
-                    const float *tb, const float *lo, const float *hi,
-                    float *out)
+typedef struct kd_split {
+    double cost;
+    int axis, planar_left;
+    float pos;
+} kd_split;
+
+/* Exact SAH over every candidate plane (Wald & Havran's sweep): the
+   events of each axis are sorted by (position, end < planar < start). */
+static void split_exact(kd_build *b, const kd_ref *r, size_t n,
+                        const float *lo, const float *hi, const double *d,
+                        double area, kd_split *best)
 {
-    double poly[2][12][3];
-    double mn[3], mx[3];
-    int n = 3, cur = 0, a, i, k;
+    int k;
+    size_t i;
     for (k = 0; k < 3; k++) {
-        poly[0][0][k] = p0[k];
-        poly[0][1][k] = p1[k];
-        poly[0][2][k] = p2[k];
-    }
-    for (a = 0; a < 3; a++) {
-        int sd;
-        for (sd = 0; sd < 2; sd++) {
-            double c = sd ? hi[a] : lo[a];
-            int m = 0;
-            /* A plane that does not cut the triangle's own box changes
-               nothing. */
-            if (sd ? tb[3 + a] <= hi[a] : tb[a] >= lo[a])
-                continue;
-            for (i = 0; i < n; i++) {
-                const double *P = poly[cur][i];
-                const double *Q = poly[cur][i + 1 == n ? 0 : i + 1];
-                int pin = sd ? P[a] <= c : P[a] >= c;
-                int qin = sd ? Q[a] <= c : Q[a] >= c;
-                if (pin)
-                    memcpy(poly[!cur][m++], P, sizeof poly[0][0]);
-                if (pin != qin) {
-                    double t = (c - P[a]) / (Q[a] - P[a]);
-                    for (k = 0; k < 3; k++)
-                        poly[!cur][m][k] = P[k] + t * (Q[k] - P[k]);
-                    poly[!cur][m][a] = c;
-                    m++;
+        uint64_t *e = b->key + (size_t)k * 2 * KD_EXACT_MAX;
+        double o1 = d[(k + 1) % 3], o2 = d[(k + 2) % 3];
+        double inv = 1.0 / area, cap = o1 * o2 * inv, perim = (o1 + o2) * inv;
+        size_t m = 0, nl = 0, nr = n;
+        if (!(d[k] > 0.0))
+            continue;
+        for (i = 0; i < n; i++) {
+            if (r[i].lo[k] == r[i].hi[k]) {
+                e[m++] = ev_make(r[i].lo[k], EV_PLANAR);
+            } else {
+                e[m++] = ev_make(r[i].lo[k], EV_START);
+                e[m++] = ev_make(r[i].hi[k], EV_END);
+            }
+        }
+        sort_u64(e, m);
+        i = 0;
+        while (i < m) {
+            uint64_t pk = e[i] >> 2;
+            float p = ev_pos(e[i]);
+            size_t pe = 0, pp = 0, ps = 0;
+            while (i < m && e[i] >> 2 == pk && (e[i] & 3) == EV_END)
+                pe++, i++;
+            while (i < m && e[i] >> 2 == pk && (e[i] & 3) == EV_PLANAR)
+                pp++, i++;
+            while (i < m && e[i] >> 2 == pk)
+                ps++, i++;
+            nr -= pp + pe;
+            /* Planes on the box's faces cut nothing off. */
+            if (p > lo[k] && p < hi[k]) {
+                double pl = cap + ((double)p - lo[k]) * perim;
+                double pr = cap + ((double)hi[k] - p) * perim;
+                double fl = ((double)p - lo[k]) / d[k];
+                double cl = sah(pl, pr, nl + pp, nr, fl);
+                double cr = sah(pl, pr, nl, nr + pp, fl);
+                if (cl < best->cost) {
+                    best->cost = cl;
+                    best->axis = k;
+                    best->pos = p;
+                    best->planar_left = 1;
+                }
+                if (cr < best->cost) {
+                    best->cost = cr;
+                    best->axis = k;
+                    best->pos = p;
+                    best->planar_left = 0;
                 }
             }
-            cur = !cur;
-            n = m;
-            if (n == 0)
-                return 0;
+            nl += ps + pp;
         }
     }
-    for (k = 0; k < 3; k++)
-        mn[k] = mx[k] = poly[cur][0][k];
-    for (i = 1; i < n; i++) {
-        for (k = 0; k < 3; k++) {
-            double x = poly[cur][i][k];
-            mn[k] = x < mn[k] ? x : mn[k];
-            mx[k] = x > mx[k] ? x : mx[k];
-        }
-    }
-    for (k = 0; k < 3; k++) {
-        out[k] = mn[k] > lo[k] ? f_down(mn[k]) : lo[k];
-        out[3 + k] = mx[k] < hi[k] ? f_up(mx[k]) : hi[k];
-        if (out[k] > out[3 + k])
-            return 0;
-    }
-    return 1;
 }
 
-/* Bounds of primitive `prim` inside the box [lo,hi].  Triangles are
-   clipped; if rounding made the clipped polygon vanish although the
-   primitive straddles the plane, the plain bounds cut to the box are used
-   (conservative: an extra reference, never a lost one). */
-static void clip_prim(const kd_build *b, uint32_t prim, const float *lo,
-                      const float *hi, float *out)
+/* Binned SAH (KD_BINS planes per axis, counting where boxes start and
+   end): O(n) for the large nodes near the root, where the exact plane
+   matters least. */
+static void split_binned(const kd_ref *r, size_t n, const float *lo,
+                         const float *hi, const double *d, double area,
+                         kd_split *best)
 {
-    const float *pb = b->pbox + 6 * (size_t)prim;
-    int k;
-    if (prim < b->kd->ntris) {
-        const float *v = b->kd->tri + 9 * (size_t)prim;
-        if (clip_tri(v, v + 3, v + 6, pb, lo, hi, out))
-            return;
+    uint32_t cs[3][KD_BINS], ce[3][KD_BINS];
+    double sc[3];
+    int k, j;
+    size_t i;
+    memset(cs, 0, sizeof cs);
+    memset(ce, 0, sizeof ce);
+    for (k = 0; k < 3; k++)
+        sc[k] = d[k] > 0.0 ? KD_BINS / d[k] : 0.0;
+    for (i = 0; i < n; i++) {
+        for (k = 0; k < 3; k++) {
+            /* Coordinates are inside the node's box: indices are in
+               range but for rounding, which the clamps absorb. */
+            int s0 = (int)(((double)r[i].lo[k] - lo[k]) * sc[k]);
+            int s1 = (int)(((double)r[i].hi[k] - lo[k]) * sc[k]);
+            s0 = s0 < 0 ? 0 : s0 > KD_BINS - 1 ? KD_BINS - 1 : s0;
+            s1 = s1 < 0 ? 0 : s1 > KD_BINS - 1 ? KD_BINS - 1 : s1;
+            cs[k][s0]++;
+            ce[k][s1]++;
+        }
     }
     for (k = 0; k < 3; k++) {
-        out[k] = pb[k] > lo[k] ? pb[k] : lo[k];
-        out[3 + k] = pb[3 + k] < hi[k] ? pb[3 + k] : hi[k];
-        if (out[k] > out[3 + k]) /* cannot happen for a straddler; safe */
-            out[3 + k] = out[k];
+        double o1 = d[(k + 1) % 3], o2 = d[(k + 2) % 3];
+        double inv = 1.0 / area, cap = o1 * o2 * inv, perim = (o1 + o2) * inv;
+        size_t nl = 0, nr = n;
+        if (!(d[k] > 0.0))
+            continue;
+        for (j = 1; j < KD_BINS; j++) {
+            double fl = (double)j / KD_BINS, c;
+            float p = (float)((double)lo[k] + d[k] * fl);
+            nl += cs[k][j - 1];
+            nr -= ce[k][j - 1];
+            if (!(p > lo[k] && p < hi[k]))
+                continue;
+            fl = ((double)p - lo[k]) / d[k];
+            c = sah(cap + ((double)p - lo[k]) * perim,
+                    cap + ((double)hi[k] - p) * perim, nl, nr, fl);
+            if (c < best->cost) {
+                best->cost = c;
+                best->axis = k;
+                best->pos = p;
+                best->planar_left = 1;
+            }
+        }
     }
+}
+
+/* Splits the reference r of a straddling primitive at `pos` on `axis`:
+   l and r2 get its bounds on either side.  A triangle's bounds are those
+   of its part on that side (its vertices there and its edges' crossing
+   points, in double, rounded outward) within r's box, which already
+   bounds it within the node: a tight box at the cost of a few flops.
+   Other primitives keep r's box cut at the plane.
+   @return bit 0: the left part is not empty, bit 1: the right part. */
+static int split_ref(const kd_build *b, const kd_ref *r, int axis, float pos,
+                     kd_ref *l, kd_ref *rr)
+{
+    int k, ret = 3;
+    *l = *r;
+    *rr = *r;
+    l->hi[axis] = pos;
+    rr->lo[axis] = pos;
+    if (r->prim < b->kd->ntris) {
+        const float *v = b->kd->tri + 9 * (size_t)r->prim;
+        double mn[2][3], mx[2][3], c = pos;
+        int i, sd;
+        for (sd = 0; sd < 2; sd++)
+            for (k = 0; k < 3; k++) {
+                mn[sd][k] = HUGE_VAL;
+                mx[sd][k] = -HUGE_VAL;
+            }
+        for (i = 0; i < 3; i++) {
+            const float *P = v + 3 * i, *Q = v + 3 * (i == 2 ? 0 : i + 1);
+            double x[3];
+            if (P[axis] <= c)
+                for (k = 0; k < 3; k++) {
+                    mn[0][k] = P[k] < mn[0][k] ? P[k] : mn[0][k];
+                    mx[0][k] = P[k] > mx[0][k] ? P[k] : mx[0][k];
+                }
+            if (P[axis] >= c)
+                for (k = 0; k < 3; k++) {
+                    mn[1][k] = P[k] < mn[1][k] ? P[k] : mn[1][k];
+                    mx[1][k] = P[k] > mx[1][k] ? P[k] : mx[1][k];
+                }
+            if ((P[axis] < c && Q[axis] > c) || (P[axis] > c && Q[axis] < c)) {
+                double t = (c - P[axis]) / ((double)Q[axis] - P[axis]);
+                for (k = 0; k < 3; k++)
+                    x[k] = P[k] + t * ((double)Q[k] - P[k]);
+                x[axis] = c;
+                for (sd = 0; sd < 2; sd++)
+                    for (k = 0; k < 3; k++) {
+                        mn[sd][k] = x[k] < mn[sd][k] ? x[k] : mn[sd][k];
+                        mx[sd][k] = x[k] > mx[sd][k] ? x[k] : mx[sd][k];
+                    }
+            }
+        }
+        for (k = 0; k < 3; k++) {
+            if (k == axis)
+                continue;
+            if (mn[0][k] <= mx[0][k]) {
+                float f0 = f_down(mn[0][k]), f1 = f_up(mx[0][k]);
+                l->lo[k] = f0 > l->lo[k] ? f0 : l->lo[k];
+                l->hi[k] = f1 < l->hi[k] ? f1 : l->hi[k];
+            }
+            if (mn[1][k] <= mx[1][k]) {
+                float f0 = f_down(mn[1][k]), f1 = f_up(mx[1][k]);
+                rr->lo[k] = f0 > rr->lo[k] ? f0 : rr->lo[k];
+                rr->hi[k] = f1 < rr->hi[k] ? f1 : rr->hi[k];
+            }
+        }
+        {
+            /* The split axis: the part's extent, at most up to the plane. */
+            float f0 = f_down(mn[0][axis]), f1 = f_up(mx[1][axis]);
+            l->lo[axis] = f0 > l->lo[axis] ? f0 : l->lo[axis];
+            rr->hi[axis] = f1 < rr->hi[axis] ? f1 : rr->hi[axis];
+        }
+        /* A part whose box came out empty lies outside the node: the
+           triangle's part on that side and the node's box do not meet. */
+        for (k = 0; k < 3; k++) {
+            if (!(l->lo[k] <= l->hi[k]))
+                ret &= ~1;
+            if (!(rr->lo[k] <= rr->hi[k]))
+                ret &= ~2;
+        }
+    }
+    return ret;
 }
 
 static int push_node(kd_build *b, uint32_t *idx)
@@ -310,283 +425,113 @@ static int push_node(kd_build *b, uint32_t *idx)
     return 0;
 }
 
-static int make_leaf(kd_build *b, const kd_ev *e0, size_t n0, size_t nprim)
+static int make_leaf(kd_build *b, const kd_ref *r, size_t n)
 {
     rtpi_kdtree *kd = b->kd;
     uint32_t idx;
     size_t i;
     if (push_node(b, &idx))
         return -1;
-    kd->nodes[idx].flags = 3u | (uint32_t)nprim << 2;
+    kd->nodes[idx].flags = 3u | (uint32_t)n << 2;
     kd->nodes[idx].a.off = 0;
-    if (nprim == 1) {
-        for (i = 0; i < n0; i++)
-            if ((e0[i].pt & 3) != EV_END)
-                kd->nodes[idx].a.one = e0[i].pt >> 2;
-    } else if (nprim > 1) {
-        if (kd->nrefs + nprim > 0xffffffffu ||
-            rtpi_grow(b->a, (void **)&kd->refs, &b->refs_cap,
-                      kd->nrefs + nprim, sizeof *kd->refs))
+    if (n == 1) {
+        kd->nodes[idx].a.one = r[0].prim;
+    } else if (n > 1) {
+        if (kd->nrefs + n > 0xffffffffu ||
+            rtpi_grow(b->a, (void **)&kd->refs, &b->refs_cap, kd->nrefs + n,
+                      sizeof *kd->refs))
             return -1;
         kd->nodes[idx].a.off = (uint32_t)kd->nrefs;
-        /* Every primitive has exactly one start or planar event per axis. */
-        for (i = 0; i < n0; i++)
-            if ((e0[i].pt & 3) != EV_END)
-                kd->refs[kd->nrefs++] = e0[i].pt >> 2;
+        for (i = 0; i < n; i++)
+            kd->refs[kd->nrefs++] = r[i].prim;
     }
     return 0;
 }
 
-/* The best split of a node by SAH over all three axes.
-   @return its cost (HUGE_VAL when there is no usable plane). */
-static double find_split(const kd_ev *const ev[3], const size_t n[3],
-                         size_t nprim, const float *lo, const float *hi,
-                         int *axis, float *pos, int *planar_left)
-{
-    double d[3], best = HUGE_VAL, area;
-    int k;
-    for (k = 0; k < 3; k++)
-        d[k] = (double)hi[k] - lo[k];
-    area = d[0] * d[1] + d[1] * d[2] + d[2] * d[0];
-    if (!(area > 0.0))
-        return best;
-    for (k = 0; k < 3; k++) {
-        const kd_ev *e = ev[k];
-        double o1 = d[(k + 1) % 3], o2 = d[(k + 2) % 3];
-        double cap = o1 * o2, perim = o1 + o2, inv = 1.0 / area;
-        size_t nl = 0, nr = nprim, i = 0, m = n[k];
-        while (i < m) {
-            float p = e[i].pos;
-            size_t pe = 0, pp = 0, ps = 0;
-            while (i < m && e[i].pos == p && (e[i].pt & 3) == EV_END)
-                pe++, i++;
-            while (i < m && e[i].pos == p && (e[i].pt & 3) == EV_PLANAR)
-                pp++, i++;
-            while (i < m && e[i].pos == p && (e[i].pt & 3) == EV_START)
-                ps++, i++;
-            nr -= pp + pe;
-            /* Planes on the box's faces cut nothing off. */
-            if (p > lo[k] && p < hi[k]) {
-                double pl = (cap + ((double)p - lo[k]) * perim) * inv;
-                double pr = (cap + ((double)hi[k] - p) * perim) * inv;
-                double cl, cr;
-                size_t a1 = nl + pp, b1 = nr, a2 = nl, b2 = nr + pp;
-                double fl = ((double)p - lo[k]) / d[k], fr = 1.0 - fl;
-                cl = KD_COST_TRAV + KD_COST_ISECT * (pl * (double)a1 + pr * (double)b1);
-                if ((a1 == 0 && fl >= KD_EMPTY_MIN) || (b1 == 0 && fr >= KD_EMPTY_MIN))
-                    cl *= KD_EMPTY_BONUS;
-                cr = KD_COST_TRAV + KD_COST_ISECT * (pl * (double)a2 + pr * (double)b2);
-                if ((a2 == 0 && fl >= KD_EMPTY_MIN) || (b2 == 0 && fr >= KD_EMPTY_MIN))
-                    cr *= KD_EMPTY_BONUS;
-                if (cl < best) {
-                    best = cl;
-                    *axis = k;
-                    *pos = p;
-                    *planar_left = 1;
-                }
-                if (cr < best) {
-                    best = cr;
-                    *axis = k;
-                    *pos = p;
-                    *planar_left = 0;
-                }
-            }
-            nl += ps + pp;
-        }
-    }
-    return best;
-}
-
-/* Appends the events of box bx (clipped bounds of prim) on axis a. */
-static size_t put_events(kd_ev *out, uint32_t prim, const float *bx, int a)
-{
-    if (bx[a] == bx[3 + a]) {
-        out[0].pos = bx[a];
-        out[0].pt = prim << 2 | EV_PLANAR;
-        return 1;
-    }
-    out[0].pos = bx[a];
-    out[0].pt = prim << 2 | EV_START;
-    out[1].pos = bx[3 + a];
-    out[1].pt = prim << 2 | EV_END;
-    return 2;
-}
-
+/* Builds the subtree of the node with box [lo,hi] whose references are
+   b->ref[off, off + n). */
 static int build_node(kd_build *b, const float *lo, const float *hi,
-                      size_t off, const size_t n[3], size_t nprim, int depth)
+                      size_t off, size_t n, int depth)
 {
-    const kd_ev *ev[3];
-    size_t total = n[0] + n[1] + n[2];
-    size_t cnt[2][3], nnew[2][3], nch[2][3], nside[2], nboth, i, gcap;
-    size_t out, base[2];
-    int axis = 0, planar_left = 1, k, sd;
-    float pos = 0.0f, clo[3], chi[3];
+    kd_split sp;
+    double d[3], area;
+    size_t i, nl, nr;
+    kd_ref *r, *L, *R;
+    float clo[3], chi[3];
     uint32_t idx;
-    kd_ev *e;
-    double cost;
+    int k;
 
     if (depth > b->depth_seen)
         b->depth_seen = depth;
-    ev[0] = b->ev + off;
-    ev[1] = ev[0] + n[0];
-    ev[2] = ev[1] + n[1];
-    cost = depth >= b->max_depth || nprim < KD_MIN_SPLIT
-               ? HUGE_VAL
-               : find_split(ev, n, nprim, lo, hi, &axis, &pos, &planar_left);
-    if (!(cost < KD_COST_ISECT * (double)nprim))
-        return make_leaf(b, ev[0], n[0], nprim);
-
-    /* Classify: left only, right only, or both (straddling). */
-    for (i = 0; i < n[0]; i++)
-        b->side[ev[0][i].pt >> 2] = SIDE_BOTH;
-    e = b->ev + off + (axis == 0 ? 0 : axis == 1 ? n[0] : n[0] + n[1]);
-    for (i = 0; i < n[axis]; i++) {
-        uint32_t prim = e[i].pt >> 2, t = e[i].pt & 3;
-        if (t == EV_END && e[i].pos <= pos)
-            b->side[prim] = SIDE_LEFT;
-        else if (t == EV_START && e[i].pos >= pos)
-            b->side[prim] = SIDE_RIGHT;
-        else if (t == EV_PLANAR)
-            b->side[prim] = e[i].pos < pos || (e[i].pos == pos && planar_left)
-                                ? SIDE_LEFT
-                                : SIDE_RIGHT;
-    }
-    nboth = 0;
-    for (i = 0; i < n[axis]; i++)
-        if ((e[i].pt & 3) == EV_START && b->side[e[i].pt >> 2] == SIDE_BOTH)
-            nboth++;
-    if (nboth > b->both_cap) {
-        uint32_t *nb = (uint32_t *)rtpi_realloc(b->a, b->both,
-                                                nboth * sizeof *nb);
-        float *nc;
-        if (!nb)
-            return -1;
-        b->both = nb;
-        nc = (float *)rtpi_realloc(b->a, b->cbox, nboth * 12 * sizeof *nc);
-        if (!nc)
-            return -1;
-        b->cbox = nc;
-        b->both_cap = nboth;
-    }
-    nboth = 0;
-    for (i = 0; i < n[axis]; i++)
-        if ((e[i].pt & 3) == EV_START && b->side[e[i].pt >> 2] == SIDE_BOTH)
-            b->both[nboth++] = e[i].pt >> 2;
-
-    /* Count the events each child keeps. */
-    memset(cnt, 0, sizeof cnt);
-    nside[0] = nside[1] = 0;
-    for (k = 0; k < 3; k++) {
-        for (i = 0; i < n[k]; i++) {
-            int s = b->side[ev[k][i].pt >> 2];
-            if (s != SIDE_BOTH)
-                cnt[s - 1][k]++;
-            if (k == 0 && s != SIDE_BOTH && (ev[0][i].pt & 3) != EV_END)
-                nside[s - 1]++;
-        }
-    }
-
-    /* Clip the straddlers to both children and make their new events:
-       group (side, axis) in tmp at (side * 3 + axis) * gcap. */
-    gcap = 2 * nboth;
-    if (grow_ev(b, &b->tmp, &b->tmp_cap, 6 * gcap) ||
-        grow_ev(b, &b->tmp2, &b->tmp2_cap, gcap))
-        return -1;
-    memset(nnew, 0, sizeof nnew);
-    for (sd = 0; sd < 2; sd++) {
-        for (k = 0; k < 3; k++) {
-            clo[k] = lo[k];
-            chi[k] = hi[k];
-        }
-        if (sd == 0)
-            chi[axis] = pos;
+    sp.cost = HUGE_VAL;
+    sp.axis = 0;
+    sp.pos = 0.0f;
+    sp.planar_left = 1;
+    for (k = 0; k < 3; k++)
+        d[k] = (double)hi[k] - lo[k];
+    area = d[0] * d[1] + d[1] * d[2] + d[2] * d[0];
+    if (depth < b->max_depth && n >= KD_MIN_SPLIT && area > 0.0) {
+        if (n <= KD_EXACT_MAX)
+            split_exact(b, b->ref + off, n, lo, hi, d, area, &sp);
         else
-            clo[axis] = pos;
-        for (i = 0; i < nboth; i++) {
-            float *bx = b->cbox + 12 * i + 6 * sd;
-            clip_prim(b, b->both[i], clo, chi, bx);
-            for (k = 0; k < 3; k++)
-                nnew[sd][k] += put_events(b->tmp + (sd * 3 + k) * gcap +
-                                              nnew[sd][k],
-                                          b->both[i], bx, k);
-        }
-        for (k = 0; k < 3; k++)
-            ev_sort(b, b->tmp + (sd * 3 + k) * gcap, nnew[sd][k], b->tmp2);
+            split_binned(b->ref + off, n, lo, hi, d, area, &sp);
     }
+    if (!(sp.cost < KD_COST_ISECT * (double)n))
+        return make_leaf(b, b->ref + off, n);
 
-    /* Write the right child's lists, then the left child's, above this
-       node's, merging kept and new events; then move them down over it. */
-    for (sd = 0; sd < 2; sd++)
-        for (k = 0; k < 3; k++)
-            nch[sd][k] = cnt[sd][k] + nnew[sd][k];
-    base[1] = 0;
-    base[0] = nch[1][0] + nch[1][1] + nch[1][2];
-    if (grow_ev(b, &b->ev, &b->ev_cap,
-                off + total + base[0] + nch[0][0] + nch[0][1] + nch[0][2]))
+    /* Partition into the right child's list at off + n and the left
+       child's at off + 2n (each has at most n references), then move them
+       down: right at off, left above it, so that the left subtree is
+       built on top and the right one after it. */
+    if (rtpi_grow(b->a, (void **)&b->ref, &b->ref_cap, off + 3 * n,
+                  sizeof *b->ref))
         return -1;
-    ev[0] = b->ev + off;
-    ev[1] = ev[0] + n[0];
-    ev[2] = ev[1] + n[1];
-    out = off + total;
-    for (sd = 1; sd >= 0; sd--) {
-        uint8_t want = (uint8_t)(sd + 1);
-        for (k = 0; k < 3; k++) {
-            const kd_ev *x = ev[k], *xe = ev[k] + n[k];
-            const kd_ev *y = b->tmp + (sd * 3 + k) * gcap;
-            const kd_ev *ye = y + nnew[sd][k];
-            kd_ev *o = b->ev + out;
-            for (;;) {
-                while (x < xe && b->side[x->pt >> 2] != want)
-                    x++;
-                if (x == xe)
-                    break;
-                if (y < ye && ev_less(*y, *x))
-                    *o++ = *y++;
-                else
-                    *o++ = *x++;
+    r = b->ref + off;
+    R = r + n;
+    L = r + 2 * n;
+    nl = nr = 0;
+    {
+        const int ax = sp.axis, pl = sp.planar_left;
+        const float pos = sp.pos;
+        for (i = 0; i < n; i++) {
+            float a0 = r[i].lo[ax], a1 = r[i].hi[ax];
+            if (a1 < pos || (a1 == pos && (a0 < pos || pl)))
+                L[nl++] = r[i];
+            else if (a0 > pos || a0 == pos)
+                R[nr++] = r[i];
+            else {
+                int m = split_ref(b, &r[i], ax, pos, &L[nl], &R[nr]);
+                nl += (size_t)(m & 1);
+                nr += (size_t)(m >> 1);
             }
-            while (y < ye)
-                *o++ = *y++;
-            out += nch[sd][k];
         }
     }
-    memmove(b->ev + off, b->ev + off + total,
-            (out - off - total) * sizeof *b->ev);
+    memmove(r, R, nr * sizeof *r);
+    memmove(r + nr, L, nl * sizeof *r);
 
     if (push_node(b, &idx))
         return -1;
-    b->kd->nodes[idx].a.split = pos;
-    b->kd->nodes[idx].flags = (uint32_t)axis;
+    b->kd->nodes[idx].a.split = sp.pos;
+    b->kd->nodes[idx].flags = (uint32_t)sp.axis;
     for (k = 0; k < 3; k++) {
         clo[k] = lo[k];
         chi[k] = hi[k];
     }
-    chi[axis] = pos;
-    {
-        size_t nl = nside[0] + nboth, nr = nside[1] + nboth;
-        size_t nr3[3];
-        for (k = 0; k < 3; k++)
-            nr3[k] = nch[1][k];
-        if (build_node(b, clo, chi, off + base[0], nch[0], nl, depth + 1))
-            return -1;
-        if (b->kd->nnodes >= KD_MAX_PRIMS)
-            return -1;
-        b->kd->nodes[idx].flags |= (uint32_t)b->kd->nnodes << 2;
-        clo[axis] = pos;
-        chi[axis] = hi[axis];
-        return build_node(b, clo, chi, off, nr3, nr, depth + 1);
-    }
+    chi[sp.axis] = sp.pos;
+    if (build_node(b, clo, chi, off + nr, nl, depth + 1))
+        return -1;
+    if (b->kd->nnodes >= KD_MAX_PRIMS)
+        return -1;
+    b->kd->nodes[idx].flags |= (uint32_t)b->kd->nnodes << 2;
+    clo[sp.axis] = sp.pos;
+    chi[sp.axis] = hi[sp.axis];
+    return build_node(b, clo, chi, off, nr, depth + 1);
 }
 
 static void build_free(kd_build *b)
 {
-    rtpi_free(b->a, b->ev);
-    rtpi_free(b->a, b->tmp);
-    rtpi_free(b->a, b->tmp2);
-    rtpi_free(b->a, b->pbox);
-    rtpi_free(b->a, b->side);
-    rtpi_free(b->a, b->both);
-    rtpi_free(b->a, b->cbox);
+    rtpi_free(b->a, b->ref);
+    rtpi_free(b->a, b->key);
     rtpi_free(b->a, b);
 }
 
@@ -608,7 +553,7 @@ rtp_status rtpi_kd_build(const rtp_scene *s, const rtp_allocator *alloc,
     rtp_allocator a;
     rtpi_kdtree *kd;
     kd_build *b;
-    size_t np = rtpi_scene_nprims(s), i, nvalid = 0, n[3];
+    size_t np = rtpi_scene_nprims(s), i, nvalid = 0;
     float lo[3], hi[3];
     int k;
     double lg;
@@ -638,14 +583,12 @@ rtp_status rtpi_kd_build(const rtp_scene *s, const rtp_allocator *alloc,
     if (np > 0) {
         kd->tri = (float *)rtpi_malloc_array(&a, s->ntris ? s->ntris : 1,
                                              9 * sizeof(float));
-        b->pbox = (float *)rtpi_malloc_array(&a, np, 6 * sizeof(float));
-        b->side = (uint8_t *)rtpi_malloc_array(&a, np, 1);
-        b->ev = (kd_ev *)rtpi_malloc_array(&a, np, 6 * sizeof(kd_ev));
-        b->tmp2 = (kd_ev *)rtpi_malloc_array(&a, np, 2 * sizeof(kd_ev));
-        if (!kd->tri || !b->pbox || !b->side || !b->ev || !b->tmp2)
+        b->ref = (kd_ref *)rtpi_malloc_array(&a, np, 4 * sizeof(kd_ref));
+        b->key = (uint64_t *)rtpi_malloc_array(&a, 6 * KD_EXACT_MAX,
+                                               sizeof(uint64_t));
+        if (!kd->tri || !b->ref || !b->key)
             goto nomem;
-        b->ev_cap = 6 * np;
-        b->tmp2_cap = 2 * np;
+        b->ref_cap = 4 * np;
     }
     for (i = 0; i < s->ntris; i++) {
         const rtpi_tri *t = &s->tris[i];
@@ -662,7 +605,7 @@ rtp_status rtpi_kd_build(const rtp_scene *s, const rtp_allocator *alloc,
     }
     for (i = 0; i < np; i++) {
         double dlo[3], dhi[3];
-        float *pb = b->pbox + 6 * i;
+        kd_ref *r = b->ref + nvalid;
         int ok = 1;
         if (i < s->ntris) {
             const float *v = kd->tri + 9 * i;
@@ -674,14 +617,14 @@ rtp_status rtpi_kd_build(const rtp_scene *s, const rtp_allocator *alloc,
                 !(fabs(dhi[k]) < 1e30))
                 ok = 0;
         }
-        b->side[i] = (uint8_t)ok;
         if (!ok)
             continue;
+        r->prim = (uint32_t)i;
         for (k = 0; k < 3; k++) {
-            pb[k] = f_down(dlo[k]);
-            pb[3 + k] = f_up(dhi[k]);
-            lo[k] = pb[k] < lo[k] ? pb[k] : lo[k];
-            hi[k] = pb[3 + k] > hi[k] ? pb[3 + k] : hi[k];
+            r->lo[k] = f_down(dlo[k]);
+            r->hi[k] = f_up(dhi[k]);
+            lo[k] = r->lo[k] < lo[k] ? r->lo[k] : lo[k];
+            hi[k] = r->hi[k] > hi[k] ? r->hi[k] : hi[k];
         }
         nvalid++;
     }
@@ -693,30 +636,16 @@ rtp_status rtpi_kd_build(const rtp_scene *s, const rtp_allocator *alloc,
             kd->hi[k] = hi[k];
             kd->maxabs[k] = fmax(fabs(kd->lo[k]), fabs(kd->hi[k]));
         }
-        /* Initial events, per axis in its own third, then packed. */
-        for (k = 0; k < 3; k++) {
-            kd_ev *e = b->ev + 2 * np * (size_t)k;
-            size_t m = 0;
-            for (i = 0; i < np; i++)
-                if (b->side[i])
-                    m += put_events(e + m, (uint32_t)i, b->pbox + 6 * i, k);
-            ev_sort(b, e, m, b->tmp2);
-            n[k] = m;
-        }
-        memmove(b->ev + n[0], b->ev + 2 * np, n[1] * sizeof *b->ev);
-        memmove(b->ev + n[0] + n[1], b->ev + 4 * np, n[2] * sizeof *b->ev);
     } else {
-        for (k = 0; k < 3; k++) {
-            n[k] = 0;
+        for (k = 0; k < 3; k++)
             lo[k] = hi[k] = 0.0f;
-        }
     }
 
     lg = nvalid > 1 ? log((double)nvalid) / log(2.0) : 0.0;
     b->max_depth = (int)(KD_DEPTH_A + KD_DEPTH_B * lg);
     if (b->max_depth > KD_DEPTH_CAP)
         b->max_depth = KD_DEPTH_CAP;
-    if (build_node(b, lo, hi, 0, n, nvalid, 0))
+    if (build_node(b, lo, hi, 0, nvalid, 0))
         goto nomem;
 
     kd->stats.nodes = kd->nnodes;

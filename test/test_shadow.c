@@ -97,7 +97,7 @@ static size_t make_samples(const rtp_scene *s, const rtpi_kdtree *kd, rtpi_v3 lp
         if (!rtpi_kd_intersect(kd, &r, &h))
             continue;
         pe = v3_madd(r.o, r.d, h.t);
-        rtpi_surface_from_point(s, h.prim, v3((float)pe.x, (float)pe.y, (float)pe.z), &sf);
+        rtpi_surface_from_point(s, h.prim, v3((float)pe.x, (float)pe.y, (float)pe.z), 0, &sf);
         ng = sf.ng;
         ns = sf.ns;
         if (v3_dot(r.d, ng) >= 0.0 && rtpi_two_sided(s, 0, h.prim, &s->mats[sf.mat])) {
@@ -275,7 +275,7 @@ static void test_lightbuf_far_from_origin(void)
                     if (!rtpi_kd_intersect(kd, &r, &h))
                         continue;
                     pe = v3_madd(r.o, r.d, h.t);
-                    rtpi_surface_from_point(s, h.prim, v3((float)pe.x, (float)pe.y, (float)pe.z), &sf);
+                    rtpi_surface_from_point(s, h.prim, v3((float)pe.x, (float)pe.y, (float)pe.z), 0, &sf);
                     ng = sf.ng;
                     ns = sf.ns;
                     if (v3_dot(r.d, ng) >= 0.0) {

@@ -1,0 +1,379 @@
+/* builder.c — ray trees handed in by another renderer: hits are collected
+ * per sample in any order, then put in the preorder layout trace records
+ * and validated like a tree file, so evaluation, edits and files work the
+ * same on them. */
+#include "internal.h"
+
+#include <stdlib.h>
+
+#define MAX_BUILD_DEPTH 1000 /* as tree files: bounds evaluation recursion */
+
+typedef struct bhit {
+    uint32_t sample, prim, vis;
+    int32_t parent;
+    uint8_t kind, back, tir;
+    float p[3];
+    size_t ext; /* first visibility word in b->ext (> 32 lights) */
+} bhit;
+
+typedef struct bmiss {
+    uint32_t sample;
+    int32_t parent;
+    uint8_t kind;
+} bmiss;
+
+struct rtp_builder {
+    rtp_allocator alloc;
+    rtp_scene *scene;
+    int width, height, nx, ny, spd;
+    size_t words;         /* visibility words per hit when > 32 lights */
+    uint32_t *count;      /* hits per sample so far */
+    bhit *hits;
+    size_t nhits, cap_hits;
+    bmiss *misses;
+    size_t nmisses, cap_misses;
+    uint32_t *ext;
+    size_t next, cap_ext;
+};
+
+void rtp_builder_destroy(rtp_builder *b)
+{
+    rtp_allocator a;
+    if (!b)
+        return;
+    a = b->alloc;
+    rtp_scene_destroy(b->scene);
+    rtpi_free(&a, b->count);
+    rtpi_free(&a, b->hits);
+    rtpi_free(&a, b->misses);
+    rtpi_free(&a, b->ext);
+    rtpi_free(&a, b);
+}
+
+rtp_status rtp_builder_create(const rtp_scene *scene, int width, int height, int spd,
+                              rtp_builder **out, rtp_error *err)
+{
+    rtp_builder *b;
+    size_t ns;
+    if (!scene || !out)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_builder_create: NULL argument");
+    *out = NULL;
+    if (!rtpi_image_size_ok(width, height) || !rtpi_image_size_ok(width + 1, height + 1))
+        return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0, "image size %dx%d not allowed", width,
+                          height);
+    b = (rtp_builder *)rtpi_calloc_array(&scene->alloc, 1, sizeof *b);
+    if (!b)
+        return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+    b->alloc = scene->alloc;
+    b->width = width;
+    b->height = height;
+    b->spd = spd ? 1 : 0;
+    b->nx = width + b->spd;
+    b->ny = height + b->spd;
+    b->words = scene->nlights > 32 ? (scene->nlights + 31) / 32 : 0;
+    ns = (size_t)b->nx * b->ny;
+    b->count = (uint32_t *)rtpi_calloc_array(&b->alloc, ns, sizeof *b->count);
+    if (!b->count || rtpi_scene_clone(scene, &b->scene) != RTP_OK) {
+        rtp_builder_destroy(b);
+        return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+    }
+    *out = b;
+    return RTP_OK;
+}
+
+static rtp_status check_link(rtp_builder *b, int x, int y, int parent, rtp_ray_kind kind,
+                             uint32_t *sample, rtp_error *err)
+{
+    if (!b)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "NULL builder");
+    if (x < 0 || y < 0 || x >= b->nx || y >= b->ny)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                          "sample (%d, %d) outside the %dx%d samples", x, y, b->nx, b->ny);
+    *sample = (uint32_t)((size_t)y * b->nx + x);
+    if ((unsigned)kind > RTP_RAY_REFRACTED || (kind == RTP_RAY_EYE) != (parent == RTP_NO_PARENT))
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                          "an eye ray has no parent; reflected and refracted rays have one");
+    if (parent != RTP_NO_PARENT && (parent < 0 || (uint32_t)parent >= b->count[*sample]))
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                          "sample (%d, %d): parent %d is not a node of this sample", x, y, parent);
+    return RTP_OK;
+}
+
+int rtp_builder_hit(rtp_builder *b, int x, int y, int parent, rtp_ray_kind kind,
+                    const rtp_hit_record *hit, rtp_error *err)
+{
+    uint32_t sample;
+    rtp_status st = check_link(b, x, y, parent, kind, &sample, err);
+    bhit *h;
+    size_t i, nl;
+    if (st != RTP_OK)
+        return -(int)st;
+    if (!hit)
+        return -(int)rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "NULL hit");
+    if (hit->prim >= rtpi_scene_nprims(b->scene))
+        return -(int)rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                                "primitive %u: the scene has %zu", hit->prim,
+                                rtpi_scene_nprims(b->scene));
+    if (!isfinite(hit->pos[0]) || !isfinite(hit->pos[1]) || !isfinite(hit->pos[2]))
+        return -(int)rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "hit position not finite");
+    if (b->count[sample] >= RTPI_MAX_SUBTREE)
+        return -(int)rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0, "too many hits in one sample");
+    nl = b->scene->nlights;
+    if (rtpi_grow(&b->alloc, (void **)&b->hits, &b->cap_hits, b->nhits + 1, sizeof *b->hits) ||
+        (b->words && rtpi_grow(&b->alloc, (void **)&b->ext, &b->cap_ext, b->next + b->words,
+                               sizeof *b->ext)))
+        return -(int)rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+    h = &b->hits[b->nhits++];
+    memset(h, 0, sizeof *h);
+    h->sample = sample;
+    h->parent = parent;
+    h->kind = (uint8_t)kind;
+    h->back = hit->back != 0;
+    h->tir = hit->total_internal != 0;
+    h->prim = hit->prim;
+    for (i = 0; i < 3; i++)
+        h->p[i] = (float)hit->pos[i];
+    h->ext = b->next;
+    if (b->words) {
+        memset(b->ext + b->next, 0, b->words * sizeof *b->ext);
+        b->next += b->words;
+    }
+    for (i = 0; hit->lights && i < nl; i++) {
+        if (!((hit->lights[i >> 3] >> (i & 7)) & 1u))
+            continue;
+        if (b->words)
+            b->ext[h->ext + (i >> 5)] |= 1u << (i & 31);
+        else
+            h->vis |= 1u << i;
+    }
+    return (int)b->count[sample]++;
+}
+
+rtp_status rtp_builder_miss(rtp_builder *b, int x, int y, int parent, rtp_ray_kind kind,
+                            rtp_error *err)
+{
+    uint32_t sample;
+    rtp_status st = check_link(b, x, y, parent, kind, &sample, err);
+    bmiss *m;
+    if (st != RTP_OK)
+        return st;
+    if (kind == RTP_RAY_EYE)
+        return RTP_OK; /* no hit at all: the sample shows the background */
+    if (rtpi_grow(&b->alloc, (void **)&b->misses, &b->cap_misses, b->nmisses + 1,
+                  sizeof *b->misses))
+        return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+    m = &b->misses[b->nmisses++];
+    m->sample = sample;
+    m->parent = parent;
+    m->kind = (uint8_t)kind;
+    return RTP_OK;
+}
+
+/* Per sample, during finish. */
+typedef struct emit {
+    const bhit *const *h;  /* the sample's hits in insertion order */
+    int32_t *refl, *refr;  /* child local index, -1 none, -2 miss */
+    rtpi_cnode *out;
+    uint32_t *out_ext;
+    const uint32_t *ext;
+    size_t words, n;
+    int depth;
+} emit;
+
+static size_t emit_node(emit *e, int32_t i, int depth, size_t at)
+{
+    const bhit *h = e->h[i];
+    rtpi_cnode *nd = &e->out[at];
+    size_t end = at + 1;
+    uint32_t link = (h->back ? RTPI_L_BACK : 0u) | (h->tir ? RTPI_L_TIR : 0u);
+    if (depth > e->depth)
+        e->depth = depth;
+    memcpy(nd->p, h->p, sizeof nd->p);
+    nd->prim = h->prim;
+    nd->vis = h->vis;
+    if (e->words)
+        memcpy(e->out_ext + at * e->words, e->ext + h->ext, e->words * sizeof *e->ext);
+    if (e->refl[i] >= 0) {
+        link |= RTPI_L_REFL;
+        end = emit_node(e, e->refl[i], depth + 1, end);
+    } else if (e->refl[i] == -2) {
+        link |= RTPI_L_REFL_MISS;
+    }
+    if (e->refr[i] >= 0) {
+        link |= RTPI_L_REFR | (uint32_t)(end - at) << RTPI_L_SHIFT;
+        end = emit_node(e, e->refr[i], depth + 1, end);
+    } else if (e->refr[i] == -2) {
+        link |= RTPI_L_REFR_MISS;
+    }
+    e->out[at].link = link;
+    return end;
+}
+
+static int depth_ok(const emit *e, int32_t i, int depth)
+{
+    if (depth > MAX_BUILD_DEPTH)
+        return 0;
+    return (e->refl[i] < 0 || depth_ok(e, e->refl[i], depth + 1)) &&
+           (e->refr[i] < 0 || depth_ok(e, e->refr[i], depth + 1));
+}
+
+rtp_status rtp_builder_finish(rtp_builder *b, rtp_tree **out, rtp_error *err)
+{
+    rtp_tree *t = NULL;
+    const rtp_allocator *a;
+    size_t ns, k, i, maxn = 0;
+    const bhit **order = NULL;
+    uint64_t *first = NULL;
+    int32_t *refl = NULL, *refr = NULL;
+    rtp_status st = RTP_OK;
+    emit e;
+    if (!b || !out) {
+        rtp_builder_destroy(b);
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_builder_finish: NULL argument");
+    }
+    *out = NULL;
+    a = &b->alloc;
+    ns = (size_t)b->nx * b->ny;
+    t = (rtp_tree *)rtpi_calloc_array(a, 1, sizeof *t);
+    first = (uint64_t *)rtpi_malloc_array(a, ns + 1, sizeof *first);
+    order = (const bhit **)rtpi_malloc_array(a, b->nhits + 1, sizeof *order);
+    if (!t || !first || !order)
+        goto nomem;
+    t->alloc = *a;
+    /* hits grouped by sample, insertion order kept (local indices) */
+    first[0] = 0;
+    for (k = 0; k < ns; k++) {
+        first[k + 1] = first[k] + b->count[k];
+        if (b->count[k] > maxn)
+            maxn = b->count[k];
+    }
+    {
+        uint64_t *fill = (uint64_t *)rtpi_malloc_array(a, ns + 1, sizeof *fill);
+        if (!fill)
+            goto nomem;
+        memcpy(fill, first, (ns + 1) * sizeof *fill);
+        for (i = 0; i < b->nhits; i++)
+            order[fill[b->hits[i].sample]++] = &b->hits[i];
+        rtpi_free(a, fill);
+    }
+    refl = (int32_t *)rtpi_malloc_array(a, maxn + 1, sizeof *refl);
+    refr = (int32_t *)rtpi_malloc_array(a, maxn + 1, sizeof *refr);
+    t->nodes = (rtpi_cnode *)rtpi_malloc_array(a, b->nhits + 1, sizeof *t->nodes);
+    t->start = (uint64_t *)rtpi_malloc_array(a, ns + 1, sizeof *t->start);
+    if (b->words)
+        t->vis_ext = (uint32_t *)rtpi_malloc_array(a, b->nhits * b->words + 1, sizeof *t->vis_ext);
+    if (!refl || !refr || !t->nodes || !t->start || (b->words && !t->vis_ext))
+        goto nomem;
+    memset(&e, 0, sizeof e);
+    e.refl = refl;
+    e.refr = refr;
+    e.out = t->nodes;
+    e.out_ext = t->vis_ext;
+    e.ext = b->ext;
+    e.words = b->words;
+    /* misses, sorted by sample too: one pass per sample over a sorted copy */
+    {
+        size_t *mfirst = (size_t *)rtpi_calloc_array(a, ns + 1, sizeof *mfirst);
+        const bmiss **morder = (const bmiss **)rtpi_malloc_array(a, b->nmisses + 1, sizeof *morder);
+        if (!mfirst || !morder) {
+            rtpi_free(a, mfirst);
+            rtpi_free(a, morder);
+            goto nomem;
+        }
+        for (i = 0; i < b->nmisses; i++)
+            mfirst[b->misses[i].sample + 1]++;
+        for (k = 0; k < ns; k++)
+            mfirst[k + 1] += mfirst[k];
+        for (i = 0; i < b->nmisses; i++)
+            morder[mfirst[b->misses[i].sample]++] = &b->misses[i];
+        for (k = ns; k > 0; k--)
+            mfirst[k] = mfirst[k - 1];
+        mfirst[0] = 0;
+        for (k = 0; k < ns && st == RTP_OK; k++) {
+            size_t n = b->count[k], roots = 0, m;
+            int32_t root = -1;
+            e.h = order + first[k];
+            e.n = n;
+            for (i = 0; i < n; i++)
+                refl[i] = refr[i] = -1;
+            for (i = 0; i < n && st == RTP_OK; i++) {
+                const bhit *h = e.h[i];
+                int32_t *slot;
+                if (h->parent == RTP_NO_PARENT) {
+                    roots++;
+                    root = (int32_t)i;
+                    continue;
+                }
+                slot = h->kind == RTP_RAY_REFLECTED ? &refl[h->parent] : &refr[h->parent];
+                if (*slot != -1)
+                    st = rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                                    "sample %zu: node %d has two %s rays", k, (int)h->parent,
+                                    h->kind == RTP_RAY_REFLECTED ? "reflected" : "refracted");
+                *slot = (int32_t)i;
+            }
+            for (m = mfirst[k]; m < mfirst[k + 1] && st == RTP_OK; m++) {
+                const bmiss *ms = morder[m];
+                int32_t *slot = ms->kind == RTP_RAY_REFLECTED ? &refl[ms->parent] : &refr[ms->parent];
+                if (*slot != -1)
+                    st = rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                                    "sample %zu: node %d has two %s rays", k, (int)ms->parent,
+                                    ms->kind == RTP_RAY_REFLECTED ? "reflected" : "refracted");
+                *slot = -2;
+            }
+            if (st == RTP_OK && n && roots != 1)
+                st = rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                                "sample %zu: %zu eye-ray hits (one expected)", k, roots);
+            if (st == RTP_OK && n && !depth_ok(&e, root, 1))
+                st = rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
+                                "sample %zu: tree deeper than %d", k, MAX_BUILD_DEPTH);
+            t->start[k] = first[k];
+            if (st == RTP_OK && n && emit_node(&e, root, 1, (size_t)first[k]) != first[k] + n)
+                st = rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                                "sample %zu: hits not connected to the eye ray", k);
+        }
+        t->start[ns] = first[ns];
+        rtpi_free(a, mfirst);
+        rtpi_free(a, morder);
+    }
+    if (st != RTP_OK)
+        goto fail;
+    t->nnodes = b->nhits;
+    t->vis_words = b->words;
+    t->width = b->width;
+    t->height = b->height;
+    t->nx = b->nx;
+    t->ny = b->ny;
+    t->spd = b->spd;
+    t->max_depth = e.depth > 0 ? e.depth : 1;
+    t->min_weight = 0.0;
+    t->scene = b->scene;
+    b->scene = NULL;
+    t->nlights0 = t->scene->nlights;
+    t->mats0 = (rtpi_material *)rtpi_malloc_array(a, t->scene->nmats + 1, sizeof *t->mats0);
+    t->lights0 = (rtpi_light *)rtpi_malloc_array(a, t->scene->nlights + 1, sizeof *t->lights0);
+    if (!t->mats0 || !t->lights0)
+        goto nomem;
+    memcpy(t->mats0, t->scene->mats, t->scene->nmats * sizeof *t->mats0);
+    memcpy(t->lights0, t->scene->lights, t->scene->nlights * sizeof *t->lights0);
+    for (i = 0; i < t->scene->nmats; i++)
+        t->mats0[i].name = NULL;
+    for (i = 0; i < t->scene->nlights; i++)
+        t->lights0[i].name = NULL;
+    rtpi_free(a, first);
+    rtpi_free(a, order);
+    rtpi_free(a, refl);
+    rtpi_free(a, refr);
+    rtp_builder_destroy(b);
+    *out = t;
+    return RTP_OK;
+nomem:
+    st = rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+fail:
+    rtpi_free(a, first);
+    rtpi_free(a, order);
+    rtpi_free(a, refl);
+    rtpi_free(a, refr);
+    rtp_builder_destroy(b);
+    rtp_tree_destroy(t);
+    return st;
+}

@@ -1,0 +1,251 @@
+/* test_builder.c — a renderer of its own (analytic sphere and floor, in
+ * this file) hands its hits to rtp through the builder, using only rtp.h,
+ * then uses rtp's evaluation, edits and tree files.  Its image must match
+ * rtp's own trace of the same scene. */
+#include "rtp.h"
+
+#include "check.h"
+
+#include <math.h>
+#include <string.h>
+
+static const char scene_text[] =
+    "v from 0 -6 2.5 at 0 0 0.6 up 0 0 1 angle 40 hither 0.1 resolution 40 30\n"
+    "b 0.2 0.3 0.5\n"
+    "ambient 0.1 0.1 0.1\n"
+    "l 3 -3 6\nname key\n"
+    "f 0.8 0.7 0.5 0.9 0 100000 0 1\nname floor\n"
+    "p 4 -4 -4 0 4 -4 0 4 4 0 -4 4 0\n"
+    "f 0.9 0.2 0.2 0.6 0.4 40 0 1\nname ball\n"
+    "s 0 0 1 1\n";
+
+/* This "renderer" knows the floor square (triangles 0 and 1, as rtp
+   triangulates the polygon: 0,1,2 and 0,2,3) and the sphere (prim 2). */
+typedef struct hitinfo {
+    double t, p[3], n[3];
+    unsigned prim;
+} hitinfo;
+
+static int intersect(const double o[3], const double d[3], hitinfo *h)
+{
+    double best = HUGE_VAL, oc[3] = {o[0], o[1], o[2] - 1.0}, b, c, disc, t;
+    int k, any = 0;
+    /* sphere at (0,0,1), radius 1 */
+    b = oc[0] * d[0] + oc[1] * d[1] + oc[2] * d[2];
+    c = oc[0] * oc[0] + oc[1] * oc[1] + oc[2] * oc[2] - 1.0;
+    disc = b * b - c;
+    if (disc > 0) {
+        t = -b - sqrt(disc);
+        if (t > 1e-6 && t < best) {
+            best = t;
+            h->prim = 2;
+            any = 1;
+        }
+    }
+    /* floor z = 0, |x|,|y| <= 4 */
+    if (d[2] != 0.0) {
+        t = -o[2] / d[2];
+        if (t > 1e-6 && t < best) {
+            double x = o[0] + t * d[0], y = o[1] + t * d[1];
+            if (fabs(x) <= 4 && fabs(y) <= 4) {
+                best = t;
+                /* triangles (-4,-4)(4,-4)(4,4) and (-4,-4)(4,4)(-4,4) */
+                h->prim = x >= y ? 0u : 1u;
+                any = 1;
+            }
+        }
+    }
+    if (!any)
+        return 0;
+    h->t = best;
+    for (k = 0; k < 3; k++)
+        h->p[k] = o[k] + best * d[k];
+    if (h->prim == 2) {
+        h->n[0] = h->p[0];
+        h->n[1] = h->p[1];
+        h->n[2] = h->p[2] - 1.0;
+    } else {
+        h->n[0] = h->n[1] = 0.0;
+        h->n[2] = 1.0;
+    }
+    return 1;
+}
+
+static void add_hit(rtp_builder *b, int x, int y, int parent, rtp_ray_kind kind,
+                    const double o[3], const double d[3], int depth, int *bad)
+{
+    hitinfo h;
+    rtp_hit_record rec;
+    unsigned char lights = 0;
+    double l[3] = {3, -3, 6}, ld[3], len, so[3], ndl;
+    int k, node;
+    if (!intersect(o, d, &h)) {
+        if (kind != RTP_RAY_EYE && rtp_builder_miss(b, x, y, parent, kind, NULL) != RTP_OK)
+            (*bad)++;
+        return;
+    }
+    for (k = 0; k < 3; k++)
+        ld[k] = l[k] - h.p[k];
+    len = sqrt(ld[0] * ld[0] + ld[1] * ld[1] + ld[2] * ld[2]);
+    ndl = (ld[0] * h.n[0] + ld[1] * h.n[1] + ld[2] * h.n[2]) / len;
+    if (ndl > 0) {
+        hitinfo sh;
+        for (k = 0; k < 3; k++) {
+            so[k] = h.p[k] + 1e-6 * h.n[k];
+            ld[k] /= len;
+        }
+        if (!intersect(so, ld, &sh) || sh.t > len)
+            lights = 1;
+    }
+    memset(&rec, 0, sizeof rec);
+    for (k = 0; k < 3; k++)
+        rec.pos[k] = h.p[k];
+    rec.prim = h.prim;
+    rec.lights = &lights;
+    rec.back = (d[0] * h.n[0] + d[1] * h.n[1] + d[2] * h.n[2]) > 0;
+    node = rtp_builder_hit(b, x, y, parent, kind, &rec, NULL);
+    if (node < 0) {
+        (*bad)++;
+        return;
+    }
+    if (h.prim == 2 && depth < 5) { /* the ball reflects */
+        double r[3], dn = d[0] * h.n[0] + d[1] * h.n[1] + d[2] * h.n[2];
+        for (k = 0; k < 3; k++) {
+            r[k] = d[k] - 2 * dn * h.n[k];
+            so[k] = h.p[k] + 1e-6 * h.n[k];
+        }
+        add_hit(b, x, y, node, RTP_RAY_REFLECTED, so, r, depth + 1, bad);
+    }
+}
+
+static rtp_tree *build(const rtp_scene *s, int w, int h)
+{
+    rtp_builder *b = NULL;
+    rtp_tree *t = NULL;
+    rtp_error err;
+    const double pi = 3.14159265358979323846;
+    double from[3] = {0, -6, 2.5}, at[3] = {0, 0, 0.6}, dir[3], right[3], up[3], step, len;
+    int x, y, k, bad = 0;
+    for (k = 0; k < 3; k++)
+        dir[k] = at[k] - from[k];
+    len = sqrt(dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]);
+    for (k = 0; k < 3; k++)
+        dir[k] /= len;
+    /* right = dir x (0,0,1), up = right x dir */
+    right[0] = dir[1];
+    right[1] = -dir[0];
+    right[2] = 0;
+    len = sqrt(right[0] * right[0] + right[1] * right[1]);
+    right[0] /= len;
+    right[1] /= len;
+    up[0] = right[1] * dir[2] - right[2] * dir[1];
+    up[1] = right[2] * dir[0] - right[0] * dir[2];
+    up[2] = right[0] * dir[1] - right[1] * dir[0];
+    step = 2 * tan(40.0 * pi / 360.0) / (double)((w > h ? w : h) - 1);
+    CHECK(rtp_builder_create(s, w, h, 0, &b, &err) == RTP_OK);
+    for (y = 0; b && y < h; y++)
+        for (x = 0; x < w; x++) {
+            double sx = (x - 0.5 * (w - 1)) * step, sy = (0.5 * (h - 1) - y) * step, d[3];
+            for (k = 0; k < 3; k++)
+                d[k] = dir[k] + sx * right[k] + sy * up[k];
+            len = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+            for (k = 0; k < 3; k++)
+                d[k] /= len;
+            add_hit(b, x, y, RTP_NO_PARENT, RTP_RAY_EYE, from, d, 1, &bad);
+        }
+    CHECK(bad == 0);
+    CHECK(b && rtp_builder_finish(b, &t, &err) == RTP_OK);
+    return t;
+}
+
+static void test_builder_matches_trace(void)
+{
+    rtp_scene *s = NULL;
+    rtp_tree *t = NULL, *t2 = NULL;
+    rtp_image *mine = NULL, *theirs = NULL, *again = NULL;
+    rtp_trace_options o;
+    rtp_diff_stats d;
+    char path[256];
+    const char *tmp = getenv("TMPDIR");
+    CHECK(rtp_scene_load_memory(scene_text, strlen(scene_text), "b.nff", "nff", NULL, &s,
+                                NULL) == RTP_OK);
+    if (!s)
+        return;
+    memset(&o, 0, sizeof o);
+    t = build(s, 40, 30);
+    CHECK(t != NULL);
+    if (!t)
+        goto out;
+    CHECK(rtp_tree_eval(t, NULL, &mine, NULL, NULL) == RTP_OK);
+    CHECK(rtp_trace(s, &o, &theirs, NULL, NULL) == RTP_OK);
+    CHECK(mine && theirs && rtp_image_diff(mine, theirs, 1e-3, &d, NULL) == RTP_OK);
+    /* the two renderers' hit points differ in the last bits only; a
+       silhouette pixel may fall either way */
+    CHECK_MSG(d.share_above < 0.01, "share above 1e-3: %g", d.share_above);
+    CHECK_MSG(d.mae < 1e-3, "mae %g", d.mae);
+    rtp_image_destroy(mine);
+    rtp_image_destroy(theirs);
+    mine = theirs = NULL;
+    /* edits on the handed-in trees equal a trace of the edited scene */
+    CHECK(rtp_tree_set(t, "mat.ball.color", "0.1,0.9,0.3", NULL) == RTP_OK);
+    CHECK(rtp_tree_set(t, "light.key.color", "0.5,0.5,1", NULL) == RTP_OK);
+    CHECK(rtp_scene_set(s, "mat.ball.color", "0.1,0.9,0.3", NULL) == RTP_OK);
+    CHECK(rtp_scene_set(s, "light.key.color", "0.5,0.5,1", NULL) == RTP_OK);
+    CHECK(rtp_tree_eval(t, NULL, &mine, NULL, NULL) == RTP_OK);
+    CHECK(rtp_trace(s, &o, &theirs, NULL, NULL) == RTP_OK);
+    CHECK(mine && theirs && rtp_image_diff(mine, theirs, 1e-3, &d, NULL) == RTP_OK);
+    CHECK(d.share_above < 0.01);
+    /* and the tree file keeps them */
+    snprintf(path, sizeof path, "%s/rtp-builder.rtp", tmp && *tmp ? tmp : "/tmp");
+    CHECK(rtp_tree_write(t, path, NULL, NULL) == RTP_OK);
+    CHECK(rtp_tree_read(path, NULL, &t2, NULL) == RTP_OK);
+    CHECK(t2 && rtp_tree_eval(t2, NULL, &again, NULL, NULL) == RTP_OK);
+    CHECK(again && mine &&
+          memcmp(again->pixels, mine->pixels, sizeof(float) * 3 * 40 * 30) == 0);
+    remove(path);
+out:
+    rtp_image_destroy(mine);
+    rtp_image_destroy(theirs);
+    rtp_image_destroy(again);
+    rtp_tree_destroy(t);
+    rtp_tree_destroy(t2);
+    rtp_scene_destroy(s);
+}
+
+static void test_builder_rejects(void)
+{
+    rtp_scene *s = NULL;
+    rtp_builder *b = NULL;
+    rtp_tree *t = NULL;
+    rtp_hit_record rec;
+    rtp_error err;
+    int root;
+    CHECK(rtp_scene_load_memory(scene_text, strlen(scene_text), "b.nff", "nff", NULL, &s,
+                                NULL) == RTP_OK);
+    if (!s)
+        return;
+    memset(&rec, 0, sizeof rec);
+    rec.pos[2] = 1.0;
+    CHECK(rtp_builder_create(s, 4, 4, 0, &b, &err) == RTP_OK);
+    CHECK(rtp_builder_hit(b, 9, 0, RTP_NO_PARENT, RTP_RAY_EYE, &rec, &err) < 0);
+    CHECK(rtp_builder_hit(b, 0, 0, 5, RTP_RAY_REFLECTED, &rec, &err) < 0);
+    rec.prim = 99;
+    CHECK(rtp_builder_hit(b, 0, 0, RTP_NO_PARENT, RTP_RAY_EYE, &rec, &err) < 0);
+    CHECK(strstr(err.message, "primitive") != NULL);
+    rec.prim = 2;
+    root = rtp_builder_hit(b, 0, 0, RTP_NO_PARENT, RTP_RAY_EYE, &rec, &err);
+    CHECK(root == 0);
+    CHECK(rtp_builder_hit(b, 0, 0, root, RTP_RAY_REFLECTED, &rec, &err) == 1);
+    CHECK(rtp_builder_miss(b, 0, 0, root, RTP_RAY_REFLECTED, &err) == RTP_OK);
+    /* two reflected rays from one node: refused at finish */
+    CHECK(rtp_builder_finish(b, &t, &err) == RTP_ERR_ARGUMENT);
+    CHECK(t == NULL && strstr(err.message, "two reflected") != NULL);
+    rtp_scene_destroy(s);
+}
+
+int main(void)
+{
+    RUN(test_builder_matches_trace);
+    RUN(test_builder_rejects);
+    return check_report();
+}
