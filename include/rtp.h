@@ -253,6 +253,12 @@ rtp_status rtp_tree_eval(rtp_tree *tree, const rtp_eval_options *opt,
                          rtp_image **out, rtp_eval_stats *stats,
                          rtp_error *err);
 
+/** Like rtp_tree_eval into an image the caller keeps (of the tree's size),
+ *  so a stream of edits allocates nothing per image. */
+rtp_status rtp_tree_eval_into(rtp_tree *tree, const rtp_eval_options *opt,
+                              rtp_image *image, rtp_eval_stats *stats,
+                              rtp_error *err);
+
 /** Adds a light (white, on) at the given position; it gets the next index.
  *  Its shadows are decided at evaluation like those of a moved light. */
 rtp_status rtp_tree_add_light(rtp_tree *tree, const double pos[3],

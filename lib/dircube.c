@@ -40,6 +40,7 @@ typedef struct dc_ctx {
     int res;
     int *rlo, *rhi; /* per row: first and last cell of the run (scratch) */
     int jmin, jmax;
+    double u0[6], v0[6], du[6], dv[6]; /* faces' windows (see dircube.h) */
     dc_bounds b;
 } dc_ctx;
 
@@ -144,19 +145,31 @@ static void dc_row_add(dc_ctx *c, int j, int i0, int i1)
    coordinates, both axes) touches: per row, the polygon's extent within
    the row's slab widened by m, found from the vertices inside the slab
    and the edges' crossings of its borders. */
-static void dc_spans_conservative(dc_ctx *c, const double uv[][2], int n,
+/* The cell along a window's edge holding coordinate x (clamped). */
+static int dc_wcoord(double x, double x0, double dx, int res)
+{
+    double t = (x - x0) / dx;
+    if (!(t > 0.0))
+        return 0;
+    if (!(t < (double)res))
+        return res - 1;
+    return (int)t;
+}
+
+static void dc_spans_conservative(dc_ctx *c, int f, const double uv[][2], int n,
                                   double m)
 {
     int res = c->res, j, j0, j1, k;
-    double vmin = uv[0][1], vmax = uv[0][1], cw = 2.0 / (double)res;
+    double vmin = uv[0][1], vmax = uv[0][1];
+    double u0 = c->u0[f], v0 = c->v0[f], du = c->du[f], dv = c->dv[f];
     for (k = 1; k < n; k++) {
         vmin = uv[k][1] < vmin ? uv[k][1] : vmin;
         vmax = uv[k][1] > vmax ? uv[k][1] : vmax;
     }
-    j0 = rtpi_dc_coord(vmin - m, res);
-    j1 = rtpi_dc_coord(vmax + m, res);
+    j0 = dc_wcoord(vmin - m, v0, dv, res);
+    j1 = dc_wcoord(vmax + m, v0, dv, res);
     for (j = j0; j <= j1; j++) {
-        double lo = -1.0 + cw * (double)j - m, hi = -1.0 + cw * (double)(j + 1) + m;
+        double lo = v0 + dv * (double)j - m, hi = v0 + dv * (double)(j + 1) + m;
         double umin = DBL_MAX, umax = -DBL_MAX;
         for (k = 0; k < n; k++) {
             const double *P = uv[k], *Q = uv[k + 1 < n ? k + 1 : 0];
@@ -175,7 +188,7 @@ static void dc_spans_conservative(dc_ctx *c, const double uv[][2], int n,
             }
         }
         if (umin <= umax)
-            dc_row_add(c, j, rtpi_dc_coord(umin - m, res), rtpi_dc_coord(umax + m, res));
+            dc_row_add(c, j, dc_wcoord(umin - m, u0, du, res), dc_wcoord(umax + m, u0, du, res));
     }
 }
 
@@ -338,7 +351,7 @@ static void dc_cover(dc_ctx *c, uint32_t prim, double ang, dc_emit_fn fn,
             if (n < 0 || (n > 0 && !dc_project(&clipped, uv)))
                 whole = 1; /* not convex after rounding, or through the light */
             else if (n > 0)
-                dc_spans_conservative(c, (const double(*)[2])uv, n, m);
+                dc_spans_conservative(c, f, (const double(*)[2])uv, n, m);
         }
         if (whole)
             dc_emit_face(c, f, fn, user);
@@ -400,9 +413,14 @@ static double dc_scale(const rtp_scene *s, rtpi_v3 L)
 static rtp_status dc_ctx_init(dc_ctx *c, const rtp_scene *s, rtpi_v3 L, int res,
                               const rtp_allocator *a)
 {
+    int f;
     c->s = s;
     c->L = L;
     c->res = res;
+    for (f = 0; f < 6; f++) { /* whole faces */
+        c->u0[f] = c->v0[f] = -1.0;
+        c->du[f] = c->dv[f] = 2.0 / (double)res;
+    }
     c->rlo = (int *)rtpi_malloc_array(a, (size_t)res, sizeof *c->rlo);
     c->rhi = (int *)rtpi_malloc_array(a, (size_t)res, sizeof *c->rhi);
     if (!c->rlo || !c->rhi) {
@@ -605,18 +623,21 @@ void rtpi_lightbuf_free(rtpi_lightbuf *lb, const rtp_allocator *a)
      - c holds prim itself and prim cannot shadow itself (a triangle, a
        sphere seen from outside): the paper's test, or
      - c's depth zc is not meaningfully nearer than p's depth zp along the
-       face axis: zc >= zp - tol, tol = zp (IB_BIAS + cell_angle tan(theta))
-       with theta the angle between the surface normal and the light.
+       face axis: zc >= zp - tol, tol = IB_BIAS zext + zp cell_angle
+       tan(theta), with theta the angle between the surface normal and the
+       light and zext the depth extent of the scene on the face.
        The ray through c's centre leaves p's ray by at most cell_angle, and
        on a plane tilted by theta depth changes by ~zp cell_angle tan(theta)
        over that angle: that term keeps the neighbouring triangles of one
        NFF polygon, and the next primitive across a shared edge, from
        shadowing each other; tan(theta) is capped at IB_TAN_MAX so that
-       grazing surfaces do not ignore real occluders.  IB_BIAS (1e-4)
-       covers the float depth of the buffer and OSMesa's 24-bit one.
-   Cones (open: the inside can be shadowed by the near wall) and
-   inside-only spheres may shadow themselves, so for them only the depth
-   test speaks.  The normal comes free: o - p is rtpi_offset_origin's step
+       grazing surfaces do not ignore real occluders.  IB_BIAS (1e-4 of
+       the scene's depth) covers the float depth of the buffer and
+       OSMesa's 24-bit one.
+   A sphere's shadow on itself is known exactly and decided first; so is
+   the outside of a cone (never self-shadowed); only for the inside of a
+   cone (shadowed by its near wall or not) does the depth test alone
+   speak (ib_self).  The normal comes free: o - p is rtpi_offset_origin's step
    along the geometric normal, towards the light (~1e-9 relative error).
    The answer is approximate within a cell of shadow edges by design. */
 #define IB_BIAS 1e-4
@@ -638,28 +659,64 @@ int rtpi_itembuf_renders(const rtp_scene *s, uint32_t prim, rtpi_v3 L)
     return 1;
 }
 
-/* Cannot shade itself: the paper's id test may be trusted. */
-static int ib_self_safe(const rtp_scene *s, uint32_t prim)
+/* Whether prim shadows a point of its own whose shadow ray starts at o:
+   0 no, 1 yes, -1 cannot tell.  A triangle never does.  A sphere does
+   exactly when the segment from o to the light crosses it where it
+   counts: o and the light on different sides for r > 0 (a point inside
+   a glass sphere, reached by a refracted ray, with the light outside);
+   o inside and the light outside for r < 0 (the ray leaves through the
+   visible inside).  An open cone bounds a convex solid: from its outside
+   (o radially beyond the wall, so the normal towards o is the outward
+   one and faces the light) the ray runs away from the solid and cannot
+   meet the wall again; from its inside it may. */
+static int ib_self(const rtp_scene *s, uint32_t prim, rtpi_v3 o, rtpi_v3 L)
 {
     size_t i = prim;
     if (i < s->ntris)
-        return 1;
-    if ((i -= s->ntris) < s->nspheres)
-        return s->spheres[i].r > 0.0f;
-    return 0;
+        return 0;
+    if ((i -= s->ntris) < s->nspheres) {
+        const rtpi_sphere *sp = &s->spheres[i];
+        rtpi_v3 c = v3_from_f(sp->c);
+        double r = fabs((double)sp->r);
+        int oin = v3_len(v3_sub(o, c)) < r, lin = v3_len(v3_sub(L, c)) < r;
+        return sp->r > 0.0f ? oin != lin : oin && !lin;
+    }
+    if ((i -= s->nspheres) < s->ncones) {
+        const rtpi_cone *cn = &s->cones[i];
+        rtpi_v3 b = v3_from_f(cn->base), ax = v3_sub(v3_from_f(cn->apex), b), q;
+        double H = v3_len(ax), h, hc, rb = fabs((double)cn->rb), ra = fabs((double)cn->ra);
+        if (!(H > 0.0))
+            return -1;
+        ax = v3_mul(ax, 1.0 / H);
+        q = v3_sub(o, b);
+        h = v3_dot(q, ax);
+        hc = h < 0.0 ? 0.0 : h > H ? H : h;
+        return v3_len(v3_madd(q, ax, -h)) > rb + (ra - rb) * (hc / H) ? 0 : -1;
+    }
+    return -1;
 }
 
 int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
                          rtpi_v3 p, rtpi_v3 o, uint32_t prim)
 {
-    size_t cell = rtpi_dc_cell(ib->res, v3_sub(o, ib->light));
-    uint32_t id = ib->id[cell];
+    size_t cell = rtpi_itembuf_cell(ib, v3_sub(o, ib->light));
+    uint32_t id;
+    int f;
     double zc, zp, tn, nl, cs;
     rtpi_v3 n, l;
+    if (cell == (size_t)-1)
+        return 1;
+    id = ib->id[cell];
     if (id == RTPI_NONE)
         return 1;
-    if (id == prim && ib_self_safe(s, prim))
-        return 1;
+    {
+        int self = ib_self(s, prim, o, ib->light);
+        if (self == 1)
+            return 0;
+        if (self == 0 && id == prim)
+            return 1;
+    }
+    f = (int)(cell / ((size_t)ib->res * (size_t)ib->res));
     zc = ib->z[cell];
     zp = rtpi_dc_depth(ib->res, cell, v3_sub(p, ib->light));
     n = v3_sub(o, p);
@@ -669,13 +726,118 @@ int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
     tn = cs * IB_TAN_MAX > 1.0 ? sqrt(fmax(0.0, 1.0 - cs * cs)) / cs : IB_TAN_MAX;
     if (tn > IB_TAN_MAX)
         tn = IB_TAN_MAX;
-    return zc >= zp - zp * (IB_BIAS + ib->cell_angle * tn);
+    return zc >= zp - ib->zbase[f] - (IB_BIAS * ib->zext[f] + zp * ib->cell_angle[f] * tn);
 }
 
-rtp_status rtpi_itembuf_alloc(rtpi_itembuf *ib, rtpi_v3 light, int res,
-                              const rtp_allocator *a, rtp_error *err)
+/* Sets each face's window to the projection of the bounds of every
+   hittable primitive (grown by 1e-6 of the scene's scale, far above the
+   rounding of bounds and projection), or to the whole face when the light
+   is inside those bounds.  A window is never narrower than 1e-9 (a flat
+   scene seen edge-on), so cell sizes stay positive. */
+static void ib_windows(rtpi_itembuf *ib, const rtp_scene *s)
+{
+    double lo[3] = {HUGE_VAL, HUGE_VAL, HUGE_VAL}, hi[3] = {-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
+    double L[3], S, g;
+    size_t i, n = rtpi_scene_nprims(s);
+    int f, k, inside = 1, any = 0;
+    L[0] = ib->light.x;
+    L[1] = ib->light.y;
+    L[2] = ib->light.z;
+    for (f = 0; f < 6; f++) {
+        ib->u0[f] = ib->v0[f] = -1.0;
+        ib->du[f] = ib->dv[f] = 2.0 / (double)ib->res;
+        ib->zbase[f] = 0.0;
+        ib->zext[f] = 1.0;
+    }
+    for (i = 0; i < n; i++) {
+        double pl[3], ph[3];
+        if (!dc_hittable(s, (uint32_t)i))
+            continue;
+        rtpi_prim_bounds(s, (uint32_t)i, pl, ph);
+        for (k = 0; k < 3; k++) {
+            lo[k] = pl[k] < lo[k] ? pl[k] : lo[k];
+            hi[k] = ph[k] > hi[k] ? ph[k] : hi[k];
+        }
+        any = 1;
+    }
+    if (!any)
+        return;
+    S = dc_scale(s, ib->light);
+    g = 1e-6 * S + 1e-30;
+    for (k = 0; k < 3; k++) {
+        lo[k] -= g;
+        hi[k] += g;
+        inside = inside && L[k] >= lo[k] && L[k] <= hi[k];
+    }
+    {
+        /* Depth extent from the light: the farthest corner. */
+        double e = 0.0;
+        for (k = 0; k < 3; k++)
+            e = fmax(e, fmax(fabs(lo[k] - L[k]), fabs(hi[k] - L[k])));
+        for (f = 0; f < 6; f++)
+            ib->zext[f] = e > 0.0 ? e : 1.0;
+    }
+    if (inside || !(S < 1e300))
+        return;
+    for (f = 0; f < 6; f++) {
+        double umin = HUGE_VAL, umax = -HUGE_VAL, vmin = HUGE_VAL, vmax = -HUGE_VAL;
+        double zmin = HUGE_VAL, zmax = -HUGE_VAL;
+        int side;
+        /* the box's six sides as polygons */
+        for (side = 0; side < 6; side++) {
+            int ax = side >> 1, a1 = (ax + 1) % 3, a2 = (ax + 2) % 3, v;
+            static const int cu[4] = {0, 1, 1, 0}, cv[4] = {0, 0, 1, 1};
+            dc_poly q, loc, cl;
+            double uv[DC_MAXV][2];
+            q.n = 4;
+            for (v = 0; v < 4; v++) {
+                q.v[v][ax] = ((side & 1) ? hi[ax] : lo[ax]) - L[ax];
+                q.v[v][a1] = (cu[v] ? hi[a1] : lo[a1]) - L[a1];
+                q.v[v][a2] = (cv[v] ? hi[a2] : lo[a2]) - L[a2];
+            }
+            loc.n = 4;
+            for (v = 0; v < 4; v++)
+                dc_local(f, q.v[v], loc.v[v]);
+            k = dc_clip(&loc, &cl, 1.0);
+            if (k < 0 || (k > 0 && !dc_project(&cl, uv))) {
+                umin = vmin = -1.0;
+                umax = vmax = 1.0;
+                continue;
+            }
+            for (v = 0; v < k; v++) {
+                /* The box within the frustum is convex, and its vertices
+                   are these: its nearest and farthest depths are here. */
+                zmin = fmin(zmin, cl.v[v][2]);
+                zmax = fmax(zmax, cl.v[v][2]);
+                umin = fmin(umin, uv[v][0]);
+                umax = fmax(umax, uv[v][0]);
+                vmin = fmin(vmin, uv[v][1]);
+                vmax = fmax(vmax, uv[v][1]);
+            }
+        }
+        if (!(umin <= umax && vmin <= vmax))
+            continue; /* the scene is not on this face: leave it whole */
+        umin = fmax(-1.0, umin);
+        vmin = fmax(-1.0, vmin);
+        umax = fmin(1.0, fmax(umax, umin + 1e-9));
+        vmax = fmin(1.0, fmax(vmax, vmin + 1e-9));
+        ib->u0[f] = umin;
+        ib->v0[f] = vmin;
+        ib->du[f] = (umax - umin) / (double)ib->res;
+        ib->dv[f] = (vmax - vmin) / (double)ib->res;
+        if (zmin <= zmax) {
+            ib->zbase[f] = zmin;
+            ib->zext[f] = zmax - zmin > 0.0 ? zmax - zmin : 1.0;
+        }
+    }
+}
+
+rtp_status rtpi_itembuf_alloc(rtpi_itembuf *ib, const rtp_scene *s,
+                              rtpi_v3 light, int res, const rtp_allocator *a,
+                              rtp_error *err)
 {
     size_t ncells, i;
+    int f;
     memset(ib, 0, sizeof *ib);
     if (res <= 0)
         res = RTPI_DC_DEFAULT_RES;
@@ -685,10 +847,12 @@ rtp_status rtpi_itembuf_alloc(rtpi_itembuf *ib, rtpi_v3 light, int res,
     ncells = 6 * (size_t)res * (size_t)res;
     ib->res = res;
     ib->light = light;
-    /* A cell spans 2/res in face coordinates, at most 2/res radians; its
-       centre is within half a diagonal, sqrt(2)/res, of any of its
-       directions; 1.25 covers the sampling of clipped, rounded edges. */
-    ib->cell_angle = 1.25 * sqrt(2.0) / (double)res;
+    ib_windows(ib, s);
+    /* A cell spans du x dv in face coordinates, no more radians; its
+       centre is within half a diagonal of any of its directions; 1.25
+       covers the sampling of clipped, rounded edges. */
+    for (f = 0; f < 6; f++)
+        ib->cell_angle[f] = 1.25 * 0.5 * sqrt(ib->du[f] * ib->du[f] + ib->dv[f] * ib->dv[f]);
     ib->id = (uint32_t *)rtpi_malloc_array(a, ncells, sizeof *ib->id);
     ib->z = (float *)rtpi_malloc_array(a, ncells, sizeof *ib->z);
     if (!ib->id || !ib->z) {
@@ -714,9 +878,10 @@ void rtpi_itembuf_free(rtpi_itembuf *ib, const rtp_allocator *a)
 
 static void ib_store(rtpi_itembuf *ib, size_t cell, double z, uint32_t prim)
 {
+    float zr = (float)(z - ib->zbase[cell / ((size_t)ib->res * (size_t)ib->res)]);
     /* Ties keep the first (lower id): deterministic. */
-    if (z < (double)ib->z[cell]) {
-        ib->z[cell] = (float)z;
+    if (zr < ib->z[cell]) {
+        ib->z[cell] = zr;
         ib->id[cell] = prim;
     }
 }
@@ -730,7 +895,8 @@ static void ib_tri(rtpi_itembuf *ib, const rtp_scene *s, int f, uint32_t prim)
     const rtpi_tri *t = &s->tris[prim];
     int res = ib->res, k, j, j0, j1;
     dc_poly loc, cl;
-    double uv[DC_MAXV][2], e1[3], e2[3], nn[3], kk, scale, vmin, vmax, cw = 2.0 / res;
+    double uv[DC_MAXV][2], e1[3], e2[3], nn[3], kk, scale, vmin, vmax;
+    double u0 = ib->u0[f], v0 = ib->v0[f], du = ib->du[f], dv = ib->dv[f];
     loc.n = 3;
     uv[0][0] = uv[0][1] = 0.0; /* (quiets a may-be-uninitialized warning) */
     for (k = 0; k < 3; k++) {
@@ -763,12 +929,12 @@ static void ib_tri(rtpi_itembuf *ib, const rtp_scene *s, int f, uint32_t prim)
         vmin = uv[k][1] < vmin ? uv[k][1] : vmin;
         vmax = uv[k][1] > vmax ? uv[k][1] : vmax;
     }
-    j0 = (int)ceil((vmin + 1.0) * 0.5 * res - 0.5);
-    j1 = (int)floor((vmax + 1.0) * 0.5 * res - 0.5);
+    j0 = (int)fmax(-1.0, ceil((vmin - v0) / dv - 0.5));
+    j1 = (int)fmin((double)res, floor((vmax - v0) / dv - 0.5));
     j0 = j0 < 0 ? 0 : j0;
     j1 = j1 > res - 1 ? res - 1 : j1;
     for (j = j0; j <= j1; j++) {
-        double vc = -1.0 + cw * (j + 0.5), umin = DBL_MAX, umax = -DBL_MAX;
+        double vc = v0 + dv * (j + 0.5), umin = DBL_MAX, umax = -DBL_MAX;
         int i, i0, i1;
         for (k = 0; k < cl.n; k++) {
             const double *P = uv[k], *Q = uv[k + 1 < cl.n ? k + 1 : 0];
@@ -787,12 +953,12 @@ static void ib_tri(rtpi_itembuf *ib, const rtp_scene *s, int f, uint32_t prim)
         }
         if (!(umin <= umax))
             continue;
-        i0 = (int)ceil((umin + 1.0) * 0.5 * res - 0.5);
-        i1 = (int)floor((umax + 1.0) * 0.5 * res - 0.5);
+        i0 = (int)fmax(-1.0, ceil((umin - u0) / du - 0.5));
+        i1 = (int)fmin((double)res, floor((umax - u0) / du - 0.5));
         i0 = i0 < 0 ? 0 : i0;
         i1 = i1 > res - 1 ? res - 1 : i1;
         for (i = i0; i <= i1; i++) {
-            double uc = -1.0 + cw * (i + 0.5);
+            double uc = u0 + du * (i + 0.5);
             /* Local point z (uc, vc, 1) on the plane nn.x = kk. */
             double w = (nn[0] * uc + nn[1] * vc + nn[2]) / kk;
             if (w > 0.0)
@@ -837,9 +1003,9 @@ static void ib_cast_run(void *user, size_t cell, int count)
     rtpi_itembuf *ib = ic->ib;
     size_t res = (size_t)ib->res, rem = cell % (res * res);
     int f = (int)(cell / (res * res)), j = (int)(rem / res), i0 = (int)(rem % res), i;
-    double cw = 2.0 / (double)res, vc = -1.0 + cw * (j + 0.5);
+    double vc = ib->v0[f] + ib->dv[f] * (j + 0.5);
     for (i = i0; i < i0 + count; i++) {
-        rtpi_v3 d = rtpi_dc_world(f, -1.0 + cw * (i + 0.5), vc, 1.0);
+        rtpi_v3 d = rtpi_dc_world(f, ib->u0[f] + ib->du[f] * (i + 0.5), vc, 1.0);
         size_t cc = cell + (size_t)(i - i0);
         double t;
         if (ic->sphere) {
@@ -852,7 +1018,7 @@ static void ib_cast_run(void *user, size_t cell, int count)
             r.o = ib->light;
             r.d = d;
             r.tmin = 0.0;
-            r.tmax = ib->z[cc];
+            r.tmax = (double)ib->z[cc] + ib->zbase[f];
             if (rtpi_intersect_prim(ic->s, ic->prim, &r, &h))
                 ib_store(ib, cc, h.t, ic->prim);
         }
@@ -865,13 +1031,17 @@ rtp_status rtpi_itembuf_build(const rtp_scene *s, rtpi_v3 light, int res,
 {
     size_t n = rtpi_scene_nprims(s), i;
     dc_ctx c;
-    rtp_status st = rtpi_itembuf_alloc(ib, light, res, a, err);
+    rtp_status st = rtpi_itembuf_alloc(ib, s, light, res, a, err);
     if (st != RTP_OK)
         return st;
     if (dc_ctx_init(&c, s, light, ib->res, a) != RTP_OK) {
         rtpi_itembuf_free(ib, a);
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory for the item buffer");
     }
+    memcpy(c.u0, ib->u0, sizeof c.u0);
+    memcpy(c.v0, ib->v0, sizeof c.v0);
+    memcpy(c.du, ib->du, sizeof c.du);
+    memcpy(c.dv, ib->dv, sizeof c.dv);
     for (i = 0; i < n; i++) {
         uint32_t prim = (uint32_t)i;
         if (!rtpi_itembuf_renders(s, prim, light))

@@ -42,12 +42,13 @@ static inline int rtpi_dc_coord(double u, int res)
     return (int)x;
 }
 
-/* The cell of direction d (from the light; any length). */
-static inline size_t rtpi_dc_cell(int res, rtpi_v3 d)
+/* The face of direction d (from the light; any length) and its face
+   coordinates there. */
+static inline int rtpi_dc_face(rtpi_v3 d, double *u, double *v)
 {
     double c[3];
     double ax, ay, az, m, inv;
-    int a, f, i, j;
+    int a;
     c[0] = d.x;
     c[1] = d.y;
     c[2] = d.z;
@@ -56,12 +57,21 @@ static inline size_t rtpi_dc_cell(int res, rtpi_v3 d)
     az = fabs(c[2]);
     a = ax >= ay ? (ax >= az ? 0 : 2) : (ay >= az ? 1 : 2);
     m = fabs(c[a]);
-    f = 2 * a + (c[a] < 0.0);
     /* |c[other]| <= m, so u and v land in [-1, 1] exactly: a direction on
        a cube edge or corner maps to this face's edge cell. */
     inv = m > 0.0 ? 1.0 / m : 0.0;
-    i = rtpi_dc_coord(c[(a + 1) % 3] * inv, res);
-    j = rtpi_dc_coord(c[(a + 2) % 3] * inv, res);
+    *u = c[(a + 1) % 3] * inv;
+    *v = c[(a + 2) % 3] * inv;
+    return 2 * a + (c[a] < 0.0);
+}
+
+/* The cell of direction d (from the light; any length) on a cube of full
+   faces. */
+static inline size_t rtpi_dc_cell(int res, rtpi_v3 d)
+{
+    double u, v;
+    int f = rtpi_dc_face(d, &u, &v);
+    int i = rtpi_dc_coord(u, res), j = rtpi_dc_coord(v, res);
     return ((size_t)f * (size_t)res + (size_t)j) * (size_t)res + (size_t)i;
 }
 
@@ -112,14 +122,41 @@ void rtpi_lightbuf_free(rtpi_lightbuf *lb, const rtp_allocator *a);
 
 /* -------------------------------------------------------- item buffer */
 
+/* Seen from a light outside the scene's bounds, the scene covers a part
+   of each face only: the item buffer spreads its res x res cells of a
+   face over a window [u0, u0 + res du] x [v0, v0 + res dv] that holds the
+   projection of the bounds (the whole face when the light is inside
+   them), so a far light still sees the scene through many cells.  Cell
+   (i, j) of face f then has its centre at u0 + (i + 1/2) du, v0 + (j +
+   1/2) dv.  OpenGL draws the same window with glFrustum. */
 typedef struct rtpi_itembuf {
     int res;
     rtpi_v3 light;
-    double cell_angle;   /* bound of the angle between a direction and
-                            the centre of its cell, radians */
-    uint32_t *id;        /* nearest occluder per cell, RTPI_NONE: none */
-    float *z;            /* its depth along the face axis */
+    double u0[6], v0[6], du[6], dv[6];
+    double cell_angle[6]; /* bound of the angle between a direction and
+                             the centre of its cell, radians */
+    double zbase[6];      /* nearest depth of the scene's bounds on a face */
+    double zext[6];       /* depth extent of the bounds on a face */
+    uint32_t *id;         /* nearest occluder per cell, RTPI_NONE: none */
+    float *z;             /* its depth along the face axis minus zbase:
+                             float keeps ~1e-7 of the scene's extent, not
+                             of the distance from a far light */
 } rtpi_itembuf;
+
+/* The cell of direction d (from the light), or (size_t)-1 when d points
+   outside the face's window by more than a cell (nothing drawn there). */
+static inline size_t rtpi_itembuf_cell(const rtpi_itembuf *ib, rtpi_v3 d)
+{
+    double u, v, x, y;
+    int f = rtpi_dc_face(d, &u, &v), res = ib->res, i, j;
+    x = (u - ib->u0[f]) / ib->du[f];
+    y = (v - ib->v0[f]) / ib->dv[f];
+    if (!(x > -1.0 && x < res + 1.0 && y > -1.0 && y < res + 1.0))
+        return (size_t)-1;
+    i = x < 0.0 ? 0 : x >= res ? res - 1 : (int)x;
+    j = y < 0.0 ? 0 : y >= res ? res - 1 : (int)y;
+    return ((size_t)f * (size_t)res + (size_t)j) * (size_t)res + (size_t)i;
+}
 
 /* The software scanline z-buffer. */
 rtp_status rtpi_itembuf_build(const rtp_scene *s, rtpi_v3 light, int res,
@@ -130,9 +167,11 @@ rtp_status rtpi_itembuf_build(const rtp_scene *s, rtpi_v3 light, int res,
 rtp_status rtpi_itembuf_build_osmesa(const rtp_scene *s, rtpi_v3 light,
                                      int res, const rtp_allocator *a,
                                      rtpi_itembuf *ib, rtp_error *err);
-/* Allocates the arrays, all cells empty (used by both builders). */
-rtp_status rtpi_itembuf_alloc(rtpi_itembuf *ib, rtpi_v3 light, int res,
-                              const rtp_allocator *a, rtp_error *err);
+/* Allocates the arrays, all cells empty, and sets the faces' windows
+   from the bounds of s (used by both builders). */
+rtp_status rtpi_itembuf_alloc(rtpi_itembuf *ib, const rtp_scene *s,
+                              rtpi_v3 light, int res, const rtp_allocator *a,
+                              rtp_error *err);
 /* The item-buffer decision for the hit at p on prim with shadow-ray
    origin o (see dircube.c for the rule). */
 int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,

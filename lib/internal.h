@@ -354,15 +354,25 @@ typedef struct rtpi_shade_ctx {
 #define RTPI_COEFFS(nl) (6 + 3 * (size_t)(nl))
 
 /* terms: n * RTPI_TERMS(nlights) floats.  vis_ext: the nodes' visibility
-   words (c->vis_words per node) or NULL for the nodes' own bits. */
+   words (c->vis_words per node) or NULL for the nodes' own bits.  nv (may
+   be NULL): receives each node's shading normal and view vector (6 floats),
+   from which rtpi_light_terms recomputes one light's terms exactly. */
 void rtpi_sample_terms(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
                        size_t n, const uint32_t *vis_ext, rtpi_v3 eye,
-                       float *terms);
+                       float *terms, float *nv);
+void rtpi_light_terms(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
+                      size_t n, const uint32_t *vis_ext, const float *nv,
+                      size_t light, float *terms);
 /* coeffs: RTPI_COEFFS(nlights) floats: G, A, then K_i; acc: as many
    doubles of scratch (sums are kept in double, then rounded once). */
 void rtpi_sample_coeffs(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
                         size_t n, const float *terms, double *acc,
                         float *coeffs);
+/* Light `light`'s coefficients alone (coeffs[6 + 3 light ..]), exactly as
+   rtpi_sample_coeffs computes them. */
+void rtpi_sample_coeffs_light(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
+                              size_t n, const float *terms, size_t light,
+                              float *coeffs);
 /* cl: 3 per light: colour * light scale, 0 when off (rtpi_light_colors). */
 void rtpi_combine(const rtp_scene *s, const double *cl, const float *coeffs,
                   float rgb[3]);
@@ -411,6 +421,8 @@ struct rtp_tree {
     int ev_valid;          /* ev_terms/ev_coeffs hold the state below */
     float *ev_terms;       /* nnodes * RTPI_TERMS(ev_nlights) */
     float *ev_coeffs;      /* samples * RTPI_COEFFS(ev_nlights) */
+    float *ev_nv;          /* nnodes * 6: shading normal, view vector */
+    float *ev_samples;     /* SPD: the corner samples before averaging */
     size_t ev_nlights;
     double *ev_pos;        /* 3 per light: positions the terms are for */
     int ev_vis_mode, ev_vis_res;

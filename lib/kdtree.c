@@ -77,6 +77,9 @@
 #ifndef KD_EXACT_MAX
 #define KD_EXACT_MAX 256
 #endif
+#ifndef KD_SMALL_MAX
+#define KD_SMALL_MAX 16
+#endif
 #ifndef KD_BINS
 #define KD_BINS 32
 #endif
@@ -129,19 +132,34 @@ typedef struct kd_build {
     int max_depth, depth_seen;
 } kd_build;
 
+/* The float next to f towards -inf or +inf (f finite): nextafterf
+   without the call, which the build makes millions of times. */
+static float f_next(float f, int up)
+{
+    uint32_t u;
+    if (f == 0.0f)
+        return up ? 1.4e-45f : -1.4e-45f; /* the smallest subnormals */
+    memcpy(&u, &f, sizeof u);
+    u += (f > 0.0f) == (up != 0) ? 1u : (uint32_t)-1;
+    memcpy(&f, &u, sizeof f);
+    return f;
+}
+
+/* x rounded down (up) to a float.  -0 becomes +0 so that positions
+   compare and sort alike. */
 static float f_down(double x)
 {
     float f = (float)x;
     if ((double)f > x)
-        f = nextafterf(f, -INFINITY);
-    return f + 0.0f; /* -0 becomes +0: events compare and sort alike */
+        f = f_next(f, 0);
+    return f + 0.0f;
 }
 
 static float f_up(double x)
 {
     float f = (float)x;
     if ((double)f < x)
-        f = nextafterf(f, INFINITY);
+        f = f_next(f, 1);
     return f + 0.0f;
 }
 
@@ -276,6 +294,54 @@ static void split_exact(kd_build *b, const kd_ref *r, size_t n,
                 }
             }
             nl += ps + pp;
+        }
+    }
+}
+
+/* The same exact SAH for a handful of references, without sorting: each
+   face of each box is a candidate, and the references on either side are
+   counted directly (n^2 compares, cheaper than a sort for small n). */
+static void split_small(const kd_ref *r, size_t n, const float *lo,
+                        const float *hi, const double *d, double area,
+                        kd_split *best)
+{
+    int k, f;
+    size_t i, j;
+    for (k = 0; k < 3; k++) {
+        double o1 = d[(k + 1) % 3], o2 = d[(k + 2) % 3];
+        double inv = 1.0 / area, cap = o1 * o2 * inv, perim = (o1 + o2) * inv;
+        if (!(d[k] > 0.0))
+            continue;
+        for (j = 0; j < n; j++) {
+            for (f = 0; f < 2; f++) {
+                float p = f ? r[j].hi[k] : r[j].lo[k];
+                size_t na = 0, nb = 0, np = 0;
+                double pl, pr, fl, cl, cr;
+                if (!(p > lo[k] && p < hi[k]))
+                    continue;
+                for (i = 0; i < n; i++) {
+                    na += r[i].lo[k] < p;
+                    nb += r[i].hi[k] > p;
+                    np += (r[i].lo[k] == p) & (r[i].hi[k] == p);
+                }
+                pl = cap + ((double)p - lo[k]) * perim;
+                pr = cap + ((double)hi[k] - p) * perim;
+                fl = ((double)p - lo[k]) / d[k];
+                cl = sah(pl, pr, na + np, nb, fl);
+                cr = sah(pl, pr, na, nb + np, fl);
+                if (cl < best->cost) {
+                    best->cost = cl;
+                    best->axis = k;
+                    best->pos = p;
+                    best->planar_left = 1;
+                }
+                if (cr < best->cost) {
+                    best->cost = cr;
+                    best->axis = k;
+                    best->pos = p;
+                    best->planar_left = 0;
+                }
+            }
         }
     }
 }
@@ -471,7 +537,9 @@ static int build_node(kd_build *b, const float *lo, const float *hi,
         d[k] = (double)hi[k] - lo[k];
     area = d[0] * d[1] + d[1] * d[2] + d[2] * d[0];
     if (depth < b->max_depth && n >= KD_MIN_SPLIT && area > 0.0) {
-        if (n <= KD_EXACT_MAX)
+        if (n <= KD_SMALL_MAX)
+            split_small(b->ref + off, n, lo, hi, d, area, &sp);
+        else if (n <= KD_EXACT_MAX)
             split_exact(b, b->ref + off, n, lo, hi, d, area, &sp);
         else
             split_binned(b->ref + off, n, lo, hi, d, area, &sp);
@@ -676,6 +744,14 @@ void rtpi_kd_get_stats(const rtpi_kdtree *kd, rtpi_kd_stats *st)
 
 /* ============================================================ traversal */
 
+#ifdef KD_PROFILE
+extern unsigned long kd_prof[4];
+unsigned long kd_prof[4];
+#define PROF(i) (kd_prof[i]++)
+#else
+#define PROF(i) ((void)0)
+#endif
+
 typedef struct kd_ray {
     double o[3], inv[3], slack[3], tol[3];
     int par[3];      /* direction is exactly 0 on this axis */
@@ -796,14 +872,17 @@ int rtpi_kd_intersect(const rtpi_kdtree *kd, const rtpi_ray *ray,
     for (;;) {
         const kd_node *nd = &nodes[node];
         if ((nd->flags & 3) != 3) {
+            PROF(0);
             node = kd_step(&kr, nd, node, &t0, &t1, stack, &sp);
             continue;
         }
         {
             uint32_t cnt = nd->flags >> 2, j;
             const uint32_t *list = cnt == 1 ? &nd->a.one : kd->refs + nd->a.off;
+            PROF(1);
             for (j = 0; j < cnt; j++) {
                 uint32_t prim = list[j];
+                PROF(2);
                 if (prim < ntris) {
                     const float *v = tri + 9 * (size_t)prim;
                     double t, u, v2;
@@ -861,14 +940,17 @@ int rtpi_kd_occluded(const rtpi_kdtree *kd, const rtpi_ray *ray)
     for (;;) {
         const kd_node *nd = &nodes[node];
         if ((nd->flags & 3) != 3) {
+            PROF(0);
             node = kd_step(&kr, nd, node, &t0, &t1, stack, &sp);
             continue;
         }
         {
             uint32_t cnt = nd->flags >> 2, j;
             const uint32_t *list = cnt == 1 ? &nd->a.one : kd->refs + nd->a.off;
+            PROF(1);
             for (j = 0; j < cnt; j++) {
                 uint32_t prim = list[j];
+                PROF(2);
                 if (prim < ntris) {
                     const float *v = tri + 9 * (size_t)prim;
                     double t, u, v2;

@@ -99,15 +99,39 @@ static int seen(const rtpi_cnode *nd, const uint32_t *ext, size_t i)
     return (int)((ext[i >> 5] >> (i & 31)) & 1u);
 }
 
+/* The terms of one light at a hit: d = n.l and s = (r.v)^shine where the
+   hit sees the light and faces it.  n and v come rounded to float (as the
+   evaluation cache keeps them), so recomputing one light's terms from the
+   cache repeats this arithmetic exactly. */
+static void light_term(const float *nv, rtpi_v3 p, const rtpi_light *L, int visible,
+                       const rtpi_material *m, float *out)
+{
+    rtpi_v3 n = v3(nv[0], nv[1], nv[2]), v = v3(nv[3], nv[4], nv[5]), l;
+    double ndl, rv;
+    out[0] = out[1] = 0.0f;
+    if (!visible)
+        return;
+    l = v3_norm(v3_sub(v3(L->pos[0], L->pos[1], L->pos[2]), p));
+    ndl = v3_dot(n, l);
+    if (ndl <= 0.0)
+        return;
+    /* r_i: l mirrored about n; the highlight is (r_i.v)^shine. */
+    rv = v3_dot(v3_sub(v3_mul(n, 2.0 * ndl), l), v);
+    out[0] = (float)ndl;
+    /* no highlight to weigh where ks is 0 (an edit making it non-zero
+       recomputes these terms) */
+    out[1] = rv > 0.0 && m->ks > 0.0f ? (float)pow(rv, m->shine) : 0.0f;
+}
+
 /* Step 1 for node idx seen from `from`; recurses into its subtrees. */
 static void terms_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t idx,
-                       const uint32_t *vis_ext, rtpi_v3 from, float *terms)
+                       const uint32_t *vis_ext, rtpi_v3 from, float *terms, float *nv_out)
 {
     const rtp_scene *s = c->s;
     const rtpi_cnode *nd = &nodes[idx];
     const uint32_t *ext = vis_ext ? vis_ext + idx * c->vis_words : NULL;
     size_t nl = s->nlights, i;
-    float *t = terms + idx * RTPI_TERMS(nl);
+    float *t = terms + idx * RTPI_TERMS(nl), nvl[6], *nv = nv_out ? nv_out + 6 * idx : nvl;
     const rtpi_material *m;
     rtpi_surface sf;
     rtpi_v3 p = v3(nd->p[0], nd->p[1], nd->p[2]), n, v;
@@ -119,45 +143,50 @@ static void terms_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t 
     if ((nd->link & RTPI_L_BACK) && rtpi_two_sided(s, c->one_sided, nd->prim, m))
         n = v3_mul(n, -1.0);
     v = v3_norm(v3_sub(from, p));
+    nv[0] = (float)n.x;
+    nv[1] = (float)n.y;
+    nv[2] = (float)n.z;
+    nv[3] = (float)v.x;
+    nv[4] = (float)v.y;
+    nv[5] = (float)v.z;
     rtpi_texture_factor(s, m, p, sf.uv, tex);
     t[0] = (float)tex[0];
     t[1] = (float)tex[1];
     t[2] = (float)tex[2];
-    for (i = 0; i < nl; i++) {
-        const rtpi_light *L = &s->lights[i];
-        rtpi_v3 l;
-        double ndl, rv;
-        t[3 + 2 * i] = t[4 + 2 * i] = 0.0f;
-        if (!seen(nd, ext, i))
-            continue;
-        l = v3_norm(v3_sub(v3(L->pos[0], L->pos[1], L->pos[2]), p));
-        ndl = v3_dot(n, l);
-        if (ndl <= 0.0)
-            continue;
-        /* r_i: l mirrored about n; the highlight is (r_i.v)^shine. */
-        rv = v3_dot(v3_sub(v3_mul(n, 2.0 * ndl), l), v);
-        t[3 + 2 * i] = (float)ndl;
-        /* no highlight to weigh where ks is 0 (an edit making it non-zero
-           recomputes these terms) */
-        t[4 + 2 * i] = rv > 0.0 && m->ks > 0.0f ? (float)pow(rv, m->shine) : 0.0f;
-    }
+    for (i = 0; i < nl; i++)
+        light_term(nv, p, &s->lights[i], seen(nd, ext, i), m, t + 3 + 2 * i);
     if (nd->link & RTPI_L_REFL)
-        terms_node(c, nodes, idx + 1, vis_ext, p, terms);
+        terms_node(c, nodes, idx + 1, vis_ext, p, terms, nv_out);
     if (nd->link & RTPI_L_REFR)
-        terms_node(c, nodes, idx + (nd->link >> RTPI_L_SHIFT), vis_ext, p, terms);
+        terms_node(c, nodes, idx + (nd->link >> RTPI_L_SHIFT), vis_ext, p, terms, nv_out);
 }
 
 void rtpi_sample_terms(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t n,
-                       const uint32_t *vis_ext, rtpi_v3 eye, float *terms)
+                       const uint32_t *vis_ext, rtpi_v3 eye, float *terms, float *nv)
 {
     if (n > 0)
-        terms_node(c, nodes, 0, vis_ext, eye, terms);
+        terms_node(c, nodes, 0, vis_ext, eye, terms, nv);
 }
 
-/* Step 2 for node idx reached with path weight w (accumulated in
-   double). */
+void rtpi_light_terms(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t n,
+                      const uint32_t *vis_ext, const float *nv, size_t light, float *terms)
+{
+    const rtp_scene *s = c->s;
+    size_t k, nt = RTPI_TERMS(s->nlights);
+    for (k = 0; k < n; k++) {
+        const rtpi_cnode *nd = &nodes[k];
+        const uint32_t *ext = vis_ext ? vis_ext + k * c->vis_words : NULL;
+        light_term(nv + 6 * k, v3(nd->p[0], nd->p[1], nd->p[2]), &s->lights[light],
+                   seen(nd, ext, light), &s->mats[rtpi_prim_material(s, nd->prim)],
+                   terms + k * nt + 3 + 2 * light);
+    }
+}
+
+/* Step 2 for node idx reached with path weight w (accumulated in double).
+   only < 0: every coefficient into acc (G, A, K_i); only = i: light i's
+   K_i alone into acc[0..2], by the very same operations. */
 static void coeffs_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t idx,
-                        const float *terms, double w, double *acc)
+                        const float *terms, double w, double *acc, long only)
 {
     const rtp_scene *s = c->s;
     const rtpi_cnode *nd = &nodes[idx];
@@ -171,14 +200,21 @@ static void coeffs_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t
         cobj[k] = m->tex == RTPI_TEX_CHECKER
                       ? t[k] * (double)m->color[k] + (1.0 - t[k]) * (double)m->color2[k]
                       : t[k] * (double)m->color[k];
-    for (k = 0; k < 3; k++)
-        acc[3 + k] += kd * cobj[k]; /* ambient: kd c_obj */
-    for (i = 0; i < nl; i++) {
-        double d = t[3 + 2 * i], sp = t[4 + 2 * i];
-        if (d == 0.0)
-            continue;
+    if (only < 0) {
         for (k = 0; k < 3; k++)
-            acc[6 + 3 * i + k] += kd * cobj[k] * d + ks * sp;
+            acc[3 + k] += kd * cobj[k]; /* ambient: kd c_obj */
+        for (i = 0; i < nl; i++) {
+            double d = t[3 + 2 * i], sp = t[4 + 2 * i];
+            if (d == 0.0)
+                continue;
+            for (k = 0; k < 3; k++)
+                acc[6 + 3 * i + k] += kd * cobj[k] * d + ks * sp;
+        }
+    } else {
+        double d = t[3 + 2 * only], sp = t[4 + 2 * only];
+        if (d != 0.0)
+            for (k = 0; k < 3; k++)
+                acc[k] += kd * cobj[k] * d + ks * sp;
     }
     /* Global terms: ks I_r + kt I_t; on total internal reflection the
        transmitted share rides on the reflected subtree. */
@@ -190,15 +226,15 @@ static void coeffs_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t
     }
     if (wr > 0.0) {
         if (nd->link & RTPI_L_REFL)
-            coeffs_node(c, nodes, idx + 1, terms, w * wr, acc);
-        else if (nd->link & RTPI_L_REFL_MISS)
+            coeffs_node(c, nodes, idx + 1, terms, w * wr, acc, only);
+        else if ((nd->link & RTPI_L_REFL_MISS) && only < 0)
             for (k = 0; k < 3; k++)
                 acc[k] += w * wr;
     }
     if (wt > 0.0) {
         if (nd->link & RTPI_L_REFR)
-            coeffs_node(c, nodes, idx + (nd->link >> RTPI_L_SHIFT), terms, w * wt, acc);
-        else if (nd->link & RTPI_L_REFR_MISS)
+            coeffs_node(c, nodes, idx + (nd->link >> RTPI_L_SHIFT), terms, w * wt, acc, only);
+        else if ((nd->link & RTPI_L_REFR_MISS) && only < 0)
             for (k = 0; k < 3; k++)
                 acc[k] += w * wt;
     }
@@ -213,9 +249,20 @@ void rtpi_sample_coeffs(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t
     if (n == 0)
         acc[0] = acc[1] = acc[2] = 1.0; /* the eye ray saw the background */
     else
-        coeffs_node(c, nodes, 0, terms, 1.0, acc);
+        coeffs_node(c, nodes, 0, terms, 1.0, acc, -1);
     for (i = 0; i < m; i++)
         coeffs[i] = (float)acc[i];
+}
+
+void rtpi_sample_coeffs_light(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t n,
+                              const float *terms, size_t light, float *coeffs)
+{
+    double acc[3] = {0.0, 0.0, 0.0};
+    int k;
+    if (n > 0)
+        coeffs_node(c, nodes, 0, terms, 1.0, acc, (long)light);
+    for (k = 0; k < 3; k++)
+        coeffs[6 + 3 * light + k] = (float)acc[k];
 }
 
 void rtpi_light_colors(const rtp_scene *s, double *cl)

@@ -280,7 +280,8 @@ static void trace_sample(worker *w, int x, int y, float *rgb)
             return;
         }
         rtpi_sample_terms(&w->sh->shade, w->nodes + w->sample_base, n,
-                          words ? w->vis + w->sample_base * words : NULL, c->from, w->terms);
+                          words ? w->vis + w->sample_base * words : NULL, c->from, w->terms,
+                          NULL);
         rtpi_sample_coeffs(&w->sh->shade, w->nodes + w->sample_base, n, w->terms, w->acc,
                            w->coeffs);
         rtpi_combine(s, w->sh->cl, w->coeffs, rgb);

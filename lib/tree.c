@@ -23,6 +23,8 @@ void rtp_tree_destroy(rtp_tree *t)
     rtpi_free(&a, t->cur_pos);
     rtpi_free(&a, t->ev_terms);
     rtpi_free(&a, t->ev_coeffs);
+    rtpi_free(&a, t->ev_nv);
+    rtpi_free(&a, t->ev_samples);
     rtpi_free(&a, t->ev_pos);
     rtpi_free(&a, t->ev_mats);
     rtpi_free(&a, t->mat_start);
@@ -329,6 +331,7 @@ typedef struct eval_ctx {
     float *samples;
     const uint32_t *list;     /* samples to redo (NULL: all) */
     size_t nlist, chunk;
+    size_t light;             /* light_row: the light to redo */
     int redo_terms;           /* recompute terms too, not only coeffs */
     int cached;               /* ev_terms / ev_coeffs in use */
     /* per thread scratch (uncached path and coefficient sums) */
@@ -361,7 +364,7 @@ static int sample_coeffs(eval_ctx *e, size_t k, int redo_terms, float **coeffs_o
     }
     if (redo_terms)
         rtpi_sample_terms(e->shade, t->nodes + a, n, e->vis ? e->vis + a * words : NULL, e->eye,
-                          terms);
+                          terms, e->cached ? t->ev_nv + 6 * a : NULL);
     rtpi_sample_coeffs(e->shade, t->nodes + a, n, terms, e->acc, coeffs);
     *coeffs_out = coeffs;
     return 0;
@@ -394,6 +397,25 @@ static int redo_chunk(void *ctx, int chunk)
         float *coeffs;
         if (sample_coeffs(e, e->list[i], e->redo_terms, &coeffs))
             return 1;
+    }
+    return 0;
+}
+
+/* One light's terms and coefficients for a row of samples, from the
+   cached normals and view vectors: what a moved light changes. */
+static int light_row(void *ctx, int y)
+{
+    eval_ctx *e = (eval_ctx *)ctx;
+    rtp_tree *t = e->t;
+    size_t k = (size_t)y * t->nx, nl = t->scene->nlights, words = e->shade->vis_words;
+    int x;
+    for (x = 0; x < t->nx; x++, k++) {
+        size_t a = (size_t)t->start[k], n = (size_t)(t->start[k + 1] - t->start[k]);
+        float *terms = t->ev_terms + a * RTPI_TERMS(nl);
+        rtpi_light_terms(e->shade, t->nodes + a, n, e->vis ? e->vis + a * words : NULL,
+                         t->ev_nv + 6 * a, e->light, terms);
+        rtpi_sample_coeffs_light(e->shade, t->nodes + a, n, terms, e->light,
+                                 t->ev_coeffs + k * RTPI_COEFFS(nl));
     }
     return 0;
 }
@@ -486,17 +508,19 @@ static void drop_caches(rtp_tree *t)
 {
     rtpi_free(&t->alloc, t->ev_terms);
     rtpi_free(&t->alloc, t->ev_coeffs);
+    rtpi_free(&t->alloc, t->ev_nv);
     rtpi_free(&t->alloc, t->ev_pos);
     rtpi_free(&t->alloc, t->ev_mats);
     t->ev_terms = NULL;
     t->ev_coeffs = NULL;
+    t->ev_nv = NULL;
     t->ev_pos = NULL;
     t->ev_mats = NULL;
     t->ev_valid = 0;
 }
 
-rtp_status rtp_tree_eval(rtp_tree *t, const rtp_eval_options *opt, rtp_image **out,
-                         rtp_eval_stats *stats, rtp_error *err)
+static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image *into,
+                            rtp_image **out, rtp_eval_stats *stats, rtp_error *err)
 {
     rtpi_shade_ctx shade;
     eval_ctx e[RTPI_MAX_THREADS];
@@ -512,9 +536,14 @@ rtp_status rtp_tree_eval(rtp_tree *t, const rtp_eval_options *opt, rtp_image **o
     float *samples = NULL;
     double t0 = seconds_now(), t1;
     const uint32_t *vis;
-    if (!t || !out)
+    if (!t || (!out && !into))
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_eval: NULL argument");
-    *out = NULL;
+    if (out)
+        *out = NULL;
+    if (into && (into->width != t->width || into->height != t->height || !into->pixels))
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                          "image is %dx%d, the tree %dx%d", into->width, into->height,
+                          t->width, t->height);
     memset(&st, 0, sizeof st);
     s = t->scene;
     nl = s->nlights;
@@ -552,30 +581,32 @@ rtp_status rtp_tree_eval(rtp_tree *t, const rtp_eval_options *opt, rtp_image **o
                                                  sizeof *t->ev_terms);
         t->ev_coeffs = (float *)rtpi_malloc_array(&t->alloc, ns * RTPI_COEFFS(nl),
                                                   sizeof *t->ev_coeffs);
+        t->ev_nv = (float *)rtpi_malloc_array(&t->alloc, t->nnodes * 6 + 1, sizeof *t->ev_nv);
         t->ev_pos = (double *)rtpi_malloc_array(&t->alloc, 3 * nl + 1, sizeof *t->ev_pos);
         t->ev_mats = (rtpi_material *)rtpi_malloc_array(&t->alloc, s->nmats + 1,
                                                         sizeof *t->ev_mats);
-        if (!t->ev_terms || !t->ev_coeffs || !t->ev_pos || !t->ev_mats)
+        if (!t->ev_terms || !t->ev_coeffs || !t->ev_nv || !t->ev_pos || !t->ev_mats)
             drop_caches(t), cached = 0; /* evaluate without caches */
         t->ev_valid = 0;
     }
     if (cached && !t->mat_start && build_material_lists(t) != RTP_OK)
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
     full = !cached || !t->ev_valid;
-    if (cached && !full)
-        for (l = 0; l < nl && !full; l++)
-            full = memcmp(t->ev_pos + 3 * l, s->lights[l].pos, sizeof s->lights[l].pos) != 0 ||
-                   (light_moved(t, l) && (t->ev_vis_mode != mode || t->ev_vis_res != res));
-
     cl = (double *)rtpi_malloc_array(&t->alloc, 3 * nl + 1, sizeof *cl);
-    rs = rtp_image_create(t->width, t->height, &t->alloc, &img, err);
+    if (into)
+        img = into;
+    else
+        rs = rtp_image_create(t->width, t->height, &t->alloc, &img, err);
     if (rs != RTP_OK || !cl) {
         rtpi_free(&t->alloc, cl);
-        rtp_image_destroy(img);
+        if (img != into)
+            rtp_image_destroy(img);
         return rs != RTP_OK ? rs : rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
     }
     rtpi_light_colors(s, cl);
-    samples = t->spd ? (float *)rtpi_malloc_array(&t->alloc, ns, 3 * sizeof(float)) : img->pixels;
+    if (t->spd && !t->ev_samples)
+        t->ev_samples = (float *)rtpi_malloc_array(&t->alloc, ns, 3 * sizeof(float));
+    samples = t->spd ? t->ev_samples : img->pixels;
     memset(e, 0, sizeof e[0] * (size_t)nthreads);
     for (i = 0; i < nthreads; i++) {
         e[i].t = t;
@@ -607,6 +638,17 @@ rtp_status rtp_tree_eval(rtp_tree *t, const rtp_eval_options *opt, rtp_image **o
                            opt ? opt->progress_user : NULL);
         st.samples = ns;
     } else {
+        /* a light that moved (or whose shadows were decided another way):
+           its terms and coefficients only, for every sample */
+        for (l = 0; l < nl; l++) {
+            if (memcmp(t->ev_pos + 3 * l, s->lights[l].pos, sizeof s->lights[l].pos) == 0 &&
+                !(light_moved(t, l) && (t->ev_vis_mode != mode || t->ev_vis_res != res)))
+                continue;
+            for (i = 0; i < nthreads; i++)
+                e[i].light = l;
+            rtpi_parallel_rows(t->ny, nthreads, ctx, light_row, NULL, NULL);
+            st.samples += ns;
+        }
         /* steps 1-2 only for samples containing an edited material */
         for (m = 0; m < s->nmats; m++) {
             int redo;
@@ -649,13 +691,12 @@ done:
         rtpi_free(&t->alloc, e[i].coeffs);
         rtpi_free(&t->alloc, e[i].acc);
     }
-    if (t->spd)
-        rtpi_free(&t->alloc, samples);
     rtpi_free(&t->alloc, cl);
     if (rs != RTP_OK) {
         /* a half-made cache must not be trusted next time */
         t->ev_valid = 0;
-        rtp_image_destroy(img);
+        if (img != into)
+            rtp_image_destroy(img);
         return rs;
     }
     if (stats) {
@@ -664,8 +705,25 @@ done:
         stats->shadow_seconds = t1 - t0;
         stats->nodes = t->nnodes;
     }
-    *out = img;
+    if (out)
+        *out = img;
     return RTP_OK;
+}
+
+rtp_status rtp_tree_eval(rtp_tree *t, const rtp_eval_options *opt, rtp_image **out,
+                         rtp_eval_stats *stats, rtp_error *err)
+{
+    if (!out)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_eval: NULL argument");
+    return eval_impl(t, opt, NULL, out, stats, err);
+}
+
+rtp_status rtp_tree_eval_into(rtp_tree *t, const rtp_eval_options *opt, rtp_image *image,
+                              rtp_eval_stats *stats, rtp_error *err)
+{
+    if (!image)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_eval_into: NULL image");
+    return eval_impl(t, opt, image, NULL, stats, err);
 }
 
 rtp_status rtp_tree_trace(const rtp_tree *t, int threads, rtp_image **out,

@@ -371,6 +371,43 @@ static void test_edit_sequence(void)
     rtp_scene_destroy(s);
 }
 
+/* A light moved on warm caches (only its terms and coefficients redone)
+   gives the very image a fresh tree gives with every step redone. */
+static void test_warm_light_move_bitwise(void)
+{
+    rtp_scene *s = load("scenes/spheres.nff");
+    rtp_tree *warm = NULL, *cold = NULL;
+    rtp_image *a = NULL, *b = NULL;
+    rtp_trace_options o;
+    rtp_eval_options eo;
+    if (!s) {
+        CHECK(s != NULL);
+        return;
+    }
+    memset(&o, 0, sizeof o);
+    memset(&eo, 0, sizeof eo);
+    o.width = 40;
+    o.height = 32;
+    eo.threads = 2;
+    CHECK(rtp_record(s, &o, &warm, NULL, NULL, NULL) == RTP_OK);
+    CHECK(rtp_record(s, &o, &cold, NULL, NULL, NULL) == RTP_OK);
+    if (warm && cold) {
+        CHECK(rtp_tree_eval(warm, &eo, &a, NULL, NULL) == RTP_OK);
+        rtp_image_destroy(a);
+        a = NULL;
+        CHECK(rtp_tree_set(warm, "light.fill.pos", "-2,-6,3", NULL) == RTP_OK);
+        CHECK(rtp_tree_set(cold, "light.fill.pos", "-2,-6,3", NULL) == RTP_OK);
+        CHECK(rtp_tree_eval(warm, &eo, &a, NULL, NULL) == RTP_OK);
+        CHECK(rtp_tree_eval(cold, &eo, &b, NULL, NULL) == RTP_OK);
+        CHECK(same_image(a, b));
+    }
+    rtp_image_destroy(a);
+    rtp_image_destroy(b);
+    rtp_tree_destroy(warm);
+    rtp_tree_destroy(cold);
+    rtp_scene_destroy(s);
+}
+
 /* ------------------------------------------------------------ bad files */
 
 static uint32_t crc32_ref(const unsigned char *p, size_t n)
@@ -517,6 +554,7 @@ int main(void)
     RUN(test_moved_light_exact);
     RUN(test_moved_light_small_spd);
     RUN(test_edit_sequence);
+    RUN(test_warm_light_move_bitwise);
     RUN(test_truncated_every_length);
     RUN(test_flipped_bits);
     RUN(test_newer_version_and_foreign);

@@ -1,0 +1,156 @@
+/* bench_reeval.c — re-evaluation against a full trace, per edit class, on
+ * the default SPD scenes at 512x512 (SPD corner samples) and 1024x1024,
+ * at one thread; the cost of recording; and the time to stream the tree's
+ * bytes once, the floor a re-evaluation cannot beat.  A benchmark: it
+ * reports, it never fails. */
+#include "internal.h"
+#include "../test/check.h"
+
+#include <time.h>
+
+static double now(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+/* Best of n runs of an evaluation after the edit. */
+static double eval_time(rtp_tree *t, const rtp_eval_options *eo, const char *key,
+                        const char *const *values, int n)
+{
+    double best = HUGE_VAL;
+    int i;
+    for (i = 0; i < n; i++) {
+        rtp_image *img = NULL;
+        double t0;
+        if (key && rtp_tree_set(t, key, values[i % 2], NULL) != RTP_OK)
+            return -1.0;
+        t0 = now();
+        if (rtp_tree_eval(t, eo, &img, NULL, NULL) != RTP_OK)
+            return -1.0;
+        t0 = now() - t0;
+        if (t0 < best)
+            best = t0;
+        rtp_image_destroy(img);
+    }
+    return best;
+}
+
+/* Reads every byte of the tree's nodes and sample index once. */
+static double stream_time(const rtp_tree *t, unsigned long long *sink)
+{
+    const uint64_t *w = (const uint64_t *)(const void *)t->nodes;
+    size_t n = t->nnodes * sizeof(rtpi_cnode) / 8, i, k;
+    double best = HUGE_VAL;
+    for (k = 0; k < 3; k++) {
+        uint64_t acc = 0;
+        double t0 = now();
+        for (i = 0; i < n; i++)
+            acc += w[i];
+        for (i = 0; i <= (size_t)t->nx * t->ny; i++)
+            acc += t->start[i];
+        t0 = now() - t0;
+        *sink += acc;
+        if (t0 < best)
+            best = t0;
+    }
+    return best;
+}
+
+static void run(const char *dir, const char *name, int size)
+{
+    char path[512];
+    rtp_scene *s = NULL;
+    rtp_tree *t = NULL;
+    rtp_image *img = NULL;
+    rtp_trace_options o;
+    rtp_eval_options eo;
+    rtp_tree_info ti;
+    double t_trace = HUGE_VAL, t_rec = HUGE_VAL, t_first, t_light, t_mat, t_shine, t_amb,
+           t_move, t_stream;
+    static const char *const lc[] = {"1,0.6,0.4", "0.4,0.6,1"};
+    static const char *const kd[] = {"0.3", "0.6"};
+    static const char *const sh[] = {"7", "30"};
+    static const char *const am[] = {"0.2", "0.05"};
+    static const char *const mv[] = {"2,3,9", "-3,2,8"};
+    unsigned long long sink = 0;
+    int i;
+    snprintf(path, sizeof path, "%s/spd/%s.nff", dir, name);
+    if (rtp_scene_load(path, NULL, &s, NULL) != RTP_OK)
+        return;
+    memset(&o, 0, sizeof o);
+    memset(&eo, 0, sizeof eo);
+    if (size == 512)
+        o.spd = 1;
+    o.width = o.height = size;
+    o.threads = 1;
+    eo.threads = 1;
+    for (i = 0; i < 2; i++) {
+        double t0 = now();
+        if (rtp_trace(s, &o, &img, NULL, NULL) != RTP_OK)
+            goto out;
+        t0 = now() - t0;
+        if (t0 < t_trace)
+            t_trace = t0;
+        rtp_image_destroy(img);
+        img = NULL;
+        rtp_tree_destroy(t);
+        t = NULL;
+        t0 = now();
+        if (rtp_record(s, &o, &t, NULL, NULL, NULL) != RTP_OK)
+            goto out;
+        t0 = now() - t0;
+        if (t0 < t_rec)
+            t_rec = t0;
+    }
+    rtp_tree_get_info(t, &ti);
+    t_first = eval_time(t, &eo, NULL, NULL, 1);
+    t_light = eval_time(t, &eo, "light.0.color", lc, 3);
+    t_amb = eval_time(t, &eo, "ambient", am, 3);
+    t_mat = eval_time(t, &eo, "mat.1.kd", kd, 3);
+    t_shine = eval_time(t, &eo, "mat.1.shine", sh, 3);
+    t_move = eval_time(t, &eo, "light.0.pos", mv, 2);
+    t_stream = stream_time(t, &sink);
+    printf("| %s | %d | %.3f | %+.1f%% | %.1f | %.4f (%.0fx) | %.4f (%.0fx) | %.4f (%.0fx) | "
+           "%.4f (%.0fx) | %.4f (%.0fx) | %.3f (%.0fx) | %.4f | %.1fx |\n",
+           name, size, t_trace, 100.0 * (t_rec / t_trace - 1.0),
+           (double)ti.nodes / (double)ti.samples, t_first, t_trace / t_first, t_light,
+           t_trace / t_light, t_amb, t_trace / t_amb, t_mat, t_trace / t_mat, t_shine,
+           t_trace / t_shine, t_move, t_trace / t_move, t_stream, t_light / t_stream);
+    fflush(stdout);
+    if (sink == 42)
+        printf("\n");
+out:
+    rtp_image_destroy(img);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+}
+
+int main(void)
+{
+    static const char *const scenes[] = {"balls_s4", "gears_s4", "mount_s6", "rings_s7",
+                                         "teapot_s12", "tetra_s6", "tree_s11"};
+    const char *dir = check_shared_scenes();
+    const char *quick = getenv("RTP_BENCH_QUICK");
+    size_t i;
+    int size;
+    if (!dir) {
+        printf("bench_reeval: ../shared/scenes absent: skipped\n");
+        return 0;
+    }
+    printf("\n## Re-evaluation against a full trace (1 thread; seconds, speed-up)\n\n");
+    printf("512: SPD procedure (513x513 corner samples); 1024: 1024x1024 pixel centres. "
+           "Edits on warm caches, best of 3; 'first' builds the caches; 'stream' reads "
+           "the tree's bytes once (the floor), 'light/stream' is the light edit against it.\n\n");
+    printf("| scene | size | trace s | recording | nodes/sample | first eval | light colour | "
+           "ambient | material kd | shine | light move (exact) | stream s | light/stream |\n");
+    printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    for (size = 512; size <= 1024; size *= 2) {
+        if (quick && size > 512)
+            break;
+        for (i = 0; i < sizeof scenes / sizeof *scenes; i++)
+            run(dir, scenes[i], size);
+    }
+    return 0;
+}
