@@ -26,9 +26,14 @@ ifeq ($(THREADS),1)
 DEFS += -DRTP_HAVE_THREADS=1
 THREAD_LIBS = -lpthread
 endif
+OSMESA ?= 0
+ifeq ($(OSMESA),1)
+DEFS += -DRTP_HAVE_OSMESA=1
+OSMESA_LIBS = -lOSMesa
+endif
 
 ALL_CFLAGS = $(WARN) $(CFLAGS) -D_POSIX_C_SOURCE=200809L $(DEFS) -Iinclude $(PNG_CFLAGS)
-LIBS = $(PNG_LIBS) $(THREAD_LIBS) -lm
+LIBS = $(PNG_LIBS) $(THREAD_LIBS) $(OSMESA_LIBS) -lm
 
 ifeq ($(V),1)
 Q =

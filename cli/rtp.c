@@ -719,11 +719,11 @@ static long long file_size(const char *path)
     return n;
 }
 
-static int reeval_one(rtp_tree *tree, const rtp_eval_options *eo, const char *image_path,
-                      int reference, int threads, FILE *stats, const char *tree_path,
-                      double load_seconds)
+static int reeval_one(rtp_tree *tree, const rtp_eval_options *eo, rtp_image **keep,
+                      const char *image_path, int reference, int threads, FILE *stats,
+                      const char *tree_path, double load_seconds)
 {
-    rtp_image *img = NULL, *ref = NULL;
+    rtp_image *img = *keep, *ref = NULL;
     rtp_eval_stats es;
     rtp_trace_stats ts;
     rtp_diff_stats d;
@@ -732,10 +732,13 @@ static int reeval_one(rtp_tree *tree, const rtp_eval_options *eo, const char *im
     double t_ref = 0.0;
     int rc = 1;
     memset(&err, 0, sizeof err);
-    if (rtp_tree_eval(tree, eo, &img, &es, &err) != RTP_OK) {
+    /* a stream of edits reuses one image */
+    if ((img ? rtp_tree_eval_into(tree, eo, img, &es, &err)
+             : rtp_tree_eval(tree, eo, &img, &es, &err)) != RTP_OK) {
         fail_err(&err);
         goto out;
     }
+    *keep = img;
     if (image_path && rtp_image_write(img, image_path, RTP_IMAGE_AUTO, &err) != RTP_OK) {
         fail_err(&err);
         goto out;
@@ -785,7 +788,6 @@ static int reeval_one(rtp_tree *tree, const rtp_eval_options *eo, const char *im
     }
     rc = 0;
 out:
-    rtp_image_destroy(img);
     rtp_image_destroy(ref);
     return rc;
 }
@@ -796,6 +798,7 @@ static int cmd_reeval(int argc, char **argv)
     const char *params = NULL;
     char *default_image = NULL;
     const char **sets, **add_lights;
+    rtp_image *img = NULL;
     int i, nsets = 0, nadd = 0, rc = 1, stream = 0, reference = 0, threads = 1;
     rtp_tree *tree = NULL;
     rtp_error err;
@@ -947,7 +950,8 @@ static int cmd_reeval(int argc, char **argv)
     if (stats_path && !(stats = stats_open(stats_path)))
         goto out;
     if (!stream) {
-        rc = reeval_one(tree, &eo, image_path, reference, threads, stats, tree_path, t_load);
+        rc = reeval_one(tree, &eo, &img, image_path, reference, threads, stats, tree_path,
+                        t_load);
         progress_end(&prog);
     } else {
         char line[8192], path[4096];
@@ -966,7 +970,7 @@ static int cmd_reeval(int argc, char **argv)
                 rc = 1;
                 break;
             }
-            if (reeval_one(tree, &eo, path, reference, threads, stats, tree_path, t_load)) {
+            if (reeval_one(tree, &eo, &img, path, reference, threads, stats, tree_path, t_load)) {
                 rc = 1;
                 break;
             }
@@ -979,6 +983,7 @@ static int cmd_reeval(int argc, char **argv)
 out:
     if (stats && stats != stdout)
         fclose(stats);
+    rtp_image_destroy(img);
     rtp_tree_destroy(tree);
     free(default_image);
     free(sets);

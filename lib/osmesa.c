@@ -20,5 +20,295 @@ rtp_status rtpi_itembuf_build_osmesa(const rtp_scene *s, rtpi_v3 light,
 }
 
 #else
-#error "not yet"
+
+#include <GL/gl.h>
+#include <GL/osmesa.h>
+
+#define OSM_PI 3.14159265358979323846
+
+/* One face being drawn: vertices go to OpenGL in eye coordinates sheared
+   so that the window's centre lies on the axis, (x - uc z, y - vc z, -z):
+   the numbers OpenGL rounds to float are then of the scene's size, not of
+   the distance from a far light, and a symmetric frustum draws the
+   window. */
+typedef struct osm_face {
+    int f;
+    double uc, vc;
+    rtpi_v3 L;
+} osm_face;
+
+static void osm_vertex(const osm_face *fc, rtpi_v3 p)
+{
+    double q[3], x, y, z;
+    int a = fc->f >> 1;
+    q[0] = p.x - fc->L.x;
+    q[1] = p.y - fc->L.y;
+    q[2] = p.z - fc->L.z;
+    x = q[(a + 1) % 3];
+    y = q[(a + 2) % 3];
+    z = (fc->f & 1) ? -q[a] : q[a];
+    glVertex3f((GLfloat)(x - fc->uc * z), (GLfloat)(y - fc->vc * z), (GLfloat)-z);
+}
+
+/* Colour id: prim + 1 in 24 bits of RGB; 0 is the empty background. */
+static void osm_color(uint32_t prim)
+{
+    uint32_t c = prim + 1u;
+    glColor4ub((GLubyte)(c & 0xffu), (GLubyte)((c >> 8) & 0xffu), (GLubyte)((c >> 16) & 0xffu),
+               255);
+}
+
+static void osm_basis(rtpi_v3 n, rtpi_v3 *e1, rtpi_v3 *e2)
+{
+    double sg = n.z >= 0.0 ? 1.0 : -1.0;
+    double a = -1.0 / (sg + n.z);
+    double b = n.x * n.y * a;
+    *e1 = v3(1.0 + sg * n.x * n.x * a, sg * b, -sg * n.x);
+    *e2 = v3(b, sg + n.y * n.y * a, -n.y);
+}
+
+/* Segments around a circle of radius r at distance d from the light so
+   that the polygon strays from the circle by under ~1/8 cell
+   (r (1 - cos(pi/N)) ~ r pi^2 / 2N^2). */
+static int osm_segments(double r, double d, double cell)
+{
+    double rc = d > 0.0 ? r / d / cell : 1e9; /* radius in cells */
+    double n = ceil(OSM_PI * sqrt(4.0 * (rc > 0.0 ? rc : 0.0)));
+    return n < 12.0 ? 12 : n > 1024.0 ? 1024 : (int)n;
+}
+
+/* The part of a sphere the item buffer holds: from a light outside, the
+   cap facing it (up to the tangent circle, which then is exact up to the
+   polygon), for both signs of r (see dircube.c); from inside, all of it. */
+static void osm_sphere(const osm_face *fc, const rtpi_sphere *sp, double cell)
+{
+    rtpi_v3 c = v3_from_f(sp->c), w, e1, e2;
+    double r = fabs((double)sp->r), D, th_max;
+    int n, m, i, k;
+    w = v3_sub(fc->L, c);
+    D = v3_len(w);
+    w = D > 0.0 ? v3_mul(w, 1.0 / D) : v3(0.0, 0.0, 1.0);
+    osm_basis(w, &e1, &e2);
+    th_max = D > r ? acos(r / D) : OSM_PI;
+    n = osm_segments(r, D > r ? D - r : r, cell);
+    m = n / 4 < 6 ? 6 : n / 4;
+    if (D <= r)
+        m *= 2;
+    glBegin(GL_TRIANGLES);
+    for (i = 0; i < m; i++) {
+        double t0 = th_max * i / m, t1 = th_max * (i + 1) / m;
+        for (k = 0; k < n; k++) {
+            double p0 = 2.0 * OSM_PI * k / n, p1 = 2.0 * OSM_PI * (k + 1) / n;
+            rtpi_v3 q[4];
+            double tt[4], pp[4];
+            int j;
+            tt[0] = t0; pp[0] = p0;
+            tt[1] = t1; pp[1] = p0;
+            tt[2] = t1; pp[2] = p1;
+            tt[3] = t0; pp[3] = p1;
+            for (j = 0; j < 4; j++) {
+                rtpi_v3 d = v3_madd(v3_madd(v3_mul(w, cos(tt[j])), e1, sin(tt[j]) * cos(pp[j])),
+                                    e2, sin(tt[j]) * sin(pp[j]));
+                q[j] = v3_madd(c, d, r);
+            }
+            osm_vertex(fc, q[0]);
+            osm_vertex(fc, q[1]);
+            osm_vertex(fc, q[2]);
+            osm_vertex(fc, q[0]);
+            osm_vertex(fc, q[2]);
+            osm_vertex(fc, q[3]);
+        }
+    }
+    glEnd();
+}
+
+/* An open cone: quads between generator lines (planar: they meet at the
+   apex), vertices on the surface. */
+static void osm_cone(const osm_face *fc, const rtpi_cone *cn, double cell)
+{
+    rtpi_v3 b = v3_from_f(cn->base), a = v3_from_f(cn->apex), w, e1, e2;
+    double rb = fabs((double)cn->rb), ra = fabs((double)cn->ra), h, d;
+    int n, k;
+    w = v3_sub(a, b);
+    h = v3_len(w);
+    if (!(h > 0.0))
+        return;
+    w = v3_mul(w, 1.0 / h);
+    osm_basis(w, &e1, &e2);
+    d = fmin(v3_len(v3_sub(b, fc->L)), v3_len(v3_sub(a, fc->L)));
+    n = osm_segments(rb > ra ? rb : ra, d > 0.0 ? d : 1e-30, cell);
+    glBegin(GL_TRIANGLES);
+    for (k = 0; k < n; k++) {
+        double p0 = 2.0 * OSM_PI * k / n, p1 = 2.0 * OSM_PI * (k + 1) / n;
+        rtpi_v3 d0 = v3_madd(v3_mul(e1, cos(p0)), e2, sin(p0));
+        rtpi_v3 d1 = v3_madd(v3_mul(e1, cos(p1)), e2, sin(p1));
+        rtpi_v3 q0 = v3_madd(b, d0, rb), q1 = v3_madd(b, d1, rb);
+        rtpi_v3 q2 = v3_madd(a, d1, ra), q3 = v3_madd(a, d0, ra);
+        osm_vertex(fc, q0);
+        osm_vertex(fc, q1);
+        osm_vertex(fc, q2);
+        osm_vertex(fc, q0);
+        osm_vertex(fc, q2);
+        osm_vertex(fc, q3);
+    }
+    glEnd();
+}
+
+static void osm_draw(const osm_face *fc, const rtp_scene *s, double cell)
+{
+    size_t i, n = rtpi_scene_nprims(s);
+    for (i = 0; i < n; i++) {
+        uint32_t prim = (uint32_t)i;
+        if (!rtpi_itembuf_renders(s, prim, fc->L))
+            continue;
+        osm_color(prim);
+        if (i < s->ntris) {
+            const rtpi_tri *t = &s->tris[i];
+            glBegin(GL_TRIANGLES);
+            osm_vertex(fc, v3_from_f(s->pos + 3 * (size_t)t->v[0]));
+            osm_vertex(fc, v3_from_f(s->pos + 3 * (size_t)t->v[1]));
+            osm_vertex(fc, v3_from_f(s->pos + 3 * (size_t)t->v[2]));
+            glEnd();
+        } else if (i < s->ntris + s->nspheres) {
+            osm_sphere(fc, &s->spheres[i - s->ntris], cell);
+        } else {
+            osm_cone(fc, &s->cones[i - s->ntris - s->nspheres], cell);
+        }
+    }
+}
+
+rtp_status rtpi_itembuf_build_osmesa(const rtp_scene *s, rtpi_v3 light,
+                                     int res, const rtp_allocator *a,
+                                     rtpi_itembuf *ib, rtp_error *err)
+{
+    OSMesaContext ctx;
+    unsigned char *rgba = NULL;
+    float *depth = NULL;
+    size_t npix, k, n = rtpi_scene_nprims(s);
+    double dmin = HUGE_VAL;
+    GLint dims[2] = {0, 0};
+    rtp_status st;
+    int f;
+    if (n >= 0xffffffu)
+        return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
+                          "osmesa shadows: %lu primitives do not fit 24-bit colour ids",
+                          (unsigned long)n);
+    st = rtpi_itembuf_alloc(ib, s, light, res, a, err);
+    if (st != RTP_OK)
+        return st;
+    res = ib->res;
+    npix = (size_t)res * (size_t)res;
+    rgba = (unsigned char *)rtpi_malloc_array(a, npix, 4);
+    depth = (float *)rtpi_malloc_array(a, npix, sizeof *depth);
+    if (!rgba || !depth) {
+        rtpi_free(a, rgba);
+        rtpi_free(a, depth);
+        rtpi_itembuf_free(ib, a);
+        return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory for the item buffer");
+    }
+    /* The near plane must stay in front of everything: the nearest
+       primitive's distance bounds every depth on every face from below
+       (depth >= distance / sqrt(3)). */
+    for (k = 0; k < n; k++) {
+        double lo[3], hi[3], d2 = 0.0;
+        int c;
+        if (!rtpi_itembuf_renders(s, (uint32_t)k, light))
+            continue;
+        rtpi_prim_bounds(s, (uint32_t)k, lo, hi);
+        for (c = 0; c < 3; c++) {
+            double x = v3_get(light, c);
+            double e = x < lo[c] ? lo[c] - x : x > hi[c] ? x - hi[c] : 0.0;
+            d2 += e * e;
+        }
+        dmin = fmin(dmin, sqrt(d2));
+    }
+    ctx = OSMesaCreateContextExt(OSMESA_RGBA, 24, 0, 0, NULL);
+    if (!ctx || !OSMesaMakeCurrent(ctx, rgba, GL_UNSIGNED_BYTE, res, res)) {
+        if (ctx)
+            OSMesaDestroyContext(ctx);
+        rtpi_free(a, rgba);
+        rtpi_free(a, depth);
+        rtpi_itembuf_free(ib, a);
+        return rtpi_error(err, RTP_ERR_UNSUPPORTED, NULL, 0, 0,
+                          "osmesa shadows: cannot make a %dx%d OSMesa context", res, res);
+    }
+    glGetIntegerv(GL_MAX_VIEWPORT_DIMS, dims);
+    if (dims[0] < res || dims[1] < res) {
+        OSMesaDestroyContext(ctx);
+        rtpi_free(a, rgba);
+        rtpi_free(a, depth);
+        rtpi_itembuf_free(ib, a);
+        return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
+                          "osmesa shadows: resolution %d above OpenGL's %d", res, (int)dims[0]);
+    }
+    /* Ids, not colours: nothing may blend, dither or smooth them. */
+    glDisable(GL_LIGHTING);
+    glDisable(GL_DITHER);
+    glDisable(GL_BLEND);
+    glDisable(GL_LINE_SMOOTH);
+    glDisable(GL_POLYGON_SMOOTH);
+    glDisable(GL_MULTISAMPLE);
+    glDisable(GL_CULL_FACE); /* primitives are hit from both sides */
+    glDisable(GL_FOG);
+    glDisable(GL_TEXTURE_2D);
+    glShadeModel(GL_FLAT);
+    glEnable(GL_DEPTH_TEST);
+    glDepthFunc(GL_LESS);
+    glDepthMask(GL_TRUE);
+    glPixelStorei(GL_PACK_ALIGNMENT, 1);
+    glViewport(0, 0, res, res);
+    glClearColor(0.0f, 0.0f, 0.0f, 0.0f);
+    glClearDepth(1.0);
+    for (f = 0; f < 6; f++) {
+        osm_face fc;
+        double hu = 0.5 * res * ib->du[f], hv = 0.5 * res * ib->dv[f];
+        double zn, zf, cell = fmin(ib->du[f], ib->dv[f]);
+        size_t base = (size_t)f * npix;
+        fc.f = f;
+        fc.L = light;
+        fc.uc = ib->u0[f] + hu;
+        fc.vc = ib->v0[f] + hv;
+        /* Near and far planes hug the scene's depths on this face (1e-3 of
+           its extent outside them, for rounding), so the 24-bit depth
+           buffer resolves ~1e-7 of that extent near the front. */
+        zn = ib->zbase[f] - 1e-3 * ib->zext[f];
+        if (!(zn > 0.0))
+            zn = dmin / sqrt(3.0) * 0.5;
+        if (!(zn > 0.0))
+            zn = 1e-6 * ib->zext[f];
+        zf = ib->zbase[f] + ib->zext[f] * (1.0 + 1e-3) + zn;
+        if (ib->zbase[f] == 0.0)
+            zf = ib->zext[f] * sqrt(3.0) * (1.0 + 1e-3) + zn;
+        glMatrixMode(GL_PROJECTION);
+        glLoadIdentity();
+        glFrustum(-hu * zn, hu * zn, -hv * zn, hv * zn, zn, zf);
+        glMatrixMode(GL_MODELVIEW);
+        glLoadIdentity();
+        glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
+        osm_draw(&fc, s, cell);
+        glFinish();
+        glReadPixels(0, 0, res, res, GL_RGBA, GL_UNSIGNED_BYTE, rgba);
+        glReadPixels(0, 0, res, res, GL_DEPTH_COMPONENT, GL_FLOAT, depth);
+        /* OSMesa's rows run bottom-up (OSMESA_Y_UP): row j is v0 + j dv,
+           as in the software buffer. */
+        for (k = 0; k < npix; k++) {
+            uint32_t id = (uint32_t)rgba[4 * k] | (uint32_t)rgba[4 * k + 1] << 8 |
+                          (uint32_t)rgba[4 * k + 2] << 16;
+            if (id == 0u || id > n)
+                continue;
+            {
+                double dz = depth[k];
+                double z = zn * zf / (zf - dz * (zf - zn)); /* window depth -> eye */
+                ib->id[base + k] = id - 1u;
+                ib->z[base + k] = (float)(z - ib->zbase[f]);
+            }
+        }
+    }
+    OSMesaMakeCurrent(NULL, NULL, 0, 0, 0);
+    OSMesaDestroyContext(ctx);
+    rtpi_free(a, rgba);
+    rtpi_free(a, depth);
+    return RTP_OK;
+}
+
 #endif

@@ -909,18 +909,40 @@ static rtp_status read_tree(loader *L, rd *r)
     if (at != nnodes)
         return bad(L, "sample node counts do not add up", NULL);
     vis_mask = s->nlights >= 32 ? 0xffffffffu : ((1u << s->nlights) - 1u);
-    for (i = 0; i < t->nnodes; i++) {
-        rtpi_cnode *nd = &t->nodes[i];
-        nd->p[0] = get_f32(r);
-        nd->p[1] = get_f32(r);
-        nd->p[2] = get_f32(r);
-        nd->prim = get_u32(r);
-        nd->vis = (layout & NODE_VIS) ? get_u32(r) : 0;
-        nd->link = (layout & NODE_LINK32) ? get_u32(r) : get_u8(r);
-        if (r->bad)
-            return bad(L, "section too short", NULL);
-        if (!finite3(nd->p) || nd->prim >= nprims || (nd->vis & ~vis_mask))
-            return bad(L, "invalid node", NULL);
+    if (!need(r, t->nnodes * node_bytes))
+        return bad(L, "section too short", NULL);
+    {
+        /* the bytes are there (checked once): read the fields directly */
+        const unsigned char *c = r->p + r->at;
+        for (i = 0; i < t->nnodes; i++) {
+            rtpi_cnode *nd = &t->nodes[i];
+            uint32_t u;
+            int j;
+            for (j = 0; j < 3; j++, c += 4) {
+                u = (uint32_t)c[0] | (uint32_t)c[1] << 8 | (uint32_t)c[2] << 16 |
+                    (uint32_t)c[3] << 24;
+                memcpy(&nd->p[j], &u, 4);
+            }
+            nd->prim = (uint32_t)c[0] | (uint32_t)c[1] << 8 | (uint32_t)c[2] << 16 |
+                       (uint32_t)c[3] << 24;
+            c += 4;
+            nd->vis = 0;
+            if (layout & NODE_VIS) {
+                nd->vis = (uint32_t)c[0] | (uint32_t)c[1] << 8 | (uint32_t)c[2] << 16 |
+                          (uint32_t)c[3] << 24;
+                c += 4;
+            }
+            if (layout & NODE_LINK32) {
+                nd->link = (uint32_t)c[0] | (uint32_t)c[1] << 8 | (uint32_t)c[2] << 16 |
+                           (uint32_t)c[3] << 24;
+                c += 4;
+            } else {
+                nd->link = *c++;
+            }
+            if (!finite3(nd->p) || nd->prim >= nprims || (nd->vis & ~vis_mask))
+                return bad(L, "invalid node", NULL);
+        }
+        r->at += t->nnodes * node_bytes;
     }
     if (words) {
         if (!count_ok(r, (uint64_t)t->nnodes * words, 4))

@@ -174,6 +174,21 @@ rtp_status rtpi_read_file(const rtp_allocator *a, const char *path,
     if (!f)
         return rtpi_error(err, RTP_ERR_IO, path, 0, 0, "cannot open: %s",
                           strerror(errno));
+    if (!is_stdin && fseek(f, 0, SEEK_END) == 0) {
+        /* a regular file: one allocation of its size (+1 to see EOF) */
+        long fsize = ftell(f);
+        if (fsize >= 0 && (unsigned long)fsize < (size_t)-2 && fseek(f, 0, SEEK_SET) == 0)
+            cap = (size_t)fsize + 2;
+        else
+            rewind(f);
+        if (cap) {
+            buf = (char *)rtpi_malloc(a, cap);
+            if (!buf) {
+                fclose(f);
+                return rtpi_error(err, RTP_ERR_NOMEM, path, 0, 0, "out of memory reading file");
+            }
+        }
+    }
     for (;;) {
         if (len + 1 >= cap) {
             size_t ncap = cap ? cap * 2 : 65536;
