@@ -113,7 +113,7 @@ uninstall:
 	      $(DESTDIR)$(PREFIX)/bin/rtp
 
 clean:
-	rm -rf build build-asan build-ubsan rtp
+	rm -rf build build-asan build-ubsan build-fuzz rtp demo
 
 # ------------------------------------------------------------------ fuzzing
 # Every fuzz/fuzz_*.c is a libFuzzer target that, built without libFuzzer,
@@ -135,7 +135,7 @@ FUZZ_BIN = $(FUZZ_SRC:fuzz/%.c=build-fuzz/%)
 FUZZ_CC ?= clang
 FUZZ_FLAGS = -g -O1 -fno-omit-frame-pointer \
 	-fsanitize=fuzzer,address,undefined -fno-sanitize-recover=undefined \
-	-DRTP_LIBFUZZER
+	-DRTP_LIBFUZZER $(FUZZ_EXTRA)
 
 .PHONY: fuzz
 fuzz: $(FUZZ_BIN)
@@ -152,3 +152,36 @@ build-fuzz/%: fuzz/%.c fuzz/fuzz_common.h fuzz/replay.h $(LIB_SRC) include/rtp.h
 	    -Iinclude -Ilib $(PNG_CFLAGS) $< $(LIB_SRC) -o $@ $(LIBS)
 
 test: $(FUZZ_REPLAY_BIN)
+
+# make demo: the paper's sequence (Santos, figures 3, 4 and 6) on the
+# project's teapot, with each step's time and its error against a full
+# trace of the same edited scene.  Images go to demo/.
+DEMO_SCENE ?= scenes/teapot.nff
+DEMO_SIZE ?= 512x512
+demo: all
+	@mkdir -p demo
+	@if [ ! -f ../shared/scenes/meshes/newell-teapot.bpt ]; then \
+	    echo "demo: ../shared/scenes (Newell's teapot patches) is absent; using scenes/spheres.nff"; \
+	    scene=scenes/spheres.nff; fig4="--set light.fill.color=1,0.6,0.3 --set mat.red.ks=0.6"; \
+	    move="--set light.key.pos=4,-6,7"; \
+	else scene=$(DEMO_SCENE); \
+	    fig4="--set light.lamp.on=1 --set mat.table.color2=0.15,0.1,0.05 --set mat.teapot.ks=0.6"; \
+	    move="--set light.key.pos=-6,-9,9"; fi; \
+	j=$$(nproc 2>/dev/null || echo 2); \
+	printf '%-44s %10s %12s %12s %10s\n' step seconds "full trace" speed-up "max error"; \
+	./rtp trace $$scene --size $(DEMO_SIZE) -j $$j -o demo/teapot.rtp -i demo/fig3.png --stats demo/fig3.json -q && \
+	printf '%-44s %10s\n' "fig. 3: first trace, trees recorded" \
+	    "$$(sed -nE 's/.*"seconds": ([0-9.]+).*/\1/p' demo/fig3.json)"; \
+	for step in "fig4|fig. 4: lamp on, checkerboard, shinier pot|$$fig4" \
+	            "fig6|fig. 6: and the key light moved (exact)|$$fig4 $$move" \
+	            "fig6i|fig. 6: light moved, item-buffer shadows|$$fig4 $$move --shadows itembuf:1024"; do \
+	    name=$${step%%|*}; rest=$${step#*|}; label=$${rest%%|*}; args=$${rest#*|}; \
+	    ./rtp reeval demo/teapot.rtp $$args -j $$j --reference -i demo/$$name.png --stats demo/$$name.json -q || exit 1; \
+	    j1=$$(cat demo/$$name.json); \
+	    printf '%-44s %10s %12s %11sx %10s\n' "$$label" \
+	        "$$(echo "$$j1" | sed -nE 's/.*"seconds": ([0-9.]+).*/\1/p')" \
+	        "$$(echo "$$j1" | sed -nE 's/.*"reference_seconds": ([0-9.]+).*/\1/p')" \
+	        "$$(echo "$$j1" | sed -nE 's/.*"speedup": ([0-9.]+).*/\1/p')" \
+	        "$$(echo "$$j1" | sed -nE 's/.*"max_abs": ("?[0-9.e+-]+"?).*/\1/p')"; \
+	done; \
+	echo "images: demo/fig3.png demo/fig4.png demo/fig6.png demo/fig6i.png"

@@ -211,9 +211,11 @@ void rtp_tree_destroy(rtp_tree *tree);
 
 /** Edits a parameter of the tree's scene (keys as rtp_scene_set).  A moved
  *  light is re-evaluated with new shadows (see rtp_eval_options.shadows).
- *  Edits the recorded trees cannot evaluate exactly — a new ior, ks or kt
- *  raised where no subtree was recorded — fail with RTP_ERR_UNSUPPORTED
- *  and a message naming the remedy; the tree is then unchanged. */
+ *  Edits that change where rays go — a new ior, ks or kt raised from 0 (or
+ *  above the trace's weight cut-off) — make the next evaluation trace again
+ *  exactly the samples whose trees contain that material (stats report how
+ *  many); never an approximation.  A refused edit leaves the tree
+ *  unchanged. */
 rtp_status rtp_tree_set(rtp_tree *tree, const char *key, const char *value,
                         rtp_error *err);
 
@@ -242,6 +244,8 @@ typedef struct rtp_eval_stats {
     unsigned long long samples, nodes;
     unsigned long long shadow_queries; /* node-light pairs decided anew */
     int moved_lights;        /* lights whose visibility was recomputed */
+    unsigned long long retraced_samples; /* traced again for a class-D edit */
+    unsigned long long retraced_rays;    /* rays those cast (all kinds) */
 } rtp_eval_stats;
 
 /** Evaluates the trees with the current parameters into a new image.  Lights

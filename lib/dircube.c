@@ -145,17 +145,6 @@ static void dc_row_add(dc_ctx *c, int j, int i0, int i1)
    coordinates, both axes) touches: per row, the polygon's extent within
    the row's slab widened by m, found from the vertices inside the slab
    and the edges' crossings of its borders. */
-/* The cell along a window's edge holding coordinate x (clamped). */
-static int dc_wcoord(double x, double x0, double dx, int res)
-{
-    double t = (x - x0) / dx;
-    if (!(t > 0.0))
-        return 0;
-    if (!(t < (double)res))
-        return res - 1;
-    return (int)t;
-}
-
 static void dc_spans_conservative(dc_ctx *c, int f, const double uv[][2], int n,
                                   double m)
 {
@@ -166,10 +155,14 @@ static void dc_spans_conservative(dc_ctx *c, int f, const double uv[][2], int n,
         vmin = uv[k][1] < vmin ? uv[k][1] : vmin;
         vmax = uv[k][1] > vmax ? uv[k][1] : vmax;
     }
-    j0 = dc_wcoord(vmin - m, v0, dv, res);
-    j1 = dc_wcoord(vmax + m, v0, dv, res);
+    j0 = rtpi_dc_wcoord(vmin - m, v0, dv, res);
+    j1 = rtpi_dc_wcoord(vmax + m, v0, dv, res);
     for (j = j0; j <= j1; j++) {
-        double lo = v0 + dv * (double)j - m, hi = v0 + dv * (double)(j + 1) + m;
+        /* The edge rows reach to infinity: directions beyond a window's
+           edge are clamped to its edge cells (rtpi_dc_wcoord), which
+           must then list whatever lies there. */
+        double lo = j == 0 ? -HUGE_VAL : v0 + dv * (double)j - m;
+        double hi = j == res - 1 ? HUGE_VAL : v0 + dv * (double)(j + 1) + m;
         double umin = DBL_MAX, umax = -DBL_MAX;
         for (k = 0; k < n; k++) {
             const double *P = uv[k], *Q = uv[k + 1 < n ? k + 1 : 0];
@@ -188,7 +181,7 @@ static void dc_spans_conservative(dc_ctx *c, int f, const double uv[][2], int n,
             }
         }
         if (umin <= umax)
-            dc_row_add(c, j, dc_wcoord(umin - m, u0, du, res), dc_wcoord(umax + m, u0, du, res));
+            dc_row_add(c, j, rtpi_dc_wcoord(umin - m, u0, du, res), rtpi_dc_wcoord(umax + m, u0, du, res));
     }
 }
 
@@ -442,6 +435,112 @@ static int dc_res_ok(int res)
     return res >= 1 && res <= RTPI_DC_MAX_RES;
 }
 
+/* Sets each face's window to the projection of the bounds of every
+   hittable primitive (grown by 1e-6 of the scene's scale, far above the
+   rounding of bounds and projection) within the face's frustum widened
+   to lim, clamped to the face; or to the whole face when the light is
+   inside those bounds or the scene is not on the face.  A window is
+   never narrower than 1e-9 (a flat scene seen edge-on), so cell sizes
+   stay positive. */
+void rtpi_dc_windows(const rtp_scene *s, rtpi_v3 light, int res, double lim,
+                     rtpi_dc_window *w)
+{
+    double lo[3] = {HUGE_VAL, HUGE_VAL, HUGE_VAL}, hi[3] = {-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
+    double L[3], S, g;
+    size_t i, n = rtpi_scene_nprims(s);
+    int f, k, inside = 1, any = 0;
+    L[0] = light.x;
+    L[1] = light.y;
+    L[2] = light.z;
+    for (f = 0; f < 6; f++) {
+        w->u0[f] = w->v0[f] = -1.0;
+        w->du[f] = w->dv[f] = 2.0 / (double)res;
+        w->zbase[f] = 0.0;
+        w->zext[f] = 1.0;
+    }
+    for (i = 0; i < n; i++) {
+        double pl[3], ph[3];
+        if (!dc_hittable(s, (uint32_t)i))
+            continue;
+        rtpi_prim_bounds(s, (uint32_t)i, pl, ph);
+        for (k = 0; k < 3; k++) {
+            lo[k] = pl[k] < lo[k] ? pl[k] : lo[k];
+            hi[k] = ph[k] > hi[k] ? ph[k] : hi[k];
+        }
+        any = 1;
+    }
+    if (!any)
+        return;
+    S = dc_scale(s, light);
+    g = 1e-6 * S + 1e-30;
+    for (k = 0; k < 3; k++) {
+        lo[k] -= g;
+        hi[k] += g;
+        inside = inside && L[k] >= lo[k] && L[k] <= hi[k];
+    }
+    {
+        /* Depth extent from the light: the farthest corner. */
+        double e = 0.0;
+        for (k = 0; k < 3; k++)
+            e = fmax(e, fmax(fabs(lo[k] - L[k]), fabs(hi[k] - L[k])));
+        for (f = 0; f < 6; f++)
+            w->zext[f] = e > 0.0 ? e : 1.0;
+    }
+    if (inside || !(S < 1e300))
+        return;
+    for (f = 0; f < 6; f++) {
+        double umin = HUGE_VAL, umax = -HUGE_VAL, vmin = HUGE_VAL, vmax = -HUGE_VAL;
+        double zmin = HUGE_VAL, zmax = -HUGE_VAL;
+        int side;
+        /* the box's six sides as polygons */
+        for (side = 0; side < 6; side++) {
+            int ax = side >> 1, a1 = (ax + 1) % 3, a2 = (ax + 2) % 3, v;
+            static const int cu[4] = {0, 1, 1, 0}, cv[4] = {0, 0, 1, 1};
+            dc_poly q, loc, cl;
+            double uv[DC_MAXV][2];
+            q.n = 4;
+            for (v = 0; v < 4; v++) {
+                q.v[v][ax] = ((side & 1) ? hi[ax] : lo[ax]) - L[ax];
+                q.v[v][a1] = (cu[v] ? hi[a1] : lo[a1]) - L[a1];
+                q.v[v][a2] = (cv[v] ? hi[a2] : lo[a2]) - L[a2];
+            }
+            loc.n = 4;
+            for (v = 0; v < 4; v++)
+                dc_local(f, q.v[v], loc.v[v]);
+            k = dc_clip(&loc, &cl, lim);
+            if (k < 0 || (k > 0 && !dc_project(&cl, uv))) {
+                umin = vmin = -1.0;
+                umax = vmax = 1.0;
+                continue;
+            }
+            for (v = 0; v < k; v++) {
+                /* The box within the frustum is convex, and its vertices
+                   are these: its nearest and farthest depths are here. */
+                zmin = fmin(zmin, cl.v[v][2]);
+                zmax = fmax(zmax, cl.v[v][2]);
+                umin = fmin(umin, uv[v][0]);
+                umax = fmax(umax, uv[v][0]);
+                vmin = fmin(vmin, uv[v][1]);
+                vmax = fmax(vmax, uv[v][1]);
+            }
+        }
+        if (!(umin <= umax && vmin <= vmax))
+            continue; /* the scene is not on this face: leave it whole */
+        umin = fmax(-1.0, umin);
+        vmin = fmax(-1.0, vmin);
+        umax = fmin(1.0, fmax(umax, umin + 1e-9));
+        vmax = fmin(1.0, fmax(vmax, vmin + 1e-9));
+        w->u0[f] = umin;
+        w->v0[f] = vmin;
+        w->du[f] = (umax - umin) / (double)res;
+        w->dv[f] = (vmax - vmin) / (double)res;
+        if (zmin <= zmax) {
+            w->zbase[f] = zmin;
+            w->zext[f] = zmax - zmin > 0.0 ? zmax - zmin : 1.0;
+        }
+    }
+}
+
 /* ------------------------------------------------------- light buffer */
 
 /* Why the lists are exact: if rtpi_intersect_prim reports a hit of prim
@@ -514,6 +613,10 @@ rtp_status rtpi_lightbuf_build(const rtp_scene *s, rtpi_v3 light, int res,
                           "light buffer resolution %d outside 1..%d", res, RTPI_DC_MAX_RES);
     lb->res = res;
     lb->light = light;
+    /* Windows projected with frusta 2% wider than the faces: more than
+       any primitive's widening (4 LB_ANG_MAX), so a primitive that can
+       be hit through a face lies in that face's window. */
+    rtpi_dc_windows(s, light, res, 1.02, &lb->w);
     ncells = 6 * (size_t)res * (size_t)res;
     S = dc_scale(s, light);
     /* Early stop: a primitive can be hit on the segment from o to the
@@ -527,6 +630,10 @@ rtp_status rtpi_lightbuf_build(const rtp_scene *s, rtpi_v3 light, int res,
         rtpi_lightbuf_free(lb, a);
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory for the light buffer");
     }
+    memcpy(c.u0, lb->w.u0, sizeof c.u0);
+    memcpy(c.v0, lb->w.v0, sizeof c.v0);
+    memcpy(c.du, lb->w.du, sizeof c.du);
+    memcpy(c.dv, lb->w.dv, sizeof c.dv);
     for (i = 0; i < n; i++) {
         if (!dc_hittable(s, (uint32_t)i))
             continue; /* never hit by any ray: cannot shadow */
@@ -589,7 +696,7 @@ int rtpi_lightbuf_visible(const rtpi_lightbuf *lb, const rtp_scene *s,
                 return 0;
         return 1;
     }
-    cell = rtpi_dc_cell(lb->res, v3_mul(ray->d, -1.0));
+    cell = rtpi_dc_wcell(&lb->w, lb->res, v3_mul(ray->d, -1.0));
     /* tmax = dist (1 - 1e-9): the segment reaches no farther than dist. */
     lim = ray->tmax * (1.0 + 2e-9) + lb->slack;
     end = lb->off[cell + 1];
@@ -726,110 +833,7 @@ int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
     tn = cs * IB_TAN_MAX > 1.0 ? sqrt(fmax(0.0, 1.0 - cs * cs)) / cs : IB_TAN_MAX;
     if (tn > IB_TAN_MAX)
         tn = IB_TAN_MAX;
-    return zc >= zp - ib->zbase[f] - (IB_BIAS * ib->zext[f] + zp * ib->cell_angle[f] * tn);
-}
-
-/* Sets each face's window to the projection of the bounds of every
-   hittable primitive (grown by 1e-6 of the scene's scale, far above the
-   rounding of bounds and projection), or to the whole face when the light
-   is inside those bounds.  A window is never narrower than 1e-9 (a flat
-   scene seen edge-on), so cell sizes stay positive. */
-static void ib_windows(rtpi_itembuf *ib, const rtp_scene *s)
-{
-    double lo[3] = {HUGE_VAL, HUGE_VAL, HUGE_VAL}, hi[3] = {-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
-    double L[3], S, g;
-    size_t i, n = rtpi_scene_nprims(s);
-    int f, k, inside = 1, any = 0;
-    L[0] = ib->light.x;
-    L[1] = ib->light.y;
-    L[2] = ib->light.z;
-    for (f = 0; f < 6; f++) {
-        ib->u0[f] = ib->v0[f] = -1.0;
-        ib->du[f] = ib->dv[f] = 2.0 / (double)ib->res;
-        ib->zbase[f] = 0.0;
-        ib->zext[f] = 1.0;
-    }
-    for (i = 0; i < n; i++) {
-        double pl[3], ph[3];
-        if (!dc_hittable(s, (uint32_t)i))
-            continue;
-        rtpi_prim_bounds(s, (uint32_t)i, pl, ph);
-        for (k = 0; k < 3; k++) {
-            lo[k] = pl[k] < lo[k] ? pl[k] : lo[k];
-            hi[k] = ph[k] > hi[k] ? ph[k] : hi[k];
-        }
-        any = 1;
-    }
-    if (!any)
-        return;
-    S = dc_scale(s, ib->light);
-    g = 1e-6 * S + 1e-30;
-    for (k = 0; k < 3; k++) {
-        lo[k] -= g;
-        hi[k] += g;
-        inside = inside && L[k] >= lo[k] && L[k] <= hi[k];
-    }
-    {
-        /* Depth extent from the light: the farthest corner. */
-        double e = 0.0;
-        for (k = 0; k < 3; k++)
-            e = fmax(e, fmax(fabs(lo[k] - L[k]), fabs(hi[k] - L[k])));
-        for (f = 0; f < 6; f++)
-            ib->zext[f] = e > 0.0 ? e : 1.0;
-    }
-    if (inside || !(S < 1e300))
-        return;
-    for (f = 0; f < 6; f++) {
-        double umin = HUGE_VAL, umax = -HUGE_VAL, vmin = HUGE_VAL, vmax = -HUGE_VAL;
-        double zmin = HUGE_VAL, zmax = -HUGE_VAL;
-        int side;
-        /* the box's six sides as polygons */
-        for (side = 0; side < 6; side++) {
-            int ax = side >> 1, a1 = (ax + 1) % 3, a2 = (ax + 2) % 3, v;
-            static const int cu[4] = {0, 1, 1, 0}, cv[4] = {0, 0, 1, 1};
-            dc_poly q, loc, cl;
-            double uv[DC_MAXV][2];
-            q.n = 4;
-            for (v = 0; v < 4; v++) {
-                q.v[v][ax] = ((side & 1) ? hi[ax] : lo[ax]) - L[ax];
-                q.v[v][a1] = (cu[v] ? hi[a1] : lo[a1]) - L[a1];
-                q.v[v][a2] = (cv[v] ? hi[a2] : lo[a2]) - L[a2];
-            }
-            loc.n = 4;
-            for (v = 0; v < 4; v++)
-                dc_local(f, q.v[v], loc.v[v]);
-            k = dc_clip(&loc, &cl, 1.0);
-            if (k < 0 || (k > 0 && !dc_project(&cl, uv))) {
-                umin = vmin = -1.0;
-                umax = vmax = 1.0;
-                continue;
-            }
-            for (v = 0; v < k; v++) {
-                /* The box within the frustum is convex, and its vertices
-                   are these: its nearest and farthest depths are here. */
-                zmin = fmin(zmin, cl.v[v][2]);
-                zmax = fmax(zmax, cl.v[v][2]);
-                umin = fmin(umin, uv[v][0]);
-                umax = fmax(umax, uv[v][0]);
-                vmin = fmin(vmin, uv[v][1]);
-                vmax = fmax(vmax, uv[v][1]);
-            }
-        }
-        if (!(umin <= umax && vmin <= vmax))
-            continue; /* the scene is not on this face: leave it whole */
-        umin = fmax(-1.0, umin);
-        vmin = fmax(-1.0, vmin);
-        umax = fmin(1.0, fmax(umax, umin + 1e-9));
-        vmax = fmin(1.0, fmax(vmax, vmin + 1e-9));
-        ib->u0[f] = umin;
-        ib->v0[f] = vmin;
-        ib->du[f] = (umax - umin) / (double)ib->res;
-        ib->dv[f] = (vmax - vmin) / (double)ib->res;
-        if (zmin <= zmax) {
-            ib->zbase[f] = zmin;
-            ib->zext[f] = zmax - zmin > 0.0 ? zmax - zmin : 1.0;
-        }
-    }
+    return zc >= zp - ib->w.zbase[f] - (IB_BIAS * ib->w.zext[f] + zp * ib->cell_angle[f] * tn);
 }
 
 rtp_status rtpi_itembuf_alloc(rtpi_itembuf *ib, const rtp_scene *s,
@@ -847,12 +851,12 @@ rtp_status rtpi_itembuf_alloc(rtpi_itembuf *ib, const rtp_scene *s,
     ncells = 6 * (size_t)res * (size_t)res;
     ib->res = res;
     ib->light = light;
-    ib_windows(ib, s);
+    rtpi_dc_windows(s, light, res, 1.0, &ib->w);
     /* A cell spans du x dv in face coordinates, no more radians; its
        centre is within half a diagonal of any of its directions; 1.25
        covers the sampling of clipped, rounded edges. */
     for (f = 0; f < 6; f++)
-        ib->cell_angle[f] = 1.25 * 0.5 * sqrt(ib->du[f] * ib->du[f] + ib->dv[f] * ib->dv[f]);
+        ib->cell_angle[f] = 1.25 * 0.5 * sqrt(ib->w.du[f] * ib->w.du[f] + ib->w.dv[f] * ib->w.dv[f]);
     ib->id = (uint32_t *)rtpi_malloc_array(a, ncells, sizeof *ib->id);
     ib->z = (float *)rtpi_malloc_array(a, ncells, sizeof *ib->z);
     if (!ib->id || !ib->z) {
@@ -878,7 +882,7 @@ void rtpi_itembuf_free(rtpi_itembuf *ib, const rtp_allocator *a)
 
 static void ib_store(rtpi_itembuf *ib, size_t cell, double z, uint32_t prim)
 {
-    float zr = (float)(z - ib->zbase[cell / ((size_t)ib->res * (size_t)ib->res)]);
+    float zr = (float)(z - ib->w.zbase[cell / ((size_t)ib->res * (size_t)ib->res)]);
     /* Ties keep the first (lower id): deterministic. */
     if (zr < ib->z[cell]) {
         ib->z[cell] = zr;
@@ -896,7 +900,7 @@ static void ib_tri(rtpi_itembuf *ib, const rtp_scene *s, int f, uint32_t prim)
     int res = ib->res, k, j, j0, j1;
     dc_poly loc, cl;
     double uv[DC_MAXV][2], e1[3], e2[3], nn[3], kk, scale, vmin, vmax;
-    double u0 = ib->u0[f], v0 = ib->v0[f], du = ib->du[f], dv = ib->dv[f];
+    double u0 = ib->w.u0[f], v0 = ib->w.v0[f], du = ib->w.du[f], dv = ib->w.dv[f];
     loc.n = 3;
     uv[0][0] = uv[0][1] = 0.0; /* (quiets a may-be-uninitialized warning) */
     for (k = 0; k < 3; k++) {
@@ -1003,9 +1007,9 @@ static void ib_cast_run(void *user, size_t cell, int count)
     rtpi_itembuf *ib = ic->ib;
     size_t res = (size_t)ib->res, rem = cell % (res * res);
     int f = (int)(cell / (res * res)), j = (int)(rem / res), i0 = (int)(rem % res), i;
-    double vc = ib->v0[f] + ib->dv[f] * (j + 0.5);
+    double vc = ib->w.v0[f] + ib->w.dv[f] * (j + 0.5);
     for (i = i0; i < i0 + count; i++) {
-        rtpi_v3 d = rtpi_dc_world(f, ib->u0[f] + ib->du[f] * (i + 0.5), vc, 1.0);
+        rtpi_v3 d = rtpi_dc_world(f, ib->w.u0[f] + ib->w.du[f] * (i + 0.5), vc, 1.0);
         size_t cc = cell + (size_t)(i - i0);
         double t;
         if (ic->sphere) {
@@ -1018,7 +1022,7 @@ static void ib_cast_run(void *user, size_t cell, int count)
             r.o = ib->light;
             r.d = d;
             r.tmin = 0.0;
-            r.tmax = (double)ib->z[cc] + ib->zbase[f];
+            r.tmax = (double)ib->z[cc] + ib->w.zbase[f];
             if (rtpi_intersect_prim(ic->s, ic->prim, &r, &h))
                 ib_store(ib, cc, h.t, ic->prim);
         }
@@ -1038,10 +1042,10 @@ rtp_status rtpi_itembuf_build(const rtp_scene *s, rtpi_v3 light, int res,
         rtpi_itembuf_free(ib, a);
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory for the item buffer");
     }
-    memcpy(c.u0, ib->u0, sizeof c.u0);
-    memcpy(c.v0, ib->v0, sizeof c.v0);
-    memcpy(c.du, ib->du, sizeof c.du);
-    memcpy(c.dv, ib->dv, sizeof c.dv);
+    memcpy(c.u0, ib->w.u0, sizeof c.u0);
+    memcpy(c.v0, ib->w.v0, sizeof c.v0);
+    memcpy(c.du, ib->w.du, sizeof c.du);
+    memcpy(c.dv, ib->w.dv, sizeof c.dv);
     for (i = 0; i < n; i++) {
         uint32_t prim = (uint32_t)i;
         if (!rtpi_itembuf_renders(s, prim, light))

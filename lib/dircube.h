@@ -65,6 +65,47 @@ static inline int rtpi_dc_face(rtpi_v3 d, double *u, double *v)
     return 2 * a + (c[a] < 0.0);
 }
 
+/* Seen from a light outside the scene's bounds, the scene covers a part
+   of each face only: a cube may spread its res x res cells of face f over
+   a window [u0, u0 + res du] x [v0, v0 + res dv] that holds the
+   projection of the bounds (the whole face when the light is inside
+   them), so that a far light still sees the scene through many cells.
+   Cell (i, j) of face f then spans u0 + [i, i+1] du, v0 + [j, j+1] dv.
+   zbase and zext: the nearest depth of the bounds on the face and their
+   depth extent there. */
+typedef struct rtpi_dc_window {
+    double u0[6], v0[6], du[6], dv[6];
+    double zbase[6], zext[6];
+} rtpi_dc_window;
+
+/* Sets w for a cube of res cells around light L over the scene s, with
+   the faces' frusta widened to |u|, |v| <= lim when projecting. */
+void rtpi_dc_windows(const rtp_scene *s, rtpi_v3 L, int res, double lim,
+                     rtpi_dc_window *w);
+
+/* The cell along a window's edge holding coordinate x; outside values and
+   NaN are clamped to the edge cells.  The one mapping both the filling of
+   cells and the queries use. */
+static inline int rtpi_dc_wcoord(double x, double x0, double dx, int res)
+{
+    double t = (x - x0) / dx;
+    if (!(t > 0.0))
+        return 0;
+    if (!(t < (double)res))
+        return res - 1;
+    return (int)t;
+}
+
+/* The cell of direction d (from the light; any length) in windows w. */
+static inline size_t rtpi_dc_wcell(const rtpi_dc_window *w, int res, rtpi_v3 d)
+{
+    double u, v;
+    int f = rtpi_dc_face(d, &u, &v);
+    int i = rtpi_dc_wcoord(u, w->u0[f], w->du[f], res);
+    int j = rtpi_dc_wcoord(v, w->v0[f], w->dv[f], res);
+    return ((size_t)f * (size_t)res + (size_t)j) * (size_t)res + (size_t)i;
+}
+
 /* The cell of direction d (from the light; any length) on a cube of full
    faces. */
 static inline size_t rtpi_dc_cell(int res, rtpi_v3 d)
@@ -104,6 +145,7 @@ typedef struct rtpi_lb_cand {
 typedef struct rtpi_lightbuf {
     int res;
     rtpi_v3 light;
+    rtpi_dc_window w;
     double slack;        /* absolute slack of the early stop (see build) */
     uint32_t *off;       /* 6 res^2 + 1 list starts into ref */
     uint32_t *ref;       /* candidate ranks, ascending within a cell */
@@ -122,23 +164,17 @@ void rtpi_lightbuf_free(rtpi_lightbuf *lb, const rtp_allocator *a);
 
 /* -------------------------------------------------------- item buffer */
 
-/* Seen from a light outside the scene's bounds, the scene covers a part
-   of each face only: the item buffer spreads its res x res cells of a
-   face over a window [u0, u0 + res du] x [v0, v0 + res dv] that holds the
-   projection of the bounds (the whole face when the light is inside
-   them), so a far light still sees the scene through many cells.  Cell
-   (i, j) of face f then has its centre at u0 + (i + 1/2) du, v0 + (j +
-   1/2) dv.  OpenGL draws the same window with glFrustum. */
+/* The item buffer's cells sample the ray through their centres,
+   u0 + (i + 1/2) du, v0 + (j + 1/2) dv; OpenGL draws the same windows
+   with glFrustum. */
 typedef struct rtpi_itembuf {
     int res;
     rtpi_v3 light;
-    double u0[6], v0[6], du[6], dv[6];
+    rtpi_dc_window w;
     double cell_angle[6]; /* bound of the angle between a direction and
                              the centre of its cell, radians */
-    double zbase[6];      /* nearest depth of the scene's bounds on a face */
-    double zext[6];       /* depth extent of the bounds on a face */
     uint32_t *id;         /* nearest occluder per cell, RTPI_NONE: none */
-    float *z;             /* its depth along the face axis minus zbase:
+    float *z;             /* its depth along the face axis minus w.zbase:
                              float keeps ~1e-7 of the scene's extent, not
                              of the distance from a far light */
 } rtpi_itembuf;
@@ -149,8 +185,8 @@ static inline size_t rtpi_itembuf_cell(const rtpi_itembuf *ib, rtpi_v3 d)
 {
     double u, v, x, y;
     int f = rtpi_dc_face(d, &u, &v), res = ib->res, i, j;
-    x = (u - ib->u0[f]) / ib->du[f];
-    y = (v - ib->v0[f]) / ib->dv[f];
+    x = (u - ib->w.u0[f]) / ib->w.du[f];
+    y = (v - ib->w.v0[f]) / ib->w.dv[f];
     if (!(x > -1.0 && x < res + 1.0 && y > -1.0 && y < res + 1.0))
         return (size_t)-1;
     i = x < 0.0 ? 0 : x >= res ? res - 1 : (int)x;

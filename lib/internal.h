@@ -431,6 +431,13 @@ struct rtp_tree {
     uint32_t *mat_samples; /* samples whose trees contain each material */
 };
 
+/* Traces the listed samples (ascending indices) of t again in t->scene as
+   it is now (materials edited; lights where they were traced) and puts
+   their new trees in place of the old; adds the rays cast to *rays.  The
+   caller drops whatever caches refer to the old nodes. */
+rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n,
+                        int threads, unsigned long long *rays, rtp_error *err);
+
 /* Resolves samples (nx*ny RGB, from a grid of corners when spd) into
    the image; one routine for trace and reeval so both round alike. */
 void rtpi_resolve_samples(const float *samples, int spd, rtp_image *img);

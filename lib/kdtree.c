@@ -77,6 +77,9 @@
 #ifndef KD_EXACT_MAX
 #define KD_EXACT_MAX 256
 #endif
+#ifndef KD_LEAF_MARGIN
+#define KD_LEAF_MARGIN 1.0
+#endif
 #ifndef KD_SMALL_MAX
 #define KD_SMALL_MAX 16
 #endif
@@ -298,50 +301,79 @@ static void split_exact(kd_build *b, const kd_ref *r, size_t n,
     }
 }
 
-/* The same exact SAH for a handful of references, without sorting: each
-   face of each box is a candidate, and the references on either side are
-   counted directly (n^2 compares, cheaper than a sort for small n). */
+static void sort_f(float *a, size_t n)
+{
+    size_t i, j;
+    for (i = 1; i < n; i++) {
+        float x = a[i];
+        for (j = i; j > 0 && x < a[j - 1]; j--)
+            a[j] = a[j - 1];
+        a[j] = x;
+    }
+}
+
+/* The same exact SAH for a few references (at most KD_SMALL_MAX): the
+   starts, ends and planar positions of each axis sorted apart (insertion
+   sorts, cheap for short lists) and swept together. */
 static void split_small(const kd_ref *r, size_t n, const float *lo,
                         const float *hi, const double *d, double area,
                         kd_split *best)
 {
-    int k, f;
-    size_t i, j;
+    float st[KD_SMALL_MAX + 1], en[KD_SMALL_MAX + 1], pl[KD_SMALL_MAX + 1];
+    int k;
+    size_t i;
     for (k = 0; k < 3; k++) {
         double o1 = d[(k + 1) % 3], o2 = d[(k + 2) % 3];
         double inv = 1.0 / area, cap = o1 * o2 * inv, perim = (o1 + o2) * inv;
+        size_t ns = 0, np = 0, is = 0, ie = 0, ip = 0, nl = 0, nr = n;
         if (!(d[k] > 0.0))
             continue;
-        for (j = 0; j < n; j++) {
-            for (f = 0; f < 2; f++) {
-                float p = f ? r[j].hi[k] : r[j].lo[k];
-                size_t na = 0, nb = 0, np = 0;
-                double pl, pr, fl, cl, cr;
-                if (!(p > lo[k] && p < hi[k]))
-                    continue;
-                for (i = 0; i < n; i++) {
-                    na += r[i].lo[k] < p;
-                    nb += r[i].hi[k] > p;
-                    np += (r[i].lo[k] == p) & (r[i].hi[k] == p);
-                }
-                pl = cap + ((double)p - lo[k]) * perim;
-                pr = cap + ((double)hi[k] - p) * perim;
-                fl = ((double)p - lo[k]) / d[k];
-                cl = sah(pl, pr, na + np, nb, fl);
-                cr = sah(pl, pr, na, nb + np, fl);
-                if (cl < best->cost) {
-                    best->cost = cl;
+        for (i = 0; i < n; i++) {
+            if (r[i].lo[k] == r[i].hi[k]) {
+                pl[np++] = r[i].lo[k];
+            } else {
+                st[ns] = r[i].lo[k];
+                en[ns++] = r[i].hi[k];
+            }
+        }
+        sort_f(st, ns);
+        sort_f(en, ns);
+        sort_f(pl, np);
+        /* Sentinels: every position is finite. */
+        st[ns] = en[ns] = pl[np] = INFINITY;
+        while (ie < ns || ip < np) {
+            float p = st[is] < en[ie] ? st[is] : en[ie];
+            size_t pe = 0, pp = 0, ps = 0;
+            p = pl[ip] < p ? pl[ip] : p;
+            while (en[ie] == p)
+                pe++, ie++;
+            while (pl[ip] == p)
+                pp++, ip++;
+            while (st[is] == p)
+                ps++, is++;
+            nr -= pp + pe;
+            if (p > lo[k] && p < hi[k]) {
+                double al = cap + ((double)p - lo[k]) * perim;
+                double ar = cap + ((double)hi[k] - p) * perim;
+                double fl = ((double)p - lo[k]) / d[k];
+                double c = sah(al, ar, nl + pp, nr, fl);
+                if (c < best->cost) {
+                    best->cost = c;
                     best->axis = k;
                     best->pos = p;
                     best->planar_left = 1;
                 }
-                if (cr < best->cost) {
-                    best->cost = cr;
-                    best->axis = k;
-                    best->pos = p;
-                    best->planar_left = 0;
+                if (pp) {
+                    c = sah(al, ar, nl, nr + pp, fl);
+                    if (c < best->cost) {
+                        best->cost = c;
+                        best->axis = k;
+                        best->pos = p;
+                        best->planar_left = 0;
+                    }
                 }
             }
+            nl += ps + pp;
         }
     }
 }
@@ -544,7 +576,7 @@ static int build_node(kd_build *b, const float *lo, const float *hi,
         else
             split_binned(b->ref + off, n, lo, hi, d, area, &sp);
     }
-    if (!(sp.cost < KD_COST_ISECT * (double)n))
+    if (!(sp.cost < KD_LEAF_MARGIN * KD_COST_ISECT * (double)n))
         return make_leaf(b, b->ref + off, n);
 
     /* Partition into the right child's list at off + n and the left

@@ -261,24 +261,24 @@ rtp_status rtpi_itembuf_build_osmesa(const rtp_scene *s, rtpi_v3 light,
     glClearDepth(1.0);
     for (f = 0; f < 6; f++) {
         osm_face fc;
-        double hu = 0.5 * res * ib->du[f], hv = 0.5 * res * ib->dv[f];
-        double zn, zf, cell = fmin(ib->du[f], ib->dv[f]);
+        double hu = 0.5 * res * ib->w.du[f], hv = 0.5 * res * ib->w.dv[f];
+        double zn, zf, cell = fmin(ib->w.du[f], ib->w.dv[f]);
         size_t base = (size_t)f * npix;
         fc.f = f;
         fc.L = light;
-        fc.uc = ib->u0[f] + hu;
-        fc.vc = ib->v0[f] + hv;
+        fc.uc = ib->w.u0[f] + hu;
+        fc.vc = ib->w.v0[f] + hv;
         /* Near and far planes hug the scene's depths on this face (1e-3 of
            its extent outside them, for rounding), so the 24-bit depth
            buffer resolves ~1e-7 of that extent near the front. */
-        zn = ib->zbase[f] - 1e-3 * ib->zext[f];
+        zn = ib->w.zbase[f] - 1e-3 * ib->w.zext[f];
         if (!(zn > 0.0))
             zn = dmin / sqrt(3.0) * 0.5;
         if (!(zn > 0.0))
-            zn = 1e-6 * ib->zext[f];
-        zf = ib->zbase[f] + ib->zext[f] * (1.0 + 1e-3) + zn;
-        if (ib->zbase[f] == 0.0)
-            zf = ib->zext[f] * sqrt(3.0) * (1.0 + 1e-3) + zn;
+            zn = 1e-6 * ib->w.zext[f];
+        zf = ib->w.zbase[f] + ib->w.zext[f] * (1.0 + 1e-3) + zn;
+        if (ib->w.zbase[f] == 0.0)
+            zf = ib->w.zext[f] * sqrt(3.0) * (1.0 + 1e-3) + zn;
         glMatrixMode(GL_PROJECTION);
         glLoadIdentity();
         glFrustum(-hu * zn, hu * zn, -hv * zn, hv * zn, zn, zf);
@@ -300,7 +300,7 @@ rtp_status rtpi_itembuf_build_osmesa(const rtp_scene *s, rtpi_v3 light,
                 double dz = depth[k];
                 double z = zn * zf / (zf - dz * (zf - zn)); /* window depth -> eye */
                 ib->id[base + k] = id - 1u;
-                ib->z[base + k] = (float)(z - ib->zbase[f]);
+                ib->z[base + k] = (float)(z - ib->w.zbase[f]);
             }
         }
     }

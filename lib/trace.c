@@ -247,7 +247,9 @@ static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
     return idx;
 }
 
-static void trace_sample(worker *w, int x, int y, float *rgb)
+/* Traces sample (x, y) of the camera grid and records its tree at the end
+   of the worker's nodes; returns how many nodes it has. */
+static size_t record_sample(worker *w, int x, int y)
 {
     const camera *c = &w->sh->cam;
     rtpi_ray ray;
@@ -255,7 +257,6 @@ static void trace_sample(worker *w, int x, int y, float *rgb)
     double len;
     double sx = ((double)x - 0.5 * (c->nx - 1)) * c->step;
     double sy = (0.5 * (c->ny - 1) - (double)y) * c->step;
-    size_t words = w->sh->shade.vis_words;
     d = v3_add(c->dir, v3_add(v3_mul(c->right, sx), v3_mul(c->up, sy)));
     len = v3_len(d);
     ray.o = c->from;
@@ -268,7 +269,14 @@ static void trace_sample(worker *w, int x, int y, float *rgb)
     w->n.eye_rays++;
     if (trace_ray(w, &ray, 1, 1.0) >= 0)
         w->n.eye_hits++;
-    w->counts[x] = (uint32_t)(w->nn - w->sample_base);
+    return w->nn - w->sample_base;
+}
+
+static void trace_sample(worker *w, int x, int y, float *rgb)
+{
+    const camera *c = &w->sh->cam;
+    size_t words = w->sh->shade.vis_words;
+    w->counts[x] = (uint32_t)record_sample(w, x, y);
     /* The sample's colour is the evaluation of the tree just recorded,
        by the steps re-evaluation takes. */
     {
@@ -569,4 +577,201 @@ rtp_status rtp_record(const rtp_scene *s, const rtp_trace_options *opt,
     if (!tree)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_record: NULL tree");
     return trace_impl(s, opt, tree, image, stats, err);
+}
+
+/* ------------------------------------------------------------ re-trace */
+
+typedef struct retrace_job {
+    worker w;
+    const uint32_t *samples;
+    size_t n, chunk;
+    row_rec *chunks;   /* per chunk: its samples' new trees */
+} retrace_job;
+
+static int retrace_chunk(void *ctx, int ci)
+{
+    retrace_job *j = (retrace_job *)ctx;
+    worker *w = &j->w;
+    shared *sh = w->sh;
+    size_t i = (size_t)ci * j->chunk, end = i + j->chunk, k = 0, words = sh->shade.vis_words;
+    row_rec *r = &j->chunks[ci];
+    if (end > j->n)
+        end = j->n;
+    w->nn = 0;
+    for (; i < end; i++, k++) {
+        uint32_t smp = j->samples[i];
+        w->counts[k] = (uint32_t)record_sample(w, (int)(smp % (uint32_t)sh->cam.nx),
+                                               (int)(smp / (uint32_t)sh->cam.nx));
+        if (w->status != RTP_OK)
+            return 1;
+    }
+    r->nnodes = w->nn;
+    r->nodes = (rtpi_cnode *)rtpi_malloc_array(&sh->s->alloc, w->nn + 1, sizeof *r->nodes);
+    r->counts = (uint32_t *)rtpi_malloc_array(&sh->s->alloc, k + 1, sizeof *r->counts);
+    r->vis = words ? (uint32_t *)rtpi_malloc_array(&sh->s->alloc, w->nn * words + 1,
+                                                   sizeof *r->vis)
+                   : NULL;
+    if (!r->nodes || !r->counts || (words && !r->vis)) {
+        w->status = RTP_ERR_NOMEM;
+        return 1;
+    }
+    memcpy(r->nodes, w->nodes, w->nn * sizeof *r->nodes);
+    memcpy(r->counts, w->counts, k * sizeof *r->counts);
+    if (words)
+        memcpy(r->vis, w->vis, w->nn * words * sizeof *r->vis);
+    return 0;
+}
+
+rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int threads,
+                        unsigned long long *rays, rtp_error *err)
+{
+    const rtp_allocator *a = &t->alloc;
+    rtp_scene tmp;
+    rtpi_light *lights = NULL;
+    shared sh;
+    retrace_job *jobs = NULL;
+    void *ctx[RTPI_MAX_THREADS];
+    row_rec *chunks = NULL;
+    size_t nchunks, chunk = 64, i, k, ns = (size_t)t->nx * t->ny, total, words = t->vis_words;
+    rtpi_cnode *nodes = NULL;
+    uint64_t *start = NULL;
+    uint32_t *vis = NULL;
+    rtp_status st = RTP_OK;
+    int nthreads = threads > 1 ? threads : 1;
+    if (n == 0)
+        return RTP_OK;
+    if (nthreads > RTPI_MAX_THREADS)
+        nthreads = RTPI_MAX_THREADS;
+    if (!t->kd && (st = rtpi_kd_build(t->scene, a, &t->kd, err)) != RTP_OK)
+        return st;
+    /* The trees record visibility of the lights where they were traced:
+       trace the new samples with the lights there (moved lights are
+       decided anew at evaluation, as for every other sample). */
+    tmp = *t->scene;
+    lights = (rtpi_light *)rtpi_malloc_array(a, t->nlights0 + 1, sizeof *lights);
+    if (!lights)
+        return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+    for (i = 0; i < t->nlights0; i++) {
+        lights[i] = t->scene->lights[i];
+        memcpy(lights[i].pos, t->lights0[i].pos, sizeof lights[i].pos);
+    }
+    tmp.lights = lights;
+    tmp.nlights = t->nlights0;
+
+    memset(&sh, 0, sizeof sh);
+    sh.s = &tmp;
+    sh.kd = t->kd;
+    sh.spd = t->spd;
+    sh.max_depth = t->max_depth;
+    sh.min_weight = t->min_weight;
+    sh.shade.s = &tmp;
+    sh.shade.one_sided = t->spd;
+    sh.shade.vis_words = words;
+    camera_init(&sh.cam, &tmp, t->nx, t->ny);
+    nchunks = (n + chunk - 1) / chunk;
+    jobs = (retrace_job *)rtpi_calloc_array(a, (size_t)nthreads, sizeof *jobs);
+    chunks = (row_rec *)rtpi_calloc_array(a, nchunks, sizeof *chunks);
+    if (!jobs || !chunks) {
+        st = rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+        goto done;
+    }
+    for (i = 0; i < (size_t)nthreads; i++) {
+        jobs[i].w.sh = &sh;
+        jobs[i].w.status = RTP_OK;
+        jobs[i].w.counts = (uint32_t *)rtpi_malloc_array(a, chunk, sizeof(uint32_t));
+        jobs[i].samples = samples;
+        jobs[i].n = n;
+        jobs[i].chunk = chunk;
+        jobs[i].chunks = chunks;
+        if (!jobs[i].w.counts) {
+            st = rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+            goto done;
+        }
+        ctx[i] = &jobs[i];
+    }
+    rtpi_parallel_rows((int)nchunks, nthreads, ctx, retrace_chunk, NULL, NULL);
+    for (i = 0; i < (size_t)nthreads; i++)
+        if (jobs[i].w.status != RTP_OK) {
+            st = rtpi_error(err, jobs[i].w.status, NULL, 0, 0, "out of memory while re-tracing");
+            goto done;
+        }
+    if (rays)
+        for (i = 0; i < (size_t)nthreads; i++)
+            *rays += jobs[i].w.n.eye_rays + jobs[i].w.n.shadow_rays +
+                     jobs[i].w.n.reflected_rays + jobs[i].w.n.refracted_rays;
+
+    /* Splice: every sample keeps its old tree unless it was re-traced. */
+    total = t->nnodes;
+    for (i = 0; i < n; i++)
+        total -= (size_t)(t->start[samples[i] + 1] - t->start[samples[i]]);
+    for (i = 0; i < nchunks; i++)
+        total += chunks[i].nnodes;
+    nodes = (rtpi_cnode *)rtpi_malloc_array(a, total + 1, sizeof *nodes);
+    start = (uint64_t *)rtpi_malloc_array(a, ns + 1, sizeof *start);
+    vis = words ? (uint32_t *)rtpi_malloc_array(a, total * words + 1, sizeof *vis) : NULL;
+    if (!nodes || !start || (words && !vis)) {
+        st = rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+        goto done;
+    }
+    {
+        size_t at = 0, next = 0, ci = 0, cj = 0, coff = 0;
+        for (k = 0; k < ns; k++) {
+            size_t cnt;
+            start[k] = at;
+            if (next < n && samples[next] == k) {
+                const row_rec *r = &chunks[ci];
+                cnt = r->counts[cj];
+                memcpy(nodes + at, r->nodes + coff, cnt * sizeof *nodes);
+                if (words)
+                    memcpy(vis + at * words, r->vis + coff * words, cnt * words * sizeof *vis);
+                coff += cnt;
+                next++;
+                if (++cj == chunk) {
+                    ci++;
+                    cj = 0;
+                    coff = 0;
+                }
+            } else {
+                size_t a0 = (size_t)t->start[k];
+                cnt = (size_t)(t->start[k + 1] - t->start[k]);
+                memcpy(nodes + at, t->nodes + a0, cnt * sizeof *nodes);
+                if (words)
+                    memcpy(vis + at * words, t->vis_ext + a0 * words, cnt * words * sizeof *vis);
+            }
+            at += cnt;
+        }
+        start[ns] = at;
+    }
+    rtpi_free(a, t->nodes);
+    rtpi_free(a, t->start);
+    rtpi_free(a, t->vis_ext);
+    t->nodes = nodes;
+    t->start = start;
+    t->vis_ext = vis;
+    t->nnodes = total;
+    nodes = NULL;
+    start = NULL;
+    vis = NULL;
+done:
+    if (jobs) {
+        for (i = 0; i < (size_t)nthreads; i++) {
+            rtpi_free(a, jobs[i].w.nodes);
+            rtpi_free(a, jobs[i].w.vis);
+            rtpi_free(a, jobs[i].w.counts);
+        }
+        rtpi_free(a, jobs);
+    }
+    if (chunks) {
+        for (i = 0; i < nchunks; i++) {
+            rtpi_free(a, chunks[i].nodes);
+            rtpi_free(a, chunks[i].counts);
+            rtpi_free(a, chunks[i].vis);
+        }
+        rtpi_free(a, chunks);
+    }
+    rtpi_free(a, nodes);
+    rtpi_free(a, start);
+    rtpi_free(a, vis);
+    rtpi_free(a, lights);
+    return st;
 }

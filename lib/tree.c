@@ -56,9 +56,7 @@ void rtp_tree_get_info(const rtp_tree *t, rtp_tree_info *info)
 
 /* ---------------------------------------------------------------- edits */
 
-/* Checks the tree's scene against what was traced: may the recorded trees
-   evaluate it exactly?  Returns RTP_OK or RTP_ERR_UNSUPPORTED with the
-   remedy in err. */
+/* Checks an edited value the trees cannot take at all. */
 static rtp_status check_exact(const rtp_tree *t, const char *key,
                               const char *value, rtp_error *err)
 {
@@ -70,39 +68,21 @@ static rtp_status check_exact(const rtp_tree *t, const char *key,
             return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
                               "%s=%s: light position must be finite", key, value);
     }
-    for (i = 0; i < s->nmats; i++) {
-        const rtpi_material *m = &s->mats[i], *m0 = &t->mats0[i];
-        if (m->ks > 0.0f && m0->ks == 0.0f)
-            return rtpi_error(err, RTP_ERR_UNSUPPORTED, NULL, 0, 0,
-                              "%s=%s: material %zu had ks 0 when traced, so no "
-                              "reflected rays were recorded for it; trace again with "
-                              "--set %s=%s",
-                              key, value, i, key, value);
-        if (m->kt > 0.0f && m0->kt == 0.0f)
-            return rtpi_error(err, RTP_ERR_UNSUPPORTED, NULL, 0, 0,
-                              "%s=%s: material %zu had kt 0 when traced, so no "
-                              "refracted rays were recorded for it; trace again with "
-                              "--set %s=%s",
-                              key, value, i, key, value);
-        if (t->spd && m0->kt > 0.0f && m->kt == 0.0f)
-            return rtpi_error(err, RTP_ERR_UNSUPPORTED, NULL, 0, 0,
-                              "%s=%s: in SPD mode kt 0 makes material %zu one-sided, "
-                              "which changes its shadow rays; trace again with "
-                              "--set %s=%s",
-                              key, value, i, key, value);
-        if (m0->kt > 0.0f && m->ior != m0->ior)
-            return rtpi_error(err, RTP_ERR_UNSUPPORTED, NULL, 0, 0,
-                              "%s=%s: a new index of refraction bends material %zu's "
-                              "refracted rays elsewhere; trace again with --set %s=%s",
-                              key, value, i, key, value);
-        if (t->min_weight > 0.0 && (m->ks > m0->ks || m->kt > m0->kt))
-            return rtpi_error(err, RTP_ERR_UNSUPPORTED, NULL, 0, 0,
-                              "%s=%s: the trace skipped rays weighing less than %g, "
-                              "which a larger ks or kt would make count; trace again "
-                              "with --min-weight 0",
-                              key, value, t->min_weight);
-    }
+    (void)t;
     return RTP_OK;
+}
+
+/* Must material m's samples be traced again before the trees can show it
+   exactly (edit class D)?  Rays the trace did not cast — reflected where
+   ks was 0, refracted where kt was 0 or below the weight cut-off — or cast
+   elsewhere — refracted with another ior, one-sidedness in SPD mode. */
+static int needs_retrace(const rtp_tree *t, size_t m)
+{
+    const rtpi_material *a = &t->scene->mats[m], *a0 = &t->mats0[m];
+    return (a->ks > 0.0f && a0->ks == 0.0f) || (a->kt > 0.0f && a0->kt == 0.0f) ||
+           (a0->kt > 0.0f && a->kt > 0.0f && a->ior != a0->ior) ||
+           (t->spd && a0->kt > 0.0f && a->kt == 0.0f) ||
+           (t->min_weight > 0.0 && (a->ks > a0->ks || a->kt > a0->kt));
 }
 
 rtp_status rtp_tree_set(rtp_tree *t, const char *key, const char *value,
@@ -519,6 +499,64 @@ static void drop_caches(rtp_tree *t)
     t->ev_valid = 0;
 }
 
+/* Class D: samples whose trees contain a material the recorded trees
+   cannot show exactly are traced again (only those), then every cache
+   that referred to the old nodes is dropped. */
+static rtp_status retrace_edited(rtp_tree *t, int threads, rtp_eval_stats *st,
+                                 rtp_error *err)
+{
+    const rtp_scene *s = t->scene;
+    size_t m, k, ns = (size_t)t->nx * t->ny, n = 0;
+    unsigned char *mark;
+    uint32_t *list;
+    int any = 0;
+    rtp_status rs;
+    for (m = 0; m < s->nmats; m++)
+        any |= needs_retrace(t, m);
+    if (!any)
+        return RTP_OK;
+    if (!t->mat_start && build_material_lists(t) != RTP_OK)
+        return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+    mark = (unsigned char *)rtpi_calloc_array(&t->alloc, ns + 1, 1);
+    list = (uint32_t *)rtpi_malloc_array(&t->alloc, ns + 1, sizeof *list);
+    if (!mark || !list) {
+        rtpi_free(&t->alloc, mark);
+        rtpi_free(&t->alloc, list);
+        return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+    }
+    for (m = 0; m < s->nmats; m++)
+        if (needs_retrace(t, m))
+            for (k = t->mat_start[m]; k < t->mat_start[m + 1]; k++)
+                mark[t->mat_samples[k]] = 1;
+    for (k = 0; k < ns; k++)
+        if (mark[k])
+            list[n++] = (uint32_t)k;
+    rs = rtpi_retrace(t, list, n, threads, st ? &st->retraced_rays : NULL, err);
+    rtpi_free(&t->alloc, mark);
+    rtpi_free(&t->alloc, list);
+    if (rs != RTP_OK)
+        return rs;
+    if (st)
+        st->retraced_samples += n;
+    /* the trees now hold these materials as they are */
+    for (m = 0; m < s->nmats; m++)
+        if (needs_retrace(t, m)) {
+            t->mats0[m].ks = s->mats[m].ks;
+            t->mats0[m].kt = s->mats[m].kt;
+            t->mats0[m].ior = s->mats[m].ior;
+        }
+    drop_caches(t);
+    rtpi_free(&t->alloc, t->cur_vis);
+    rtpi_free(&t->alloc, t->cur_pos);
+    rtpi_free(&t->alloc, t->mat_start);
+    rtpi_free(&t->alloc, t->mat_samples);
+    t->cur_vis = NULL;
+    t->cur_pos = NULL;
+    t->mat_start = NULL;
+    t->mat_samples = NULL;
+    return RTP_OK;
+}
+
 static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image *into,
                             rtp_image **out, rtp_eval_stats *stats, rtp_error *err)
 {
@@ -561,6 +599,9 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
     shade.one_sided = t->spd;
     shade.vis_words = t->vis_words;
     vis = t->vis_words ? t->vis_ext : NULL;
+    rs = retrace_edited(t, nthreads, &st, err);
+    if (rs != RTP_OK)
+        return rs;
     for (l = 0; l < nl; l++)
         any_moved |= light_moved(t, l);
     if (any_moved) {

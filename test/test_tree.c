@@ -195,7 +195,7 @@ static void test_class_a_edits(void)
     }
 }
 
-/* What the trees cannot evaluate is refused, and the tree is unchanged. */
+/* Refused edits leave the tree unchanged. */
 static void test_refused_edits(void)
 {
     rtp_scene *s = load("scenes/spheres.nff");
@@ -203,7 +203,6 @@ static void test_refused_edits(void)
     rtp_image *a = NULL, *b = NULL;
     rtp_trace_options o;
     rtp_error err;
-    size_t i;
     if (!s) {
         CHECK(s != NULL);
         return;
@@ -213,23 +212,63 @@ static void test_refused_edits(void)
     o.height = 24;
     CHECK(rtp_record(s, &o, &t, &a, NULL, NULL) == RTP_OK);
     if (t) {
-        /* material 0 (floor) has ks 0, kt 0; material 3 is glass */
-        CHECK(s->mats[0].ks == 0.0f && s->mats[3].kt > 0.0f);
-        CHECK(rtp_tree_set(t, "mat.0.ks", "0.5", &err) == RTP_ERR_UNSUPPORTED);
-        CHECK(strstr(err.message, "trace again") != NULL);
-        CHECK(rtp_tree_set(t, "mat.0.kt", "0.5", &err) == RTP_ERR_UNSUPPORTED);
-        CHECK(rtp_tree_set(t, "mat.3.ior", "1.9", &err) == RTP_ERR_UNSUPPORTED);
         CHECK(rtp_tree_set(t, "mat.99.kd", "1", &err) == RTP_ERR_KEY);
         CHECK(rtp_tree_set(t, "mat.0.kd", "abc", &err) == RTP_ERR_PARSE);
+        CHECK(rtp_tree_set(t, "mat.0.kd", "-1", &err) == RTP_ERR_ARGUMENT);
+        CHECK(rtp_tree_set(t, "light.0.pos", "1,nan,3", &err) != RTP_OK);
         CHECK(rtp_tree_eval(t, NULL, &b, NULL, NULL) == RTP_OK);
         CHECK(same_image(a, b));
-        for (i = 0; i < t->scene->nmats; i++)
-            CHECK(t->scene->mats[i].ks == s->mats[i].ks && t->scene->mats[i].ior == s->mats[i].ior);
     }
     rtp_image_destroy(a);
     rtp_image_destroy(b);
     rtp_tree_destroy(t);
     rtp_scene_destroy(s);
+}
+
+/* Class D: ks or kt from 0, a new ior: only the samples containing the
+   material are traced again, and the result equals a full trace. */
+static void test_class_d_retrace(void)
+{
+    static const char *const edits[][2] = {
+        {"mat.floor.ks", "0.4"}, {"mat.red.kt", "0.5"}, {"mat.glass.ior", "2.4"},
+        {"mat.glass.ior", "1.0001"}, {"mat.floor.kt", "0.3"},
+    };
+    size_t i;
+    for (i = 0; i < sizeof edits / sizeof *edits; i++) {
+        rtp_scene *s = load("scenes/spheres.nff");
+        rtp_tree *t = NULL;
+        rtp_image *re = NULL, *full = NULL, *first = NULL;
+        rtp_trace_options o;
+        rtp_eval_stats es;
+        rtp_diff_stats d;
+        if (!s) {
+            CHECK(s != NULL);
+            return;
+        }
+        memset(&o, 0, sizeof o);
+        o.width = 48;
+        o.height = 36;
+        CHECK(rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
+        CHECK(t && rtp_tree_eval(t, NULL, &first, NULL, NULL) == RTP_OK);
+        CHECK(rtp_tree_set(t, edits[i][0], edits[i][1], NULL) == RTP_OK);
+        CHECK(rtp_scene_set(s, edits[i][0], edits[i][1], NULL) == RTP_OK);
+        memset(&es, 0, sizeof es);
+        if (t && rtp_tree_eval(t, NULL, &re, &es, NULL) == RTP_OK &&
+            rtp_trace(s, &o, &full, NULL, NULL) == RTP_OK &&
+            rtp_image_diff(re, full, 1e-6, &d, NULL) == RTP_OK) {
+            CHECK_MSG(d.max_abs <= 1e-6, "%s=%s: %g", edits[i][0], edits[i][1], d.max_abs);
+            /* some samples, not all of them, were traced again */
+            CHECK_MSG(es.retraced_samples > 0 && es.retraced_samples < 48u * 36u,
+                      "%s: %llu samples re-traced", edits[i][0], es.retraced_samples);
+        } else {
+            CHECK(0);
+        }
+        rtp_image_destroy(re);
+        rtp_image_destroy(full);
+        rtp_image_destroy(first);
+        rtp_tree_destroy(t);
+        rtp_scene_destroy(s);
+    }
 }
 
 /* A moved or added light, re-evaluated with the given shadow mode, against
@@ -336,7 +375,9 @@ static void test_edit_sequence(void)
         {"mat.floor.checker", "1"},     {"mat.floor.checker_scale", "0.8"},
         {"background", "0.5,0.5,0"},    {"light.key.pos", "-4,-5,8"},
         {"mat.red.ks", "0"},            {"mat.red.ks", "0.4"},
-        {"mat.floor.checker", "0"},
+        {"mat.floor.checker", "0"},     {"mat.floor.ks", "0.3"}, /* class D */
+        {"light.fill.pos", "4,-3,6"},   {"mat.glass.ior", "1.8"},
+        {"light.0.color", "1,1,1"},
     };
     rtp_scene *s = load("scenes/spheres.nff");
     rtp_tree *t = NULL;
@@ -551,6 +592,7 @@ int main(void)
     RUN(test_identical_small_spd);
     RUN(test_class_a_edits);
     RUN(test_refused_edits);
+    RUN(test_class_d_retrace);
     RUN(test_moved_light_exact);
     RUN(test_moved_light_small_spd);
     RUN(test_edit_sequence);
