@@ -679,8 +679,9 @@ static const char reeval_help[] =
     "  -j, --threads N      threads (default 1)\n"
     "  --stats FILE         write statistics as one JSON object ('-' = stdout)\n"
     "  -q, --quiet / -v, --verbose / -h, --help\n"
-    "Edits the trees cannot evaluate exactly (a new ior, ks or kt raised from 0)\n"
-    "fail with a message naming the remedy.\n";
+    "Edits that change where rays go (a new ior, ks or kt raised from 0) trace\n"
+    "again exactly the samples that contain the material (--stats reports\n"
+    "retraced_samples and retraced_rays); the result equals a full trace.\n";
 
 /* Expands a pattern with one %d or %0Nd; returns 0 or -1. */
 static int expand_pattern(const char *pat, int n, char *out, size_t size)
@@ -760,16 +761,21 @@ static int reeval_one(rtp_tree *tree, const rtp_eval_options *eo, rtp_image **ke
     } else if (verbosity > 1) {
         fprintf(stderr, "rtp: reeval %.4f s, %llu nodes\n", es.seconds, es.nodes);
     }
+    if (verbosity > 0 && es.retraced_samples)
+        fprintf(stderr, "rtp: traced %llu of %llu samples again (%llu rays) for edits that move rays\n",
+                es.retraced_samples, es.samples ? es.samples : 0ULL, es.retraced_rays);
     if (stats) {
         long long fb = file_size(tree_path);
         rtp_tree_get_info(tree, &ti);
         fprintf(stats,
                 "{\"command\": \"reeval\", \"seconds\": %.6f, \"load_seconds\": %.6f, "
                 "\"shadow_seconds\": %.6f, \"moved_lights\": %d, \"shadow_queries\": %llu, "
+                "\"retraced_samples\": %llu, \"retraced_rays\": %llu, "
                 "\"pixels\": %llu, \"samples\": %llu, \"nodes\": %llu, \"bytes_per_node\": %u, "
                 "\"tree_bytes\": %llu",
                 es.seconds, load_seconds, es.shadow_seconds, es.moved_lights,
-                es.shadow_queries, (unsigned long long)img->width * img->height,
+                es.shadow_queries, es.retraced_samples, es.retraced_rays,
+                (unsigned long long)img->width * img->height,
                 ti.samples, ti.nodes, ti.bytes_per_node, ti.tree_bytes);
         if (fb >= 0)
             fprintf(stats, ", \"file_bytes\": %lld", fb);

@@ -386,21 +386,23 @@ static void split_binned(const kd_ref *r, size_t n, const float *lo,
                          kd_split *best)
 {
     uint32_t cs[3][KD_BINS], ce[3][KD_BINS];
-    double sc[3];
+    float sc[3];
     int k, j;
     size_t i;
     memset(cs, 0, sizeof cs);
     memset(ce, 0, sizeof ce);
     for (k = 0; k < 3; k++)
-        sc[k] = d[k] > 0.0 ? KD_BINS / d[k] : 0.0;
+        sc[k] = d[k] > 0.0 ? (float)(KD_BINS / d[k]) : 0.0f;
     for (i = 0; i < n; i++) {
         for (k = 0; k < 3; k++) {
-            /* Coordinates are inside the node's box: indices are in
-               range but for rounding, which the clamps absorb. */
-            int s0 = (int)(((double)r[i].lo[k] - lo[k]) * sc[k]);
-            int s1 = (int)(((double)r[i].hi[k] - lo[k]) * sc[k]);
-            s0 = s0 < 0 ? 0 : s0 > KD_BINS - 1 ? KD_BINS - 1 : s0;
-            s1 = s1 < 0 ? 0 : s1 > KD_BINS - 1 ? KD_BINS - 1 : s1;
+            /* The boxes lie inside the node's, so the offsets are >= 0;
+               rounding may give KD_BINS at the top, which the clamp
+               absorbs.  A bin only steers the choice of plane: the
+               partition below uses the exact coordinates. */
+            unsigned s0 = (unsigned)((r[i].lo[k] - lo[k]) * sc[k]);
+            unsigned s1 = (unsigned)((r[i].hi[k] - lo[k]) * sc[k]);
+            s0 = s0 < KD_BINS - 1 ? s0 : KD_BINS - 1;
+            s1 = s1 < KD_BINS - 1 ? s1 : KD_BINS - 1;
             cs[k][s0]++;
             ce[k][s1]++;
         }
@@ -412,15 +414,15 @@ static void split_binned(const kd_ref *r, size_t n, const float *lo,
         if (!(d[k] > 0.0))
             continue;
         for (j = 1; j < KD_BINS; j++) {
-            double fl = (double)j / KD_BINS, c;
-            float p = (float)((double)lo[k] + d[k] * fl);
+            float p = (float)((double)lo[k] + d[k] * j * (1.0 / KD_BINS));
+            double c;
             nl += cs[k][j - 1];
             nr -= ce[k][j - 1];
             if (!(p > lo[k] && p < hi[k]))
                 continue;
-            fl = ((double)p - lo[k]) / d[k];
             c = sah(cap + ((double)p - lo[k]) * perim,
-                    cap + ((double)hi[k] - p) * perim, nl, nr, fl);
+                    cap + ((double)hi[k] - p) * perim, nl, nr,
+                    ((double)p - lo[k]) / d[k]);
             if (c < best->cost) {
                 best->cost = c;
                 best->axis = k;
