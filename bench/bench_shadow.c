@@ -115,7 +115,7 @@ static int run_mode(const char *scene, const rtp_scene *s, const rtpi_kdtree *kd
         /* cell agreement with the software z-buffer at the same res */
         rtpi_itembuf gl;
         if (rtpi_itembuf_build_osmesa(s, lp, res, &a, &gl, NULL) == RTP_OK) {
-            size_t c, same = 0, nc = 6 * (size_t)res * (size_t)res;
+            size_t c, same = 0, nc = sw->w.ncells < gl.w.ncells ? sw->w.ncells : gl.w.ncells;
             for (c = 0; c < nc; c++)
                 same += sw->id[c] == gl.id[c];
             snprintf(extra, sizeof extra, "cells agreeing with software: %.4f%%",

@@ -262,8 +262,9 @@ static const char trace_help[] =
     "  -i, --image FILE     image to write (.png, .ppm, .pfm; '-' = PFM on stdout);\n"
     "                       default: SCENE's name with .png\n"
     "  --set KEY=VALUE      edit the scene first (repeatable): light.N.pos|color|on,\n"
-    "                       mat.N.color|kd|ks|kt|shine|ior, ambient, background;\n"
-    "                       N is a 0-based index or a name the scene gives\n"
+    "                       mat.N.color|kd|ks|kt|shine|ior|checker|color2|\n"
+    "                       checker_scale|bump|bump_strength|bump_scale,\n"
+    "                       ambient, background; N is a 0-based index or a name\n"
     "  --params FILE        edits from FILE: KEY=VALUE per line, '#' comments\n"
     "  --size WxH           image size (default: the scene's resolution)\n"
     "  --spd                SPD testing procedure: 512x512 from 513x513 corner\n"
@@ -672,6 +673,9 @@ static const char reeval_help[] =
     "                       itembuf[:RES] (item buffer, approximate at shadow\n"
     "                       edges), osmesa[:RES] (item buffer by OSMesa); RES:\n"
     "                       direction-cube cells per face edge (default 1024)\n"
+    "  --stale MODE         after a bump edit, the reflected and refracted rays\n"
+    "                       below changed normals: keep (the paper's way, fast,\n"
+    "                       approximate; default) or retrace (exact)\n"
     "  --add-light X,Y,Z    add a white light (repeatable); it is light N, after\n"
     "                       the scene's lights, for --set light.N.*\n"
     "  --reference          also trace the edited scene in full and report both\n"
@@ -864,6 +868,17 @@ static int cmd_reeval(int argc, char **argv)
                 goto usage;
             }
             eo.shadows = (rtp_shadow_mode)m;
+        } else if (is_opt(a, "--stale")) {
+            if (!(v = opt_value(argc, argv, &i, "--stale")))
+                goto usage;
+            if (strcmp(v, "keep") == 0) {
+                eo.stale = RTP_STALE_KEEP;
+            } else if (strcmp(v, "retrace") == 0) {
+                eo.stale = RTP_STALE_RETRACE;
+            } else {
+                msg("--stale %s: expected keep or retrace", v);
+                goto usage;
+            }
         } else if (is_opt(a, "--add-light")) {
             if (!(v = opt_value(argc, argv, &i, "--add-light")))
                 goto usage;

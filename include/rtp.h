@@ -230,10 +230,20 @@ typedef enum rtp_shadow_mode {
                                  with OSMESA=1) */
 } rtp_shadow_mode;
 
+/* What becomes of the reflected and refracted subtrees below a normal a
+   bump edit changed: their rays would now leave in other directions. */
+typedef enum rtp_stale_mode {
+    RTP_STALE_KEEP = 0,   /* keep them (the paper's behaviour): fast,
+                             approximate; --reference reports the error */
+    RTP_STALE_RETRACE = 1 /* trace again the samples that contain the
+                             material: exact */
+} rtp_stale_mode;
+
 typedef struct rtp_eval_options {
     int threads;            /* 0 or 1: the calling thread only */
     rtp_shadow_mode shadows;
     int shadow_res;         /* direction-cube cells per face edge; 0: 1024 */
+    rtp_stale_mode stale;
     void (*progress)(void *user, double done);
     void *progress_user;
 } rtp_eval_options;

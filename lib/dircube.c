@@ -41,6 +41,7 @@ typedef struct dc_ctx {
     int *rlo, *rhi; /* per row: first and last cell of the run (scratch) */
     int jmin, jmax;
     double u0[6], v0[6], du[6], dv[6]; /* faces' windows (see dircube.h) */
+    size_t fbase[6];
     dc_bounds b;
 } dc_ctx;
 
@@ -191,7 +192,7 @@ static void dc_emit_rows(dc_ctx *c, int f, dc_emit_fn fn, void *user)
     size_t res = (size_t)c->res;
     for (j = c->jmin; j <= c->jmax; j++)
         if (c->rlo[j] <= c->rhi[j])
-            fn(user, ((size_t)f * res + (size_t)j) * res + (size_t)c->rlo[j],
+            fn(user, c->fbase[f] + (size_t)j * res + (size_t)c->rlo[j],
                c->rhi[j] - c->rlo[j] + 1);
 }
 
@@ -200,7 +201,16 @@ static void dc_emit_face(dc_ctx *c, int f, dc_emit_fn fn, void *user)
     int j;
     size_t res = (size_t)c->res;
     for (j = 0; j < c->res; j++)
-        fn(user, ((size_t)f * res + (size_t)j) * res, c->res);
+        fn(user, c->fbase[f] + (size_t)j * res, c->res);
+}
+
+static void dc_ctx_window(dc_ctx *c, const rtpi_dc_window *w)
+{
+    memcpy(c->u0, w->u0, sizeof c->u0);
+    memcpy(c->v0, w->v0, sizeof c->v0);
+    memcpy(c->du, w->du, sizeof c->du);
+    memcpy(c->dv, w->dv, sizeof c->dv);
+    memcpy(c->fbase, w->fbase, sizeof c->fbase);
 }
 
 /* ---------------------------------------------------- bounding polygons */
@@ -333,6 +343,8 @@ static void dc_cover(dc_ctx *c, uint32_t prim, double ang, dc_emit_fn fn,
     dc_bound_prim(c, prim, ang);
     for (f = 0; f < 6; f++) {
         int whole = c->b.full;
+        if (c->fbase[f] == RTPI_DC_ABSENT)
+            continue;
         dc_rows_reset(c);
         for (k = 0; k < c->b.npoly && !whole; k++) {
             dc_poly loc, clipped;
@@ -413,6 +425,7 @@ static rtp_status dc_ctx_init(dc_ctx *c, const rtp_scene *s, rtpi_v3 L, int res,
     for (f = 0; f < 6; f++) { /* whole faces */
         c->u0[f] = c->v0[f] = -1.0;
         c->du[f] = c->dv[f] = 2.0 / (double)res;
+        c->fbase[f] = (size_t)f * (size_t)res * (size_t)res;
     }
     c->rlo = (int *)rtpi_malloc_array(a, (size_t)res, sizeof *c->rlo);
     c->rhi = (int *)rtpi_malloc_array(a, (size_t)res, sizeof *c->rhi);
@@ -452,6 +465,7 @@ void rtpi_dc_windows(const rtp_scene *s, rtpi_v3 light, int res, double lim,
     L[0] = light.x;
     L[1] = light.y;
     L[2] = light.z;
+    int present[6] = {1, 1, 1, 1, 1, 1};
     for (f = 0; f < 6; f++) {
         w->u0[f] = w->v0[f] = -1.0;
         w->du[f] = w->dv[f] = 2.0 / (double)res;
@@ -470,7 +484,7 @@ void rtpi_dc_windows(const rtp_scene *s, rtpi_v3 light, int res, double lim,
         any = 1;
     }
     if (!any)
-        return;
+        goto done;
     S = dc_scale(s, light);
     g = 1e-6 * S + 1e-30;
     for (k = 0; k < 3; k++) {
@@ -487,7 +501,7 @@ void rtpi_dc_windows(const rtp_scene *s, rtpi_v3 light, int res, double lim,
             w->zext[f] = e > 0.0 ? e : 1.0;
     }
     if (inside || !(S < 1e300))
-        return;
+        goto done;
     for (f = 0; f < 6; f++) {
         double umin = HUGE_VAL, umax = -HUGE_VAL, vmin = HUGE_VAL, vmax = -HUGE_VAL;
         double zmin = HUGE_VAL, zmax = -HUGE_VAL;
@@ -524,8 +538,10 @@ void rtpi_dc_windows(const rtp_scene *s, rtpi_v3 light, int res, double lim,
                 vmax = fmax(vmax, uv[v][1]);
             }
         }
-        if (!(umin <= umax && vmin <= vmax))
-            continue; /* the scene is not on this face: leave it whole */
+        if (!(umin <= umax && vmin <= vmax)) {
+            present[f] = 0; /* the scene is not on this face */
+            continue;
+        }
         umin = fmax(-1.0, umin);
         vmin = fmax(-1.0, vmin);
         umax = fmin(1.0, fmax(umax, umin + 1e-9));
@@ -538,6 +554,12 @@ void rtpi_dc_windows(const rtp_scene *s, rtpi_v3 light, int res, double lim,
             w->zbase[f] = zmin;
             w->zext[f] = zmax - zmin > 0.0 ? zmax - zmin : 1.0;
         }
+    }
+done:
+    w->ncells = 0;
+    for (f = 0; f < 6; f++) {
+        w->fbase[f] = present[f] ? w->ncells : RTPI_DC_ABSENT;
+        w->ncells += present[f] ? (size_t)res * (size_t)res : 0;
     }
 }
 
@@ -617,7 +639,7 @@ rtp_status rtpi_lightbuf_build(const rtp_scene *s, rtpi_v3 light, int res,
        any primitive's widening (4 LB_ANG_MAX), so a primitive that can
        be hit through a face lies in that face's window. */
     rtpi_dc_windows(s, light, res, 1.02, &lb->w);
-    ncells = 6 * (size_t)res * (size_t)res;
+    ncells = lb->w.ncells;
     S = dc_scale(s, light);
     /* Early stop: a primitive can be hit on the segment from o to the
        light only if near <= dist + delta + lambda (see above); 1e-12 S
@@ -630,10 +652,7 @@ rtp_status rtpi_lightbuf_build(const rtp_scene *s, rtpi_v3 light, int res,
         rtpi_lightbuf_free(lb, a);
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory for the light buffer");
     }
-    memcpy(c.u0, lb->w.u0, sizeof c.u0);
-    memcpy(c.v0, lb->w.v0, sizeof c.v0);
-    memcpy(c.du, lb->w.du, sizeof c.du);
-    memcpy(c.dv, lb->w.dv, sizeof c.dv);
+    dc_ctx_window(&c, &lb->w);
     for (i = 0; i < n; i++) {
         if (!dc_hittable(s, (uint32_t)i))
             continue; /* never hit by any ray: cannot shadow */
@@ -697,6 +716,8 @@ int rtpi_lightbuf_visible(const rtpi_lightbuf *lb, const rtp_scene *s,
         return 1;
     }
     cell = rtpi_dc_wcell(&lb->w, lb->res, v3_mul(ray->d, -1.0));
+    if (cell == RTPI_DC_ABSENT)
+        return 1; /* no primitive can be met in these directions */
     /* tmax = dist (1 - 1e-9): the segment reaches no farther than dist. */
     lim = ray->tmax * (1.0 + 2e-9) + lb->slack;
     end = lb->off[cell + 1];
@@ -806,12 +827,12 @@ static int ib_self(const rtp_scene *s, uint32_t prim, rtpi_v3 o, rtpi_v3 L)
 int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
                          rtpi_v3 p, rtpi_v3 o, uint32_t prim)
 {
-    size_t cell = rtpi_itembuf_cell(ib, v3_sub(o, ib->light));
-    uint32_t id;
     int f;
+    size_t cell = rtpi_itembuf_cell(ib, v3_sub(o, ib->light), &f);
+    uint32_t id;
     double zc, zp, tn, nl, cs;
     rtpi_v3 n, l;
-    if (cell == (size_t)-1)
+    if (cell == RTPI_DC_ABSENT)
         return 1;
     id = ib->id[cell];
     if (id == RTPI_NONE)
@@ -823,9 +844,8 @@ int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
         if (self == 0 && id == prim)
             return 1;
     }
-    f = (int)(cell / ((size_t)ib->res * (size_t)ib->res));
     zc = ib->z[cell];
-    zp = rtpi_dc_depth(ib->res, cell, v3_sub(p, ib->light));
+    zp = rtpi_dc_depth(f, v3_sub(p, ib->light));
     n = v3_sub(o, p);
     l = v3_sub(ib->light, p);
     nl = v3_len(n) * v3_len(l);
@@ -840,7 +860,7 @@ rtp_status rtpi_itembuf_alloc(rtpi_itembuf *ib, const rtp_scene *s,
                               rtpi_v3 light, int res, const rtp_allocator *a,
                               rtp_error *err)
 {
-    size_t ncells, i;
+    size_t ncells;
     int f;
     memset(ib, 0, sizeof *ib);
     if (res <= 0)
@@ -848,25 +868,23 @@ rtp_status rtpi_itembuf_alloc(rtpi_itembuf *ib, const rtp_scene *s,
     if (!dc_res_ok(res))
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
                           "item buffer resolution %d outside 1..%d", res, RTPI_DC_MAX_RES);
-    ncells = 6 * (size_t)res * (size_t)res;
     ib->res = res;
     ib->light = light;
     rtpi_dc_windows(s, light, res, 1.0, &ib->w);
+    ncells = ib->w.ncells;
     /* A cell spans du x dv in face coordinates, no more radians; its
        centre is within half a diagonal of any of its directions; 1.25
        covers the sampling of clipped, rounded edges. */
     for (f = 0; f < 6; f++)
         ib->cell_angle[f] = 1.25 * 0.5 * sqrt(ib->w.du[f] * ib->w.du[f] + ib->w.dv[f] * ib->w.dv[f]);
-    ib->id = (uint32_t *)rtpi_malloc_array(a, ncells, sizeof *ib->id);
-    ib->z = (float *)rtpi_malloc_array(a, ncells, sizeof *ib->z);
+    ib->id = (uint32_t *)rtpi_malloc_array(a, ncells ? ncells : 1, sizeof *ib->id);
+    ib->z = (float *)rtpi_malloc_array(a, ncells ? ncells : 1, sizeof *ib->z);
     if (!ib->id || !ib->z) {
         rtpi_itembuf_free(ib, a);
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory for the item buffer");
     }
-    for (i = 0; i < ncells; i++) {
-        ib->id[i] = RTPI_NONE;
-        ib->z[i] = FLT_MAX;
-    }
+    /* RTPI_NONE is all ones; an empty cell's depth is never read. */
+    memset(ib->id, 0xff, ncells * sizeof *ib->id);
     return RTP_OK;
 }
 
@@ -880,11 +898,11 @@ void rtpi_itembuf_free(rtpi_itembuf *ib, const rtp_allocator *a)
     ib->z = NULL;
 }
 
-static void ib_store(rtpi_itembuf *ib, size_t cell, double z, uint32_t prim)
+static void ib_store(rtpi_itembuf *ib, int f, size_t cell, double z, uint32_t prim)
 {
-    float zr = (float)(z - ib->w.zbase[cell / ((size_t)ib->res * (size_t)ib->res)]);
+    float zr = (float)(z - ib->w.zbase[f]);
     /* Ties keep the first (lower id): deterministic. */
-    if (zr < ib->z[cell]) {
+    if (ib->id[cell] == RTPI_NONE || zr < ib->z[cell]) {
         ib->z[cell] = zr;
         ib->id[cell] = prim;
     }
@@ -966,7 +984,7 @@ static void ib_tri(rtpi_itembuf *ib, const rtp_scene *s, int f, uint32_t prim)
             /* Local point z (uc, vc, 1) on the plane nn.x = kk. */
             double w = (nn[0] * uc + nn[1] * vc + nn[2]) / kk;
             if (w > 0.0)
-                ib_store(ib, ((size_t)f * res + (size_t)j) * res + (size_t)i, 1.0 / w, prim);
+                ib_store(ib, f, ib->w.fbase[f] + (size_t)j * res + (size_t)i, 1.0 / w, prim);
         }
     }
 }
@@ -1005,8 +1023,13 @@ static void ib_cast_run(void *user, size_t cell, int count)
 {
     ib_cast *ic = (ib_cast *)user;
     rtpi_itembuf *ib = ic->ib;
-    size_t res = (size_t)ib->res, rem = cell % (res * res);
-    int f = (int)(cell / (res * res)), j = (int)(rem / res), i0 = (int)(rem % res), i;
+    size_t res = (size_t)ib->res, rem;
+    int f = 0, j, i0, i;
+    while (f < 5 && (ib->w.fbase[f] == RTPI_DC_ABSENT || cell >= ib->w.fbase[f] + res * res))
+        f++;
+    rem = cell - ib->w.fbase[f];
+    j = (int)(rem / res);
+    i0 = (int)(rem % res);
     double vc = ib->w.v0[f] + ib->w.dv[f] * (j + 0.5);
     for (i = i0; i < i0 + count; i++) {
         rtpi_v3 d = rtpi_dc_world(f, ib->w.u0[f] + ib->w.du[f] * (i + 0.5), vc, 1.0);
@@ -1015,16 +1038,16 @@ static void ib_cast_run(void *user, size_t cell, int count)
         if (ic->sphere) {
             if (ib_sphere_t(&ic->s->spheres[ic->prim - ic->s->ntris], ib->light, d,
                             ic->inside, &t))
-                ib_store(ib, cc, t, ic->prim);
+                ib_store(ib, f, cc, t, ic->prim);
         } else {
             rtpi_ray r;
             rtpi_hit h;
             r.o = ib->light;
             r.d = d;
             r.tmin = 0.0;
-            r.tmax = (double)ib->z[cc] + ib->w.zbase[f];
+            r.tmax = ib->id[cc] == RTPI_NONE ? HUGE_VAL : (double)ib->z[cc] + ib->w.zbase[f];
             if (rtpi_intersect_prim(ic->s, ic->prim, &r, &h))
-                ib_store(ib, cc, h.t, ic->prim);
+                ib_store(ib, f, cc, h.t, ic->prim);
         }
     }
 }
@@ -1042,10 +1065,7 @@ rtp_status rtpi_itembuf_build(const rtp_scene *s, rtpi_v3 light, int res,
         rtpi_itembuf_free(ib, a);
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory for the item buffer");
     }
-    memcpy(c.u0, ib->w.u0, sizeof c.u0);
-    memcpy(c.v0, ib->w.v0, sizeof c.v0);
-    memcpy(c.du, ib->w.du, sizeof c.du);
-    memcpy(c.dv, ib->w.dv, sizeof c.dv);
+    dc_ctx_window(&c, &ib->w);
     for (i = 0; i < n; i++) {
         uint32_t prim = (uint32_t)i;
         if (!rtpi_itembuf_renders(s, prim, light))
@@ -1053,7 +1073,8 @@ rtp_status rtpi_itembuf_build(const rtp_scene *s, rtpi_v3 light, int res,
         if (i < s->ntris) {
             int f;
             for (f = 0; f < 6; f++)
-                ib_tri(ib, s, f, prim);
+                if (ib->w.fbase[f] != RTPI_DC_ABSENT)
+                    ib_tri(ib, s, f, prim);
         } else {
             /* Round shapes exactly: a ray per cell within their bounds
                (1e-9: a hair wider than the bounds, for rounding). */

@@ -72,11 +72,17 @@ static inline int rtpi_dc_face(rtpi_v3 d, double *u, double *v)
    them), so that a far light still sees the scene through many cells.
    Cell (i, j) of face f then spans u0 + [i, i+1] du, v0 + [j, j+1] dv.
    zbase and zext: the nearest depth of the bounds on the face and their
-   depth extent there. */
+   depth extent there.  A face the scene does not reach has no cells at
+   all (fbase (size_t)-1): a light above a scene keeps one to five faces.
+   The cells of face f are fbase[f] + j res + i. */
 typedef struct rtpi_dc_window {
     double u0[6], v0[6], du[6], dv[6];
     double zbase[6], zext[6];
+    size_t fbase[6];
+    size_t ncells;
 } rtpi_dc_window;
+
+#define RTPI_DC_ABSENT ((size_t)-1)
 
 /* Sets w for a cube of res cells around light L over the scene s, with
    the faces' frusta widened to |u|, |v| <= lim when projecting. */
@@ -96,14 +102,17 @@ static inline int rtpi_dc_wcoord(double x, double x0, double dx, int res)
     return (int)t;
 }
 
-/* The cell of direction d (from the light; any length) in windows w. */
+/* The cell of direction d (from the light; any length) in windows w, or
+   RTPI_DC_ABSENT on a face without cells. */
 static inline size_t rtpi_dc_wcell(const rtpi_dc_window *w, int res, rtpi_v3 d)
 {
     double u, v;
-    int f = rtpi_dc_face(d, &u, &v);
-    int i = rtpi_dc_wcoord(u, w->u0[f], w->du[f], res);
-    int j = rtpi_dc_wcoord(v, w->v0[f], w->dv[f], res);
-    return ((size_t)f * (size_t)res + (size_t)j) * (size_t)res + (size_t)i;
+    int f = rtpi_dc_face(d, &u, &v), i, j;
+    if (w->fbase[f] == RTPI_DC_ABSENT)
+        return RTPI_DC_ABSENT;
+    i = rtpi_dc_wcoord(u, w->u0[f], w->du[f], res);
+    j = rtpi_dc_wcoord(v, w->v0[f], w->dv[f], res);
+    return w->fbase[f] + (size_t)j * (size_t)res + (size_t)i;
 }
 
 /* The cell of direction d (from the light; any length) on a cube of full
@@ -116,10 +125,9 @@ static inline size_t rtpi_dc_cell(int res, rtpi_v3 d)
     return ((size_t)f * (size_t)res + (size_t)j) * (size_t)res + (size_t)i;
 }
 
-/* Depth of q (from the light) along the axis of the face holding cell. */
-static inline double rtpi_dc_depth(int res, size_t cell, rtpi_v3 q)
+/* Depth of q (from the light) along the axis of face f. */
+static inline double rtpi_dc_depth(int f, rtpi_v3 q)
 {
-    int f = (int)(cell / ((size_t)res * (size_t)res));
     double z = v3_get(q, f >> 1);
     return (f & 1) ? -z : z;
 }
@@ -147,7 +155,7 @@ typedef struct rtpi_lightbuf {
     rtpi_v3 light;
     rtpi_dc_window w;
     double slack;        /* absolute slack of the early stop (see build) */
-    uint32_t *off;       /* 6 res^2 + 1 list starts into ref */
+    uint32_t *off;       /* w.ncells + 1 list starts into ref */
     uint32_t *ref;       /* candidate ranks, ascending within a cell */
     rtpi_lb_cand *cand;  /* by rank: ascending near */
     size_t nrefs, ncand;
@@ -174,24 +182,29 @@ typedef struct rtpi_itembuf {
     double cell_angle[6]; /* bound of the angle between a direction and
                              the centre of its cell, radians */
     uint32_t *id;         /* nearest occluder per cell, RTPI_NONE: none */
-    float *z;             /* its depth along the face axis minus w.zbase:
+    float *z;             /* its depth along the face axis minus w.zbase
+                             (unset where id is RTPI_NONE):
                              float keeps ~1e-7 of the scene's extent, not
                              of the distance from a far light */
 } rtpi_itembuf;
 
-/* The cell of direction d (from the light), or (size_t)-1 when d points
-   outside the face's window by more than a cell (nothing drawn there). */
-static inline size_t rtpi_itembuf_cell(const rtpi_itembuf *ib, rtpi_v3 d)
+/* The cell of direction d (from the light) and its face, or
+   RTPI_DC_ABSENT when d points at a face without cells or outside its
+   window by more than a cell (nothing drawn there). */
+static inline size_t rtpi_itembuf_cell(const rtpi_itembuf *ib, rtpi_v3 d, int *face)
 {
     double u, v, x, y;
     int f = rtpi_dc_face(d, &u, &v), res = ib->res, i, j;
+    *face = f;
+    if (ib->w.fbase[f] == RTPI_DC_ABSENT)
+        return RTPI_DC_ABSENT;
     x = (u - ib->w.u0[f]) / ib->w.du[f];
     y = (v - ib->w.v0[f]) / ib->w.dv[f];
     if (!(x > -1.0 && x < res + 1.0 && y > -1.0 && y < res + 1.0))
-        return (size_t)-1;
+        return RTPI_DC_ABSENT;
     i = x < 0.0 ? 0 : x >= res ? res - 1 : (int)x;
     j = y < 0.0 ? 0 : y >= res ? res - 1 : (int)y;
-    return ((size_t)f * (size_t)res + (size_t)j) * (size_t)res + (size_t)i;
+    return ib->w.fbase[f] + (size_t)j * (size_t)res + (size_t)i;
 }
 
 /* The software scanline z-buffer. */

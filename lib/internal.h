@@ -383,6 +383,13 @@ void rtpi_light_colors(const rtp_scene *s, double *cl);
 void rtpi_surface_from_point(const rtp_scene *s, uint32_t prim, rtpi_v3 p,
                              int want_uv, rtpi_surface *out);
 
+/* The shading normal n perturbed by the material's bump map at p/uv
+   (Blinn 1978; solid procedural bumps, or an image height map on triangles
+   with uvs); n unchanged without a bump. */
+rtpi_v3 rtpi_bump_normal(const rtp_scene *s, const rtpi_material *m,
+                         uint32_t prim, rtpi_v3 p, const double uv[2],
+                         rtpi_v3 n);
+
 /* The texture's part of c_obj at p/uv: for an image texture the image's
    colour (c_obj = colour * it), for a checker 1 in colour cells and 0 in
    color2 cells, else 1 (shade.c). */

@@ -72,11 +72,6 @@
    relative, so 1e-11 is a wide margin, and it is still far too small to
    make a ray visit many extra nodes. */
 #define KD_SLACK 1e-11
-/* Nodes with up to this many references get the exact SAH sweep, larger
-   ones the binned one with KD_BINS planes per axis. */
-#ifndef KD_EXACT_MAX
-#define KD_EXACT_MAX 256
-#endif
 #ifndef KD_LEAF_MARGIN
 #define KD_LEAF_MARGIN 1.0
 #endif
@@ -122,7 +117,6 @@ typedef struct kd_ref {
     uint32_t prim;
 } kd_ref;
 
-enum { EV_END = 0, EV_PLANAR = 1, EV_START = 2 };
 
 typedef struct kd_build {
     const rtp_allocator *a;
@@ -130,7 +124,6 @@ typedef struct kd_build {
     rtpi_kdtree *kd;
     kd_ref *ref;      /* the arena of reference lists, used as a stack */
     size_t ref_cap;
-    uint64_t *key;    /* sorted events of one node, 3 x 2 KD_EXACT_MAX */
     size_t nodes_cap, refs_cap;
     int max_depth, depth_seen;
 } kd_build;
@@ -166,63 +159,6 @@ static float f_up(double x)
     return f + 0.0f;
 }
 
-/* An event as one integer that sorts like (position, type): the float's
-   bits made order-preserving, then the 2-bit type. */
-static uint64_t ev_make(float f, unsigned type)
-{
-    uint32_t u;
-    memcpy(&u, &f, sizeof u);
-    u = u & 0x80000000u ? ~u : u | 0x80000000u;
-    return (uint64_t)u << 2 | type;
-}
-
-static float ev_pos(uint64_t k)
-{
-    uint32_t u = (uint32_t)(k >> 2);
-    float f;
-    u = u & 0x80000000u ? u & 0x7fffffffu : ~u;
-    memcpy(&f, &u, sizeof f);
-    return f;
-}
-
-static void sort_u64(uint64_t *a, size_t n)
-{
-    while (n > 24) {
-        uint64_t p, x, y = a[0], z = a[n / 2], w = a[n - 1];
-        size_t i = 0, j = n - 1;
-        p = y < z ? (z < w ? z : (y < w ? w : y)) : (y < w ? y : (z < w ? w : z));
-        for (;;) { /* Hoare partition around the median of three */
-            while (a[i] < p)
-                i++;
-            while (a[j] > p)
-                j--;
-            if (i >= j)
-                break;
-            x = a[i];
-            a[i++] = a[j];
-            a[j--] = x;
-        }
-        /* [0, j] <= p <= [j+1, n): recurse into the smaller part. */
-        if (j + 1 < n - j - 1) {
-            sort_u64(a, j + 1);
-            a += j + 1;
-            n -= j + 1;
-        } else {
-            sort_u64(a + j + 1, n - j - 1);
-            n = j + 1;
-        }
-    }
-    {
-        size_t i, j;
-        for (i = 1; i < n; i++) {
-            uint64_t x = a[i];
-            for (j = i; j > 0 && x < a[j - 1]; j--)
-                a[j] = a[j - 1];
-            a[j] = x;
-        }
-    }
-}
-
 /* The SAH cost of a split with nl and nr primitives on the two sides,
    pl and pr the children's areas relative to the node's.  fl is the left
    child's share of the node's extent on the split axis. */
@@ -239,67 +175,6 @@ typedef struct kd_split {
     int axis, planar_left;
     float pos;
 } kd_split;
-
-/* Exact SAH over every candidate plane (Wald & Havran's sweep): the
-   events of each axis are sorted by (position, end < planar < start). */
-static void split_exact(kd_build *b, const kd_ref *r, size_t n,
-                        const float *lo, const float *hi, const double *d,
-                        double area, kd_split *best)
-{
-    int k;
-    size_t i;
-    for (k = 0; k < 3; k++) {
-        uint64_t *e = b->key + (size_t)k * 2 * KD_EXACT_MAX;
-        double o1 = d[(k + 1) % 3], o2 = d[(k + 2) % 3];
-        double inv = 1.0 / area, cap = o1 * o2 * inv, perim = (o1 + o2) * inv;
-        size_t m = 0, nl = 0, nr = n;
-        if (!(d[k] > 0.0))
-            continue;
-        for (i = 0; i < n; i++) {
-            if (r[i].lo[k] == r[i].hi[k]) {
-                e[m++] = ev_make(r[i].lo[k], EV_PLANAR);
-            } else {
-                e[m++] = ev_make(r[i].lo[k], EV_START);
-                e[m++] = ev_make(r[i].hi[k], EV_END);
-            }
-        }
-        sort_u64(e, m);
-        i = 0;
-        while (i < m) {
-            uint64_t pk = e[i] >> 2;
-            float p = ev_pos(e[i]);
-            size_t pe = 0, pp = 0, ps = 0;
-            while (i < m && e[i] >> 2 == pk && (e[i] & 3) == EV_END)
-                pe++, i++;
-            while (i < m && e[i] >> 2 == pk && (e[i] & 3) == EV_PLANAR)
-                pp++, i++;
-            while (i < m && e[i] >> 2 == pk)
-                ps++, i++;
-            nr -= pp + pe;
-            /* Planes on the box's faces cut nothing off. */
-            if (p > lo[k] && p < hi[k]) {
-                double pl = cap + ((double)p - lo[k]) * perim;
-                double pr = cap + ((double)hi[k] - p) * perim;
-                double fl = ((double)p - lo[k]) / d[k];
-                double cl = sah(pl, pr, nl + pp, nr, fl);
-                double cr = sah(pl, pr, nl, nr + pp, fl);
-                if (cl < best->cost) {
-                    best->cost = cl;
-                    best->axis = k;
-                    best->pos = p;
-                    best->planar_left = 1;
-                }
-                if (cr < best->cost) {
-                    best->cost = cr;
-                    best->axis = k;
-                    best->pos = p;
-                    best->planar_left = 0;
-                }
-            }
-            nl += ps + pp;
-        }
-    }
-}
 
 static void sort_f(float *a, size_t n)
 {
@@ -573,8 +448,6 @@ static int build_node(kd_build *b, const float *lo, const float *hi,
     if (depth < b->max_depth && n >= KD_MIN_SPLIT && area > 0.0) {
         if (n <= KD_SMALL_MAX)
             split_small(b->ref + off, n, lo, hi, d, area, &sp);
-        else if (n <= KD_EXACT_MAX)
-            split_exact(b, b->ref + off, n, lo, hi, d, area, &sp);
         else
             split_binned(b->ref + off, n, lo, hi, d, area, &sp);
     }
@@ -633,7 +506,6 @@ static int build_node(kd_build *b, const float *lo, const float *hi,
 static void build_free(kd_build *b)
 {
     rtpi_free(b->a, b->ref);
-    rtpi_free(b->a, b->key);
     rtpi_free(b->a, b);
 }
 
@@ -686,9 +558,7 @@ rtp_status rtpi_kd_build(const rtp_scene *s, const rtp_allocator *alloc,
         kd->tri = (float *)rtpi_malloc_array(&a, s->ntris ? s->ntris : 1,
                                              9 * sizeof(float));
         b->ref = (kd_ref *)rtpi_malloc_array(&a, np, 4 * sizeof(kd_ref));
-        b->key = (uint64_t *)rtpi_malloc_array(&a, 6 * KD_EXACT_MAX,
-                                               sizeof(uint64_t));
-        if (!kd->tri || !b->ref || !b->key)
+        if (!kd->tri || !b->ref)
             goto nomem;
         b->ref_cap = 4 * np;
     }

@@ -263,7 +263,9 @@ rtp_status rtpi_itembuf_build_osmesa(const rtp_scene *s, rtpi_v3 light,
         osm_face fc;
         double hu = 0.5 * res * ib->w.du[f], hv = 0.5 * res * ib->w.dv[f];
         double zn, zf, cell = fmin(ib->w.du[f], ib->w.dv[f]);
-        size_t base = (size_t)f * npix;
+        size_t base = ib->w.fbase[f];
+        if (base == RTPI_DC_ABSENT)
+            continue;
         fc.f = f;
         fc.L = light;
         fc.uc = ib->w.u0[f] + hu;

@@ -492,6 +492,38 @@ rtp_status rtp_scene_set(rtp_scene *s, const char *key, const char *value,
             }
             return RTP_OK;
         }
+        if (strcmp(field, "bump") == 0) {
+            /* none, waves, noise, or a PNG height map */
+            if (strcmp(value, "none") == 0) {
+                m->bump = RTPI_BUMP_NONE;
+            } else if (strcmp(value, "waves") == 0) {
+                m->bump = RTPI_BUMP_WAVES;
+            } else if (strcmp(value, "noise") == 0) {
+                m->bump = RTPI_BUMP_NOISE;
+            } else {
+                uint32_t idx;
+                if ((st = rtpi_scene_add_texture(s, value, &idx, err)) != RTP_OK)
+                    return st;
+                m = &s->mats[i]; /* (textures live apart; m is still valid) */
+                m->bump = RTPI_BUMP_IMAGE;
+                m->bump_image = idx;
+            }
+            if (m->bump != RTPI_BUMP_NONE && m->bump_strength == 0.0f)
+                m->bump_strength = 1.0f;
+            return RTP_OK;
+        }
+        if (strcmp(field, "bump_strength") == 0 || strcmp(field, "bump_scale") == 0) {
+            if ((st = want(err, key, value, n, 1)) != RTP_OK)
+                return st;
+            if (field[5] == 's' && field[6] == 'c' && !(v[0] > 0.0))
+                return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                                  "%s: the bump scale must be > 0", key);
+            if (field[6] == 't')
+                m->bump_strength = (float)v[0];
+            else
+                m->bump_scale = (float)v[0];
+            return RTP_OK;
+        }
         if (strcmp(field, "kd") == 0) dst = &m->kd;
         else if (strcmp(field, "ks") == 0) dst = &m->ks;
         else if (strcmp(field, "kt") == 0) dst = &m->kt;
@@ -500,7 +532,8 @@ rtp_status rtp_scene_set(rtp_scene *s, const char *key, const char *value,
         if (!dst)
             return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0,
                               "unknown key '%s' (material fields: color, kd, ks, kt, shine, ior, "
-                              "checker, color2, checker_scale)",
+                              "checker, color2, checker_scale, bump, bump_strength, "
+                              "bump_scale)",
                               key);
         if ((st = want(err, key, value, n, 1)) != RTP_OK)
             return st;

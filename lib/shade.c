@@ -92,6 +92,120 @@ void rtpi_surface_from_point(const rtp_scene *s, uint32_t prim, rtpi_v3 p,
     rtpi_surface_at_ex(s, &ray, &hit, want_uv, out);
 }
 
+/* ------------------------------------------------------------ bumps */
+
+/* A smooth hash of an integer lattice point to [-1, 1]. */
+static double lattice(long x, long y, long z)
+{
+    unsigned long h = (unsigned long)x * 73856093ul ^ (unsigned long)y * 19349663ul ^
+                      (unsigned long)z * 83492791ul;
+    h ^= h >> 13;
+    h *= 0x5bd1e995ul;
+    h ^= h >> 15;
+    return (double)(h & 0xffffu) / 32767.5 - 1.0;
+}
+
+static double smooth(double t) { return t * t * (3.0 - 2.0 * t); }
+
+/* Value noise: trilinear over the lattice with smoothstep weights. */
+static double noise3(double x, double y, double z)
+{
+    double fx = floor(x), fy = floor(y), fz = floor(z), v = 0.0;
+    double tx = smooth(x - fx), ty = smooth(y - fy), tz = smooth(z - fz);
+    long ix = (long)fx, iy = (long)fy, iz = (long)fz;
+    int c;
+    for (c = 0; c < 8; c++) {
+        double w = ((c & 1) ? tx : 1.0 - tx) * ((c & 2) ? ty : 1.0 - ty) * ((c & 4) ? tz : 1.0 - tz);
+        v += w * lattice(ix + (c & 1), iy + ((c >> 1) & 1), iz + ((c >> 2) & 1));
+    }
+    return v;
+}
+
+/* Gradient of a procedural solid height field at p (cell/period: scale). */
+static rtpi_v3 solid_gradient(const rtpi_material *m, rtpi_v3 p)
+{
+    double k = 1.0 / (m->bump_scale > 0.0f ? m->bump_scale : 1.0f);
+    if (m->bump == RTPI_BUMP_WAVES) {
+        /* three plane waves across fixed directions; analytic gradient */
+        static const double dir[3][3] = {{0.8, 0.6, 0.0}, {0.0, 0.6, 0.8}, {0.6, 0.0, -0.8}};
+        rtpi_v3 g = v3(0.0, 0.0, 0.0);
+        int i;
+        for (i = 0; i < 3; i++) {
+            rtpi_v3 a = v3(dir[i][0], dir[i][1], dir[i][2]);
+            double ph = 2.0 * 3.14159265358979323846 * k * v3_dot(a, p) + i;
+            g = v3_madd(g, a, 2.0 * 3.14159265358979323846 * k * cos(ph) / 3.0);
+        }
+        return g;
+    } else {
+        /* value noise; central differences a thousandth of a cell apart,
+           far below the cell and far above double rounding of p * k */
+        double h = 1e-3, x = p.x * k, y = p.y * k, z = p.z * k, inv = k / (2.0 * h);
+        return v3((noise3(x + h, y, z) - noise3(x - h, y, z)) * inv,
+                  (noise3(x, y + h, z) - noise3(x, y - h, z)) * inv,
+                  (noise3(x, y, z + h) - noise3(x, y, z - h)) * inv);
+    }
+}
+
+static double height_at(const rtp_image *img, double u, double v)
+{
+    double rgb[3];
+    image_lookup(img, u, v, rgb);
+    return (rgb[0] + rgb[1] + rgb[2]) / 3.0;
+}
+
+rtpi_v3 rtpi_bump_normal(const rtp_scene *s, const rtpi_material *m, uint32_t prim,
+                         rtpi_v3 p, const double uv[2], rtpi_v3 n)
+{
+    if (m->bump == RTPI_BUMP_NONE || m->bump_strength == 0.0f)
+        return n;
+    if (m->bump == RTPI_BUMP_IMAGE) {
+        /* Blinn 1978: n' = n + (h_u (n x P_v) - h_v (n x P_u)) / |P_u x P_v|,
+           with P_u, P_v from the triangle's positions and uvs and the height
+           differences one texel apart; only triangles carry uvs to do it. */
+        const rtpi_tri *t;
+        const rtp_image *img;
+        rtpi_v3 p0, e1, e2, pu, pv, d;
+        const float *t0, *t1, *t2;
+        double du1, dv1, du2, dv2, det, hu, hv, a, eu, ev;
+        if (prim >= s->ntris || m->bump_image >= s->ntexs || !s->texs[m->bump_image].image)
+            return n;
+        t = &s->tris[prim];
+        if (t->t[0] == RTPI_NONE)
+            return n;
+        img = s->texs[m->bump_image].image;
+        t0 = s->uv + 2 * (size_t)t->t[0];
+        t1 = s->uv + 2 * (size_t)t->t[1];
+        t2 = s->uv + 2 * (size_t)t->t[2];
+        p0 = v3_from_f(s->pos + 3 * (size_t)t->v[0]);
+        e1 = v3_sub(v3_from_f(s->pos + 3 * (size_t)t->v[1]), p0);
+        e2 = v3_sub(v3_from_f(s->pos + 3 * (size_t)t->v[2]), p0);
+        du1 = t1[0] - t0[0];
+        dv1 = t1[1] - t0[1];
+        du2 = t2[0] - t0[0];
+        dv2 = t2[1] - t0[1];
+        det = du1 * dv2 - du2 * dv1;
+        if (det == 0.0)
+            return n;
+        pu = v3_mul(v3_sub(v3_mul(e1, dv2), v3_mul(e2, dv1)), 1.0 / det);
+        pv = v3_mul(v3_sub(v3_mul(e2, du1), v3_mul(e1, du2)), 1.0 / det);
+        a = v3_len(v3_cross(pu, pv));
+        if (!(a > 0.0))
+            return n;
+        eu = 1.0 / img->width;
+        ev = 1.0 / img->height;
+        hu = (height_at(img, uv[0] + eu, uv[1]) - height_at(img, uv[0] - eu, uv[1])) / (2.0 * eu);
+        hv = (height_at(img, uv[0], uv[1] + ev) - height_at(img, uv[0], uv[1] - ev)) / (2.0 * ev);
+        d = v3_sub(v3_mul(v3_cross(n, pv), hu), v3_mul(v3_cross(n, pu), hv));
+        return v3_norm(v3_madd(n, d, m->bump_strength * m->bump_scale / a));
+    } else {
+        /* a solid height field: tilt n against the surface part of its
+           gradient */
+        rtpi_v3 g = solid_gradient(m, p);
+        g = v3_madd(g, n, -v3_dot(g, n));
+        return v3_norm(v3_madd(n, g, -(double)m->bump_strength));
+    }
+}
+
 static int seen(const rtpi_cnode *nd, const uint32_t *ext, size_t i)
 {
     if (!ext)
@@ -138,8 +252,9 @@ static void terms_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t 
     double tex[3];
 
     m = &s->mats[rtpi_prim_material(s, nd->prim)];
-    rtpi_surface_from_point(s, nd->prim, p, m->tex == RTPI_TEX_IMAGE, &sf);
-    n = sf.ns;
+    rtpi_surface_from_point(s, nd->prim, p,
+                            m->tex == RTPI_TEX_IMAGE || m->bump == RTPI_BUMP_IMAGE, &sf);
+    n = rtpi_bump_normal(s, m, nd->prim, p, sf.uv, sf.ns);
     if ((nd->link & RTPI_L_BACK) && rtpi_two_sided(s, c->one_sided, nd->prim, m))
         n = v3_mul(n, -1.0);
     v = v3_norm(v3_sub(from, p));

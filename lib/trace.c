@@ -150,7 +150,7 @@ static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
     const rtpi_material *m;
     rtpi_hit hit;
     rtpi_surface sf;
-    rtpi_v3 d = ray->d, ng, ns;
+    rtpi_v3 d = ray->d, ng, ns, nb;
     int32_t idx, refl = RTPI_CHILD_NONE;
     uint32_t link = 0, vis = 0;
     int front;
@@ -168,17 +168,24 @@ static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
            with the surface derived from it exactly as shading derives it,
            so a re-evaluation that casts rays again casts these very rays. */
         rtpi_v3 pe = v3_madd(ray->o, ray->d, hit.t);
-        rtpi_surface_from_point(s, hit.prim, v3((float)pe.x, (float)pe.y, (float)pe.z), 0, &sf);
+        const rtpi_material *hm = &s->mats[rtpi_prim_material(s, hit.prim)];
+        rtpi_surface_from_point(s, hit.prim, v3((float)pe.x, (float)pe.y, (float)pe.z),
+                                hm->bump == RTPI_BUMP_IMAGE, &sf);
     }
     m = &s->mats[sf.mat];
     ng = sf.ng;
     ns = sf.ns;
+    /* Bumps bend the reflected and refracted rays; shadow rays follow the
+       unbumped surface, so the recorded visibility holds for any bump a
+       re-evaluation may set. */
+    nb = rtpi_bump_normal(s, m, hit.prim, sf.p, sf.uv, ns);
     front = v3_dot(d, ng) < 0.0;
     if (!front)
         link |= RTPI_L_BACK;
     if (!front && rtpi_two_sided(s, sh->spd, hit.prim, m)) {
         ng = v3_mul(ng, -1.0);
         ns = v3_mul(ns, -1.0);
+        nb = v3_mul(nb, -1.0);
     }
 
     /* Shadows: no ray where the surface faces away from the light. */
@@ -204,7 +211,7 @@ static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
     if (depth < sh->max_depth &&
         ((m->ks > 0.0f && weight * m->ks >= sh->min_weight) ||
          (sh->spd && m->kt > 0.0f))) {
-        rtpi_v3 r = v3_norm(v3_madd(d, ns, -2.0 * v3_dot(d, ns)));
+        rtpi_v3 r = v3_norm(v3_madd(d, nb, -2.0 * v3_dot(d, nb)));
         w->n.reflected_rays++;
         refl = spawn(w, sf.p, ng, r, depth + 1, weight * m->ks);
         link |= child_flags(refl, RTPI_L_REFL, RTPI_L_REFL_MISS);
@@ -212,13 +219,13 @@ static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
     if (depth < sh->max_depth && m->kt > 0.0f && weight * m->kt >= sh->min_weight) {
         double ior = m->ior > 0.0f ? m->ior : 1.0;
         double eta = front ? 1.0 / ior : ior;
-        double cosi = -v3_dot(d, ns);
+        double cosi = -v3_dot(d, nb);
         double k = 1.0 - eta * eta * (1.0 - cosi * cosi);
         if (k < 0.0) {
             /* Total internal reflection: the transmitted share follows
                the reflected ray; trace it if ks did not already. */
             if (refl == RTPI_CHILD_NONE) {
-                rtpi_v3 r = v3_norm(v3_madd(d, ns, -2.0 * v3_dot(d, ns)));
+                rtpi_v3 r = v3_norm(v3_madd(d, nb, -2.0 * v3_dot(d, nb)));
                 w->n.reflected_rays++;
                 refl = spawn(w, sf.p, ng, r, depth + 1, weight * m->kt);
                 link |= child_flags(refl, RTPI_L_REFL, RTPI_L_REFL_MISS);
@@ -226,7 +233,7 @@ static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
             link |= RTPI_L_TIR;
         } else {
             rtpi_v3 t = v3_norm(v3_add(v3_mul(d, eta),
-                                       v3_mul(ns, eta * cosi - sqrt(k))));
+                                       v3_mul(nb, eta * cosi - sqrt(k))));
             int32_t refr;
             w->n.refracted_rays++;
             refr = spawn(w, sf.p, ng, t, depth + 1, weight * m->kt);

@@ -72,13 +72,23 @@ static rtp_status check_exact(const rtp_tree *t, const char *key,
     return RTP_OK;
 }
 
+static int bump_changed(const rtpi_material *a, const rtpi_material *b)
+{
+    return a->bump != b->bump || a->bump_image != b->bump_image ||
+           a->bump_strength != b->bump_strength || a->bump_scale != b->bump_scale;
+}
+
 /* Must material m's samples be traced again before the trees can show it
    exactly (edit class D)?  Rays the trace did not cast — reflected where
    ks was 0, refracted where kt was 0 or below the weight cut-off — or cast
    elsewhere — refracted with another ior, one-sidedness in SPD mode. */
-static int needs_retrace(const rtp_tree *t, size_t m)
+static int needs_retrace(const rtp_tree *t, size_t m, int stale_retrace)
 {
     const rtpi_material *a = &t->scene->mats[m], *a0 = &t->mats0[m];
+    /* a new bump bends the reflected and refracted rays below it: those
+       subtrees are stale; kept (the paper's way) unless asked otherwise */
+    if (stale_retrace && bump_changed(a, a0) && (a0->ks > 0.0f || a0->kt > 0.0f))
+        return 1;
     return (a->ks > 0.0f && a0->ks == 0.0f) || (a->kt > 0.0f && a0->kt == 0.0f) ||
            (a0->kt > 0.0f && a->kt > 0.0f && a->ior != a0->ior) ||
            (t->spd && a0->kt > 0.0f && a->kt == 0.0f) ||
@@ -466,7 +476,8 @@ static rtp_status build_material_lists(rtp_tree *t)
 static int terms_changed(const rtpi_material *a, const rtpi_material *b)
 {
     return a->shine != b->shine || a->tex != b->tex || a->tex_scale != b->tex_scale ||
-           a->tex_image != b->tex_image || (a->ks > 0.0f) != (b->ks > 0.0f);
+           a->tex_image != b->tex_image || (a->ks > 0.0f) != (b->ks > 0.0f) ||
+           bump_changed(a, b);
 }
 
 static int coeffs_changed(const rtpi_material *a, const rtpi_material *b)
@@ -502,7 +513,7 @@ static void drop_caches(rtp_tree *t)
 /* Class D: samples whose trees contain a material the recorded trees
    cannot show exactly are traced again (only those), then every cache
    that referred to the old nodes is dropped. */
-static rtp_status retrace_edited(rtp_tree *t, int threads, rtp_eval_stats *st,
+static rtp_status retrace_edited(rtp_tree *t, int threads, int stale, rtp_eval_stats *st,
                                  rtp_error *err)
 {
     const rtp_scene *s = t->scene;
@@ -512,7 +523,7 @@ static rtp_status retrace_edited(rtp_tree *t, int threads, rtp_eval_stats *st,
     int any = 0;
     rtp_status rs;
     for (m = 0; m < s->nmats; m++)
-        any |= needs_retrace(t, m);
+        any |= needs_retrace(t, m, stale);
     if (!any)
         return RTP_OK;
     if (!t->mat_start && build_material_lists(t) != RTP_OK)
@@ -525,7 +536,7 @@ static rtp_status retrace_edited(rtp_tree *t, int threads, rtp_eval_stats *st,
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
     }
     for (m = 0; m < s->nmats; m++)
-        if (needs_retrace(t, m))
+        if (needs_retrace(t, m, stale))
             for (k = t->mat_start[m]; k < t->mat_start[m + 1]; k++)
                 mark[t->mat_samples[k]] = 1;
     for (k = 0; k < ns; k++)
@@ -540,10 +551,14 @@ static rtp_status retrace_edited(rtp_tree *t, int threads, rtp_eval_stats *st,
         st->retraced_samples += n;
     /* the trees now hold these materials as they are */
     for (m = 0; m < s->nmats; m++)
-        if (needs_retrace(t, m)) {
+        if (needs_retrace(t, m, stale)) {
             t->mats0[m].ks = s->mats[m].ks;
             t->mats0[m].kt = s->mats[m].kt;
             t->mats0[m].ior = s->mats[m].ior;
+            t->mats0[m].bump = s->mats[m].bump;
+            t->mats0[m].bump_image = s->mats[m].bump_image;
+            t->mats0[m].bump_strength = s->mats[m].bump_strength;
+            t->mats0[m].bump_scale = s->mats[m].bump_scale;
         }
     drop_caches(t);
     rtpi_free(&t->alloc, t->cur_vis);
@@ -599,7 +614,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
     shade.one_sided = t->spd;
     shade.vis_words = t->vis_words;
     vis = t->vis_words ? t->vis_ext : NULL;
-    rs = retrace_edited(t, nthreads, &st, err);
+    rs = retrace_edited(t, nthreads, opt && opt->stale == RTP_STALE_RETRACE, &st, err);
     if (rs != RTP_OK)
         return rs;
     for (l = 0; l < nl; l++)

@@ -250,6 +250,10 @@ static rtp_status serialize(const rtp_tree *t, buf *out)
         put_f32(&b, m0->ks);
         put_f32(&b, m0->kt);
         put_f32(&b, m0->ior);
+        put_u8(&b, (unsigned)m0->bump);
+        put_u32(&b, m0->bump_image);
+        put_f32(&b, m0->bump_strength);
+        put_f32(&b, m0->bump_scale);
     }
     put_section(out, "MATL", &b);
 
@@ -608,7 +612,7 @@ static rtp_status read_matl(loader *L, rd *r)
     rtp_tree *t = L->t;
     uint32_t n = get_u32(r), i;
     int k, oom = 0;
-    if (r->bad || !count_ok(r, n, 65))
+    if (r->bad || !count_ok(r, n, 78))
         return bad(L, "invalid material count", NULL);
     s->mats = (rtpi_material *)rtpi_calloc_array(L->a, n ? n : 1, sizeof *s->mats);
     t->mats0 = (rtpi_material *)rtpi_calloc_array(L->a, n ? n : 1, sizeof *t->mats0);
@@ -640,6 +644,10 @@ static rtp_status read_matl(loader *L, rd *r)
         t->mats0[i].ks = get_f32(r);
         t->mats0[i].kt = get_f32(r);
         t->mats0[i].ior = get_f32(r);
+        t->mats0[i].bump = (rtpi_bump_kind)get_u8(r);
+        t->mats0[i].bump_image = get_u32(r);
+        t->mats0[i].bump_strength = get_f32(r);
+        t->mats0[i].bump_scale = get_f32(r);
         if (oom)
             return nomem(L);
         if (r->bad)
@@ -648,9 +656,11 @@ static rtp_status read_matl(loader *L, rd *r)
             !isfinite(m->shine) || !isfinite(m->kt) || !isfinite(m->ior) ||
             !isfinite(m->tex_scale) || !isfinite(m->bump_strength) ||
             !isfinite(m->bump_scale) || !isfinite(t->mats0[i].ks) ||
-            !isfinite(t->mats0[i].kt) || !isfinite(t->mats0[i].ior))
+            !isfinite(t->mats0[i].kt) || !isfinite(t->mats0[i].ior) ||
+            !isfinite(t->mats0[i].bump_strength) || !isfinite(t->mats0[i].bump_scale))
             return bad(L, "material value is not finite", NULL);
-        if ((unsigned)m->tex > RTPI_TEX_IMAGE || (unsigned)m->bump > RTPI_BUMP_NOISE)
+        if ((unsigned)m->tex > RTPI_TEX_IMAGE || (unsigned)m->bump > RTPI_BUMP_NOISE ||
+            (unsigned)t->mats0[i].bump > RTPI_BUMP_NOISE)
             return bad(L, "unknown texture or bump kind", NULL);
     }
     return RTP_OK;

@@ -412,6 +412,77 @@ static void test_edit_sequence(void)
     rtp_scene_destroy(s);
 }
 
+/* Bump edits: on a surface with no subtrees they are exact either way; on
+   a mirror, --stale retrace is exact and keep has an error (reported by
+   comparison). */
+static double bump_error(const char *const *before, const char *const *after,
+                         rtp_stale_mode stale, unsigned long long *retraced)
+{
+    rtp_scene *s = load("scenes/spheres.nff");
+    rtp_tree *t = NULL;
+    rtp_image *re = NULL, *full = NULL, *first = NULL;
+    rtp_trace_options o;
+    rtp_eval_options eo;
+    rtp_eval_stats es;
+    rtp_diff_stats d;
+    double e = HUGE_VAL;
+    int i;
+    if (!s)
+        return e;
+    memset(&o, 0, sizeof o);
+    memset(&eo, 0, sizeof eo);
+    memset(&es, 0, sizeof es);
+    o.width = 48;
+    o.height = 36;
+    eo.stale = stale;
+    for (i = 0; before[i]; i += 2)
+        if (rtp_scene_set(s, before[i], before[i + 1], NULL) != RTP_OK)
+            goto out;
+    if (rtp_record(s, &o, &t, NULL, NULL, NULL) != RTP_OK ||
+        rtp_tree_eval(t, &eo, &first, NULL, NULL) != RTP_OK)
+        goto out;
+    for (i = 0; after[i]; i += 2)
+        if (rtp_tree_set(t, after[i], after[i + 1], NULL) != RTP_OK ||
+            rtp_scene_set(s, after[i], after[i + 1], NULL) != RTP_OK)
+            goto out;
+    if (rtp_tree_eval(t, &eo, &re, &es, NULL) == RTP_OK &&
+        rtp_trace(s, &o, &full, NULL, NULL) == RTP_OK &&
+        rtp_image_diff(re, full, 1e-6, &d, NULL) == RTP_OK)
+        e = d.max_abs;
+    *retraced = es.retraced_samples;
+out:
+    rtp_image_destroy(re);
+    rtp_image_destroy(full);
+    rtp_image_destroy(first);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+    return e;
+}
+
+static void test_bump_edits(void)
+{
+    static const char *const none[] = {NULL};
+    static const char *const floor_noise[] = {"mat.floor.bump", "noise", "mat.floor.bump_scale",
+                                              "0.3", "mat.floor.bump_strength", "0.5", NULL};
+    static const char *const mirror_waves[] = {"mat.mirror.bump", "waves",
+                                               "mat.mirror.bump_scale", "0.4",
+                                               "mat.mirror.bump_strength", "0.05", NULL};
+    static const char *const mirror_more[] = {"mat.mirror.bump_strength", "0.3", NULL};
+    unsigned long long rt = 0;
+    double e;
+    /* floor: no reflected or refracted rays below it */
+    e = bump_error(none, floor_noise, RTP_STALE_KEEP, &rt);
+    CHECK_MSG(e <= 1e-6 && rt == 0, "floor bump, keep: %g (%llu re-traced)", e, rt);
+    /* mirror: kept subtrees are stale, re-traced ones exact */
+    e = bump_error(mirror_waves, mirror_more, RTP_STALE_RETRACE, &rt);
+    CHECK_MSG(e <= 1e-6 && rt > 0, "mirror bump, retrace: %g (%llu re-traced)", e, rt);
+    e = bump_error(mirror_waves, mirror_more, RTP_STALE_KEEP, &rt);
+    CHECK_MSG(e > 1e-3 && isfinite(e) && rt == 0, "mirror bump, keep: %g", e);
+    /* a bump present at the trace is reproduced exactly without edits */
+    e = bump_error(mirror_waves, none, RTP_STALE_KEEP, &rt);
+    CHECK_MSG(e <= 1e-6, "bumped trace vs reeval: %g", e);
+}
+
 /* A light moved on warm caches (only its terms and coefficients redone)
    gives the very image a fresh tree gives with every step redone. */
 static void test_warm_light_move_bitwise(void)
@@ -597,6 +668,7 @@ int main(void)
     RUN(test_moved_light_small_spd);
     RUN(test_edit_sequence);
     RUN(test_warm_light_move_bitwise);
+    RUN(test_bump_edits);
     RUN(test_truncated_every_length);
     RUN(test_flipped_bits);
     RUN(test_newer_version_and_foreign);

@@ -1,0 +1,581 @@
+/* test_alloc.c — allocation-failure injection.  An rtp_allocator that fails
+ * the N-th allocation (counted in a struct passed as `user`) and tracks
+ * every live block runs each operation with N = 1, 2, 3, ... until one run
+ * meets no failure.  Every failing run must return RTP_ERR_NOMEM (or
+ * another documented status, listed per operation), leave nothing
+ * allocated once what it returned is destroyed, and not crash.  Prints how
+ * many allocation sites (allocations of the successful run) each
+ * operation exercised.  Deterministic: no seed. */
+#include "check.h"
+#include "rtp.h"
+
+#include <stdint.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+/* ------------------------------------------------------------ allocator */
+
+typedef struct failing {
+    int armed;       /* count and fail only while armed */
+    long count;      /* allocations (malloc, realloc) while armed */
+    long fail_at;    /* fail the fail_at-th; 0: never */
+    int failed;      /* a failure was injected */
+    long live;       /* blocks allocated and not freed (armed or not) */
+    long bad_frees;  /* frees of pointers this allocator never gave */
+} failing;
+
+/* Each block carries a header with a magic word, so a free of a foreign
+   pointer or a double free is caught instead of corrupting the heap. */
+#define HDR 16
+#define MAGIC 0x52545041u  /* "RTPA" */
+#define DEAD 0x44454144u
+
+static int inject(failing *f)
+{
+    if (!f->armed)
+        return 0;
+    f->count++;
+    if (f->fail_at && f->count == f->fail_at) {
+        f->failed = 1;
+        return 1;
+    }
+    return 0;
+}
+
+static void *fa_malloc(void *user, size_t size)
+{
+    failing *f = (failing *)user;
+    unsigned char *p;
+    uint32_t m = MAGIC;
+    if (inject(f) || size > (size_t)-1 - HDR)
+        return NULL;
+    p = (unsigned char *)malloc(size + HDR);
+    if (!p)
+        return NULL;
+    memcpy(p, &m, sizeof m);
+    f->live++;
+    return p + HDR;
+}
+
+static int fa_check(failing *f, void *ptr)
+{
+    uint32_t m;
+    memcpy(&m, (unsigned char *)ptr - HDR, sizeof m);
+    if (m != MAGIC) {
+        f->bad_frees++;
+        return 0;
+    }
+    return 1;
+}
+
+static void fa_free(void *user, void *ptr)
+{
+    failing *f = (failing *)user;
+    uint32_t d = DEAD;
+    if (!ptr || !fa_check(f, ptr))
+        return;
+    memcpy((unsigned char *)ptr - HDR, &d, sizeof d);
+    f->live--;
+    free((unsigned char *)ptr - HDR);
+}
+
+static void *fa_realloc(void *user, void *ptr, size_t size)
+{
+    failing *f = (failing *)user;
+    unsigned char *p;
+    if (!ptr)
+        return fa_malloc(user, size);
+    if (!fa_check(f, ptr))
+        return NULL;
+    if (inject(f) || size > (size_t)-1 - HDR)
+        return NULL;
+    p = (unsigned char *)realloc((unsigned char *)ptr - HDR, size + HDR);
+    return p ? p + HDR : NULL;
+}
+
+/* ------------------------------------------------------------- fixtures */
+
+static char dir[512];
+
+static const char *tmp_path(const char *name)
+{
+    static char buf[8][600];
+    static int i;
+    i = (i + 1) % 8;
+    snprintf(buf[i], sizeof buf[i], "%s/%s", dir, name);
+    return buf[i];
+}
+
+static int write_text(const char *name, const char *text)
+{
+    FILE *f = fopen(tmp_path(name), "wb");
+    if (!f)
+        return -1;
+    fputs(text, f);
+    return fclose(f);
+}
+
+/* Every NFF construct and addition: camera, background, ambient, named
+   and switched-off lights, materials with names, checker, image texture,
+   bump maps, sphere, cone, polygon (concave), pp, an included OBJ with its
+   MTL and a transform, an included NFF and a Bezier patch. */
+static const char nff_text[] =
+    "b 0.1 0.1 0.2\n"
+    "v from 0 -6 2 at 0 0 0.5 up 0 0 1 angle 40 hither 0.01 resolution 6 5\n"
+    "ambient 0.05 0.05 0.05\n"
+    "l 3 -4 6 0.8 0.7 0.6\nname lamp\n"
+    "l -3 -4 5\n"
+    "l 0 3 5\nname spare\noff\n"
+    "s -3 3 0.2 0.2\n" /* before any f: the default material */
+    "f 0.9 0.9 0.9 0.8 0.2 20 0 0\nname floor\nchecker 0.1 0.1 0.1 0.5\n"
+    "bump waves 0.5 0.2\n"
+    "p 6 -4 -4 0 4 -4 0 4 0 0 0 0 0 0 4 0 -4 4 0\n"
+    "f 0.8 0.3 0.3 0.5 0.4 40 0.4 1.5\nname glass\nbump noise 0.2 0.3\n"
+    "s 0 0 1 0.8\n"
+    "f 0.3 0.8 0.3 0.9 0 100000 0 0\nname green\ntexture tex.ppm\n"
+    "bump tex.ppm 0.5\n"
+    "c 1.5 0 0 0.3 1.5 0 1.5 0.1\n"
+    "pp 3 -2 0 0 0 0 1 -1 0 1 0 0 1 -2 0 2 0 0 1\n"
+    "include mesh.obj scale 0.5 rotate z 30 translate -2 1 0.5\n"
+    "include sub.nff\n"
+    "bezier patch.bpt 2 scale 0.3 translate 2 2 1\n";
+
+static const char sub_text[] =
+    "f 0.5 0.5 0.9 0.7 0.2 30 0 0\nname inner\n"
+    "l 1 1 4 0.3 0.3 0.3\nname inner_lamp\n"
+    "s 0 2 0.5 0.3\n";
+
+static const char obj_text[] =
+    "mtllib mesh.mtl\n"
+    "v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nv 0 0 1\n"
+    "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
+    "vn 0 0 1\nvn 0 0.7 0.7\n"
+    "usemtl red\nf 1/1/1 2/2/1 3/3/1 4/4/1\n"
+    "usemtl pic\nf -5/-4/-2 -4/-3/-2 -1/-1/-1\n"
+    "usemtl clear\nf 1 2 5\nf 3 4 5\n";
+
+static const char mtl_text[] =
+    "newmtl red\nKd 0.8 0.2 0.2\nKs 0.3\nNs 40\n"
+    "newmtl clear\nKd 0.2 0.2 0.2\nKs 0.5\nNi 1.5\nd 0.3\n"
+    "newmtl pic\nKd 1 1 1\nmap_Kd tex.ppm\nbump -bm 0.5 tex.ppm\n";
+
+static const char ppm_text[] = "P3\n2 2\n255\n255 0 0  0 255 0\n0 0 255  255 255 255\n";
+
+static int write_patch(void)
+{
+    FILE *f = fopen(tmp_path("patch.bpt"), "wb");
+    int i, j;
+    if (!f)
+        return -1;
+    fprintf(f, "1\n1,2,3,4,5,6,7,8,9,10,11,12,13,14,15,16\n16\n");
+    for (j = 0; j < 4; j++)
+        for (i = 0; i < 4; i++)
+            fprintf(f, "%g,%g,%g\n", i - 1.5, j - 1.5, 0.1 * (i * j));
+    return fclose(f);
+}
+
+static int setup(void)
+{
+    const char *t = getenv("TMPDIR");
+    snprintf(dir, sizeof dir, "%s/rtp-alloc.%ld", t && *t ? t : "/tmp", (long)getpid());
+    if (mkdir(dir, 0700) != 0)
+        return -1;
+    return write_text("scene.nff", nff_text) || write_text("sub.nff", sub_text) ||
+           write_text("mesh.obj", obj_text) || write_text("mesh.mtl", mtl_text) ||
+           write_text("tex.ppm", ppm_text) || write_patch();
+}
+
+/* ----------------------------------------------------------- operations */
+
+/* What an operation gets: the allocator (unarmed), and what earlier,
+   unarmed steps made with it.  An operation arms f around the one call it
+   tests, destroys all it made and returns that call's status. */
+typedef struct ctx {
+    failing *f;
+    const rtp_allocator *a;
+    rtp_error err;
+} ctx;
+
+#define ARM(c) ((c)->f->armed = 1)
+#define DISARM(c) ((c)->f->armed = 0)
+
+static rtp_trace_options small_opt(void)
+{
+    rtp_trace_options o;
+    memset(&o, 0, sizeof o);
+    o.width = 6;
+    o.height = 5;
+    o.threads = 1;
+    return o;
+}
+
+static rtp_status op_load_nff(ctx *c)
+{
+    rtp_scene *s = NULL;
+    rtp_status st;
+    ARM(c);
+    st = rtp_scene_load(tmp_path("scene.nff"), c->a, &s, &c->err);
+    DISARM(c);
+    if (st == RTP_OK) {
+        rtp_scene_info info;
+        rtp_scene_get_info(s, &info);
+        CHECK(info.spheres == 3 && info.cones == 1 && info.textures == 1);
+        CHECK(info.lights == 4);
+    }
+    rtp_scene_destroy(s);
+    return st;
+}
+
+static rtp_status op_load_obj(ctx *c)
+{
+    rtp_scene *s = NULL;
+    rtp_status st;
+    ARM(c);
+    st = rtp_scene_load(tmp_path("mesh.obj"), c->a, &s, &c->err);
+    DISARM(c);
+    if (st == RTP_OK) {
+        rtp_scene_info info;
+        rtp_scene_get_info(s, &info);
+        CHECK(info.triangles == 5 && info.materials >= 3 && info.textures == 1);
+    }
+    rtp_scene_destroy(s);
+    return st;
+}
+
+/* Loads the NFF scene unarmed. */
+static rtp_scene *scene(ctx *c)
+{
+    rtp_scene *s = NULL;
+    if (rtp_scene_load(tmp_path("scene.nff"), c->a, &s, &c->err) != RTP_OK) {
+        fprintf(stderr, "setup: %s\n", c->err.message);
+        return NULL;
+    }
+    return s;
+}
+
+static rtp_status op_trace(ctx *c)
+{
+    rtp_scene *s = scene(c);
+    rtp_image *img = NULL;
+    rtp_trace_options o = small_opt();
+    rtp_status st;
+    if (!s)
+        return RTP_ERR_IO;
+    ARM(c);
+    st = rtp_trace(s, &o, &img, NULL, &c->err);
+    DISARM(c);
+    rtp_image_destroy(img);
+    rtp_scene_destroy(s);
+    return st;
+}
+
+static rtp_status op_record(ctx *c)
+{
+    rtp_scene *s = scene(c);
+    rtp_image *img = NULL;
+    rtp_tree *t = NULL;
+    rtp_trace_options o = small_opt();
+    rtp_status st;
+    if (!s)
+        return RTP_ERR_IO;
+    ARM(c);
+    st = rtp_record(s, &o, &t, &img, NULL, &c->err);
+    DISARM(c);
+    CHECK(st == RTP_OK || (!t && !img));
+    rtp_image_destroy(img);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+    return st;
+}
+
+/* Records the NFF scene's trees unarmed. */
+static rtp_tree *tree(ctx *c)
+{
+    rtp_scene *s = scene(c);
+    rtp_tree *t = NULL;
+    rtp_trace_options o = small_opt();
+    if (!s)
+        return NULL;
+    if (rtp_record(s, &o, &t, NULL, NULL, &c->err) != RTP_OK)
+        t = NULL;
+    rtp_scene_destroy(s);
+    return t;
+}
+
+static rtp_status op_tree_write(ctx *c)
+{
+    rtp_tree *t = tree(c);
+    rtp_status st;
+    unsigned long long bytes = 0;
+    if (!t)
+        return RTP_ERR_IO;
+    ARM(c);
+    st = rtp_tree_write(t, tmp_path("w.rtp"), &bytes, &c->err);
+    DISARM(c);
+    rtp_tree_destroy(t);
+    return st;
+}
+
+static rtp_status op_tree_read(ctx *c)
+{
+    rtp_tree *t = NULL;
+    rtp_status st;
+    ARM(c);
+    st = rtp_tree_read(tmp_path("r.rtp"), c->a, &t, &c->err);
+    DISARM(c);
+    CHECK(st == RTP_OK || !t);
+    rtp_tree_destroy(t);
+    return st;
+}
+
+static rtp_status op_tree_eval(ctx *c)
+{
+    rtp_tree *t = tree(c);
+    rtp_image *img = NULL;
+    rtp_status st;
+    if (!t)
+        return RTP_ERR_IO;
+    ARM(c);
+    st = rtp_tree_eval(t, NULL, &img, NULL, &c->err);
+    DISARM(c);
+    rtp_image_destroy(img);
+    rtp_tree_destroy(t);
+    return st;
+}
+
+/* Edits of every class the tree takes: optical (A), a moved light (B,
+   shadows decided anew at evaluation), a raised ks (D, re-traced). */
+static const char *const tree_edits[][2] = {
+    {"mat.floor.color", "0.2,0.4,0.6"}, {"light.lamp.color", "1,0.5,0"},
+    {"light.spare.on", "1"},            {"ambient", "0.2"},
+    {"light.0.pos", "2,-3,5"},          {"mat.green.ks", "0.3"},
+    {"mat.glass.ior", "1.2"}};
+
+static rtp_status op_tree_set(ctx *c)
+{
+    rtp_tree *t = tree(c);
+    rtp_status st = RTP_OK;
+    size_t i;
+    if (!t)
+        return RTP_ERR_IO;
+    ARM(c);
+    for (i = 0; i < sizeof tree_edits / sizeof *tree_edits && st == RTP_OK; i++)
+        st = rtp_tree_set(t, tree_edits[i][0], tree_edits[i][1], &c->err);
+    DISARM(c);
+    rtp_tree_destroy(t);
+    return st;
+}
+
+/* Evaluation after those edits: moved-light shadows and re-tracing. */
+static rtp_status op_tree_eval_edited(ctx *c)
+{
+    rtp_tree *t = tree(c);
+    rtp_image *img = NULL;
+    rtp_status st;
+    size_t i;
+    if (!t)
+        return RTP_ERR_IO;
+    for (i = 0; i < sizeof tree_edits / sizeof *tree_edits; i++)
+        if (rtp_tree_set(t, tree_edits[i][0], tree_edits[i][1], &c->err) != RTP_OK) {
+            fprintf(stderr, "setup: %s\n", c->err.message);
+            rtp_tree_destroy(t);
+            return RTP_ERR_IO;
+        }
+    ARM(c);
+    st = rtp_tree_eval(t, NULL, &img, NULL, &c->err);
+    DISARM(c);
+    rtp_image_destroy(img);
+    rtp_tree_destroy(t);
+    return st;
+}
+
+static const char *const image_names[] = {"i.png", "i.ppm", "i.pfm"};
+static int image_kind;
+
+static rtp_image *gradient(ctx *c, float k)
+{
+    rtp_image *img = NULL;
+    int i;
+    if (rtp_image_create(7, 5, c->a, &img, &c->err) != RTP_OK)
+        return NULL;
+    for (i = 0; i < 7 * 5 * 3; i++)
+        img->pixels[i] = (float)((i * 37) % 101) / 100.0f * k;
+    return img;
+}
+
+static rtp_status op_image_write(ctx *c)
+{
+    rtp_image *img = gradient(c, 1.0f);
+    rtp_status st;
+    if (!img)
+        return RTP_ERR_IO;
+    ARM(c);
+    st = rtp_image_write(img, tmp_path(image_names[image_kind]), RTP_IMAGE_AUTO, &c->err);
+    DISARM(c);
+    rtp_image_destroy(img);
+    return st;
+}
+
+static rtp_status op_image_read(ctx *c)
+{
+    rtp_image *img = NULL;
+    rtp_status st;
+    ARM(c);
+    st = rtp_image_read(tmp_path(image_names[image_kind]), c->a, &img, &c->err);
+    DISARM(c);
+    CHECK(st == RTP_OK || !img);
+    if (st == RTP_OK)
+        CHECK(img->width == 7 && img->height == 5);
+    rtp_image_destroy(img);
+    return st;
+}
+
+static rtp_status op_image_diff(ctx *c)
+{
+    rtp_image *a = gradient(c, 1.0f), *b = gradient(c, 0.9f);
+    rtp_diff_stats d;
+    rtp_status st = RTP_ERR_IO;
+    if (a && b) {
+        ARM(c);
+        st = rtp_image_diff(a, b, 0.01, &d, &c->err);
+        DISARM(c);
+    }
+    rtp_image_destroy(a);
+    rtp_image_destroy(b);
+    return st;
+}
+
+static rtp_status op_heatmap(ctx *c)
+{
+    rtp_image *a = gradient(c, 1.0f), *b = gradient(c, 0.9f);
+    rtp_status st = RTP_ERR_IO;
+    if (a && b) {
+        ARM(c);
+        st = rtp_diff_heatmap(a, b, 0.0, tmp_path("heat.png"), &c->err);
+        DISARM(c);
+    }
+    rtp_image_destroy(a);
+    rtp_image_destroy(b);
+    return st;
+}
+
+/* -------------------------------------------------------------- driver */
+
+/* Runs op with the 1st, 2nd, ... allocation failing until a run meets no
+   failure.  @return the allocation sites (allocations of that run). */
+static long sweep(const char *name, rtp_status (*op)(ctx *))
+{
+    long n, sites = -1;
+    for (n = 1; n < 100000; n++) {
+        failing f;
+        rtp_allocator a;
+        ctx c;
+        rtp_status st;
+        memset(&f, 0, sizeof f);
+        f.fail_at = n;
+        a.malloc_fn = fa_malloc;
+        a.realloc_fn = fa_realloc;
+        a.free_fn = fa_free;
+        a.user = &f;
+        memset(&c, 0, sizeof c);
+        c.f = &f;
+        c.a = &a;
+        st = op(&c);
+        CHECK_MSG(f.live == 0, "%s: fail at %ld: %ld block(s) leaked", name, n, f.live);
+        CHECK_MSG(f.bad_frees == 0, "%s: fail at %ld: %ld bad free(s)", name, n,
+                  f.bad_frees);
+        if (!f.failed) {
+            CHECK_MSG(st == RTP_OK, "%s: no failure injected, yet status %d (%s)", name,
+                      (int)st, c.err.message);
+            sites = f.count;
+            break;
+        }
+        if (st == RTP_OK)
+            continue; /* the failure was tolerated (an optional cache) */
+        CHECK_MSG(st == RTP_ERR_NOMEM, "%s: fail at %ld: status %d (%s), not NOMEM",
+                  name, n, (int)st, c.err.message);
+        CHECK_MSG(c.err.status == st, "%s: fail at %ld: err.status %d, returned %d",
+                  name, n, (int)c.err.status, (int)st);
+        if (check_failed_now)
+            break; /* one report per operation is enough */
+    }
+    printf("%-24s %ld allocation sites\n", name, sites);
+    return sites;
+}
+
+#define SWEEP(fn) static void test_##fn(void) { CHECK(sweep(#fn, op_##fn) >= 0); }
+SWEEP(load_nff)
+SWEEP(load_obj)
+SWEEP(trace)
+SWEEP(record)
+SWEEP(tree_write)
+SWEEP(tree_read)
+SWEEP(tree_eval)
+SWEEP(tree_set)
+SWEEP(tree_eval_edited)
+SWEEP(image_diff)
+SWEEP(heatmap)
+
+static void test_image_io(void)
+{
+    char name[64];
+    for (image_kind = 0; image_kind < 3; image_kind++) {
+        if (image_kind == 0 && !rtp_png_supported())
+            continue;
+        snprintf(name, sizeof name, "image_write %s", image_names[image_kind] + 2);
+        CHECK(sweep(name, op_image_write) >= 0);
+        snprintf(name, sizeof name, "image_read %s", image_names[image_kind] + 2);
+        CHECK(sweep(name, op_image_read) >= 0);
+    }
+}
+
+static void cleanup(void)
+{
+    static const char *const names[] = {"scene.nff", "sub.nff", "mesh.obj", "mesh.mtl",
+                                        "tex.ppm", "patch.bpt", "w.rtp", "r.rtp",
+                                        "i.png", "i.ppm", "i.pfm", "heat.png"};
+    size_t i;
+    for (i = 0; i < sizeof names / sizeof *names; i++)
+        remove(tmp_path(names[i]));
+    rmdir(dir);
+}
+
+int main(void)
+{
+    rtp_scene *s = NULL;
+    rtp_tree *t = NULL;
+    rtp_trace_options o = small_opt();
+    rtp_error err;
+    if (setup() != 0) {
+        fprintf(stderr, "cannot write the fixtures in %s\n", dir);
+        return 1;
+    }
+    /* The file op_tree_read reads. */
+    if (rtp_scene_load(tmp_path("scene.nff"), NULL, &s, &err) != RTP_OK ||
+        rtp_record(s, &o, &t, NULL, NULL, &err) != RTP_OK ||
+        rtp_tree_write(t, tmp_path("r.rtp"), NULL, &err) != RTP_OK) {
+        char buf[600];
+        fprintf(stderr, "fixture: %s\n", rtp_error_format(&err, buf, sizeof buf));
+        rtp_tree_destroy(t);
+        rtp_scene_destroy(s);
+        cleanup();
+        return 1;
+    }
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+    RUN(test_load_nff);
+    RUN(test_load_obj);
+    RUN(test_trace);
+    RUN(test_record);
+    RUN(test_tree_write);
+    RUN(test_tree_read);
+    RUN(test_tree_eval);
+    RUN(test_tree_set);
+    RUN(test_tree_eval_edited);
+    RUN(test_image_io);
+    RUN(test_image_diff);
+    RUN(test_heatmap);
+    cleanup();
+    return check_report();
+}
