@@ -111,6 +111,9 @@ static int run_mode(const char *scene, const rtp_scene *s, const rtpi_kdtree *kd
             diff += (size_t)(ref[k] != v);
     }
     t2 = now();
+    if (mode == RTPI_SHADOW_EXACT)
+        snprintf(extra, sizeof extra, "%.1f%% of queries lit",
+                 100.0 * (double)lit / (double)(n ? n : 1));
     if (sw && mode == RTPI_SHADOW_OSMESA) {
         /* cell agreement with the software z-buffer at the same res */
         rtpi_itembuf gl;

@@ -930,6 +930,8 @@ static int cmd_reeval(int argc, char **argv)
         }
     }
     eo.threads = threads;
+    /* one image: caches for later edits would only cost time */
+    eo.no_cache = !stream;
     prog.start = now_seconds();
     prog.shown = 0;
     if (verbosity > 0 && isatty(2) && !stream) {

@@ -244,6 +244,8 @@ typedef struct rtp_eval_options {
     rtp_shadow_mode shadows;
     int shadow_res;         /* direction-cube cells per face edge; 0: 1024 */
     rtp_stale_mode stale;
+    int no_cache;           /* 1: a one-off evaluation: keep no caches for
+                               later edits (faster once, slower after) */
     void (*progress)(void *user, double done);
     void *progress_user;
 } rtp_eval_options;

@@ -629,7 +629,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
     t1 = seconds_now();
 
     /* What the caches hold versus what is asked now. */
-    cached = nl <= EV_MAX_LIGHTS;
+    cached = nl <= EV_MAX_LIGHTS && !(opt && opt->no_cache);
     if (t->ev_valid && t->ev_nlights != nl)
         drop_caches(t);
     if (cached && !t->ev_terms) {

@@ -896,6 +896,10 @@ static rtp_status read_tree(loader *L, rd *r)
         return bad(L, "section too short", NULL);
     if (nsamples != (uint64_t)t->nx * (uint64_t)t->ny)
         return bad(L, "sample count does not match the image", NULL);
+    /* Every sample's node count takes at least one byte: a header asking
+       for 2^27 samples must not allocate their index from a tiny file. */
+    if (!count_ok(r, nsamples, 1))
+        return bad(L, "sample count larger than the section", NULL);
     if (words != (s->nlights > 32 ? (s->nlights + 31) / 32 : 0) || (layout & ~3u) ||
         ((layout & NODE_VIS) != 0) != (s->nlights > 0 && words == 0))
         return bad(L, "node layout does not match the scene", NULL);

@@ -61,8 +61,14 @@ static int roundtrip_identical(const char *path, int w, int h, int spd)
         rtp_tree_write(t, file, NULL, NULL) == RTP_OK &&
         rtp_tree_read(file, NULL, &t2, NULL) == RTP_OK &&
         rtp_tree_eval(t2, NULL, &re2, NULL, NULL) == RTP_OK) {
+        rtp_image *re3 = NULL;
+        rtp_eval_options once;
+        memset(&once, 0, sizeof once);
+        once.no_cache = 1; /* the one-off path the CLI takes */
         rtp_tree_get_info(t2, &ti);
-        ok = same_image(img, re) && same_image(img, re2) && ti.bytes_per_node <= 24;
+        ok = same_image(img, re) && same_image(img, re2) && ti.bytes_per_node <= 24 &&
+             rtp_tree_eval(t2, &once, &re3, NULL, NULL) == RTP_OK && same_image(img, re3);
+        rtp_image_destroy(re3);
         if (!ok)
             fprintf(stderr, "%s: re-evaluation differs from trace\n", path);
     } else {
