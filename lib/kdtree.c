@@ -426,7 +426,7 @@ static int build_node(kd_build *b, const float *lo, const float *hi,
     kd_split sp;
     double d[3], area;
     size_t i, nl, nr;
-    kd_ref *r, *L, *R;
+    kd_ref *r;
     float clo[3], chi[3];
     uint32_t idx;
     int k;
@@ -449,35 +449,54 @@ static int build_node(kd_build *b, const float *lo, const float *hi,
     if (!(sp.cost < KD_LEAF_MARGIN * KD_COST_ISECT * (double)n))
         return make_leaf(b, b->ref + off, n);
 
-    /* Partition into the right child's list at off + n and the left
-       child's at off + 2n (each has at most n references), then move them
-       down: right at off, left above it, so that the left subtree is
-       built on top and the right one after it. */
-    if (rtpi_grow(b->a, (void **)&b->ref, &b->ref_cap, off + 3 * n,
-                  sizeof *b->ref))
-        return -1;
-    r = b->ref + off;
-    R = r + n;
-    L = r + 2 * n;
-    nl = nr = 0;
+    /* Partition in place into [right | straddling | left] (three-way, as
+       the Dutch flag), then split each straddler: its right part takes
+       its place, its left part goes after the left ones.  The right
+       child's list ends up at off, the left child's above it, so that the
+       left subtree is built on top and the right one after it; the arena
+       grows by the straddlers only. */
     {
         const int ax = sp.axis, pl = sp.planar_left;
         const float pos = sp.pos;
-        for (i = 0; i < n; i++) {
-            float a0 = r[i].lo[ax], a1 = r[i].hi[ax];
-            if (a1 < pos || (a1 == pos && (a0 < pos || pl)))
-                L[nl++] = r[i];
-            else if (a0 > pos || a0 == pos)
-                R[nr++] = r[i];
-            else {
-                int m = split_ref(b, &r[i], ax, pos, &L[nl], &R[nr]);
-                nl += (size_t)(m & 1);
-                nr += (size_t)(m >> 1);
+        size_t j = 0, e = n, w, t;
+        kd_ref x;
+        r = b->ref + off;
+        i = 0;
+        while (j < e) {
+            float a0 = r[j].lo[ax], a1 = r[j].hi[ax];
+            if (a1 < pos || (a1 == pos && (a0 < pos || pl))) {
+                e--; /* left */
+                x = r[j];
+                r[j] = r[e];
+                r[e] = x;
+            } else if (a0 >= pos) { /* right */
+                x = r[j];
+                r[j] = r[i];
+                r[i] = x;
+                i++;
+                j++;
+            } else { /* straddles */
+                j++;
             }
         }
+        if (rtpi_grow(b->a, (void **)&b->ref, &b->ref_cap, off + n + (j - i),
+                      sizeof *b->ref))
+            return -1;
+        r = b->ref + off;
+        w = i;
+        t = n;
+        for (; i < j; i++) {
+            kd_ref lp, rp;
+            int m = split_ref(b, &r[i], ax, pos, &lp, &rp);
+            if (m & 2)
+                r[w++] = rp;
+            if (m & 1)
+                r[t++] = lp;
+        }
+        nr = w;
+        nl = t - j;
+        memmove(r + w, r + j, nl * sizeof *r);
     }
-    memmove(r, R, nr * sizeof *r);
-    memmove(r + nr, L, nl * sizeof *r);
 
     if (push_node(b, &idx))
         return -1;
@@ -552,10 +571,10 @@ rtp_status rtpi_kd_build(const rtp_scene *s, const rtp_allocator *alloc,
     if (np > 0) {
         kd->tri = (float *)rtpi_malloc_array(&a, s->ntris ? s->ntris : 1,
                                              9 * sizeof(float));
-        b->ref = (kd_ref *)rtpi_malloc_array(&a, np, 4 * sizeof(kd_ref));
+        b->ref = (kd_ref *)rtpi_malloc_array(&a, np, 2 * sizeof(kd_ref));
         if (!kd->tri || !b->ref)
             goto nomem;
-        b->ref_cap = 4 * np;
+        b->ref_cap = 2 * np;
     }
     for (i = 0; i < s->ntris; i++) {
         const rtpi_tri *t = &s->tris[i];

@@ -306,7 +306,7 @@ rtp_status rtpi_itembuf_build_osmesa(const rtp_scene *s, rtpi_v3 light,
             }
         }
     }
-    //XX
+    OSMesaMakeCurrent(NULL, NULL, 0, 0, 0);
     OSMesaDestroyContext(ctx);
     rtpi_free(a, rgba);
     rtpi_free(a, depth);

@@ -1,0 +1,70 @@
+#!/bin/sh
+# CLI tests for rtp reeval and rtp info: the full pipe, bit-identical
+# re-evaluation, edits against full traces, stream mode, params files,
+# refused input, and tree-file errors.
+RTP=${RTP:-./rtp}
+T=${TMPDIR:-/tmp}/rtp-reeval.$$
+mkdir -p "$T"
+pass=0; fail=0; skip=0
+ok()  { pass=$((pass + 1)); }
+bad() { fail=$((fail + 1)); echo "FAIL: $*" >&2; }
+expect_rc() {
+    want=$1; shift
+    "$@" >"$T/out" 2>"$T/err"; rc=$?
+    if [ "$rc" -eq "$want" ]; then ok; else bad "exit $rc (want $want): $*"; cat "$T/err" >&2; fi
+}
+S=scenes/spheres.nff
+
+# The whole pipeline through pipes: trace | reeval | diff against a full trace.
+$RTP trace $S --size 48x36 --set light.key.pos=2,-5,6 -i "$T/ref.pfm" -q
+$RTP trace $S --size 48x36 -o - -q | $RTP reeval - --set light.key.pos=2,-5,6 -i - -q |
+    $RTP diff - "$T/ref.pfm" --fail-above max_abs=1e-6 --stats "$T/pipe.json" >/dev/null
+[ $? -eq 0 ] && ok || { bad "trace | reeval | diff pipe"; cat "$T/pipe.json" >&2; }
+
+# No edits: bit for bit.
+expect_rc 0 $RTP trace $S --size 40x30 -o "$T/t.rtp" -i "$T/t.pfm"
+expect_rc 0 $RTP reeval "$T/t.rtp" -i "$T/r.pfm"
+cmp -s "$T/t.pfm" "$T/r.pfm" && ok || bad "reeval without edits differs from trace"
+
+# Edits of every class equal a full trace of the edited scene.
+for kv in "mat.red.color=0.1,0.9,0.2" "light.fill.on=0" "ambient=0.3" \
+          "light.key.pos=-3,-4,7" "mat.floor.ks=0.4" "mat.glass.ior=2"; do
+    $RTP trace $S --size 40x30 --set "$kv" -i "$T/full.pfm" -q
+    $RTP reeval "$T/t.rtp" --set "$kv" -i "$T/re.pfm" -q
+    if $RTP diff "$T/re.pfm" "$T/full.pfm" --fail-above max_abs=1e-6 -q; then ok
+    else bad "reeval --set $kv differs from trace --set $kv"; fi
+done
+expect_rc 0 $RTP reeval "$T/t.rtp" --set light.key.pos=-3,-4,7 --shadows exact --reference -i "$T/x.pfm" --stats "$T/ref.json"
+grep -q '"max_abs": 0' "$T/ref.json" && ok || { bad "--reference error"; cat "$T/ref.json" >&2; }
+
+# --params file and stream mode (tree loaded once, one image per line).
+printf '# a params file\nmat.red.kd=0.2 light.key.color=1,0.5,0.5\n\n' > "$T/p.txt"
+expect_rc 0 $RTP reeval "$T/t.rtp" --params "$T/p.txt" -i "$T/p.pfm"
+printf 'light.key.color=1,0,0\nlight.key.color=0,1,0\nmat.red.kd=0.1\n' |
+    $RTP reeval "$T/t.rtp" --stream -i "$T/frame%02d.pfm" --stats "$T/stream.json" -q
+[ -f "$T/frame00.pfm" ] && [ -f "$T/frame02.pfm" ] && [ "$(wc -l < "$T/stream.json")" -eq 3 ] && ok ||
+    bad "stream mode"
+$RTP trace $S --size 40x30 --set light.key.color=0,1,0 -i "$T/g.pfm" -q
+$RTP diff "$T/frame01.pfm" "$T/g.pfm" --fail-above max_abs=1e-6 -q && ok || bad "stream frame 1"
+
+# info
+expect_rc 0 $RTP info "$T/t.rtp" --stats "$T/info.json"
+grep -q '"bytes_per_node": 24' "$T/info.json" && ok || bad "info bytes_per_node"
+
+# Refused and broken input: named errors, exit 1, no image written.
+expect_rc 1 $RTP reeval "$T/t.rtp" --set mat.nosuch.kd=1 -i "$T/no1.pfm"
+[ ! -e "$T/no1.pfm" ] && ok || bad "image written after a bad key"
+head -c 100 "$T/t.rtp" > "$T/trunc.rtp"
+expect_rc 1 $RTP reeval "$T/trunc.rtp" -i "$T/no2.pfm"
+grep -q "trunc.rtp" "$T/err" && ok || bad "truncated file not named"
+[ ! -e "$T/no2.pfm" ] && ok || bad "image written from a truncated tree"
+expect_rc 1 $RTP reeval "$T/t.pfm" -i "$T/no3.pfm"
+grep -q "signature" "$T/err" && ok || bad "foreign file"
+expect_rc 2 $RTP reeval "$T/t.rtp" --shadows bogus
+expect_rc 2 $RTP reeval
+expect_rc 0 $RTP reeval --help
+expect_rc 0 $RTP info --help
+
+rm -rf "$T"
+echo "$pass passed, $fail failed, $skip skipped"
+[ "$fail" -eq 0 ]
