@@ -27,6 +27,7 @@ J=${J:-2}
 RESES=${RESES:-"256 512 1024 2048"}
 work=$out/matrix
 tsv=$out/matrix.tsv
+rm -rf "$work"
 mkdir -p "$work" || exit 1
 : > "$tsv" || exit 1
 t_start=$(date +%s)

@@ -118,6 +118,25 @@ static int is_opt(const char *arg, const char *name)
     return strncmp(arg, name, n) == 0 && (arg[n] == '\0' || arg[n] == '=');
 }
 
+/* "x0,y0,x1,y1" into r; returns 0 or -1. */
+static int parse_region(const char *v, int *r)
+{
+    char buf[128], *p, *save = NULL;
+    int k;
+    if (strlen(v) >= sizeof buf)
+        return -1;
+    strcpy(buf, v);
+    p = buf;
+    for (k = 0; k < 4; k++) {
+        char *tok = k ? strtok_r(NULL, ",", &save) : strtok_r(p, ",", &save);
+        if (!tok || parse_int(tok, 0, 1 << 20, &r[k]))
+            return -1;
+    }
+    if (strtok_r(NULL, ",", &save) || r[0] >= r[2] || r[1] >= r[3])
+        return -1;
+    return 0;
+}
+
 /* ---------------------------------------------------------------- stats */
 
 static FILE *stats_open(const char *path)
@@ -267,6 +286,9 @@ static const char trace_help[] =
     "                       ambient, background; N is a 0-based index or a name\n"
     "  --params FILE        edits from FILE: KEY=VALUE per line, '#' comments\n"
     "  --size WxH           image size (default: the scene's resolution)\n"
+    "  --region X0,Y0,X1,Y1 trace only pixels X0 <= x < X1, Y0 <= y < Y1 of the\n"
+    "                       frame; image and trees are the region's (rtp merge\n"
+    "                       joins regions into the frame)\n"
     "  --spd                SPD testing procedure: 512x512 from 513x513 corner\n"
     "                       rays, depth 5, no weight cut-off, one-sided opaque\n"
     "  --depth N            maximum ray-tree depth, eye ray = 1 (default 5)\n"
@@ -347,6 +369,11 @@ static int cmd_trace(int argc, char **argv)
         } else if (is_opt(a, "--params")) {
             if (!(params = opt_value(argc, argv, &i, "--params")))
                 goto usage;
+        } else if (is_opt(a, "--region")) {
+            if (!(v = opt_value(argc, argv, &i, "--region")) || parse_region(v, opt.region)) {
+                msg("--region: expected x0,y0,x1,y1 with x0 < x1 and y0 < y1");
+                goto usage;
+            }
         } else if (is_opt(a, "--size")) {
             char *x;
             if (!(v = opt_value(argc, argv, &i, "--size")))
@@ -678,6 +705,7 @@ static const char reeval_help[] =
     "                       approximate; default) or retrace (exact)\n"
     "  --add-light X,Y,Z    add a white light (repeatable); it is light N, after\n"
     "                       the scene's lights, for --set light.N.*\n"
+    "  --region X0,Y0,X1,Y1 write only these pixels of the frame\n"
     "  --reference          also trace the edited scene in full and report both\n"
     "                       times and the error of the re-evaluation\n"
     "  -j, --threads N      threads (default 1)\n"
@@ -724,9 +752,37 @@ static long long file_size(const char *path)
     return n;
 }
 
+/* The part of img (the tree's region of the frame) inside `region` (frame
+   coordinates), or NULL with a message. */
+static rtp_image *crop(const rtp_tree *tree, const rtp_image *img, const int *region)
+{
+    rtp_tree_info ti;
+    rtp_image *c = NULL;
+    int y, x0, y0;
+    rtp_tree_get_info(tree, &ti);
+    x0 = region[0] - ti.region_x;
+    y0 = region[1] - ti.region_y;
+    if (x0 < 0 || y0 < 0 || region[2] - ti.region_x > img->width ||
+        region[3] - ti.region_y > img->height) {
+        msg("--region %d,%d,%d,%d is not inside the tree's pixels %d,%d,%d,%d", region[0],
+            region[1], region[2], region[3], ti.region_x, ti.region_y,
+            ti.region_x + img->width, ti.region_y + img->height);
+        return NULL;
+    }
+    if (rtp_image_create(region[2] - region[0], region[3] - region[1], NULL, &c, NULL) != RTP_OK) {
+        msg("out of memory");
+        return NULL;
+    }
+    for (y = 0; y < c->height; y++)
+        memcpy(c->pixels + 3 * (size_t)y * c->width,
+               img->pixels + 3 * ((size_t)(y0 + y) * img->width + (size_t)x0),
+               sizeof(float) * 3 * (size_t)c->width);
+    return c;
+}
+
 static int reeval_one(rtp_tree *tree, const rtp_eval_options *eo, rtp_image **keep,
-                      const char *image_path, int reference, int threads, FILE *stats,
-                      const char *tree_path, double load_seconds)
+                      const char *image_path, const int *region, int reference, int threads,
+                      FILE *stats, const char *tree_path, double load_seconds)
 {
     rtp_image *img = *keep, *ref = NULL;
     rtp_eval_stats es;
@@ -744,7 +800,18 @@ static int reeval_one(rtp_tree *tree, const rtp_eval_options *eo, rtp_image **ke
         goto out;
     }
     *keep = img;
-    if (image_path && rtp_image_write(img, image_path, RTP_IMAGE_AUTO, &err) != RTP_OK) {
+    if (region[2] > 0) {
+        rtp_image *c = crop(tree, img, region);
+        rtp_status ws;
+        if (!c)
+            goto out;
+        ws = rtp_image_write(c, image_path, RTP_IMAGE_AUTO, &err);
+        rtp_image_destroy(c);
+        if (ws != RTP_OK) {
+            fail_err(&err);
+            goto out;
+        }
+    } else if (image_path && rtp_image_write(img, image_path, RTP_IMAGE_AUTO, &err) != RTP_OK) {
         fail_err(&err);
         goto out;
     }
@@ -809,6 +876,7 @@ static int cmd_reeval(int argc, char **argv)
     char *default_image = NULL;
     const char **sets, **add_lights;
     rtp_image *img = NULL;
+    int region[4] = {0, 0, 0, 0};
     int i, nsets = 0, nadd = 0, rc = 1, stream = 0, reference = 0, threads = 1;
     rtp_tree *tree = NULL;
     rtp_error err;
@@ -868,6 +936,11 @@ static int cmd_reeval(int argc, char **argv)
                 goto usage;
             }
             eo.shadows = (rtp_shadow_mode)m;
+        } else if (is_opt(a, "--region")) {
+            if (!(v = opt_value(argc, argv, &i, "--region")) || parse_region(v, region)) {
+                msg("--region: expected x0,y0,x1,y1 with x0 < x1 and y0 < y1");
+                goto usage;
+            }
         } else if (is_opt(a, "--stale")) {
             if (!(v = opt_value(argc, argv, &i, "--stale")))
                 goto usage;
@@ -973,8 +1046,8 @@ static int cmd_reeval(int argc, char **argv)
     if (stats_path && !(stats = stats_open(stats_path)))
         goto out;
     if (!stream) {
-        rc = reeval_one(tree, &eo, &img, image_path, reference, threads, stats, tree_path,
-                        t_load);
+        rc = reeval_one(tree, &eo, &img, image_path, region, reference, threads, stats,
+                        tree_path, t_load);
         progress_end(&prog);
     } else {
         char line[8192], path[4096];
@@ -993,7 +1066,8 @@ static int cmd_reeval(int argc, char **argv)
                 rc = 1;
                 break;
             }
-            if (reeval_one(tree, &eo, &img, path, reference, threads, stats, tree_path, t_load)) {
+            if (reeval_one(tree, &eo, &img, path, region, reference, threads, stats, tree_path,
+                           t_load)) {
                 rc = 1;
                 break;
             }
@@ -1100,6 +1174,178 @@ static int cmd_info(int argc, char **argv)
     return 0;
 }
 
+
+/* ---------------------------------------------------------------- merge */
+
+static const char merge_help[] =
+    "usage: rtp merge -o TREE [-i IMAGE] REGION.rtp...\n"
+    "       rtp merge -i IMAGE --size WxH REGION-IMAGE@X,Y...\n"
+    "Joins what `rtp trace --region` made on several machines into the whole\n"
+    "frame: region trees into the frame's tree (and, with -i, its image,\n"
+    "identical to a whole-frame trace), or region images placed at X,Y.\n"
+    "  -o, --output TREE    the joined tree file ('-' = stdout)\n"
+    "  -i, --image FILE     the joined image (.png .ppm .pfm; '-' = PFM on stdout)\n"
+    "  --size WxH           the frame's size (image mode)\n"
+    "  -j N                 threads for evaluating the joined tree\n"
+    "Regions must cover the frame without overlapping.\n";
+
+static int cmd_merge(int argc, char **argv)
+{
+    const char *out_tree = NULL, *out_image = NULL;
+    int i, n = 0, rc = 1, fw = 0, fh = 0, threads = 1, images = 0;
+    const char **in = (const char **)calloc((size_t)argc + 1, sizeof *in);
+    rtp_tree **parts = NULL, *joined = NULL;
+    rtp_image *img = NULL;
+    rtp_error err;
+    memset(&err, 0, sizeof err);
+    if (!in) {
+        msg("out of memory");
+        return 1;
+    }
+    for (i = 0; i < argc; i++) {
+        const char *a = argv[i], *v;
+        if (strcmp(a, "-h") == 0 || strcmp(a, "--help") == 0) {
+            fputs(merge_help, stdout);
+            free(in);
+            return 0;
+        } else if (strcmp(a, "-q") == 0 || strcmp(a, "--quiet") == 0) {
+            verbosity = 0;
+        } else if (strcmp(a, "-o") == 0 || is_opt(a, "--output")) {
+            if (!(out_tree = opt_value(argc, argv, &i, a[1] == 'o' ? "-o" : "--output")))
+                goto usage;
+        } else if (strcmp(a, "-i") == 0 || is_opt(a, "--image")) {
+            if (!(out_image = opt_value(argc, argv, &i, a[1] == 'i' ? "-i" : "--image")))
+                goto usage;
+        } else if (strncmp(a, "-j", 2) == 0) {
+            if (!(v = opt_value(argc, argv, &i, "-j")) || parse_int(v, 1, 256, &threads)) {
+                msg("-j: expected a thread count from 1 to 256");
+                goto usage;
+            }
+        } else if (is_opt(a, "--size")) {
+            char *x;
+            if (!(v = opt_value(argc, argv, &i, "--size")) || !(x = strchr(v, 'x'))) {
+                msg("--size: expected WxH");
+                goto usage;
+            }
+            *x = '\0';
+            if (parse_int(v, 1, 1 << 20, &fw) || parse_int(x + 1, 1, 1 << 20, &fh)) {
+                *x = 'x';
+                msg("--size: expected WxH");
+                goto usage;
+            }
+            *x = 'x';
+        } else if (a[0] == '-' && a[1] != '\0') {
+            msg("merge: unknown option '%s'", a);
+            goto usage;
+        } else {
+            in[n++] = a;
+            if (strchr(a, '@'))
+                images = 1;
+        }
+    }
+    if (!n || (!out_tree && !out_image) || (images && (!out_image || !fw || out_tree))) {
+        msg("merge: give region trees and -o (and/or -i), or region images with @X,Y, "
+            "--size and -i");
+        goto usage;
+    }
+    if (images) {
+        int x0, y0, x, y;
+        if (rtp_image_create(fw, fh, NULL, &img, &err) != RTP_OK) {
+            fail_err(&err);
+            goto out;
+        }
+        /* NaN marks what no region has covered yet */
+        for (i = 0; i < fw * fh * 3; i++)
+            img->pixels[i] = NAN;
+        for (i = 0; i < n; i++) {
+            char path[4096];
+            const char *at = strrchr(in[i], '@');
+            rtp_image *part = NULL;
+            size_t pl = (size_t)(at - in[i]);
+            if (!at || pl >= sizeof path || sscanf(at + 1, "%d,%d", &x0, &y0) != 2) {
+                msg("merge: %s: expected IMAGE@X,Y", in[i]);
+                goto out;
+            }
+            memcpy(path, in[i], pl);
+            path[pl] = '\0';
+            if (rtp_image_read(path, NULL, &part, &err) != RTP_OK) {
+                fail_err(&err);
+                goto out;
+            }
+            if (x0 < 0 || y0 < 0 || part->width > fw - x0 || part->height > fh - y0) {
+                msg("merge: %s (%dx%d at %d,%d) does not fit the %dx%d frame", path,
+                    part->width, part->height, x0, y0, fw, fh);
+                rtp_image_destroy(part);
+                goto out;
+            }
+            for (y = 0; y < part->height; y++)
+                for (x = 0; x < part->width; x++) {
+                    float *d = img->pixels + 3 * ((size_t)(y0 + y) * fw + (size_t)(x0 + x));
+                    const float *sp = part->pixels + 3 * ((size_t)y * part->width + x);
+                    if (!isnan(d[0])) {
+                        msg("merge: %s overlaps another region at %d,%d", path, x0 + x, y0 + y);
+                        rtp_image_destroy(part);
+                        goto out;
+                    }
+                    d[0] = sp[0];
+                    d[1] = sp[1];
+                    d[2] = sp[2];
+                }
+            rtp_image_destroy(part);
+        }
+        for (i = 0; i < fw * fh; i++)
+            if (isnan(img->pixels[3 * i])) {
+                msg("merge: pixel %d,%d is in no region", i % fw, i / fw);
+                goto out;
+            }
+    } else {
+        rtp_eval_options eo;
+        parts = (rtp_tree **)calloc((size_t)n, sizeof *parts);
+        if (!parts) {
+            msg("out of memory");
+            goto out;
+        }
+        for (i = 0; i < n; i++)
+            if (rtp_tree_read(in[i], NULL, &parts[i], &err) != RTP_OK) {
+                fail_err(&err);
+                goto out;
+            }
+        if (rtp_tree_merge(parts, (size_t)n, &joined, &err) != RTP_OK) {
+            fail_err(&err);
+            goto out;
+        }
+        if (out_tree && rtp_tree_write(joined, out_tree, NULL, &err) != RTP_OK) {
+            fail_err(&err);
+            goto out;
+        }
+        memset(&eo, 0, sizeof eo);
+        eo.threads = threads;
+        eo.no_cache = 1;
+        if (out_image && rtp_tree_eval(joined, &eo, &img, NULL, &err) != RTP_OK) {
+            fail_err(&err);
+            goto out;
+        }
+    }
+    if (out_image && rtp_image_write(img, out_image, RTP_IMAGE_AUTO, &err) != RTP_OK) {
+        fail_err(&err);
+        goto out;
+    }
+    rc = 0;
+out:
+    if (parts)
+        for (i = 0; i < n; i++)
+            rtp_tree_destroy(parts[i]);
+    free(parts);
+    rtp_tree_destroy(joined);
+    rtp_image_destroy(img);
+    free(in);
+    return rc;
+usage:
+    fputs(merge_help, stderr);
+    free(in);
+    return EXIT_USAGE;
+}
+
 /* ----------------------------------------------------------------- main */
 
 static const char main_help[] =
@@ -1108,6 +1354,7 @@ static const char main_help[] =
     "  trace SCENE   trace a scene (NFF or OBJ); write the image and ray trees\n"
     "  reeval TREE   re-evaluate ray trees with edited parameters, no tracing\n"
     "  info TREE     what a tree file holds\n"
+    "  merge ...     join region trees or images into the whole frame\n"
     "  diff A B      compare two images: MAE, RMSE, PSNR, max error, heat map\n"
     "  version       print the version\n"
     "Exit status: 0 ok, 1 failure, 2 usage error, 3 diff over --fail-above.\n";
@@ -1138,6 +1385,8 @@ int main(int argc, char **argv)
         return cmd_reeval(argc - 2, argv + 2);
     if (strcmp(argv[1], "info") == 0)
         return cmd_info(argc - 2, argv + 2);
+    if (strcmp(argv[1], "merge") == 0)
+        return cmd_merge(argc - 2, argv + 2);
     msg("unknown command '%s'", argv[1]);
     fputs(main_help, stderr);
     return EXIT_USAGE;

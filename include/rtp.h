@@ -171,6 +171,9 @@ typedef struct rtp_trace_options {
     int max_depth;      /* ray-tree depth, eye ray = 1; 0: 5 */
     double min_weight;  /* rays weighing less are not spawned; 0: none */
     int threads;        /* 0 or 1: the calling thread only */
+    int region[4];      /* x0, y0, x1, y1: trace only pixels x0 <= x < x1,
+                           y0 <= y < y1 of the frame (all 0: the frame);
+                           the image is the region's; see rtp_tree_merge */
     /* Called now and then from the calling thread with done in [0,1];
        NULL for none. */
     void (*progress)(void *user, double done);
@@ -286,8 +289,17 @@ rtp_status rtp_tree_add_light(rtp_tree *tree, const double pos[3],
 rtp_status rtp_tree_trace(const rtp_tree *tree, int threads, rtp_image **out,
                           rtp_trace_stats *stats, rtp_error *err);
 
+/** Joins trees traced from regions of one frame (rtp_trace_options.region)
+ *  of the same scene with the same options into the whole frame's tree;
+ *  the regions must cover the frame without overlapping.  Its evaluation
+ *  equals a whole-frame trace bit for bit. */
+rtp_status rtp_tree_merge(rtp_tree *const *parts, size_t n, rtp_tree **out,
+                          rtp_error *err);
+
 typedef struct rtp_tree_info {
     int width, height, spd, max_depth;
+    int full_width, full_height, region_x, region_y; /* the frame and where
+                                                        this region is */
     unsigned long long samples, nodes;
     unsigned bytes_per_node;  /* size of one node record */
     unsigned long long tree_bytes; /* nodes, visibility and sample index */

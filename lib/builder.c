@@ -341,6 +341,8 @@ rtp_status rtp_builder_finish(rtp_builder *b, rtp_tree **out, rtp_error *err)
     t->vis_words = b->words;
     t->width = b->width;
     t->height = b->height;
+    t->full_w = b->width;
+    t->full_h = b->height;
     t->nx = b->nx;
     t->ny = b->ny;
     t->spd = b->spd;

@@ -403,8 +403,10 @@ struct rtp_tree {
     rtp_scene *scene;      /* owned copy: parameters are edited here */
     rtpi_material *mats0;  /* materials as traced (names not kept) */
     rtpi_light *lights0;   /* lights as traced (names not kept) */
-    int width, height;     /* image */
+    int width, height;     /* image (of the region, when one was traced) */
     int nx, ny;            /* sample grid: image, or corners + 1 (SPD) */
+    int full_w, full_h;    /* the whole frame the camera spans */
+    int rx, ry;            /* the region's first pixel in the frame */
     int spd, max_depth;
     double min_weight;
     rtpi_cnode *nodes;

@@ -64,6 +64,8 @@ struct shared {
     row_rec *rows;     /* per row when recording, else NULL */
     rtpi_shade_ctx shade;
     double *cl;        /* light colours as shading sees them */
+    int gx, gy;        /* samples traced: the region's grid */
+    int ox, oy;        /* its first sample in the frame's grid */
 };
 
 static double now_seconds(void)
@@ -283,7 +285,7 @@ static void trace_sample(worker *w, int x, int y, float *rgb)
 {
     const camera *c = &w->sh->cam;
     size_t words = w->sh->shade.vis_words;
-    w->counts[x] = (uint32_t)record_sample(w, x, y);
+    w->counts[x] = (uint32_t)record_sample(w, w->sh->ox + x, w->sh->oy + y);
     /* The sample's colour is the evaluation of the tree just recorded,
        by the steps re-evaluation takes. */
     {
@@ -313,8 +315,8 @@ static int trace_row(void *ctx, int y)
     if (w->status != RTP_OK)
         return 1;
     w->nn = 0;
-    for (x = 0; x < sh->cam.nx; x++)
-        trace_sample(w, x, y, sh->out + 3 * ((size_t)y * sh->cam.nx + x));
+    for (x = 0; x < sh->gx; x++)
+        trace_sample(w, x, y, sh->out + 3 * ((size_t)y * sh->gx + x));
     if (w->status != RTP_OK)
         return 1;
     if (sh->rows) {
@@ -323,7 +325,7 @@ static int trace_row(void *ctx, int y)
         size_t words = sh->shade.vis_words;
         r->nnodes = w->nn;
         r->nodes = (rtpi_cnode *)rtpi_malloc_array(&sh->s->alloc, w->nn, sizeof *r->nodes);
-        r->counts = (uint32_t *)rtpi_malloc_array(&sh->s->alloc, (size_t)sh->cam.nx,
+        r->counts = (uint32_t *)rtpi_malloc_array(&sh->s->alloc, (size_t)sh->gx,
                                                   sizeof *r->counts);
         r->vis = words ? (uint32_t *)rtpi_malloc_array(&sh->s->alloc, w->nn * words,
                                                        sizeof *r->vis)
@@ -333,7 +335,7 @@ static int trace_row(void *ctx, int y)
             return 1;
         }
         memcpy(r->nodes, w->nodes, w->nn * sizeof *r->nodes);
-        memcpy(r->counts, w->counts, (size_t)sh->cam.nx * sizeof *r->counts);
+        memcpy(r->counts, w->counts, (size_t)sh->gx * sizeof *r->counts);
         if (words)
             memcpy(r->vis, w->vis, w->nn * words * sizeof *r->vis);
     }
@@ -366,7 +368,7 @@ static rtp_status gather_tree(const shared *sh, const rtp_trace_options *opt,
     rtp_tree *t;
     size_t total = 0, words = sh->shade.vis_words, k = 0, at = 0;
     int y, x;
-    for (y = 0; y < sh->cam.ny; y++)
+    for (y = 0; y < sh->gy; y++)
         total += sh->rows[y].nnodes;
     t = (rtp_tree *)rtpi_calloc_array(a, 1, sizeof *t);
     if (!t)
@@ -374,8 +376,12 @@ static rtp_status gather_tree(const shared *sh, const rtp_trace_options *opt,
     t->alloc = *a;
     t->width = w;
     t->height = h;
-    t->nx = sh->cam.nx;
-    t->ny = sh->cam.ny;
+    t->nx = sh->gx;
+    t->ny = sh->gy;
+    t->full_w = sh->cam.nx - sh->spd;
+    t->full_h = sh->cam.ny - sh->spd;
+    t->rx = sh->ox;
+    t->ry = sh->oy;
     t->spd = sh->spd;
     t->max_depth = sh->max_depth;
     t->min_weight = sh->min_weight;
@@ -405,13 +411,13 @@ static rtp_status gather_tree(const shared *sh, const rtp_trace_options *opt,
     for (k = 0; k < s->nlights; k++)
         t->lights0[k].name = NULL;
     k = 0;
-    for (y = 0; y < sh->cam.ny; y++) {
+    for (y = 0; y < sh->gy; y++) {
         const row_rec *r = &sh->rows[y];
         if (r->nnodes)
             memcpy(t->nodes + at, r->nodes, r->nnodes * sizeof *t->nodes);
         if (words && r->nnodes)
             memcpy(t->vis_ext + at * words, r->vis, r->nnodes * words * sizeof *r->vis);
-        for (x = 0; x < sh->cam.nx; x++) {
+        for (x = 0; x < sh->gx; x++) {
             t->start[k++] = at;
             at += r->counts[x];
         }
@@ -433,7 +439,7 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
     rtp_image *img = NULL;
     float *samples = NULL;
     rtp_status st;
-    int w, h, nthreads, i;
+    int w, h, fw, fh, rg[4], nthreads, i;
     double t0, t1, t2;
     rtpi_kd_stats ks;
 
@@ -450,13 +456,30 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
         !(opt.min_weight >= 0.0))
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
                           "rtp_trace: negative option value");
-    w = opt.width > 0 ? opt.width : s->width;
-    h = opt.height > 0 ? opt.height : s->height;
+    fw = opt.width > 0 ? opt.width : s->width;
+    fh = opt.height > 0 ? opt.height : s->height;
     if (opt.spd)
-        w = h = 512;
+        fw = fh = 512;
+    rg[0] = opt.region[0];
+    rg[1] = opt.region[1];
+    rg[2] = opt.region[2];
+    rg[3] = opt.region[3];
+    if (!rg[0] && !rg[1] && !rg[2] && !rg[3]) {
+        rg[2] = fw;
+        rg[3] = fh;
+    }
+    if (rg[0] < 0 || rg[1] < 0 || rg[2] > fw || rg[3] > fh || rg[0] >= rg[2] ||
+        rg[1] >= rg[3])
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                          "region %d,%d,%d,%d is not inside the %dx%d image", rg[0], rg[1],
+                          rg[2], rg[3], fw, fh);
+    w = rg[2] - rg[0];
+    h = rg[3] - rg[1];
     nthreads = opt.threads > 1 ? opt.threads : 1;
     if (nthreads > RTPI_MAX_THREADS)
         nthreads = RTPI_MAX_THREADS;
+    if (!rtpi_image_size_ok(fw + 1, fh + 1))
+        return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0, "image size %dx%d not allowed", fw, fh);
     st = rtp_image_create(w, h, &s->alloc, &img, err);
     if (st != RTP_OK)
         return st;
@@ -469,17 +492,21 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
     sh.shade.s = s;
     sh.shade.one_sided = opt.spd;
     sh.shade.vis_words = s->nlights > 32 ? (s->nlights + 31) / 32 : 0;
-    /* SPD: rays through the (w+1)x(h+1) pixel corners, averaged. */
-    camera_init(&sh.cam, s, opt.spd ? w + 1 : w, opt.spd ? h + 1 : h);
-    samples = (float *)rtpi_malloc_array(&s->alloc, (size_t)sh.cam.nx * sh.cam.ny,
-                                         3 * sizeof(float));
+    /* SPD: rays through the (w+1)x(h+1) pixel corners, averaged.  The
+       camera spans the whole frame; a region traces its part of it. */
+    camera_init(&sh.cam, s, fw + opt.spd, fh + opt.spd);
+    sh.gx = w + opt.spd;
+    sh.gy = h + opt.spd;
+    sh.ox = rg[0];
+    sh.oy = rg[1];
+    samples = (float *)rtpi_malloc_array(&s->alloc, (size_t)sh.gx * sh.gy, 3 * sizeof(float));
     sh.cl = (double *)rtpi_malloc_array(&s->alloc, s->nlights ? 3 * s->nlights : 1,
                                         sizeof *sh.cl);
     if (sh.cl)
         rtpi_light_colors(s, sh.cl);
     ws = (worker *)rtpi_calloc_array(&s->alloc, (size_t)nthreads, sizeof *ws);
     if (tree_out)
-        sh.rows = (row_rec *)rtpi_calloc_array(&s->alloc, (size_t)sh.cam.ny, sizeof *sh.rows);
+        sh.rows = (row_rec *)rtpi_calloc_array(&s->alloc, (size_t)sh.gy, sizeof *sh.rows);
     if (!samples || !ws || !sh.cl || (tree_out && !sh.rows)) {
         st = rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
         goto done;
@@ -488,7 +515,7 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
     for (i = 0; i < nthreads; i++) {
         ws[i].sh = &sh;
         ws[i].status = RTP_OK;
-        ws[i].counts = (uint32_t *)rtpi_malloc_array(&s->alloc, (size_t)sh.cam.nx,
+        ws[i].counts = (uint32_t *)rtpi_malloc_array(&s->alloc, (size_t)sh.gx,
                                                      sizeof *ws[i].counts);
         ws[i].coeffs = (float *)rtpi_malloc_array(&s->alloc, RTPI_COEFFS(s->nlights),
                                                   sizeof *ws[i].coeffs);
@@ -507,8 +534,7 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
         goto done;
     sh.kd = kd;
     t1 = now_seconds();
-    rtpi_parallel_rows(sh.cam.ny, nthreads, ctx, trace_row, opt.progress,
-                       opt.progress_user);
+    rtpi_parallel_rows(sh.gy, nthreads, ctx, trace_row, opt.progress, opt.progress_user);
     t2 = now_seconds();
     for (i = 0; i < nthreads; i++)
         if (ws[i].status != RTP_OK) {
@@ -553,7 +579,7 @@ done:
         rtpi_free(&s->alloc, ws);
     }
     if (sh.rows) {
-        for (i = 0; i < sh.cam.ny; i++) {
+        for (i = 0; i < sh.gy; i++) {
             rtpi_free(&s->alloc, sh.rows[i].nodes);
             rtpi_free(&s->alloc, sh.rows[i].counts);
             rtpi_free(&s->alloc, sh.rows[i].vis);
@@ -607,8 +633,8 @@ static int retrace_chunk(void *ctx, int ci)
     w->nn = 0;
     for (; i < end; i++, k++) {
         uint32_t smp = j->samples[i];
-        w->counts[k] = (uint32_t)record_sample(w, (int)(smp % (uint32_t)sh->cam.nx),
-                                               (int)(smp / (uint32_t)sh->cam.nx));
+        w->counts[k] = (uint32_t)record_sample(w, sh->ox + (int)(smp % (uint32_t)sh->gx),
+                                               sh->oy + (int)(smp / (uint32_t)sh->gx));
         if (w->status != RTP_OK)
             return 1;
     }
@@ -674,7 +700,11 @@ rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int thre
     sh.shade.s = &tmp;
     sh.shade.one_sided = t->spd;
     sh.shade.vis_words = words;
-    camera_init(&sh.cam, &tmp, t->nx, t->ny);
+    camera_init(&sh.cam, &tmp, t->full_w + t->spd, t->full_h + t->spd);
+    sh.gx = t->nx;
+    sh.gy = t->ny;
+    sh.ox = t->rx;
+    sh.oy = t->ry;
     nchunks = (n + chunk - 1) / chunk;
     jobs = (retrace_job *)rtpi_calloc_array(a, (size_t)nthreads, sizeof *jobs);
     chunks = (row_rec *)rtpi_calloc_array(a, nchunks, sizeof *chunks);

@@ -39,6 +39,10 @@ void rtp_tree_get_info(const rtp_tree *t, rtp_tree_info *info)
         return;
     info->width = t->width;
     info->height = t->height;
+    info->full_width = t->full_w;
+    info->full_height = t->full_h;
+    info->region_x = t->rx;
+    info->region_y = t->ry;
     info->spd = t->spd;
     info->max_depth = t->max_depth;
     info->samples = (unsigned long long)t->nx * (unsigned long long)t->ny;
@@ -796,4 +800,173 @@ rtp_status rtp_tree_trace(const rtp_tree *t, int threads, rtp_image **out,
     o.min_weight = t->min_weight;
     o.threads = threads;
     return rtp_trace(t->scene, &o, out, stats, err);
+}
+
+/* ---------------------------------------------------------------- merge */
+
+/* Same scene and options?  The parts of one frame were traced from one
+   scene file with one command line, so their scenes are equal value for
+   value (names and texture paths included). */
+static int same_setup(const rtp_tree *a, const rtp_tree *b)
+{
+    const rtp_scene *x = a->scene, *y = b->scene;
+    size_t i;
+    if (a->full_w != b->full_w || a->full_h != b->full_h || a->spd != b->spd ||
+        a->max_depth != b->max_depth || a->min_weight != b->min_weight ||
+        a->vis_words != b->vis_words || a->nlights0 != b->nlights0 ||
+        x->nlights != y->nlights || x->nmats != y->nmats || x->ntris != y->ntris ||
+        x->nspheres != y->nspheres || x->ncones != y->ncones || x->npos != y->npos ||
+        x->nnrm != y->nnrm || x->nuv != y->nuv || x->ntexs != y->ntexs ||
+        memcmp(&x->camera, &y->camera, sizeof x->camera) != 0 ||
+        memcmp(x->background, y->background, sizeof x->background) != 0 ||
+        memcmp(x->ambient, y->ambient, sizeof x->ambient) != 0 ||
+        x->light_scale != y->light_scale)
+        return 0;
+    if ((x->npos && memcmp(x->pos, y->pos, x->npos * 3 * sizeof *x->pos)) ||
+        (x->nnrm && memcmp(x->nrm, y->nrm, x->nnrm * 3 * sizeof *x->nrm)) ||
+        (x->nuv && memcmp(x->uv, y->uv, x->nuv * 2 * sizeof *x->uv)) ||
+        (x->ntris && memcmp(x->tris, y->tris, x->ntris * sizeof *x->tris)) ||
+        (x->nspheres && memcmp(x->spheres, y->spheres, x->nspheres * sizeof *x->spheres)) ||
+        (x->ncones && memcmp(x->cones, y->cones, x->ncones * sizeof *x->cones)))
+        return 0;
+    for (i = 0; i < x->nmats; i++) {
+        rtpi_material m = x->mats[i], n = y->mats[i];
+        m.name = n.name = NULL;
+        if (memcmp(&m, &n, sizeof m) != 0 || memcmp(&a->mats0[i], &b->mats0[i], sizeof m) != 0)
+            return 0;
+    }
+    for (i = 0; i < x->nlights; i++) {
+        rtpi_light l = x->lights[i], k = y->lights[i];
+        l.name = k.name = NULL;
+        if (memcmp(&l, &k, sizeof l) != 0)
+            return 0;
+    }
+    return 1;
+}
+
+rtp_status rtp_tree_merge(rtp_tree *const *parts, size_t n, rtp_tree **out, rtp_error *err)
+{
+    const rtp_tree *p0;
+    rtp_tree *t = NULL;
+    const rtp_allocator *a;
+    size_t i, k, ns, total = 0, at = 0, words;
+    int fw, fh, gx, gy, x, y, spd;
+    int32_t *owner = NULL; /* per frame sample: which part has it */
+    rtp_status st = RTP_OK;
+    if (!parts || !n || !out)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_merge: no trees");
+    *out = NULL;
+    p0 = parts[0];
+    a = &p0->alloc;
+    fw = p0->full_w;
+    fh = p0->full_h;
+    spd = p0->spd;
+    gx = fw + spd;
+    gy = fh + spd;
+    words = p0->vis_words;
+    for (i = 0; i < n; i++) {
+        if (!parts[i])
+            return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_merge: NULL tree");
+        if (i && !same_setup(p0, parts[i]))
+            return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                              "tree %zu was traced from another scene, frame or options", i);
+        if (parts[i]->scene->nlights != parts[i]->nlights0)
+            return rtpi_error(err, RTP_ERR_UNSUPPORTED, NULL, 0, 0,
+                              "tree %zu has added lights", i);
+    }
+    ns = (size_t)gx * gy;
+    owner = (int32_t *)rtpi_malloc_array(a, ns, sizeof *owner);
+    if (!owner)
+        return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+    for (k = 0; k < ns; k++)
+        owner[k] = -1;
+    /* pixels: each exactly once; SPD corner samples on shared edges are
+       traced by both neighbours, identically: the first one is kept */
+    {
+        unsigned char *px = (unsigned char *)rtpi_calloc_array(a, (size_t)fw * fh, 1);
+        if (!px) {
+            rtpi_free(a, owner);
+            return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+        }
+        for (i = 0; i < n && st == RTP_OK; i++) {
+            const rtp_tree *p = parts[i];
+            for (y = 0; y < p->height && st == RTP_OK; y++)
+                for (x = 0; x < p->width; x++) {
+                    unsigned char *c = &px[(size_t)(p->ry + y) * fw + (size_t)(p->rx + x)];
+                    if (*c) {
+                        st = rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                                        "regions overlap at pixel %d,%d (tree %zu)", p->rx + x,
+                                        p->ry + y, i);
+                        break;
+                    }
+                    *c = 1;
+                }
+            for (y = 0; y < p->ny; y++)
+                for (x = 0; x < p->nx; x++) {
+                    size_t f = (size_t)(p->ry + y) * gx + (size_t)(p->rx + x);
+                    if (owner[f] < 0) {
+                        owner[f] = (int32_t)i;
+                        total += (size_t)(p->start[(size_t)y * p->nx + x + 1] -
+                                          p->start[(size_t)y * p->nx + x]);
+                    }
+                }
+        }
+        for (k = 0; st == RTP_OK && k < (size_t)fw * fh; k++)
+            if (!px[k])
+                st = rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                                "the regions leave pixel %d,%d uncovered", (int)(k % (size_t)fw),
+                                (int)(k / (size_t)fw));
+        rtpi_free(a, px);
+    }
+    if (st != RTP_OK)
+        goto fail;
+    t = (rtp_tree *)rtpi_calloc_array(a, 1, sizeof *t);
+    if (!t)
+        goto nomem;
+    t->alloc = *a;
+    t->width = t->full_w = fw;
+    t->height = t->full_h = fh;
+    t->nx = gx;
+    t->ny = gy;
+    t->spd = spd;
+    t->max_depth = p0->max_depth;
+    t->min_weight = p0->min_weight;
+    t->vis_words = words;
+    t->nnodes = total;
+    t->nlights0 = p0->nlights0;
+    if (rtpi_scene_clone(p0->scene, &t->scene) != RTP_OK)
+        goto nomem;
+    t->mats0 = (rtpi_material *)rtpi_malloc_array(a, t->scene->nmats + 1, sizeof *t->mats0);
+    t->lights0 = (rtpi_light *)rtpi_malloc_array(a, t->scene->nlights + 1, sizeof *t->lights0);
+    t->nodes = (rtpi_cnode *)rtpi_malloc_array(a, total + 1, sizeof *t->nodes);
+    t->start = (uint64_t *)rtpi_malloc_array(a, ns + 1, sizeof *t->start);
+    if (words)
+        t->vis_ext = (uint32_t *)rtpi_malloc_array(a, total * words + 1, sizeof *t->vis_ext);
+    if (!t->mats0 || !t->lights0 || !t->nodes || !t->start || (words && !t->vis_ext))
+        goto nomem;
+    memcpy(t->mats0, p0->mats0, t->scene->nmats * sizeof *t->mats0);
+    memcpy(t->lights0, p0->lights0, t->scene->nlights * sizeof *t->lights0);
+    for (y = 0; y < gy; y++)
+        for (x = 0; x < gx; x++) {
+            size_t f = (size_t)y * gx + x, ls, cnt;
+            const rtp_tree *p = parts[owner[f]];
+            ls = (size_t)(y - p->ry) * p->nx + (size_t)(x - p->rx);
+            cnt = (size_t)(p->start[ls + 1] - p->start[ls]);
+            t->start[f] = at;
+            memcpy(t->nodes + at, p->nodes + p->start[ls], cnt * sizeof *t->nodes);
+            if (words)
+                memcpy(t->vis_ext + at * words, p->vis_ext + p->start[ls] * words,
+                       cnt * words * sizeof *t->vis_ext);
+            at += cnt;
+        }
+    t->start[ns] = at;
+    rtpi_free(a, owner);
+    *out = t;
+    return RTP_OK;
+nomem:
+    st = rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+fail:
+    rtpi_free(a, owner);
+    rtp_tree_destroy(t);
+    return st;
 }

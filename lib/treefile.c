@@ -207,6 +207,10 @@ static rtp_status serialize(const rtp_tree *t, buf *out)
     put_u32(&b, (uint32_t)t->spd);
     put_u32(&b, (uint32_t)t->max_depth);
     put_f64(&b, t->min_weight);
+    put_u32(&b, (uint32_t)t->full_w);
+    put_u32(&b, (uint32_t)t->full_h);
+    put_u32(&b, (uint32_t)t->rx);
+    put_u32(&b, (uint32_t)t->ry);
     put_section(out, "HEAD", &b);
 
     body_reset(&b);
@@ -565,8 +569,15 @@ static rtp_status read_head(loader *L, rd *r)
     t->spd = (int)get_u32(r);
     t->max_depth = (int)get_u32(r);
     t->min_weight = get_f64(r);
+    t->full_w = (int)get_u32(r);
+    t->full_h = (int)get_u32(r);
+    t->rx = (int)get_u32(r);
+    t->ry = (int)get_u32(r);
     if (r->bad)
         return bad(L, "header too short", NULL);
+    if (!rtpi_image_size_ok(t->full_w, t->full_h) || t->rx < 0 || t->ry < 0 ||
+        t->width > t->full_w - t->rx || t->height > t->full_h - t->ry)
+        return bad(L, "region outside the frame", NULL);
     if (!rtpi_image_size_ok(t->width, t->height) || t->spd < 0 || t->spd > 1 ||
         t->nx != t->width + t->spd || t->ny != t->height + t->spd)
         return bad(L, "invalid image or sample size", NULL);

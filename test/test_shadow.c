@@ -482,11 +482,34 @@ static void test_osmesa(void)
     memset(&err, 0, sizeof err);
     if (rtpi_itembuf_build_osmesa(s, v3(2, -2, 6), 64, &a, &gl, &err) == RTP_ERR_UNSUPPORTED) {
         char buf[256];
-        rtp_scene_destroy(s);
+        rtpi_shadow *sh = NULL;
         CHECK(strstr(rtp_error_format(&err, buf, sizeof buf), "OSMESA=1") != NULL);
+        CHECK(rtpi_shadow_create(s, NULL, v3(2, -2, 6), RTPI_SHADOW_OSMESA, 0, &a, &sh, NULL) ==
+              RTP_ERR_UNSUPPORTED);
+        CHECK(sh == NULL);
+        rtp_scene_destroy(s);
         SKIP("not built with OSMESA=1");
     }
     rtpi_itembuf_free(&gl, &a);
+    {
+        /* its decisions against the kd-tree's, as for the software one */
+        rtpi_kdtree *kd = NULL;
+        sample *sm = (sample *)malloc(NSAMPLES * sizeof *sm);
+        if (sm && rtpi_kd_build(s, NULL, &kd, NULL) == RTP_OK) {
+            for (li = 0; li < NLIGHTS; li++) {
+                rtpi_v3 lp = v3(lights[li].pos[0], lights[li].pos[1], lights[li].pos[2]);
+                size_t n = make_samples(s, kd, lp, sm, NSAMPLES / 3);
+                size_t bad = compare(s, kd, lp, RTPI_SHADOW_OSMESA, 1024, sm, n, NULL);
+                printf("  osmesa light %-30s %6lu points: wrong %.3f%%\n", lights[li].name,
+                       (unsigned long)n, 100.0 * (double)bad / (double)(n ? n : 1));
+                CHECK((double)bad < 0.01 * (double)n);
+            }
+        } else {
+            CHECK(0);
+        }
+        rtpi_kd_destroy(kd);
+        free(sm);
+    }
     for (li = 0; li < NLIGHTS; li++) {
         rtpi_v3 lp = v3(lights[li].pos[0], lights[li].pos[1], lights[li].pos[2]);
         size_t k, same = 0, ncells;

@@ -1,0 +1,52 @@
+#!/bin/sh
+# Splitting a frame across machines: regions traced apart (here with
+# xargs -P, as a farm would), merged, must equal a whole-frame run bit for
+# bit — images, trees, and re-evaluations of the merged tree.
+RTP=${RTP:-./rtp}
+T=${TMPDIR:-/tmp}/rtp-region.$$
+mkdir -p "$T"
+pass=0; fail=0; skip=0
+ok()  { pass=$((pass + 1)); }
+bad() { fail=$((fail + 1)); echo "FAIL: $*" >&2; }
+S=scenes/spheres.nff
+
+for mode in "" "--spd"; do
+    if [ -n "$mode" ]; then size=512; regions="0,0,512,200 0,200,300,512 300,200,512,512"
+    else size=72; regions="0,0,40,30 40,0,72,30 0,30,72,72"; fi
+    $RTP trace $S $mode --size ${size}x$size -o "$T/full.rtp" -i "$T/full.pfm" -q
+    # the farm: one job per region, two at a time
+    echo $regions | tr ' ' '\n' |
+        xargs -P 2 -I R $RTP trace $S $mode --size ${size}x$size --region R \
+            -o "$T/part-R.rtp" -i "$T/part-R.pfm" -q
+    $RTP merge -o "$T/merged.rtp" -i "$T/merged.pfm" "$T"/part-*.rtp
+    cmp -s "$T/full.pfm" "$T/merged.pfm" && ok || bad "merged trees $mode: image differs"
+    args=""
+    for r in $regions; do args="$args $T/part-$r.pfm@${r%%,*},$(echo $r | cut -d, -f2)"; done
+    $RTP merge -i "$T/mimg.pfm" --size ${size}x$size $args
+    cmp -s "$T/full.pfm" "$T/mimg.pfm" && ok || bad "merged images $mode differ"
+    # the merged tree re-evaluates like the whole one, moved light and class D too
+    for kv in "light.key.pos=1,-4,5" "mat.floor.ks=0.3"; do
+        $RTP reeval "$T/merged.rtp" --set $kv -i "$T/a.pfm" -q
+        $RTP reeval "$T/full.rtp" --set $kv -i "$T/b.pfm" -q
+        cmp -s "$T/a.pfm" "$T/b.pfm" && ok || bad "reeval of merged tree $mode --set $kv"
+    done
+    # a region tree re-evaluates its own pixels like the whole tree does
+    r=$(echo $regions | cut -d' ' -f2)
+    $RTP reeval "$T/part-$r.rtp" --set light.key.pos=1,-4,5 -i "$T/c.pfm" -q
+    $RTP reeval "$T/full.rtp" --set light.key.pos=1,-4,5 --region $r -i "$T/d.pfm" -q
+    cmp -s "$T/c.pfm" "$T/d.pfm" && ok || bad "region tree reeval $mode"
+    rm -f "$T"/part-*
+done
+# regions that overlap or leave a gap are refused
+$RTP trace $S --size 32x32 --region 0,0,32,20 -o "$T/p1.rtp" -i "$T/p1.pfm" -q
+$RTP trace $S --size 32x32 --region 0,10,32,32 -o "$T/p2.rtp" -i "$T/p2.pfm" -q
+$RTP merge -o "$T/x.rtp" "$T/p1.rtp" "$T/p2.rtp" 2>"$T/err"
+[ $? -eq 1 ] && grep -q overlap "$T/err" && ok || bad "overlap not refused"
+$RTP merge -o "$T/x.rtp" "$T/p1.rtp" 2>"$T/err"
+[ $? -eq 1 ] && grep -q uncovered "$T/err" && ok || bad "gap not refused"
+$RTP trace $S --size 32x32 --region 0,0,99,9 -i "$T/p3.pfm" -q 2>/dev/null
+[ $? -eq 1 ] && ok || bad "region outside the frame accepted"
+
+rm -rf "$T"
+echo "$pass passed, $fail failed, $skip skipped"
+[ "$fail" -eq 0 ]
