@@ -292,6 +292,7 @@ static const char trace_help[] =
     "  --spd                SPD testing procedure: 512x512 from 513x513 corner\n"
     "                       rays, depth 5, no weight cut-off, one-sided opaque\n"
     "  --depth N            maximum ray-tree depth, eye ray = 1 (default 5)\n"
+    "  --memory-limit MIB   refuse images whose image and trees need more (16384)\n"
     "  --min-weight W       do not spawn rays weighing less than W (default 0)\n"
     "  -j, --threads N      threads (default 1)\n"
     "  --stats FILE         write statistics as one JSON object ('-' = stdout)\n"
@@ -369,6 +370,14 @@ static int cmd_trace(int argc, char **argv)
         } else if (is_opt(a, "--params")) {
             if (!(params = opt_value(argc, argv, &i, "--params")))
                 goto usage;
+        } else if (is_opt(a, "--memory-limit")) {
+            double mib;
+            if (!(v = opt_value(argc, argv, &i, "--memory-limit")) || parse_double(v, &mib) ||
+                !(mib > 0)) {
+                msg("--memory-limit: expected a size in MiB > 0");
+                goto usage;
+            }
+            opt.memory_limit = mib * 1048576.0;
         } else if (is_opt(a, "--region")) {
             if (!(v = opt_value(argc, argv, &i, "--region")) || parse_region(v, opt.region)) {
                 msg("--region: expected x0,y0,x1,y1 with x0 < x1 and y0 < y1");

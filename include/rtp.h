@@ -171,6 +171,9 @@ typedef struct rtp_trace_options {
     int max_depth;      /* ray-tree depth, eye ray = 1; 0: 5 */
     double min_weight;  /* rays weighing less are not spawned; 0: none */
     int threads;        /* 0 or 1: the calling thread only */
+    double memory_limit; /* bytes the image, samples and trees may take;
+                            0: 16 GiB.  Past it: RTP_ERR_LIMIT, before any
+                            tracing */
     int region[4];      /* x0, y0, x1, y1: trace only pixels x0 <= x < x1,
                            y0 <= y < y1 of the frame (all 0: the frame);
                            the image is the region's; see rtp_tree_merge */

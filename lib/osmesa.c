@@ -34,6 +34,7 @@ rtp_status rtpi_itembuf_build_osmesa(const rtp_scene *s, rtpi_v3 light,
 typedef struct osm_face {
     int f;
     double uc, vc;
+    double ua, ub, va, vb; /* the window */
     rtpi_v3 L;
 } osm_face;
 
@@ -68,13 +69,15 @@ static void osm_basis(rtpi_v3 n, rtpi_v3 *e1, rtpi_v3 *e2)
 }
 
 /* Segments around a circle of radius r at distance d from the light so
-   that the polygon strays from the circle by under ~1/8 cell
-   (r (1 - cos(pi/N)) ~ r pi^2 / 2N^2). */
+   that the polygon strays from the circle by under ~1/32 cell
+   (r (1 - cos(pi/N)) ~ r pi^2 / 2N^2): silhouettes, and the curves where
+   a cylinder meets a sphere at a small angle, then land in the cells the
+   exact software buffer puts them in. */
 static int osm_segments(double r, double d, double cell)
 {
     double rc = d > 0.0 ? r / d / cell : 1e9; /* radius in cells */
-    double n = ceil(OSM_PI * sqrt(4.0 * (rc > 0.0 ? rc : 0.0)));
-    return n < 12.0 ? 12 : n > 1024.0 ? 1024 : (int)n;
+    double n = ceil(OSM_PI * sqrt(16.0 * (rc > 0.0 ? rc : 0.0)));
+    return n < 8.0 ? 8 : n > 2048.0 ? 2048 : (int)n;
 }
 
 /* The part of a sphere the item buffer holds: from a light outside, the
@@ -91,7 +94,7 @@ static void osm_sphere(const osm_face *fc, const rtpi_sphere *sp, double cell)
     osm_basis(w, &e1, &e2);
     th_max = D > r ? acos(r / D) : OSM_PI;
     n = osm_segments(r, D > r ? D - r : r, cell);
-    m = n / 4 < 6 ? 6 : n / 4;
+    m = n / 4 < 4 ? 4 : n / 4;
     if (D <= r)
         m *= 2;
     glBegin(GL_TRIANGLES);
@@ -154,13 +157,43 @@ static void osm_cone(const osm_face *fc, const rtpi_cone *cn, double cell)
     glEnd();
 }
 
+/* Is the box lo..hi wholly outside the face's window (all corners beyond
+   one of its four planes)? */
+static int osm_culled(const osm_face *fc, const double lo[3], const double hi[3])
+{
+    int plane, k;
+    for (plane = 0; plane < 4; plane++) {
+        int out = 1;
+        for (k = 0; k < 8 && out; k++) {
+            double q[3], x, y, z, e;
+            int a = fc->f >> 1;
+            q[0] = ((k & 1) ? hi[0] : lo[0]) - fc->L.x;
+            q[1] = ((k & 2) ? hi[1] : lo[1]) - fc->L.y;
+            q[2] = ((k & 4) ? hi[2] : lo[2]) - fc->L.z;
+            x = q[(a + 1) % 3];
+            y = q[(a + 2) % 3];
+            z = (fc->f & 1) ? -q[a] : q[a];
+            e = plane == 0 ? x - fc->ua * z : plane == 1 ? fc->ub * z - x
+              : plane == 2 ? y - fc->va * z : fc->vb * z - y;
+            out = e < 0.0;
+        }
+        if (out)
+            return 1;
+    }
+    return 0;
+}
+
 static void osm_draw(const osm_face *fc, const rtp_scene *s, double cell)
 {
     size_t i, n = rtpi_scene_nprims(s);
     for (i = 0; i < n; i++) {
         uint32_t prim = (uint32_t)i;
+        double lo[3], hi[3];
         if (!rtpi_itembuf_renders(s, prim, fc->L))
             continue;
+        rtpi_prim_bounds(s, prim, lo, hi);
+        if (osm_culled(fc, lo, hi))
+            continue; /* not on this face: spare OpenGL the triangles */
         osm_color(prim);
         if (i < s->ntris) {
             const rtpi_tri *t = &s->tris[i];
@@ -270,6 +303,10 @@ rtp_status rtpi_itembuf_build_osmesa(const rtp_scene *s, rtpi_v3 light,
         fc.L = light;
         fc.uc = ib->w.u0[f] + hu;
         fc.vc = ib->w.v0[f] + hv;
+        fc.ua = ib->w.u0[f];
+        fc.ub = ib->w.u0[f] + 2.0 * hu;
+        fc.va = ib->w.v0[f];
+        fc.vb = ib->w.v0[f] + 2.0 * hv;
         /* Near and far planes hug the scene's depths on this face (1e-3 of
            its extent outside them, for rounding), so the 24-bit depth
            buffer resolves ~1e-7 of that extent near the front. */

@@ -479,7 +479,22 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
     if (nthreads > RTPI_MAX_THREADS)
         nthreads = RTPI_MAX_THREADS;
     if (!rtpi_image_size_ok(fw + 1, fh + 1))
-        return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0, "image size %dx%d not allowed", fw, fh);
+        return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
+                          "image size %dx%d is over the limit (2^20 a side, 2^27 pixels)", fw,
+                          fh);
+    {
+        /* What this trace will hold at least: the image, the samples and,
+           when recording, one node per sample (most samples have one). */
+        double limit = opt.memory_limit > 0.0 ? opt.memory_limit : 16.0 * 1073741824.0;
+        double need = (double)w * h * 12.0 + (double)(w + 1) * (h + 1) * 12.0 +
+                      (tree_out ? (double)(w + 1) * (h + 1) * (24.0 + 8.0) : 0.0);
+        if (!(need <= limit))
+            return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
+                              "a %dx%d %s needs at least %.0f MiB, over the memory limit of "
+                              "%.0f MiB (raise it with --memory-limit)",
+                              w, h, tree_out ? "traced image with its trees" : "traced image",
+                              need / 1048576.0, limit / 1048576.0);
+    }
     st = rtp_image_create(w, h, &s->alloc, &img, err);
     if (st != RTP_OK)
         return st;
