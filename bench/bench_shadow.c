@@ -114,6 +114,24 @@ static int run_mode(const char *scene, const rtp_scene *s, const rtpi_kdtree *kd
     if (mode == RTPI_SHADOW_EXACT)
         snprintf(extra, sizeof extra, "%.1f%% of queries lit",
                  100.0 * (double)lit / (double)(n ? n : 1));
+    if (mode == RTPI_SHADOW_ITEMBUF) {
+        /* 8 bytes per cell of the faces the scene reaches */
+        rtpi_dc_window w;
+        rtpi_dc_windows(s, lp, res, 1.0, &w);
+        snprintf(extra, sizeof extra, "%.1f MB, %lu of 6 faces",
+                 (double)w.ncells * 8.0 / 1048576.0, (unsigned long)(w.ncells / ((size_t)res * res)));
+    }
+    if (mode == RTPI_SHADOW_LIGHTBUF) {
+        /* built once more on its own to see its size */
+        rtpi_lightbuf lb;
+        if (rtpi_lightbuf_build(s, lp, res, &a, &lb, NULL) == RTP_OK) {
+            snprintf(extra, sizeof extra, "%.1f MB, %.2f candidates per cell",
+                     ((double)(lb.w.ncells + 1) * 4.0 + (double)lb.nrefs * 4.0 +
+                      (double)lb.ncand * sizeof *lb.cand) / 1048576.0,
+                     (double)lb.nrefs / (double)(lb.w.ncells ? lb.w.ncells : 1));
+            rtpi_lightbuf_free(&lb, &a);
+        }
+    }
     if (sw && mode == RTPI_SHADOW_OSMESA) {
         /* cell agreement with the software z-buffer at the same res */
         rtpi_itembuf gl;

@@ -21,6 +21,10 @@
 
 static int verbosity = 1; /* 0 quiet, 1 normal, 2 verbose; CLI-only state */
 
+#if defined(__GNUC__)
+__attribute__((format(printf, 1, 2)))
+#endif
+static void msg(const char *fmt, ...);
 static void msg(const char *fmt, ...)
 {
     va_list ap;

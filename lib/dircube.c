@@ -451,10 +451,10 @@ static int dc_res_ok(int res)
 /* Sets each face's window to the projection of the bounds of every
    hittable primitive (grown by 1e-6 of the scene's scale, far above the
    rounding of bounds and projection) within the face's frustum widened
-   to lim, clamped to the face; or to the whole face when the light is
-   inside those bounds or the scene is not on the face.  A window is
-   never narrower than 1e-9 (a flat scene seen edge-on), so cell sizes
-   stay positive. */
+   to lim, clamped to the face; to the whole face when the light is
+   inside those bounds; to no cells when the bounds miss the face.  A
+   window is never narrower than 1e-9 (a flat scene seen edge-on), so
+   cell sizes stay positive. */
 void rtpi_dc_windows(const rtp_scene *s, rtpi_v3 light, int res, double lim,
                      rtpi_dc_window *w)
 {
@@ -462,10 +462,10 @@ void rtpi_dc_windows(const rtp_scene *s, rtpi_v3 light, int res, double lim,
     double L[3], S, g;
     size_t i, n = rtpi_scene_nprims(s);
     int f, k, inside = 1, any = 0;
+    int present[6] = {1, 1, 1, 1, 1, 1};
     L[0] = light.x;
     L[1] = light.y;
     L[2] = light.z;
-    int present[6] = {1, 1, 1, 1, 1, 1};
     for (f = 0; f < 6; f++) {
         w->u0[f] = w->v0[f] = -1.0;
         w->du[f] = w->dv[f] = 2.0 / (double)res;
@@ -574,8 +574,13 @@ done:
    (delta + lambda) / near(prim) radians.  Each primitive is projected
    widened by ang = 1e-7 + 1e-13 S / near: the first term covers the
    rounding of face coordinates (~1e-16), the second the above with a
-   hundredfold margin.  A primitive closer to the light than that bound
-   makes sense of (ang > 1e-3) is listed everywhere. */
+   hundredfold margin.  A primitive so close to the light that the bound
+   grows past LB_ANG_MAX (1e-3, near < 1e-10 S) is listed in every cell.
+   Windows and absent faces keep this: a window is the bounds' projection
+   through frusta widened by more than any listed primitive's widening,
+   and a direction beyond a window's edge is clamped to the edge cell,
+   which lists everything whose widened projection reaches past the edge
+   (the edge rows' slabs run to infinity). */
 #define LB_ANG_BASE 1e-7
 #define LB_ANG_SCALE 1e-13
 #define LB_ANG_MAX 1e-3
@@ -745,29 +750,33 @@ void rtpi_lightbuf_free(rtpi_lightbuf *lb, const rtp_allocator *a)
 /* -------------------------------------------------------- item buffer */
 
 /* The ITEMBUF rule.  Cell c is the one the shadow ray pierces (direction
-   o - light, as LIGHTBUF).  The hit at p on prim sees the light when
-     - c is empty (nothing drawn there: the point itself fell between
-       cell centres), or
-     - c holds prim itself and prim cannot shadow itself (a triangle, a
-       sphere seen from outside): the paper's test, or
-     - c's depth zc is not meaningfully nearer than p's depth zp along the
-       face axis: zc >= zp - tol, tol = IB_BIAS zext + zp cell_angle
-       tan(theta), with theta the angle between the surface normal and the
-       light and zext the depth extent of the scene on the face.
-       The ray through c's centre leaves p's ray by at most cell_angle, and
-       on a plane tilted by theta depth changes by ~zp cell_angle tan(theta)
-       over that angle: that term keeps the neighbouring triangles of one
-       NFF polygon, and the next primitive across a shared edge, from
-       shadowing each other; tan(theta) is capped at IB_TAN_MAX so that
-       grazing surfaces do not ignore real occluders.  IB_BIAS (1e-4 of
-       the scene's depth) covers the float depth of the buffer and
-       OSMesa's 24-bit one.
-   A sphere's shadow on itself is known exactly and decided first; so is
-   the outside of a cone (never self-shadowed); only for the inside of a
-   cone (shadowed by its near wall or not) does the depth test alone
-   speak (ib_self).  The normal comes free: o - p is rtpi_offset_origin's step
-   along the geometric normal, towards the light (~1e-9 relative error).
-   The answer is approximate within a cell of shadow edges by design. */
+   o - light, as LIGHTBUF; the ray through c's centre was drawn).  In this
+   order, the hit at p on prim
+     1. sees the light when c lies on no cell at all (a face or a part of
+        a window the scene does not reach) or c is empty;
+     2. is in shadow when prim itself must block the segment from o to
+        the light, and the id test below may be trusted when it cannot
+        (ib_self, exact and cheap: never for a triangle; for a sphere by
+        whether o and the light lie inside it; for a cone when o is
+        outside its convex solid; the inside of a cone cannot tell);
+     3. sees the light when c holds prim itself and prim cannot shadow
+        itself there: the paper's test;
+     4. otherwise sees the light only if c's depth zc is not meaningfully
+        nearer than p's depth zp along the face axis:
+          zc >= zp - (IB_BIAS zext + zp cell_angle tan(theta)),
+        theta the angle between the surface normal and the light, zext
+        the scene's depth extent on the face.  The ray through c's centre
+        leaves p's ray by at most cell_angle, and on a plane tilted by
+        theta depth changes by ~zp cell_angle tan(theta) over that angle:
+        that term keeps the triangles of one NFF polygon, and the next
+        primitive across a shared edge, from shadowing each other;
+        tan(theta) is capped at IB_TAN_MAX so that grazing surfaces do not
+        ignore real occluders.  IB_BIAS (1e-4 of the scene's depth extent,
+        not of the distance: a far light keeps its precision) covers the
+        float depths of the buffer and OSMesa's 24-bit ones.
+   The normal comes free: o - p is rtpi_offset_origin's step along the
+   geometric normal, towards the light (~1e-9 relative error).  The answer
+   is approximate within about a cell of shadow edges, by design. */
 #define IB_BIAS 1e-4
 #define IB_TAN_MAX 8.0
 
