@@ -68,7 +68,7 @@ static void run(const char *dir, const char *name, int size)
     rtp_eval_options eo;
     rtp_tree_info ti;
     double t_trace = HUGE_VAL, t_rec = HUGE_VAL, t_first, t_light, t_mat, t_shine, t_amb,
-           t_move, t_stream;
+           t_move, t_lb, t_ib, t_stream;
     static const char *const lc[] = {"1,0.6,0.4", "0.4,0.6,1"};
     static const char *const kd[] = {"0.3", "0.6"};
     static const char *const sh[] = {"7", "30"};
@@ -111,13 +111,20 @@ static void run(const char *dir, const char *name, int size)
     t_mat = eval_time(t, &eo, "mat.1.kd", kd, 3);
     t_shine = eval_time(t, &eo, "mat.1.shine", sh, 3);
     t_move = eval_time(t, &eo, "light.0.pos", mv, 2);
+    eo.shadows = RTP_SHADOWS_LIGHTBUF;
+    t_lb = eval_time(t, &eo, "light.0.pos", mv, 2);
+    eo.shadows = RTP_SHADOWS_ITEMBUF;
+    t_ib = eval_time(t, &eo, "light.0.pos", mv, 2);
+    eo.shadows = RTP_SHADOWS_EXACT;
     t_stream = stream_time(t, &sink);
     printf("| %s | %d | %.3f | %+.1f%% | %.1f | %.4f (%.0fx) | %.4f (%.0fx) | %.4f (%.0fx) | "
-           "%.4f (%.0fx) | %.4f (%.0fx) | %.3f (%.0fx) | %.4f | %.1fx |\n",
+           "%.4f (%.0fx) | %.4f (%.0fx) | %.3f (%.0fx) | %.3f (%.0fx) | %.3f (%.0fx) | "
+           "%.4f | %.1fx |\n",
            name, size, t_trace, 100.0 * (t_rec / t_trace - 1.0),
            (double)ti.nodes / (double)ti.samples, t_first, t_trace / t_first, t_light,
            t_trace / t_light, t_amb, t_trace / t_amb, t_mat, t_trace / t_mat, t_shine,
-           t_trace / t_shine, t_move, t_trace / t_move, t_stream, t_light / t_stream);
+           t_trace / t_shine, t_move, t_trace / t_move, t_lb, t_trace / t_lb, t_ib,
+           t_trace / t_ib, t_stream, t_light / t_stream);
     fflush(stdout);
     if (sink == 42)
         printf("\n");
@@ -144,8 +151,9 @@ int main(void)
            "Edits on warm caches, best of 3; 'first' builds the caches; 'stream' reads "
            "the tree's bytes once (the floor), 'light/stream' is the light edit against it.\n\n");
     printf("| scene | size | trace s | recording | nodes/sample | first eval | light colour | "
-           "ambient | material kd | shine | light move (exact) | stream s | light/stream |\n");
-    printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+           "ambient | material kd | shine | light move exact | lightbuf:1024 | itembuf:1024 | "
+           "stream s | light/stream |\n");
+    printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for (size = 512; size <= 1024; size *= 2) {
         if (quick && size > 512)
             break;

@@ -66,8 +66,11 @@ static void use_tree(rtp_tree *t)
     fuzz_check_error(&err, st);
     rtp_image_destroy(img);
     img = NULL;
-    /* A full trace costs samples x primitives at worst: keep it small. */
-    if (info.samples <= 64 && info.triangles + info.spheres + info.cones <= 256) {
+    /* A full trace costs samples x primitives x rays per sample, and a
+       file may ask for depth 1000 (up to 2^20 rays a sample, trace's
+       cap: seconds, not a bug): keep it small. */
+    if (info.samples <= 64 && info.max_depth <= 8 &&
+        info.triangles + info.spheres + info.cones <= 256) {
         st = rtp_tree_trace(t, 1, &img, NULL, &err);
         fuzz_check_error(&err, st);
         rtp_image_destroy(img);

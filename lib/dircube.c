@@ -752,13 +752,13 @@ void rtpi_lightbuf_free(rtpi_lightbuf *lb, const rtp_allocator *a)
 /* The ITEMBUF rule.  Cell c is the one the shadow ray pierces (direction
    o - light, as LIGHTBUF; the ray through c's centre was drawn).  In this
    order, the hit at p on prim
-     1. sees the light when c lies on no cell at all (a face or a part of
-        a window the scene does not reach) or c is empty;
-     2. is in shadow when prim itself must block the segment from o to
+     1. is in shadow when prim itself must block the segment from o to
         the light, and the id test below may be trusted when it cannot
         (ib_self, exact and cheap: never for a triangle; for a sphere by
         whether o and the light lie inside it; for a cone when o is
         outside its convex solid; the inside of a cone cannot tell);
+     2. sees the light when c lies on no cell at all (a face or a part of
+        a window the scene does not reach) or c is empty;
      3. sees the light when c holds prim itself and prim cannot shadow
         itself there: the paper's test;
      4. otherwise sees the light only if c's depth zc is not meaningfully
@@ -836,23 +836,20 @@ static int ib_self(const rtp_scene *s, uint32_t prim, rtpi_v3 o, rtpi_v3 L)
 int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
                          rtpi_v3 p, rtpi_v3 o, uint32_t prim)
 {
-    int f;
+    int f, self = ib_self(s, prim, o, ib->light);
     size_t cell = rtpi_itembuf_cell(ib, v3_sub(o, ib->light), &f);
     uint32_t id;
     double zc, zp, tn, nl, cs;
     rtpi_v3 n, l;
+    if (self == 1)
+        return 0;
     if (cell == RTPI_DC_ABSENT)
         return 1;
     id = ib->id[cell];
     if (id == RTPI_NONE)
         return 1;
-    {
-        int self = ib_self(s, prim, o, ib->light);
-        if (self == 1)
-            return 0;
-        if (self == 0 && id == prim)
-            return 1;
-    }
+    if (self == 0 && id == prim)
+        return 1;
     zc = ib->z[cell];
     zp = rtpi_dc_depth(f, v3_sub(p, ib->light));
     n = v3_sub(o, p);

@@ -353,6 +353,22 @@ static void test_moved_light_exact(void)
     CHECK_MSG(e <= 1e-6, "added light: %g", e);
 }
 
+/* The light buffer's answers are exact too: moved lights through it equal
+   a full trace, on triangles, polygons, spheres, cones and cylinders. */
+static void test_moved_light_lightbuf(void)
+{
+    double e;
+    e = moved_light_error("scenes/prims.nff", "light.0.pos", "-2,-4,6", NULL,
+                          RTP_SHADOWS_LIGHTBUF, 0);
+    CHECK_MSG(e <= 1e-6, "prims: %g", e);
+    e = moved_light_error("scenes/spheres.nff", "light.key.pos", "3,-6,5", NULL,
+                          RTP_SHADOWS_LIGHTBUF, 0);
+    CHECK_MSG(e <= 1e-6, "spheres: %g", e);
+    e = moved_light_error("scenes/prims.nff", "light.0.pos", "1,-3,2", NULL,
+                          RTP_SHADOWS_LIGHTBUF, 1);
+    CHECK_MSG(e <= 1e-6, "prims spd: %g", e);
+}
+
 static void test_moved_light_small_spd(void)
 {
     static const char *const names[] = {"balls_s1", "gears_s1", "mount_s2", "rings_s1",
@@ -367,6 +383,8 @@ static void test_moved_light_small_spd(void)
         snprintf(path, sizeof path, "%s/spd/%s.nff", dir, names[i]);
         e = moved_light_error(path, "light.0.pos", "1.5,-2.5,4", NULL, RTP_SHADOWS_EXACT, 0);
         CHECK_MSG(e <= 1e-6, "%s: %g", names[i], e);
+        e = moved_light_error(path, "light.0.pos", "1.5,-2.5,4", NULL, RTP_SHADOWS_LIGHTBUF, 0);
+        CHECK_MSG(e <= 1e-6, "%s lightbuf: %g", names[i], e);
     }
 }
 
@@ -671,6 +689,7 @@ int main(void)
     RUN(test_refused_edits);
     RUN(test_class_d_retrace);
     RUN(test_moved_light_exact);
+    RUN(test_moved_light_lightbuf);
     RUN(test_moved_light_small_spd);
     RUN(test_edit_sequence);
     RUN(test_warm_light_move_bitwise);
