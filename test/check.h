@@ -7,8 +7,14 @@
 #include <stdio.h>
 #include <stdlib.h>
 
-static int check_failed_now, check_skipped_now;
-static int check_passed, check_failed, check_skipped;
+#if defined(__GNUC__)
+#define CHECK_UNUSED __attribute__((unused))
+#else
+#define CHECK_UNUSED
+#endif
+
+CHECK_UNUSED static int check_failed_now, check_skipped_now;
+CHECK_UNUSED static int check_passed, check_failed, check_skipped;
 
 #define CHECK(cond)                                                         \
     do {                                                                    \
@@ -52,13 +58,7 @@ static int check_passed, check_failed, check_skipped;
         }                                                                   \
     } while (0)
 
-#if defined(__GNUC__)
-#define CHECK_UNUSED __attribute__((unused))
-#else
-#define CHECK_UNUSED
-#endif
-
-static int check_report(void)
+CHECK_UNUSED static int check_report(void)
 {
     printf("%d passed, %d failed, %d skipped\n", check_passed, check_failed,
            check_skipped);
