@@ -122,6 +122,28 @@ static int is_opt(const char *arg, const char *name)
     return strncmp(arg, name, n) == 0 && (arg[n] == '\0' || arg[n] == '=');
 }
 
+/* "WxH" into *w, *h (1 .. 2^20 each); returns 0 or -1 (with a message). */
+static int parse_size(const char *v, int *w, int *h)
+{
+    char buf[64], *x;
+    if (!v || strlen(v) >= sizeof buf) {
+        msg("--size: expected WxH");
+        return -1;
+    }
+    strcpy(buf, v);
+    x = strchr(buf, 'x');
+    if (!x) {
+        msg("--size %s: expected WxH", v);
+        return -1;
+    }
+    *x = '\0';
+    if (parse_int(buf, 1, 1 << 20, w) || parse_int(x + 1, 1, 1 << 20, h)) {
+        msg("--size %s: expected WxH with integers from 1 to 1048576", v);
+        return -1;
+    }
+    return 0;
+}
+
 /* "x0,y0,x1,y1" into r; returns 0 or -1. */
 static int parse_region(const char *v, int *r)
 {
@@ -388,22 +410,8 @@ static int cmd_trace(int argc, char **argv)
                 goto usage;
             }
         } else if (is_opt(a, "--size")) {
-            char *x;
-            if (!(v = opt_value(argc, argv, &i, "--size")))
+            if (parse_size(opt_value(argc, argv, &i, "--size"), &opt.width, &opt.height))
                 goto usage;
-            x = strchr(v, 'x');
-            if (!x) {
-                msg("--size %s: expected WxH", v);
-                goto usage;
-            }
-            *x = '\0';
-            if (parse_int(v, 1, 1 << 20, &opt.width) ||
-                parse_int(x + 1, 1, 1 << 20, &opt.height)) {
-                *x = 'x';
-                msg("--size %s: expected WxH with positive integers", v);
-                goto usage;
-            }
-            *x = 'x';
         } else if (is_opt(a, "--depth")) {
             if (!(v = opt_value(argc, argv, &i, "--depth")) ||
                 parse_int(v, 1, 1000, &opt.max_depth)) {
@@ -1235,18 +1243,8 @@ static int cmd_merge(int argc, char **argv)
                 goto usage;
             }
         } else if (is_opt(a, "--size")) {
-            char *x;
-            if (!(v = opt_value(argc, argv, &i, "--size")) || !(x = strchr(v, 'x'))) {
-                msg("--size: expected WxH");
+            if (parse_size(opt_value(argc, argv, &i, "--size"), &fw, &fh))
                 goto usage;
-            }
-            *x = '\0';
-            if (parse_int(v, 1, 1 << 20, &fw) || parse_int(x + 1, 1, 1 << 20, &fh)) {
-                *x = 'x';
-                msg("--size: expected WxH");
-                goto usage;
-            }
-            *x = 'x';
         } else if (a[0] == '-' && a[1] != '\0') {
             msg("merge: unknown option '%s'", a);
             goto usage;

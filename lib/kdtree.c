@@ -672,8 +672,8 @@ unsigned long kd_prof[4];
 
 typedef struct kd_ray {
     double o[3], inv[3], slack[3], tol[3];
-    int par[3];      /* direction is exactly 0 on this axis */
-    int neg[3];      /* direction < 0: the above child comes first */
+    unsigned par;    /* bit k: the direction is exactly 0 on axis k */
+    unsigned neg;    /* bit k: direction < 0, the above child comes first */
 } kd_ray;
 
 typedef struct kd_item {
@@ -686,7 +686,7 @@ typedef struct kd_item {
 static int kd_ray_setup(const rtpi_kdtree *kd, const rtpi_ray *r, kd_ray *kr,
                         double *t0, double *t1)
 {
-    double d[3];
+    double d[3], a0 = r->tmin, a1 = r->tmax;
     int k;
     if (!kd->has_box)
         return 0;
@@ -696,14 +696,15 @@ static int kd_ray_setup(const rtpi_kdtree *kd, const rtpi_ray *r, kd_ray *kr,
     d[0] = r->d.x;
     d[1] = r->d.y;
     d[2] = r->d.z;
-    *t0 = r->tmin;
-    *t1 = r->tmax;
+    kr->par = kr->neg = 0;
     for (k = 0; k < 3; k++) {
-        double m = fmax(fabs(kr->o[k]), kd->maxabs[k]);
+        /* fmax without the call; a NaN origin gives maxabs, as fmax. */
+        double ao = fabs(kr->o[k]);
+        double m = ao > kd->maxabs[k] ? ao : kd->maxabs[k];
         kr->tol[k] = KD_SLACK * m;
-        kr->par[k] = d[k] == 0.0;
-        kr->neg[k] = d[k] < 0.0;
-        if (kr->par[k]) {
+        kr->neg |= (unsigned)(d[k] < 0.0) << k;
+        if (d[k] == 0.0) {
+            kr->par |= 1u << k;
             kr->inv[k] = 0.0;
             kr->slack[k] = 0.0;
             if (kr->o[k] < kd->lo[k] - kr->tol[k] ||
@@ -721,53 +722,76 @@ static int kd_ray_setup(const rtpi_kdtree *kd, const rtpi_ray *r, kd_ray *kr,
                 tb = x;
             }
             /* Written so that a NaN leaves the interval as it is. */
-            if (ta - kr->slack[k] > *t0)
-                *t0 = ta - kr->slack[k];
-            if (tb + kr->slack[k] < *t1)
-                *t1 = tb + kr->slack[k];
+            if (ta - kr->slack[k] > a0)
+                a0 = ta - kr->slack[k];
+            if (tb + kr->slack[k] < a1)
+                a1 = tb + kr->slack[k];
         }
     }
-    return *t0 <= *t1;
+    *t0 = a0;
+    *t1 = a1;
+    return a0 <= a1;
 }
 
-/* One interior step: picks the child(ren) of `nd` for [*t0,*t1]; pushes
-   the far one when both are needed.  @return the node to go on with. */
-static inline uint32_t kd_step(const kd_ray *kr, const kd_node *nd,
-                               uint32_t node, double *t0, double *t1,
-                               kd_item *stack, int *sp)
+/* Walks down from `node` over [*t0,*t1] to the first leaf the ray may
+   meet, pushing the far children it will need later.  One interior step:
+   a plane crossed outside the interval (widened by the slack) leaves one
+   child, else both are visited, the near one first; a ray parallel to
+   the plane stays on its side, or runs in it and visits both.
+   @return the leaf's index. */
+static RTPI_FORCE_INLINE uint32_t kd_descend(const kd_node *nodes,
+                                             const kd_ray *kr, uint32_t node,
+                                             double *t0p, double *t1p,
+                                             kd_item *stack, int *spp)
 {
-    uint32_t fl = nd->flags, ax = fl & 3;
-    uint32_t below = node + 1, above = fl >> 2;
-    double split = nd->a.split;
-    if (kr->par[ax]) {
-        /* Parallel to the plane: stays on its side, or runs in it. */
-        double dd = split - kr->o[ax];
-        if (dd > kr->tol[ax])
-            return below;
-        if (dd < -kr->tol[ax])
-            return above;
-        stack[*sp].node = above;
-        stack[*sp].t0 = *t0;
-        stack[*sp].t1 = *t1;
-        (*sp)++;
-        return below;
-    } else {
-        double ts = (split - kr->o[ax]) * kr->inv[ax];
-        double lo = ts - kr->slack[ax], hi = ts + kr->slack[ax];
-        uint32_t nearc = kr->neg[ax] ? above : below;
-        uint32_t farc = kr->neg[ax] ? below : above;
-        if (hi < *t0)
-            return farc;
-        if (lo > *t1)
-            return nearc;
-        stack[*sp].node = farc;
-        stack[*sp].t0 = lo > *t0 ? lo : *t0;
-        stack[*sp].t1 = *t1;
-        (*sp)++;
-        if (hi < *t1)
-            *t1 = hi;
-        return nearc;
+    double t0 = *t0p, t1 = *t1p;
+    int sp = *spp;
+    for (;;) {
+        const kd_node *nd = &nodes[node];
+        uint32_t fl = nd->flags, ax = fl & 3, above = fl >> 2,
+                 below = node + 1;
+        double split = nd->a.split;
+        if (ax == 3)
+            break;
+        PROF(0);
+        if (kr->par >> ax & 1) {
+            double dd = split - kr->o[ax];
+            if (dd > kr->tol[ax]) {
+                node = below;
+            } else if (dd < -kr->tol[ax]) {
+                node = above;
+            } else {
+                stack[sp].node = above;
+                stack[sp].t0 = t0;
+                stack[sp].t1 = t1;
+                sp++;
+                node = below;
+            }
+        } else {
+            double ts = (split - kr->o[ax]) * kr->inv[ax];
+            double lo = ts - kr->slack[ax], hi = ts + kr->slack[ax];
+            int neg = (int)(kr->neg >> ax & 1);
+            uint32_t nearc = neg ? above : below;
+            uint32_t farc = neg ? below : above;
+            if (hi < t0) {
+                node = farc;
+            } else if (lo > t1) {
+                node = nearc;
+            } else {
+                stack[sp].node = farc;
+                stack[sp].t0 = lo > t0 ? lo : t0;
+                stack[sp].t1 = t1;
+                sp++;
+                if (hi < t1)
+                    t1 = hi;
+                node = nearc;
+            }
+        }
     }
+    *t0p = t0;
+    *t1p = t1;
+    *spp = sp;
+    return node;
 }
 
 int rtpi_kd_intersect(const rtpi_kdtree *kd, const rtpi_ray *ray,
@@ -776,27 +800,23 @@ int rtpi_kd_intersect(const rtpi_kdtree *kd, const rtpi_ray *ray,
     kd_item stack[KD_DEPTH_CAP + 4];
     kd_ray kr;
     rtpi_wt_ray w;
-    rtpi_ray r2;
     const kd_node *nodes = kd->nodes;
     const float *tri = kd->tri;
-    size_t ntris = kd->ntris;
+    const uint32_t *refs = kd->refs;
+    uint32_t ntris = (uint32_t)kd->ntris;
     double t0, t1, best = ray->tmax, tmin = ray->tmin;
-    uint32_t node = 0;
+    double bt = 0.0, bu = 0.0, bv = 0.0;
+    uint32_t node = 0, bprim = 0;
     int sp = 0, found = 0;
 
     if (!kd_ray_setup(kd, ray, &kr, &t0, &t1) || !rtpi_wt_setup(&w, ray))
         return 0;
-    r2 = *ray;
     for (;;) {
-        const kd_node *nd = &nodes[node];
-        if ((nd->flags & 3) != 3) {
-            PROF(0);
-            node = kd_step(&kr, nd, node, &t0, &t1, stack, &sp);
-            continue;
-        }
+        node = kd_descend(nodes, &kr, node, &t0, &t1, stack, &sp);
         {
+            const kd_node *nd = &nodes[node];
             uint32_t cnt = nd->flags >> 2, j;
-            const uint32_t *list = cnt == 1 ? &nd->a.one : kd->refs + nd->a.off;
+            const uint32_t *list = cnt == 1 ? &nd->a.one : refs + nd->a.off;
             PROF(1);
             for (j = 0; j < cnt; j++) {
                 uint32_t prim = list[j];
@@ -806,19 +826,21 @@ int rtpi_kd_intersect(const rtpi_kdtree *kd, const rtpi_ray *ray,
                     double t, u, v2;
                     if (rtpi_wt_tri(&w, v, v + 3, v + 6, tmin, best, &t, &u,
                                     &v2)) {
-                        best = t;
-                        hit->t = t;
-                        hit->u = u;
-                        hit->v = v2;
-                        hit->prim = prim;
+                        best = bt = t;
+                        bu = u;
+                        bv = v2;
+                        bprim = prim;
                         found = 1;
                     }
                 } else {
+                    rtpi_ray r2 = *ray;
                     rtpi_hit h;
                     r2.tmax = best;
                     if (rtpi_intersect_prim(kd->scene, prim, &r2, &h)) {
-                        best = h.t;
-                        *hit = h;
+                        best = bt = h.t;
+                        bu = h.u;
+                        bv = h.v;
+                        bprim = prim;
                         found = 1;
                     }
                 }
@@ -829,8 +851,15 @@ int rtpi_kd_intersect(const rtpi_kdtree *kd, const rtpi_ray *ray,
            overlapping intervals.  Skipping every pending node that starts
            beyond the best hit is exact and costs a compare per entry. */
         for (;;) {
-            if (sp == 0)
+            if (sp == 0) {
+                if (found) {
+                    hit->t = bt;
+                    hit->u = bu;
+                    hit->v = bv;
+                    hit->prim = bprim;
+                }
                 return found;
+            }
             sp--;
             if (!found || stack[sp].t0 <= best)
                 break;
@@ -848,7 +877,8 @@ int rtpi_kd_occluded(const rtpi_kdtree *kd, const rtpi_ray *ray)
     rtpi_wt_ray w;
     const kd_node *nodes = kd->nodes;
     const float *tri = kd->tri;
-    size_t ntris = kd->ntris;
+    const uint32_t *refs = kd->refs;
+    uint32_t ntris = (uint32_t)kd->ntris;
     double t0, t1, tmin = ray->tmin, tmax = ray->tmax;
     uint32_t node = 0;
     int sp = 0;
@@ -856,15 +886,11 @@ int rtpi_kd_occluded(const rtpi_kdtree *kd, const rtpi_ray *ray)
     if (!kd_ray_setup(kd, ray, &kr, &t0, &t1) || !rtpi_wt_setup(&w, ray))
         return 0;
     for (;;) {
-        const kd_node *nd = &nodes[node];
-        if ((nd->flags & 3) != 3) {
-            PROF(0);
-            node = kd_step(&kr, nd, node, &t0, &t1, stack, &sp);
-            continue;
-        }
+        node = kd_descend(nodes, &kr, node, &t0, &t1, stack, &sp);
         {
+            const kd_node *nd = &nodes[node];
             uint32_t cnt = nd->flags >> 2, j;
-            const uint32_t *list = cnt == 1 ? &nd->a.one : kd->refs + nd->a.off;
+            const uint32_t *list = cnt == 1 ? &nd->a.one : refs + nd->a.off;
             PROF(1);
             for (j = 0; j < cnt; j++) {
                 uint32_t prim = list[j];
