@@ -99,7 +99,7 @@ VERSION = $(shell sed -nE 's/^\#define RTP_VERSION_(MAJOR|MINOR|PATCH) ([0-9]+).
 
 install: all
 	install -d $(DESTDIR)$(PREFIX)/lib/pkgconfig $(DESTDIR)$(PREFIX)/include $(DESTDIR)$(PREFIX)/bin
-	sed -e 's|@PREFIX@|$(PREFIX)|' -e 's|@VERSION@|$(VERSION)|' -e 's|@LIBS@|$(LIBS)|' rtp.pc.in > $(DESTDIR)$(PREFIX)/lib/pkgconfig/rtp.pc
+	sed -e 's|@PREFIX@|$(PREFIX)|' -e 's|@VERSION@|$(VERSION)|' -e 's|@LIBS@|$(LIBS)|' lib/rtp.pc.in > $(DESTDIR)$(PREFIX)/lib/pkgconfig/rtp.pc
 	install -m 644 $(BUILD)/librtp.a $(DESTDIR)$(PREFIX)/lib/
 	install -m 755 $(BUILD)/librtp.so $(DESTDIR)$(PREFIX)/lib/librtp.so.0
 	ln -sf librtp.so.0 $(DESTDIR)$(PREFIX)/lib/librtp.so
@@ -129,6 +129,8 @@ clean:
 #       -max_total_time=600 /tmp/nff fuzz/corpus/fuzz_nff
 #   build-fuzz/fuzz_nff -minimize_crash=1 -runs=10000 crash-...
 #   cp minimized-from-... fuzz/corpus/fuzz_nff/crash-<what>
+# FUZZ_EXTRA adds flags (e.g. -fno-sanitize=pointer-overflow to look past a
+# known NULL+0 report); FUZZ_CC picks the compiler (clang >= 6).
 FUZZ_SRC = $(sort $(wildcard fuzz/fuzz_*.c))
 FUZZ_REPLAY_BIN = $(FUZZ_SRC:fuzz/%.c=$(BUILD)/fuzz/%)
 FUZZ_BIN = $(FUZZ_SRC:fuzz/%.c=build-fuzz/%)

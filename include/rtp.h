@@ -311,7 +311,7 @@ typedef struct rtp_tree_info {
 
 void rtp_tree_get_info(const rtp_tree *tree, rtp_tree_info *info);
 
-/** Writes the tree file (format: doc/tree-format.md); "-" is stdout.
+/** Writes the tree file (format: lib/tree-format.md); "-" is stdout.
  *  Files are written to a temporary name and renamed: nothing half
  *  written is left.  bytes (may be NULL) receives the file size. */
 rtp_status rtp_tree_write(const rtp_tree *tree, const char *path,

@@ -1,6 +1,6 @@
 /* nff.c — the NFF reader: Eric Haines' Neutral File Format exactly as the
  * SPD generators write it, read token by token (not line by line), plus
- * rtp's additions (doc/scene-format.md): name, off, ambient, checker,
+ * rtp's additions (scenes/README.md): name, off, ambient, checker,
  * texture, bump, include and bezier.
  *
  * Every malformed input is a parse error at the offending token's line

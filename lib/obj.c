@@ -6,7 +6,7 @@
  * free-form statements are read past.  MTL: newmtl, Kd, Ks, Ns, Ni, d,
  * Tr, map_Kd, bump/map_bump (-bm strength); Ka, Ke, illum and the other
  * maps are read past.  How MTL values become rtp materials is written in
- * doc/scene-format.md.  Positions are transformed by the 4x3 `xform`,
+ * scenes/README.md.  Positions are transformed by the 4x3 `xform`,
  * normals by its inverse transpose. */
 #include "readers.h"
 

@@ -1,7 +1,7 @@
 /* treefile.c — the tree file (.rtp): a traced image's ray trees with
  * everything needed to re-evaluate them, little-endian, written and read
  * byte by byte, every section checksummed and every length validated.
- * The format is specified in doc/tree-format.md. */
+ * The format is specified in lib/tree-format.md. */
 #include "internal.h"
 
 #include <errno.h>
