@@ -87,7 +87,7 @@ moved() {
 }
 # material indices: 0 for the colour/kd edits; the first with Ks > 0 for
 # shine (its highlight is then visible), else 0
-shiny() { awk '$1 == "f" { if ($6 + 0 > 0) { print n; found = 1; exit } n++ }
+shiny() { awk 'BEGIN { n = 0 } $1 == "f" { if ($6 + 0 > 0) { print n; found = 1; exit } n++ }
                END { if (!found) print 0 }' "$1"; }
 
 # stream RUN-NAME TREE SHADOWS [--reference]: runs the edit sequence,

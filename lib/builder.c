@@ -355,8 +355,10 @@ rtp_status rtp_builder_finish(rtp_builder *b, rtp_tree **out, rtp_error *err)
     t->lights0 = (rtpi_light *)rtpi_malloc_array(a, t->scene->nlights + 1, sizeof *t->lights0);
     if (!t->mats0 || !t->lights0)
         goto nomem;
-    memcpy(t->mats0, t->scene->mats, t->scene->nmats * sizeof *t->mats0);
-    memcpy(t->lights0, t->scene->lights, t->scene->nlights * sizeof *t->lights0);
+    if (t->scene->nmats)
+        memcpy(t->mats0, t->scene->mats, t->scene->nmats * sizeof *t->mats0);
+    if (t->scene->nlights)
+        memcpy(t->lights0, t->scene->lights, t->scene->nlights * sizeof *t->lights0);
     for (i = 0; i < t->scene->nmats; i++)
         t->mats0[i].name = NULL;
     for (i = 0; i < t->scene->nlights; i++)

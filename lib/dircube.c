@@ -1058,6 +1058,49 @@ static void ib_cast_run(void *user, size_t cell, int count)
     }
 }
 
+/* Draws one primitive into the buffer. */
+static void ib_draw(rtpi_itembuf *ib, const rtp_scene *s, dc_ctx *c, uint32_t prim)
+{
+    size_t i = prim;
+    if (!rtpi_itembuf_renders(s, prim, ib->light))
+        return;
+    if (i < s->ntris) {
+        int f;
+        for (f = 0; f < 6; f++)
+            if (ib->w.fbase[f] != RTPI_DC_ABSENT)
+                ib_tri(ib, s, f, prim);
+    } else {
+        /* Round shapes exactly: a ray per cell within their bounds
+           (1e-9: a hair wider than the bounds, for rounding). */
+        ib_cast ic;
+        ic.ib = ib;
+        ic.s = s;
+        ic.prim = prim;
+        ic.sphere = i < s->ntris + s->nspheres;
+        ic.inside = ic.sphere &&
+                    v3_len(v3_sub(v3_from_f(s->spheres[i - s->ntris].c), ib->light)) <=
+                        fabs((double)s->spheres[i - s->ntris].r);
+        dc_cover(c, prim, 1e-9, ib_cast_run, &ic);
+    }
+}
+
+rtp_status rtpi_itembuf_draw(rtpi_itembuf *ib, const rtp_scene *s,
+                             const uint32_t *prims, size_t n,
+                             const rtp_allocator *a)
+{
+    dc_ctx c;
+    size_t k;
+    if (!n)
+        return RTP_OK;
+    if (dc_ctx_init(&c, s, ib->light, ib->res, a) != RTP_OK)
+        return RTP_ERR_NOMEM;
+    dc_ctx_window(&c, &ib->w);
+    for (k = 0; k < n; k++)
+        ib_draw(ib, s, &c, prims[k]);
+    dc_ctx_free(&c, a);
+    return RTP_OK;
+}
+
 rtp_status rtpi_itembuf_build(const rtp_scene *s, rtpi_v3 light, int res,
                               const rtp_allocator *a, rtpi_itembuf *ib,
                               rtp_error *err)
@@ -1072,29 +1115,8 @@ rtp_status rtpi_itembuf_build(const rtp_scene *s, rtpi_v3 light, int res,
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory for the item buffer");
     }
     dc_ctx_window(&c, &ib->w);
-    for (i = 0; i < n; i++) {
-        uint32_t prim = (uint32_t)i;
-        if (!rtpi_itembuf_renders(s, prim, light))
-            continue;
-        if (i < s->ntris) {
-            int f;
-            for (f = 0; f < 6; f++)
-                if (ib->w.fbase[f] != RTPI_DC_ABSENT)
-                    ib_tri(ib, s, f, prim);
-        } else {
-            /* Round shapes exactly: a ray per cell within their bounds
-               (1e-9: a hair wider than the bounds, for rounding). */
-            ib_cast ic;
-            ic.ib = ib;
-            ic.s = s;
-            ic.prim = prim;
-            ic.sphere = i < s->ntris + s->nspheres;
-            ic.inside = ic.sphere &&
-                        v3_len(v3_sub(v3_from_f(s->spheres[i - s->ntris].c), light)) <=
-                            fabs((double)s->spheres[i - s->ntris].r);
-            dc_cover(&c, prim, 1e-9, ib_cast_run, &ic);
-        }
-    }
+    for (i = 0; i < n; i++)
+        ib_draw(ib, s, &c, (uint32_t)i);
     dc_ctx_free(&c, a);
     return RTP_OK;
 }

@@ -216,6 +216,12 @@ rtp_status rtpi_itembuf_build(const rtp_scene *s, rtpi_v3 light, int res,
 rtp_status rtpi_itembuf_build_osmesa(const rtp_scene *s, rtpi_v3 light,
                                      int res, const rtp_allocator *a,
                                      rtpi_itembuf *ib, rtp_error *err);
+/* Draws the listed primitives into ib with the software z-buffer, over
+   what is there (osmesa.c: primitives too close to the light for
+   OpenGL's near plane).  @return RTP_OK or RTP_ERR_NOMEM. */
+rtp_status rtpi_itembuf_draw(rtpi_itembuf *ib, const rtp_scene *s,
+                             const uint32_t *prims, size_t n,
+                             const rtp_allocator *a);
 /* Allocates the arrays, all cells empty, and sets the faces' windows
    from the bounds of s (used by both builders). */
 rtp_status rtpi_itembuf_alloc(rtpi_itembuf *ib, const rtp_scene *s,

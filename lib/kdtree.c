@@ -109,7 +109,6 @@ typedef struct kd_ref {
     uint32_t prim;
 } kd_ref;
 
-
 typedef struct kd_build {
     const rtp_allocator *a;
     const rtp_scene *s;
@@ -304,7 +303,7 @@ static void split_binned(const kd_ref *r, size_t n, const float *lo,
 }
 
 /* Splits the reference r of a straddling primitive at `pos` on `axis`:
-   l and r2 get its bounds on either side.  A triangle's bounds are those
+   l and rr get its bounds on either side.  A triangle's bounds are those
    of its part on that side (its vertices there and its edges' crossing
    points, in double, rounded outward) within r's box, which already
    bounds it within the node: a tight box at the cost of a few flops.
@@ -662,14 +661,6 @@ void rtpi_kd_get_stats(const rtpi_kdtree *kd, rtpi_kd_stats *st)
 
 /* ============================================================ traversal */
 
-#ifdef KD_PROFILE
-extern unsigned long kd_prof[4];
-unsigned long kd_prof[4];
-#define PROF(i) (kd_prof[i]++)
-#else
-#define PROF(i) ((void)0)
-#endif
-
 typedef struct kd_ray {
     double o[3], inv[3], slack[3], tol[3];
     unsigned par;    /* bit k: the direction is exactly 0 on axis k */
@@ -753,7 +744,6 @@ static RTPI_FORCE_INLINE uint32_t kd_descend(const kd_node *nodes,
         double split = nd->a.split;
         if (ax == 3)
             break;
-        PROF(0);
         if (kr->par >> ax & 1) {
             double dd = split - kr->o[ax];
             if (dd > kr->tol[ax]) {
@@ -817,10 +807,8 @@ int rtpi_kd_intersect(const rtpi_kdtree *kd, const rtpi_ray *ray,
             const kd_node *nd = &nodes[node];
             uint32_t cnt = nd->flags >> 2, j;
             const uint32_t *list = cnt == 1 ? &nd->a.one : refs + nd->a.off;
-            PROF(1);
             for (j = 0; j < cnt; j++) {
                 uint32_t prim = list[j];
-                PROF(2);
                 if (prim < ntris) {
                     const float *v = tri + 9 * (size_t)prim;
                     double t, u, v2;
@@ -891,10 +879,8 @@ int rtpi_kd_occluded(const rtpi_kdtree *kd, const rtpi_ray *ray)
             const kd_node *nd = &nodes[node];
             uint32_t cnt = nd->flags >> 2, j;
             const uint32_t *list = cnt == 1 ? &nd->a.one : refs + nd->a.off;
-            PROF(1);
             for (j = 0; j < cnt; j++) {
                 uint32_t prim = list[j];
-                PROF(2);
                 if (prim < ntris) {
                     const float *v = tri + 9 * (size_t)prim;
                     double t, u, v2;

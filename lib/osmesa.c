@@ -183,13 +183,14 @@ static int osm_culled(const osm_face *fc, const double lo[3], const double hi[3]
     return 0;
 }
 
-static void osm_draw(const osm_face *fc, const rtp_scene *s, double cell)
+static void osm_draw(const osm_face *fc, const rtp_scene *s, double cell,
+                     const unsigned char *soft)
 {
     size_t i, n = rtpi_scene_nprims(s);
     for (i = 0; i < n; i++) {
         uint32_t prim = (uint32_t)i;
         double lo[3], hi[3];
-        if (!rtpi_itembuf_renders(s, prim, fc->L))
+        if (soft[i] || !rtpi_itembuf_renders(s, prim, fc->L))
             continue;
         rtpi_prim_bounds(s, prim, lo, hi);
         if (osm_culled(fc, lo, hi))
@@ -215,8 +216,10 @@ rtp_status rtpi_itembuf_build_osmesa(const rtp_scene *s, rtpi_v3 light,
                                      rtpi_itembuf *ib, rtp_error *err)
 {
     OSMesaContext ctx;
-    unsigned char *rgba = NULL;
+    unsigned char *rgba = NULL, *soft = NULL;
     float *depth = NULL;
+    double *pdist = NULL, znear[6], zfar[6], znmax = 0.0;
+    size_t nsoft = 0;
     size_t npix, k, n = rtpi_scene_nprims(s);
     double dmin = HUGE_VAL;
     GLint dims[2] = {0, 0};
@@ -233,9 +236,13 @@ rtp_status rtpi_itembuf_build_osmesa(const rtp_scene *s, rtpi_v3 light,
     npix = (size_t)res * (size_t)res;
     rgba = (unsigned char *)rtpi_malloc_array(a, npix, 4);
     depth = (float *)rtpi_malloc_array(a, npix, sizeof *depth);
-    if (!rgba || !depth) {
+    soft = (unsigned char *)rtpi_malloc_array(a, n ? n : 1, 1);
+    pdist = (double *)rtpi_malloc_array(a, n ? n : 1, sizeof *pdist);
+    if (!rgba || !depth || !soft || !pdist) {
         rtpi_free(a, rgba);
         rtpi_free(a, depth);
+        rtpi_free(a, soft);
+        rtpi_free(a, pdist);
         rtpi_itembuf_free(ib, a);
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory for the item buffer");
     }
@@ -245,15 +252,41 @@ rtp_status rtpi_itembuf_build_osmesa(const rtp_scene *s, rtpi_v3 light,
     for (k = 0; k < n; k++) {
         double lo[3], hi[3], d2 = 0.0;
         int c;
-        if (!rtpi_itembuf_renders(s, (uint32_t)k, light))
-            continue;
         rtpi_prim_bounds(s, (uint32_t)k, lo, hi);
         for (c = 0; c < 3; c++) {
             double x = v3_get(light, c);
             double e = x < lo[c] ? lo[c] - x : x > hi[c] ? x - hi[c] : 0.0;
             d2 += e * e;
         }
-        dmin = fmin(dmin, sqrt(d2));
+        pdist[k] = sqrt(d2);
+        if (rtpi_itembuf_renders(s, (uint32_t)k, light) && pdist[k] > 0.0)
+            dmin = fmin(dmin, pdist[k]);
+    }
+    /* Near and far planes hug the scene's depths on each face (1e-3 of
+       its extent outside them, for rounding), so the 24-bit depth buffer
+       resolves ~1e-7 of that extent near the front. */
+    for (f = 0; f < 6; f++) {
+        double zn = ib->w.zbase[f] - 1e-3 * ib->w.zext[f];
+        if (!(zn > 0.0))
+            zn = dmin / sqrt(3.0) * 0.5;
+        if (!(zn > 1e-6 * ib->w.zext[f]))
+            zn = 1e-6 * ib->w.zext[f];
+        znear[f] = zn;
+        zfar[f] = ib->w.zbase[f] + ib->w.zext[f] * (1.0 + 1e-3) + zn;
+        if (ib->w.zbase[f] == 0.0) {
+            zfar[f] = ib->w.zext[f] * sqrt(3.0) * (1.0 + 1e-3) + zn;
+            znmax = fmax(znmax, zn);
+        }
+    }
+    /* With the light outside the bounds every primitive lies behind the
+       near planes.  Inside them, a primitive nearer the light than
+       2 sqrt(3) znmax (depth >= distance / sqrt 3, and a factor of 2) may
+       reach in front of a near plane and be cut: the software z-buffer
+       draws those after OpenGL, into the same cells. */
+    for (k = 0; k < n; k++) {
+        soft[k] = (unsigned char)(rtpi_itembuf_renders(s, (uint32_t)k, light) &&
+                                  pdist[k] < 2.0 * sqrt(3.0) * znmax);
+        nsoft += soft[k];
     }
     ctx = OSMesaCreateContextExt(OSMESA_RGBA, 24, 0, 0, NULL);
     if (!ctx || !OSMesaMakeCurrent(ctx, rgba, GL_UNSIGNED_BYTE, res, res)) {
@@ -261,6 +294,8 @@ rtp_status rtpi_itembuf_build_osmesa(const rtp_scene *s, rtpi_v3 light,
             OSMesaDestroyContext(ctx);
         rtpi_free(a, rgba);
         rtpi_free(a, depth);
+        rtpi_free(a, soft);
+        rtpi_free(a, pdist);
         rtpi_itembuf_free(ib, a);
         return rtpi_error(err, RTP_ERR_UNSUPPORTED, NULL, 0, 0,
                           "osmesa shadows: cannot make a %dx%d OSMesa context", res, res);
@@ -270,6 +305,8 @@ rtp_status rtpi_itembuf_build_osmesa(const rtp_scene *s, rtpi_v3 light,
         OSMesaDestroyContext(ctx);
         rtpi_free(a, rgba);
         rtpi_free(a, depth);
+        rtpi_free(a, soft);
+        rtpi_free(a, pdist);
         rtpi_itembuf_free(ib, a);
         return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
                           "osmesa shadows: resolution %d above OpenGL's %d", res, (int)dims[0]);
@@ -295,7 +332,7 @@ rtp_status rtpi_itembuf_build_osmesa(const rtp_scene *s, rtpi_v3 light,
     for (f = 0; f < 6; f++) {
         osm_face fc;
         double hu = 0.5 * res * ib->w.du[f], hv = 0.5 * res * ib->w.dv[f];
-        double zn, zf, cell = fmin(ib->w.du[f], ib->w.dv[f]);
+        double zn = znear[f], zf = zfar[f], cell = fmin(ib->w.du[f], ib->w.dv[f]);
         size_t base = ib->w.fbase[f];
         if (base == RTPI_DC_ABSENT)
             continue;
@@ -307,24 +344,13 @@ rtp_status rtpi_itembuf_build_osmesa(const rtp_scene *s, rtpi_v3 light,
         fc.ub = ib->w.u0[f] + 2.0 * hu;
         fc.va = ib->w.v0[f];
         fc.vb = ib->w.v0[f] + 2.0 * hv;
-        /* Near and far planes hug the scene's depths on this face (1e-3 of
-           its extent outside them, for rounding), so the 24-bit depth
-           buffer resolves ~1e-7 of that extent near the front. */
-        zn = ib->w.zbase[f] - 1e-3 * ib->w.zext[f];
-        if (!(zn > 0.0))
-            zn = dmin / sqrt(3.0) * 0.5;
-        if (!(zn > 0.0))
-            zn = 1e-6 * ib->w.zext[f];
-        zf = ib->w.zbase[f] + ib->w.zext[f] * (1.0 + 1e-3) + zn;
-        if (ib->w.zbase[f] == 0.0)
-            zf = ib->w.zext[f] * sqrt(3.0) * (1.0 + 1e-3) + zn;
         glMatrixMode(GL_PROJECTION);
         glLoadIdentity();
         glFrustum(-hu * zn, hu * zn, -hv * zn, hv * zn, zn, zf);
         glMatrixMode(GL_MODELVIEW);
         glLoadIdentity();
         glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
-        osm_draw(&fc, s, cell);
+        osm_draw(&fc, s, cell, soft);
         glFinish();
         glReadPixels(0, 0, res, res, GL_RGBA, GL_UNSIGNED_BYTE, rgba);
         glReadPixels(0, 0, res, res, GL_DEPTH_COMPONENT, GL_FLOAT, depth);
@@ -347,6 +373,26 @@ rtp_status rtpi_itembuf_build_osmesa(const rtp_scene *s, rtpi_v3 light,
     OSMesaDestroyContext(ctx);
     rtpi_free(a, rgba);
     rtpi_free(a, depth);
+    if (nsoft) {
+        /* the primitives OpenGL's near plane would cut, in software */
+        uint32_t *list = (uint32_t *)rtpi_malloc_array(a, nsoft, sizeof *list);
+        size_t m = 0;
+        if (list) {
+            for (k = 0; k < n; k++)
+                if (soft[k])
+                    list[m++] = (uint32_t)k;
+            st = rtpi_itembuf_draw(ib, s, list, m, a);
+        }
+        rtpi_free(a, list);
+        if (!list || st != RTP_OK) {
+            rtpi_free(a, soft);
+            rtpi_free(a, pdist);
+            rtpi_itembuf_free(ib, a);
+            return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory for the item buffer");
+        }
+    }
+    rtpi_free(a, soft);
+    rtpi_free(a, pdist);
     return RTP_OK;
 }
 

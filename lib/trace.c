@@ -334,9 +334,10 @@ static int trace_row(void *ctx, int y)
             w->status = RTP_ERR_NOMEM;
             return 1;
         }
-        memcpy(r->nodes, w->nodes, w->nn * sizeof *r->nodes);
+        if (w->nn) /* (memcpy from a NULL buffer is undefined even for 0) */
+            memcpy(r->nodes, w->nodes, w->nn * sizeof *r->nodes);
         memcpy(r->counts, w->counts, (size_t)sh->gx * sizeof *r->counts);
-        if (words)
+        if (words && w->nn)
             memcpy(r->vis, w->vis, w->nn * words * sizeof *r->vis);
     }
     return 0;
@@ -490,8 +491,8 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
                       (tree_out ? (double)(w + 1) * (h + 1) * (24.0 + 8.0) : 0.0);
         if (!(need <= limit))
             return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
-                              "a %dx%d %s needs at least %.0f MiB, over the memory limit of "
-                              "%.0f MiB (raise it with --memory-limit)",
+                              "a %dx%d %s needs at least %.3g MiB, over the memory limit of "
+                              "%.3g MiB (raise it with --memory-limit)",
                               w, h, tree_out ? "traced image with its trees" : "traced image",
                               need / 1048576.0, limit / 1048576.0);
     }
@@ -663,9 +664,10 @@ static int retrace_chunk(void *ctx, int ci)
         w->status = RTP_ERR_NOMEM;
         return 1;
     }
-    memcpy(r->nodes, w->nodes, w->nn * sizeof *r->nodes);
+    if (w->nn)
+        memcpy(r->nodes, w->nodes, w->nn * sizeof *r->nodes);
     memcpy(r->counts, w->counts, k * sizeof *r->counts);
-    if (words)
+    if (words && w->nn)
         memcpy(r->vis, w->vis, w->nn * words * sizeof *r->vis);
     return 0;
 }

@@ -119,8 +119,10 @@ rtp_status rtp_tree_set(rtp_tree *t, const char *key, const char *value,
         rtpi_free(&t->alloc, lights);
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
     }
-    memcpy(mats, s->mats, s->nmats * sizeof *mats);
-    memcpy(lights, s->lights, s->nlights * sizeof *lights);
+    if (s->nmats) /* (memcpy from NULL is undefined even for 0 bytes) */
+        memcpy(mats, s->mats, s->nmats * sizeof *mats);
+    if (s->nlights)
+        memcpy(lights, s->lights, s->nlights * sizeof *lights);
     memcpy(amb, s->ambient, sizeof amb);
     memcpy(bg, s->background, sizeof bg);
     st = rtp_scene_set(s, key, value, err);
@@ -129,8 +131,10 @@ rtp_status rtp_tree_set(rtp_tree *t, const char *key, const char *value,
     if (st != RTP_OK) {
         /* names are untouched by rtp_scene_set: the copies' pointers are
            the scene's own */
-        memcpy(s->mats, mats, s->nmats * sizeof *mats);
-        memcpy(s->lights, lights, s->nlights * sizeof *lights);
+        if (s->nmats)
+            memcpy(s->mats, mats, s->nmats * sizeof *mats);
+        if (s->nlights)
+            memcpy(s->lights, lights, s->nlights * sizeof *lights);
         memcpy(s->ambient, amb, sizeof amb);
         memcpy(s->background, bg, sizeof bg);
     }
@@ -735,7 +739,8 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
             goto done;
         }
     if (cached) {
-        memcpy(t->ev_mats, s->mats, s->nmats * sizeof *t->ev_mats);
+        if (s->nmats)
+            memcpy(t->ev_mats, s->mats, s->nmats * sizeof *t->ev_mats);
         for (l = 0; l < nl; l++)
             memcpy(t->ev_pos + 3 * l, s->lights[l].pos, sizeof s->lights[l].pos);
         t->ev_nlights = nl;

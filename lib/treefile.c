@@ -83,7 +83,7 @@ typedef struct buf {
 
 static void put(buf *b, const void *src, size_t n)
 {
-    if (b->bad)
+    if (b->bad || n == 0)
         return;
     if (rtpi_grow(b->a, (void **)&b->p, &b->cap, b->n + n, 1)) {
         b->bad = 1;

@@ -299,6 +299,46 @@ static void test_grid(void)
     rtp_scene_destroy(s);
 }
 
+/* Many axis-parallel quads on the planes x, y or z = k/32 of a unit box:
+   the large nodes choose binned planes, which are then exactly these
+   planes, so triangles lie in the binned split planes as well as in the
+   exact ones below, and rays with grid origins run along them. */
+static void test_bin_planes(void)
+{
+    rng g;
+    rtp_scene *s = new_scene();
+    int i;
+    g.s = g_seed ^ 0x2323;
+    add_t(s, add_v(s, 0, 0, 0), add_v(s, 1, 0, 0), add_v(s, 0, 1, 0));
+    add_t(s, add_v(s, 1, 1, 1), add_v(s, 0, 1, 1), add_v(s, 1, 0, 1));
+    for (i = 0; i < 1500; i++) {
+        int ax = i % 3;
+        double x = floor(rnd(&g) * 31) / 32, y = floor(rnd(&g) * 31) / 32,
+               z = floor(rnd(&g) * 31) / 32, w = (1 + (i % 2)) / 32.0;
+        uint32_t a, b, c, d;
+        if (ax == 0) {
+            a = add_v(s, x, y, z);
+            b = add_v(s, x, y + w, z);
+            c = add_v(s, x, y + w, z + w);
+            d = add_v(s, x, y, z + w);
+        } else if (ax == 1) {
+            a = add_v(s, x, y, z);
+            b = add_v(s, x + w, y, z);
+            c = add_v(s, x + w, y, z + w);
+            d = add_v(s, x, y, z + w);
+        } else {
+            a = add_v(s, x, y, z);
+            b = add_v(s, x + w, y, z);
+            c = add_v(s, x + w, y + w, z);
+            d = add_v(s, x, y + w, z);
+        }
+        add_t(s, a, b, c);
+        add_t(s, a, c, d);
+    }
+    check_scene_vs_brute(s, &g, 8000, 1);
+    rtp_scene_destroy(s);
+}
+
 static void test_spheres_cones(void)
 {
     rng g;
@@ -900,6 +940,7 @@ int main(void)
     RUN(test_empty);
     RUN(test_soup);
     RUN(test_grid);
+    RUN(test_bin_planes);
     RUN(test_spheres_cones);
     RUN(test_closed_meshes);
     RUN(test_self_intersection);

@@ -61,6 +61,8 @@ static const light_case lights[] = {
     {"inside the inside-only sphere", {-2.4, 2.5, 1.2}},
     {"inside the cylinder", {2, -1.5, 1.0}},
     {"far away", {1e4, -2e4, 3e4}},
+    {"on a floor corner", {5, 5, 0}},
+    {"just inside a cone's tip", {3, 2.5, 1.2}},
 };
 #define NLIGHTS (sizeof lights / sizeof *lights)
 
@@ -289,6 +291,8 @@ static void test_lightbuf_far_from_origin(void)
                     sm[n].prim = h.prim;
                     n++;
                 }
+                CHECK_MSG(n > NSAMPLES / 10, "far scene, light %s: only %lu points",
+                          lights[li].name, (unsigned long)n);
                 bad = compare(s, kd, lp, RTPI_SHADOW_LIGHTBUF, 512, sm, n, NULL);
                 CHECK_MSG(bad == 0, "far scene, light %s: %lu of %lu differ", lights[li].name,
                           (unsigned long)bad, (unsigned long)n);
