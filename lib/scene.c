@@ -492,6 +492,21 @@ rtp_status rtp_scene_set(rtp_scene *s, const char *key, const char *value,
             }
             return RTP_OK;
         }
+        if (strcmp(field, "texture") == 0) {
+            /* an image texture (PNG/PPM/PFM) by uv, or none */
+            if (strcmp(value, "none") == 0) {
+                if (m->tex == RTPI_TEX_IMAGE)
+                    m->tex = RTPI_TEX_NONE;
+            } else {
+                uint32_t idx;
+                if ((st = rtpi_scene_add_texture(s, value, &idx, err)) != RTP_OK)
+                    return st;
+                m = &s->mats[i];
+                m->tex = RTPI_TEX_IMAGE;
+                m->tex_image = idx;
+            }
+            return RTP_OK;
+        }
         if (strcmp(field, "bump") == 0) {
             /* none, waves, noise, or a PNG height map */
             if (strcmp(value, "none") == 0) {
@@ -532,8 +547,8 @@ rtp_status rtp_scene_set(rtp_scene *s, const char *key, const char *value,
         if (!dst)
             return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0,
                               "unknown key '%s' (material fields: color, kd, ks, kt, shine, ior, "
-                              "checker, color2, checker_scale, bump, bump_strength, "
-                              "bump_scale)",
+                              "checker, color2, checker_scale, texture, bump, "
+                              "bump_strength, bump_scale)",
                               key);
         if ((st = want(err, key, value, n, 1)) != RTP_OK)
             return st;
