@@ -12,14 +12,15 @@ t0=$(date +%s)
 
 # the compile command make uses for the library, for the header
 build=$(dirname "$dir")
-src=$(ls lib/*.c 2>/dev/null | head -n 1)
+src=""
+for f in lib/*.c; do [ -f "$f" ] && src=$f && break; done
 cmd=""
 [ -n "$src" ] && cmd=$(make -n -B V=1 BUILD="$build" "$build/${src%.c}.o" 2>/dev/null |
     grep -e " -c $src" | head -n 1)
 cc_used=${cmd%% *}
 [ -n "$cc_used" ] || cc_used=${CC:-cc}
 flags=${cmd#* }
-flags=$(echo "${flags% -c $src*}" | sed "s/ *$//")
+flags=$(echo "${flags% -c "$src"*}" | sed "s/ *$//")
 [ -n "$cmd" ] || flags="(unknown: make -n gave no compile command)"
 BENCH_MACHINE="$(uname -srm), $(nproc 2>/dev/null || echo '?') cores, $(grep -m1 'model name' /proc/cpuinfo 2>/dev/null | sed 's/.*: //')"
 BENCH_COMPILER="$cc_used: $($cc_used --version 2>/dev/null | head -n 1)"
