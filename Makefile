@@ -84,7 +84,8 @@ $(BUILD)/bench/%: bench/%.c $(BUILD)/librtp.a
 	$(Q)$(CC) $(ALL_CFLAGS) -Ilib $(LDFLAGS) $< $(BUILD)/librtp.a -o $@ $(LIBS)
 
 test: all $(TEST_BIN)
-	$(Q)sh test/run.sh $(BUILD)/test
+	$(Q)CC="$(CC)" RTP_BUILD="$(BUILD)" RTP_CFLAGS="$(CFLAGS)" RTP_LDFLAGS="$(LDFLAGS)" \
+	    sh test/run.sh $(BUILD)/test
 
 bench: all $(BENCH_BIN)
 	$(Q)sh bench/run.sh $(BUILD)/bench

@@ -921,6 +921,7 @@ static int cmd_reeval(int argc, char **argv)
         if (strcmp(a, "-h") == 0 || strcmp(a, "--help") == 0) {
             fputs(reeval_help, stdout);
             free(sets);
+            free(add_lights);
             return 0;
         } else if (strcmp(a, "-q") == 0 || strcmp(a, "--quiet") == 0) {
             verbosity = 0;

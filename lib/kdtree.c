@@ -446,7 +446,7 @@ static int build_node(kd_build *b, const float *lo, const float *hi,
             split_binned(b->ref + off, n, lo, hi, d, area, &sp);
     }
     if (!(sp.cost < KD_LEAF_MARGIN * KD_COST_ISECT * (double)n))
-        return make_leaf(b, b->ref + off, n);
+        return make_leaf(b, n ? b->ref + off : NULL, n); /* (no NULL + 0) */
 
     /* Partition in place into [right | straddling | left] (three-way, as
        the Dutch flag), then split each straddler: its right part takes

@@ -536,6 +536,9 @@ static rtp_status read_path(nff *c, const char *what, rtpi_tok *t,
     rtp_status st = need(c, t, what, "a file name");
     if (st != RTP_OK)
         return st;
+    /* A NUL would silently cut the name (the folder itself was read). */
+    if (memchr(t->s, '\0', t->n))
+        return rtpi_lex_error(&c->lx, t, "%s: a file name must not contain a NUL byte", what);
     *path = rtpi_path_join(&c->s->alloc, c->lx.name, t->s, t->n);
     return *path ? RTP_OK : nomem(c, t);
 }

@@ -145,6 +145,9 @@ static rtp_status mtl_map(rtpi_lex *lx, rtp_scene *s, const char *what,
     if (!have)
         return rtpi_lex_error(lx, &t, "unexpected end of line in %s, expected a file name",
                               what);
+    /* A NUL would silently cut the name (the folder itself was read). */
+    if (memchr(file.s, '\0', file.n))
+        return rtpi_lex_error(lx, &file, "%s: a file name must not contain a NUL byte", what);
     path = rtpi_path_join(&s->alloc, lx->name, file.s, file.n);
     if (!path)
         return nomem(lx, &file);
@@ -297,10 +300,14 @@ static rtp_status read_mtllib(obj *o)
     rtpi_tok t;
     rtp_status st;
     while (rtpi_lex_next_inline(&o->lx, &t)) {
-        char *path = rtpi_path_join(&o->s->alloc, o->lx.name, t.s, t.n);
+        char *path = NULL;
         char *text = NULL;
         size_t size = 0;
         rtp_error inner;
+        /* A NUL would silently cut the name (the folder itself was read). */
+        if (memchr(t.s, '\0', t.n))
+            return rtpi_lex_error(&o->lx, &t, "mtllib: a file name must not contain a NUL byte");
+        path = rtpi_path_join(&o->s->alloc, o->lx.name, t.s, t.n);
         if (!path)
             return nomem(&o->lx, &t);
         memset(&inner, 0, sizeof inner);

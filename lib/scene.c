@@ -347,7 +347,9 @@ static int parse_numbers(const char *v, double *out, int max)
             v++;
         errno = 0;
         d = strtod(v, &end);
-        if (end == v || errno == ERANGE || !isfinite(d))
+        /* values are stored as floats (colours, coefficients): beyond
+           float's range they would become infinite */
+        if (end == v || errno == ERANGE || !isfinite(d) || fabs(d) > 3.4e38)
             return -1;
         if (n == max)
             return -1;

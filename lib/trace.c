@@ -296,11 +296,12 @@ static void trace_sample(worker *w, int x, int y, float *rgb)
             w->status = RTP_ERR_NOMEM;
             return;
         }
-        rtpi_sample_terms(&w->sh->shade, w->nodes + w->sample_base, n,
-                          words ? w->vis + w->sample_base * words : NULL, c->from, w->terms,
-                          NULL);
-        rtpi_sample_coeffs(&w->sh->shade, w->nodes + w->sample_base, n, w->terms, w->acc,
-                           w->coeffs);
+        /* (no NULL + 0 when nothing was hit yet) */
+        const rtpi_cnode *nodes = n ? w->nodes + w->sample_base : NULL;
+        rtpi_sample_terms(&w->sh->shade, nodes, n,
+                          words && n ? w->vis + w->sample_base * words : NULL, c->from,
+                          w->terms, NULL);
+        rtpi_sample_coeffs(&w->sh->shade, nodes, n, w->terms, w->acc, w->coeffs);
         rtpi_combine(s, w->sh->cl, w->coeffs, rgb);
     }
     if (!w->sh->rows)

@@ -3,6 +3,7 @@
 
 #include <errno.h>
 #include <stdarg.h>
+#include <sys/stat.h>
 #include <stdio.h>
 #include <stdlib.h>
 
@@ -174,6 +175,13 @@ rtp_status rtpi_read_file(const rtp_allocator *a, const char *path,
     if (!f)
         return rtpi_error(err, RTP_ERR_IO, path, 0, 0, "cannot open: %s",
                           strerror(errno));
+    if (!is_stdin) {
+        struct stat sb;
+        if (fstat(fileno(f), &sb) != 0 || S_ISDIR(sb.st_mode)) {
+            fclose(f);
+            return rtpi_error(err, RTP_ERR_IO, path, 0, 0, "is a directory, not a file");
+        }
+    }
     if (!is_stdin && fseek(f, 0, SEEK_END) == 0) {
         /* a regular file: one allocation of its size (+1 to see EOF) */
         long fsize = ftell(f);

@@ -9,7 +9,9 @@ ok()  { pass=$((pass + 1)); }
 bad() { fail=$((fail + 1)); echo "FAIL: $*" >&2; }
 CC=${CC:-cc}
 
-if make -s install DESTDIR="$T/stage" PREFIX=/opt/rtp >"$T/log" 2>&1; then ok
+# the build being tested (sanitizer builds pass their flags down)
+if make -s install BUILD="${RTP_BUILD:-build}" ${RTP_CFLAGS:+CFLAGS="$RTP_CFLAGS"} \
+        ${RTP_LDFLAGS:+LDFLAGS="$RTP_LDFLAGS"} DESTDIR="$T/stage" PREFIX=/opt/rtp >"$T/log" 2>&1; then ok
 else bad "make install"; cat "$T/log" >&2; fi
 for f in lib/librtp.a lib/librtp.so lib/librtp.so.0 include/rtp.h bin/rtp lib/pkgconfig/rtp.pc; do
     [ -e "$T/stage/opt/rtp/$f" ] && ok || bad "not installed: $f"
@@ -32,11 +34,11 @@ if command -v pkg-config >/dev/null 2>&1; then
     export PKG_CONFIG_PATH="$T/stage/opt/rtp/lib/pkgconfig"
     export PKG_CONFIG_SYSROOT_DIR="$T/stage"
     # static: the archive plus what pkg-config says it needs privately
-    if $CC -std=c99 -o "$T/prog" "$T/prog.c" $(pkg-config --cflags rtp) \
+    if $CC -std=c99 $RTP_CFLAGS $RTP_LDFLAGS -o "$T/prog" "$T/prog.c" $(pkg-config --cflags rtp) \
            "$T/stage/opt/rtp/lib/librtp.a" $(pkg-config --static --libs rtp | sed 's/-lrtp//') 2>"$T/err"; then
         "$T/prog" >"$T/out" && grep -q "4x3" "$T/out" && ok || bad "static program run"
     else bad "build against installed static library"; cat "$T/err" >&2; fi
-    if $CC -std=c99 -o "$T/prog_so" "$T/prog.c" $(pkg-config --cflags --libs rtp) 2>"$T/err"; then
+    if $CC -std=c99 $RTP_CFLAGS $RTP_LDFLAGS -o "$T/prog_so" "$T/prog.c" $(pkg-config --cflags --libs rtp) 2>"$T/err"; then
         LD_LIBRARY_PATH="$T/stage/opt/rtp/lib" "$T/prog_so" >"$T/out" && grep -q "4x3" "$T/out" && ok || bad "shared program run"
     else bad "build against installed shared library"; cat "$T/err" >&2; fi
 else
