@@ -46,8 +46,8 @@ LIB_OBJ  = $(LIB_SRC:%.c=$(BUILD)/%.o)
 LIB_PIC  = $(LIB_SRC:%.c=$(BUILD)/pic/%.o)
 TEST_SRC = $(sort $(wildcard test/test_*.c))
 TEST_BIN = $(TEST_SRC:%.c=$(BUILD)/%)
-BENCH_SRC = $(sort $(wildcard bench/*.c))
-BENCH_BIN = $(BENCH_SRC:%.c=$(BUILD)/%)
+BENCH_SRC = $(sort $(wildcard test/bench/*.c))
+BENCH_BIN = $(BENCH_SRC:test/bench/%.c=$(BUILD)/bench/%)
 
 .PHONY: all test bench install uninstall clean asan ubsan demo
 all: $(BUILD)/librtp.a $(BUILD)/librtp.so rtp
@@ -78,7 +78,7 @@ $(BUILD)/test/%: test/%.c test/check.h $(BUILD)/librtp.a
 	@$(if $(Q),echo "  CCLD    $@")
 	$(Q)$(CC) $(ALL_CFLAGS) -Ilib $(LDFLAGS) $< $(BUILD)/librtp.a -o $@ $(LIBS)
 
-$(BUILD)/bench/%: bench/%.c $(BUILD)/librtp.a
+$(BUILD)/bench/%: test/bench/%.c $(BUILD)/librtp.a
 	@mkdir -p $(dir $@)
 	@$(if $(Q),echo "  CCLD    $@")
 	$(Q)$(CC) $(ALL_CFLAGS) -Ilib $(LDFLAGS) $< $(BUILD)/librtp.a -o $@ $(LIBS)
@@ -88,7 +88,7 @@ test: all $(TEST_BIN)
 	    sh test/run.sh $(BUILD)/test
 
 bench: all $(BENCH_BIN)
-	$(Q)sh bench/run.sh $(BUILD)/bench
+	$(Q)sh test/bench/run.sh $(BUILD)/bench
 
 asan:
 	$(MAKE) BUILD=build-asan CFLAGS="-O1 -g -fsanitize=address -fno-omit-frame-pointer" LDFLAGS="-fsanitize=address" test

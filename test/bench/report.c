@@ -2,12 +2,12 @@
  *
  *     build/bench/report MATRIX.TSV OUTDIR
  *
- * Reads the records bench/matrix.sh collected (tab separated: kind, scene,
+ * Reads the records test/bench/matrix.sh collected (tab separated: kind, scene,
  * edit, method, JSON from rtp's --stats) and writes OUTDIR/report.md (a
  * markdown table per scene, edit and method, and a summary per method) and
  * OUTDIR/errspeed.svg (RMSE against speed-up, both logarithmic, one series
  * per method; error-free points on an "exact" band below the axis).  Not a
- * benchmark itself: bench/run.sh runs only bench_* programs. */
+ * benchmark itself: test/bench/run.sh runs only bench_* programs. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>

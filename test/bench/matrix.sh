@@ -1,7 +1,7 @@
 #!/bin/sh
-# bench/matrix.sh — the error-against-run-time matrix: scenes x edit classes
+# test/bench/matrix.sh — the error-against-run-time matrix: scenes x edit classes
 # x shadow modes x direction-cube resolutions, measured through the CLI's
-# --stats JSON.  Writes bench/out/matrix.tsv (one record a line, tab
+# --stats JSON.  Writes test/bench/out/matrix.tsv (one record a line, tab
 # separated: kind, scene, edit, method, JSON) for build/bench/report.
 #
 # Per scene:
@@ -18,11 +18,11 @@
 #      compared (rtp diff) with the exact run's, which step 2 compared with a
 #      full trace; the speed-up uses step 2's reference time for that line.
 #
-# Environment: RTP (./rtp), OUT (bench/out), J (threads, 2), RESES (cube
+# Environment: RTP (./rtp), OUT (test/bench/out), J (threads, 2), RESES (cube
 # resolutions, "256 512 1024 2048"), SCENES (names, overriding the default
 # list), KEEP=1 keeps the trees and images.
 RTP=${RTP:-./rtp}
-out=${OUT:-bench/out}
+out=${OUT:-test/bench/out}
 J=${J:-2}
 RESES=${RESES:-"256 512 1024 2048"}
 work=$out/matrix

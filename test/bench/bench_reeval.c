@@ -4,7 +4,7 @@
  * bytes once, the floor a re-evaluation cannot beat.  A benchmark: it
  * reports, it never fails. */
 #include "internal.h"
-#include "../test/check.h"
+#include "../check.h"
 
 #include <time.h>
 

@@ -1,12 +1,12 @@
 #!/bin/sh
 # make bench: kd-tree build and ray rates and the other bench_* programs,
 # SPD full traces at 1 and 2 threads with SPD's ray counts, then the
-# error-against-run-time matrix (bench/matrix.sh) and its report
-# (build/bench/report: bench/out/report.md and bench/out/errspeed.svg).
+# error-against-run-time matrix (test/bench/matrix.sh) and its report
+# (build/bench/report: test/bench/out/report.md and test/bench/out/errspeed.svg).
 # A benchmark, not a test: it reports.
 dir=${1:-build/bench}
 RTP=${RTP:-./rtp}
-out=bench/out
+out=test/bench/out
 mkdir -p "$out"
 t0=$(date +%s)
 
@@ -62,8 +62,8 @@ fi
 
 # error against run time: the matrix, then the report (also on stdout)
 echo
-echo "(error against run time: running bench/matrix.sh, a few minutes)" >&2
-if RTP=$RTP OUT=$out sh bench/matrix.sh && [ -x "$dir/report" ] &&
+echo "(error against run time: running test/bench/matrix.sh, a few minutes)" >&2
+if RTP=$RTP OUT=$out sh test/bench/matrix.sh && [ -x "$dir/report" ] &&
         "$dir/report" "$out/matrix.tsv" "$out"; then
     cat "$out/report.md"
     echo
