@@ -177,7 +177,7 @@ demo: all
 	    "$$(sed -nE 's/.*"seconds": ([0-9.]+).*/\1/p' demo/fig3.json)"; \
 	for step in "fig4|fig. 4: lamp on, checkerboard, shinier pot|$$fig4" \
 	            "fig6|fig. 6: and the key light moved (exact)|$$fig4 $$move" \
-	            "fig6i|fig. 6: light moved, item-buffer shadows|$$fig4 $$move --shadows itembuf:1024"; do \
+	            "fig6i|fig. 6: light moved, item-buffer shadows|$$fig4 $$move --shadows itembuf:512"; do \
 	    name=$${step%%|*}; rest=$${step#*|}; label=$${rest%%|*}; args=$${rest#*|}; \
 	    ./rtp reeval demo/teapot.rtp $$args -j $$j --reference -i demo/$$name.png --stats demo/$$name.json -q || exit 1; \
 	    j1=$$(cat demo/$$name.json); \
