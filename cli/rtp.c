@@ -163,6 +163,35 @@ static int parse_region(const char *v, int *r)
     return 0;
 }
 
+/* Options every subcommand takes: -q, -v, -j N, --stats FILE.  Returns 1
+   when argv[*i] was one (consumed), 0 when not, -1 on a bad value. */
+static int common_option(int argc, char **argv, int *i, int *threads, const char **stats)
+{
+    const char *a = argv[*i], *v;
+    if (strcmp(a, "-q") == 0 || strcmp(a, "--quiet") == 0) {
+        verbosity = 0;
+        return 1;
+    }
+    if (strcmp(a, "-v") == 0 || strcmp(a, "--verbose") == 0) {
+        verbosity = 2;
+        return 1;
+    }
+    if (threads && (strncmp(a, "-j", 2) == 0 || is_opt(a, "--threads"))) {
+        if (!(v = opt_value(argc, argv, i, a[1] == 'j' ? "-j" : "--threads")) ||
+            parse_int(v, 1, 256, threads)) {
+            msg("-j: expected a thread count from 1 to 256");
+            return -1;
+        }
+        return 1;
+    }
+    if (stats && is_opt(a, "--stats")) {
+        if (!(*stats = opt_value(argc, argv, i, "--stats")))
+            return -1;
+        return 1;
+    }
+    return 0;
+}
+
 /* ---------------------------------------------------------------- stats */
 
 static FILE *stats_open(const char *path)
@@ -356,7 +385,7 @@ static int cmd_trace(int argc, char **argv)
     rtp_image *img = NULL;
     rtp_error err;
     progress prog;
-    int i, rc = 1, nsets = 0;
+    int i, rc = 1, nsets = 0, c;
     const char **sets;
     double t0, t_load, t_trace, t_write;
 
@@ -373,10 +402,9 @@ static int cmd_trace(int argc, char **argv)
             fputs(trace_help, stdout);
             free(sets);
             return 0;
-        } else if (strcmp(a, "-q") == 0 || strcmp(a, "--quiet") == 0) {
-            verbosity = 0;
-        } else if (strcmp(a, "-v") == 0 || strcmp(a, "--verbose") == 0) {
-            verbosity = 2;
+        } else if ((c = common_option(argc, argv, &i, &opt.threads, &stats_path)) != 0) {
+            if (c < 0)
+                goto usage;
         } else if (strcmp(a, "--spd") == 0) {
             opt.spd = 1;
         } else if (strcmp(a, "-i") == 0 || is_opt(a, "--image")) {
@@ -424,15 +452,6 @@ static int cmd_trace(int argc, char **argv)
                 msg("--min-weight: expected a number >= 0");
                 goto usage;
             }
-        } else if (strncmp(a, "-j", 2) == 0 || is_opt(a, "--threads")) {
-            if (!(v = opt_value(argc, argv, &i, a[1] == 'j' ? "-j" : "--threads")) ||
-                parse_int(v, 1, 256, &opt.threads)) {
-                msg("-j: expected a thread count from 1 to 256");
-                goto usage;
-            }
-        } else if (is_opt(a, "--stats")) {
-            if (!(stats_path = opt_value(argc, argv, &i, "--stats")))
-                goto usage;
         } else if (a[0] == '-' && a[1] != '\0') {
             msg("trace: unknown option '%s'", a);
             goto usage;
@@ -574,7 +593,7 @@ static int cmd_diff(int argc, char **argv)
     rtp_image *a = NULL, *b = NULL;
     rtp_diff_stats d;
     rtp_error err;
-    int i, rc = 1, over = 0;
+    int i, rc = 1, over = 0, c;
     char metric[32];
 
     memset(&err, 0, sizeof err);
@@ -583,15 +602,11 @@ static int cmd_diff(int argc, char **argv)
         if (strcmp(arg, "-h") == 0 || strcmp(arg, "--help") == 0) {
             fputs(diff_help, stdout);
             return 0;
-        } else if (strcmp(arg, "-q") == 0 || strcmp(arg, "--quiet") == 0) {
-            verbosity = 0;
-        } else if (strcmp(arg, "-v") == 0 || strcmp(arg, "--verbose") == 0) {
-            verbosity = 2;
+        } else if ((c = common_option(argc, argv, &i, NULL, &stats_path)) != 0) {
+            if (c < 0)
+                goto usage;
         } else if (is_opt(arg, "--heatmap")) {
             if (!(heat = opt_value(argc, argv, &i, "--heatmap")))
-                goto usage;
-        } else if (is_opt(arg, "--stats")) {
-            if (!(stats_path = opt_value(argc, argv, &i, "--stats")))
                 goto usage;
         } else if (is_opt(arg, "--threshold")) {
             if (!(v = opt_value(argc, argv, &i, "--threshold")) ||
@@ -898,7 +913,7 @@ static int cmd_reeval(int argc, char **argv)
     const char **sets, **add_lights;
     rtp_image *img = NULL;
     int region[4] = {0, 0, 0, 0};
-    int i, nsets = 0, nadd = 0, rc = 1, stream = 0, reference = 0, threads = 1;
+    int i, nsets = 0, nadd = 0, rc = 1, stream = 0, reference = 0, threads = 1, c;
     rtp_tree *tree = NULL;
     rtp_error err;
     rtp_eval_options eo;
@@ -923,10 +938,9 @@ static int cmd_reeval(int argc, char **argv)
             free(sets);
             free(add_lights);
             return 0;
-        } else if (strcmp(a, "-q") == 0 || strcmp(a, "--quiet") == 0) {
-            verbosity = 0;
-        } else if (strcmp(a, "-v") == 0 || strcmp(a, "--verbose") == 0) {
-            verbosity = 2;
+        } else if ((c = common_option(argc, argv, &i, &threads, &stats_path)) != 0) {
+            if (c < 0)
+                goto usage;
         } else if (strcmp(a, "--stream") == 0) {
             stream = 1;
         } else if (strcmp(a, "--reference") == 0) {
@@ -978,15 +992,6 @@ static int cmd_reeval(int argc, char **argv)
             if (!(v = opt_value(argc, argv, &i, "--add-light")))
                 goto usage;
             add_lights[nadd++] = v;
-        } else if (strncmp(a, "-j", 2) == 0 || is_opt(a, "--threads")) {
-            if (!(v = opt_value(argc, argv, &i, a[1] == 'j' ? "-j" : "--threads")) ||
-                parse_int(v, 1, 256, &threads)) {
-                msg("-j: expected a thread count from 1 to 256");
-                goto usage;
-            }
-        } else if (is_opt(a, "--stats")) {
-            if (!(stats_path = opt_value(argc, argv, &i, "--stats")))
-                goto usage;
         } else if (a[0] == '-' && a[1] != '\0') {
             msg("reeval: unknown option '%s'", a);
             goto usage;
@@ -1214,7 +1219,7 @@ static const char merge_help[] =
 static int cmd_merge(int argc, char **argv)
 {
     const char *out_tree = NULL, *out_image = NULL;
-    int i, n = 0, rc = 1, fw = 0, fh = 0, threads = 1, images = 0;
+    int i, n = 0, rc = 1, fw = 0, fh = 0, threads = 1, images = 0, c;
     const char **in = (const char **)calloc((size_t)argc + 1, sizeof *in);
     rtp_tree **parts = NULL, *joined = NULL;
     rtp_image *img = NULL;
@@ -1225,24 +1230,20 @@ static int cmd_merge(int argc, char **argv)
         return 1;
     }
     for (i = 0; i < argc; i++) {
-        const char *a = argv[i], *v;
+        const char *a = argv[i];
         if (strcmp(a, "-h") == 0 || strcmp(a, "--help") == 0) {
             fputs(merge_help, stdout);
             free(in);
             return 0;
-        } else if (strcmp(a, "-q") == 0 || strcmp(a, "--quiet") == 0) {
-            verbosity = 0;
+        } else if ((c = common_option(argc, argv, &i, &threads, NULL)) != 0) {
+            if (c < 0)
+                goto usage;
         } else if (strcmp(a, "-o") == 0 || is_opt(a, "--output")) {
             if (!(out_tree = opt_value(argc, argv, &i, a[1] == 'o' ? "-o" : "--output")))
                 goto usage;
         } else if (strcmp(a, "-i") == 0 || is_opt(a, "--image")) {
             if (!(out_image = opt_value(argc, argv, &i, a[1] == 'i' ? "-i" : "--image")))
                 goto usage;
-        } else if (strncmp(a, "-j", 2) == 0) {
-            if (!(v = opt_value(argc, argv, &i, "-j")) || parse_int(v, 1, 256, &threads)) {
-                msg("-j: expected a thread count from 1 to 256");
-                goto usage;
-            }
         } else if (is_opt(a, "--size")) {
             if (parse_size(opt_value(argc, argv, &i, "--size"), &fw, &fh))
                 goto usage;
