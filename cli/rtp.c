@@ -1124,7 +1124,7 @@ usage:
 /* ----------------------------------------------------------------- info */
 
 static const char info_help[] =
-    "usage: rtp info TREE [--stats FILE]\n"
+    "usage: rtp info TREE [--stats FILE] [-q]\n"
     "Prints what a tree file holds: image and sample sizes, nodes, bytes per\n"
     "node, file size, lights and materials (with their names).\n";
 
@@ -1135,14 +1135,14 @@ static int cmd_info(int argc, char **argv)
     rtp_tree_info ti;
     rtp_error err;
     long long fb;
-    int i;
+    int i, c;
     memset(&err, 0, sizeof err);
     for (i = 0; i < argc; i++) {
         if (strcmp(argv[i], "-h") == 0 || strcmp(argv[i], "--help") == 0) {
             fputs(info_help, stdout);
             return 0;
-        } else if (is_opt(argv[i], "--stats")) {
-            if (!(stats_path = opt_value(argc, argv, &i, "--stats"))) {
+        } else if ((c = common_option(argc, argv, &i, NULL, &stats_path)) != 0) {
+            if (c < 0) {
                 fputs(info_help, stderr);
                 return EXIT_USAGE;
             }
@@ -1166,7 +1166,7 @@ static int cmd_info(int argc, char **argv)
         return fail_err(&err);
     rtp_tree_get_info(tree, &ti);
     fb = file_size(tree_path);
-    if (!stats_path || strcmp(stats_path, "-") != 0) {
+    if ((!stats_path || strcmp(stats_path, "-") != 0) && verbosity > 0) {
         unsigned long long px = (unsigned long long)ti.width * ti.height;
         printf("%s: %dx%d image%s, %llu samples, depth %d\n", tree_path, ti.width, ti.height,
                ti.spd ? " (SPD: corner samples)" : "", ti.samples, ti.max_depth);
@@ -1178,6 +1178,10 @@ static int cmd_info(int argc, char **argv)
                    px ? (double)fb / (3.0 * (double)px) : 0.0, 3 * px);
         printf("scene: %zu triangles, %zu spheres, %zu cones; %zu materials, %zu lights\n",
                ti.triangles, ti.spheres, ti.cones, ti.materials, ti.lights);
+        if (ti.width != ti.full_width || ti.height != ti.full_height)
+            printf("region: pixels %d,%d to %d,%d of a %dx%d frame\n", ti.region_x,
+                   ti.region_y, ti.region_x + ti.width, ti.region_y + ti.height,
+                   ti.full_width, ti.full_height);
     }
     if (stats_path) {
         FILE *f = stats_open(stats_path);
