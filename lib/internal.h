@@ -438,6 +438,15 @@ struct rtp_tree {
     rtpi_material *ev_mats; /* materials the caches were made with */
     uint32_t *mat_start;   /* per material: its samples in mat_samples */
     uint32_t *mat_samples; /* samples whose trees contain each material */
+
+    /* Large blocks the direction cubes of moved lights used, kept for the
+       next move: fresh memory costs a page fault a page (tree.c). */
+    struct rtpi_block {
+        void *p;
+        size_t n;
+        int live;
+    } blocks[16];
+    rtp_allocator cube_alloc; /* the tree's allocator through blocks[] */
 };
 
 /* Traces the listed samples (ascending indices) of t again in t->scene as

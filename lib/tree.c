@@ -9,9 +9,12 @@
 void rtp_tree_destroy(rtp_tree *t)
 {
     rtp_allocator a;
+    size_t i;
     if (!t)
         return;
     a = t->alloc;
+    for (i = 0; i < sizeof t->blocks / sizeof *t->blocks; i++)
+        rtpi_free(&a, t->blocks[i].p);
     rtp_scene_destroy(t->scene);
     rtpi_free(&a, t->mats0);
     rtpi_free(&a, t->lights0);
@@ -144,6 +147,73 @@ rtp_status rtp_tree_set(rtp_tree *t, const char *key, const char *value,
 }
 
 /* ------------------------------------------------------ moved lights */
+
+/* The direction cube of a moved light takes tens of megabytes; the next
+   move needs as much again.  Blocks of a megabyte or more are kept for
+   reuse (best fit, at most twice the size asked), so a sequence of moves
+   touches warm memory instead of faulting fresh pages in. */
+#define BLOCK_MIN (1u << 20)
+
+static void *blk_malloc(void *user, size_t size)
+{
+    rtp_tree *t = (rtp_tree *)user;
+    size_t i, best = (size_t)-1;
+    void *p;
+    if (size < BLOCK_MIN)
+        return rtpi_malloc(&t->alloc, size);
+    for (i = 0; i < sizeof t->blocks / sizeof *t->blocks; i++) {
+        const struct rtpi_block *b = &t->blocks[i];
+        if (b->p && !b->live && b->n >= size && b->n / 2 <= size &&
+            (best == (size_t)-1 || b->n < t->blocks[best].n))
+            best = i;
+    }
+    if (best != (size_t)-1) {
+        t->blocks[best].live = 1;
+        return t->blocks[best].p;
+    }
+    p = rtpi_malloc(&t->alloc, size);
+    if (!p)
+        return NULL;
+    for (i = 0; i < sizeof t->blocks / sizeof *t->blocks; i++)
+        if (!t->blocks[i].p) {
+            t->blocks[i].p = p;
+            t->blocks[i].n = size;
+            t->blocks[i].live = 1;
+            break;
+        }
+    return p; /* untracked when every slot is taken: freed as usual */
+}
+
+static void blk_free(void *user, void *p)
+{
+    rtp_tree *t = (rtp_tree *)user;
+    size_t i;
+    for (i = 0; i < sizeof t->blocks / sizeof *t->blocks; i++)
+        if (t->blocks[i].p == p) {
+            t->blocks[i].live = 0;
+            return;
+        }
+    rtpi_free(&t->alloc, p);
+}
+
+static void *blk_realloc(void *user, void *p, size_t size)
+{
+    rtp_tree *t = (rtp_tree *)user;
+    size_t i;
+    void *q;
+    for (i = 0; i < sizeof t->blocks / sizeof *t->blocks; i++)
+        if (p && t->blocks[i].p == p) {
+            if (size <= t->blocks[i].n)
+                return p;
+            q = rtpi_realloc(&t->alloc, p, size);
+            if (q) {
+                t->blocks[i].p = q;
+                t->blocks[i].n = size;
+            }
+            return q;
+        }
+    return rtpi_realloc(&t->alloc, p, size);
+}
 
 rtp_status rtp_tree_add_light(rtp_tree *t, const double pos[3], rtp_error *err)
 {
@@ -282,10 +352,16 @@ static rtp_status update_visibility(rtp_tree *t, const rtp_eval_options *opt,
         } else {
             rtpi_shadow *sh = NULL;
             rtp_status rs;
-            if (!t->kd && (rs = rtpi_kd_build(s, &t->alloc, &t->kd, err)) != RTP_OK)
+            /* only shadow rays need the kd-tree; the cubes draw the scene */
+            if (mode == RTP_SHADOWS_EXACT && !t->kd &&
+                (rs = rtpi_kd_build(s, &t->alloc, &t->kd, err)) != RTP_OK)
                 return rs;
+            t->cube_alloc.malloc_fn = blk_malloc;
+            t->cube_alloc.realloc_fn = blk_realloc;
+            t->cube_alloc.free_fn = blk_free;
+            t->cube_alloc.user = t;
             rs = rtpi_shadow_create(s, t->kd, v3(lp[0], lp[1], lp[2]), (rtpi_shadow_mode)mode,
-                                    res, &t->alloc, &sh, err);
+                                    res, &t->cube_alloc, &sh, err);
             if (rs != RTP_OK)
                 return rs;
             for (k = 0; k < threads; k++) {
