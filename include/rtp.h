@@ -6,16 +6,31 @@
  * This header is the whole public interface of librtp; the command-line
  * tool `rtp` uses nothing else.
  *
+ * The flow
+ *   rtp_scene_load     NFF (with rtp's additions) or OBJ+MTL -> rtp_scene
+ *   rtp_scene_set      edit a parameter by key ("light.0.pos", "mat.2.kd")
+ *   rtp_trace          the image;  rtp_record: the image and its ray trees
+ *   rtp_tree_write/read   the self-contained tree file (.rtp)
+ *   rtp_tree_set       edit the tree's scene: materials, lights (moved ones
+ *                      get new shadows), bumps, even ks/kt/ior (the samples
+ *                      concerned are traced again, exactly)
+ *   rtp_tree_eval      the edited image, without tracing (rtp_tree_trace:
+ *                      the full trace it must equal)
+ *   rtp_image_diff     the error between two images
+ * A renderer with its own tracer builds trees with rtp_builder_*.
+ *
  * Conventions
  *  - Every function that can fail returns an rtp_status; RTP_OK is 0.
  *    Where an rtp_error* is taken (it may be NULL), it receives the status,
  *    a message and, for parse errors, the file, line and column.
- *  - Stateful objects (rtp_scene) are opaque handles; destroy functions
- *    accept NULL.  Plain data (options, images, stats) are structs where a
+ *  - Stateful objects (rtp_scene, rtp_tree, rtp_builder) are opaque
+ *    handles; destroy functions accept NULL.  Plain data (options, images, stats) are structs where a
  *    zero-initialised value means "defaults".
  *  - The library has no global mutable state, never prints and never exits.
  *    A scene that is not being modified may be used from several threads at
- *    once (rtp_trace only reads it).
+ *    once (rtp_trace only reads it); a tree keeps evaluation caches, so one
+ *    tree is used by one thread at a time (options.threads parallelise one
+ *    call).
  *  - Memory comes from an rtp_allocator (NULL means malloc/realloc/free);
  *    objects remember the allocator they were created with.
  *  - Images are linear RGB floats, row-major, top row first.
