@@ -280,6 +280,20 @@ static void test_class_d_retrace(void)
             /* some samples, not all of them, were traced again */
             CHECK_MSG(es.retraced_samples > 0 && es.retraced_samples < 48u * 36u,
                       "%s: %llu samples re-traced", edits[i][0], es.retraced_samples);
+            /* the re-traced trees are saved and read back as they are */
+            {
+                char file[512];
+                rtp_tree *back = NULL;
+                rtp_image *again = NULL;
+                snprintf(file, sizeof file, "%s/rtp-classd-%d.rtp", tmpdir(), (int)getpid());
+                CHECK(rtp_tree_write(t, file, NULL, NULL) == RTP_OK);
+                CHECK(rtp_tree_read(file, NULL, &back, NULL) == RTP_OK);
+                CHECK(back && rtp_tree_eval(back, NULL, &again, NULL, NULL) == RTP_OK &&
+                      same_image(again, re));
+                remove(file);
+                rtp_image_destroy(again);
+                rtp_tree_destroy(back);
+            }
         } else {
             CHECK(0);
         }
