@@ -1,6 +1,7 @@
 /* trace.c — the Whitted ray tracer.  For each pixel sample it records the
  * ray tree (hits, light visibility, reflected and refracted subtrees) and
- * then evaluates that tree with rtpi_shade_tree: the image trace produces
+ * then evaluates that tree by the shading steps (rtpi_sample_terms,
+ * rtpi_sample_coeffs, rtpi_combine): the image trace produces
  * is the evaluation of the trees it recorded. */
 #include "internal.h"
 #include "shadow.h"
@@ -362,8 +363,8 @@ void rtpi_resolve_samples(const float *samples, int spd, rtp_image *img)
 }
 
 /* Moves the rows' trees into one tree object. */
-static rtp_status gather_tree(const shared *sh, const rtp_trace_options *opt,
-                              int w, int h, rtp_tree **out, rtp_error *err)
+static rtp_status gather_tree(const shared *sh, int w, int h, rtp_tree **out,
+                              rtp_error *err)
 {
     const rtp_scene *s = sh->s;
     const rtp_allocator *a = &s->alloc;
@@ -390,7 +391,6 @@ static rtp_status gather_tree(const shared *sh, const rtp_trace_options *opt,
     t->vis_words = words;
     t->nnodes = total;
     t->nlights0 = s->nlights;
-    (void)opt;
     if (rtpi_scene_clone(s, &t->scene) != RTP_OK ||
         !(t->mats0 = (rtpi_material *)rtpi_malloc_array(a, s->nmats ? s->nmats : 1,
                                                          sizeof *t->mats0)) ||
@@ -560,7 +560,7 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
         }
     rtpi_resolve_samples(samples, opt.spd, img);
     if (tree_out) {
-        st = gather_tree(&sh, &opt, w, h, tree_out, err);
+        st = gather_tree(&sh, w, h, tree_out, err);
         if (st != RTP_OK)
             goto done;
     }
