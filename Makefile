@@ -117,24 +117,24 @@ clean:
 	rm -rf build build-asan build-ubsan build-fuzz rtp demo
 
 # ------------------------------------------------------------------ fuzzing
-# Every fuzz/fuzz_*.c is a libFuzzer target that, built without libFuzzer,
-# has a plain main replaying files and folders (fuzz/replay.h).  `make test`
+# Every test/fuzz/fuzz_*.c is a libFuzzer target that, built without libFuzzer,
+# has a plain main replaying files and folders (test/fuzz/replay.h).  `make test`
 # builds those replay mains into $(BUILD)/fuzz/ and test/cli_fuzz_replay.sh
-# replays every checked-in corpus fuzz/corpus/<target>/ through them.
+# replays every checked-in corpus test/fuzz/corpus/<target>/ through them.
 #
 # `make fuzz` builds the libFuzzer binaries (clang, ASan+UBSan) into
 # build-fuzz/.  Run one from the top of the repository (inputs name files
-# in fuzz/data/), on a scratch copy of its corpus, then check in any crash:
+# in test/fuzz/data/), on a scratch copy of its corpus, then check in any crash:
 #   make fuzz
 #   mkdir -p /tmp/nff && build-fuzz/fuzz_nff -rss_limit_mb=2048 \
-#       -max_total_time=600 /tmp/nff fuzz/corpus/fuzz_nff
+#       -max_total_time=600 /tmp/nff test/fuzz/corpus/fuzz_nff
 #   build-fuzz/fuzz_nff -minimize_crash=1 -runs=10000 crash-...
-#   cp minimized-from-... fuzz/corpus/fuzz_nff/crash-<what>
+#   cp minimized-from-... test/fuzz/corpus/fuzz_nff/crash-<what>
 # FUZZ_EXTRA adds flags (e.g. -fno-sanitize=pointer-overflow to look past a
 # known NULL+0 report); FUZZ_CC picks the compiler (clang >= 6).
-FUZZ_SRC = $(sort $(wildcard fuzz/fuzz_*.c))
-FUZZ_REPLAY_BIN = $(FUZZ_SRC:fuzz/%.c=$(BUILD)/fuzz/%)
-FUZZ_BIN = $(FUZZ_SRC:fuzz/%.c=build-fuzz/%)
+FUZZ_SRC = $(sort $(wildcard test/fuzz/fuzz_*.c))
+FUZZ_REPLAY_BIN = $(FUZZ_SRC:test/fuzz/%.c=$(BUILD)/fuzz/%)
+FUZZ_BIN = $(FUZZ_SRC:test/fuzz/%.c=build-fuzz/%)
 FUZZ_CC ?= clang
 FUZZ_FLAGS = -g -O1 -fno-omit-frame-pointer \
 	-fsanitize=fuzzer,address,undefined -fno-sanitize-recover=undefined \
@@ -143,12 +143,12 @@ FUZZ_FLAGS = -g -O1 -fno-omit-frame-pointer \
 .PHONY: fuzz
 fuzz: $(FUZZ_BIN)
 
-$(BUILD)/fuzz/%: fuzz/%.c fuzz/fuzz_common.h fuzz/replay.h $(BUILD)/librtp.a
+$(BUILD)/fuzz/%: test/fuzz/%.c test/fuzz/fuzz_common.h test/fuzz/replay.h $(BUILD)/librtp.a
 	@mkdir -p $(dir $@)
 	@$(if $(Q),echo "  CCLD    $@")
 	$(Q)$(CC) $(ALL_CFLAGS) -Ilib $(LDFLAGS) $< $(BUILD)/librtp.a -o $@ $(LIBS)
 
-build-fuzz/%: fuzz/%.c fuzz/fuzz_common.h fuzz/replay.h $(LIB_SRC) include/rtp.h $(wildcard lib/*.h)
+build-fuzz/%: test/fuzz/%.c test/fuzz/fuzz_common.h test/fuzz/replay.h $(LIB_SRC) include/rtp.h $(wildcard lib/*.h)
 	@mkdir -p $(dir $@)
 	@$(if $(Q),echo "  FUZZ    $@")
 	$(Q)$(FUZZ_CC) $(WARN) $(FUZZ_FLAGS) -D_POSIX_C_SOURCE=200809L $(DEFS) \

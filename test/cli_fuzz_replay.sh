@@ -1,5 +1,5 @@
 #!/bin/sh
-# Replays every checked-in fuzz corpus (fuzz/corpus/<target>/, seeds and
+# Replays every checked-in fuzz corpus (test/fuzz/corpus/<target>/, seeds and
 # every crash ever found) through its target's replay main.  A target
 # passes when it exits 0 with no crash and no sanitizer report.  The
 # replay mains are built by `make test` into $BUILD/fuzz (default build).
@@ -7,7 +7,7 @@ cd "$(dirname "$0")/.." || exit 1
 bin=${RTP_FUZZ_BIN:-${BUILD:-build}/fuzz}
 pass=0; fail=0; skip=0
 tmp=${TMPDIR:-/tmp}/rtp-fuzz-replay.$$
-for dir in fuzz/corpus/*/; do
+for dir in test/fuzz/corpus/*/; do
     target=$(basename "$dir")
     exe=$bin/$target
     if [ ! -x "$exe" ]; then

@@ -1,7 +1,7 @@
 /* fuzz_obj.c — fuzzes the OBJ reader (rtp_scene_load_memory "obj"), and
  * the OBJ reader with a transform (rtpi_read_obj, as NFF's include uses
  * it), then traces, records and re-evaluates a 3x3 image of every mesh
- * it accepts.  mtllib names resolve in fuzz/data/ (quad.mtl there). */
+ * it accepts.  mtllib names resolve in test/fuzz/data/ (quad.mtl there). */
 #include "fuzz_common.h"
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
@@ -12,7 +12,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     if (size > 1 << 16 || fuzz_names_special_file(data, size))
         return 0;
     memset(&err, 0, sizeof err);
-    st = rtp_scene_load_memory((const char *)data, size, "fuzz/data/fuzz.obj",
+    st = rtp_scene_load_memory((const char *)data, size, "test/fuzz/data/fuzz.obj",
                                "obj", &fuzz_alloc, &s, &err);
     fuzz_check_error(&err, st);
     FUZZ_ASSERT((st == RTP_OK) == (s != NULL));
@@ -31,7 +31,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             if (rtpi_scene_add_material(s, &m) == 0) {
                 memset(&err, 0, sizeof err);
                 st = rtpi_read_obj(s, (const char *)data, size,
-                                   "fuzz/data/fuzz.obj", xf, 0, &err);
+                                   "test/fuzz/data/fuzz.obj", xf, 0, &err);
                 fuzz_check_error(&err, st);
             }
         }

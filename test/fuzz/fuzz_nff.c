@@ -2,7 +2,7 @@
  * (rtp_scene_load_memory), then traces, records and re-evaluates a 3x3
  * image of every scene it accepts, checking that the trees reproduce the
  * traced image bit for bit.  Relative file names (include, texture, bump,
- * bezier) resolve in fuzz/data/, so run from the repository's top. */
+ * bezier) resolve in test/fuzz/data/, so run from the repository's top. */
 #include "fuzz_common.h"
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
@@ -13,7 +13,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     if (size > 1 << 16 || fuzz_names_special_file(data, size))
         return 0;
     memset(&err, 0, sizeof err);
-    st = rtp_scene_load_memory((const char *)data, size, "fuzz/data/fuzz.nff",
+    st = rtp_scene_load_memory((const char *)data, size, "test/fuzz/data/fuzz.nff",
                                "nff", &fuzz_alloc, &s, &err);
     fuzz_check_error(&err, st);
     FUZZ_ASSERT((st == RTP_OK) == (s != NULL));
