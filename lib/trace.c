@@ -309,6 +309,29 @@ static void trace_sample(worker *w, int x, int y, float *rgb)
         w->nn = 0; /* not recording: only the current sample is kept */
 }
 
+/* Keeps the worker's current nodes (nsamples samples' trees) in r, at
+   their exact size; 0, or 1 with w->status set. */
+static int keep_row(worker *w, row_rec *r, size_t nsamples)
+{
+    const rtp_allocator *a = &w->sh->s->alloc;
+    size_t words = w->sh->shade.vis_words;
+    r->nnodes = w->nn;
+    r->nodes = (rtpi_cnode *)rtpi_malloc_array(a, w->nn + 1, sizeof *r->nodes);
+    r->counts = (uint32_t *)rtpi_malloc_array(a, nsamples + 1, sizeof *r->counts);
+    r->vis = words ? (uint32_t *)rtpi_malloc_array(a, w->nn * words + 1, sizeof *r->vis)
+                   : NULL;
+    if (!r->nodes || !r->counts || (words && !r->vis)) {
+        w->status = RTP_ERR_NOMEM;
+        return 1;
+    }
+    if (w->nn) /* (memcpy from a NULL buffer is undefined even for 0) */
+        memcpy(r->nodes, w->nodes, w->nn * sizeof *r->nodes);
+    memcpy(r->counts, w->counts, nsamples * sizeof *r->counts);
+    if (words && w->nn)
+        memcpy(r->vis, w->vis, w->nn * words * sizeof *r->vis);
+    return 0;
+}
+
 static int trace_row(void *ctx, int y)
 {
     worker *w = (worker *)ctx;
@@ -322,25 +345,8 @@ static int trace_row(void *ctx, int y)
     if (w->status != RTP_OK)
         return 1;
     if (sh->rows) {
-        /* Keep the row's trees at their exact size. */
-        row_rec *r = &sh->rows[y];
-        size_t words = sh->shade.vis_words;
-        r->nnodes = w->nn;
-        r->nodes = (rtpi_cnode *)rtpi_malloc_array(&sh->s->alloc, w->nn, sizeof *r->nodes);
-        r->counts = (uint32_t *)rtpi_malloc_array(&sh->s->alloc, (size_t)sh->gx,
-                                                  sizeof *r->counts);
-        r->vis = words ? (uint32_t *)rtpi_malloc_array(&sh->s->alloc, w->nn * words,
-                                                       sizeof *r->vis)
-                       : NULL;
-        if (!r->nodes || !r->counts || (words && !r->vis)) {
-            w->status = RTP_ERR_NOMEM;
+        if (keep_row(w, &sh->rows[y], (size_t)sh->gx))
             return 1;
-        }
-        if (w->nn) /* (memcpy from a NULL buffer is undefined even for 0) */
-            memcpy(r->nodes, w->nodes, w->nn * sizeof *r->nodes);
-        memcpy(r->counts, w->counts, (size_t)sh->gx * sizeof *r->counts);
-        if (words && w->nn)
-            memcpy(r->vis, w->vis, w->nn * words * sizeof *r->vis);
     }
     return 0;
 }
@@ -643,7 +649,7 @@ static int retrace_chunk(void *ctx, int ci)
     retrace_job *j = (retrace_job *)ctx;
     worker *w = &j->w;
     shared *sh = w->sh;
-    size_t i = (size_t)ci * j->chunk, end = i + j->chunk, k = 0, words = sh->shade.vis_words;
+    size_t i = (size_t)ci * j->chunk, end = i + j->chunk, k = 0;
     row_rec *r = &j->chunks[ci];
     if (end > j->n)
         end = j->n;
@@ -655,22 +661,7 @@ static int retrace_chunk(void *ctx, int ci)
         if (w->status != RTP_OK)
             return 1;
     }
-    r->nnodes = w->nn;
-    r->nodes = (rtpi_cnode *)rtpi_malloc_array(&sh->s->alloc, w->nn + 1, sizeof *r->nodes);
-    r->counts = (uint32_t *)rtpi_malloc_array(&sh->s->alloc, k + 1, sizeof *r->counts);
-    r->vis = words ? (uint32_t *)rtpi_malloc_array(&sh->s->alloc, w->nn * words + 1,
-                                                   sizeof *r->vis)
-                   : NULL;
-    if (!r->nodes || !r->counts || (words && !r->vis)) {
-        w->status = RTP_ERR_NOMEM;
-        return 1;
-    }
-    if (w->nn)
-        memcpy(r->nodes, w->nodes, w->nn * sizeof *r->nodes);
-    memcpy(r->counts, w->counts, k * sizeof *r->counts);
-    if (words && w->nn)
-        memcpy(r->vis, w->vis, w->nn * words * sizeof *r->vis);
-    return 0;
+    return keep_row(w, r, k);
 }
 
 rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int threads,
