@@ -11,6 +11,7 @@
  * frustum, projected, and turned into a run of cells per row. */
 #include "dircube.h"
 #include "kdtree.h" /* rtpi_tri_degenerate */
+#include "shadow.h"  /* rtpi_shadow_ray */
 
 #include <float.h>
 #include <stdlib.h>
@@ -212,6 +213,9 @@ static void dc_ctx_window(dc_ctx *c, const rtpi_dc_window *w)
     memcpy(c->dv, w->dv, sizeof c->dv);
     memcpy(c->fbase, w->fbase, sizeof c->fbase);
 }
+
+static void dc_windows_some(const rtp_scene *s, const unsigned char *sel, unsigned char want,
+                            rtpi_v3 light, int res, double lim, rtpi_dc_window *w);
 
 /* ---------------------------------------------------- bounding polygons */
 
@@ -458,6 +462,13 @@ static int dc_res_ok(int res)
 void rtpi_dc_windows(const rtp_scene *s, rtpi_v3 light, int res, double lim,
                      rtpi_dc_window *w)
 {
+    dc_windows_some(s, NULL, 0, light, res, lim, w);
+}
+
+/* The same over the primitives i with sel[i] == want (sel NULL: all). */
+static void dc_windows_some(const rtp_scene *s, const unsigned char *sel, unsigned char want,
+                            rtpi_v3 light, int res, double lim, rtpi_dc_window *w)
+{
     double lo[3] = {HUGE_VAL, HUGE_VAL, HUGE_VAL}, hi[3] = {-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
     double L[3], S, g;
     size_t i, n = rtpi_scene_nprims(s);
@@ -474,7 +485,7 @@ void rtpi_dc_windows(const rtp_scene *s, rtpi_v3 light, int res, double lim,
     }
     for (i = 0; i < n; i++) {
         double pl[3], ph[3];
-        if (!dc_hittable(s, (uint32_t)i))
+        if (!dc_hittable(s, (uint32_t)i) || (sel && sel[i] != want))
             continue;
         rtpi_prim_bounds(s, (uint32_t)i, pl, ph);
         for (k = 0; k < 3; k++) {
@@ -628,6 +639,14 @@ rtp_status rtpi_lightbuf_build(const rtp_scene *s, rtpi_v3 light, int res,
                                const rtp_allocator *a, rtpi_lightbuf *lb,
                                rtp_error *err)
 {
+    return rtpi_lightbuf_build_some(s, light, res, NULL, 0, a, lb, err);
+}
+
+rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
+                                    const unsigned char *sel, unsigned char want,
+                                    const rtp_allocator *a, rtpi_lightbuf *lb,
+                                    rtp_error *err)
+{
     size_t n = rtpi_scene_nprims(s), ncells, i, nc = 0;
     dc_ctx c;
     lb_fill lf;
@@ -643,7 +662,7 @@ rtp_status rtpi_lightbuf_build(const rtp_scene *s, rtpi_v3 light, int res,
     /* Windows projected with frusta 2% wider than the faces: more than
        any primitive's widening (4 LB_ANG_MAX), so a primitive that can
        be hit through a face lies in that face's window. */
-    rtpi_dc_windows(s, light, res, 1.02, &lb->w);
+    dc_windows_some(s, sel, want, light, res, 1.02, &lb->w);
     ncells = lb->w.ncells;
     S = dc_scale(s, light);
     /* Early stop: a primitive can be hit on the segment from o to the
@@ -661,6 +680,8 @@ rtp_status rtpi_lightbuf_build(const rtp_scene *s, rtpi_v3 light, int res,
     for (i = 0; i < n; i++) {
         if (!dc_hittable(s, (uint32_t)i))
             continue; /* never hit by any ray: cannot shadow */
+        if (sel && sel[i] != want)
+            continue;
         lb->cand[nc].prim = (uint32_t)i;
         lb->cand[nc].near = dc_near(s, (uint32_t)i, light);
         nc++;
@@ -749,34 +770,41 @@ void rtpi_lightbuf_free(rtpi_lightbuf *lb, const rtp_allocator *a)
 
 /* -------------------------------------------------------- item buffer */
 
-/* The ITEMBUF rule.  Cell c is the one the shadow ray pierces (direction
-   o - light, as LIGHTBUF; the ray through c's centre was drawn).  In this
-   order, the hit at p on prim
+/* The ITEMBUF rule (rtpi_itembuf_visible; shadow.c adds the light
+   buffers).  The shadow ray leaves o towards the light; its direction
+   o - light lies in cell c.  The hit at p on prim
      1. is in shadow when prim itself must block the segment from o to
-        the light, and the id test below may be trusted when it cannot
-        (ib_self, exact and cheap: never for a triangle; for a sphere by
-        whether o and the light lie inside it; for a cone when o is
-        outside its convex solid; the inside of a cone cannot tell);
-     2. sees the light when c lies on no cell at all (a face or a part of
-        a window the scene does not reach) or c is empty;
-     3. sees the light when c holds prim itself and prim cannot shadow
-        itself there: the paper's test;
-     4. otherwise sees the light only if c's depth zc is not meaningfully
-        nearer than p's depth zp along the face axis:
-          zc >= zp - (IB_BIAS zext + zp cell_angle tan(theta)),
-        theta the angle between the surface normal and the light, zext
-        the scene's depth extent on the face.  The ray through c's centre
-        leaves p's ray by at most cell_angle, and on a plane tilted by
-        theta depth changes by ~zp cell_angle tan(theta) over that angle:
-        that term keeps the triangles of one NFF polygon, and the next
-        primitive across a shared edge, from shadowing each other;
-        tan(theta) is capped at IB_TAN_MAX so that grazing surfaces do not
-        ignore real occluders.  IB_BIAS (1e-4 of the scene's depth extent,
-        not of the distance: a far light keeps its precision) covers the
-        float depths of the buffer and OSMesa's 24-bit ones.
-   The normal comes free: o - p is rtpi_offset_origin's step along the
-   geometric normal, towards the light (~1e-9 relative error).  The answer
-   is approximate within about a cell of shadow edges, by design. */
+        the light (ib_self: exact and cheap, never for a triangle; for a
+        sphere by whether o and the light lie inside it; for a cone when o
+        is outside its convex solid; the inside of a cone cannot tell, and
+        prim is then tested like any other);
+     2. sees the light when its direction falls on no cell at all (a face
+        or a part of a window the scene does not reach);
+     3. else looks at the 9 samples of c and its neighbours (across a cube
+        edge on the next face), leaving out empty ones and prim itself
+        where it cannot shadow itself.  The shadow ray is intersected, by
+        the kd-tree's own routine, with each primitive sampled there that
+        is not thin (thin ones are decided exactly by shadow.c's light
+        buffer): a hit is in shadow, exactly.  Otherwise, when no sample
+        lies clearly in front of p, it sees the light; when one does (a
+        shadow edge: something in front, beside the ray), the answer is
+        left open (-1) for an exact query.
+   "Clearly in front": depth along the face axis zs < zp - (IB_BIAS zext
+   + zp e tan(theta)), theta the angle between the surface normal and the
+   light, e the sample's distance from the ray's direction in face
+   coordinates (>= the angle between them), zext the scene's depth extent
+   on the face.  On a plane tilted by theta depth changes by ~zp e
+   tan(theta) over that angle: that term keeps the neighbours of prim in
+   one mesh from counting; tan(theta) is capped at IB_TAN_MAX so that
+   grazing surfaces still see real occluders.  IB_BIAS (1e-4 of the
+   scene's depth extent, not of the distance: a far light keeps its
+   precision) covers the float depths of the buffer and OSMesa's 24-bit
+   ones.  The normal comes free: o - p is rtpi_offset_origin's step along
+   the geometric normal, towards the light (~1e-9 relative error).
+   What can still be wrong: "sees the light" where a wide primitive blocks
+   the ray yet shows at none of the 9 samples while nothing else there
+   lies in front of p, i.e. a part of it narrower than the samples'
+   spacing (a sharp corner) reaches across the ray between them. */
 #define IB_BIAS 1e-4
 #define IB_TAN_MAX 8.0
 
@@ -833,33 +861,149 @@ static int ib_self(const rtp_scene *s, uint32_t prim, rtpi_v3 o, rtpi_v3 L)
     return -1;
 }
 
-int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
-                         rtpi_v3 p, rtpi_v3 o, uint32_t prim)
+/* The sample at window cell (i, j) of face f, where i or j may lie a cell
+   outside the window: such samples are looked up by direction, on the
+   neighbouring face across a cube edge, or as nothing beyond a window's
+   edge (the window holds the whole scene).  @return its cell or
+   RTPI_DC_ABSENT, *g its face. */
+static size_t ib_sample(const rtpi_itembuf *ib, int f, int i, int j, int *g)
 {
-    int f, self = ib_self(s, prim, o, ib->light);
-    size_t cell = rtpi_itembuf_cell(ib, v3_sub(o, ib->light), &f);
-    uint32_t id;
-    double zc, zp, tn, nl, cs;
-    rtpi_v3 n, l;
+    int res = ib->res;
+    if (i >= 0 && i < res && j >= 0 && j < res) {
+        *g = f;
+        return ib->w.fbase[f] + (size_t)j * (size_t)res + (size_t)i;
+    }
+    return rtpi_itembuf_cell(ib, rtpi_dc_world(f, ib->w.u0[f] + ib->w.du[f] * (i + 0.5),
+                                               ib->w.v0[f] + ib->w.dv[f] * (j + 0.5), 1.0),
+                             g);
+}
+
+int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
+                         rtpi_v3 p, rtpi_v3 o, uint32_t prim,
+                         const unsigned char *thin)
+{
+    int f, self = ib_self(s, prim, o, ib->light), res = ib->res, i, j, di, dj, k, n = 0, m = 0;
+    uint32_t cand[9];
+    double u, v, x, y, zp, tn, nl, cs;
+    rtpi_v3 nv, l;
+    rtpi_ray r;
+    rtpi_hit h;
     if (self == 1)
         return 0;
-    if (cell == RTPI_DC_ABSENT)
+    f = rtpi_dc_face(v3_sub(o, ib->light), &u, &v);
+    if (ib->w.fbase[f] == RTPI_DC_ABSENT)
         return 1;
-    id = ib->id[cell];
-    if (id == RTPI_NONE)
+    x = (u - ib->w.u0[f]) / ib->w.du[f];
+    y = (v - ib->w.v0[f]) / ib->w.dv[f];
+    if (!(x > -1.0 && x < res + 1.0 && y > -1.0 && y < res + 1.0))
         return 1;
-    if (self == 0 && id == prim)
-        return 1;
-    zc = ib->z[cell];
+    i = x < 0.0 ? 0 : x >= res ? res - 1 : (int)x;
+    j = y < 0.0 ? 0 : y >= res ? res - 1 : (int)y;
     zp = rtpi_dc_depth(f, v3_sub(p, ib->light));
-    n = v3_sub(o, p);
+    nv = v3_sub(o, p);
     l = v3_sub(ib->light, p);
-    nl = v3_len(n) * v3_len(l);
-    cs = nl > 0.0 ? v3_dot(n, l) / nl : 0.0;
+    nl = v3_len(nv) * v3_len(l);
+    cs = nl > 0.0 ? v3_dot(nv, l) / nl : 0.0;
     tn = cs * IB_TAN_MAX > 1.0 ? sqrt(fmax(0.0, 1.0 - cs * cs)) / cs : IB_TAN_MAX;
     if (tn > IB_TAN_MAX)
         tn = IB_TAN_MAX;
-    return zc >= zp - ib->w.zbase[f] - (IB_BIAS * ib->w.zext[f] + zp * ib->cell_angle[f] * tn);
+    for (dj = -1; dj <= 1; dj++) {
+        for (di = -1; di <= 1; di++) {
+            int g;
+            size_t c = ib_sample(ib, f, i + di, j + dj, &g);
+            uint32_t id;
+            double zc, ex, ey, tol;
+            if (c == RTPI_DC_ABSENT || (id = ib->id[c]) == RTPI_NONE ||
+                (id == prim && self == 0))
+                continue;
+            for (k = 0; k < n && cand[k] != id; k++)
+                ;
+            if (k == n && !(thin && thin[id]))
+                cand[n++] = id;
+            /* a sample on another face: depths not comparable, count it
+               as in front */
+            zc = g == f ? ib->z[c] + ib->w.zbase[g] : -HUGE_VAL;
+            ex = (i + di + 0.5 - x) * ib->w.du[f];
+            ey = (j + dj + 0.5 - y) * ib->w.dv[f];
+            tol = IB_BIAS * ib->w.zext[f] + zp * sqrt(ex * ex + ey * ey) * tn;
+            m |= zc < zp - tol;
+        }
+    }
+    if (!n)
+        return 1;
+    r = rtpi_shadow_ray(o, ib->light);
+    for (k = 0; k < n; k++)
+        if (rtpi_intersect_prim(s, cand[k], &r, &h))
+            return 0;
+    return m ? -1 : 1;
+}
+
+/* A lower bound, roughly, of the angle (radians) a primitive's
+   projection from L spans across its narrowest direction; HUGE_VAL where
+   it is large or the light is close to it.  A sphere: its angular
+   diameter.  A cone: the diameter of its wider end seen from its far
+   end (a pointed tip is thin like any corner; corners are left to the
+   item buffer's neighbourhood test).  A triangle: the width of its
+   gnomonic projection around its centroid's direction, where distances
+   are at least the angles and about equal for a small triangle. */
+static double dc_ang_width(const rtp_scene *s, uint32_t prim, rtpi_v3 L)
+{
+    size_t i = prim;
+    if (i < s->ntris) {
+        const rtpi_tri *t = &s->tris[i];
+        rtpi_v3 q[3], w, e1, e2;
+        double x[3], y[3], area, emax = 0.0;
+        int k;
+        for (k = 0; k < 3; k++)
+            q[k] = v3_sub(v3_from_f(s->pos + 3 * (size_t)t->v[k]), L);
+        w = v3_add(q[0], v3_add(q[1], q[2]));
+        if (!(v3_len(w) > 0.0))
+            return HUGE_VAL;
+        w = v3_norm(w);
+        dc_basis(w, &e1, &e2);
+        for (k = 0; k < 3; k++) {
+            double tk = v3_dot(q[k], w);
+            /* a vertex 75 degrees or more off the centroid: wide */
+            if (!(tk > 0.25 * v3_len(q[k])))
+                return HUGE_VAL;
+            x[k] = v3_dot(q[k], e1) / tk;
+            y[k] = v3_dot(q[k], e2) / tk;
+        }
+        area = fabs((x[1] - x[0]) * (y[2] - y[0]) - (x[2] - x[0]) * (y[1] - y[0]));
+        for (k = 0; k < 3; k++) {
+            double ex = x[(k + 1) % 3] - x[k], ey = y[(k + 1) % 3] - y[k];
+            emax = fmax(emax, sqrt(ex * ex + ey * ey));
+        }
+        return emax > 0.0 ? area / emax : 0.0;
+    }
+    if ((i -= s->ntris) < s->nspheres) {
+        const rtpi_sphere *sp = &s->spheres[i];
+        double D = v3_len(v3_sub(v3_from_f(sp->c), L)), r = fabs((double)sp->r);
+        /* 0.99: within 8 degrees of filling half the sky, wide */
+        return r < 0.99 * D ? 2.0 * asin(r / D) : HUGE_VAL;
+    }
+    if ((i -= s->nspheres) < s->ncones) {
+        const rtpi_cone *cn = &s->cones[i];
+        double r = fmax(fabs((double)cn->rb), fabs((double)cn->ra));
+        double D = fmax(v3_len(v3_sub(v3_from_f(cn->base), L)),
+                        v3_len(v3_sub(v3_from_f(cn->apex), L))) + r;
+        return D > 0.0 ? 2.0 * r / D : HUGE_VAL;
+    }
+    return HUGE_VAL;
+}
+
+void rtpi_itembuf_thin(const rtpi_itembuf *ib, const rtp_scene *s, double cells,
+                       unsigned char *thin)
+{
+    size_t n = rtpi_scene_nprims(s), i;
+    double cell = 0.0;
+    int f;
+    for (f = 0; f < 6; f++)
+        if (ib->w.fbase[f] != RTPI_DC_ABSENT)
+            cell = fmax(cell, fmax(ib->w.du[f], ib->w.dv[f]));
+    for (i = 0; i < n; i++)
+        thin[i] = (unsigned char)(rtpi_itembuf_renders(s, (uint32_t)i, ib->light) &&
+                                  dc_ang_width(s, (uint32_t)i, ib->light) < cells * cell);
 }
 
 rtp_status rtpi_itembuf_alloc(rtpi_itembuf *ib, const rtp_scene *s,

@@ -19,7 +19,10 @@
  *    list only, with the same intersection routine the kd-tree uses, so
  *    the answer equals the kd-tree's;
  *  - the item buffer: per cell the nearest occluding primitive along the
- *    ray through the cell's centre, and its depth z.
+ *    ray through the cell's centre, and its depth z.  Its decisions
+ *    intersect the shadow ray with the primitives sampled around it and
+ *    leave shadow edges open (see dircube.c); shadow.c completes them
+ *    with light buffers.
  * Both are immutable once built: queries may run on many threads.
  */
 #ifndef RTP_DIRCUBE_H
@@ -164,6 +167,12 @@ typedef struct rtpi_lightbuf {
 rtp_status rtpi_lightbuf_build(const rtp_scene *s, rtpi_v3 light, int res,
                                const rtp_allocator *a, rtpi_lightbuf *lb,
                                rtp_error *err);
+/* The same over the primitives i with sel[i] == want only (sel NULL:
+   all): its answers are the kd-tree's over those primitives. */
+rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
+                                    const unsigned char *sel, unsigned char want,
+                                    const rtp_allocator *a, rtpi_lightbuf *lb,
+                                    rtp_error *err);
 /* 1 when no candidate of ray's cell hits ray in [tmin, tmax]; ray must run
    towards the light (rtpi_shadow_ray). */
 int rtpi_lightbuf_visible(const rtpi_lightbuf *lb, const rtp_scene *s,
@@ -228,9 +237,18 @@ rtp_status rtpi_itembuf_alloc(rtpi_itembuf *ib, const rtp_scene *s,
                               rtpi_v3 light, int res, const rtp_allocator *a,
                               rtp_error *err);
 /* The item-buffer decision for the hit at p on prim with shadow-ray
-   origin o (see dircube.c for the rule). */
+   origin o (see dircube.c for the rule): 1 lit, 0 in shadow (then
+   certain), -1 open (something lies in front near the ray: ask an exact
+   query).  thin (NULL: none): per primitive, 1 for those the caller
+   decides itself (rtpi_itembuf_thin); they are never intersected here. */
 int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
-                         rtpi_v3 p, rtpi_v3 o, uint32_t prim);
+                         rtpi_v3 p, rtpi_v3 o, uint32_t prim,
+                         const unsigned char *thin);
+/* Sets thin[i] (one per primitive) to 1 where primitive i is drawn and
+   its projection may be narrower than `cells` cells of ib somewhere, else
+   0. */
+void rtpi_itembuf_thin(const rtpi_itembuf *ib, const rtp_scene *s, double cells,
+                       unsigned char *thin);
 void rtpi_itembuf_free(rtpi_itembuf *ib, const rtp_allocator *a);
 
 /* Whether a primitive is rendered into the item buffer from light L:

@@ -4,15 +4,46 @@
 #include "shadow.h"
 #include "dircube.h"
 
+/* Item-buffer modes: a primitive narrower than SH_THIN_CELLS cells of the
+   item buffer may slip between its samples, so such primitives are left
+   to a light buffer of the item buffer's resolution (thin); the item
+   buffer answers for the rest, and where its neighbourhood leaves the
+   answer open, a coarse light buffer over the others (wide) decides. */
+#ifndef SH_THIN_CELLS
+#define SH_THIN_CELLS 3.0
+#endif
+#ifndef SH_WIDE_RES
+#define SH_WIDE_RES 64
+#endif
+
 struct rtpi_shadow {
     rtp_allocator alloc;
     rtpi_shadow_mode mode;
     const rtp_scene *s;
     const rtpi_kdtree *kd;
     rtpi_v3 light;
-    rtpi_lightbuf lb;
+    rtpi_lightbuf lb;   /* LIGHTBUF; the thin primitives for the item buffer */
+    rtpi_lightbuf wide; /* the other primitives, for the item buffer */
     rtpi_itembuf ib;
+    unsigned char *thin; /* per primitive: 1 if in lb */
 };
+
+/* The item buffer's companions (see above). */
+static rtp_status sh_itembuf_lists(rtpi_shadow *sh, int res, const rtp_allocator *a,
+                                   rtp_error *err)
+{
+    size_t n = rtpi_scene_nprims(sh->s);
+    rtp_status st;
+    sh->thin = (unsigned char *)rtpi_malloc_array(a, n ? n : 1, 1);
+    if (!sh->thin)
+        return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+    rtpi_itembuf_thin(&sh->ib, sh->s, SH_THIN_CELLS, sh->thin);
+    st = rtpi_lightbuf_build_some(sh->s, sh->light, sh->ib.res, sh->thin, 1, a, &sh->lb, err);
+    if (st == RTP_OK)
+        st = rtpi_lightbuf_build_some(sh->s, sh->light, res < SH_WIDE_RES ? res : SH_WIDE_RES,
+                                      sh->thin, 0, a, &sh->wide, err);
+    return st;
+}
 
 rtp_status rtpi_shadow_create(const rtp_scene *s, const rtpi_kdtree *kd,
                               rtpi_v3 light, rtpi_shadow_mode mode, int res,
@@ -43,15 +74,19 @@ rtp_status rtpi_shadow_create(const rtp_scene *s, const rtpi_kdtree *kd,
         break;
     case RTPI_SHADOW_ITEMBUF:
         st = rtpi_itembuf_build(s, light, res, a, &sh->ib, err);
+        if (st == RTP_OK)
+            st = sh_itembuf_lists(sh, res, a, err);
         break;
     case RTPI_SHADOW_OSMESA:
         st = rtpi_itembuf_build_osmesa(s, light, res, a, &sh->ib, err);
+        if (st == RTP_OK)
+            st = sh_itembuf_lists(sh, res, a, err);
         break;
     case RTPI_SHADOW_EXACT:
         break;
     }
     if (st != RTP_OK) {
-        rtpi_free(a, sh);
+        rtpi_shadow_destroy(sh);
         return st;
     }
     *out = sh;
@@ -61,13 +96,20 @@ rtp_status rtpi_shadow_create(const rtp_scene *s, const rtpi_kdtree *kd,
 int rtpi_shadow_visible(const rtpi_shadow *sh, rtpi_v3 p, rtpi_v3 o, uint32_t prim)
 {
     rtpi_ray r;
+    int v;
     switch (sh->mode) {
     case RTPI_SHADOW_LIGHTBUF:
         r = rtpi_shadow_ray(o, sh->light);
         return rtpi_lightbuf_visible(&sh->lb, sh->s, &r);
     case RTPI_SHADOW_ITEMBUF:
     case RTPI_SHADOW_OSMESA:
-        return rtpi_itembuf_visible(&sh->ib, sh->s, p, o, prim);
+        v = rtpi_itembuf_visible(&sh->ib, sh->s, p, o, prim, sh->thin);
+        if (v == 0)
+            return 0;
+        r = rtpi_shadow_ray(o, sh->light);
+        if (!rtpi_lightbuf_visible(&sh->lb, sh->s, &r))
+            return 0;
+        return v > 0 ? 1 : rtpi_lightbuf_visible(&sh->wide, sh->s, &r);
     case RTPI_SHADOW_EXACT:
         break;
     }
@@ -82,6 +124,8 @@ void rtpi_shadow_destroy(rtpi_shadow *sh)
         return;
     a = sh->alloc;
     rtpi_lightbuf_free(&sh->lb, &a);
+    rtpi_lightbuf_free(&sh->wide, &a);
     rtpi_itembuf_free(&sh->ib, &a);
+    rtpi_free(&a, sh->thin);
     rtpi_free(&a, sh);
 }

@@ -11,7 +11,20 @@
  *                         its cell's list, so the answer equals EXACT
  *   RTPI_SHADOW_ITEMBUF   item buffer: each cube face rendered by a
  *                         software scanline z-buffer, one primitive per
- *                         cell; fast, approximate at shadow edges
+ *                         cell.  Primitives narrower than 3 cells go to
+ *                         a light buffer of the same resolution instead
+ *                         (exact for them); for the rest the shadow ray
+ *                         is intersected with the primitives sampled in
+ *                         the 3x3 cells around it (a hit is certain), and
+ *                         where one of those lies in front of the point
+ *                         but misses the ray (a shadow edge) a coarse
+ *                         light buffer decides exactly.  Approximate: it
+ *                         answers "lit" wrongly only where a wide
+ *                         primitive reaches across the ray between the
+ *                         samples while none shows in front of the point
+ *                         (a corner sharper than a cell); measured below
+ *                         0.01% of decisions at 256-2048 cells on the
+ *                         SPD scenes (test/bench/bench_shadow.c)
  *   RTPI_SHADOW_OSMESA    the same item buffer drawn by OpenGL (OSMesa);
  *                         only in builds with OSMESA=1
  *

@@ -7,8 +7,9 @@
  * moved light's visibility is decided by every mode.  Reported per mode:
  * build time, query time (all queries, one thread, wall clock), and the
  * share of decisions that differ from EXACT (the kd-tree's shadow rays):
- * LIGHTBUF must have none; ITEMBUF at 256..2048 cells per face edge is
- * approximate at shadow edges; OSMESA (in OSMESA=1 builds) likewise, plus
+ * LIGHTBUF must have none; ITEMBUF at 256..2048 cells per face edge may
+ * miss a corner sharper than its cells (lib/shadow.h); OSMESA (in OSMESA=1
+ * builds) likewise, plus
  * the share of cells where its item buffer agrees with the software one.
  * Reports; never fails on speed. */
 #include "dircube.h"
