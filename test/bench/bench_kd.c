@@ -4,11 +4,13 @@
  * generated ~1M-triangle displaced sphere, then shoots, one thread:
  * camera rays (1024x1024 pinhole looking at the bunny's bounds), shadow
  * rays from the camera hits to a point light (any-hit), and random rays
- * (origins inside the bounds, uniform directions).  Rays are made before
+ * (origins inside the bounds, uniform directions).  Builds are timed on
+ * two threads and on one (wall clock), rays on one (this thread's CPU
+ * time).  Rays are made before
  * the clock starts, so the rates are the kd-tree's alone.  Reports; never
  * fails on speed.  `bench_kd --bunny` runs the bunny alone, `--big` the
  * generated mesh alone. */
-#include "internal.h"
+#include "kdtree.h"
 
 #include <stdio.h>
 #include <stdlib.h>
@@ -17,10 +19,40 @@
 
 /* CPU time of this thread: the benchmark is single-threaded, and other
    load on a shared machine then does not count against it. */
+#ifdef KD_COUNT
+extern unsigned long long kd_cnt[4];
+static void cnt_report(void)
+{
+    printf("   per ray: %.1f steps, %.1f leaves, %.1f tests\n",
+           (double)kd_cnt[0] / (double)kd_cnt[3], (double)kd_cnt[1] / (double)kd_cnt[3],
+           (double)kd_cnt[2] / (double)kd_cnt[3]);
+    memset(kd_cnt, 0, sizeof kd_cnt);
+}
+#define CNT_REPORT() cnt_report()
+#else
+#define CNT_REPORT() ((void)0)
+#endif
+
 static double now(void)
 {
     struct timespec ts;
     clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+/* Wall-clock time, for builds on more than one thread. */
+static double wall(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+/* CPU time of the whole process (all threads). */
+static double cpu(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
     return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
 
@@ -51,31 +83,37 @@ static const char *find_bunny(void)
     return NULL;
 }
 
-/* Builds `reps` times; reports the fastest.  @return the last tree. */
-static rtpi_kdtree *timed_build(const rtp_scene *s, const char *name, int reps)
+/* Builds `reps` times on `threads` threads; reports the fastest (wall
+   clock: the build may use more than this thread).  @return the last
+   tree. */
+static rtpi_kdtree *timed_build(const rtp_scene *s, const char *name, int reps,
+                                int threads)
 {
     rtpi_kdtree *kd = NULL;
-    double best = 1e30;
+    double best = 1e30, best_cpu = 1e30;
     int i;
     for (i = 0; i < reps; i++) {
-        double t = now();
+        double t = wall(), c = cpu();
         rtpi_kd_destroy(kd);
         kd = NULL;
-        if (rtpi_kd_build(s, NULL, &kd, NULL) != RTP_OK) {
+        if (rtpi_kd_build_mt(s, NULL, threads, &kd, NULL) != RTP_OK) {
             fprintf(stderr, "bench_kd: build failed\n");
             return NULL;
         }
-        t = now() - t;
-        if (t < best)
-            best = t;
+        t = wall() - t;
+        c = cpu() - c;
+        best = t < best ? t : best;
+        best_cpu = c < best_cpu ? c : best_cpu;
     }
     {
         rtpi_kd_stats st;
         rtpi_kd_get_stats(kd, &st);
-        printf("build %s: %lu tris in %.3f s = %.2f Mtris/s"
-               " (%lu nodes, %lu leaves, %lu empty, %.2f refs/tri, depth %d)\n",
-               name, (unsigned long)s->ntris, best,
-               (double)s->ntris / best * 1e-6, (unsigned long)st.nodes,
+        printf("build %s %dT: %lu tris in %.3f s = %.2f Mtris/s"
+               " (CPU %.3f s = %.2f Mtris/s;"
+               " %lu nodes, %lu leaves, %lu empty, %.2f refs/tri, depth %d)\n",
+               name, threads, (unsigned long)s->ntris, best,
+               (double)s->ntris / best * 1e-6, best_cpu,
+               (double)s->ntris / best_cpu * 1e-6, (unsigned long)st.nodes,
                (unsigned long)st.leaves, (unsigned long)st.empty_leaves,
                (double)st.prim_refs / (double)(s->ntris ? s->ntris : 1),
                st.depth);
@@ -184,6 +222,7 @@ static void rays_bunny(const rtp_scene *s, const rtpi_kdtree *kd)
     printf("camera bunny %dx%d: %lu rays in %.3f s = %.2f Mrays/s (%.0f%% hit)\n",
            W, H, (unsigned long)n, t, (double)n / t * 1e-6,
            100.0 * (double)nhit / (double)n);
+    CNT_REPORT();
 
     /* Shadow rays from every hit to a light above, right and in front. */
     light = v3(c[0] + ext, c[1] + 1.5 * ext, c[2] + ext);
@@ -209,6 +248,7 @@ static void rays_bunny(const rtp_scene *s, const rtpi_kdtree *kd)
         printf("shadow bunny: %lu rays in %.3f s = %.2f Mrays/s (%.0f%% occluded)\n",
                (unsigned long)m, t, (double)m / t * 1e-6,
                100.0 * (double)nocc / (double)(m ? m : 1));
+        CNT_REPORT();
     }
 
     for (i = 0; i < NRAND; i++) {
@@ -230,6 +270,7 @@ static void rays_bunny(const rtp_scene *s, const rtpi_kdtree *kd)
     printf("random bunny: %lu rays in %.3f s = %.2f Mrays/s (%.0f%% hit)\n",
            (unsigned long)NRAND, t, (double)NRAND / t * 1e-6,
            100.0 * (double)nhit / NRAND);
+    CNT_REPORT();
 done:
     free(rays);
     free(hits);
@@ -253,7 +294,8 @@ int main(int argc, char **argv)
         char buf[600];
         printf("skip: %s\n", rtp_error_format(&err, buf, sizeof buf));
     } else {
-        kd = timed_build(s, "bunny", 5);
+        rtpi_kd_destroy(timed_build(s, "bunny", 5, 2));
+        kd = timed_build(s, "bunny", 5, 1);
         if (kd)
             rays_bunny(s, kd);
         rtpi_kd_destroy(kd);
@@ -266,8 +308,8 @@ int main(int argc, char **argv)
         fprintf(stderr, "bench_kd: out of memory\n");
         return 1;
     }
-    kd = timed_build(big, "sphere-1M", 1);
-    rtpi_kd_destroy(kd);
+    rtpi_kd_destroy(timed_build(big, "sphere-1M", 2, 2));
+    rtpi_kd_destroy(timed_build(big, "sphere-1M", 1, 1));
     rtp_scene_destroy(big);
     return 0;
 }
