@@ -878,10 +878,10 @@ static int reeval_one(rtp_tree *tree, const rtp_eval_options *eo, rtp_image **ke
                 "{\"command\": \"reeval\", \"seconds\": %.6f, \"load_seconds\": %.6f, "
                 "\"shadow_seconds\": %.6f, \"moved_lights\": %d, \"shadow_queries\": %llu, "
                 "\"retraced_samples\": %llu, \"retraced_rays\": %llu, "
-                "\"pixels\": %llu, \"samples\": %llu, \"nodes\": %llu, \"bytes_per_node\": %u, "
+                "\"combined_samples\": %llu, \"pixels\": %llu, \"samples\": %llu, \"nodes\": %llu, \"bytes_per_node\": %u, "
                 "\"tree_bytes\": %llu",
                 es.seconds, load_seconds, es.shadow_seconds, es.moved_lights,
-                es.shadow_queries, es.retraced_samples, es.retraced_rays,
+                es.shadow_queries, es.retraced_samples, es.retraced_rays, es.combined_samples,
                 (unsigned long long)img->width * img->height,
                 ti.samples, ti.nodes, ti.bytes_per_node, ti.tree_bytes);
         if (fb >= 0)

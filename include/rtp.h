@@ -279,6 +279,10 @@ typedef struct rtp_eval_stats {
     int moved_lights;        /* lights whose visibility was recomputed */
     unsigned long long retraced_samples; /* traced again for a class-D edit */
     unsigned long long retraced_rays;    /* rays those cast (all kinds) */
+    unsigned long long combined_samples; /* samples whose colour was summed
+                                            from their coefficients; 0 when
+                                            an edit of one colour alone was
+                                            applied per pixel as P + K c */
 } rtp_eval_stats;
 
 /** Evaluates the trees with the current parameters into a new image.  Lights

@@ -436,6 +436,15 @@ struct rtp_tree {
     double *ev_pos;        /* 3 per light: positions the terms are for */
     int ev_vis_mode, ev_vis_res;
     rtpi_material *ev_mats; /* materials the caches were made with */
+    double *ev_cl;         /* the colours of the image's linear form the
+                              caches were combined with: background,
+                              ambient, then each light (RTPI_COEFFS) */
+    int pk_term;           /* the one-term path (tree.c): 0 (none), or
+                              1 + the term whose planes pk holds (term 0:
+                              background, 1: ambient, 2 + l: light l) */
+    float *pk;             /* pixels * 6: per pixel the rest P of the
+                              image with term pk_term left out, and that
+                              term's coefficient K (pixel = P + K c) */
     uint32_t *mat_start;   /* per material: its samples in mat_samples */
     uint32_t *mat_samples; /* samples whose trees contain each material */
 
@@ -463,6 +472,23 @@ void rtpi_resolve_samples(const float *samples, int spd, rtp_image *img);
 /* -------------------------------------------------------------- threads */
 
 #define RTPI_MAX_THREADS 256
+
+/* A lock for work that must be serial within a parallel run (a no-op in
+   builds without threads, where every run is serial). */
+#ifdef RTP_HAVE_THREADS
+#include <pthread.h>
+typedef pthread_mutex_t rtpi_mutex;
+static inline int rtpi_mutex_init(rtpi_mutex *m) { return pthread_mutex_init(m, NULL); }
+static inline void rtpi_mutex_lock(rtpi_mutex *m) { pthread_mutex_lock(m); }
+static inline void rtpi_mutex_unlock(rtpi_mutex *m) { pthread_mutex_unlock(m); }
+static inline void rtpi_mutex_destroy(rtpi_mutex *m) { pthread_mutex_destroy(m); }
+#else
+typedef int rtpi_mutex;
+static inline int rtpi_mutex_init(rtpi_mutex *m) { *m = 0; return 0; }
+static inline void rtpi_mutex_lock(rtpi_mutex *m) { (void)m; }
+static inline void rtpi_mutex_unlock(rtpi_mutex *m) { (void)m; }
+static inline void rtpi_mutex_destroy(rtpi_mutex *m) { (void)m; }
+#endif
 
 /* Work on one row with a thread's context; nonzero stops the whole run. */
 typedef int (*rtpi_row_fn)(void *ctx, int row);

@@ -62,7 +62,20 @@ struct shared {
     int spd, max_depth;
     double min_weight;
     float *out;        /* nx*ny samples, RGB */
+    /* Recording: finished rows go into the tree's arrays in row order, so
+       each node is copied once, from its worker's row buffer (reused and
+       cache-warm) to its final place, and fresh memory is touched once.  A
+       row finished before its predecessors waits in rows[] until they are
+       in (then its buffers are freed for the next such row to reuse). */
     row_rec *rows;     /* per row when recording, else NULL */
+    unsigned char *stashed; /* row y waits in rows[y] */
+    int next_row;      /* the next row to go in */
+    rtpi_cnode *tnodes;/* the tree's nodes so far, tn of them */
+    size_t tn, tcap;
+    uint32_t *tvis;    /* their visibility words (> 32 lights) */
+    size_t tvis_cap;
+    uint64_t *tstart;  /* gx*gy + 1 sample starts */
+    rtpi_mutex lock;   /* guards the above */
     rtpi_shade_ctx shade;
     double *cl;        /* light colours as shading sees them */
     int gx, gy;        /* samples traced: the region's grid */
@@ -332,6 +345,64 @@ static int keep_row(worker *w, row_rec *r, size_t nsamples)
     return 0;
 }
 
+/* Appends row y's trees (nn nodes, per[x] of sample x) to the tree's
+   arrays; the caller holds sh->lock.  0, or 1 when out of memory. */
+static int append_row(shared *sh, int y, const rtpi_cnode *nodes, const uint32_t *vis,
+                      const uint32_t *per, size_t nn)
+{
+    const rtp_allocator *a = &sh->s->alloc;
+    size_t words = sh->shade.vis_words, k = (size_t)y * sh->gx, at = sh->tn;
+    int x;
+    if (rtpi_grow(a, (void **)&sh->tnodes, &sh->tcap, sh->tn + nn + 1, sizeof *sh->tnodes) ||
+        (words && rtpi_grow(a, (void **)&sh->tvis, &sh->tvis_cap, (sh->tn + nn) * words + 1,
+                            sizeof *sh->tvis)))
+        return 1;
+    if (nn) /* (memcpy from a NULL buffer is undefined even for 0) */
+        memcpy(sh->tnodes + sh->tn, nodes, nn * sizeof *nodes);
+    if (words && nn)
+        memcpy(sh->tvis + sh->tn * words, vis, nn * words * sizeof *vis);
+    for (x = 0; x < sh->gx; x++) {
+        sh->tstart[k + (size_t)x] = at;
+        at += per[x];
+    }
+    sh->tn = at;
+    return 0;
+}
+
+/* Puts the worker's finished row y into the tree, with every waiting row
+   after it, or makes it wait.  0, or 1 with w->status set. */
+static int commit_row(worker *w, int y)
+{
+    shared *sh = w->sh;
+    const rtp_allocator *a = &sh->s->alloc;
+    int bad = 0;
+    rtpi_mutex_lock(&sh->lock);
+    if (y != sh->next_row) {
+        bad = keep_row(w, &sh->rows[y], (size_t)sh->gx);
+        if (!bad)
+            sh->stashed[y] = 1;
+    } else {
+        bad = append_row(sh, y, w->nodes, w->vis, w->counts, w->nn);
+        if (!bad)
+            sh->next_row++;
+        while (!bad && sh->next_row < sh->gy && sh->stashed[sh->next_row]) {
+            row_rec *r = &sh->rows[sh->next_row];
+            bad = append_row(sh, sh->next_row, r->nodes, r->vis, r->counts, r->nnodes);
+            if (bad)
+                break;
+            rtpi_free(a, r->nodes);
+            rtpi_free(a, r->counts);
+            rtpi_free(a, r->vis);
+            memset(r, 0, sizeof *r);
+            sh->stashed[sh->next_row++] = 0;
+        }
+    }
+    rtpi_mutex_unlock(&sh->lock);
+    if (bad)
+        w->status = RTP_ERR_NOMEM;
+    return bad;
+}
+
 static int trace_row(void *ctx, int y)
 {
     worker *w = (worker *)ctx;
@@ -344,10 +415,8 @@ static int trace_row(void *ctx, int y)
         trace_sample(w, x, y, sh->out + 3 * ((size_t)y * sh->gx + x));
     if (w->status != RTP_OK)
         return 1;
-    if (sh->rows) {
-        if (keep_row(w, &sh->rows[y], (size_t)sh->gx))
-            return 1;
-    }
+    if (sh->rows)
+        return commit_row(w, y);
     return 0;
 }
 
@@ -369,16 +438,14 @@ void rtpi_resolve_samples(const float *samples, int spd, rtp_image *img)
 }
 
 /* Moves the rows' trees into one tree object. */
-static rtp_status gather_tree(const shared *sh, int w, int h, rtp_tree **out,
+static rtp_status gather_tree(shared *sh, int w, int h, rtp_tree **out,
                               rtp_error *err)
 {
     const rtp_scene *s = sh->s;
     const rtp_allocator *a = &s->alloc;
     rtp_tree *t;
-    size_t total = 0, words = sh->shade.vis_words, k = 0, at = 0;
-    int y, x;
-    for (y = 0; y < sh->gy; y++)
-        total += sh->rows[y].nnodes;
+    size_t total = sh->tn, words = sh->shade.vis_words, k;
+    void *p;
     t = (rtp_tree *)rtpi_calloc_array(a, 1, sizeof *t);
     if (!t)
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
@@ -397,16 +464,21 @@ static rtp_status gather_tree(const shared *sh, int w, int h, rtp_tree **out,
     t->vis_words = words;
     t->nnodes = total;
     t->nlights0 = s->nlights;
+    /* the arrays the rows went into, at their exact size */
+    sh->tstart[(size_t)sh->gx * sh->gy] = total;
+    if (sh->tcap > total + 1 && (p = rtpi_realloc(a, sh->tnodes, (total + 1) * sizeof *t->nodes)))
+        sh->tnodes = (rtpi_cnode *)p;
+    t->nodes = sh->tnodes;
+    t->start = sh->tstart;
+    t->vis_ext = sh->tvis;
+    sh->tnodes = NULL;
+    sh->tstart = NULL;
+    sh->tvis = NULL;
     if (rtpi_scene_clone(s, &t->scene) != RTP_OK ||
         !(t->mats0 = (rtpi_material *)rtpi_malloc_array(a, s->nmats ? s->nmats : 1,
                                                          sizeof *t->mats0)) ||
         !(t->lights0 = (rtpi_light *)rtpi_malloc_array(a, s->nlights ? s->nlights : 1,
-                                                        sizeof *t->lights0)) ||
-        !(t->nodes = (rtpi_cnode *)rtpi_malloc_array(a, total ? total : 1, sizeof *t->nodes)) ||
-        !(t->start = (uint64_t *)rtpi_malloc_array(a, (size_t)t->nx * t->ny + 1,
-                                                   sizeof *t->start)) ||
-        (words && !(t->vis_ext = (uint32_t *)rtpi_malloc_array(a, total * words,
-                                                                sizeof *t->vis_ext)))) {
+                                                        sizeof *t->lights0))) {
         rtp_tree_destroy(t);
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory keeping ray trees");
     }
@@ -418,19 +490,6 @@ static rtp_status gather_tree(const shared *sh, int w, int h, rtp_tree **out,
         t->mats0[k].name = NULL;
     for (k = 0; k < s->nlights; k++)
         t->lights0[k].name = NULL;
-    k = 0;
-    for (y = 0; y < sh->gy; y++) {
-        const row_rec *r = &sh->rows[y];
-        if (r->nnodes)
-            memcpy(t->nodes + at, r->nodes, r->nnodes * sizeof *t->nodes);
-        if (words && r->nnodes)
-            memcpy(t->vis_ext + at * words, r->vis, r->nnodes * words * sizeof *r->vis);
-        for (x = 0; x < sh->gx; x++) {
-            t->start[k++] = at;
-            at += r->counts[x];
-        }
-    }
-    t->start[k] = at;
     *out = t;
     return RTP_OK;
 }
@@ -447,7 +506,7 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
     rtp_image *img = NULL;
     float *samples = NULL;
     rtp_status st;
-    int w, h, fw, fh, rg[4], nthreads, i;
+    int w, h, fw, fh, rg[4], nthreads, i, lock_made = 0;
     double t0, t1, t2;
     rtpi_kd_stats ks;
 
@@ -528,8 +587,18 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
     if (sh.cl)
         rtpi_light_colors(s, sh.cl);
     ws = (worker *)rtpi_calloc_array(&s->alloc, (size_t)nthreads, sizeof *ws);
-    if (tree_out)
+    if (tree_out) {
         sh.rows = (row_rec *)rtpi_calloc_array(&s->alloc, (size_t)sh.gy, sizeof *sh.rows);
+        sh.stashed = (unsigned char *)rtpi_calloc_array(&s->alloc, (size_t)sh.gy, 1);
+        sh.tstart = (uint64_t *)rtpi_malloc_array(&s->alloc, (size_t)sh.gx * sh.gy + 1,
+                                                  sizeof *sh.tstart);
+        if (!sh.stashed || !sh.tstart)
+            rtpi_free(&s->alloc, sh.rows), sh.rows = NULL;
+        else if (rtpi_mutex_init(&sh.lock) != 0)
+            rtpi_free(&s->alloc, sh.rows), sh.rows = NULL;
+        else
+            lock_made = 1;
+    }
     if (!samples || !ws || !sh.cl || (tree_out && !sh.rows)) {
         st = rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
         goto done;
@@ -609,6 +678,12 @@ done:
         }
         rtpi_free(&s->alloc, sh.rows);
     }
+    if (lock_made)
+        rtpi_mutex_destroy(&sh.lock);
+    rtpi_free(&s->alloc, sh.stashed);
+    rtpi_free(&s->alloc, sh.tnodes);
+    rtpi_free(&s->alloc, sh.tvis);
+    rtpi_free(&s->alloc, sh.tstart);
     rtpi_kd_destroy(kd);
     rtpi_free(&s->alloc, samples);
     rtpi_free(&s->alloc, sh.cl);

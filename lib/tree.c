@@ -28,6 +28,8 @@ void rtp_tree_destroy(rtp_tree *t)
     rtpi_free(&a, t->ev_coeffs);
     rtpi_free(&a, t->ev_nv);
     rtpi_free(&a, t->ev_samples);
+    rtpi_free(&a, t->ev_cl);
+    rtpi_free(&a, t->pk);
     rtpi_free(&a, t->ev_pos);
     rtpi_free(&a, t->ev_mats);
     rtpi_free(&a, t->mat_start);
@@ -406,6 +408,9 @@ typedef struct eval_ctx {
     const uint32_t *list;     /* samples to redo (NULL: all) */
     size_t nlist, chunk;
     size_t light;             /* light_row: the light to redo */
+    const double *cv;         /* one-term path: colours of every term */
+    size_t term;              /* one-term path: the term edited */
+    float *pixels;            /* one-term path: the image */
     int redo_terms;           /* recompute terms too, not only coeffs */
     int cached;               /* ev_terms / ev_coeffs in use */
     /* per thread scratch (uncached path and coefficient sums) */
@@ -506,6 +511,95 @@ static int combine_row(void *ctx, int y)
     return 0;
 }
 
+/* ----------------------------------------------------- one-term path
+   The image is linear in the colours of its terms (background, ambient,
+   each light).  While an edit changes the colour of one term alone, every
+   pixel is P + K c: P the rest of the image, K the term's coefficient (for
+   SPD both averaged over the pixel's four corner samples), fixed until
+   something else changes.  The first such edit of a term precombines P
+   and K per pixel, a pass like a full combine; each further edit of that
+   term (a script animating a light's colour, a slider) reads 24 bytes and
+   writes 12 a pixel.  P is rounded to float once more than the full path
+   rounds, so pixels differ from it by about a float ulp of their value. */
+
+/* Sample k's image with term j left out, in the order rtpi_combine sums. */
+static void rest_of(const double *cv, size_t nc, size_t j, const float *coeffs, double v[3])
+{
+    size_t i;
+    int c;
+    for (c = 0; c < 3; c++) {
+        double a = 0.0;
+        for (i = 0; i < nc; i += 3)
+            if (i != 3 * j)
+                a += coeffs[i + c] * cv[i + c];
+        v[c] = a;
+    }
+}
+
+/* SPD, pass 1: the rest of each corner sample of a row, into samples. */
+static int pk_rest_row(void *ctx, int y)
+{
+    eval_ctx *e = (eval_ctx *)ctx;
+    const rtp_tree *t = e->t;
+    size_t k = (size_t)y * t->nx, nc = RTPI_COEFFS(t->scene->nlights);
+    int x, c;
+    for (x = 0; x < t->nx; x++, k++) {
+        double v[3];
+        rest_of(e->cv, nc, e->term, t->ev_coeffs + k * nc, v);
+        for (c = 0; c < 3; c++)
+            e->samples[3 * k + c] = (float)v[c];
+    }
+    return 0;
+}
+
+/* Pass 2 (pass 1 too without SPD): P and K of a row of pixels. */
+static int pk_row(void *ctx, int y)
+{
+    eval_ctx *e = (eval_ctx *)ctx;
+    const rtp_tree *t = e->t;
+    size_t nc = RTPI_COEFFS(t->scene->nlights), p = (size_t)y * t->width, j3 = 3 * e->term;
+    float *pk = t->pk + 6 * p;
+    int x, c;
+    for (x = 0; x < t->width; x++, pk += 6) {
+        if (t->spd) {
+            size_t a = (size_t)y * t->nx + x, b = a + t->nx;
+            const float *ca = t->ev_coeffs + a * nc, *cb = t->ev_coeffs + b * nc;
+            for (c = 0; c < 3; c++) {
+                pk[c] = (float)(0.25 * ((double)e->samples[3 * a + c] + e->samples[3 * a + 3 + c] +
+                                        e->samples[3 * b + c] + e->samples[3 * b + 3 + c]));
+                pk[3 + c] = (float)(0.25 * ((double)ca[j3 + c] + ca[nc + j3 + c] + cb[j3 + c] +
+                                            cb[nc + j3 + c]));
+            }
+        } else {
+            const float *co = t->ev_coeffs + (p + x) * nc;
+            double v[3];
+            rest_of(e->cv, nc, e->term, co, v);
+            for (c = 0; c < 3; c++) {
+                pk[c] = (float)v[c];
+                pk[3 + c] = co[j3 + c];
+            }
+        }
+    }
+    return 0;
+}
+
+/* The edit itself: P + K c for a row of pixels. */
+static int pk_apply_row(void *ctx, int y)
+{
+    eval_ctx *e = (eval_ctx *)ctx;
+    const rtp_tree *t = e->t;
+    size_t p = (size_t)y * t->width, n = (size_t)t->width, i;
+    const float *pk = t->pk + 6 * p;
+    const double *c = e->cv + 3 * e->term;
+    float *out = e->pixels + 3 * p;
+    for (i = 0; i < n; i++, pk += 6, out += 3) {
+        out[0] = (float)(pk[0] + pk[3] * c[0]);
+        out[1] = (float)(pk[1] + pk[4] * c[1]);
+        out[2] = (float)(pk[2] + pk[5] * c[2]);
+    }
+    return 0;
+}
+
 /* For each material, the samples whose trees contain it (built once). */
 static rtp_status build_material_lists(rtp_tree *t)
 {
@@ -586,6 +680,11 @@ static void drop_caches(rtp_tree *t)
     rtpi_free(&t->alloc, t->ev_nv);
     rtpi_free(&t->alloc, t->ev_pos);
     rtpi_free(&t->alloc, t->ev_mats);
+    rtpi_free(&t->alloc, t->ev_cl);
+    rtpi_free(&t->alloc, t->pk);
+    t->ev_cl = NULL;
+    t->pk = NULL;
+    t->pk_term = 0;
     t->ev_terms = NULL;
     t->ev_coeffs = NULL;
     t->ev_nv = NULL;
@@ -656,6 +755,38 @@ static rtp_status retrace_edited(rtp_tree *t, int threads, int stale, rtp_eval_s
     return RTP_OK;
 }
 
+/* May the one-term path make this image?  Yes when the coefficients are
+   those the last image used and at most one term's colour differs from
+   it (none: the term whose planes are built, if any); *term: that term. */
+static int one_term(rtp_tree *t, const double *cv, size_t nl, size_t *term)
+{
+    size_t j, nt = 2 + nl, changed = 0;
+    if (!t->ev_valid || !t->ev_cl)
+        return 0;
+    for (j = 0; j < nt; j++)
+        if (cv[3 * j] != t->ev_cl[3 * j] || cv[3 * j + 1] != t->ev_cl[3 * j + 1] ||
+            cv[3 * j + 2] != t->ev_cl[3 * j + 2]) {
+            if (changed++)
+                return 0;
+            *term = j;
+        }
+    if (!changed) {
+        if (!t->pk_term)
+            return 0;
+        *term = (size_t)t->pk_term - 1;
+    }
+    /* planes for another term hold its old colour in P: rebuilt */
+    if (t->pk_term && (size_t)t->pk_term - 1 != *term)
+        t->pk_term = 0;
+    if (!t->pk) {
+        t->pk = (float *)rtpi_malloc_array(&t->alloc, (size_t)t->width * t->height,
+                                           6 * sizeof *t->pk);
+        if (!t->pk)
+            return 0; /* the full combine needs no more memory */
+    }
+    return 1;
+}
+
 static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image *into,
                             rtp_image **out, rtp_eval_stats *stats, rtp_error *err)
 {
@@ -666,10 +797,11 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
     rtp_eval_stats st;
     rtp_scene *s;
     int i, nthreads = opt && opt->threads > 1 ? opt->threads : 1, any_moved = 0, full;
-    int cached, mode, res;
+    int cached, mode, res, one = 0;
+    size_t pk = 0;
     rtp_status rs = RTP_OK;
     size_t l, nl, ns, m;
-    double *cl = NULL;
+    double *cl = NULL, *cv = NULL;
     float *samples = NULL;
     double t0 = seconds_now(), t1;
     const uint32_t *vis;
@@ -725,23 +857,32 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
         t->ev_pos = (double *)rtpi_malloc_array(&t->alloc, 3 * nl + 1, sizeof *t->ev_pos);
         t->ev_mats = (rtpi_material *)rtpi_malloc_array(&t->alloc, s->nmats + 1,
                                                         sizeof *t->ev_mats);
-        if (!t->ev_terms || !t->ev_coeffs || !t->ev_nv || !t->ev_pos || !t->ev_mats)
+        t->ev_cl = (double *)rtpi_malloc_array(&t->alloc, RTPI_COEFFS(nl), sizeof *t->ev_cl);
+        if (!t->ev_terms || !t->ev_coeffs || !t->ev_nv || !t->ev_pos || !t->ev_mats ||
+            !t->ev_cl)
             drop_caches(t), cached = 0; /* evaluate without caches */
         t->ev_valid = 0;
     }
     if (cached && !t->mat_start && build_material_lists(t) != RTP_OK)
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
     full = !cached || !t->ev_valid;
-    cl = (double *)rtpi_malloc_array(&t->alloc, 3 * nl + 1, sizeof *cl);
+    /* cv: the colours of every term of the image's linear form, in the
+       order of the coefficients; cl: the lights' part of it */
+    cv = (double *)rtpi_malloc_array(&t->alloc, RTPI_COEFFS(nl), sizeof *cv);
+    cl = cv ? cv + 6 : NULL;
     if (into)
         img = into;
     else
         rs = rtp_image_create(t->width, t->height, &t->alloc, &img, err);
-    if (rs != RTP_OK || !cl) {
-        rtpi_free(&t->alloc, cl);
+    if (rs != RTP_OK || !cv) {
+        rtpi_free(&t->alloc, cv);
         if (img != into)
             rtp_image_destroy(img);
         return rs != RTP_OK ? rs : rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+    }
+    for (i = 0; i < 3; i++) {
+        cv[i] = s->background[i];
+        cv[3 + i] = s->ambient[i];
     }
     rtpi_light_colors(s, cl);
     if (t->spd && !t->ev_samples)
@@ -777,7 +918,10 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
         rtpi_parallel_rows(t->ny, nthreads, ctx, eval_row, opt ? opt->progress : NULL,
                            opt ? opt->progress_user : NULL);
         st.samples = ns;
+        st.combined_samples = ns;
+        t->pk_term = 0;
     } else {
+        int coeffs_dirty = 0;
         /* a light that moved (or whose shadows were decided another way):
            its terms and coefficients only, for every sample */
         for (l = 0; l < nl; l++) {
@@ -788,6 +932,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                 e[i].light = l;
             rtpi_parallel_rows(t->ny, nthreads, ctx, light_row, NULL, NULL);
             st.samples += ns;
+            coeffs_dirty = 1;
         }
         /* steps 1-2 only for samples containing an edited material */
         for (m = 0; m < s->nmats; m++) {
@@ -805,9 +950,30 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
             }
             rtpi_parallel_rows((int)((n + 255) / 256), nthreads, ctx, redo_chunk, NULL, NULL);
             st.samples += n;
+            coeffs_dirty = 1;
         }
-        /* step 3 for every sample */
-        rtpi_parallel_rows(t->ny, nthreads, ctx, combine_row, NULL, NULL);
+        if (!coeffs_dirty && one_term(t, cv, nl, &pk)) {
+            /* one colour changed: P + K c per pixel */
+            for (i = 0; i < nthreads; i++) {
+                e[i].cv = cv;
+                e[i].term = pk;
+                e[i].pixels = img->pixels;
+            }
+            if (t->pk_term != (int)pk + 1) {
+                if (t->spd)
+                    rtpi_parallel_rows(t->ny, nthreads, ctx, pk_rest_row, NULL, NULL);
+                rtpi_parallel_rows(t->height, nthreads, ctx, pk_row, NULL, NULL);
+                t->pk_term = (int)pk + 1;
+                st.combined_samples = ns;
+            }
+            rtpi_parallel_rows(t->height, nthreads, ctx, pk_apply_row, NULL, NULL);
+            one = 1;
+        } else {
+            /* step 3 for every sample */
+            rtpi_parallel_rows(t->ny, nthreads, ctx, combine_row, NULL, NULL);
+            st.combined_samples = ns;
+            t->pk_term = 0;
+        }
     }
     for (i = 0; i < nthreads; i++)
         if (e[i].nomem) {
@@ -819,12 +985,13 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
             memcpy(t->ev_mats, s->mats, s->nmats * sizeof *t->ev_mats);
         for (l = 0; l < nl; l++)
             memcpy(t->ev_pos + 3 * l, s->lights[l].pos, sizeof s->lights[l].pos);
+        memcpy(t->ev_cl, cv, RTPI_COEFFS(nl) * sizeof *cv);
         t->ev_nlights = nl;
         t->ev_vis_mode = mode;
         t->ev_vis_res = res;
         t->ev_valid = 1;
     }
-    if (t->spd)
+    if (t->spd && !one)
         rtpi_resolve_samples(samples, 1, img);
 done:
     for (i = 0; i < nthreads; i++) {
@@ -832,7 +999,7 @@ done:
         rtpi_free(&t->alloc, e[i].coeffs);
         rtpi_free(&t->alloc, e[i].acc);
     }
-    rtpi_free(&t->alloc, cl);
+    rtpi_free(&t->alloc, cv);
     if (rs != RTP_OK) {
         /* a half-made cache must not be trusted next time */
         t->ev_valid = 0;

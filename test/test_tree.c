@@ -464,6 +464,78 @@ static void test_edit_sequence(void)
     rtp_scene_destroy(s);
 }
 
+/* Edits of one colour of the image's linear form (a light's colour or
+   on/off, the ambient, the background), one after another: after the
+   first of a term each is P + K c from precombined planes (no sample is
+   redone: stats.samples is 0), and every image equals a full trace.  Runs
+   on plain samples and on an SPD region (corner samples averaged). */
+static void one_term_run(int spd)
+{
+    static const char *const seq[][2] = {
+        {"light.0.color", "0.2,0.4,1"}, {"light.0.color", "1,0.5,0.25"}, {"", ""},
+        {"light.0.on", "0"},            {"light.0.on", "1"},             {"light.1.color", "0.3,0.3,0.9"},
+        {"light.1.color", "2,2,2"},     {"ambient", "0.3"},              {"ambient", "0.05,0.1,0.2"},
+        {"background", "0.5,0.5,0"},    {"background", "0,0,0.25"},      {"mat.red.kd", "0.3"},
+        {"light.1.color", "0.5,0.5,0.5"}, {"light.1.color", "0.1,0.2,0.3"},
+    };
+    /* edits whose planes are already built: P + K c, no sample summed */
+    static const int planes[] = {0, 0, 1, 1, 1, 0, 1, 0, 1, 0, 1, 0, 0, 1};
+    rtp_scene *s = load("scenes/spheres.nff");
+    rtp_tree *t = NULL;
+    rtp_trace_options o;
+    rtp_eval_options eo;
+    rtp_image *re = NULL;
+    size_t i;
+    if (!s) {
+        CHECK(s != NULL);
+        return;
+    }
+    memset(&o, 0, sizeof o);
+    memset(&eo, 0, sizeof eo);
+    o.width = 40;
+    o.height = 30;
+    if (spd) {
+        o.spd = 1;
+        o.region[0] = 200;
+        o.region[1] = 180;
+        o.region[2] = 264;
+        o.region[3] = 228;
+    }
+    eo.threads = 2;
+    CHECK(rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
+    CHECK(t && rtp_tree_eval(t, &eo, &re, NULL, NULL) == RTP_OK);
+    for (i = 0; t && re && i < sizeof seq / sizeof *seq; i++) {
+        rtp_image *full = NULL;
+        rtp_diff_stats d;
+        rtp_eval_stats es;
+        if (seq[i][0][0]) {
+            CHECK(rtp_tree_set(t, seq[i][0], seq[i][1], NULL) == RTP_OK);
+            CHECK(rtp_scene_set(s, seq[i][0], seq[i][1], NULL) == RTP_OK);
+        }
+        if (rtp_tree_eval_into(t, &eo, re, &es, NULL) == RTP_OK &&
+            rtp_trace(s, &o, &full, NULL, NULL) == RTP_OK &&
+            rtp_image_diff(re, full, 1e-6, &d, NULL) == RTP_OK) {
+            CHECK_MSG(d.max_abs <= 1e-6, "spd %d, after %s=%s: %g", spd, seq[i][0], seq[i][1],
+                      d.max_abs);
+            if (planes[i])
+                CHECK_MSG(es.combined_samples == 0, "spd %d, %s=%s summed %llu samples", spd,
+                          seq[i][0], seq[i][1], es.combined_samples);
+        } else {
+            CHECK(0);
+        }
+        rtp_image_destroy(full);
+    }
+    rtp_image_destroy(re);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+}
+
+static void test_one_term_edits(void)
+{
+    one_term_run(0);
+    one_term_run(1);
+}
+
 /* Bump edits: on a surface with no subtrees they are exact either way; on
    a mirror, --stale retrace is exact and keep has an error (reported by
    comparison). */
@@ -720,6 +792,7 @@ int main(void)
     RUN(test_moved_light_lightbuf);
     RUN(test_moved_light_small_spd);
     RUN(test_edit_sequence);
+    RUN(test_one_term_edits);
     RUN(test_warm_light_move_bitwise);
     RUN(test_bump_edits);
     RUN(test_truncated_every_length);
