@@ -240,13 +240,23 @@ static void dc_put(double dst[3], rtpi_v3 q)
    circumscribing the circle of radius r. */
 static void dc_ngon(dc_poly *p, rtpi_v3 c, rtpi_v3 e1, rtpi_v3 e2, double r)
 {
+    /* cos and sin of 2 pi k / 16, and 1 / cos(pi / 16) */
+    static const double cs[DC_N][2] = {
+        {1.0, 0.0}, {0.92387953251128674, 0.38268343236508978},
+        {0.70710678118654752, 0.70710678118654752}, {0.38268343236508978, 0.92387953251128674},
+        {0.0, 1.0}, {-0.38268343236508978, 0.92387953251128674},
+        {-0.70710678118654752, 0.70710678118654752}, {-0.92387953251128674, 0.38268343236508978},
+        {-1.0, 0.0}, {-0.92387953251128674, -0.38268343236508978},
+        {-0.70710678118654752, -0.70710678118654752}, {-0.38268343236508978, -0.92387953251128674},
+        {0.0, -1.0}, {0.38268343236508978, -0.92387953251128674},
+        {0.70710678118654752, -0.70710678118654752}, {0.92387953251128674, -0.38268343236508978}};
     int k;
-    double R = r / cos(DC_PI / DC_N);
+    /* a hair over 1/cos(pi/16) = 1.0195911582...: rounding of the table
+       must not shrink the polygon inside the circle */
+    double R = r * (1.0195911582083184 * (1.0 + 1e-12));
     p->n = DC_N;
-    for (k = 0; k < DC_N; k++) {
-        double a = 2.0 * DC_PI * (double)k / DC_N;
-        dc_put(p->v[k], v3_madd(v3_madd(c, e1, R * cos(a)), e2, R * sin(a)));
-    }
+    for (k = 0; k < DC_N; k++)
+        dc_put(p->v[k], v3_madd(v3_madd(c, e1, R * cs[k][0]), e2, R * cs[k][1]));
 }
 
 /* Can the primitive be hit at all (rtpi_intersect_prim)?  Degenerate
@@ -333,6 +343,86 @@ full:
     b->full = 1;
 }
 
+/* The 2D convex hull of pts[0..n) (n <= 2 DC_N), counter-clockwise,
+   into hull (Andrew's monotone chain).  @return its vertex count. */
+static int dc_hull2(double pts[][2], int n, double hull[][2])
+{
+    int i, k = 0, t;
+    /* insertion sort by (u, v): n is at most 32 */
+    for (i = 1; i < n; i++) {
+        double a = pts[i][0], b = pts[i][1];
+        int j = i - 1;
+        while (j >= 0 && (pts[j][0] > a || (pts[j][0] == a && pts[j][1] > b))) {
+            pts[j + 1][0] = pts[j][0];
+            pts[j + 1][1] = pts[j][1];
+            j--;
+        }
+        pts[j + 1][0] = a;
+        pts[j + 1][1] = b;
+    }
+    if (n < 3) {
+        for (i = 0; i < n; i++) {
+            hull[i][0] = pts[i][0];
+            hull[i][1] = pts[i][1];
+        }
+        return n;
+    }
+    for (i = 0; i < n; i++) { /* lower hull */
+        while (k >= 2 && (hull[k - 1][0] - hull[k - 2][0]) * (pts[i][1] - hull[k - 2][1]) -
+                                 (hull[k - 1][1] - hull[k - 2][1]) * (pts[i][0] - hull[k - 2][0]) <= 0.0)
+            k--;
+        hull[k][0] = pts[i][0];
+        hull[k][1] = pts[i][1];
+        k++;
+    }
+    for (i = n - 2, t = k + 1; i >= 0; i--) { /* upper hull */
+        while (k >= t && (hull[k - 1][0] - hull[k - 2][0]) * (pts[i][1] - hull[k - 2][1]) -
+                                (hull[k - 1][1] - hull[k - 2][1]) * (pts[i][0] - hull[k - 2][0]) <= 0.0)
+            k--;
+        hull[k][0] = pts[i][0];
+        hull[k][1] = pts[i][1];
+        k++;
+    }
+    return k - 1; /* the last point repeats the first */
+}
+
+/* The fast way to a face for a bound whose points all lie well in front
+   of it (|x|, |y| <= DC_FAST_UV z: projected coordinates of size <= 10,
+   whose rounding stays ~1e-15, far below the widening m >= 4e-9): the
+   projection of the bound's convex hull is the 2D hull of its points'
+   projections, drawn without clipping (parts beyond the face land on its
+   edge cells, which is still a cover).  pts: the points (light-relative);
+   @return 0 if they do not qualify, 1 when done (culled or drawn). */
+#define DC_FAST_UV 10.0
+static int dc_cover_fast(dc_ctx *c, int f, const double (*pts)[3], int n, double m,
+                         double lim)
+{
+    double uv[2 * DC_N][2], hull[2 * DC_N + 1][2];
+    double umin = HUGE_VAL, umax = -HUGE_VAL, vmin = HUGE_VAL, vmax = -HUGE_VAL;
+    int k, nh;
+    for (k = 0; k < n; k++) {
+        double q[3];
+        dc_local(f, pts[k], q);
+        if (!(q[2] > 0.0 && fabs(q[0]) <= DC_FAST_UV * q[2] && fabs(q[1]) <= DC_FAST_UV * q[2]))
+            return 0;
+        uv[k][0] = q[0] / q[2];
+        uv[k][1] = q[1] / q[2];
+        umin = fmin(umin, uv[k][0]);
+        umax = fmax(umax, uv[k][0]);
+        vmin = fmin(vmin, uv[k][1]);
+        vmax = fmax(vmax, uv[k][1]);
+    }
+    if (umin > lim || umax < -lim || vmin > lim || vmax < -lim)
+        return 1; /* wholly off this face */
+    if (n <= DC_N) { /* one convex polygon: a triangle or a sphere's bound */
+        dc_spans_conservative(c, f, (const double(*)[2])uv, n, m);
+        return 1;
+    }
+    nh = dc_hull2(uv, n, hull);
+    dc_spans_conservative(c, f, (const double(*)[2])hull, nh, m);
+    return 1;
+}
+
 /* Emits every cell the primitive's projection widened by `ang` radians
    may touch.  Face coordinates change by at most ~3x an angle change on
    a face (du/dtheta <= 1 + u^2 + v^2), so the polygons are grown by 4 ang
@@ -344,12 +434,25 @@ static void dc_cover(dc_ctx *c, uint32_t prim, double ang, dc_emit_fn fn,
     double m = 4.0 * ang, lim = 1.0 + m;
     double uv[DC_MAXV][2];
     int f, k;
+    double pts[2 * DC_N][3];
+    int npts = 0;
     dc_bound_prim(c, prim, ang);
+    if (!c->b.full) {
+        /* the bound's points: a cone's two end polygons span its hull */
+        int np = c->b.npoly == 1 ? 1 : 2, v;
+        for (k = 0; k < np; k++)
+            for (v = 0; v < c->b.poly[k].n; v++)
+                memcpy(pts[npts++], c->b.poly[k].v[v], sizeof pts[0]);
+    }
     for (f = 0; f < 6; f++) {
         int whole = c->b.full;
         if (c->fbase[f] == RTPI_DC_ABSENT)
             continue;
         dc_rows_reset(c);
+        if (!whole && dc_cover_fast(c, f, (const double(*)[3])pts, npts, m, lim)) {
+            dc_emit_rows(c, f, fn, user);
+            continue;
+        }
         for (k = 0; k < c->b.npoly && !whole; k++) {
             dc_poly loc, clipped;
             int v, n;

@@ -6,11 +6,15 @@
 
 /* Item-buffer modes: a primitive narrower than SH_THIN_CELLS cells of the
    item buffer may slip between its samples, so such primitives are left
-   to a light buffer of the item buffer's resolution (thin); the item
+   to a light buffer of half the item buffer's resolution (thin: a
+   quarter of the cells to fill, lists not much longer); the item
    buffer answers for the rest, and where its neighbourhood leaves the
    answer open, a coarse light buffer over the others (wide) decides. */
 #ifndef SH_THIN_CELLS
 #define SH_THIN_CELLS 3.0
+#endif
+#ifndef SH_THIN_DIV
+#define SH_THIN_DIV 2 /* the thin light buffer's cells: 2x2 of the item buffer's */
 #endif
 #ifndef SH_WIDE_RES
 #define SH_WIDE_RES 64
@@ -38,7 +42,8 @@ static rtp_status sh_itembuf_lists(rtpi_shadow *sh, int res, const rtp_allocator
     if (!sh->thin)
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
     rtpi_itembuf_thin(&sh->ib, sh->s, SH_THIN_CELLS, sh->thin);
-    st = rtpi_lightbuf_build_some(sh->s, sh->light, sh->ib.res, sh->thin, 1, a, &sh->lb, err);
+    st = rtpi_lightbuf_build_some(sh->s, sh->light, (sh->ib.res + 1) / SH_THIN_DIV, sh->thin, 1,
+                                  a, &sh->lb, err);
     if (st == RTP_OK)
         st = rtpi_lightbuf_build_some(sh->s, sh->light, res < SH_WIDE_RES ? res : SH_WIDE_RES,
                                       sh->thin, 0, a, &sh->wide, err);
@@ -107,7 +112,7 @@ int rtpi_shadow_visible(const rtpi_shadow *sh, rtpi_v3 p, rtpi_v3 o, uint32_t pr
         if (v == 0)
             return 0;
         r = rtpi_shadow_ray(o, sh->light);
-        if (!rtpi_lightbuf_visible(&sh->lb, sh->s, &r))
+        if (sh->lb.ncand && !rtpi_lightbuf_visible(&sh->lb, sh->s, &r))
             return 0;
         return v > 0 ? 1 : rtpi_lightbuf_visible(&sh->wide, sh->s, &r);
     case RTPI_SHADOW_EXACT:

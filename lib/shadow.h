@@ -12,7 +12,7 @@
  *   RTPI_SHADOW_ITEMBUF   item buffer: each cube face rendered by a
  *                         software scanline z-buffer, one primitive per
  *                         cell.  Primitives narrower than 3 cells go to
- *                         a light buffer of the same resolution instead
+ *                         a light buffer of half the resolution instead
  *                         (exact for them); for the rest the shadow ray
  *                         is intersected with the primitives sampled in
  *                         the 3x3 cells around it (a hit is certain), and
