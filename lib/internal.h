@@ -373,6 +373,16 @@ void rtpi_sample_coeffs(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
 void rtpi_sample_coeffs_light(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
                               size_t n, const float *terms, size_t light,
                               float *coeffs);
+/* The diffuse light material mat receives in a sample, per channel:
+   q = sum over its nodes of path weight * texture factor * (ambient +
+   sum_i (n.l_i) c_li), with cv the colours of every term (background,
+   ambient, lights: RTPI_COEFFS).  For a material without a checker the
+   sample's colour is affine in x = kd * colour of mat: x q is what mat's
+   diffuse and ambient shading add, so an edit of kd or colour alone moves
+   the colour by (x' - x) q. */
+void rtpi_sample_diffuse(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
+                         size_t n, const float *terms, uint32_t mat,
+                         const double *cv, double q[3]);
 /* cl: 3 per light: colour * light scale, 0 when off (rtpi_light_colors). */
 void rtpi_combine(const rtp_scene *s, const double *cl, const float *coeffs,
                   float rgb[3]);
@@ -441,10 +451,13 @@ struct rtp_tree {
                               ambient, then each light (RTPI_COEFFS) */
     int pk_term;           /* the one-term path (tree.c): 0 (none), or
                               1 + the term whose planes pk holds (term 0:
-                              background, 1: ambient, 2 + l: light l) */
+                              background, 1: ambient, 2 + l: light l,
+                              2 + nlights + m: kd * colour of material m) */
     float *pk;             /* pixels * 6: per pixel the rest P of the
                               image with term pk_term left out, and that
                               term's coefficient K (pixel = P + K c) */
+    float *pk_q;           /* samples * 3: q of the material whose kd *
+                              colour is the term (rtpi_sample_diffuse) */
     uint32_t *mat_start;   /* per material: its samples in mat_samples */
     uint32_t *mat_samples; /* samples whose trees contain each material */
 

@@ -400,3 +400,43 @@ void rtpi_combine(const rtp_scene *s, const double *cl, const float *coeffs, flo
         rgb[k] = (float)v;
     }
 }
+
+static void diffuse_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t idx,
+                         const float *terms, uint32_t mat, const double *cv, double w,
+                         double q[3])
+{
+    const rtp_scene *s = c->s;
+    const rtpi_cnode *nd = &nodes[idx];
+    size_t nl = s->nlights, i;
+    const float *t = terms + idx * RTPI_TERMS(nl);
+    uint32_t mi = rtpi_prim_material(s, nd->prim);
+    const rtpi_material *m = &s->mats[mi];
+    double wr, wt;
+    int k;
+    if (mi == mat)
+        for (k = 0; k < 3; k++) {
+            double l = cv[3 + k];
+            for (i = 0; i < nl; i++)
+                l += (double)t[3 + 2 * i] * cv[6 + 3 * i + k];
+            q[k] += w * t[k] * l;
+        }
+    /* the path weights as coeffs_node has them */
+    wr = m->ks;
+    wt = m->kt;
+    if (nd->link & RTPI_L_TIR) {
+        wr += wt;
+        wt = 0.0;
+    }
+    if (wr > 0.0 && (nd->link & RTPI_L_REFL))
+        diffuse_node(c, nodes, idx + 1, terms, mat, cv, w * wr, q);
+    if (wt > 0.0 && (nd->link & RTPI_L_REFR))
+        diffuse_node(c, nodes, idx + (nd->link >> RTPI_L_SHIFT), terms, mat, cv, w * wt, q);
+}
+
+void rtpi_sample_diffuse(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t n,
+                         const float *terms, uint32_t mat, const double *cv, double q[3])
+{
+    q[0] = q[1] = q[2] = 0.0;
+    if (n > 0)
+        diffuse_node(c, nodes, 0, terms, mat, cv, 1.0, q);
+}

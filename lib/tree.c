@@ -30,6 +30,7 @@ void rtp_tree_destroy(rtp_tree *t)
     rtpi_free(&a, t->ev_samples);
     rtpi_free(&a, t->ev_cl);
     rtpi_free(&a, t->pk);
+    rtpi_free(&a, t->pk_q);
     rtpi_free(&a, t->ev_pos);
     rtpi_free(&a, t->ev_mats);
     rtpi_free(&a, t->mat_start);
@@ -408,9 +409,16 @@ typedef struct eval_ctx {
     const uint32_t *list;     /* samples to redo (NULL: all) */
     size_t nlist, chunk;
     size_t light;             /* light_row: the light to redo */
-    const double *cv;         /* one-term path: colours of every term */
-    size_t term;              /* one-term path: the term edited */
-    float *pixels;            /* one-term path: the image */
+    /* one-term path */
+    const double *cv;         /* colours of every term */
+    size_t term;              /* the colour term edited */
+    int pk_mat;               /* a material's kd * colour is edited */
+    uint32_t mat;             /* that material */
+    double xold[3];           /* its kd * colour in the coefficients */
+    const double *x;          /* the term's value now */
+    const float *kp;          /* K per sample: kp + k kstride */
+    size_t kstride;
+    float *pixels;            /* the image */
     int redo_terms;           /* recompute terms too, not only coeffs */
     int cached;               /* ev_terms / ev_coeffs in use */
     /* per thread scratch (uncached path and coefficient sums) */
@@ -522,7 +530,8 @@ static int combine_row(void *ctx, int y)
    writes 12 a pixel.  P is rounded to float once more than the full path
    rounds, so pixels differ from it by about a float ulp of their value. */
 
-/* Sample k's image with term j left out, in the order rtpi_combine sums. */
+/* Sample k's image with term j left out (none when j is past the
+   terms), in the order rtpi_combine sums. */
 static void rest_of(const double *cv, size_t nc, size_t j, const float *coeffs, double v[3])
 {
     size_t i;
@@ -536,7 +545,10 @@ static void rest_of(const double *cv, size_t nc, size_t j, const float *coeffs, 
     }
 }
 
-/* SPD, pass 1: the rest of each corner sample of a row, into samples. */
+/* Pass 1: the rest P_s of each sample of a row, into samples (the
+   corner samples with SPD, else the image itself, which the edit then
+   overwrites).  A colour term is left out of the sum; a material's
+   diffuse part x q is taken off the whole. */
 static int pk_rest_row(void *ctx, int y)
 {
     eval_ctx *e = (eval_ctx *)ctx;
@@ -545,52 +557,78 @@ static int pk_rest_row(void *ctx, int y)
     int x, c;
     for (x = 0; x < t->nx; x++, k++) {
         double v[3];
-        rest_of(e->cv, nc, e->term, t->ev_coeffs + k * nc, v);
+        if (e->pk_mat) {
+            const float *q = t->pk_q + 3 * k;
+            rest_of(e->cv, nc, (size_t)-1, t->ev_coeffs + k * nc, v);
+            for (c = 0; c < 3; c++)
+                v[c] -= e->xold[c] * q[c];
+        } else {
+            rest_of(e->cv, nc, e->term, t->ev_coeffs + k * nc, v);
+        }
         for (c = 0; c < 3; c++)
             e->samples[3 * k + c] = (float)v[c];
     }
     return 0;
 }
 
-/* Pass 2 (pass 1 too without SPD): P and K of a row of pixels. */
+/* Pass 2: P and K of a row of pixels (SPD: averaged over the corners). */
 static int pk_row(void *ctx, int y)
 {
     eval_ctx *e = (eval_ctx *)ctx;
     const rtp_tree *t = e->t;
-    size_t nc = RTPI_COEFFS(t->scene->nlights), p = (size_t)y * t->width, j3 = 3 * e->term;
+    size_t p = (size_t)y * t->width, ks = e->kstride;
     float *pk = t->pk + 6 * p;
+    const float *sm = e->samples;
     int x, c;
     for (x = 0; x < t->width; x++, pk += 6) {
         if (t->spd) {
             size_t a = (size_t)y * t->nx + x, b = a + t->nx;
-            const float *ca = t->ev_coeffs + a * nc, *cb = t->ev_coeffs + b * nc;
+            const float *ka = e->kp + a * ks, *kb = e->kp + b * ks;
             for (c = 0; c < 3; c++) {
-                pk[c] = (float)(0.25 * ((double)e->samples[3 * a + c] + e->samples[3 * a + 3 + c] +
-                                        e->samples[3 * b + c] + e->samples[3 * b + 3 + c]));
-                pk[3 + c] = (float)(0.25 * ((double)ca[j3 + c] + ca[nc + j3 + c] + cb[j3 + c] +
-                                            cb[nc + j3 + c]));
+                pk[c] = (float)(0.25 * ((double)sm[3 * a + c] + sm[3 * a + 3 + c] +
+                                        sm[3 * b + c] + sm[3 * b + 3 + c]));
+                pk[3 + c] = (float)(0.25 * ((double)ka[c] + ka[ks + c] + kb[c] + kb[ks + c]));
             }
         } else {
-            const float *co = t->ev_coeffs + (p + x) * nc;
-            double v[3];
-            rest_of(e->cv, nc, e->term, co, v);
+            const float *kk = e->kp + (p + x) * ks;
             for (c = 0; c < 3; c++) {
-                pk[c] = (float)v[c];
-                pk[3 + c] = co[j3 + c];
+                pk[c] = sm[3 * (p + x) + c];
+                pk[3 + c] = kk[c];
             }
         }
     }
     return 0;
 }
 
-/* The edit itself: P + K c for a row of pixels. */
+/* A chunk of the edited material's samples: q (rtpi_sample_diffuse). */
+static int pk_q_chunk(void *ctx, int chunk)
+{
+    eval_ctx *e = (eval_ctx *)ctx;
+    rtp_tree *t = e->t;
+    size_t i = (size_t)chunk * e->chunk, end = i + e->chunk;
+    if (end > e->nlist)
+        end = e->nlist;
+    for (; i < end; i++) {
+        size_t k = e->list[i], a = (size_t)t->start[k];
+        double q[3];
+        rtpi_sample_diffuse(e->shade, t->nodes + a, (size_t)(t->start[k + 1] - a),
+                            t->ev_terms + a * RTPI_TERMS(t->scene->nlights), e->mat, e->cv,
+                            q);
+        t->pk_q[3 * k] = (float)q[0];
+        t->pk_q[3 * k + 1] = (float)q[1];
+        t->pk_q[3 * k + 2] = (float)q[2];
+    }
+    return 0;
+}
+
+/* The edit itself: P + K x for a row of pixels. */
 static int pk_apply_row(void *ctx, int y)
 {
     eval_ctx *e = (eval_ctx *)ctx;
     const rtp_tree *t = e->t;
     size_t p = (size_t)y * t->width, n = (size_t)t->width, i;
     const float *pk = t->pk + 6 * p;
-    const double *c = e->cv + 3 * e->term;
+    const double *c = e->x;
     float *out = e->pixels + 3 * p;
     for (i = 0; i < n; i++, pk += 6, out += 3) {
         out[0] = (float)(pk[0] + pk[3] * c[0]);
@@ -682,8 +720,10 @@ static void drop_caches(rtp_tree *t)
     rtpi_free(&t->alloc, t->ev_mats);
     rtpi_free(&t->alloc, t->ev_cl);
     rtpi_free(&t->alloc, t->pk);
+    rtpi_free(&t->alloc, t->pk_q);
     t->ev_cl = NULL;
     t->pk = NULL;
+    t->pk_q = NULL;
     t->pk_term = 0;
     t->ev_terms = NULL;
     t->ev_coeffs = NULL;
@@ -755,6 +795,8 @@ static rtp_status retrace_edited(rtp_tree *t, int threads, int stale, rtp_eval_s
     return RTP_OK;
 }
 
+static int pk_alloc(rtp_tree *t, int q);
+
 /* May the one-term path make this image?  Yes when the coefficients are
    those the last image used and at most one term's colour differs from
    it (none: the term whose planes are built, if any); *term: that term. */
@@ -771,20 +813,61 @@ static int one_term(rtp_tree *t, const double *cv, size_t nl, size_t *term)
             *term = j;
         }
     if (!changed) {
-        if (!t->pk_term)
+        if (!t->pk_term || (size_t)t->pk_term - 1 >= nt)
             return 0;
         *term = (size_t)t->pk_term - 1;
     }
     /* planes for another term hold its old colour in P: rebuilt */
     if (t->pk_term && (size_t)t->pk_term - 1 != *term)
         t->pk_term = 0;
-    if (!t->pk) {
+    return pk_alloc(t, 0);
+}
+
+/* The planes (and q for a material), unless they are there. */
+static int pk_alloc(rtp_tree *t, int q)
+{
+    if (!t->pk)
         t->pk = (float *)rtpi_malloc_array(&t->alloc, (size_t)t->width * t->height,
                                            6 * sizeof *t->pk);
-        if (!t->pk)
-            return 0; /* the full combine needs no more memory */
+    if (q && t->pk && !t->pk_q)
+        t->pk_q = (float *)rtpi_malloc_array(&t->alloc, (size_t)t->nx * t->ny,
+                                             3 * sizeof *t->pk_q);
+    return t->pk && (!q || t->pk_q); /* else: the full combine needs no more memory */
+}
+
+/* May the one-term path make this image for a material edit?  Yes when
+   the lights, their colours and every other material are as the caches
+   have them, and one material without a checker differs from them in kd
+   or colour alone: the image is then affine in x = kd * colour of that
+   material (rtpi_sample_diffuse).  *mat: the material. */
+static int mat_term(rtp_tree *t, const double *cv, size_t nl, uint32_t *mat)
+{
+    const rtp_scene *s = t->scene;
+    size_t j, found = 0;
+    if (!t->ev_valid || !t->ev_cl)
+        return 0;
+    for (j = 0; j < RTPI_COEFFS(nl); j++)
+        if (cv[j] != t->ev_cl[j])
+            return 0;
+    for (j = 0; j < s->nmats; j++) {
+        const rtpi_material *a = &t->ev_mats[j], *b = &s->mats[j];
+        rtpi_material x;
+        if (!coeffs_changed(a, b))
+            continue;
+        if (found++)
+            return 0;
+        x = *a;
+        x.kd = b->kd;
+        memcpy(x.color, b->color, sizeof x.color);
+        if (coeffs_changed(&x, b) || b->tex == RTPI_TEX_CHECKER)
+            return 0;
+        *mat = (uint32_t)j;
     }
-    return 1;
+    if (!found)
+        return 0;
+    if (t->pk_term != (int)(2 + nl + *mat) + 1)
+        t->pk_term = 0;
+    return pk_alloc(t, 1);
 }
 
 static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image *into,
@@ -797,8 +880,10 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
     rtp_eval_stats st;
     rtp_scene *s;
     int i, nthreads = opt && opt->threads > 1 ? opt->threads : 1, any_moved = 0, full;
-    int cached, mode, res, one = 0;
+    int cached, mode, res, one = 0, matpath = 0;
     size_t pk = 0;
+    uint32_t mt = 0;
+    double xold[3], xnew[3];
     rtp_status rs = RTP_OK;
     size_t l, nl, ns, m;
     double *cl = NULL, *cv = NULL;
@@ -934,8 +1019,41 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
             st.samples += ns;
             coeffs_dirty = 1;
         }
+        if (!coeffs_dirty && mat_term(t, cv, nl, &mt)) {
+            /* one material's kd * colour changed: P + K x per pixel */
+            const rtpi_material *mo = &t->ev_mats[mt], *mn = &s->mats[mt];
+            for (l = 0; l < 3; l++) {
+                xold[l] = (double)mo->kd * mo->color[l];
+                xnew[l] = (double)mn->kd * mn->color[l];
+            }
+            for (i = 0; i < nthreads; i++) {
+                e[i].cv = cv;
+                e[i].pk_mat = 1;
+                e[i].mat = mt;
+                memcpy(e[i].xold, xold, sizeof xold);
+                e[i].x = xnew;
+                e[i].kp = t->pk_q;
+                e[i].kstride = 3;
+                e[i].pixels = img->pixels;
+                e[i].list = t->mat_samples + t->mat_start[mt];
+                e[i].nlist = t->mat_start[mt + 1] - t->mat_start[mt];
+                e[i].chunk = 256;
+            }
+            if (t->pk_term != (int)(2 + nl + mt) + 1) {
+                memset(t->pk_q, 0, ns * 3 * sizeof *t->pk_q);
+                rtpi_parallel_rows((int)((e[0].nlist + 255) / 256), nthreads, ctx, pk_q_chunk,
+                                   NULL, NULL);
+                rtpi_parallel_rows(t->ny, nthreads, ctx, pk_rest_row, NULL, NULL);
+                rtpi_parallel_rows(t->height, nthreads, ctx, pk_row, NULL, NULL);
+                t->pk_term = (int)(2 + nl + mt) + 1;
+                st.combined_samples = ns;
+            }
+            rtpi_parallel_rows(t->height, nthreads, ctx, pk_apply_row, NULL, NULL);
+            one = 1;
+            matpath = 1; /* the coefficients stay those of the material before */
+        }
         /* steps 1-2 only for samples containing an edited material */
-        for (m = 0; m < s->nmats; m++) {
+        for (m = 0; !matpath && m < s->nmats; m++) {
             int redo;
             size_t n;
             if (!coeffs_changed(&s->mats[m], &t->ev_mats[m]))
@@ -952,16 +1070,20 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
             st.samples += n;
             coeffs_dirty = 1;
         }
-        if (!coeffs_dirty && one_term(t, cv, nl, &pk)) {
+        if (matpath) {
+            /* done above */
+        } else if (!coeffs_dirty && one_term(t, cv, nl, &pk)) {
             /* one colour changed: P + K c per pixel */
             for (i = 0; i < nthreads; i++) {
                 e[i].cv = cv;
                 e[i].term = pk;
+                e[i].x = cv + 3 * pk;
+                e[i].kp = t->ev_coeffs + 3 * pk;
+                e[i].kstride = RTPI_COEFFS(nl);
                 e[i].pixels = img->pixels;
             }
             if (t->pk_term != (int)pk + 1) {
-                if (t->spd)
-                    rtpi_parallel_rows(t->ny, nthreads, ctx, pk_rest_row, NULL, NULL);
+                rtpi_parallel_rows(t->ny, nthreads, ctx, pk_rest_row, NULL, NULL);
                 rtpi_parallel_rows(t->height, nthreads, ctx, pk_row, NULL, NULL);
                 t->pk_term = (int)pk + 1;
                 st.combined_samples = ns;
@@ -981,7 +1103,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
             goto done;
         }
     if (cached) {
-        if (s->nmats)
+        if (s->nmats && !matpath)
             memcpy(t->ev_mats, s->mats, s->nmats * sizeof *t->ev_mats);
         for (l = 0; l < nl; l++)
             memcpy(t->ev_pos + 3 * l, s->lights[l].pos, sizeof s->lights[l].pos);

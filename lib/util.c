@@ -45,7 +45,19 @@ static void *huge_advice(void *p, size_t size)
 static void *default_malloc(void *user, size_t size)
 {
     (void)user;
-    return huge_advice(malloc(size), size);
+#if defined(__linux__) && defined(MADV_HUGEPAGE)
+    if (size >= RTPI_HUGE_MIN && size <= (size_t)-1 - RTPI_HUGE_PAGE) {
+        /* aligned and rounded up to whole huge pages, so that every page
+           of the block can be one (a fresh block's first touch then costs
+           a fault per 2 MiB, not per 4 KiB); realloc and free take it */
+        size_t whole = (size + RTPI_HUGE_PAGE - 1) & ~(size_t)(RTPI_HUGE_PAGE - 1);
+        void *p = NULL;
+        if (posix_memalign(&p, (size_t)RTPI_HUGE_PAGE, whole) == 0)
+            return huge_advice(p, whole);
+        return NULL;
+    }
+#endif
+    return malloc(size);
 }
 static void *default_realloc(void *user, void *p, size_t size)
 {

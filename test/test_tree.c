@@ -464,11 +464,12 @@ static void test_edit_sequence(void)
     rtp_scene_destroy(s);
 }
 
-/* Edits of one colour of the image's linear form (a light's colour or
-   on/off, the ambient, the background), one after another: after the
-   first of a term each is P + K c from precombined planes (no sample is
-   redone: stats.samples is 0), and every image equals a full trace.  Runs
-   on plain samples and on an SPD region (corner samples averaged). */
+/* Edits of one term of the image's linear form (a light's colour or
+   on/off, the ambient, the background, a material's kd or colour), one
+   after another: after the first of a term each is P + K x from
+   precombined planes (no sample summed: stats.combined_samples is 0), and
+   every image equals a full trace.  Runs on plain samples and on an SPD
+   region (corner samples averaged). */
 static void one_term_run(int spd)
 {
     static const char *const seq[][2] = {
@@ -476,10 +477,15 @@ static void one_term_run(int spd)
         {"light.0.on", "0"},            {"light.0.on", "1"},             {"light.1.color", "0.3,0.3,0.9"},
         {"light.1.color", "2,2,2"},     {"ambient", "0.3"},              {"ambient", "0.05,0.1,0.2"},
         {"background", "0.5,0.5,0"},    {"background", "0,0,0.25"},      {"mat.red.kd", "0.3"},
+        {"mat.red.color", "0.2,0.9,0.4"}, {"mat.red.kd", "0.7"},         {"mat.mirror.kd", "0.5"},
+        {"mat.mirror.color", "1,0,0"},  {"mat.mirror.color", "0.3,0.3,1"}, {"mat.red.ks", "0.3"},
+        {"mat.red.kd", "0.1"},
         {"light.1.color", "0.5,0.5,0.5"}, {"light.1.color", "0.1,0.2,0.3"},
+        {"light.1.color", "0.9,0.2,0.3"},
     };
-    /* edits whose planes are already built: P + K c, no sample summed */
-    static const int planes[] = {0, 0, 1, 1, 1, 0, 1, 0, 1, 0, 1, 0, 0, 1};
+    /* edits whose planes are already built: P + K x, no sample summed */
+    static const int planes[] = {0, 0, 1, 1, 1, 0, 1, 0, 1, 0, 1, 0,
+                                 1, 1, 0, 0, 1, 0, 0, 0, 0, 1};
     rtp_scene *s = load("scenes/spheres.nff");
     rtp_tree *t = NULL;
     rtp_trace_options o;
