@@ -699,11 +699,21 @@ done:
 #define LB_ANG_SCALE 1e-13
 #define LB_ANG_MAX 1e-3
 
+/* A run of cells [cell, cell + n) listing candidate `rank`: recorded by
+   the counting pass so the filling pass need not project again. */
+typedef struct lb_run {
+    size_t cell;
+    uint32_t n, rank;
+} lb_run;
+
 typedef struct lb_fill {
     uint32_t *count; /* per cell; then write cursors */
-    uint32_t *ref;
     uint32_t rank;
     uint64_t total;
+    lb_run *runs;
+    size_t nruns, cap;
+    const rtp_allocator *a;
+    int oom;
 } lb_fill;
 
 static void lb_count(void *user, size_t cell, int n)
@@ -714,15 +724,24 @@ static void lb_count(void *user, size_t cell, int n)
     for (k = 0; k < n; k++)
         p[k]++;
     lf->total += (uint64_t)n;
-}
-
-static void lb_put(void *user, size_t cell, int n)
-{
-    lb_fill *lf = (lb_fill *)user;
-    uint32_t *p = lf->count + cell;
-    int k;
-    for (k = 0; k < n; k++)
-        lf->ref[p[k]++] = lf->rank;
+    if (lf->nruns == lf->cap && !lf->oom) {
+        size_t cap = lf->cap ? 2 * lf->cap : 4096;
+        lb_run *r = cap <= (size_t)-1 / sizeof *r
+                        ? (lb_run *)rtpi_realloc(lf->a, lf->runs, cap * sizeof *r)
+                        : NULL;
+        if (!r)
+            lf->oom = 1;
+        else {
+            lf->runs = r;
+            lf->cap = cap;
+        }
+    }
+    if (lf->oom)
+        return;
+    lf->runs[lf->nruns].cell = cell;
+    lf->runs[lf->nruns].n = (uint32_t)n;
+    lf->runs[lf->nruns].rank = lf->rank;
+    lf->nruns++;
 }
 
 static int lb_cmp(const void *a, const void *b)
@@ -793,18 +812,23 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
     /* Filling the cells in ascending near order sorts every list. */
     qsort(lb->cand, nc, sizeof *lb->cand, lb_cmp);
     lf.count = lb->off;
-    for (i = 0; i < nc; i++)
+    lf.a = a;
+    for (i = 0; i < nc; i++) {
+        lf.rank = (uint32_t)i;
         dc_cover(&c, lb->cand[i].prim, lb_ang(S, lb->cand[i].near), lb_count, &lf);
+    }
+    dc_ctx_free(&c, a);
     if (lf.total > 0xffffffffu) {
-        dc_ctx_free(&c, a);
+        rtpi_free(a, lf.runs);
         rtpi_lightbuf_free(lb, a);
         return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
                           "light buffer would hold more than 2^32 entries; lower the resolution");
     }
     lb->nrefs = (size_t)lf.total;
-    lb->ref = (uint32_t *)rtpi_malloc_array(a, lb->nrefs ? lb->nrefs : 1, sizeof *lb->ref);
+    lb->ref = lf.oom ? NULL
+                     : (uint32_t *)rtpi_malloc_array(a, lb->nrefs ? lb->nrefs : 1, sizeof *lb->ref);
     if (!lb->ref) {
-        dc_ctx_free(&c, a);
+        rtpi_free(a, lf.runs);
         rtpi_lightbuf_free(lb, a);
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory for the light buffer");
     }
@@ -818,15 +842,17 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
         }
         lb->off[ncells] = sum;
     }
-    lf.ref = lb->ref;
-    for (i = 0; i < nc; i++) {
-        lf.rank = (uint32_t)i;
-        dc_cover(&c, lb->cand[i].prim, lb_ang(S, lb->cand[i].near), lb_put, &lf);
+    /* The runs in ascending rank: each list fills in ascending near. */
+    for (i = 0; i < lf.nruns; i++) {
+        const lb_run *r = &lf.runs[i];
+        uint32_t *p = lb->off + r->cell, k;
+        for (k = 0; k < r->n; k++)
+            lb->ref[p[k]++] = r->rank;
     }
+    rtpi_free(a, lf.runs);
     /* Each cursor now stands at its cell's end = the next cell's start. */
     memmove(lb->off + 1, lb->off, ncells * sizeof *lb->off);
     lb->off[0] = 0;
-    dc_ctx_free(&c, a);
     return RTP_OK;
 }
 

@@ -11,7 +11,7 @@
    buffer answers for the rest, and where its neighbourhood leaves the
    answer open, a coarse light buffer over the others (wide) decides. */
 #ifndef SH_THIN_CELLS
-#define SH_THIN_CELLS 3.0
+#define SH_THIN_CELLS 2.0
 #endif
 #ifndef SH_THIN_DIV
 #define SH_THIN_DIV 2 /* the thin light buffer's cells: 2x2 of the item buffer's */

@@ -11,7 +11,7 @@
  *                         its cell's list, so the answer equals EXACT
  *   RTPI_SHADOW_ITEMBUF   item buffer: each cube face rendered by a
  *                         software scanline z-buffer, one primitive per
- *                         cell.  Primitives narrower than 3 cells go to
+ *                         cell.  Primitives narrower than 2 cells go to
  *                         a light buffer of half the resolution instead
  *                         (exact for them); for the rest the shadow ray
  *                         is intersected with the primitives sampled in
