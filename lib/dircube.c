@@ -911,13 +911,14 @@ void rtpi_lightbuf_free(rtpi_lightbuf *lb, const rtp_allocator *a)
         or a part of a window the scene does not reach);
      3. else looks at the 9 samples of c and its neighbours (across a cube
         edge on the next face), leaving out empty ones and prim itself
-        where it cannot shadow itself.  The shadow ray is intersected, by
-        the kd-tree's own routine, with each primitive sampled there that
-        is not thin (thin ones are decided exactly by shadow.c's light
-        buffer): a hit is in shadow, exactly.  Otherwise, when no sample
-        lies clearly in front of p, it sees the light; when one does (a
-        shadow edge: something in front, beside the ray), the answer is
-        left open (-1) for an exact query.
+        where it cannot shadow itself, and thin primitives (decided
+        exactly by shadow.c's light buffer; too narrow to hide a wide
+        primitive from all 9 samples).  The shadow ray is intersected, by
+        the kd-tree's own routine, with each primitive sampled there: a
+        hit is in shadow, exactly.  Otherwise, when no such sample lies
+        clearly in front of p, it sees the light; when one does (a shadow
+        edge: something in front, beside the ray), the answer is left
+        open (-1) for an exact query.
    "Clearly in front": depth along the face axis zs < zp - (IB_BIAS zext
    + zp e tan(theta)), theta the angle between the surface normal and the
    light, e the sample's distance from the ray's direction in face
@@ -1007,14 +1008,23 @@ static size_t ib_sample(const rtpi_itembuf *ib, int f, int i, int j, int *g)
                              g);
 }
 
+/* tan of the angle between the normal o - p and the light at L, capped
+   at IB_TAN_MAX (see the rule above). */
+static double ib_tan(rtpi_v3 p, rtpi_v3 o, rtpi_v3 L)
+{
+    rtpi_v3 nv = v3_sub(o, p), l = v3_sub(L, p);
+    double nl = v3_len(nv) * v3_len(l), cs = nl > 0.0 ? v3_dot(nv, l) / nl : 0.0, tn;
+    tn = cs * IB_TAN_MAX > 1.0 ? sqrt(fmax(0.0, 1.0 - cs * cs)) / cs : IB_TAN_MAX;
+    return tn < IB_TAN_MAX ? tn : IB_TAN_MAX;
+}
+
 int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
                          rtpi_v3 p, rtpi_v3 o, uint32_t prim,
                          const unsigned char *thin)
 {
     int f, self = ib_self(s, prim, o, ib->light), res = ib->res, i, j, di, dj, k, n = 0, m = 0;
     uint32_t cand[9];
-    double u, v, x, y, zp, tn, nl, cs;
-    rtpi_v3 nv, l;
+    double u, v, x, y, zp, zlim, tn = -1.0;
     rtpi_ray r;
     rtpi_hit h;
     if (self == 1)
@@ -1029,33 +1039,34 @@ int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
     i = x < 0.0 ? 0 : x >= res ? res - 1 : (int)x;
     j = y < 0.0 ? 0 : y >= res ? res - 1 : (int)y;
     zp = rtpi_dc_depth(f, v3_sub(p, ib->light));
-    nv = v3_sub(o, p);
-    l = v3_sub(ib->light, p);
-    nl = v3_len(nv) * v3_len(l);
-    cs = nl > 0.0 ? v3_dot(nv, l) / nl : 0.0;
-    tn = cs * IB_TAN_MAX > 1.0 ? sqrt(fmax(0.0, 1.0 - cs * cs)) / cs : IB_TAN_MAX;
-    if (tn > IB_TAN_MAX)
-        tn = IB_TAN_MAX;
+    zlim = zp - IB_BIAS * ib->w.zext[f]; /* nothing at or beyond is in front */
     for (dj = -1; dj <= 1; dj++) {
         for (di = -1; di <= 1; di++) {
             int g;
             size_t c = ib_sample(ib, f, i + di, j + dj, &g);
             uint32_t id;
-            double zc, ex, ey, tol;
+            double zc, ex, ey;
             if (c == RTPI_DC_ABSENT || (id = ib->id[c]) == RTPI_NONE ||
-                (id == prim && self == 0))
+                (id == prim && self == 0) || (thin && thin[id]))
                 continue;
             for (k = 0; k < n && cand[k] != id; k++)
                 ;
-            if (k == n && !(thin && thin[id]))
+            if (k == n)
                 cand[n++] = id;
-            /* a sample on another face: depths not comparable, count it
-               as in front */
-            zc = g == f ? ib->z[c] + ib->w.zbase[g] : -HUGE_VAL;
+            if (m)
+                continue;
+            if (g != f) {
+                m = 1; /* a sample on another face: depths not comparable */
+                continue;
+            }
+            zc = ib->z[c] + ib->w.zbase[g];
+            if (!(zc < zlim))
+                continue;
+            if (tn < 0.0)
+                tn = ib_tan(p, o, ib->light);
             ex = (i + di + 0.5 - x) * ib->w.du[f];
             ey = (j + dj + 0.5 - y) * ib->w.dv[f];
-            tol = IB_BIAS * ib->w.zext[f] + zp * sqrt(ex * ex + ey * ey) * tn;
-            m |= zc < zp - tol;
+            m = zc < zlim - zp * sqrt(ex * ex + ey * ey) * tn;
         }
     }
     if (!n)
