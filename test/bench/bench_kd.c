@@ -5,10 +5,12 @@
  * camera rays (1024x1024 pinhole looking at the bunny's bounds), shadow
  * rays from the camera hits to a point light (any-hit), and random rays
  * (origins inside the bounds, uniform directions).  Builds are timed on
- * two threads and on one (wall clock), rays on one (this thread's CPU
- * time).  Rays are made before
- * the clock starts, so the rates are the kd-tree's alone.  Reports; never
- * fails on speed.  `bench_kd --bunny` runs the bunny alone, `--big` the
+ * two threads and on one: wall clock, and the CPU time of all threads
+ * (on a busy machine the wall clock says little).  Rays are timed on one
+ * thread, in its CPU time, and are made before the clock starts, so the
+ * rates are the kd-tree's alone.  Reports; never fails on speed.  Built
+ * with -DKD_COUNT (kdtree.c too) it also prints steps, leaves and tests a
+ * ray.  `bench_kd --bunny` runs the bunny alone, `--big` the
  * generated mesh alone. */
 #include "kdtree.h"
 
