@@ -878,10 +878,11 @@ static int reeval_one(rtp_tree *tree, const rtp_eval_options *eo, rtp_image **ke
                 "{\"command\": \"reeval\", \"seconds\": %.6f, \"load_seconds\": %.6f, "
                 "\"shadow_seconds\": %.6f, \"moved_lights\": %d, \"shadow_queries\": %llu, "
                 "\"retraced_samples\": %llu, \"retraced_rays\": %llu, "
-                "\"combined_samples\": %llu, \"pixels\": %llu, \"samples\": %llu, \"nodes\": %llu, \"bytes_per_node\": %u, "
+                "\"combined_samples\": %llu, \"written_pixels\": %llu, \"pixels\": %llu, \"samples\": %llu, \"nodes\": %llu, \"bytes_per_node\": %u, "
                 "\"tree_bytes\": %llu",
                 es.seconds, load_seconds, es.shadow_seconds, es.moved_lights,
                 es.shadow_queries, es.retraced_samples, es.retraced_rays, es.combined_samples,
+                es.written_pixels,
                 (unsigned long long)img->width * img->height,
                 ti.samples, ti.nodes, ti.bytes_per_node, ti.tree_bytes);
         if (fb >= 0)
@@ -1032,6 +1033,9 @@ static int cmd_reeval(int argc, char **argv)
     eo.threads = threads;
     /* one image: caches for later edits would only cost time */
     eo.no_cache = !stream;
+    /* the stream's one image is only read between edits: an edit writes
+       only the pixels it changes */
+    eo.incremental = stream;
     prog.start = now_seconds();
     prog.shown = 0;
     if (verbosity > 0 && isatty(2) && !stream) {

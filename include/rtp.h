@@ -269,6 +269,11 @@ typedef struct rtp_eval_options {
                                later edits (faster once, slower after) */
     void (*progress)(void *user, double done);
     void *progress_user;
+    int incremental;        /* 1: the image given to rtp_tree_eval_into still
+                               holds what this tree's last evaluation wrote
+                               there (the caller's promise): pixels an edit
+                               cannot change are not written again.  Ignored
+                               when that image was not the last one written. */
 } rtp_eval_options;
 
 typedef struct rtp_eval_stats {
@@ -283,6 +288,8 @@ typedef struct rtp_eval_stats {
                                             from their coefficients; 0 when
                                             an edit of one colour alone was
                                             applied per pixel as P + K c */
+    unsigned long long written_pixels;   /* pixels written (fewer than the
+                                            image's with opt->incremental) */
 } rtp_eval_stats;
 
 /** Evaluates the trees with the current parameters into a new image.  Lights

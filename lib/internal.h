@@ -456,6 +456,10 @@ struct rtp_tree {
     float *pk;             /* pixels * 6: per pixel the rest P of the
                               image with term pk_term left out, and that
                               term's coefficient K (pixel = P + K c) */
+    uint32_t *pk_nz;       /* the pixels whose K is not 0, pk_nnz of them:
+                              the only ones an edit of the term changes */
+    size_t pk_nnz;
+    const float *last_pixels; /* the image the last evaluation wrote */
     float *pk_q;           /* samples * 3: q of the material whose kd *
                               colour is the term (rtpi_sample_diffuse) */
     uint32_t *mat_start;   /* per material: its samples in mat_samples */

@@ -31,6 +31,7 @@ void rtp_tree_destroy(rtp_tree *t)
     rtpi_free(&a, t->ev_cl);
     rtpi_free(&a, t->pk);
     rtpi_free(&a, t->pk_q);
+    rtpi_free(&a, t->pk_nz);
     rtpi_free(&a, t->ev_pos);
     rtpi_free(&a, t->ev_mats);
     rtpi_free(&a, t->mat_start);
@@ -638,6 +639,38 @@ static int pk_apply_row(void *ctx, int y)
     return 0;
 }
 
+/* The listed pixels only (opt->incremental): chunk of 4096 of pk_nz. */
+static int pk_apply_chunk(void *ctx, int chunk)
+{
+    eval_ctx *e = (eval_ctx *)ctx;
+    const rtp_tree *t = e->t;
+    size_t i = (size_t)chunk * 4096, end = i + 4096;
+    const double *c = e->x;
+    if (end > t->pk_nnz)
+        end = t->pk_nnz;
+    for (; i < end; i++) {
+        size_t p = t->pk_nz[i];
+        const float *pk = t->pk + 6 * p;
+        float *out = e->pixels + 3 * p;
+        out[0] = (float)(pk[0] + pk[3] * c[0]);
+        out[1] = (float)(pk[1] + pk[4] * c[1]);
+        out[2] = (float)(pk[2] + pk[5] * c[2]);
+    }
+    return 0;
+}
+
+/* Lists the pixels whose K is not 0 (after the planes are built). */
+static void pk_list_nonzero(rtp_tree *t)
+{
+    size_t np = (size_t)t->width * t->height, p;
+    t->pk_nnz = 0;
+    for (p = 0; p < np; p++) {
+        const float *k = t->pk + 6 * p + 3;
+        if (k[0] != 0.0f || k[1] != 0.0f || k[2] != 0.0f)
+            t->pk_nz[t->pk_nnz++] = (uint32_t)p;
+    }
+}
+
 /* For each material, the samples whose trees contain it (built once). */
 static rtp_status build_material_lists(rtp_tree *t)
 {
@@ -721,6 +754,8 @@ static void drop_caches(rtp_tree *t)
     rtpi_free(&t->alloc, t->ev_cl);
     rtpi_free(&t->alloc, t->pk);
     rtpi_free(&t->alloc, t->pk_q);
+    rtpi_free(&t->alloc, t->pk_nz);
+    t->pk_nz = NULL;
     t->ev_cl = NULL;
     t->pk = NULL;
     t->pk_q = NULL;
@@ -797,6 +832,22 @@ static rtp_status retrace_edited(rtp_tree *t, int threads, int stale, rtp_eval_s
 
 static int pk_alloc(rtp_tree *t, int q);
 
+/* P + K x into the image: every pixel, or with `sparse` (the image holds
+   the last evaluation, which differed in this term alone) the pixels
+   whose K is not 0. */
+static void pk_apply(rtp_tree *t, void *const *ctx, int nthreads, int sparse,
+                     rtp_eval_stats *st)
+{
+    if (sparse) {
+        rtpi_parallel_rows((int)((t->pk_nnz + 4095) / 4096), nthreads, ctx, pk_apply_chunk,
+                           NULL, NULL);
+        st->written_pixels = t->pk_nnz;
+    } else {
+        rtpi_parallel_rows(t->height, nthreads, ctx, pk_apply_row, NULL, NULL);
+        st->written_pixels = (unsigned long long)t->width * t->height;
+    }
+}
+
 /* May the one-term path make this image?  Yes when the coefficients are
    those the last image used and at most one term's colour differs from
    it (none: the term whose planes are built, if any); *term: that term. */
@@ -829,6 +880,11 @@ static int pk_alloc(rtp_tree *t, int q)
     if (!t->pk)
         t->pk = (float *)rtpi_malloc_array(&t->alloc, (size_t)t->width * t->height,
                                            6 * sizeof *t->pk);
+    if (t->pk && !t->pk_nz)
+        t->pk_nz = (uint32_t *)rtpi_malloc_array(&t->alloc, (size_t)t->width * t->height,
+                                                 sizeof *t->pk_nz);
+    if (!t->pk_nz)
+        return 0;
     if (q && t->pk && !t->pk_q)
         t->pk_q = (float *)rtpi_malloc_array(&t->alloc, (size_t)t->nx * t->ny,
                                              3 * sizeof *t->pk_q);
@@ -880,7 +936,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
     rtp_eval_stats st;
     rtp_scene *s;
     int i, nthreads = opt && opt->threads > 1 ? opt->threads : 1, any_moved = 0, full;
-    int cached, mode, res, one = 0, matpath = 0;
+    int cached, mode, res, one = 0, matpath = 0, sparse;
     size_t pk = 0;
     uint32_t mt = 0;
     double xold[3], xnew[3];
@@ -951,6 +1007,11 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
     if (cached && !t->mat_start && build_material_lists(t) != RTP_OK)
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
     full = !cached || !t->ev_valid;
+    /* the caller's image holds the last evaluation: only changes need
+       writing (pk_apply) */
+    sparse = opt && opt->incremental && into && t->last_pixels == into->pixels;
+    t->last_pixels = NULL; /* until this evaluation has written it */
+    st.written_pixels = (unsigned long long)t->width * t->height;
     /* cv: the colours of every term of the image's linear form, in the
        order of the coefficients; cl: the lights' part of it */
     cv = (double *)rtpi_malloc_array(&t->alloc, RTPI_COEFFS(nl), sizeof *cv);
@@ -1045,10 +1106,11 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                                    NULL, NULL);
                 rtpi_parallel_rows(t->ny, nthreads, ctx, pk_rest_row, NULL, NULL);
                 rtpi_parallel_rows(t->height, nthreads, ctx, pk_row, NULL, NULL);
+                pk_list_nonzero(t);
                 t->pk_term = (int)(2 + nl + mt) + 1;
                 st.combined_samples = ns;
             }
-            rtpi_parallel_rows(t->height, nthreads, ctx, pk_apply_row, NULL, NULL);
+            pk_apply(t, ctx, nthreads, sparse, &st);
             one = 1;
             matpath = 1; /* the coefficients stay those of the material before */
         }
@@ -1085,10 +1147,11 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
             if (t->pk_term != (int)pk + 1) {
                 rtpi_parallel_rows(t->ny, nthreads, ctx, pk_rest_row, NULL, NULL);
                 rtpi_parallel_rows(t->height, nthreads, ctx, pk_row, NULL, NULL);
+                pk_list_nonzero(t);
                 t->pk_term = (int)pk + 1;
                 st.combined_samples = ns;
             }
-            rtpi_parallel_rows(t->height, nthreads, ctx, pk_apply_row, NULL, NULL);
+            pk_apply(t, ctx, nthreads, sparse, &st);
             one = 1;
         } else {
             /* step 3 for every sample */
@@ -1135,6 +1198,7 @@ done:
         stats->shadow_seconds = t1 - t0;
         stats->nodes = t->nnodes;
     }
+    t->last_pixels = img->pixels;
     if (out)
         *out = img;
     return RTP_OK;

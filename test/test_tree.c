@@ -508,6 +508,7 @@ static void one_term_run(int spd)
         o.region[3] = 228;
     }
     eo.threads = 2;
+    eo.incremental = 1; /* re is only read between edits */
     CHECK(rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
     CHECK(t && rtp_tree_eval(t, &eo, &re, NULL, NULL) == RTP_OK);
     for (i = 0; t && re && i < sizeof seq / sizeof *seq; i++) {
@@ -526,6 +527,12 @@ static void one_term_run(int spd)
             if (planes[i])
                 CHECK_MSG(es.combined_samples == 0, "spd %d, %s=%s summed %llu samples", spd,
                           seq[i][0], seq[i][1], es.combined_samples);
+            /* the background shows in part of the image: only that part
+               is written again */
+            if (planes[i] && strcmp(seq[i][0], "background") == 0)
+                CHECK_MSG(es.written_pixels > 0 &&
+                              es.written_pixels < (unsigned long long)re->width * re->height,
+                          "spd %d, background: wrote %llu pixels", spd, es.written_pixels);
         } else {
             CHECK(0);
         }

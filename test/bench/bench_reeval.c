@@ -96,6 +96,7 @@ static void run(const char *dir, const char *name, int size)
     o.width = o.height = size;
     o.threads = 1;
     eo.threads = 1;
+    eo.incremental = 1; /* one image kept, as --stream keeps it */
     for (i = 0; i < 2; i++) {
         double t0 = now();
         if (rtp_trace(s, &o, &img, NULL, NULL) != RTP_OK)
