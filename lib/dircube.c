@@ -1038,6 +1038,19 @@ int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
         return 1;
     i = x < 0.0 ? 0 : x >= res ? res - 1 : (int)x;
     j = y < 0.0 ? 0 : y >= res ? res - 1 : (int)y;
+    if (self == 0 && i > 0 && j > 0 && i < res - 1 && j < res - 1) {
+        /* The common case first: all 9 samples empty, prim's own or
+           thin. */
+        const uint32_t *row = ib->id + ib->w.fbase[f] + (size_t)(j - 1) * (size_t)res + (size_t)(i - 1);
+        int other = 0;
+        for (dj = 0; dj < 3 && !other; dj++, row += res)
+            for (di = 0; di < 3; di++) {
+                uint32_t id = row[di];
+                other |= id != prim && id != RTPI_NONE && !(thin && thin[id]);
+            }
+        if (!other)
+            return 1;
+    }
     zp = rtpi_dc_depth(f, v3_sub(p, ib->light));
     zlim = zp - IB_BIAS * ib->w.zext[f]; /* nothing at or beyond is in front */
     for (dj = -1; dj <= 1; dj++) {
