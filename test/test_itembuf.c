@@ -1,0 +1,304 @@
+/* test_itembuf.c — the item buffer's share of wrong shadow decisions
+ * (lib/shadow.h, RTPI_SHADOW_ITEMBUF and, in OSMESA=1 builds, OSMESA)
+ * stays at most 0.1% of the kd-tree's at 256, 512 and 1024 cells a face,
+ * on scenes built to trip it: branches far thinner than a cell under a
+ * far light over a wide floor, a fine mesh whose triangles are smaller
+ * than the cells, slivers, and the light between objects; and on the
+ * small SPD scenes when ../shared/scenes is present.  Its "in shadow"
+ * answers are certain (a real intersection): never wrong.  Query points
+ * are eye-ray hits as trace makes them, plus random rays through the
+ * scene (which reach backs, undersides and grazing spots). */
+#include "check.h"
+#include "dircube.h"
+#include "shadow.h"
+
+#include <time.h>
+
+static uint64_t rng_state;
+
+static double rnd(void)
+{
+    rng_state ^= rng_state >> 12;
+    rng_state ^= rng_state << 25;
+    rng_state ^= rng_state >> 27;
+    return (double)((rng_state * 2685821657736338717ull) >> 11) * (1.0 / 9007199254740992.0);
+}
+
+typedef struct sample {
+    rtpi_v3 p, o;
+    uint32_t prim;
+} sample;
+
+/* Hits of rays from the camera towards its target (spread by `spread`)
+   and from random points of the box lo..hi in random directions, kept
+   where trace would ask about light lp. */
+static size_t make_samples(const rtp_scene *s, const rtpi_kdtree *kd, rtpi_v3 lp,
+                           const double lo[3], const double hi[3], double spread,
+                           sample *out, size_t want)
+{
+    size_t n = 0, tries;
+    rtpi_v3 eye = v3(s->camera.from[0], s->camera.from[1], s->camera.from[2]);
+    rtpi_v3 at = v3(s->camera.at[0], s->camera.at[1], s->camera.at[2]);
+    for (tries = 0; n < want && tries < want * 20; tries++) {
+        rtpi_ray r;
+        rtpi_hit h;
+        rtpi_surface sf;
+        rtpi_v3 pe, ng, ns, o;
+        if (tries & 1) {
+            r.o = eye;
+            r.d = v3_norm(v3_add(v3_sub(at, eye), v3(spread * (rnd() - 0.5), spread * (rnd() - 0.5),
+                                                     spread * (rnd() - 0.5))));
+        } else {
+            double z = 2 * rnd() - 1, ph = 6.283185307179586 * rnd(), rr = sqrt(1 - z * z);
+            r.o = v3(lo[0] + (hi[0] - lo[0]) * rnd(), lo[1] + (hi[1] - lo[1]) * rnd(),
+                     lo[2] + (hi[2] - lo[2]) * rnd());
+            r.d = v3(rr * cos(ph), rr * sin(ph), z);
+        }
+        r.tmin = 0.0;
+        r.tmax = HUGE_VAL;
+        if (!rtpi_kd_intersect(kd, &r, &h))
+            continue;
+        pe = v3_madd(r.o, r.d, h.t);
+        rtpi_surface_from_point(s, h.prim, v3((float)pe.x, (float)pe.y, (float)pe.z), 0, &sf);
+        ng = sf.ng;
+        ns = sf.ns;
+        if (v3_dot(r.d, ng) >= 0.0 && rtpi_two_sided(s, 0, h.prim, &s->mats[sf.mat])) {
+            ng = v3_mul(ng, -1.0);
+            ns = v3_mul(ns, -1.0);
+        }
+        if (!rtpi_shadow_setup(sf.p, ng, ns, lp, &o))
+            continue;
+        out[n].p = sf.p;
+        out[n].o = o;
+        out[n].prim = h.prim;
+        n++;
+    }
+    return n;
+}
+
+/* Checks one mode at one resolution against EXACT on n samples. */
+static void check_mode(const char *label, const rtp_scene *s, const rtpi_kdtree *kd, rtpi_v3 lp,
+                       rtpi_shadow_mode mode, int res, const sample *sm, size_t n)
+{
+    rtpi_shadow *ex = NULL, *sh = NULL;
+    rtp_allocator a;
+    rtp_error err;
+    size_t k, wrong = 0, false_shadow = 0, lit = 0;
+    rtpi_allocator_init(&a, NULL);
+    if (rtpi_shadow_create(s, kd, lp, RTPI_SHADOW_EXACT, 0, &a, &ex, NULL) != RTP_OK ||
+        rtpi_shadow_create(s, NULL, lp, mode, res, &a, &sh, &err) != RTP_OK) {
+        CHECK_MSG(0, "%s: cannot create the shadow queries", label);
+        rtpi_shadow_destroy(ex);
+        return;
+    }
+    for (k = 0; k < n; k++) {
+        int e = rtpi_shadow_visible(ex, sm[k].p, sm[k].o, sm[k].prim);
+        int v = rtpi_shadow_visible(sh, sm[k].p, sm[k].o, sm[k].prim);
+        wrong += e != v;
+        false_shadow += e && !v;
+        lit += (size_t)e;
+    }
+    printf("  %-34s %-7s %4d: %6lu points, %5.1f%% lit, wrong %.4f%%\n", label,
+           mode == RTPI_SHADOW_OSMESA ? "osmesa" : "itembuf", res, (unsigned long)n,
+           100.0 * (double)lit / (double)(n ? n : 1), 100.0 * (double)wrong / (double)(n ? n : 1));
+    CHECK_MSG((double)wrong <= 0.001 * (double)n, "%s, res %d: %lu of %lu decisions wrong", label,
+              res, (unsigned long)wrong, (unsigned long)n);
+    CHECK_MSG(false_shadow == 0, "%s, res %d: %lu lit points put in shadow", label, res,
+              (unsigned long)false_shadow);
+    rtpi_shadow_destroy(ex);
+    rtpi_shadow_destroy(sh);
+}
+
+static int have_osmesa(const rtp_scene *s)
+{
+    rtpi_itembuf ib;
+    rtp_allocator a;
+    rtpi_allocator_init(&a, NULL);
+    if (rtpi_itembuf_build_osmesa(s, v3(0, 0, 100), 8, &a, &ib, NULL) != RTP_OK)
+        return 0;
+    rtpi_itembuf_free(&ib, &a);
+    return 1;
+}
+
+#define NSAMPLES 20000
+
+static void run(const char *label, const rtp_scene *s, const rtpi_v3 *lights, size_t nl,
+                double spread)
+{
+    static const int res[] = {256, 512, 1024};
+    rtpi_kdtree *kd = NULL;
+    sample *sm = (sample *)malloc(NSAMPLES * sizeof *sm);
+    double lo[3] = {HUGE_VAL, HUGE_VAL, HUGE_VAL}, hi[3] = {-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
+    size_t li, k;
+    int r, c, gl = have_osmesa(s);
+    if (!sm || rtpi_kd_build(s, NULL, &kd, NULL) != RTP_OK) {
+        CHECK(0);
+        free(sm);
+        return;
+    }
+    for (k = 0; k < rtpi_scene_nprims(s); k++) {
+        double pl[3], ph[3];
+        rtpi_prim_bounds(s, (uint32_t)k, pl, ph);
+        for (c = 0; c < 3; c++) {
+            lo[c] = fmin(lo[c], pl[c]);
+            hi[c] = fmax(hi[c], ph[c]);
+        }
+    }
+    for (li = 0; li < nl; li++) {
+        size_t n = make_samples(s, kd, lights[li], lo, hi, spread, sm, NSAMPLES);
+        char name[96];
+        CHECK_MSG(n > NSAMPLES / 10, "%s: only %lu points", label, (unsigned long)n);
+        snprintf(name, sizeof name, "%s, light %lu", label, (unsigned long)li);
+        for (r = 0; r < 3; r++) {
+            check_mode(name, s, kd, lights[li], RTPI_SHADOW_ITEMBUF, res[r], sm, n);
+            if (gl)
+                check_mode(name, s, kd, lights[li], RTPI_SHADOW_OSMESA, res[r], sm, n);
+        }
+    }
+    rtpi_kd_destroy(kd);
+    free(sm);
+}
+
+static rtp_scene *load(const char *text, size_t len)
+{
+    rtp_scene *s = NULL;
+    rtp_error err;
+    if (rtp_scene_load_memory(text, len, "test.nff", "nff", NULL, &s, &err) != RTP_OK) {
+        char buf[256];
+        fprintf(stderr, "load: %s\n", rtp_error_format(&err, buf, sizeof buf));
+        return NULL;
+    }
+    return s;
+}
+
+/* A wide floor, thin branches (cones of radius 0.004 to 0.03, far below a
+   cell from a light 50 away), twigs ending in small spheres, slivers. */
+static void test_thin_branches(void)
+{
+    char *text = (char *)malloc(200000);
+    size_t m = 0;
+    int k;
+    rtp_scene *s;
+    rtpi_v3 lights[3];
+    if (!text) {
+        CHECK(0);
+        return;
+    }
+    m += (size_t)sprintf(text + m,
+                         "v\nfrom 4.5 0.4 2\nat 0 0 1.2\nup 0 0 1\nangle 45\nhither 0.01\n"
+                         "resolution 64 64\nl -5 5 50\n"
+                         "f 0.2 0.7 0.2 1 0 10 0 0\np 4\n50 50 0\n-50 50 0\n-50 -50 0\n50 -50 0\n"
+                         "f 0.55 0.4 0.2 1 0 10 0 0\n");
+    for (k = 0; k < 300; k++) {
+        double a = 6.283185307179586 * rnd(), z0 = 0.2 + 1.6 * rnd(), len = 0.2 + 0.6 * rnd();
+        double x0 = 0.3 * cos(a) * rnd(), y0 = 0.3 * sin(a) * rnd();
+        double x1 = x0 + len * cos(a), y1 = y0 + len * sin(a), z1 = z0 + 0.5 * len * (rnd() - 0.3);
+        double r0 = 0.004 + 0.026 * rnd(), r1 = r0 * (0.3 + 0.7 * rnd());
+        m += (size_t)sprintf(text + m, "c\n%.6f %.6f %.6f %.6f\n%.6f %.6f %.6f %.6f\n", x0, y0, z0,
+                             r0, x1, y1, z1, r1);
+        m += (size_t)sprintf(text + m, "s %.6f %.6f %.6f %.6f\n", x1, y1, z1, r1);
+        if (k % 3 == 0) /* a sliver leaf */
+            m += (size_t)sprintf(text + m, "p 3\n%.6f %.6f %.6f\n%.6f %.6f %.6f\n%.6f %.6f %.6f\n",
+                                 x1, y1, z1, x1 + 0.2, y1 + 0.01, z1 + 0.05, x1 + 0.2,
+                                 y1 + 0.02, z1 + 0.04);
+    }
+    s = load(text, m);
+    CHECK(s != NULL);
+    if (s) {
+        lights[0] = v3(-5, 5, 50);
+        lights[1] = v3(3, -2, 6);    /* close: branches a few cells wide */
+        lights[2] = v3(0.1, 0.2, 1); /* among the branches */
+        run("thin branches", s, lights, 3, 2.0);
+    }
+    rtp_scene_destroy(s);
+    free(text);
+}
+
+/* A height field of 2 x 64 x 64 triangles (each a fraction of a cell at
+   256 from the far light) with boxes and a sphere standing on it. */
+static void test_fine_mesh(void)
+{
+    enum { N = 64 };
+    char *text = (char *)malloc(3000000); /* ~190 bytes a cell */
+    size_t m = 0;
+    int x, y;
+    rtp_scene *s;
+    rtpi_v3 lights[3];
+    if (!text) {
+        CHECK(0);
+        return;
+    }
+    m += (size_t)sprintf(text + m,
+                         "v\nfrom 0 -6 4\nat 0 0 0\nup 0 0 1\nangle 50\nhither 0.01\n"
+                         "resolution 64 64\nl 20 10 30\nf 0.8 0.8 0.8 1 0 10 0 0\n");
+    for (y = 0; y < N; y++)
+        for (x = 0; x < N; x++) {
+            double q[4][3];
+            int c;
+            for (c = 0; c < 4; c++) {
+                double u = -3 + 6.0 * (x + (c == 1 || c == 2)) / N;
+                double v = -3 + 6.0 * (y + (c >= 2)) / N;
+                q[c][0] = u;
+                q[c][1] = v;
+                q[c][2] = 0.3 * sin(2 * u) * cos(1.5 * v) + 0.05 * sin(9 * u + 4 * v);
+            }
+            m += (size_t)sprintf(text + m, "p 3\n%.6f %.6f %.6f\n%.6f %.6f %.6f\n%.6f %.6f %.6f\n",
+                                 q[0][0], q[0][1], q[0][2], q[1][0], q[1][1], q[1][2], q[2][0],
+                                 q[2][1], q[2][2]);
+            m += (size_t)sprintf(text + m, "p 3\n%.6f %.6f %.6f\n%.6f %.6f %.6f\n%.6f %.6f %.6f\n",
+                                 q[0][0], q[0][1], q[0][2], q[2][0], q[2][1], q[2][2], q[3][0],
+                                 q[3][1], q[3][2]);
+        }
+    m += (size_t)sprintf(text + m, "s 0.5 0.5 0.8 0.4\nc\n-1 1 0 0.3\n-1 1 1.2 0.3\n"
+                                   "p 4\n1 -1 0.9\n2 -1 0.9\n2 0 0.9\n1 0 0.9\n");
+    s = load(text, m);
+    CHECK(s != NULL);
+    if (s) {
+        lights[0] = v3(20, 10, 30);
+        lights[1] = v3(1e3, -2e3, 1.5e3); /* far: the mesh in few cells */
+        lights[2] = v3(0.2, -0.3, 0.9);   /* low, just over the mesh */
+        run("fine mesh", s, lights, 3, 4.0);
+    }
+    rtp_scene_destroy(s);
+    free(text);
+}
+
+/* The small SPD scenes, light 0 moved. */
+static void test_spd(void)
+{
+    static const char *names[] = {"balls_s2", "gears_s2", "mount_s3", "rings_s2",
+                                  "teapot_s3", "tetra_s3", "tree_s3"};
+    const char *dir = check_shared_scenes();
+    size_t k;
+    if (!dir)
+        SKIP("../shared/scenes absent");
+    for (k = 0; k < sizeof names / sizeof *names; k++) {
+        char path[512];
+        rtp_scene *s = NULL;
+        rtpi_v3 lp;
+        snprintf(path, sizeof path, "%s/spd/%s.nff", dir, names[k]);
+        if (rtp_scene_load(path, NULL, &s, NULL) != RTP_OK || !s->nlights) {
+            CHECK_MSG(0, "cannot load %s", path);
+            rtp_scene_destroy(s);
+            continue;
+        }
+        lp = v3(s->lights[0].pos[0] * 0.8 + 0.4, s->lights[0].pos[1] * 0.9 - 0.3,
+                s->lights[0].pos[2] * 1.1 + 0.2);
+        run(names[k], s, &lp, 1, 0.8);
+        rtp_scene_destroy(s);
+    }
+}
+
+int main(void)
+{
+    const char *env = getenv("RTP_TEST_SEED");
+    unsigned seed = env ? (unsigned)strtoul(env, NULL, 10) : (unsigned)time(NULL);
+    printf("test_itembuf: seed %u (RTP_TEST_SEED=%u repeats it)\n", seed, seed);
+    rng_state = 0x9e3779b97f4a7c15ull ^ ((uint64_t)seed * 0xbf58476d1ce4e5b9ull);
+    if (!rng_state)
+        rng_state = 1;
+    RUN(test_thin_branches);
+    RUN(test_fine_mesh);
+    RUN(test_spd);
+    return check_report();
+}
