@@ -282,6 +282,11 @@ typedef struct rtpi_kd_stats {
    not change geometry while it lives). */
 rtp_status rtpi_kd_build(const rtp_scene *s, const rtp_allocator *a,
                          rtpi_kdtree **out, rtp_error *err);
+/* rtpi_kd_build on up to nthreads threads (1 without RTP_HAVE_THREADS).
+   The tree is the same for every nthreads; while it builds on more than
+   one thread, calls to the allocator are serialised by a lock. */
+rtp_status rtpi_kd_build_mt(const rtp_scene *s, const rtp_allocator *a,
+                            int nthreads, rtpi_kdtree **out, rtp_error *err);
 void rtpi_kd_destroy(rtpi_kdtree *kd);
 void rtpi_kd_get_stats(const rtpi_kdtree *kd, rtpi_kd_stats *st);
 /* Closest hit with t in [ray->tmin, ray->tmax].  @return 1 on hit. */

@@ -123,10 +123,5 @@ static inline int rtpi_tri_degenerate(const float *p0, const float *p1,
            !(fabs(nx) + fabs(ny) + fabs(nz) <= 1.79e308);
 }
 
-/* rtpi_kd_build on up to nthreads threads (1 without RTP_HAVE_THREADS).
-   The tree is the same for every nthreads; while it builds on more than
-   one thread, calls to the allocator are serialised by a lock. */
-rtp_status rtpi_kd_build_mt(const rtp_scene *s, const rtp_allocator *a,
-                            int nthreads, rtpi_kdtree **out, rtp_error *err);
 
 #endif /* RTP_KDTREE_H */

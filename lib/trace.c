@@ -621,7 +621,7 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
     }
 
     t0 = now_seconds();
-    st = rtpi_kd_build(s, &s->alloc, &kd, err);
+    st = rtpi_kd_build_mt(s, &s->alloc, nthreads, &kd, err);
     if (st != RTP_OK)
         goto done;
     sh.kd = kd;
@@ -759,7 +759,7 @@ rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int thre
         return RTP_OK;
     if (nthreads > RTPI_MAX_THREADS)
         nthreads = RTPI_MAX_THREADS;
-    if (!t->kd && (st = rtpi_kd_build(t->scene, a, &t->kd, err)) != RTP_OK)
+    if (!t->kd && (st = rtpi_kd_build_mt(t->scene, a, nthreads, &t->kd, err)) != RTP_OK)
         return st;
     /* The trees record visibility of the lights where they were traced:
        trace the new samples with the lights there (moved lights are

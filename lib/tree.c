@@ -358,7 +358,7 @@ static rtp_status update_visibility(rtp_tree *t, const rtp_eval_options *opt,
             rtp_status rs;
             /* only shadow rays need the kd-tree; the cubes draw the scene */
             if (mode == RTP_SHADOWS_EXACT && !t->kd &&
-                (rs = rtpi_kd_build(s, &t->alloc, &t->kd, err)) != RTP_OK)
+                (rs = rtpi_kd_build_mt(s, &t->alloc, threads, &t->kd, err)) != RTP_OK)
                 return rs;
             t->cube_alloc.malloc_fn = blk_malloc;
             t->cube_alloc.realloc_fn = blk_realloc;
