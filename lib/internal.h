@@ -378,6 +378,23 @@ void rtpi_sample_coeffs(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
 void rtpi_sample_coeffs_light(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
                               size_t n, const float *terms, size_t light,
                               float *coeffs);
+/* The light terms (n.l, highlight) of every node of material mat among a
+   sample's n nodes, from the cached normals and view vectors nv, exactly
+   as rtpi_sample_terms computes them: what an edit of mat's shine or ks
+   changes. */
+void rtpi_material_light_terms(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
+                               size_t n, const uint32_t *vis_ext, const float *nv,
+                               uint32_t mat, float *terms);
+/* The highlights of material mat among a sample's n nodes (numbered from
+   node0 in the whole tree): for every node of mat and light it sees and
+   faces with r.v > 0 (ks > 0), the index of its highlight term in the
+   terms of the whole tree and log2(r.v), appended at idx[*count] and
+   lrv[*count] (room for n * nlights more).  A new shine makes each term
+   2^(shine lrv); every other highlight of mat is 0 for any shine. */
+void rtpi_material_highlights(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
+                              size_t n, size_t node0, const uint32_t *vis_ext,
+                              const float *nv, uint32_t mat, size_t *idx,
+                              double *lrv, size_t *count);
 /* The diffuse light material mat receives in a sample, per channel:
    q = sum over its nodes of path weight * texture factor * (ambient +
    sum_i (n.l_i) c_li), with cv the colours of every term (background,
@@ -446,7 +463,9 @@ struct rtp_tree {
     float *ev_terms;       /* nnodes * RTPI_TERMS(ev_nlights) */
     float *ev_coeffs;      /* samples * RTPI_COEFFS(ev_nlights) */
     float *ev_nv;          /* nnodes * 6: shading normal, view vector */
-    float *ev_samples;     /* SPD: the corner samples before averaging */
+    float *ev_samples;     /* the samples' colours (SPD: corners, averaged
+                              into pixels); with the caches, or SPD */
+    int ev_samples_ok;     /* ev_samples hold ev_coeffs combined with ev_cl */
     size_t ev_nlights;
     double *ev_pos;        /* 3 per light: positions the terms are for */
     int ev_vis_mode, ev_vis_res;
@@ -461,6 +480,11 @@ struct rtp_tree {
     float *pk;             /* pixels * 6: per pixel the rest P of the
                               image with term pk_term left out, and that
                               term's coefficient K (pixel = P + K c) */
+    int hl_mat;            /* 0, or 1 + the material whose highlights are
+                              listed (tree.c: consecutive shine edits) */
+    size_t *hl_idx;        /* their terms' indices in ev_terms */
+    double *hl_lrv;        /* log2 (r.v) of each */
+    size_t hl_n, hl_cap;
     uint32_t *pk_nz;       /* the pixels whose K is not 0, pk_nnz of them:
                               the only ones an edit of the term changes */
     size_t pk_nnz;

@@ -297,6 +297,66 @@ void rtpi_light_terms(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t n
     }
 }
 
+void rtpi_material_light_terms(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t n,
+                               const uint32_t *vis_ext, const float *nv, uint32_t mat,
+                               float *terms)
+{
+    const rtp_scene *s = c->s;
+    size_t k, i, nl = s->nlights, nt = RTPI_TERMS(nl);
+    const rtpi_material *m = &s->mats[mat];
+    for (k = 0; k < n; k++) {
+        const rtpi_cnode *nd = &nodes[k];
+        const uint32_t *ext = vis_ext ? vis_ext + k * c->vis_words : NULL;
+        rtpi_v3 p;
+        if (rtpi_prim_material(s, nd->prim) != mat)
+            continue;
+        p = v3(nd->p[0], nd->p[1], nd->p[2]);
+        for (i = 0; i < nl; i++)
+            light_term(nv + 6 * k, p, &s->lights[i], seen(nd, ext, i), m,
+                       terms + k * nt + 3 + 2 * i);
+    }
+}
+
+void rtpi_material_highlights(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t n,
+                              size_t node0, const uint32_t *vis_ext, const float *nv,
+                              uint32_t mat, size_t *idx, double *lrv, size_t *count)
+{
+    const rtp_scene *s = c->s;
+    size_t k, i, nl = s->nlights, nt = RTPI_TERMS(nl);
+    const rtpi_material *m = &s->mats[mat];
+    if (!(m->ks > 0.0f))
+        return;
+    for (k = 0; k < n; k++) {
+        const rtpi_cnode *nd = &nodes[k];
+        const uint32_t *ext = vis_ext ? vis_ext + k * c->vis_words : NULL;
+        const float *q = nv + 6 * k;
+        rtpi_v3 p, nn, v;
+        if (rtpi_prim_material(s, nd->prim) != mat)
+            continue;
+        p = v3(nd->p[0], nd->p[1], nd->p[2]);
+        nn = v3(q[0], q[1], q[2]);
+        v = v3(q[3], q[4], q[5]);
+        for (i = 0; i < nl; i++) {
+            const rtpi_light *L = &s->lights[i];
+            rtpi_v3 l;
+            double ndl, rv;
+            if (!seen(nd, ext, i))
+                continue;
+            /* light_term's arithmetic, up to the power */
+            l = v3_norm(v3_sub(v3(L->pos[0], L->pos[1], L->pos[2]), p));
+            ndl = v3_dot(nn, l);
+            if (ndl <= 0.0)
+                continue;
+            rv = v3_dot(v3_sub(v3_mul(nn, 2.0 * ndl), l), v);
+            if (!(rv > 0.0))
+                continue;
+            idx[*count] = (node0 + k) * nt + 4 + 2 * i;
+            lrv[*count] = log2(rv);
+            ++*count;
+        }
+    }
+}
+
 /* Step 2 for node idx reached with path weight w (accumulated in double).
    only < 0: every coefficient into acc (G, A, K_i); only = i: light i's
    K_i alone into acc[0..2], by the very same operations. */

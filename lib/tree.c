@@ -32,6 +32,8 @@ void rtp_tree_destroy(rtp_tree *t)
     rtpi_free(&a, t->pk);
     rtpi_free(&a, t->pk_q);
     rtpi_free(&a, t->pk_nz);
+    rtpi_free(&a, t->hl_idx);
+    rtpi_free(&a, t->hl_lrv);
     rtpi_free(&a, t->ev_pos);
     rtpi_free(&a, t->ev_mats);
     rtpi_free(&a, t->mat_start);
@@ -410,6 +412,8 @@ typedef struct eval_ctx {
     const uint32_t *list;     /* samples to redo (NULL: all) */
     size_t nlist, chunk;
     size_t light;             /* light_row: the light to redo */
+    int spec_only;            /* redo_chunk: mat's light terms alone */
+    int combine_too;          /* redo_chunk: step 3 for the sample too */
     /* one-term path */
     const double *cv;         /* colours of every term */
     size_t term;              /* the colour term edited */
@@ -474,6 +478,54 @@ static int eval_row(void *ctx, int y)
     return 0;
 }
 
+/* ------------------------------------------------------- highlights
+   A shine edit changes the highlights (r.v)^shine of one material's nodes
+   and nothing else of step 1.  Consecutive shine edits of a material keep
+   the list of its highlights that are not 0 with log2 (r.v): each edit
+   then sets every term to 2^(shine log2 (r.v)) (within a float ulp of
+   pow's) instead of deriving lights and mirror vectors anew. */
+
+/* Lists material m's highlights over its samples (serially); 0, or -1
+   when out of memory (the list is then not used). */
+static int hl_build(rtp_tree *t, const rtpi_shade_ctx *shade, const uint32_t *vis, uint32_t m)
+{
+    size_t i, nl = t->scene->nlights;
+    t->hl_mat = 0;
+    t->hl_n = 0;
+    for (i = t->mat_start[m]; i < t->mat_start[m + 1]; i++) {
+        size_t k = t->mat_samples[i], a = (size_t)t->start[k];
+        size_t n = (size_t)(t->start[k + 1] - a), cap = t->hl_cap, cap2 = t->hl_cap;
+        if (n > ((size_t)-1 - t->hl_n) / (nl + 1) ||
+            rtpi_grow(&t->alloc, (void **)&t->hl_idx, &cap, t->hl_n + n * nl + 1,
+                      sizeof *t->hl_idx) ||
+            rtpi_grow(&t->alloc, (void **)&t->hl_lrv, &cap2, t->hl_n + n * nl + 1,
+                      sizeof *t->hl_lrv)) {
+            t->hl_cap = cap < cap2 ? cap : cap2;
+            return -1;
+        }
+        t->hl_cap = cap < cap2 ? cap : cap2;
+        rtpi_material_highlights(shade, t->nodes + a, n, a,
+                                 vis ? vis + a * shade->vis_words : NULL, t->ev_nv + 6 * a, m,
+                                 t->hl_idx, t->hl_lrv, &t->hl_n);
+    }
+    t->hl_mat = (int)m + 1;
+    return 0;
+}
+
+/* A chunk of 4096 listed highlights set for the new shine. */
+static int hl_chunk(void *ctx, int chunk)
+{
+    eval_ctx *e = (eval_ctx *)ctx;
+    rtp_tree *t = e->t;
+    size_t i = (size_t)chunk * 4096, end = i + 4096;
+    double shine = t->scene->mats[e->mat].shine;
+    if (end > t->hl_n)
+        end = t->hl_n;
+    for (; i < end; i++)
+        t->ev_terms[t->hl_idx[i]] = (float)exp2(shine * t->hl_lrv[i]);
+    return 0;
+}
+
 /* A chunk of a material's sample list: steps 1 (if needed) and 2. */
 static int redo_chunk(void *ctx, int chunk)
 {
@@ -482,9 +534,20 @@ static int redo_chunk(void *ctx, int chunk)
     if (end > e->nlist)
         end = e->nlist;
     for (; i < end; i++) {
+        rtp_tree *t = e->t;
+        size_t k = e->list[i];
         float *coeffs;
-        if (sample_coeffs(e, e->list[i], e->redo_terms, &coeffs))
+        if (e->spec_only) {
+            size_t a = (size_t)t->start[k];
+            rtpi_material_light_terms(e->shade, t->nodes + a, (size_t)(t->start[k + 1] - a),
+                                      e->vis ? e->vis + a * e->shade->vis_words : NULL,
+                                      t->ev_nv + 6 * a, e->mat,
+                                      t->ev_terms + a * RTPI_TERMS(t->scene->nlights));
+        }
+        if (sample_coeffs(e, k, e->redo_terms, &coeffs))
             return 1;
+        if (e->combine_too) /* the other samples' colours are kept */
+            rtpi_combine(t->scene, e->cl, coeffs, e->samples + 3 * k);
     }
     return 0;
 }
@@ -729,11 +792,29 @@ static int terms_changed(const rtpi_material *a, const rtpi_material *b)
            bump_changed(a, b);
 }
 
+/* Does a material edit change only the nodes' light terms (shine, or ks
+   to or from 0), not their normals or texture factors? */
+static int light_terms_only(const rtpi_material *a, const rtpi_material *b)
+{
+    rtpi_material x = *a;
+    x.shine = b->shine;
+    x.ks = b->ks;
+    return !terms_changed(&x, b);
+}
+
 static int coeffs_changed(const rtpi_material *a, const rtpi_material *b)
 {
     return terms_changed(a, b) || a->kd != b->kd || a->ks != b->ks || a->kt != b->kt ||
            memcmp(a->color, b->color, sizeof a->color) != 0 ||
            memcmp(a->color2, b->color2, sizeof a->color2) != 0;
+}
+
+/* Does a material edit change the shine alone? */
+static int shine_only(const rtpi_material *a, const rtpi_material *b)
+{
+    rtpi_material x = *a;
+    x.shine = b->shine;
+    return !coeffs_changed(&x, b);
 }
 
 static double seconds_now(void)
@@ -755,11 +836,18 @@ static void drop_caches(rtp_tree *t)
     rtpi_free(&t->alloc, t->pk);
     rtpi_free(&t->alloc, t->pk_q);
     rtpi_free(&t->alloc, t->pk_nz);
+    rtpi_free(&t->alloc, t->hl_idx);
+    rtpi_free(&t->alloc, t->hl_lrv);
+    t->hl_idx = NULL;
+    t->hl_lrv = NULL;
+    t->hl_n = t->hl_cap = 0;
+    t->hl_mat = 0;
     t->pk_nz = NULL;
     t->ev_cl = NULL;
     t->pk = NULL;
     t->pk_q = NULL;
     t->pk_term = 0;
+    t->ev_samples_ok = 0;
     t->ev_terms = NULL;
     t->ev_coeffs = NULL;
     t->ev_nv = NULL;
@@ -936,7 +1024,8 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
     rtp_eval_stats st;
     rtp_scene *s;
     int i, nthreads = opt && opt->threads > 1 ? opt->threads : 1, any_moved = 0, full;
-    int cached, mode, res, one = 0, matpath = 0, sparse;
+    int cached, mode, res, one = 0, matpath = 0, sparse, list_combine = 0, hl_used = 0;
+    size_t nmat_changed = 0;
     size_t pk = 0;
     uint32_t mt = 0;
     double xold[3], xnew[3];
@@ -1031,9 +1120,11 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
         cv[3 + i] = s->ambient[i];
     }
     rtpi_light_colors(s, cl);
-    if (t->spd && !t->ev_samples)
+    /* the samples' colours: kept across evaluations with the caches (and
+       always with SPD, whose pixels average them) */
+    if ((t->spd || cached) && !t->ev_samples)
         t->ev_samples = (float *)rtpi_malloc_array(&t->alloc, ns, 3 * sizeof(float));
-    samples = t->spd ? t->ev_samples : img->pixels;
+    samples = t->spd || cached ? t->ev_samples : img->pixels;
     memset(e, 0, sizeof e[0] * (size_t)nthreads);
     for (i = 0; i < nthreads; i++) {
         e[i].t = t;
@@ -1066,6 +1157,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
         st.samples = ns;
         st.combined_samples = ns;
         t->pk_term = 0;
+        t->ev_samples_ok = cached;
     } else {
         int coeffs_dirty = 0;
         /* a light that moved (or whose shadows were decided another way):
@@ -1080,6 +1172,10 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
             st.samples += ns;
             coeffs_dirty = 1;
         }
+        /* the samples hold the colours of the coefficients and colours as
+           they are: a material edit recombines only its own samples */
+        list_combine = t->ev_samples_ok && !coeffs_dirty && t->ev_cl &&
+                       memcmp(cv, t->ev_cl, RTPI_COEFFS(nl) * sizeof *cv) == 0;
         if (!coeffs_dirty && mat_term(t, cv, nl, &mt)) {
             /* one material's kd * colour changed: P + K x per pixel */
             const rtpi_material *mo = &t->ev_mats[mt], *mn = &s->mats[mt];
@@ -1115,6 +1211,8 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
             matpath = 1; /* the coefficients stay those of the material before */
         }
         /* steps 1-2 only for samples containing an edited material */
+        for (m = 0; !matpath && m < s->nmats; m++)
+            nmat_changed += coeffs_changed(&s->mats[m], &t->ev_mats[m]);
         for (m = 0; !matpath && m < s->nmats; m++) {
             int redo;
             size_t n;
@@ -1122,18 +1220,35 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                 continue;
             redo = terms_changed(&s->mats[m], &t->ev_mats[m]);
             n = t->mat_start[m + 1] - t->mat_start[m];
+            if (redo && nmat_changed == 1 && !coeffs_dirty && shine_only(&t->ev_mats[m], &s->mats[m]) &&
+                (t->hl_mat == (int)m + 1 || hl_build(t, &shade, vis, (uint32_t)m) == 0)) {
+                /* the listed highlights for the new shine, then step 2 */
+                for (i = 0; i < nthreads; i++)
+                    e[i].mat = (uint32_t)m;
+                rtpi_parallel_rows((int)((t->hl_n + 4095) / 4096), nthreads, ctx, hl_chunk, NULL,
+                                   NULL);
+                redo = 0;
+                hl_used = 1;
+            }
             for (i = 0; i < nthreads; i++) {
                 e[i].list = t->mat_samples + t->mat_start[m];
                 e[i].nlist = n;
                 e[i].chunk = 256;
-                e[i].redo_terms = redo;
+                /* a new ks: the material's light terms, not all terms */
+                e[i].spec_only = redo && light_terms_only(&t->ev_mats[m], &s->mats[m]);
+                e[i].redo_terms = redo && !e[i].spec_only;
+                e[i].mat = (uint32_t)m;
+                e[i].combine_too = list_combine;
             }
             rtpi_parallel_rows((int)((n + 255) / 256), nthreads, ctx, redo_chunk, NULL, NULL);
             st.samples += n;
             coeffs_dirty = 1;
         }
         if (matpath) {
-            /* done above */
+            t->ev_samples_ok = 0;
+        } else if (list_combine && coeffs_dirty) {
+            /* step 3 was done with step 2, for the edited samples only */
+            st.combined_samples = st.samples;
         } else if (!coeffs_dirty && one_term(t, cv, nl, &pk)) {
             /* one colour changed: P + K c per pixel */
             for (i = 0; i < nthreads; i++) {
@@ -1153,11 +1268,13 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
             }
             pk_apply(t, ctx, nthreads, sparse, &st);
             one = 1;
+            t->ev_samples_ok = 0; /* P_s were made in the samples */
         } else {
             /* step 3 for every sample */
             rtpi_parallel_rows(t->ny, nthreads, ctx, combine_row, NULL, NULL);
             st.combined_samples = ns;
             t->pk_term = 0;
+            t->ev_samples_ok = cached;
         }
     }
     for (i = 0; i < nthreads; i++)
@@ -1176,8 +1293,8 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
         t->ev_vis_res = res;
         t->ev_valid = 1;
     }
-    if (t->spd && !one)
-        rtpi_resolve_samples(samples, 1, img);
+    if (!one && samples != img->pixels)
+        rtpi_resolve_samples(samples, t->spd, img);
 done:
     for (i = 0; i < nthreads; i++) {
         rtpi_free(&t->alloc, e[i].terms);
@@ -1199,6 +1316,8 @@ done:
         stats->nodes = t->nnodes;
     }
     t->last_pixels = img->pixels;
+    if (!hl_used)
+        t->hl_mat = 0; /* the list holds only while shine edits follow */
     if (out)
         *out = img;
     return RTP_OK;
