@@ -343,6 +343,12 @@ full:
     b->full = 1;
 }
 
+/* > 0 when a, b, c turn counter-clockwise. */
+static double dc_turn(const double a[2], const double b[2], const double c[2])
+{
+    return (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
+}
+
 /* The 2D convex hull of pts[0..n) (n <= 2 DC_N), counter-clockwise,
    into hull (Andrew's monotone chain).  @return its vertex count. */
 static int dc_hull2(double pts[][2], int n, double hull[][2])
@@ -368,16 +374,14 @@ static int dc_hull2(double pts[][2], int n, double hull[][2])
         return n;
     }
     for (i = 0; i < n; i++) { /* lower hull */
-        while (k >= 2 && (hull[k - 1][0] - hull[k - 2][0]) * (pts[i][1] - hull[k - 2][1]) -
-                                 (hull[k - 1][1] - hull[k - 2][1]) * (pts[i][0] - hull[k - 2][0]) <= 0.0)
+        while (k >= 2 && dc_turn(hull[k - 2], hull[k - 1], pts[i]) <= 0.0)
             k--;
         hull[k][0] = pts[i][0];
         hull[k][1] = pts[i][1];
         k++;
     }
     for (i = n - 2, t = k + 1; i >= 0; i--) { /* upper hull */
-        while (k >= t && (hull[k - 1][0] - hull[k - 2][0]) * (pts[i][1] - hull[k - 2][1]) -
-                                (hull[k - 1][1] - hull[k - 2][1]) * (pts[i][0] - hull[k - 2][0]) <= 0.0)
+        while (k >= t && dc_turn(hull[k - 2], hull[k - 1], pts[i]) <= 0.0)
             k--;
         hull[k][0] = pts[i][0];
         hull[k][1] = pts[i][1];
@@ -1041,7 +1045,8 @@ int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
     if (self == 0 && i > 0 && j > 0 && i < res - 1 && j < res - 1) {
         /* The common case first: all 9 samples empty, prim's own or
            thin. */
-        const uint32_t *row = ib->id + ib->w.fbase[f] + (size_t)(j - 1) * (size_t)res + (size_t)(i - 1);
+        const uint32_t *row =
+            ib->id + ib->w.fbase[f] + (size_t)(j - 1) * (size_t)res + (size_t)(i - 1);
         int other = 0;
         for (dj = 0; dj < 3 && !other; dj++, row += res)
             for (di = 0; di < 3; di++) {
@@ -1402,6 +1407,14 @@ rtp_status rtpi_itembuf_build(const rtp_scene *s, rtpi_v3 light, int res,
                               const rtp_allocator *a, rtpi_itembuf *ib,
                               rtp_error *err)
 {
+    return rtpi_itembuf_build_wide(s, light, res, 0.0, NULL, a, ib, err);
+}
+
+rtp_status rtpi_itembuf_build_wide(const rtp_scene *s, rtpi_v3 light, int res,
+                                   double cells, unsigned char *thin,
+                                   const rtp_allocator *a, rtpi_itembuf *ib,
+                                   rtp_error *err)
+{
     size_t n = rtpi_scene_nprims(s), i;
     dc_ctx c;
     rtp_status st = rtpi_itembuf_alloc(ib, s, light, res, a, err);
@@ -1411,9 +1424,12 @@ rtp_status rtpi_itembuf_build(const rtp_scene *s, rtpi_v3 light, int res,
         rtpi_itembuf_free(ib, a);
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory for the item buffer");
     }
+    if (thin)
+        rtpi_itembuf_thin(ib, s, cells, thin);
     dc_ctx_window(&c, &ib->w);
     for (i = 0; i < n; i++)
-        ib_draw(ib, s, &c, (uint32_t)i);
+        if (!thin || !thin[i])
+            ib_draw(ib, s, &c, (uint32_t)i);
     dc_ctx_free(&c, a);
     return RTP_OK;
 }

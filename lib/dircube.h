@@ -220,11 +220,24 @@ static inline size_t rtpi_itembuf_cell(const rtpi_itembuf *ib, rtpi_v3 d, int *f
 rtp_status rtpi_itembuf_build(const rtp_scene *s, rtpi_v3 light, int res,
                               const rtp_allocator *a, rtpi_itembuf *ib,
                               rtp_error *err);
-/* The same buffer drawn by OSMesa (osmesa.c); RTP_ERR_UNSUPPORTED in
+/* The same over the wide primitives only: thin (one per primitive) is
+   set by rtpi_itembuf_thin(ib, s, cells, thin) once the windows are
+   known, and the primitives it marks are left out of the buffer (the
+   caller decides them otherwise; they would only hide wide ones).  thin
+   NULL: every primitive, as rtpi_itembuf_build. */
+rtp_status rtpi_itembuf_build_wide(const rtp_scene *s, rtpi_v3 light, int res,
+                                   double cells, unsigned char *thin,
+                                   const rtp_allocator *a, rtpi_itembuf *ib,
+                                   rtp_error *err);
+/* The same buffers drawn by OSMesa (osmesa.c); RTP_ERR_UNSUPPORTED in
    builds without it. */
 rtp_status rtpi_itembuf_build_osmesa(const rtp_scene *s, rtpi_v3 light,
                                      int res, const rtp_allocator *a,
                                      rtpi_itembuf *ib, rtp_error *err);
+rtp_status rtpi_itembuf_build_osmesa_wide(const rtp_scene *s, rtpi_v3 light, int res,
+                                          double cells, unsigned char *thin,
+                                          const rtp_allocator *a, rtpi_itembuf *ib,
+                                          rtp_error *err);
 /* Draws the listed primitives into ib with the software z-buffer, over
    what is there (osmesa.c: primitives too close to the light for
    OpenGL's near plane).  @return RTP_OK or RTP_ERR_NOMEM. */

@@ -8,9 +8,19 @@ rtp_status rtpi_itembuf_build_osmesa(const rtp_scene *s, rtpi_v3 light,
                                      int res, const rtp_allocator *a,
                                      rtpi_itembuf *ib, rtp_error *err)
 {
+    return rtpi_itembuf_build_osmesa_wide(s, light, res, 0.0, NULL, a, ib, err);
+}
+
+rtp_status rtpi_itembuf_build_osmesa_wide(const rtp_scene *s, rtpi_v3 light, int res,
+                                          double cells, unsigned char *thin,
+                                          const rtp_allocator *a, rtpi_itembuf *ib,
+                                          rtp_error *err)
+{
     (void)s;
     (void)light;
     (void)res;
+    (void)cells;
+    (void)thin;
     (void)a;
     memset(ib, 0, sizeof *ib);
     return rtpi_error(err, RTP_ERR_UNSUPPORTED, NULL, 0, 0,
@@ -184,13 +194,13 @@ static int osm_culled(const osm_face *fc, const double lo[3], const double hi[3]
 }
 
 static void osm_draw(const osm_face *fc, const rtp_scene *s, double cell,
-                     const unsigned char *soft)
+                     const unsigned char *soft, const unsigned char *thin)
 {
     size_t i, n = rtpi_scene_nprims(s);
     for (i = 0; i < n; i++) {
         uint32_t prim = (uint32_t)i;
         double lo[3], hi[3];
-        if (soft[i] || !rtpi_itembuf_renders(s, prim, fc->L))
+        if (soft[i] || (thin && thin[i]) || !rtpi_itembuf_renders(s, prim, fc->L))
             continue;
         rtpi_prim_bounds(s, prim, lo, hi);
         if (osm_culled(fc, lo, hi))
@@ -215,6 +225,14 @@ rtp_status rtpi_itembuf_build_osmesa(const rtp_scene *s, rtpi_v3 light,
                                      int res, const rtp_allocator *a,
                                      rtpi_itembuf *ib, rtp_error *err)
 {
+    return rtpi_itembuf_build_osmesa_wide(s, light, res, 0.0, NULL, a, ib, err);
+}
+
+rtp_status rtpi_itembuf_build_osmesa_wide(const rtp_scene *s, rtpi_v3 light, int res,
+                                          double cells, unsigned char *thin,
+                                          const rtp_allocator *a, rtpi_itembuf *ib,
+                                          rtp_error *err)
+{
     OSMesaContext ctx;
     unsigned char *rgba = NULL, *soft = NULL;
     float *depth = NULL;
@@ -233,6 +251,8 @@ rtp_status rtpi_itembuf_build_osmesa(const rtp_scene *s, rtpi_v3 light,
     if (st != RTP_OK)
         return st;
     res = ib->res;
+    if (thin)
+        rtpi_itembuf_thin(ib, s, cells, thin);
     npix = (size_t)res * (size_t)res;
     rgba = (unsigned char *)rtpi_malloc_array(a, npix, 4);
     depth = (float *)rtpi_malloc_array(a, npix, sizeof *depth);
@@ -285,7 +305,7 @@ rtp_status rtpi_itembuf_build_osmesa(const rtp_scene *s, rtpi_v3 light,
        draws those after OpenGL, into the same cells. */
     for (k = 0; k < n; k++) {
         soft[k] = (unsigned char)(rtpi_itembuf_renders(s, (uint32_t)k, light) &&
-                                  pdist[k] < 2.0 * sqrt(3.0) * znmax);
+                                  !(thin && thin[k]) && pdist[k] < 2.0 * sqrt(3.0) * znmax);
         nsoft += soft[k];
     }
     ctx = OSMesaCreateContextExt(OSMESA_RGBA, 24, 0, 0, NULL);
@@ -350,7 +370,7 @@ rtp_status rtpi_itembuf_build_osmesa(const rtp_scene *s, rtpi_v3 light,
         glMatrixMode(GL_MODELVIEW);
         glLoadIdentity();
         glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
-        osm_draw(&fc, s, cell, soft);
+        osm_draw(&fc, s, cell, soft, thin);
         glFinish();
         glReadPixels(0, 0, res, res, GL_RGBA, GL_UNSIGNED_BYTE, rgba);
         glReadPixels(0, 0, res, res, GL_DEPTH_COMPONENT, GL_FLOAT, depth);

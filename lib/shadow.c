@@ -6,7 +6,8 @@
 
 /* Item-buffer modes: a primitive narrower than SH_THIN_CELLS cells of the
    item buffer may slip between its samples, so such primitives are left
-   to a light buffer of half the item buffer's resolution (thin: a
+   out of it (where drawn they would only hide wide ones) and go to a
+   light buffer of half the item buffer's resolution (thin: a
    quarter of the cells to fill, lists not much longer); the item
    buffer answers for the rest, and where its neighbourhood leaves the
    answer open, a coarse light buffer over the others (wide) decides. */
@@ -32,20 +33,26 @@ struct rtpi_shadow {
     unsigned char *thin; /* per primitive: 1 if in lb */
 };
 
-/* The item buffer's companions (see above). */
-static rtp_status sh_itembuf_lists(rtpi_shadow *sh, int res, const rtp_allocator *a,
-                                   rtp_error *err)
+/* The item buffer over the wide primitives and its companions (see
+   above). */
+static rtp_status sh_itembuf(rtpi_shadow *sh, int res, const rtp_allocator *a, rtp_error *err)
 {
     size_t n = rtpi_scene_nprims(sh->s);
     rtp_status st;
     sh->thin = (unsigned char *)rtpi_malloc_array(a, n ? n : 1, 1);
     if (!sh->thin)
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
-    rtpi_itembuf_thin(&sh->ib, sh->s, SH_THIN_CELLS, sh->thin);
-    st = rtpi_lightbuf_build_some(sh->s, sh->light, (sh->ib.res + 1) / SH_THIN_DIV, sh->thin, 1,
-                                  a, &sh->lb, err);
+    st = sh->mode == RTPI_SHADOW_OSMESA
+             ? rtpi_itembuf_build_osmesa_wide(sh->s, sh->light, res, SH_THIN_CELLS, sh->thin, a,
+                                              &sh->ib, err)
+             : rtpi_itembuf_build_wide(sh->s, sh->light, res, SH_THIN_CELLS, sh->thin, a, &sh->ib,
+                                       err);
     if (st == RTP_OK)
-        st = rtpi_lightbuf_build_some(sh->s, sh->light, res < SH_WIDE_RES ? res : SH_WIDE_RES,
+        st = rtpi_lightbuf_build_some(sh->s, sh->light, (sh->ib.res + 1) / SH_THIN_DIV, sh->thin,
+                                      1, a, &sh->lb, err);
+    if (st == RTP_OK)
+        st = rtpi_lightbuf_build_some(sh->s, sh->light,
+                                      sh->ib.res < SH_WIDE_RES ? sh->ib.res : SH_WIDE_RES,
                                       sh->thin, 0, a, &sh->wide, err);
     return st;
 }
@@ -78,14 +85,8 @@ rtp_status rtpi_shadow_create(const rtp_scene *s, const rtpi_kdtree *kd,
         st = rtpi_lightbuf_build(s, light, res, a, &sh->lb, err);
         break;
     case RTPI_SHADOW_ITEMBUF:
-        st = rtpi_itembuf_build(s, light, res, a, &sh->ib, err);
-        if (st == RTP_OK)
-            st = sh_itembuf_lists(sh, res, a, err);
-        break;
     case RTPI_SHADOW_OSMESA:
-        st = rtpi_itembuf_build_osmesa(s, light, res, a, &sh->ib, err);
-        if (st == RTP_OK)
-            st = sh_itembuf_lists(sh, res, a, err);
+        st = sh_itembuf(sh, res, a, err);
         break;
     case RTPI_SHADOW_EXACT:
         break;
