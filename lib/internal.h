@@ -395,6 +395,10 @@ void rtpi_material_highlights(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
                               size_t n, size_t node0, const uint32_t *vis_ext,
                               const float *nv, uint32_t mat, size_t *idx,
                               double *lrv, size_t *count);
+/* The path weight with which step 2 reaches each of a sample's n nodes
+   (0 where it does not), into w[0..n). */
+void rtpi_sample_weights(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t n,
+                         double *w);
 /* The diffuse light material mat receives in a sample, per channel:
    q = sum over its nodes of path weight * texture factor * (ambient +
    sum_i (n.l_i) c_li), with cv the colours of every term (background,
@@ -484,7 +488,10 @@ struct rtp_tree {
                               listed (tree.c: consecutive shine edits) */
     size_t *hl_idx;        /* their terms' indices in ev_terms */
     double *hl_lrv;        /* log2 (r.v) of each */
+    float *hl_w;           /* 3 each: path weight * ks * light colour */
     size_t hl_n, hl_cap;
+    size_t *hl_off;        /* per sample of the material: its first one */
+    float *hl_p;           /* per sample of the material: colour less them */
     uint32_t *pk_nz;       /* the pixels whose K is not 0, pk_nnz of them:
                               the only ones an edit of the term changes */
     size_t pk_nnz;

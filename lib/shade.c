@@ -500,3 +500,31 @@ void rtpi_sample_diffuse(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_
     if (n > 0)
         diffuse_node(c, nodes, 0, terms, mat, cv, 1.0, q);
 }
+
+static void weights_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t idx, double w,
+                         double *out)
+{
+    const rtp_scene *s = c->s;
+    const rtpi_cnode *nd = &nodes[idx];
+    const rtpi_material *m = &s->mats[rtpi_prim_material(s, nd->prim)];
+    double wr = m->ks, wt = m->kt;
+    out[idx] = w;
+    /* coeffs_node's descent */
+    if (nd->link & RTPI_L_TIR) {
+        wr += wt;
+        wt = 0.0;
+    }
+    if (wr > 0.0 && (nd->link & RTPI_L_REFL))
+        weights_node(c, nodes, idx + 1, w * wr, out);
+    if (wt > 0.0 && (nd->link & RTPI_L_REFR))
+        weights_node(c, nodes, idx + (nd->link >> RTPI_L_SHIFT), w * wt, out);
+}
+
+void rtpi_sample_weights(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t n, double *w)
+{
+    size_t k;
+    for (k = 0; k < n; k++)
+        w[k] = 0.0;
+    if (n > 0)
+        weights_node(c, nodes, 0, 1.0, w);
+}

@@ -34,6 +34,9 @@ void rtp_tree_destroy(rtp_tree *t)
     rtpi_free(&a, t->pk_nz);
     rtpi_free(&a, t->hl_idx);
     rtpi_free(&a, t->hl_lrv);
+    rtpi_free(&a, t->hl_w);
+    rtpi_free(&a, t->hl_off);
+    rtpi_free(&a, t->hl_p);
     rtpi_free(&a, t->ev_pos);
     rtpi_free(&a, t->ev_mats);
     rtpi_free(&a, t->mat_start);
@@ -480,34 +483,79 @@ static int eval_row(void *ctx, int y)
 
 /* ------------------------------------------------------- highlights
    A shine edit changes the highlights (r.v)^shine of one material's nodes
-   and nothing else of step 1.  Consecutive shine edits of a material keep
-   the list of its highlights that are not 0 with log2 (r.v): each edit
-   then sets every term to 2^(shine log2 (r.v)) (within a float ulp of
-   pow's) instead of deriving lights and mirror vectors anew. */
+   and nothing else of step 1, and each sample's colour is affine in them:
+   colour = P + sum W s over the sample's highlights s of that material,
+   with W = path weight * ks * light colour.  Consecutive shine edits of a
+   material keep the list of its highlights that are not 0 (per sample of
+   the material: log2 (r.v), W, and P from the coefficients the caches
+   hold), and each edit sets every term to 2^(shine log2 (r.v)) (within a
+   float ulp of pow's) and the samples' colours from them: no lights or
+   mirror vectors derived anew, no coefficients summed.  The coefficients
+   stay those of the shine before, as with a material's kd (mat_term). */
 
 /* Lists material m's highlights over its samples (serially); 0, or -1
-   when out of memory (the list is then not used). */
-static int hl_build(rtp_tree *t, const rtpi_shade_ctx *shade, const uint32_t *vis, uint32_t m)
+   when out of memory (the list is then not used).  cl: light colours. */
+static int hl_build(rtp_tree *t, const rtpi_shade_ctx *shade, const uint32_t *vis, uint32_t m,
+                    const double *cl, const double *cv)
 {
-    size_t i, nl = t->scene->nlights;
+    const rtp_allocator *al = &t->alloc;
+    size_t i, j, nl = t->scene->nlights, nc = RTPI_COEFFS(nl), nt = RTPI_TERMS(nl);
+    size_t nlist = t->mat_start[m + 1] - t->mat_start[m], wcap = 0;
+    double ks = t->scene->mats[m].ks, *w = NULL;
     t->hl_mat = 0;
     t->hl_n = 0;
-    for (i = t->mat_start[m]; i < t->mat_start[m + 1]; i++) {
-        size_t k = t->mat_samples[i], a = (size_t)t->start[k];
+    rtpi_free(al, t->hl_off);
+    rtpi_free(al, t->hl_p);
+    t->hl_off = (size_t *)rtpi_malloc_array(al, nlist + 1, sizeof *t->hl_off);
+    t->hl_p = (float *)rtpi_malloc_array(al, nlist + 1, 3 * sizeof *t->hl_p);
+    if (!t->hl_off || !t->hl_p)
+        return -1;
+    for (j = 0; j < nlist; j++) {
+        size_t k = t->mat_samples[t->mat_start[m] + j], a = (size_t)t->start[k];
         size_t n = (size_t)(t->start[k + 1] - a), cap = t->hl_cap, cap2 = t->hl_cap;
+        size_t cap3 = t->hl_cap, e0 = t->hl_n, e;
+        double pv[3];
+        int c;
         if (n > ((size_t)-1 - t->hl_n) / (nl + 1) ||
-            rtpi_grow(&t->alloc, (void **)&t->hl_idx, &cap, t->hl_n + n * nl + 1,
-                      sizeof *t->hl_idx) ||
-            rtpi_grow(&t->alloc, (void **)&t->hl_lrv, &cap2, t->hl_n + n * nl + 1,
-                      sizeof *t->hl_lrv)) {
+            rtpi_grow(al, (void **)&t->hl_idx, &cap, t->hl_n + n * nl + 1, sizeof *t->hl_idx) ||
+            rtpi_grow(al, (void **)&t->hl_lrv, &cap2, t->hl_n + n * nl + 1, sizeof *t->hl_lrv) ||
+            rtpi_grow(al, (void **)&t->hl_w, &cap3, t->hl_n + n * nl + 1, 3 * sizeof *t->hl_w) ||
+            rtpi_grow(al, (void **)&w, &wcap, n + 1, sizeof *w)) {
             t->hl_cap = cap < cap2 ? cap : cap2;
+            t->hl_cap = t->hl_cap < cap3 ? t->hl_cap : cap3;
+            rtpi_free(al, w);
             return -1;
         }
         t->hl_cap = cap < cap2 ? cap : cap2;
+        t->hl_cap = t->hl_cap < cap3 ? t->hl_cap : cap3;
+        t->hl_off[j] = e0;
         rtpi_material_highlights(shade, t->nodes + a, n, a,
                                  vis ? vis + a * shade->vis_words : NULL, t->ev_nv + 6 * a, m,
                                  t->hl_idx, t->hl_lrv, &t->hl_n);
+        /* W per highlight, and P: the sample's colour from the cached
+           coefficients less what these highlights (as the terms hold them
+           now) add to it */
+        rtpi_sample_weights(shade, t->nodes + a, n, w);
+        for (c = 0; c < 3; c++) {
+            double v = 0.0;
+            for (i = 0; i < nc; i += 3)
+                v += t->ev_coeffs[k * nc + i + c] * cv[i + c];
+            pv[c] = v;
+        }
+        for (e = e0; e < t->hl_n; e++) {
+            size_t node = t->hl_idx[e] / nt, li = (t->hl_idx[e] % nt - 4) / 2;
+            double sold = t->ev_terms[t->hl_idx[e]];
+            for (c = 0; c < 3; c++) {
+                float wc = (float)(w[node - a] * ks * cl[3 * li + c]);
+                t->hl_w[3 * e + c] = wc;
+                pv[c] -= wc * sold;
+            }
+        }
+        for (c = 0; c < 3; c++)
+            t->hl_p[3 * j + c] = (float)pv[c];
     }
+    t->hl_off[nlist] = t->hl_n;
+    rtpi_free(al, w);
     t->hl_mat = (int)m + 1;
     return 0;
 }
@@ -523,6 +571,34 @@ static int hl_chunk(void *ctx, int chunk)
         end = t->hl_n;
     for (; i < end; i++)
         t->ev_terms[t->hl_idx[i]] = (float)exp2(shine * t->hl_lrv[i]);
+    return 0;
+}
+
+/* A chunk of 256 of the material's samples: their highlights for the new
+   shine and their colours P + sum W s. */
+static int hl_apply_chunk(void *ctx, int chunk)
+{
+    eval_ctx *e = (eval_ctx *)ctx;
+    rtp_tree *t = e->t;
+    size_t j = (size_t)chunk * 256, end = j + 256, q;
+    double shine = t->scene->mats[e->mat].shine;
+    if (end > e->nlist)
+        end = e->nlist;
+    for (; j < end; j++) {
+        double v0 = t->hl_p[3 * j], v1 = t->hl_p[3 * j + 1], v2 = t->hl_p[3 * j + 2];
+        float *out = e->samples + 3 * (size_t)e->list[j];
+        for (q = t->hl_off[j]; q < t->hl_off[j + 1]; q++) {
+            float sp = (float)exp2(shine * t->hl_lrv[q]);
+            const float *wq = t->hl_w + 3 * q;
+            t->ev_terms[t->hl_idx[q]] = sp;
+            v0 += wq[0] * sp;
+            v1 += wq[1] * sp;
+            v2 += wq[2] * sp;
+        }
+        out[0] = (float)v0;
+        out[1] = (float)v1;
+        out[2] = (float)v2;
+    }
     return 0;
 }
 
@@ -838,8 +914,14 @@ static void drop_caches(rtp_tree *t)
     rtpi_free(&t->alloc, t->pk_nz);
     rtpi_free(&t->alloc, t->hl_idx);
     rtpi_free(&t->alloc, t->hl_lrv);
+    rtpi_free(&t->alloc, t->hl_w);
+    rtpi_free(&t->alloc, t->hl_off);
+    rtpi_free(&t->alloc, t->hl_p);
     t->hl_idx = NULL;
     t->hl_lrv = NULL;
+    t->hl_w = NULL;
+    t->hl_off = NULL;
+    t->hl_p = NULL;
     t->hl_n = t->hl_cap = 0;
     t->hl_mat = 0;
     t->pk_nz = NULL;
@@ -1025,6 +1107,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
     rtp_scene *s;
     int i, nthreads = opt && opt->threads > 1 ? opt->threads : 1, any_moved = 0, full;
     int cached, mode, res, one = 0, matpath = 0, sparse, list_combine = 0, hl_used = 0;
+    int hl_apply = 0;
     size_t nmat_changed = 0;
     size_t pk = 0;
     uint32_t mt = 0;
@@ -1220,15 +1303,29 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                 continue;
             redo = terms_changed(&s->mats[m], &t->ev_mats[m]);
             n = t->mat_start[m + 1] - t->mat_start[m];
-            if (redo && nmat_changed == 1 && !coeffs_dirty && shine_only(&t->ev_mats[m], &s->mats[m]) &&
-                (t->hl_mat == (int)m + 1 || hl_build(t, &shade, vis, (uint32_t)m) == 0)) {
-                /* the listed highlights for the new shine, then step 2 */
-                for (i = 0; i < nthreads; i++)
+            if (redo && nmat_changed == 1 && !coeffs_dirty &&
+                shine_only(&t->ev_mats[m], &s->mats[m]) &&
+                (t->hl_mat == (int)m + 1 || hl_build(t, &shade, vis, (uint32_t)m, cl, cv) == 0)) {
+                for (i = 0; i < nthreads; i++) {
                     e[i].mat = (uint32_t)m;
+                    e[i].list = t->mat_samples + t->mat_start[m];
+                    e[i].nlist = n;
+                }
+                if (list_combine) {
+                    /* every other sample's colour holds: the material's
+                       samples from their highlights alone */
+                    rtpi_parallel_rows((int)((n + 255) / 256), nthreads, ctx, hl_apply_chunk,
+                                       NULL, NULL);
+                    hl_used = 1;
+                    hl_apply = 1;
+                    st.combined_samples = n;
+                    continue;
+                }
+                /* the listed highlights for the new shine, then step 2
+                   below (the list's P is then out of date: dropped) */
                 rtpi_parallel_rows((int)((t->hl_n + 4095) / 4096), nthreads, ctx, hl_chunk, NULL,
                                    NULL);
                 redo = 0;
-                hl_used = 1;
             }
             for (i = 0; i < nthreads; i++) {
                 e[i].list = t->mat_samples + t->mat_start[m];
@@ -1246,6 +1343,8 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
         }
         if (matpath) {
             t->ev_samples_ok = 0;
+        } else if (hl_apply) {
+            /* the samples were set with the highlights */
         } else if (list_combine && coeffs_dirty) {
             /* step 3 was done with step 2, for the edited samples only */
             st.combined_samples = st.samples;
@@ -1283,7 +1382,9 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
             goto done;
         }
     if (cached) {
-        if (s->nmats && !matpath)
+        /* (the material and highlight paths leave the coefficients as
+           they were for the edited material) */
+        if (s->nmats && !matpath && !hl_apply)
             memcpy(t->ev_mats, s->mats, s->nmats * sizeof *t->ev_mats);
         for (l = 0; l < nl; l++)
             memcpy(t->ev_pos + 3 * l, s->lights[l].pos, sizeof s->lights[l].pos);
