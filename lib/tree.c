@@ -1002,6 +1002,14 @@ static rtp_status retrace_edited(rtp_tree *t, int threads, int stale, rtp_eval_s
 
 static int pk_alloc(rtp_tree *t, int q);
 
+/* Threads for a quick pass moving `bytes`: below 8 MiB (a millisecond or
+   so) the calling thread alone, as starting a thread costs tens of
+   microseconds and, on a busy machine, waking it a scheduler slice. */
+static int threads_for(double bytes, int nthreads)
+{
+    return bytes < 8.0 * 1048576.0 ? 1 : nthreads;
+}
+
 /* P + K x into the image: every pixel, or with `sparse` (the image holds
    the last evaluation, which differed in this term alone) the pixels
    whose K is not 0. */
@@ -1009,11 +1017,14 @@ static void pk_apply(rtp_tree *t, void *const *ctx, int nthreads, int sparse,
                      rtp_eval_stats *st)
 {
     if (sparse) {
-        rtpi_parallel_rows((int)((t->pk_nnz + 4095) / 4096), nthreads, ctx, pk_apply_chunk,
+        rtpi_parallel_rows((int)((t->pk_nnz + 4095) / 4096),
+                           threads_for(40.0 * (double)t->pk_nnz, nthreads), ctx, pk_apply_chunk,
                            NULL, NULL);
         st->written_pixels = t->pk_nnz;
     } else {
-        rtpi_parallel_rows(t->height, nthreads, ctx, pk_apply_row, NULL, NULL);
+        rtpi_parallel_rows(t->height,
+                           threads_for(36.0 * (double)t->width * (double)t->height, nthreads),
+                           ctx, pk_apply_row, NULL, NULL);
         st->written_pixels = (unsigned long long)t->width * t->height;
     }
 }
@@ -1314,8 +1325,10 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                 if (list_combine) {
                     /* every other sample's colour holds: the material's
                        samples from their highlights alone */
-                    rtpi_parallel_rows((int)((n + 255) / 256), nthreads, ctx, hl_apply_chunk,
-                                       NULL, NULL);
+                    rtpi_parallel_rows((int)((n + 255) / 256),
+                                       threads_for(28.0 * (double)t->hl_n + 28.0 * (double)n,
+                                                   nthreads),
+                                       ctx, hl_apply_chunk, NULL, NULL);
                     hl_used = 1;
                     hl_apply = 1;
                     st.combined_samples = n;

@@ -8,10 +8,14 @@
 #   1. rtp trace -o TREE (the tree file; its size and bytes per node).
 #   2. One `rtp reeval --stream --shadows exact --reference` over an edit
 #      sequence: an empty first line (the first evaluation builds the
-#      caches), then light colour, light off, light on, ambient, material
-#      colour, material kd, shine, and a moved light.  Edits persist, so each
-#      line is timed on warm caches, and each line's --reference traces the
-#      same edited scene in full at the same thread count.
+#      caches), then light colour twice, light off, light on, ambient
+#      twice, material colour twice, material kd, shine twice, and a moved
+#      light.  Edits persist, so each line is timed on warm caches, and each
+#      line's --reference traces the same edited scene in full at the same
+#      thread count.  The first edit of a term (a light's colour, the
+#      ambient, a material's colour) precombines the planes the further
+#      edits of that term reuse, and the first shine edit lists the
+#      highlights: both are shown apart.
 #   3. The same sequence again without --reference for every other shadow
 #      mode (lightbuf:RES, itembuf:RES, osmesa:RES when rtp has OSMesa): the
 #      state before the moved light is identical, so the moved-light image is
@@ -132,25 +136,33 @@ for f in $list; do
         echo
         if [ -n "$l0" ]; then
             echo "light.0.color=1,0.8,0.6"
+            echo "light.0.color=0.6,0.8,1"
             echo "light.0.on=0"
             echo "light.0.on=1"
         fi
         echo "ambient=0.2,0.2,0.25"
+        echo "ambient=0.1,0.1,0.15"
         echo "mat.0.color=0.3,0.6,0.9"
+        echo "mat.0.color=0.9,0.6,0.3"
         echo "mat.0.kd=0.5"
         echo "mat.$s.shine=20"
+        echo "mat.$s.shine=60"
         [ -n "$l0" ] && echo "light.0.pos=$(moved "$l0")"
     } > "$work/edits.txt"
     {
         echo "first evaluation (builds caches)"
         if [ -n "$l0" ]; then
+            echo "light colour (first: builds its planes)"
             echo "light colour"
             echo "light off"
             echo "light on"
         fi
+        echo "ambient (first: builds its planes)"
         echo "ambient"
+        echo "material colour (first: builds its planes)"
         echo "material colour"
         echo "material kd"
+        echo "shine (first: lists the highlights)"
         echo "shine"
         [ -n "$l0" ] && echo "moved light"
     } > "$work/labels.txt"
