@@ -30,7 +30,7 @@
 
 #include "internal.h"
 
-#define RTPI_DC_DEFAULT_RES 1024
+#define RTPI_DC_DEFAULT_RES 512
 #define RTPI_DC_MAX_RES 8192
 
 /* The cell index along one face edge for face coordinate u; NaN and
