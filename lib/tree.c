@@ -1358,9 +1358,11 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
             t->ev_samples_ok = 0;
         } else if (hl_apply) {
             /* the samples were set with the highlights */
+            t->pk_term = 0;
         } else if (list_combine && coeffs_dirty) {
             /* step 3 was done with step 2, for the edited samples only */
             st.combined_samples = st.samples;
+            t->pk_term = 0;
         } else if (!coeffs_dirty && one_term(t, cv, nl, &pk)) {
             /* one colour changed: P + K c per pixel */
             for (i = 0; i < nthreads; i++) {
