@@ -92,7 +92,10 @@ static RTPI_FORCE_INLINE int rtpi_wt_tri(const rtpi_wt_ray *w, const float *p0,
     double e1 = ax * cy - ay * cx; /* weight of p1 */
     double e2 = bx * ay - by * ax; /* weight of p2 */
     double det, tt, inv;
-    if ((e0 < 0.0 || e1 < 0.0 || e2 < 0.0) && (e0 > 0.0 || e1 > 0.0 || e2 > 0.0))
+    /* Bitwise, not short-circuit: one branch (mostly "missed", so well
+       predicted) rather than up to six that go either way. */
+    if (((e0 < 0.0) | (e1 < 0.0) | (e2 < 0.0)) &
+        ((e0 > 0.0) | (e1 > 0.0) | (e2 > 0.0)))
         return 0;
     det = e0 + e1 + e2;
     if (det == 0.0)
