@@ -213,10 +213,14 @@ static float f_up(double x)
 /* The SAH cost of a split with nl and nr primitives on the two sides,
    al and ar the children's areas relative to the node's; the plane is at
    x from the node's low face on an axis of extent dk. */
-static double sah(double al, double ar, size_t nl, size_t nr, double x,
-                  double dk)
+static RTPI_FORCE_INLINE double sah(double al, double ar, size_t nl,
+                                    size_t nr, double x, double dk)
 {
-    double c = KD_COST_TRAV + KD_COST_ISECT * (al * (double)nl + ar * (double)nr);
+    /* Through int64_t: x86-64 converts a signed integer to double in one
+       instruction, an unsigned 64-bit one in a branchy sequence, and this
+       runs ~90 times a node.  Counts are below 2^32. */
+    double c = KD_COST_TRAV + KD_COST_ISECT * (al * (double)(int64_t)nl +
+                                               ar * (double)(int64_t)nr);
     if (nl == 0 || nr == 0) { /* rare: the share is needed only here */
         double fl = x / dk;
         if ((nl == 0 && fl >= KD_EMPTY_MIN) || (nr == 0 && 1.0 - fl >= KD_EMPTY_MIN))
