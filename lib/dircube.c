@@ -863,6 +863,12 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
 int rtpi_lightbuf_visible(const rtpi_lightbuf *lb, const rtp_scene *s,
                           const rtpi_ray *ray)
 {
+    return rtpi_lightbuf_occluder(lb, s, ray) == RTPI_NONE;
+}
+
+uint32_t rtpi_lightbuf_occluder(const rtpi_lightbuf *lb, const rtp_scene *s,
+                                const rtpi_ray *ray)
+{
     size_t cell, k, end;
     double lim;
     rtpi_hit h;
@@ -871,12 +877,12 @@ int rtpi_lightbuf_visible(const rtpi_lightbuf *lb, const rtp_scene *s,
            every candidate (never happens with real hits). */
         for (k = 0; k < lb->ncand; k++)
             if (rtpi_intersect_prim(s, lb->cand[k].prim, ray, &h))
-                return 0;
-        return 1;
+                return lb->cand[k].prim;
+        return RTPI_NONE;
     }
     cell = rtpi_dc_wcell(&lb->w, lb->res, v3_mul(ray->d, -1.0));
     if (cell == RTPI_DC_ABSENT)
-        return 1; /* no primitive can be met in these directions */
+        return RTPI_NONE; /* no primitive can be met in these directions */
     /* tmax = dist (1 - 1e-9): the segment reaches no farther than dist. */
     lim = ray->tmax * (1.0 + 2e-9) + lb->slack;
     end = lb->off[cell + 1];
@@ -885,9 +891,9 @@ int rtpi_lightbuf_visible(const rtpi_lightbuf *lb, const rtp_scene *s,
         if (cd->near > lim)
             break; /* sorted: nothing farther on can reach the segment */
         if (rtpi_intersect_prim(s, cd->prim, ray, &h))
-            return 0;
+            return cd->prim;
     }
-    return 1;
+    return RTPI_NONE;
 }
 
 void rtpi_lightbuf_free(rtpi_lightbuf *lb, const rtp_allocator *a)
@@ -1024,15 +1030,17 @@ static double ib_tan(rtpi_v3 p, rtpi_v3 o, rtpi_v3 L)
 
 int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
                          rtpi_v3 p, rtpi_v3 o, uint32_t prim,
-                         const unsigned char *thin)
+                         const unsigned char *thin, uint32_t *occ)
 {
     int f, self = ib_self(s, prim, o, ib->light), res = ib->res, i, j, di, dj, k, n = 0, m = 0;
     uint32_t cand[9];
     double u, v, x, y, zp, zlim, tn = -1.0;
     rtpi_ray r;
     rtpi_hit h;
-    if (self == 1)
+    if (self == 1) {
+        *occ = prim;
         return 0;
+    }
     f = rtpi_dc_face(v3_sub(o, ib->light), &u, &v);
     if (ib->w.fbase[f] == RTPI_DC_ABSENT)
         return 1;
@@ -1091,8 +1099,10 @@ int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
         return 1;
     r = rtpi_shadow_ray(o, ib->light);
     for (k = 0; k < n; k++)
-        if (rtpi_intersect_prim(s, cand[k], &r, &h))
+        if (rtpi_intersect_prim(s, cand[k], &r, &h)) {
+            *occ = cand[k];
             return 0;
+        }
     return m ? -1 : 1;
 }
 

@@ -177,6 +177,9 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
    towards the light (rtpi_shadow_ray). */
 int rtpi_lightbuf_visible(const rtpi_lightbuf *lb, const rtp_scene *s,
                           const rtpi_ray *ray);
+/* The first candidate found in the ray's way, or RTPI_NONE. */
+uint32_t rtpi_lightbuf_occluder(const rtpi_lightbuf *lb, const rtp_scene *s,
+                                const rtpi_ray *ray);
 void rtpi_lightbuf_free(rtpi_lightbuf *lb, const rtp_allocator *a);
 
 /* -------------------------------------------------------- item buffer */
@@ -253,10 +256,11 @@ rtp_status rtpi_itembuf_alloc(rtpi_itembuf *ib, const rtp_scene *s,
    origin o (see dircube.c for the rule): 1 lit, 0 in shadow (then
    certain), -1 open (something lies in front near the ray: ask an exact
    query).  thin (NULL: none): per primitive, 1 for those the caller
-   decides itself (rtpi_itembuf_thin); they are never intersected here. */
+   decides itself (rtpi_itembuf_thin); they are never intersected here.
+   On 0, *occ is the primitive found in the way. */
 int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
                          rtpi_v3 p, rtpi_v3 o, uint32_t prim,
-                         const unsigned char *thin);
+                         const unsigned char *thin, uint32_t *occ);
 /* Sets thin[i] (one per primitive) to 1 where primitive i is drawn and
    its projection may be narrower than `cells` cells of ib somewhere, else
    0. */

@@ -99,28 +99,60 @@ rtp_status rtpi_shadow_create(const rtp_scene *s, const rtpi_kdtree *kd,
     return RTP_OK;
 }
 
-int rtpi_shadow_visible(const rtpi_shadow *sh, rtpi_v3 p, rtpi_v3 o, uint32_t prim)
+/* The decision, and in *occ a primitive in the way when one was seen
+   (RTPI_NONE otherwise: EXACT's kd-tree does not tell which). */
+static int sh_visible(const rtpi_shadow *sh, rtpi_v3 p, rtpi_v3 o, uint32_t prim,
+                      uint32_t *occ)
 {
     rtpi_ray r;
     int v;
+    *occ = RTPI_NONE;
     switch (sh->mode) {
     case RTPI_SHADOW_LIGHTBUF:
         r = rtpi_shadow_ray(o, sh->light);
-        return rtpi_lightbuf_visible(&sh->lb, sh->s, &r);
+        return (*occ = rtpi_lightbuf_occluder(&sh->lb, sh->s, &r)) == RTPI_NONE;
     case RTPI_SHADOW_ITEMBUF:
     case RTPI_SHADOW_OSMESA:
-        v = rtpi_itembuf_visible(&sh->ib, sh->s, p, o, prim, sh->thin);
+        v = rtpi_itembuf_visible(&sh->ib, sh->s, p, o, prim, sh->thin, occ);
         if (v == 0)
             return 0;
         r = rtpi_shadow_ray(o, sh->light);
-        if (sh->lb.ncand && !rtpi_lightbuf_visible(&sh->lb, sh->s, &r))
+        if (sh->lb.ncand && (*occ = rtpi_lightbuf_occluder(&sh->lb, sh->s, &r)) != RTPI_NONE)
             return 0;
-        return v > 0 ? 1 : rtpi_lightbuf_visible(&sh->wide, sh->s, &r);
+        if (v > 0)
+            return 1;
+        return (*occ = rtpi_lightbuf_occluder(&sh->wide, sh->s, &r)) == RTPI_NONE;
     case RTPI_SHADOW_EXACT:
         break;
     }
     r = rtpi_shadow_ray(o, sh->light);
     return !rtpi_kd_occluded(sh->kd, &r);
+}
+
+int rtpi_shadow_visible(const rtpi_shadow *sh, rtpi_v3 p, rtpi_v3 o, uint32_t prim)
+{
+    uint32_t occ;
+    return sh_visible(sh, p, o, prim, &occ);
+}
+
+int rtpi_shadow_visible_cached(const rtpi_shadow *sh, rtpi_shadow_cache *c, rtpi_v3 p,
+                               rtpi_v3 o, uint32_t prim)
+{
+    uint32_t occ;
+    int v;
+    if (c->last) {
+        /* A hit is a hit: the primitive is in the way whichever mode
+           asks, and every exact mode's lists would hold it. */
+        rtpi_ray r = rtpi_shadow_ray(o, sh->light);
+        rtpi_hit h;
+        if (rtpi_intersect_prim(sh->s, c->last - 1u, &r, &h))
+            return 0;
+    }
+    v = sh_visible(sh, p, o, prim, &occ);
+    /* Remembered only while queries keep meeting occluders: after a lit
+       answer the next is most likely lit too, and a test would be lost. */
+    c->last = occ != RTPI_NONE ? occ + 1u : 0u;
+    return v;
 }
 
 void rtpi_shadow_destroy(rtpi_shadow *sh)

@@ -61,6 +61,20 @@ rtp_status rtpi_shadow_create(const rtp_scene *s, const rtpi_kdtree *kd,
 int rtpi_shadow_visible(const rtpi_shadow *sh, rtpi_v3 p, rtpi_v3 o,
                         uint32_t prim);
 
+/* One thread's memory of the primitive found in the last shadow ray's
+   way: neighbouring queries (a row of samples) in a shadow often meet the
+   same one, and testing it first answers them with one intersection.  The answers are
+   rtpi_shadow_visible's (a hit is a hit; LIGHTBUF and EXACT stay exact).
+   Zero-initialise one per thread and never share it; it stays valid
+   across lights and modes of the same scene.  EXACT learns nothing (the
+   kd-tree's occlusion query does not say which primitive it met). */
+typedef struct rtpi_shadow_cache {
+    uint32_t last; /* primitive + 1; 0: none */
+} rtpi_shadow_cache;
+
+int rtpi_shadow_visible_cached(const rtpi_shadow *sh, rtpi_shadow_cache *c, rtpi_v3 p,
+                               rtpi_v3 o, uint32_t prim);
+
 void rtpi_shadow_destroy(rtpi_shadow *sh);
 
 /* The shadow ray trace casts from o to a light at lp: the one definition

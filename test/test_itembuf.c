@@ -5,7 +5,9 @@
  * far light over a wide floor, a fine mesh whose triangles are smaller
  * than the cells, slivers, and the light between objects; and on the
  * small SPD scenes when ../shared/scenes is present.  Its "in shadow"
- * answers are certain (a real intersection): never wrong.  Query points
+ * answers are certain (a real intersection): never wrong.  A thread's
+ * shadow cache (the last occluder met, tested first) changes no light-
+ * buffer answer and only rights item-buffer ones.  Query points
  * are eye-ray hits as trace makes them, plus random rays through the
  * scene (which reach backs, undersides and grazing spots). */
 #include "check.h"
@@ -83,7 +85,8 @@ static void check_mode(const char *label, const rtp_scene *s, const rtpi_kdtree 
     rtpi_shadow *ex = NULL, *sh = NULL;
     rtp_allocator a;
     rtp_error err;
-    size_t k, wrong = 0, false_shadow = 0, lit = 0;
+    size_t k, wrong = 0, false_shadow = 0, lit = 0, cache_bad = 0;
+    rtpi_shadow_cache cache = {0};
     rtpi_allocator_init(&a, NULL);
     if (rtpi_shadow_create(s, kd, lp, RTPI_SHADOW_EXACT, 0, &a, &ex, NULL) != RTP_OK ||
         rtpi_shadow_create(s, NULL, lp, mode, res, &a, &sh, &err) != RTP_OK) {
@@ -94,6 +97,9 @@ static void check_mode(const char *label, const rtp_scene *s, const rtpi_kdtree 
     for (k = 0; k < n; k++) {
         int e = rtpi_shadow_visible(ex, sm[k].p, sm[k].o, sm[k].prim);
         int v = rtpi_shadow_visible(sh, sm[k].p, sm[k].o, sm[k].prim);
+        int vc = rtpi_shadow_visible_cached(sh, &cache, sm[k].p, sm[k].o, sm[k].prim);
+        /* the cache only finds real occluders: it may right a wrong "lit" */
+        cache_bad += vc != v && vc != e;
         wrong += e != v;
         false_shadow += e && !v;
         lit += (size_t)e;
@@ -105,8 +111,34 @@ static void check_mode(const char *label, const rtp_scene *s, const rtpi_kdtree 
               res, (unsigned long)wrong, (unsigned long)n);
     CHECK_MSG(false_shadow == 0, "%s, res %d: %lu lit points put in shadow", label, res,
               (unsigned long)false_shadow);
+    CHECK_MSG(cache_bad == 0, "%s, res %d: %lu cached answers wrong where uncached were right",
+              label, res, (unsigned long)cache_bad);
     rtpi_shadow_destroy(ex);
     rtpi_shadow_destroy(sh);
+}
+
+/* The light buffer through a thread's cache still answers as EXACT. */
+static void check_lightbuf_cached(const char *label, const rtp_scene *s, const rtpi_kdtree *kd,
+                                  rtpi_v3 lp, const sample *sm, size_t n)
+{
+    rtpi_shadow *ex = NULL, *lb = NULL;
+    rtpi_shadow_cache cache = {0};
+    rtp_allocator a;
+    size_t k, bad = 0;
+    rtpi_allocator_init(&a, NULL);
+    if (rtpi_shadow_create(s, kd, lp, RTPI_SHADOW_EXACT, 0, &a, &ex, NULL) != RTP_OK ||
+        rtpi_shadow_create(s, NULL, lp, RTPI_SHADOW_LIGHTBUF, 256, &a, &lb, NULL) != RTP_OK) {
+        CHECK_MSG(0, "%s: cannot create the shadow queries", label);
+        rtpi_shadow_destroy(ex);
+        return;
+    }
+    for (k = 0; k < n; k++)
+        bad += rtpi_shadow_visible(ex, sm[k].p, sm[k].o, sm[k].prim) !=
+               rtpi_shadow_visible_cached(lb, &cache, sm[k].p, sm[k].o, sm[k].prim);
+    CHECK_MSG(bad == 0, "%s: %lu of %lu cached light-buffer answers differ from exact", label,
+              (unsigned long)bad, (unsigned long)n);
+    rtpi_shadow_destroy(ex);
+    rtpi_shadow_destroy(lb);
 }
 
 static int have_osmesa(const rtp_scene *s)
@@ -149,6 +181,7 @@ static void run(const char *label, const rtp_scene *s, const rtpi_v3 *lights, si
         char name[96];
         CHECK_MSG(n > NSAMPLES / 10, "%s: only %lu points", label, (unsigned long)n);
         snprintf(name, sizeof name, "%s, light %lu", label, (unsigned long)li);
+        check_lightbuf_cached(name, s, kd, lights[li], sm, n);
         for (r = 0; r < 3; r++) {
             check_mode(name, s, kd, lights[li], RTPI_SHADOW_ITEMBUF, res[r], sm, n);
             if (gl)
