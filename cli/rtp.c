@@ -735,7 +735,7 @@ static const char reeval_help[] =
     "                       default), lightbuf[:RES] (light buffer, exact),\n"
     "                       itembuf[:RES] (item buffer, approximate at shadow\n"
     "                       edges), osmesa[:RES] (item buffer by OSMesa); RES:\n"
-    "                       direction-cube cells per face edge (default 1024)\n"
+    "                       direction-cube cells per face edge (default 512)\n"
     "  --stale MODE         after a bump edit, the reflected and refracted rays\n"
     "                       below changed normals: keep (the paper's way, fast,\n"
     "                       approximate; default) or retrace (exact)\n"

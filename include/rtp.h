@@ -263,7 +263,7 @@ typedef enum rtp_stale_mode {
 typedef struct rtp_eval_options {
     int threads;            /* 0 or 1: the calling thread only */
     rtp_shadow_mode shadows;
-    int shadow_res;         /* direction-cube cells per face edge; 0: 1024 */
+    int shadow_res;         /* direction-cube cells per face edge; 0: 512 */
     rtp_stale_mode stale;
     int no_cache;           /* 1: a one-off evaluation: keep no caches for
                                later edits (faster once, slower after) */

@@ -3,6 +3,7 @@
  * routine. */
 #include "internal.h"
 #include "shadow.h"
+#include "dircube.h"
 
 #include <time.h>
 
@@ -269,6 +270,7 @@ typedef struct vis_ctx {
     rtpi_v3 lp;
     size_t light;
     unsigned long long queries;
+    rtpi_shadow_cache cache; /* the thread's last occluder */
 } vis_ctx;
 
 /* Decides light `light` anew for every node of one row of samples, with
@@ -298,7 +300,7 @@ static int vis_row(void *ctx, int y)
         if (!rtpi_shadow_setup(sf.p, ng, ns, v->lp, &o))
             continue;
         v->queries++;
-        if (rtpi_shadow_visible(v->sh, sf.p, o, nd->prim))
+        if (rtpi_shadow_visible_cached(v->sh, &v->cache, sf.p, o, nd->prim))
             *w |= bit;
     }
     return 0;
@@ -320,7 +322,7 @@ static rtp_status update_visibility(rtp_tree *t, const rtp_eval_options *opt,
 {
     rtp_scene *s = t->scene;
     size_t nl = s->nlights, words = (nl + 31) / 32, i, n;
-    int mode = opt ? (int)opt->shadows : 0, res = opt && opt->shadow_res > 0 ? opt->shadow_res : 1024;
+    int mode = opt ? (int)opt->shadows : 0, res = opt && opt->shadow_res > 0 ? opt->shadow_res : RTPI_DC_DEFAULT_RES;
     int threads = opt && opt->threads > 1 ? opt->threads : 1, k;
     void *ctx[RTPI_MAX_THREADS];
     vis_ctx vc[RTPI_MAX_THREADS];
@@ -379,6 +381,7 @@ static rtp_status update_visibility(rtp_tree *t, const rtp_eval_options *opt,
                 vc[k].lp = v3(lp[0], lp[1], lp[2]);
                 vc[k].light = i;
                 vc[k].queries = 0;
+                memset(&vc[k].cache, 0, sizeof vc[k].cache);
                 ctx[k] = &vc[k];
             }
             rtpi_parallel_rows(t->ny, threads, ctx, vis_row, NULL, NULL);
@@ -1148,7 +1151,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
                           "invalid shadow mode or resolution (1..16384)");
     mode = opt ? (int)opt->shadows : 0;
-    res = opt && opt->shadow_res > 0 ? opt->shadow_res : 1024;
+    res = opt && opt->shadow_res > 0 ? opt->shadow_res : RTPI_DC_DEFAULT_RES;
     memset(&shade, 0, sizeof shade);
     shade.s = s;
     shade.one_sided = t->spd;
