@@ -1121,7 +1121,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
     rtp_scene *s;
     int i, nthreads = opt && opt->threads > 1 ? opt->threads : 1, any_moved = 0, full;
     int cached, mode, res, one = 0, matpath = 0, sparse, list_combine = 0, hl_used = 0;
-    int hl_apply = 0;
+    int hl_apply = 0, hl_after = 0;
     size_t nmat_changed = 0;
     size_t pk = 0;
     uint32_t mt = 0;
@@ -1338,10 +1338,13 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                     continue;
                 }
                 /* the listed highlights for the new shine, then step 2
-                   below (the list's P is then out of date: dropped) */
+                   below; the list is made again once the samples are
+                   (its P and W are those of the coefficients and colours
+                   now), so the next shine edit applies it */
                 rtpi_parallel_rows((int)((t->hl_n + 4095) / 4096), nthreads, ctx, hl_chunk, NULL,
                                    NULL);
                 redo = 0;
+                hl_after = (int)m + 1;
             }
             for (i = 0; i < nthreads; i++) {
                 e[i].list = t->mat_samples + t->mat_start[m];
@@ -1393,6 +1396,9 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
             t->pk_term = 0;
             t->ev_samples_ok = cached;
         }
+        if (hl_after && t->ev_samples_ok &&
+            hl_build(t, &shade, vis, (uint32_t)(hl_after - 1), cl, cv) == 0)
+            hl_used = 1;
     }
     for (i = 0; i < nthreads; i++)
         if (e[i].nomem) {

@@ -9,13 +9,13 @@
 #   2. One `rtp reeval --stream --shadows exact --reference` over an edit
 #      sequence: an empty first line (the first evaluation builds the
 #      caches), then light colour twice, light off, light on, ambient
-#      twice, material colour twice, material kd, shine twice, and a moved
+#      twice, material colour twice, material kd, shine three times, and a moved
 #      light.  Edits persist, so each line is timed on warm caches, and each
 #      line's --reference traces the same edited scene in full at the same
 #      thread count.  The first edit of a term (a light's colour, the
 #      ambient, a material's colour) precombines the planes the further
-#      edits of that term reuse, and the first shine edit lists the
-#      highlights: both are shown apart.
+#      edits of that term reuse, and the second of consecutive shine edits
+#      lists the highlights the further ones reuse: all are shown apart.
 #   3. The same sequence again without --reference for every other shadow
 #      mode (lightbuf:RES, itembuf:RES, osmesa:RES when rtp has OSMesa): the
 #      state before the moved light is identical, so the moved-light image is
@@ -147,6 +147,7 @@ for f in $list; do
         echo "mat.0.kd=0.5"
         echo "mat.$s.shine=20"
         echo "mat.$s.shine=60"
+        echo "mat.$s.shine=40"
         [ -n "$l0" ] && echo "light.0.pos=$(moved "$l0")"
     } > "$work/edits.txt"
     {
@@ -162,7 +163,8 @@ for f in $list; do
         echo "material colour (first: builds its planes)"
         echo "material colour"
         echo "material kd"
-        echo "shine (first: lists the highlights)"
+        echo "shine (first)"
+        echo "shine (second: lists the highlights)"
         echo "shine"
         [ -n "$l0" ] && echo "moved light"
     } > "$work/labels.txt"
