@@ -390,6 +390,46 @@ static rtp_status op_tree_eval_edited(ctx *c)
     return st;
 }
 
+/* A stream of edits on warm caches, into one kept image: what allocates
+   the one-term planes (light colour, ambient, a material's kd and colour),
+   the highlight lists (consecutive shine edits) and the kept samples. */
+static const char *const warm_edits[][2] = {
+    {"light.lamp.color", "1,0.5,0"}, {"light.lamp.color", "0.5,1,0"},
+    {"ambient", "0.2"},              {"mat.glass.kd", "0.3"},
+    {"mat.glass.color", "0.1,0.2,0.9"}, {"mat.glass.shine", "10"},
+    {"mat.glass.shine", "80"},       {"mat.glass.shine", "5"},
+    {"light.lamp.color", "0.2,0.2,0.2"}, {"mat.glass.shine", "7"},
+    {"mat.glass.shine", "9"},        {"mat.green.ks", "0.2"}};
+
+static rtp_status op_tree_eval_warm(ctx *c)
+{
+    rtp_tree *t = tree(c);
+    rtp_image *img = NULL;
+    rtp_eval_options eo;
+    rtp_status st;
+    size_t i;
+    if (!t)
+        return RTP_ERR_IO;
+    memset(&eo, 0, sizeof eo);
+    eo.incremental = 1;
+    if (rtp_tree_eval(t, &eo, &img, NULL, &c->err) != RTP_OK) {
+        fprintf(stderr, "setup: %s\n", c->err.message);
+        rtp_tree_destroy(t);
+        return RTP_ERR_IO;
+    }
+    ARM(c);
+    st = RTP_OK;
+    for (i = 0; i < sizeof warm_edits / sizeof *warm_edits && st == RTP_OK; i++) {
+        st = rtp_tree_set(t, warm_edits[i][0], warm_edits[i][1], &c->err);
+        if (st == RTP_OK)
+            st = rtp_tree_eval_into(t, &eo, img, NULL, &c->err);
+    }
+    DISARM(c);
+    rtp_image_destroy(img);
+    rtp_tree_destroy(t);
+    return st;
+}
+
 static const char *const image_names[] = {"i.png", "i.ppm", "i.pfm"};
 static int image_kind;
 
@@ -514,6 +554,7 @@ SWEEP(tree_read)
 SWEEP(tree_eval)
 SWEEP(tree_set)
 SWEEP(tree_eval_edited)
+SWEEP(tree_eval_warm)
 SWEEP(image_diff)
 SWEEP(heatmap)
 
@@ -573,6 +614,7 @@ int main(void)
     RUN(test_tree_eval);
     RUN(test_tree_set);
     RUN(test_tree_eval_edited);
+    RUN(test_tree_eval_warm);
     RUN(test_image_io);
     RUN(test_image_diff);
     RUN(test_heatmap);
