@@ -217,20 +217,28 @@ static int seen(const rtpi_cnode *nd, const uint32_t *ext, size_t i)
    hit sees the light and faces it.  n and v come rounded to float (as the
    evaluation cache keeps them), so recomputing one light's terms from the
    cache repeats this arithmetic exactly. */
+/* n.l and the highlight's base r.v at a hit facing the light; 0 where
+   the light is behind the surface. */
+static int light_geometry(const float *nv, rtpi_v3 p, const rtpi_light *L, double *ndl,
+                          double *rv)
+{
+    rtpi_v3 n = v3(nv[0], nv[1], nv[2]), v = v3(nv[3], nv[4], nv[5]), l;
+    l = v3_norm(v3_sub(v3(L->pos[0], L->pos[1], L->pos[2]), p));
+    *ndl = v3_dot(n, l);
+    if (*ndl <= 0.0)
+        return 0;
+    /* r_i: l mirrored about n; the highlight is (r_i.v)^shine. */
+    *rv = v3_dot(v3_sub(v3_mul(n, 2.0 * *ndl), l), v);
+    return 1;
+}
+
 static void light_term(const float *nv, rtpi_v3 p, const rtpi_light *L, int visible,
                        const rtpi_material *m, float *out)
 {
-    rtpi_v3 n = v3(nv[0], nv[1], nv[2]), v = v3(nv[3], nv[4], nv[5]), l;
     double ndl, rv;
     out[0] = out[1] = 0.0f;
-    if (!visible)
+    if (!visible || !light_geometry(nv, p, L, &ndl, &rv))
         return;
-    l = v3_norm(v3_sub(v3(L->pos[0], L->pos[1], L->pos[2]), p));
-    ndl = v3_dot(n, l);
-    if (ndl <= 0.0)
-        return;
-    /* r_i: l mirrored about n; the highlight is (r_i.v)^shine. */
-    rv = v3_dot(v3_sub(v3_mul(n, 2.0 * ndl), l), v);
     out[0] = (float)ndl;
     /* no highlight to weigh where ks is 0 (an edit making it non-zero
        recomputes these terms) */
@@ -329,26 +337,15 @@ void rtpi_material_highlights(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, 
     for (k = 0; k < n; k++) {
         const rtpi_cnode *nd = &nodes[k];
         const uint32_t *ext = vis_ext ? vis_ext + k * c->vis_words : NULL;
-        const float *q = nv + 6 * k;
-        rtpi_v3 p, nn, v;
+        rtpi_v3 p;
         if (rtpi_prim_material(s, nd->prim) != mat)
             continue;
         p = v3(nd->p[0], nd->p[1], nd->p[2]);
-        nn = v3(q[0], q[1], q[2]);
-        v = v3(q[3], q[4], q[5]);
         for (i = 0; i < nl; i++) {
-            const rtpi_light *L = &s->lights[i];
-            rtpi_v3 l;
             double ndl, rv;
-            if (!seen(nd, ext, i))
-                continue;
-            /* light_term's arithmetic, up to the power */
-            l = v3_norm(v3_sub(v3(L->pos[0], L->pos[1], L->pos[2]), p));
-            ndl = v3_dot(nn, l);
-            if (ndl <= 0.0)
-                continue;
-            rv = v3_dot(v3_sub(v3_mul(nn, 2.0 * ndl), l), v);
-            if (!(rv > 0.0))
+            /* light_term's terms, up to the power */
+            if (!seen(nd, ext, i) || !light_geometry(nv + 6 * k, p, &s->lights[i], &ndl, &rv) ||
+                !(rv > 0.0))
                 continue;
             idx[*count] = (node0 + k) * nt + 4 + 2 * i;
             lrv[*count] = log2(rv);

@@ -484,6 +484,29 @@ static int eval_row(void *ctx, int y)
     return 0;
 }
 
+/* Sample k's image with term j left out (none when j is past the
+   terms), in the order rtpi_combine sums. */
+static void rest_of(const double *cv, size_t nc, size_t j, const float *coeffs, double v[3])
+{
+    size_t i;
+    int c;
+    for (c = 0; c < 3; c++) {
+        double a = 0.0;
+        for (i = 0; i < nc; i += 3)
+            if (i != 3 * j)
+                a += coeffs[i + c] * cv[i + c];
+        v[c] = a;
+    }
+}
+
+/* One pixel: P + K x. */
+static void pk_pixel(const float *pk, const double *x, float *out)
+{
+    out[0] = (float)(pk[0] + pk[3] * x[0]);
+    out[1] = (float)(pk[1] + pk[4] * x[1]);
+    out[2] = (float)(pk[2] + pk[5] * x[2]);
+}
+
 /* ------------------------------------------------------- highlights
    A shine edit changes the highlights (r.v)^shine of one material's nodes
    and nothing else of step 1, and each sample's colour is affine in them:
@@ -502,7 +525,7 @@ static int hl_build(rtp_tree *t, const rtpi_shade_ctx *shade, const uint32_t *vi
                     const double *cl, const double *cv)
 {
     const rtp_allocator *al = &t->alloc;
-    size_t i, j, nl = t->scene->nlights, nc = RTPI_COEFFS(nl), nt = RTPI_TERMS(nl);
+    size_t j, nl = t->scene->nlights, nc = RTPI_COEFFS(nl), nt = RTPI_TERMS(nl);
     size_t nlist = t->mat_start[m + 1] - t->mat_start[m], wcap = 0;
     double ks = t->scene->mats[m].ks, *w = NULL;
     t->hl_mat = 0;
@@ -539,12 +562,7 @@ static int hl_build(rtp_tree *t, const rtpi_shade_ctx *shade, const uint32_t *vi
            coefficients less what these highlights (as the terms hold them
            now) add to it */
         rtpi_sample_weights(shade, t->nodes + a, n, w);
-        for (c = 0; c < 3; c++) {
-            double v = 0.0;
-            for (i = 0; i < nc; i += 3)
-                v += t->ev_coeffs[k * nc + i + c] * cv[i + c];
-            pv[c] = v;
-        }
+        rest_of(cv, nc, (size_t)-1, t->ev_coeffs + k * nc, pv);
         for (e = e0; e < t->hl_n; e++) {
             size_t node = t->hl_idx[e] / nt, li = (t->hl_idx[e] % nt - 4) / 2;
             double sold = t->ev_terms[t->hl_idx[e]];
@@ -673,21 +691,6 @@ static int combine_row(void *ctx, int y)
    writes 12 a pixel.  P is rounded to float once more than the full path
    rounds, so pixels differ from it by about a float ulp of their value. */
 
-/* Sample k's image with term j left out (none when j is past the
-   terms), in the order rtpi_combine sums. */
-static void rest_of(const double *cv, size_t nc, size_t j, const float *coeffs, double v[3])
-{
-    size_t i;
-    int c;
-    for (c = 0; c < 3; c++) {
-        double a = 0.0;
-        for (i = 0; i < nc; i += 3)
-            if (i != 3 * j)
-                a += coeffs[i + c] * cv[i + c];
-        v[c] = a;
-    }
-}
-
 /* Pass 1: the rest P_s of each sample of a row, into samples (the
    corner samples with SPD, else the image itself, which the edit then
    overwrites).  A colour term is left out of the sum; a material's
@@ -773,11 +776,8 @@ static int pk_apply_row(void *ctx, int y)
     const float *pk = t->pk + 6 * p;
     const double *c = e->x;
     float *out = e->pixels + 3 * p;
-    for (i = 0; i < n; i++, pk += 6, out += 3) {
-        out[0] = (float)(pk[0] + pk[3] * c[0]);
-        out[1] = (float)(pk[1] + pk[4] * c[1]);
-        out[2] = (float)(pk[2] + pk[5] * c[2]);
-    }
+    for (i = 0; i < n; i++, pk += 6, out += 3)
+        pk_pixel(pk, c, out);
     return 0;
 }
 
@@ -790,14 +790,8 @@ static int pk_apply_chunk(void *ctx, int chunk)
     const double *c = e->x;
     if (end > t->pk_nnz)
         end = t->pk_nnz;
-    for (; i < end; i++) {
-        size_t p = t->pk_nz[i];
-        const float *pk = t->pk + 6 * p;
-        float *out = e->pixels + 3 * p;
-        out[0] = (float)(pk[0] + pk[3] * c[0]);
-        out[1] = (float)(pk[1] + pk[4] * c[1]);
-        out[2] = (float)(pk[2] + pk[5] * c[2]);
-    }
+    for (; i < end; i++)
+        pk_pixel(t->pk + 6 * (size_t)t->pk_nz[i], c, e->pixels + 3 * (size_t)t->pk_nz[i]);
     return 0;
 }
 
