@@ -108,4 +108,27 @@ static inline int rtpi_shadow_setup(rtpi_v3 p, rtpi_v3 ng, rtpi_v3 ns, rtpi_v3 l
     return 1;
 }
 
+/* The query trace makes for a ray (direction d) hitting primitive prim
+   at pe: pe rounded to float as the tree keeps it, the surface derived
+   from that, the normals turned towards the ray where the material is
+   two-sided (one_sided: SPD's rule), then rtpi_shadow_setup.  0 where the
+   surface faces away from the light, else 1 with the query's p and o.
+   For tests and benchmarks that ask what trace would ask. */
+static inline int rtpi_shadow_query_at(const rtp_scene *s, int one_sided, uint32_t prim,
+                                       rtpi_v3 pe, rtpi_v3 d, rtpi_v3 lp, rtpi_v3 *p,
+                                       rtpi_v3 *o)
+{
+    rtpi_surface sf;
+    rtpi_v3 ng, ns;
+    rtpi_surface_from_point(s, prim, v3((float)pe.x, (float)pe.y, (float)pe.z), 0, &sf);
+    ng = sf.ng;
+    ns = sf.ns;
+    if (v3_dot(d, ng) >= 0.0 && rtpi_two_sided(s, one_sided, prim, &s->mats[sf.mat])) {
+        ng = v3_mul(ng, -1.0);
+        ns = v3_mul(ns, -1.0);
+    }
+    *p = sf.p;
+    return rtpi_shadow_setup(sf.p, ng, ns, lp, o);
+}
+
 #endif

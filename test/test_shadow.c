@@ -83,8 +83,6 @@ static size_t make_samples(const rtp_scene *s, const rtpi_kdtree *kd, rtpi_v3 lp
     for (tries = 0; n < want && tries < want * 20; tries++) {
         rtpi_ray r;
         rtpi_hit h;
-        rtpi_surface sf;
-        rtpi_v3 pe, ng, ns, o;
         if (tries & 1) {
             r.o = eye;
             r.d = v3_norm(v3_add(v3_sub(at, eye),
@@ -96,20 +94,10 @@ static size_t make_samples(const rtp_scene *s, const rtpi_kdtree *kd, rtpi_v3 lp
         }
         r.tmin = 0.0;
         r.tmax = HUGE_VAL;
-        if (!rtpi_kd_intersect(kd, &r, &h))
+        if (!rtpi_kd_intersect(kd, &r, &h) ||
+            !rtpi_shadow_query_at(s, 0, h.prim, v3_madd(r.o, r.d, h.t), r.d, lp, &out[n].p,
+                                  &out[n].o))
             continue;
-        pe = v3_madd(r.o, r.d, h.t);
-        rtpi_surface_from_point(s, h.prim, v3((float)pe.x, (float)pe.y, (float)pe.z), 0, &sf);
-        ng = sf.ng;
-        ns = sf.ns;
-        if (v3_dot(r.d, ng) >= 0.0 && rtpi_two_sided(s, 0, h.prim, &s->mats[sf.mat])) {
-            ng = v3_mul(ng, -1.0);
-            ns = v3_mul(ns, -1.0);
-        }
-        if (!rtpi_shadow_setup(sf.p, ng, ns, lp, &o))
-            continue;
-        out[n].p = sf.p;
-        out[n].o = o;
         out[n].prim = h.prim;
         n++;
     }

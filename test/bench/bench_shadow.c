@@ -52,29 +52,17 @@ static size_t make_queries(const rtp_scene *s, const rtpi_kdtree *kd, rtpi_v3 lp
         for (x = 0; x < n; x++) {
             rtpi_ray r;
             rtpi_hit h;
-            rtpi_surface sf;
             rtpi_v3 d = v3_add(dir, v3_add(v3_mul(right, (x - 0.5 * (n - 1)) * step),
                                            v3_mul(upv, (0.5 * (n - 1) - y) * step)));
-            rtpi_v3 pe, ng, ns, o;
             double len = v3_len(d);
             r.o = from;
             r.d = v3_mul(d, 1.0 / len);
             r.tmin = (s->camera.hither > 0.0 ? s->camera.hither : 0.0) * len;
             r.tmax = HUGE_VAL;
-            if (!rtpi_kd_intersect(kd, &r, &h))
+            if (!rtpi_kd_intersect(kd, &r, &h) ||
+                !rtpi_shadow_query_at(s, 1, h.prim, v3_madd(r.o, r.d, h.t), r.d, lp, &q[m].p,
+                                      &q[m].o))
                 continue;
-            pe = v3_madd(r.o, r.d, h.t);
-            rtpi_surface_from_point(s, h.prim, v3((float)pe.x, (float)pe.y, (float)pe.z), 0, &sf);
-            ng = sf.ng;
-            ns = sf.ns;
-            if (v3_dot(r.d, ng) >= 0.0 && rtpi_two_sided(s, 1, h.prim, &s->mats[sf.mat])) {
-                ng = v3_mul(ng, -1.0);
-                ns = v3_mul(ns, -1.0);
-            }
-            if (!rtpi_shadow_setup(sf.p, ng, ns, lp, &o))
-                continue;
-            q[m].p = sf.p;
-            q[m].o = o;
             q[m].prim = h.prim;
             m++;
         }
