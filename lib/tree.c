@@ -974,6 +974,20 @@ static rtp_status retrace_edited(rtp_tree *t, int threads, int stale, rtp_eval_s
         return rs;
     if (st)
         st->retraced_samples += n;
+    /* The samples just traced spawned rays with every material as it is
+       now: where another material's ks or kt is lower now than when its
+       own samples were traced (0: no reflected or refracted rays at all),
+       those samples hold less below it, so raising it later must trace
+       again (for the samples traced before, which kept theirs, this is
+       conservative).  Found by fuzz_set: ks 0, a class-D edit elsewhere,
+       then ks 2 missed the glass's reflections in the re-traced samples. */
+    for (m = 0; m < s->nmats; m++)
+        if (!needs_retrace(t, m, stale)) {
+            if (s->mats[m].ks < t->mats0[m].ks)
+                t->mats0[m].ks = s->mats[m].ks;
+            if (s->mats[m].kt < t->mats0[m].kt)
+                t->mats0[m].kt = s->mats[m].kt;
+        }
     /* the trees now hold these materials as they are */
     for (m = 0; m < s->nmats; m++)
         if (needs_retrace(t, m, stale)) {
