@@ -488,7 +488,9 @@ struct rtp_tree {
                               listed (tree.c: consecutive shine edits) */
     size_t *hl_idx;        /* their terms' indices in ev_terms */
     double *hl_lrv;        /* log2 (r.v) of each */
-    float *hl_w;           /* 3 each: path weight * ks * light colour */
+    float *hl_w;           /* 4 each: W = path weight * ks * light colour,
+                              then the term as the coefficients hold it
+                              (hl_restore puts it back) */
     size_t hl_n, hl_cap;
     size_t *hl_off;        /* per sample of the material: its first one */
     float *hl_p;           /* per sample of the material: colour less them */

@@ -545,7 +545,7 @@ static int hl_build(rtp_tree *t, const rtpi_shade_ctx *shade, const uint32_t *vi
         if (n > ((size_t)-1 - t->hl_n) / (nl + 1) ||
             rtpi_grow(al, (void **)&t->hl_idx, &cap, t->hl_n + n * nl + 1, sizeof *t->hl_idx) ||
             rtpi_grow(al, (void **)&t->hl_lrv, &cap2, t->hl_n + n * nl + 1, sizeof *t->hl_lrv) ||
-            rtpi_grow(al, (void **)&t->hl_w, &cap3, t->hl_n + n * nl + 1, 3 * sizeof *t->hl_w) ||
+            rtpi_grow(al, (void **)&t->hl_w, &cap3, t->hl_n + n * nl + 1, 4 * sizeof *t->hl_w) ||
             rtpi_grow(al, (void **)&w, &wcap, n + 1, sizeof *w)) {
             t->hl_cap = cap < cap2 ? cap : cap2;
             t->hl_cap = t->hl_cap < cap3 ? t->hl_cap : cap3;
@@ -568,9 +568,10 @@ static int hl_build(rtp_tree *t, const rtpi_shade_ctx *shade, const uint32_t *vi
             double sold = t->ev_terms[t->hl_idx[e]];
             for (c = 0; c < 3; c++) {
                 float wc = (float)(w[node - a] * ks * cl[3 * li + c]);
-                t->hl_w[3 * e + c] = wc;
+                t->hl_w[4 * e + c] = wc;
                 pv[c] -= wc * sold;
             }
+            t->hl_w[4 * e + 3] = (float)sold; /* (a float term) */
         }
         for (c = 0; c < 3; c++)
             t->hl_p[3 * j + c] = (float)pv[c];
@@ -579,6 +580,23 @@ static int hl_build(rtp_tree *t, const rtpi_shade_ctx *shade, const uint32_t *vi
     rtpi_free(al, w);
     t->hl_mat = (int)m + 1;
     return 0;
+}
+
+/* The listed highlights' terms back to the shine the coefficients (and
+   ev_mats) still have, and the list dropped.  A chain of shine edits moves
+   those terms and the material's samples along with each edit but leaves
+   the coefficients as they were; any other evaluation must first find
+   terms and coefficients agreeing again.  The material's samples still
+   hold the chain's colours: the caller redoes them.  Returns the
+   material. */
+static int hl_restore(rtp_tree *t)
+{
+    size_t q;
+    int m = t->hl_mat - 1;
+    for (q = 0; q < t->hl_n; q++)
+        t->ev_terms[t->hl_idx[q]] = t->hl_w[4 * q + 3];
+    t->hl_mat = 0;
+    return m;
 }
 
 /* A chunk of 4096 listed highlights set for the new shine. */
@@ -610,7 +628,7 @@ static int hl_apply_chunk(void *ctx, int chunk)
         float *out = e->samples + 3 * (size_t)e->list[j];
         for (q = t->hl_off[j]; q < t->hl_off[j + 1]; q++) {
             float sp = (float)exp2(shine * t->hl_lrv[q]);
-            const float *wq = t->hl_w + 3 * q;
+            const float *wq = t->hl_w + 4 * q;
             t->ev_terms[t->hl_idx[q]] = sp;
             v0 += wq[0] * sp;
             v1 += wq[1] * sp;
@@ -890,6 +908,33 @@ static int shine_only(const rtpi_material *a, const rtpi_material *b)
     return !coeffs_changed(&x, b);
 }
 
+/* Are light l's terms not those of where it is now (it moved since, or
+   its shadows are to be decided another way)? */
+static int light_terms_stale(const rtp_tree *t, size_t l, int mode, int res)
+{
+    const rtpi_light *L = &t->scene->lights[l];
+    return memcmp(t->ev_pos + 3 * l, L->pos, sizeof L->pos) != 0 ||
+           (light_moved(t, l) && (t->ev_vis_mode != mode || t->ev_vis_res != res));
+}
+
+/* Does this evaluation go on with the listed highlights: no light's terms
+   stale, and no material changed since the list was made but its own,
+   in its shine alone? */
+static int hl_continues(const rtp_tree *t, int mode, int res)
+{
+    const rtp_scene *s = t->scene;
+    size_t l, m, hm = (size_t)t->hl_mat - 1;
+    for (l = 0; l < s->nlights; l++)
+        if (light_terms_stale(t, l, mode, res))
+            return 0;
+    for (m = 0; m < s->nmats; m++)
+        if (m == hm ? t->ev_mats[m].shine == s->mats[m].shine ||
+                          !shine_only(&t->ev_mats[m], &s->mats[m])
+                    : coeffs_changed(&t->ev_mats[m], &s->mats[m]))
+            return 0;
+    return 1;
+}
+
 static double seconds_now(void)
 {
     struct timespec ts;
@@ -1129,7 +1174,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
     rtp_scene *s;
     int i, nthreads = opt && opt->threads > 1 ? opt->threads : 1, any_moved = 0, full;
     int cached, mode, res, one = 0, matpath = 0, sparse, list_combine = 0, hl_used = 0;
-    int hl_apply = 0, hl_after = 0;
+    int hl_apply = 0, hl_after = 0, restored = -1;
     size_t nmat_changed = 0;
     size_t pk = 0;
     uint32_t mt = 0;
@@ -1201,6 +1246,8 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
     if (cached && !t->mat_start && build_material_lists(t) != RTP_OK)
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
     full = !cached || !t->ev_valid;
+    if (t->hl_mat && !full && !hl_continues(t, mode, res))
+        restored = hl_restore(t);
     /* the caller's image holds the last evaluation: only changes need
        writing (pk_apply) */
     sparse = opt && opt->incremental && into && t->last_pixels == into->pixels;
@@ -1268,8 +1315,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
         /* a light that moved (or whose shadows were decided another way):
            its terms and coefficients only, for every sample */
         for (l = 0; l < nl; l++) {
-            if (memcmp(t->ev_pos + 3 * l, s->lights[l].pos, sizeof s->lights[l].pos) == 0 &&
-                !(light_moved(t, l) && (t->ev_vis_mode != mode || t->ev_vis_res != res)))
+            if (!light_terms_stale(t, l, mode, res))
                 continue;
             for (i = 0; i < nthreads; i++)
                 e[i].light = l;
@@ -1316,12 +1362,14 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
             matpath = 1; /* the coefficients stay those of the material before */
         }
         /* steps 1-2 only for samples containing an edited material */
+        /* (the material whose highlights were put back has its samples
+           redone whether or not it changed since) */
         for (m = 0; !matpath && m < s->nmats; m++)
-            nmat_changed += coeffs_changed(&s->mats[m], &t->ev_mats[m]);
+            nmat_changed += coeffs_changed(&s->mats[m], &t->ev_mats[m]) || (int)m == restored;
         for (m = 0; !matpath && m < s->nmats; m++) {
             int redo;
             size_t n;
-            if (!coeffs_changed(&s->mats[m], &t->ev_mats[m]))
+            if (!coeffs_changed(&s->mats[m], &t->ev_mats[m]) && (int)m != restored)
                 continue;
             redo = terms_changed(&s->mats[m], &t->ev_mats[m]);
             n = t->mat_start[m + 1] - t->mat_start[m];

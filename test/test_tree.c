@@ -483,10 +483,15 @@ static void one_term_run(int spd)
         {"light.1.color", "0.5,0.5,0.5"}, {"light.1.color", "0.1,0.2,0.3"},
         {"light.1.color", "0.9,0.2,0.3"}, {"mat.red.shine", "80"},     {"mat.red.shine", "3"},
         {"mat.red.shine", "40"},         {"mat.red.ks", "0.05"},
+        /* a chain of shine edits back to the shine it started from, then
+           on: the chain's terms must not outlive it */
+        {"mat.red.shine", "7"},          {"mat.red.shine", "0.05"},       {"mat.red.shine", "40"},
+        {"mat.red.shine", "200"},        {"mat.red.kd", "0.4"},           {"mat.red.shine", "9"},
+        {"mat.red.shine", "30"},         {"light.0.color", "0.7,0.7,0.2"}, {"mat.red.shine", "2"},
     };
     /* edits whose planes are already built: P + K x, no sample summed */
-    static const int planes[] = {0, 0, 1, 1, 1, 0, 1, 0, 1, 0, 1, 0,
-                                 1, 1, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0};
+    static const int planes[] = {0, 0, 1, 1, 1, 0, 1, 0, 1, 0, 1, 0, 1, 1, 0, 0,
+                                 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0};
     rtp_scene *s = load("scenes/spheres.nff");
     rtp_tree *t = NULL;
     rtp_trace_options o;
@@ -532,7 +537,8 @@ static void one_term_run(int spd)
                is written again */
             /* after a full combine, a material's other edits recombine
                only its own samples */
-            if (i > 0 && strncmp(seq[i - 1][0], "mat.red.s", 9) == 0)
+            if (i > 0 && strncmp(seq[i - 1][0], "mat.red.s", 9) == 0 &&
+                strncmp(seq[i][0], "mat.", 4) == 0)
                 CHECK_MSG(es.combined_samples > 0 &&
                               es.combined_samples < (unsigned long long)re->width * re->height,
                           "spd %d, %s: summed %llu samples", spd, seq[i][0],

@@ -4,8 +4,9 @@
  * of a small recorded scene and, when the tree takes it, to rtp_scene_set
  * on the scene, which must take it too.  After each line the trees are
  * evaluated into one kept image (as --stream does, so later lines take
- * the cached paths); at the end the edited scene is traced in full: the
- * brief promises the images agree for every edit the tree accepts. */
+ * the cached paths) and compared with a full trace of the edited scene,
+ * and so is a fresh evaluation at the end: the brief promises the images
+ * agree for every edit the tree accepts. */
 #include "fuzz_common.h"
 
 static const char scene_text[] =
@@ -45,16 +46,42 @@ static void apply(rtp_tree *t, rtp_scene *s, char *item)
     *eq = '=';
 }
 
+/* Aborts unless img equals a full trace of s: edits take float
+   parameters, so float rounding only is allowed, 1e-4 of the image's
+   largest value (a ks of 10 over a few bounces makes values of
+   thousands, whose float ulp is 1e-4), at least 1e-4. */
+static void check_traced(const rtp_image *img, const rtp_scene *s, const rtp_trace_options *o,
+                         const char *what)
+{
+    rtp_image *full = NULL;
+    rtp_diff_stats d;
+    rtp_error err;
+    memset(&err, 0, sizeof err);
+    if (rtp_trace(s, o, &full, NULL, &err) == RTP_OK &&
+        rtp_image_diff(img, full, 1e-6, &d, &err) == RTP_OK) {
+        double big = 1.0;
+        size_t i, np = 3 * (size_t)full->width * (size_t)full->height;
+        for (i = 0; i < np; i++)
+            if (fabs(full->pixels[i]) > big)
+                big = fabs(full->pixels[i]);
+        if (!(d.max_abs <= 1e-4 * big)) {
+            fprintf(stderr, "fuzz_set: %s differs from a full trace of the edited scene by %g\n",
+                    what, d.max_abs);
+            abort();
+        }
+    }
+    rtp_image_destroy(full);
+}
+
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {
     rtp_scene *s = NULL;
     rtp_tree *t = NULL;
-    rtp_image *re = NULL, *full = NULL;
+    rtp_image *re = NULL;
     rtp_trace_options o;
     rtp_eval_options eo;
     rtp_image *kept = NULL;
     rtp_status st;
-    rtp_diff_stats d;
     rtp_error err;
     char *text, *p, *line;
     if (size > 4096)
@@ -114,29 +141,16 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         else
             st = rtp_tree_eval_into(t, &eo, kept, NULL, &err);
         fuzz_check_error(&err, st);
+        /* every line's image, not only the last: a cache left wrong by
+           one line may be overwritten by the next before it shows */
+        if (st == RTP_OK)
+            check_traced(kept, s, &o, "the image after a line");
     }
-    if (rtp_tree_eval(t, &eo, &re, NULL, &err) == RTP_OK &&
-        rtp_trace(s, &o, &full, NULL, &err) == RTP_OK &&
-        rtp_image_diff(re, full, 1e-6, &d, &err) == RTP_OK) {
-        /* Edits take float parameters; allow float rounding only: 1e-4 of
-           the image's largest value (a ks of 10 over a few bounces makes
-           values of thousands, whose float ulp is 1e-4), at least 1e-4. */
-        double tol = 1e-4, big = 1.0;
-        size_t i, np = 3 * (size_t)full->width * (size_t)full->height;
-        for (i = 0; i < np; i++)
-            if (fabs(full->pixels[i]) > big)
-                big = fabs(full->pixels[i]);
-        tol *= big;
-        if (!(d.max_abs <= tol) ||
-            (kept && rtp_image_diff(kept, full, 1e-6, &d, &err) == RTP_OK && !(d.max_abs <= tol))) {
-            fprintf(stderr, "fuzz_set: re-evaluation differs from a full "
-                            "trace of the edited scene by %g\n", d.max_abs);
-            abort();
-        }
-    }
+    /* and a fresh evaluation of the edited trees */
+    if (rtp_tree_eval(t, &eo, &re, NULL, &err) == RTP_OK)
+        check_traced(re, s, &o, "the re-evaluation");
     rtp_image_destroy(re);
     rtp_image_destroy(kept);
-    rtp_image_destroy(full);
     rtp_tree_destroy(t);
     rtp_scene_destroy(s);
     free(text);
