@@ -4,9 +4,10 @@
  * of a small recorded scene and, when the tree takes it, to rtp_scene_set
  * on the scene, which must take it too.  After each line the trees are
  * evaluated into one kept image (as --stream does, so later lines take
- * the cached paths) and compared with a full trace of the edited scene,
- * and so is a fresh evaluation at the end: the brief promises the images
- * agree for every edit the tree accepts. */
+ * the cached paths) and compared with an uncached evaluation of a twin
+ * tree given the same edits; at the end the kept image and a fresh
+ * evaluation are compared with a full trace of the edited scene: the
+ * brief promises the images agree for every edit the tree accepts. */
 #include "fuzz_common.h"
 
 static const char scene_text[] =
@@ -27,7 +28,8 @@ static const char scene_text[] =
 #define W 4
 #define H 4
 
-static void apply(rtp_tree *t, rtp_scene *s, char *item)
+/* One item to the trees, their uncached twin and the scene. */
+static void apply(rtp_tree *t, rtp_tree *twin, rtp_scene *s, char *item)
 {
     char *eq = strchr(item, '=');
     rtp_error err;
@@ -38,12 +40,31 @@ static void apply(rtp_tree *t, rtp_scene *s, char *item)
     memset(&err, 0, sizeof err);
     st = rtp_tree_set(t, item, eq + 1, &err);
     fuzz_check_error(&err, st);
+    st2 = rtp_tree_set(twin, item, eq + 1, &err);
+    FUZZ_ASSERT(st2 == st);
     if (st == RTP_OK) {
         st2 = rtp_scene_set(s, item, eq + 1, &err);
         fuzz_check_error(&err, st2);
         FUZZ_ASSERT(st2 == RTP_OK);
     }
     *eq = '=';
+}
+
+/* Aborts unless a and b agree to float rounding (see check_traced). */
+static void check_same(const rtp_image *a, const rtp_image *b, const char *what)
+{
+    rtp_diff_stats d;
+    double big = 1.0;
+    size_t i, np = 3 * (size_t)b->width * (size_t)b->height;
+    if (rtp_image_diff(a, b, 1e-6, &d, NULL) != RTP_OK)
+        return;
+    for (i = 0; i < np; i++)
+        if (fabs(b->pixels[i]) > big)
+            big = fabs(b->pixels[i]);
+    if (!(d.max_abs <= 1e-4 * big)) {
+        fprintf(stderr, "fuzz_set: %s differs by %g\n", what, d.max_abs);
+        abort();
+    }
 }
 
 /* Aborts unless img equals a full trace of s: edits take float
@@ -54,32 +75,18 @@ static void check_traced(const rtp_image *img, const rtp_scene *s, const rtp_tra
                          const char *what)
 {
     rtp_image *full = NULL;
-    rtp_diff_stats d;
-    rtp_error err;
-    memset(&err, 0, sizeof err);
-    if (rtp_trace(s, o, &full, NULL, &err) == RTP_OK &&
-        rtp_image_diff(img, full, 1e-6, &d, &err) == RTP_OK) {
-        double big = 1.0;
-        size_t i, np = 3 * (size_t)full->width * (size_t)full->height;
-        for (i = 0; i < np; i++)
-            if (fabs(full->pixels[i]) > big)
-                big = fabs(full->pixels[i]);
-        if (!(d.max_abs <= 1e-4 * big)) {
-            fprintf(stderr, "fuzz_set: %s differs from a full trace of the edited scene by %g\n",
-                    what, d.max_abs);
-            abort();
-        }
-    }
+    if (rtp_trace(s, o, &full, NULL, NULL) == RTP_OK)
+        check_same(img, full, what);
     rtp_image_destroy(full);
 }
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {
     rtp_scene *s = NULL;
-    rtp_tree *t = NULL;
-    rtp_image *re = NULL;
+    rtp_tree *t = NULL, *twin = NULL;
+    rtp_image *re = NULL, *plain = NULL;
     rtp_trace_options o;
-    rtp_eval_options eo;
+    rtp_eval_options eo, eo_plain;
     rtp_image *kept = NULL;
     rtp_status st;
     rtp_error err;
@@ -99,7 +106,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     o.threads = 1;
     if (rtp_scene_load_memory(scene_text, sizeof scene_text - 1, "set.nff", "nff",
                               &fuzz_alloc, &s, &err) != RTP_OK ||
-        rtp_record(s, &o, &t, NULL, NULL, &err) != RTP_OK) {
+        rtp_record(s, &o, &t, NULL, NULL, &err) != RTP_OK ||
+        rtp_record(s, &o, &twin, NULL, NULL, &err) != RTP_OK) {
         fprintf(stderr, "fuzz_set: setup failed: %s\n", err.message);
         abort();
     }
@@ -109,6 +117,10 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     memset(&eo, 0, sizeof eo);
     eo.stale = RTP_STALE_RETRACE;
     eo.incremental = 1;
+    /* the twin evaluates every line from its trees alone, no caches */
+    eo_plain = eo;
+    eo_plain.incremental = 0;
+    eo_plain.no_cache = 1;
     /* Lines as apply_params_file reads them, items as apply_line splits
        them (a NUL ends the text as it ends a C string). */
     for (line = text; line && *line; line = p) {
@@ -131,7 +143,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
                 q++;
             if (*q)
                 *q++ = '\0';
-            apply(t, s, tok);
+            apply(t, twin, s, tok);
         }
         /* each line evaluated into one kept image, as --stream does: the
            paths later evaluations take (planes, highlight lists, a
@@ -141,17 +153,25 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         else
             st = rtp_tree_eval_into(t, &eo, kept, NULL, &err);
         fuzz_check_error(&err, st);
-        /* every line's image, not only the last: a cache left wrong by
-           one line may be overwritten by the next before it shows */
-        if (st == RTP_OK)
-            check_traced(kept, s, &o, "the image after a line");
+        /* every line's image, not only the last (a cache left wrong by
+           one line may be overwritten by the next before it shows),
+           against the twin's evaluation without caches: a full trace
+           after every line would cost a kd-tree build each */
+        if (st == RTP_OK && rtp_tree_eval(twin, &eo_plain, &plain, NULL, &err) == RTP_OK)
+            check_same(kept, plain, "the image after a line, against no caches,");
+        rtp_image_destroy(plain);
+        plain = NULL;
     }
-    /* and a fresh evaluation of the edited trees */
+    /* at the end, the kept image and a fresh evaluation against a full
+       trace of the edited scene */
+    if (kept)
+        check_traced(kept, s, &o, "the kept image");
     if (rtp_tree_eval(t, &eo, &re, NULL, &err) == RTP_OK)
         check_traced(re, s, &o, "the re-evaluation");
     rtp_image_destroy(re);
     rtp_image_destroy(kept);
     rtp_tree_destroy(t);
+    rtp_tree_destroy(twin);
     rtp_scene_destroy(s);
     free(text);
     return 0;
