@@ -523,6 +523,18 @@ rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n,
 /* Resolves samples (nx*ny RGB, from a grid of corners when spd) into
    the image; one routine for trace and reeval so both round alike. */
 void rtpi_resolve_samples(const float *samples, int spd, rtp_image *img);
+/* SPD: pixel (x, y) of img, the average of its four corner samples (a
+   grid of img->width + 1 columns). */
+static inline void rtpi_resolve_pixel(const float *samples, rtp_image *img, int x, int y)
+{
+    size_t w = (size_t)img->width, a = 3 * ((size_t)y * (w + 1) + (size_t)x);
+    size_t b = a + 3 * (w + 1);
+    float *out = img->pixels + 3 * ((size_t)y * w + (size_t)x);
+    int c;
+    for (c = 0; c < 3; c++)
+        out[c] = 0.25f * (samples[a + c] + samples[a + 3 + c] + samples[b + c] +
+                          samples[b + 3 + c]);
+}
 
 /* -------------------------------------------------------------- threads */
 

@@ -422,19 +422,14 @@ static int trace_row(void *ctx, int y)
 
 void rtpi_resolve_samples(const float *samples, int spd, rtp_image *img)
 {
-    int w = img->width, h = img->height, x, y, c;
+    int w = img->width, h = img->height, x, y;
     if (!spd) {
         memcpy(img->pixels, samples, sizeof(float) * 3 * (size_t)w * h);
         return;
     }
     for (y = 0; y < h; y++)
         for (x = 0; x < w; x++)
-            for (c = 0; c < 3; c++) {
-                size_t a = 3 * ((size_t)y * (w + 1) + x) + c;
-                size_t b = a + 3 * (size_t)(w + 1);
-                img->pixels[3 * ((size_t)y * w + x) + c] =
-                    0.25f * (samples[a] + samples[a + 3] + samples[b] + samples[b + 3]);
-            }
+            rtpi_resolve_pixel(samples, img, x, y);
 }
 
 /* Moves the rows' trees into one tree object. */

@@ -878,7 +878,9 @@ static rtp_status build_material_lists(rtp_tree *t)
 /* Does a material edit change step 1 (terms), or only step 2? */
 static int terms_changed(const rtpi_material *a, const rtpi_material *b)
 {
-    return a->shine != b->shine || a->tex != b->tex || a->tex_scale != b->tex_scale ||
+    /* (a highlight is 0 at any shine where ks is 0: light_term) */
+    return (a->shine != b->shine && (a->ks > 0.0f || b->ks > 0.0f)) || a->tex != b->tex ||
+           a->tex_scale != b->tex_scale ||
            a->tex_image != b->tex_image || (a->ks > 0.0f) != (b->ks > 0.0f) ||
            bump_changed(a, b);
 }
@@ -915,6 +917,46 @@ static int light_terms_stale(const rtp_tree *t, size_t l, int mode, int res)
     const rtpi_light *L = &t->scene->lights[l];
     return memcmp(t->ev_pos + 3 * l, L->pos, sizeof L->pos) != 0 ||
            (light_moved(t, l) && (t->ev_vis_mode != mode || t->ev_vis_res != res));
+}
+
+/* Notes material m among those whose samples alone step 3 set; -1 once
+   there are more than RESOLVE_MAX (every pixel is then averaged). */
+#define RESOLVE_MAX 8
+static void note_set(uint32_t *mats, int *n, uint32_t m)
+{
+    if (*n >= 0 && *n < RESOLVE_MAX)
+        mats[(*n)++] = m;
+    else
+        *n = -1;
+}
+
+/* An incremental evaluation's step 3 for the pixels of the listed samples
+   only (the image holds every other pixel): a sample is a pixel, or (SPD)
+   a corner of four.  Returns the pixels written (a pixel written by the
+   sample left of it in the list is not written again; one below a
+   listed sample may be). */
+static unsigned long long resolve_listed(const rtp_tree *t, const float *samples,
+                                         const uint32_t *list, size_t n, rtp_image *img)
+{
+    unsigned long long writes = 0;
+    size_t i;
+    for (i = 0; i < n; i++) {
+        size_t k = list[i];
+        int sx = (int)(k % (size_t)t->nx), sy = (int)(k / (size_t)t->nx), x, y;
+        if (!t->spd) {
+            memcpy(img->pixels + 3 * k, samples + 3 * k, 3 * sizeof *samples);
+            writes++;
+            continue;
+        }
+        for (y = sy - 1; y <= sy; y++)
+            for (x = sx - 1; x <= sx; x++)
+                if (x >= 0 && y >= 0 && x < img->width && y < img->height &&
+                    !(x < sx && i > 0 && list[i - 1] == k - 1)) {
+                    rtpi_resolve_pixel(samples, img, x, y);
+                    writes++;
+                }
+    }
+    return writes;
 }
 
 /* Does this evaluation go on with the listed highlights: no light's terms
@@ -1175,6 +1217,10 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
     int i, nthreads = opt && opt->threads > 1 ? opt->threads : 1, any_moved = 0, full;
     int cached, mode, res, one = 0, matpath = 0, sparse, list_combine = 0, hl_used = 0;
     int hl_apply = 0, hl_after = 0, restored = -1;
+    /* the materials whose samples alone step 3 set (RESOLVE_MAX at most;
+       more: -1), so an incremental evaluation averages only their pixels */
+    int nset = 0, partial = 0;
+    uint32_t set_mats[RESOLVE_MAX];
     size_t nmat_changed = 0;
     size_t pk = 0;
     uint32_t mt = 0;
@@ -1391,6 +1437,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                     hl_used = 1;
                     hl_apply = 1;
                     st.combined_samples = n;
+                    note_set(set_mats, &nset, (uint32_t)m);
                     continue;
                 }
                 /* the listed highlights for the new shine, then step 2
@@ -1412,6 +1459,8 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                 e[i].mat = (uint32_t)m;
                 e[i].combine_too = list_combine;
             }
+            if (list_combine)
+                note_set(set_mats, &nset, (uint32_t)m);
             rtpi_parallel_rows((int)((n + 255) / 256), nthreads, ctx, redo_chunk, NULL, NULL);
             st.samples += n;
             coeffs_dirty = 1;
@@ -1421,10 +1470,12 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
         } else if (hl_apply) {
             /* the samples were set with the highlights */
             t->pk_term = 0;
+            partial = 1;
         } else if (list_combine && coeffs_dirty) {
             /* step 3 was done with step 2, for the edited samples only */
             st.combined_samples = st.samples;
             t->pk_term = 0;
+            partial = 1;
         } else if (!coeffs_dirty && one_term(t, cv, nl, &pk)) {
             /* one colour changed: P + K c per pixel */
             for (i = 0; i < nthreads; i++) {
@@ -1445,6 +1496,10 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
             pk_apply(t, ctx, nthreads, sparse, &st);
             one = 1;
             t->ev_samples_ok = 0; /* P_s were made in the samples */
+        } else if (list_combine && !coeffs_dirty) {
+            /* nothing changed since: the samples hold their colours (and
+               an incremental image its pixels) */
+            partial = 1;
         } else {
             /* step 3 for every sample */
             rtpi_parallel_rows(t->ny, nthreads, ctx, combine_row, NULL, NULL);
@@ -1474,8 +1529,21 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
         t->ev_vis_res = res;
         t->ev_valid = 1;
     }
-    if (!one && samples != img->pixels)
-        rtpi_resolve_samples(samples, t->spd, img);
+    if (!one && samples != img->pixels) {
+        if (sparse && partial && nset >= 0) {
+            /* only the samples of these materials changed */
+            unsigned long long wr = 0;
+            /* (none when nothing changed) */
+            for (i = 0; i < nset; i++)
+                wr += resolve_listed(t, samples, t->mat_samples + t->mat_start[set_mats[i]],
+                                     t->mat_start[set_mats[i] + 1] - t->mat_start[set_mats[i]],
+                                     img);
+            if (wr < st.written_pixels)
+                st.written_pixels = wr;
+        } else {
+            rtpi_resolve_samples(samples, t->spd, img);
+        }
+    }
 done:
     for (i = 0; i < nthreads; i++) {
         rtpi_free(&t->alloc, e[i].terms);
