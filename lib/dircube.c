@@ -863,11 +863,11 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
 int rtpi_lightbuf_visible(const rtpi_lightbuf *lb, const rtp_scene *s,
                           const rtpi_ray *ray)
 {
-    return rtpi_lightbuf_occluder(lb, s, ray) == RTPI_NONE;
+    return rtpi_lightbuf_occluder(lb, s, ray, RTPI_NONE) == RTPI_NONE;
 }
 
 uint32_t rtpi_lightbuf_occluder(const rtpi_lightbuf *lb, const rtp_scene *s,
-                                const rtpi_ray *ray)
+                                const rtpi_ray *ray, uint32_t skip)
 {
     size_t cell, k, end;
     double lim;
@@ -890,7 +890,7 @@ uint32_t rtpi_lightbuf_occluder(const rtpi_lightbuf *lb, const rtp_scene *s,
         const rtpi_lb_cand *cd = &lb->cand[lb->ref[k]];
         if (cd->near > lim)
             break; /* sorted: nothing farther on can reach the segment */
-        if (rtpi_intersect_prim(s, cd->prim, ray, &h))
+        if (cd->prim != skip && rtpi_intersect_prim(s, cd->prim, ray, &h))
             return cd->prim;
     }
     return RTPI_NONE;
@@ -913,7 +913,7 @@ void rtpi_lightbuf_free(rtpi_lightbuf *lb, const rtp_allocator *a)
    buffers).  The shadow ray leaves o towards the light; its direction
    o - light lies in cell c.  The hit at p on prim
      1. is in shadow when prim itself must block the segment from o to
-        the light (ib_self: exact and cheap, never for a triangle; for a
+        the light (rtpi_prim_shadows_own: exact and cheap, never for a triangle; for a
         sphere by whether o and the light lie inside it; for a cone when o
         is outside its convex solid; the inside of a cone cannot tell, and
         prim is then tested like any other);
@@ -974,7 +974,7 @@ int rtpi_itembuf_renders(const rtp_scene *s, uint32_t prim, rtpi_v3 L)
    (o radially beyond the wall, so the normal towards o is the outward
    one and faces the light) the ray runs away from the solid and cannot
    meet the wall again; from its inside it may. */
-static int ib_self(const rtp_scene *s, uint32_t prim, rtpi_v3 o, rtpi_v3 L)
+int rtpi_prim_shadows_own(const rtp_scene *s, uint32_t prim, rtpi_v3 o, rtpi_v3 L)
 {
     size_t i = prim;
     if (i < s->ntris)
@@ -1032,7 +1032,7 @@ int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
                          rtpi_v3 p, rtpi_v3 o, uint32_t prim,
                          const unsigned char *thin, uint32_t *occ)
 {
-    int f, self = ib_self(s, prim, o, ib->light), res = ib->res, i, j, di, dj, k, n = 0, m = 0;
+    int f, self = rtpi_prim_shadows_own(s, prim, o, ib->light), res = ib->res, i, j, di, dj, k, n = 0, m = 0;
     uint32_t cand[9];
     double u, v, x, y, zp, zlim, tn = -1.0;
     rtpi_ray r;

@@ -177,9 +177,15 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
    towards the light (rtpi_shadow_ray). */
 int rtpi_lightbuf_visible(const rtpi_lightbuf *lb, const rtp_scene *s,
                           const rtpi_ray *ray);
-/* The first candidate found in the ray's way, or RTPI_NONE. */
+/* The first candidate found in the ray's way, or RTPI_NONE; candidate
+   skip (RTPI_NONE: none) is not asked, the caller knowing it cannot be
+   in the way (rtpi_prim_shadows_own). */
 uint32_t rtpi_lightbuf_occluder(const rtpi_lightbuf *lb, const rtp_scene *s,
-                                const rtpi_ray *ray);
+                                const rtpi_ray *ray, uint32_t skip);
+/* Whether prim shadows a point of its own whose shadow ray starts at o
+   (rtpi_offset_origin's step off the surface, towards light L): 0 no, 1
+   yes, -1 cannot tell (see dircube.c). */
+int rtpi_prim_shadows_own(const rtp_scene *s, uint32_t prim, rtpi_v3 o, rtpi_v3 L);
 void rtpi_lightbuf_free(rtpi_lightbuf *lb, const rtp_allocator *a);
 
 /* -------------------------------------------------------- item buffer */
