@@ -964,43 +964,6 @@ int rtpi_itembuf_renders(const rtp_scene *s, uint32_t prim, rtpi_v3 L)
     return 1;
 }
 
-/* Whether prim shadows a point of its own whose shadow ray starts at o:
-   0 no, 1 yes, -1 cannot tell.  A triangle never does.  A sphere does
-   exactly when the segment from o to the light crosses it where it
-   counts: o and the light on different sides for r > 0 (a point inside
-   a glass sphere, reached by a refracted ray, with the light outside);
-   o inside and the light outside for r < 0 (the ray leaves through the
-   visible inside).  An open cone bounds a convex solid: from its outside
-   (o radially beyond the wall, so the normal towards o is the outward
-   one and faces the light) the ray runs away from the solid and cannot
-   meet the wall again; from its inside it may. */
-int rtpi_prim_shadows_own(const rtp_scene *s, uint32_t prim, rtpi_v3 o, rtpi_v3 L)
-{
-    size_t i = prim;
-    if (i < s->ntris)
-        return 0;
-    if ((i -= s->ntris) < s->nspheres) {
-        const rtpi_sphere *sp = &s->spheres[i];
-        rtpi_v3 c = v3_from_f(sp->c);
-        double r = fabs((double)sp->r);
-        int oin = v3_len(v3_sub(o, c)) < r, lin = v3_len(v3_sub(L, c)) < r;
-        return sp->r > 0.0f ? oin != lin : oin && !lin;
-    }
-    if ((i -= s->nspheres) < s->ncones) {
-        const rtpi_cone *cn = &s->cones[i];
-        rtpi_v3 b = v3_from_f(cn->base), ax = v3_sub(v3_from_f(cn->apex), b), q;
-        double H = v3_len(ax), h, hc, rb = fabs((double)cn->rb), ra = fabs((double)cn->ra);
-        if (!(H > 0.0))
-            return -1;
-        ax = v3_mul(ax, 1.0 / H);
-        q = v3_sub(o, b);
-        h = v3_dot(q, ax);
-        hc = h < 0.0 ? 0.0 : h > H ? H : h;
-        return v3_len(v3_madd(q, ax, -h)) > rb + (ra - rb) * (hc / H) ? 0 : -1;
-    }
-    return -1;
-}
-
 /* The sample at window cell (i, j) of face f, where i or j may lie a cell
    outside the window: such samples are looked up by direction, on the
    neighbouring face across a cube edge, or as nothing beyond a window's

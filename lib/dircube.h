@@ -182,10 +182,7 @@ int rtpi_lightbuf_visible(const rtpi_lightbuf *lb, const rtp_scene *s,
    in the way (rtpi_prim_shadows_own). */
 uint32_t rtpi_lightbuf_occluder(const rtpi_lightbuf *lb, const rtp_scene *s,
                                 const rtpi_ray *ray, uint32_t skip);
-/* Whether prim shadows a point of its own whose shadow ray starts at o
-   (rtpi_offset_origin's step off the surface, towards light L): 0 no, 1
-   yes, -1 cannot tell (see dircube.c). */
-int rtpi_prim_shadows_own(const rtp_scene *s, uint32_t prim, rtpi_v3 o, rtpi_v3 L);
+
 void rtpi_lightbuf_free(rtpi_lightbuf *lb, const rtp_allocator *a);
 
 /* -------------------------------------------------------- item buffer */

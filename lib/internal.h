@@ -261,6 +261,12 @@ void rtpi_surface_at_ex(const rtp_scene *s, const rtpi_ray *ray,
    from the origin, yet does not skip nearby geometry. */
 rtpi_v3 rtpi_offset_origin(rtpi_v3 p, rtpi_v3 ng, double side);
 
+/* Whether prim shadows a point of its own whose shadow ray starts at o
+   (rtpi_offset_origin's step off the surface, towards light L): 0 no, 1
+   yes, -1 cannot tell (see intersect.c).  Where 0, shadow queries leave
+   prim out. */
+int rtpi_prim_shadows_own(const rtp_scene *s, uint32_t prim, rtpi_v3 o, rtpi_v3 L);
+
 /* Closest hit of ray with one primitive in [tmin, tmax]; 1 on hit. */
 int rtpi_intersect_prim(const rtp_scene *s, uint32_t prim,
                         const rtpi_ray *ray, rtpi_hit *hit);
@@ -292,8 +298,9 @@ void rtpi_kd_get_stats(const rtpi_kdtree *kd, rtpi_kd_stats *st);
 /* Closest hit with t in [ray->tmin, ray->tmax].  @return 1 on hit. */
 int rtpi_kd_intersect(const rtpi_kdtree *kd, const rtpi_ray *ray,
                       rtpi_hit *hit);
-/* Any hit with t in [ray->tmin, ray->tmax].  @return 1 if occluded. */
-int rtpi_kd_occluded(const rtpi_kdtree *kd, const rtpi_ray *ray);
+/* Any hit with t in [ray->tmin, ray->tmax], primitive skip (RTPI_NONE:
+   none) left out.  @return 1 if occluded. */
+int rtpi_kd_occluded(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t skip);
 
 /* ------------------------------------------------------------- ray trees */
 

@@ -1148,7 +1148,7 @@ int rtpi_kd_intersect(const rtpi_kdtree *kd, const rtpi_ray *ray,
     }
 }
 
-int rtpi_kd_occluded(const rtpi_kdtree *kd, const rtpi_ray *ray)
+int rtpi_kd_occluded(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t skip)
 {
     kd_item stack[KD_DEPTH_CAP + 4];
     kd_ray kr;
@@ -1173,6 +1173,8 @@ int rtpi_kd_occluded(const rtpi_kdtree *kd, const rtpi_ray *ray)
             const uint32_t *list = cnt == 1 ? &nd->a.one : refs + nd->a.off;
             for (j = 0; j < cnt; j++) {
                 uint32_t prim = list[j];
+                if (prim == skip)
+                    continue;
                 KD_CNT(2);
                 if (prim < ntris) {
                     const float *v = tri + 9 * (size_t)prim;

@@ -102,8 +102,9 @@ rtp_status rtpi_shadow_create(const rtp_scene *s, const rtpi_kdtree *kd,
 /* The point's own primitive when it cannot be in the way of the point's
    shadow ray (a triangle, a sphere seen from outside with the light
    outside too, an open cone from outside): the light buffers then need
-   not ask it, which for scenes of spheres and meshes is about half of
-   their tests.  RTPI_NONE otherwise. */
+   not ask it (for scenes of spheres and meshes about half of their
+   tests), nor the kd-tree (trace leaves it out alike).  RTPI_NONE
+   otherwise. */
 static uint32_t own_skip(const rtpi_shadow *sh, uint32_t prim, rtpi_v3 o)
 {
     return rtpi_prim_shadows_own(sh->s, prim, o, sh->light) == 0 ? prim : RTPI_NONE;
@@ -140,7 +141,7 @@ static int sh_visible(const rtpi_shadow *sh, rtpi_v3 p, rtpi_v3 o, uint32_t prim
         break;
     }
     r = rtpi_shadow_ray(o, sh->light);
-    return !rtpi_kd_occluded(sh->kd, &r);
+    return !rtpi_kd_occluded(sh->kd, &r, own_skip(sh, prim, o));
 }
 
 int rtpi_shadow_visible(const rtpi_shadow *sh, rtpi_v3 p, rtpi_v3 o, uint32_t prim)

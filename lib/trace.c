@@ -213,7 +213,11 @@ static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
             continue;
         sr = rtpi_shadow_ray(o, lp);
         w->n.shadow_rays++;
-        if (rtpi_kd_occluded(sh->kd, &sr))
+        /* (the hit's own primitive left out where it cannot be in the way:
+           one test fewer a ray, the same answer) */
+        if (rtpi_kd_occluded(sh->kd, &sr,
+                             rtpi_prim_shadows_own(s, hit.prim, o, lp) == 0 ? hit.prim
+                                                                             : RTPI_NONE))
             continue;
         if (words)
             w->vis[(w->sample_base + (size_t)idx) * words + (i >> 5)] |= 1u << (i & 31);

@@ -122,7 +122,7 @@ static int agree(const rtp_scene *s, const rtpi_kdtree *kd, const rtpi_ray *r)
     rtpi_hit a, b;
     int ha = rtpi_kd_intersect(kd, r, &a);
     int hb = brute(s, r, &b);
-    int occ = rtpi_kd_occluded(kd, r);
+    int occ = rtpi_kd_occluded(kd, r, RTPI_NONE);
     if (ha != hb || occ != hb)
         return 0;
     if (!ha)
@@ -232,7 +232,7 @@ static void test_empty(void)
     CHECK(kd != NULL);
     if (kd) {
         CHECK(!rtpi_kd_intersect(kd, &r, &h));
-        CHECK(!rtpi_kd_occluded(kd, &r));
+        CHECK(!rtpi_kd_occluded(kd, &r, RTPI_NONE));
         rtpi_kd_get_stats(kd, &st);
         CHECK(st.prim_refs == 0);
     }
@@ -454,9 +454,9 @@ static int shoot_closed(const rtp_scene *s, const rtpi_kdtree *kd, rtpi_v3 o)
             rtpi_ray r1 = mkray(o, v3_sub(a, o));
             rtpi_ray r2 = mkray(o, v3_sub(v3_mul(v3_add(a, b), 0.5), o));
             rtpi_hit h;
-            if (!rtpi_kd_intersect(kd, &r1, &h) || !rtpi_kd_occluded(kd, &r1))
+            if (!rtpi_kd_intersect(kd, &r1, &h) || !rtpi_kd_occluded(kd, &r1, RTPI_NONE))
                 miss++;
-            if (!rtpi_kd_intersect(kd, &r2, &h) || !rtpi_kd_occluded(kd, &r2))
+            if (!rtpi_kd_intersect(kd, &r2, &h) || !rtpi_kd_occluded(kd, &r2, RTPI_NONE))
                 miss++;
             if (i % 7 == 0 && !brute(s, &r2, &h))
                 miss++;

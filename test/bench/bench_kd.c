@@ -253,7 +253,7 @@ static void rays_bunny(const rtp_scene *s, const rtpi_kdtree *kd)
             double t1 = now();
             nocc = 0;
             for (i = 0; i < m; i++)
-                nocc += (size_t)rtpi_kd_occluded(kd, &rays[i]);
+                nocc += (size_t)rtpi_kd_occluded(kd, &rays[i], RTPI_NONE);
             t1 = now() - t1;
             t = t1 < t ? t1 : t;
         }
