@@ -703,6 +703,8 @@ done:
 #define LB_ANG_SCALE 1e-13
 #define LB_ANG_MAX 1e-3
 
+#define LB_MAX_PARTS 16 /* threads of a light buffer's counting pass */
+
 /* A run of cells [cell, cell + n) listing candidate `rank`: recorded by
    the counting pass so the filling pass need not project again. */
 typedef struct lb_run {
@@ -710,9 +712,9 @@ typedef struct lb_run {
     uint32_t n, rank;
 } lb_run;
 
+/* The runs of one part of the candidates (ranks [r0, r1)). */
 typedef struct lb_fill {
-    uint32_t *count; /* per cell; then write cursors */
-    uint32_t rank;
+    uint32_t rank, r0, r1;
     uint64_t total;
     lb_run *runs;
     size_t nruns, cap;
@@ -723,10 +725,6 @@ typedef struct lb_fill {
 static void lb_count(void *user, size_t cell, int n)
 {
     lb_fill *lf = (lb_fill *)user;
-    uint32_t *p = lf->count + cell;
-    int k;
-    for (k = 0; k < n; k++)
-        p[k]++;
     lf->total += (uint64_t)n;
     if (lf->nruns == lf->cap && !lf->oom) {
         size_t cap = lf->cap ? 2 * lf->cap : 4096;
@@ -765,17 +763,43 @@ rtp_status rtpi_lightbuf_build(const rtp_scene *s, rtpi_v3 light, int res,
                                const rtp_allocator *a, rtpi_lightbuf *lb,
                                rtp_error *err)
 {
-    return rtpi_lightbuf_build_some(s, light, res, NULL, 0, a, lb, err);
+    return rtpi_lightbuf_build_some(s, light, res, NULL, 0, 1, a, lb, err);
+}
+
+/* A thread of the counting pass: its projection scratch, and the parts
+   (lb_fill) it is handed. */
+typedef struct lb_worker {
+    dc_ctx c;
+    const rtpi_lightbuf *lb;
+    lb_fill *parts;
+    double S;
+} lb_worker;
+
+static int lb_part(void *ctx, int part)
+{
+    lb_worker *w = (lb_worker *)ctx;
+    lb_fill *lf = &w->parts[part];
+    uint32_t i;
+    for (i = lf->r0; i < lf->r1 && !lf->oom; i++) {
+        lf->rank = i;
+        dc_cover(&w->c, w->lb->cand[i].prim, lb_ang(w->S, w->lb->cand[i].near), lb_count, lf);
+    }
+    return lf->oom;
 }
 
 rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
-                                    const unsigned char *sel, unsigned char want,
+                                    const unsigned char *sel, unsigned char want, int threads,
                                     const rtp_allocator *a, rtpi_lightbuf *lb,
                                     rtp_error *err)
 {
     size_t n = rtpi_scene_nprims(s), ncells, i, nc = 0;
-    dc_ctx c;
-    lb_fill lf;
+    lb_worker wk[LB_MAX_PARTS];
+    lb_fill parts[LB_MAX_PARTS];
+    void *ctx[LB_MAX_PARTS];
+    rtpi_locked_alloc la;
+    const rtp_allocator *ta = a;
+    uint64_t total = 0;
+    int np, k, nw = 0, failed = 0;
     double S;
     memset(lb, 0, sizeof *lb);
     if (res <= 0)
@@ -795,14 +819,12 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
        light only if near <= dist + delta + lambda (see above); 1e-12 S
        bounds delta + lambda with room to spare. */
     lb->slack = 1e-12 * S;
-    memset(&lf, 0, sizeof lf);
     lb->cand = (rtpi_lb_cand *)rtpi_malloc_array(a, n ? n : 1, sizeof *lb->cand);
     lb->off = (uint32_t *)rtpi_calloc_array(a, ncells + 1, sizeof *lb->off);
-    if (!lb->cand || !lb->off || dc_ctx_init(&c, s, light, res, a) != RTP_OK) {
+    if (!lb->cand || !lb->off) {
         rtpi_lightbuf_free(lb, a);
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory for the light buffer");
     }
-    dc_ctx_window(&c, &lb->w);
     for (i = 0; i < n; i++) {
         if (!dc_hittable(s, (uint32_t)i))
             continue; /* never hit by any ray: cannot shadow */
@@ -815,45 +837,83 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
     lb->ncand = nc;
     /* Filling the cells in ascending near order sorts every list. */
     qsort(lb->cand, nc, sizeof *lb->cand, lb_cmp);
-    lf.count = lb->off;
-    lf.a = a;
-    for (i = 0; i < nc; i++) {
-        lf.rank = (uint32_t)i;
-        dc_cover(&c, lb->cand[i].prim, lb_ang(S, lb->cand[i].near), lb_count, &lf);
+    /* The counting pass: every candidate projected, its runs of cells
+       recorded, in parts of consecutive ranks on up to `threads` threads
+       (the parts' runs, taken in order, are the one-thread pass's runs:
+       the same buffer for any thread count). */
+    np = threads < 1 ? 1 : threads > LB_MAX_PARTS ? LB_MAX_PARTS : threads;
+    if ((size_t)np > nc / 256 + 1)
+        np = (int)(nc / 256 + 1); /* small scenes: not worth a thread */
+    memset(parts, 0, sizeof parts);
+    if (np > 1 && rtpi_locked_alloc_init(&la, a) == 0)
+        ta = &la.a;
+    else
+        np = 1;
+    for (k = 0; k < np; k++) {
+        parts[k].r0 = (uint32_t)(nc * (size_t)k / (size_t)np);
+        parts[k].r1 = (uint32_t)(nc * (size_t)(k + 1) / (size_t)np);
+        parts[k].a = ta;
     }
-    dc_ctx_free(&c, a);
-    if (lf.total > 0xffffffffu) {
-        rtpi_free(a, lf.runs);
+    for (nw = 0; nw < np; nw++) {
+        if (dc_ctx_init(&wk[nw].c, s, light, res, a) != RTP_OK)
+            break;
+        dc_ctx_window(&wk[nw].c, &lb->w);
+        wk[nw].lb = lb;
+        wk[nw].parts = parts;
+        wk[nw].S = S;
+        ctx[nw] = &wk[nw];
+    }
+    failed = nw < np || rtpi_parallel_rows(np, np, ctx, lb_part, NULL, NULL) != 0;
+    for (k = 0; k < nw; k++)
+        dc_ctx_free(&wk[k].c, a);
+    if (ta != a)
+        rtpi_locked_alloc_destroy(&la);
+    for (k = 0; k < np; k++)
+        total += parts[k].total;
+    if (!failed && total > 0xffffffffu) {
+        for (k = 0; k < np; k++)
+            rtpi_free(a, parts[k].runs);
         rtpi_lightbuf_free(lb, a);
         return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
                           "light buffer would hold more than 2^32 entries; lower the resolution");
     }
-    lb->nrefs = (size_t)lf.total;
-    lb->ref = lf.oom ? NULL
+    lb->nrefs = (size_t)total;
+    lb->ref = failed ? NULL
                      : (uint32_t *)rtpi_malloc_array(a, lb->nrefs ? lb->nrefs : 1, sizeof *lb->ref);
     if (!lb->ref) {
-        rtpi_free(a, lf.runs);
+        for (k = 0; k < np; k++)
+            rtpi_free(a, parts[k].runs);
         rtpi_lightbuf_free(lb, a);
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory for the light buffer");
     }
+    /* every cell's count from the runs */
+    for (k = 0; k < np; k++)
+        for (i = 0; i < parts[k].nruns; i++) {
+            const lb_run *r = &parts[k].runs[i];
+            uint32_t *p = lb->off + r->cell, j;
+            for (j = 0; j < r->n; j++)
+                p[j]++;
+        }
     {
         /* counts -> starts (exclusive prefix sum), used as write cursors */
         uint32_t sum = 0;
         for (i = 0; i < ncells; i++) {
-            uint32_t k = lb->off[i];
+            uint32_t c = lb->off[i];
             lb->off[i] = sum;
-            sum += k;
+            sum += c;
         }
         lb->off[ncells] = sum;
     }
     /* The runs in ascending rank: each list fills in ascending near. */
-    for (i = 0; i < lf.nruns; i++) {
-        const lb_run *r = &lf.runs[i];
-        uint32_t *p = lb->off + r->cell, k;
-        for (k = 0; k < r->n; k++)
-            lb->ref[p[k]++] = r->rank;
+    for (k = 0; k < np; k++) {
+        for (i = 0; i < parts[k].nruns; i++) {
+            const lb_run *r = &parts[k].runs[i];
+            uint32_t *p = lb->off + r->cell, j;
+            for (j = 0; j < r->n; j++)
+                lb->ref[p[j]++] = r->rank;
+        }
+        rtpi_free(a, parts[k].runs);
     }
-    rtpi_free(a, lf.runs);
     /* Each cursor now stands at its cell's end = the next cell's start. */
     memmove(lb->off + 1, lb->off, ncells * sizeof *lb->off);
     lb->off[0] = 0;

@@ -564,6 +564,16 @@ static inline void rtpi_mutex_unlock(rtpi_mutex *m) { (void)m; }
 static inline void rtpi_mutex_destroy(rtpi_mutex *m) { (void)m; }
 #endif
 
+/* An allocator for threads over one that need not be thread-safe: every
+   call through a (the one to hand out) takes one lock. */
+typedef struct rtpi_locked_alloc {
+    rtp_allocator a, inner;
+    rtpi_mutex m;
+} rtpi_locked_alloc;
+/* @return 0, or -1 when no lock could be made (then use inner alone). */
+int rtpi_locked_alloc_init(rtpi_locked_alloc *l, const rtp_allocator *inner);
+void rtpi_locked_alloc_destroy(rtpi_locked_alloc *l);
+
 /* Work on one row with a thread's context; nonzero stops the whole run. */
 typedef int (*rtpi_row_fn)(void *ctx, int row);
 

@@ -689,43 +689,6 @@ static int run_task(void *ctx, int row)
     return build_node(&t->b, t->lo, t->hi, 0, t->n, t->depth);
 }
 
-#ifdef RTP_HAVE_THREADS
-/* The caller's allocator need not be thread-safe: while tasks run on
-   several threads every call goes through one lock. */
-typedef struct kd_locked {
-    rtp_allocator a;
-    pthread_mutex_t m;
-} kd_locked;
-
-static void *lk_malloc(void *u, size_t n)
-{
-    kd_locked *l = (kd_locked *)u;
-    void *p;
-    pthread_mutex_lock(&l->m);
-    p = l->a.malloc_fn(l->a.user, n);
-    pthread_mutex_unlock(&l->m);
-    return p;
-}
-
-static void *lk_realloc(void *u, void *q, size_t n)
-{
-    kd_locked *l = (kd_locked *)u;
-    void *p;
-    pthread_mutex_lock(&l->m);
-    p = l->a.realloc_fn(l->a.user, q, n);
-    pthread_mutex_unlock(&l->m);
-    return p;
-}
-
-static void lk_free(void *u, void *q)
-{
-    kd_locked *l = (kd_locked *)u;
-    pthread_mutex_lock(&l->m);
-    l->a.free_fn(l->a.user, q);
-    pthread_mutex_unlock(&l->m);
-}
-#endif
-
 /* Builds every task on up to nthreads threads.  @return 0 or -1. */
 static int run_tasks(kd_build *top, int nthreads)
 {
@@ -733,10 +696,7 @@ static int run_tasks(kd_build *top, int nthreads)
     void *ctx[KD_MAX_THREADS];
     size_t i, j, n = top->ntasks;
     int ret, k;
-#ifdef RTP_HAVE_THREADS
-    kd_locked lk;
-    rtp_allocator la;
-#endif
+    rtpi_locked_alloc lk;
     if (n == 0)
         return 0;
     run.tasks = top->tasks;
@@ -755,28 +715,18 @@ static int run_tasks(kd_build *top, int nthreads)
         nthreads = (int)n;
     for (k = 0; k < KD_MAX_THREADS; k++)
         ctx[k] = &run;
-#ifdef RTP_HAVE_THREADS
-    if (nthreads > 1) {
-        lk.a = *top->a;
-        la.malloc_fn = lk_malloc;
-        la.realloc_fn = lk_realloc;
-        la.free_fn = lk_free;
-        la.user = &lk;
-        if (pthread_mutex_init(&lk.m, NULL) != 0) {
-            nthreads = 1;
-        } else {
-            for (i = 0; i < n; i++)
-                top->tasks[i].b.a = &la;
-            ret = rtpi_parallel_rows((int)n, nthreads, ctx, run_task, NULL,
-                                     NULL);
-            for (i = 0; i < n; i++)
-                top->tasks[i].b.a = top->a;
-            pthread_mutex_destroy(&lk.m);
-            rtpi_free(top->a, run.order);
-            return ret ? -1 : 0;
-        }
+    /* the caller's allocator need not be thread-safe: while tasks run on
+       several threads every call goes through one lock */
+    if (nthreads > 1 && rtpi_locked_alloc_init(&lk, top->a) == 0) {
+        for (i = 0; i < n; i++)
+            top->tasks[i].b.a = &lk.a;
+        ret = rtpi_parallel_rows((int)n, nthreads, ctx, run_task, NULL, NULL);
+        for (i = 0; i < n; i++)
+            top->tasks[i].b.a = top->a;
+        rtpi_locked_alloc_destroy(&lk);
+        rtpi_free(top->a, run.order);
+        return ret ? -1 : 0;
     }
-#endif
     ret = rtpi_parallel_rows((int)n, 1, ctx, run_task, NULL, NULL);
     rtpi_free(top->a, run.order);
     return ret ? -1 : 0;

@@ -35,7 +35,8 @@ struct rtpi_shadow {
 
 /* The item buffer over the wide primitives and its companions (see
    above). */
-static rtp_status sh_itembuf(rtpi_shadow *sh, int res, const rtp_allocator *a, rtp_error *err)
+static rtp_status sh_itembuf(rtpi_shadow *sh, int res, int threads, const rtp_allocator *a,
+                             rtp_error *err)
 {
     size_t n = rtpi_scene_nprims(sh->s);
     rtp_status st;
@@ -49,11 +50,11 @@ static rtp_status sh_itembuf(rtpi_shadow *sh, int res, const rtp_allocator *a, r
                                        err);
     if (st == RTP_OK)
         st = rtpi_lightbuf_build_some(sh->s, sh->light, (sh->ib.res + 1) / SH_THIN_DIV, sh->thin,
-                                      1, a, &sh->lb, err);
+                                      1, threads, a, &sh->lb, err);
     if (st == RTP_OK)
         st = rtpi_lightbuf_build_some(sh->s, sh->light,
                                       sh->ib.res < SH_WIDE_RES ? sh->ib.res : SH_WIDE_RES,
-                                      sh->thin, 0, a, &sh->wide, err);
+                                      sh->thin, 0, threads, a, &sh->wide, err);
     return st;
 }
 
@@ -61,6 +62,13 @@ rtp_status rtpi_shadow_create(const rtp_scene *s, const rtpi_kdtree *kd,
                               rtpi_v3 light, rtpi_shadow_mode mode, int res,
                               const rtp_allocator *a, rtpi_shadow **out,
                               rtp_error *err)
+{
+    return rtpi_shadow_create_mt(s, kd, light, mode, res, 1, a, out, err);
+}
+
+rtp_status rtpi_shadow_create_mt(const rtp_scene *s, const rtpi_kdtree *kd, rtpi_v3 light,
+                                 rtpi_shadow_mode mode, int res, int threads,
+                                 const rtp_allocator *a, rtpi_shadow **out, rtp_error *err)
 {
     rtpi_shadow *sh;
     rtp_status st = RTP_OK;
@@ -82,11 +90,11 @@ rtp_status rtpi_shadow_create(const rtp_scene *s, const rtpi_kdtree *kd,
     sh->light = light;
     switch (mode) {
     case RTPI_SHADOW_LIGHTBUF:
-        st = rtpi_lightbuf_build(s, light, res, a, &sh->lb, err);
+        st = rtpi_lightbuf_build_some(s, light, res, NULL, 0, threads, a, &sh->lb, err);
         break;
     case RTPI_SHADOW_ITEMBUF:
     case RTPI_SHADOW_OSMESA:
-        st = sh_itembuf(sh, res, a, err);
+        st = sh_itembuf(sh, res, threads, a, err);
         break;
     case RTPI_SHADOW_EXACT:
         break;

@@ -53,6 +53,11 @@ rtp_status rtpi_shadow_create(const rtp_scene *s, const rtpi_kdtree *kd,
                               rtpi_v3 light, rtpi_shadow_mode mode, int res,
                               const rtp_allocator *a, rtpi_shadow **out,
                               rtp_error *err);
+/* The same, building the direction cube's light buffers on up to
+   `threads` threads (the same buffers for any number). */
+rtp_status rtpi_shadow_create_mt(const rtp_scene *s, const rtpi_kdtree *kd, rtpi_v3 light,
+                                 rtpi_shadow_mode mode, int res, int threads,
+                                 const rtp_allocator *a, rtpi_shadow **out, rtp_error *err);
 
 /* Does the recorded hit at p (a float position, as the tree keeps it) on
    primitive prim, whose shadow ray trace would start at o (p moved off the

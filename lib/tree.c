@@ -371,8 +371,9 @@ static rtp_status update_visibility(rtp_tree *t, const rtp_eval_options *opt,
             t->cube_alloc.realloc_fn = blk_realloc;
             t->cube_alloc.free_fn = blk_free;
             t->cube_alloc.user = t;
-            rs = rtpi_shadow_create(s, t->kd, v3(lp[0], lp[1], lp[2]), (rtpi_shadow_mode)mode,
-                                    res, &t->cube_alloc, &sh, err);
+            rs = rtpi_shadow_create_mt(s, t->kd, v3(lp[0], lp[1], lp[2]),
+                                       (rtpi_shadow_mode)mode, res, threads, &t->cube_alloc, &sh,
+                                       err);
             if (rs != RTP_OK)
                 return rs;
             for (k = 0; k < threads; k++) {

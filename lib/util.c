@@ -281,3 +281,48 @@ rtp_status rtpi_read_file(const rtp_allocator *a, const char *path,
     *size = len;
     return RTP_OK;
 }
+
+/* ------------------------------------------------- a locked allocator */
+
+static void *lk_malloc(void *u, size_t n)
+{
+    rtpi_locked_alloc *l = (rtpi_locked_alloc *)u;
+    void *p;
+    rtpi_mutex_lock(&l->m);
+    p = rtpi_malloc(&l->inner, n);
+    rtpi_mutex_unlock(&l->m);
+    return p;
+}
+
+static void *lk_realloc(void *u, void *q, size_t n)
+{
+    rtpi_locked_alloc *l = (rtpi_locked_alloc *)u;
+    void *p;
+    rtpi_mutex_lock(&l->m);
+    p = rtpi_realloc(&l->inner, q, n);
+    rtpi_mutex_unlock(&l->m);
+    return p;
+}
+
+static void lk_free(void *u, void *q)
+{
+    rtpi_locked_alloc *l = (rtpi_locked_alloc *)u;
+    rtpi_mutex_lock(&l->m);
+    rtpi_free(&l->inner, q);
+    rtpi_mutex_unlock(&l->m);
+}
+
+int rtpi_locked_alloc_init(rtpi_locked_alloc *l, const rtp_allocator *inner)
+{
+    l->inner = *inner;
+    l->a.malloc_fn = lk_malloc;
+    l->a.realloc_fn = lk_realloc;
+    l->a.free_fn = lk_free;
+    l->a.user = l;
+    return rtpi_mutex_init(&l->m) == 0 ? 0 : -1;
+}
+
+void rtpi_locked_alloc_destroy(rtpi_locked_alloc *l)
+{
+    rtpi_mutex_destroy(&l->m);
+}

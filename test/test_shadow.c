@@ -334,6 +334,60 @@ static void test_spd_scene(void)
     }
 }
 
+/* A light buffer built on several threads is the one-thread buffer, cell
+   for cell and entry for entry (the project's scene, and a mesh large
+   enough to be split over threads when ../shared is there). */
+static void lb_same(const rtp_scene *s, rtpi_v3 lp, int res, const char *what)
+{
+    rtpi_lightbuf a, b;
+    rtp_allocator al;
+    size_t k;
+    int threads;
+    rtpi_allocator_init(&al, NULL);
+    if (rtpi_lightbuf_build_some(s, lp, res, NULL, 0, 1, &al, &a, NULL) != RTP_OK) {
+        CHECK_MSG(0, "%s: build failed", what);
+        return;
+    }
+    for (threads = 2; threads <= 5; threads += 3) {
+        int same;
+        if (rtpi_lightbuf_build_some(s, lp, res, NULL, 0, threads, &al, &b, NULL) != RTP_OK) {
+            CHECK_MSG(0, "%s: build on %d threads failed", what, threads);
+            continue;
+        }
+        same = a.w.ncells == b.w.ncells && a.nrefs == b.nrefs && a.ncand == b.ncand &&
+               memcmp(a.off, b.off, (a.w.ncells + 1) * sizeof *a.off) == 0 &&
+               memcmp(a.ref, b.ref, a.nrefs * sizeof *a.ref) == 0;
+        for (k = 0; same && k < a.ncand; k++) /* (field by field: padding) */
+            same = a.cand[k].prim == b.cand[k].prim && a.cand[k].near == b.cand[k].near;
+        CHECK_MSG(same, "%s: the buffer on %d threads differs from one thread's", what, threads);
+        rtpi_lightbuf_free(&b, &al);
+    }
+    rtpi_lightbuf_free(&a, &al);
+}
+
+static void test_lightbuf_threads(void)
+{
+    const char *dir = check_shared_scenes();
+    rtp_scene *s = NULL;
+    char path[512];
+    if (rtp_scene_load_memory(scene_text, sizeof scene_text - 1, "t.nff", "nff", NULL, &s,
+                              NULL) == RTP_OK) {
+        lb_same(s, v3(2, -2, 6), 128, "test scene");
+        rtp_scene_destroy(s);
+        s = NULL;
+    }
+    if (!dir)
+        SKIP("../shared/scenes absent (the test scene alone was built)");
+    snprintf(path, sizeof path, "%s/spd/teapot_s3.nff", dir);
+    if (rtp_scene_load(path, NULL, &s, NULL) == RTP_OK) {
+        lb_same(s, v3(s->lights[0].pos[0] + 0.5, s->lights[0].pos[1], s->lights[0].pos[2]), 256,
+                "teapot_s3");
+        rtp_scene_destroy(s);
+    } else {
+        CHECK_MSG(0, "cannot load %s", path);
+    }
+}
+
 /* Edges, corners and zero components map to a cell on a face that
    touches the direction; the cell's face coordinates hold it. */
 static void test_cell_mapping(void)
@@ -541,6 +595,7 @@ int main(void)
     RUN(test_alloc_failures);
     RUN(test_lightbuf_equals_exact);
     RUN(test_lightbuf_far_from_origin);
+    RUN(test_lightbuf_threads);
     RUN(test_spd_scene);
     RUN(test_osmesa);
     return check_report();
