@@ -489,9 +489,10 @@ static void one_term_run(int spd)
         {"mat.red.shine", "200"},        {"mat.red.kd", "0.4"},           {"mat.red.shine", "9"},
         {"mat.red.shine", "30"},         {"light.0.color", "0.7,0.7,0.2"}, {"mat.red.shine", "2"},
     };
-    /* edits whose planes are already built: P + K x, no sample summed */
-    static const int planes[] = {0, 0, 1, 1, 1, 0, 1, 0, 1, 0, 1, 0, 1, 1, 0, 0,
-                                 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0};
+    /* edits whose planes are already built: P + K x, no sample summed
+       (the ones not given are 0) */
+    static const int planes[sizeof seq / sizeof *seq] = {0, 0, 1, 1, 1, 0, 1, 0, 1, 0, 1,
+                                                          0, 1, 1, 0, 0, 1, 0, 0, 0, 0, 1};
     rtp_scene *s = load("scenes/spheres.nff");
     rtp_tree *t = NULL;
     rtp_trace_options o;
