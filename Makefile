@@ -49,7 +49,7 @@ TEST_BIN = $(TEST_SRC:%.c=$(BUILD)/%)
 BENCH_SRC = $(sort $(wildcard test/bench/*.c))
 BENCH_BIN = $(BENCH_SRC:test/bench/%.c=$(BUILD)/bench/%)
 
-.PHONY: all test bench install uninstall clean asan ubsan demo
+.PHONY: all test bench install uninstall clean asan ubsan demo FORCE
 all: $(BUILD)/librtp.a $(BUILD)/librtp.so rtp
 
 $(BUILD)/%.o: %.c include/rtp.h $(wildcard lib/*.h)
@@ -69,7 +69,15 @@ $(BUILD)/librtp.so: $(LIB_PIC)
 	@$(if $(Q),echo "  LD      $@")
 	$(Q)$(CC) -shared -Wl,-soname,librtp.so.0 $(LDFLAGS) $^ -o $@ $(LIBS)
 
-rtp: cli/rtp.c include/rtp.h $(BUILD)/librtp.a
+# ./rtp is one file for every BUILD (make asan links it with ASan, for the
+# CLI tests): .rtp-flavour holds how it was last linked, so that the next
+# plain `make` (or `make bench`) links it again rather than keep another's.
+RTP_FLAVOUR = $(BUILD) $(CC) $(CFLAGS) $(LDFLAGS) $(DEFS)
+.rtp-flavour: FORCE
+	@echo '$(RTP_FLAVOUR)' | cmp -s - $@ 2>/dev/null || echo '$(RTP_FLAVOUR)' > $@
+FORCE:
+
+rtp: cli/rtp.c include/rtp.h $(BUILD)/librtp.a .rtp-flavour
 	@$(if $(Q),echo "  CCLD    $@")
 	$(Q)$(CC) $(ALL_CFLAGS) $(LDFLAGS) cli/rtp.c $(BUILD)/librtp.a -o $@ $(LIBS)
 
@@ -114,7 +122,7 @@ uninstall:
 	      $(DESTDIR)$(PREFIX)/bin/rtp
 
 clean:
-	rm -rf build build-asan build-ubsan build-fuzz rtp demo
+	rm -rf build build-asan build-ubsan build-fuzz rtp .rtp-flavour demo
 
 # ------------------------------------------------------------------ fuzzing
 # Every test/fuzz/fuzz_*.c is a libFuzzer target that, built without libFuzzer,
