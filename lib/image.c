@@ -392,6 +392,13 @@ static int png_write_body(png_wctx *c)
                  (png_uint_32)c->img->height, 8, PNG_COLOR_TYPE_RGB,
                  PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_DEFAULT,
                  PNG_FILTER_TYPE_DEFAULT);
+    /* zlib level 3 with the Sub and Up filters only: a rendered 512x512
+       image writes in ~10 ms instead of libpng's default 24-39 ms (level
+       6, all five filters tried per row) for files 2-10% larger (the SPD
+       scenes balls, teapot, gears, mount); a --stream of PNG frames is
+       bound by this, not by the edits. */
+    png_set_compression_level(c->png, 3);
+    png_set_filter(c->png, PNG_FILTER_TYPE_BASE, PNG_FILTER_SUB | PNG_FILTER_UP);
     png_write_info(c->png, c->info);
     n = row_floats(c->img);
     for (y = 0; y < c->img->height; y++) {
