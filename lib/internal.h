@@ -499,6 +499,8 @@ struct rtp_tree {
                               then the term as the coefficients hold it
                               (hl_restore puts it back) */
     size_t hl_n, hl_cap;
+    double hl_shine;       /* the shine the listed terms and the samples
+                              were last set for (NaN: not known) */
     size_t *hl_off;        /* per sample of the material: its first one */
     float *hl_p;           /* per sample of the material: colour less them */
     uint32_t *pk_nz;       /* the pixels whose K is not 0, pk_nnz of them:

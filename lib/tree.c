@@ -580,6 +580,7 @@ static int hl_build(rtp_tree *t, const rtpi_shade_ctx *shade, const uint32_t *vi
     t->hl_off[nlist] = t->hl_n;
     rtpi_free(al, w);
     t->hl_mat = (int)m + 1;
+    t->hl_shine = NAN;
     return 0;
 }
 
@@ -1428,6 +1429,12 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                     e[i].list = t->mat_samples + t->mat_start[m];
                     e[i].nlist = n;
                 }
+                if (list_combine && t->hl_shine == (double)s->mats[m].shine) {
+                    /* the samples hold this shine already */
+                    hl_used = 1;
+                    hl_apply = 1;
+                    continue;
+                }
                 if (list_combine) {
                     /* every other sample's colour holds: the material's
                        samples from their highlights alone */
@@ -1437,6 +1444,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                                        ctx, hl_apply_chunk, NULL, NULL);
                     hl_used = 1;
                     hl_apply = 1;
+                    t->hl_shine = s->mats[m].shine;
                     st.combined_samples = n;
                     note_set(set_mats, &nset, (uint32_t)m);
                     continue;

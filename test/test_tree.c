@@ -487,7 +487,8 @@ static void one_term_run(int spd)
            on: the chain's terms must not outlive it */
         {"mat.red.shine", "7"},          {"mat.red.shine", "0.05"},       {"mat.red.shine", "40"},
         {"mat.red.shine", "200"},        {"mat.red.kd", "0.4"},           {"mat.red.shine", "9"},
-        {"mat.red.shine", "30"},         {"light.0.color", "0.7,0.7,0.2"}, {"mat.red.shine", "2"},
+        {"mat.red.shine", "30"},         {"", ""},                        {"light.0.color", "0.7,0.7,0.2"},
+        {"mat.red.shine", "2"},
     };
     /* edits whose planes are already built: P + K x, no sample summed
        (the ones not given are 0) */
@@ -539,11 +540,23 @@ static void one_term_run(int spd)
             /* after a full combine, a material's other edits recombine
                only its own samples */
             if (i > 0 && strncmp(seq[i - 1][0], "mat.red.s", 9) == 0 &&
-                strncmp(seq[i][0], "mat.", 4) == 0)
+                strncmp(seq[i][0], "mat.", 4) == 0) {
                 CHECK_MSG(es.combined_samples > 0 &&
                               es.combined_samples < (unsigned long long)re->width * re->height,
                           "spd %d, %s: summed %llu samples", spd, seq[i][0],
                           es.combined_samples);
+                /* and only the pixels of those samples are written (SPD:
+                   averaged) into the kept image */
+                CHECK_MSG(es.written_pixels > 0 &&
+                              es.written_pixels < (unsigned long long)re->width * re->height,
+                          "spd %d, %s: wrote %llu pixels", spd, seq[i][0], es.written_pixels);
+            }
+            /* nothing changed after a material's samples were set: nothing
+               to sum or write */
+            if (i > 0 && !seq[i][0][0] && strncmp(seq[i - 1][0], "mat.", 4) == 0)
+                CHECK_MSG(es.combined_samples == 0 && es.written_pixels == 0,
+                          "spd %d, no edit after %s: summed %llu, wrote %llu", spd,
+                          seq[i - 1][0], es.combined_samples, es.written_pixels);
             if (planes[i] && strcmp(seq[i][0], "background") == 0)
                 CHECK_MSG(es.written_pixels > 0 &&
                               es.written_pixels < (unsigned long long)re->width * re->height,
