@@ -503,6 +503,10 @@ struct rtp_tree {
                               were last set for (NaN: not known) */
     size_t *hl_off;        /* per sample of the material: its first one */
     float *hl_p;           /* per sample of the material: colour less them */
+    float *pk_c;           /* pk of those pixels alone, in their order (an
+                              edit then reads them in one run), pk_c_cap
+                              floats; NULL: read pk itself */
+    size_t pk_c_cap;
     uint32_t *pk_nz;       /* the pixels whose K is not 0, pk_nnz of them:
                               the only ones an edit of the term changes */
     size_t pk_nnz;

@@ -33,6 +33,7 @@ void rtp_tree_destroy(rtp_tree *t)
     rtpi_free(&a, t->pk);
     rtpi_free(&a, t->pk_q);
     rtpi_free(&a, t->pk_nz);
+    rtpi_free(&a, t->pk_c);
     rtpi_free(&a, t->hl_idx);
     rtpi_free(&a, t->hl_lrv);
     rtpi_free(&a, t->hl_w);
@@ -810,8 +811,12 @@ static int pk_apply_chunk(void *ctx, int chunk)
     const double *c = e->x;
     if (end > t->pk_nnz)
         end = t->pk_nnz;
-    for (; i < end; i++)
-        pk_pixel(t->pk + 6 * (size_t)t->pk_nz[i], c, e->pixels + 3 * (size_t)t->pk_nz[i]);
+    if (t->pk_c)
+        for (; i < end; i++)
+            pk_pixel(t->pk_c + 6 * i, c, e->pixels + 3 * (size_t)t->pk_nz[i]);
+    else
+        for (; i < end; i++)
+            pk_pixel(t->pk + 6 * (size_t)t->pk_nz[i], c, e->pixels + 3 * (size_t)t->pk_nz[i]);
     return 0;
 }
 
@@ -819,12 +824,26 @@ static int pk_apply_chunk(void *ctx, int chunk)
 static void pk_list_nonzero(rtp_tree *t)
 {
     size_t np = (size_t)t->width * t->height, p;
+    size_t i;
     t->pk_nnz = 0;
     for (p = 0; p < np; p++) {
         const float *k = t->pk + 6 * p + 3;
         if (k[0] != 0.0f || k[1] != 0.0f || k[2] != 0.0f)
             t->pk_nz[t->pk_nnz++] = (uint32_t)p;
     }
+    /* their planes side by side: a further edit of the term reads 24
+       bytes a pixel in one run instead of gathering them from the whole
+       image's planes (tetra at 1024^2: 0.59 -> 0.40 ms an edit); without
+       the memory, pk itself serves */
+    if (rtpi_grow(&t->alloc, (void **)&t->pk_c, &t->pk_c_cap, 6 * t->pk_nnz + 6,
+                  sizeof *t->pk_c)) {
+        rtpi_free(&t->alloc, t->pk_c);
+        t->pk_c = NULL;
+        t->pk_c_cap = 0;
+        return;
+    }
+    for (i = 0; i < t->pk_nnz; i++)
+        memcpy(t->pk_c + 6 * i, t->pk + 6 * (size_t)t->pk_nz[i], 6 * sizeof *t->pk_c);
 }
 
 /* For each material, the samples whose trees contain it (built once). */
@@ -998,6 +1017,7 @@ static void drop_caches(rtp_tree *t)
     rtpi_free(&t->alloc, t->pk);
     rtpi_free(&t->alloc, t->pk_q);
     rtpi_free(&t->alloc, t->pk_nz);
+    rtpi_free(&t->alloc, t->pk_c);
     rtpi_free(&t->alloc, t->hl_idx);
     rtpi_free(&t->alloc, t->hl_lrv);
     rtpi_free(&t->alloc, t->hl_w);
@@ -1011,6 +1031,8 @@ static void drop_caches(rtp_tree *t)
     t->hl_n = t->hl_cap = 0;
     t->hl_mat = 0;
     t->pk_nz = NULL;
+    t->pk_c = NULL;
+    t->pk_c_cap = 0;
     t->ev_cl = NULL;
     t->pk = NULL;
     t->pk_q = NULL;
