@@ -165,6 +165,18 @@ static int parse_region(const char *v, int *r)
 
 /* Options every subcommand takes: -q, -v, -j N, --stats FILE.  Returns 1
    when argv[*i] was one (consumed), 0 when not, -1 on a bad value. */
+/* -j's default: the processors online (images are the same for any
+   count, so this only makes them sooner), 1 where that cannot be told. */
+static int default_threads(void)
+{
+#ifdef _SC_NPROCESSORS_ONLN
+    long n = sysconf(_SC_NPROCESSORS_ONLN);
+    return n < 1 ? 1 : n > 256 ? 256 : (int)n;
+#else
+    return 1;
+#endif
+}
+
 static int common_option(int argc, char **argv, int *i, int *threads, const char **stats)
 {
     const char *a = argv[*i], *v;
@@ -349,7 +361,7 @@ static const char trace_help[] =
     "  --depth N            maximum ray-tree depth, eye ray = 1 (default 5)\n"
     "  --memory-limit MIB   refuse images whose image and trees need more (16384)\n"
     "  --min-weight W       do not spawn rays weighing less than W (default 0)\n"
-    "  -j, --threads N      threads (default 1)\n"
+    "  -j, --threads N      threads (default: the processors online)\n"
     "  --stats FILE         write statistics as one JSON object ('-' = stdout)\n"
     "  -q, --quiet          no messages but errors;  -v, --verbose  more\n"
     "  -h, --help           this help\n";
@@ -390,6 +402,7 @@ static int cmd_trace(int argc, char **argv)
     double t0, t_load, t_trace, t_write;
 
     memset(&opt, 0, sizeof opt);
+    opt.threads = default_threads();
     memset(&err, 0, sizeof err);
     sets = (const char **)calloc((size_t)argc + 1, sizeof *sets);
     if (!sets) {
@@ -744,7 +757,7 @@ static const char reeval_help[] =
     "  --region X0,Y0,X1,Y1 write only these pixels of the frame\n"
     "  --reference          also trace the edited scene in full and report both\n"
     "                       times and the error of the re-evaluation\n"
-    "  -j, --threads N      threads (default 1)\n"
+    "  -j, --threads N      threads (default: the processors online)\n"
     "  --stats FILE         write statistics as one JSON object ('-' = stdout)\n"
     "  -q, --quiet / -v, --verbose / -h, --help\n"
     "Edits that change where rays go (a new ior, ks or kt raised from 0) trace\n"
@@ -914,7 +927,7 @@ static int cmd_reeval(int argc, char **argv)
     const char **sets, **add_lights;
     rtp_image *img = NULL;
     int region[4] = {0, 0, 0, 0};
-    int i, nsets = 0, nadd = 0, rc = 1, stream = 0, reference = 0, threads = 1, c;
+    int i, nsets = 0, nadd = 0, rc = 1, stream = 0, reference = 0, threads = default_threads(), c;
     rtp_tree *tree = NULL;
     rtp_error err;
     rtp_eval_options eo;
@@ -1221,13 +1234,14 @@ static const char merge_help[] =
     "  -o, --output TREE    the joined tree file ('-' = stdout)\n"
     "  -i, --image FILE     the joined image (.png .ppm .pfm; '-' = PFM on stdout)\n"
     "  --size WxH           the frame's size (image mode)\n"
-    "  -j N                 threads for evaluating the joined tree\n"
+    "  -j N                 threads for evaluating the joined tree (default: the\n"
+    "                       processors online)\n"
     "Regions must cover the frame without overlapping.\n";
 
 static int cmd_merge(int argc, char **argv)
 {
     const char *out_tree = NULL, *out_image = NULL;
-    int i, n = 0, rc = 1, fw = 0, fh = 0, threads = 1, images = 0, c;
+    int i, n = 0, rc = 1, fw = 0, fh = 0, threads = default_threads(), images = 0, c;
     const char **in = (const char **)calloc((size_t)argc + 1, sizeof *in);
     rtp_tree **parts = NULL, *joined = NULL;
     rtp_image *img = NULL;
