@@ -490,15 +490,20 @@ static int eval_row(void *ctx, int y)
    terms), in the order rtpi_combine sums. */
 static void rest_of(const double *cv, size_t nc, size_t j, const float *coeffs, double v[3])
 {
+    /* each channel summed over the terms in ascending order, as before,
+       the three side by side (a third of the loop's steps) */
+    double a0 = 0.0, a1 = 0.0, a2 = 0.0;
     size_t i;
-    int c;
-    for (c = 0; c < 3; c++) {
-        double a = 0.0;
-        for (i = 0; i < nc; i += 3)
-            if (i != 3 * j)
-                a += coeffs[i + c] * cv[i + c];
-        v[c] = a;
+    for (i = 0; i < nc; i += 3) {
+        if (i == 3 * j)
+            continue;
+        a0 += coeffs[i] * cv[i];
+        a1 += coeffs[i + 1] * cv[i + 1];
+        a2 += coeffs[i + 2] * cv[i + 2];
     }
+    v[0] = a0;
+    v[1] = a1;
+    v[2] = a2;
 }
 
 /* One pixel: P + K x. */
