@@ -752,21 +752,23 @@ static int pk_row(void *ctx, int y)
     float *pk = t->pk + 6 * p;
     const float *sm = e->samples;
     int x, c;
-    for (x = 0; x < t->width; x++, pk += 6) {
-        if (t->spd) {
-            size_t a = (size_t)y * t->nx + x, b = a + t->nx;
-            const float *ka = e->kp + a * ks, *kb = e->kp + b * ks;
+    if (t->spd) {
+        /* the four corners' rows, walked side by side */
+        size_t a = (size_t)y * t->nx, nx = (size_t)t->nx;
+        const float *sa = sm + 3 * a, *sb = sa + 3 * nx;
+        const float *ka = e->kp + a * ks, *kb = ka + nx * ks;
+        for (x = 0; x < t->width; x++, pk += 6, sa += 3, sb += 3, ka += ks, kb += ks)
             for (c = 0; c < 3; c++) {
-                pk[c] = (float)(0.25 * ((double)sm[3 * a + c] + sm[3 * a + 3 + c] +
-                                        sm[3 * b + c] + sm[3 * b + 3 + c]));
+                pk[c] = (float)(0.25 * ((double)sa[c] + sa[3 + c] + sb[c] + sb[3 + c]));
                 pk[3 + c] = (float)(0.25 * ((double)ka[c] + ka[ks + c] + kb[c] + kb[ks + c]));
             }
-        } else {
-            const float *kk = e->kp + (p + x) * ks;
-            for (c = 0; c < 3; c++) {
-                pk[c] = sm[3 * (p + x) + c];
-                pk[3 + c] = kk[c];
-            }
+        return 0;
+    }
+    for (x = 0; x < t->width; x++, pk += 6) {
+        const float *kk = e->kp + (p + x) * ks;
+        for (c = 0; c < 3; c++) {
+            pk[c] = sm[3 * (p + x) + c];
+            pk[3 + c] = kk[c];
         }
     }
     return 0;
