@@ -487,6 +487,49 @@ static void test_alloc_failures(void)
     CHECK_MSG(bad == 0, "%d bad outcomes", bad);
     rtpi_kd_destroy(kd);
     rtp_scene_destroy(s);
+    /* a light buffer projected on 3 threads (enough primitives to be
+       split: 600 spheres), each allocation failed in turn, the threads'
+       ones through the lock */
+    {
+        char *text = (char *)malloc(600 * 48 + 256);
+        size_t len;
+        long fail;
+        int k;
+        bad = 0;
+        if (!text) {
+            CHECK(0);
+            return;
+        }
+        len = (size_t)sprintf(text, "v\nfrom 0 -30 10\nat 0 0 0\nup 0 0 1\nangle 40\n"
+                                    "resolution 8 8\nl 1 -2 20\nf 1 1 1 1 0 0 0 1\n");
+        for (k = 0; k < 600; k++)
+            len += (size_t)sprintf(text + len, "s %d %d %d 0.3\n", k % 10 - 5, k / 10 % 10 - 5,
+                                   k / 100);
+        s = load(text, len);
+        free(text);
+        if (!s) {
+            CHECK(0);
+            return;
+        }
+        for (fail = 0; fail < 400; fail++) {
+            rtpi_shadow *sh = NULL;
+            rtp_status st;
+            c.calls = 0;
+            c.live = 0;
+            c.fail_at = fail;
+            st = rtpi_shadow_create_mt(s, NULL, v3(1, -2, 20), RTPI_SHADOW_LIGHTBUF, 64, 3, &a, &sh,
+                                       NULL);
+            if (c.calls <= fail) {
+                bad += st != RTP_OK;
+                rtpi_shadow_destroy(sh);
+                bad += c.live != 0;
+                break;
+            }
+            bad += st != RTP_ERR_NOMEM || sh != NULL || c.live != 0;
+        }
+        CHECK_MSG(bad == 0 && fail < 400, "3 threads: %d bad outcomes (%ld sites)", bad, fail);
+        rtp_scene_destroy(s);
+    }
 }
 
 static void test_bad_arguments(void)
