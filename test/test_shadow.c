@@ -448,88 +448,82 @@ static void c_free(void *u, void *p)
 }
 
 /* Every allocation failing in turn: NOMEM, nothing leaked. */
+/* Creates the shadow structures of mode with allocation k failed, for k
+   = 0, 1, ... until one succeeds (at most max tries): each failure must
+   be RTP_ERR_NOMEM with nothing left allocated, the success must free
+   all it took.  Returns the bad outcomes; *sites the allocations. */
+static int fail_each(const rtp_scene *s, const rtpi_kdtree *kd, rtpi_v3 lp, rtpi_shadow_mode mode,
+                     int res, int threads, long max, long *sites)
+{
+    counting c;
+    rtp_allocator a;
+    long fail;
+    int bad = 0;
+    a.malloc_fn = c_malloc;
+    a.realloc_fn = c_realloc;
+    a.free_fn = c_free;
+    a.user = &c;
+    for (fail = 0; fail < max; fail++) {
+        rtpi_shadow *sh = NULL;
+        rtp_status st;
+        c.calls = 0;
+        c.live = 0;
+        c.fail_at = fail;
+        st = rtpi_shadow_create_mt(s, kd, lp, mode, res, threads, &a, &sh, NULL);
+        if (c.calls <= fail) {
+            bad += st != RTP_OK;
+            rtpi_shadow_destroy(sh);
+            bad += c.live != 0;
+            break;
+        }
+        bad += st != RTP_ERR_NOMEM || sh != NULL || c.live != 0;
+    }
+    *sites = fail;
+    return bad + (fail == max);
+}
+
 static void test_alloc_failures(void)
 {
     rtp_scene *s = load(scene_text, sizeof scene_text - 1);
     rtpi_kdtree *kd = NULL;
-    counting c;
-    rtp_allocator a;
-    int m, bad = 0;
     static const rtpi_shadow_mode modes[] = {RTPI_SHADOW_EXACT, RTPI_SHADOW_LIGHTBUF,
                                              RTPI_SHADOW_ITEMBUF};
+    char *text;
+    size_t len;
+    long sites;
+    int m, k, bad = 0;
     if (!s || rtpi_kd_build(s, NULL, &kd, NULL) != RTP_OK) {
         CHECK(0);
         rtp_scene_destroy(s);
         return;
     }
-    a.malloc_fn = c_malloc;
-    a.realloc_fn = c_realloc;
-    a.free_fn = c_free;
-    a.user = &c;
-    for (m = 0; m < 3; m++) {
-        long fail;
-        for (fail = 0; fail < 100; fail++) {
-            rtpi_shadow *sh = NULL;
-            rtp_status st;
-            c.calls = 0;
-            c.live = 0;
-            c.fail_at = fail;
-            st = rtpi_shadow_create(s, kd, v3(1, 2, 3), modes[m], 32, &a, &sh, NULL);
-            if (c.calls <= fail) {
-                bad += st != RTP_OK;
-                rtpi_shadow_destroy(sh);
-                bad += c.live != 0;
-                break;
-            }
-            bad += st != RTP_ERR_NOMEM || sh != NULL || c.live != 0;
-        }
-    }
+    for (m = 0; m < 3; m++)
+        bad += fail_each(s, kd, v3(1, 2, 3), modes[m], 32, 1, 100, &sites);
     CHECK_MSG(bad == 0, "%d bad outcomes", bad);
     rtpi_kd_destroy(kd);
     rtp_scene_destroy(s);
     /* a light buffer projected on 3 threads (enough primitives to be
        split: 600 spheres), each allocation failed in turn, the threads'
        ones through the lock */
-    {
-        char *text = (char *)malloc(600 * 48 + 256);
-        size_t len;
-        long fail;
-        int k;
-        bad = 0;
-        if (!text) {
-            CHECK(0);
-            return;
-        }
-        len = (size_t)sprintf(text, "v\nfrom 0 -30 10\nat 0 0 0\nup 0 0 1\nangle 40\n"
-                                    "resolution 8 8\nl 1 -2 20\nf 1 1 1 1 0 0 0 1\n");
-        for (k = 0; k < 600; k++)
-            len += (size_t)sprintf(text + len, "s %d %d %d 0.3\n", k % 10 - 5, k / 10 % 10 - 5,
-                                   k / 100);
-        s = load(text, len);
-        free(text);
-        if (!s) {
-            CHECK(0);
-            return;
-        }
-        for (fail = 0; fail < 400; fail++) {
-            rtpi_shadow *sh = NULL;
-            rtp_status st;
-            c.calls = 0;
-            c.live = 0;
-            c.fail_at = fail;
-            st = rtpi_shadow_create_mt(s, NULL, v3(1, -2, 20), RTPI_SHADOW_LIGHTBUF, 64, 3, &a, &sh,
-                                       NULL);
-            if (c.calls <= fail) {
-                bad += st != RTP_OK;
-                rtpi_shadow_destroy(sh);
-                bad += c.live != 0;
-                break;
-            }
-            bad += st != RTP_ERR_NOMEM || sh != NULL || c.live != 0;
-        }
-        CHECK_MSG(bad == 0 && fail < 400, "3 threads: %d bad outcomes (%ld sites)", bad, fail);
-        rtp_scene_destroy(s);
+    text = (char *)malloc(600 * 48 + 256);
+    if (!text) {
+        CHECK(0);
+        return;
     }
+    len = (size_t)sprintf(text, "v\nfrom 0 -30 10\nat 0 0 0\nup 0 0 1\nangle 40\n"
+                                "resolution 8 8\nl 1 -2 20\nf 1 1 1 1 0 0 0 1\n");
+    for (k = 0; k < 600; k++)
+        len += (size_t)sprintf(text + len, "s %d %d %d 0.3\n", k % 10 - 5, k / 10 % 10 - 5,
+                               k / 100);
+    s = load(text, len);
+    free(text);
+    if (!s) {
+        CHECK(0);
+        return;
+    }
+    bad = fail_each(s, NULL, v3(1, -2, 20), RTPI_SHADOW_LIGHTBUF, 64, 3, 400, &sites);
+    CHECK_MSG(bad == 0, "3 threads: %d bad outcomes (%ld sites)", bad, sites);
+    rtp_scene_destroy(s);
 }
 
 static void test_bad_arguments(void)
