@@ -448,14 +448,21 @@ void rtpi_light_colors(const rtp_scene *s, double *cl)
 
 void rtpi_combine(const rtp_scene *s, const double *cl, const float *coeffs, float rgb[3])
 {
+    /* each channel in the same order as ever (background, ambient, the
+       lights ascending), the three side by side */
     size_t i, nl = s->nlights;
-    int k;
-    for (k = 0; k < 3; k++) {
-        double v = coeffs[k] * (double)s->background[k] + coeffs[3 + k] * (double)s->ambient[k];
-        for (i = 0; i < nl; i++)
-            v += coeffs[6 + 3 * i + k] * cl[3 * i + k];
-        rgb[k] = (float)v;
+    const float *c = coeffs + 6;
+    double v0 = coeffs[0] * (double)s->background[0] + coeffs[3] * (double)s->ambient[0];
+    double v1 = coeffs[1] * (double)s->background[1] + coeffs[4] * (double)s->ambient[1];
+    double v2 = coeffs[2] * (double)s->background[2] + coeffs[5] * (double)s->ambient[2];
+    for (i = 0; i < nl; i++, c += 3, cl += 3) {
+        v0 += c[0] * cl[0];
+        v1 += c[1] * cl[1];
+        v2 += c[2] * cl[2];
     }
+    rgb[0] = (float)v0;
+    rgb[1] = (float)v1;
+    rgb[2] = (float)v2;
 }
 
 static void diffuse_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t idx,
