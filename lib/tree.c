@@ -586,7 +586,9 @@ static int hl_build(rtp_tree *t, const rtpi_shade_ctx *shade, const uint32_t *vi
     t->hl_off[nlist] = t->hl_n;
     rtpi_free(al, w);
     t->hl_mat = (int)m + 1;
-    t->hl_shine = NAN;
+    /* the samples hold the colours of the caches' shine (hl_after below
+       has them at the scene's, which the caches are about to take) */
+    t->hl_shine = t->ev_mats[m].shine;
     return 0;
 }
 
@@ -998,11 +1000,18 @@ static int hl_continues(const rtp_tree *t, int mode, int res)
         if (light_terms_stale(t, l, mode, res))
             return 0;
     for (m = 0; m < s->nmats; m++)
-        if (m == hm ? t->ev_mats[m].shine == s->mats[m].shine ||
-                          !shine_only(&t->ev_mats[m], &s->mats[m])
+        if (m == hm ? !shine_only(&t->ev_mats[m], &s->mats[m])
                     : coeffs_changed(&t->ev_mats[m], &s->mats[m]))
             return 0;
     return 1;
+}
+
+/* Is material m the listed one with its samples at another shine than
+   the scene's?  (Back at the caches' shine after a chain, say: a shine
+   edit like any other, though the material equals the caches'.) */
+static int hl_pending(const rtp_tree *t, size_t m)
+{
+    return t->hl_mat == (int)m + 1 && t->hl_shine != (double)t->scene->mats[m].shine;
 }
 
 static double seconds_now(void)
@@ -1442,13 +1451,14 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
         /* (the material whose highlights were put back has its samples
            redone whether or not it changed since) */
         for (m = 0; !matpath && m < s->nmats; m++)
-            nmat_changed += coeffs_changed(&s->mats[m], &t->ev_mats[m]) || (int)m == restored;
+            nmat_changed += coeffs_changed(&s->mats[m], &t->ev_mats[m]) || (int)m == restored ||
+                            hl_pending(t, m);
         for (m = 0; !matpath && m < s->nmats; m++) {
-            int redo;
+            int redo, pend = hl_pending(t, m);
             size_t n;
-            if (!coeffs_changed(&s->mats[m], &t->ev_mats[m]) && (int)m != restored)
+            if (!coeffs_changed(&s->mats[m], &t->ev_mats[m]) && (int)m != restored && !pend)
                 continue;
-            redo = terms_changed(&s->mats[m], &t->ev_mats[m]);
+            redo = terms_changed(&s->mats[m], &t->ev_mats[m]) || pend;
             n = t->mat_start[m + 1] - t->mat_start[m];
             if (redo && nmat_changed == 1 && !coeffs_dirty &&
                 shine_only(&t->ev_mats[m], &s->mats[m]) &&
@@ -1546,8 +1556,10 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
             t->ev_samples_ok = cached;
         }
         if (hl_after && t->ev_samples_ok &&
-            hl_build(t, &shade, vis, (uint32_t)(hl_after - 1), cl, cv) == 0)
+            hl_build(t, &shade, vis, (uint32_t)(hl_after - 1), cl, cv) == 0) {
             hl_used = 1;
+            t->hl_shine = s->mats[hl_after - 1].shine;
+        }
     }
     for (i = 0; i < nthreads; i++)
         if (e[i].nomem) {
