@@ -440,6 +440,7 @@ typedef struct eval_ctx {
     float *coeffs;
     double *acc;
     int nomem;
+    int nonfinite;            /* pk_row met a plane value that is not finite */
 } eval_ctx;
 
 /* Steps 1 and 2 for sample k, into the caches or the scratch. */
@@ -582,6 +583,17 @@ static int hl_build(rtp_tree *t, const rtpi_shade_ctx *shade, const uint32_t *vi
         }
         for (c = 0; c < 3; c++)
             t->hl_p[3 * j + c] = (float)pv[c];
+        /* P or W beyond the float range (values near it, as with the
+           planes: pk_check): the list is not used */
+        for (e = e0; e < t->hl_n; e++)
+            if (!(isfinite(t->hl_w[4 * e]) && isfinite(t->hl_w[4 * e + 1]) &&
+                  isfinite(t->hl_w[4 * e + 2])))
+                break;
+        if (e < t->hl_n || !(isfinite(t->hl_p[3 * j]) && isfinite(t->hl_p[3 * j + 1]) &&
+                             isfinite(t->hl_p[3 * j + 2]))) {
+            rtpi_free(al, w);
+            return -1;
+        }
     }
     t->hl_off[nlist] = t->hl_n;
     rtpi_free(al, w);
@@ -745,6 +757,17 @@ static int pk_rest_row(void *ctx, int y)
     return 0;
 }
 
+/* P and K held as floats overflow where an image's values come near the
+   float range (a kt of 1e21 over a few bounces: the pixel stays finite,
+   its rest P and coefficient K need not): then the planes are not used
+   and the edit takes the full path. */
+static void pk_check(eval_ctx *e, const float *pk)
+{
+    if (!(isfinite(pk[0]) && isfinite(pk[1]) && isfinite(pk[2]) && isfinite(pk[3]) &&
+          isfinite(pk[4]) && isfinite(pk[5])))
+        e->nonfinite = 1;
+}
+
 /* Pass 2: P and K of a row of pixels (SPD: averaged over the corners). */
 static int pk_row(void *ctx, int y)
 {
@@ -759,11 +782,13 @@ static int pk_row(void *ctx, int y)
         size_t a = (size_t)y * t->nx, nx = (size_t)t->nx;
         const float *sa = sm + 3 * a, *sb = sa + 3 * nx;
         const float *ka = e->kp + a * ks, *kb = ka + nx * ks;
-        for (x = 0; x < t->width; x++, pk += 6, sa += 3, sb += 3, ka += ks, kb += ks)
+        for (x = 0; x < t->width; x++, pk += 6, sa += 3, sb += 3, ka += ks, kb += ks) {
             for (c = 0; c < 3; c++) {
                 pk[c] = (float)(0.25 * ((double)sa[c] + sa[3 + c] + sb[c] + sb[3 + c]));
                 pk[3 + c] = (float)(0.25 * ((double)ka[c] + ka[ks + c] + kb[c] + kb[ks + c]));
             }
+            pk_check(e, pk);
+        }
         return 0;
     }
     for (x = 0; x < t->width; x++, pk += 6) {
@@ -772,8 +797,20 @@ static int pk_row(void *ctx, int y)
             pk[c] = sm[3 * (p + x) + c];
             pk[3 + c] = kk[c];
         }
+        pk_check(e, pk);
     }
     return 0;
+}
+
+/* Did every thread's planes come out finite?  (Clears the flags.) */
+static int pk_finite(eval_ctx *e, int nthreads)
+{
+    int i, ok = 1;
+    for (i = 0; i < nthreads; i++) {
+        ok &= !e[i].nonfinite;
+        e[i].nonfinite = 0;
+    }
+    return ok;
 }
 
 /* A chunk of the edited material's samples: q (rtpi_sample_diffuse). */
@@ -1439,13 +1476,22 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                                    NULL, NULL);
                 rtpi_parallel_rows(t->ny, nthreads, ctx, pk_rest_row, NULL, NULL);
                 rtpi_parallel_rows(t->height, nthreads, ctx, pk_row, NULL, NULL);
-                pk_list_nonzero(t);
-                t->pk_term = (int)(2 + nl + mt) + 1;
-                st.combined_samples = ns;
+                if (pk_finite(e, nthreads)) {
+                    pk_list_nonzero(t);
+                    t->pk_term = (int)(2 + nl + mt) + 1;
+                    st.combined_samples = ns;
+                }
             }
-            pk_apply(t, ctx, nthreads, sparse, &st);
-            one = 1;
-            matpath = 1; /* the coefficients stay those of the material before */
+            if (t->pk_term == (int)(2 + nl + mt) + 1) {
+                pk_apply(t, ctx, nthreads, sparse, &st);
+                one = 1;
+                matpath = 1; /* the coefficients stay those of the material before */
+            } else {
+                /* planes not finite: the material's samples below, and
+                   then every sample (pass 1 wrote P into them) */
+                list_combine = 0;
+                t->ev_samples_ok = 0;
+            }
         }
         /* steps 1-2 only for samples containing an edited material */
         /* (the material whose highlights were put back has its samples
@@ -1537,13 +1583,20 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
             if (t->pk_term != (int)pk + 1) {
                 rtpi_parallel_rows(t->ny, nthreads, ctx, pk_rest_row, NULL, NULL);
                 rtpi_parallel_rows(t->height, nthreads, ctx, pk_row, NULL, NULL);
-                pk_list_nonzero(t);
-                t->pk_term = (int)pk + 1;
+                if (pk_finite(e, nthreads)) {
+                    pk_list_nonzero(t);
+                    t->pk_term = (int)pk + 1;
+                }
                 st.combined_samples = ns;
             }
-            pk_apply(t, ctx, nthreads, sparse, &st);
-            one = 1;
-            t->ev_samples_ok = 0; /* P_s were made in the samples */
+            if (t->pk_term == (int)pk + 1) {
+                pk_apply(t, ctx, nthreads, sparse, &st);
+                one = 1;
+            } else {
+                /* planes not finite: step 3 for every sample */
+                rtpi_parallel_rows(t->ny, nthreads, ctx, combine_row, NULL, NULL);
+            }
+            t->ev_samples_ok = !one && cached; /* else P_s were made in the samples */
         } else if (list_combine && !coeffs_dirty) {
             /* nothing changed since: the samples hold their colours (and
                an incremental image its pixels) */
