@@ -1495,7 +1495,9 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
         }
         /* steps 1-2 only for samples containing an edited material */
         /* (the material whose highlights were put back has its samples
-           redone whether or not it changed since) */
+           redone whether or not it changed since, and the listed one is
+           edited whenever its samples hold another shine than the
+           scene's: hl_pending) */
         for (m = 0; !matpath && m < s->nmats; m++)
             nmat_changed += coeffs_changed(&s->mats[m], &t->ev_mats[m]) || (int)m == restored ||
                             hl_pending(t, m);
