@@ -137,6 +137,8 @@ static int sh_visible(const rtpi_shadow *sh, rtpi_v3 p, rtpi_v3 o, uint32_t prim
         v = rtpi_itembuf_visible(&sh->ib, sh->s, p, o, prim, sh->thin, occ);
         if (v == 0)
             return 0;
+        if (!sh->lb.ncand && v > 0)
+            return 1; /* (no light buffer to ask: skip not needed) */
         r = rtpi_shadow_ray(o, sh->light);
         skip = own_skip(sh, prim, o);
         if (sh->lb.ncand &&

@@ -549,7 +549,7 @@ static int hl_build(rtp_tree *t, const rtpi_shade_ctx *shade, const uint32_t *vi
         size_t n = (size_t)(t->start[k + 1] - a), cap = t->hl_cap, cap2 = t->hl_cap;
         size_t cap3 = t->hl_cap, e0 = t->hl_n, e;
         double pv[3];
-        int c;
+        int c, finite = 1;
         if (n > ((size_t)-1 - t->hl_n) / (nl + 1) ||
             rtpi_grow(al, (void **)&t->hl_idx, &cap, t->hl_n + n * nl + 1, sizeof *t->hl_idx) ||
             rtpi_grow(al, (void **)&t->hl_lrv, &cap2, t->hl_n + n * nl + 1, sizeof *t->hl_lrv) ||
@@ -578,19 +578,17 @@ static int hl_build(rtp_tree *t, const rtpi_shade_ctx *shade, const uint32_t *vi
                 float wc = (float)(w[node - a] * ks * cl[3 * li + c]);
                 t->hl_w[4 * e + c] = wc;
                 pv[c] -= wc * sold;
+                finite &= isfinite(wc);
             }
             t->hl_w[4 * e + 3] = (float)sold; /* (a float term) */
         }
-        for (c = 0; c < 3; c++)
+        for (c = 0; c < 3; c++) {
             t->hl_p[3 * j + c] = (float)pv[c];
+            finite &= isfinite(t->hl_p[3 * j + c]);
+        }
         /* P or W beyond the float range (values near it, as with the
            planes: pk_check): the list is not used */
-        for (e = e0; e < t->hl_n; e++)
-            if (!(isfinite(t->hl_w[4 * e]) && isfinite(t->hl_w[4 * e + 1]) &&
-                  isfinite(t->hl_w[4 * e + 2])))
-                break;
-        if (e < t->hl_n || !(isfinite(t->hl_p[3 * j]) && isfinite(t->hl_p[3 * j + 1]) &&
-                             isfinite(t->hl_p[3 * j + 2]))) {
+        if (!finite) {
             rtpi_free(al, w);
             return -1;
         }
