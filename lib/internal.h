@@ -488,9 +488,10 @@ struct rtp_tree {
                               1 + the term whose planes pk holds (term 0:
                               background, 1: ambient, 2 + l: light l,
                               2 + nlights + m: kd * colour of material m) */
-    float *pk;             /* pixels * 6: per pixel the rest P of the
-                              image with term pk_term left out, and that
-                              term's coefficient K (pixel = P + K c) */
+    float *pk;             /* pixels * 3: the rest P of the image with
+                              term pk_term left out, at the pixels where
+                              that term's coefficient K is 0 (pixel = P
+                              there, P + K c elsewhere: pk_c) */
     int hl_mat;            /* 0, or 1 + the material whose highlights are
                               listed (tree.c: consecutive shine edits) */
     size_t *hl_idx;        /* their terms' indices in ev_terms */
@@ -503,12 +504,13 @@ struct rtp_tree {
                               were last set for (NaN: not known) */
     size_t *hl_off;        /* per sample of the material: its first one */
     float *hl_p;           /* per sample of the material: colour less them */
-    float *pk_c;           /* pk of those pixels alone, in their order (an
-                              edit then reads them in one run), pk_c_cap
-                              floats; NULL: read pk itself */
-    size_t pk_c_cap;
-    uint32_t *pk_nz;       /* the pixels whose K is not 0, pk_nnz of them:
-                              the only ones an edit of the term changes */
+    float *pk_c;           /* pixels * 6 at most: P and K of the pixels
+                              whose K is not 0, in bands of rows (tree.c,
+                              PK_ROWS): an edit reads them in one run */
+    uint32_t *pk_nz;       /* those pixels (pixels at most, in the same
+                              bands): the only ones an edit of the term
+                              changes; pk_nnz of them in all */
+    uint32_t *pk_seg;      /* per band: how many pk_nz and pk_c hold */
     size_t pk_nnz;
     const float *last_pixels; /* the image the last evaluation wrote */
     float *pk_q;           /* samples * 3: q of the material whose kd *

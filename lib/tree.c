@@ -34,6 +34,7 @@ void rtp_tree_destroy(rtp_tree *t)
     rtpi_free(&a, t->pk_q);
     rtpi_free(&a, t->pk_nz);
     rtpi_free(&a, t->pk_c);
+    rtpi_free(&a, t->pk_seg);
     rtpi_free(&a, t->hl_idx);
     rtpi_free(&a, t->hl_lrv);
     rtpi_free(&a, t->hl_w);
@@ -440,7 +441,8 @@ typedef struct eval_ctx {
     float *coeffs;
     double *acc;
     int nomem;
-    int nonfinite;            /* pk_row met a plane value that is not finite */
+    int nonfinite;            /* pk_put met a plane value that is not finite */
+    float *rest;              /* pk_build_chunk: two sample rows' rest */
 } eval_ctx;
 
 /* Steps 1 and 2 for sample k, into the caches or the scratch. */
@@ -587,7 +589,7 @@ static int hl_build(rtp_tree *t, const rtpi_shade_ctx *shade, const uint32_t *vi
             finite &= isfinite(t->hl_p[3 * j + c]);
         }
         /* P or W beyond the float range (values near it, as with the
-           planes: pk_check): the list is not used */
+           planes: pk_put): the list is not used */
         if (!finite) {
             rtpi_free(al, w);
             return -1;
@@ -724,22 +726,27 @@ static int combine_row(void *ctx, int y)
    pixel is P + K c: P the rest of the image, K the term's coefficient (for
    SPD both averaged over the pixel's four corner samples), fixed until
    something else changes.  The first such edit of a term precombines P
-   and K per pixel, a pass like a full combine; each further edit of that
-   term (a script animating a light's colour, a slider) reads 24 bytes and
-   writes 12 a pixel.  P is rounded to float once more than the full path
-   rounds, so pixels differ from it by about a float ulp of their value. */
+   and K per pixel in one pass over the coefficients (pk_build_chunk);
+   each further edit of that term (a script animating a light's colour, a
+   slider) reads 24 bytes and writes 12 a pixel whose K is not 0.  P is
+   rounded to float once more than the full path rounds, so pixels differ
+   from it by about a float ulp of their value.
 
-/* Pass 1: the rest P_s of each sample of a row, into samples (the
-   corner samples with SPD, else the image itself, which the edit then
-   overwrites).  A colour term is left out of the sum; a material's
-   diffuse part x q is taken off the whole. */
-static int pk_rest_row(void *ctx, int y)
+   The planes are made and kept in bands of PK_ROWS pixel rows, one band
+   a task: in band b, pk_c and pk_nz from pixel b * PK_ROWS * width on
+   hold pk_seg[b] pixels whose K is not 0, in pixel order; pk holds P of
+   the band's other pixels, at their own place. */
+#define PK_ROWS 16
+
+/* The rest P_s of each sample of sample row y, into out (3 floats a
+   sample).  A colour term is left out of the sum; a material's diffuse
+   part x q is taken off the whole. */
+static void pk_rest_into(const eval_ctx *e, int y, float *out)
 {
-    eval_ctx *e = (eval_ctx *)ctx;
     const rtp_tree *t = e->t;
     size_t k = (size_t)y * t->nx, nc = RTPI_COEFFS(t->scene->nlights);
     int x, c;
-    for (x = 0; x < t->nx; x++, k++) {
+    for (x = 0; x < t->nx; x++, k++, out += 3) {
         double v[3];
         if (e->pk_mat) {
             const float *q = t->pk_q + 3 * k;
@@ -750,64 +757,105 @@ static int pk_rest_row(void *ctx, int y)
             rest_of(e->cv, nc, e->term, t->ev_coeffs + k * nc, v);
         }
         for (c = 0; c < 3; c++)
-            e->samples[3 * k + c] = (float)v[c];
+            out[c] = (float)v[c];
     }
-    return 0;
 }
 
-/* P and K held as floats overflow where an image's values come near the
-   float range (a kt of 1e21 over a few bounces: the pixel stays finite,
-   its rest P and coefficient K need not): then the planes are not used
-   and the edit takes the full path. */
-static void pk_check(eval_ctx *e, const float *pk)
+/* One pixel's planes pk (P then K) into its band: the list where K is
+   not 0, else P alone in t->pk.  P and K held as floats overflow where an
+   image's values come near the float range (a kt of 1e21 over a few
+   bounces: the pixel stays finite, its rest P and coefficient K need
+   not): then the planes are not used and the edit takes the full path. */
+static void pk_put(eval_ctx *e, const float *pk, size_t p, float *pc, uint32_t *nz, size_t *n)
 {
+    rtp_tree *t = e->t;
     if (!(isfinite(pk[0]) && isfinite(pk[1]) && isfinite(pk[2]) && isfinite(pk[3]) &&
           isfinite(pk[4]) && isfinite(pk[5])))
         e->nonfinite = 1;
+    if (pk[3] != 0.0f || pk[4] != 0.0f || pk[5] != 0.0f) {
+        memcpy(pc + 6 * *n, pk, 6 * sizeof *pk);
+        nz[(*n)++] = (uint32_t)p;
+    } else {
+        memcpy(t->pk + 3 * p, pk, 3 * sizeof *pk);
+    }
 }
 
-/* Pass 2: P and K of a row of pixels (SPD: averaged over the corners). */
-static int pk_row(void *ctx, int y)
+/* The planes of one band: the rest of its samples (kept for two sample
+   rows at a time: SPD's pixels average the corners of two) and the
+   term's coefficient K (kp, kstride floats a sample), averaged per pixel
+   with SPD. */
+static int pk_build_chunk(void *ctx, int chunk)
 {
     eval_ctx *e = (eval_ctx *)ctx;
-    const rtp_tree *t = e->t;
-    size_t p = (size_t)y * t->width, ks = e->kstride;
-    float *pk = t->pk + 6 * p;
-    const float *sm = e->samples;
-    int x, c;
-    if (t->spd) {
-        /* the four corners' rows, walked side by side */
-        size_t a = (size_t)y * t->nx, nx = (size_t)t->nx;
-        const float *sa = sm + 3 * a, *sb = sa + 3 * nx;
-        const float *ka = e->kp + a * ks, *kb = ka + nx * ks;
-        for (x = 0; x < t->width; x++, pk += 6, sa += 3, sb += 3, ka += ks, kb += ks) {
-            for (c = 0; c < 3; c++) {
-                pk[c] = (float)(0.25 * ((double)sa[c] + sa[3 + c] + sb[c] + sb[3 + c]));
-                pk[3 + c] = (float)(0.25 * ((double)ka[c] + ka[ks + c] + kb[c] + kb[ks + c]));
+    rtp_tree *t = e->t;
+    size_t w = (size_t)t->width, nx = (size_t)t->nx, ks = e->kstride, n = 0, base;
+    int y0 = chunk * PK_ROWS, y1 = y0 + PK_ROWS, y, x, c;
+    float *ra, *rb, *pc, pk[6];
+    uint32_t *nz;
+    if (y1 > t->height)
+        y1 = t->height;
+    base = (size_t)y0 * w;
+    pc = t->pk_c + 6 * base;
+    nz = t->pk_nz + base;
+    ra = e->rest;
+    rb = ra + 3 * nx;
+    if (t->spd)
+        pk_rest_into(e, y0, ra);
+    for (y = y0; y < y1; y++) {
+        size_t p = (size_t)y * w;
+        if (!t->spd) {
+            const float *kk = e->kp + p * ks;
+            pk_rest_into(e, y, ra);
+            for (x = 0; x < t->width; x++, kk += ks) {
+                for (c = 0; c < 3; c++) {
+                    pk[c] = ra[3 * x + c];
+                    pk[3 + c] = kk[c];
+                }
+                pk_put(e, pk, p + (size_t)x, pc, nz, &n);
             }
-            pk_check(e, pk);
+            continue;
         }
-        return 0;
-    }
-    for (x = 0; x < t->width; x++, pk += 6) {
-        const float *kk = e->kp + (p + x) * ks;
-        for (c = 0; c < 3; c++) {
-            pk[c] = sm[3 * (p + x) + c];
-            pk[3 + c] = kk[c];
+        /* the four corners: sample rows y (ra) and y + 1 (rb) */
+        pk_rest_into(e, y + 1, rb);
+        {
+            const float *sa = ra, *sb = rb, *ka = e->kp + (size_t)y * nx * ks, *kb = ka + nx * ks;
+            float *tmp;
+            for (x = 0; x < t->width; x++, sa += 3, sb += 3, ka += ks, kb += ks) {
+                for (c = 0; c < 3; c++) {
+                    pk[c] = (float)(0.25 * ((double)sa[c] + sa[3 + c] + sb[c] + sb[3 + c]));
+                    pk[3 + c] = (float)(0.25 * ((double)ka[c] + ka[ks + c] + kb[c] + kb[ks + c]));
+                }
+                pk_put(e, pk, p + (size_t)x, pc, nz, &n);
+            }
+            tmp = ra;
+            ra = rb;
+            rb = tmp;
         }
-        pk_check(e, pk);
     }
+    t->pk_seg[chunk] = (uint32_t)n;
     return 0;
 }
 
-/* Did every thread's planes come out finite?  (Clears the flags.) */
-static int pk_finite(eval_ctx *e, int nthreads)
+/* Builds the planes for the term the contexts name; 1 if they came out
+   finite, else 0 (not to be used; out of memory for the threads' scratch
+   also sets e->nomem). */
+static int pk_build(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads)
 {
-    int i, ok = 1;
+    int i, nb = (t->height + PK_ROWS - 1) / PK_ROWS, ok = 1;
+    for (i = 0; i < nthreads; i++)
+        if (!e[i].rest && !(e[i].rest = (float *)rtpi_malloc_array(&t->alloc, (size_t)t->nx,
+                                                                   6 * sizeof *e[i].rest))) {
+            e[i].nomem = 1;
+            return 0;
+        }
+    rtpi_parallel_rows(nb, nthreads, ctx, pk_build_chunk, NULL, NULL);
     for (i = 0; i < nthreads; i++) {
         ok &= !e[i].nonfinite;
         e[i].nonfinite = 0;
     }
+    t->pk_nnz = 0;
+    for (i = 0; ok && i < nb; i++)
+        t->pk_nnz += t->pk_seg[i];
     return ok;
 }
 
@@ -832,64 +880,41 @@ static int pk_q_chunk(void *ctx, int chunk)
     return 0;
 }
 
-/* The edit itself: P + K x for a row of pixels. */
-static int pk_apply_row(void *ctx, int y)
+/* The edit itself for one band, every pixel: P + K x where K is not 0,
+   P elsewhere. */
+static int pk_apply_band(void *ctx, int chunk)
 {
     eval_ctx *e = (eval_ctx *)ctx;
     const rtp_tree *t = e->t;
-    size_t p = (size_t)y * t->width, n = (size_t)t->width, i;
-    const float *pk = t->pk + 6 * p;
-    const double *c = e->x;
-    float *out = e->pixels + 3 * p;
-    for (i = 0; i < n; i++, pk += 6, out += 3)
-        pk_pixel(pk, c, out);
+    size_t p = (size_t)chunk * PK_ROWS * (size_t)t->width, end = p + PK_ROWS * (size_t)t->width;
+    size_t n = t->pk_seg[chunk], j = 0;
+    const float *pc = t->pk_c + 6 * p;
+    const uint32_t *nz = t->pk_nz + p;
+    if (end > (size_t)t->width * t->height)
+        end = (size_t)t->width * t->height;
+    for (; p < end; p++)
+        if (j < n && nz[j] == p) {
+            pk_pixel(pc + 6 * j, e->x, e->pixels + 3 * p);
+            j++;
+        } else {
+            memcpy(e->pixels + 3 * p, t->pk + 3 * p, 3 * sizeof *t->pk);
+        }
     return 0;
 }
 
-/* The listed pixels only (opt->incremental): chunk of 4096 of pk_nz. */
-static int pk_apply_chunk(void *ctx, int chunk)
+/* The same for the pixels whose K is not 0 alone (opt->incremental). */
+static int pk_apply_listed(void *ctx, int chunk)
 {
     eval_ctx *e = (eval_ctx *)ctx;
     const rtp_tree *t = e->t;
-    size_t i = (size_t)chunk * 4096, end = i + 4096;
+    size_t base = (size_t)chunk * PK_ROWS * (size_t)t->width, n = t->pk_seg[chunk], j;
+    const float *pc = t->pk_c + 6 * base;
+    const uint32_t *nz = t->pk_nz + base;
     const double *c = e->x;
-    if (end > t->pk_nnz)
-        end = t->pk_nnz;
-    if (t->pk_c)
-        for (; i < end; i++)
-            pk_pixel(t->pk_c + 6 * i, c, e->pixels + 3 * (size_t)t->pk_nz[i]);
-    else
-        for (; i < end; i++)
-            pk_pixel(t->pk + 6 * (size_t)t->pk_nz[i], c, e->pixels + 3 * (size_t)t->pk_nz[i]);
+    for (j = 0; j < n; j++)
+        pk_pixel(pc + 6 * j, c, e->pixels + 3 * (size_t)nz[j]);
     return 0;
 }
-
-/* Lists the pixels whose K is not 0 (after the planes are built). */
-static void pk_list_nonzero(rtp_tree *t)
-{
-    size_t np = (size_t)t->width * t->height, p;
-    size_t i;
-    t->pk_nnz = 0;
-    for (p = 0; p < np; p++) {
-        const float *k = t->pk + 6 * p + 3;
-        if (k[0] != 0.0f || k[1] != 0.0f || k[2] != 0.0f)
-            t->pk_nz[t->pk_nnz++] = (uint32_t)p;
-    }
-    /* their planes side by side: a further edit of the term reads 24
-       bytes a pixel in one run instead of gathering them from the whole
-       image's planes (tetra at 1024^2: 0.59 -> 0.40 ms an edit); without
-       the memory, pk itself serves */
-    if (rtpi_grow(&t->alloc, (void **)&t->pk_c, &t->pk_c_cap, 6 * t->pk_nnz + 6,
-                  sizeof *t->pk_c)) {
-        rtpi_free(&t->alloc, t->pk_c);
-        t->pk_c = NULL;
-        t->pk_c_cap = 0;
-        return;
-    }
-    for (i = 0; i < t->pk_nnz; i++)
-        memcpy(t->pk_c + 6 * i, t->pk + 6 * (size_t)t->pk_nz[i], 6 * sizeof *t->pk_c);
-}
-
 /* For each material, the samples whose trees contain it (built once). */
 static rtp_status build_material_lists(rtp_tree *t)
 {
@@ -1069,6 +1094,7 @@ static void drop_caches(rtp_tree *t)
     rtpi_free(&t->alloc, t->pk_q);
     rtpi_free(&t->alloc, t->pk_nz);
     rtpi_free(&t->alloc, t->pk_c);
+    rtpi_free(&t->alloc, t->pk_seg);
     rtpi_free(&t->alloc, t->hl_idx);
     rtpi_free(&t->alloc, t->hl_lrv);
     rtpi_free(&t->alloc, t->hl_w);
@@ -1083,7 +1109,7 @@ static void drop_caches(rtp_tree *t)
     t->hl_mat = 0;
     t->pk_nz = NULL;
     t->pk_c = NULL;
-    t->pk_c_cap = 0;
+    t->pk_seg = NULL;
     t->ev_cl = NULL;
     t->pk = NULL;
     t->pk_q = NULL;
@@ -1189,15 +1215,14 @@ static int threads_for(double bytes, int nthreads)
 static void pk_apply(rtp_tree *t, void *const *ctx, int nthreads, int sparse,
                      rtp_eval_stats *st)
 {
+    int nb = (t->height + PK_ROWS - 1) / PK_ROWS;
     if (sparse) {
-        rtpi_parallel_rows((int)((t->pk_nnz + 4095) / 4096),
-                           threads_for(40.0 * (double)t->pk_nnz, nthreads), ctx, pk_apply_chunk,
-                           NULL, NULL);
+        rtpi_parallel_rows(nb, threads_for(40.0 * (double)t->pk_nnz, nthreads), ctx,
+                           pk_apply_listed, NULL, NULL);
         st->written_pixels = t->pk_nnz;
     } else {
-        rtpi_parallel_rows(t->height,
-                           threads_for(36.0 * (double)t->width * (double)t->height, nthreads),
-                           ctx, pk_apply_row, NULL, NULL);
+        rtpi_parallel_rows(nb, threads_for(36.0 * (double)t->width * (double)t->height, nthreads),
+                           ctx, pk_apply_band, NULL, NULL);
         st->written_pixels = (unsigned long long)t->width * t->height;
     }
 }
@@ -1231,13 +1256,17 @@ static int one_term(rtp_tree *t, const double *cv, size_t nl, size_t *term)
 /* The planes (and q for a material), unless they are there. */
 static int pk_alloc(rtp_tree *t, int q)
 {
+    size_t np = (size_t)t->width * t->height;
     if (!t->pk)
-        t->pk = (float *)rtpi_malloc_array(&t->alloc, (size_t)t->width * t->height,
-                                           6 * sizeof *t->pk);
-    if (t->pk && !t->pk_nz)
-        t->pk_nz = (uint32_t *)rtpi_malloc_array(&t->alloc, (size_t)t->width * t->height,
-                                                 sizeof *t->pk_nz);
-    if (!t->pk_nz)
+        t->pk = (float *)rtpi_malloc_array(&t->alloc, np, 3 * sizeof *t->pk);
+    if (t->pk && !t->pk_c)
+        t->pk_c = (float *)rtpi_malloc_array(&t->alloc, np, 6 * sizeof *t->pk_c);
+    if (t->pk_c && !t->pk_nz)
+        t->pk_nz = (uint32_t *)rtpi_malloc_array(&t->alloc, np, sizeof *t->pk_nz);
+    if (t->pk_nz && !t->pk_seg)
+        t->pk_seg = (uint32_t *)rtpi_malloc_array(
+            &t->alloc, (size_t)(t->height + PK_ROWS - 1) / PK_ROWS + 1, sizeof *t->pk_seg);
+    if (!t->pk_seg)
         return 0;
     if (q && t->pk && !t->pk_q)
         t->pk_q = (float *)rtpi_malloc_array(&t->alloc, (size_t)t->nx * t->ny,
@@ -1472,10 +1501,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                 memset(t->pk_q, 0, ns * 3 * sizeof *t->pk_q);
                 rtpi_parallel_rows((int)((e[0].nlist + 255) / 256), nthreads, ctx, pk_q_chunk,
                                    NULL, NULL);
-                rtpi_parallel_rows(t->ny, nthreads, ctx, pk_rest_row, NULL, NULL);
-                rtpi_parallel_rows(t->height, nthreads, ctx, pk_row, NULL, NULL);
-                if (pk_finite(e, nthreads)) {
-                    pk_list_nonzero(t);
+                if (pk_build(t, e, ctx, nthreads)) {
                     t->pk_term = (int)(2 + nl + mt) + 1;
                     st.combined_samples = ns;
                 }
@@ -1485,8 +1511,8 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                 one = 1;
                 matpath = 1; /* the coefficients stay those of the material before */
             } else {
-                /* planes not finite: the material's samples below, and
-                   then every sample (pass 1 wrote P into them) */
+                /* planes not finite (or no memory for them): the
+                   material's samples below, then every sample */
                 list_combine = 0;
                 t->ev_samples_ok = 0;
             }
@@ -1581,10 +1607,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                 e[i].pixels = img->pixels;
             }
             if (t->pk_term != (int)pk + 1) {
-                rtpi_parallel_rows(t->ny, nthreads, ctx, pk_rest_row, NULL, NULL);
-                rtpi_parallel_rows(t->height, nthreads, ctx, pk_row, NULL, NULL);
-                if (pk_finite(e, nthreads)) {
-                    pk_list_nonzero(t);
+                if (pk_build(t, e, ctx, nthreads)) {
                     t->pk_term = (int)pk + 1;
                 }
                 st.combined_samples = ns;
@@ -1596,7 +1619,8 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                 /* planes not finite: step 3 for every sample */
                 rtpi_parallel_rows(t->ny, nthreads, ctx, combine_row, NULL, NULL);
             }
-            t->ev_samples_ok = !one && cached; /* else P_s were made in the samples */
+            /* (after P + K c the samples hold the colours before it) */
+            t->ev_samples_ok = !one && cached;
         } else if (list_combine && !coeffs_dirty) {
             /* nothing changed since: the samples hold their colours (and
                an incremental image its pixels) */
@@ -1652,6 +1676,7 @@ done:
         rtpi_free(&t->alloc, e[i].terms);
         rtpi_free(&t->alloc, e[i].coeffs);
         rtpi_free(&t->alloc, e[i].acc);
+        rtpi_free(&t->alloc, e[i].rest);
     }
     rtpi_free(&t->alloc, cv);
     if (rs != RTP_OK) {
