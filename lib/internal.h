@@ -512,6 +512,19 @@ struct rtp_tree {
                               changes; pk_nnz of them in all */
     uint32_t *pk_seg;      /* per band: how many pk_nz and pk_c hold */
     size_t pk_nnz;
+    /* colour planes (tree.c: cp_*): an image for other colours of the
+       terms (background, ambient, lights) is S + sum K_d (c_d - cS_d) */
+    float *cp_s;           /* pixels * 3: S, the full path's image for... */
+    double *cp_cl;         /* ...the colours cS (3 per term) */
+    int cp_s_ok;           /* S holds for the coefficients now */
+    size_t cp_nt;          /* terms: 2 + lights */
+    float **cp_k;          /* per term: pixels * 3, K (NULL: not made yet) */
+    uint32_t **cp_nz;      /* per term: the pixels whose K is not 0, in
+                              bands of rows as pk_nz */
+    uint32_t **cp_seg;     /* per term, per band: how many */
+    unsigned char *cp_ok;  /* per term: its plane holds */
+    size_t *cp_d, cp_nd;   /* the terms whose colour differs from cS... */
+    double *cp_dc;         /* ...and by how much (3 each) */
     const float *last_pixels; /* the image the last evaluation wrote */
     float *pk_q;           /* samples * 3: q of the material whose kd *
                               colour is the term (rtpi_sample_diffuse) */

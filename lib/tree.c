@@ -7,6 +7,8 @@
 
 #include <time.h>
 
+static void cp_free(rtp_tree *t);
+
 void rtp_tree_destroy(rtp_tree *t)
 {
     rtp_allocator a;
@@ -35,6 +37,7 @@ void rtp_tree_destroy(rtp_tree *t)
     rtpi_free(&a, t->pk_nz);
     rtpi_free(&a, t->pk_c);
     rtpi_free(&a, t->pk_seg);
+    cp_free(t);
     rtpi_free(&a, t->hl_idx);
     rtpi_free(&a, t->hl_lrv);
     rtpi_free(&a, t->hl_w);
@@ -748,16 +751,10 @@ static void pk_rest_into(const eval_ctx *e, int y, float *out)
     int x, c;
     for (x = 0; x < t->nx; x++, k++, out += 3) {
         double v[3];
-        if (e->pk_mat) {
-            const float *q = t->pk_q + 3 * k;
-            rest_of(e->cv, nc, (size_t)-1, t->ev_coeffs + k * nc, v);
-            for (c = 0; c < 3; c++)
-                v[c] -= e->xold[c] * q[c];
-        } else {
-            rest_of(e->cv, nc, e->term, t->ev_coeffs + k * nc, v);
-        }
+        const float *q = t->pk_q + 3 * k;
+        rest_of(e->cv, nc, (size_t)-1, t->ev_coeffs + k * nc, v);
         for (c = 0; c < 3; c++)
-            out[c] = (float)v[c];
+            out[c] = (float)(v[c] - e->xold[c] * q[c]);
     }
 }
 
@@ -1095,6 +1092,7 @@ static void drop_caches(rtp_tree *t)
     rtpi_free(&t->alloc, t->pk_nz);
     rtpi_free(&t->alloc, t->pk_c);
     rtpi_free(&t->alloc, t->pk_seg);
+    cp_free(t);
     rtpi_free(&t->alloc, t->hl_idx);
     rtpi_free(&t->alloc, t->hl_lrv);
     rtpi_free(&t->alloc, t->hl_w);
@@ -1227,32 +1225,6 @@ static void pk_apply(rtp_tree *t, void *const *ctx, int nthreads, int sparse,
     }
 }
 
-/* May the one-term path make this image?  Yes when the coefficients are
-   those the last image used and at most one term's colour differs from
-   it (none: the term whose planes are built, if any); *term: that term. */
-static int one_term(rtp_tree *t, const double *cv, size_t nl, size_t *term)
-{
-    size_t j, nt = 2 + nl, changed = 0;
-    if (!t->ev_valid || !t->ev_cl)
-        return 0;
-    for (j = 0; j < nt; j++)
-        if (cv[3 * j] != t->ev_cl[3 * j] || cv[3 * j + 1] != t->ev_cl[3 * j + 1] ||
-            cv[3 * j + 2] != t->ev_cl[3 * j + 2]) {
-            if (changed++)
-                return 0;
-            *term = j;
-        }
-    if (!changed) {
-        if (!t->pk_term || (size_t)t->pk_term - 1 >= nt)
-            return 0;
-        *term = (size_t)t->pk_term - 1;
-    }
-    /* planes for another term hold its old colour in P: rebuilt */
-    if (t->pk_term && (size_t)t->pk_term - 1 != *term)
-        t->pk_term = 0;
-    return pk_alloc(t, 0);
-}
-
 /* The planes (and q for a material), unless they are there. */
 static int pk_alloc(rtp_tree *t, int q)
 {
@@ -1309,6 +1281,303 @@ static int mat_term(rtp_tree *t, const double *cv, size_t nl, uint32_t *mat)
     return pk_alloc(t, 1);
 }
 
+/* ------------------------------------------------------ colour planes
+   The image is linear in the colours of its terms (background, ambient,
+   each light): pixel = sum over terms i of K_i c_i, K_i the term's
+   coefficient (for SPD averaged over the pixel's four corner samples).
+   While the coefficients stay as they are (no material, shine or light
+   position changed), an image for other colours is
+
+       pixel = S + sum over terms d whose colour differs from S's of
+               K_d (c_d - cS_d)
+
+   with S the image made by the full path for colours cS (the snapshot,
+   cp_s) and K_d one float plane per term (cp_k), made the first time its
+   term is edited.  The edit reads 12 bytes of S and of each differing
+   term's plane and writes 12 a pixel, and with an image that holds the
+   last evaluation (opt->incremental) only the pixels whose K is not 0 of
+   the term that changed since (cp_nz, in bands of PK_ROWS rows as the
+   planes of pk).  Moving between terms (one light's colour, then
+   another's, then back) costs no more than editing one; several colours
+   at once, one plane each.  S and the planes are made from what the
+   full path made (no image of this path feeds the next), so errors do not
+   build up along a chain of edits: a pixel is within about a float ulp
+   of S's value and its own of what the full path gives. */
+
+/* Frees the colour planes and S. */
+static void cp_free(rtp_tree *t)
+{
+    size_t i;
+    for (i = 0; t->cp_k && i < t->cp_nt; i++) {
+        rtpi_free(&t->alloc, t->cp_k[i]);
+        rtpi_free(&t->alloc, t->cp_nz[i]);
+        rtpi_free(&t->alloc, t->cp_seg[i]);
+    }
+    rtpi_free(&t->alloc, t->cp_k);
+    rtpi_free(&t->alloc, t->cp_nz);
+    rtpi_free(&t->alloc, t->cp_seg);
+    rtpi_free(&t->alloc, t->cp_ok);
+    rtpi_free(&t->alloc, t->cp_cl);
+    rtpi_free(&t->alloc, t->cp_d);
+    rtpi_free(&t->alloc, t->cp_dc);
+    rtpi_free(&t->alloc, t->cp_s);
+    t->cp_k = NULL;
+    t->cp_nz = t->cp_seg = NULL;
+    t->cp_ok = NULL;
+    t->cp_cl = t->cp_dc = NULL;
+    t->cp_d = NULL;
+    t->cp_s = NULL;
+    t->cp_nt = t->cp_nd = 0;
+    t->cp_s_ok = 0;
+}
+
+/* The colour term arrays (cp_nt of them), unless they are there. */
+static int cp_alloc(rtp_tree *t, size_t nt)
+{
+    if (t->cp_k && t->cp_nt == nt)
+        return 1;
+    if (t->cp_k)
+        return 0; /* (drop_caches frees them when the lights change) */
+    t->cp_k = (float **)rtpi_calloc_array(&t->alloc, nt, sizeof *t->cp_k);
+    t->cp_nz = (uint32_t **)rtpi_calloc_array(&t->alloc, nt, sizeof *t->cp_nz);
+    t->cp_seg = (uint32_t **)rtpi_calloc_array(&t->alloc, nt, sizeof *t->cp_seg);
+    t->cp_ok = (unsigned char *)rtpi_calloc_array(&t->alloc, nt, 1);
+    t->cp_cl = (double *)rtpi_malloc_array(&t->alloc, 3 * nt, sizeof *t->cp_cl);
+    t->cp_d = (size_t *)rtpi_malloc_array(&t->alloc, nt, sizeof *t->cp_d);
+    t->cp_dc = (double *)rtpi_malloc_array(&t->alloc, 3 * nt, sizeof *t->cp_dc);
+    if (!t->cp_k || !t->cp_nz || !t->cp_seg || !t->cp_ok || !t->cp_cl || !t->cp_d || !t->cp_dc) {
+        cp_free(t);
+        return 0;
+    }
+    t->cp_nt = nt;
+    return 1;
+}
+
+/* Forgets S (the coefficients changed) and, for term i (or every term
+   where i is (size_t)-1), its plane. */
+static void cp_stale(rtp_tree *t, size_t i)
+{
+    t->cp_s_ok = 0;
+    if (!t->cp_ok)
+        return;
+    if (i == (size_t)-1)
+        memset(t->cp_ok, 0, t->cp_nt);
+    else if (i < t->cp_nt)
+        t->cp_ok[i] = 0;
+}
+
+/* One band of the plane of term e->term, from the coefficients. */
+static int cp_plane_chunk(void *ctx, int chunk)
+{
+    eval_ctx *e = (eval_ctx *)ctx;
+    rtp_tree *t = e->t;
+    size_t w = (size_t)t->width, nx = (size_t)t->nx, ks = RTPI_COEFFS(t->scene->nlights);
+    size_t j = e->term, n = 0, base;
+    int y0 = chunk * PK_ROWS, y1 = y0 + PK_ROWS, y, x, c;
+    float *k = t->cp_k[j];
+    uint32_t *nz;
+    if (y1 > t->height)
+        y1 = t->height;
+    base = (size_t)y0 * w;
+    nz = t->cp_nz[j] + base;
+    for (y = y0; y < y1; y++) {
+        size_t p = (size_t)y * w;
+        const float *ka = t->ev_coeffs + (t->spd ? (size_t)y * nx : p) * ks + 3 * j;
+        for (x = 0; x < t->width; x++, p++, ka += ks) {
+            float *kp = k + 3 * p;
+            if (t->spd) {
+                const float *kb = ka + nx * ks; /* the corners below */
+                for (c = 0; c < 3; c++)
+                    kp[c] = (float)(0.25 * ((double)ka[c] + ka[ks + c] + kb[c] + kb[ks + c]));
+            } else
+                for (c = 0; c < 3; c++)
+                    kp[c] = ka[c];
+            if (!(isfinite(kp[0]) && isfinite(kp[1]) && isfinite(kp[2])))
+                e->nonfinite = 1;
+            if (kp[0] != 0.0f || kp[1] != 0.0f || kp[2] != 0.0f)
+                nz[n++] = (uint32_t)p;
+        }
+    }
+    t->cp_seg[j][chunk] = (uint32_t)n;
+    return 0;
+}
+
+/* The plane of term j, unless it holds; 0 where it cannot be made (no
+   memory, or values beyond the float range: the full path serves). */
+static int cp_plane(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, size_t j)
+{
+    size_t np = (size_t)t->width * t->height;
+    int i, nb = (t->height + PK_ROWS - 1) / PK_ROWS, ok = 1;
+    if (t->cp_ok[j])
+        return 1;
+    if (!t->cp_k[j])
+        t->cp_k[j] = (float *)rtpi_malloc_array(&t->alloc, np, 3 * sizeof(float));
+    if (t->cp_k[j] && !t->cp_nz[j])
+        t->cp_nz[j] = (uint32_t *)rtpi_malloc_array(&t->alloc, np, sizeof(uint32_t));
+    if (t->cp_nz[j] && !t->cp_seg[j])
+        t->cp_seg[j] = (uint32_t *)rtpi_malloc_array(&t->alloc, (size_t)nb + 1, sizeof(uint32_t));
+    if (!t->cp_seg[j])
+        return 0;
+    for (i = 0; i < nthreads; i++)
+        e[i].term = j;
+    rtpi_parallel_rows(nb, threads_for(16.0 * (double)np * RTPI_COEFFS(t->scene->nlights) / 3.0,
+                                       nthreads),
+                       ctx, cp_plane_chunk, NULL, NULL);
+    for (i = 0; i < nthreads; i++) {
+        ok &= !e[i].nonfinite;
+        e[i].nonfinite = 0;
+    }
+    t->cp_ok[j] = (unsigned char)ok;
+    return ok;
+}
+
+/* S from the samples (which hold the colours ev_cl for the coefficients
+   now), unless it holds: the image `last` when it holds the last
+   evaluation (made from those samples), else the samples resolved.  0
+   where it cannot be made (no memory, a value beyond the float range). */
+static int cp_snapshot(rtp_tree *t, const float *samples, const float *last, size_t nt)
+{
+    size_t np = (size_t)t->width * t->height, i;
+    int finite = 1;
+    if (t->cp_s_ok)
+        return 1;
+    if (!t->ev_samples_ok || !samples)
+        return 0;
+    if (!t->cp_s)
+        t->cp_s = (float *)rtpi_malloc_array(&t->alloc, np, 3 * sizeof *t->cp_s);
+    if (!t->cp_s)
+        return 0;
+    if (last) {
+        for (i = 0; i < 3 * np; i++)
+            finite &= isfinite(t->cp_s[i] = last[i]) != 0;
+    } else {
+        rtp_image im;
+        memset(&im, 0, sizeof im);
+        im.width = t->width;
+        im.height = t->height;
+        im.pixels = t->cp_s;
+        rtpi_resolve_samples(samples, t->spd, &im);
+        for (i = 0; i < 3 * np; i++)
+            finite &= isfinite(t->cp_s[i]) != 0;
+    }
+    if (!finite)
+        return 0;
+    memcpy(t->cp_cl, t->ev_cl, 3 * nt * sizeof *t->cp_cl);
+    t->cp_s_ok = 1;
+    return 1;
+}
+
+/* One pixel: S + sum K_d (c_d - cS_d) over the differing terms. */
+static void cp_pixel(const rtp_tree *t, size_t p, float *out)
+{
+    const float *sp = t->cp_s + 3 * p;
+    double v0 = sp[0], v1 = sp[1], v2 = sp[2];
+    size_t i;
+    for (i = 0; i < t->cp_nd; i++) {
+        const float *k = t->cp_k[t->cp_d[i]] + 3 * p;
+        const double *dc = t->cp_dc + 3 * i;
+        v0 += k[0] * dc[0];
+        v1 += k[1] * dc[1];
+        v2 += k[2] * dc[2];
+    }
+    out[0] = (float)v0;
+    out[1] = (float)v1;
+    out[2] = (float)v2;
+}
+
+/* A band of every pixel. */
+static int cp_apply_band(void *ctx, int chunk)
+{
+    eval_ctx *e = (eval_ctx *)ctx;
+    const rtp_tree *t = e->t;
+    size_t p = (size_t)chunk * PK_ROWS * (size_t)t->width, end = p + PK_ROWS * (size_t)t->width;
+    if (end > (size_t)t->width * t->height)
+        end = (size_t)t->width * t->height;
+    for (; p < end; p++)
+        cp_pixel(t, p, e->pixels + 3 * p);
+    return 0;
+}
+
+/* A band of the pixels whose K is not 0 in the plane of term e->term. */
+static int cp_apply_listed(void *ctx, int chunk)
+{
+    eval_ctx *e = (eval_ctx *)ctx;
+    const rtp_tree *t = e->t;
+    size_t base = (size_t)chunk * PK_ROWS * (size_t)t->width, n = t->cp_seg[e->term][chunk], j;
+    const uint32_t *nz = t->cp_nz[e->term] + base;
+    if (t->cp_nd == 1 && t->cp_d[0] == e->term) {
+        /* the common case, one term edited (cp_pixel's sums alone) */
+        const float *k = t->cp_k[e->term], *sp = t->cp_s;
+        const double *dc = t->cp_dc;
+        float *out = e->pixels;
+        for (j = 0; j < n; j++) {
+            size_t q = 3 * (size_t)nz[j];
+            out[q] = (float)(sp[q] + k[q] * dc[0]);
+            out[q + 1] = (float)(sp[q + 1] + k[q + 1] * dc[1]);
+            out[q + 2] = (float)(sp[q + 2] + k[q + 2] * dc[2]);
+        }
+        return 0;
+    }
+    for (j = 0; j < n; j++)
+        cp_pixel(t, nz[j], e->pixels + 3 * (size_t)nz[j]);
+    return 0;
+}
+
+/* The image for colours cv by the colour planes into pixels, if they can
+   make it (the coefficients as the last evaluation left them; `sparse`:
+   pixels hold that evaluation).  1 when done. */
+static int cp_eval(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, const double *cv,
+                   const float *samples, float *pixels, int sparse, rtp_eval_stats *st)
+{
+    size_t nt = 2 + t->scene->nlights, j, nd = 0, nc = 0, changed = 0;
+    size_t np = (size_t)t->width * t->height;
+    int i, nb = (t->height + PK_ROWS - 1) / PK_ROWS;
+    if (!t->ev_valid || !t->ev_cl || !cp_alloc(t, nt) ||
+        !cp_snapshot(t, samples, sparse ? pixels : NULL, nt))
+        return 0;
+    for (j = 0; j < nt; j++) {
+        const double *a = cv + 3 * j, *b = t->cp_cl + 3 * j, *l = t->ev_cl + 3 * j;
+        if (a[0] != b[0] || a[1] != b[1] || a[2] != b[2]) {
+            if (!cp_plane(t, e, ctx, nthreads, j))
+                return 0;
+            t->cp_d[nd] = j;
+            t->cp_dc[3 * nd] = a[0] - b[0];
+            t->cp_dc[3 * nd + 1] = a[1] - b[1];
+            t->cp_dc[3 * nd + 2] = a[2] - b[2];
+            nd++;
+        }
+        if (a[0] != l[0] || a[1] != l[1] || a[2] != l[2]) {
+            changed = j;
+            nc++;
+        }
+    }
+    t->cp_nd = nd;
+    for (i = 0; i < nthreads; i++) {
+        e[i].term = changed;
+        e[i].pixels = pixels;
+    }
+    if (nc)
+        t->ev_samples_ok = 0; /* they hold the colours before */
+    if (sparse && nc <= 1) {
+        /* (nothing changed since the last image: nothing to write) */
+        size_t nw = 0;
+        if (nc == 1) {
+            if (!cp_plane(t, e, ctx, nthreads, changed))
+                return 0;
+            for (i = 0; i < nb; i++)
+                nw += t->cp_seg[changed][i];
+            rtpi_parallel_rows(nb, threads_for(16.0 * (1.0 + (double)nd) * (double)nw, nthreads),
+                               ctx, cp_apply_listed, NULL, NULL);
+        }
+        st->written_pixels = nw;
+    } else {
+        rtpi_parallel_rows(nb, threads_for(12.0 * (2.0 + (double)nd) * (double)np, nthreads), ctx,
+                           cp_apply_band, NULL, NULL);
+        st->written_pixels = np;
+    }
+    return 1;
+}
+
 static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image *into,
                             rtp_image **out, rtp_eval_stats *stats, rtp_error *err)
 {
@@ -1326,7 +1595,6 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
     int nset = 0, partial = 0;
     uint32_t set_mats[RESOLVE_MAX];
     size_t nmat_changed = 0;
-    size_t pk = 0;
     uint32_t mt = 0;
     double xold[3], xnew[3];
     rtp_status rs = RTP_OK;
@@ -1456,6 +1724,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
         /* every step for every sample */
         rtpi_parallel_rows(t->ny, nthreads, ctx, eval_row, opt ? opt->progress : NULL,
                            opt ? opt->progress_user : NULL);
+        cp_stale(t, (size_t)-1);
         st.samples = ns;
         st.combined_samples = ns;
         t->pk_term = 0;
@@ -1470,6 +1739,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
             for (i = 0; i < nthreads; i++)
                 e[i].light = l;
             rtpi_parallel_rows(t->ny, nthreads, ctx, light_row, NULL, NULL);
+            cp_stale(t, 2 + l);
             st.samples += ns;
             coeffs_dirty = 1;
         }
@@ -1582,6 +1852,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
             if (list_combine)
                 note_set(set_mats, &nset, (uint32_t)m);
             rtpi_parallel_rows((int)((n + 255) / 256), nthreads, ctx, redo_chunk, NULL, NULL);
+            cp_stale(t, (size_t)-1);
             st.samples += n;
             coeffs_dirty = 1;
         }
@@ -1596,35 +1867,14 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
             st.combined_samples = st.samples;
             t->pk_term = 0;
             partial = 1;
-        } else if (!coeffs_dirty && one_term(t, cv, nl, &pk)) {
-            /* one colour changed: P + K c per pixel */
-            for (i = 0; i < nthreads; i++) {
-                e[i].cv = cv;
-                e[i].term = pk;
-                e[i].x = cv + 3 * pk;
-                e[i].kp = t->ev_coeffs + 3 * pk;
-                e[i].kstride = RTPI_COEFFS(nl);
-                e[i].pixels = img->pixels;
-            }
-            if (t->pk_term != (int)pk + 1) {
-                if (pk_build(t, e, ctx, nthreads)) {
-                    t->pk_term = (int)pk + 1;
-                }
-                st.combined_samples = ns;
-            }
-            if (t->pk_term == (int)pk + 1) {
-                pk_apply(t, ctx, nthreads, sparse, &st);
-                one = 1;
-            } else {
-                /* planes not finite: step 3 for every sample */
-                rtpi_parallel_rows(t->ny, nthreads, ctx, combine_row, NULL, NULL);
-            }
-            /* (after P + K c the samples hold the colours before it) */
-            t->ev_samples_ok = !one && cached;
         } else if (list_combine && !coeffs_dirty) {
             /* nothing changed since: the samples hold their colours (and
                an incremental image its pixels) */
             partial = 1;
+        } else if (!coeffs_dirty && cp_eval(t, e, ctx, nthreads, cv, samples, img->pixels, sparse, &st)) {
+            /* colours alone changed: S + K (c - cS) per pixel */
+            one = 1;
+            t->pk_term = 0; /* (a material's planes hold the colours before) */
         } else {
             /* step 3 for every sample */
             rtpi_parallel_rows(t->ny, nthreads, ctx, combine_row, NULL, NULL);

@@ -466,10 +466,11 @@ static void test_edit_sequence(void)
 
 /* Edits of one term of the image's linear form (a light's colour or
    on/off, the ambient, the background, a material's kd or colour), one
-   after another: after the first of a term each is P + K x from
-   precombined planes (no sample summed: stats.combined_samples is 0), and
-   every image equals a full trace.  Runs on plain samples and on an SPD
-   region (corner samples averaged). */
+   after another: a colour edit is S + K (c - cS) from the snapshot and
+   the term's plane, a material's after its first P + K x from planes (no
+   sample summed: stats.combined_samples is 0), and every image equals a
+   full trace.  Runs on plain samples and on an SPD region (corner
+   samples averaged). */
 static void one_term_run(int spd)
 {
     static const char *const seq[][2] = {
@@ -490,10 +491,12 @@ static void one_term_run(int spd)
         {"mat.red.shine", "30"},         {"", ""},                        {"light.0.color", "0.7,0.7,0.2"},
         {"mat.red.shine", "2"},
     };
-    /* edits whose planes are already built: P + K x, no sample summed
-       (the ones not given are 0) */
-    static const int planes[sizeof seq / sizeof *seq] = {0, 0, 1, 1, 1, 0, 1, 0, 1, 0, 1,
-                                                          0, 1, 1, 0, 0, 1, 0, 0, 0, 0, 1};
+    /* edits made from planes, no sample summed (the ones not given are
+       0): every colour edit while the coefficients hold (the first of a
+       term too), a material's after its first; after a material's edit
+       the first colour edit recombines (the coefficients change) */
+    static const int planes[sizeof seq / sizeof *seq] = {1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1,
+                                                          0, 1, 1, 0, 0, 1, 0, 0, 0, 1, 1};
     rtp_scene *s = load("scenes/spheres.nff");
     rtp_tree *t = NULL;
     rtp_trace_options o;
@@ -575,6 +578,90 @@ static void test_one_term_edits(void)
 {
     one_term_run(0);
     one_term_run(1);
+}
+
+/* Colour edits of several terms at once and a long run moving between
+   terms: each image from the snapshot and the planes alone (no sample
+   summed), written only where the edited term shows, and after 60 edits
+   still equal to a full trace (no error builds up: nothing of one edit's
+   image feeds the next). */
+static void colour_run(int spd)
+{
+    rtp_scene *s = load("scenes/spheres.nff");
+    rtp_tree *t = NULL;
+    rtp_trace_options o;
+    rtp_eval_options eo;
+    rtp_image *re = NULL;
+    int i;
+    if (!s) {
+        CHECK(s != NULL);
+        return;
+    }
+    memset(&o, 0, sizeof o);
+    memset(&eo, 0, sizeof eo);
+    o.width = 40;
+    o.height = 30;
+    if (spd) {
+        o.spd = 1;
+        o.region[0] = 200;
+        o.region[1] = 180;
+        o.region[2] = 264;
+        o.region[3] = 228;
+    }
+    eo.threads = 2;
+    eo.incremental = 1;
+    CHECK(rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
+    CHECK(t && rtp_tree_eval(t, &eo, &re, NULL, NULL) == RTP_OK);
+    for (i = 0; t && re && i < 62; i++) {
+        char v[64];
+        rtp_eval_stats es;
+        rtp_image *full = NULL;
+        rtp_diff_stats d;
+        int check = i < 2 || i == 61;
+        if (i == 0) {
+            /* three terms in one edit */
+            CHECK(rtp_tree_set(t, "light.0.color", "0.9,0.1,0.3", NULL) == RTP_OK &&
+                  rtp_tree_set(t, "light.1.color", "0.2,0.8,0.4", NULL) == RTP_OK &&
+                  rtp_tree_set(t, "ambient", "0.25", NULL) == RTP_OK);
+            CHECK(rtp_scene_set(s, "light.0.color", "0.9,0.1,0.3", NULL) == RTP_OK &&
+                  rtp_scene_set(s, "light.1.color", "0.2,0.8,0.4", NULL) == RTP_OK &&
+                  rtp_scene_set(s, "ambient", "0.25", NULL) == RTP_OK);
+        } else {
+            /* then light 0, light 1 and the background by turns */
+            const char *key = i % 3 == 0 ? "light.0.color" : i % 3 == 1 ? "light.1.color"
+                                                                         : "background";
+            snprintf(v, sizeof v, "%g,%g,%g", 0.013 * i, 0.5 + 0.0071 * i, 1.0 - 0.011 * i);
+            CHECK(rtp_tree_set(t, key, v, NULL) == RTP_OK);
+            CHECK(rtp_scene_set(s, key, v, NULL) == RTP_OK);
+        }
+        if (rtp_tree_eval_into(t, &eo, re, &es, NULL) != RTP_OK) {
+            CHECK(0);
+            break;
+        }
+        CHECK_MSG(es.combined_samples == 0, "spd %d, edit %d summed %llu samples", spd, i,
+                  es.combined_samples);
+        if (i > 0)
+            CHECK_MSG(es.written_pixels > 0 &&
+                          es.written_pixels < (unsigned long long)re->width * re->height,
+                      "spd %d, edit %d wrote %llu pixels", spd, i, es.written_pixels);
+        if (!check)
+            continue;
+        if (rtp_trace(s, &o, &full, NULL, NULL) == RTP_OK &&
+            rtp_image_diff(re, full, 1e-6, &d, NULL) == RTP_OK)
+            CHECK_MSG(d.max_abs <= 1e-6, "spd %d, after edit %d: %g", spd, i, d.max_abs);
+        else
+            CHECK(0);
+        rtp_image_destroy(full);
+    }
+    rtp_image_destroy(re);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+}
+
+static void test_colour_edits(void)
+{
+    colour_run(0);
+    colour_run(1);
 }
 
 /* Bump edits: on a surface with no subtrees they are exact either way; on
@@ -824,6 +911,7 @@ static void test_newer_version_and_foreign(void)
 int main(void)
 {
     RUN(test_identical_project_scenes);
+    RUN(test_colour_edits);
     RUN(test_identical_teapot);
     RUN(test_identical_small_spd);
     RUN(test_class_a_edits);
