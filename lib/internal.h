@@ -526,6 +526,8 @@ struct rtp_tree {
     size_t *cp_d, cp_nd;   /* the terms whose colour differs from cS... */
     double *cp_dc;         /* ...and by how much (3 each) */
     const float *last_pixels; /* the image the last evaluation wrote */
+    int last_exact;        /* ...and it is the image of the coefficients
+                              (tree.c; not a material's P + K x) */
     float *pk_q;           /* samples * 3: q of the material whose kd *
                               colour is the term (rtpi_sample_diffuse) */
     uint32_t *mat_start;   /* per material: its samples in mat_samples */

@@ -1532,6 +1532,8 @@ static int cp_eval(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, con
     size_t nt = 2 + t->scene->nlights, j, nd = 0, nc = 0, changed = 0;
     size_t np = (size_t)t->width * t->height;
     int i, nb = (t->height + PK_ROWS - 1) / PK_ROWS;
+    /* the kept image serves only where it is the coefficients' image */
+    sparse = sparse && t->last_exact;
     if (!t->ev_valid || !t->ev_cl || !cp_alloc(t, nt) ||
         !cp_snapshot(t, samples, sparse ? pixels : NULL, nt))
         return 0;
@@ -1943,6 +1945,9 @@ done:
         stats->nodes = t->nnodes;
     }
     t->last_pixels = img->pixels;
+    /* a material's planes and listed highlights make images the
+       coefficients (held at the material before) do not */
+    t->last_exact = !matpath && !hl_apply;
     if (!hl_used)
         t->hl_mat = 0; /* the list holds only while shine edits follow */
     if (out)
