@@ -511,6 +511,8 @@ struct rtp_tree {
                               bands): the only ones an edit of the term
                               changes; pk_nnz of them in all */
     uint32_t *pk_seg;      /* per band: how many pk_nz and pk_c hold */
+    int pk_part;           /* the planes are made only where the material
+                              reaches (pk holds P nowhere else) */
     size_t pk_nnz;
     /* colour planes (tree.c: cp_*): an image for other colours of the
        terms (background, ambient, lights) is S + sum K_d (c_d - cS_d) */

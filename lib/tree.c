@@ -445,7 +445,9 @@ typedef struct eval_ctx {
     double *acc;
     int nomem;
     int nonfinite;            /* pk_put met a plane value that is not finite */
-    float *rest;              /* pk_build_chunk: two sample rows' rest */
+    float *rest;              /* pk_build_chunk, pk_mat_chunk: scratch */
+    size_t rest_bytes;
+    unsigned long long summed; /* pk_mat_chunk: samples whose rest it made */
 } eval_ctx;
 
 /* Steps 1 and 2 for sample k, into the caches or the scratch. */
@@ -741,21 +743,27 @@ static int combine_row(void *ctx, int y)
    the band's other pixels, at their own place. */
 #define PK_ROWS 16
 
-/* The rest P_s of each sample of sample row y, into out (3 floats a
-   sample).  A colour term is left out of the sum; a material's diffuse
-   part x q is taken off the whole. */
+/* The rest P_s of sample k into out (3 floats): the material's diffuse
+   part x q taken off the whole.  q: the sample's, or NULL for 0 (a
+   sample without the material). */
+static void pk_rest_one(const eval_ctx *e, size_t k, const float *q, float *out)
+{
+    size_t nc = RTPI_COEFFS(e->t->scene->nlights);
+    double v[3];
+    int c;
+    rest_of(e->cv, nc, (size_t)-1, e->t->ev_coeffs + k * nc, v);
+    for (c = 0; c < 3; c++)
+        out[c] = (float)(v[c] - e->xold[c] * (q ? q[c] : 0.0f));
+}
+
+/* The same for each sample of sample row y (pk_q 0 where the material is
+   not). */
 static void pk_rest_into(const eval_ctx *e, int y, float *out)
 {
-    const rtp_tree *t = e->t;
-    size_t k = (size_t)y * t->nx, nc = RTPI_COEFFS(t->scene->nlights);
-    int x, c;
-    for (x = 0; x < t->nx; x++, k++, out += 3) {
-        double v[3];
-        const float *q = t->pk_q + 3 * k;
-        rest_of(e->cv, nc, (size_t)-1, t->ev_coeffs + k * nc, v);
-        for (c = 0; c < 3; c++)
-            out[c] = (float)(v[c] - e->xold[c] * q[c]);
-    }
+    size_t k = (size_t)y * e->t->nx;
+    int x;
+    for (x = 0; x < e->t->nx; x++, k++, out += 3)
+        pk_rest_one(e, k, e->t->pk_q + 3 * k, out);
 }
 
 /* One pixel's planes pk (P then K) into its band: the list where K is
@@ -833,19 +841,123 @@ static int pk_build_chunk(void *ctx, int chunk)
     return 0;
 }
 
-/* Builds the planes for the term the contexts name; 1 if they came out
+/* The first index of the sorted list (n entries) at or above v. */
+static size_t lower_bound(const uint32_t *list, size_t n, size_t v)
+{
+    size_t lo = 0, hi = n;
+    while (lo < hi) {
+        size_t mid = lo + (hi - lo) / 2;
+        if (list[mid] < v)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    return lo;
+}
+
+/* The planes of one band where only the pixels the edited material's
+   samples (e->list) reach can change (an image kept from the last
+   evaluation, opt->incremental): P and K there alone, from the rest of
+   just their (corner) samples; q is read only at the listed samples
+   (pk_q is not cleared).  Values are those pk_build_chunk gives. */
+static int pk_mat_chunk(void *ctx, int chunk)
+{
+    eval_ctx *e = (eval_ctx *)ctx;
+    rtp_tree *t = e->t;
+    size_t w = (size_t)t->width, nx = (size_t)t->nx, n = 0, base, i, lo, hi, srows;
+    int y0 = chunk * PK_ROWS, y1 = y0 + PK_ROWS, y, x, c, j, spd = t->spd;
+    float *pc, pk[6], *rest = e->rest;
+    unsigned char *listed, *done, *touched;
+    uint32_t *nz;
+    if (y1 > t->height)
+        y1 = t->height;
+    /* the band's sample rows: SPD pixels also reach the row below */
+    srows = (size_t)(y1 - y0) + (spd ? 1u : 0u);
+    listed = (unsigned char *)(rest + 3 * (PK_ROWS + 1) * nx);
+    done = listed + (PK_ROWS + 1) * nx;
+    touched = done + (PK_ROWS + 1) * nx;
+    memset(listed, 0, srows * nx);
+    memset(done, 0, srows * nx);
+    memset(touched, 0, (size_t)(y1 - y0) * w);
+    base = (size_t)y0 * w;
+    pc = t->pk_c + 6 * base;
+    nz = t->pk_nz + base;
+    lo = lower_bound(e->list, e->nlist, (size_t)y0 * nx);
+    hi = lower_bound(e->list, e->nlist, ((size_t)y0 + srows) * nx);
+    for (i = lo; i < hi; i++) {
+        size_t k = e->list[i], sx = k % nx, sy = k / nx - (size_t)y0;
+        listed[sy * nx + sx] = 1;
+        if (!spd) {
+            touched[sy * w + sx] = 1;
+            continue;
+        }
+        /* the pixels whose corners it is: (sx-1..sx, sy-1..sy) */
+        for (j = 0; j < 4; j++) {
+            size_t px = sx - (size_t)(j & 1), py = sy - (size_t)(j >> 1);
+            if (px < w && py < (size_t)(y1 - y0)) /* (unsigned: -1 is large) */
+                touched[py * w + px] = 1;
+        }
+    }
+    for (y = y0; y < y1; y++) {
+        size_t p = (size_t)y * w, ly = (size_t)(y - y0);
+        for (x = 0; x < t->width; x++) {
+            size_t corner[4], nco = spd ? 4 : 1;
+            double sp[3] = {0.0, 0.0, 0.0}, sk[3] = {0.0, 0.0, 0.0};
+            if (!touched[ly * w + (size_t)x])
+                continue;
+            corner[0] = ly * nx + (size_t)x;
+            corner[1] = corner[0] + 1;
+            corner[2] = corner[0] + nx;
+            corner[3] = corner[2] + 1;
+            for (j = 0; j < (int)nco; j++) {
+                size_t l = corner[j], k = (size_t)y0 * nx + l;
+                const float *q = listed[l] ? t->pk_q + 3 * k : NULL;
+                if (!done[l]) {
+                    pk_rest_one(e, k, q, rest + 3 * l);
+                    done[l] = 1;
+                    e->summed++;
+                }
+                for (c = 0; c < 3; c++) {
+                    sp[c] += rest[3 * l + c];
+                    sk[c] += q ? q[c] : 0.0f;
+                }
+            }
+            /* the sums in pk_build_chunk's order: (x, y), (x+1, y), (x, y+1), (x+1, y+1) */
+            for (c = 0; c < 3; c++) {
+                pk[c] = spd ? (float)(0.25 * sp[c]) : (float)sp[c];
+                pk[3 + c] = spd ? (float)(0.25 * sk[c]) : (float)sk[c];
+            }
+            pk_put(e, pk, p + (size_t)x, pc, nz, &n);
+        }
+    }
+    t->pk_seg[chunk] = (uint32_t)n;
+    return 0;
+}
+
+/* Builds the planes for the term the contexts name (with `part`, only
+   where the material's samples reach: pk_mat_chunk); 1 if they came out
    finite, else 0 (not to be used; out of memory for the threads' scratch
    also sets e->nomem). */
-static int pk_build(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads)
+static int pk_build(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, int part)
 {
     int i, nb = (t->height + PK_ROWS - 1) / PK_ROWS, ok = 1;
-    for (i = 0; i < nthreads; i++)
-        if (!e[i].rest && !(e[i].rest = (float *)rtpi_malloc_array(&t->alloc, (size_t)t->nx,
-                                                                   6 * sizeof *e[i].rest))) {
+    /* two sample rows' rest, or with `part` a band's and its marks */
+    size_t nx = (size_t)t->nx, bytes = part ? (PK_ROWS + 1) * nx * (3 * sizeof(float) + 2) +
+                                                  PK_ROWS * (size_t)t->width
+                                            : 6 * nx * sizeof(float);
+    for (i = 0; i < nthreads; i++) {
+        if (e[i].rest && e[i].rest_bytes < bytes) {
+            rtpi_free(&t->alloc, e[i].rest);
+            e[i].rest = NULL;
+        }
+        if (!e[i].rest && !(e[i].rest = (float *)rtpi_malloc_array(&t->alloc, bytes, 1))) {
             e[i].nomem = 1;
             return 0;
         }
-    rtpi_parallel_rows(nb, nthreads, ctx, pk_build_chunk, NULL, NULL);
+        e[i].rest_bytes = bytes;
+        e[i].summed = 0;
+    }
+    rtpi_parallel_rows(nb, nthreads, ctx, part ? pk_mat_chunk : pk_build_chunk, NULL, NULL);
     for (i = 0; i < nthreads; i++) {
         ok &= !e[i].nonfinite;
         e[i].nonfinite = 0;
@@ -1769,13 +1881,20 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                 e[i].nlist = t->mat_start[mt + 1] - t->mat_start[mt];
                 e[i].chunk = 256;
             }
-            if (t->pk_term != (int)(2 + nl + mt) + 1) {
-                memset(t->pk_q, 0, ns * 3 * sizeof *t->pk_q);
+            if (t->pk_term != (int)(2 + nl + mt) + 1 || (t->pk_part && !sparse)) {
+                /* into a kept image only the pixels of the material's
+                   samples change: their planes alone (pk_part) */
+                if (!sparse)
+                    memset(t->pk_q, 0, ns * 3 * sizeof *t->pk_q);
                 rtpi_parallel_rows((int)((e[0].nlist + 255) / 256), nthreads, ctx, pk_q_chunk,
                                    NULL, NULL);
-                if (pk_build(t, e, ctx, nthreads)) {
+                if (pk_build(t, e, ctx, nthreads, sparse)) {
                     t->pk_term = (int)(2 + nl + mt) + 1;
+                    t->pk_part = sparse;
                     st.combined_samples = ns;
+                    if (sparse)
+                        for (st.combined_samples = 0, i = 0; i < nthreads; i++)
+                            st.combined_samples += e[i].summed;
                 }
             }
             if (t->pk_term == (int)(2 + nl + mt) + 1) {

@@ -538,6 +538,15 @@ static void one_term_run(int spd)
             if (planes[i])
                 CHECK_MSG(es.combined_samples == 0, "spd %d, %s=%s summed %llu samples", spd,
                           seq[i][0], seq[i][1], es.combined_samples);
+            /* a material's first edit into the kept image makes planes
+               only where its samples reach */
+            if (i == 11 || i == 15) {
+                rtp_tree_info ti;
+                rtp_tree_get_info(t, &ti);
+                CHECK_MSG(es.combined_samples > 0 && es.combined_samples < ti.samples,
+                          "spd %d, %s=%s summed %llu of %llu samples", spd, seq[i][0],
+                          seq[i][1], es.combined_samples, (unsigned long long)ti.samples);
+            }
             /* the background shows in part of the image: only that part
                is written again */
             /* after a full combine, a material's other edits recombine
