@@ -527,6 +527,7 @@ struct rtp_tree {
     unsigned char *cp_ok;  /* per term: its plane holds */
     size_t *cp_d, cp_nd;   /* the terms whose colour differs from cS... */
     double *cp_dc;         /* ...and by how much (3 each) */
+    double *cp_ab;         /* |c_d| + |cS_d| (3 each: cp_lost) */
     const float *last_pixels; /* the image the last evaluation wrote */
     int last_exact;        /* ...and it is the image of the coefficients
                               (tree.c; not a material's P + K x) */

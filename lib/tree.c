@@ -1432,11 +1432,12 @@ static void cp_free(rtp_tree *t)
     rtpi_free(&t->alloc, t->cp_cl);
     rtpi_free(&t->alloc, t->cp_d);
     rtpi_free(&t->alloc, t->cp_dc);
+    rtpi_free(&t->alloc, t->cp_ab);
     rtpi_free(&t->alloc, t->cp_s);
     t->cp_k = NULL;
     t->cp_nz = t->cp_seg = NULL;
     t->cp_ok = NULL;
-    t->cp_cl = t->cp_dc = NULL;
+    t->cp_cl = t->cp_dc = t->cp_ab = NULL;
     t->cp_d = NULL;
     t->cp_s = NULL;
     t->cp_nt = t->cp_nd = 0;
@@ -1457,7 +1458,9 @@ static int cp_alloc(rtp_tree *t, size_t nt)
     t->cp_cl = (double *)rtpi_malloc_array(&t->alloc, 3 * nt, sizeof *t->cp_cl);
     t->cp_d = (size_t *)rtpi_malloc_array(&t->alloc, nt, sizeof *t->cp_d);
     t->cp_dc = (double *)rtpi_malloc_array(&t->alloc, 3 * nt, sizeof *t->cp_dc);
-    if (!t->cp_k || !t->cp_nz || !t->cp_seg || !t->cp_ok || !t->cp_cl || !t->cp_d || !t->cp_dc) {
+    t->cp_ab = (double *)rtpi_malloc_array(&t->alloc, 3 * nt, sizeof *t->cp_ab);
+    if (!t->cp_k || !t->cp_nz || !t->cp_seg || !t->cp_ok || !t->cp_cl || !t->cp_d || !t->cp_dc ||
+        !t->cp_ab) {
         cp_free(t);
         return 0;
     }
@@ -1579,22 +1582,42 @@ static int cp_snapshot(rtp_tree *t, const float *samples, const float *last, siz
     return 1;
 }
 
-/* One pixel: S + sum K_d (c_d - cS_d) over the differing terms. */
-static void cp_pixel(const rtp_tree *t, size_t p, float *out)
+/* S and the planes are floats: S + K (c - cS) carries their rounding,
+   about 2^-24 of |S| + |K| (|c| + |cS|), where P + K c from the
+   coefficients carries 2^-24 of the pixel.  Where that sum is more than
+   CP_SPAN times the pixel (and than 1: below, the error is below 2^-22
+   absolute), as when a colour is cut from thousands to 2, the colours
+   lost digits to cancellation and the full path makes the image (and S
+   anew from it). */
+#define CP_SPAN 4.0
+
+static int cp_lost(double s, double kc, double v)
+{
+    double a = fabs(v);
+    return !(fabs(s) + kc <= CP_SPAN * (a > 1.0 ? a : 1.0));
+}
+
+/* One pixel: S + sum K_d (c_d - cS_d) over the differing terms; 1 where
+   it lost digits (cp_lost). */
+static int cp_pixel(const rtp_tree *t, size_t p, float *out)
 {
     const float *sp = t->cp_s + 3 * p;
-    double v0 = sp[0], v1 = sp[1], v2 = sp[2];
+    double v0 = sp[0], v1 = sp[1], v2 = sp[2], k0 = 0.0, k1 = 0.0, k2 = 0.0;
     size_t i;
     for (i = 0; i < t->cp_nd; i++) {
         const float *k = t->cp_k[t->cp_d[i]] + 3 * p;
-        const double *dc = t->cp_dc + 3 * i;
+        const double *dc = t->cp_dc + 3 * i, *ab = t->cp_ab + 3 * i;
         v0 += k[0] * dc[0];
         v1 += k[1] * dc[1];
         v2 += k[2] * dc[2];
+        k0 += fabs(k[0]) * ab[0];
+        k1 += fabs(k[1]) * ab[1];
+        k2 += fabs(k[2]) * ab[2];
     }
     out[0] = (float)v0;
     out[1] = (float)v1;
     out[2] = (float)v2;
+    return cp_lost(sp[0], k0, v0) | cp_lost(sp[1], k1, v1) | cp_lost(sp[2], k2, v2);
 }
 
 /* A band of every pixel. */
@@ -1606,7 +1629,7 @@ static int cp_apply_band(void *ctx, int chunk)
     if (end > (size_t)t->width * t->height)
         end = (size_t)t->width * t->height;
     for (; p < end; p++)
-        cp_pixel(t, p, e->pixels + 3 * p);
+        e->nonfinite |= cp_pixel(t, p, e->pixels + 3 * p);
     return 0;
 }
 
@@ -1620,18 +1643,25 @@ static int cp_apply_listed(void *ctx, int chunk)
     if (t->cp_nd == 1 && t->cp_d[0] == e->term) {
         /* the common case, one term edited (cp_pixel's sums alone) */
         const float *k = t->cp_k[e->term], *sp = t->cp_s;
-        const double *dc = t->cp_dc;
+        const double *dc = t->cp_dc, *ab = t->cp_ab;
         float *out = e->pixels;
+        int lost = 0;
         for (j = 0; j < n; j++) {
             size_t q = 3 * (size_t)nz[j];
-            out[q] = (float)(sp[q] + k[q] * dc[0]);
-            out[q + 1] = (float)(sp[q + 1] + k[q + 1] * dc[1]);
-            out[q + 2] = (float)(sp[q + 2] + k[q + 2] * dc[2]);
+            double v0 = sp[q] + k[q] * dc[0], v1 = sp[q + 1] + k[q + 1] * dc[1];
+            double v2 = sp[q + 2] + k[q + 2] * dc[2];
+            out[q] = (float)v0;
+            out[q + 1] = (float)v1;
+            out[q + 2] = (float)v2;
+            lost |= cp_lost(sp[q], fabs(k[q]) * ab[0], v0) |
+                    cp_lost(sp[q + 1], fabs(k[q + 1]) * ab[1], v1) |
+                    cp_lost(sp[q + 2], fabs(k[q + 2]) * ab[2], v2);
         }
+        e->nonfinite |= lost;
         return 0;
     }
     for (j = 0; j < n; j++)
-        cp_pixel(t, nz[j], e->pixels + 3 * (size_t)nz[j]);
+        e->nonfinite |= cp_pixel(t, nz[j], e->pixels + 3 * (size_t)nz[j]);
     return 0;
 }
 
@@ -1643,7 +1673,7 @@ static int cp_eval(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, con
 {
     size_t nt = 2 + t->scene->nlights, j, nd = 0, nc = 0, changed = 0;
     size_t np = (size_t)t->width * t->height;
-    int i, nb = (t->height + PK_ROWS - 1) / PK_ROWS;
+    int i, c, nb = (t->height + PK_ROWS - 1) / PK_ROWS, lost = 0;
     /* the kept image serves only where it is the coefficients' image */
     sparse = sparse && t->last_exact;
     if (!t->ev_valid || !t->ev_cl || !cp_alloc(t, nt) ||
@@ -1655,9 +1685,10 @@ static int cp_eval(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, con
             if (!cp_plane(t, e, ctx, nthreads, j))
                 return 0;
             t->cp_d[nd] = j;
-            t->cp_dc[3 * nd] = a[0] - b[0];
-            t->cp_dc[3 * nd + 1] = a[1] - b[1];
-            t->cp_dc[3 * nd + 2] = a[2] - b[2];
+            for (c = 0; c < 3; c++) {
+                t->cp_dc[3 * nd + c] = a[c] - b[c];
+                t->cp_ab[3 * nd + c] = fabs(a[c]) + fabs(b[c]);
+            }
             nd++;
         }
         if (a[0] != l[0] || a[1] != l[1] || a[2] != l[2]) {
@@ -1688,6 +1719,16 @@ static int cp_eval(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, con
         rtpi_parallel_rows(nb, threads_for(12.0 * (2.0 + (double)nd) * (double)np, nthreads), ctx,
                            cp_apply_band, NULL, NULL);
         st->written_pixels = np;
+    }
+    for (i = 0; i < nthreads; i++) {
+        lost |= e[i].nonfinite;
+        e[i].nonfinite = 0;
+    }
+    if (lost) {
+        /* the full path writes every pixel and S is made anew from it */
+        t->cp_s_ok = 0;
+        st->written_pixels = np;
+        return 0;
     }
     return 1;
 }

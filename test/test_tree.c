@@ -667,10 +667,50 @@ static void colour_run(int spd)
     rtp_scene_destroy(s);
 }
 
+/* A colour cut from thousands to a fraction after the snapshot S was
+   made: S's digits cancel, and the image must still equal a full trace
+   (the full path makes it). */
+static void colour_cancel_run(int spd)
+{
+    rtp_scene *s = load("scenes/spheres.nff");
+    rtp_tree *t = NULL;
+    rtp_trace_options o;
+    rtp_eval_options eo;
+    rtp_image *re = NULL, *full = NULL;
+    rtp_diff_stats d;
+    if (!s) {
+        CHECK(s != NULL);
+        return;
+    }
+    memset(&o, 0, sizeof o);
+    memset(&eo, 0, sizeof eo);
+    o.width = 40;
+    o.height = 30;
+    o.spd = spd;
+    eo.incremental = 1;
+    CHECK(rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
+    CHECK(t && rtp_tree_set(t, "ambient", "5000", NULL) == RTP_OK);
+    CHECK(t && rtp_tree_eval(t, &eo, &re, NULL, NULL) == RTP_OK);
+    CHECK(t && rtp_tree_set(t, "ambient", "0.2", NULL) == RTP_OK);
+    CHECK(rtp_scene_set(s, "ambient", "0.2", NULL) == RTP_OK);
+    CHECK(t && re && rtp_tree_eval_into(t, &eo, re, NULL, NULL) == RTP_OK);
+    if (re && rtp_trace(s, &o, &full, NULL, NULL) == RTP_OK &&
+        rtp_image_diff(re, full, 1e-6, &d, NULL) == RTP_OK)
+        CHECK_MSG(d.max_abs <= 1e-6, "spd %d, ambient 5000 then 0.2: %g", spd, d.max_abs);
+    else
+        CHECK(0);
+    rtp_image_destroy(full);
+    rtp_image_destroy(re);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+}
+
 static void test_colour_edits(void)
 {
     colour_run(0);
     colour_run(1);
+    colour_cancel_run(0);
+    colour_cancel_run(1);
 }
 
 /* Bump edits: on a surface with no subtrees they are exact either way; on
