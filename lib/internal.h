@@ -301,6 +301,8 @@ int rtpi_kd_intersect(const rtpi_kdtree *kd, const rtpi_ray *ray,
 /* Any hit with t in [ray->tmin, ray->tmax], primitive skip (RTPI_NONE:
    none) left out.  @return 1 if occluded. */
 int rtpi_kd_occluded(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t skip);
+/* The same, naming the first primitive found in the way (RTPI_NONE: none). */
+uint32_t rtpi_kd_occluder(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t skip);
 
 /* ------------------------------------------------------------- ray trees */
 

@@ -1098,7 +1098,7 @@ int rtpi_kd_intersect(const rtpi_kdtree *kd, const rtpi_ray *ray,
     }
 }
 
-int rtpi_kd_occluded(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t skip)
+uint32_t rtpi_kd_occluder(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t skip)
 {
     kd_item stack[KD_DEPTH_CAP + 4];
     kd_ray kr;
@@ -1113,7 +1113,7 @@ int rtpi_kd_occluded(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t skip)
 
     KD_CNT(3);
     if (!kd_ray_setup(kd, ray, &kr, &t0, &t1) || !rtpi_wt_setup(&w, ray))
-        return 0;
+        return RTPI_NONE;
     for (;;) {
         node = kd_descend(nodes, &kr, node, &t0, &t1, stack, &sp);
         KD_CNT(1);
@@ -1131,19 +1131,24 @@ int rtpi_kd_occluded(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t skip)
                     double t, u, v2;
                     if (rtpi_wt_tri(&w, v, v + 3, v + 6, tmin, tmax, &t, &u,
                                     &v2))
-                        return 1;
+                        return prim;
                 } else {
                     rtpi_hit h;
                     if (rtpi_intersect_prim(kd->scene, prim, ray, &h))
-                        return 1;
+                        return prim;
                 }
             }
         }
         if (sp == 0)
-            return 0;
+            return RTPI_NONE;
         sp--;
         node = stack[sp].node;
         t0 = stack[sp].t0;
         t1 = stack[sp].t1;
     }
+}
+
+int rtpi_kd_occluded(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t skip)
+{
+    return rtpi_kd_occluder(kd, ray, skip) != RTPI_NONE;
 }

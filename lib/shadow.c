@@ -119,7 +119,7 @@ static uint32_t own_skip(const rtpi_shadow *sh, uint32_t prim, rtpi_v3 o)
 }
 
 /* The decision, and in *occ a primitive in the way when one was seen
-   (RTPI_NONE otherwise: EXACT's kd-tree does not tell which). */
+   (RTPI_NONE otherwise). */
 static int sh_visible(const rtpi_shadow *sh, rtpi_v3 p, rtpi_v3 o, uint32_t prim,
                       uint32_t *occ)
 {
@@ -151,7 +151,7 @@ static int sh_visible(const rtpi_shadow *sh, rtpi_v3 p, rtpi_v3 o, uint32_t prim
         break;
     }
     r = rtpi_shadow_ray(o, sh->light);
-    return !rtpi_kd_occluded(sh->kd, &r, own_skip(sh, prim, o));
+    return (*occ = rtpi_kd_occluder(sh->kd, &r, own_skip(sh, prim, o))) == RTPI_NONE;
 }
 
 int rtpi_shadow_visible(const rtpi_shadow *sh, rtpi_v3 p, rtpi_v3 o, uint32_t prim)
@@ -165,9 +165,11 @@ int rtpi_shadow_visible_cached(const rtpi_shadow *sh, rtpi_shadow_cache *c, rtpi
 {
     uint32_t occ;
     int v;
-    if (c->last) {
+    if (c->last && c->last - 1u != prim) {
         /* A hit is a hit: the primitive is in the way whichever mode
-           asks, and every exact mode's lists would hold it. */
+           asks, and every exact mode's lists would hold it (the kd-tree's
+           too: the same intersection tests).  Not the point's own
+           primitive, which the queries may leave out (own_skip). */
         rtpi_ray r = rtpi_shadow_ray(o, sh->light);
         rtpi_hit h;
         if (rtpi_intersect_prim(sh->s, c->last - 1u, &r, &h))

@@ -71,8 +71,7 @@ int rtpi_shadow_visible(const rtpi_shadow *sh, rtpi_v3 p, rtpi_v3 o,
    same one, and testing it first answers them with one intersection.  The answers are
    rtpi_shadow_visible's (a hit is a hit; LIGHTBUF and EXACT stay exact).
    Zero-initialise one per thread and never share it; it stays valid
-   across lights and modes of the same scene.  EXACT learns nothing (the
-   kd-tree's occlusion query does not say which primitive it met). */
+   across lights and modes of the same scene. */
 typedef struct rtpi_shadow_cache {
     uint32_t last; /* primitive + 1; 0: none */
 } rtpi_shadow_cache;
