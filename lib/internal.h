@@ -530,6 +530,9 @@ struct rtp_tree {
     size_t *cp_d, cp_nd;   /* the terms whose colour differs from cS... */
     double *cp_dc;         /* ...and by how much (3 each) */
     double *cp_ab;         /* |c_d| + |cS_d| (3 each: cp_lost) */
+    double *cp_kmax;       /* per term: the largest |K| per channel */
+    double cp_smax[3];     /* the largest |S| per channel */
+    int cp_check;          /* pixels are checked for lost digits */
     const float *last_pixels; /* the image the last evaluation wrote */
     int last_exact;        /* ...and it is the image of the coefficients
                               (tree.c; not a material's P + K x) */

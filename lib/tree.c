@@ -448,6 +448,7 @@ typedef struct eval_ctx {
     float *rest;              /* pk_build_chunk, pk_mat_chunk: scratch */
     size_t rest_bytes;
     unsigned long long summed; /* pk_mat_chunk: samples whose rest it made */
+    double kmax[3];           /* cp_plane_chunk: largest |K| per channel */
 } eval_ctx;
 
 /* Steps 1 and 2 for sample k, into the caches or the scratch. */
@@ -1433,11 +1434,12 @@ static void cp_free(rtp_tree *t)
     rtpi_free(&t->alloc, t->cp_d);
     rtpi_free(&t->alloc, t->cp_dc);
     rtpi_free(&t->alloc, t->cp_ab);
+    rtpi_free(&t->alloc, t->cp_kmax);
     rtpi_free(&t->alloc, t->cp_s);
     t->cp_k = NULL;
     t->cp_nz = t->cp_seg = NULL;
     t->cp_ok = NULL;
-    t->cp_cl = t->cp_dc = t->cp_ab = NULL;
+    t->cp_cl = t->cp_dc = t->cp_ab = t->cp_kmax = NULL;
     t->cp_d = NULL;
     t->cp_s = NULL;
     t->cp_nt = t->cp_nd = 0;
@@ -1459,8 +1461,9 @@ static int cp_alloc(rtp_tree *t, size_t nt)
     t->cp_d = (size_t *)rtpi_malloc_array(&t->alloc, nt, sizeof *t->cp_d);
     t->cp_dc = (double *)rtpi_malloc_array(&t->alloc, 3 * nt, sizeof *t->cp_dc);
     t->cp_ab = (double *)rtpi_malloc_array(&t->alloc, 3 * nt, sizeof *t->cp_ab);
+    t->cp_kmax = (double *)rtpi_malloc_array(&t->alloc, 3 * nt, sizeof *t->cp_kmax);
     if (!t->cp_k || !t->cp_nz || !t->cp_seg || !t->cp_ok || !t->cp_cl || !t->cp_d || !t->cp_dc ||
-        !t->cp_ab) {
+        !t->cp_ab || !t->cp_kmax) {
         cp_free(t);
         return 0;
     }
@@ -1509,6 +1512,9 @@ static int cp_plane_chunk(void *ctx, int chunk)
                     kp[c] = ka[c];
             if (!(isfinite(kp[0]) && isfinite(kp[1]) && isfinite(kp[2])))
                 e->nonfinite = 1;
+            for (c = 0; c < 3; c++)
+                if (fabs(kp[c]) > e->kmax[c])
+                    e->kmax[c] = fabs(kp[c]);
             if (kp[0] != 0.0f || kp[1] != 0.0f || kp[2] != 0.0f)
                 nz[n++] = (uint32_t)p;
         }
@@ -1522,7 +1528,7 @@ static int cp_plane_chunk(void *ctx, int chunk)
 static int cp_plane(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, size_t j)
 {
     size_t np = (size_t)t->width * t->height;
-    int i, nb = (t->height + PK_ROWS - 1) / PK_ROWS, ok = 1;
+    int i, c, nb = (t->height + PK_ROWS - 1) / PK_ROWS, ok = 1;
     if (t->cp_ok[j])
         return 1;
     if (!t->cp_k[j])
@@ -1533,14 +1539,21 @@ static int cp_plane(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, si
         t->cp_seg[j] = (uint32_t *)rtpi_malloc_array(&t->alloc, (size_t)nb + 1, sizeof(uint32_t));
     if (!t->cp_seg[j])
         return 0;
-    for (i = 0; i < nthreads; i++)
+    for (i = 0; i < nthreads; i++) {
         e[i].term = j;
+        e[i].kmax[0] = e[i].kmax[1] = e[i].kmax[2] = 0.0;
+    }
     rtpi_parallel_rows(nb, threads_for(16.0 * (double)np * RTPI_COEFFS(t->scene->nlights) / 3.0,
                                        nthreads),
                        ctx, cp_plane_chunk, NULL, NULL);
+    for (c = 0; c < 3; c++)
+        t->cp_kmax[3 * j + c] = 0.0;
     for (i = 0; i < nthreads; i++) {
         ok &= !e[i].nonfinite;
         e[i].nonfinite = 0;
+        for (c = 0; c < 3; c++)
+            if (e[i].kmax[c] > t->cp_kmax[3 * j + c])
+                t->cp_kmax[3 * j + c] = e[i].kmax[c];
     }
     t->cp_ok[j] = (unsigned char)ok;
     return ok;
@@ -1562,18 +1575,30 @@ static int cp_snapshot(rtp_tree *t, const float *samples, const float *last, siz
         t->cp_s = (float *)rtpi_malloc_array(&t->alloc, np, 3 * sizeof *t->cp_s);
     if (!t->cp_s)
         return 0;
-    if (last) {
-        for (i = 0; i < 3 * np; i++)
-            finite &= isfinite(t->cp_s[i] = last[i]) != 0;
-    } else {
+    if (last)
+        memcpy(t->cp_s, last, 3 * np * sizeof *t->cp_s);
+    else {
         rtp_image im;
         memset(&im, 0, sizeof im);
         im.width = t->width;
         im.height = t->height;
         im.pixels = t->cp_s;
         rtpi_resolve_samples(samples, t->spd, &im);
-        for (i = 0; i < 3 * np; i++)
-            finite &= isfinite(t->cp_s[i]) != 0;
+    }
+    {
+        float m0 = 0.0f, m1 = 0.0f, m2 = 0.0f;
+        const float *q = t->cp_s;
+        for (i = 0; i < np; i++, q += 3) {
+            /* (NaN fails every comparison: caught below) */
+            m0 = fabsf(q[0]) > m0 ? fabsf(q[0]) : m0;
+            m1 = fabsf(q[1]) > m1 ? fabsf(q[1]) : m1;
+            m2 = fabsf(q[2]) > m2 ? fabsf(q[2]) : m2;
+            finite &= !(q[0] != q[0] || q[1] != q[1] || q[2] != q[2]);
+        }
+        finite &= isfinite(m0) && isfinite(m1) && isfinite(m2);
+        t->cp_smax[0] = m0;
+        t->cp_smax[1] = m1;
+        t->cp_smax[2] = m2;
     }
     if (!finite)
         return 0;
@@ -1583,41 +1608,47 @@ static int cp_snapshot(rtp_tree *t, const float *samples, const float *last, siz
 }
 
 /* S and the planes are floats: S + K (c - cS) carries their rounding,
-   about 2^-24 of |S| + |K| (|c| + |cS|), where P + K c from the
-   coefficients carries 2^-24 of the pixel.  Where that sum is more than
-   CP_SPAN times the pixel (and than 1: below, the error is below 2^-22
-   absolute), as when a colour is cut from thousands to 2, the colours
-   lost digits to cancellation and the full path makes the image (and S
-   anew from it). */
+   about 2^-24 of |S| + sum |K_d| (|c_d| + |cS_d|), where P + K c from
+   the coefficients carries 2^-24 of the pixel.  That sum may not pass
+   CP_SPAN times the pixel, nor CP_SPAN * 2 (below it the error stays
+   under 2^-21 absolute, 5e-7): else (a colour cut from thousands to 2)
+   the colours lost digits to cancellation and the full path makes the
+   image (and S anew from it).  Where the bound of the sum over the
+   whole image (cp_smax, cp_kmax) is below CP_SPAN * 2, no pixel is
+   checked. */
 #define CP_SPAN 4.0
 
 static int cp_lost(double s, double kc, double v)
 {
     double a = fabs(v);
-    return !(fabs(s) + kc <= CP_SPAN * (a > 1.0 ? a : 1.0));
+    return !(fabs(s) + kc <= CP_SPAN * (a > 2.0 ? a : 2.0));
 }
 
-/* One pixel: S + sum K_d (c_d - cS_d) over the differing terms; 1 where
-   it lost digits (cp_lost). */
+/* One pixel: S + sum K_d (c_d - cS_d) over the differing terms (the
+   sums in the order of the terms); 1 where checked and it lost digits. */
 static int cp_pixel(const rtp_tree *t, size_t p, float *out)
 {
     const float *sp = t->cp_s + 3 * p;
-    double v0 = sp[0], v1 = sp[1], v2 = sp[2], k0 = 0.0, k1 = 0.0, k2 = 0.0;
-    size_t i;
-    for (i = 0; i < t->cp_nd; i++) {
+    double v[3], kc[3] = {0.0, 0.0, 0.0};
+    size_t i, nd = t->cp_nd;
+    int c;
+    for (c = 0; c < 3; c++)
+        v[c] = sp[c];
+    for (i = 0; i < nd; i++) {
         const float *k = t->cp_k[t->cp_d[i]] + 3 * p;
-        const double *dc = t->cp_dc + 3 * i, *ab = t->cp_ab + 3 * i;
-        v0 += k[0] * dc[0];
-        v1 += k[1] * dc[1];
-        v2 += k[2] * dc[2];
-        k0 += fabs(k[0]) * ab[0];
-        k1 += fabs(k[1]) * ab[1];
-        k2 += fabs(k[2]) * ab[2];
+        const double *dc = t->cp_dc + 3 * i;
+        for (c = 0; c < 3; c++)
+            v[c] += k[c] * dc[c];
     }
-    out[0] = (float)v0;
-    out[1] = (float)v1;
-    out[2] = (float)v2;
-    return cp_lost(sp[0], k0, v0) | cp_lost(sp[1], k1, v1) | cp_lost(sp[2], k2, v2);
+    for (c = 0; c < 3; c++)
+        out[c] = (float)v[c];
+    if (!t->cp_check)
+        return 0;
+    for (i = 0; i < nd; i++)
+        for (c = 0; c < 3; c++)
+            kc[c] += fabs(t->cp_k[t->cp_d[i]][3 * p + c]) * t->cp_ab[3 * i + c];
+    return cp_lost(sp[0], kc[0], v[0]) | cp_lost(sp[1], kc[1], v[1]) |
+           cp_lost(sp[2], kc[2], v[2]);
 }
 
 /* A band of every pixel. */
@@ -1640,28 +1671,36 @@ static int cp_apply_listed(void *ctx, int chunk)
     const rtp_tree *t = e->t;
     size_t base = (size_t)chunk * PK_ROWS * (size_t)t->width, n = t->cp_seg[e->term][chunk], j;
     const uint32_t *nz = t->cp_nz[e->term] + base;
-    if (t->cp_nd == 1 && t->cp_d[0] == e->term) {
-        /* the common case, one term edited (cp_pixel's sums alone) */
-        const float *k = t->cp_k[e->term], *sp = t->cp_s;
-        const double *dc = t->cp_dc, *ab = t->cp_ab;
-        float *out = e->pixels;
-        int lost = 0;
-        for (j = 0; j < n; j++) {
-            size_t q = 3 * (size_t)nz[j];
-            double v0 = sp[q] + k[q] * dc[0], v1 = sp[q + 1] + k[q + 1] * dc[1];
-            double v2 = sp[q + 2] + k[q + 2] * dc[2];
-            out[q] = (float)v0;
-            out[q + 1] = (float)v1;
-            out[q + 2] = (float)v2;
-            lost |= cp_lost(sp[q], fabs(k[q]) * ab[0], v0) |
-                    cp_lost(sp[q + 1], fabs(k[q + 1]) * ab[1], v1) |
-                    cp_lost(sp[q + 2], fabs(k[q + 2]) * ab[2], v2);
-        }
-        e->nonfinite |= lost;
+    const float *sp = t->cp_s;
+    const double *dc = t->cp_dc;
+    float *out = e->pixels;
+    if (t->cp_check) {
+        for (j = 0; j < n; j++)
+            e->nonfinite |= cp_pixel(t, nz[j], out + 3 * (size_t)nz[j]);
         return 0;
     }
-    for (j = 0; j < n; j++)
-        e->nonfinite |= cp_pixel(t, nz[j], e->pixels + 3 * (size_t)nz[j]);
+    /* the common cases, one or two terms differing from S, unrolled
+       (the sums as cp_pixel makes them) */
+    if (t->cp_nd == 1) {
+        const float *k = t->cp_k[t->cp_d[0]];
+        for (j = 0; j < n; j++) {
+            size_t q = 3 * (size_t)nz[j];
+            out[q] = (float)(sp[q] + k[q] * dc[0]);
+            out[q + 1] = (float)(sp[q + 1] + k[q + 1] * dc[1]);
+            out[q + 2] = (float)(sp[q + 2] + k[q + 2] * dc[2]);
+        }
+    } else if (t->cp_nd == 2) {
+        const float *k = t->cp_k[t->cp_d[0]], *l = t->cp_k[t->cp_d[1]];
+        for (j = 0; j < n; j++) {
+            size_t q = 3 * (size_t)nz[j];
+            out[q] = (float)(sp[q] + k[q] * dc[0] + l[q] * dc[3]);
+            out[q + 1] = (float)(sp[q + 1] + k[q + 1] * dc[1] + l[q + 1] * dc[4]);
+            out[q + 2] = (float)(sp[q + 2] + k[q + 2] * dc[2] + l[q + 2] * dc[5]);
+        }
+    } else {
+        for (j = 0; j < n; j++)
+            cp_pixel(t, nz[j], out + 3 * (size_t)nz[j]);
+    }
     return 0;
 }
 
@@ -1697,6 +1736,14 @@ static int cp_eval(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, con
         }
     }
     t->cp_nd = nd;
+    /* the bound of |S| + sum |K_d| (|c_d| + |cS_d|) over the image */
+    t->cp_check = 0;
+    for (c = 0; c < 3; c++) {
+        double b = t->cp_smax[c];
+        for (j = 0; j < nd; j++)
+            b += t->cp_kmax[3 * t->cp_d[j] + c] * t->cp_ab[3 * j + c];
+        t->cp_check |= !(b <= 2.0 * CP_SPAN);
+    }
     for (i = 0; i < nthreads; i++) {
         e[i].term = changed;
         e[i].pixels = pixels;
