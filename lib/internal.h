@@ -533,6 +533,12 @@ struct rtp_tree {
     double *cp_kmax;       /* per term: the largest |K| per channel */
     double cp_smax[3];     /* the largest |S| per channel */
     int cp_check;          /* pixels are checked for lost digits */
+    unsigned cp_gen;       /* counts the snapshots and stale planes */
+    float *cb_p;           /* a chain's P' (tree.c: cb_chunk) for... */
+    size_t cb_term;        /* ...1 + term j (0: none), with... */
+    double *cb_cl;         /* ...the other terms' colours, and... */
+    unsigned cb_gen;       /* ...made at this cp_gen */
+    double cb_dc[3];       /* c_j - cS_j of the edit */
     const float *last_pixels; /* the image the last evaluation wrote */
     int last_exact;        /* ...and it is the image of the coefficients
                               (tree.c; not a material's P + K x) */

@@ -1435,11 +1435,15 @@ static void cp_free(rtp_tree *t)
     rtpi_free(&t->alloc, t->cp_dc);
     rtpi_free(&t->alloc, t->cp_ab);
     rtpi_free(&t->alloc, t->cp_kmax);
+    rtpi_free(&t->alloc, t->cb_cl);
+    rtpi_free(&t->alloc, t->cb_p);
     rtpi_free(&t->alloc, t->cp_s);
     t->cp_k = NULL;
     t->cp_nz = t->cp_seg = NULL;
     t->cp_ok = NULL;
-    t->cp_cl = t->cp_dc = t->cp_ab = t->cp_kmax = NULL;
+    t->cp_cl = t->cp_dc = t->cp_ab = t->cp_kmax = t->cb_cl = NULL;
+    t->cb_p = NULL;
+    t->cb_term = 0;
     t->cp_d = NULL;
     t->cp_s = NULL;
     t->cp_nt = t->cp_nd = 0;
@@ -1462,8 +1466,9 @@ static int cp_alloc(rtp_tree *t, size_t nt)
     t->cp_dc = (double *)rtpi_malloc_array(&t->alloc, 3 * nt, sizeof *t->cp_dc);
     t->cp_ab = (double *)rtpi_malloc_array(&t->alloc, 3 * nt, sizeof *t->cp_ab);
     t->cp_kmax = (double *)rtpi_malloc_array(&t->alloc, 3 * nt, sizeof *t->cp_kmax);
+    t->cb_cl = (double *)rtpi_malloc_array(&t->alloc, 3 * nt, sizeof *t->cb_cl);
     if (!t->cp_k || !t->cp_nz || !t->cp_seg || !t->cp_ok || !t->cp_cl || !t->cp_d || !t->cp_dc ||
-        !t->cp_ab || !t->cp_kmax) {
+        !t->cp_ab || !t->cp_kmax || !t->cb_cl) {
         cp_free(t);
         return 0;
     }
@@ -1476,6 +1481,7 @@ static int cp_alloc(rtp_tree *t, size_t nt)
 static void cp_stale(rtp_tree *t, size_t i)
 {
     t->cp_s_ok = 0;
+    t->cp_gen++;
     if (!t->cp_ok)
         return;
     if (i == (size_t)-1)
@@ -1604,6 +1610,7 @@ static int cp_snapshot(rtp_tree *t, const float *samples, const float *last, siz
         return 0;
     memcpy(t->cp_cl, t->ev_cl, 3 * nt * sizeof *t->cp_cl);
     t->cp_s_ok = 1;
+    t->cp_gen++; /* (a chain's P' was made from another S) */
     return 1;
 }
 
@@ -1704,6 +1711,77 @@ static int cp_apply_listed(void *ctx, int chunk)
     return 0;
 }
 
+/* A chain of edits of one term j while other terms differ from S too
+   (the ambient after a light's colour): the sum of the others, P' = S +
+   sum over d other than j of K_d (c_d - cS_d), is made once at the
+   pixels whose K_j is not 0 (cb_p, in the bands of cp_nz[j]), and each
+   edit of the chain reads it and K_j alone, as for one term.  P' is
+   rounded to float once more than cp_pixel rounds (about a float ulp);
+   it is made from S and the planes, never from an image. */
+static int cb_chunk(void *ctx, int chunk)
+{
+    eval_ctx *e = (eval_ctx *)ctx;
+    const rtp_tree *t = e->t;
+    size_t base = (size_t)chunk * PK_ROWS * (size_t)t->width, n = t->cp_seg[e->term][chunk], j, i;
+    const uint32_t *nz = t->cp_nz[e->term] + base;
+    float *pb = t->cb_p + 3 * base;
+    for (j = 0; j < n; j++) {
+        size_t q = 3 * (size_t)nz[j];
+        double v0 = t->cp_s[q], v1 = t->cp_s[q + 1], v2 = t->cp_s[q + 2];
+        for (i = 0; i < t->cp_nd; i++) {
+            const float *k = t->cp_k[t->cp_d[i]] + q;
+            const double *dc = t->cp_dc + 3 * i;
+            if (t->cp_d[i] == e->term)
+                continue;
+            v0 += k[0] * dc[0];
+            v1 += k[1] * dc[1];
+            v2 += k[2] * dc[2];
+        }
+        pb[3 * j] = (float)v0;
+        pb[3 * j + 1] = (float)v1;
+        pb[3 * j + 2] = (float)v2;
+    }
+    return 0;
+}
+
+/* An edit of the chain: P' + K_j (c_j - cS_j) at those pixels. */
+static int cb_apply(void *ctx, int chunk)
+{
+    eval_ctx *e = (eval_ctx *)ctx;
+    const rtp_tree *t = e->t;
+    size_t base = (size_t)chunk * PK_ROWS * (size_t)t->width, n = t->cp_seg[e->term][chunk], j;
+    const uint32_t *nz = t->cp_nz[e->term] + base;
+    const float *pb = t->cb_p + 3 * base, *k = t->cp_k[e->term];
+    const double *dc = t->cb_dc;
+    float *out = e->pixels;
+    for (j = 0; j < n; j++, pb += 3) {
+        size_t q = 3 * (size_t)nz[j];
+        out[q] = (float)(pb[0] + k[q] * dc[0]);
+        out[q + 1] = (float)(pb[1] + k[q + 1] * dc[1]);
+        out[q + 2] = (float)(pb[2] + k[q + 2] * dc[2]);
+    }
+    return 0;
+}
+
+/* Are the chain's P' those of term j with the other colours cv? */
+static int cb_holds(const rtp_tree *t, size_t j, const double *cv)
+{
+    size_t i;
+    if (t->cb_term != j + 1 || t->cb_gen != t->cp_gen)
+        return 0;
+    for (i = 0; i < 3 * t->cp_nt; i++)
+        if (i / 3 != j && cv[i] != t->cb_cl[i])
+            return 0;
+    return 1;
+}
+
+/* Does term j's colour in cv differ from S's? */
+static int cp_differs(const rtp_tree *t, const double *cv, size_t j)
+{
+    const double *a = cv + 3 * j, *b = t->cp_cl + 3 * j;
+    return a[0] != b[0] || a[1] != b[1] || a[2] != b[2];
+}
+
 /* The image for colours cv by the colour planes into pixels, if they can
    make it (the coefficients as the last evaluation left them; `sparse`:
    pixels hold that evaluation).  1 when done. */
@@ -1758,8 +1836,27 @@ static int cp_eval(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, con
                 return 0;
             for (i = 0; i < nb; i++)
                 nw += t->cp_seg[changed][i];
-            rtpi_parallel_rows(nb, threads_for(16.0 * (1.0 + (double)nd) * (double)nw, nthreads),
-                               ctx, cp_apply_listed, NULL, NULL);
+            if (nd - (size_t)(nd && cp_differs(t, cv, changed)) >= 1 && !t->cp_check &&
+                (t->cb_p || (t->cb_p = (float *)rtpi_malloc_array(&t->alloc, np,
+                                                                  3 * sizeof *t->cb_p)))) {
+                /* other terms differ from S too: their sum once a chain */
+                if (!cb_holds(t, changed, cv)) {
+                    rtpi_parallel_rows(nb, threads_for(16.0 * (1.0 + (double)nd) * (double)nw,
+                                                       nthreads),
+                                       ctx, cb_chunk, NULL, NULL);
+                    t->cb_term = changed + 1;
+                    t->cb_gen = t->cp_gen;
+                    memcpy(t->cb_cl, cv, 3 * nt * sizeof *cv);
+                }
+                for (c = 0; c < 3; c++)
+                    t->cb_dc[c] = cv[3 * changed + c] - t->cp_cl[3 * changed + c];
+                rtpi_parallel_rows(nb, threads_for(28.0 * (double)nw, nthreads), ctx, cb_apply,
+                                   NULL, NULL);
+            } else {
+                rtpi_parallel_rows(nb, threads_for(16.0 * (1.0 + (double)nd) * (double)nw,
+                                                   nthreads),
+                                   ctx, cp_apply_listed, NULL, NULL);
+            }
         }
         st->written_pixels = nw;
     } else {

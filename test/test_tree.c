@@ -626,7 +626,7 @@ static void colour_run(int spd)
         rtp_eval_stats es;
         rtp_image *full = NULL;
         rtp_diff_stats d;
-        int check = i < 2 || i == 61;
+        int check = i < 4 || i == 61;
         if (i == 0) {
             /* three terms in one edit */
             CHECK(rtp_tree_set(t, "light.0.color", "0.9,0.1,0.3", NULL) == RTP_OK &&
@@ -636,9 +636,11 @@ static void colour_run(int spd)
                   rtp_scene_set(s, "light.1.color", "0.2,0.8,0.4", NULL) == RTP_OK &&
                   rtp_scene_set(s, "ambient", "0.25", NULL) == RTP_OK);
         } else {
-            /* then light 0, light 1 and the background by turns */
-            const char *key = i % 3 == 0 ? "light.0.color" : i % 3 == 1 ? "light.1.color"
-                                                                         : "background";
+            /* then light 0, light 1 and the background by turns, two
+               edits each (the second of a chain reuses the sum of the
+               other terms) */
+            int k = (i / 2) % 3;
+            const char *key = k == 0 ? "light.0.color" : k == 1 ? "light.1.color" : "background";
             snprintf(v, sizeof v, "%g,%g,%g", 0.013 * i, 0.5 + 0.0071 * i, 1.0 - 0.011 * i);
             CHECK(rtp_tree_set(t, key, v, NULL) == RTP_OK);
             CHECK(rtp_scene_set(s, key, v, NULL) == RTP_OK);
