@@ -1497,8 +1497,8 @@ static int cp_plane_chunk(void *ctx, int chunk)
     rtp_tree *t = e->t;
     size_t w = (size_t)t->width, nx = (size_t)t->nx, ks = RTPI_COEFFS(t->scene->nlights);
     size_t j = e->term, n = 0, base;
-    int y0 = chunk * PK_ROWS, y1 = y0 + PK_ROWS, y, x, c;
-    float *k = t->cp_k[j];
+    int y0 = chunk * PK_ROWS, y1 = y0 + PK_ROWS, y, x, spd = t->spd, bad = 0;
+    float *k = t->cp_k[j], m0 = 0.0f, m1 = 0.0f, m2 = 0.0f;
     uint32_t *nz;
     if (y1 > t->height)
         y1 = t->height;
@@ -1506,25 +1506,40 @@ static int cp_plane_chunk(void *ctx, int chunk)
     nz = t->cp_nz[j] + base;
     for (y = y0; y < y1; y++) {
         size_t p = (size_t)y * w;
-        const float *ka = t->ev_coeffs + (t->spd ? (size_t)y * nx : p) * ks + 3 * j;
-        for (x = 0; x < t->width; x++, p++, ka += ks) {
-            float *kp = k + 3 * p;
-            if (t->spd) {
+        const float *ka = t->ev_coeffs + (spd ? (size_t)y * nx : p) * ks + 3 * j;
+        float *kp = k + 3 * p;
+        for (x = 0; x < t->width; x++, p++, ka += ks, kp += 3) {
+            float k0, k1, k2;
+            if (spd) {
                 const float *kb = ka + nx * ks; /* the corners below */
-                for (c = 0; c < 3; c++)
-                    kp[c] = (float)(0.25 * ((double)ka[c] + ka[ks + c] + kb[c] + kb[ks + c]));
-            } else
-                for (c = 0; c < 3; c++)
-                    kp[c] = ka[c];
-            if (!(isfinite(kp[0]) && isfinite(kp[1]) && isfinite(kp[2])))
-                e->nonfinite = 1;
-            for (c = 0; c < 3; c++)
-                if (fabs(kp[c]) > e->kmax[c])
-                    e->kmax[c] = fabs(kp[c]);
-            if (kp[0] != 0.0f || kp[1] != 0.0f || kp[2] != 0.0f)
+                k0 = (float)(0.25 * ((double)ka[0] + ka[ks] + kb[0] + kb[ks]));
+                k1 = (float)(0.25 * ((double)ka[1] + ka[ks + 1] + kb[1] + kb[ks + 1]));
+                k2 = (float)(0.25 * ((double)ka[2] + ka[ks + 2] + kb[2] + kb[ks + 2]));
+            } else {
+                k0 = ka[0];
+                k1 = ka[1];
+                k2 = ka[2];
+            }
+            kp[0] = k0;
+            kp[1] = k1;
+            kp[2] = k2;
+            /* (a NaN fails every comparison; infinities show in the maxima) */
+            bad |= k0 != k0 || k1 != k1 || k2 != k2;
+            m0 = fabsf(k0) > m0 ? fabsf(k0) : m0;
+            m1 = fabsf(k1) > m1 ? fabsf(k1) : m1;
+            m2 = fabsf(k2) > m2 ? fabsf(k2) : m2;
+            if (k0 != 0.0f || k1 != 0.0f || k2 != 0.0f)
                 nz[n++] = (uint32_t)p;
         }
     }
+    if (bad || !isfinite(m0) || !isfinite(m1) || !isfinite(m2))
+        e->nonfinite = 1;
+    if (m0 > e->kmax[0])
+        e->kmax[0] = m0;
+    if (m1 > e->kmax[1])
+        e->kmax[1] = m1;
+    if (m2 > e->kmax[2])
+        e->kmax[2] = m2;
     t->cp_seg[j][chunk] = (uint32_t)n;
     return 0;
 }
