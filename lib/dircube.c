@@ -1239,6 +1239,21 @@ void rtpi_itembuf_free(rtpi_itembuf *ib, const rtp_allocator *a)
     ib->z = NULL;
 }
 
+/* Drawing on several threads, each owns the rows j of every face with
+   (j / IB_BAND) % nparts == part and draws every primitive into them in
+   the same order one thread would: each cell sees the same stores in the
+   same order, so the buffer is the same for any number of parts. */
+#define IB_BAND 8
+
+typedef struct ib_part {
+    int part, nparts;
+} ib_part;
+
+static int ib_owns(const ib_part *pt, int j)
+{
+    return pt->nparts <= 1 || (j / IB_BAND) % pt->nparts == pt->part;
+}
+
 static void ib_store(rtpi_itembuf *ib, int f, size_t cell, double z, uint32_t prim)
 {
     float zr = (float)(z - ib->w.zbase[f]);
@@ -1253,7 +1268,8 @@ static void ib_store(rtpi_itembuf *ib, int f, size_t cell, double z, uint32_t pr
    projection (edges inclusive, crossings computed from the lower end so
    neighbours agree: no cracks), depth from the plane, exact at the centre
    (1/z is linear in u, v: perspective-correct). */
-static void ib_tri(rtpi_itembuf *ib, const rtp_scene *s, int f, uint32_t prim)
+static void ib_tri(rtpi_itembuf *ib, const rtp_scene *s, int f, uint32_t prim,
+                   const ib_part *pt)
 {
     const rtpi_tri *t = &s->tris[prim];
     int res = ib->res, k, j, j0, j1;
@@ -1299,6 +1315,8 @@ static void ib_tri(rtpi_itembuf *ib, const rtp_scene *s, int f, uint32_t prim)
     for (j = j0; j <= j1; j++) {
         double vc = v0 + dv * (j + 0.5), umin = DBL_MAX, umax = -DBL_MAX;
         int i, i0, i1;
+        if (!ib_owns(pt, j))
+            continue;
         for (k = 0; k < cl.n; k++) {
             const double *P = uv[k], *Q = uv[k + 1 < cl.n ? k + 1 : 0];
             const double *A = P[1] <= Q[1] ? P : Q, *B = P[1] <= Q[1] ? Q : P;
@@ -1357,6 +1375,7 @@ typedef struct ib_cast {
     const rtp_scene *s;
     uint32_t prim;
     int sphere, inside;
+    const ib_part *pt;
 } ib_cast;
 
 /* Casts the ray through each cell's centre at a sphere or cone. */
@@ -1371,6 +1390,8 @@ static void ib_cast_run(void *user, size_t cell, int count)
     rem = cell - ib->w.fbase[f];
     j = (int)(rem / res);
     i0 = (int)(rem % res);
+    if (!ib_owns(ic->pt, j))
+        return; /* (a run lies in one row) */
     double vc = ib->w.v0[f] + ib->w.dv[f] * (j + 0.5);
     for (i = i0; i < i0 + count; i++) {
         rtpi_v3 d = rtpi_dc_world(f, ib->w.u0[f] + ib->w.du[f] * (i + 0.5), vc, 1.0);
@@ -1393,8 +1414,9 @@ static void ib_cast_run(void *user, size_t cell, int count)
     }
 }
 
-/* Draws one primitive into the buffer. */
-static void ib_draw(rtpi_itembuf *ib, const rtp_scene *s, dc_ctx *c, uint32_t prim)
+/* Draws one primitive into the buffer (the part's rows). */
+static void ib_draw(rtpi_itembuf *ib, const rtp_scene *s, dc_ctx *c, uint32_t prim,
+                    const ib_part *pt)
 {
     size_t i = prim;
     if (!rtpi_itembuf_renders(s, prim, ib->light))
@@ -1403,7 +1425,7 @@ static void ib_draw(rtpi_itembuf *ib, const rtp_scene *s, dc_ctx *c, uint32_t pr
         int f;
         for (f = 0; f < 6; f++)
             if (ib->w.fbase[f] != RTPI_DC_ABSENT)
-                ib_tri(ib, s, f, prim);
+                ib_tri(ib, s, f, prim, pt);
     } else {
         /* Round shapes exactly: a ray per cell within their bounds
            (1e-9: a hair wider than the bounds, for rounding). */
@@ -1415,6 +1437,7 @@ static void ib_draw(rtpi_itembuf *ib, const rtp_scene *s, dc_ctx *c, uint32_t pr
         ic.inside = ic.sphere &&
                     v3_len(v3_sub(v3_from_f(s->spheres[i - s->ntris].c), ib->light)) <=
                         fabs((double)s->spheres[i - s->ntris].r);
+        ic.pt = pt;
         dc_cover(c, prim, 1e-9, ib_cast_run, &ic);
     }
 }
@@ -1425,13 +1448,14 @@ rtp_status rtpi_itembuf_draw(rtpi_itembuf *ib, const rtp_scene *s,
 {
     dc_ctx c;
     size_t k;
+    ib_part whole = {0, 1};
     if (!n)
         return RTP_OK;
     if (dc_ctx_init(&c, s, ib->light, ib->res, a) != RTP_OK)
         return RTP_ERR_NOMEM;
     dc_ctx_window(&c, &ib->w);
     for (k = 0; k < n; k++)
-        ib_draw(ib, s, &c, prims[k]);
+        ib_draw(ib, s, &c, prims[k], &whole);
     dc_ctx_free(&c, a);
     return RTP_OK;
 }
@@ -1448,21 +1472,64 @@ rtp_status rtpi_itembuf_build_wide(const rtp_scene *s, rtpi_v3 light, int res,
                                    const rtp_allocator *a, rtpi_itembuf *ib,
                                    rtp_error *err)
 {
-    size_t n = rtpi_scene_nprims(s), i;
+    return rtpi_itembuf_build_wide_mt(s, light, res, cells, thin, 1, a, ib, err);
+}
+
+typedef struct ib_job {
+    rtpi_itembuf *ib;
+    const rtp_scene *s;
+    const unsigned char *thin;
     dc_ctx c;
+    ib_part pt;
+} ib_job;
+
+/* One part: every primitive into the part's rows. */
+static int ib_job_run(void *ctx, int part)
+{
+    ib_job *jb = (ib_job *)ctx;
+    size_t n = rtpi_scene_nprims(jb->s), i;
+    jb->pt.part = part;
+    for (i = 0; i < n; i++)
+        if (!jb->thin || !jb->thin[i])
+            ib_draw(jb->ib, jb->s, &jb->c, (uint32_t)i, &jb->pt);
+    return 0;
+}
+
+rtp_status rtpi_itembuf_build_wide_mt(const rtp_scene *s, rtpi_v3 light, int res, double cells,
+                                      unsigned char *thin, int threads, const rtp_allocator *a,
+                                      rtpi_itembuf *ib, rtp_error *err)
+{
+    ib_job jobs[RTPI_MAX_THREADS];
+    void *ctx[RTPI_MAX_THREADS];
+    int k, nparts = threads < 1 ? 1 : threads > RTPI_MAX_THREADS ? RTPI_MAX_THREADS : threads;
     rtp_status st = rtpi_itembuf_alloc(ib, s, light, res, a, err);
     if (st != RTP_OK)
         return st;
-    if (dc_ctx_init(&c, s, light, ib->res, a) != RTP_OK) {
-        rtpi_itembuf_free(ib, a);
-        return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory for the item buffer");
+    /* no more parts than bands of rows */
+    if (nparts > (ib->res + IB_BAND - 1) / IB_BAND)
+        nparts = (ib->res + IB_BAND - 1) / IB_BAND;
+    for (k = 0; k < nparts; k++) {
+        if (dc_ctx_init(&jobs[k].c, s, light, ib->res, a) != RTP_OK) {
+            while (k-- > 0)
+                dc_ctx_free(&jobs[k].c, a);
+            rtpi_itembuf_free(ib, a);
+            return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0,
+                              "out of memory for the item buffer");
+        }
+        dc_ctx_window(&jobs[k].c, &ib->w);
+        jobs[k].ib = ib;
+        jobs[k].s = s;
+        jobs[k].thin = thin;
+        jobs[k].pt.part = k;
+        jobs[k].pt.nparts = nparts;
+        ctx[k] = &jobs[k];
     }
     if (thin)
         rtpi_itembuf_thin(ib, s, cells, thin);
-    dc_ctx_window(&c, &ib->w);
-    for (i = 0; i < n; i++)
-        if (!thin || !thin[i])
-            ib_draw(ib, s, &c, (uint32_t)i);
-    dc_ctx_free(&c, a);
+    /* (rtpi_parallel_rows hands part k to some thread: each job keeps
+       its own context and scratch, and any thread may run any part) */
+    rtpi_parallel_rows(nparts, nparts, ctx, ib_job_run, NULL, NULL);
+    for (k = 0; k < nparts; k++)
+        dc_ctx_free(&jobs[k].c, a);
     return RTP_OK;
 }

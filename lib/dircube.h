@@ -237,6 +237,11 @@ rtp_status rtpi_itembuf_build_wide(const rtp_scene *s, rtpi_v3 light, int res,
                                    double cells, unsigned char *thin,
                                    const rtp_allocator *a, rtpi_itembuf *ib,
                                    rtp_error *err);
+/* The same drawn on up to `threads` threads (the same buffer for any
+   number; a's functions are called from the calling thread only). */
+rtp_status rtpi_itembuf_build_wide_mt(const rtp_scene *s, rtpi_v3 light, int res, double cells,
+                                      unsigned char *thin, int threads, const rtp_allocator *a,
+                                      rtpi_itembuf *ib, rtp_error *err);
 /* The same buffers drawn by OSMesa (osmesa.c); RTP_ERR_UNSUPPORTED in
    builds without it. */
 rtp_status rtpi_itembuf_build_osmesa(const rtp_scene *s, rtpi_v3 light,

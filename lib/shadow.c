@@ -46,8 +46,8 @@ static rtp_status sh_itembuf(rtpi_shadow *sh, int res, int threads, const rtp_al
     st = sh->mode == RTPI_SHADOW_OSMESA
              ? rtpi_itembuf_build_osmesa_wide(sh->s, sh->light, res, SH_THIN_CELLS, sh->thin, a,
                                               &sh->ib, err)
-             : rtpi_itembuf_build_wide(sh->s, sh->light, res, SH_THIN_CELLS, sh->thin, a, &sh->ib,
-                                       err);
+             : rtpi_itembuf_build_wide_mt(sh->s, sh->light, res, SH_THIN_CELLS, sh->thin, threads,
+                                          a, &sh->ib, err);
     if (st == RTP_OK)
         st = rtpi_lightbuf_build_some(sh->s, sh->light, (sh->ib.res + 1) / SH_THIN_DIV, sh->thin,
                                       1, threads, a, &sh->lb, err);

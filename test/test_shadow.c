@@ -365,6 +365,42 @@ static void lb_same(const rtp_scene *s, rtpi_v3 lp, int res, const char *what)
     rtpi_lightbuf_free(&a, &al);
 }
 
+/* The item buffer drawn on 2 and 5 threads equals one thread's, cell
+   for cell (ids, and depths where there is an id), and so do the thin
+   marks. */
+static void ib_same(const rtp_scene *s, rtpi_v3 lp, int res, const char *what)
+{
+    rtpi_itembuf a, b;
+    rtp_allocator al;
+    size_t k, n = rtpi_scene_nprims(s);
+    unsigned char *ta = (unsigned char *)calloc(n + 1, 1), *tb = (unsigned char *)calloc(n + 1, 1);
+    int threads;
+    rtpi_allocator_init(&al, NULL);
+    if (!ta || !tb ||
+        rtpi_itembuf_build_wide_mt(s, lp, res, 2.0, ta, 1, &al, &a, NULL) != RTP_OK) {
+        CHECK_MSG(0, "%s: item buffer build failed", what);
+        free(ta);
+        free(tb);
+        return;
+    }
+    for (threads = 2; threads <= 5; threads += 3) {
+        int same;
+        if (rtpi_itembuf_build_wide_mt(s, lp, res, 2.0, tb, threads, &al, &b, NULL) != RTP_OK) {
+            CHECK_MSG(0, "%s: item buffer on %d threads failed", what, threads);
+            continue;
+        }
+        same = a.w.ncells == b.w.ncells && memcmp(ta, tb, n) == 0;
+        for (k = 0; same && k < a.w.ncells; k++)
+            same = a.id[k] == b.id[k] && (a.id[k] == RTPI_NONE || a.z[k] == b.z[k]);
+        CHECK_MSG(same, "%s: the item buffer on %d threads differs from one thread's", what,
+                  threads);
+        rtpi_itembuf_free(&b, &al);
+    }
+    rtpi_itembuf_free(&a, &al);
+    free(ta);
+    free(tb);
+}
+
 static void test_lightbuf_threads(void)
 {
     const char *dir = check_shared_scenes();
@@ -373,6 +409,7 @@ static void test_lightbuf_threads(void)
     if (rtp_scene_load_memory(scene_text, sizeof scene_text - 1, "t.nff", "nff", NULL, &s,
                               NULL) == RTP_OK) {
         lb_same(s, v3(2, -2, 6), 128, "test scene");
+        ib_same(s, v3(2, -2, 6), 128, "test scene");
         rtp_scene_destroy(s);
         s = NULL;
     }
@@ -382,6 +419,18 @@ static void test_lightbuf_threads(void)
     if (rtp_scene_load(path, NULL, &s, NULL) == RTP_OK) {
         lb_same(s, v3(s->lights[0].pos[0] + 0.5, s->lights[0].pos[1], s->lights[0].pos[2]), 256,
                 "teapot_s3");
+        ib_same(s, v3(s->lights[0].pos[0] + 0.5, s->lights[0].pos[1], s->lights[0].pos[2]), 256,
+                "teapot_s3");
+        rtp_scene_destroy(s);
+    } else {
+        CHECK_MSG(0, "cannot load %s", path);
+    }
+    /* spheres (drawn by a ray per cell) and a polygon */
+    snprintf(path, sizeof path, "%s/spd/balls_s2.nff", dir);
+    s = NULL;
+    if (rtp_scene_load(path, NULL, &s, NULL) == RTP_OK) {
+        ib_same(s, v3(s->lights[0].pos[0] + 0.5, s->lights[0].pos[1], s->lights[0].pos[2]), 256,
+                "balls_s2");
         rtp_scene_destroy(s);
     } else {
         CHECK_MSG(0, "cannot load %s", path);
