@@ -744,6 +744,13 @@ static int combine_row(void *ctx, int y)
    the band's other pixels, at their own place. */
 #define PK_ROWS 16
 
+/* Float images carry 2^-24 of the magnitudes they are summed from: where
+   those pass CP_SPAN times a value (and CP_SPAN * 2: below, the error
+   stays under 2^-21 absolute, 5e-7), the value lost digits to
+   cancellation (a colour or kd cut from thousands to a fraction), and
+   the full path makes the image instead (pk_put, cp_lost). */
+#define CP_SPAN 4.0
+
 /* The rest P_s of sample k into out (3 floats): the material's diffuse
    part x q taken off the whole.  q: the sample's, or NULL for 0 (a
    sample without the material). */
@@ -771,13 +778,21 @@ static void pk_rest_into(const eval_ctx *e, int y, float *out)
    not 0, else P alone in t->pk.  P and K held as floats overflow where an
    image's values come near the float range (a kt of 1e21 over a few
    bounces: the pixel stays finite, its rest P and coefficient K need
-   not): then the planes are not used and the edit takes the full path. */
+   not); and P = rest - xold q loses digits where xold q is far above P
+   (a colour of 10000 cut to 0: the rest, about |P| + |xold K|, carries
+   2^-24 of itself).  Then the planes are not used and the edit takes the
+   full path. */
 static void pk_put(eval_ctx *e, const float *pk, size_t p, float *pc, uint32_t *nz, size_t *n)
 {
     rtp_tree *t = e->t;
+    int c;
     if (!(isfinite(pk[0]) && isfinite(pk[1]) && isfinite(pk[2]) && isfinite(pk[3]) &&
           isfinite(pk[4]) && isfinite(pk[5])))
         e->nonfinite = 1;
+    for (c = 0; c < 3; c++)
+        if (!(fabs(pk[c]) + 2.0 * fabs(e->xold[c] * pk[3 + c]) <=
+              CP_SPAN * (fabs(pk[c]) > 2.0 ? fabs(pk[c]) : 2.0)))
+            e->nonfinite = 1;
     if (pk[3] != 0.0f || pk[4] != 0.0f || pk[5] != 0.0f) {
         memcpy(pc + 6 * *n, pk, 6 * sizeof *pk);
         nz[(*n)++] = (uint32_t)p;
@@ -1632,13 +1647,10 @@ static int cp_snapshot(rtp_tree *t, const float *samples, const float *last, siz
 /* S and the planes are floats: S + K (c - cS) carries their rounding,
    about 2^-24 of |S| + sum |K_d| (|c_d| + |cS_d|), where P + K c from
    the coefficients carries 2^-24 of the pixel.  That sum may not pass
-   CP_SPAN times the pixel, nor CP_SPAN * 2 (below it the error stays
-   under 2^-21 absolute, 5e-7): else (a colour cut from thousands to 2)
-   the colours lost digits to cancellation and the full path makes the
-   image (and S anew from it).  Where the bound of the sum over the
-   whole image (cp_smax, cp_kmax) is below CP_SPAN * 2, no pixel is
-   checked. */
-#define CP_SPAN 4.0
+   CP_SPAN times the pixel, nor CP_SPAN * 2 (see CP_SPAN): else the full
+   path makes the image (and S anew from it).  Where the bound of the sum
+   over the whole image (cp_smax, cp_kmax) is below CP_SPAN * 2, no pixel
+   is checked. */
 
 static int cp_lost(double s, double kc, double v)
 {

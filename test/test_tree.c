@@ -670,9 +670,11 @@ static void colour_run(int spd)
 }
 
 /* A colour cut from thousands to a fraction after the snapshot S was
-   made: S's digits cancel, and the image must still equal a full trace
-   (the full path makes it). */
-static void colour_cancel_run(int spd)
+   made (key: the ambient), or after the coefficients were made with it
+   (a material's colour: its planes' P = rest - xold q): the digits
+   cancel, and the image must still equal a full trace (the full path
+   makes it). */
+static void colour_cancel_run(int spd, const char *key)
 {
     rtp_scene *s = load("scenes/spheres.nff");
     rtp_tree *t = NULL;
@@ -691,14 +693,14 @@ static void colour_cancel_run(int spd)
     o.spd = spd;
     eo.incremental = 1;
     CHECK(rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
-    CHECK(t && rtp_tree_set(t, "ambient", "5000", NULL) == RTP_OK);
+    CHECK(t && rtp_tree_set(t, key, "5000", NULL) == RTP_OK);
     CHECK(t && rtp_tree_eval(t, &eo, &re, NULL, NULL) == RTP_OK);
-    CHECK(t && rtp_tree_set(t, "ambient", "0.2", NULL) == RTP_OK);
-    CHECK(rtp_scene_set(s, "ambient", "0.2", NULL) == RTP_OK);
+    CHECK(t && rtp_tree_set(t, key, "0.2", NULL) == RTP_OK);
+    CHECK(rtp_scene_set(s, key, "0.2", NULL) == RTP_OK);
     CHECK(t && re && rtp_tree_eval_into(t, &eo, re, NULL, NULL) == RTP_OK);
     if (re && rtp_trace(s, &o, &full, NULL, NULL) == RTP_OK &&
         rtp_image_diff(re, full, 1e-6, &d, NULL) == RTP_OK)
-        CHECK_MSG(d.max_abs <= 1e-6, "spd %d, ambient 5000 then 0.2: %g", spd, d.max_abs);
+        CHECK_MSG(d.max_abs <= 1e-6, "spd %d, %s 5000 then 0.2: %g", spd, key, d.max_abs);
     else
         CHECK(0);
     rtp_image_destroy(full);
@@ -711,8 +713,10 @@ static void test_colour_edits(void)
 {
     colour_run(0);
     colour_run(1);
-    colour_cancel_run(0);
-    colour_cancel_run(1);
+    colour_cancel_run(0, "ambient");
+    colour_cancel_run(1, "ambient");
+    colour_cancel_run(0, "mat.red.color");
+    colour_cancel_run(1, "mat.red.color");
 }
 
 /* Bump edits: on a surface with no subtrees they are exact either way; on
