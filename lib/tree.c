@@ -414,6 +414,13 @@ static rtp_status update_visibility(rtp_tree *t, const rtp_eval_options *opt,
    from scratch, as trace does. */
 #define EV_MAX_LIGHTS 64
 
+/* Float images carry 2^-24 of the magnitudes they are summed from: where
+   those pass CP_SPAN times a value (and CP_SPAN * 2: below, the error
+   stays under 2^-21 absolute, 5e-7), the value lost digits to
+   cancellation (a colour or kd cut from thousands to a fraction), and
+   the full path makes the image instead (hl_build, pk_put, cp_lost). */
+#define CP_SPAN 4.0
+
 typedef struct eval_ctx {
     rtp_tree *t;
     const rtpi_shade_ctx *shade;
@@ -556,7 +563,7 @@ static int hl_build(rtp_tree *t, const rtpi_shade_ctx *shade, const uint32_t *vi
         size_t k = t->mat_samples[t->mat_start[m] + j], a = (size_t)t->start[k];
         size_t n = (size_t)(t->start[k + 1] - a), cap = t->hl_cap, cap2 = t->hl_cap;
         size_t cap3 = t->hl_cap, e0 = t->hl_n, e;
-        double pv[3];
+        double pv[3], ws[3] = {0.0, 0.0, 0.0};
         int c, finite = 1;
         if (n > ((size_t)-1 - t->hl_n) / (nl + 1) ||
             rtpi_grow(al, (void **)&t->hl_idx, &cap, t->hl_n + n * nl + 1, sizeof *t->hl_idx) ||
@@ -586,16 +593,20 @@ static int hl_build(rtp_tree *t, const rtpi_shade_ctx *shade, const uint32_t *vi
                 float wc = (float)(w[node - a] * ks * cl[3 * li + c]);
                 t->hl_w[4 * e + c] = wc;
                 pv[c] -= wc * sold;
+                ws[c] += fabs(wc * sold);
                 finite &= isfinite(wc);
             }
             t->hl_w[4 * e + 3] = (float)sold; /* (a float term) */
         }
         for (c = 0; c < 3; c++) {
+            double pa = fabs(pv[c]);
             t->hl_p[3 * j + c] = (float)pv[c];
             finite &= isfinite(t->hl_p[3 * j + c]);
+            /* P lost digits where the highlights were far above it */
+            finite &= pa + 2.0 * ws[c] <= CP_SPAN * (pa > 2.0 ? pa : 2.0);
         }
         /* P or W beyond the float range (values near it, as with the
-           planes: pk_put): the list is not used */
+           planes: pk_put), or P without its digits: the list is not used */
         if (!finite) {
             rtpi_free(al, w);
             return -1;
@@ -744,12 +755,6 @@ static int combine_row(void *ctx, int y)
    the band's other pixels, at their own place. */
 #define PK_ROWS 16
 
-/* Float images carry 2^-24 of the magnitudes they are summed from: where
-   those pass CP_SPAN times a value (and CP_SPAN * 2: below, the error
-   stays under 2^-21 absolute, 5e-7), the value lost digits to
-   cancellation (a colour or kd cut from thousands to a fraction), and
-   the full path makes the image instead (pk_put, cp_lost). */
-#define CP_SPAN 4.0
 
 /* The rest P_s of sample k into out (3 floats): the material's diffuse
    part x q taken off the whole.  q: the sample's, or NULL for 0 (a
