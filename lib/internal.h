@@ -534,6 +534,8 @@ struct rtp_tree {
     double cp_smax[3];     /* the largest |S| per channel */
     int cp_check;          /* pixels are checked for lost digits */
     unsigned cp_gen;       /* counts the snapshots and stale planes */
+    unsigned *cp_used;     /* per term: cp_clock when its plane was last used */
+    unsigned cp_clock;     /* counts the evaluations by colour planes */
     float *cb_p;           /* a chain's P' (tree.c: cb_chunk) for... */
     size_t cb_term;        /* ...1 + term j (0: none), with... */
     double *cb_cl;         /* ...the other terms' colours, and... */

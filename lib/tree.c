@@ -1437,6 +1437,11 @@ static int mat_term(rtp_tree *t, const double *cv, size_t nl, uint32_t *mat)
    build up along a chain of edits: a pixel is within about a float ulp
    of S's value and its own of what the full path gives. */
 
+/* Colour planes kept at most (16 bytes a pixel each): with more terms
+   edited, the least recently used give way; with more differing from S
+   at once, the full path makes the image. */
+#define CP_MAX_PLANES 8
+
 /* Frees the colour planes and S. */
 static void cp_free(rtp_tree *t)
 {
@@ -1456,6 +1461,7 @@ static void cp_free(rtp_tree *t)
     rtpi_free(&t->alloc, t->cp_ab);
     rtpi_free(&t->alloc, t->cp_kmax);
     rtpi_free(&t->alloc, t->cb_cl);
+    rtpi_free(&t->alloc, t->cp_used);
     rtpi_free(&t->alloc, t->cb_p);
     rtpi_free(&t->alloc, t->cp_s);
     t->cp_k = NULL;
@@ -1463,6 +1469,7 @@ static void cp_free(rtp_tree *t)
     t->cp_ok = NULL;
     t->cp_cl = t->cp_dc = t->cp_ab = t->cp_kmax = t->cb_cl = NULL;
     t->cb_p = NULL;
+    t->cp_used = NULL;
     t->cb_term = 0;
     t->cp_d = NULL;
     t->cp_s = NULL;
@@ -1487,8 +1494,9 @@ static int cp_alloc(rtp_tree *t, size_t nt)
     t->cp_ab = (double *)rtpi_malloc_array(&t->alloc, 3 * nt, sizeof *t->cp_ab);
     t->cp_kmax = (double *)rtpi_malloc_array(&t->alloc, 3 * nt, sizeof *t->cp_kmax);
     t->cb_cl = (double *)rtpi_malloc_array(&t->alloc, 3 * nt, sizeof *t->cb_cl);
+    t->cp_used = (unsigned *)rtpi_calloc_array(&t->alloc, nt, sizeof *t->cp_used);
     if (!t->cp_k || !t->cp_nz || !t->cp_seg || !t->cp_ok || !t->cp_cl || !t->cp_d || !t->cp_dc ||
-        !t->cp_ab || !t->cp_kmax || !t->cb_cl) {
+        !t->cp_ab || !t->cp_kmax || !t->cb_cl || !t->cp_used) {
         cp_free(t);
         return 0;
     }
@@ -1572,8 +1580,27 @@ static int cp_plane(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, si
     int i, c, nb = (t->height + PK_ROWS - 1) / PK_ROWS, ok = 1;
     if (t->cp_ok[j])
         return 1;
-    if (!t->cp_k[j])
+    if (!t->cp_k[j]) {
+        /* at most CP_MAX_PLANES planes: the least recently used other
+           than this evaluation's (cp_used == cp_clock) goes */
+        size_t have = 0, victim = (size_t)-1, q;
+        for (q = 0; q < t->cp_nt; q++)
+            if (t->cp_k[q]) {
+                have++;
+                if (t->cp_used[q] != t->cp_clock &&
+                    (victim == (size_t)-1 || t->cp_used[q] < t->cp_used[victim]))
+                    victim = q;
+            }
+        if (have >= CP_MAX_PLANES && victim != (size_t)-1) {
+            rtpi_free(&t->alloc, t->cp_k[victim]);
+            rtpi_free(&t->alloc, t->cp_nz[victim]);
+            rtpi_free(&t->alloc, t->cp_seg[victim]);
+            t->cp_k[victim] = NULL;
+            t->cp_nz[victim] = t->cp_seg[victim] = NULL;
+            t->cp_ok[victim] = 0;
+        }
         t->cp_k[j] = (float *)rtpi_malloc_array(&t->alloc, np, 3 * sizeof(float));
+    }
     if (t->cp_k[j] && !t->cp_nz[j])
         t->cp_nz[j] = (uint32_t *)rtpi_malloc_array(&t->alloc, np, sizeof(uint32_t));
     if (t->cp_nz[j] && !t->cp_seg[j])
@@ -1831,8 +1858,6 @@ static int cp_eval(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, con
     for (j = 0; j < nt; j++) {
         const double *a = cv + 3 * j, *b = t->cp_cl + 3 * j, *l = t->ev_cl + 3 * j;
         if (a[0] != b[0] || a[1] != b[1] || a[2] != b[2]) {
-            if (!cp_plane(t, e, ctx, nthreads, j))
-                return 0;
             t->cp_d[nd] = j;
             for (c = 0; c < 3; c++) {
                 t->cp_dc[3 * nd + c] = a[c] - b[c];
@@ -1846,6 +1871,22 @@ static int cp_eval(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, con
         }
     }
     t->cp_nd = nd;
+    /* the planes of those terms and of the one changed last (more than
+       CP_MAX_PLANES differing: the full path, which is then about as
+       quick) */
+    if (nd + 1 > CP_MAX_PLANES) {
+        t->cp_s_ok = 0; /* S anew from the full path's image: none differ */
+        return 0;
+    }
+    /* (all marked first: none of them is the one that gives way) */
+    t->cp_clock++;
+    for (j = 0; j < nd; j++)
+        t->cp_used[t->cp_d[j]] = t->cp_clock;
+    if (nc == 1)
+        t->cp_used[changed] = t->cp_clock;
+    for (j = 0; j < nd; j++)
+        if (!cp_plane(t, e, ctx, nthreads, t->cp_d[j]))
+            return 0;
     /* the bound of |S| + sum |K_d| (|c_d| + |cS_d|) over the image */
     t->cp_check = 0;
     for (c = 0; c < 3; c++) {

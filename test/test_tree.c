@@ -709,8 +709,71 @@ static void colour_cancel_run(int spd, const char *key)
     rtp_scene_destroy(s);
 }
 
+/* Twelve colour terms (ten lights) edited by turns: no more than
+   CP_MAX_PLANES planes are kept, S is made anew when more terms than
+   that differ from it, and every image equals a full trace. */
+static void colour_many_run(void)
+{
+    rtp_scene *s = load("scenes/spheres.nff");
+    rtp_tree *t = NULL;
+    rtp_trace_options o;
+    rtp_eval_options eo;
+    rtp_image *re = NULL;
+    int i, planes_ok = 1, made = 0;
+    if (!s) {
+        CHECK(s != NULL);
+        return;
+    }
+    memset(&o, 0, sizeof o);
+    memset(&eo, 0, sizeof eo);
+    o.width = 40;
+    o.height = 30;
+    eo.incremental = 1;
+    CHECK(rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
+    for (i = 0; t && i < 8; i++) {
+        double pos[3];
+        pos[0] = -4.0 + i;
+        pos[1] = -5.0;
+        pos[2] = 6.0 + 0.1 * i;
+        CHECK(rtp_tree_add_light(t, pos, NULL) == RTP_OK);
+    }
+    CHECK(t && rtp_tree_eval(t, &eo, &re, NULL, NULL) == RTP_OK);
+    for (i = 0; t && re && i < 30; i++) {
+        char key[32], v[64];
+        size_t q, n = 0;
+        rtp_eval_stats es;
+        snprintf(key, sizeof key, "light.%d.color", (i * 3) % 10);
+        snprintf(v, sizeof v, "%g,%g,%g", 0.1 + 0.02 * i, 0.3, 0.05 * (i % 7));
+        CHECK(rtp_tree_set(t, key, v, NULL) == RTP_OK);
+        CHECK(rtp_tree_eval_into(t, &eo, re, &es, NULL) == RTP_OK);
+        made += es.combined_samples == 0;
+        for (q = 0; t->cp_k && q < t->cp_nt; q++)
+            n += t->cp_k[q] != NULL;
+        planes_ok &= n <= 8;
+        if (i % 10 == 9) {
+            /* the tree's scene holds the edits and the added lights */
+            rtp_image *full = NULL;
+            rtp_diff_stats d;
+            if (rtp_tree_trace(t, 1, &full, NULL, NULL) == RTP_OK &&
+                rtp_image_diff(re, full, 1e-6, &d, NULL) == RTP_OK)
+                CHECK_MSG(d.max_abs <= 1e-6, "edit %d of ten lights' colours: %g", i, d.max_abs);
+            else
+                CHECK(0);
+            rtp_image_destroy(full);
+        }
+    }
+    CHECK_MSG(planes_ok, "more than 8 colour planes kept");
+    /* most edits from planes (the ones that found 8 terms differing from
+       S went the full path once) */
+    CHECK_MSG(made >= 20, "only %d of 30 colour edits from planes", made);
+    rtp_image_destroy(re);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+}
+
 static void test_colour_edits(void)
 {
+    colour_many_run();
     colour_run(0);
     colour_run(1);
     colour_cancel_run(0, "ambient");
