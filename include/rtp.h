@@ -286,8 +286,10 @@ typedef struct rtp_eval_stats {
     unsigned long long retraced_rays;    /* rays those cast (all kinds) */
     unsigned long long combined_samples; /* samples whose colour was summed
                                             from their coefficients; 0 when
-                                            an edit of one colour alone was
-                                            applied per pixel as P + K c */
+                                            an edit of colours (lights,
+                                            ambient, background) or of one
+                                            material's kd or colour was made
+                                            per pixel from planes */
     unsigned long long written_pixels;   /* pixels written (fewer than the
                                             image's with opt->incremental) */
 } rtp_eval_stats;
@@ -296,7 +298,10 @@ typedef struct rtp_eval_stats {
  *  that moved since the trace get their shadows decided anew (opt->shadows);
  *  the tree keeps what it computes for the next evaluation, so one tree must
  *  not be evaluated from two threads at once (opt->threads parallelises one
- *  evaluation). */
+ *  evaluation).  What it keeps, beyond the tree: per node and sample the
+ *  shading terms and coefficients, and for colour edits a snapshot image
+ *  (12 bytes a pixel) and a plane for each colour term edited (16 bytes a
+ *  pixel, at most 8 kept); opt->no_cache keeps none of it. */
 rtp_status rtp_tree_eval(rtp_tree *tree, const rtp_eval_options *opt,
                          rtp_image **out, rtp_eval_stats *stats,
                          rtp_error *err);
