@@ -756,9 +756,12 @@ static int combine_row(void *ctx, int y)
 #define PK_ROWS 16
 
 
+/* q of a sample without the material. */
+static const float pk_zero[3] = {0.0f, 0.0f, 0.0f};
+
 /* The rest P_s of sample k into out (3 floats): the material's diffuse
-   part x q taken off the whole.  q: the sample's, or NULL for 0 (a
-   sample without the material). */
+   part x q taken off the whole (q: the sample's, pk_zero where the
+   material is not). */
 static void pk_rest_one(const eval_ctx *e, size_t k, const float *q, float *out)
 {
     size_t nc = RTPI_COEFFS(e->t->scene->nlights);
@@ -766,7 +769,7 @@ static void pk_rest_one(const eval_ctx *e, size_t k, const float *q, float *out)
     int c;
     rest_of(e->cv, nc, (size_t)-1, e->t->ev_coeffs + k * nc, v);
     for (c = 0; c < 3; c++)
-        out[c] = (float)(v[c] - e->xold[c] * (q ? q[c] : 0.0f));
+        out[c] = (float)(v[c] - e->xold[c] * q[c]);
 }
 
 /* The same for each sample of sample row y (pk_q 0 where the material is
@@ -932,7 +935,7 @@ static int pk_mat_chunk(void *ctx, int chunk)
             corner[3] = corner[2] + 1;
             for (j = 0; j < (int)nco; j++) {
                 size_t l = corner[j], k = (size_t)y0 * nx + l;
-                const float *q = listed[l] ? t->pk_q + 3 * k : NULL;
+                const float *q = listed[l] ? t->pk_q + 3 * k : pk_zero;
                 if (!done[l]) {
                     pk_rest_one(e, k, q, rest + 3 * l);
                     done[l] = 1;
@@ -940,7 +943,7 @@ static int pk_mat_chunk(void *ctx, int chunk)
                 }
                 for (c = 0; c < 3; c++) {
                     sp[c] += rest[3 * l + c];
-                    sk[c] += q ? q[c] : 0.0f;
+                    sk[c] += q[c];
                 }
             }
             /* the sums in pk_build_chunk's order: (x, y), (x+1, y), (x, y+1), (x+1, y+1) */
@@ -2141,16 +2144,20 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
             }
             if (t->pk_term != (int)(2 + nl + mt) + 1 || (t->pk_part && !sparse)) {
                 /* into a kept image only the pixels of the material's
-                   samples change: their planes alone (pk_part) */
-                if (!sparse)
+                   samples change: their planes alone (pk_part), unless
+                   they are most of the image (the whole-image pass is
+                   then the quicker: balls' spheres, seen in the floor
+                   too, 67 M against 47 M instructions) */
+                int part = sparse && e[0].nlist < ns / 2;
+                if (!part)
                     memset(t->pk_q, 0, ns * 3 * sizeof *t->pk_q);
                 rtpi_parallel_rows((int)((e[0].nlist + 255) / 256), nthreads, ctx, pk_q_chunk,
                                    NULL, NULL);
-                if (pk_build(t, e, ctx, nthreads, sparse)) {
+                if (pk_build(t, e, ctx, nthreads, part)) {
                     t->pk_term = (int)(2 + nl + mt) + 1;
-                    t->pk_part = sparse;
+                    t->pk_part = part;
                     st.combined_samples = ns;
-                    if (sparse)
+                    if (part)
                         for (st.combined_samples = 0, i = 0; i < nthreads; i++)
                             st.combined_samples += e[i].summed;
                 }
