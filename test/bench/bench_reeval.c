@@ -171,7 +171,8 @@ int main(void)
     printf("512: SPD procedure (513x513 corner samples); 1024: 1024x1024 pixel centres. "
            "Edits on warm caches into one kept image (as --stream), best of 3; 'first eval' "
            "builds the caches; '1st' is the first edit of a term (light 0's colour, the "
-           "material's kd), which precombines the planes every further edit of it reuses; "
+           "material's kd), which makes the plane(s) every further edit of it reuses; "
+           "'ambient' follows the light edits (two colours then differ from the snapshot); "
            "'stream' reads the tree's bytes once (the floor), 'light/stream' is the light "
            "edit against it.\n\n");
     printf("| scene | size | trace s | recording | nodes/sample | first eval | light colour 1st | "

@@ -13,8 +13,8 @@
 #      light.  Edits persist, so each line is timed on warm caches, and each
 #      line's --reference traces the same edited scene in full at the same
 #      thread count.  The first edit of a term (a light's colour, the
-#      ambient, a material's colour) precombines the planes the further
-#      edits of that term reuse, and the second of consecutive shine edits
+#      ambient, a material's colour) makes the plane(s) the further edits
+#      of that term reuse, and the second of consecutive shine edits
 #      lists the highlights the further ones reuse: all are shown apart.
 #   3. The same sequence again without --reference for every other shadow
 #      mode (lightbuf:RES, itembuf:RES, osmesa:RES when rtp has OSMesa): the
