@@ -502,17 +502,15 @@ static int eval_row(void *ctx, int y)
     return 0;
 }
 
-/* Sample k's image with term j left out (none when j is past the
-   terms), in the order rtpi_combine sums. */
-static void rest_of(const double *cv, size_t nc, size_t j, const float *coeffs, double v[3])
+/* Sample k's image from its coefficients, in double, in the order
+   rtpi_combine sums. */
+static void rest_of(const double *cv, size_t nc, const float *coeffs, double v[3])
 {
     /* each channel summed over the terms in ascending order, as before,
        the three side by side (a third of the loop's steps) */
     double a0 = 0.0, a1 = 0.0, a2 = 0.0;
     size_t i;
     for (i = 0; i < nc; i += 3) {
-        if (i == 3 * j)
-            continue;
         a0 += coeffs[i] * cv[i];
         a1 += coeffs[i + 1] * cv[i + 1];
         a2 += coeffs[i + 2] * cv[i + 2];
@@ -585,7 +583,7 @@ static int hl_build(rtp_tree *t, const rtpi_shade_ctx *shade, const uint32_t *vi
            coefficients less what these highlights (as the terms hold them
            now) add to it */
         rtpi_sample_weights(shade, t->nodes + a, n, w);
-        rest_of(cv, nc, (size_t)-1, t->ev_coeffs + k * nc, pv);
+        rest_of(cv, nc, t->ev_coeffs + k * nc, pv);
         for (e = e0; e < t->hl_n; e++) {
             size_t node = t->hl_idx[e] / nt, li = (t->hl_idx[e] % nt - 4) / 2;
             double sold = t->ev_terms[t->hl_idx[e]];
@@ -767,7 +765,7 @@ static void pk_rest_one(const eval_ctx *e, size_t k, const float *q, float *out)
     size_t nc = RTPI_COEFFS(e->t->scene->nlights);
     double v[3];
     int c;
-    rest_of(e->cv, nc, (size_t)-1, e->t->ev_coeffs + k * nc, v);
+    rest_of(e->cv, nc, e->t->ev_coeffs + k * nc, v);
     for (c = 0; c < 3; c++)
         out[c] = (float)(v[c] - e->xold[c] * q[c]);
 }
