@@ -464,6 +464,26 @@ static void test_edit_sequence(void)
     rtp_scene_destroy(s);
 }
 
+/* The options of the edit-sequence tests: 40x30 plain samples, or an SPD
+   region (corner samples averaged); 2 threads into one kept image (only
+   read between edits). */
+static void edit_options(int spd, rtp_trace_options *o, rtp_eval_options *eo)
+{
+    memset(o, 0, sizeof *o);
+    memset(eo, 0, sizeof *eo);
+    o->width = 40;
+    o->height = 30;
+    if (spd) {
+        o->spd = 1;
+        o->region[0] = 200;
+        o->region[1] = 180;
+        o->region[2] = 264;
+        o->region[3] = 228;
+    }
+    eo->threads = 2;
+    eo->incremental = 1;
+}
+
 /* Edits of one term of the image's linear form (a light's colour or
    on/off, the ambient, the background, a material's kd or colour), one
    after another: a colour edit is S + K (c - cS) from the snapshot and
@@ -507,19 +527,7 @@ static void one_term_run(int spd)
         CHECK(s != NULL);
         return;
     }
-    memset(&o, 0, sizeof o);
-    memset(&eo, 0, sizeof eo);
-    o.width = 40;
-    o.height = 30;
-    if (spd) {
-        o.spd = 1;
-        o.region[0] = 200;
-        o.region[1] = 180;
-        o.region[2] = 264;
-        o.region[3] = 228;
-    }
-    eo.threads = 2;
-    eo.incremental = 1; /* re is only read between edits */
+    edit_options(spd, &o, &eo);
     CHECK(rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
     CHECK(t && rtp_tree_eval(t, &eo, &re, NULL, NULL) == RTP_OK);
     for (i = 0; t && re && i < sizeof seq / sizeof *seq; i++) {
@@ -606,19 +614,7 @@ static void colour_run(int spd)
         CHECK(s != NULL);
         return;
     }
-    memset(&o, 0, sizeof o);
-    memset(&eo, 0, sizeof eo);
-    o.width = 40;
-    o.height = 30;
-    if (spd) {
-        o.spd = 1;
-        o.region[0] = 200;
-        o.region[1] = 180;
-        o.region[2] = 264;
-        o.region[3] = 228;
-    }
-    eo.threads = 2;
-    eo.incremental = 1;
+    edit_options(spd, &o, &eo);
     CHECK(rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
     CHECK(t && rtp_tree_eval(t, &eo, &re, NULL, NULL) == RTP_OK);
     for (i = 0; t && re && i < 62; i++) {
