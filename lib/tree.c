@@ -1691,22 +1691,34 @@ static int cp_lost(double s, double kc, double v)
     return !(fabs(s) + kc <= CP_SPAN * (a > 2.0 ? a : 2.0));
 }
 
-/* One pixel: S + sum K_d (c_d - cS_d) over the differing terms (the
-   sums in the order of the terms); 1 where checked and it lost digits. */
+/* S + sum K_d (c_d - cS_d) at pixel p over the differing terms but
+   `skip` ((size_t)-1: none), the sums in the order of the terms. */
+static void cp_sum(const rtp_tree *t, size_t p, size_t skip, double v[3])
+{
+    const float *sp = t->cp_s + 3 * p;
+    size_t i;
+    int c;
+    for (c = 0; c < 3; c++)
+        v[c] = sp[c];
+    for (i = 0; i < t->cp_nd; i++) {
+        const float *k = t->cp_k[t->cp_d[i]] + 3 * p;
+        const double *dc = t->cp_dc + 3 * i;
+        if (t->cp_d[i] == skip)
+            continue;
+        for (c = 0; c < 3; c++)
+            v[c] += k[c] * dc[c];
+    }
+}
+
+/* One pixel: cp_sum over every differing term; 1 where checked and it
+   lost digits. */
 static int cp_pixel(const rtp_tree *t, size_t p, float *out)
 {
     const float *sp = t->cp_s + 3 * p;
     double v[3], kc[3] = {0.0, 0.0, 0.0};
     size_t i, nd = t->cp_nd;
     int c;
-    for (c = 0; c < 3; c++)
-        v[c] = sp[c];
-    for (i = 0; i < nd; i++) {
-        const float *k = t->cp_k[t->cp_d[i]] + 3 * p;
-        const double *dc = t->cp_dc + 3 * i;
-        for (c = 0; c < 3; c++)
-            v[c] += k[c] * dc[c];
-    }
+    cp_sum(t, p, (size_t)-1, v);
     for (c = 0; c < 3; c++)
         out[c] = (float)v[c];
     if (!t->cp_check)
@@ -1782,24 +1794,15 @@ static int cb_chunk(void *ctx, int chunk)
 {
     eval_ctx *e = (eval_ctx *)ctx;
     const rtp_tree *t = e->t;
-    size_t base = (size_t)chunk * PK_ROWS * (size_t)t->width, n = t->cp_seg[e->term][chunk], j, i;
+    size_t base = (size_t)chunk * PK_ROWS * (size_t)t->width, n = t->cp_seg[e->term][chunk], j;
     const uint32_t *nz = t->cp_nz[e->term] + base;
     float *pb = t->cb_p + 3 * base;
     for (j = 0; j < n; j++) {
-        size_t q = 3 * (size_t)nz[j];
-        double v0 = t->cp_s[q], v1 = t->cp_s[q + 1], v2 = t->cp_s[q + 2];
-        for (i = 0; i < t->cp_nd; i++) {
-            const float *k = t->cp_k[t->cp_d[i]] + q;
-            const double *dc = t->cp_dc + 3 * i;
-            if (t->cp_d[i] == e->term)
-                continue;
-            v0 += k[0] * dc[0];
-            v1 += k[1] * dc[1];
-            v2 += k[2] * dc[2];
-        }
-        pb[3 * j] = (float)v0;
-        pb[3 * j + 1] = (float)v1;
-        pb[3 * j + 2] = (float)v2;
+        double v[3];
+        cp_sum(t, nz[j], e->term, v);
+        pb[3 * j] = (float)v[0];
+        pb[3 * j + 1] = (float)v[1];
+        pb[3 * j + 2] = (float)v[2];
     }
     return 0;
 }
