@@ -378,10 +378,12 @@ void rtpi_light_terms(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
                       size_t n, const uint32_t *vis_ext, const float *nv,
                       size_t light, float *terms);
 /* coeffs: RTPI_COEFFS(nlights) floats: G, A, then K_i; acc: as many
-   doubles of scratch (sums are kept in double, then rounded once). */
+   doubles of scratch (sums are kept in double, then rounded once).  w
+   (NULL: not wanted): the path weight step 2 reaches each of the n nodes
+   with, as rtpi_sample_weights gives it. */
 void rtpi_sample_coeffs(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
                         size_t n, const float *terms, double *acc,
-                        float *coeffs);
+                        float *coeffs, double *w);
 /* Light `light`'s coefficients alone (coeffs[6 + 3 light ..]), exactly as
    rtpi_sample_coeffs computes them. */
 void rtpi_sample_coeffs_light(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
@@ -418,6 +420,11 @@ void rtpi_sample_weights(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_
 void rtpi_sample_diffuse(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
                          size_t n, const float *terms, uint32_t mat,
                          const double *cv, double q[3]);
+/* The same q from the nodes' path weights w (rtpi_sample_coeffs'), in
+   one pass over the nodes instead of a descent: bit for bit equal. */
+void rtpi_sample_diffuse_w(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
+                           size_t n, const float *terms, const double *w,
+                           uint32_t mat, const double *cv, double q[3]);
 /* cl: 3 per light: colour * light scale, 0 when off (rtpi_light_colors). */
 void rtpi_combine(const rtp_scene *s, const double *cl, const float *coeffs,
                   float rgb[3]);
@@ -476,6 +483,9 @@ struct rtp_tree {
     float *ev_terms;       /* nnodes * RTPI_TERMS(ev_nlights) */
     float *ev_coeffs;      /* samples * RTPI_COEFFS(ev_nlights) */
     float *ev_nv;          /* nnodes * 6: shading normal, view vector */
+    double *ev_w;          /* nnodes: the path weight step 2 reaches each
+                              node with (0: not reached), as ev_coeffs
+                              were made: a material's q in one pass */
     float *ev_samples;     /* the samples' colours (SPD: corners, averaged
                               into pixels); with the caches, or SPD */
     int ev_samples_ok;     /* ev_samples hold ev_coeffs combined with ev_cl */

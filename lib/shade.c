@@ -358,7 +358,7 @@ void rtpi_material_highlights(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, 
    only < 0: every coefficient into acc (G, A, K_i); only = i: light i's
    K_i alone into acc[0..2], by the very same operations. */
 static void coeffs_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t idx,
-                        const float *terms, double w, double *acc, long only)
+                        const float *terms, double w, double *acc, long only, double *wout)
 {
     const rtp_scene *s = c->s;
     const rtpi_cnode *nd = &nodes[idx];
@@ -367,6 +367,8 @@ static void coeffs_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t
     const rtpi_material *m = &s->mats[rtpi_prim_material(s, nd->prim)];
     double wr, wt, kd = w * m->kd, ks = w * m->ks, cobj[3];
     int k;
+    if (wout)
+        wout[idx] = w;
     /* c_obj from the texture factor and the material's colours now */
     for (k = 0; k < 3; k++)
         cobj[k] = m->tex == RTPI_TEX_CHECKER
@@ -398,14 +400,15 @@ static void coeffs_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t
     }
     if (wr > 0.0) {
         if (nd->link & RTPI_L_REFL)
-            coeffs_node(c, nodes, idx + 1, terms, w * wr, acc, only);
+            coeffs_node(c, nodes, idx + 1, terms, w * wr, acc, only, wout);
         else if ((nd->link & RTPI_L_REFL_MISS) && only < 0)
             for (k = 0; k < 3; k++)
                 acc[k] += w * wr;
     }
     if (wt > 0.0) {
         if (nd->link & RTPI_L_REFR)
-            coeffs_node(c, nodes, idx + (nd->link >> RTPI_L_SHIFT), terms, w * wt, acc, only);
+            coeffs_node(c, nodes, idx + (nd->link >> RTPI_L_SHIFT), terms, w * wt, acc, only,
+                        wout);
         else if ((nd->link & RTPI_L_REFR_MISS) && only < 0)
             for (k = 0; k < 3; k++)
                 acc[k] += w * wt;
@@ -413,15 +416,18 @@ static void coeffs_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t
 }
 
 void rtpi_sample_coeffs(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t n,
-                        const float *terms, double *acc, float *coeffs)
+                        const float *terms, double *acc, float *coeffs, double *w)
 {
     size_t m = RTPI_COEFFS(c->s->nlights), i;
     for (i = 0; i < m; i++)
         acc[i] = 0.0;
+    if (w)
+        for (i = 0; i < n; i++)
+            w[i] = 0.0; /* (nodes step 2 does not reach) */
     if (n == 0)
         acc[0] = acc[1] = acc[2] = 1.0; /* the eye ray saw the background */
     else
-        coeffs_node(c, nodes, 0, terms, 1.0, acc, -1);
+        coeffs_node(c, nodes, 0, terms, 1.0, acc, -1, w);
     for (i = 0; i < m; i++)
         coeffs[i] = (float)acc[i];
 }
@@ -432,7 +438,7 @@ void rtpi_sample_coeffs_light(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, 
     double acc[3] = {0.0, 0.0, 0.0};
     int k;
     if (n > 0)
-        coeffs_node(c, nodes, 0, terms, 1.0, acc, (long)light);
+        coeffs_node(c, nodes, 0, terms, 1.0, acc, (long)light, NULL);
     for (k = 0; k < 3; k++)
         coeffs[6 + 3 * light + k] = (float)acc[k];
 }
@@ -503,6 +509,37 @@ void rtpi_sample_diffuse(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_
     q[0] = q[1] = q[2] = 0.0;
     if (n > 0)
         diffuse_node(c, nodes, 0, terms, mat, cv, 1.0, q);
+}
+
+void rtpi_sample_diffuse_w(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t n,
+                           const float *terms, const double *w, uint32_t mat,
+                           const double *cv, double q[3])
+{
+    const rtp_scene *s = c->s;
+    size_t nl = s->nlights, nt = RTPI_TERMS(nl), j, i;
+    double q0 = 0.0, q1 = 0.0, q2 = 0.0;
+    /* the nodes in diffuse_node's order (depth first, reflected subtree
+       first: the order they are stored in), with its operations in its
+       order for each channel */
+    for (j = 0; j < n; j++) {
+        const float *t = terms + j * nt;
+        const double *cl = cv + 6;
+        double l0 = cv[3], l1 = cv[4], l2 = cv[5], wj = w[j];
+        if (wj == 0.0 || rtpi_prim_material(s, nodes[j].prim) != mat)
+            continue;
+        for (i = 0; i < nl; i++, cl += 3) {
+            double d = t[3 + 2 * i];
+            l0 += d * cl[0];
+            l1 += d * cl[1];
+            l2 += d * cl[2];
+        }
+        q0 += wj * t[0] * l0;
+        q1 += wj * t[1] * l1;
+        q2 += wj * t[2] * l2;
+    }
+    q[0] = q0;
+    q[1] = q1;
+    q[2] = q2;
 }
 
 static void weights_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t idx, double w,

@@ -319,7 +319,7 @@ static void trace_sample(worker *w, int x, int y, float *rgb)
         rtpi_sample_terms(&w->sh->shade, nodes, n,
                           words && n ? w->vis + w->sample_base * words : NULL, c->from,
                           w->terms, NULL);
-        rtpi_sample_coeffs(&w->sh->shade, nodes, n, w->terms, w->acc, w->coeffs);
+        rtpi_sample_coeffs(&w->sh->shade, nodes, n, w->terms, w->acc, w->coeffs, NULL);
         rtpi_combine(s, w->sh->cl, w->coeffs, rgb);
     }
     if (!w->sh->rows)

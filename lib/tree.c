@@ -5,6 +5,7 @@
 #include "shadow.h"
 #include "dircube.h"
 
+#include <float.h>
 #include <time.h>
 
 static void cp_free(rtp_tree *t);
@@ -30,6 +31,7 @@ void rtp_tree_destroy(rtp_tree *t)
     rtpi_free(&a, t->ev_terms);
     rtpi_free(&a, t->ev_coeffs);
     rtpi_free(&a, t->ev_nv);
+    rtpi_free(&a, t->ev_w);
     rtpi_free(&a, t->ev_samples);
     rtpi_free(&a, t->ev_cl);
     rtpi_free(&a, t->pk);
@@ -452,9 +454,8 @@ typedef struct eval_ctx {
     double *acc;
     int nomem;
     int nonfinite;            /* pk_put met a plane value that is not finite */
-    float *rest;              /* pk_build_chunk, pk_mat_chunk: scratch */
+    float *rest;              /* pk_build_chunk, pk_img_chunk: scratch */
     size_t rest_bytes;
-    unsigned long long summed; /* pk_mat_chunk: samples whose rest it made */
     double kmax[3];           /* cp_plane_chunk: largest |K| per channel */
 } eval_ctx;
 
@@ -481,7 +482,8 @@ static int sample_coeffs(eval_ctx *e, size_t k, int redo_terms, float **coeffs_o
     if (redo_terms)
         rtpi_sample_terms(e->shade, t->nodes + a, n, e->vis ? e->vis + a * words : NULL, e->eye,
                           terms, e->cached ? t->ev_nv + 6 * a : NULL);
-    rtpi_sample_coeffs(e->shade, t->nodes + a, n, terms, e->acc, coeffs);
+    rtpi_sample_coeffs(e->shade, t->nodes + a, n, terms, e->acc, coeffs,
+                       e->cached ? t->ev_w + a : NULL);
     *coeffs_out = coeffs;
     return 0;
 }
@@ -791,14 +793,15 @@ static void pk_rest_into(const eval_ctx *e, int y, float *out)
 static void pk_put(eval_ctx *e, const float *pk, size_t p, float *pc, uint32_t *nz, size_t *n)
 {
     rtp_tree *t = e->t;
-    int c;
-    if (!(isfinite(pk[0]) && isfinite(pk[1]) && isfinite(pk[2]) && isfinite(pk[3]) &&
-          isfinite(pk[4]) && isfinite(pk[5])))
-        e->nonfinite = 1;
-    for (c = 0; c < 3; c++)
-        if (!(fabs(pk[c]) + 2.0 * fabs(e->xold[c] * pk[3 + c]) <=
-              CP_SPAN * (fabs(pk[c]) > 2.0 ? fabs(pk[c]) : 2.0)))
-            e->nonfinite = 1;
+    int c, bad = 0;
+    for (c = 0; c < 3; c++) {
+        /* (false for a NaN P or K, and for an infinite K: xold K is then
+           infinite or NaN; an infinite P fails the second test) */
+        double a = fabs(pk[c]);
+        bad |= !(a + 2.0 * fabs(e->xold[c] * pk[3 + c]) <= CP_SPAN * (a > 2.0 ? a : 2.0)) |
+               !(a <= FLT_MAX);
+    }
+    e->nonfinite |= bad;
     if (pk[3] != 0.0f || pk[4] != 0.0f || pk[5] != 0.0f) {
         memcpy(pc + 6 * *n, pk, 6 * sizeof *pk);
         nz[(*n)++] = (uint32_t)p;
@@ -878,28 +881,29 @@ static size_t lower_bound(const uint32_t *list, size_t n, size_t v)
 }
 
 /* The planes of one band where only the pixels the edited material's
-   samples (e->list) reach can change (an image kept from the last
-   evaluation, opt->incremental): P and K there alone, from the rest of
-   just their (corner) samples; q is read only at the listed samples
-   (pk_q is not cleared).  Values are those pk_build_chunk gives. */
-static int pk_mat_chunk(void *ctx, int chunk)
+   samples (e->list) reach can change: an image kept from the last
+   evaluation (opt->incremental) that is the image of the coefficients
+   and colours now (t->last_exact), B.  K as pk_build_chunk makes it
+   (q is read only at the listed samples: pk_q is not cleared), and P =
+   B - xold K, so no sample's rest is summed: P differs from the rest
+   pk_build_chunk sums by the rounding of B (a float ulp of the pixel),
+   and pk_put's guard stops the planes where xold K is far above P. */
+static int pk_img_chunk(void *ctx, int chunk)
 {
     eval_ctx *e = (eval_ctx *)ctx;
     rtp_tree *t = e->t;
     size_t w = (size_t)t->width, nx = (size_t)t->nx, n = 0, base, i, lo, hi, srows;
-    int y0 = chunk * PK_ROWS, y1 = y0 + PK_ROWS, y, x, c, j, spd = t->spd;
-    float *pc, pk[6], *rest = e->rest;
-    unsigned char *listed, *done, *touched;
+    int y0 = chunk * PK_ROWS, y1 = y0 + PK_ROWS, y, x, c, spd = t->spd;
+    const float *img = e->pixels;
+    float *pc, pk[6];
+    unsigned char *listed, *touched;
     uint32_t *nz;
     if (y1 > t->height)
         y1 = t->height;
-    /* the band's sample rows: SPD pixels also reach the row below */
     srows = (size_t)(y1 - y0) + (spd ? 1u : 0u);
-    listed = (unsigned char *)(rest + 3 * (PK_ROWS + 1) * nx);
-    done = listed + (PK_ROWS + 1) * nx;
-    touched = done + (PK_ROWS + 1) * nx;
+    listed = (unsigned char *)e->rest;
+    touched = listed + (PK_ROWS + 1) * nx;
     memset(listed, 0, srows * nx);
-    memset(done, 0, srows * nx);
     memset(touched, 0, (size_t)(y1 - y0) * w);
     base = (size_t)y0 * w;
     pc = t->pk_c + 6 * base;
@@ -907,48 +911,58 @@ static int pk_mat_chunk(void *ctx, int chunk)
     lo = lower_bound(e->list, e->nlist, (size_t)y0 * nx);
     hi = lower_bound(e->list, e->nlist, ((size_t)y0 + srows) * nx);
     for (i = lo; i < hi; i++) {
-        size_t k = e->list[i], sx = k % nx, sy = k / nx - (size_t)y0;
-        listed[sy * nx + sx] = 1;
+        size_t l = e->list[i] - (size_t)y0 * nx, sx = l % nx, sy = l / nx;
+        listed[l] = 1;
         if (!spd) {
-            touched[sy * w + sx] = 1;
+            touched[l] = 1; /* (nx = w) */
             continue;
         }
         /* the pixels whose corners it is: (sx-1..sx, sy-1..sy) */
-        for (j = 0; j < 4; j++) {
-            size_t px = sx - (size_t)(j & 1), py = sy - (size_t)(j >> 1);
-            if (px < w && py < (size_t)(y1 - y0)) /* (unsigned: -1 is large) */
-                touched[py * w + px] = 1;
+        if (sy < (size_t)(y1 - y0)) {
+            if (sx < w)
+                touched[sy * w + sx] = 1;
+            if (sx > 0)
+                touched[sy * w + sx - 1] = 1;
+        }
+        if (sy > 0) {
+            if (sx < w)
+                touched[(sy - 1) * w + sx] = 1;
+            if (sx > 0)
+                touched[(sy - 1) * w + sx - 1] = 1;
         }
     }
     for (y = y0; y < y1; y++) {
-        size_t p = (size_t)y * w, ly = (size_t)(y - y0);
+        size_t ly = (size_t)(y - y0), p = (size_t)y * w;
+        const unsigned char *tr = touched + ly * w;
         for (x = 0; x < t->width; x++) {
-            size_t corner[4], nco = spd ? 4 : 1;
-            double sp[3] = {0.0, 0.0, 0.0}, sk[3] = {0.0, 0.0, 0.0};
-            if (!touched[ly * w + (size_t)x])
-                continue;
-            corner[0] = ly * nx + (size_t)x;
-            corner[1] = corner[0] + 1;
-            corner[2] = corner[0] + nx;
-            corner[3] = corner[2] + 1;
-            for (j = 0; j < (int)nco; j++) {
-                size_t l = corner[j], k = (size_t)y0 * nx + l;
-                const float *q = listed[l] ? t->pk_q + 3 * k : pk_zero;
-                if (!done[l]) {
-                    pk_rest_one(e, k, q, rest + 3 * l);
-                    done[l] = 1;
-                    e->summed++;
-                }
-                for (c = 0; c < 3; c++) {
-                    sp[c] += rest[3 * l + c];
-                    sk[c] += q[c];
-                }
+            size_t l = ly * nx + (size_t)x, k = (size_t)y * nx + (size_t)x;
+            const float *b = img + 3 * (p + (size_t)x);
+            uint64_t word;
+            if (!tr[x]) {
+                /* most of a row is not touched: 8 marks at a time */
+                while (x + 8 <= t->width && (memcpy(&word, tr + x, 8), word == 0))
+                    x += 8;
+                if (x >= t->width || !tr[x])
+                    continue;
+                l = ly * nx + (size_t)x;
+                k = (size_t)y * nx + (size_t)x;
+                b = img + 3 * (p + (size_t)x);
             }
-            /* the sums in pk_build_chunk's order: (x, y), (x+1, y), (x, y+1), (x+1, y+1) */
-            for (c = 0; c < 3; c++) {
-                pk[c] = spd ? (float)(0.25 * sp[c]) : (float)sp[c];
-                pk[3 + c] = spd ? (float)(0.25 * sk[c]) : (float)sk[c];
+            if (spd) {
+                /* pk_build_chunk's sums: (x, y), (x+1, y), (x, y+1), (x+1, y+1) */
+                const float *qa = listed[l] ? t->pk_q + 3 * k : pk_zero;
+                const float *qb = listed[l + 1] ? t->pk_q + 3 * (k + 1) : pk_zero;
+                const float *qc = listed[l + nx] ? t->pk_q + 3 * (k + nx) : pk_zero;
+                const float *qd = listed[l + nx + 1] ? t->pk_q + 3 * (k + nx + 1) : pk_zero;
+                for (c = 0; c < 3; c++)
+                    pk[3 + c] =
+                        (float)(0.25 * ((((double)qa[c] + qb[c]) + qc[c]) + qd[c]));
+            } else {
+                for (c = 0; c < 3; c++)
+                    pk[3 + c] = t->pk_q[3 * k + c];
             }
+            for (c = 0; c < 3; c++)
+                pk[c] = (float)((double)b[c] - e->xold[c] * pk[3 + c]);
             pk_put(e, pk, p + (size_t)x, pc, nz, &n);
         }
     }
@@ -957,15 +971,14 @@ static int pk_mat_chunk(void *ctx, int chunk)
 }
 
 /* Builds the planes for the term the contexts name (with `part`, only
-   where the material's samples reach: pk_mat_chunk); 1 if they came out
+   where the material's samples reach: pk_img_chunk); 1 if they came out
    finite, else 0 (not to be used; out of memory for the threads' scratch
    also sets e->nomem). */
 static int pk_build(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, int part)
 {
     int i, nb = (t->height + PK_ROWS - 1) / PK_ROWS, ok = 1;
-    /* two sample rows' rest, or with `part` a band's and its marks */
-    size_t nx = (size_t)t->nx, bytes = part ? (PK_ROWS + 1) * nx * (3 * sizeof(float) + 2) +
-                                                  PK_ROWS * (size_t)t->width
+    /* two sample rows' rest, or with `part` a band's marks */
+    size_t nx = (size_t)t->nx, bytes = part ? (PK_ROWS + 1) * nx + PK_ROWS * (size_t)t->width
                                             : 6 * nx * sizeof(float);
     for (i = 0; i < nthreads; i++) {
         if (e[i].rest && e[i].rest_bytes < bytes) {
@@ -977,9 +990,8 @@ static int pk_build(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, in
             return 0;
         }
         e[i].rest_bytes = bytes;
-        e[i].summed = 0;
     }
-    rtpi_parallel_rows(nb, nthreads, ctx, part ? pk_mat_chunk : pk_build_chunk, NULL, NULL);
+    rtpi_parallel_rows(nb, nthreads, ctx, part ? pk_img_chunk : pk_build_chunk, NULL, NULL);
     for (i = 0; i < nthreads; i++) {
         ok &= !e[i].nonfinite;
         e[i].nonfinite = 0;
@@ -990,7 +1002,7 @@ static int pk_build(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, in
     return ok;
 }
 
-/* A chunk of the edited material's samples: q (rtpi_sample_diffuse). */
+/* A chunk of the edited material's samples: q (rtpi_sample_diffuse_w). */
 static int pk_q_chunk(void *ctx, int chunk)
 {
     eval_ctx *e = (eval_ctx *)ctx;
@@ -1001,9 +1013,9 @@ static int pk_q_chunk(void *ctx, int chunk)
     for (; i < end; i++) {
         size_t k = e->list[i], a = (size_t)t->start[k];
         double q[3];
-        rtpi_sample_diffuse(e->shade, t->nodes + a, (size_t)(t->start[k + 1] - a),
-                            t->ev_terms + a * RTPI_TERMS(t->scene->nlights), e->mat, e->cv,
-                            q);
+        rtpi_sample_diffuse_w(e->shade, t->nodes + a, (size_t)(t->start[k + 1] - a),
+                              t->ev_terms + a * RTPI_TERMS(t->scene->nlights), t->ev_w + a,
+                              e->mat, e->cv, q);
         t->pk_q[3 * k] = (float)q[0];
         t->pk_q[3 * k + 1] = (float)q[1];
         t->pk_q[3 * k + 2] = (float)q[2];
@@ -1218,6 +1230,7 @@ static void drop_caches(rtp_tree *t)
     rtpi_free(&t->alloc, t->ev_terms);
     rtpi_free(&t->alloc, t->ev_coeffs);
     rtpi_free(&t->alloc, t->ev_nv);
+    rtpi_free(&t->alloc, t->ev_w);
     rtpi_free(&t->alloc, t->ev_pos);
     rtpi_free(&t->alloc, t->ev_mats);
     rtpi_free(&t->alloc, t->ev_cl);
@@ -1250,6 +1263,7 @@ static void drop_caches(rtp_tree *t)
     t->ev_terms = NULL;
     t->ev_coeffs = NULL;
     t->ev_nv = NULL;
+    t->ev_w = NULL;
     t->ev_pos = NULL;
     t->ev_mats = NULL;
     t->ev_valid = 0;
@@ -2028,11 +2042,12 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
         t->ev_coeffs = (float *)rtpi_malloc_array(&t->alloc, ns * RTPI_COEFFS(nl),
                                                   sizeof *t->ev_coeffs);
         t->ev_nv = (float *)rtpi_malloc_array(&t->alloc, t->nnodes * 6 + 1, sizeof *t->ev_nv);
+        t->ev_w = (double *)rtpi_malloc_array(&t->alloc, t->nnodes + 1, sizeof *t->ev_w);
         t->ev_pos = (double *)rtpi_malloc_array(&t->alloc, 3 * nl + 1, sizeof *t->ev_pos);
         t->ev_mats = (rtpi_material *)rtpi_malloc_array(&t->alloc, s->nmats + 1,
                                                         sizeof *t->ev_mats);
         t->ev_cl = (double *)rtpi_malloc_array(&t->alloc, RTPI_COEFFS(nl), sizeof *t->ev_cl);
-        if (!t->ev_terms || !t->ev_coeffs || !t->ev_nv || !t->ev_pos || !t->ev_mats ||
+        if (!t->ev_terms || !t->ev_coeffs || !t->ev_nv || !t->ev_w || !t->ev_pos || !t->ev_mats ||
             !t->ev_cl)
             drop_caches(t), cached = 0; /* evaluate without caches */
         t->ev_valid = 0;
@@ -2144,23 +2159,24 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                 e[i].chunk = 256;
             }
             if (t->pk_term != (int)(2 + nl + mt) + 1 || (t->pk_part && !sparse)) {
-                /* into a kept image only the pixels of the material's
-                   samples change: their planes alone (pk_part), unless
-                   they are most of the image (the whole-image pass is
-                   then the quicker: balls' spheres, seen in the floor
-                   too, 67 M against 47 M instructions) */
-                int part = sparse && e[0].nlist < ns / 2;
-                if (!part)
+                /* Into a kept image that is the coefficients' own
+                   (last_exact), only the pixels of the material's
+                   samples change: their planes alone, P from that image
+                   (pk_img_chunk).  Any other image (a new one, or a
+                   material's P + K x, whose other pixels show that
+                   material as last edited) gets every pixel's planes
+                   and is written whole. */
+                int part = sparse && t->last_exact;
+                if (!part) {
+                    sparse = 0;
                     memset(t->pk_q, 0, ns * 3 * sizeof *t->pk_q);
+                }
                 rtpi_parallel_rows((int)((e[0].nlist + 255) / 256), nthreads, ctx, pk_q_chunk,
                                    NULL, NULL);
                 if (pk_build(t, e, ctx, nthreads, part)) {
                     t->pk_term = (int)(2 + nl + mt) + 1;
                     t->pk_part = part;
-                    st.combined_samples = ns;
-                    if (part)
-                        for (st.combined_samples = 0, i = 0; i < nthreads; i++)
-                            st.combined_samples += e[i].summed;
+                    st.combined_samples = part ? 0 : ns;
                 }
             }
             if (t->pk_term == (int)(2 + nl + mt) + 1) {

@@ -487,8 +487,9 @@ static void edit_options(int spd, rtp_trace_options *o, rtp_eval_options *eo)
 /* Edits of one term of the image's linear form (a light's colour or
    on/off, the ambient, the background, a material's kd or colour), one
    after another: a colour edit is S + K (c - cS) from the snapshot and
-   the term's plane, a material's after its first P + K x from planes (no
-   sample summed: stats.combined_samples is 0), and every image equals a
+   the term's plane, a material's P + K x from planes (no sample summed:
+   stats.combined_samples is 0; the first, into the kept image, takes P
+   from it), and every image equals a
    full trace.  Runs on plain samples and on an SPD region (corner
    samples averaged). */
 static void one_term_run(int spd)
@@ -516,7 +517,7 @@ static void one_term_run(int spd)
        term too), a material's after its first; after a material's edit
        the first colour edit recombines (the coefficients change) */
     static const int planes[sizeof seq / sizeof *seq] = {1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1,
-                                                          0, 1, 1, 0, 0, 1, 0, 0, 0, 1, 1};
+                                                          1, 1, 1, 0, 1, 1, 0, 0, 0, 1, 1};
     rtp_scene *s = load("scenes/spheres.nff");
     rtp_tree *t = NULL;
     rtp_trace_options o;
@@ -547,14 +548,13 @@ static void one_term_run(int spd)
                 CHECK_MSG(es.combined_samples == 0, "spd %d, %s=%s summed %llu samples", spd,
                           seq[i][0], seq[i][1], es.combined_samples);
             /* a material's first edit into the kept image makes planes
-               only where its samples reach */
-            if (i == 11 || i == 15) {
-                rtp_tree_info ti;
-                rtp_tree_get_info(t, &ti);
-                CHECK_MSG(es.combined_samples > 0 && es.combined_samples < ti.samples,
-                          "spd %d, %s=%s summed %llu of %llu samples", spd, seq[i][0],
-                          seq[i][1], es.combined_samples, (unsigned long long)ti.samples);
-            }
+               only where its samples reach, from the kept image (no
+               sample summed: planes[]), and writes only those pixels */
+            if (i == 11 || i == 15)
+                CHECK_MSG(es.written_pixels > 0 &&
+                              es.written_pixels < (unsigned long long)re->width * re->height,
+                          "spd %d, %s=%s wrote %llu pixels", spd, seq[i][0], seq[i][1],
+                          es.written_pixels);
             /* the background shows in part of the image: only that part
                is written again */
             /* after a full combine, a material's other edits recombine
@@ -595,6 +595,86 @@ static void test_one_term_edits(void)
 {
     one_term_run(0);
     one_term_run(1);
+}
+
+/* The two ways a material's first edit makes its planes, each equal to
+   a full trace: from the kept image where it is the coefficients' image
+   (no sample summed, only the material's pixels written), and from
+   every sample's rest where it is not: a new image, or a kept one that
+   is a material's P + K x (a chain gone back to where it started while
+   another material is edited: that image's pixels of the first material
+   show it as last edited, so every pixel is written; writing only the
+   second material's pixels left them 0.09 off). */
+static void material_planes_run(int spd)
+{
+    static const struct {
+        const char *set[2][2];
+        int incremental;
+        int summed;      /* 0: none, 2: all */
+    } seq[] = {
+        {{{"mat.red.kd", "0.3"}, {NULL, NULL}}, 1, 0},
+        {{{"mat.red.kd", "0.5"}, {NULL, NULL}}, 1, 0},
+        {{{"mat.red.kd", "0.8"}, {"mat.mirror.color", "1,0,0"}}, 1, 2},
+        {{{"mat.mirror.color", "0.2,0.9,0.2"}, {NULL, NULL}}, 1, 0},
+        {{{"mat.red.color", "0.1,0.2,0.9"}, {NULL, NULL}}, 1, 2},
+        {{{"mat.red.color", "0.4,0.4,0.4"}, {NULL, NULL}}, 0, 2},
+        {{{"mat.red.color", "0.9,0.1,0.1"}, {NULL, NULL}}, 0, 0},
+    };
+    rtp_scene *s = load("scenes/spheres.nff");
+    rtp_tree *t = NULL;
+    rtp_trace_options o;
+    rtp_eval_options eo;
+    rtp_image *re = NULL;
+    size_t i, j;
+    if (!s) {
+        CHECK(s != NULL);
+        return;
+    }
+    edit_options(spd, &o, &eo);
+    CHECK(rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
+    CHECK(t && rtp_tree_eval(t, &eo, &re, NULL, NULL) == RTP_OK);
+    for (i = 0; t && re && i < sizeof seq / sizeof *seq; i++) {
+        rtp_image *full = NULL, *img = NULL;
+        rtp_diff_stats d;
+        rtp_eval_stats es;
+        rtp_tree_info ti;
+        rtp_status rs;
+        for (j = 0; j < 2 && seq[i].set[j][0]; j++) {
+            CHECK(rtp_tree_set(t, seq[i].set[j][0], seq[i].set[j][1], NULL) == RTP_OK);
+            CHECK(rtp_scene_set(s, seq[i].set[j][0], seq[i].set[j][1], NULL) == RTP_OK);
+        }
+        eo.incremental = seq[i].incremental;
+        rs = seq[i].incremental ? rtp_tree_eval_into(t, &eo, re, &es, NULL)
+                                : rtp_tree_eval(t, &eo, &img, &es, NULL);
+        rtp_tree_get_info(t, &ti);
+        if (rs == RTP_OK && rtp_trace(s, &o, &full, NULL, NULL) == RTP_OK &&
+            rtp_image_diff(img ? img : re, full, 1e-6, &d, NULL) == RTP_OK) {
+            CHECK_MSG(d.max_abs <= 1e-6, "spd %d, step %zu (%s=%s): %g", spd, i,
+                      seq[i].set[0][0], seq[i].set[0][1], d.max_abs);
+            CHECK_MSG(seq[i].summed ? es.combined_samples == ti.samples
+                                    : es.combined_samples == 0,
+                      "spd %d, step %zu (%s=%s): summed %llu of %llu samples", spd, i,
+                      seq[i].set[0][0], seq[i].set[0][1], es.combined_samples,
+                      (unsigned long long)ti.samples);
+            if (seq[i].incremental && seq[i].summed < 2)
+                CHECK_MSG(es.written_pixels > 0 &&
+                              es.written_pixels < (unsigned long long)re->width * re->height,
+                          "spd %d, step %zu: wrote %llu pixels", spd, i, es.written_pixels);
+        } else {
+            CHECK(0);
+        }
+        rtp_image_destroy(img);
+        rtp_image_destroy(full);
+    }
+    rtp_image_destroy(re);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+}
+
+static void test_material_planes(void)
+{
+    material_planes_run(0);
+    material_planes_run(1);
 }
 
 /* Colour edits of several terms at once and a long run moving between
@@ -1036,6 +1116,7 @@ int main(void)
     RUN(test_moved_light_small_spd);
     RUN(test_edit_sequence);
     RUN(test_one_term_edits);
+    RUN(test_material_planes);
     RUN(test_warm_light_move_bitwise);
     RUN(test_bump_edits);
     RUN(test_truncated_every_length);
