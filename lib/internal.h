@@ -522,7 +522,8 @@ struct rtp_tree {
     uint32_t *pk_nz;       /* those pixels (pixels at most, in the same
                               bands): the only ones an edit of the term
                               changes; pk_nnz of them in all */
-    uint32_t *pk_seg;      /* per band: how many pk_nz and pk_c hold */
+    uint32_t *pk_seg;      /* per band: how many pk_nz and pk_c hold... */
+    size_t *pk_off;        /* ...from this entry on */
     int pk_part;           /* the planes are made only where the material
                               reaches (pk holds P nowhere else) */
     size_t pk_nnz;

@@ -39,6 +39,7 @@ void rtp_tree_destroy(rtp_tree *t)
     rtpi_free(&a, t->pk_nz);
     rtpi_free(&a, t->pk_c);
     rtpi_free(&a, t->pk_seg);
+    rtpi_free(&a, t->pk_off);
     cp_free(t);
     rtpi_free(&a, t->hl_idx);
     rtpi_free(&a, t->hl_lrv);
@@ -455,6 +456,8 @@ typedef struct eval_ctx {
     int nomem;
     int nonfinite;            /* pk_put met a plane value that is not finite */
     float *rest;              /* pk_build_chunk, pk_img_chunk: scratch */
+    int count_pass;           /* pk_img_chunk: count the band's pixels */
+    int q_by_list;            /* pk_q_chunk: q at the sample's place in the list */
     size_t rest_bytes;
     double kmax[3];           /* cp_plane_chunk: largest |K| per channel */
 } eval_ctx;
@@ -750,9 +753,11 @@ static int combine_row(void *ctx, int y)
    from it by about a float ulp of their value.
 
    The planes are made and kept in bands of PK_ROWS pixel rows, one band
-   a task: in band b, pk_c and pk_nz from pixel b * PK_ROWS * width on
-   hold pk_seg[b] pixels whose K is not 0, in pixel order; pk holds P of
-   the band's other pixels, at their own place. */
+   a task: in band b, pk_c and pk_nz from entry pk_off[b] on hold pk_seg[b]
+   pixels whose K is not 0, in pixel order (pk_off[b]: the band's first
+   pixel, or where only the material's pixels are made, the entries of
+   the bands before: pk_img_chunk); pk holds P of the band's other
+   pixels, at their own place. */
 #define PK_ROWS 16
 
 
@@ -790,9 +795,8 @@ static void pk_rest_into(const eval_ctx *e, int y, float *out)
    (a colour of 10000 cut to 0: the rest, about |P| + |xold K|, carries
    2^-24 of itself).  Then the planes are not used and the edit takes the
    full path. */
-static void pk_put(eval_ctx *e, const float *pk, size_t p, float *pc, uint32_t *nz, size_t *n)
+static inline int pk_guard(eval_ctx *e, const float *pk)
 {
-    rtp_tree *t = e->t;
     int c, bad = 0;
     for (c = 0; c < 3; c++) {
         /* (false for a NaN P or K, and for an infinite K: xold K is then
@@ -802,7 +806,13 @@ static void pk_put(eval_ctx *e, const float *pk, size_t p, float *pc, uint32_t *
                !(a <= FLT_MAX);
     }
     e->nonfinite |= bad;
-    if (pk[3] != 0.0f || pk[4] != 0.0f || pk[5] != 0.0f) {
+    return pk[3] != 0.0f || pk[4] != 0.0f || pk[5] != 0.0f;
+}
+
+static void pk_put(eval_ctx *e, const float *pk, size_t p, float *pc, uint32_t *nz, size_t *n)
+{
+    rtp_tree *t = e->t;
+    if (pk_guard(e, pk)) {
         memcpy(pc + 6 * *n, pk, 6 * sizeof *pk);
         nz[(*n)++] = (uint32_t)p;
     } else {
@@ -825,6 +835,7 @@ static int pk_build_chunk(void *ctx, int chunk)
     if (y1 > t->height)
         y1 = t->height;
     base = (size_t)y0 * w;
+    t->pk_off[chunk] = base;
     pc = t->pk_c + 6 * base;
     nz = t->pk_nz + base;
     ra = e->rest;
@@ -892,27 +903,27 @@ static int pk_img_chunk(void *ctx, int chunk)
 {
     eval_ctx *e = (eval_ctx *)ctx;
     rtp_tree *t = e->t;
-    size_t w = (size_t)t->width, nx = (size_t)t->nx, n = 0, base, i, lo, hi, srows;
+    size_t w = (size_t)t->width, nx = (size_t)t->nx, n = 0, i, lo, hi, srows;
     int y0 = chunk * PK_ROWS, y1 = y0 + PK_ROWS, y, x, c, spd = t->spd;
     const float *img = e->pixels;
     float *pc, pk[6];
-    unsigned char *listed, *touched;
-    uint32_t *nz;
+    uint32_t *listed, *nz;
+    unsigned char *touched;
     if (y1 > t->height)
         y1 = t->height;
     srows = (size_t)(y1 - y0) + (spd ? 1u : 0u);
-    listed = (unsigned char *)e->rest;
-    touched = listed + (PK_ROWS + 1) * nx;
-    memset(listed, 0, srows * nx);
+    /* listed: 1 + the sample's place in the list (its q), or 0 */
+    listed = (uint32_t *)(void *)e->rest;
+    touched = (unsigned char *)(listed + (PK_ROWS + 1) * nx);
+    if (!e->count_pass)
+        memset(listed, 0, srows * nx * sizeof *listed);
     memset(touched, 0, (size_t)(y1 - y0) * w);
-    base = (size_t)y0 * w;
-    pc = t->pk_c + 6 * base;
-    nz = t->pk_nz + base;
     lo = lower_bound(e->list, e->nlist, (size_t)y0 * nx);
     hi = lower_bound(e->list, e->nlist, ((size_t)y0 + srows) * nx);
     for (i = lo; i < hi; i++) {
         size_t l = e->list[i] - (size_t)y0 * nx, sx = l % nx, sy = l / nx;
-        listed[l] = 1;
+        if (!e->count_pass)
+            listed[l] = (uint32_t)i + 1u;
         if (!spd) {
             touched[l] = 1; /* (nx = w) */
             continue;
@@ -931,12 +942,28 @@ static int pk_img_chunk(void *ctx, int chunk)
                 touched[(sy - 1) * w + sx - 1] = 1;
         }
     }
+    if (e->count_pass) {
+        /* the first pass: how many pixels the band may hold (marks of
+           0 or 1 summed 8 at a time: the top byte of word * 0x01...01) */
+        size_t nb = (size_t)(y1 - y0) * w;
+        uint64_t word;
+        for (i = 0; i + 8 <= nb; i += 8) {
+            memcpy(&word, touched + i, 8);
+            n += (size_t)((word * 0x0101010101010101ull) >> 56);
+        }
+        for (; i < nb; i++)
+            n += touched[i];
+        t->pk_seg[chunk] = (uint32_t)n;
+        return 0;
+    }
+    pc = t->pk_c + 6 * t->pk_off[chunk];
+    nz = t->pk_nz + t->pk_off[chunk];
     for (y = y0; y < y1; y++) {
         size_t ly = (size_t)(y - y0), p = (size_t)y * w;
         const unsigned char *tr = touched + ly * w;
         for (x = 0; x < t->width; x++) {
-            size_t l = ly * nx + (size_t)x, k = (size_t)y * nx + (size_t)x;
-            const float *b = img + 3 * (p + (size_t)x);
+            size_t l;
+            const float *b;
             uint64_t word;
             if (!tr[x]) {
                 /* most of a row is not touched: 8 marks at a time */
@@ -944,26 +971,30 @@ static int pk_img_chunk(void *ctx, int chunk)
                     x += 8;
                 if (x >= t->width || !tr[x])
                     continue;
-                l = ly * nx + (size_t)x;
-                k = (size_t)y * nx + (size_t)x;
-                b = img + 3 * (p + (size_t)x);
             }
+            l = ly * nx + (size_t)x;
+            b = img + 3 * (p + (size_t)x);
             if (spd) {
                 /* pk_build_chunk's sums: (x, y), (x+1, y), (x, y+1), (x+1, y+1) */
-                const float *qa = listed[l] ? t->pk_q + 3 * k : pk_zero;
-                const float *qb = listed[l + 1] ? t->pk_q + 3 * (k + 1) : pk_zero;
-                const float *qc = listed[l + nx] ? t->pk_q + 3 * (k + nx) : pk_zero;
-                const float *qd = listed[l + nx + 1] ? t->pk_q + 3 * (k + nx + 1) : pk_zero;
+                const float *qa = listed[l] ? t->pk_q + 3 * (listed[l] - 1u) : pk_zero;
+                const float *qb = listed[l + 1] ? t->pk_q + 3 * (listed[l + 1] - 1u) : pk_zero;
+                const float *qc = listed[l + nx] ? t->pk_q + 3 * (listed[l + nx] - 1u) : pk_zero;
+                const float *qd =
+                    listed[l + nx + 1] ? t->pk_q + 3 * (listed[l + nx + 1] - 1u) : pk_zero;
                 for (c = 0; c < 3; c++)
                     pk[3 + c] =
                         (float)(0.25 * ((((double)qa[c] + qb[c]) + qc[c]) + qd[c]));
             } else {
                 for (c = 0; c < 3; c++)
-                    pk[3 + c] = t->pk_q[3 * k + c];
+                    pk[3 + c] = t->pk_q[3 * (listed[l] - 1u) + c];
             }
             for (c = 0; c < 3; c++)
                 pk[c] = (float)((double)b[c] - e->xold[c] * pk[3 + c]);
-            pk_put(e, pk, p + (size_t)x, pc, nz, &n);
+            /* (where K is 0 the pixel stays B: nothing to keep) */
+            if (pk_guard(e, pk)) {
+                memcpy(pc + 6 * n, pk, sizeof pk);
+                nz[n++] = (uint32_t)(p + (size_t)x);
+            }
         }
     }
     t->pk_seg[chunk] = (uint32_t)n;
@@ -978,8 +1009,9 @@ static int pk_build(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, in
 {
     int i, nb = (t->height + PK_ROWS - 1) / PK_ROWS, ok = 1;
     /* two sample rows' rest, or with `part` a band's marks */
-    size_t nx = (size_t)t->nx, bytes = part ? (PK_ROWS + 1) * nx + PK_ROWS * (size_t)t->width
-                                            : 6 * nx * sizeof(float);
+    size_t nx = (size_t)t->nx,
+           bytes = part ? (PK_ROWS + 1) * nx * sizeof(uint32_t) + PK_ROWS * (size_t)t->width
+                        : 6 * nx * sizeof(float);
     for (i = 0; i < nthreads; i++) {
         if (e[i].rest && e[i].rest_bytes < bytes) {
             rtpi_free(&t->alloc, e[i].rest);
@@ -990,6 +1022,21 @@ static int pk_build(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, in
             return 0;
         }
         e[i].rest_bytes = bytes;
+    }
+    if (part) {
+        /* the bands one after another in pk_c and pk_nz, so that their
+           memory is as much as the material's pixels need: count, then
+           fill */
+        size_t off = 0;
+        for (i = 0; i < nthreads; i++)
+            e[i].count_pass = 1;
+        rtpi_parallel_rows(nb, nthreads, ctx, pk_img_chunk, NULL, NULL);
+        for (i = 0; i < nb; i++) {
+            t->pk_off[i] = off;
+            off += t->pk_seg[i];
+        }
+        for (i = 0; i < nthreads; i++)
+            e[i].count_pass = 0;
     }
     rtpi_parallel_rows(nb, nthreads, ctx, part ? pk_img_chunk : pk_build_chunk, NULL, NULL);
     for (i = 0; i < nthreads; i++) {
@@ -1016,6 +1063,8 @@ static int pk_q_chunk(void *ctx, int chunk)
         rtpi_sample_diffuse_w(e->shade, t->nodes + a, (size_t)(t->start[k + 1] - a),
                               t->ev_terms + a * RTPI_TERMS(t->scene->nlights), t->ev_w + a,
                               e->mat, e->cv, q);
+        if (e->q_by_list)
+            k = i; /* (pk_img_chunk reads q by the sample's place in the list) */
         t->pk_q[3 * k] = (float)q[0];
         t->pk_q[3 * k + 1] = (float)q[1];
         t->pk_q[3 * k + 2] = (float)q[2];
@@ -1031,8 +1080,8 @@ static int pk_apply_band(void *ctx, int chunk)
     const rtp_tree *t = e->t;
     size_t p = (size_t)chunk * PK_ROWS * (size_t)t->width, end = p + PK_ROWS * (size_t)t->width;
     size_t n = t->pk_seg[chunk], j = 0;
-    const float *pc = t->pk_c + 6 * p;
-    const uint32_t *nz = t->pk_nz + p;
+    const float *pc = t->pk_c + 6 * t->pk_off[chunk];
+    const uint32_t *nz = t->pk_nz + t->pk_off[chunk];
     if (end > (size_t)t->width * t->height)
         end = (size_t)t->width * t->height;
     for (; p < end; p++)
@@ -1050,9 +1099,9 @@ static int pk_apply_listed(void *ctx, int chunk)
 {
     eval_ctx *e = (eval_ctx *)ctx;
     const rtp_tree *t = e->t;
-    size_t base = (size_t)chunk * PK_ROWS * (size_t)t->width, n = t->pk_seg[chunk], j;
-    const float *pc = t->pk_c + 6 * base;
-    const uint32_t *nz = t->pk_nz + base;
+    size_t n = t->pk_seg[chunk], j;
+    const float *pc = t->pk_c + 6 * t->pk_off[chunk];
+    const uint32_t *nz = t->pk_nz + t->pk_off[chunk];
     const double *c = e->x;
     for (j = 0; j < n; j++)
         pk_pixel(pc + 6 * j, c, e->pixels + 3 * (size_t)nz[j]);
@@ -1239,6 +1288,7 @@ static void drop_caches(rtp_tree *t)
     rtpi_free(&t->alloc, t->pk_nz);
     rtpi_free(&t->alloc, t->pk_c);
     rtpi_free(&t->alloc, t->pk_seg);
+    rtpi_free(&t->alloc, t->pk_off);
     cp_free(t);
     rtpi_free(&t->alloc, t->hl_idx);
     rtpi_free(&t->alloc, t->hl_lrv);
@@ -1255,6 +1305,7 @@ static void drop_caches(rtp_tree *t)
     t->pk_nz = NULL;
     t->pk_c = NULL;
     t->pk_seg = NULL;
+    t->pk_off = NULL;
     t->ev_cl = NULL;
     t->pk = NULL;
     t->pk_q = NULL;
@@ -1386,7 +1437,10 @@ static int pk_alloc(rtp_tree *t, int q)
     if (t->pk_nz && !t->pk_seg)
         t->pk_seg = (uint32_t *)rtpi_malloc_array(
             &t->alloc, (size_t)(t->height + PK_ROWS - 1) / PK_ROWS + 1, sizeof *t->pk_seg);
-    if (!t->pk_seg)
+    if (t->pk_seg && !t->pk_off)
+        t->pk_off = (size_t *)rtpi_malloc_array(
+            &t->alloc, (size_t)(t->height + PK_ROWS - 1) / PK_ROWS + 1, sizeof *t->pk_off);
+    if (!t->pk_off)
         return 0;
     if (q && t->pk && !t->pk_q)
         t->pk_q = (float *)rtpi_malloc_array(&t->alloc, (size_t)t->nx * t->ny,
@@ -2171,6 +2225,8 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                     sparse = 0;
                     memset(t->pk_q, 0, ns * 3 * sizeof *t->pk_q);
                 }
+                for (i = 0; i < nthreads; i++)
+                    e[i].q_by_list = part;
                 rtpi_parallel_rows((int)((e[0].nlist + 255) / 256), nthreads, ctx, pk_q_chunk,
                                    NULL, NULL);
                 if (pk_build(t, e, ctx, nthreads, part)) {
