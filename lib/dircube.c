@@ -773,6 +773,7 @@ typedef struct lb_worker {
     const rtpi_lightbuf *lb;
     lb_fill *parts;
     double S;
+    char pad[64]; /* the workers lie side by side: no cache line shared */
 } lb_worker;
 
 static int lb_part(void *ctx, int part)
@@ -1481,6 +1482,7 @@ typedef struct ib_job {
     const unsigned char *thin;
     dc_ctx c;
     ib_part pt;
+    char pad[64]; /* the jobs lie side by side: no cache line shared */
 } ib_job;
 
 /* One part: every primitive into the part's rows. */

@@ -53,6 +53,8 @@ typedef struct worker {
     double *acc;
     counts n;
     rtp_status status;
+    char pad[64]; /* the workers lie side by side, each writing its counts
+                     and nn for every ray: no cache line shared */
 } worker;
 
 struct shared {
@@ -608,9 +610,11 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
         ws[i].status = RTP_OK;
         ws[i].counts = (uint32_t *)rtpi_malloc_array(&s->alloc, (size_t)sh.gx,
                                                      sizeof *ws[i].counts);
-        ws[i].coeffs = (float *)rtpi_malloc_array(&s->alloc, RTPI_COEFFS(s->nlights),
+        /* (16 more each: scratch written for every node shares no cache
+           line with another thread's) */
+        ws[i].coeffs = (float *)rtpi_malloc_array(&s->alloc, RTPI_COEFFS(s->nlights) + 16,
                                                   sizeof *ws[i].coeffs);
-        ws[i].acc = (double *)rtpi_malloc_array(&s->alloc, RTPI_COEFFS(s->nlights),
+        ws[i].acc = (double *)rtpi_malloc_array(&s->alloc, RTPI_COEFFS(s->nlights) + 16,
                                                 sizeof *ws[i].acc);
         if (!ws[i].counts || !ws[i].coeffs || !ws[i].acc) {
             st = rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
