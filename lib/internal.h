@@ -489,6 +489,8 @@ struct rtp_tree {
     float *ev_samples;     /* the samples' colours (SPD: corners, averaged
                               into pixels); with the caches, or SPD */
     int ev_samples_ok;     /* ev_samples hold ev_coeffs combined with ev_cl */
+    int ev_inf;            /* some coefficient is beyond the float range
+                              (a kt of 1e19): no material planes */
     size_t ev_nlights;
     double *ev_pos;        /* 3 per light: positions the terms are for */
     int ev_vis_mode, ev_vis_res;

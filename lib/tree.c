@@ -466,6 +466,7 @@ typedef struct eval_ctx {
     int nonfinite;            /* pk_put met a plane value that is not finite */
     float *rest;              /* pk_build_chunk, pk_img_chunk: scratch */
     int count_pass;           /* pk_img_chunk: count the band's pixels */
+    int coef_bad;             /* a coefficient made was not finite */
     int q_by_list;            /* pk_q_chunk: q at the sample's place in the list */
     size_t rest_bytes;
     double kmax[3];           /* cp_plane_chunk: largest |K| per channel */
@@ -496,6 +497,11 @@ static int sample_coeffs(eval_ctx *e, size_t k, int redo_terms, float **coeffs_o
                           terms, e->cached ? t->ev_nv + 6 * a : NULL);
     rtpi_sample_coeffs(e->shade, t->nodes + a, n, terms, e->acc, coeffs,
                        e->cached ? t->ev_w + a : NULL);
+    if (e->cached) {
+        size_t i, nc = RTPI_COEFFS(nl);
+        for (i = 0; i < nc; i++)
+            e->coef_bad |= !isfinite(coeffs[i]);
+    }
     *coeffs_out = coeffs;
     return 0;
 }
@@ -733,6 +739,10 @@ static int light_row(void *ctx, int y)
                          t->ev_nv + 6 * a, e->light, terms);
         rtpi_sample_coeffs_light(e->shade, t->nodes + a, n, terms, e->light,
                                  t->ev_coeffs + k * RTPI_COEFFS(nl));
+        {
+            const float *c = t->ev_coeffs + k * RTPI_COEFFS(nl) + 6 + 3 * e->light;
+            e->coef_bad |= !isfinite(c[0]) | !isfinite(c[1]) | !isfinite(c[2]);
+        }
     }
     return 0;
 }
@@ -1466,7 +1476,10 @@ static int mat_term(rtp_tree *t, const double *cv, size_t nl, uint32_t *mat)
 {
     const rtp_scene *s = t->scene;
     size_t j, found = 0;
-    if (!t->ev_valid || !t->ev_cl)
+    /* (coefficients beyond the float range: the planes' values can be
+       finite where the image the coefficients make is not, so the
+       samples are summed as trace sums them) */
+    if (!t->ev_valid || !t->ev_cl || t->ev_inf)
         return 0;
     for (j = 0; j < RTPI_COEFFS(nl); j++)
         if (cv[j] != t->ev_cl[j])
@@ -2178,6 +2191,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
 
     if (full) {
         /* every step for every sample */
+        t->ev_inf = 0;
         rtpi_parallel_rows(t->ny, nthreads, ctx, eval_row, opt ? opt->progress : NULL,
                            opt ? opt->progress_user : NULL);
         cp_stale(t, (size_t)-1);
@@ -2358,11 +2372,13 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
             t->hl_shine = s->mats[hl_after - 1].shine;
         }
     }
-    for (i = 0; i < nthreads; i++)
+    for (i = 0; i < nthreads; i++) {
+        t->ev_inf |= e[i].coef_bad; /* (until the full path makes them all anew) */
         if (e[i].nomem) {
             rs = rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
             goto done;
         }
+    }
     if (cached) {
         /* (the material and highlight paths leave the coefficients as
            they were for the edited material) */
