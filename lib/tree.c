@@ -814,17 +814,22 @@ static void pk_rest_into(const eval_ctx *e, int y, float *out)
    (a colour of 10000 cut to 0: the rest, about |P| + |xold K|, carries
    2^-24 of itself).  Then the planes are not used and the edit takes the
    full path. */
-static inline int pk_guard(eval_ctx *e, const float *pk)
+static inline int pk_bad(const double *xold, const float *pk)
 {
     int c, bad = 0;
     for (c = 0; c < 3; c++) {
         /* (false for a NaN P or K, and for an infinite K: xold K is then
            infinite or NaN; an infinite P fails the second test) */
         double a = fabs(pk[c]);
-        bad |= !(a + 2.0 * fabs(e->xold[c] * pk[3 + c]) <= CP_SPAN * (a > 2.0 ? a : 2.0)) |
+        bad |= !(a + 2.0 * fabs(xold[c] * pk[3 + c]) <= CP_SPAN * (a > 2.0 ? a : 2.0)) |
                !(a <= FLT_MAX);
     }
-    e->nonfinite |= bad;
+    return bad;
+}
+
+static inline int pk_guard(eval_ctx *e, const float *pk)
+{
+    e->nonfinite |= pk_bad(e->xold, pk);
     return pk[3] != 0.0f || pk[4] != 0.0f || pk[5] != 0.0f;
 }
 
@@ -924,10 +929,13 @@ static int pk_img_chunk(void *ctx, int chunk)
     rtp_tree *t = e->t;
     size_t w = (size_t)t->width, nx = (size_t)t->nx, n = 0, i, lo, hi, srows;
     int y0 = chunk * PK_ROWS, y1 = y0 + PK_ROWS, y, x, c, spd = t->spd;
-    const float *img = e->pixels;
+    const float *img = e->pixels, *pq = t->pk_q;
+    const double xo[3] = {e->xold[0], e->xold[1], e->xold[2]};
+    double mp = 0.0, mk = 0.0; /* the band's largest |P| and |xold K| */
     float *pc, pk[6];
     uint32_t *listed, *nz;
     unsigned char *touched;
+    int bad = 0;
     if (y1 > t->height)
         y1 = t->height;
     srows = (size_t)(y1 - y0) + (spd ? 1u : 0u);
@@ -940,13 +948,15 @@ static int pk_img_chunk(void *ctx, int chunk)
     lo = lower_bound(e->list, e->nlist, (size_t)y0 * nx);
     hi = lower_bound(e->list, e->nlist, ((size_t)y0 + srows) * nx);
     for (i = lo; i < hi; i++) {
-        size_t l = e->list[i] - (size_t)y0 * nx, sx = l % nx, sy = l / nx;
+        size_t l = e->list[i] - (size_t)y0 * nx, sx, sy;
         if (!e->count_pass)
             listed[l] = (uint32_t)i + 1u;
         if (!spd) {
             touched[l] = 1; /* (nx = w) */
             continue;
         }
+        sx = l % nx;
+        sy = l / nx;
         /* the pixels whose corners it is: (sx-1..sx, sy-1..sy) */
         if (sy < (size_t)(y1 - y0)) {
             if (sx < w)
@@ -995,27 +1005,44 @@ static int pk_img_chunk(void *ctx, int chunk)
             b = img + 3 * (p + (size_t)x);
             if (spd) {
                 /* pk_build_chunk's sums: (x, y), (x+1, y), (x, y+1), (x+1, y+1) */
-                const float *qa = listed[l] ? t->pk_q + 3 * (listed[l] - 1u) : pk_zero;
-                const float *qb = listed[l + 1] ? t->pk_q + 3 * (listed[l + 1] - 1u) : pk_zero;
-                const float *qc = listed[l + nx] ? t->pk_q + 3 * (listed[l + nx] - 1u) : pk_zero;
-                const float *qd =
-                    listed[l + nx + 1] ? t->pk_q + 3 * (listed[l + nx + 1] - 1u) : pk_zero;
+                const float *qa = listed[l] ? pq + 3 * (listed[l] - 1u) : pk_zero;
+                const float *qb = listed[l + 1] ? pq + 3 * (listed[l + 1] - 1u) : pk_zero;
+                const float *qc = listed[l + nx] ? pq + 3 * (listed[l + nx] - 1u) : pk_zero;
+                const float *qd = listed[l + nx + 1] ? pq + 3 * (listed[l + nx + 1] - 1u) : pk_zero;
                 for (c = 0; c < 3; c++)
                     pk[3 + c] =
                         (float)(0.25 * ((((double)qa[c] + qb[c]) + qc[c]) + qd[c]));
             } else {
-                for (c = 0; c < 3; c++)
-                    pk[3 + c] = t->pk_q[3 * (listed[l] - 1u) + c];
+                const float *q = pq + 3 * (listed[l] - 1u);
+                pk[3] = q[0];
+                pk[4] = q[1];
+                pk[5] = q[2];
             }
-            for (c = 0; c < 3; c++)
-                pk[c] = (float)((double)b[c] - e->xold[c] * pk[3 + c]);
             /* (where K is 0 the pixel stays B: nothing to keep) */
-            if (pk_guard(e, pk)) {
+            if (pk[3] != 0.0f || pk[4] != 0.0f || pk[5] != 0.0f) {
+                float sum = 0.0f;
+                for (c = 0; c < 3; c++) {
+                    double kx = fabs(xo[c] * pk[3 + c]);
+                    pk[c] = (float)((double)b[c] - xo[c] * pk[3 + c]);
+                    mp = fabs(pk[c]) > mp ? fabs(pk[c]) : mp;
+                    mk = kx > mk ? kx : mk;
+                    sum += pk[c] + pk[3 + c];
+                }
+                /* a NaN or infinity shows in the sum (or a sum beyond
+                   the float range: the full path then, as for those) */
+                bad |= !(fabsf(sum) <= FLT_MAX);
                 memcpy(pc + 6 * n, pk, sizeof pk);
                 nz[n++] = (uint32_t)(p + (size_t)x);
             }
         }
     }
+    /* pk_bad per pixel only where the band's bound leaves it open:
+       |P| + 2 |xold K| <= mp + 2 mk <= 8 <= CP_SPAN max(|P|, 2) holds
+       for every pixel below it */
+    if (!(mp + 2.0 * mk <= 2.0 * CP_SPAN))
+        for (i = 0; i < n; i++)
+            bad |= pk_bad(xo, pc + 6 * i);
+    e->nonfinite |= bad;
     t->pk_seg[chunk] = (uint32_t)n;
     return 0;
 }
