@@ -420,11 +420,12 @@ void rtpi_sample_weights(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_
 void rtpi_sample_diffuse(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
                          size_t n, const float *terms, uint32_t mat,
                          const double *cv, double q[3]);
-/* The same q from the nodes' path weights w (rtpi_sample_coeffs'), in
-   one pass over the nodes instead of a descent: bit for bit equal. */
-void rtpi_sample_diffuse_w(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
-                           size_t n, const float *terms, const double *w,
-                           uint32_t mat, const double *cv, double q[3]);
+/* The same q from the listed nodes idx[0..n) of mat alone (ascending:
+   one sample's nodes of that material), with terms and the path weights w
+   (rtpi_sample_coeffs') indexed by node: bit for bit rtpi_sample_diffuse,
+   without descending the sample's tree. */
+void rtpi_nodes_diffuse(const rtpi_shade_ctx *c, const uint32_t *idx, size_t n,
+                        const float *terms, const double *w, const double *cv, double q[3]);
 /* cl: 3 per light: colour * light scale, 0 when off (rtpi_light_colors). */
 void rtpi_combine(const rtp_scene *s, const double *cl, const float *coeffs,
                   float rgb[3]);
@@ -561,6 +562,8 @@ struct rtp_tree {
                               colour is the term (rtpi_sample_diffuse) */
     uint32_t *mat_start;   /* per material: its samples in mat_samples */
     uint32_t *mat_samples; /* samples whose trees contain each material */
+    uint32_t *mat_nstart;  /* per material: its nodes in mat_nodes */
+    uint32_t *mat_nodes;   /* the nodes of each material, ascending */
 
     /* Large blocks the direction cubes of moved lights used, kept for the
        next move: fresh memory costs a page fault a page (tree.c). */

@@ -511,21 +511,19 @@ void rtpi_sample_diffuse(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_
         diffuse_node(c, nodes, 0, terms, mat, cv, 1.0, q);
 }
 
-void rtpi_sample_diffuse_w(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t n,
-                           const float *terms, const double *w, uint32_t mat,
-                           const double *cv, double q[3])
+void rtpi_nodes_diffuse(const rtpi_shade_ctx *c, const uint32_t *idx, size_t n,
+                        const float *terms, const double *w, const double *cv, double q[3])
 {
-    const rtp_scene *s = c->s;
-    size_t nl = s->nlights, nt = RTPI_TERMS(nl), j, i;
+    size_t nl = c->s->nlights, nt = RTPI_TERMS(nl), j, i;
     double q0 = 0.0, q1 = 0.0, q2 = 0.0;
-    /* the nodes in diffuse_node's order (depth first, reflected subtree
-       first: the order they are stored in), with its operations in its
-       order for each channel */
+    /* diffuse_node's operations, for its nodes of mat in its order (depth
+       first, reflected subtree first: the order they are stored in); it
+       does not reach the nodes of weight 0 */
     for (j = 0; j < n; j++) {
-        const float *t = terms + j * nt;
+        const float *t = terms + (size_t)idx[j] * nt;
         const double *cl = cv + 6;
-        double l0 = cv[3], l1 = cv[4], l2 = cv[5], wj = w[j];
-        if (wj == 0.0 || rtpi_prim_material(s, nodes[j].prim) != mat)
+        double l0 = cv[3], l1 = cv[4], l2 = cv[5], wj = w[idx[j]];
+        if (wj == 0.0)
             continue;
         for (i = 0; i < nl; i++, cl += 3) {
             double d = t[3 + 2 * i];

@@ -50,6 +50,8 @@ void rtp_tree_destroy(rtp_tree *t)
     rtpi_free(&a, t->ev_mats);
     rtpi_free(&a, t->mat_start);
     rtpi_free(&a, t->mat_samples);
+    rtpi_free(&a, t->mat_nstart);
+    rtpi_free(&a, t->mat_nodes);
     rtpi_free(&a, t);
 }
 
@@ -1095,20 +1097,28 @@ static int pk_build(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, in
     return ok;
 }
 
-/* A chunk of the edited material's samples: q (rtpi_sample_diffuse_w). */
+/* A chunk of the edited material's samples: q, from the material's own
+   nodes (rtpi_nodes_diffuse: rtpi_sample_diffuse bit for bit). */
 static int pk_q_chunk(void *ctx, int chunk)
 {
     eval_ctx *e = (eval_ctx *)ctx;
     rtp_tree *t = e->t;
-    size_t i = (size_t)chunk * e->chunk, end = i + e->chunk;
+    size_t i = (size_t)chunk * e->chunk, end = i + e->chunk, j, jend;
+    const uint32_t *mn = t->mat_nodes;
     if (end > e->nlist)
         end = e->nlist;
+    if (i >= end)
+        return 0;
+    /* the material's nodes from the chunk's first sample on */
+    j = t->mat_nstart[e->mat];
+    jend = t->mat_nstart[e->mat + 1];
+    j += lower_bound(mn + j, jend - j, (size_t)t->start[e->list[i]]);
     for (; i < end; i++) {
-        size_t k = e->list[i], a = (size_t)t->start[k];
+        size_t k = e->list[i], b = (size_t)t->start[k + 1], j0 = j;
         double q[3];
-        rtpi_sample_diffuse_w(e->shade, t->nodes + a, (size_t)(t->start[k + 1] - a),
-                              t->ev_terms + a * RTPI_TERMS(t->scene->nlights), t->ev_w + a,
-                              e->mat, e->cv, q);
+        while (j < jend && mn[j] < b)
+            j++;
+        rtpi_nodes_diffuse(e->shade, mn + j0, j - j0, t->ev_terms, t->ev_w, e->cv, q);
         if (e->q_by_list)
             k = i; /* (pk_img_chunk reads q by the sample's place in the list) */
         t->pk_q[3 * k] = (float)q[0];
@@ -1153,46 +1163,60 @@ static int pk_apply_listed(void *ctx, int chunk)
         pk_pixel(pc + 6 * j, c, e->pixels + 3 * (size_t)nz[j]);
     return 0;
 }
-/* For each material, the samples whose trees contain it (built once). */
+static void free_material_lists(rtp_tree *t)
+{
+    rtpi_free(&t->alloc, t->mat_start);
+    rtpi_free(&t->alloc, t->mat_samples);
+    rtpi_free(&t->alloc, t->mat_nstart);
+    rtpi_free(&t->alloc, t->mat_nodes);
+    t->mat_start = t->mat_samples = t->mat_nstart = t->mat_nodes = NULL;
+}
+
+/* For each material, the samples whose trees contain it and its nodes
+   (built once). */
 static rtp_status build_material_lists(rtp_tree *t)
 {
     const rtp_scene *s = t->scene;
     size_t nm = s->nmats, ns = (size_t)t->nx * t->ny, k, n, total = 0;
-    uint32_t *last, *fill;
+    uint32_t *last = NULL, *fill = NULL, *nfill = NULL;
     last = (uint32_t *)rtpi_malloc_array(&t->alloc, nm ? nm : 1, sizeof *last);
+    fill = (uint32_t *)rtpi_malloc_array(&t->alloc, nm ? nm : 1, sizeof *fill);
+    nfill = (uint32_t *)rtpi_malloc_array(&t->alloc, nm ? nm : 1, sizeof *nfill);
     t->mat_start = (uint32_t *)rtpi_calloc_array(&t->alloc, nm + 1, sizeof *t->mat_start);
-    if (!last || !t->mat_start) {
-        rtpi_free(&t->alloc, last);
-        return RTP_ERR_NOMEM;
-    }
+    t->mat_nstart = (uint32_t *)rtpi_calloc_array(&t->alloc, nm + 1, sizeof *t->mat_nstart);
+    t->mat_nodes = (uint32_t *)rtpi_malloc_array(&t->alloc, t->nnodes ? t->nnodes : 1,
+                                                 sizeof *t->mat_nodes);
+    if (!last || !fill || !nfill || !t->mat_start || !t->mat_nstart || !t->mat_nodes)
+        goto nomem;
     for (k = 0; k < nm; k++)
         last[k] = 0xffffffffu;
     for (k = 0; k < ns; k++)
         for (n = (size_t)t->start[k]; n < (size_t)t->start[k + 1]; n++) {
             uint32_t m = rtpi_prim_material(s, t->nodes[n].prim);
+            t->mat_nstart[m + 1]++;
             if (last[m] != (uint32_t)k) {
                 last[m] = (uint32_t)k;
                 t->mat_start[m + 1]++;
                 total++;
             }
         }
-    for (k = 0; k < nm; k++)
+    for (k = 0; k < nm; k++) {
         t->mat_start[k + 1] += t->mat_start[k];
+        t->mat_nstart[k + 1] += t->mat_nstart[k];
+    }
     t->mat_samples = (uint32_t *)rtpi_malloc_array(&t->alloc, total ? total : 1,
                                                    sizeof *t->mat_samples);
-    fill = (uint32_t *)rtpi_malloc_array(&t->alloc, nm ? nm : 1, sizeof *fill);
-    if (!t->mat_samples || !fill) {
-        rtpi_free(&t->alloc, last);
-        rtpi_free(&t->alloc, fill);
-        return RTP_ERR_NOMEM;
-    }
+    if (!t->mat_samples)
+        goto nomem;
     for (k = 0; k < nm; k++) {
         last[k] = 0xffffffffu;
         fill[k] = t->mat_start[k];
+        nfill[k] = t->mat_nstart[k];
     }
     for (k = 0; k < ns; k++)
         for (n = (size_t)t->start[k]; n < (size_t)t->start[k + 1]; n++) {
             uint32_t m = rtpi_prim_material(s, t->nodes[n].prim);
+            t->mat_nodes[nfill[m]++] = (uint32_t)n;
             if (last[m] != (uint32_t)k) {
                 last[m] = (uint32_t)k;
                 t->mat_samples[fill[m]++] = (uint32_t)k;
@@ -1200,7 +1224,15 @@ static rtp_status build_material_lists(rtp_tree *t)
         }
     rtpi_free(&t->alloc, last);
     rtpi_free(&t->alloc, fill);
+    rtpi_free(&t->alloc, nfill);
     return RTP_OK;
+nomem:
+    /* (none kept: mat_start alone would read as built) */
+    rtpi_free(&t->alloc, last);
+    rtpi_free(&t->alloc, fill);
+    rtpi_free(&t->alloc, nfill);
+    free_material_lists(t);
+    return RTP_ERR_NOMEM;
 }
 
 /* Does a material edit change step 1 (terms), or only step 2? */
@@ -1433,12 +1465,9 @@ static rtp_status retrace_edited(rtp_tree *t, int threads, int stale, rtp_eval_s
     drop_caches(t);
     rtpi_free(&t->alloc, t->cur_vis);
     rtpi_free(&t->alloc, t->cur_pos);
-    rtpi_free(&t->alloc, t->mat_start);
-    rtpi_free(&t->alloc, t->mat_samples);
+    free_material_lists(t);
     t->cur_vis = NULL;
     t->cur_pos = NULL;
-    t->mat_start = NULL;
-    t->mat_samples = NULL;
     return RTP_OK;
 }
 

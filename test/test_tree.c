@@ -677,6 +677,64 @@ static void test_material_planes(void)
     material_planes_run(1);
 }
 
+/* The q of a material's first edit, from its nodes' list and the path
+   weights the evaluation keeps (rtpi_nodes_diffuse), equals the descent
+   of each sample's tree (rtpi_sample_diffuse) bit for bit, for every
+   material and sample of a scene with a mirror and glass. */
+static void test_material_q(void)
+{
+    rtp_scene *s = load("scenes/spheres.nff");
+    rtp_tree *t = NULL;
+    rtp_trace_options o;
+    rtp_eval_options eo;
+    rtp_image *img = NULL;
+    rtpi_shade_ctx sc;
+    double cv[6 + 3 * 8];
+    size_t m, i, checked = 0, differ = 0;
+    if (!s) {
+        CHECK(s != NULL);
+        return;
+    }
+    edit_options(0, &o, &eo);
+    CHECK(rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
+    CHECK(t && rtp_tree_eval(t, &eo, &img, NULL, NULL) == RTP_OK);
+    CHECK(t && t->mat_nodes && t->ev_w && t->scene->nlights <= 8);
+    if (!t || !t->mat_nodes || !t->ev_w || t->scene->nlights > 8)
+        goto out;
+    memset(&sc, 0, sizeof sc);
+    sc.s = t->scene;
+    sc.one_sided = t->spd;
+    sc.vis_words = t->vis_words;
+    for (i = 0; i < 3; i++) {
+        cv[i] = 0.3;
+        cv[3 + i] = 0.1 + 0.2 * (double)i;
+    }
+    rtpi_light_colors(t->scene, cv + 6);
+    for (m = 0; m < t->scene->nmats; m++) {
+        size_t j = t->mat_nstart[m];
+        for (i = t->mat_start[m]; i < t->mat_start[m + 1]; i++) {
+            size_t k = t->mat_samples[i], a = t->start[k], b = t->start[k + 1], j0;
+            double q1[3], q2[3];
+            while (j < t->mat_nstart[m + 1] && t->mat_nodes[j] < a)
+                j++;
+            j0 = j;
+            while (j < t->mat_nstart[m + 1] && t->mat_nodes[j] < b)
+                j++;
+            rtpi_sample_diffuse(&sc, t->nodes + a, b - a,
+                                t->ev_terms + a * RTPI_TERMS(t->scene->nlights), (uint32_t)m, cv,
+                                q1);
+            rtpi_nodes_diffuse(&sc, t->mat_nodes + j0, j - j0, t->ev_terms, t->ev_w, cv, q2);
+            differ += memcmp(q1, q2, sizeof q1) != 0;
+            checked++;
+        }
+    }
+    CHECK_MSG(checked > 100 && differ == 0, "%zu of %zu samples' q differ", differ, checked);
+out:
+    rtp_image_destroy(img);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+}
+
 /* Colour edits of several terms at once and a long run moving between
    terms: each image from the snapshot and the planes alone (no sample
    summed), written only where the edited term shows, and after 60 edits
@@ -1117,6 +1175,7 @@ int main(void)
     RUN(test_edit_sequence);
     RUN(test_one_term_edits);
     RUN(test_material_planes);
+    RUN(test_material_q);
     RUN(test_warm_light_move_bitwise);
     RUN(test_bump_edits);
     RUN(test_truncated_every_length);
