@@ -929,7 +929,7 @@ static int pk_img_chunk(void *ctx, int chunk)
 {
     eval_ctx *e = (eval_ctx *)ctx;
     rtp_tree *t = e->t;
-    size_t w = (size_t)t->width, nx = (size_t)t->nx, n = 0, i, lo, hi, srows;
+    size_t w = (size_t)t->width, nx = (size_t)t->nx, n = 0, i, lo, hi, srows, sy, rs;
     int y0 = chunk * PK_ROWS, y1 = y0 + PK_ROWS, y, x, c, spd = t->spd;
     const float *img = e->pixels, *pq = t->pk_q;
     const double xo[3] = {e->xold[0], e->xold[1], e->xold[2]};
@@ -949,16 +949,21 @@ static int pk_img_chunk(void *ctx, int chunk)
     memset(touched, 0, (size_t)(y1 - y0) * w);
     lo = lower_bound(e->list, e->nlist, (size_t)y0 * nx);
     hi = lower_bound(e->list, e->nlist, ((size_t)y0 + srows) * nx);
-    for (i = lo; i < hi; i++) {
-        size_t l = e->list[i] - (size_t)y0 * nx, sx, sy;
+    for (i = lo, sy = 0, rs = 0; i < hi; i++) {
+        size_t l = e->list[i] - (size_t)y0 * nx, sx;
         if (!e->count_pass)
             listed[l] = (uint32_t)i + 1u;
         if (!spd) {
             touched[l] = 1; /* (nx = w) */
             continue;
         }
-        sx = l % nx;
-        sy = l / nx;
+        /* the sample's row and column: the list ascends, so the row
+           follows it (a division per sample cost more than the rest) */
+        while (l >= rs + nx) {
+            rs += nx;
+            sy++;
+        }
+        sx = l - rs;
         /* the pixels whose corners it is: (sx-1..sx, sy-1..sy) */
         if (sy < (size_t)(y1 - y0)) {
             if (sx < w)
