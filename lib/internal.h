@@ -370,13 +370,10 @@ typedef struct rtpi_shade_ctx {
 /* terms: n * RTPI_TERMS(nlights) floats.  vis_ext: the nodes' visibility
    words (c->vis_words per node) or NULL for the nodes' own bits.  nv (may
    be NULL): receives each node's shading normal and view vector (6 floats),
-   from which rtpi_light_terms recomputes one light's terms exactly. */
+   from which rtpi_light_redo recomputes one light's terms exactly. */
 void rtpi_sample_terms(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
                        size_t n, const uint32_t *vis_ext, rtpi_v3 eye,
                        float *terms, float *nv);
-void rtpi_light_terms(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
-                      size_t n, const uint32_t *vis_ext, const float *nv,
-                      size_t light, float *terms);
 /* coeffs: RTPI_COEFFS(nlights) floats: G, A, then K_i; acc: as many
    doubles of scratch (sums are kept in double, then rounded once).  w
    (NULL: not wanted): the path weight step 2 reaches each of the n nodes
@@ -384,11 +381,13 @@ void rtpi_light_terms(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
 void rtpi_sample_coeffs(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
                         size_t n, const float *terms, double *acc,
                         float *coeffs, double *w);
-/* Light `light`'s coefficients alone (coeffs[6 + 3 light ..]), exactly as
-   rtpi_sample_coeffs computes them. */
-void rtpi_sample_coeffs_light(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
-                              size_t n, const float *terms, size_t light,
-                              float *coeffs);
+/* A moved light's terms and coefficients (coeffs[6 + 3 light ..]) for a
+   sample's n nodes in one pass, with the nodes' path weights w
+   (rtpi_sample_coeffs'): bit for bit what rtpi_sample_terms and
+   rtpi_sample_coeffs make for that light. */
+void rtpi_light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t n,
+                     const uint32_t *vis_ext, const float *nv, const double *w, size_t light,
+                     float *terms, float *coeffs);
 /* The light terms (n.l, highlight) of every node of material mat among a
    sample's n nodes, from the cached normals and view vectors nv, exactly
    as rtpi_sample_terms computes them: what an edit of mat's shine or ks

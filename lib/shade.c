@@ -291,18 +291,46 @@ void rtpi_sample_terms(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t 
         terms_node(c, nodes, 0, vis_ext, eye, terms, nv);
 }
 
-void rtpi_light_terms(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t n,
-                      const uint32_t *vis_ext, const float *nv, size_t light, float *terms)
+void rtpi_light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t n,
+                     const uint32_t *vis_ext, const float *nv, const double *w, size_t light,
+                     float *terms, float *coeffs)
 {
     const rtp_scene *s = c->s;
     size_t k, nt = RTPI_TERMS(s->nlights);
+    double a0 = 0.0, a1 = 0.0, a2 = 0.0;
     for (k = 0; k < n; k++) {
         const rtpi_cnode *nd = &nodes[k];
         const uint32_t *ext = vis_ext ? vis_ext + k * c->vis_words : NULL;
+        const rtpi_material *m = &s->mats[rtpi_prim_material(s, nd->prim)];
+        float *t = terms + k * nt;
+        double d, sp, kd, ks, c0, c1, c2;
         light_term(nv + 6 * k, v3(nd->p[0], nd->p[1], nd->p[2]), &s->lights[light],
-                   seen(nd, ext, light), &s->mats[rtpi_prim_material(s, nd->prim)],
-                   terms + k * nt + 3 + 2 * light);
+                   seen(nd, ext, light), m, t + 3 + 2 * light);
+        /* coeffs_node's sum for this light, node by node
+           in its order (depth first, reflected subtree first: the order
+           they are stored in), leaving out the nodes it does not reach */
+        d = t[3 + 2 * light];
+        if (w[k] == 0.0 || d == 0.0)
+            continue;
+        sp = t[4 + 2 * light];
+        kd = w[k] * m->kd;
+        ks = w[k] * m->ks;
+        if (m->tex == RTPI_TEX_CHECKER) {
+            c0 = t[0] * (double)m->color[0] + (1.0 - t[0]) * (double)m->color2[0];
+            c1 = t[1] * (double)m->color[1] + (1.0 - t[1]) * (double)m->color2[1];
+            c2 = t[2] * (double)m->color[2] + (1.0 - t[2]) * (double)m->color2[2];
+        } else {
+            c0 = t[0] * (double)m->color[0];
+            c1 = t[1] * (double)m->color[1];
+            c2 = t[2] * (double)m->color[2];
+        }
+        a0 += kd * c0 * d + ks * sp;
+        a1 += kd * c1 * d + ks * sp;
+        a2 += kd * c2 * d + ks * sp;
     }
+    coeffs[6 + 3 * light] = (float)a0;
+    coeffs[6 + 3 * light + 1] = (float)a1;
+    coeffs[6 + 3 * light + 2] = (float)a2;
 }
 
 void rtpi_material_light_terms(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t n,
@@ -354,11 +382,11 @@ void rtpi_material_highlights(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, 
     }
 }
 
-/* Step 2 for node idx reached with path weight w (accumulated in double).
-   only < 0: every coefficient into acc (G, A, K_i); only = i: light i's
-   K_i alone into acc[0..2], by the very same operations. */
+/* Step 2 for node idx reached with path weight w (accumulated in double):
+   every coefficient into acc (G, A, K_i); rtpi_light_redo makes one
+   light's K_i by the very same operations. */
 static void coeffs_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t idx,
-                        const float *terms, double w, double *acc, long only, double *wout)
+                        const float *terms, double w, double *acc, double *wout)
 {
     const rtp_scene *s = c->s;
     const rtpi_cnode *nd = &nodes[idx];
@@ -374,21 +402,14 @@ static void coeffs_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t
         cobj[k] = m->tex == RTPI_TEX_CHECKER
                       ? t[k] * (double)m->color[k] + (1.0 - t[k]) * (double)m->color2[k]
                       : t[k] * (double)m->color[k];
-    if (only < 0) {
+    for (k = 0; k < 3; k++)
+        acc[3 + k] += kd * cobj[k]; /* ambient: kd c_obj */
+    for (i = 0; i < nl; i++) {
+        double d = t[3 + 2 * i], sp = t[4 + 2 * i];
+        if (d == 0.0)
+            continue;
         for (k = 0; k < 3; k++)
-            acc[3 + k] += kd * cobj[k]; /* ambient: kd c_obj */
-        for (i = 0; i < nl; i++) {
-            double d = t[3 + 2 * i], sp = t[4 + 2 * i];
-            if (d == 0.0)
-                continue;
-            for (k = 0; k < 3; k++)
-                acc[6 + 3 * i + k] += kd * cobj[k] * d + ks * sp;
-        }
-    } else {
-        double d = t[3 + 2 * only], sp = t[4 + 2 * only];
-        if (d != 0.0)
-            for (k = 0; k < 3; k++)
-                acc[k] += kd * cobj[k] * d + ks * sp;
+            acc[6 + 3 * i + k] += kd * cobj[k] * d + ks * sp;
     }
     /* Global terms: ks I_r + kt I_t; on total internal reflection the
        transmitted share rides on the reflected subtree. */
@@ -400,16 +421,15 @@ static void coeffs_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t
     }
     if (wr > 0.0) {
         if (nd->link & RTPI_L_REFL)
-            coeffs_node(c, nodes, idx + 1, terms, w * wr, acc, only, wout);
-        else if ((nd->link & RTPI_L_REFL_MISS) && only < 0)
+            coeffs_node(c, nodes, idx + 1, terms, w * wr, acc, wout);
+        else if (nd->link & RTPI_L_REFL_MISS)
             for (k = 0; k < 3; k++)
                 acc[k] += w * wr;
     }
     if (wt > 0.0) {
         if (nd->link & RTPI_L_REFR)
-            coeffs_node(c, nodes, idx + (nd->link >> RTPI_L_SHIFT), terms, w * wt, acc, only,
-                        wout);
-        else if ((nd->link & RTPI_L_REFR_MISS) && only < 0)
+            coeffs_node(c, nodes, idx + (nd->link >> RTPI_L_SHIFT), terms, w * wt, acc, wout);
+        else if (nd->link & RTPI_L_REFR_MISS)
             for (k = 0; k < 3; k++)
                 acc[k] += w * wt;
     }
@@ -427,20 +447,9 @@ void rtpi_sample_coeffs(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t
     if (n == 0)
         acc[0] = acc[1] = acc[2] = 1.0; /* the eye ray saw the background */
     else
-        coeffs_node(c, nodes, 0, terms, 1.0, acc, -1, w);
+        coeffs_node(c, nodes, 0, terms, 1.0, acc, w);
     for (i = 0; i < m; i++)
         coeffs[i] = (float)acc[i];
-}
-
-void rtpi_sample_coeffs_light(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t n,
-                              const float *terms, size_t light, float *coeffs)
-{
-    double acc[3] = {0.0, 0.0, 0.0};
-    int k;
-    if (n > 0)
-        coeffs_node(c, nodes, 0, terms, 1.0, acc, (long)light, NULL);
-    for (k = 0; k < 3; k++)
-        coeffs[6 + 3 * light + k] = (float)acc[k];
 }
 
 void rtpi_light_colors(const rtp_scene *s, double *cl)

@@ -737,10 +737,9 @@ static int light_row(void *ctx, int y)
     for (x = 0; x < t->nx; x++, k++) {
         size_t a = (size_t)t->start[k], n = (size_t)(t->start[k + 1] - t->start[k]);
         float *terms = t->ev_terms + a * RTPI_TERMS(nl);
-        rtpi_light_terms(e->shade, t->nodes + a, n, e->vis ? e->vis + a * words : NULL,
-                         t->ev_nv + 6 * a, e->light, terms);
-        rtpi_sample_coeffs_light(e->shade, t->nodes + a, n, terms, e->light,
-                                 t->ev_coeffs + k * RTPI_COEFFS(nl));
+        rtpi_light_redo(e->shade, t->nodes + a, n, e->vis ? e->vis + a * words : NULL,
+                        t->ev_nv + 6 * a, t->ev_w + a, e->light, terms,
+                        t->ev_coeffs + k * RTPI_COEFFS(nl));
         {
             const float *c = t->ev_coeffs + k * RTPI_COEFFS(nl) + 6 + 3 * e->light;
             e->coef_bad |= !isfinite(c[0]) | !isfinite(c[1]) | !isfinite(c[2]);
