@@ -923,7 +923,9 @@ static size_t lower_bound(const uint32_t *list, size_t n, size_t v)
    (q is read only at the listed samples: pk_q is not cleared), and P =
    B - xold K, so no sample's rest is summed: P differs from the rest
    pk_build_chunk sums by the rounding of B (a float ulp of the pixel),
-   and pk_put's guard stops the planes where xold K is far above P. */
+   and pk_bad's guard (per band where its bound settles it) stops the
+   planes where xold K is far above P.  Pixels whose K is 0 keep B and
+   are not part of the planes. */
 static int pk_img_chunk(void *ctx, int chunk)
 {
     eval_ctx *e = (eval_ctx *)ctx;
