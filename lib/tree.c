@@ -1704,8 +1704,12 @@ static int cp_plane_chunk(void *ctx, int chunk)
             kp[0] = k0;
             kp[1] = k1;
             kp[2] = k2;
-            /* (a NaN fails every comparison; infinities show in the maxima) */
-            bad |= k0 != k0 || k1 != k1 || k2 != k2;
+            /* (a NaN fails every comparison, but makes the sum NaN;
+               infinities show in the maxima) */
+            {
+                float sum = k0 + k1 + k2;
+                bad |= sum != sum;
+            }
             m0 = fabsf(k0) > m0 ? fabsf(k0) : m0;
             m1 = fabsf(k1) > m1 ? fabsf(k1) : m1;
             m2 = fabsf(k2) > m2 ? fabsf(k2) : m2;
@@ -1810,11 +1814,14 @@ static int cp_snapshot(rtp_tree *t, const float *samples, const float *last, siz
         float m0 = 0.0f, m1 = 0.0f, m2 = 0.0f;
         const float *q = t->cp_s;
         for (i = 0; i < np; i++, q += 3) {
-            /* (NaN fails every comparison: caught below) */
+            /* (NaN fails every comparison, so the maxima miss it: a NaN
+               makes the sum NaN, as do opposite infinities, which the
+               maxima show anyway) */
+            float sum = q[0] + q[1] + q[2];
             m0 = fabsf(q[0]) > m0 ? fabsf(q[0]) : m0;
             m1 = fabsf(q[1]) > m1 ? fabsf(q[1]) : m1;
             m2 = fabsf(q[2]) > m2 ? fabsf(q[2]) : m2;
-            finite &= !(q[0] != q[0] || q[1] != q[1] || q[2] != q[2]);
+            finite &= sum == sum;
         }
         finite &= isfinite(m0) && isfinite(m1) && isfinite(m2);
         t->cp_smax[0] = m0;
