@@ -469,6 +469,7 @@ typedef struct eval_ctx {
     float *rest;              /* pk_build_chunk, pk_img_chunk: scratch */
     int count_pass;           /* pk_img_chunk: count the band's pixels */
     int coef_bad;             /* a coefficient made was not finite */
+    unsigned long long combined; /* light_row: samples it combined */
     int q_by_list;            /* pk_q_chunk: q at the sample's place in the list */
     size_t rest_bytes;
     double kmax[3];           /* cp_plane_chunk: largest |K| per channel */
@@ -736,13 +737,17 @@ static int light_row(void *ctx, int y)
     int x;
     for (x = 0; x < t->nx; x++, k++) {
         size_t a = (size_t)t->start[k], n = (size_t)(t->start[k + 1] - t->start[k]);
-        float *terms = t->ev_terms + a * RTPI_TERMS(nl);
+        float *terms = t->ev_terms + a * RTPI_TERMS(nl), *coeffs;
+        if (n == 0)
+            continue; /* the background: no light in it, nothing changes */
+        coeffs = t->ev_coeffs + k * RTPI_COEFFS(nl);
         rtpi_light_redo(e->shade, t->nodes + a, n, e->vis ? e->vis + a * words : NULL,
-                        t->ev_nv + 6 * a, t->ev_w + a, e->light, terms,
-                        t->ev_coeffs + k * RTPI_COEFFS(nl));
-        {
-            const float *c = t->ev_coeffs + k * RTPI_COEFFS(nl) + 6 + 3 * e->light;
-            e->coef_bad |= !isfinite(c[0]) | !isfinite(c[1]) | !isfinite(c[2]);
+                        t->ev_nv + 6 * a, t->ev_w + a, e->light, terms, coeffs);
+        e->coef_bad |= !isfinite(coeffs[6 + 3 * e->light]) |
+                       !isfinite(coeffs[7 + 3 * e->light]) | !isfinite(coeffs[8 + 3 * e->light]);
+        if (e->combine_too) { /* the other samples' colours hold */
+            rtpi_combine(t->scene, e->cl, coeffs, e->samples + 3 * k);
+            e->combined++;
         }
     }
     return 0;
@@ -2269,14 +2274,25 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
         t->pk_term = 0;
         t->ev_samples_ok = cached;
     } else {
-        int coeffs_dirty = 0;
+        int coeffs_dirty = 0, moved_combined = 0;
         /* a light that moved (or whose shadows were decided another way):
-           its terms and coefficients only, for every sample */
+           its terms and coefficients only, for every sample; where the
+           samples hold every other colour as it is (no colour or material
+           edited with the move), each is combined there too */
+        if (t->ev_samples_ok && t->ev_cl && restored < 0 &&
+            memcmp(cv, t->ev_cl, RTPI_COEFFS(nl) * sizeof *cv) == 0) {
+            moved_combined = 1;
+            for (m = 0; m < s->nmats; m++)
+                if (coeffs_changed(&s->mats[m], &t->ev_mats[m]) || hl_pending(t, m))
+                    moved_combined = 0;
+        }
         for (l = 0; l < nl; l++) {
             if (!light_terms_stale(t, l, mode, res))
                 continue;
-            for (i = 0; i < nthreads; i++)
+            for (i = 0; i < nthreads; i++) {
                 e[i].light = l;
+                e[i].combine_too = moved_combined;
+            }
             rtpi_parallel_rows(t->ny, nthreads, ctx, light_row, NULL, NULL);
             cp_stale(t, 2 + l);
             st.samples += ns;
@@ -2424,6 +2440,13 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
             /* nothing changed since: the samples hold their colours (and
                an incremental image its pixels) */
             partial = 1;
+        } else if (coeffs_dirty && moved_combined) {
+            /* light_row combined the samples with lights in them */
+            for (st.combined_samples = 0, i = 0; i < nthreads; i++)
+                st.combined_samples += e[i].combined;
+            if (st.combined_samples > ns) /* (several lights moved) */
+                st.combined_samples = ns;
+            t->pk_term = 0;
         } else if (!coeffs_dirty && cp_eval(t, e, ctx, nthreads, cv, samples, img->pixels, sparse, &st)) {
             /* colours alone changed: S + K (c - cS) per pixel */
             one = 1;

@@ -987,8 +987,9 @@ static void test_bump_edits(void)
     CHECK_MSG(e <= 1e-6, "bumped trace vs reeval: %g", e);
 }
 
-/* A light moved on warm caches (only its terms and coefficients redone)
-   gives the very image a fresh tree gives with every step redone. */
+/* A light moved on warm caches (only its terms and coefficients redone,
+   the samples with hits combined as they are) gives the very image a
+   fresh tree gives with every step redone. */
 static void test_warm_light_move_bitwise(void)
 {
     rtp_scene *s = load("scenes/spheres.nff");
@@ -1011,11 +1012,19 @@ static void test_warm_light_move_bitwise(void)
         CHECK(rtp_tree_eval(warm, &eo, &a, NULL, NULL) == RTP_OK);
         rtp_image_destroy(a);
         a = NULL;
+        rtp_eval_stats es;
+        rtp_tree_info ti;
         CHECK(rtp_tree_set(warm, "light.fill.pos", "-2,-6,3", NULL) == RTP_OK);
         CHECK(rtp_tree_set(cold, "light.fill.pos", "-2,-6,3", NULL) == RTP_OK);
-        CHECK(rtp_tree_eval(warm, &eo, &a, NULL, NULL) == RTP_OK);
+        CHECK(rtp_tree_eval(warm, &eo, &a, &es, NULL) == RTP_OK);
         CHECK(rtp_tree_eval(cold, &eo, &b, NULL, NULL) == RTP_OK);
         CHECK(same_image(a, b));
+        /* nothing else edited: the samples with hits are combined as
+           their light is redone, and the background's are left alone */
+        rtp_tree_get_info(warm, &ti);
+        CHECK_MSG(es.combined_samples > 0 && es.combined_samples < ti.samples,
+                  "a moved light combined %llu of %llu samples", es.combined_samples,
+                  (unsigned long long)ti.samples);
     }
     rtp_image_destroy(a);
     rtp_image_destroy(b);
