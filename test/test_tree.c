@@ -484,6 +484,25 @@ static void edit_options(int spd, rtp_trace_options *o, rtp_eval_options *eo)
     eo->incremental = 1;
 }
 
+/* The test scene recorded with edit_options and evaluated once into the
+   image *re the edits then keep: 0 when the scene does not load (*t and
+   *re NULL where recording or the evaluation failed, a check failing). */
+static int edit_start(int spd, rtp_scene **s, rtp_tree **t, rtp_trace_options *o,
+                      rtp_eval_options *eo, rtp_image **re)
+{
+    *t = NULL;
+    *re = NULL;
+    *s = load("scenes/spheres.nff");
+    if (!*s) {
+        CHECK(*s != NULL);
+        return 0;
+    }
+    edit_options(spd, o, eo);
+    CHECK(rtp_record(*s, o, t, NULL, NULL, NULL) == RTP_OK);
+    CHECK(*t && rtp_tree_eval(*t, eo, re, NULL, NULL) == RTP_OK);
+    return 1;
+}
+
 /* Edits of one term of the image's linear form (a light's colour or
    on/off, the ambient, the background, a material's kd or colour), one
    after another: a colour edit is S + K (c - cS) from the snapshot and
@@ -518,19 +537,14 @@ static void one_term_run(int spd)
        the first colour edit recombines (the coefficients change) */
     static const int planes[sizeof seq / sizeof *seq] = {1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1,
                                                           1, 1, 1, 0, 1, 1, 0, 0, 0, 1, 1};
-    rtp_scene *s = load("scenes/spheres.nff");
-    rtp_tree *t = NULL;
+    rtp_scene *s;
+    rtp_tree *t;
     rtp_trace_options o;
     rtp_eval_options eo;
-    rtp_image *re = NULL;
+    rtp_image *re;
     size_t i;
-    if (!s) {
-        CHECK(s != NULL);
+    if (!edit_start(spd, &s, &t, &o, &eo, &re))
         return;
-    }
-    edit_options(spd, &o, &eo);
-    CHECK(rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
-    CHECK(t && rtp_tree_eval(t, &eo, &re, NULL, NULL) == RTP_OK);
     for (i = 0; t && re && i < sizeof seq / sizeof *seq; i++) {
         rtp_image *full = NULL;
         rtp_diff_stats d;
@@ -620,19 +634,14 @@ static void material_planes_run(int spd)
         {{{"mat.red.color", "0.4,0.4,0.4"}, {NULL, NULL}}, 0, 2},
         {{{"mat.red.color", "0.9,0.1,0.1"}, {NULL, NULL}}, 0, 0},
     };
-    rtp_scene *s = load("scenes/spheres.nff");
-    rtp_tree *t = NULL;
+    rtp_scene *s;
+    rtp_tree *t;
     rtp_trace_options o;
     rtp_eval_options eo;
-    rtp_image *re = NULL;
+    rtp_image *re;
     size_t i, j;
-    if (!s) {
-        CHECK(s != NULL);
+    if (!edit_start(spd, &s, &t, &o, &eo, &re))
         return;
-    }
-    edit_options(spd, &o, &eo);
-    CHECK(rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
-    CHECK(t && rtp_tree_eval(t, &eo, &re, NULL, NULL) == RTP_OK);
     for (i = 0; t && re && i < sizeof seq / sizeof *seq; i++) {
         rtp_image *full = NULL, *img = NULL;
         rtp_diff_stats d;
@@ -683,21 +692,16 @@ static void test_material_planes(void)
    material and sample of a scene with a mirror and glass. */
 static void test_material_q(void)
 {
-    rtp_scene *s = load("scenes/spheres.nff");
-    rtp_tree *t = NULL;
+    rtp_scene *s;
+    rtp_tree *t;
     rtp_trace_options o;
     rtp_eval_options eo;
-    rtp_image *img = NULL;
+    rtp_image *img;
     rtpi_shade_ctx sc;
     double cv[6 + 3 * 8];
     size_t m, i, checked = 0, differ = 0;
-    if (!s) {
-        CHECK(s != NULL);
+    if (!edit_start(0, &s, &t, &o, &eo, &img))
         return;
-    }
-    edit_options(0, &o, &eo);
-    CHECK(rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
-    CHECK(t && rtp_tree_eval(t, &eo, &img, NULL, NULL) == RTP_OK);
     CHECK(t && t->mat_nodes && t->ev_w && t->scene->nlights <= 8);
     if (!t || !t->mat_nodes || !t->ev_w || t->scene->nlights > 8)
         goto out;
@@ -742,19 +746,14 @@ out:
    image feeds the next). */
 static void colour_run(int spd)
 {
-    rtp_scene *s = load("scenes/spheres.nff");
-    rtp_tree *t = NULL;
+    rtp_scene *s;
+    rtp_tree *t;
     rtp_trace_options o;
     rtp_eval_options eo;
-    rtp_image *re = NULL;
+    rtp_image *re;
     int i;
-    if (!s) {
-        CHECK(s != NULL);
+    if (!edit_start(spd, &s, &t, &o, &eo, &re))
         return;
-    }
-    edit_options(spd, &o, &eo);
-    CHECK(rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
-    CHECK(t && rtp_tree_eval(t, &eo, &re, NULL, NULL) == RTP_OK);
     for (i = 0; t && re && i < 62; i++) {
         char v[64];
         rtp_eval_stats es;
