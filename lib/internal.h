@@ -415,7 +415,9 @@ void rtpi_sample_weights(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_
    ambient, lights: RTPI_COEFFS).  For a material without a checker the
    sample's colour is affine in x = kd * colour of mat: x q is what mat's
    diffuse and ambient shading add, so an edit of kd or colour alone moves
-   the colour by (x' - x) q. */
+   the colour by (x' - x) q.  By descent of the sample's tree: the
+   definition rtpi_nodes_diffuse (what evaluation uses) is tested
+   against. */
 void rtpi_sample_diffuse(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
                          size_t n, const float *terms, uint32_t mat,
                          const double *cv, double q[3]);
