@@ -377,10 +377,11 @@ void rtpi_sample_terms(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
 /* coeffs: RTPI_COEFFS(nlights) floats: G, A, then K_i; acc: as many
    doubles of scratch (sums are kept in double, then rounded once).  w
    (NULL: not wanted): the path weight step 2 reaches each of the n nodes
-   with, as rtpi_sample_weights gives it. */
-void rtpi_sample_coeffs(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
-                        size_t n, const float *terms, double *acc,
-                        float *coeffs, double *w);
+   with, as rtpi_sample_weights gives it.  0 where a coefficient is not
+   finite (or they sum beyond the float range), else 1. */
+int rtpi_sample_coeffs(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
+                       size_t n, const float *terms, double *acc,
+                       float *coeffs, double *w);
 /* A moved light's terms and coefficients (coeffs[6 + 3 light ..]) for a
    sample's n nodes in one pass, with the nodes' path weights w
    (rtpi_sample_coeffs'): bit for bit what rtpi_sample_terms and

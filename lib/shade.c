@@ -8,6 +8,8 @@
  * times the scene's light scale; I_a = ambient * kd * c_obj. */
 #include "internal.h"
 
+#include <float.h>
+
 static double fract_floor(double x) { return x - floor(x); }
 
 static void image_lookup(const rtp_image *img, double u, double v,
@@ -435,10 +437,11 @@ static void coeffs_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t
     }
 }
 
-void rtpi_sample_coeffs(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t n,
-                        const float *terms, double *acc, float *coeffs, double *w)
+int rtpi_sample_coeffs(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t n,
+                       const float *terms, double *acc, float *coeffs, double *w)
 {
     size_t m = RTPI_COEFFS(c->s->nlights), i;
+    float sum = 0.0f;
     for (i = 0; i < m; i++)
         acc[i] = 0.0;
     if (w)
@@ -448,8 +451,13 @@ void rtpi_sample_coeffs(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t
         acc[0] = acc[1] = acc[2] = 1.0; /* the eye ray saw the background */
     else
         coeffs_node(c, nodes, 0, terms, 1.0, acc, w);
-    for (i = 0; i < m; i++)
+    for (i = 0; i < m; i++) {
         coeffs[i] = (float)acc[i];
+        sum += coeffs[i];
+    }
+    /* a coefficient not finite makes the sum so (as may finite ones near
+       the float range, which the caller then treats alike) */
+    return fabsf(sum) <= FLT_MAX;
 }
 
 void rtpi_light_colors(const rtp_scene *s, double *cl)

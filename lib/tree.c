@@ -498,13 +498,10 @@ static int sample_coeffs(eval_ctx *e, size_t k, int redo_terms, float **coeffs_o
     if (redo_terms)
         rtpi_sample_terms(e->shade, t->nodes + a, n, e->vis ? e->vis + a * words : NULL, e->eye,
                           terms, e->cached ? t->ev_nv + 6 * a : NULL);
-    rtpi_sample_coeffs(e->shade, t->nodes + a, n, terms, e->acc, coeffs,
-                       e->cached ? t->ev_w + a : NULL);
-    if (e->cached) {
-        size_t i, nc = RTPI_COEFFS(nl);
-        for (i = 0; i < nc; i++)
-            e->coef_bad |= !isfinite(coeffs[i]);
-    }
+    /* (coefficients near the float range count as not finite too: the
+       planes then give way needlessly, which is safe) */
+    e->coef_bad |= !rtpi_sample_coeffs(e->shade, t->nodes + a, n, terms, e->acc, coeffs,
+                                       e->cached ? t->ev_w + a : NULL);
     *coeffs_out = coeffs;
     return 0;
 }
