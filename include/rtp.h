@@ -299,8 +299,8 @@ typedef struct rtp_eval_stats {
  *  the tree keeps what it computes for the next evaluation, so one tree must
  *  not be evaluated from two threads at once (opt->threads parallelises one
  *  evaluation).  What it keeps, beyond the tree: per node and sample the
- *  shading terms and coefficients (and per node its path weight, 8
- *  bytes), for colour edits a snapshot image (12 bytes a pixel) and a
+ *  shading terms and coefficients (and per node its path weight and its
+ *  place in its material's list, 12 bytes), for colour edits a snapshot image (12 bytes a pixel) and a
  *  plane for each colour term edited (16 bytes a pixel, at most 8 kept),
  *  and for the material last edited in kd or colour its planes (up to 40
  *  bytes a pixel, 12 a sample); opt->no_cache keeps none of it. */
