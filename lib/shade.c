@@ -533,9 +533,9 @@ void rtpi_nodes_diffuse(const rtpi_shade_ctx *c, const uint32_t *idx, size_t n,
 {
     size_t nl = c->s->nlights, nt = RTPI_TERMS(nl), j, i;
     double q0 = 0.0, q1 = 0.0, q2 = 0.0;
-    /* diffuse_node's operations, for its nodes of mat in its order (depth
-       first, reflected subtree first: the order they are stored in); it
-       does not reach the nodes of weight 0 */
+    /* diffuse_node's operations on the listed nodes (the material's), in
+       its order (depth first, reflected subtree first: the order they are
+       stored in); it does not reach the nodes of weight 0 */
     for (j = 0; j < n; j++) {
         const float *t = terms + (size_t)idx[j] * nt;
         const double *cl = cv + 6;
