@@ -416,6 +416,22 @@ static void test_moved_light_small_spd(void)
     }
 }
 
+/* The test scene, with options zero but for a 40x30 image; NULL (a
+   check failing) when it does not load. */
+static rtp_scene *spheres_40x30(rtp_trace_options *o, rtp_eval_options *eo)
+{
+    rtp_scene *s = load("scenes/spheres.nff");
+    if (!s) {
+        CHECK(s != NULL);
+        return NULL;
+    }
+    memset(o, 0, sizeof *o);
+    memset(eo, 0, sizeof *eo);
+    o->width = 40;
+    o->height = 30;
+    return s;
+}
+
 /* Editing materials, lights and the ambient one after another on one tree
    (caches in play) equals a full trace of the final scene. */
 static void test_edit_sequence(void)
@@ -431,19 +447,13 @@ static void test_edit_sequence(void)
         {"light.fill.pos", "4,-3,6"},   {"mat.glass.ior", "1.8"},
         {"light.0.color", "1,1,1"},
     };
-    rtp_scene *s = load("scenes/spheres.nff");
-    rtp_tree *t = NULL;
     rtp_trace_options o;
     rtp_eval_options eo;
+    rtp_scene *s = spheres_40x30(&o, &eo);
+    rtp_tree *t = NULL;
     size_t i;
-    if (!s) {
-        CHECK(s != NULL);
+    if (!s)
         return;
-    }
-    memset(&o, 0, sizeof o);
-    memset(&eo, 0, sizeof eo);
-    o.width = 40;
-    o.height = 30;
     eo.threads = 2;
     CHECK(rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
     for (i = 0; t && i < sizeof seq / sizeof *seq; i++) {
@@ -809,20 +819,14 @@ static void colour_run(int spd)
    makes it). */
 static void colour_cancel_run(int spd, const char *key)
 {
-    rtp_scene *s = load("scenes/spheres.nff");
-    rtp_tree *t = NULL;
     rtp_trace_options o;
     rtp_eval_options eo;
+    rtp_scene *s = spheres_40x30(&o, &eo);
+    rtp_tree *t = NULL;
     rtp_image *re = NULL, *full = NULL;
     rtp_diff_stats d;
-    if (!s) {
-        CHECK(s != NULL);
+    if (!s)
         return;
-    }
-    memset(&o, 0, sizeof o);
-    memset(&eo, 0, sizeof eo);
-    o.width = 40;
-    o.height = 30;
     o.spd = spd;
     eo.incremental = 1;
     CHECK(rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
@@ -847,20 +851,14 @@ static void colour_cancel_run(int spd, const char *key)
    that differ from it, and every image equals a full trace. */
 static void colour_many_run(void)
 {
-    rtp_scene *s = load("scenes/spheres.nff");
-    rtp_tree *t = NULL;
     rtp_trace_options o;
     rtp_eval_options eo;
+    rtp_scene *s = spheres_40x30(&o, &eo);
+    rtp_tree *t = NULL;
     rtp_image *re = NULL;
     int i, planes_ok = 1, made = 0;
-    if (!s) {
-        CHECK(s != NULL);
+    if (!s)
         return;
-    }
-    memset(&o, 0, sizeof o);
-    memset(&eo, 0, sizeof eo);
-    o.width = 40;
-    o.height = 30;
     eo.incremental = 1;
     CHECK(rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
     for (i = 0; t && i < 8; i++) {
