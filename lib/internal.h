@@ -259,7 +259,26 @@ void rtpi_surface_at_ex(const rtp_scene *s, const rtpi_ray *ray,
    points to, -1: the other) by an amount that scales with |p|, so that the
    new ray cannot hit the surface it starts on at any scale or distance
    from the origin, yet does not skip nearby geometry. */
-rtpi_v3 rtpi_offset_origin(rtpi_v3 p, rtpi_v3 ng, double side);
+static inline rtpi_v3 rtpi_offset_origin(rtpi_v3 p, rtpi_v3 ng, double side)
+{
+    /* (inline, without fmax's calls: every hit and shadow query takes
+       this step; a NaN p gives a NaN origin either way) */
+    double ax = fabs(p.x), ay = fabs(p.y), az = fabs(p.z);
+    double m = ax > ay ? (ax > az ? ax : az) : (ay > az ? ay : az), eps;
+    /* Hit points are rounded to float before anything leaves them (the
+       ray tree stores float positions, and re-evaluation must cast the
+       very rays trace cast), so p may be off its surface by half a float
+       ulp per coordinate: at most sqrt(3) * 2^-24 * max|p| ~ 1.03e-7 max|p|
+       along the normal (double rounding, ~1e-15, adds nothing).  4e-7 *
+       max|p| clears that with a factor of four, at every scale and
+       distance from the origin; surfaces closer than that to each other
+       cannot be told apart by float positions anyway.  The absolute 1e-12
+       keeps the offset non-zero near the origin, where the error comes
+       from the vertices (double rounding of unit-size geometry, ~1e-16)
+       rather than from p. */
+    eps = 4e-7 * m + 1e-12;
+    return v3_madd(p, ng, side >= 0.0 ? eps : -eps);
+}
 
 /* Whether prim shadows a point of its own whose shadow ray starts at o
    (rtpi_offset_origin's step off the surface, towards light L): 0 no, 1

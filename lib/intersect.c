@@ -379,21 +379,3 @@ void rtpi_prim_bounds(const rtp_scene *s, uint32_t prim, double lo[3],
     for (k = 0; k < 3; k++)
         lo[k] = hi[k] = 0.0;
 }
-
-rtpi_v3 rtpi_offset_origin(rtpi_v3 p, rtpi_v3 ng, double side)
-{
-    double m = fmax(fabs(p.x), fmax(fabs(p.y), fabs(p.z)));
-    /* Hit points are rounded to float before anything leaves them (the
-       ray tree stores float positions, and re-evaluation must cast the
-       very rays trace cast), so p may be off its surface by half a float
-       ulp per coordinate: at most sqrt(3) * 2^-24 * max|p| ~ 1.03e-7 max|p|
-       along the normal (double rounding, ~1e-15, adds nothing).  4e-7 *
-       max|p| clears that with a factor of four, at every scale and
-       distance from the origin; surfaces closer than that to each other
-       cannot be told apart by float positions anyway.  The absolute 1e-12
-       keeps the offset non-zero near the origin, where the error comes
-       from the vertices (double rounding of unit-size geometry, ~1e-16)
-       rather than from p. */
-    double eps = 4e-7 * m + 1e-12;
-    return v3_madd(p, ng, side >= 0.0 ? eps : -eps);
-}
