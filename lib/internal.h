@@ -457,6 +457,38 @@ void rtpi_light_colors(const rtp_scene *s, double *cl);
 void rtpi_surface_from_point(const rtp_scene *s, uint32_t prim, rtpi_v3 p,
                              int want_uv, rtpi_surface *out);
 
+/* The normals (ng, ns) and material rtpi_surface_from_point gives at the
+   float position p on prim, without uv: for a sphere and a triangle
+   without vertex normals by its own arithmetic, inline (a moved light asks
+   this of every recorded hit); else by rtpi_surface_from_point. */
+static inline uint32_t rtpi_surface_normals(const rtp_scene *s, uint32_t prim, rtpi_v3 p,
+                                            rtpi_v3 *ng, rtpi_v3 *ns)
+{
+    rtpi_surface sf;
+    size_t i = prim;
+    if (i < s->ntris) {
+        const rtpi_tri *tr = &s->tris[i];
+        if (tr->n[0] == RTPI_NONE) {
+            rtpi_v3 p0 = v3_from_f(s->pos + 3 * (size_t)tr->v[0]);
+            rtpi_v3 p1 = v3_from_f(s->pos + 3 * (size_t)tr->v[1]);
+            rtpi_v3 p2 = v3_from_f(s->pos + 3 * (size_t)tr->v[2]);
+            *ng = *ns = v3_norm(v3_cross(v3_sub(p1, p0), v3_sub(p2, p0)));
+            return tr->mat;
+        }
+    } else if ((i -= s->ntris) < s->nspheres) {
+        const rtpi_sphere *sp = &s->spheres[i];
+        rtpi_v3 n = v3_norm(v3_sub(p, v3_from_f(sp->c)));
+        if (sp->r < 0.0f)
+            n = v3_mul(n, -1.0);
+        *ng = *ns = n;
+        return sp->mat;
+    }
+    rtpi_surface_from_point(s, prim, p, 0, &sf);
+    *ng = sf.ng;
+    *ns = sf.ns;
+    return sf.mat;
+}
+
 /* The shading normal n perturbed by the material's bump map at p/uv
    (Blinn 1978; solid procedural bumps, or an image height map on triangles
    with uvs); n unchanged without a bump. */

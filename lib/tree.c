@@ -302,22 +302,18 @@ static int vis_row(void *ctx, int y)
     rtpi_shadow_cache cache = v->cache;
     for (n = (size_t)t->start[k0]; n < (size_t)t->start[k1]; n++) {
         const rtpi_cnode *nd = &t->nodes[n];
-        rtpi_surface sf;
-        rtpi_v3 ng, ns, o;
+        rtpi_v3 p = v3(nd->p[0], nd->p[1], nd->p[2]), ng, ns, o;
         uint32_t *w = &t->cur_vis[n * words + wi];
-        rtpi_surface_from_point(s, nd->prim, v3(nd->p[0], nd->p[1], nd->p[2]), 0, &sf);
-        ng = sf.ng;
-        ns = sf.ns;
-        if ((nd->link & RTPI_L_BACK) &&
-            rtpi_two_sided(s, t->spd, nd->prim, &s->mats[sf.mat])) {
+        uint32_t mat = rtpi_surface_normals(s, nd->prim, p, &ng, &ns);
+        if ((nd->link & RTPI_L_BACK) && rtpi_two_sided(s, t->spd, nd->prim, &s->mats[mat])) {
             ng = v3_mul(ng, -1.0);
             ns = v3_mul(ns, -1.0);
         }
         *w &= ~bit;
-        if (!rtpi_shadow_setup(sf.p, ng, ns, v->lp, &o))
+        if (!rtpi_shadow_setup(p, ng, ns, v->lp, &o))
             continue;
         queries++;
-        if (rtpi_shadow_visible_cached(v->sh, &cache, sf.p, o, nd->prim))
+        if (rtpi_shadow_visible_cached(v->sh, &cache, p, o, nd->prim))
             *w |= bit;
     }
     v->queries += queries;
