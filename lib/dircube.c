@@ -794,6 +794,38 @@ static int lb_cmp(const void *a, const void *b)
     return x->prim < y->prim ? -1 : x->prim > y->prim;
 }
 
+/* The plane entry of candidate prim (see rtpi_lightbuf; t 0 for other
+   primitives).  Where the light and a shadow ray's origin o both lie
+   more than 1e-9 S from a triangle's plane on one side (S the scale:
+   every coordinate, the light's and o's, at most S), the segment between
+   them misses the plane by as much; the ray rtpi_shadow_ray makes runs
+   on that segment to within ~1e-16 of its length, and the watertight
+   test's rounding (~1e-15 S) is far below 1e-9 S, so it reports no hit
+   either.  n.o - n.p0 is within ~1e-15 S |n| of n.(o - p0). */
+static void lb_plane(const rtp_scene *s, uint32_t prim, rtpi_v3 L, double S, double *pl)
+{
+    const rtpi_tri *t;
+    rtpi_v3 p0, n;
+    double d, sl, thr;
+    pl[0] = pl[1] = pl[2] = pl[3] = pl[4] = 0.0;
+    if (prim >= s->ntris)
+        return;
+    t = &s->tris[prim];
+    p0 = v3_from_f(s->pos + 3 * (size_t)t->v[0]);
+    n = v3_cross(v3_sub(v3_from_f(s->pos + 3 * (size_t)t->v[1]), p0),
+                 v3_sub(v3_from_f(s->pos + 3 * (size_t)t->v[2]), p0));
+    d = v3_dot(n, p0);
+    sl = v3_dot(n, L) - d;
+    thr = 1e-9 * S * v3_len(n);
+    if (!(thr > 0.0 && fabs(sl) > thr && thr < HUGE_VAL))
+        return; /* degenerate, or the light (nearly) in the plane: no test */
+    pl[0] = n.x;
+    pl[1] = n.y;
+    pl[2] = n.z;
+    pl[3] = d;
+    pl[4] = sl > 0.0 ? thr : -thr;
+}
+
 static double lb_ang(double S, double near)
 {
     return near > 0.0 ? LB_ANG_BASE + LB_ANG_SCALE * S / near : HUGE_VAL;
@@ -860,9 +892,12 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
        light only if near <= dist + delta + lambda (see above); 1e-12 S
        bounds delta + lambda with room to spare. */
     lb->slack = 1e-12 * S;
+    lb->scale = S;
     lb->cand = (rtpi_lb_cand *)rtpi_malloc_array(a, n ? n : 1, sizeof *lb->cand);
     lb->off = (uint32_t *)rtpi_calloc_array(a, ncells + 1, sizeof *lb->off);
-    if (!lb->cand || !lb->off) {
+    if (s->ntris)
+        lb->plane = (double *)rtpi_malloc_array(a, n ? 5 * n : 1, sizeof *lb->plane);
+    if (!lb->cand || !lb->off || (s->ntris && !lb->plane)) {
         rtpi_lightbuf_free(lb, a);
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory for the light buffer");
     }
@@ -878,6 +913,9 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
     lb->ncand = nc;
     /* Filling the cells in ascending near order sorts every list. */
     qsort(lb->cand, nc, sizeof *lb->cand, lb_cmp);
+    if (lb->plane)
+        for (i = 0; i < nc; i++)
+            lb_plane(s, lb->cand[i].prim, light, S, lb->plane + 5 * i);
     /* The counting pass: every candidate projected, its runs of cells
        recorded, in parts of consecutive ranks on up to `threads` threads
        (the parts' runs, taken in order, are the one-thread pass's runs:
@@ -972,6 +1010,7 @@ uint32_t rtpi_lightbuf_occluder(const rtpi_lightbuf *lb, const rtp_scene *s,
 {
     size_t cell, k, end;
     double lim;
+    const double *pl;
     rtpi_hit h;
     if (!(ray->tmax > 0.0)) {
         /* The origin is at the light: the direction means nothing; ask
@@ -987,11 +1026,28 @@ uint32_t rtpi_lightbuf_occluder(const rtpi_lightbuf *lb, const rtp_scene *s,
     /* tmax = dist (1 - 1e-9): the segment reaches no farther than dist. */
     lim = ray->tmax * (1.0 + 2e-9) + lb->slack;
     end = lb->off[cell + 1];
+    /* the planes' test holds for origins within the scale (lb_plane) */
+    pl = lb->plane && fabs(ray->o.x) <= lb->scale && fabs(ray->o.y) <= lb->scale &&
+                 fabs(ray->o.z) <= lb->scale
+             ? lb->plane
+             : NULL;
     for (k = lb->off[cell]; k < end; k++) {
-        const rtpi_lb_cand *cd = &lb->cand[lb->ref[k]];
+        uint32_t rank = lb->ref[k];
+        const rtpi_lb_cand *cd = &lb->cand[rank];
         if (cd->near > lim)
             break; /* sorted: nothing farther on can reach the segment */
-        if (cd->prim != skip && rtpi_intersect_prim(s, cd->prim, ray, &h))
+        if (cd->prim == skip)
+            continue;
+        if (pl && pl[5 * rank + 4] != 0.0) {
+            /* a triangle with the light on one side of its plane: the
+               origin on that side too, the segment misses it (a floor
+               under the scene is in most cells' lists) */
+            const double *q = pl + 5 * (size_t)rank;
+            double so = q[0] * ray->o.x + q[1] * ray->o.y + q[2] * ray->o.z - q[3];
+            if (q[4] > 0.0 ? so > q[4] : so < q[4])
+                continue;
+        }
+        if (rtpi_intersect_prim(s, cd->prim, ray, &h))
             return cd->prim;
     }
     return RTPI_NONE;
@@ -1004,8 +1060,10 @@ void rtpi_lightbuf_free(rtpi_lightbuf *lb, const rtp_allocator *a)
     rtpi_free(a, lb->off);
     rtpi_free(a, lb->ref);
     rtpi_free(a, lb->cand);
+    rtpi_free(a, lb->plane);
     lb->off = lb->ref = NULL;
     lb->cand = NULL;
+    lb->plane = NULL;
 }
 
 /* -------------------------------------------------------- item buffer */

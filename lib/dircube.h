@@ -161,6 +161,13 @@ typedef struct rtpi_lightbuf {
     uint32_t *off;       /* w.ncells + 1 list starts into ref */
     uint32_t *ref;       /* candidate ranks, ascending within a cell */
     rtpi_lb_cand *cand;  /* by rank: ascending near */
+    /* by rank, 5 each, where the scene has triangles: a triangle's plane
+       n (unnormalised), n.p0, and t: 0, or where the light lies farther
+       than |t| from the plane on its side (the sign of t), |t| the
+       distance (times |n|) at which a shadow ray's origin on that side
+       too lets the segment miss it (see rtpi_lightbuf_occluder) */
+    double *plane;
+    double scale;        /* the scene's and light's largest |coordinate| */
     size_t nrefs, ncand;
 } rtpi_lightbuf;
 
