@@ -298,23 +298,38 @@ void rtpi_light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t n,
                      float *terms, float *coeffs)
 {
     const rtp_scene *s = c->s;
-    size_t k, nt = RTPI_TERMS(s->nlights);
+    const rtpi_light *L = &s->lights[light];
+    const rtpi_v3 lp = v3(L->pos[0], L->pos[1], L->pos[2]);
+    size_t k, nt = RTPI_TERMS(s->nlights), wi = light >> 5;
+    uint32_t bit = 1u << (light & 31);
     double a0 = 0.0, a1 = 0.0, a2 = 0.0;
     for (k = 0; k < n; k++) {
         const rtpi_cnode *nd = &nodes[k];
-        const uint32_t *ext = vis_ext ? vis_ext + k * c->vis_words : NULL;
         const rtpi_material *m = &s->mats[rtpi_prim_material(s, nd->prim)];
-        float *t = terms + k * nt;
+        float *t = terms + k * nt, *tl = t + 3 + 2 * light;
+        int visible = vis_ext ? (vis_ext[k * c->vis_words + wi] & bit) != 0
+                              : (int)((nd->vis >> light) & 1u);
         double d, sp, kd, ks, c0, c1, c2;
-        light_term(nv + 6 * k, v3(nd->p[0], nd->p[1], nd->p[2]), &s->lights[light],
-                   seen(nd, ext, light), m, t + 3 + 2 * light);
+        /* light_term's terms, with the light's position taken once */
+        tl[0] = tl[1] = 0.0f;
+        if (visible) {
+            const float *q = nv + 6 * k;
+            rtpi_v3 nn = v3(q[0], q[1], q[2]);
+            rtpi_v3 l = v3_norm(v3_sub(lp, v3(nd->p[0], nd->p[1], nd->p[2])));
+            double ndl = v3_dot(nn, l);
+            if (!(ndl <= 0.0)) { /* (light_geometry's test: a NaN goes on) */
+                double rv = v3_dot(v3_sub(v3_mul(nn, 2.0 * ndl), l), v3(q[3], q[4], q[5]));
+                tl[0] = (float)ndl;
+                tl[1] = rv > 0.0 && m->ks > 0.0f ? (float)pow(rv, m->shine) : 0.0f;
+            }
+        }
         /* coeffs_node's sum for this light, node by node
            in its order (depth first, reflected subtree first: the order
            they are stored in), leaving out the nodes it does not reach */
-        d = t[3 + 2 * light];
+        d = tl[0];
         if (w[k] == 0.0 || d == 0.0)
             continue;
-        sp = t[4 + 2 * light];
+        sp = tl[1];
         kd = w[k] * m->kd;
         ks = w[k] * m->ks;
         if (m->tex == RTPI_TEX_CHECKER) {
