@@ -497,12 +497,12 @@ static void edit_options(int spd, rtp_trace_options *o, rtp_eval_options *eo)
 /* The test scene recorded with edit_options and evaluated once into the
    image *re the edits then keep: 0 when the scene does not load (*t and
    *re NULL where recording or the evaluation failed, a check failing). */
-static int edit_start(int spd, rtp_scene **s, rtp_tree **t, rtp_trace_options *o,
-                      rtp_eval_options *eo, rtp_image **re)
+static int edit_start_on(const char *path, int spd, rtp_scene **s, rtp_tree **t,
+                         rtp_trace_options *o, rtp_eval_options *eo, rtp_image **re)
 {
     *t = NULL;
     *re = NULL;
-    *s = load("scenes/spheres.nff");
+    *s = load(path);
     if (!*s) {
         CHECK(*s != NULL);
         return 0;
@@ -511,6 +511,12 @@ static int edit_start(int spd, rtp_scene **s, rtp_tree **t, rtp_trace_options *o
     CHECK(rtp_record(*s, o, t, NULL, NULL, NULL) == RTP_OK);
     CHECK(*t && rtp_tree_eval(*t, eo, re, NULL, NULL) == RTP_OK);
     return 1;
+}
+
+static int edit_start(int spd, rtp_scene **s, rtp_tree **t, rtp_trace_options *o,
+                      rtp_eval_options *eo, rtp_image **re)
+{
+    return edit_start_on("scenes/spheres.nff", spd, s, t, o, eo, re);
 }
 
 /* Edits of one term of the image's linear form (a light's colour or
@@ -699,8 +705,9 @@ static void test_material_planes(void)
 /* The q of a material's first edit, from its nodes' list and the path
    weights the evaluation keeps (rtpi_nodes_diffuse), equals the descent
    of each sample's tree (rtpi_sample_diffuse) bit for bit, for every
-   material and sample of a scene with a mirror and glass. */
-static void test_material_q(void)
+   material and sample of a scene with a mirror and glass (two lights),
+   and of one with a single light (rtpi_nodes_diffuse's own loop). */
+static void material_q_on(const char *path)
 {
     rtp_scene *s;
     rtp_tree *t;
@@ -710,7 +717,7 @@ static void test_material_q(void)
     rtpi_shade_ctx sc;
     double cv[6 + 3 * 8];
     size_t m, i, checked = 0, differ = 0;
-    if (!edit_start(0, &s, &t, &o, &eo, &img))
+    if (!edit_start_on(path, 0, &s, &t, &o, &eo, &img))
         return;
     CHECK(t && t->mat_nodes && t->ev_w && t->scene->nlights <= 8);
     if (!t || !t->mat_nodes || !t->ev_w || t->scene->nlights > 8)
@@ -742,11 +749,18 @@ static void test_material_q(void)
             checked++;
         }
     }
-    CHECK_MSG(checked > 100 && differ == 0, "%zu of %zu samples' q differ", differ, checked);
+    CHECK_MSG(checked > 100 && differ == 0, "%s: %zu of %zu samples' q differ", path, differ,
+              checked);
 out:
     rtp_image_destroy(img);
     rtp_tree_destroy(t);
     rtp_scene_destroy(s);
+}
+
+static void test_material_q(void)
+{
+    material_q_on("scenes/spheres.nff");
+    material_q_on("scenes/checker.nff");
 }
 
 /* Colour edits of several terms at once and a long run moving between
