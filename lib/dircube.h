@@ -63,8 +63,9 @@ static inline int rtpi_dc_face(rtpi_v3 d, double *u, double *v)
     /* |c[other]| <= m, so u and v land in [-1, 1] exactly: a direction on
        a cube edge or corner maps to this face's edge cell. */
     inv = m > 0.0 ? 1.0 / m : 0.0;
-    *u = c[(a + 1) % 3] * inv;
-    *v = c[(a + 2) % 3] * inv;
+    /* (the other two axes in order a+1, a+2 mod 3, without the modulo) */
+    *u = (a == 0 ? c[1] : a == 1 ? c[2] : c[0]) * inv;
+    *v = (a == 0 ? c[2] : a == 1 ? c[0] : c[1]) * inv;
     return 2 * a + (c[a] < 0.0);
 }
 
