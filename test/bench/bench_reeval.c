@@ -85,7 +85,7 @@ static void run(const char *dir, const char *name, int size)
     static const char *const am[] = {"0.2", "0.05"};
     static const char *const mv[] = {"2,3,9", "-3,2,8"};
     unsigned long long sink = 0;
-    int i;
+    int i, saved;
     snprintf(path, sizeof path, "%s/spd/%s.nff", dir, name);
     if (rtp_scene_load(path, NULL, &s, NULL) != RTP_OK)
         return;
@@ -118,6 +118,8 @@ static void run(const char *dir, const char *name, int size)
         if (t0 < t_rec)
             t_rec = t0;
     }
+    snprintf(path, sizeof path, "build/bench/first-%s-%d.rtp", name, size);
+    saved = rtp_tree_write(t, path, NULL, NULL) == RTP_OK;
     rtp_tree_get_info(t, &ti);
     rtp_scene_get_info(s, &si);
     /* the second material (the first is often a background's), if any */
@@ -137,6 +139,27 @@ static void run(const char *dir, const char *name, int size)
     t_ib = eval_time(t, img, &eo, "light.0.pos", mv, 2);
     eo.shadows = RTP_SHADOWS_EXACT;
     t_stream = stream_time(t, &sink);
+    /* A term's first edit happens once a session, so the run above timed
+       it once, and this host's noise moved single runs by 2x: two more
+       sessions on the tree as read back from its file (written before
+       any edit), each the same edits up to the first kd edit, and the
+       best of the three. */
+    if (saved) {
+        for (i = 0; i < 2; i++) {
+            rtp_tree *c = NULL;
+            double l1 = HUGE_VAL, m1 = HUGE_VAL;
+            if (rtp_tree_read(path, NULL, &c, NULL) != RTP_OK)
+                break;
+            eval_time(c, img, &eo, NULL, NULL, 1);
+            eval_time2(c, img, &eo, "light.0.color", lc, 3, &l1);
+            eval_time(c, img, &eo, "ambient", am, 3);
+            eval_time2(c, img, &eo, mkd, kd, 3, &m1);
+            t_light1 = l1 < t_light1 ? l1 : t_light1;
+            t_mat1 = m1 < t_mat1 ? m1 : t_mat1;
+            rtp_tree_destroy(c);
+        }
+        remove(path);
+    }
     printf("| %s | %d | %.3f | %+.1f%% | %.1f | %.4f (%.0fx) | %.4f (%.0fx) | %.4f (%.0fx) | "
            "%.4f (%.0fx) | %.4f (%.0fx) | %.4f (%.0fx) | %.4f (%.0fx) | %.3f (%.0fx) | "
            "%.3f (%.0fx) | %.3f (%.0fx) | %.4f | %.1fx |\n",
@@ -171,7 +194,8 @@ int main(void)
     printf("512: SPD procedure (513x513 corner samples); 1024: 1024x1024 pixel centres. "
            "Edits on warm caches into one kept image (as --stream), best of 3; 'first eval' "
            "builds the caches; '1st' is the first edit of a term (light 0's colour, the "
-           "material's kd), which makes the plane(s) every further edit of it reuses; "
+           "material's kd), which makes the plane(s) every further edit of it reuses (best of "
+           "3 sessions); "
            "'ambient' follows the light edits (two colours then differ from the snapshot); "
            "'stream' reads the tree's bytes once (the floor), 'light/stream' is the light "
            "edit against it.\n\n");
