@@ -895,9 +895,7 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
     lb->scale = S;
     lb->cand = (rtpi_lb_cand *)rtpi_malloc_array(a, n ? n : 1, sizeof *lb->cand);
     lb->off = (uint32_t *)rtpi_calloc_array(a, ncells + 1, sizeof *lb->off);
-    if (s->ntris)
-        lb->plane = (double *)rtpi_malloc_array(a, n ? 5 * n : 1, sizeof *lb->plane);
-    if (!lb->cand || !lb->off || (s->ntris && !lb->plane)) {
+    if (!lb->cand || !lb->off) {
         rtpi_lightbuf_free(lb, a);
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory for the light buffer");
     }
@@ -913,9 +911,15 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
     lb->ncand = nc;
     /* Filling the cells in ascending near order sorts every list. */
     qsort(lb->cand, nc, sizeof *lb->cand, lb_cmp);
-    if (lb->plane)
+    if (s->ntris && nc) {
+        if (!(lb->plane = (double *)rtpi_malloc_array(a, 5 * nc, sizeof *lb->plane))) {
+            rtpi_lightbuf_free(lb, a);
+            return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0,
+                              "out of memory for the light buffer");
+        }
         for (i = 0; i < nc; i++)
             lb_plane(s, lb->cand[i].prim, light, S, lb->plane + 5 * i);
+    }
     /* The counting pass: every candidate projected, its runs of cells
        recorded, in parts of consecutive ranks on up to `threads` threads
        (the parts' runs, taken in order, are the one-thread pass's runs:

@@ -133,7 +133,9 @@ static int run_mode(const char *scene, const rtp_scene *s, const rtpi_kdtree *kd
         if (rtpi_lightbuf_build(s, lp, res, &a, &lb, NULL) == RTP_OK) {
             snprintf(extra, sizeof extra, "%.1f MB, %.2f candidates per cell",
                      ((double)(lb.w.ncells + 1) * 4.0 + (double)lb.nrefs * 4.0 +
-                      (double)lb.ncand * sizeof *lb.cand) / 1048576.0,
+                      (double)lb.ncand * sizeof *lb.cand +
+                      (lb.plane ? (double)lb.ncand * 5.0 * sizeof *lb.plane : 0.0)) /
+                         1048576.0,
                      (double)lb.nrefs / (double)(lb.w.ncells ? lb.w.ncells : 1));
             rtpi_lightbuf_free(&lb, &a);
         }
