@@ -48,12 +48,14 @@ typedef struct dc_ctx {
 
 /* ------------------------------------------------------ face geometry */
 
+/* The two axes after axis a, in order: a face's local x and y. */
+static const int dc_next[3][2] = {{1, 2}, {2, 0}, {0, 1}};
+
 static inline void dc_local(int f, const double q[3], double out[3])
 {
-    static const int next[3][2] = {{1, 2}, {2, 0}, {0, 1}};
     int a = f >> 1;
-    out[0] = q[next[a][0]];
-    out[1] = q[next[a][1]];
+    out[0] = q[dc_next[a][0]];
+    out[1] = q[dc_next[a][1]];
     out[2] = (f & 1) ? -q[a] : q[a];
 }
 
@@ -456,10 +458,9 @@ static int dc_faces_reached(const double (*pts)[3], int n, double lim)
            (every comparison below is then false) */
         mabs[a] = lo[a] > 0.0 ? lo[a] : hi[a] < 0.0 ? -hi[a] : 0.0;
     for (f = 0; f < 6; f++) {
-        static const int next[3][2] = {{1, 2}, {2, 0}, {0, 1}};
         int ax = f >> 1;
         double zmax = (f & 1) ? -lo[ax] : hi[ax], zl = lim * zmax;
-        if (zmax < 0.0 || mabs[next[ax][0]] > zl || mabs[next[ax][1]] > zl)
+        if (zmax < 0.0 || mabs[dc_next[ax][0]] > zl || mabs[dc_next[ax][1]] > zl)
             continue;
         live |= 1 << f;
     }

@@ -457,6 +457,22 @@ void rtpi_light_colors(const rtp_scene *s, double *cl);
 void rtpi_surface_from_point(const rtp_scene *s, uint32_t prim, rtpi_v3 p,
                              int want_uv, rtpi_surface *out);
 
+/* A triangle's geometric normal, and a sphere's outward one at p (its
+   visible side's is the reverse where r < 0): the expressions
+   rtpi_surface_at_ex and rtpi_surface_normals share. */
+static inline rtpi_v3 rtpi_tri_normal(const rtp_scene *s, const rtpi_tri *tr)
+{
+    rtpi_v3 p0 = v3_from_f(s->pos + 3 * (size_t)tr->v[0]);
+    rtpi_v3 p1 = v3_from_f(s->pos + 3 * (size_t)tr->v[1]);
+    rtpi_v3 p2 = v3_from_f(s->pos + 3 * (size_t)tr->v[2]);
+    return v3_norm(v3_cross(v3_sub(p1, p0), v3_sub(p2, p0)));
+}
+
+static inline rtpi_v3 rtpi_sphere_normal(const rtpi_sphere *sp, rtpi_v3 p)
+{
+    return v3_norm(v3_sub(p, v3_from_f(sp->c)));
+}
+
 /* The normals (ng, ns) and material rtpi_surface_from_point gives at the
    float position p on prim, without uv: for a sphere and a triangle
    without vertex normals by its own arithmetic, inline (a moved light asks
@@ -469,15 +485,12 @@ static inline uint32_t rtpi_surface_normals(const rtp_scene *s, uint32_t prim, r
     if (i < s->ntris) {
         const rtpi_tri *tr = &s->tris[i];
         if (tr->n[0] == RTPI_NONE) {
-            rtpi_v3 p0 = v3_from_f(s->pos + 3 * (size_t)tr->v[0]);
-            rtpi_v3 p1 = v3_from_f(s->pos + 3 * (size_t)tr->v[1]);
-            rtpi_v3 p2 = v3_from_f(s->pos + 3 * (size_t)tr->v[2]);
-            *ng = *ns = v3_norm(v3_cross(v3_sub(p1, p0), v3_sub(p2, p0)));
+            *ng = *ns = rtpi_tri_normal(s, tr);
             return tr->mat;
         }
     } else if ((i -= s->ntris) < s->nspheres) {
         const rtpi_sphere *sp = &s->spheres[i];
-        rtpi_v3 n = v3_norm(v3_sub(p, v3_from_f(sp->c)));
+        rtpi_v3 n = rtpi_sphere_normal(sp, p);
         if (sp->r < 0.0f)
             n = v3_mul(n, -1.0);
         *ng = *ns = n;

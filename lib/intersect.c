@@ -245,12 +245,9 @@ void rtpi_surface_at_ex(const rtp_scene *s, const rtpi_ray *ray,
     out->mat = 0;
     if (i < s->ntris) {
         const rtpi_tri *tr = &s->tris[i];
-        rtpi_v3 p0 = v3_from_f(s->pos + 3 * (size_t)tr->v[0]);
-        rtpi_v3 p1 = v3_from_f(s->pos + 3 * (size_t)tr->v[1]);
-        rtpi_v3 p2 = v3_from_f(s->pos + 3 * (size_t)tr->v[2]);
         double b0 = 1.0 - hit->u - hit->v;
         out->mat = tr->mat;
-        out->ng = v3_norm(v3_cross(v3_sub(p1, p0), v3_sub(p2, p0)));
+        out->ng = rtpi_tri_normal(s, tr);
         out->ns = out->ng;
         if (tr->n[0] != RTPI_NONE && tr->n[1] != RTPI_NONE &&
             tr->n[2] != RTPI_NONE) {
@@ -279,7 +276,7 @@ void rtpi_surface_at_ex(const rtp_scene *s, const rtpi_ray *ray,
     }
     if ((i -= s->ntris) < s->nspheres) {
         const rtpi_sphere *sp = &s->spheres[i];
-        rtpi_v3 n = v3_norm(v3_sub(out->p, v3_from_f(sp->c)));
+        rtpi_v3 n = rtpi_sphere_normal(sp, out->p);
         out->mat = sp->mat;
         /* Longitude around z from +x, latitude from -z (0) to +z (1). */
         if (want_uv) {

@@ -221,11 +221,16 @@ static int seen(const rtpi_cnode *nd, const uint32_t *ext, size_t i)
    cache repeats this arithmetic exactly. */
 /* n.l and the highlight's base r.v at a hit facing the light; 0 where
    the light is behind the surface. */
-static int light_geometry(const float *nv, rtpi_v3 p, const rtpi_light *L, double *ndl,
-                          double *rv)
+static inline rtpi_v3 light_pos(const rtpi_light *L)
+{
+    return v3(L->pos[0], L->pos[1], L->pos[2]);
+}
+
+static inline int light_geometry(const float *nv, rtpi_v3 p, rtpi_v3 lp, double *ndl,
+                                 double *rv)
 {
     rtpi_v3 n = v3(nv[0], nv[1], nv[2]), v = v3(nv[3], nv[4], nv[5]), l;
-    l = v3_norm(v3_sub(v3(L->pos[0], L->pos[1], L->pos[2]), p));
+    l = v3_norm(v3_sub(lp, p));
     *ndl = v3_dot(n, l);
     if (*ndl <= 0.0)
         return 0;
@@ -234,12 +239,12 @@ static int light_geometry(const float *nv, rtpi_v3 p, const rtpi_light *L, doubl
     return 1;
 }
 
-static void light_term(const float *nv, rtpi_v3 p, const rtpi_light *L, int visible,
-                       const rtpi_material *m, float *out)
+static inline void light_term(const float *nv, rtpi_v3 p, rtpi_v3 lp, int visible,
+                              const rtpi_material *m, float *out)
 {
     double ndl, rv;
     out[0] = out[1] = 0.0f;
-    if (!visible || !light_geometry(nv, p, L, &ndl, &rv))
+    if (!visible || !light_geometry(nv, p, lp, &ndl, &rv))
         return;
     out[0] = (float)ndl;
     /* no highlight to weigh where ks is 0 (an edit making it non-zero
@@ -279,7 +284,7 @@ static void terms_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t 
     t[1] = (float)tex[1];
     t[2] = (float)tex[2];
     for (i = 0; i < nl; i++)
-        light_term(nv, p, &s->lights[i], seen(nd, ext, i), m, t + 3 + 2 * i);
+        light_term(nv, p, light_pos(&s->lights[i]), seen(nd, ext, i), m, t + 3 + 2 * i);
     if (nd->link & RTPI_L_REFL)
         terms_node(c, nodes, idx + 1, vis_ext, p, terms, nv_out);
     if (nd->link & RTPI_L_REFR)
@@ -298,8 +303,7 @@ void rtpi_light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t n,
                      float *terms, float *coeffs)
 {
     const rtp_scene *s = c->s;
-    const rtpi_light *L = &s->lights[light];
-    const rtpi_v3 lp = v3(L->pos[0], L->pos[1], L->pos[2]);
+    const rtpi_v3 lp = light_pos(&s->lights[light]);
     size_t k, nt = RTPI_TERMS(s->nlights), wi = light >> 5;
     uint32_t bit = 1u << (light & 31);
     double a0 = 0.0, a1 = 0.0, a2 = 0.0;
@@ -310,19 +314,8 @@ void rtpi_light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t n,
         int visible = vis_ext ? (vis_ext[k * c->vis_words + wi] & bit) != 0
                               : (int)((nd->vis >> light) & 1u);
         double d, sp, kd, ks, c0, c1, c2;
-        /* light_term's terms, with the light's position taken once */
-        tl[0] = tl[1] = 0.0f;
-        if (visible) {
-            const float *q = nv + 6 * k;
-            rtpi_v3 nn = v3(q[0], q[1], q[2]);
-            rtpi_v3 l = v3_norm(v3_sub(lp, v3(nd->p[0], nd->p[1], nd->p[2])));
-            double ndl = v3_dot(nn, l);
-            if (!(ndl <= 0.0)) { /* (light_geometry's test: a NaN goes on) */
-                double rv = v3_dot(v3_sub(v3_mul(nn, 2.0 * ndl), l), v3(q[3], q[4], q[5]));
-                tl[0] = (float)ndl;
-                tl[1] = rv > 0.0 && m->ks > 0.0f ? (float)pow(rv, m->shine) : 0.0f;
-            }
-        }
+        /* (the light's position taken once: light_term inline) */
+        light_term(nv + 6 * k, v3(nd->p[0], nd->p[1], nd->p[2]), lp, visible, m, tl);
         /* coeffs_node's sum for this light, node by node
            in its order (depth first, reflected subtree first: the order
            they are stored in), leaving out the nodes it does not reach */
@@ -365,7 +358,7 @@ void rtpi_material_light_terms(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
             continue;
         p = v3(nd->p[0], nd->p[1], nd->p[2]);
         for (i = 0; i < nl; i++)
-            light_term(nv + 6 * k, p, &s->lights[i], seen(nd, ext, i), m,
+            light_term(nv + 6 * k, p, light_pos(&s->lights[i]), seen(nd, ext, i), m,
                        terms + k * nt + 3 + 2 * i);
     }
 }
@@ -389,7 +382,8 @@ void rtpi_material_highlights(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, 
         for (i = 0; i < nl; i++) {
             double ndl, rv;
             /* light_term's terms, up to the power */
-            if (!seen(nd, ext, i) || !light_geometry(nv + 6 * k, p, &s->lights[i], &ndl, &rv) ||
+            if (!seen(nd, ext, i) ||
+                !light_geometry(nv + 6 * k, p, light_pos(&s->lights[i]), &ndl, &rv) ||
                 !(rv > 0.0))
                 continue;
             idx[*count] = (node0 + k) * nt + 4 + 2 * i;
