@@ -778,13 +778,9 @@ static int combine_row(void *ctx, int y)
    pixels, at their own place. */
 #define PK_ROWS 16
 
-
-/* q of a sample without the material. */
-static const float pk_zero[3] = {0.0f, 0.0f, 0.0f};
-
 /* The rest P_s of sample k into out (3 floats): the material's diffuse
-   part x q taken off the whole (q: the sample's, pk_zero where the
-   material is not). */
+   part x q taken off the whole (q: the sample's, 0 where the material is
+   not). */
 static void pk_rest_one(const eval_ctx *e, size_t k, const float *q, float *out)
 {
     size_t nc = RTPI_COEFFS(e->t->scene->nlights);
@@ -940,18 +936,22 @@ static int pk_img_chunk(void *ctx, int chunk)
     if (y1 > t->height)
         y1 = t->height;
     srows = (size_t)(y1 - y0) + (spd ? 1u : 0u);
-    /* listed: 1 + the sample's place in the list (its q), or 0 */
+    /* listed: the sample's place in the list (its q), or nlist, whose
+       entry in pk_q is 0 (so that a pixel's four corners are read
+       without a test each; a pixel of its own per sample is read only
+       where its sample is listed) */
     listed = (uint32_t *)(void *)e->rest;
     touched = (unsigned char *)(listed + (PK_ROWS + 1) * nx);
-    if (!e->count_pass)
-        memset(listed, 0, srows * nx * sizeof *listed);
+    if (!e->count_pass && spd)
+        for (i = 0; i < srows * nx; i++)
+            listed[i] = (uint32_t)e->nlist;
     memset(touched, 0, (size_t)(y1 - y0) * w);
     lo = lower_bound(e->list, e->nlist, (size_t)y0 * nx);
     hi = lower_bound(e->list, e->nlist, ((size_t)y0 + srows) * nx);
     for (i = lo, sy = 0, rs = 0; i < hi; i++) {
         size_t l = e->list[i] - (size_t)y0 * nx, sx;
         if (!e->count_pass)
-            listed[l] = (uint32_t)i + 1u;
+            listed[l] = (uint32_t)i;
         if (!spd) {
             touched[l] = 1; /* (nx = w) */
             continue;
@@ -1011,15 +1011,15 @@ static int pk_img_chunk(void *ctx, int chunk)
             b = img + 3 * (p + (size_t)x);
             if (spd) {
                 /* pk_build_chunk's sums: (x, y), (x+1, y), (x, y+1), (x+1, y+1) */
-                const float *qa = listed[l] ? pq + 3 * (listed[l] - 1u) : pk_zero;
-                const float *qb = listed[l + 1] ? pq + 3 * (listed[l + 1] - 1u) : pk_zero;
-                const float *qc = listed[l + nx] ? pq + 3 * (listed[l + nx] - 1u) : pk_zero;
-                const float *qd = listed[l + nx + 1] ? pq + 3 * (listed[l + nx + 1] - 1u) : pk_zero;
+                const float *qa = pq + 3 * (size_t)listed[l];
+                const float *qb = pq + 3 * (size_t)listed[l + 1];
+                const float *qc = pq + 3 * (size_t)listed[l + nx];
+                const float *qd = pq + 3 * (size_t)listed[l + nx + 1];
                 for (c = 0; c < 3; c++)
                     pk[3 + c] =
                         (float)(0.25 * ((((double)qa[c] + qb[c]) + qc[c]) + qd[c]));
             } else {
-                const float *q = pq + 3 * (listed[l] - 1u);
+                const float *q = pq + 3 * (size_t)listed[l];
                 pk[3] = q[0];
                 pk[4] = q[1];
                 pk[5] = q[2];
@@ -1537,8 +1537,9 @@ static int pk_alloc(rtp_tree *t, int q)
             &t->alloc, (size_t)(t->height + PK_ROWS - 1) / PK_ROWS + 1, sizeof *t->pk_off);
     if (!t->pk_off)
         return 0;
+    /* (one more: pk_img_chunk's zero entry after a list of every sample) */
     if (q && t->pk && !t->pk_q)
-        t->pk_q = (float *)rtpi_malloc_array(&t->alloc, (size_t)t->nx * t->ny,
+        t->pk_q = (float *)rtpi_malloc_array(&t->alloc, (size_t)t->nx * t->ny + 1,
                                              3 * sizeof *t->pk_q);
     return t->pk && (!q || t->pk_q); /* else: the full combine needs no more memory */
 }
@@ -2348,6 +2349,8 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                     e[i].q_by_list = part;
                 rtpi_parallel_rows((int)((e[0].nlist + 255) / 256), nthreads, ctx, pk_q_chunk,
                                    NULL, NULL);
+                if (part) /* the zero entry: q where no listed sample is */
+                    memset(t->pk_q + 3 * e[0].nlist, 0, 3 * sizeof *t->pk_q);
                 if (pk_build(t, e, ctx, nthreads, part)) {
                     t->pk_term = (int)(2 + nl + mt) + 1;
                     t->pk_part = part;
