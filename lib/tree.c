@@ -464,6 +464,10 @@ typedef struct eval_ctx {
     int nonfinite;            /* pk_put met a plane value that is not finite */
     float *rest;              /* pk_build_chunk, pk_img_chunk: scratch */
     int count_pass;           /* pk_img_chunk: count the band's pixels */
+    unsigned char *marks;     /* pk_img_chunk with corner samples: every
+                                 pixel's mark, image-wide, kept from the
+                                 counting pass for the filling one (NULL:
+                                 each pass marks its band anew) */
     int coef_bad;             /* a coefficient made was not finite */
     unsigned long long combined; /* light_row: samples it combined */
     int q_by_list;            /* pk_q_chunk: q at the sample's place in the list */
@@ -932,7 +936,7 @@ static int pk_img_chunk(void *ctx, int chunk)
     float *pc, pk[6];
     uint32_t *listed, *nz;
     unsigned char *touched;
-    int bad = 0;
+    int bad = 0, kept;
     if (y1 > t->height)
         y1 = t->height;
     srows = (size_t)(y1 - y0) + (spd ? 1u : 0u);
@@ -941,14 +945,20 @@ static int pk_img_chunk(void *ctx, int chunk)
        without a test each; a pixel of its own per sample is read only
        where its sample is listed) */
     listed = (uint32_t *)(void *)e->rest;
-    touched = (unsigned char *)(listed + (PK_ROWS + 1) * nx);
+    touched = e->marks ? e->marks + (size_t)y0 * w
+                       : (unsigned char *)(listed + (PK_ROWS + 1) * nx);
+    kept = e->marks && !e->count_pass;
     if (!e->count_pass && spd)
         for (i = 0; i < srows * nx; i++)
             listed[i] = (uint32_t)e->nlist;
-    memset(touched, 0, (size_t)(y1 - y0) * w);
+    if (!kept)
+        memset(touched, 0, (size_t)(y1 - y0) * w);
     lo = lower_bound(e->list, e->nlist, (size_t)y0 * nx);
     hi = lower_bound(e->list, e->nlist, ((size_t)y0 + srows) * nx);
-    for (i = lo, sy = 0, rs = 0; i < hi; i++) {
+    if (kept) /* the counting pass marked the pixels: the q's places only */
+        for (i = lo; i < hi; i++)
+            listed[e->list[i] - (size_t)y0 * nx] = (uint32_t)i;
+    for (i = lo, sy = 0, rs = 0; i < hi && !kept; i++) {
         size_t l = e->list[i] - (size_t)y0 * nx, sx;
         if (!e->count_pass)
             listed[l] = (uint32_t)i;
@@ -1060,6 +1070,7 @@ static int pk_img_chunk(void *ctx, int chunk)
 static int pk_build(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, int part)
 {
     int i, nb = (t->height + PK_ROWS - 1) / PK_ROWS, ok = 1;
+    unsigned char *marks = NULL;
     /* two sample rows' rest, or with `part` a band's marks */
     size_t nx = (size_t)t->nx,
            bytes = part ? (PK_ROWS + 1) * nx * sizeof(uint32_t) + PK_ROWS * (size_t)t->width
@@ -1095,8 +1106,13 @@ static int pk_build(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, in
                 lo = hi;
             }
         } else {
-            for (i = 0; i < nthreads; i++)
+            /* (the marks kept for the filling pass where memory allows) */
+            marks = (unsigned char *)rtpi_malloc_array(&t->alloc, (size_t)t->width,
+                                                       (size_t)t->height);
+            for (i = 0; i < nthreads; i++) {
                 e[i].count_pass = 1;
+                e[i].marks = marks;
+            }
             rtpi_parallel_rows(nb, nthreads, ctx, pk_img_chunk, NULL, NULL);
             for (i = 0; i < nb; i++) {
                 t->pk_off[i] = off;
@@ -1107,6 +1123,9 @@ static int pk_build(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, in
         }
     }
     rtpi_parallel_rows(nb, nthreads, ctx, part ? pk_img_chunk : pk_build_chunk, NULL, NULL);
+    for (i = 0; i < nthreads; i++)
+        e[i].marks = NULL;
+    rtpi_free(&t->alloc, marks);
     for (i = 0; i < nthreads; i++) {
         ok &= !e[i].nonfinite;
         e[i].nonfinite = 0;
