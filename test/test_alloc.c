@@ -290,6 +290,8 @@ static rtp_status op_record(ctx *c)
 }
 
 /* Records the NFF scene's trees unarmed. */
+static int tree_spd; /* tree(): SPD's corner samples */
+
 static rtp_tree *tree(ctx *c)
 {
     rtp_scene *s = scene(c);
@@ -297,6 +299,13 @@ static rtp_tree *tree(ctx *c)
     rtp_trace_options o = small_opt();
     if (!s)
         return NULL;
+    if (tree_spd) { /* a 6x5 region of SPD's 512x512 */
+        o.spd = 1;
+        o.region[0] = 253;
+        o.region[1] = 253;
+        o.region[2] = 259;
+        o.region[3] = 258;
+    }
     if (rtp_record(s, &o, &t, NULL, NULL, &c->err) != RTP_OK)
         t = NULL;
     rtp_scene_destroy(s);
@@ -392,7 +401,9 @@ static rtp_status op_tree_eval_edited(ctx *c)
 
 /* A stream of edits on warm caches, into one kept image: what allocates
    the one-term planes (light colour, ambient, a material's kd and colour),
-   the highlight lists (consecutive shine edits) and the kept samples. */
+   the highlight lists (consecutive shine edits) and the kept samples.
+   Each image, also where a failure was tolerated (an optional cache or
+   scratch left out), must be an uncached twin tree's. */
 static const char *const warm_edits[][2] = {
     {"light.lamp.color", "1,0.5,0"}, {"light.lamp.color", "0.5,1,0"},
     {"ambient", "0.2"},              {"mat.glass.kd", "0.3"},
@@ -403,30 +414,59 @@ static const char *const warm_edits[][2] = {
 
 static rtp_status op_tree_eval_warm(ctx *c)
 {
-    rtp_tree *t = tree(c);
+    rtp_tree *t = tree(c), *twin = tree(c);
     rtp_image *img = NULL;
-    rtp_eval_options eo;
+    rtp_eval_options eo, fo;
     rtp_status st;
     size_t i;
-    if (!t)
+    if (!t || !twin) {
+        rtp_tree_destroy(t);
+        rtp_tree_destroy(twin);
         return RTP_ERR_IO;
+    }
     memset(&eo, 0, sizeof eo);
     eo.incremental = 1;
+    memset(&fo, 0, sizeof fo);
+    fo.no_cache = 1; /* the twin: every image from scratch */
     if (rtp_tree_eval(t, &eo, &img, NULL, &c->err) != RTP_OK) {
         fprintf(stderr, "setup: %s\n", c->err.message);
         rtp_tree_destroy(t);
+        rtp_tree_destroy(twin);
         return RTP_ERR_IO;
     }
-    ARM(c);
     st = RTP_OK;
     for (i = 0; i < sizeof warm_edits / sizeof *warm_edits && st == RTP_OK; i++) {
+        rtp_image *ref = NULL;
+        rtp_diff_stats d;
+        ARM(c);
         st = rtp_tree_set(t, warm_edits[i][0], warm_edits[i][1], &c->err);
         if (st == RTP_OK)
             st = rtp_tree_eval_into(t, &eo, img, NULL, &c->err);
+        DISARM(c);
+        if (st != RTP_OK)
+            break;
+        /* each image, also where a failure was tolerated, the twin's */
+        CHECK(rtp_tree_set(twin, warm_edits[i][0], warm_edits[i][1], NULL) == RTP_OK &&
+              rtp_tree_eval(twin, &fo, &ref, NULL, NULL) == RTP_OK);
+        CHECK_MSG(ref && rtp_image_diff(img, ref, 0.0, &d, NULL) == RTP_OK && d.max_abs <= 1e-5,
+                  "%s=%s: %g off the uncached twin", warm_edits[i][0], warm_edits[i][1],
+                  ref ? d.max_abs : -1.0);
+        rtp_image_destroy(ref);
     }
-    DISARM(c);
     rtp_image_destroy(img);
     rtp_tree_destroy(t);
+    rtp_tree_destroy(twin);
+    return st;
+}
+
+/* The same on a tree of SPD's corner samples (material planes from the
+   kept image count and mark the pixels first). */
+static rtp_status op_tree_eval_warm_spd(ctx *c)
+{
+    rtp_status st;
+    tree_spd = 1;
+    st = op_tree_eval_warm(c);
+    tree_spd = 0;
     return st;
 }
 
@@ -555,6 +595,7 @@ SWEEP(tree_eval)
 SWEEP(tree_set)
 SWEEP(tree_eval_edited)
 SWEEP(tree_eval_warm)
+SWEEP(tree_eval_warm_spd)
 SWEEP(image_diff)
 SWEEP(heatmap)
 
@@ -615,6 +656,7 @@ int main(void)
     RUN(test_tree_set);
     RUN(test_tree_eval_edited);
     RUN(test_tree_eval_warm);
+    RUN(test_tree_eval_warm_spd);
     RUN(test_image_io);
     RUN(test_image_diff);
     RUN(test_heatmap);
