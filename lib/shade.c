@@ -252,6 +252,19 @@ static inline void light_term(const float *nv, rtpi_v3 p, rtpi_v3 lp, int visibl
     out[1] = rv > 0.0 && m->ks > 0.0f ? (float)pow(rv, m->shine) : 0.0f;
 }
 
+/* c_obj at a node: its texture factor t[0..2] and the material's
+   colours now (coeffs_node and rtpi_light_redo). */
+static inline void obj_colour(const rtpi_material *m, const float *t, double cobj[3])
+{
+    int k;
+    if (m->tex == RTPI_TEX_CHECKER)
+        for (k = 0; k < 3; k++)
+            cobj[k] = t[k] * (double)m->color[k] + (1.0 - t[k]) * (double)m->color2[k];
+    else
+        for (k = 0; k < 3; k++)
+            cobj[k] = t[k] * (double)m->color[k];
+}
+
 /* Step 1 for node idx seen from `from`; recurses into its subtrees. */
 static void terms_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t idx,
                        const uint32_t *vis_ext, rtpi_v3 from, float *terms, float *nv_out)
@@ -313,7 +326,7 @@ void rtpi_light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t n,
         float *t = terms + k * nt, *tl = t + 3 + 2 * light;
         int visible = vis_ext ? (vis_ext[k * c->vis_words + wi] & bit) != 0
                               : (int)((nd->vis >> light) & 1u);
-        double d, sp, kd, ks, c0, c1, c2;
+        double d, sp, kd, ks, cobj[3];
         /* (the light's position taken once: light_term inline) */
         light_term(nv + 6 * k, v3(nd->p[0], nd->p[1], nd->p[2]), lp, visible, m, tl);
         /* coeffs_node's sum for this light, node by node
@@ -325,18 +338,10 @@ void rtpi_light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t n,
         sp = tl[1];
         kd = w[k] * m->kd;
         ks = w[k] * m->ks;
-        if (m->tex == RTPI_TEX_CHECKER) {
-            c0 = t[0] * (double)m->color[0] + (1.0 - t[0]) * (double)m->color2[0];
-            c1 = t[1] * (double)m->color[1] + (1.0 - t[1]) * (double)m->color2[1];
-            c2 = t[2] * (double)m->color[2] + (1.0 - t[2]) * (double)m->color2[2];
-        } else {
-            c0 = t[0] * (double)m->color[0];
-            c1 = t[1] * (double)m->color[1];
-            c2 = t[2] * (double)m->color[2];
-        }
-        a0 += kd * c0 * d + ks * sp;
-        a1 += kd * c1 * d + ks * sp;
-        a2 += kd * c2 * d + ks * sp;
+        obj_colour(m, t, cobj);
+        a0 += kd * cobj[0] * d + ks * sp;
+        a1 += kd * cobj[1] * d + ks * sp;
+        a2 += kd * cobj[2] * d + ks * sp;
     }
     coeffs[6 + 3 * light] = (float)a0;
     coeffs[6 + 3 * light + 1] = (float)a1;
@@ -408,11 +413,7 @@ static void coeffs_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t
     int k;
     if (wout)
         wout[idx] = w;
-    /* c_obj from the texture factor and the material's colours now */
-    for (k = 0; k < 3; k++)
-        cobj[k] = m->tex == RTPI_TEX_CHECKER
-                      ? t[k] * (double)m->color[k] + (1.0 - t[k]) * (double)m->color2[k]
-                      : t[k] * (double)m->color[k];
+    obj_colour(m, t, cobj);
     for (k = 0; k < 3; k++)
         acc[3 + k] += kd * cobj[k]; /* ambient: kd c_obj */
     for (i = 0; i < nl; i++) {
