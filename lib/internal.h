@@ -445,8 +445,54 @@ void rtpi_sample_diffuse(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
    one sample's nodes of that material), with terms and the path weights w
    (rtpi_sample_coeffs') indexed by node: bit for bit rtpi_sample_diffuse,
    without descending the sample's tree. */
-void rtpi_nodes_diffuse(const rtpi_shade_ctx *c, const uint32_t *idx, size_t n,
-                        const float *terms, const double *w, const double *cv, double q[3]);
+/* (inline: the first edit of a material calls it once a sample) */
+static inline void rtpi_nodes_diffuse(const rtpi_shade_ctx *c, const uint32_t *idx, size_t n,
+                        const float *terms, const double *w, const double *cv, double q[3])
+{
+    size_t nl = c->s->nlights, nt = RTPI_TERMS(nl), j, i;
+    double q0 = 0.0, q1 = 0.0, q2 = 0.0;
+    /* diffuse_node's operations on the listed nodes (the material's), in
+       its order (depth first, reflected subtree first: the order they are
+       stored in); it does not reach the nodes of weight 0 */
+    if (nl == 1) {
+        /* one light (a third of the SPD scenes): the same sums without
+           the loop over lights */
+        const double a0 = cv[3], a1 = cv[4], a2 = cv[5], c0 = cv[6], c1 = cv[7], c2 = cv[8];
+        for (j = 0; j < n; j++) {
+            const float *t = terms + (size_t)idx[j] * nt;
+            double wj = w[idx[j]], d;
+            if (wj == 0.0)
+                continue;
+            d = t[3];
+            q0 += wj * t[0] * (a0 + d * c0);
+            q1 += wj * t[1] * (a1 + d * c1);
+            q2 += wj * t[2] * (a2 + d * c2);
+        }
+        q[0] = q0;
+        q[1] = q1;
+        q[2] = q2;
+        return;
+    }
+    for (j = 0; j < n; j++) {
+        const float *t = terms + (size_t)idx[j] * nt;
+        const double *cl = cv + 6;
+        double l0 = cv[3], l1 = cv[4], l2 = cv[5], wj = w[idx[j]];
+        if (wj == 0.0)
+            continue;
+        for (i = 0; i < nl; i++, cl += 3) {
+            double d = t[3 + 2 * i];
+            l0 += d * cl[0];
+            l1 += d * cl[1];
+            l2 += d * cl[2];
+        }
+        q0 += wj * t[0] * l0;
+        q1 += wj * t[1] * l1;
+        q2 += wj * t[2] * l2;
+    }
+    q[0] = q0;
+    q[1] = q1;
+    q[2] = q2;
+}
 /* cl: 3 per light: colour * light scale, 0 when off (rtpi_light_colors). */
 void rtpi_combine(const rtp_scene *s, const double *cl, const float *coeffs,
                   float rgb[3]);

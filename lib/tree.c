@@ -470,7 +470,8 @@ typedef struct eval_ctx {
                                  each pass marks its band anew) */
     int coef_bad;             /* a coefficient made was not finite */
     unsigned long long combined; /* light_row: samples it combined */
-    int q_by_list;            /* pk_q_chunk: q at the sample's place in the list */
+    int q_by_list;            /* pk_q_chunk: q at 1 + the sample's place in the
+                                 list (entry 0: a zero q) */
     size_t rest_bytes;
     double kmax[3];           /* cp_plane_chunk: largest |K| per channel */
 } eval_ctx;
@@ -930,38 +931,39 @@ static int pk_img_chunk(void *ctx, int chunk)
     rtp_tree *t = e->t;
     size_t w = (size_t)t->width, nx = (size_t)t->nx, n = 0, i, lo, hi, srows, sy, rs;
     int y0 = chunk * PK_ROWS, y1 = y0 + PK_ROWS, y, x, c, spd = t->spd;
-    const float *img = e->pixels, *pq = t->pk_q;
+    const float *img = e->pixels, *pq = t->pk_q + 3; /* (pk_q_chunk's q_by_list) */
     const double xo[3] = {e->xold[0], e->xold[1], e->xold[2]};
-    double mp = 0.0, mk = 0.0; /* the band's largest |P| and |xold K| */
-    float *pc, pk[6];
-    uint32_t *listed, *nz;
+    const double xo0 = xo[0], xo1 = xo[1], xo2 = xo[2];
+    float *pc, sum = 0.0f, bmax = 0.0f, kmax = 0.0f; /* over the pixels kept: the sum of
+                                                         B and K, the largest |B| and |K| */
+    int32_t *listed;
+    uint32_t *nz;
     unsigned char *touched;
     int bad = 0, kept;
     if (y1 > t->height)
         y1 = t->height;
     srows = (size_t)(y1 - y0) + (spd ? 1u : 0u);
-    /* listed: the sample's place in the list (its q), or nlist, whose
-       entry in pk_q is 0 (so that a pixel's four corners are read
-       without a test each; a pixel of its own per sample is read only
-       where its sample is listed) */
-    listed = (uint32_t *)(void *)e->rest;
+    /* listed: the sample's place in the list (its q at pq), or -1, whose
+       entry is 0 (so that a pixel's four corners are read without a test
+       each; a pixel of its own per sample is read only where its sample
+       is listed) */
+    listed = (int32_t *)(void *)e->rest;
     touched = e->marks ? e->marks + (size_t)y0 * w
                        : (unsigned char *)(listed + (PK_ROWS + 1) * nx);
     kept = e->marks && !e->count_pass;
-    if (!e->count_pass && spd)
-        for (i = 0; i < srows * nx; i++)
-            listed[i] = (uint32_t)e->nlist;
+    if (!e->count_pass && spd) /* (-1: every byte 0xff, int32_t being two's complement) */
+        memset(listed, 0xff, srows * nx * sizeof *listed);
     if (!kept)
         memset(touched, 0, (size_t)(y1 - y0) * w);
     lo = lower_bound(e->list, e->nlist, (size_t)y0 * nx);
     hi = lower_bound(e->list, e->nlist, ((size_t)y0 + srows) * nx);
     if (kept) /* the counting pass marked the pixels: the q's places only */
         for (i = lo; i < hi; i++)
-            listed[e->list[i] - (size_t)y0 * nx] = (uint32_t)i;
+            listed[e->list[i] - (size_t)y0 * nx] = (int32_t)i;
     for (i = lo, sy = 0, rs = 0; i < hi && !kept; i++) {
         size_t l = e->list[i] - (size_t)y0 * nx, sx;
         if (!e->count_pass)
-            listed[l] = (uint32_t)i;
+            listed[l] = (int32_t)i;
         if (!spd) {
             touched[l] = 1; /* (nx = w) */
             continue;
@@ -1006,9 +1008,12 @@ static int pk_img_chunk(void *ctx, int chunk)
     for (y = y0; y < y1; y++) {
         size_t ly = (size_t)(y - y0), p = (size_t)y * w;
         const unsigned char *tr = touched + ly * w;
+        const int32_t *lr = listed + ly * nx;
         for (x = 0; x < t->width; x++) {
-            size_t l;
             const float *b;
+            float k0, k1, k2, *o;
+            double x0, x1, x2;
+            float p0, p1, p2;
             uint64_t word;
             if (!tr[x]) {
                 /* most of a row is not touched: 8 marks at a time */
@@ -1017,47 +1022,73 @@ static int pk_img_chunk(void *ctx, int chunk)
                 if (x >= t->width || !tr[x])
                     continue;
             }
-            l = ly * nx + (size_t)x;
             b = img + 3 * (p + (size_t)x);
             if (spd) {
                 /* pk_build_chunk's sums: (x, y), (x+1, y), (x, y+1), (x+1, y+1) */
-                const float *qa = pq + 3 * (size_t)listed[l];
-                const float *qb = pq + 3 * (size_t)listed[l + 1];
-                const float *qc = pq + 3 * (size_t)listed[l + nx];
-                const float *qd = pq + 3 * (size_t)listed[l + nx + 1];
-                for (c = 0; c < 3; c++)
-                    pk[3 + c] =
-                        (float)(0.25 * ((((double)qa[c] + qb[c]) + qc[c]) + qd[c]));
+                const float *qa = pq + 3 * (ptrdiff_t)lr[x];
+                const float *qb = pq + 3 * (ptrdiff_t)lr[x + 1];
+                const float *qc = pq + 3 * (ptrdiff_t)lr[x + nx];
+                const float *qd = pq + 3 * (ptrdiff_t)lr[x + nx + 1];
+                k0 = (float)(0.25 * ((((double)qa[0] + qb[0]) + qc[0]) + qd[0]));
+                k1 = (float)(0.25 * ((((double)qa[1] + qb[1]) + qc[1]) + qd[1]));
+                k2 = (float)(0.25 * ((((double)qa[2] + qb[2]) + qc[2]) + qd[2]));
             } else {
-                const float *q = pq + 3 * (size_t)listed[l];
-                pk[3] = q[0];
-                pk[4] = q[1];
-                pk[5] = q[2];
+                const float *q = pq + 3 * (ptrdiff_t)lr[x];
+                k0 = q[0];
+                k1 = q[1];
+                k2 = q[2];
             }
             /* (where K is 0 the pixel stays B: nothing to keep) */
-            if (pk[3] != 0.0f || pk[4] != 0.0f || pk[5] != 0.0f) {
-                float sum = 0.0f;
-                for (c = 0; c < 3; c++) {
-                    double kx = fabs(xo[c] * pk[3 + c]);
-                    pk[c] = (float)((double)b[c] - xo[c] * pk[3 + c]);
-                    mp = fabs(pk[c]) > mp ? fabs(pk[c]) : mp;
-                    mk = kx > mk ? kx : mk;
-                    sum += pk[c] + pk[3 + c];
-                }
-                /* a NaN or infinity shows in the sum (or a sum beyond
-                   the float range: the full path then, as for those) */
-                bad |= !(fabsf(sum) <= FLT_MAX);
-                memcpy(pc + 6 * n, pk, sizeof pk);
-                nz[n++] = (uint32_t)(p + (size_t)x);
-            }
+            if (k0 == 0.0f && k1 == 0.0f && k2 == 0.0f)
+                continue;
+            x0 = xo0 * k0;
+            x1 = xo1 * k1;
+            x2 = xo2 * k2;
+            p0 = (float)((double)b[0] - x0);
+            p1 = (float)((double)b[1] - x1);
+            p2 = (float)((double)b[2] - x2);
+            /* (for the band's bound below) */
+            sum += (b[0] + b[1] + b[2]) + (k0 + k1 + k2);
+            bmax = fabsf(b[0]) > bmax ? fabsf(b[0]) : bmax;
+            bmax = fabsf(b[1]) > bmax ? fabsf(b[1]) : bmax;
+            bmax = fabsf(b[2]) > bmax ? fabsf(b[2]) : bmax;
+            kmax = fabsf(k0) > kmax ? fabsf(k0) : kmax;
+            kmax = fabsf(k1) > kmax ? fabsf(k1) : kmax;
+            kmax = fabsf(k2) > kmax ? fabsf(k2) : kmax;
+            o = pc + 6 * n;
+            o[0] = p0;
+            o[1] = p1;
+            o[2] = p2;
+            o[3] = k0;
+            o[4] = k1;
+            o[5] = k2;
+            nz[n++] = (uint32_t)(p + (size_t)x);
         }
     }
-    /* pk_bad per pixel only where the band's bound leaves it open:
-       |P| + 2 |xold K| <= mp + 2 mk <= 8 <= CP_SPAN max(|P|, 2) holds
-       for every pixel below it */
-    if (!(mp + 2.0 * mk <= 2.0 * CP_SPAN))
-        for (i = 0; i < n; i++)
-            bad |= pk_bad(xo, pc + 6 * i);
+    /* Each pixel's pk_bad test, and a finite sum of its P and K, hold
+       where |P| + 2 |xold K| <= 8 <= CP_SPAN max(|P|, 2) and |K| <= 1e30
+       in every channel.  With X the largest |xold|, |xold K| <= X |K|
+       (1 + 2^-52) =: A (a double product) and |P| <= (|B| + A)(1 +
+       2^-24), so |B| + 3 X |K| (1 + 2^-21) <= 7.99 for the largest |B|
+       and |K| of the band settles it, if its B and K are finite (their
+       float sum finite: a NaN or infinity shows in it).  Otherwise each
+       pixel is tested as the full path would need. */
+    {
+        double xm = fabs(xo0) > fabs(xo1) ? fabs(xo0) : fabs(xo1);
+        xm = fabs(xo2) > xm ? fabs(xo2) : xm;
+        if (!(fabsf(sum) <= FLT_MAX && kmax <= 1e30f &&
+              (double)bmax + 3.0 * xm * kmax * (1.0 + 0x1p-21) <= 7.99))
+            for (i = 0; i < n; i++) {
+                const float *o = pc + 6 * i;
+                float ps = 0.0f;
+                for (c = 0; c < 3; c++)
+                    ps += o[c] + o[3 + c];
+                /* a NaN or infinity shows in the sum (or a sum beyond
+                   the float range: the full path then, as for those) */
+                bad |= !(fabsf(ps) <= FLT_MAX);
+                bad |= pk_bad(xo, o);
+            }
+    }
     e->nonfinite |= bad;
     t->pk_seg[chunk] = (uint32_t)n;
     return 0;
@@ -1155,14 +1186,15 @@ static int pk_q_chunk(void *ctx, int chunk)
     for (; i < end; i++) {
         size_t k = e->list[i], b = (size_t)t->start[k + 1], j0 = j;
         double q[3];
+        float *o;
         while (j < jend && mn[j] < b)
             j++;
         rtpi_nodes_diffuse(e->shade, mn + j0, j - j0, t->ev_terms, t->ev_w, e->cv, q);
-        if (e->q_by_list)
-            k = i; /* (pk_img_chunk reads q by the sample's place in the list) */
-        t->pk_q[3 * k] = (float)q[0];
-        t->pk_q[3 * k + 1] = (float)q[1];
-        t->pk_q[3 * k + 2] = (float)q[2];
+        /* (pk_img_chunk reads q by the sample's place in the list) */
+        o = t->pk_q + 3 * (e->q_by_list ? i + 1 : k);
+        o[0] = (float)q[0];
+        o[1] = (float)q[1];
+        o[2] = (float)q[2];
     }
     return 0;
 }
@@ -2369,7 +2401,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                 rtpi_parallel_rows((int)((e[0].nlist + 255) / 256), nthreads, ctx, pk_q_chunk,
                                    NULL, NULL);
                 if (part) /* the zero entry: q where no listed sample is */
-                    memset(t->pk_q + 3 * e[0].nlist, 0, 3 * sizeof *t->pk_q);
+                    memset(t->pk_q, 0, 3 * sizeof *t->pk_q);
                 if (pk_build(t, e, ctx, nthreads, part)) {
                     t->pk_term = (int)(2 + nl + mt) + 1;
                     t->pk_part = part;
