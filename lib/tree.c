@@ -1091,6 +1091,16 @@ static int pk_img_chunk(void *ctx, int chunk)
     }
     e->nonfinite |= bad;
     t->pk_seg[chunk] = (uint32_t)n;
+    /* the edit itself for the band (pk_apply_listed's), while its planes
+       are in cache: a pass over them all after every band was made read
+       them from memory again (where a band's planes are not to be used,
+       the full path makes the image anew) */
+    if (!bad) {
+        const double xn[3] = {e->x[0], e->x[1], e->x[2]};
+        float *out = e->pixels;
+        for (i = 0; i < n; i++)
+            pk_pixel(pc + 6 * i, xn, out + 3 * (size_t)nz[i]);
+    }
     return 0;
 }
 
@@ -2335,7 +2345,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
         t->pk_term = 0;
         t->ev_samples_ok = cached;
     } else {
-        int coeffs_dirty = 0, moved_combined = 0;
+        int coeffs_dirty = 0, moved_combined = 0, applied = 0;
         /* a light that moved (or whose shadows were decided another way):
            its terms and coefficients only, for every sample; where the
            samples hold every other colour as it is (no colour or material
@@ -2405,11 +2415,15 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                 if (pk_build(t, e, ctx, nthreads, part)) {
                     t->pk_term = (int)(2 + nl + mt) + 1;
                     t->pk_part = part;
+                    applied = part;
                     st.combined_samples = part ? 0 : ns;
                 }
             }
             if (t->pk_term == (int)(2 + nl + mt) + 1) {
-                pk_apply(t, ctx, nthreads, sparse, &st);
+                if (applied) /* (pk_img_chunk wrote them as it made their planes) */
+                    st.written_pixels = t->pk_nnz;
+                else
+                    pk_apply(t, ctx, nthreads, sparse, &st);
                 one = 1;
                 matpath = 1; /* the coefficients stay those of the material before */
             } else {
