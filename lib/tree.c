@@ -915,6 +915,49 @@ static size_t lower_bound(const uint32_t *list, size_t n, size_t v)
     return lo;
 }
 
+/* pk_img_chunk's planes of m pixels pix[] whose K is kq (3 floats a
+   pixel) and B the image's: those whose K is not 0 (else the pixel stays
+   B: nothing to keep) into pc and nz, with the band's float sum of B and
+   K and largest |B| and |K| (bd: 3 floats) for its bound; returns how
+   many. */
+static size_t pk_img_pixels(const float *kq, const uint32_t *pix, size_t m, const float *img,
+                            const double *xo, float *pc, uint32_t *nz, float *bd)
+{
+    const double xo0 = xo[0], xo1 = xo[1], xo2 = xo[2];
+    float sum = bd[0], bmax = bd[1], kmax = bd[2];
+    size_t j, n = 0;
+    for (j = 0; j < m; j++, kq += 3) {
+        const float k0 = kq[0], k1 = kq[1], k2 = kq[2], *b;
+        double x0, x1, x2;
+        float *o;
+        if (k0 == 0.0f && k1 == 0.0f && k2 == 0.0f)
+            continue;
+        b = img + 3 * (size_t)pix[j];
+        x0 = xo0 * k0;
+        x1 = xo1 * k1;
+        x2 = xo2 * k2;
+        sum += (b[0] + b[1] + b[2]) + (k0 + k1 + k2);
+        bmax = fabsf(b[0]) > bmax ? fabsf(b[0]) : bmax;
+        bmax = fabsf(b[1]) > bmax ? fabsf(b[1]) : bmax;
+        bmax = fabsf(b[2]) > bmax ? fabsf(b[2]) : bmax;
+        kmax = fabsf(k0) > kmax ? fabsf(k0) : kmax;
+        kmax = fabsf(k1) > kmax ? fabsf(k1) : kmax;
+        kmax = fabsf(k2) > kmax ? fabsf(k2) : kmax;
+        o = pc + 6 * n;
+        o[0] = (float)((double)b[0] - x0);
+        o[1] = (float)((double)b[1] - x1);
+        o[2] = (float)((double)b[2] - x2);
+        o[3] = k0;
+        o[4] = k1;
+        o[5] = k2;
+        nz[n++] = pix[j];
+    }
+    bd[0] = sum;
+    bd[1] = bmax;
+    bd[2] = kmax;
+    return n;
+}
+
 /* The planes of one band where only the pixels the edited material's
    samples (e->list) reach can change: an image kept from the last
    evaluation (opt->incremental) that is the image of the coefficients
@@ -933,16 +976,24 @@ static int pk_img_chunk(void *ctx, int chunk)
     int y0 = chunk * PK_ROWS, y1 = y0 + PK_ROWS, y, x, c, spd = t->spd;
     const float *img = e->pixels, *pq = t->pk_q + 3; /* (pk_q_chunk's q_by_list) */
     const double xo[3] = {e->xold[0], e->xold[1], e->xold[2]};
-    const double xo0 = xo[0], xo1 = xo[1], xo2 = xo[2];
-    float *pc, sum = 0.0f, bmax = 0.0f, kmax = 0.0f; /* over the pixels kept: the sum of
-                                                         B and K, the largest |B| and |K| */
+    float *pc, bd[3] = {0.0f, 0.0f, 0.0f}; /* bd: pk_img_pixels' */
     int32_t *listed;
     uint32_t *nz;
     unsigned char *touched;
     int bad = 0, kept;
     if (y1 > t->height)
         y1 = t->height;
-    srows = (size_t)(y1 - y0) + (spd ? 1u : 0u);
+    pc = t->pk_c + 6 * t->pk_off[chunk];
+    nz = t->pk_nz + t->pk_off[chunk];
+    if (!spd) {
+        /* a pixel of its own per sample: the band's listed samples are
+           its pixels, in order, with their q as K (no map of them) */
+        lo = lower_bound(e->list, e->nlist, (size_t)y0 * w);
+        hi = lower_bound(e->list, e->nlist, (size_t)y1 * w);
+        n = pk_img_pixels(pq + 3 * lo, e->list + lo, hi - lo, img, xo, pc, nz, bd);
+        goto check;
+    }
+    srows = (size_t)(y1 - y0) + 1u;
     /* listed: the sample's place in the list (its q at pq), or -1, whose
        entry is 0 (so that a pixel's four corners are read without a test
        each; a pixel of its own per sample is read only where its sample
@@ -951,7 +1002,7 @@ static int pk_img_chunk(void *ctx, int chunk)
     touched = e->marks ? e->marks + (size_t)y0 * w
                        : (unsigned char *)(listed + (PK_ROWS + 1) * nx);
     kept = e->marks && !e->count_pass;
-    if (!e->count_pass && spd) /* (-1: every byte 0xff, int32_t being two's complement) */
+    if (!e->count_pass) /* (-1: every byte 0xff, int32_t being two's complement) */
         memset(listed, 0xff, srows * nx * sizeof *listed);
     if (!kept)
         memset(touched, 0, (size_t)(y1 - y0) * w);
@@ -964,10 +1015,6 @@ static int pk_img_chunk(void *ctx, int chunk)
         size_t l = e->list[i] - (size_t)y0 * nx, sx;
         if (!e->count_pass)
             listed[l] = (int32_t)i;
-        if (!spd) {
-            touched[l] = 1; /* (nx = w) */
-            continue;
-        }
         /* the sample's row and column: the list ascends, so the row
            follows it (a division per sample cost more than the rest) */
         while (l >= rs + nx) {
@@ -1003,68 +1050,70 @@ static int pk_img_chunk(void *ctx, int chunk)
         t->pk_seg[chunk] = (uint32_t)n;
         return 0;
     }
-    pc = t->pk_c + 6 * t->pk_off[chunk];
-    nz = t->pk_nz + t->pk_off[chunk];
-    for (y = y0; y < y1; y++) {
-        size_t ly = (size_t)(y - y0), p = (size_t)y * w;
-        const unsigned char *tr = touched + ly * w;
-        const int32_t *lr = listed + ly * nx;
-        for (x = 0; x < t->width; x++) {
-            const float *b;
-            float k0, k1, k2, *o;
-            double x0, x1, x2;
-            float p0, p1, p2;
-            uint64_t word;
-            if (!tr[x]) {
-                /* most of a row is not touched: 8 marks at a time */
-                while (x + 8 <= t->width && (memcpy(&word, tr + x, 8), word == 0))
-                    x += 8;
-                if (x >= t->width || !tr[x])
-                    continue;
-            }
-            b = img + 3 * (p + (size_t)x);
-            if (spd) {
+    {
+        const double xo0 = xo[0], xo1 = xo[1], xo2 = xo[2];
+        float sum = 0.0f, bmax = 0.0f, kmax = 0.0f;
+        for (y = y0; y < y1; y++) {
+            size_t ly = (size_t)(y - y0), p = (size_t)y * w;
+            const unsigned char *tr = touched + ly * w;
+            const int32_t *lr = listed + ly * nx;
+            for (x = 0; x < t->width; x++) {
+                const float *b, *qa, *qb, *qc, *qd;
+                float k0, k1, k2, *o;
+                double x0, x1, x2;
+                float p0, p1, p2;
+                uint64_t word;
+                if (!tr[x]) {
+                    /* most of a row is not touched: 8 marks at a time */
+                    while (x + 8 <= t->width && (memcpy(&word, tr + x, 8), word == 0))
+                        x += 8;
+                    if (x >= t->width || !tr[x])
+                        continue;
+                }
                 /* pk_build_chunk's sums: (x, y), (x+1, y), (x, y+1), (x+1, y+1) */
-                const float *qa = pq + 3 * (ptrdiff_t)lr[x];
-                const float *qb = pq + 3 * (ptrdiff_t)lr[x + 1];
-                const float *qc = pq + 3 * (ptrdiff_t)lr[x + nx];
-                const float *qd = pq + 3 * (ptrdiff_t)lr[x + nx + 1];
+                qa = pq + 3 * (ptrdiff_t)lr[x];
+                qb = pq + 3 * (ptrdiff_t)lr[x + 1];
+                qc = pq + 3 * (ptrdiff_t)lr[x + nx];
+                qd = pq + 3 * (ptrdiff_t)lr[x + nx + 1];
                 k0 = (float)(0.25 * ((((double)qa[0] + qb[0]) + qc[0]) + qd[0]));
                 k1 = (float)(0.25 * ((((double)qa[1] + qb[1]) + qc[1]) + qd[1]));
                 k2 = (float)(0.25 * ((((double)qa[2] + qb[2]) + qc[2]) + qd[2]));
-            } else {
-                const float *q = pq + 3 * (ptrdiff_t)lr[x];
-                k0 = q[0];
-                k1 = q[1];
-                k2 = q[2];
+                /* (where K is 0 the pixel stays B: nothing to keep) */
+                if (k0 == 0.0f && k1 == 0.0f && k2 == 0.0f)
+                    continue;
+                /* (pk_img_pixels' steps, written out here: through it, or with
+                   the row's K kept for it, the corner samples' planes took 7%
+                   more instructions) */
+                b = img + 3 * (p + (size_t)x);
+                x0 = xo0 * k0;
+                x1 = xo1 * k1;
+                x2 = xo2 * k2;
+                p0 = (float)((double)b[0] - x0);
+                p1 = (float)((double)b[1] - x1);
+                p2 = (float)((double)b[2] - x2);
+                /* (for the band's bound below) */
+                sum += (b[0] + b[1] + b[2]) + (k0 + k1 + k2);
+                bmax = fabsf(b[0]) > bmax ? fabsf(b[0]) : bmax;
+                bmax = fabsf(b[1]) > bmax ? fabsf(b[1]) : bmax;
+                bmax = fabsf(b[2]) > bmax ? fabsf(b[2]) : bmax;
+                kmax = fabsf(k0) > kmax ? fabsf(k0) : kmax;
+                kmax = fabsf(k1) > kmax ? fabsf(k1) : kmax;
+                kmax = fabsf(k2) > kmax ? fabsf(k2) : kmax;
+                o = pc + 6 * n;
+                o[0] = p0;
+                o[1] = p1;
+                o[2] = p2;
+                o[3] = k0;
+                o[4] = k1;
+                o[5] = k2;
+                nz[n++] = (uint32_t)(p + (size_t)x);
             }
-            /* (where K is 0 the pixel stays B: nothing to keep) */
-            if (k0 == 0.0f && k1 == 0.0f && k2 == 0.0f)
-                continue;
-            x0 = xo0 * k0;
-            x1 = xo1 * k1;
-            x2 = xo2 * k2;
-            p0 = (float)((double)b[0] - x0);
-            p1 = (float)((double)b[1] - x1);
-            p2 = (float)((double)b[2] - x2);
-            /* (for the band's bound below) */
-            sum += (b[0] + b[1] + b[2]) + (k0 + k1 + k2);
-            bmax = fabsf(b[0]) > bmax ? fabsf(b[0]) : bmax;
-            bmax = fabsf(b[1]) > bmax ? fabsf(b[1]) : bmax;
-            bmax = fabsf(b[2]) > bmax ? fabsf(b[2]) : bmax;
-            kmax = fabsf(k0) > kmax ? fabsf(k0) : kmax;
-            kmax = fabsf(k1) > kmax ? fabsf(k1) : kmax;
-            kmax = fabsf(k2) > kmax ? fabsf(k2) : kmax;
-            o = pc + 6 * n;
-            o[0] = p0;
-            o[1] = p1;
-            o[2] = p2;
-            o[3] = k0;
-            o[4] = k1;
-            o[5] = k2;
-            nz[n++] = (uint32_t)(p + (size_t)x);
         }
+        bd[0] = sum;
+        bd[1] = bmax;
+        bd[2] = kmax;
     }
+check:
     /* Each pixel's pk_bad test, and a finite sum of its P and K, hold
        where |P| + 2 |xold K| <= 8 <= CP_SPAN max(|P|, 2) and |K| <= 1e30
        in every channel.  With X the largest |xold|, |xold K| <= X |K|
@@ -1074,10 +1123,10 @@ static int pk_img_chunk(void *ctx, int chunk)
        float sum finite: a NaN or infinity shows in it).  Otherwise each
        pixel is tested as the full path would need. */
     {
-        double xm = fabs(xo0) > fabs(xo1) ? fabs(xo0) : fabs(xo1);
-        xm = fabs(xo2) > xm ? fabs(xo2) : xm;
-        if (!(fabsf(sum) <= FLT_MAX && kmax <= 1e30f &&
-              (double)bmax + 3.0 * xm * kmax * (1.0 + 0x1p-21) <= 7.99))
+        double xm = fabs(xo[0]) > fabs(xo[1]) ? fabs(xo[0]) : fabs(xo[1]);
+        xm = fabs(xo[2]) > xm ? fabs(xo[2]) : xm;
+        if (!(fabsf(bd[0]) <= FLT_MAX && bd[2] <= 1e30f &&
+              (double)bd[1] + 3.0 * xm * bd[2] * (1.0 + 0x1p-21) <= 7.99))
             for (i = 0; i < n; i++) {
                 const float *o = pc + 6 * i;
                 float ps = 0.0f;
@@ -1112,10 +1161,12 @@ static int pk_build(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, in
 {
     int i, nb = (t->height + PK_ROWS - 1) / PK_ROWS, ok = 1;
     unsigned char *marks = NULL;
-    /* two sample rows' rest, or with `part` a band's marks */
+    /* two sample rows' rest, or with `part` and corner samples a band's
+       marks (a pixel of its own per sample needs none: pk_img_pixels) */
     size_t nx = (size_t)t->nx,
-           bytes = part ? (PK_ROWS + 1) * nx * sizeof(uint32_t) + PK_ROWS * (size_t)t->width
-                        : 6 * nx * sizeof(float);
+           bytes = !part ? 6 * nx * sizeof(float)
+                   : t->spd ? (PK_ROWS + 1) * nx * sizeof(uint32_t) + PK_ROWS * (size_t)t->width
+                            : sizeof(float);
     for (i = 0; i < nthreads; i++) {
         if (e[i].rest && e[i].rest_bytes < bytes) {
             rtpi_free(&t->alloc, e[i].rest);
