@@ -102,7 +102,7 @@ static rtp_status check_link(rtp_builder *b, int x, int y, int parent, rtp_ray_k
 int rtp_builder_hit(rtp_builder *b, int x, int y, int parent, rtp_ray_kind kind,
                     const rtp_hit_record *hit, rtp_error *err)
 {
-    uint32_t sample;
+    uint32_t sample = 0; /* (set by check_link where it succeeds; -O3 cannot tell) */
     rtp_status st = check_link(b, x, y, parent, kind, &sample, err);
     bhit *h;
     size_t i, nl;
@@ -152,7 +152,7 @@ int rtp_builder_hit(rtp_builder *b, int x, int y, int parent, rtp_ray_kind kind,
 rtp_status rtp_builder_miss(rtp_builder *b, int x, int y, int parent, rtp_ray_kind kind,
                             rtp_error *err)
 {
-    uint32_t sample;
+    uint32_t sample = 0; /* (set by check_link where it succeeds; -O3 cannot tell) */
     rtp_status st = check_link(b, x, y, parent, kind, &sample, err);
     bmiss *m;
     if (st != RTP_OK)
