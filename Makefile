@@ -1,5 +1,5 @@
-# rtp — top-level Makefile.  Targets: all test bench install uninstall clean
-# asan ubsan.  Honours CC, CFLAGS, LDFLAGS, PREFIX, DESTDIR; V=1 shows the
+# rtp — top-level Makefile.  Targets: all test bench instr install uninstall
+# clean asan ubsan.  Honours CC, CFLAGS, LDFLAGS, PREFIX, DESTDIR; V=1 shows the
 # commands; THREADS=0 leaves POSIX threads out; WERROR=0 drops -Werror.
 
 CC      ?= cc
@@ -49,7 +49,7 @@ TEST_BIN = $(TEST_SRC:%.c=$(BUILD)/%)
 BENCH_SRC = $(sort $(wildcard test/bench/*.c))
 BENCH_BIN = $(BENCH_SRC:test/bench/%.c=$(BUILD)/bench/%)
 
-.PHONY: all test bench install uninstall clean asan ubsan demo FORCE
+.PHONY: all test bench instr install uninstall clean asan ubsan demo FORCE
 all: $(BUILD)/librtp.a $(BUILD)/librtp.so rtp
 
 $(BUILD)/%.o: %.c include/rtp.h $(wildcard lib/*.h)
@@ -97,6 +97,17 @@ test: all $(TEST_BIN)
 
 bench: all $(BENCH_BIN)
 	$(Q)sh test/bench/run.sh $(BUILD)/bench
+
+# Instructions per edit class under callgrind (valgrind; its header
+# valgrind/callgrind.h comes with it): deterministic where wall-clock
+# time on a shared machine is not.  Not part of test or bench.
+$(BUILD)/instr/instr: test/instr/instr.c $(BUILD)/librtp.a
+	@mkdir -p $(dir $@)
+	@$(if $(Q),echo "  CCLD    $@")
+	$(Q)$(CC) $(ALL_CFLAGS) $(LDFLAGS) $< $(BUILD)/librtp.a -o $@ $(LIBS)
+
+instr: all $(BUILD)/instr/instr
+	$(Q)sh test/instr/run.sh $(BUILD)/instr
 
 asan:
 	$(MAKE) BUILD=build-asan CFLAGS="-O1 -g -fsanitize=address -fno-omit-frame-pointer" LDFLAGS="-fsanitize=address" test
