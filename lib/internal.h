@@ -493,6 +493,10 @@ static inline void rtpi_nodes_diffuse(const rtpi_shade_ctx *c, const uint32_t *i
     q[1] = q1;
     q[2] = q2;
 }
+/* acc + coefficient k x colour c, where a colour of 0 adds nothing (not
+   even a NaN from an infinite k: rtpi_combine, which takes it where its
+   plain sum came out NaN). */
+#define RTPI_TERM_SUM(acc, k, c) ((c) != 0.0 ? (acc) + (k) * (c) : (acc))
 /* cl: 3 per light: colour * light scale, 0 when off (rtpi_light_colors). */
 void rtpi_combine(const rtp_scene *s, const double *cl, const float *coeffs,
                   float rgb[3]);

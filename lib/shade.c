@@ -479,6 +479,21 @@ void rtpi_light_colors(const rtp_scene *s, double *cl)
             cl[3 * i + k] = s->lights[i].on ? s->lights[i].color[k] * s->light_scale : 0.0;
 }
 
+/* rtpi_combine's sums where one came out NaN: a colour of 0 adds nothing
+   there (RTPI_TERM_SUM). */
+static void combine_zero(const rtp_scene *s, const double *cl, const float *coeffs, float rgb[3])
+{
+    size_t i, nl = s->nlights;
+    int k;
+    for (k = 0; k < 3; k++) {
+        double a = RTPI_TERM_SUM(RTPI_TERM_SUM(0.0, coeffs[k], (double)s->background[k]),
+                                 coeffs[3 + k], (double)s->ambient[k]);
+        for (i = 0; i < nl; i++)
+            a = RTPI_TERM_SUM(a, coeffs[6 + 3 * i + k], cl[3 * i + k]);
+        rgb[k] = (float)a;
+    }
+}
+
 void rtpi_combine(const rtp_scene *s, const double *cl, const float *coeffs, float rgb[3])
 {
     /* each channel in the same order as ever (background, ambient, the
@@ -492,6 +507,18 @@ void rtpi_combine(const rtp_scene *s, const double *cl, const float *coeffs, flo
         v0 += c[0] * cl[0];
         v1 += c[1] * cl[1];
         v2 += c[2] * cl[2];
+    }
+    /* A colour of 0 adds nothing, whatever its coefficient: a light
+       turned off keeps its coefficients (for turning it on again), and
+       where a huge kt or ks took one beyond the float range, inf x 0 made
+       the pixel NaN.  Only a NaN sum can hold such a product (else the
+       rule gives the same sums, but for the sign of a zero), so only then
+       are the sums made again with it (tested as one: their sum is NaN
+       where one is, or where infinities of both signs meet, which the
+       rule leaves as they are). */
+    if (!(v0 + v1 + v2 == v0 + v1 + v2)) {
+        combine_zero(s, cl - 3 * nl, coeffs, rgb); /* (a tail call: no frame here) */
+        return;
     }
     rgb[0] = (float)v0;
     rgb[1] = (float)v1;

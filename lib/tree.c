@@ -536,6 +536,15 @@ static void rest_of(const double *cv, size_t nc, const float *coeffs, double v[3
         a1 += coeffs[i + 1] * cv[i + 1];
         a2 += coeffs[i + 2] * cv[i + 2];
     }
+    if (a0 != a0 || a1 != a1 || a2 != a2) {
+        /* rtpi_combine's rule: a colour of 0 adds nothing */
+        a0 = a1 = a2 = 0.0;
+        for (i = 0; i < nc; i += 3) {
+            a0 = RTPI_TERM_SUM(a0, coeffs[i], cv[i]);
+            a1 = RTPI_TERM_SUM(a1, coeffs[i + 1], cv[i + 1]);
+            a2 = RTPI_TERM_SUM(a2, coeffs[i + 2], cv[i + 2]);
+        }
+    }
     v[0] = a0;
     v[1] = a1;
     v[2] = a2;
