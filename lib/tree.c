@@ -992,11 +992,11 @@ static int pk_img_chunk(void *ctx, int chunk)
     int bad = 0, kept;
     if (y1 > t->height)
         y1 = t->height;
-    pc = t->pk_c + 6 * t->pk_off[chunk];
-    nz = t->pk_nz + t->pk_off[chunk];
     if (!spd) {
         /* a pixel of its own per sample: the band's listed samples are
            its pixels, in order, with their q as K (no map of them) */
+        pc = t->pk_c + 6 * t->pk_off[chunk];
+        nz = t->pk_nz + t->pk_off[chunk];
         lo = lower_bound(e->list, e->nlist, (size_t)y0 * w);
         hi = lower_bound(e->list, e->nlist, (size_t)y1 * w);
         n = pk_img_pixels(pq + 3 * lo, e->list + lo, hi - lo, img, xo, pc, nz, bd);
@@ -1059,6 +1059,10 @@ static int pk_img_chunk(void *ctx, int chunk)
         t->pk_seg[chunk] = (uint32_t)n;
         return 0;
     }
+    /* (only now: the counting pass runs before the bands' offsets are
+       known) */
+    pc = t->pk_c + 6 * t->pk_off[chunk];
+    nz = t->pk_nz + t->pk_off[chunk];
     {
         const double xo0 = xo[0], xo1 = xo[1], xo2 = xo[2];
         float sum = 0.0f, bmax = 0.0f, kmax = 0.0f;
