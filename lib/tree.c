@@ -924,6 +924,30 @@ static size_t lower_bound(const uint32_t *list, size_t n, size_t v)
     return lo;
 }
 
+/* One pixel's planes P = B - xold K and K into o (6 floats), and its B
+   and K into the band's float sum, largest |B| and largest |K| (bd). */
+static inline void pk_img_one(const float *b, float k0, float k1, float k2, double xo0,
+                              double xo1, double xo2, float *o, float *bd)
+{
+    const double x0 = xo0 * k0, x1 = xo1 * k1, x2 = xo2 * k2;
+    float bmax = bd[1], kmax = bd[2];
+    bd[0] += (b[0] + b[1] + b[2]) + (k0 + k1 + k2);
+    bmax = fabsf(b[0]) > bmax ? fabsf(b[0]) : bmax;
+    bmax = fabsf(b[1]) > bmax ? fabsf(b[1]) : bmax;
+    bmax = fabsf(b[2]) > bmax ? fabsf(b[2]) : bmax;
+    kmax = fabsf(k0) > kmax ? fabsf(k0) : kmax;
+    kmax = fabsf(k1) > kmax ? fabsf(k1) : kmax;
+    kmax = fabsf(k2) > kmax ? fabsf(k2) : kmax;
+    bd[1] = bmax;
+    bd[2] = kmax;
+    o[0] = (float)((double)b[0] - x0);
+    o[1] = (float)((double)b[1] - x1);
+    o[2] = (float)((double)b[2] - x2);
+    o[3] = k0;
+    o[4] = k1;
+    o[5] = k2;
+}
+
 /* pk_img_chunk's planes of m pixels pix[] whose K is kq (3 floats a
    pixel) and B the image's: those whose K is not 0 (else the pixel stays
    B: nothing to keep) into pc and nz, with the band's float sum of B and
@@ -933,37 +957,17 @@ static size_t pk_img_pixels(const float *kq, const uint32_t *pix, size_t m, cons
                             const double *xo, float *pc, uint32_t *nz, float *bd)
 {
     const double xo0 = xo[0], xo1 = xo[1], xo2 = xo[2];
-    float sum = bd[0], bmax = bd[1], kmax = bd[2];
+    float acc[3];
     size_t j, n = 0;
+    memcpy(acc, bd, sizeof acc);
     for (j = 0; j < m; j++, kq += 3) {
-        const float k0 = kq[0], k1 = kq[1], k2 = kq[2], *b;
-        double x0, x1, x2;
-        float *o;
+        const float k0 = kq[0], k1 = kq[1], k2 = kq[2];
         if (k0 == 0.0f && k1 == 0.0f && k2 == 0.0f)
             continue;
-        b = img + 3 * (size_t)pix[j];
-        x0 = xo0 * k0;
-        x1 = xo1 * k1;
-        x2 = xo2 * k2;
-        sum += (b[0] + b[1] + b[2]) + (k0 + k1 + k2);
-        bmax = fabsf(b[0]) > bmax ? fabsf(b[0]) : bmax;
-        bmax = fabsf(b[1]) > bmax ? fabsf(b[1]) : bmax;
-        bmax = fabsf(b[2]) > bmax ? fabsf(b[2]) : bmax;
-        kmax = fabsf(k0) > kmax ? fabsf(k0) : kmax;
-        kmax = fabsf(k1) > kmax ? fabsf(k1) : kmax;
-        kmax = fabsf(k2) > kmax ? fabsf(k2) : kmax;
-        o = pc + 6 * n;
-        o[0] = (float)((double)b[0] - x0);
-        o[1] = (float)((double)b[1] - x1);
-        o[2] = (float)((double)b[2] - x2);
-        o[3] = k0;
-        o[4] = k1;
-        o[5] = k2;
+        pk_img_one(img + 3 * (size_t)pix[j], k0, k1, k2, xo0, xo1, xo2, pc + 6 * n, acc);
         nz[n++] = pix[j];
     }
-    bd[0] = sum;
-    bd[1] = bmax;
-    bd[2] = kmax;
+    memcpy(bd, acc, sizeof acc);
     return n;
 }
 
@@ -1065,16 +1069,14 @@ static int pk_img_chunk(void *ctx, int chunk)
     nz = t->pk_nz + t->pk_off[chunk];
     {
         const double xo0 = xo[0], xo1 = xo[1], xo2 = xo[2];
-        float sum = 0.0f, bmax = 0.0f, kmax = 0.0f;
+        float acc[3] = {0.0f, 0.0f, 0.0f};
         for (y = y0; y < y1; y++) {
             size_t ly = (size_t)(y - y0), p = (size_t)y * w;
             const unsigned char *tr = touched + ly * w;
             const int32_t *lr = listed + ly * nx;
             for (x = 0; x < t->width; x++) {
-                const float *b, *qa, *qb, *qc, *qd;
-                float k0, k1, k2, *o;
-                double x0, x1, x2;
-                float p0, p1, p2;
+                const float *qa, *qb, *qc, *qd;
+                float k0, k1, k2;
                 uint64_t word;
                 if (!tr[x]) {
                     /* most of a row is not touched: 8 marks at a time */
@@ -1094,37 +1096,12 @@ static int pk_img_chunk(void *ctx, int chunk)
                 /* (where K is 0 the pixel stays B: nothing to keep) */
                 if (k0 == 0.0f && k1 == 0.0f && k2 == 0.0f)
                     continue;
-                /* (pk_img_pixels' steps, written out here: through it, or with
-                   the row's K kept for it, the corner samples' planes took 7%
-                   more instructions) */
-                b = img + 3 * (p + (size_t)x);
-                x0 = xo0 * k0;
-                x1 = xo1 * k1;
-                x2 = xo2 * k2;
-                p0 = (float)((double)b[0] - x0);
-                p1 = (float)((double)b[1] - x1);
-                p2 = (float)((double)b[2] - x2);
-                /* (for the band's bound below) */
-                sum += (b[0] + b[1] + b[2]) + (k0 + k1 + k2);
-                bmax = fabsf(b[0]) > bmax ? fabsf(b[0]) : bmax;
-                bmax = fabsf(b[1]) > bmax ? fabsf(b[1]) : bmax;
-                bmax = fabsf(b[2]) > bmax ? fabsf(b[2]) : bmax;
-                kmax = fabsf(k0) > kmax ? fabsf(k0) : kmax;
-                kmax = fabsf(k1) > kmax ? fabsf(k1) : kmax;
-                kmax = fabsf(k2) > kmax ? fabsf(k2) : kmax;
-                o = pc + 6 * n;
-                o[0] = p0;
-                o[1] = p1;
-                o[2] = p2;
-                o[3] = k0;
-                o[4] = k1;
-                o[5] = k2;
+                pk_img_one(img + 3 * (p + (size_t)x), k0, k1, k2, xo0, xo1, xo2, pc + 6 * n,
+                           acc);
                 nz[n++] = (uint32_t)(p + (size_t)x);
             }
         }
-        bd[0] = sum;
-        bd[1] = bmax;
-        bd[2] = kmax;
+        memcpy(bd, acc, sizeof acc);
     }
 check:
     /* Each pixel's pk_bad test, and a finite sum of its P and K, hold
