@@ -1009,8 +1009,7 @@ static int pk_img_chunk(void *ctx, int chunk)
     srows = (size_t)(y1 - y0) + 1u;
     /* listed: the sample's place in the list (its q at pq), or -1, whose
        entry is 0 (so that a pixel's four corners are read without a test
-       each; a pixel of its own per sample is read only where its sample
-       is listed) */
+       each) */
     listed = (int32_t *)(void *)e->rest;
     touched = e->marks ? e->marks + (size_t)y0 * w
                        : (unsigned char *)(listed + (PK_ROWS + 1) * nx);
