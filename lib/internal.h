@@ -447,7 +447,8 @@ void rtpi_sample_diffuse(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
    without descending the sample's tree. */
 /* (inline: the first edit of a material calls it once a sample) */
 static inline void rtpi_nodes_diffuse(const rtpi_shade_ctx *c, const uint32_t *idx, size_t n,
-                        const float *terms, const double *w, const double *cv, double q[3])
+                                      const float *terms, const double *w, const double *cv,
+                                      double q[3])
 {
     size_t nl = c->s->nlights, nt = RTPI_TERMS(nl), j, i;
     double q0 = 0.0, q1 = 0.0, q2 = 0.0;

@@ -1638,7 +1638,8 @@ static int pk_alloc(rtp_tree *t, int q)
             &t->alloc, (size_t)(t->height + PK_ROWS - 1) / PK_ROWS + 1, sizeof *t->pk_off);
     if (!t->pk_off)
         return 0;
-    /* (one more: pk_img_chunk's zero entry after a list of every sample) */
+    /* (one more: pk_img_chunk's zero q at entry 0, before a list of every
+       sample) */
     if (q && t->pk && !t->pk_q)
         t->pk_q = (float *)rtpi_malloc_array(&t->alloc, (size_t)t->nx * t->ny + 1,
                                              3 * sizeof *t->pk_q);
