@@ -1088,11 +1088,15 @@ void rtpi_lightbuf_free(rtpi_lightbuf *lb, const rtp_allocator *a)
         where it cannot shadow itself, and thin primitives (decided
         exactly by shadow.c's light buffer; too narrow to hide a wide
         primitive from all 9 samples).  The shadow ray is intersected, by
-        the kd-tree's own routine, with each primitive sampled there: a
-        hit is in shadow, exactly.  Otherwise, when no such sample lies
-        clearly in front of p, it sees the light; when one does (a shadow
-        edge: something in front, beside the ray), the answer is left
-        open (-1) for an exact query.
+        the kd-tree's own routine, with each primitive sampled there in
+        front of p (depth below zp - IB_BIAS zext; one sampled at or
+        beyond it is not tested: in a mesh those are mostly prim's
+        neighbours, which the ray misses, and testing them cost more than
+        the rest of the decision): a hit is in shadow, exactly.
+        Otherwise, when no such sample lies clearly in front of p, it sees
+        the light; when one does (a shadow edge: something in front,
+        beside the ray), the answer is left open (-1) for an exact
+        query.
    "Clearly in front": depth along the face axis zs < zp - (IB_BIAS zext
    + zp e tan(theta)), theta the angle between the surface normal and the
    light, e the sample's distance from the ray's direction in face
@@ -1106,9 +1110,12 @@ void rtpi_lightbuf_free(rtpi_lightbuf *lb, const rtp_allocator *a)
    ones.  The normal comes free: o - p is rtpi_offset_origin's step along
    the geometric normal, towards the light (~1e-9 relative error).
    What can still be wrong: "sees the light" where a wide primitive blocks
-   the ray yet shows at none of the 9 samples while nothing else there
-   lies in front of p, i.e. a part of it narrower than the samples'
-   spacing (a sharp corner) reaches across the ray between them. */
+   the ray yet shows at none of the 9 samples in front of p while nothing
+   else there lies in front of p: a part of it narrower than the samples'
+   spacing (a sharp corner) reaches across the ray between them, or it
+   blocks the ray just in front of p while sampled beside the ray at or
+   behind p's depth (steep, touching p's surface: a contact shadow's edge,
+   within a cell of the contact). */
 #define IB_BIAS 1e-4
 #define IB_TAN_MAX 8.0
 
@@ -1156,13 +1163,13 @@ static double ib_tan(rtpi_v3 p, rtpi_v3 o, rtpi_v3 L)
 }
 
 int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
-                         rtpi_v3 p, rtpi_v3 o, uint32_t prim,
-                         const unsigned char *thin, uint32_t *occ)
+                         rtpi_v3 p, rtpi_v3 o, uint32_t prim, int self,
+                         const rtpi_ray *r, const unsigned char *thin, uint32_t *occ)
 {
-    int f, self = rtpi_prim_shadows_own(s, prim, o, ib->light), res = ib->res, i, j, di, dj, k, n = 0, m = 0;
+    int f, res = ib->res, i, j, di, dj, k, n = 0, m = 0;
     uint32_t cand[9];
     double u, v, x, y, zp, zlim, tn = -1.0;
-    rtpi_ray r;
+    rtpi_ray rr;
     rtpi_hit h;
     if (self == 1) {
         *occ = prim;
@@ -1198,9 +1205,11 @@ int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
             int g;
             size_t c = ib_sample(ib, f, i + di, j + dj, &g);
             uint32_t id;
-            double zc, ex, ey;
+            double zc = 0.0, ex, ey;
             if (c == RTPI_DC_ABSENT || (id = ib->id[c]) == RTPI_NONE ||
                 (id == prim && self == 0) || (thin && thin[id]))
+                continue;
+            if (g == f && !((zc = ib->z[c] + ib->w.zbase[g]) < zlim))
                 continue;
             for (k = 0; k < n && cand[k] != id; k++)
                 ;
@@ -1212,9 +1221,6 @@ int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
                 m = 1; /* a sample on another face: depths not comparable */
                 continue;
             }
-            zc = ib->z[c] + ib->w.zbase[g];
-            if (!(zc < zlim))
-                continue;
             if (tn < 0.0)
                 tn = ib_tan(p, o, ib->light);
             ex = (i + di + 0.5 - x) * ib->w.du[f];
@@ -1224,9 +1230,12 @@ int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
     }
     if (!n)
         return 1;
-    r = rtpi_shadow_ray(o, ib->light);
+    if (!r) {
+        rr = rtpi_shadow_ray(o, ib->light);
+        r = &rr;
+    }
     for (k = 0; k < n; k++)
-        if (rtpi_intersect_prim(s, cand[k], &r, &h)) {
+        if (rtpi_intersect_prim(s, cand[k], r, &h)) {
             *occ = cand[k];
             return 0;
         }
@@ -1442,12 +1451,18 @@ static void ib_tri(rtpi_itembuf *ib, const rtp_scene *s, int f, uint32_t prim,
         i1 = (int)fmin((double)res, floor((umax - u0) / du - 0.5));
         i0 = i0 < 0 ? 0 : i0;
         i1 = i1 > res - 1 ? res - 1 : i1;
-        for (i = i0; i <= i1; i++) {
-            double uc = u0 + du * (i + 0.5);
-            /* Local point z (uc, vc, 1) on the plane nn.x = kk. */
-            double w = (nn[0] * uc + nn[1] * vc + nn[2]) / kk;
-            if (w > 0.0)
-                ib_store(ib, f, ib->w.fbase[f] + (size_t)j * res + (size_t)i, 1.0 / w, prim);
+        {
+            /* Local point z (uc, vc, 1) on the plane nn.x = kk: z = 1/w,
+               w = (nn0 uc + nn1 vc + nn2) / kk, with the row's part and
+               nn0/kk taken once (one division a cell, not two: drawing a
+               floor at 1024 cells a face edge divides millions of times) */
+            const double wa = nn[0] / kk, wb = (nn[1] * vc + nn[2]) / kk;
+            const size_t row = ib->w.fbase[f] + (size_t)j * res;
+            for (i = i0; i <= i1; i++) {
+                double w = wa * (u0 + du * (i + 0.5)) + wb;
+                if (w > 0.0)
+                    ib_store(ib, f, row + (size_t)i, 1.0 / w, prim);
+            }
         }
     }
 }

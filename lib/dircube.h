@@ -275,10 +275,12 @@ rtp_status rtpi_itembuf_alloc(rtpi_itembuf *ib, const rtp_scene *s,
    certain), -1 open (something lies in front near the ray: ask an exact
    query).  thin (NULL: none): per primitive, 1 for those the caller
    decides itself (rtpi_itembuf_thin); they are never intersected here.
-   On 0, *occ is the primitive found in the way. */
+   self: rtpi_prim_shadows_own(s, prim, o, light), which the caller needs
+   too.  r (NULL: made here when needed): rtpi_shadow_ray(o, light).  On
+   0, *occ is the primitive found in the way. */
 int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
-                         rtpi_v3 p, rtpi_v3 o, uint32_t prim,
-                         const unsigned char *thin, uint32_t *occ);
+                         rtpi_v3 p, rtpi_v3 o, uint32_t prim, int self,
+                         const rtpi_ray *r, const unsigned char *thin, uint32_t *occ);
 /* Sets thin[i] (one per primitive) to 1 where primitive i is drawn and
    its projection may be narrower than `cells` cells of ib somewhere, else
    0. */

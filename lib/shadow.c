@@ -31,7 +31,41 @@ struct rtpi_shadow {
     rtpi_lightbuf wide; /* the other primitives, for the item buffer */
     rtpi_itembuf ib;
     unsigned char *thin; /* per primitive: 1 if in lb */
+    uint64_t *thin_cells; /* bit c: lb's cell c lists a thin primitive */
 };
+
+/* Marks the cells of the thin light buffer whose lists are not empty.  A
+   query whose direction falls in an unmarked cell meets no thin
+   primitive (the lists are exact: see dircube.c), so the item buffer's
+   answer stands without building the ray and reading the cell's list:
+   the bits, 1/32 of the list starts, stay in cache where the starts do
+   not. */
+static rtp_status sh_thin_cells(rtpi_shadow *sh, const rtp_allocator *a, rtp_error *err)
+{
+    size_t n = sh->lb.w.ncells, c;
+    sh->thin_cells = (uint64_t *)rtpi_calloc_array(a, n / 64 + 1, sizeof *sh->thin_cells);
+    if (!sh->thin_cells)
+        return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+    for (c = 0; c < n; c++)
+        if (sh->lb.off[c] != sh->lb.off[c + 1])
+            sh->thin_cells[c >> 6] |= (uint64_t)1 << (c & 63);
+    return RTP_OK;
+}
+
+/* May a thin primitive lie in the way from o to the light?  0 only where
+   none can (its direction's cell lists none). */
+static int sh_thin_near(const rtpi_shadow *sh, rtpi_v3 o)
+{
+    rtpi_v3 d = v3_sub(o, sh->light);
+    size_t c;
+    if (d.x == 0.0 && d.y == 0.0 && d.z == 0.0)
+        return 1; /* at the light: the light buffer asks every candidate */
+    /* The cell of o - light, not of the ray's rounded -d: both lie far
+       within a listed primitive's widening (1e-7 radians) of it where the
+       ray can hit it, so the same cells list it. */
+    c = rtpi_dc_wcell(&sh->lb.w, sh->lb.res, d);
+    return c != RTPI_DC_ABSENT && ((sh->thin_cells[c >> 6] >> (c & 63)) & 1u);
+}
 
 /* The item buffer over the wide primitives and its companions (see
    above). */
@@ -51,6 +85,8 @@ static rtp_status sh_itembuf(rtpi_shadow *sh, int res, int threads, const rtp_al
     if (st == RTP_OK)
         st = rtpi_lightbuf_build_some(sh->s, sh->light, (sh->ib.res + 1) / SH_THIN_DIV, sh->thin,
                                       1, threads, a, &sh->lb, err);
+    if (st == RTP_OK && sh->lb.ncand)
+        st = sh_thin_cells(sh, a, err);
     if (st == RTP_OK)
         st = rtpi_lightbuf_build_some(sh->s, sh->light,
                                       sh->ib.res < SH_WIDE_RES ? sh->ib.res : SH_WIDE_RES,
@@ -107,57 +143,58 @@ rtp_status rtpi_shadow_create_mt(const rtp_scene *s, const rtpi_kdtree *kd, rtpi
     return RTP_OK;
 }
 
-/* The point's own primitive when it cannot be in the way of the point's
-   shadow ray (a triangle, a sphere seen from outside with the light
-   outside too, an open cone from outside): the light buffers then need
-   not ask it (for scenes of spheres and meshes about half of their
-   tests), nor the kd-tree (trace leaves it out alike).  RTPI_NONE
-   otherwise. */
-static uint32_t own_skip(const rtpi_shadow *sh, uint32_t prim, rtpi_v3 o)
-{
-    return rtpi_prim_shadows_own(sh->s, prim, o, sh->light) == 0 ? prim : RTPI_NONE;
-}
-
 /* The decision, and in *occ a primitive in the way when one was seen
-   (RTPI_NONE otherwise). */
+   (RTPI_NONE otherwise).  r: rtpi_shadow_ray(o, light), or NULL where
+   the caller has not made it (made here when needed).  The point's own
+   primitive is left out where it cannot be in the way of the point's
+   shadow ray (rtpi_prim_shadows_own 0: a triangle, a sphere seen from
+   outside with the light outside too, an open cone from outside): the
+   light buffers then need not ask it (for scenes of spheres and meshes
+   about half of their tests), nor the kd-tree (trace leaves it out
+   alike). */
 static int sh_visible(const rtpi_shadow *sh, rtpi_v3 p, rtpi_v3 o, uint32_t prim,
-                      uint32_t *occ)
+                      const rtpi_ray *r, uint32_t *occ)
 {
-    rtpi_ray r;
-    uint32_t skip;
-    int v;
+    rtpi_ray rr;
+    int own = rtpi_prim_shadows_own(sh->s, prim, o, sh->light), v;
+    uint32_t skip = own == 0 ? prim : RTPI_NONE;
     *occ = RTPI_NONE;
     switch (sh->mode) {
     case RTPI_SHADOW_LIGHTBUF:
-        r = rtpi_shadow_ray(o, sh->light);
-        return (*occ = rtpi_lightbuf_occluder(&sh->lb, sh->s, &r, own_skip(sh, prim, o))) ==
-               RTPI_NONE;
+        break;
     case RTPI_SHADOW_ITEMBUF:
     case RTPI_SHADOW_OSMESA:
-        v = rtpi_itembuf_visible(&sh->ib, sh->s, p, o, prim, sh->thin, occ);
+        v = rtpi_itembuf_visible(&sh->ib, sh->s, p, o, prim, own, r, sh->thin, occ);
         if (v == 0)
             return 0;
-        if (!sh->lb.ncand && v > 0)
-            return 1; /* (no light buffer to ask: skip not needed) */
-        r = rtpi_shadow_ray(o, sh->light);
-        skip = own_skip(sh, prim, o);
+        if (v > 0 && (!sh->lb.ncand || !sh_thin_near(sh, o)))
+            return 1; /* (no thin primitive to ask) */
+        if (!r) {
+            rr = rtpi_shadow_ray(o, sh->light);
+            r = &rr;
+        }
         if (sh->lb.ncand &&
-            (*occ = rtpi_lightbuf_occluder(&sh->lb, sh->s, &r, skip)) != RTPI_NONE)
+            (*occ = rtpi_lightbuf_occluder(&sh->lb, sh->s, r, skip)) != RTPI_NONE)
             return 0;
         if (v > 0)
             return 1;
-        return (*occ = rtpi_lightbuf_occluder(&sh->wide, sh->s, &r, skip)) == RTPI_NONE;
+        return (*occ = rtpi_lightbuf_occluder(&sh->wide, sh->s, r, skip)) == RTPI_NONE;
     case RTPI_SHADOW_EXACT:
         break;
     }
-    r = rtpi_shadow_ray(o, sh->light);
-    return (*occ = rtpi_kd_occluder(sh->kd, &r, own_skip(sh, prim, o))) == RTPI_NONE;
+    if (!r) {
+        rr = rtpi_shadow_ray(o, sh->light);
+        r = &rr;
+    }
+    if (sh->mode == RTPI_SHADOW_LIGHTBUF)
+        return (*occ = rtpi_lightbuf_occluder(&sh->lb, sh->s, r, skip)) == RTPI_NONE;
+    return (*occ = rtpi_kd_occluder(sh->kd, r, skip)) == RTPI_NONE;
 }
 
 int rtpi_shadow_visible(const rtpi_shadow *sh, rtpi_v3 p, rtpi_v3 o, uint32_t prim)
 {
     uint32_t occ;
-    return sh_visible(sh, p, o, prim, &occ);
+    return sh_visible(sh, p, o, prim, NULL, &occ);
 }
 
 int rtpi_shadow_visible_cached(const rtpi_shadow *sh, rtpi_shadow_cache *c, rtpi_v3 p,
@@ -165,17 +202,20 @@ int rtpi_shadow_visible_cached(const rtpi_shadow *sh, rtpi_shadow_cache *c, rtpi
 {
     uint32_t occ;
     int v;
+    rtpi_ray r;
     if (c->last && c->last - 1u != prim) {
         /* A hit is a hit: the primitive is in the way whichever mode
            asks, and every exact mode's lists would hold it (the kd-tree's
            too: the same intersection tests).  Not the point's own
-           primitive, which the queries may leave out (own_skip). */
-        rtpi_ray r = rtpi_shadow_ray(o, sh->light);
+           primitive, which the queries may leave out (sh_visible). */
         rtpi_hit h;
+        r = rtpi_shadow_ray(o, sh->light);
         if (rtpi_intersect_prim(sh->s, c->last - 1u, &r, &h))
             return 0;
+        v = sh_visible(sh, p, o, prim, &r, &occ);
+    } else {
+        v = sh_visible(sh, p, o, prim, NULL, &occ);
     }
-    v = sh_visible(sh, p, o, prim, &occ);
     /* Remembered only while queries keep meeting occluders: after a lit
        answer the next is most likely lit too, and a test would be lost. */
     c->last = occ != RTPI_NONE ? occ + 1u : 0u;
@@ -192,5 +232,6 @@ void rtpi_shadow_destroy(rtpi_shadow *sh)
     rtpi_lightbuf_free(&sh->wide, &a);
     rtpi_itembuf_free(&sh->ib, &a);
     rtpi_free(&a, sh->thin);
+    rtpi_free(&a, sh->thin_cells);
     rtpi_free(&a, sh);
 }
