@@ -861,6 +861,63 @@ static int lb_part(void *ctx, int part)
     return lf->oom;
 }
 
+/* One range of cells [lo, hi) of the lists, in three phases over every
+   run (each range's own cells only, so the ranges run side by side and
+   the buffer is the same for any number of them).  Cell c's count goes
+   to off[c + 2]; phase 1 makes those the running sums (from the range's
+   first start, in `sum`), so that off[c + 1] is cell c's start; phase 2
+   fills each cell's list with off[c + 1] as its cursor, the runs taken
+   in ascending rank (each list in ascending near), which leaves off[c]
+   at cell c's start: the starts without a pass to shift them. */
+typedef struct lb_cells {
+    rtpi_lightbuf *lb;
+    const lb_fill *parts;
+    int nparts, phase;
+    size_t lo, hi;
+    uint32_t sum; /* phase 0: the range's count; then its first start */
+    char pad[64]; /* side by side: no cache line shared */
+} lb_cells;
+
+static int lb_cells_fn(void *ctx, int part)
+{
+    lb_cells *lc = (lb_cells *)ctx + part; /* (every thread: the array) */
+    uint32_t *off = lc->lb->off;
+    size_t lo = lc->lo, hi = lc->hi, i, c;
+    int k;
+    if (lc->phase == 0) {
+        uint32_t sum = 0;
+        memset(off + lo + 2, 0, (hi - lo) * sizeof *off);
+        for (k = 0; k < lc->nparts; k++)
+            for (i = 0; i < lc->parts[k].nruns; i++) {
+                const lb_run *r = &lc->parts[k].runs[i];
+                size_t a = r->cell > lo ? r->cell : lo, b = r->cell + r->n < hi ? r->cell + r->n : hi;
+                for (c = a; c < b; c++)
+                    off[c + 2]++;
+            }
+        for (c = lo; c < hi; c++)
+            sum += off[c + 2];
+        lc->sum = sum;
+    } else if (lc->phase == 1) {
+        uint32_t sum = lc->sum;
+        if (lo == 0)
+            off[1] = 0;
+        for (c = lo; c < hi; c++) {
+            sum += off[c + 2];
+            off[c + 2] = sum;
+        }
+    } else {
+        uint32_t *ref = lc->lb->ref;
+        for (k = 0; k < lc->nparts; k++)
+            for (i = 0; i < lc->parts[k].nruns; i++) {
+                const lb_run *r = &lc->parts[k].runs[i];
+                size_t a = r->cell > lo ? r->cell : lo, b = r->cell + r->n < hi ? r->cell + r->n : hi;
+                for (c = a; c < b; c++)
+                    ref[off[c + 1]++] = r->rank;
+            }
+    }
+    return 0;
+}
+
 rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
                                     const unsigned char *sel, unsigned char want, int threads,
                                     const rtp_allocator *a, rtpi_lightbuf *lb,
@@ -895,7 +952,8 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
     lb->slack = 1e-12 * S;
     lb->scale = S;
     lb->cand = (rtpi_lb_cand *)rtpi_malloc_array(a, n ? n : 1, sizeof *lb->cand);
-    lb->off = (uint32_t *)rtpi_calloc_array(a, ncells + 1, sizeof *lb->off);
+    /* (ncells + 2: lb_cells' cursors; zeroed there, by parts) */
+    lb->off = (uint32_t *)rtpi_malloc_array(a, ncells + 2, sizeof *lb->off);
     if (!lb->cand || !lb->off) {
         rtpi_lightbuf_free(lb, a);
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory for the light buffer");
@@ -970,37 +1028,38 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
         rtpi_lightbuf_free(lb, a);
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory for the light buffer");
     }
-    /* every cell's count from the runs */
-    for (k = 0; k < np; k++)
-        for (i = 0; i < parts[k].nruns; i++) {
-            const lb_run *r = &parts[k].runs[i];
-            uint32_t *p = lb->off + r->cell, j;
-            for (j = 0; j < r->n; j++)
-                p[j]++;
-        }
+    /* The lists from the runs, by ranges of cells on up to `threads`
+       threads (lb_cells) */
     {
-        /* counts -> starts (exclusive prefix sum), used as write cursors */
-        uint32_t sum = 0;
-        for (i = 0; i < ncells; i++) {
-            uint32_t c = lb->off[i];
-            lb->off[i] = sum;
-            sum += c;
+        lb_cells lc[LB_MAX_PARTS];
+        int nr = threads < 1 ? 1 : threads > LB_MAX_PARTS ? LB_MAX_PARTS : threads;
+        uint32_t base = 0;
+        if ((size_t)nr > ncells / 4096 + 1)
+            nr = (int)(ncells / 4096 + 1); /* small buffers: not worth a thread */
+        for (k = 0; k < nr; k++) {
+            lc[k].lb = lb;
+            lc[k].parts = parts;
+            lc[k].nparts = np;
+            lc[k].lo = ncells * (size_t)k / (size_t)nr;
+            lc[k].hi = ncells * (size_t)(k + 1) / (size_t)nr;
+            ctx[k] = lc;
         }
-        lb->off[ncells] = sum;
+        for (k = 0; k < 3; k++) {
+            int q;
+            for (q = 0; q < nr; q++)
+                lc[q].phase = k;
+            rtpi_parallel_rows(nr, nr, ctx, lb_cells_fn, NULL, NULL);
+            if (k == 0)
+                for (q = 0; q < nr; q++) { /* each range's first start */
+                    uint32_t c = lc[q].sum;
+                    lc[q].sum = base;
+                    base += c;
+                }
+        }
+        lb->off[0] = 0;
     }
-    /* The runs in ascending rank: each list fills in ascending near. */
-    for (k = 0; k < np; k++) {
-        for (i = 0; i < parts[k].nruns; i++) {
-            const lb_run *r = &parts[k].runs[i];
-            uint32_t *p = lb->off + r->cell, j;
-            for (j = 0; j < r->n; j++)
-                lb->ref[p[j]++] = r->rank;
-        }
+    for (k = 0; k < np; k++)
         rtpi_free(a, parts[k].runs);
-    }
-    /* Each cursor now stands at its cell's end = the next cell's start. */
-    memmove(lb->off + 1, lb->off, ncells * sizeof *lb->off);
-    lb->off[0] = 0;
     return RTP_OK;
 }
 
