@@ -401,6 +401,8 @@ static int dc_hull2(double pts[][2], int n, double hull[][2])
    edge cells, which is still a cover).  pts: the points (light-relative);
    @return 0 if they do not qualify, 1 when done (culled or drawn). */
 #define DC_FAST_UV 10.0
+#define DC_BOX_EDGE 2   /* a bound this many cells wide or high, */
+#define DC_BOX_CELLS 16 /* or of this many cells: its box (dc_cover_fast) */
 static int dc_cover_fast(dc_ctx *c, int f, const double (*pts)[3], int n, double m,
                          double lim)
 {
@@ -422,6 +424,28 @@ static int dc_cover_fast(dc_ctx *c, int f, const double (*pts)[3], int n, double
     }
     if (umin > lim || umax < -lim || vmin > lim || vmax < -lim)
         return 1; /* wholly off this face */
+    {
+        /* A round shape's bound a few cells across (most of those of a
+           big scene): the cells of its box, widened as
+           dc_spans_conservative widens, hold every cell of its hull's
+           spans (each row's extent lies within the box's), at a few more
+           cells than the hull's and none of the hull's cost (a cone's 32
+           points sorted, then clipped row by row: 7,000 instructions a
+           cylinder).  Cells beyond the window clamp to its edges alike.
+           Not for a triangle: its spans cost little, and the box's extra
+           cells lengthen the lists of a mesh's every cell (mount: 2-5%
+           more to a move). */
+        int i0 = rtpi_dc_wcoord(umin - m, c->u0[f], c->du[f], c->res),
+            i1 = rtpi_dc_wcoord(umax + m, c->u0[f], c->du[f], c->res),
+            j0 = rtpi_dc_wcoord(vmin - m, c->v0[f], c->dv[f], c->res),
+            j1 = rtpi_dc_wcoord(vmax + m, c->v0[f], c->dv[f], c->res), j;
+        int ni = i1 - i0 + 1, nj = j1 - j0 + 1;
+        if (n > 3 && (ni <= DC_BOX_EDGE || nj <= DC_BOX_EDGE || ni * nj <= DC_BOX_CELLS)) {
+            for (j = j0; j <= j1; j++)
+                dc_row_add(c, j, i0, i1);
+            return 1;
+        }
+    }
     if (n <= DC_N) { /* one convex polygon: a triangle or a sphere's bound */
         dc_spans_conservative(c, f, (const double(*)[2])uv, n, m);
         return 1;
