@@ -101,7 +101,8 @@ int main(void)
         printf("bench_pairs: ../shared/scenes absent: skipped\n");
         return 0;
     }
-    printf("\n## Item buffer against exact shadows, every recorded hit (light 0 moved, 512x512)\n\n");
+    printf("\n## Item buffer against exact shadows, every recorded hit "
+           "(light 0 moved, 512x512)\n\n");
     printf("Decisions of light 0's visibility at every node that faces it, item buffer "
            "against exact shadow rays; 'called lit' is the part of the wrong ones that "
            "were in shadow; RMSE and PSNR of the image against the exact move's.\n\n");
