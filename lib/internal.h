@@ -290,6 +290,20 @@ int rtpi_prim_shadows_own(const rtp_scene *s, uint32_t prim, rtpi_v3 o, rtpi_v3 
 int rtpi_intersect_prim(const rtp_scene *s, uint32_t prim,
                         const rtpi_ray *ray, rtpi_hit *hit);
 
+/* Axis frame of a cone: unit axis w from base b to apex, height h, end
+   radii rb and ra, slope k (radius change per unit height). */
+typedef struct rtpi_cone_frame {
+    rtpi_v3 b, w;
+    double h, rb, ra, k;
+} rtpi_cone_frame;
+/* The frame rtpi_intersect_prim derives for cone cn; 0 where it has no
+   height or radius (never hit). */
+int rtpi_cone_frame_of(const rtpi_cone *cn, rtpi_cone_frame *f);
+/* rtpi_intersect_prim's cone test with the frame given, bit for bit (for
+   many rays at one cone: the item buffer's ray a cell); hit->prim is not
+   set. */
+int rtpi_hit_cone_frame(const rtpi_cone_frame *f, const rtpi_ray *ray, rtpi_hit *hit);
+
 /* Bounds of one primitive. */
 void rtpi_prim_bounds(const rtp_scene *s, uint32_t prim, double lo[3],
                       double hi[3]);

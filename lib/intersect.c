@@ -71,14 +71,9 @@ static int hit_sphere(const rtpi_sphere *sp, const rtpi_ray *ray,
 
 /* --------------------------------------------------- cones and cylinders */
 
-/* Axis frame of a cone: unit axis w from base to apex, height H, slope k
-   (radius change per unit height). */
-typedef struct cone_frame {
-    rtpi_v3 b, w;
-    double h, rb, ra, k;
-} cone_frame;
+typedef rtpi_cone_frame cone_frame;
 
-static int cone_frame_of(const rtpi_cone *cn, cone_frame *f)
+int rtpi_cone_frame_of(const rtpi_cone *cn, rtpi_cone_frame *f)
 {
     rtpi_v3 ax;
     f->b = v3_from_f(cn->base);
@@ -104,14 +99,12 @@ static void basis(rtpi_v3 n, rtpi_v3 *e1, rtpi_v3 *e2)
     *e2 = v3(b, sg + n.y * n.y * a, -n.y);
 }
 
-static int hit_cone(const rtpi_cone *cn, const rtpi_ray *ray, rtpi_hit *hit)
+int rtpi_hit_cone_frame(const rtpi_cone_frame *cfp, const rtpi_ray *ray, rtpi_hit *hit)
 {
-    cone_frame cf;
+    const cone_frame cf = *cfp;
     rtpi_v3 mid, o2, f, q0, qd;
     double a, tc, h0, hd, s0, sd, qa, qb, qc, disc, q, r[2];
     int n = 0, i;
-    if (!cone_frame_of(cn, &cf))
-        return 0;
     a = v3_dot(ray->d, ray->d);
     if (!(a > 0.0))
         return 0;
@@ -164,6 +157,12 @@ static int hit_cone(const rtpi_cone *cn, const rtpi_ray *ray, rtpi_hit *hit)
         }
     }
     return 0;
+}
+
+static int hit_cone(const rtpi_cone *cn, const rtpi_ray *ray, rtpi_hit *hit)
+{
+    cone_frame cf;
+    return rtpi_cone_frame_of(cn, &cf) && rtpi_hit_cone_frame(&cf, ray, hit);
 }
 
 /* ------------------------------------------------------------ interface */
@@ -295,7 +294,7 @@ void rtpi_surface_at_ex(const rtp_scene *s, const rtpi_ray *ray,
         rtpi_v3 f, q, e1, e2, n;
         double h, ql;
         out->mat = cn->mat;
-        if (!cone_frame_of(cn, &cf)) { /* never hit; something sane */
+        if (!rtpi_cone_frame_of(cn, &cf)) { /* never hit; something sane */
             out->ng = out->ns = v3(0.0, 0.0, 1.0);
             return;
         }
