@@ -1577,7 +1577,6 @@ typedef struct ib_cast {
     const rtp_scene *s;
     uint32_t prim;
     int sphere, inside;
-    rtpi_cone_frame cf; /* a cone's, made once for all its cells */
     const ib_part *pt;
 } ib_cast;
 
@@ -1611,7 +1610,7 @@ static void ib_cast_run(void *user, size_t cell, int count)
             r.d = d;
             r.tmin = 0.0;
             r.tmax = ib->id[cc] == RTPI_NONE ? HUGE_VAL : (double)ib->z[cc] + ib->w.zbase[f];
-            if (rtpi_hit_cone_frame(&ic->cf, &r, &h))
+            if (rtpi_intersect_prim(ic->s, ic->prim, &r, &h))
                 ib_store(ib, f, cc, h.t, ic->prim);
         }
     }
@@ -1652,10 +1651,6 @@ static void ib_draw(rtpi_itembuf *ib, const rtp_scene *s, dc_ctx *c, uint32_t pr
                     v3_len(v3_sub(v3_from_f(s->spheres[i - s->ntris].c), ib->light)) <=
                         fabs((double)s->spheres[i - s->ntris].r);
         ic.pt = pt;
-        /* (a cone without height or radius is never hit: not drawn) */
-        if (!ic.sphere && (i - s->ntris - s->nspheres >= s->ncones ||
-                           !rtpi_cone_frame_of(&s->cones[i - s->ntris - s->nspheres], &ic.cf)))
-            return;
         dc_cover(c, prim, 1e-9, ib_cast_run, &ic);
     }
 }

@@ -96,6 +96,18 @@ typedef struct rtpi_cone {
     uint32_t mat;
 } rtpi_cone;
 
+/* A cone's axis frame in double, derived from its floats once (every ray
+   test and surface normal needs it; deriving it each time, a square root
+   and two divisions, was a fifth of a shadow ray's work on rings): unit
+   axis w from base b to the apex, height h, end radii rb and ra, slope k
+   (radius change per unit height); ok 0 where the cone has no height or
+   radius, or is too long to handle (never hit). */
+typedef struct rtpi_cone_frame {
+    rtpi_v3 b, w;
+    double h, rb, ra, k;
+    int ok;
+} rtpi_cone_frame;
+
 typedef enum rtpi_tex_kind {
     RTPI_TEX_NONE = 0,
     RTPI_TEX_CHECKER = 1, /* solid 3D checker: colour / color2, cell size */
@@ -158,6 +170,7 @@ struct rtp_scene {
     rtpi_tri *tris;       size_t ntris, cap_tris;
     rtpi_sphere *spheres; size_t nspheres, cap_spheres;
     rtpi_cone *cones;     size_t ncones, cap_cones;
+    rtpi_cone_frame *cframes; size_t cap_cframes; /* one per cone */
 
     rtpi_material *mats;  size_t nmats, cap_mats;
     rtpi_light *lights;   size_t nlights, cap_lights;
@@ -172,6 +185,9 @@ int rtpi_scene_add_uv(rtp_scene *s, double u, double v);
 int rtpi_scene_add_tri(rtp_scene *s, const rtpi_tri *t);
 int rtpi_scene_add_sphere(rtp_scene *s, const rtpi_sphere *sp);
 int rtpi_scene_add_cone(rtp_scene *s, const rtpi_cone *c);
+/* Derives cframes for every cone (cones put in place by other means than
+   rtpi_scene_add_cone); 0 or -1. */
+int rtpi_scene_cone_frames(rtp_scene *s);
 /* Adds a material with NFF defaults; returns its index or -1. */
 long rtpi_scene_add_material(rtp_scene *s, const rtpi_material *m);
 long rtpi_scene_add_light(rtp_scene *s, const rtpi_light *l);
@@ -290,19 +306,9 @@ int rtpi_prim_shadows_own(const rtp_scene *s, uint32_t prim, rtpi_v3 o, rtpi_v3 
 int rtpi_intersect_prim(const rtp_scene *s, uint32_t prim,
                         const rtpi_ray *ray, rtpi_hit *hit);
 
-/* Axis frame of a cone: unit axis w from base b to apex, height h, end
-   radii rb and ra, slope k (radius change per unit height). */
-typedef struct rtpi_cone_frame {
-    rtpi_v3 b, w;
-    double h, rb, ra, k;
-} rtpi_cone_frame;
-/* The frame rtpi_intersect_prim derives for cone cn; 0 where it has no
+/* The axis frame of cone cn (rtp_scene.cframes): ok 0 where it has no
    height or radius (never hit). */
-int rtpi_cone_frame_of(const rtpi_cone *cn, rtpi_cone_frame *f);
-/* rtpi_intersect_prim's cone test with the frame given, bit for bit (for
-   many rays at one cone: the item buffer's ray a cell); hit->prim is not
-   set. */
-int rtpi_hit_cone_frame(const rtpi_cone_frame *f, const rtpi_ray *ray, rtpi_hit *hit);
+void rtpi_cone_frame_of(const rtpi_cone *cn, rtpi_cone_frame *f);
 
 /* Bounds of one primitive. */
 void rtpi_prim_bounds(const rtp_scene *s, uint32_t prim, double lo[3],

@@ -73,9 +73,10 @@ static int hit_sphere(const rtpi_sphere *sp, const rtpi_ray *ray,
 
 typedef rtpi_cone_frame cone_frame;
 
-int rtpi_cone_frame_of(const rtpi_cone *cn, rtpi_cone_frame *f)
+void rtpi_cone_frame_of(const rtpi_cone *cn, rtpi_cone_frame *f)
 {
     rtpi_v3 ax;
+    memset(f, 0, sizeof *f);
     f->b = v3_from_f(cn->base);
     ax = v3_sub(v3_from_f(cn->apex), f->b);
     f->h = v3_len(ax);
@@ -83,10 +84,10 @@ int rtpi_cone_frame_of(const rtpi_cone *cn, rtpi_cone_frame *f)
     f->ra = fabs((double)cn->ra);
     /* No height or no radius at all: a disc edge or a line, nothing to hit. */
     if (!(f->h > 0.0) || !(f->rb + f->ra > 0.0) || !(f->h < 1e300))
-        return 0;
+        return;
     f->w = v3_mul(ax, 1.0 / f->h);
     f->k = (f->ra - f->rb) / f->h;
-    return 1;
+    f->ok = 1;
 }
 
 /* Orthonormal e1, e2 perpendicular to unit n (Duff et al. 2017). */
@@ -99,12 +100,14 @@ static void basis(rtpi_v3 n, rtpi_v3 *e1, rtpi_v3 *e2)
     *e2 = v3(b, sg + n.y * n.y * a, -n.y);
 }
 
-int rtpi_hit_cone_frame(const rtpi_cone_frame *cfp, const rtpi_ray *ray, rtpi_hit *hit)
+static int hit_cone(const cone_frame *cfp, const rtpi_ray *ray, rtpi_hit *hit)
 {
     const cone_frame cf = *cfp;
     rtpi_v3 mid, o2, f, q0, qd;
     double a, tc, h0, hd, s0, sd, qa, qb, qc, disc, q, r[2];
     int n = 0, i;
+    if (!cf.ok)
+        return 0;
     a = v3_dot(ray->d, ray->d);
     if (!(a > 0.0))
         return 0;
@@ -159,12 +162,6 @@ int rtpi_hit_cone_frame(const rtpi_cone_frame *cfp, const rtpi_ray *ray, rtpi_hi
     return 0;
 }
 
-static int hit_cone(const rtpi_cone *cn, const rtpi_ray *ray, rtpi_hit *hit)
-{
-    cone_frame cf;
-    return rtpi_cone_frame_of(cn, &cf) && rtpi_hit_cone_frame(&cf, ray, hit);
-}
-
 /* ------------------------------------------------------------ interface */
 
 int rtpi_intersect_prim(const rtp_scene *s, uint32_t prim, const rtpi_ray *ray,
@@ -177,7 +174,7 @@ int rtpi_intersect_prim(const rtp_scene *s, uint32_t prim, const rtpi_ray *ray,
     } else if ((i -= s->ntris) < s->nspheres) {
         r = hit_sphere(&s->spheres[i], ray, hit);
     } else if ((i -= s->nspheres) < s->ncones) {
-        r = hit_cone(&s->cones[i], ray, hit);
+        r = hit_cone(&s->cframes[i], ray, hit);
     } else {
         return 0;
     }
@@ -290,11 +287,11 @@ void rtpi_surface_at_ex(const rtp_scene *s, const rtpi_ray *ray,
     }
     if ((i -= s->nspheres) < s->ncones) {
         const rtpi_cone *cn = &s->cones[i];
-        cone_frame cf;
+        const cone_frame cf = s->cframes[i];
         rtpi_v3 f, q, e1, e2, n;
         double h, ql;
         out->mat = cn->mat;
-        if (!rtpi_cone_frame_of(cn, &cf)) { /* never hit; something sane */
+        if (!cf.ok) { /* never hit; something sane */
             out->ng = out->ns = v3(0.0, 0.0, 1.0);
             return;
         }
@@ -302,7 +299,10 @@ void rtpi_surface_at_ex(const rtp_scene *s, const rtpi_ray *ray,
         h = v3_dot(f, cf.w);
         q = v3_madd(f, cf.w, -h);
         ql = v3_len(q);
-        basis(cf.w, &e1, &e2);
+        /* (the frame across the axis only where it is used: a moved
+           light asks every recorded hit's normal) */
+        if (want_uv || !(ql > 0.0))
+            basis(cf.w, &e1, &e2);
         if (!(ql > 0.0)) /* at a pointed apex: any direction across */
             q = e1;
         else

@@ -62,6 +62,7 @@ void rtp_scene_destroy(rtp_scene *s)
     rtpi_free(&a, s->tris);
     rtpi_free(&a, s->spheres);
     rtpi_free(&a, s->cones);
+    rtpi_free(&a, s->cframes);
     rtpi_free(&a, s->mats);
     rtpi_free(&a, s->lights);
     rtpi_free(&a, s->texs);
@@ -137,9 +138,23 @@ int rtpi_scene_add_sphere(rtp_scene *s, const rtpi_sphere *sp)
 
 int rtpi_scene_add_cone(rtp_scene *s, const rtpi_cone *c)
 {
-    if (!prim_room(s) || GROW(s, cones, ncones, cap_cones))
+    if (!prim_room(s) || GROW(s, cones, ncones, cap_cones) ||
+        GROW(s, cframes, ncones, cap_cframes))
         return -1;
+    rtpi_cone_frame_of(c, &s->cframes[s->ncones]);
     s->cones[s->ncones++] = *c;
+    return 0;
+}
+
+int rtpi_scene_cone_frames(rtp_scene *s)
+{
+    size_t i;
+    if (s->ncones &&
+        rtpi_grow(&s->alloc, (void **)&s->cframes, &s->cap_cframes, s->ncones,
+                  sizeof *s->cframes))
+        return -1;
+    for (i = 0; i < s->ncones; i++)
+        rtpi_cone_frame_of(&s->cones[i], &s->cframes[i]);
     return 0;
 }
 
@@ -601,6 +616,7 @@ rtp_status rtpi_scene_clone(const rtp_scene *s, rtp_scene **out)
     c->tris = NULL;
     c->spheres = NULL;
     c->cones = NULL;
+    c->cframes = NULL;
     c->mats = NULL;
     c->lights = NULL;
     c->texs = NULL;
@@ -611,12 +627,13 @@ rtp_status rtpi_scene_clone(const rtp_scene *s, rtp_scene **out)
     bad |= dup_array(a, (void **)&c->tris, s->tris, s->ntris, sizeof *s->tris);
     bad |= dup_array(a, (void **)&c->spheres, s->spheres, s->nspheres, sizeof *s->spheres);
     bad |= dup_array(a, (void **)&c->cones, s->cones, s->ncones, sizeof *s->cones);
+    bad |= dup_array(a, (void **)&c->cframes, s->cframes, s->ncones, sizeof *s->cframes);
     c->cap_pos = s->npos * 3;
     c->cap_nrm = s->nnrm * 3;
     c->cap_uv = s->nuv * 2;
     c->cap_tris = s->ntris;
     c->cap_spheres = s->nspheres;
-    c->cap_cones = s->ncones;
+    c->cap_cones = c->cap_cframes = s->ncones;
     if (!bad && !dup_array(a, (void **)&c->mats, s->mats, s->nmats, sizeof *s->mats)) {
         c->cap_mats = s->nmats;
         for (i = 0; i < s->nmats; i++)

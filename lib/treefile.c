@@ -883,6 +883,8 @@ static rtp_status read_geom(loader *L, rd *r)
             c->mat >= s->nmats)
             return bad(L, "invalid cone", NULL);
     }
+    if (rtpi_scene_cone_frames(s))
+        return nomem(L);
     if (rtpi_scene_nprims(s) >= (size_t)RTPI_NONE)
         return bad(L, "too many primitives", NULL);
     return RTP_OK;
