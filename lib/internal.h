@@ -544,10 +544,30 @@ static inline rtpi_v3 rtpi_sphere_normal(const rtpi_sphere *sp, rtpi_v3 p)
     return v3_norm(v3_sub(p, v3_from_f(sp->c)));
 }
 
+/* A cone's outward normal n at p (its frame cf, ok): the gradient of
+   |q|^2 - (rb + k h)^2, with h the height of p along the axis and q its
+   unit offset from the axis (also returned).  0 where p lies on the axis
+   (a pointed apex: the caller picks a direction across). */
+static inline int rtpi_cone_normal(const rtpi_cone_frame *cf, rtpi_v3 p, rtpi_v3 *n,
+                                   rtpi_v3 *q, double *h)
+{
+    rtpi_v3 f = v3_sub(p, cf->b), a;
+    double ql;
+    *h = v3_dot(f, cf->w);
+    a = v3_madd(f, cf->w, -*h);
+    ql = v3_len(a);
+    if (!(ql > 0.0))
+        return 0;
+    *q = v3_mul(a, 1.0 / ql);
+    *n = v3_norm(v3_madd(*q, cf->w, -cf->k));
+    return 1;
+}
+
 /* The normals (ng, ns) and material rtpi_surface_from_point gives at the
-   float position p on prim, without uv: for a sphere and a triangle
-   without vertex normals by its own arithmetic, inline (a moved light asks
-   this of every recorded hit); else by rtpi_surface_from_point. */
+   float position p on prim, without uv: for a sphere, a triangle without
+   vertex normals and a cone off its axis by their own arithmetic, inline
+   (a moved light asks this of every recorded hit); else by
+   rtpi_surface_from_point. */
 static inline uint32_t rtpi_surface_normals(const rtp_scene *s, uint32_t prim, rtpi_v3 p,
                                             rtpi_v3 *ng, rtpi_v3 *ns)
 {
@@ -566,6 +586,14 @@ static inline uint32_t rtpi_surface_normals(const rtp_scene *s, uint32_t prim, r
             n = v3_mul(n, -1.0);
         *ng = *ns = n;
         return sp->mat;
+    } else if ((i -= s->nspheres) < s->ncones) {
+        const rtpi_cone_frame *cf = &s->cframes[i];
+        rtpi_v3 n, q;
+        double h;
+        if (cf->ok && rtpi_cone_normal(cf, p, &n, &q, &h)) {
+            *ng = *ns = n;
+            return s->cones[i].mat;
+        }
     }
     rtpi_surface_from_point(s, prim, p, 0, &sf);
     *ng = sf.ng;

@@ -288,27 +288,22 @@ void rtpi_surface_at_ex(const rtp_scene *s, const rtpi_ray *ray,
     if ((i -= s->nspheres) < s->ncones) {
         const rtpi_cone *cn = &s->cones[i];
         const cone_frame cf = s->cframes[i];
-        rtpi_v3 f, q, e1, e2, n;
-        double h, ql;
+        rtpi_v3 q, e1, e2, n;
+        double h;
         out->mat = cn->mat;
         if (!cf.ok) { /* never hit; something sane */
             out->ng = out->ns = v3(0.0, 0.0, 1.0);
             return;
         }
-        f = v3_sub(out->p, cf.b);
-        h = v3_dot(f, cf.w);
-        q = v3_madd(f, cf.w, -h);
-        ql = v3_len(q);
         /* (the frame across the axis only where it is used: a moved
            light asks every recorded hit's normal) */
-        if (want_uv || !(ql > 0.0))
+        if (!rtpi_cone_normal(&cf, out->p, &n, &q, &h)) {
             basis(cf.w, &e1, &e2);
-        if (!(ql > 0.0)) /* at a pointed apex: any direction across */
-            q = e1;
-        else
-            q = v3_mul(q, 1.0 / ql);
-        /* Gradient of |q|^2 - (rb + k h)^2 on the surface, outward. */
-        n = v3_norm(v3_madd(q, cf.w, -cf.k));
+            q = e1; /* at a pointed apex: any direction across */
+            n = v3_norm(v3_madd(q, cf.w, -cf.k));
+        } else if (want_uv) {
+            basis(cf.w, &e1, &e2);
+        }
         out->ng = out->ns = n;
         if (want_uv) {
             out->uv[0] = wrap01(atan2(v3_dot(q, e2), v3_dot(q, e1)) /
