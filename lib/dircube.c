@@ -949,6 +949,13 @@ typedef struct lb_cells {
     char pad[64]; /* side by side: no cache line shared */
 } lb_cells;
 
+/* The part [*a, *b) of run r within cells [lo, hi) (empty: *a >= *b). */
+static inline void lb_clip(const lb_run *r, size_t lo, size_t hi, size_t *a, size_t *b)
+{
+    *a = r->cell > lo ? r->cell : lo;
+    *b = r->cell + r->n < hi ? r->cell + r->n : hi;
+}
+
 static int lb_cells_fn(void *ctx, int part)
 {
     lb_cells *lc = (lb_cells *)ctx + part; /* (every thread: the array) */
@@ -961,7 +968,8 @@ static int lb_cells_fn(void *ctx, int part)
         for (k = 0; k < lc->nparts; k++)
             for (i = 0; i < lc->parts[k].nruns; i++) {
                 const lb_run *r = &lc->parts[k].runs[i];
-                size_t a = r->cell > lo ? r->cell : lo, b = r->cell + r->n < hi ? r->cell + r->n : hi;
+                size_t a, b;
+                lb_clip(r, lo, hi, &a, &b);
                 for (c = a; c < b; c++)
                     off[c + 2]++;
             }
@@ -981,7 +989,8 @@ static int lb_cells_fn(void *ctx, int part)
         for (k = 0; k < lc->nparts; k++)
             for (i = 0; i < lc->parts[k].nruns; i++) {
                 const lb_run *r = &lc->parts[k].runs[i];
-                size_t a = r->cell > lo ? r->cell : lo, b = r->cell + r->n < hi ? r->cell + r->n : hi;
+                size_t a, b;
+                lb_clip(r, lo, hi, &a, &b);
                 for (c = a; c < b; c++)
                     ref[off[c + 1]++] = r->rank;
             }
@@ -1155,9 +1164,9 @@ int rtpi_lightbuf_visible(const rtpi_lightbuf *lb, const rtp_scene *s,
 }
 
 /* The list from entry k to end (one cell's) for the ray with direction
-   -dn; `round` 0 where the scene has no spheres or cones (a constant at
-   each call: the compiler makes the loop twice, and a mesh's candidates
-   pay no test of their kind). */
+   -dn; `round` 0 where the buffer has no cone entries (few or no spheres
+   and cones: a constant at each call, so the compiler makes the loop
+   twice, and a mesh's candidates pay no test of their kind). */
 static inline uint32_t lb_walk(const rtpi_lightbuf *lb, const rtp_scene *s,
                                const rtpi_ray *ray, uint32_t skip, size_t k, size_t end,
                                rtpi_v3 dn, int round)
