@@ -962,38 +962,35 @@ static int lb_cells_fn(void *ctx, int part)
     uint32_t *off = lc->lb->off;
     size_t lo = lc->lo, hi = lc->hi, i, c;
     int k;
-    if (lc->phase == 0) {
-        uint32_t sum = 0;
-        memset(off + lo + 2, 0, (hi - lo) * sizeof *off);
-        for (k = 0; k < lc->nparts; k++)
-            for (i = 0; i < lc->parts[k].nruns; i++) {
-                const lb_run *r = &lc->parts[k].runs[i];
-                size_t a, b;
-                lb_clip(r, lo, hi, &a, &b);
-                for (c = a; c < b; c++)
-                    off[c + 2]++;
-            }
-        for (c = lo; c < hi; c++)
-            sum += off[c + 2];
-        lc->sum = sum;
-    } else if (lc->phase == 1) {
-        uint32_t sum = lc->sum;
+    uint32_t *ref = lc->lb->ref, sum = lc->sum;
+    if (lc->phase == 1) {
         if (lo == 0)
             off[1] = 0;
         for (c = lo; c < hi; c++) {
             sum += off[c + 2];
             off[c + 2] = sum;
         }
-    } else {
-        uint32_t *ref = lc->lb->ref;
-        for (k = 0; k < lc->nparts; k++)
-            for (i = 0; i < lc->parts[k].nruns; i++) {
-                const lb_run *r = &lc->parts[k].runs[i];
-                size_t a, b;
-                lb_clip(r, lo, hi, &a, &b);
+        return 0;
+    }
+    if (lc->phase == 0)
+        memset(off + lo + 2, 0, (hi - lo) * sizeof *off);
+    /* phase 0 counts the runs' cells, phase 2 lists the runs' ranks */
+    for (k = 0; k < lc->nparts; k++)
+        for (i = 0; i < lc->parts[k].nruns; i++) {
+            const lb_run *r = &lc->parts[k].runs[i];
+            size_t a, b;
+            lb_clip(r, lo, hi, &a, &b);
+            if (lc->phase == 0)
+                for (c = a; c < b; c++)
+                    off[c + 2]++;
+            else
                 for (c = a; c < b; c++)
                     ref[off[c + 1]++] = r->rank;
-            }
+        }
+    if (lc->phase == 0) {
+        for (sum = 0, c = lo; c < hi; c++)
+            sum += off[c + 2];
+        lc->sum = sum;
     }
     return 0;
 }

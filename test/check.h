@@ -65,6 +65,12 @@ CHECK_UNUSED static int check_report(void)
     return check_failed ? 1 : 0;
 }
 
+/* The seven default SPD scenes (../shared/scenes/spd/NAME.nff) the
+   benchmarks measure. */
+#define CHECK_SPD_SCENES 7
+CHECK_UNUSED static const char *const check_spd_scenes[CHECK_SPD_SCENES] = {
+    "balls_s4", "gears_s4", "mount_s6", "rings_s7", "teapot_s12", "tetra_s6", "tree_s11"};
+
 /* The folder ../shared/scenes when present, else NULL (tests skip). */
 CHECK_UNUSED static inline const char *check_shared_scenes(void)
 {

@@ -195,8 +195,6 @@ out:
 
 int main(void)
 {
-    static const char *const scenes[] = {"balls_s4", "gears_s4", "mount_s6", "rings_s7",
-                                         "teapot_s12", "tetra_s6", "tree_s11"};
     const char *dir = check_shared_scenes();
     const char *quick = getenv("RTP_BENCH_QUICK");
     size_t i;
@@ -223,8 +221,8 @@ int main(void)
     for (size = 512; size <= 1024; size *= 2) {
         if (quick && size > 512)
             break;
-        for (i = 0; i < sizeof scenes / sizeof *scenes; i++)
-            run(dir, scenes[i], size);
+        for (i = 0; i < (size_t)CHECK_SPD_SCENES; i++)
+            run(dir, check_spd_scenes[i], size);
     }
     return 0;
 }

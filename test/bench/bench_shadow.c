@@ -16,6 +16,7 @@
  * Reports; never fails on speed. */
 #include "dircube.h"
 #include "shadow.h"
+#include "../check.h"
 
 #include <stdio.h>
 #include <stdlib.h>
@@ -179,8 +180,6 @@ static const char *find_spd(void)
 
 int main(void)
 {
-    static const char *scenes[] = {"balls_s4", "gears_s4", "mount_s6", "rings_s7",
-                                   "teapot_s12", "tetra_s6", "tree_s11"};
     static const int ib_res[] = {256, 512, 1024, 2048};
     const char *dir = find_spd();
     const int grid = 512;
@@ -201,7 +200,7 @@ int main(void)
            grid, grid);
     printf("| scene | mode | build s | queries s | ns/query | differ from exact | note |\n");
     printf("|---|---|---|---|---|---|---|\n");
-    for (i = 0; i < sizeof scenes / sizeof *scenes; i++) {
+    for (i = 0; i < (size_t)CHECK_SPD_SCENES; i++) {
         char path[512];
         rtp_scene *s = NULL;
         rtpi_kdtree *kd = NULL;
@@ -210,10 +209,10 @@ int main(void)
         double diag;
         size_t k, n;
         int r, c;
-        snprintf(path, sizeof path, "%s/%s.nff", dir, scenes[i]);
+        snprintf(path, sizeof path, "%s/%s.nff", dir, check_spd_scenes[i]);
         if (rtp_scene_load(path, NULL, &s, NULL) != RTP_OK || !s->nlights ||
             rtpi_kd_build(s, NULL, &kd, NULL) != RTP_OK) {
-            printf("| %s | skipped: cannot load | | | | | |\n", scenes[i]);
+            printf("| %s | skipped: cannot load | | | | | |\n", check_spd_scenes[i]);
             rtp_scene_destroy(s);
             continue;
         }
@@ -232,23 +231,23 @@ int main(void)
         n = make_queries(s, kd, lp, grid, q);
         {
             char name[64];
-            snprintf(name, sizeof name, "%s (%lu prims, %lu queries)", scenes[i],
+            snprintf(name, sizeof name, "%s (%lu prims, %lu queries)", check_spd_scenes[i],
                      (unsigned long)rtpi_scene_nprims(s), (unsigned long)n);
             run_mode(name, s, kd, lp, RTPI_SHADOW_EXACT, "exact", 0, q, n, ref, NULL);
         }
-        run_mode(scenes[i], s, kd, lp, RTPI_SHADOW_LIGHTBUF, "lightbuf 1024", 1024, q, n, ref, NULL);
+        run_mode(check_spd_scenes[i], s, kd, lp, RTPI_SHADOW_LIGHTBUF, "lightbuf 1024", 1024, q, n, ref, NULL);
         for (r = 0; r < (int)(sizeof ib_res / sizeof *ib_res); r++) {
             char name[32];
             rtpi_itembuf sw;
             rtp_allocator a;
             int have_sw;
             snprintf(name, sizeof name, "itembuf %d", ib_res[r]);
-            run_mode(scenes[i], s, kd, lp, RTPI_SHADOW_ITEMBUF, name, ib_res[r], q, n, ref, NULL);
+            run_mode(check_spd_scenes[i], s, kd, lp, RTPI_SHADOW_ITEMBUF, name, ib_res[r], q, n, ref, NULL);
 #if defined(RTP_HAVE_OSMESA)
             rtpi_allocator_init(&a, NULL);
             have_sw = rtpi_itembuf_build(s, lp, ib_res[r], &a, &sw, NULL) == RTP_OK;
             snprintf(name, sizeof name, "osmesa %d", ib_res[r]);
-            run_mode(scenes[i], s, kd, lp, RTPI_SHADOW_OSMESA, name, ib_res[r], q, n, ref,
+            run_mode(check_spd_scenes[i], s, kd, lp, RTPI_SHADOW_OSMESA, name, ib_res[r], q, n, ref,
                      have_sw ? &sw : NULL);
             if (have_sw)
                 rtpi_itembuf_free(&sw, &a);
