@@ -168,8 +168,9 @@ typedef struct rtpi_lightbuf {
        distance (times |n|) at which a shadow ray's origin on that side
        too lets the segment miss it (see rtpi_lightbuf_occluder) */
     double *plane;
-    /* by rank, 4 each, where the scene has spheres or cones (set for
-       those only): the unit direction from the light to the centre of a
+    /* by rank, 4 each, where spheres and cones are at least a sixteenth
+       of the scene's primitives (NULL elsewhere; set for those only):
+       the unit direction from the light to the centre of a
        ball holding the candidate, and a bound below the cosine of the
        widest angle between that direction and a ray that can hit it (-2:
        no bound): a ray whose direction's cosine falls below misses it
