@@ -28,6 +28,7 @@ void rtp_tree_destroy(rtp_tree *t)
     rtpi_kd_destroy(t->kd);
     rtpi_free(&a, t->cur_vis);
     rtpi_free(&a, t->cur_pos);
+    rtpi_free(&a, t->tri_nrm);
     rtpi_free(&a, t->ev_terms);
     rtpi_free(&a, t->ev_coeffs);
     rtpi_free(&a, t->ev_nv);
@@ -303,8 +304,15 @@ static int vis_row(void *ctx, int y)
     for (n = (size_t)t->start[k0]; n < (size_t)t->start[k1]; n++) {
         const rtpi_cnode *nd = &t->nodes[n];
         rtpi_v3 p = v3(nd->p[0], nd->p[1], nd->p[2]), ng, ns, o;
-        uint32_t *w = &t->cur_vis[n * words + wi];
-        uint32_t mat = rtpi_surface_normals(s, nd->prim, p, &ng, &ns);
+        uint32_t *w = &t->cur_vis[n * words + wi], mat;
+        const double *tn = t->tri_nrm && nd->prim < s->ntris ? t->tri_nrm + 3 * (size_t)nd->prim
+                                                            : NULL;
+        if (tn && tn[0] == tn[0]) { /* (a flat triangle's, as rtpi_surface_normals makes it) */
+            ng = ns = v3(tn[0], tn[1], tn[2]);
+            mat = s->tris[nd->prim].mat;
+        } else {
+            mat = rtpi_surface_normals(s, nd->prim, p, &ng, &ns);
+        }
         if ((nd->link & RTPI_L_BACK) && rtpi_two_sided(s, t->spd, nd->prim, &s->mats[mat])) {
             ng = v3_mul(ng, -1.0);
             ns = v3_mul(ns, -1.0);
@@ -318,6 +326,29 @@ static int vis_row(void *ctx, int y)
     }
     v->queries += queries;
     v->cache = cache;
+    return 0;
+}
+
+/* t->tri_nrm where the scene has a triangle without vertex normals; 0,
+   or -1 when out of memory. */
+static int tri_normals(rtp_tree *t)
+{
+    const rtp_scene *s = t->scene;
+    size_t i, flat = 0;
+    for (i = 0; i < s->ntris; i++)
+        flat += s->tris[i].n[0] == RTPI_NONE;
+    if (!flat)
+        return 0;
+    t->tri_nrm = (double *)rtpi_malloc_array(&t->alloc, 3 * s->ntris, sizeof *t->tri_nrm);
+    if (!t->tri_nrm)
+        return -1;
+    for (i = 0; i < s->ntris; i++) {
+        rtpi_v3 n = s->tris[i].n[0] == RTPI_NONE ? rtpi_tri_normal(s, &s->tris[i])
+                                                 : v3(NAN, NAN, NAN);
+        t->tri_nrm[3 * i] = n.x;
+        t->tri_nrm[3 * i + 1] = n.y;
+        t->tri_nrm[3 * i + 2] = n.z;
+    }
     return 0;
 }
 
@@ -378,6 +409,8 @@ static rtp_status update_visibility(rtp_tree *t, const rtp_eval_options *opt,
         } else {
             rtpi_shadow *sh = NULL;
             rtp_status rs;
+            if (!t->tri_nrm && tri_normals(t) != 0)
+                return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
             /* only shadow rays need the kd-tree; the cubes draw the scene */
             if (mode == RTP_SHADOWS_EXACT && !t->kd &&
                 (rs = rtpi_kd_build_mt(s, &t->alloc, threads, &t->kd, err)) != RTP_OK)
