@@ -421,13 +421,20 @@ void rtpi_sample_terms(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
 int rtpi_sample_coeffs(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
                        size_t n, const float *terms, double *acc,
                        float *coeffs, double *w);
-/* A moved light's terms and coefficients (coeffs[6 + 3 light ..]) for a
-   sample's n nodes in one pass, with the nodes' path weights w
-   (rtpi_sample_coeffs'): bit for bit what rtpi_sample_terms and
-   rtpi_sample_coeffs make for that light. */
-void rtpi_light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t n,
-                     const uint32_t *vis_ext, const float *nv, const double *w, size_t light,
-                     float *terms, float *coeffs);
+/* A moved light's terms and coefficients (coeffs[6 + 3 light ..]) for
+   samples k0 .. k1 - 1 (sample k's nodes from start[k] to start[k + 1];
+   nodes, vis_ext, nv, w and terms indexed by node, coeffs and samples by
+   sample), with the nodes' path weights w (rtpi_sample_coeffs'): bit for
+   bit what rtpi_sample_terms and rtpi_sample_coeffs make for that light.
+   Where samples is not NULL each sample's colour is combined there too
+   with the colours cl (rtpi_combine; the other coefficients must be those
+   the colours are to be combined with).  *bad |= 1 where a coefficient
+   made is not finite.  Returns how many samples were combined. */
+unsigned long long rtpi_light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
+                                   const uint64_t *start, size_t k0, size_t k1,
+                                   const uint32_t *vis_ext, const float *nv, const double *w,
+                                   size_t light, float *terms, float *coeffs, const double *cl,
+                                   float *samples, int *bad);
 /* The light terms (n.l, highlight) of every node of material mat among a
    sample's n nodes, from the cached normals and view vectors nv, exactly
    as rtpi_sample_terms computes them: what an edit of mat's shine or ks

@@ -311,41 +311,61 @@ void rtpi_sample_terms(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t 
         terms_node(c, nodes, 0, vis_ext, eye, terms, nv);
 }
 
-void rtpi_light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t n,
-                     const uint32_t *vis_ext, const float *nv, const double *w, size_t light,
-                     float *terms, float *coeffs)
+unsigned long long rtpi_light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
+                                   const uint64_t *start, size_t k0, size_t k1,
+                                   const uint32_t *vis_ext, const float *nv, const double *w,
+                                   size_t light, float *terms, float *coeffs, const double *cl,
+                                   float *samples, int *bad)
 {
     const rtp_scene *s = c->s;
     const rtpi_v3 lp = light_pos(&s->lights[light]);
-    size_t k, nt = RTPI_TERMS(s->nlights), wi = light >> 5;
-    uint32_t bit = 1u << (light & 31);
-    double a0 = 0.0, a1 = 0.0, a2 = 0.0;
-    for (k = 0; k < n; k++) {
-        const rtpi_cnode *nd = &nodes[k];
-        const rtpi_material *m = &s->mats[rtpi_prim_material(s, nd->prim)];
-        float *t = terms + k * nt, *tl = t + 3 + 2 * light;
-        int visible = vis_ext ? (vis_ext[k * c->vis_words + wi] & bit) != 0
-                              : (int)((nd->vis >> light) & 1u);
-        double d, sp, kd, ks, cobj[3];
-        /* (the light's position taken once: light_term inline) */
-        light_term(nv + 6 * k, v3(nd->p[0], nd->p[1], nd->p[2]), lp, visible, m, tl);
-        /* coeffs_node's sum for this light, node by node
-           in its order (depth first, reflected subtree first: the order
-           they are stored in), leaving out the nodes it does not reach */
-        d = tl[0];
-        if (w[k] == 0.0 || d == 0.0)
-            continue;
-        sp = tl[1];
-        kd = w[k] * m->kd;
-        ks = w[k] * m->ks;
-        obj_colour(m, t, cobj);
-        a0 += kd * cobj[0] * d + ks * sp;
-        a1 += kd * cobj[1] * d + ks * sp;
-        a2 += kd * cobj[2] * d + ks * sp;
+    const size_t nt = RTPI_TERMS(s->nlights), nc = RTPI_COEFFS(s->nlights), wi = light >> 5;
+    const size_t vw = c->vis_words;
+    const uint32_t bit = 1u << (light & 31);
+    unsigned long long combined = 0;
+    int nonfinite = 0;
+    size_t k, j;
+    for (k = k0; k < k1; k++) {
+        size_t a = (size_t)start[k], b = (size_t)start[k + 1];
+        float *co = coeffs + k * nc;
+        double a0 = 0.0, a1 = 0.0, a2 = 0.0;
+        if (a == b)
+            continue; /* the background: no light in it, nothing changes */
+        for (j = a; j < b; j++) {
+            const rtpi_cnode *nd = &nodes[j];
+            const rtpi_material *m = &s->mats[rtpi_prim_material(s, nd->prim)];
+            float *t = terms + j * nt, *tl = t + 3 + 2 * light;
+            int visible = vis_ext ? (vis_ext[j * vw + wi] & bit) != 0
+                                  : (int)((nd->vis >> light) & 1u);
+            double d, sp, kd, ks, cobj[3];
+            /* (the light's position taken once: light_term inline) */
+            light_term(nv + 6 * j, v3(nd->p[0], nd->p[1], nd->p[2]), lp, visible, m, tl);
+            /* coeffs_node's sum for this light, node by node in its order
+               (depth first, reflected subtree first: the order they are
+               stored in), leaving out the nodes it does not reach */
+            d = tl[0];
+            if (w[j] == 0.0 || d == 0.0)
+                continue;
+            sp = tl[1];
+            kd = w[j] * m->kd;
+            ks = w[j] * m->ks;
+            obj_colour(m, t, cobj);
+            a0 += kd * cobj[0] * d + ks * sp;
+            a1 += kd * cobj[1] * d + ks * sp;
+            a2 += kd * cobj[2] * d + ks * sp;
+        }
+        co[6 + 3 * light] = (float)a0;
+        co[7 + 3 * light] = (float)a1;
+        co[8 + 3 * light] = (float)a2;
+        nonfinite |= !isfinite(co[6 + 3 * light]) | !isfinite(co[7 + 3 * light]) |
+                     !isfinite(co[8 + 3 * light]);
+        if (samples) { /* the other samples' colours hold */
+            rtpi_combine(s, cl, co, samples + 3 * k);
+            combined++;
+        }
     }
-    coeffs[6 + 3 * light] = (float)a0;
-    coeffs[6 + 3 * light + 1] = (float)a1;
-    coeffs[6 + 3 * light + 2] = (float)a2;
+    *bad |= nonfinite;
+    return combined;
 }
 
 void rtpi_material_light_terms(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t n,

@@ -773,23 +773,10 @@ static int light_row(void *ctx, int y)
 {
     eval_ctx *e = (eval_ctx *)ctx;
     rtp_tree *t = e->t;
-    size_t k = (size_t)y * t->nx, nl = t->scene->nlights, words = e->shade->vis_words;
-    int x;
-    for (x = 0; x < t->nx; x++, k++) {
-        size_t a = (size_t)t->start[k], n = (size_t)(t->start[k + 1] - t->start[k]);
-        float *terms = t->ev_terms + a * RTPI_TERMS(nl), *coeffs;
-        if (n == 0)
-            continue; /* the background: no light in it, nothing changes */
-        coeffs = t->ev_coeffs + k * RTPI_COEFFS(nl);
-        rtpi_light_redo(e->shade, t->nodes + a, n, e->vis ? e->vis + a * words : NULL,
-                        t->ev_nv + 6 * a, t->ev_w + a, e->light, terms, coeffs);
-        e->coef_bad |= !isfinite(coeffs[6 + 3 * e->light]) |
-                       !isfinite(coeffs[7 + 3 * e->light]) | !isfinite(coeffs[8 + 3 * e->light]);
-        if (e->combine_too) { /* the other samples' colours hold */
-            rtpi_combine(t->scene, e->cl, coeffs, e->samples + 3 * k);
-            e->combined++;
-        }
-    }
+    size_t k = (size_t)y * t->nx;
+    e->combined += rtpi_light_redo(e->shade, t->nodes, t->start, k, k + (size_t)t->nx, e->vis,
+                                   t->ev_nv, t->ev_w, e->light, t->ev_terms, t->ev_coeffs,
+                                   e->cl, e->combine_too ? e->samples : NULL, &e->coef_bad);
     return 0;
 }
 
