@@ -744,8 +744,10 @@ static const char reeval_help[] =
     "                       pairs; edits persist), and write one image per line:\n"
     "                       -i takes a pattern with %d (or %04d), or '-' for a\n"
     "                       stream of PFM images on stdout\n"
-    "  --shadows MODE       shadows of moved or added lights: exact (shadow rays,\n"
-    "                       default), lightbuf[:RES] (light buffer, exact),\n"
+    "  --shadows MODE       shadows of moved or added lights: auto[:RES] (exact:\n"
+    "                       the light buffer where the tree has 4 or more hits a\n"
+    "                       primitive, else shadow rays; default), exact (shadow\n"
+    "                       rays), lightbuf[:RES] (light buffer, exact),\n"
     "                       itembuf[:RES] (item buffer, approximate at shadow\n"
     "                       edges), osmesa[:RES] (item buffer by OSMesa); RES:\n"
     "                       direction-cube cells per face edge (default 512)\n"
@@ -784,6 +786,25 @@ static int expand_pattern(const char *pat, int n, char *out, size_t size)
                    (int)size
                ? 0
                : -1;
+}
+
+/* --shadows' name of a mode (--stats' "shadows": how moved lights were
+   decided, auto resolved). */
+static const char *shadow_name(rtp_shadow_mode m)
+{
+    switch (m) {
+    case RTP_SHADOWS_EXACT:
+        return "exact";
+    case RTP_SHADOWS_LIGHTBUF:
+        return "lightbuf";
+    case RTP_SHADOWS_ITEMBUF:
+        return "itembuf";
+    case RTP_SHADOWS_OSMESA:
+        return "osmesa";
+    case RTP_SHADOWS_AUTO:
+        break;
+    }
+    return "auto";
 }
 
 static long long file_size(const char *path)
@@ -900,6 +921,8 @@ static int reeval_one(rtp_tree *tree, const rtp_eval_options *eo, rtp_image **ke
                 ti.samples, ti.nodes, ti.bytes_per_node, ti.tree_bytes);
         if (fb >= 0)
             fprintf(stats, ", \"file_bytes\": %lld", fb);
+        if (es.moved_lights)
+            fprintf(stats, ", \"shadows\": \"%s\"", shadow_name(es.shadows));
         if (reference) {
             fprintf(stats, ", \"reference_seconds\": %.6f, \"speedup\": %.3f, ", t_ref,
                     es.seconds > 0 ? t_ref / es.seconds : 0.0);
@@ -937,6 +960,7 @@ static int cmd_reeval(int argc, char **argv)
 
     memset(&err, 0, sizeof err);
     memset(&eo, 0, sizeof eo);
+    eo.shadows = RTP_SHADOWS_AUTO; /* exact, by whichever is faster for the tree */
     sets = (const char **)calloc((size_t)argc + 1, sizeof *sets);
     add_lights = (const char **)calloc((size_t)argc + 1, sizeof *add_lights);
     if (!sets || !add_lights) {
@@ -970,18 +994,20 @@ static int cmd_reeval(int argc, char **argv)
             if (!(params = opt_value(argc, argv, &i, "--params")))
                 goto usage;
         } else if (is_opt(a, "--shadows")) {
-            static const char *const modes[] = {"exact", "lightbuf", "itembuf", "osmesa"};
+            static const char *const modes[] = {"exact", "lightbuf", "itembuf", "osmesa",
+                                                "auto"};
             const char *colon;
             size_t n, m;
             if (!(v = opt_value(argc, argv, &i, "--shadows")))
                 goto usage;
             colon = strchr(v, ':');
             n = colon ? (size_t)(colon - v) : strlen(v);
-            for (m = 0; m < 4; m++)
+            for (m = 0; m < 5; m++)
                 if (strlen(modes[m]) == n && strncmp(v, modes[m], n) == 0)
                     break;
-            if (m == 4 || (colon && (m < 1 || parse_int(colon + 1, 1, 16384, &eo.shadow_res)))) {
-                msg("--shadows %s: expected exact, lightbuf[:RES], itembuf[:RES] or osmesa[:RES]",
+            if (m == 5 || (colon && (m < 1 || parse_int(colon + 1, 1, 16384, &eo.shadow_res)))) {
+                msg("--shadows %s: expected auto[:RES], exact, lightbuf[:RES], itembuf[:RES] or "
+                    "osmesa[:RES]",
                     v);
                 goto usage;
             }

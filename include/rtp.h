@@ -247,8 +247,13 @@ typedef enum rtp_shadow_mode {
                                  candidate lists per cell: exact, faster */
     RTP_SHADOWS_ITEMBUF = 2,  /* item buffer from a software z-buffer:
                                  fastest, approximate at shadow edges */
-    RTP_SHADOWS_OSMESA = 3    /* the item buffer drawn by OSMesa (builds
+    RTP_SHADOWS_OSMESA = 3,   /* the item buffer drawn by OSMesa (builds
                                  with OSMESA=1) */
+    RTP_SHADOWS_AUTO = 4      /* exact: the light buffer where the tree has
+                                 at least 4 recorded hits a primitive (or no
+                                 kd-tree yet and no move before: a first
+                                 move), else shadow rays through the
+                                 kd-tree (the CLI's default) */
 } rtp_shadow_mode;
 
 /* What becomes of the reflected and refracted subtrees below a normal a
@@ -292,6 +297,9 @@ typedef struct rtp_eval_stats {
                                             per pixel from planes */
     unsigned long long written_pixels;   /* pixels written (fewer than the
                                             image's with opt->incremental) */
+    rtp_shadow_mode shadows; /* how moved lights' shadows were decided (the
+                                mode asked, RTP_SHADOWS_AUTO resolved),
+                                where moved_lights > 0 */
 } rtp_eval_stats;
 
 /** Evaluates the trees with the current parameters into a new image.  Lights

@@ -37,6 +37,13 @@ done
 expect_rc 0 $RTP reeval "$T/t.rtp" --set light.key.pos=-3,-4,7 --shadows exact --reference -i "$T/x.pfm" --stats "$T/ref.json"
 grep -q '"max_abs": 0' "$T/ref.json" && ok || { bad "--reference error"; cat "$T/ref.json" >&2; }
 
+# The default shadows (auto) say what decided a moved light: here, 40x30
+# hits of spheres.nff's few primitives, the light buffer; auto:RES parses.
+expect_rc 0 $RTP reeval "$T/t.rtp" --set light.key.pos=-3,-4,7 -i "$T/a.pfm" --stats "$T/auto.json"
+grep -q '"shadows": "lightbuf"' "$T/auto.json" && ok || { bad "default shadows"; cat "$T/auto.json" >&2; }
+expect_rc 0 $RTP reeval "$T/t.rtp" --set light.key.pos=-3,-4,7 --shadows auto:128 -i "$T/a2.pfm"
+cmp -s "$T/a.pfm" "$T/a2.pfm" && ok || bad "auto:128 differs from auto"
+
 # --params file and stream mode (tree loaded once, one image per line).
 printf '# a params file\nmat.red.kd=0.2 light.key.color=1,0.5,0.5\n\n' > "$T/p.txt"
 expect_rc 0 $RTP reeval "$T/t.rtp" --params "$T/p.txt" -i "$T/p.pfm"
@@ -61,6 +68,7 @@ grep -q "trunc.rtp" "$T/err" && ok || bad "truncated file not named"
 expect_rc 1 $RTP reeval "$T/t.pfm" -i "$T/no3.pfm"
 grep -q "signature" "$T/err" && ok || bad "foreign file"
 expect_rc 2 $RTP reeval "$T/t.rtp" --shadows bogus
+grep -q "auto\[:RES\]" "$T/err" && ok || bad "--shadows bogus: the modes not named"
 expect_rc 2 $RTP reeval
 expect_rc 0 $RTP reeval --help
 expect_rc 0 $RTP info --help

@@ -397,6 +397,107 @@ static void test_moved_light_lightbuf(void)
     CHECK_MSG(e <= 1e-6, "prims spd: %g", e);
 }
 
+/* One evaluation of t with shadow mode `mode` after key=value (none when
+   key is NULL); its stats in *st, 0 on success. */
+static int eval_with(rtp_tree *t, rtp_shadow_mode mode, const char *key, const char *value,
+                     rtp_image **img, rtp_eval_stats *st)
+{
+    rtp_eval_options eo;
+    rtp_error err;
+    memset(&eo, 0, sizeof eo);
+    eo.threads = 2;
+    eo.shadows = mode;
+    rtp_image_destroy(*img);
+    *img = NULL;
+    if (key && rtp_tree_set(t, key, value, &err) != RTP_OK)
+        return -1;
+    return rtp_tree_eval(t, &eo, img, st, &err) == RTP_OK ? 0 : -1;
+}
+
+/* RTP_SHADOWS_AUTO is exact, and takes the light buffer where the tree
+   holds 4 or more recorded hits a primitive, else (few hits: a small
+   image of many primitives) the light buffer for a first move and shadow
+   rays from the second on.  Visibility decided by either exact mode is
+   kept when the mode switches to the other (no new decisions), not when
+   it switches to the item buffer. */
+static void test_shadows_auto(void)
+{
+    static const struct {
+        int w, h;
+        rtp_shadow_mode second; /* the second move's method */
+    } cases[] = {{56, 44, RTP_SHADOWS_LIGHTBUF}, {3, 2, RTP_SHADOWS_EXACT}};
+    double e;
+    size_t c;
+    e = moved_light_error("scenes/prims.nff", "light.0.pos", "-2,-4,6", NULL, RTP_SHADOWS_AUTO,
+                          0);
+    CHECK_MSG(e <= 1e-6, "prims, auto: %g", e);
+    e = moved_light_error("scenes/spheres.nff", "light.key.pos", "3,-6,5", NULL,
+                          RTP_SHADOWS_AUTO, 1);
+    CHECK_MSG(e <= 1e-6, "spheres spd, auto: %g", e);
+    for (c = 0; c < sizeof cases / sizeof *cases; c++) {
+        rtp_scene *s = load("scenes/prims.nff");
+        rtp_tree *t = NULL;
+        rtp_image *img = NULL, *full = NULL;
+        rtp_trace_options o;
+        rtp_eval_stats st;
+        rtp_tree_info ti;
+        rtp_diff_stats d;
+        unsigned long long prims;
+        if (!s) {
+            CHECK(s != NULL);
+            return;
+        }
+        memset(&o, 0, sizeof o);
+        o.width = cases[c].w;
+        o.height = cases[c].h;
+        if (rtp_record(s, &o, &t, NULL, NULL, NULL) != RTP_OK) {
+            CHECK_MSG(0, "%dx%d: cannot record", o.width, o.height);
+            rtp_scene_destroy(s);
+            continue;
+        }
+        rtp_tree_get_info(t, &ti);
+        prims = ti.triangles + ti.spheres + ti.cones;
+        /* the case is what it claims to be */
+        CHECK_MSG((ti.nodes >= 4 * prims) == (cases[c].second == RTP_SHADOWS_LIGHTBUF),
+                  "%dx%d: %llu nodes for %llu primitives", o.width, o.height, ti.nodes, prims);
+        CHECK(eval_with(t, RTP_SHADOWS_AUTO, NULL, NULL, &img, &st) == 0);
+        CHECK(eval_with(t, RTP_SHADOWS_AUTO, "light.0.pos", "-2,-4,6", &img, &st) == 0);
+        CHECK_MSG(st.moved_lights == 1 && st.shadows == RTP_SHADOWS_LIGHTBUF,
+                  "%dx%d, first move: %d moved, mode %d", o.width, o.height, st.moved_lights,
+                  (int)st.shadows);
+        /* a colour edit decides nothing anew */
+        CHECK(eval_with(t, RTP_SHADOWS_AUTO, "light.0.color", "0.5,0.7,0.9", &img, &st) == 0);
+        CHECK_MSG(st.moved_lights == 0, "%dx%d, colour edit: %d moved", o.width, o.height,
+                  st.moved_lights);
+        CHECK(eval_with(t, RTP_SHADOWS_AUTO, "light.0.pos", "1,-3,2", &img, &st) == 0);
+        CHECK_MSG(st.moved_lights == 1 && st.shadows == cases[c].second,
+                  "%dx%d, second move: %d moved, mode %d", o.width, o.height, st.moved_lights,
+                  (int)st.shadows);
+        /* the other exact mode keeps the decisions; the item buffer not */
+        CHECK(eval_with(t,
+                        cases[c].second == RTP_SHADOWS_EXACT ? RTP_SHADOWS_LIGHTBUF
+                                                             : RTP_SHADOWS_EXACT,
+                        NULL, NULL, &img, &st) == 0);
+        CHECK_MSG(st.moved_lights == 0, "%dx%d, other exact mode: %d moved", o.width, o.height,
+                  st.moved_lights);
+        if (rtp_scene_set(s, "light.0.pos", "1,-3,2", NULL) != RTP_OK ||
+            rtp_scene_set(s, "light.0.color", "0.5,0.7,0.9", NULL) != RTP_OK ||
+            rtp_trace(s, &o, &full, NULL, NULL) != RTP_OK || !img ||
+            rtp_image_diff(img, full, 1e-6, &d, NULL) != RTP_OK)
+            CHECK_MSG(0, "%dx%d: no full trace to compare", o.width, o.height);
+        else
+            CHECK_MSG(d.max_abs <= 1e-6, "%dx%d: %g from a full trace", o.width, o.height,
+                      d.max_abs);
+        CHECK(eval_with(t, RTP_SHADOWS_ITEMBUF, NULL, NULL, &img, &st) == 0);
+        CHECK_MSG(st.moved_lights == 1 && st.shadows == RTP_SHADOWS_ITEMBUF,
+                  "%dx%d, item buffer: %d moved", o.width, o.height, st.moved_lights);
+        rtp_image_destroy(img);
+        rtp_image_destroy(full);
+        rtp_tree_destroy(t);
+        rtp_scene_destroy(s);
+    }
+}
+
 static void test_moved_light_small_spd(void)
 {
     static const char *const names[] = {"balls_s1", "gears_s1", "mount_s2", "rings_s1",
@@ -1191,6 +1292,7 @@ int main(void)
     RUN(test_class_d_retrace);
     RUN(test_moved_light_exact);
     RUN(test_moved_light_lightbuf);
+    RUN(test_shadows_auto);
     RUN(test_moved_light_small_spd);
     RUN(test_edit_sequence);
     RUN(test_one_term_edits);
