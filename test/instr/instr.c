@@ -58,7 +58,8 @@ int main(int argc, char **argv)
         const char *label;
     } moves[] = {{RTP_SHADOWS_EXACT, "move_exact"},
                  {RTP_SHADOWS_LIGHTBUF, "move_lightbuf256"},
-                 {RTP_SHADOWS_ITEMBUF, "move_itembuf256"}};
+                 {RTP_SHADOWS_ITEMBUF, "move_itembuf256"},
+                 {RTP_SHADOWS_AUTO, "move_auto"}};
     rtp_tree *t = NULL;
     rtp_image *img = NULL;
     rtp_eval_options eo;
@@ -113,7 +114,8 @@ int main(int argc, char **argv)
             goto out;
     for (m = 0; m < sizeof moves / sizeof *moves; m++) {
         eo.shadows = moves[m].mode;
-        eo.shadow_res = 256;
+        /* (auto: the CLI's default, its own resolution) */
+        eo.shadow_res = moves[m].mode == RTP_SHADOWS_AUTO ? 0 : 256;
         for (i = 0; i < 2; i++)
             if (step(t, img, &eo, "light.0.pos", mv[i % 2], i == 1 ? moves[m].label : NULL))
                 goto out;
