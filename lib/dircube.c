@@ -29,6 +29,7 @@ typedef struct dc_poly {
 typedef struct dc_bounds {
     int full;   /* may be seen in any direction: every cell */
     int npoly;
+    int sides;  /* a cone's: its sides are still to add (dc_bound_sides) */
     dc_poly poly[DC_MAXP];
 } dc_bounds;
 
@@ -241,7 +242,7 @@ static void dc_put(double dst[3], rtpi_v3 q)
 
 /* Regular DC_N-gon around centre c (light-relative) across unit axis w,
    circumscribing the circle of radius r. */
-static void dc_ngon(dc_poly *p, rtpi_v3 c, rtpi_v3 e1, rtpi_v3 e2, double r)
+static void dc_ngon(dc_poly *p, rtpi_v3 c, rtpi_v3 e1, rtpi_v3 e2, double r, int half)
 {
     /* cos and sin of 2 pi k / 16, and 1 / cos(pi / 16) */
     static const double cs[DC_N][2] = {
@@ -253,13 +254,14 @@ static void dc_ngon(dc_poly *p, rtpi_v3 c, rtpi_v3 e1, rtpi_v3 e2, double r)
         {-0.70710678118654752, -0.70710678118654752}, {-0.38268343236508978, -0.92387953251128674},
         {0.0, -1.0}, {0.38268343236508978, -0.92387953251128674},
         {0.70710678118654752, -0.70710678118654752}, {0.92387953251128674, -0.38268343236508978}};
-    int k;
-    /* a hair over 1/cos(pi/16) = 1.0195911582...: rounding of the table
-       must not shrink the polygon inside the circle */
-    double R = r * (1.0195911582083184 * (1.0 + 1e-12));
-    p->n = DC_N;
-    for (k = 0; k < DC_N; k++)
-        dc_put(p->v[k], v3_madd(v3_madd(c, e1, R * cs[k][0]), e2, R * cs[k][1]));
+    int k, step = half ? 2 : 1;
+    /* a hair over 1/cos(pi/16) = 1.0195911582... (1/cos(pi/8) =
+       1.0823922002... for half the sides): rounding of the table must
+       not shrink the polygon inside the circle */
+    double R = r * ((half ? 1.0823922002923940 : 1.0195911582083184) * (1.0 + 1e-12));
+    p->n = DC_N / step;
+    for (k = 0; k < p->n; k++)
+        dc_put(p->v[k], v3_madd(v3_madd(c, e1, R * cs[step * k][0]), e2, R * cs[step * k][1]));
 }
 
 /* Can the primitive be hit at all (rtpi_intersect_prim)?  Degenerate
@@ -293,6 +295,7 @@ static void dc_bound_prim(dc_ctx *c, uint32_t prim, double ang)
     size_t i = prim;
     b->full = 0;
     b->npoly = 0;
+    b->sides = 0;
     if (i < s->ntris) {
         const rtpi_tri *t = &s->tris[i];
         int k;
@@ -316,7 +319,7 @@ static void dc_bound_prim(dc_ctx *c, uint32_t prim, double ang)
         w = v3_mul(cl, 1.0 / D);
         dc_basis(w, &e1, &e2);
         b->npoly = 1;
-        dc_ngon(&b->poly[0], w, e1, e2, tan(alpha));
+        dc_ngon(&b->poly[0], w, e1, e2, tan(alpha), 0);
         return;
     }
     if ((i -= s->nspheres) < s->ncones) {
@@ -324,26 +327,34 @@ static void dc_bound_prim(dc_ctx *c, uint32_t prim, double ang)
         rtpi_v3 base = v3_sub(v3_from_f(cn->base), c->L);
         rtpi_v3 apex = v3_sub(v3_from_f(cn->apex), c->L);
         rtpi_v3 w = v3_norm(v3_sub(apex, base)), e1, e2;
-        int k;
         dc_basis(w, &e1, &e2);
-        dc_ngon(&b->poly[0], base, e1, e2, fabs((double)cn->rb));
-        dc_ngon(&b->poly[1], apex, e1, e2, fabs((double)cn->ra));
-        /* Corresponding edges of the two homothetic polygons are parallel,
-           so each side of their hull is a planar trapezoid. */
-        for (k = 0; k < DC_N; k++) {
-            dc_poly *q = &b->poly[2 + k];
-            int k1 = (k + 1) % DC_N;
-            q->n = 4;
-            memcpy(q->v[0], b->poly[0].v[k], sizeof q->v[0]);
-            memcpy(q->v[1], b->poly[0].v[k1], sizeof q->v[0]);
-            memcpy(q->v[2], b->poly[1].v[k1], sizeof q->v[0]);
-            memcpy(q->v[3], b->poly[1].v[k], sizeof q->v[0]);
-        }
-        b->npoly = 2 + DC_N;
+        dc_ngon(&b->poly[0], base, e1, e2, fabs((double)cn->rb), 1);
+        dc_ngon(&b->poly[1], apex, e1, e2, fabs((double)cn->ra), 1);
+        b->npoly = 2;
+        b->sides = 1; /* (only the faces dc_cover_fast cannot take need them) */
         return;
     }
 full:
     b->full = 1;
+}
+
+/* A cone's sides, after its two end polygons: corresponding edges of the
+   two homothetic polygons are parallel, so each side of their hull is a
+   planar trapezoid. */
+static void dc_bound_sides(dc_bounds *b)
+{
+    int k, n = b->poly[0].n;
+    for (k = 0; k < n; k++) {
+        dc_poly *q = &b->poly[2 + k];
+        int k1 = (k + 1) % n;
+        q->n = 4;
+        memcpy(q->v[0], b->poly[0].v[k], sizeof q->v[0]);
+        memcpy(q->v[1], b->poly[0].v[k1], sizeof q->v[0]);
+        memcpy(q->v[2], b->poly[1].v[k1], sizeof q->v[0]);
+        memcpy(q->v[3], b->poly[1].v[k], sizeof q->v[0]);
+    }
+    b->npoly = 2 + n;
+    b->sides = 0;
 }
 
 /* > 0 when a, b, c turn counter-clockwise. */
@@ -446,7 +457,7 @@ static int dc_cover_fast(dc_ctx *c, int f, const double (*pts)[3], int n, double
             return 1;
         }
     }
-    if (n <= DC_N) { /* one convex polygon: a triangle or a sphere's bound */
+    if (c->b.npoly == 1) { /* one convex polygon: a triangle or a sphere's bound */
         dc_spans_conservative(c, f, (const double(*)[2])uv, n, m);
         return 1;
     }
@@ -522,6 +533,8 @@ static void dc_cover(dc_ctx *c, uint32_t prim, double ang, dc_emit_fn fn,
             dc_emit_rows(c, f, fn, user);
             continue;
         }
+        if (!whole && c->b.sides)
+            dc_bound_sides(&c->b);
         for (k = 0; k < c->b.npoly && !whole; k++) {
             dc_poly loc, clipped;
             int v, n;
