@@ -561,7 +561,7 @@ static double dc_near(const rtp_scene *s, uint32_t prim, rtpi_v3 L)
     double lo[3], hi[3], d2 = 0.0, best;
     size_t i = prim;
     int k;
-    rtpi_prim_bounds(s, prim, lo, hi);
+    rtpi_prim_bounds_kept(s, prim, lo, hi);
     for (k = 0; k < 3; k++) {
         double x = v3_get(L, k);
         double e = x < lo[k] ? lo[k] - x : x > hi[k] ? x - hi[k] : 0.0;
@@ -596,7 +596,7 @@ static double dc_scale(const rtp_scene *s, rtpi_v3 L)
     for (i = 0; i < n; i++) {
         double lo[3], hi[3];
         int k;
-        rtpi_prim_bounds(s, (uint32_t)i, lo, hi);
+        rtpi_prim_bounds_kept(s, (uint32_t)i, lo, hi);
         for (k = 0; k < 3; k++) {
             S = fabs(lo[k]) > S ? fabs(lo[k]) : S;
             S = fabs(hi[k]) > S ? fabs(hi[k]) : S;
@@ -673,7 +673,7 @@ static void dc_windows_some(const rtp_scene *s, const unsigned char *sel, unsign
         double pl[3], ph[3];
         if (!dc_hittable(s, (uint32_t)i) || (sel && sel[i] != want))
             continue;
-        rtpi_prim_bounds(s, (uint32_t)i, pl, ph);
+        rtpi_prim_bounds_kept(s, (uint32_t)i, pl, ph);
         for (k = 0; k < 3; k++) {
             lo[k] = pl[k] < lo[k] ? pl[k] : lo[k];
             hi[k] = ph[k] > hi[k] ? ph[k] : hi[k];
@@ -899,7 +899,7 @@ static void lb_cone(const rtp_scene *s, uint32_t prim, rtpi_v3 L, double S, doub
         R = fabs((double)s->spheres[i].r);
     } else {
         double lo[3], hi[3];
-        rtpi_prim_bounds(s, prim, lo, hi);
+        rtpi_prim_bounds_kept(s, prim, lo, hi);
         C = v3(0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), 0.5 * (lo[2] + hi[2]));
         R = 0.5 * v3_len(v3(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]));
     }

@@ -171,6 +171,12 @@ struct rtp_scene {
     rtpi_sphere *spheres; size_t nspheres, cap_spheres;
     rtpi_cone *cones;     size_t ncones, cap_cones;
     rtpi_cone_frame *cframes; size_t cap_cframes; /* one per cone */
+    double *pbounds; size_t npbounds; /* rtpi_prim_bounds of every
+                                  primitive (lo, hi: 6 each) for the
+                                  direction cubes, which ask them 3 times a
+                                  primitive a move; made by
+                                  rtpi_scene_bounds (npbounds: the
+                                  primitives then), else NULL */
 
     rtpi_material *mats;  size_t nmats, cap_mats;
     rtpi_light *lights;   size_t nlights, cap_lights;
@@ -311,6 +317,12 @@ int rtpi_intersect_prim(const rtp_scene *s, uint32_t prim,
 void rtpi_cone_frame_of(const rtpi_cone *cn, rtpi_cone_frame *f);
 
 /* Bounds of one primitive. */
+/* rtpi_prim_bounds, from s->pbounds where rtpi_scene_bounds made them for
+   the primitives there are (the very same numbers). */
+void rtpi_prim_bounds_kept(const rtp_scene *s, uint32_t prim, double lo[3], double hi[3]);
+/* Keeps every primitive's bounds in s->pbounds (once: again only where
+   primitives were added since); 0, or -1 when out of memory. */
+int rtpi_scene_bounds(rtp_scene *s);
 void rtpi_prim_bounds(const rtp_scene *s, uint32_t prim, double lo[3],
                       double hi[3]);
 

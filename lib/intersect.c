@@ -329,6 +329,40 @@ void rtpi_surface_at_ex(const rtp_scene *s, const rtpi_ray *ray,
     out->ng = out->ns = v3(0.0, 0.0, 1.0);
 }
 
+void rtpi_prim_bounds_kept(const rtp_scene *s, uint32_t prim, double lo[3], double hi[3])
+{
+    if (s->pbounds && s->npbounds == rtpi_scene_nprims(s)) {
+        const double *b = s->pbounds + 6 * (size_t)prim;
+        lo[0] = b[0];
+        lo[1] = b[1];
+        lo[2] = b[2];
+        hi[0] = b[3];
+        hi[1] = b[4];
+        hi[2] = b[5];
+        return;
+    }
+    rtpi_prim_bounds(s, prim, lo, hi);
+}
+
+int rtpi_scene_bounds(rtp_scene *s)
+{
+    size_t i, n = rtpi_scene_nprims(s);
+    double *b;
+    if (s->pbounds && s->npbounds == n)
+        return 0;
+    rtpi_free(&s->alloc, s->pbounds);
+    s->pbounds = NULL;
+    s->npbounds = 0;
+    b = (double *)rtpi_malloc_array(&s->alloc, n ? n : 1, 6 * sizeof *b);
+    if (!b)
+        return -1;
+    for (i = 0; i < n; i++)
+        rtpi_prim_bounds(s, (uint32_t)i, b + 6 * i, b + 6 * i + 3);
+    s->pbounds = b;
+    s->npbounds = n;
+    return 0;
+}
+
 void rtpi_prim_bounds(const rtp_scene *s, uint32_t prim, double lo[3],
                       double hi[3])
 {

@@ -463,7 +463,8 @@ static rtp_status update_visibility(rtp_tree *t, int mode, int res, int threads,
         } else {
             rtpi_shadow *sh = NULL;
             rtp_status rs;
-            if (!t->tri_nrm && tri_normals(t) != 0)
+            if ((!t->tri_nrm && tri_normals(t) != 0) ||
+                (mode != RTP_SHADOWS_EXACT && rtpi_scene_bounds(s) != 0))
                 return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
             /* only shadow rays need the kd-tree; the cubes draw the scene */
             if (mode == RTP_SHADOWS_EXACT && !t->kd &&
