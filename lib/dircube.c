@@ -444,9 +444,9 @@ static int dc_cover_fast(dc_ctx *c, int f, const double (*pts)[3], int n, double
            cells than the hull's and none of the hull's cost (a cone's 32
            points, as its bound then had, sorted, then clipped row by row:
            7,000 instructions a cylinder).  Cells beyond the window clamp
-           to its edges alike.  Not for a triangle: its spans cost little, and the box's extra
-           cells lengthen the lists of a mesh's every cell (mount: 2-5%
-           more to a move). */
+           to its edges alike.  Not for a triangle: its spans cost little,
+           and the box's extra cells lengthen the lists of a mesh's every
+           cell (mount: 2-5% more to a move). */
         int i0 = rtpi_dc_wcoord(umin - m, c->u0[f], c->du[f], c->res),
             i1 = rtpi_dc_wcoord(umax + m, c->u0[f], c->du[f], c->res),
             j0 = rtpi_dc_wcoord(vmin - m, c->v0[f], c->dv[f], c->res),
