@@ -17,7 +17,8 @@
 #      of that term reuse, and the second of consecutive shine edits
 #      lists the highlights the further ones reuse: all are shown apart.
 #   3. The same sequence again without --reference for every other shadow
-#      mode (lightbuf:RES, itembuf:RES, osmesa:RES when rtp has OSMesa): the
+#      mode (lightbuf:RES, itembuf:RES, osmesa:RES when rtp has OSMesa, and
+#      auto, the CLI's default, at its own resolution): the
 #      state before the moved light is identical, so the moved-light image is
 #      compared (rtp diff) with the exact run's, which step 2 compared with a
 #      full trace; the speed-up uses step 2's reference time for that line.
@@ -195,6 +196,7 @@ for f in $list; do
     if [ "$osmesa" = yes ]; then
         for r in $RESES; do modes="$modes osmesa:$r"; done
     fi
+    modes="$modes auto" # the CLI's default: its own method and resolution
     for m in $modes; do
         run=$work/$sc.$(echo "$m" | tr ':' '_')
         if ! stream "$run" "$tree" "$m"; then
