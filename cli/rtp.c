@@ -789,24 +789,10 @@ static int expand_pattern(const char *pat, int n, char *out, size_t size)
                : -1;
 }
 
-/* --shadows' name of a mode (--stats' "shadows": how moved lights were
-   decided, auto resolved). */
-static const char *shadow_name(rtp_shadow_mode m)
-{
-    switch (m) {
-    case RTP_SHADOWS_EXACT:
-        return "exact";
-    case RTP_SHADOWS_LIGHTBUF:
-        return "lightbuf";
-    case RTP_SHADOWS_ITEMBUF:
-        return "itembuf";
-    case RTP_SHADOWS_OSMESA:
-        return "osmesa";
-    case RTP_SHADOWS_AUTO:
-        break;
-    }
-    return "auto";
-}
+/* --shadows' modes, indexed by rtp_shadow_mode (--stats' "shadows" names
+   the one that decided a move, auto resolved). */
+static const char *const shadow_modes[] = {"exact", "lightbuf", "itembuf", "osmesa", "auto"};
+#define N_SHADOW_MODES (sizeof shadow_modes / sizeof *shadow_modes)
 
 static long long file_size(const char *path)
 {
@@ -923,7 +909,8 @@ static int reeval_one(rtp_tree *tree, const rtp_eval_options *eo, rtp_image **ke
         if (fb >= 0)
             fprintf(stats, ", \"file_bytes\": %lld", fb);
         if (es.moved_lights)
-            fprintf(stats, ", \"shadows\": \"%s\"", shadow_name(es.shadows));
+            fprintf(stats, ", \"shadows\": \"%s\"",
+                    (size_t)es.shadows < N_SHADOW_MODES ? shadow_modes[es.shadows] : "?");
         if (reference) {
             fprintf(stats, ", \"reference_seconds\": %.6f, \"speedup\": %.3f, ", t_ref,
                     es.seconds > 0 ? t_ref / es.seconds : 0.0);
@@ -995,18 +982,16 @@ static int cmd_reeval(int argc, char **argv)
             if (!(params = opt_value(argc, argv, &i, "--params")))
                 goto usage;
         } else if (is_opt(a, "--shadows")) {
-            static const char *const modes[] = {"exact", "lightbuf", "itembuf", "osmesa",
-                                                "auto"};
             const char *colon;
             size_t n, m;
             if (!(v = opt_value(argc, argv, &i, "--shadows")))
                 goto usage;
             colon = strchr(v, ':');
             n = colon ? (size_t)(colon - v) : strlen(v);
-            for (m = 0; m < 5; m++)
-                if (strlen(modes[m]) == n && strncmp(v, modes[m], n) == 0)
+            for (m = 0; m < N_SHADOW_MODES; m++)
+                if (strlen(shadow_modes[m]) == n && strncmp(v, shadow_modes[m], n) == 0)
                     break;
-            if (m == 5 || (colon && (m < 1 || parse_int(colon + 1, 1, 16384, &eo.shadow_res)))) {
+            if (m == N_SHADOW_MODES || (colon && (m < 1 || parse_int(colon + 1, 1, 16384, &eo.shadow_res)))) {
                 msg("--shadows %s: expected auto[:RES], exact, lightbuf[:RES], itembuf[:RES] or "
                     "osmesa[:RES]",
                     v);

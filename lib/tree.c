@@ -329,8 +329,8 @@ static int vis_row(void *ctx, int y)
     return 0;
 }
 
-/* t->tri_nrm where the scene has a triangle without vertex normals; 0,
-   or -1 when out of memory. */
+/* t->tri_nrm where the scene has a triangle without vertex normals (else
+   it stays NULL); 0, or -1 when out of memory. */
 static int tri_normals(rtp_tree *t)
 {
     const rtp_scene *s = t->scene;
@@ -424,8 +424,6 @@ static rtp_status update_visibility(rtp_tree *t, int mode, int res, int threads,
     void *ctx[RTPI_MAX_THREADS];
     vis_ctx vc[RTPI_MAX_THREADS];
     vis_key(mode, res, &kmode, &kres);
-    if (threads < 1)
-        threads = 1;
     if (threads > RTPI_MAX_THREADS)
         threads = RTPI_MAX_THREADS;
     if (t->cur_vis && (t->cur_words != words)) {
@@ -448,6 +446,10 @@ static rtp_status update_visibility(rtp_tree *t, int mode, int res, int threads,
         t->cur_words = words;
         for (i = 0; i < nl; i++)
             t->cur_pos[3 * i] = NAN; /* nothing decided yet */
+        /* the first move: the flat triangles' normals (where tri_normals
+           finds none, or no memory, vis_row derives each hit's) */
+        if (!t->tri_nrm && tri_normals(t) != 0)
+            return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
     }
     for (i = 0; i < nl; i++) {
         const double *lp = s->lights[i].pos;
@@ -463,8 +465,7 @@ static rtp_status update_visibility(rtp_tree *t, int mode, int res, int threads,
         } else {
             rtpi_shadow *sh = NULL;
             rtp_status rs;
-            if ((!t->tri_nrm && tri_normals(t) != 0) ||
-                (mode != RTP_SHADOWS_EXACT && rtpi_scene_bounds(s) != 0))
+            if (mode != RTP_SHADOWS_EXACT && rtpi_scene_bounds(s) != 0)
                 return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
             /* only shadow rays need the kd-tree; the cubes draw the scene */
             if (mode == RTP_SHADOWS_EXACT && !t->kd &&
