@@ -354,11 +354,17 @@ unsigned long long rtpi_light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *no
             a1 += kd * cobj[1] * d + ks * sp;
             a2 += kd * cobj[2] * d + ks * sp;
         }
-        co[6 + 3 * light] = (float)a0;
-        co[7 + 3 * light] = (float)a1;
-        co[8 + 3 * light] = (float)a2;
-        nonfinite |= !isfinite(co[6 + 3 * light]) | !isfinite(co[7 + 3 * light]) |
-                     !isfinite(co[8 + 3 * light]);
+        {
+            /* a coefficient the same to the bit (a node in shadow before
+               and after, or out of the light's reach) combines to the
+               same colour: that sample holds */
+            const float f[3] = {(float)a0, (float)a1, (float)a2};
+            float *cf = co + 6 + 3 * light;
+            nonfinite |= !isfinite(f[0]) | !isfinite(f[1]) | !isfinite(f[2]);
+            if (samples && memcmp(cf, f, sizeof f) == 0)
+                continue;
+            memcpy(cf, f, sizeof f);
+        }
         if (samples) { /* the other samples' colours hold */
             rtpi_combine(s, cl, co, samples + 3 * k);
             combined++;
