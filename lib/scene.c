@@ -406,14 +406,21 @@ static long find_index(const char *tok, size_t toklen, size_t n,
 static const char *light_name(const rtp_scene *s, size_t i) { return s->lights[i].name; }
 static const char *mat_name(const rtp_scene *s, size_t i) { return s->mats[i].name; }
 
-static rtp_status want(rtp_error *err, const char *key, const char *value,
-                       int got, int need)
+/* need numbers, or for a colour (need 3, `broadcast`) one for all three
+   channels. */
+static rtp_status want_n(rtp_error *err, const char *key, const char *value, int got, int need,
+                         int broadcast)
 {
-    if (got == need || (need == 3 && got == 1))
+    if (got == need || (broadcast && got == 1))
         return RTP_OK;
     return rtpi_error(err, RTP_ERR_PARSE, NULL, 0, 0,
-                      "%s: expected %d comma-separated number%s, got '%s'",
-                      key, need, need > 1 ? "s" : "", value);
+                      "%s: expected %d comma-separated finite number%s%s, got '%s'", key, need,
+                      need > 1 ? "s" : "", broadcast ? " (or one for all three)" : "", value);
+}
+
+static rtp_status want(rtp_error *err, const char *key, const char *value, int got, int need)
+{
+    return want_n(err, key, value, got, need, need == 3);
 }
 
 static void set_rgb(float *dst, const double *v, int n)
@@ -455,8 +462,9 @@ rtp_status rtp_scene_set(rtp_scene *s, const char *key, const char *value,
                               s->nlights);
         l = &s->lights[i];
         if (strcmp(field, "pos") == 0) {
-            if (n != 3)
-                return want(err, key, value, n, 4);
+            /* (a position: x,y,z, never one number for all three) */
+            if ((st = want_n(err, key, value, n, 3, 0)) != RTP_OK)
+                return st;
             l->pos[0] = v[0];
             l->pos[1] = v[1];
             l->pos[2] = v[2];

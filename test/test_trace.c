@@ -93,6 +93,28 @@ static void test_analytic_sphere(void)
         CHECK_MSG(fabs(c[0] - 0.2) < 1e-6 && fabs(c[2] - 0.4) < 1e-6, "%g %g", c[0], c[2]);
         rtp_image_destroy(img);
     }
+    {
+        /* a position takes exactly x,y,z: four numbers once passed without
+           moving the light, and one is not taken for all three as a
+           colour's is; the message says what it wants */
+        static const char *const bad[] = {"1,2,3,4", "1", "1,2", "1,inf,3", "1,,3"};
+        rtp_error err;
+        char buf[256];
+        size_t i;
+        memset(&err, 0, sizeof err);
+        for (i = 0; i < sizeof bad / sizeof *bad; i++) {
+            CHECK_MSG(rtp_scene_set(s, "light.0.pos", bad[i], &err) == RTP_ERR_PARSE, "%s",
+                      bad[i]);
+            CHECK_MSG(strstr(rtp_error_format(&err, buf, sizeof buf),
+                             "expected 3 comma-separated finite numbers") != NULL,
+                      "%s", buf);
+        }
+        CHECK(s->lights[0].pos[0] == 0.0 && s->lights[0].pos[1] == 0.0 && s->lights[0].pos[2] == 5.0);
+        CHECK(rtp_scene_set(s, "light.0.color", "0.5", NULL) == RTP_OK);
+        CHECK(s->lights[0].color[2] == 0.5f);
+        CHECK(rtp_scene_set(s, "light.0.color", "1,2", &err) == RTP_ERR_PARSE);
+        CHECK(strstr(rtp_error_format(&err, buf, sizeof buf), "(or one for all three)") != NULL);
+    }
     rtp_scene_destroy(s);
 }
 
