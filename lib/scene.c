@@ -406,6 +406,21 @@ static long find_index(const char *tok, size_t toklen, size_t n,
 static const char *light_name(const rtp_scene *s, size_t i) { return s->lights[i].name; }
 static const char *mat_name(const rtp_scene *s, size_t i) { return s->mats[i].name; }
 
+/* A texture or bump map the key names could not be read: the message
+   (whose file is the image's) names the key and what else it takes. */
+static rtp_status image_key_error(rtp_error *err, rtp_status st, const char *key,
+                                  const char *others)
+{
+    if (err) {
+        /* (made whole, then cut to the message's size) */
+        char msg[2 * sizeof err->message + 128];
+        snprintf(msg, sizeof msg, "%s: %s (values: %s)", key, err->message, others);
+        msg[sizeof err->message - 1] = '\0';
+        memcpy(err->message, msg, sizeof err->message);
+    }
+    return st;
+}
+
 /* need numbers, or for a colour (need 3, `broadcast`) one for all three
    channels. */
 static rtp_status want_n(rtp_error *err, const char *key, const char *value, int got, int need,
@@ -526,7 +541,7 @@ rtp_status rtp_scene_set(rtp_scene *s, const char *key, const char *value,
             } else {
                 uint32_t idx;
                 if ((st = rtpi_scene_add_texture(s, value, &idx, err)) != RTP_OK)
-                    return st;
+                    return image_key_error(err, st, key, "none, or a PNG, PPM or PFM image");
                 m = &s->mats[i];
                 m->tex = RTPI_TEX_IMAGE;
                 m->tex_image = idx;
@@ -544,7 +559,8 @@ rtp_status rtp_scene_set(rtp_scene *s, const char *key, const char *value,
             } else {
                 uint32_t idx;
                 if ((st = rtpi_scene_add_texture(s, value, &idx, err)) != RTP_OK)
-                    return st;
+                    return image_key_error(err, st, key,
+                                           "none, waves, noise, or a height map image");
                 m = &s->mats[i]; /* (textures live apart; m is still valid) */
                 m->bump = RTPI_BUMP_IMAGE;
                 m->bump_image = idx;

@@ -114,6 +114,16 @@ static void test_analytic_sphere(void)
         CHECK(s->lights[0].color[2] == 0.5f);
         CHECK(rtp_scene_set(s, "light.0.color", "1,2", &err) == RTP_ERR_PARSE);
         CHECK(strstr(rtp_error_format(&err, buf, sizeof buf), "(or one for all three)") != NULL);
+        /* an image that cannot be read: the key and the other values */
+        CHECK(rtp_scene_set(s, "mat.0.bump", "no-such-map.png", &err) != RTP_OK);
+        rtp_error_format(&err, buf, sizeof buf);
+        CHECK_MSG(strstr(buf, "no-such-map.png") && strstr(buf, "mat.0.bump: ") &&
+                      strstr(buf, "waves, noise"),
+                  "%s", buf);
+        CHECK(rtp_scene_set(s, "mat.0.texture", "no-such-image.png", &err) != RTP_OK);
+        rtp_error_format(&err, buf, sizeof buf);
+        CHECK_MSG(strstr(buf, "mat.0.texture: ") && strstr(buf, "none, or a PNG"), "%s", buf);
+        CHECK(s->mats[0].bump == RTPI_BUMP_NONE && s->mats[0].tex == RTPI_TEX_NONE);
     }
     rtp_scene_destroy(s);
 }
