@@ -278,6 +278,76 @@ static void test_total_internal_reflection(void)
     rtp_scene_destroy(s);
 }
 
+/* SPD casts a reflection ray off every transmitting surface, ks 0 or
+   not (its statistics count them).  With ks 0 that subtree weighs 0 in
+   every evaluation (a ks edit from 0 traces again), so it is not kept,
+   unless the ray is reflected totally (the transmitted share then rides
+   on it).  Against the same scene with a ks of 1e-30 (subtrees kept, a
+   contribution far below float): the same rays counted, fewer nodes, and
+   the same image to 1e-6; from inside the sphere past the critical angle
+   (every ray reflected totally) the subtrees stay and light the image
+   as with a tiny ks. */
+static void test_spd_zero_ks_subtrees(void)
+{
+    static const char *const scenes[] = {
+        /* a glass ball before a lit wall, seen from outside */
+        "v from 0 -6 0.5 at 0 0 0.5 up 0 0 1 angle 30 hither 0.01 resolution 16 16\n"
+        "b 0.1 0.2 0.3\nl 3 -4 6\n"
+        "f 0.9 0.8 0.3 0.8 0.2 20 0 1\np 4\n-4 3 -2\n4 3 -2\n4 3 4\n-4 3 4\n"
+        "f 0.3 0.6 0.9 0.2 0 100000 0.8 1.5\ns 0 0 0.5 1.2\n",
+        /* inside a glass ball of ior 3, looking along its wall */
+        "v from 0 0 0.95 at 0 1 0.95 up 0 0 1 angle 10 hither 0.001 resolution 8 8\n"
+        "b 0.2 0.4 0.6\nl 0 0 5\nf 1 1 1 0.3 0 100000 0.7 3\ns 0 0 0 1\n"};
+    size_t k;
+    for (k = 0; k < sizeof scenes / sizeof *scenes; k++) {
+        rtp_scene *s0 = load_text(scenes[k]), *s1 = load_text(scenes[k]);
+        rtp_trace_options o;
+        rtp_trace_stats st0, st1;
+        rtp_tree *t0 = NULL, *t1 = NULL;
+        rtp_tree_info i0, i1;
+        rtp_image *a = NULL, *b = NULL;
+        rtp_eval_stats es;
+        int n;
+        if (!s0 || !s1) {
+            CHECK(0);
+            rtp_scene_destroy(s0);
+            rtp_scene_destroy(s1);
+            continue;
+        }
+        CHECK(rtp_scene_set(s1, k == 0 ? "mat.1.ks" : "mat.0.ks", "1e-30", NULL) == RTP_OK);
+        memset(&o, 0, sizeof o);
+        o.spd = 1;
+        o.threads = 1;
+        CHECK(rtp_record(s0, &o, &t0, NULL, &st0, NULL) == RTP_OK);
+        CHECK(rtp_record(s1, &o, &t1, NULL, &st1, NULL) == RTP_OK);
+        if (t0 && t1) {
+            rtp_tree_get_info(t0, &i0);
+            rtp_tree_get_info(t1, &i1);
+            CHECK(st0.reflected_rays == st1.reflected_rays && st0.reflected_rays > 0);
+            CHECK(st0.refracted_rays == st1.refracted_rays);
+            if (k == 0)
+                CHECK_MSG(i0.nodes < i1.nodes, "%lu vs %lu nodes", (unsigned long)i0.nodes,
+                          (unsigned long)i1.nodes);
+            else
+                CHECK_MSG(i0.nodes == i1.nodes && st0.refracted_rays == 0, "%lu vs %lu nodes",
+                          (unsigned long)i0.nodes, (unsigned long)i1.nodes);
+            CHECK(rtp_tree_eval(t0, NULL, &a, &es, NULL) == RTP_OK);
+            CHECK(rtp_tree_eval(t1, NULL, &b, &es, NULL) == RTP_OK);
+            for (n = 0; a && b && n < 3 * a->width * a->height; n++)
+                if (fabsf(a->pixels[n] - b->pixels[n]) > 1e-6f) {
+                    CHECK_MSG(0, "value %d: %g vs %g", n, a->pixels[n], b->pixels[n]);
+                    break;
+                }
+        }
+        rtp_image_destroy(a);
+        rtp_image_destroy(b);
+        rtp_tree_destroy(t0);
+        rtp_tree_destroy(t1);
+        rtp_scene_destroy(s0);
+        rtp_scene_destroy(s1);
+    }
+}
+
 /* Golden images of the project's scenes: a change in shading or
    traversal shows as a difference above the tolerance.  Regenerate with
    RTP_UPDATE_GOLDEN=1 after a deliberate change. */
@@ -330,6 +400,7 @@ int main(void)
     RUN(test_threads_identical);
     RUN(test_spd_counts);
     RUN(test_total_internal_reflection);
+    RUN(test_spd_zero_ks_subtrees);
     RUN(test_golden_spheres);
     RUN(test_golden_prims);
     RUN(test_golden_checker);
