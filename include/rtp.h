@@ -244,7 +244,8 @@ rtp_status rtp_tree_set(rtp_tree *tree, const char *key, const char *value,
 typedef enum rtp_shadow_mode {
     RTP_SHADOWS_EXACT = 0,    /* shadow rays through the kd-tree: exact */
     RTP_SHADOWS_LIGHTBUF = 1, /* light buffer: direction cube with sorted
-                                 candidate lists per cell: exact, faster */
+                                 candidate lists per cell: exact, faster
+                                 on six of the seven SPD scenes (README) */
     RTP_SHADOWS_ITEMBUF = 2,  /* item buffer from a software z-buffer (the
                                  paper's): approximate at shadow edges; its
                                  checks make it no faster than the light
