@@ -340,6 +340,17 @@ static int apply_params_file(set_fn set, void *obj, const char *path)
 
 /* ---------------------------------------------------------------- trace */
 
+/* After a usage error: the command's usage line (the first of its help)
+   and where the rest is, not the whole help, which buried the message
+   above it. */
+static void usage_hint(const char *help)
+{
+    const char *nl = strchr(help, '\n'), *cmd = help + strlen("usage: rtp ");
+    int n = (int)strcspn(cmd, " \n");
+    fprintf(stderr, "%.*s\n'rtp %.*s --help' lists the options\n", (int)(nl - help), help, n,
+            cmd);
+}
+
 static const char trace_help[] =
     "usage: rtp trace SCENE [options]\n"
     "Traces SCENE (NFF, or .obj) with a Whitted ray tracer and writes the image\n"
@@ -570,7 +581,7 @@ out:
     free(sets);
     return rc;
 usage:
-    fputs(trace_help, stderr);
+    usage_hint(trace_help);
     free(default_image);
     free(sets);
     return EXIT_USAGE;
@@ -725,7 +736,7 @@ out:
     rtp_image_destroy(b);
     return rc;
 usage:
-    fputs(diff_help, stderr);
+    usage_hint(diff_help);
     return EXIT_USAGE;
 }
 
@@ -1143,7 +1154,7 @@ out:
     free(add_lights);
     return rc;
 usage:
-    fputs(reeval_help, stderr);
+    usage_hint(reeval_help);
     free(default_image);
     free(sets);
     free(add_lights);
@@ -1172,12 +1183,12 @@ static int cmd_info(int argc, char **argv)
             return 0;
         } else if ((c = common_option(argc, argv, &i, NULL, &stats_path)) != 0) {
             if (c < 0) {
-                fputs(info_help, stderr);
+                usage_hint(info_help);
                 return EXIT_USAGE;
             }
         } else if (argv[i][0] == '-' && argv[i][1] != '\0') {
             msg("info: unknown option '%s'", argv[i]);
-            fputs(info_help, stderr);
+            usage_hint(info_help);
             return EXIT_USAGE;
         } else if (!tree_path) {
             tree_path = argv[i];
@@ -1188,7 +1199,7 @@ static int cmd_info(int argc, char **argv)
     }
     if (!tree_path) {
         msg("info: no tree file given");
-        fputs(info_help, stderr);
+        usage_hint(info_help);
         return EXIT_USAGE;
     }
     if (rtp_tree_read(tree_path, NULL, &tree, &err) != RTP_OK)
@@ -1388,7 +1399,7 @@ out:
     free(in);
     return rc;
 usage:
-    fputs(merge_help, stderr);
+    usage_hint(merge_help);
     free(in);
     return EXIT_USAGE;
 }

@@ -70,7 +70,12 @@ grep -q "signature" "$T/err" && ok || bad "foreign file"
 expect_rc 2 $RTP reeval "$T/t.rtp" --shadows bogus
 grep -q "auto\[:RES\]" "$T/err" && ok || bad "--shadows bogus: the modes not named"
 expect_rc 2 $RTP reeval
+# a usage error: the message, the usage line and where the options are,
+# not the whole help burying the message
+grep -q "no tree\|TREE" "$T/err" && grep -q "'rtp reeval --help' lists the options" "$T/err" &&
+    [ "$(wc -l <"$T/err")" -le 4 ] && ok || { bad "usage error output"; cat "$T/err" >&2; }
 expect_rc 0 $RTP reeval --help
+grep -q -- "--shadows MODE" "$T/out" && ok || bad "--help lists the options on stdout"
 expect_rc 0 $RTP info --help
 
 rm -rf "$T"
