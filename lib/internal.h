@@ -441,12 +441,13 @@ int rtpi_sample_coeffs(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
    Where samples is not NULL each sample's colour is combined there too
    with the colours cl (rtpi_combine; the other coefficients must be those
    the colours are to be combined with).  *bad |= 1 where a coefficient
-   made is not finite.  Returns how many samples were combined. */
+   made is not finite.  Returns how many samples were combined; where
+   mark is not NULL, mark[k] is set to 1 for each. */
 unsigned long long rtpi_light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
                                    const uint64_t *start, size_t k0, size_t k1,
                                    const uint32_t *vis_ext, const float *nv, const double *w,
                                    size_t light, float *terms, float *coeffs, const double *cl,
-                                   float *samples, int *bad);
+                                   float *samples, int *bad, unsigned char *mark);
 /* The light terms (n.l, highlight) of every node of material mat among a
    sample's n nodes, from the cached normals and view vectors nv, exactly
    as rtpi_sample_terms computes them: what an edit of mat's shine or ks
@@ -679,6 +680,9 @@ struct rtp_tree {
     float *ev_samples;     /* the samples' colours (SPD: corners, averaged
                               into pixels); with the caches, or SPD */
     int ev_samples_ok;     /* ev_samples hold ev_coeffs combined with ev_cl */
+    unsigned char *ev_mark; /* samples + 8 bytes, all 0 between evaluations:
+                              the samples a moved light's pass combined
+                              (tree.c: resolve_marked) */
     int ev_inf;            /* some coefficient is beyond the float range
                               (a kt of 1e19): no material planes */
     size_t ev_nlights;

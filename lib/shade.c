@@ -315,7 +315,7 @@ unsigned long long rtpi_light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *no
                                    const uint64_t *start, size_t k0, size_t k1,
                                    const uint32_t *vis_ext, const float *nv, const double *w,
                                    size_t light, float *terms, float *coeffs, const double *cl,
-                                   float *samples, int *bad)
+                                   float *samples, int *bad, unsigned char *mark)
 {
     const rtp_scene *s = c->s;
     const rtpi_v3 lp = light_pos(&s->lights[light]);
@@ -367,6 +367,8 @@ unsigned long long rtpi_light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *no
         }
         if (samples) { /* the other samples' colours hold */
             rtpi_combine(s, cl, co, samples + 3 * k);
+            if (mark)
+                mark[k] = 1;
             combined++;
         }
     }

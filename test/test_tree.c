@@ -803,6 +803,66 @@ static void test_material_planes(void)
     material_planes_run(1);
 }
 
+/* Moved lights into a kept image: only the pixels of the samples the
+   moved light's pass combined are written (plain samples: exactly those;
+   corner samples: the pixels they are corners of), every image equals a
+   full trace, and marks left by one move do not widen the next (a second
+   light, a move back in between).  After a colour edit the samples hold
+   the colours before it, and the move combines and writes them all. */
+static void moves_kept_run(int spd)
+{
+    static const struct {
+        const char *key, *value;
+        int local; /* 1: a move that writes the pixels it changed alone */
+    } seq[] = {
+        {"light.key.pos", "2,-5,6", 1},   {"light.key.pos", "-4,-5,8", 1},
+        {"light.0.color", "1,0.5,0.5", 0}, {"light.key.pos", "-3,-6,7", 0},
+        {"light.fill.pos", "4,-3,6", 1},  {"light.key.pos", "2,-5,6", 1},
+    };
+    rtp_scene *s;
+    rtp_tree *t;
+    rtp_trace_options o;
+    rtp_eval_options eo;
+    rtp_image *re;
+    size_t i, moves = 0;
+    if (!edit_start(spd, &s, &t, &o, &eo, &re))
+        return;
+    for (i = 0; t && re && i < sizeof seq / sizeof *seq; i++) {
+        rtp_image *full = NULL;
+        rtp_diff_stats d;
+        rtp_eval_stats es;
+        unsigned long long np = (unsigned long long)re->width * re->height;
+        CHECK(rtp_tree_set(t, seq[i].key, seq[i].value, NULL) == RTP_OK);
+        CHECK(rtp_scene_set(s, seq[i].key, seq[i].value, NULL) == RTP_OK);
+        if (rtp_tree_eval_into(t, &eo, re, &es, NULL) == RTP_OK &&
+            rtp_trace(s, &o, &full, NULL, NULL) == RTP_OK &&
+            rtp_image_diff(re, full, 1e-6, &d, NULL) == RTP_OK)
+            CHECK_MSG(d.max_abs <= 1e-6, "spd %d, after %s=%s: %g", spd, seq[i].key,
+                      seq[i].value, d.max_abs);
+        else
+            CHECK(0);
+        if (seq[i].local) {
+            moves++;
+            CHECK_MSG(es.combined_samples > 0 && es.written_pixels < np &&
+                          (spd ? es.written_pixels <= 4 * es.combined_samples
+                               : es.written_pixels == es.combined_samples),
+                      "spd %d, %s=%s: %llu samples combined, %llu of %llu pixels written", spd,
+                      seq[i].key, seq[i].value, es.combined_samples, es.written_pixels, np);
+        }
+        rtp_image_destroy(full);
+    }
+    CHECK(moves == 4);
+    rtp_image_destroy(re);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+}
+
+static void test_moves_kept_image(void)
+{
+    moves_kept_run(0);
+    moves_kept_run(1);
+}
+
 /* The q of a material's first edit, from its nodes' list and the path
    weights the evaluation keeps (rtpi_nodes_diffuse), equals the descent
    of each sample's tree (rtpi_sample_diffuse) bit for bit, for every
@@ -1297,6 +1357,7 @@ int main(void)
     RUN(test_edit_sequence);
     RUN(test_one_term_edits);
     RUN(test_material_planes);
+    RUN(test_moves_kept_image);
     RUN(test_material_q);
     RUN(test_warm_light_move_bitwise);
     RUN(test_bump_edits);
