@@ -2153,6 +2153,19 @@ static int cp_apply_band(void *ctx, int chunk)
     return 0;
 }
 
+/* S + K dc over len consecutive pixels (cp_apply_listed, one term). */
+static void cp_run1(const float *restrict sp, const float *restrict k, const double *dc,
+                    float *restrict out, size_t len)
+{
+    const double d0 = dc[0], d1 = dc[1], d2 = dc[2];
+    size_t i;
+    for (i = 0; i < len; i++) {
+        out[3 * i] = (float)(sp[3 * i] + k[3 * i] * d0);
+        out[3 * i + 1] = (float)(sp[3 * i + 1] + k[3 * i + 1] * d1);
+        out[3 * i + 2] = (float)(sp[3 * i + 2] + k[3 * i + 2] * d2);
+    }
+}
+
 /* A band of the pixels whose K is not 0 in the plane of term e->term. */
 static int cp_apply_listed(void *ctx, int chunk)
 {
@@ -2172,11 +2185,14 @@ static int cp_apply_listed(void *ctx, int chunk)
        (the sums as cp_pixel makes them) */
     if (t->cp_nd == 1) {
         const float *k = t->cp_k[t->cp_d[0]];
-        for (j = 0; j < n; j++) {
-            size_t q = 3 * (size_t)nz[j];
-            out[q] = (float)(sp[q] + k[q] * dc[0]);
-            out[q + 1] = (float)(sp[q + 1] + k[q + 1] * dc[1]);
-            out[q + 2] = (float)(sp[q + 2] + k[q + 2] * dc[2]);
+        for (j = 0; j < n;) {
+            /* a run of consecutive pixels at a time: three planes read
+               and one written straight through */
+            size_t p0 = nz[j], len = 1;
+            while (j + len < n && nz[j + len] == p0 + len)
+                len++;
+            cp_run1(sp + 3 * p0, k + 3 * p0, dc, out + 3 * p0, len);
+            j += len;
         }
     } else if (t->cp_nd == 2) {
         const float *k = t->cp_k[t->cp_d[0]], *l = t->cp_k[t->cp_d[1]];
