@@ -833,6 +833,63 @@ static int lb_cmp(const void *a, const void *b)
     return x->prim < y->prim ? -1 : x->prim > y->prim;
 }
 
+/* near's bits as an unsigned key in the doubles' order (negative ones
+   turned over, positive ones above them). */
+static inline uint64_t lb_key(double d)
+{
+    uint64_t u;
+    memcpy(&u, &d, sizeof u);
+    return u >> 63 ? ~u : u | (uint64_t)1 << 63;
+}
+
+/* The candidates in lb_cmp's order, given in ascending prim order: a
+   stable radix sort on near's 64 bits, 8 at a time, skipping the bytes
+   every key shares (the exponent's high bits mostly).  qsort's calls of
+   lb_cmp had been 3-20% of a light buffer's build (gears' thin
+   primitives: 23 M instructions).  -1 when out of memory. */
+static int lb_sort(rtpi_lb_cand *c, size_t n, const rtp_allocator *a)
+{
+    size_t (*cnt)[256], i;
+    rtpi_lb_cand *tmp, *src = c, *dst;
+    int b;
+    if (n < 64) {
+        qsort(c, n, sizeof *c, lb_cmp);
+        return 0;
+    }
+    cnt = (size_t(*)[256])rtpi_calloc_array(a, 8, sizeof *cnt);
+    tmp = (rtpi_lb_cand *)rtpi_malloc_array(a, n, sizeof *tmp);
+    if (!cnt || !tmp) {
+        rtpi_free(a, cnt);
+        rtpi_free(a, tmp);
+        return -1;
+    }
+    for (i = 0; i < n; i++) {
+        uint64_t k = lb_key(c[i].near);
+        for (b = 0; b < 8; b++)
+            cnt[b][(k >> (8 * b)) & 255]++;
+    }
+    dst = tmp;
+    for (b = 0; b < 8; b++) {
+        size_t sum = 0, j;
+        if (cnt[b][(lb_key(src[0].near) >> (8 * b)) & 255] == n)
+            continue; /* one value of this byte: the order holds */
+        for (j = 0; j < 256; j++) {
+            size_t x = cnt[b][j];
+            cnt[b][j] = sum;
+            sum += x;
+        }
+        for (i = 0; i < n; i++)
+            dst[cnt[b][(lb_key(src[i].near) >> (8 * b)) & 255]++] = src[i];
+        dst = src;
+        src = src == c ? tmp : c;
+    }
+    if (src != c)
+        memcpy(c, src, n * sizeof *c);
+    rtpi_free(a, cnt);
+    rtpi_free(a, tmp);
+    return 0;
+}
+
 /* The plane entry of candidate prim (see rtpi_lightbuf; t 0 for other
    primitives).  Where the light and a shadow ray's origin o both lie
    more than 1e-9 S from a triangle's plane on one side (S the scale:
@@ -1060,7 +1117,10 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
     }
     lb->ncand = nc;
     /* Filling the cells in ascending near order sorts every list. */
-    qsort(lb->cand, nc, sizeof *lb->cand, lb_cmp);
+    if (lb_sort(lb->cand, nc, a) != 0) {
+        rtpi_lightbuf_free(lb, a);
+        return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory for the light buffer");
+    }
     if (s->ntris && nc) {
         if (!(lb->plane = (double *)rtpi_malloc_array(a, 5 * nc, sizeof *lb->plane))) {
             rtpi_lightbuf_free(lb, a);
