@@ -833,11 +833,31 @@ static int light_row(void *ctx, int y)
 {
     eval_ctx *e = (eval_ctx *)ctx;
     rtp_tree *t = e->t;
-    size_t k = (size_t)y * t->nx;
-    e->combined += rtpi_light_redo(e->shade, t->nodes, t->start, k, k + (size_t)t->nx, e->vis,
-                                   t->ev_nv, t->ev_w, e->light, t->ev_terms, t->ev_coeffs,
-                                   e->cl, e->combine_too ? e->samples : NULL, &e->coef_bad,
-                                   e->mark);
+    size_t k0 = (size_t)y * t->nx, k1 = k0 + (size_t)t->nx, lo, hi;
+    const uint64_t *st = t->start, a = st[k0], b = st[k1];
+    if (a == b)
+        return 0; /* a row of background */
+    /* the row's first and last samples with nodes (start rises with k):
+       the background on either side of the scene is not walked */
+    for (lo = k0 + 1, hi = k1; lo < hi;) {
+        size_t mid = lo + (hi - lo) / 2;
+        if (st[mid] > a)
+            hi = mid;
+        else
+            lo = mid + 1;
+    }
+    k0 = lo - 1; /* st[lo] > a: sample lo - 1 has nodes */
+    for (lo = k0, hi = k1; lo < hi;) {
+        size_t mid = lo + (hi - lo) / 2;
+        if (st[mid] < b)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    k1 = lo; /* st[lo - 1] < b: sample lo - 1 has nodes, none after it */
+    e->combined += rtpi_light_redo(e->shade, t->nodes, st, k0, k1, e->vis, t->ev_nv, t->ev_w,
+                                   e->light, t->ev_terms, t->ev_coeffs, e->cl,
+                                   e->combine_too ? e->samples : NULL, &e->coef_bad, e->mark);
     return 0;
 }
 
