@@ -1447,6 +1447,7 @@ int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
     double u, v, x, y, zp, zlim, tn = -1.0;
     rtpi_ray rr;
     rtpi_hit h;
+    lb_tri_ray w;
     if (self == 1) {
         *occ = prim;
         return 0;
@@ -1510,8 +1511,11 @@ int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
         rr = rtpi_shadow_ray(o, ib->light);
         r = &rr;
     }
+    w.made = -1;
     for (k = 0; k < n; k++)
-        if (rtpi_intersect_prim(s, cand[k], r, &h)) {
+        /* (an item buffer draws no zero-area triangle: rtpi_itembuf_renders) */
+        if (cand[k] < s->ntris ? lb_tri_hit(s, cand[k], r, &w)
+                               : rtpi_intersect_prim(s, cand[k], r, &h)) {
             *occ = cand[k];
             return 0;
         }
