@@ -442,12 +442,16 @@ int rtpi_sample_coeffs(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
    with the colours cl (rtpi_combine; the other coefficients must be those
    the colours are to be combined with).  *bad |= 1 where a coefficient
    made is not finite.  Returns how many samples were combined; where
-   mark is not NULL, mark[k] is set to 1 for each. */
+   mark is not NULL, mark[k] is set to 1 for each.  rest (NULL: none):
+   3 doubles a sample, rtpi_combine_rest's for this light where
+   rest_ok[k] is 1 (else made there, and rest_ok[k] set), from which a
+   sample is combined with this light's term alone. */
 unsigned long long rtpi_light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
                                    const uint64_t *start, size_t k0, size_t k1,
                                    const uint32_t *vis_ext, const float *nv, const double *w,
                                    size_t light, float *terms, float *coeffs, const double *cl,
-                                   float *samples, int *bad, unsigned char *mark);
+                                   float *samples, int *bad, unsigned char *mark,
+                                   double *rest, unsigned char *rest_ok);
 /* The light terms (n.l, highlight) of every node of material mat among a
    sample's n nodes, from the cached normals and view vectors nv, exactly
    as rtpi_sample_terms computes them: what an edit of mat's shine or ks
@@ -541,6 +545,10 @@ static inline void rtpi_nodes_diffuse(const rtpi_shade_ctx *c, const uint32_t *i
 /* cl: 3 per light: colour * light scale, 0 when off (rtpi_light_colors). */
 void rtpi_combine(const rtp_scene *s, const double *cl, const float *coeffs,
                   float rgb[3]);
+/* rtpi_combine's sums, in its order, over every term but light `light`
+   (rtpi_light_redo's rest): 3 doubles, not rounded. */
+void rtpi_combine_rest(const rtp_scene *s, const double *cl, const float *coeffs, size_t light,
+                       double rest[3]);
 void rtpi_light_colors(const rtp_scene *s, double *cl);
 
 /* Surface data at a recorded hit position (normals, material, and uv when
@@ -680,6 +688,12 @@ struct rtp_tree {
     float *ev_samples;     /* the samples' colours (SPD: corners, averaged
                               into pixels); with the caches, or SPD */
     int ev_samples_ok;     /* ev_samples hold ev_coeffs combined with ev_cl */
+    double *mv_rest;       /* 3 a sample: rtpi_combine_rest's for light
+                              mv_light - 1 where mv_ok (tree.c: a light
+                              moved again and again) */
+    unsigned char *mv_ok;  /* a sample: 1 where mv_rest holds its rest */
+    size_t mv_light;       /* 0, or 1 + the light mv_rest is for, while the
+                              other terms' coefficients and colours hold */
     unsigned char *ev_mark; /* samples + 8 bytes, all 0 between evaluations:
                               the samples a moved light's pass combined
                               (tree.c: resolve_marked) */

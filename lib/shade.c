@@ -315,7 +315,8 @@ unsigned long long rtpi_light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *no
                                    const uint64_t *start, size_t k0, size_t k1,
                                    const uint32_t *vis_ext, const float *nv, const double *w,
                                    size_t light, float *terms, float *coeffs, const double *cl,
-                                   float *samples, int *bad, unsigned char *mark)
+                                   float *samples, int *bad, unsigned char *mark,
+                                   double *rest, unsigned char *rest_ok)
 {
     const rtp_scene *s = c->s;
     const rtpi_v3 lp = light_pos(&s->lights[light]);
@@ -366,7 +367,31 @@ unsigned long long rtpi_light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *no
             memcpy(cf, f, sizeof f);
         }
         if (samples) { /* the other samples' colours hold */
-            rtpi_combine(s, cl, co, samples + 3 * k);
+            if (rest) {
+                /* the rest of the sum, then this light's term: as
+                   rtpi_combine where the light is the last, else about
+                   a float ulp from it; it serves where the sum is finite */
+                double *r = rest + 3 * k, v0, v1, v2;
+                const double *lc = cl + 3 * light;
+                const float *f = co + 6 + 3 * light;
+                if (!rest_ok[k]) { /* (made the first time the sample changes) */
+                    rtpi_combine_rest(s, cl, co, light, r);
+                    rest_ok[k] = 1;
+                }
+                v0 = r[0] + f[0] * lc[0];
+                v1 = r[1] + f[1] * lc[1];
+                v2 = r[2] + f[2] * lc[2];
+                if (fabs(v0) + fabs(v1) + fabs(v2) <= DBL_MAX) {
+                    float *o = samples + 3 * k;
+                    o[0] = (float)v0;
+                    o[1] = (float)v1;
+                    o[2] = (float)v2;
+                } else {
+                    rtpi_combine(s, cl, co, samples + 3 * k);
+                }
+            } else {
+                rtpi_combine(s, cl, co, samples + 3 * k);
+            }
             if (mark)
                 mark[k] = 1;
             combined++;
@@ -551,6 +576,26 @@ void rtpi_combine(const rtp_scene *s, const double *cl, const float *coeffs, flo
     rgb[0] = (float)v0;
     rgb[1] = (float)v1;
     rgb[2] = (float)v2;
+}
+
+void rtpi_combine_rest(const rtp_scene *s, const double *cl, const float *coeffs, size_t light,
+                       double rest[3])
+{
+    size_t i, nl = s->nlights;
+    const float *c = coeffs + 6;
+    double v0 = coeffs[0] * (double)s->background[0] + coeffs[3] * (double)s->ambient[0];
+    double v1 = coeffs[1] * (double)s->background[1] + coeffs[4] * (double)s->ambient[1];
+    double v2 = coeffs[2] * (double)s->background[2] + coeffs[5] * (double)s->ambient[2];
+    for (i = 0; i < nl; i++, c += 3, cl += 3) {
+        if (i == light)
+            continue;
+        v0 += c[0] * cl[0];
+        v1 += c[1] * cl[1];
+        v2 += c[2] * cl[2];
+    }
+    rest[0] = v0;
+    rest[1] = v1;
+    rest[2] = v2;
 }
 
 static void diffuse_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t idx,

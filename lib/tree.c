@@ -34,6 +34,8 @@ void rtp_tree_destroy(rtp_tree *t)
     rtpi_free(&a, t->ev_nv);
     rtpi_free(&a, t->ev_w);
     rtpi_free(&a, t->ev_mark);
+    rtpi_free(&a, t->mv_rest);
+    rtpi_free(&a, t->mv_ok);
     rtpi_free(&a, t->ev_samples);
     rtpi_free(&a, t->ev_cl);
     rtpi_free(&a, t->pk);
@@ -563,6 +565,7 @@ typedef struct eval_ctx {
     unsigned long long combined; /* light_row: samples it combined */
     unsigned char *mark;      /* light_row (may be NULL): 1 for each
                                  sample it combined (t->ev_mark) */
+    double *mv_rest;          /* light_row (may be NULL): t->mv_rest */
     int q_by_list;            /* pk_q_chunk: q at 1 + the sample's place in the
                                  list (entry 0: a zero q) */
     size_t rest_bytes;
@@ -857,9 +860,14 @@ static int light_row(void *ctx, int y)
     k1 = lo; /* st[lo - 1] < b: sample lo - 1 has nodes, none after it */
     e->combined += rtpi_light_redo(e->shade, t->nodes, st, k0, k1, e->vis, t->ev_nv, t->ev_w,
                                    e->light, t->ev_terms, t->ev_coeffs, e->cl,
-                                   e->combine_too ? e->samples : NULL, &e->coef_bad, e->mark);
+                                   e->combine_too ? e->samples : NULL, &e->coef_bad, e->mark,
+                                   e->mv_rest, t->mv_ok);
     return 0;
 }
+
+/* Lights a scene has at least where a moved light keeps the rest of its
+   samples' sums (eval_impl). */
+#define MV_REST_LIGHTS 3
 
 /* Step 3 only, from the cached coefficients. */
 static int combine_row(void *ctx, int y)
@@ -1668,6 +1676,11 @@ static void drop_caches(rtp_tree *t)
     t->ev_nv = NULL;
     t->ev_w = NULL;
     t->ev_mark = NULL;
+    rtpi_free(&t->alloc, t->mv_rest);
+    rtpi_free(&t->alloc, t->mv_ok);
+    t->mv_rest = NULL;
+    t->mv_ok = NULL;
+    t->mv_light = 0;
     t->ev_pos = NULL;
     t->ev_mats = NULL;
     t->ev_valid = 0;
@@ -2415,6 +2428,9 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
     /* the materials whose samples alone step 3 set (RESOLVE_MAX at most;
        more: -1), so an incremental evaluation averages only their pixels */
     int nset = 0, partial = 0, by_mark = 0;
+    /* a moved light's rest holds only through moves of that light alone:
+       every other evaluation ends it */
+    size_t mv_light = t->mv_light;
     uint32_t set_mats[RESOLVE_MAX];
     size_t nmat_changed = 0;
     uint32_t mt = 0;
@@ -2434,6 +2450,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                           "image is %dx%d, the tree %dx%d", into->width, into->height,
                           t->width, t->height);
     memset(&st, 0, sizeof st);
+    t->mv_light = 0;
     s = t->scene;
     nl = s->nlights;
     ns = (size_t)t->nx * t->ny;
@@ -2563,6 +2580,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
         t->ev_samples_ok = cached;
     } else {
         int coeffs_dirty = 0, moved_combined = 0, applied = 0;
+        size_t nstale, lmoved = 0;
         /* a light that moved (or whose shadows were decided another way):
            its terms and coefficients only, for every sample; where the
            samples hold every other colour as it is (no colour or material
@@ -2583,6 +2601,34 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
              (t->ev_mark = (unsigned char *)rtpi_calloc_array(&t->alloc, ns + 8, 1)) != NULL))
             for (i = 0; i < nthreads; i++)
                 e[i].mark = t->ev_mark;
+        /* One light moved alone, again and again (a drag): the sums of
+           its samples but for its term hold while nothing else changes.
+           They are kept (t->mv_rest, each made when its sample first
+           changes), and a sample is its rest plus the light's term, not
+           the sum over every term (tree, 7 lights: combining was 13% of
+           a move).  With 1 or 2 lights the sum is short and the rest not
+           worth its memory. */
+        for (l = 0, nstale = 0; l < nl; l++)
+            if (light_terms_stale(t, l, kmode, kres))
+                nstale++, lmoved = l;
+        if (moved_combined && nstale == 1 && nl >= MV_REST_LIGHTS) {
+            if (mv_light != lmoved + 1) {
+                if (!t->mv_rest)
+                    t->mv_rest = (double *)rtpi_malloc_array(&t->alloc, 3 * ns,
+                                                             sizeof *t->mv_rest);
+                if (!t->mv_ok)
+                    t->mv_ok = (unsigned char *)rtpi_malloc_array(&t->alloc, ns, 1);
+                if (t->mv_rest && t->mv_ok) {
+                    memset(t->mv_ok, 0, ns);
+                    mv_light = lmoved + 1;
+                }
+            }
+            if (mv_light == lmoved + 1) {
+                for (i = 0; i < nthreads; i++)
+                    e[i].mv_rest = t->mv_rest;
+                t->mv_light = mv_light; /* (this move changes no other term) */
+            }
+        }
         for (l = 0; l < nl; l++) {
             if (!light_terms_stale(t, l, kmode, kres))
                 continue;

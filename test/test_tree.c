@@ -863,6 +863,70 @@ static void test_moves_kept_image(void)
     moves_kept_run(1);
 }
 
+/* One light of four moved again and again keeps the rest of its samples'
+   sums (t->mv_rest): each image equals a full trace of the edited scene
+   (plain samples: rtp_tree_trace makes the whole frame), the rest is in
+   use through consecutive moves, and a colour or material edit or
+   another light's move in between ends it (the moves after must not add
+   the old rest; the first of them combines every sample, as the samples
+   then hold the colours before the edit). */
+static void moves_rest_run(int spd)
+{
+    static const struct {
+        const char *key, *value;
+        int rest; /* the rest in use after this step */
+    } seq[] = {
+        {"light.key.pos", "2,-5,6", 1},      {"light.key.pos", "-4,-5,8", 1},
+        {"light.key.pos", "-3,-6,7", 1},     {"light.fill.color", "0.2,0.9,0.3", 0},
+        {"light.key.pos", "1,-6,6", 0},      {"light.key.pos", "2,-4,7", 1},
+        {"mat.red.kd", "0.3", 0},            {"light.key.pos", "2,-5,6", 0},
+        {"light.key.pos", "-1,-5,6", 1},     {"light.2.pos", "3,-2,5", 1},
+        {"light.key.pos", "-4,-5,8", 1},     {"background", "0.3,0.3,0.5", 0},
+        {"light.key.pos", "0,-6,7", 0},      {"light.key.pos", "1,-6,7", 1},
+    };
+    rtp_scene *s;
+    rtp_tree *t;
+    rtp_trace_options o;
+    rtp_eval_options eo;
+    rtp_image *re;
+    size_t i;
+    const double p2[3] = {-3.0, -4.0, 5.0}, p3[3] = {4.0, -6.0, 3.0};
+    if (!edit_start(spd, &s, &t, &o, &eo, &re))
+        return;
+    rtp_image_destroy(re);
+    re = NULL;
+    CHECK(t && rtp_tree_add_light(t, p2, NULL) == RTP_OK);
+    CHECK(t && rtp_tree_add_light(t, p3, NULL) == RTP_OK);
+    CHECK(t && rtp_tree_eval(t, &eo, &re, NULL, NULL) == RTP_OK);
+    for (i = 0; t && re && i < sizeof seq / sizeof *seq; i++) {
+        rtp_image *full = NULL;
+        rtp_diff_stats d;
+        CHECK(rtp_tree_set(t, seq[i].key, seq[i].value, NULL) == RTP_OK);
+        CHECK(rtp_tree_eval_into(t, &eo, re, NULL, NULL) == RTP_OK);
+        {
+            rtp_error err;
+            rtp_status rs = rtp_tree_trace(t, 1, &full, NULL, &err);
+            CHECK_MSG(rs == RTP_OK, "%s", err.message);
+        }
+        if (full && rtp_image_diff(re, full, 1e-6, &d, NULL) == RTP_OK)
+            CHECK_MSG(d.max_abs <= 1e-6, "spd %d, after %s=%s: %g", spd, seq[i].key,
+                      seq[i].value, d.max_abs);
+        else
+            CHECK(0);
+        CHECK_MSG((t->mv_light != 0) == seq[i].rest, "spd %d, after %s=%s: rest for light %zu",
+                  spd, seq[i].key, seq[i].value, t->mv_light);
+        rtp_image_destroy(full);
+    }
+    rtp_image_destroy(re);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+}
+
+static void test_moves_rest(void)
+{
+    moves_rest_run(0);
+}
+
 /* The q of a material's first edit, from its nodes' list and the path
    weights the evaluation keeps (rtpi_nodes_diffuse), equals the descent
    of each sample's tree (rtpi_sample_diffuse) bit for bit, for every
@@ -1358,6 +1422,7 @@ int main(void)
     RUN(test_one_term_edits);
     RUN(test_material_planes);
     RUN(test_moves_kept_image);
+    RUN(test_moves_rest);
     RUN(test_material_q);
     RUN(test_warm_light_move_bitwise);
     RUN(test_bump_edits);
