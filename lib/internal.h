@@ -669,11 +669,9 @@ struct rtp_tree {
     double *cur_pos;       /* 3 per light: position cur_vis holds bits for
                               (NaN: not computed) */
     int cur_mode, cur_res; /* shadow mode and resolution they came from */
-    double *tri_nrm;       /* 3 per triangle: rtpi_tri_normal of a flat
-                              one (NaN: it has vertex normals), made at
-                              the first move where the scene has flat
-                              triangles (vis_row asks it of every hit),
-                              else NULL */
+    double *tri_nrm;       /* 3 per triangle: its rtpi_tri_normal, made at
+                              the first move (vis_row asks it of every
+                              hit), NULL in a scene without triangles */
     size_t nlights0;       /* lights traced; later ones were added */
 
     /* Evaluation caches (tree.c): the shading steps' results, kept so an
