@@ -582,6 +582,7 @@ typedef struct eval_ctx {
     unsigned long long combined; /* light_row: samples it combined */
     unsigned char *mark;      /* light_row (may be NULL): 1 for each
                                  sample it combined (t->ev_mark) */
+    unsigned long long written; /* mark_row: pixels it wrote */
     double *mv_rest;          /* light_row (may be NULL): t->mv_rest */
     int q_by_list;            /* pk_q_chunk: q at 1 + the sample's place in the
                                  list (entry 0: a zero q) */
@@ -1567,54 +1568,76 @@ static unsigned long long resolve_listed(const rtp_tree *t, const float *samples
     return writes;
 }
 
-/* The pixels of the samples light_row marked (mark: one byte a sample,
-   and 8 more, all 0) from samples into img, which holds every other pixel
-   already; the marks are cleared as they are read.  With corner samples
-   pixel x of row y averages samples x and x + 1 of sample rows y and
-   y + 1.  Rows are read 8 samples a word, skipping those with no mark.
-   Returns how many pixels were written. */
-static unsigned long long resolve_marked(const rtp_tree *t, const float *samples,
-                                         unsigned char *mark, rtp_image *img)
+/* Pixel row y of the samples light_row marked (t->ev_mark: one byte a
+   sample, and 8 more, all 0) from e->samples into e->pixels, which hold
+   every other pixel already; with corner samples pixel x of row y
+   averages samples x and x + 1 of sample rows y and y + 1.  Rows are read
+   8 samples a word, skipping those with no mark.  The marks are cleared
+   after every row is done (mark_clear). */
+static int mark_row(void *ctx, int y)
 {
+    eval_ctx *e = (eval_ctx *)ctx;
+    const rtp_tree *t = e->t;
+    const unsigned char *r0 = t->ev_mark + (size_t)y * t->nx, *r1 = r0 + t->nx;
+    const float *samples = e->samples;
+    size_t nx = (size_t)t->nx, w = (size_t)t->width, x, q;
     unsigned long long writes = 0;
-    size_t nx = (size_t)t->nx, w = (size_t)img->width, x, q;
-    int y;
-    for (y = 0; y < img->height; y++) {
-        unsigned char *r0 = mark + (size_t)y * nx, *r1 = r0 + nx;
-        if (!t->spd) {
-            for (x = 0; x < w; x++)
-                if (r0[x]) {
-                    memcpy(img->pixels + 3 * ((size_t)y * w + x),
-                           samples + 3 * ((size_t)y * nx + x), 3 * sizeof *samples);
+    if (!t->spd) {
+        for (x = 0; x < w; x++)
+            if (r0[x]) {
+                memcpy(e->pixels + 3 * ((size_t)y * w + x), samples + 3 * ((size_t)y * nx + x),
+                       3 * sizeof *samples);
+                writes++;
+            }
+    } else {
+        /* (rtpi_resolve_pixel's sums, with the rows' places kept) */
+        const float *s0 = samples + 3 * (size_t)y * nx, *s1 = s0 + 3 * nx;
+        float *out = e->pixels + 3 * (size_t)y * w;
+        for (x = 0; x < w; x += 8) {
+            /* pixels x .. x + 7 have samples x .. x + 8 as corners */
+            uint64_t a, b;
+            size_t end = x + 8 < w ? x + 8 : w;
+            memcpy(&a, r0 + x, 8);
+            memcpy(&b, r1 + x, 8);
+            if (!(a | b | r0[x + 8] | r1[x + 8]))
+                continue;
+            for (q = x; q < end; q++)
+                if (r0[q] | r0[q + 1] | r1[q] | r1[q + 1]) {
+                    const float *u = s0 + 3 * q, *v = s1 + 3 * q;
+                    float *o = out + 3 * q;
+                    o[0] = 0.25f * (u[0] + u[3] + v[0] + v[3]);
+                    o[1] = 0.25f * (u[1] + u[4] + v[1] + v[4]);
+                    o[2] = 0.25f * (u[2] + u[5] + v[2] + v[5]);
                     writes++;
                 }
-        } else {
-            /* (rtpi_resolve_pixel's sums, with the rows' places kept) */
-            const float *s0 = samples + 3 * (size_t)y * nx, *s1 = s0 + 3 * nx;
-            float *out = img->pixels + 3 * (size_t)y * w;
-            for (x = 0; x < w; x += 8) {
-                /* pixels x .. x + 7 have samples x .. x + 8 as corners */
-                uint64_t a, b;
-                size_t end = x + 8 < w ? x + 8 : w;
-                memcpy(&a, r0 + x, 8);
-                memcpy(&b, r1 + x, 8);
-                if (!(a | b | r0[x + 8] | r1[x + 8]))
-                    continue;
-                for (q = x; q < end; q++)
-                    if (r0[q] | r0[q + 1] | r1[q] | r1[q + 1]) {
-                        const float *u = s0 + 3 * q, *v = s1 + 3 * q;
-                        float *o = out + 3 * q;
-                        o[0] = 0.25f * (u[0] + u[3] + v[0] + v[3]);
-                        o[1] = 0.25f * (u[1] + u[4] + v[1] + v[4]);
-                        o[2] = 0.25f * (u[2] + u[5] + v[2] + v[5]);
-                        writes++;
-                    }
-            }
         }
-        memset(r0, 0, nx); /* (row y serves no later pixel row) */
     }
-    memset(mark + (size_t)img->height * nx, 0, (size_t)t->ny * nx - (size_t)img->height * nx);
-    return writes;
+    e->written += writes;
+    return 0;
+}
+
+/* Every pixel row from e->samples into e->pixels (rtpi_resolve_samples,
+   by rows on the threads). */
+static int resolve_row(void *ctx, int y)
+{
+    eval_ctx *e = (eval_ctx *)ctx;
+    const rtp_tree *t = e->t;
+    size_t w = (size_t)t->width, x;
+    if (!t->spd) {
+        memcpy(e->pixels + 3 * (size_t)y * w, e->samples + 3 * (size_t)y * w,
+               3 * w * sizeof *e->pixels);
+        return 0;
+    }
+    {
+        const float *s0 = e->samples + 3 * (size_t)y * (w + 1), *s1 = s0 + 3 * (w + 1);
+        float *out = e->pixels + 3 * (size_t)y * w;
+        for (x = 0; x < w; x++, s0 += 3, s1 += 3, out += 3) {
+            out[0] = 0.25f * (s0[0] + s0[3] + s1[0] + s1[3]);
+            out[1] = 0.25f * (s0[1] + s0[4] + s1[1] + s1[4]);
+            out[2] = 0.25f * (s0[2] + s0[5] + s1[2] + s1[5]);
+        }
+    }
+    return 0;
 }
 
 /* Does this evaluation go on with the listed highlights: no light's terms
@@ -2864,10 +2887,19 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                                      img);
             if (wr < st.written_pixels)
                 st.written_pixels = wr;
-        } else if (by_mark) {
-            st.written_pixels = resolve_marked(t, samples, t->ev_mark, img);
         } else {
-            rtpi_resolve_samples(samples, t->spd, img);
+            for (i = 0; i < nthreads; i++) {
+                e[i].samples = samples;
+                e[i].pixels = img->pixels;
+                e[i].written = 0;
+            }
+            rtpi_parallel_rows(t->height, nthreads, ctx, by_mark ? mark_row : resolve_row, NULL,
+                               NULL);
+            if (by_mark) {
+                for (st.written_pixels = 0, i = 0; i < nthreads; i++)
+                    st.written_pixels += e[i].written;
+                memset(t->ev_mark, 0, ns);
+            }
         }
     }
 done:
