@@ -116,8 +116,13 @@ int main(int argc, char **argv)
         eo.shadows = moves[m].mode;
         /* (auto: the CLI's default, its own resolution) */
         eo.shadow_res = moves[m].mode == RTP_SHADOWS_AUTO ? 0 : 256;
-        for (i = 0; i < 2; i++)
-            if (step(t, img, &eo, "light.0.pos", mv[i % 2], i == 1 ? moves[m].label : NULL))
+        /* the third of three: a drag as it goes on (the first after the
+           material edits combines every sample, the second starts the
+           light's kept rest of the sums: tree.c); from mv[0] to mv[1] as
+           the second of two was before session 11 */
+        for (i = 0; i < 3; i++)
+            if (step(t, img, &eo, "light.0.pos", mv[(i + 1) % 2],
+                     i == 2 ? moves[m].label : NULL))
                 goto out;
     }
     rc = 0;
