@@ -316,9 +316,11 @@ typedef struct rtp_eval_stats {
  *  shading terms and coefficients (and per node its path weight and its
  *  place in its material's list, 12 bytes), for colour edits a snapshot
  *  image (12 bytes a pixel) and a plane for each colour term edited (16
- *  bytes a pixel, at most 8 kept), and for the material last edited in kd
- *  or colour its planes (up to 40 bytes a pixel, 12 a sample);
- *  opt->no_cache keeps none of it. */
+ *  bytes a pixel, at most 8 kept), for the material last edited in kd
+ *  or colour its planes (up to 40 bytes a pixel, 12 a sample), after a
+ *  move a byte a sample (the samples it changed), and for a light moved
+ *  alone again and again in a scene of 3 lights or more the sums of every
+ *  other term (25 bytes a sample); opt->no_cache keeps none of it. */
 rtp_status rtp_tree_eval(rtp_tree *tree, const rtp_eval_options *opt,
                          rtp_image **out, rtp_eval_stats *stats,
                          rtp_error *err);
