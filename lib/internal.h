@@ -694,7 +694,7 @@ struct rtp_tree {
                               other terms' coefficients and colours hold */
     unsigned char *ev_mark; /* samples + 8 bytes, all 0 between evaluations:
                               the samples a moved light's pass combined
-                              (tree.c: resolve_marked) */
+                              (tree.c: mark_row) */
     int ev_inf;            /* some coefficient is beyond the float range
                               (a kt of 1e19): no material planes */
     size_t ev_nlights;

@@ -1572,8 +1572,8 @@ static unsigned long long resolve_listed(const rtp_tree *t, const float *samples
    sample, and 8 more, all 0) from e->samples into e->pixels, which hold
    every other pixel already; with corner samples pixel x of row y
    averages samples x and x + 1 of sample rows y and y + 1.  Rows are read
-   8 samples a word, skipping those with no mark.  The marks are cleared
-   after every row is done (mark_clear). */
+   8 samples a word, skipping those with no mark.  eval_impl clears the
+   marks once every row is done (a row's serve two pixel rows). */
 static int mark_row(void *ctx, int y)
 {
     eval_ctx *e = (eval_ctx *)ctx;
