@@ -547,20 +547,33 @@ static void combine_zero(const rtp_scene *s, const double *cl, const float *coef
     }
 }
 
-void rtpi_combine(const rtp_scene *s, const double *cl, const float *coeffs, float rgb[3])
+/* The sums of rtpi_combine, each channel in the same order as ever
+   (background, ambient, the lights ascending), the three side by side;
+   light `skip` left out (none where it is nlights). */
+static inline void combine_sums(const rtp_scene *s, const double *cl, const float *coeffs,
+                                size_t skip, double v[3])
 {
-    /* each channel in the same order as ever (background, ambient, the
-       lights ascending), the three side by side */
     size_t i, nl = s->nlights;
     const float *c = coeffs + 6;
     double v0 = coeffs[0] * (double)s->background[0] + coeffs[3] * (double)s->ambient[0];
     double v1 = coeffs[1] * (double)s->background[1] + coeffs[4] * (double)s->ambient[1];
     double v2 = coeffs[2] * (double)s->background[2] + coeffs[5] * (double)s->ambient[2];
     for (i = 0; i < nl; i++, c += 3, cl += 3) {
+        if (i == skip)
+            continue;
         v0 += c[0] * cl[0];
         v1 += c[1] * cl[1];
         v2 += c[2] * cl[2];
     }
+    v[0] = v0;
+    v[1] = v1;
+    v[2] = v2;
+}
+
+void rtpi_combine(const rtp_scene *s, const double *cl, const float *coeffs, float rgb[3])
+{
+    double v[3];
+    combine_sums(s, cl, coeffs, s->nlights, v);
     /* A colour of 0 adds nothing, whatever its coefficient: a light
        turned off keeps its coefficients (for turning it on again), and
        where a huge kt or ks took one beyond the float range, inf x 0 made
@@ -569,33 +582,19 @@ void rtpi_combine(const rtp_scene *s, const double *cl, const float *coeffs, flo
        are the sums made again with it (tested as one: their sum is NaN
        where one is, or where infinities of both signs meet, which the
        rule leaves as they are). */
-    if (!(v0 + v1 + v2 == v0 + v1 + v2)) {
-        combine_zero(s, cl - 3 * nl, coeffs, rgb); /* (a tail call: no frame here) */
+    if (!(v[0] + v[1] + v[2] == v[0] + v[1] + v[2])) {
+        combine_zero(s, cl, coeffs, rgb); /* (a tail call: no frame here) */
         return;
     }
-    rgb[0] = (float)v0;
-    rgb[1] = (float)v1;
-    rgb[2] = (float)v2;
+    rgb[0] = (float)v[0];
+    rgb[1] = (float)v[1];
+    rgb[2] = (float)v[2];
 }
 
 void rtpi_combine_rest(const rtp_scene *s, const double *cl, const float *coeffs, size_t light,
                        double rest[3])
 {
-    size_t i, nl = s->nlights;
-    const float *c = coeffs + 6;
-    double v0 = coeffs[0] * (double)s->background[0] + coeffs[3] * (double)s->ambient[0];
-    double v1 = coeffs[1] * (double)s->background[1] + coeffs[4] * (double)s->ambient[1];
-    double v2 = coeffs[2] * (double)s->background[2] + coeffs[5] * (double)s->ambient[2];
-    for (i = 0; i < nl; i++, c += 3, cl += 3) {
-        if (i == light)
-            continue;
-        v0 += c[0] * cl[0];
-        v1 += c[1] * cl[1];
-        v2 += c[2] * cl[2];
-    }
-    rest[0] = v0;
-    rest[1] = v1;
-    rest[2] = v2;
+    combine_sums(s, cl, coeffs, light, rest);
 }
 
 static void diffuse_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t idx,
