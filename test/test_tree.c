@@ -803,6 +803,26 @@ static void test_material_planes(void)
     material_planes_run(1);
 }
 
+/* key=value to the tree and the scene, the tree evaluated into the kept
+   image re, which must then equal a full trace of the scene (1e-6); the
+   evaluation's stats into *es.  `what` labels a failure. */
+static void kept_step(rtp_scene *s, rtp_tree *t, const rtp_trace_options *o,
+                      const rtp_eval_options *eo, rtp_image *re, const char *key,
+                      const char *value, rtp_eval_stats *es, const char *what)
+{
+    rtp_image *full = NULL;
+    rtp_diff_stats d;
+    CHECK(rtp_tree_set(t, key, value, NULL) == RTP_OK);
+    CHECK(rtp_scene_set(s, key, value, NULL) == RTP_OK);
+    if (rtp_tree_eval_into(t, eo, re, es, NULL) == RTP_OK &&
+        rtp_trace(s, o, &full, NULL, NULL) == RTP_OK &&
+        rtp_image_diff(re, full, 1e-6, &d, NULL) == RTP_OK)
+        CHECK_MSG(d.max_abs <= 1e-6, "%s, after %s=%s: %g", what, key, value, d.max_abs);
+    else
+        CHECK(0);
+    rtp_image_destroy(full);
+}
+
 /* Moved lights into a kept image: only the pixels of the samples the
    moved light's pass combined are written (plain samples: exactly those;
    corner samples: the pixels they are corners of), every image equals a
@@ -828,19 +848,10 @@ static void moves_kept_run(int spd)
     if (!edit_start(spd, &s, &t, &o, &eo, &re))
         return;
     for (i = 0; t && re && i < sizeof seq / sizeof *seq; i++) {
-        rtp_image *full = NULL;
-        rtp_diff_stats d;
         rtp_eval_stats es;
         unsigned long long np = (unsigned long long)re->width * re->height;
-        CHECK(rtp_tree_set(t, seq[i].key, seq[i].value, NULL) == RTP_OK);
-        CHECK(rtp_scene_set(s, seq[i].key, seq[i].value, NULL) == RTP_OK);
-        if (rtp_tree_eval_into(t, &eo, re, &es, NULL) == RTP_OK &&
-            rtp_trace(s, &o, &full, NULL, NULL) == RTP_OK &&
-            rtp_image_diff(re, full, 1e-6, &d, NULL) == RTP_OK)
-            CHECK_MSG(d.max_abs <= 1e-6, "spd %d, after %s=%s: %g", spd, seq[i].key,
-                      seq[i].value, d.max_abs);
-        else
-            CHECK(0);
+        memset(&es, 0, sizeof es);
+        kept_step(s, t, &o, &eo, re, seq[i].key, seq[i].value, &es, spd ? "spd" : "plain");
         if (seq[i].local) {
             moves++;
             CHECK_MSG(es.combined_samples > 0 && es.written_pixels < np &&
@@ -849,7 +860,6 @@ static void moves_kept_run(int spd)
                       "spd %d, %s=%s: %llu samples combined, %llu of %llu pixels written", spd,
                       seq[i].key, seq[i].value, es.combined_samples, es.written_pixels, np);
         }
-        rtp_image_destroy(full);
     }
     CHECK(moves == 4);
     rtp_image_destroy(re);
@@ -870,7 +880,7 @@ static void test_moves_kept_image(void)
    another light's move in between ends it (the moves after must not add
    the old rest; the first of them combines every sample, as the samples
    then hold the colours before the edit). */
-static void moves_rest_run(int spd)
+static void test_moves_rest(void)
 {
     static const struct {
         const char *key, *value;
@@ -891,7 +901,7 @@ static void moves_rest_run(int spd)
     rtp_image *re;
     size_t i;
     const double p2[3] = {-3.0, -4.0, 5.0}, p3[3] = {4.0, -6.0, 3.0};
-    if (!edit_start(spd, &s, &t, &o, &eo, &re))
+    if (!edit_start(0, &s, &t, &o, &eo, &re))
         return;
     rtp_image_destroy(re);
     re = NULL;
@@ -909,12 +919,12 @@ static void moves_rest_run(int spd)
             CHECK_MSG(rs == RTP_OK, "%s", err.message);
         }
         if (full && rtp_image_diff(re, full, 1e-6, &d, NULL) == RTP_OK)
-            CHECK_MSG(d.max_abs <= 1e-6, "spd %d, after %s=%s: %g", spd, seq[i].key,
+            CHECK_MSG(d.max_abs <= 1e-6, "after %s=%s: %g", seq[i].key,
                       seq[i].value, d.max_abs);
         else
             CHECK(0);
-        CHECK_MSG((t->mv_light != 0) == seq[i].rest, "spd %d, after %s=%s: rest for light %zu",
-                  spd, seq[i].key, seq[i].value, t->mv_light);
+        CHECK_MSG((t->mv_light != 0) == seq[i].rest, "after %s=%s: rest for light %zu",
+                  seq[i].key, seq[i].value, t->mv_light);
         rtp_image_destroy(full);
     }
     rtp_image_destroy(re);
@@ -922,10 +932,6 @@ static void moves_rest_run(int spd)
     rtp_scene_destroy(s);
 }
 
-static void test_moves_rest(void)
-{
-    moves_rest_run(0);
-}
 
 /* Moves on smooth triangles (vertex normals) into a kept image, where the
    shadow queries take the shading normals the evaluation keeps: each
@@ -944,18 +950,8 @@ static void moves_smooth_on(const char *path, const char *key)
     if (!edit_start_on(path, 0, &s, &t, &o, &eo, &re))
         return;
     for (i = 0; t && re && i < sizeof pos / sizeof *pos; i++) {
-        rtp_image *full = NULL;
-        rtp_diff_stats d;
         eo.shadows = i % 2 ? RTP_SHADOWS_LIGHTBUF : RTP_SHADOWS_EXACT;
-        CHECK(rtp_tree_set(t, key, pos[i], NULL) == RTP_OK);
-        CHECK(rtp_scene_set(s, key, pos[i], NULL) == RTP_OK);
-        if (rtp_tree_eval_into(t, &eo, re, NULL, NULL) == RTP_OK &&
-            rtp_trace(s, &o, &full, NULL, NULL) == RTP_OK &&
-            rtp_image_diff(re, full, 1e-6, &d, NULL) == RTP_OK)
-            CHECK_MSG(d.max_abs <= 1e-6, "%s, %s=%s: %g", path, key, pos[i], d.max_abs);
-        else
-            CHECK(0);
-        rtp_image_destroy(full);
+        kept_step(s, t, &o, &eo, re, key, pos[i], NULL, path);
     }
     rtp_image_destroy(re);
     rtp_tree_destroy(t);
