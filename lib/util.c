@@ -19,10 +19,16 @@
    page fault costs microseconds: tens of thousands of them were a third
    of what recording added to a trace.  Where Linux has transparent huge
    pages in "madvise" mode, the default allocator asks for them on the
-   2 MiB-aligned inside of blocks of 4 MiB and more (a user's allocator is
-   left as it is). */
+   2 MiB-aligned inside of blocks of 1 MiB and more (a user's allocator is
+   left as it is).  Why 1 MiB: on the development VM a fresh 4 KiB page
+   cost 10 us (2.5 ms a MiB) and a fresh huge page 0.13-2.3 ms (2 MiB
+   zeroed), so a block of 1 MiB touched through costs less as one huge
+   page, for at most 1 MiB more resident memory; from 4 MiB on (session
+   11) the 1-4 MiB caches of an evaluation (path weights, q, the planes'
+   pixel lists) took 400-2200 faults: half of a material's first kd edit
+   on balls (7.8 -> 3.9 ms) and most of a first light-colour edit. */
 #if defined(__linux__) && defined(MADV_HUGEPAGE)
-#define RTPI_HUGE_MIN ((size_t)4 << 20)
+#define RTPI_HUGE_MIN ((size_t)1 << 20)
 #define RTPI_HUGE_PAGE ((uintptr_t)2 << 20)
 static void *huge_advice(void *p, size_t size)
 {
