@@ -58,6 +58,28 @@ $RTP diff "$T/frame01.pfm" "$T/g.pfm" --fail-above max_abs=1e-6 -q && ok || bad 
 expect_rc 0 $RTP info "$T/t.rtp" --stats "$T/info.json"
 grep -q '"bytes_per_node": 24' "$T/info.json" && ok || bad "info bytes_per_node"
 
+# The tree file is streamed out in 64 KiB pieces (treefile.c: sink): one
+# of several pieces written to a file and through a pipe is the same, its
+# size is the file_bytes trace reports, and it reads back to the same image;
+# a write that fails (a full device, a missing directory) is exit 1 naming
+# it, and leaves no file or temporary behind.
+expect_rc 0 $RTP trace $S --size 200x150 -o "$T/big.rtp" -i "$T/big.pfm" --stats "$T/big.json" -q
+$RTP trace $S --size 200x150 -o - -q > "$T/big2.rtp" && cmp -s "$T/big.rtp" "$T/big2.rtp" && ok ||
+    bad "tree through a pipe differs from the file"
+sz=$(wc -c < "$T/big.rtp" | tr -d ' ')
+[ "$sz" -gt 200000 ] && grep -q "\"file_bytes\": $sz" "$T/big.json" && ok ||
+    { bad "file_bytes is not the file's size ($sz)"; cat "$T/big.json" >&2; }
+expect_rc 0 $RTP reeval "$T/big.rtp" -i "$T/big-r.pfm" -q
+$RTP diff "$T/big.pfm" "$T/big-r.pfm" --fail-above max_abs=0 -q && ok || bad "big tree read back"
+if [ -w /dev/full ]; then
+    expect_rc 1 sh -c "$RTP trace $S --size 200x150 -o - -q > /dev/full"
+    grep -q "write failed" "$T/err" && ok || { bad "full device not reported"; cat "$T/err" >&2; }
+fi
+expect_rc 1 $RTP trace $S --size 40x30 -o "$T/nodir/t.rtp" -q
+grep -q "nodir/t.rtp" "$T/err" && ok || bad "unwritable tree path not named"
+[ ! -e "$T/nodir" ] && ok || bad "something written for an unwritable path"
+ls "$T" | grep -q "tmp-rtp" && bad "temporary tree file left behind" || ok
+
 # Refused and broken input: named errors, exit 1, no image written.
 expect_rc 1 $RTP reeval "$T/t.rtp" --set mat.nosuch.kd=1 -i "$T/no1.pfm"
 [ ! -e "$T/no1.pfm" ] && ok || bad "image written after a bad key"
