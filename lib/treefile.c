@@ -276,12 +276,19 @@ static void sink_end(sink *k)
     k->crc_at = k->n;
 }
 
-/* Section `tag` holding body: tag, length, body, CRC of tag+length+body. */
-static void put_section(sink *out, const char *tag, const buf *body)
+/* Appends section `tag` holding body to out (a buf: the sections before
+   TREE are made whole first, so that running out of memory writes
+   nothing): tag, length, body, CRC of tag+length+body. */
+static void put_section(buf *out, const char *tag, const buf *body)
 {
-    sink_begin(out, tag, body->n);
-    sink_put(out, body->p, body->n);
-    sink_end(out);
+    size_t start = out->n;
+    put(out, tag, 4);
+    put_u64(out, body->n);
+    put(out, body->p, body->n);
+    if (!out->bad)
+        put_u32(out, crc32_update(0, out->p + start, out->n - start));
+    if (body->bad)
+        out->bad = 1;
 }
 
 static void body_reset(buf *b)
@@ -326,10 +333,13 @@ static rtp_status serialize(const rtp_tree *t, sink *out)
     size_t i, k, ns = (size_t)t->nx * t->ny, node_bytes;
     uint64_t len;
     unsigned layout = node_layout(t);
+    buf head; /* the file up to TREE */
     memset(&b, 0, sizeof b);
     b.a = &t->alloc;
+    memset(&head, 0, sizeof head);
+    head.a = &t->alloc;
 
-    sink_put(out, signature, 8);
+    put(&head, signature, 8);
     /* header: version, then a fixed block with its own CRC */
     body_reset(&b);
     put_u32(&b, (uint32_t)FMT_MAJOR);
@@ -345,7 +355,7 @@ static rtp_status serialize(const rtp_tree *t, sink *out)
     put_u32(&b, (uint32_t)t->full_h);
     put_u32(&b, (uint32_t)t->rx);
     put_u32(&b, (uint32_t)t->ry);
-    put_section(out, "HEAD", &b);
+    put_section(&head, "HEAD", &b);
 
     body_reset(&b);
     for (k = 0; k < 3; k++)
@@ -361,7 +371,7 @@ static rtp_status serialize(const rtp_tree *t, sink *out)
     for (k = 0; k < 3; k++)
         put_f32(&b, s->ambient[k]);
     put_f64(&b, s->light_scale);
-    put_section(out, "SCEN", &b);
+    put_section(&head, "SCEN", &b);
 
     body_reset(&b);
     put_u32(&b, (uint32_t)s->nmats);
@@ -393,7 +403,7 @@ static rtp_status serialize(const rtp_tree *t, sink *out)
         put_f32(&b, m0->bump_strength);
         put_f32(&b, m0->bump_scale);
     }
-    put_section(out, "MATL", &b);
+    put_section(&head, "MATL", &b);
 
     body_reset(&b);
     put_u32(&b, (uint32_t)s->nlights);
@@ -408,7 +418,7 @@ static rtp_status serialize(const rtp_tree *t, sink *out)
         for (k = 0; k < 3; k++)
             put_f64(&b, t->lights0[i].pos[k]);
     }
-    put_section(out, "LITE", &b);
+    put_section(&head, "LITE", &b);
 
     if (s->ntexs) {
         body_reset(&b);
@@ -422,7 +432,7 @@ static rtp_status serialize(const rtp_tree *t, sink *out)
             for (k = 0; k < n; k++)
                 put_f32(&b, img->pixels[k]);
         }
-        put_section(out, "TEXR", &b);
+        put_section(&head, "TEXR", &b);
     }
 
     body_reset(&b);
@@ -462,12 +472,15 @@ static rtp_status serialize(const rtp_tree *t, sink *out)
         put_f32(&b, c->ra);
         put_u32(&b, c->mat);
     }
-    put_section(out, "GEOM", &b);
+    put_section(&head, "GEOM", &b);
 
-    if (b.bad) {
-        rtpi_free(b.a, b.p);
+    rtpi_free(b.a, b.p);
+    if (head.bad) {
+        rtpi_free(head.a, head.p);
         return RTP_ERR_NOMEM;
     }
+    sink_put(out, head.p, head.n);
+    rtpi_free(head.a, head.p);
     /* TREE, streamed: its length first */
     node_bytes = 16 + (layout & NODE_VIS ? 4 : 0) + (layout & NODE_LINK32 ? 4 : 1);
     len = 8 + 8 + 4 + 1 + (uint64_t)t->nnodes * node_bytes +
@@ -522,11 +535,10 @@ static rtp_status serialize(const rtp_tree *t, sink *out)
         sink_u32(out, t->vis_ext[i]);
     sink_end(out);
 
-    body_reset(&b);
-    put_section(out, "END ", &b);
+    sink_begin(out, "END ", 0);
+    sink_end(out);
     sink_flush(out);
-    rtpi_free(b.a, b.p);
-    return b.bad ? RTP_ERR_NOMEM : RTP_OK;
+    return RTP_OK;
 }
 
 rtp_status rtp_tree_write(const rtp_tree *t, const char *path,
