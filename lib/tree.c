@@ -2239,6 +2239,34 @@ static void cp_run1(const float *restrict sp, const float *restrict k, const dou
     }
 }
 
+/* How many of the n >= 1 ascending pixel indices nz[] from the first on
+   are consecutive (nz[m] == nz[0] + m).  They ascend strictly, so that
+   holds for every m below the run's end and none from it on: galloping
+   then bisection, a few reads a run instead of one a pixel (stepping
+   through was 30% of tetra's light-colour edit: 6,700 runs of 8 pixels
+   on average). */
+static size_t run_length(const uint32_t *nz, size_t n)
+{
+    size_t lo = 1, hi = n, step = 1, p0 = nz[0];
+    while (step < n) {
+        if (nz[step] != p0 + step) {
+            hi = step;
+            break;
+        }
+        lo = step + 1;
+        step *= 2;
+    }
+    /* nz[m] == p0 + m for m < lo; not for m >= hi (or hi == n) */
+    while (lo < hi) {
+        size_t mid = lo + (hi - lo) / 2;
+        if (nz[mid] == p0 + mid)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    return lo;
+}
+
 /* A band of the pixels whose K is not 0 in the plane of term e->term. */
 static int cp_apply_listed(void *ctx, int chunk)
 {
@@ -2261,9 +2289,7 @@ static int cp_apply_listed(void *ctx, int chunk)
         for (j = 0; j < n;) {
             /* a run of consecutive pixels at a time: three planes read
                and one written straight through */
-            size_t p0 = nz[j], len = 1;
-            while (j + len < n && nz[j + len] == p0 + len)
-                len++;
+            size_t p0 = nz[j], len = run_length(nz + j, n - j);
             cp_run1(sp + 3 * p0, k + 3 * p0, dc, out + 3 * p0, len);
             j += len;
         }
