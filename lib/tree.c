@@ -2232,7 +2232,20 @@ static void cp_run1(const float *restrict sp, const float *restrict k, const dou
 {
     const double d0 = dc[0], d1 = dc[1], d2 = dc[2];
     size_t i;
-    for (i = 0; i < len; i++) {
+    /* two pixels a step: six values the compiler pairs into three
+       two-wide operations (one pixel a step left its third channel
+       alone: a sixth more instructions a pixel); the same arithmetic */
+    for (i = 0; i + 2 <= len; i += 2) {
+        const float *a = sp + 3 * i, *b = k + 3 * i;
+        float *o = out + 3 * i;
+        o[0] = (float)(a[0] + b[0] * d0);
+        o[1] = (float)(a[1] + b[1] * d1);
+        o[2] = (float)(a[2] + b[2] * d2);
+        o[3] = (float)(a[3] + b[3] * d0);
+        o[4] = (float)(a[4] + b[4] * d1);
+        o[5] = (float)(a[5] + b[5] * d2);
+    }
+    if (i < len) {
         out[3 * i] = (float)(sp[3 * i] + k[3 * i] * d0);
         out[3 * i + 1] = (float)(sp[3 * i + 1] + k[3 * i + 1] * d1);
         out[3 * i + 2] = (float)(sp[3 * i + 2] + k[3 * i + 2] * d2);
