@@ -8,6 +8,7 @@
 
 #include <math.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 static const char *tmpdir(void)
@@ -92,6 +93,59 @@ static void test_identical_project_scenes(void)
     for (i = 0; i < sizeof scenes / sizeof *scenes; i++)
         CHECK_MSG(roundtrip_identical(scenes[i], 64, 48, 0), "%s", scenes[i]);
     CHECK(roundtrip_identical("scenes/spheres.nff", 0, 0, 1)); /* SPD corners */
+}
+
+/* More lights than a node's word holds (40: the visibility bits go to
+   their own section) and surfaces that reflect and transmit (full link
+   words): the tree file of every node layout, several of the writer's
+   64 KiB pieces long, reads back bit for bit, and rtp_tree_write's byte
+   count is the file's size. */
+static void test_identical_many_lights(void)
+{
+    char path[512], file[512];
+    FILE *f;
+    int i;
+    rtp_scene *s;
+    rtp_tree *t = NULL;
+    rtp_trace_options o;
+    unsigned long long bytes = 0;
+    snprintf(path, sizeof path, "%s/rtp-lights-%d.nff", tmpdir(), (int)getpid());
+    snprintf(file, sizeof file, "%s/rtp-lights-%d.rtp", tmpdir(), (int)getpid());
+    f = fopen(path, "w");
+    CHECK(f != NULL);
+    if (!f)
+        return;
+    fprintf(f, "v\nfrom 0 -8 3\nat 0 0 0\nup 0 0 1\nangle 40\nhither 0.01\n"
+               "resolution 96 72\nb 0.1 0.1 0.2\n");
+    for (i = 0; i < 40; i++)
+        fprintf(f, "l %g %g %g 0.05 0.04 0.03\n", 6.0 * cos(i * 0.157), 6.0 * sin(i * 0.157) - 2.0,
+                4.0 + 0.05 * i);
+    fprintf(f, "f 0.8 0.3 0.2 0.6 0.3 20 0 1\ns -1.2 0 0 1\n"
+               "f 0.9 0.9 0.9 0.1 0.5 60 0.6 1.5\ns 1.2 0 0.2 1\n"
+               "f 0.4 0.7 0.4 0.8 0.2 10 0 1\np 4\n-9 -9 -1\n9 -9 -1\n9 9 -1\n-9 9 -1\n");
+    fclose(f);
+    CHECK(roundtrip_identical(path, 96, 72, 0));
+    s = load(path);
+    memset(&o, 0, sizeof o);
+    o.width = 96;
+    o.height = 72;
+    o.threads = 2;
+    if (s && rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK) {
+        struct stat sb;
+        rtp_tree_info ti;
+        rtp_tree_get_info(t, &ti);
+        CHECK(t->vis_words == 2);
+        CHECK(rtp_tree_write(t, file, &bytes, NULL) == RTP_OK);
+        CHECK_MSG(stat(file, &sb) == 0 && (unsigned long long)sb.st_size == bytes &&
+                      bytes > 3 * 65536,
+                  "%llu bytes written, %lld on disk", bytes, (long long)sb.st_size);
+    } else {
+        CHECK(0);
+    }
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+    remove(file);
+    remove(path);
 }
 
 static void test_identical_teapot(void)
@@ -1452,6 +1506,7 @@ int main(void)
 {
     RUN(test_identical_project_scenes);
     RUN(test_colour_edits);
+    RUN(test_identical_many_lights);
     RUN(test_identical_teapot);
     RUN(test_identical_small_spd);
     RUN(test_class_a_edits);
