@@ -270,7 +270,7 @@ static void sink_begin(sink *k, const char *tag, uint64_t len)
 static void sink_end(sink *k)
 {
     k->crc = crc32_sliced((const uint32_t(*)[256])k->slices, k->crc, k->p + k->crc_at,
-                              k->n - k->crc_at);
+                          k->n - k->crc_at);
     k->in_section = 0;
     sink_u32(k, k->crc);
     k->crc_at = k->n;
@@ -315,7 +315,8 @@ static unsigned node_layout(const rtp_tree *t)
     return layout;
 }
 
-/* The number of bytes put_varint writes for v. */
+/* The bytes of v as TREE writes it: 7 bits a byte, low first, the top
+   bit set on every byte but the last. */
 static size_t varint_len(uint64_t v)
 {
     size_t n = 1;
