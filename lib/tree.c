@@ -2232,9 +2232,10 @@ static void cp_run1(const float *restrict sp, const float *restrict k, const dou
 {
     const double d0 = dc[0], d1 = dc[1], d2 = dc[2];
     size_t i;
-    /* two pixels a step: six values the compiler pairs into three
-       two-wide operations (one pixel a step left its third channel
-       alone: a sixth more instructions a pixel); the same arithmetic */
+    /* two pixels a step: gcc 12 -O2 pairs four of the six values into
+       two-wide operations (one pixel a step paired two of three): 7%
+       fewer instructions on balls' light-colour edit; the same
+       arithmetic value by value */
     for (i = 0; i + 2 <= len; i += 2) {
         const float *a = sp + 3 * i, *b = k + 3 * i;
         float *o = out + 3 * i;
