@@ -137,13 +137,18 @@ static void put_u8(buf *b, unsigned v)
     put(b, &c, 1);
 }
 
-static void put_u32(buf *b, uint32_t v)
+static void le32(unsigned char *c, uint32_t v)
 {
-    unsigned char c[4];
     c[0] = (unsigned char)v;
     c[1] = (unsigned char)(v >> 8);
     c[2] = (unsigned char)(v >> 16);
     c[3] = (unsigned char)(v >> 24);
+}
+
+static void put_u32(buf *b, uint32_t v)
+{
+    unsigned char c[4];
+    le32(c, v);
     put(b, c, 4);
 }
 
@@ -238,19 +243,17 @@ static unsigned char *sink_room(sink *k, size_t m)
     return k->p + k->n;
 }
 
-static void le32(unsigned char *c, uint32_t v)
+/* m bytes written at sink_room's pointer are in. */
+static void sink_advance(sink *k, size_t m)
 {
-    c[0] = (unsigned char)v;
-    c[1] = (unsigned char)(v >> 8);
-    c[2] = (unsigned char)(v >> 16);
-    c[3] = (unsigned char)(v >> 24);
+    k->n += m;
+    k->total += m;
 }
 
 static void sink_u32(sink *k, uint32_t v)
 {
     le32(sink_room(k, 4), v);
-    k->n += 4;
-    k->total += 4;
+    sink_advance(k, 4);
 }
 
 /* A section's head: tag and body length; the CRC runs from the tag. */
@@ -506,8 +509,7 @@ static rtp_status serialize(const rtp_tree *t, sink *out)
             v >>= 7;
         }
         *c++ = (unsigned char)v;
-        out->n += (size_t)(c - c0);
-        out->total += (unsigned long long)(c - c0);
+        sink_advance(out, (size_t)(c - c0));
     }
     for (i = 0; i < t->nnodes; i++) {
         const rtpi_cnode *nd = &t->nodes[i];
@@ -529,8 +531,7 @@ static rtp_status serialize(const rtp_tree *t, sink *out)
         } else {
             *c++ = (unsigned char)(nd->link & 0xffu);
         }
-        out->n += (size_t)(c - c0);
-        out->total += (unsigned long long)(c - c0);
+        sink_advance(out, (size_t)(c - c0));
     }
     for (i = 0; i < t->nnodes * t->vis_words; i++)
         sink_u32(out, t->vis_ext[i]);
