@@ -573,11 +573,6 @@ typedef struct eval_ctx {
     int nomem;
     int nonfinite;            /* pk_put met a plane value that is not finite */
     float *rest;              /* pk_build_chunk, pk_img_chunk: scratch */
-    int count_pass;           /* pk_img_chunk: count the band's pixels */
-    unsigned char *marks;     /* pk_img_chunk with corner samples: every
-                                 pixel's mark, image-wide, kept from the
-                                 counting pass for the filling one (NULL:
-                                 each pass marks its band anew) */
     int coef_bad;             /* a coefficient made was not finite */
     unsigned long long combined; /* light_row: samples it combined */
     unsigned char *mark;      /* light_row (may be NULL): 1 for each
@@ -585,8 +580,9 @@ typedef struct eval_ctx {
     unsigned long long written; /* mark_row: pixels it wrote */
     double *mv_rest;          /* light_row (may be NULL): t->mv_rest */
     int q_by_list;            /* pk_q_chunk: q at 1 + the sample's place in the
-                                 list (entry 0: a zero q) */
+                                 list (pk_img_pixels') */
     size_t rest_bytes;
+    float *qgrid;             /* pk_img_chunk: a band's q, 0 between uses */
     double kmax[3];           /* cp_plane_chunk: largest |K| per channel */
 } eval_ctx;
 
@@ -1098,6 +1094,31 @@ static size_t pk_img_pixels(const float *kq, const uint32_t *pix, size_t m, cons
     return n;
 }
 
+/* The pixels x0 .. x1 - 1 of a pixel row, from the listed columns of
+   its two sample rows (the list's entries bnd[0] .. bnd[1] - 1 and
+   bnd[1] .. bnd[2] - 1, sample row base .. base + nx - 1 and the next):
+   every pixel with a listed corner (pixel x: columns x and x + 1) lies
+   there.  0 where neither row has a listed sample. */
+static int pk_img_span(const uint32_t *list, const size_t *bnd, size_t base, size_t nx,
+                       size_t *x0, size_t *x1)
+{
+    size_t lo = nx, hi = 0; /* columns: the first listed, 1 + the last */
+    if (bnd[0] < bnd[1]) {
+        lo = list[bnd[0]] - base;
+        hi = list[bnd[1] - 1] - base + 1;
+    }
+    if (bnd[1] < bnd[2]) {
+        size_t a = list[bnd[1]] - base - nx, b = list[bnd[2] - 1] - base - nx + 1;
+        lo = a < lo ? a : lo;
+        hi = b > hi ? b : hi;
+    }
+    if (lo >= hi)
+        return 0;
+    *x0 = lo > 0 ? lo - 1 : 0;
+    *x1 = hi < nx ? hi : nx - 1; /* (pixels: nx - 1 of them) */
+    return 1;
+}
+
 /* The planes of one band where only the pixels the edited material's
    samples (e->list) reach can change: an image kept from the last
    evaluation (opt->incremental) that is the image of the coefficients
@@ -1112,15 +1133,13 @@ static int pk_img_chunk(void *ctx, int chunk)
 {
     eval_ctx *e = (eval_ctx *)ctx;
     rtp_tree *t = e->t;
-    size_t w = (size_t)t->width, nx = (size_t)t->nx, n = 0, i, lo, hi, srows, sy, rs;
-    int y0 = chunk * PK_ROWS, y1 = y0 + PK_ROWS, y, x, c, spd = t->spd;
+    size_t w = (size_t)t->width, nx = (size_t)t->nx, n = 0, i, lo, hi;
+    int y0 = chunk * PK_ROWS, y1 = y0 + PK_ROWS, y, c, spd = t->spd;
     const float *img = e->pixels, *pq = t->pk_q + 3; /* (pk_q_chunk's q_by_list) */
     const double xo[3] = {e->xold[0], e->xold[1], e->xold[2]};
     float *pc, bd[3] = {0.0f, 0.0f, 0.0f}; /* bd: pk_img_pixels' */
-    int32_t *listed;
     uint32_t *nz;
-    unsigned char *touched;
-    int bad = 0, kept;
+    int bad = 0;
     if (y1 > t->height)
         y1 = t->height;
     if (!spd) {
@@ -1133,100 +1152,62 @@ static int pk_img_chunk(void *ctx, int chunk)
         n = pk_img_pixels(pq + 3 * lo, e->list + lo, hi - lo, img, xo, pc, nz, bd);
         goto check;
     }
-    srows = (size_t)(y1 - y0) + 1u;
-    /* listed: the sample's place in the list (its q at pq), or -1, whose
-       entry is 0 (so that a pixel's four corners are read without a test
-       each) */
-    listed = (int32_t *)(void *)e->rest;
-    touched = e->marks ? e->marks + (size_t)y0 * w
-                       : (unsigned char *)(listed + (PK_ROWS + 1) * nx);
-    kept = e->marks && !e->count_pass;
-    if (!e->count_pass) /* (-1: every byte 0xff, int32_t being two's complement) */
-        memset(listed, 0xff, srows * nx * sizeof *listed);
-    if (!kept)
-        memset(touched, 0, (size_t)(y1 - y0) * w);
-    lo = lower_bound(e->list, e->nlist, (size_t)y0 * nx);
-    hi = lower_bound(e->list, e->nlist, ((size_t)y0 + srows) * nx);
-    if (kept) /* the counting pass marked the pixels: the q's places only */
-        for (i = lo; i < hi; i++)
-            listed[e->list[i] - (size_t)y0 * nx] = (int32_t)i;
-    for (i = lo, sy = 0, rs = 0; i < hi && !kept; i++) {
-        size_t l = e->list[i] - (size_t)y0 * nx, sx;
-        if (!e->count_pass)
-            listed[l] = (int32_t)i;
-        /* the sample's row and column: the list ascends, so the row
-           follows it (a division per sample cost more than the rest) */
-        while (l >= rs + nx) {
-            rs += nx;
-            sy++;
-        }
-        sx = l - rs;
-        /* the pixels whose corners it is: (sx-1..sx, sy-1..sy) */
-        if (sy < (size_t)(y1 - y0)) {
-            if (sx < w)
-                touched[sy * w + sx] = 1;
-            if (sx > 0)
-                touched[sy * w + sx - 1] = 1;
-        }
-        if (sy > 0) {
-            if (sx < w)
-                touched[(sy - 1) * w + sx] = 1;
-            if (sx > 0)
-                touched[(sy - 1) * w + sx - 1] = 1;
-        }
-    }
-    if (e->count_pass) {
-        /* the first pass: how many pixels the band may hold (marks of
-           0 or 1 summed 8 at a time: the top byte of word * 0x01...01) */
-        size_t nb = (size_t)(y1 - y0) * w;
-        uint64_t word;
-        for (i = 0; i + 8 <= nb; i += 8) {
-            memcpy(&word, touched + i, 8);
-            n += (size_t)((word * 0x0101010101010101ull) >> 56);
-        }
-        for (; i < nb; i++)
-            n += touched[i];
-        t->pk_seg[chunk] = (uint32_t)n;
-        return 0;
-    }
-    /* (only now: the counting pass runs before the bands' offsets are
-       known) */
     pc = t->pk_c + 6 * t->pk_off[chunk];
     nz = t->pk_nz + t->pk_off[chunk];
     {
         const double xo0 = xo[0], xo1 = xo[1], xo2 = xo[2];
-        float acc[3] = {0.0f, 0.0f, 0.0f};
-        for (y = y0; y < y1; y++) {
-            size_t ly = (size_t)(y - y0), p = (size_t)y * w;
-            const unsigned char *tr = touched + ly * w;
-            const int32_t *lr = listed + ly * nx;
-            for (x = 0; x < t->width; x++) {
-                const float *qa, *qb, *qc, *qd;
-                float k0, k1, k2;
-                uint64_t word;
-                if (!tr[x]) {
-                    /* most of a row is not touched: 8 marks at a time */
-                    while (x + 8 <= t->width && (memcpy(&word, tr + x, 8), word == 0))
-                        x += 8;
-                    if (x >= t->width || !tr[x])
-                        continue;
-                }
-                /* pk_build_chunk's sums: (x, y), (x+1, y), (x, y+1), (x+1, y+1) */
-                qa = pq + 3 * (ptrdiff_t)lr[x];
-                qb = pq + 3 * (ptrdiff_t)lr[x + 1];
-                qc = pq + 3 * (ptrdiff_t)lr[x + nx];
-                qd = pq + 3 * (ptrdiff_t)lr[x + nx + 1];
-                k0 = (float)(0.25 * ((((double)qa[0] + qb[0]) + qc[0]) + qd[0]));
-                k1 = (float)(0.25 * ((((double)qa[1] + qb[1]) + qc[1]) + qd[1]));
-                k2 = (float)(0.25 * ((((double)qa[2] + qb[2]) + qc[2]) + qd[2]));
+        const uint32_t *list = e->list, *mn = t->mat_nodes;
+        const size_t srows = (size_t)(y1 - y0) + 1u, jend = t->mat_nstart[e->mat + 1];
+        size_t bnd[PK_ROWS + 2], r, j;
+        float *g = e->qgrid, acc[3] = {0.0f, 0.0f, 0.0f};
+        /* bnd[r]: the list's first entry in sample row y0 + r or after */
+        for (r = 0; r <= srows; r++)
+            bnd[r] = lower_bound(list, e->nlist, ((size_t)y0 + r) * nx);
+        /* the band's samples' q (pk_q_chunk's, from the material's own
+           nodes) in a grid of its sample rows, 0 where the material is
+           not: each pixel's four corners are read without a test.  The
+           grid is all 0 between bands (the entries set are put back
+           below: clearing the whole grid cost more than the rest where
+           a material is small) */
+        if (bnd[0] < bnd[srows]) {
+            j = t->mat_nstart[e->mat];
+            j += lower_bound(mn + j, jend - j, (size_t)t->start[list[bnd[0]]]);
+        }
+        for (i = bnd[0]; i < bnd[srows]; i++) {
+            size_t k = list[i], b = (size_t)t->start[k + 1], j0 = j;
+            double q[3];
+            float *o = g + 3 * (k - (size_t)y0 * nx);
+            while (j < jend && mn[j] < b)
+                j++;
+            rtpi_nodes_diffuse(e->shade, mn + j0, j - j0, t->ev_terms, t->ev_w, e->cv, q);
+            o[0] = (float)q[0];
+            o[1] = (float)q[1];
+            o[2] = (float)q[2];
+        }
+        for (y = y0, r = 0; y < y1; y++, r++) {
+            const float *ga = g + 3 * r * nx, *gb = ga + 3 * nx;
+            const size_t p = (size_t)y * w;
+            size_t x, x1;
+            /* the pixels with a listed corner lie in the span of the
+               two rows' listed columns (pk_img_span) */
+            if (!pk_img_span(list, bnd + r, (size_t)y * nx, nx, &x, &x1))
+                continue;
+            for (; x < x1; x++) {
+                /* pk_build_chunk's sums: (x, y), (x+1, y), (x, y+1),
+                   (x+1, y+1) */
+                const float *qa = ga + 3 * x, *qc = gb + 3 * x;
+                float k0 = (float)(0.25 * ((((double)qa[0] + qa[3]) + qc[0]) + qc[3]));
+                float k1 = (float)(0.25 * ((((double)qa[1] + qa[4]) + qc[1]) + qc[4]));
+                float k2 = (float)(0.25 * ((((double)qa[2] + qa[5]) + qc[2]) + qc[5]));
                 /* (where K is 0 the pixel stays B: nothing to keep) */
                 if (k0 == 0.0f && k1 == 0.0f && k2 == 0.0f)
                     continue;
-                pk_img_one(img + 3 * (p + (size_t)x), k0, k1, k2, xo0, xo1, xo2, pc + 6 * n,
-                           acc);
-                nz[n++] = (uint32_t)(p + (size_t)x);
+                pk_img_one(img + 3 * (p + x), k0, k1, k2, xo0, xo1, xo2, pc + 6 * n, acc);
+                nz[n++] = (uint32_t)(p + x);
             }
         }
+        for (i = bnd[0]; i < bnd[srows]; i++)
+            memset(g + 3 * (list[i] - (size_t)y0 * nx), 0, 3 * sizeof *g);
         memcpy(bd, acc, sizeof acc);
     }
 check:
@@ -1276,14 +1257,17 @@ check:
 static int pk_build(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, int part)
 {
     int i, nb = (t->height + PK_ROWS - 1) / PK_ROWS, ok = 1;
-    unsigned char *marks = NULL;
     /* two sample rows' rest, or with `part` and corner samples a band's
-       marks (a pixel of its own per sample needs none: pk_img_pixels) */
-    size_t nx = (size_t)t->nx,
-           bytes = !part ? 6 * nx * sizeof(float)
-                   : t->spd ? (PK_ROWS + 1) * nx * sizeof(uint32_t) + PK_ROWS * (size_t)t->width
-                            : sizeof(float);
-    for (i = 0; i < nthreads; i++) {
+       grid of q, all 0 (a pixel of its own per sample needs neither) */
+    size_t nx = (size_t)t->nx, bytes = 6 * nx * sizeof(float);
+    for (i = 0; part && t->spd && i < nthreads; i++)
+        if (!e[i].qgrid &&
+            !(e[i].qgrid = (float *)rtpi_calloc_array(&t->alloc, (PK_ROWS + 1) * nx,
+                                                       3 * sizeof(float)))) {
+            e[i].nomem = 1;
+            return 0;
+        }
+    for (i = 0; !part && i < nthreads; i++) {
         if (e[i].rest && e[i].rest_bytes < bytes) {
             rtpi_free(&t->alloc, e[i].rest);
             e[i].rest = NULL;
@@ -1300,8 +1284,8 @@ static int pk_build(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, in
            every band's own place, the entries of a small material touched
            a page or, with transparent huge pages, 2 MB more a band: tetra
            at 1024x1024, 20% slower).  A pixel of its own per sample: the
-           band's listed samples bound its entries; corner samples: count,
-           then fill. */
+           band's listed samples bound its entries; corner samples: the
+           spans of its rows (pk_img_span). */
         size_t off = 0;
         if (!t->spd) {
             size_t w = (size_t)t->width, lo = 0;
@@ -1314,26 +1298,23 @@ static int pk_build(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, in
                 lo = hi;
             }
         } else {
-            /* (the marks kept for the filling pass where memory allows) */
-            marks = (unsigned char *)rtpi_malloc_array(&t->alloc, (size_t)t->width,
-                                                       (size_t)t->height);
-            for (i = 0; i < nthreads; i++) {
-                e[i].count_pass = 1;
-                e[i].marks = marks;
-            }
-            rtpi_parallel_rows(nb, nthreads, ctx, pk_img_chunk, NULL, NULL);
-            for (i = 0; i < nb; i++) {
+            size_t r, x0, x1, bnd[3];
+            bnd[1] = lower_bound(e->list, e->nlist, 0);
+            bnd[2] = lower_bound(e->list, e->nlist, nx);
+            for (i = 0, r = 0; i < nb; i++) {
                 t->pk_off[i] = off;
-                off += t->pk_seg[i];
+                for (; r < (size_t)(i + 1) * PK_ROWS && r < (size_t)t->height; r++) {
+                    /* pixel row r: sample rows r and r + 1 */
+                    bnd[0] = bnd[1];
+                    bnd[1] = bnd[2];
+                    bnd[2] = lower_bound(e->list, e->nlist, (r + 2) * nx);
+                    if (pk_img_span(e->list, bnd, r * nx, nx, &x0, &x1))
+                        off += x1 - x0;
+                }
             }
-            for (i = 0; i < nthreads; i++)
-                e[i].count_pass = 0;
         }
     }
     rtpi_parallel_rows(nb, nthreads, ctx, part ? pk_img_chunk : pk_build_chunk, NULL, NULL);
-    for (i = 0; i < nthreads; i++)
-        e[i].marks = NULL;
-    rtpi_free(&t->alloc, marks);
     for (i = 0; i < nthreads; i++) {
         ok &= !e[i].nonfinite;
         e[i].nonfinite = 0;
@@ -1845,8 +1826,8 @@ static int pk_alloc(rtp_tree *t, int q)
             &t->alloc, (size_t)(t->height + PK_ROWS - 1) / PK_ROWS + 1, sizeof *t->pk_off);
     if (!t->pk_off)
         return 0;
-    /* (one more: pk_img_chunk's zero q at entry 0, before a list of every
-       sample) */
+    /* (one more: q_by_list's entries start at 1, and a list may hold
+       every sample) */
     if (q && t->pk && !t->pk_q)
         t->pk_q = (float *)rtpi_malloc_array(&t->alloc, (size_t)t->nx * t->ny + 1,
                                              3 * sizeof *t->pk_q);
@@ -2760,10 +2741,11 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                 }
                 for (i = 0; i < nthreads; i++)
                     e[i].q_by_list = part;
-                rtpi_parallel_rows((int)((e[0].nlist + 255) / 256), nthreads, ctx, pk_q_chunk,
-                                   NULL, NULL);
-                if (part) /* the zero entry: q where no listed sample is */
-                    memset(t->pk_q, 0, 3 * sizeof *t->pk_q);
+                /* (with corner samples pk_img_chunk makes q itself, band
+                   by band) */
+                if (!part || !t->spd)
+                    rtpi_parallel_rows((int)((e[0].nlist + 255) / 256), nthreads, ctx,
+                                       pk_q_chunk, NULL, NULL);
                 if (pk_build(t, e, ctx, nthreads, part)) {
                     t->pk_term = (int)(2 + nl + mt) + 1;
                     t->pk_part = part;
@@ -2948,6 +2930,7 @@ done:
         rtpi_free(&t->alloc, e[i].coeffs);
         rtpi_free(&t->alloc, e[i].acc);
         rtpi_free(&t->alloc, e[i].rest);
+        rtpi_free(&t->alloc, e[i].qgrid);
     }
     rtpi_free(&t->alloc, cv);
     if (rs != RTP_OK) {
