@@ -71,12 +71,8 @@ static inline int rtpi_wt_setup(rtpi_wt_ray *w, const rtpi_ray *r)
    triangle, which the callers filter out beforehand (rtpi_tri_degenerate)
    because rounding can make its det non-zero. */
 /* Inlined into the traversal loops whatever the compiler's heuristics
-   say: a call per triangle costs as much as the test. */
-#if defined(__GNUC__)
-#define RTPI_FORCE_INLINE __attribute__((always_inline)) inline
-#else
-#define RTPI_FORCE_INLINE inline
-#endif
+   say (RTPI_FORCE_INLINE): a call per triangle costs as much as the
+   test. */
 
 static RTPI_FORCE_INLINE int rtpi_wt_tri(const rtpi_wt_ray *w, const float *p0,
                               const float *p1, const float *p2, double tmin,
