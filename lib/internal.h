@@ -702,9 +702,10 @@ struct rtp_tree {
     unsigned char *mv_ok;  /* a sample: 1 where mv_rest holds its rest */
     size_t mv_light;       /* 0, or 1 + the light mv_rest is for, while the
                               other terms' coefficients and colours hold */
-    unsigned char *ev_mark; /* samples + 8 bytes, all 0 between evaluations:
-                              the samples a moved light's pass combined
-                              (tree.c: mark_row) */
+    unsigned char *ev_mark; /* samples + 8 bytes, then a byte a sample row,
+                              all 0 between evaluations: the samples a
+                              moved light's pass combined, and the rows
+                              that have any (tree.c: mark_row) */
     int ev_inf;            /* some coefficient is beyond the float range
                               (a kt of 1e19): no material planes */
     size_t ev_nlights;

@@ -334,11 +334,19 @@ unsigned long long rtpi_light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *no
             continue; /* the background: no light in it, nothing changes */
         for (j = a; j < b; j++) {
             const rtpi_cnode *nd = &nodes[j];
-            const rtpi_material *m = &s->mats[rtpi_prim_material(s, nd->prim)];
+            const rtpi_material *m;
             float *t = terms + j * nt, *tl = t + 3 + 2 * light;
             int visible = vis_ext ? (vis_ext[j * vw + wi] & bit) != 0
                                   : (int)((nd->vis >> light) & 1u);
             double d, sp, kd, ks, cobj[3];
+            if (!visible) {
+                /* light_term's terms where the light is not seen, and
+                   nothing to sum (most nodes of a scene in shadow: no
+                   material to look up) */
+                tl[0] = tl[1] = 0.0f;
+                continue;
+            }
+            m = &s->mats[rtpi_prim_material(s, nd->prim)];
             /* (the light's position taken once: light_term inline) */
             light_term(nv + 6 * j, v3(nd->p[0], nd->p[1], nd->p[2]), lp, visible, m, tl);
             /* coeffs_node's sum for this light, node by node in its order
@@ -361,7 +369,12 @@ unsigned long long rtpi_light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *no
                same colour: that sample holds */
             const float f[3] = {(float)a0, (float)a1, (float)a2};
             float *cf = co + 6 + 3 * light;
-            nonfinite |= !isfinite(f[0]) | !isfinite(f[1]) | !isfinite(f[2]);
+            /* each finite as a float where their magnitudes sum to no
+               more than FLT_MAX (a NaN fails the test; so, needlessly but
+               safely, do three near the float range, as in
+               rtpi_sample_coeffs): one test, not three classifications
+               (a tenth of a move's sums on tetra) */
+            nonfinite |= !(fabs(a0) + fabs(a1) + fabs(a2) <= FLT_MAX);
             if (samples && memcmp(cf, f, sizeof f) == 0)
                 continue;
             memcpy(cf, f, sizeof f);
