@@ -1109,10 +1109,12 @@ uint32_t rtpi_kd_occluder(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t s
     uint32_t ntris = (uint32_t)kd->ntris;
     double t0, t1, tmin = ray->tmin, tmax = ray->tmax;
     uint32_t node = 0;
-    int sp = 0;
+    int sp = 0, wt = 0; /* wt: w made */
 
     KD_CNT(3);
-    if (!kd_ray_setup(kd, ray, &kr, &t0, &t1) || !rtpi_wt_setup(&w, ray))
+    /* (w is made at the first triangle: a shadow ray among spheres and
+       cones never needs it, and making it was a tenth of such a ray) */
+    if (!kd_ray_setup(kd, ray, &kr, &t0, &t1) || !rtpi_wt_valid(ray))
         return RTPI_NONE;
     for (;;) {
         node = kd_descend(nodes, &kr, node, &t0, &t1, stack, &sp);
@@ -1129,6 +1131,10 @@ uint32_t rtpi_kd_occluder(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t s
                 if (prim < ntris) {
                     const float *v = tri + 9 * (size_t)prim;
                     double t, u, v2;
+                    if (!wt) {
+                        rtpi_wt_make(&w, ray);
+                        wt = 1;
+                    }
                     if (rtpi_wt_tri(&w, v, v + 3, v + 6, tmin, tmax, &t, &u,
                                     &v2))
                         return prim;

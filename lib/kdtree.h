@@ -31,7 +31,16 @@ typedef struct rtpi_wt_ray {
 } rtpi_wt_ray;
 
 /* @return 0 when the direction is zero or not finite (nothing can be hit). */
-static inline int rtpi_wt_setup(rtpi_wt_ray *w, const rtpi_ray *r)
+/* Whether rtpi_wt_setup accepts r's direction: not 0, every component
+   finite (written so that NaN or infinite components fail). */
+static inline int rtpi_wt_valid(const rtpi_ray *r)
+{
+    double s = fabs(r->d.x) + fabs(r->d.y) + fabs(r->d.z);
+    return s > 0.0 && s <= 1.79e308;
+}
+
+/* rtpi_wt_setup for a direction rtpi_wt_valid accepts. */
+static inline void rtpi_wt_make(rtpi_wt_ray *w, const rtpi_ray *r)
 {
     double d[3];
     double ax, ay, az;
@@ -42,9 +51,6 @@ static inline int rtpi_wt_setup(rtpi_wt_ray *w, const rtpi_ray *r)
     ax = fabs(d[0]);
     ay = fabs(d[1]);
     az = fabs(d[2]);
-    /* Written so that NaN or infinite components fail the test below. */
-    if (!(ax + ay + az > 0.0) || !(ax + ay + az <= 1.79e308))
-        return 0;
     kz = ax > ay ? (ax > az ? 0 : 2) : (ay > az ? 1 : 2);
     kx = kz == 2 ? 0 : kz + 1;
     ky = kx == 2 ? 0 : kx + 1;
@@ -62,6 +68,13 @@ static inline int rtpi_wt_setup(rtpi_wt_ray *w, const rtpi_ray *r)
     w->o[0] = r->o.x;
     w->o[1] = r->o.y;
     w->o[2] = r->o.z;
+}
+
+static inline int rtpi_wt_setup(rtpi_wt_ray *w, const rtpi_ray *r)
+{
+    if (!rtpi_wt_valid(r))
+        return 0;
+    rtpi_wt_make(w, r);
     return 1;
 }
 
