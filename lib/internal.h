@@ -113,6 +113,8 @@ typedef struct rtpi_cone {
 typedef struct rtpi_cone_frame {
     rtpi_v3 b, w;
     double h, rb, ra, k;
+    rtpi_v3 mid;  /* the axis' middle, b + w h/2 */
+    double bound; /* a radius about mid the cone lies within, with margin */
     int ok;
 } rtpi_cone_frame;
 

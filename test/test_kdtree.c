@@ -800,6 +800,57 @@ static void test_cones(void)
     }
 }
 
+/* hit_cone turns away lines farther from the cone's middle than its
+   bound: rays aimed at points of the surface a millionth of the height
+   from either end (within ~1e-6 of that bound), from near and from a
+   million heights away, must all still hit, no farther than the point.
+   A bound too small (the full height instead of half, the smaller
+   radius) or its rounding margin lost at a far origin fails here. */
+static void test_cone_bound(void)
+{
+    rng g;
+    int i, k, miss = 0, far = 0;
+    g.s = g_seed ^ 0x5151;
+    for (i = 0; i < 200; i++) {
+        rtp_scene *s = new_scene();
+        rtpi_v3 b = v3(rndr(&g, -5, 5), rndr(&g, -5, 5), rndr(&g, -5, 5));
+        rtpi_v3 a = v3_add(b, v3_mul(rnd_dir(&g), rndr(&g, 0.5, 3)));
+        double rb = rndr(&g, 0.1, 1), ra = i % 3 == 0 ? rb : i % 3 == 1 ? 0 : rndr(&g, 0, 1);
+        rtpi_v3 B, A, w;
+        double H;
+        if (i % 2)
+            rb = ra, ra = rndr(&g, 0.1, 1); /* the wider end either way */
+        add_cone(s, b, rb, a, ra);
+        rb = s->cones[0].rb;
+        ra = s->cones[0].ra;
+        B = v3_from_f(s->cones[0].base);
+        A = v3_from_f(s->cones[0].apex);
+        H = v3_len(v3_sub(A, B));
+        w = v3_mul(v3_sub(A, B), 1 / H);
+        for (k = 0; k < 200; k++) {
+            /* a point of the surface at height hh, across the axis u */
+            double hh = (k % 2 ? 1e-6 : 1 - 1e-6) * H, rad = rb + (ra - rb) * hh / H;
+            double dist = H * (k % 3 == 0 ? 2.0 : k % 3 == 1 ? 1e3 : 1e6);
+            rtpi_v3 u = v3_norm(v3_cross(w, rnd_dir(&g)));
+            rtpi_v3 p = v3_madd(v3_madd(B, w, hh), u, rad);
+            rtpi_v3 o = v3_madd(p, rnd_dir(&g), dist);
+            rtpi_ray r = mkray(o, v3_sub(p, o));
+            rtpi_hit h;
+            if (!(rad > 1e-3))
+                continue; /* (a pointed end: no surface to aim at there) */
+            if (!rtpi_intersect_prim(s, 0, &r, &h))
+                miss++;
+            else if (h.t > v3_len(v3_sub(p, o)) * (1 + 1e-9))
+                far++;
+        }
+        rtp_scene_destroy(s);
+    }
+    CHECK_MSG(miss == 0, "%d rays at a cone's ends missed it (seed %llu)", miss,
+              (unsigned long long)g_seed);
+    CHECK_MSG(far == 0, "%d rays at a cone's ends hit beyond their point (seed %llu)", far,
+              (unsigned long long)g_seed);
+}
+
 static void test_shading_normal(void)
 {
     rtp_scene *s = new_scene();
@@ -947,6 +998,7 @@ int main(void)
     RUN(test_sphere_precision);
     RUN(test_inside_sphere);
     RUN(test_cones);
+    RUN(test_cone_bound);
     RUN(test_shading_normal);
     RUN(test_nomem);
     RUN(test_stats);
