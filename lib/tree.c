@@ -1179,7 +1179,7 @@ static int pk_img_chunk(void *ctx, int chunk)
     pc = t->pk_c + 6 * t->pk_off[chunk];
     nz = t->pk_nz + t->pk_off[chunk];
     {
-        const double xo0 = xo[0], xo1 = xo[1], xo2 = xo[2];
+        const double xo0 = xo[0], xo1 = xo[1], xo2 = xo[2], xn[3] = {e->x[0], e->x[1], e->x[2]};
         const uint32_t *list = e->list, *mn = t->mat_nodes;
         const size_t srows = (size_t)(y1 - y0) + 1u, jend = t->mat_nstart[e->mat + 1];
         size_t bnd[PK_ROWS + 2], r, j;
@@ -1227,6 +1227,10 @@ static int pk_img_chunk(void *ctx, int chunk)
                 if (k0 == 0.0f && k1 == 0.0f && k2 == 0.0f)
                     continue;
                 pk_img_one(img + 3 * (p + x), k0, k1, k2, xo0, xo1, xo2, pc + 6 * n, acc);
+                /* the edit itself (pk_apply_listed's), over B just read:
+                   where the band's planes turn out not to be used (the
+                   check below), the full path writes every pixel anew */
+                pk_pixel(pc + 6 * n, xn, e->pixels + 3 * (p + x));
                 nz[n++] = (uint32_t)(p + x);
             }
         }
@@ -1265,7 +1269,7 @@ check:
        are in cache: a pass over them all after every band was made read
        them from memory again (where a band's planes are not to be used,
        the full path makes the image anew) */
-    if (!bad) {
+    if (!bad && !spd) { /* (with corner samples done as the planes were made) */
         const double xn[3] = {e->x[0], e->x[1], e->x[2]};
         float *out = e->pixels;
         for (i = 0; i < n; i++)
