@@ -1071,22 +1071,31 @@ static size_t lower_bound(const uint32_t *list, size_t n, size_t v)
     return lo;
 }
 
+/* The bits of |x| (x a float): ordered as |x| is, and at or above
+   0x7f800000 exactly where x is infinite or NaN. */
+static inline uint32_t abs_bits(float x)
+{
+    uint32_t u;
+    memcpy(&u, &x, sizeof u);
+    return u & 0x7fffffffu;
+}
+
 /* One pixel's planes P = B - xold K and K into o (6 floats), and its B
-   and K into the band's float sum, largest |B| and largest |K| (bd). */
+   and K into the band's largest |B| and |K| as abs_bits (bd: 2; integer
+   maxima, which see a NaN or infinity too). */
 static inline void pk_img_one(const float *b, float k0, float k1, float k2, double xo0,
-                              double xo1, double xo2, float *o, float *bd)
+                              double xo1, double xo2, float *o, uint32_t *bd)
 {
     const double x0 = xo0 * k0, x1 = xo1 * k1, x2 = xo2 * k2;
-    float bmax = bd[1], kmax = bd[2];
-    bd[0] += (b[0] + b[1] + b[2]) + (k0 + k1 + k2);
-    bmax = fabsf(b[0]) > bmax ? fabsf(b[0]) : bmax;
-    bmax = fabsf(b[1]) > bmax ? fabsf(b[1]) : bmax;
-    bmax = fabsf(b[2]) > bmax ? fabsf(b[2]) : bmax;
-    kmax = fabsf(k0) > kmax ? fabsf(k0) : kmax;
-    kmax = fabsf(k1) > kmax ? fabsf(k1) : kmax;
-    kmax = fabsf(k2) > kmax ? fabsf(k2) : kmax;
-    bd[1] = bmax;
-    bd[2] = kmax;
+    uint32_t bmax = bd[0], kmax = bd[1], u;
+    u = abs_bits(b[0]), bmax = u > bmax ? u : bmax;
+    u = abs_bits(b[1]), bmax = u > bmax ? u : bmax;
+    u = abs_bits(b[2]), bmax = u > bmax ? u : bmax;
+    u = abs_bits(k0), kmax = u > kmax ? u : kmax;
+    u = abs_bits(k1), kmax = u > kmax ? u : kmax;
+    u = abs_bits(k2), kmax = u > kmax ? u : kmax;
+    bd[0] = bmax;
+    bd[1] = kmax;
     o[0] = (float)((double)b[0] - x0);
     o[1] = (float)((double)b[1] - x1);
     o[2] = (float)((double)b[2] - x2);
@@ -1097,14 +1106,13 @@ static inline void pk_img_one(const float *b, float k0, float k1, float k2, doub
 
 /* pk_img_chunk's planes of m pixels pix[] whose K is kq (3 floats a
    pixel) and B the image's: those whose K is not 0 (else the pixel stays
-   B: nothing to keep) into pc and nz, with the band's float sum of B and
-   K and largest |B| and |K| (bd: 3 floats) for its bound; returns how
-   many. */
+   B: nothing to keep) into pc and nz, with the band's largest |B| and |K|
+   (bd: pk_img_one's) for its bound; returns how many. */
 static size_t pk_img_pixels(const float *kq, const uint32_t *pix, size_t m, const float *img,
-                            const double *xo, float *pc, uint32_t *nz, float *bd)
+                            const double *xo, float *pc, uint32_t *nz, uint32_t *bd)
 {
     const double xo0 = xo[0], xo1 = xo[1], xo2 = xo[2];
-    float acc[3];
+    uint32_t acc[2];
     size_t j, n = 0;
     memcpy(acc, bd, sizeof acc);
     for (j = 0; j < m; j++, kq += 3) {
@@ -1161,7 +1169,8 @@ static int pk_img_chunk(void *ctx, int chunk)
     int y0 = chunk * PK_ROWS, y1 = y0 + PK_ROWS, y, c, spd = t->spd;
     const float *img = e->pixels, *pq = t->pk_q + 3; /* (pk_q_chunk's q_by_list) */
     const double xo[3] = {e->xold[0], e->xold[1], e->xold[2]};
-    float *pc, bd[3] = {0.0f, 0.0f, 0.0f}; /* bd: pk_img_pixels' */
+    float *pc;
+    uint32_t bd[2] = {0, 0}; /* bd: pk_img_one's */
     uint32_t *nz;
     int bad = 0;
     if (y1 > t->height)
@@ -1183,7 +1192,8 @@ static int pk_img_chunk(void *ctx, int chunk)
         const uint32_t *list = e->list, *mn = t->mat_nodes;
         const size_t srows = (size_t)(y1 - y0) + 1u, jend = t->mat_nstart[e->mat + 1];
         size_t bnd[PK_ROWS + 2], r, j;
-        float *g = e->qgrid, acc[3] = {0.0f, 0.0f, 0.0f};
+        float *g = e->qgrid;
+        uint32_t acc[2] = {0, 0};
         /* bnd[r]: the list's first entry in sample row y0 + r or after */
         for (r = 0; r <= srows; r++)
             bnd[r] = lower_bound(list, e->nlist, ((size_t)y0 + r) * nx);
@@ -1201,8 +1211,11 @@ static int pk_img_chunk(void *ctx, int chunk)
             size_t k = list[i], b = (size_t)t->start[k + 1], j0 = j;
             double q[3];
             float *o = g + 3 * (k - (size_t)y0 * nx);
-            while (j < jend && mn[j] < b)
+            /* (a listed sample has a node of the material at least: mn[j]
+               is its first) */
+            do
                 j++;
+            while (j < jend && mn[j] < b);
             rtpi_nodes_diffuse(e->shade, mn + j0, j - j0, t->ev_terms, t->ev_w, e->cv, q);
             o[0] = (float)q[0];
             o[1] = (float)q[1];
@@ -1245,13 +1258,16 @@ check:
        (1 + 2^-52) =: A (a double product) and |P| <= (|B| + A)(1 +
        2^-24), so |B| + 3 X |K| (1 + 2^-21) <= 7.99 for the largest |B|
        and |K| of the band settles it, if its B and K are finite (their
-       float sum finite: a NaN or infinity shows in it).  Otherwise each
-       pixel is tested as the full path would need. */
+       largest abs_bits below 0x7f800000: a NaN or infinity shows there).
+       Otherwise each pixel is tested as the full path would need. */
     {
         double xm = fabs(xo[0]) > fabs(xo[1]) ? fabs(xo[0]) : fabs(xo[1]);
+        float bm, km;
         xm = fabs(xo[2]) > xm ? fabs(xo[2]) : xm;
-        if (!(fabsf(bd[0]) <= FLT_MAX && bd[2] <= 1e30f &&
-              (double)bd[1] + 3.0 * xm * bd[2] * (1.0 + 0x1p-21) <= 7.99))
+        memcpy(&bm, &bd[0], sizeof bm);
+        memcpy(&km, &bd[1], sizeof km);
+        if (!(bd[0] < 0x7f800000u && bd[1] < 0x7f800000u && km <= 1e30f &&
+              (double)bm + 3.0 * xm * km * (1.0 + 0x1p-21) <= 7.99))
             for (i = 0; i < n; i++) {
                 const float *o = pc + 6 * i;
                 float ps = 0.0f;
