@@ -316,7 +316,13 @@ static inline rtpi_v3 rtpi_offset_origin(rtpi_v3 p, rtpi_v3 ng, double side)
    (rtpi_offset_origin's step off the surface, towards light L): 0 no, 1
    yes, -1 cannot tell (see intersect.c).  Where 0, shadow queries leave
    prim out. */
-int rtpi_prim_shadows_own(const rtp_scene *s, uint32_t prim, rtpi_v3 o, rtpi_v3 L);
+int rtpi_prim_shadows_own_solid(const rtp_scene *s, uint32_t prim, rtpi_v3 o, rtpi_v3 L);
+/* (a triangle answered inline: every shadow query asks, and for a mesh
+   the call was most of the answer) */
+static inline int rtpi_prim_shadows_own(const rtp_scene *s, uint32_t prim, rtpi_v3 o, rtpi_v3 L)
+{
+    return prim < s->ntris ? 0 : rtpi_prim_shadows_own_solid(s, prim, o, L);
+}
 
 /* Closest hit of ray with one primitive in [tmin, tmax]; 1 on hit. */
 int rtpi_intersect_prim(const rtp_scene *s, uint32_t prim,

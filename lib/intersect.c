@@ -213,7 +213,7 @@ int rtpi_intersect_prim(const rtp_scene *s, uint32_t prim, const rtpi_ray *ray,
    (o radially beyond the wall, so the normal towards o is the outward
    one and faces the light) the ray runs away from the solid and cannot
    meet the wall again; from its inside it may. */
-int rtpi_prim_shadows_own(const rtp_scene *s, uint32_t prim, rtpi_v3 o, rtpi_v3 L)
+int rtpi_prim_shadows_own_solid(const rtp_scene *s, uint32_t prim, rtpi_v3 o, rtpi_v3 L)
 {
     size_t i = prim;
     if (i < s->ntris)

@@ -152,8 +152,11 @@ rtp_status rtpi_shadow_create_mt(const rtp_scene *s, const rtpi_kdtree *kd, rtpi
    light buffers then need not ask it (for scenes of spheres and meshes
    about half of their tests), nor the kd-tree (trace leaves it out
    alike). */
-static int sh_visible(const rtpi_shadow *sh, rtpi_v3 p, rtpi_v3 o, uint32_t prim,
-                      const rtpi_ray *r, uint32_t *occ)
+/* (inlined whatever the compiler's heuristics say: every query passes
+   through it, and the call with its copies of p and o cost a third of a
+   light buffer's query) */
+static RTPI_FORCE_INLINE int sh_visible(const rtpi_shadow *sh, rtpi_v3 p, rtpi_v3 o,
+                                        uint32_t prim, const rtpi_ray *r, uint32_t *occ)
 {
     rtpi_ray rr;
     int own = rtpi_prim_shadows_own(sh->s, prim, o, sh->light), v;
@@ -197,9 +200,10 @@ int rtpi_shadow_visible(const rtpi_shadow *sh, rtpi_v3 p, rtpi_v3 o, uint32_t pr
     return sh_visible(sh, p, o, prim, NULL, &occ);
 }
 
-int rtpi_shadow_visible_cached(const rtpi_shadow *sh, rtpi_shadow_cache *c, rtpi_v3 p,
-                               rtpi_v3 o, uint32_t prim)
+int rtpi_shadow_visible_cached(const rtpi_shadow *sh, rtpi_shadow_cache *c, const rtpi_v3 *pp,
+                               const rtpi_v3 *op, uint32_t prim)
 {
+    const rtpi_v3 p = *pp, o = *op;
     uint32_t occ;
     int v;
     rtpi_ray r;

@@ -344,7 +344,7 @@ static int vis_row(void *ctx, int y)
         if (!rtpi_shadow_setup(p, ng, ns, v->lp, &o))
             continue;
         queries++;
-        if (rtpi_shadow_visible_cached(v->sh, &cache, p, o, nd->prim))
+        if (rtpi_shadow_visible_cached(v->sh, &cache, &p, &o, nd->prim))
             *w |= bit;
     }
     v->queries += queries;

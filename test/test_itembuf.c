@@ -85,7 +85,7 @@ static void check_mode(const char *label, const rtp_scene *s, const rtpi_kdtree 
     for (k = 0; k < n; k++) {
         int e = rtpi_shadow_visible(ex, sm[k].p, sm[k].o, sm[k].prim);
         int v = rtpi_shadow_visible(sh, sm[k].p, sm[k].o, sm[k].prim);
-        int vc = rtpi_shadow_visible_cached(sh, &cache, sm[k].p, sm[k].o, sm[k].prim);
+        int vc = rtpi_shadow_visible_cached(sh, &cache, &sm[k].p, &sm[k].o, sm[k].prim);
         /* the cache only finds real occluders: it may right a wrong "lit" */
         cache_bad += vc != v && vc != e;
         wrong += e != v;
@@ -122,7 +122,7 @@ static void check_lightbuf_cached(const char *label, const rtp_scene *s, const r
     }
     for (k = 0; k < n; k++)
         bad += rtpi_shadow_visible(ex, sm[k].p, sm[k].o, sm[k].prim) !=
-               rtpi_shadow_visible_cached(lb, &cache, sm[k].p, sm[k].o, sm[k].prim);
+               rtpi_shadow_visible_cached(lb, &cache, &sm[k].p, &sm[k].o, sm[k].prim);
     CHECK_MSG(bad == 0, "%s: %lu of %lu cached light-buffer answers differ from exact", label,
               (unsigned long)bad, (unsigned long)n);
     rtpi_shadow_destroy(ex);
