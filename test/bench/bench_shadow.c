@@ -110,7 +110,7 @@ static int run_mode(const char *scene, const rtp_scene *s, const rtpi_kdtree *kd
         double t3 = now(), t4;
         size_t cdiff = 0;
         for (k = 0; k < n; k++) {
-            int v = rtpi_shadow_visible_cached(sh, &cache, q[k].p, q[k].o, q[k].prim);
+            int v = rtpi_shadow_visible_cached(sh, &cache, &q[k].p, &q[k].o, q[k].prim);
             cdiff += ref && (size_t)(ref[k] != v);
         }
         t4 = now();
