@@ -897,7 +897,7 @@ static int light_row(void *ctx, int y)
     n = rtpi_light_redo(e->shade, t->nodes, st, k0, k1, e->vis, t->ev_nv, t->ev_w, e->light,
                         t->ev_terms, t->ev_coeffs, e->cl, e->combine_too ? e->samples : NULL,
                         &e->coef_bad, e->mark, e->mv_rest, t->mv_ok);
-    if (n && e->mark) /* (the row's flag after the marks: mark_rows) */
+    if (n && e->mark) /* (the row's flag after the marks: mark_rows_at) */
         e->mark[mark_rows_at(t) + (size_t)y] = 1;
     e->combined += n;
     return 0;
@@ -1126,6 +1126,35 @@ static size_t pk_img_pixels(const float *kq, const uint32_t *pix, size_t m, cons
     return n;
 }
 
+/* q of the edited material's listed samples e->list[i0 .. i1) (i0 < i1),
+   from its own nodes (rtpi_nodes_diffuse: rtpi_sample_diffuse bit for
+   bit), each into out + 3 (k - base) for sample k, or with by_list into
+   out + 3 (1 + i) by its place i in the list.  (Inlined: pk_img_chunk
+   calls it for a band's samples, pk_q_chunk for a chunk of the list.) */
+static RTPI_FORCE_INLINE void listed_q(const eval_ctx *e, size_t i0, size_t i1, float *out,
+                                       size_t base, int by_list)
+{
+    const rtp_tree *t = e->t;
+    const uint32_t *mn = t->mat_nodes;
+    size_t i, jend = t->mat_nstart[e->mat + 1], j = t->mat_nstart[e->mat];
+    /* the material's nodes from the first sample on */
+    j += lower_bound(mn + j, jend - j, (size_t)t->start[e->list[i0]]);
+    for (i = i0; i < i1; i++) {
+        size_t k = e->list[i], b = (size_t)t->start[k + 1], j0 = j;
+        double q[3];
+        float *o = out + 3 * (by_list ? i + 1 : k - base);
+        /* (a listed sample has a node of the material at least: mn[j]
+           is its first) */
+        do
+            j++;
+        while (j < jend && mn[j] < b);
+        rtpi_nodes_diffuse(e->shade, mn + j0, j - j0, t->ev_terms, t->ev_w, e->cv, q);
+        o[0] = (float)q[0];
+        o[1] = (float)q[1];
+        o[2] = (float)q[2];
+    }
+}
+
 /* The pixels x0 .. x1 - 1 of a pixel row, from the listed columns of
    its two sample rows (the list's entries bnd[0] .. bnd[1] - 1 and
    bnd[1] .. bnd[2] - 1, sample row base .. base + nx - 1 and the next):
@@ -1189,9 +1218,9 @@ static int pk_img_chunk(void *ctx, int chunk)
     nz = t->pk_nz + t->pk_off[chunk];
     {
         const double xo0 = xo[0], xo1 = xo[1], xo2 = xo[2], xn[3] = {e->x[0], e->x[1], e->x[2]};
-        const uint32_t *list = e->list, *mn = t->mat_nodes;
-        const size_t srows = (size_t)(y1 - y0) + 1u, jend = t->mat_nstart[e->mat + 1];
-        size_t bnd[PK_ROWS + 2], r, j;
+        const uint32_t *list = e->list;
+        const size_t srows = (size_t)(y1 - y0) + 1u;
+        size_t bnd[PK_ROWS + 2], r;
         float *g = e->qgrid;
         uint32_t acc[2] = {0, 0};
         /* bnd[r]: the list's first entry in sample row y0 + r or after */
@@ -1203,24 +1232,8 @@ static int pk_img_chunk(void *ctx, int chunk)
            grid is all 0 between bands (the entries set are put back
            below: clearing the whole grid cost more than the rest where
            a material is small) */
-        if (bnd[0] < bnd[srows]) {
-            j = t->mat_nstart[e->mat];
-            j += lower_bound(mn + j, jend - j, (size_t)t->start[list[bnd[0]]]);
-        }
-        for (i = bnd[0]; i < bnd[srows]; i++) {
-            size_t k = list[i], b = (size_t)t->start[k + 1], j0 = j;
-            double q[3];
-            float *o = g + 3 * (k - (size_t)y0 * nx);
-            /* (a listed sample has a node of the material at least: mn[j]
-               is its first) */
-            do
-                j++;
-            while (j < jend && mn[j] < b);
-            rtpi_nodes_diffuse(e->shade, mn + j0, j - j0, t->ev_terms, t->ev_w, e->cv, q);
-            o[0] = (float)q[0];
-            o[1] = (float)q[1];
-            o[2] = (float)q[2];
-        }
+        if (bnd[0] < bnd[srows])
+            listed_q(e, bnd[0], bnd[srows], g, (size_t)y0 * nx, 0);
         for (y = y0, r = 0; y < y1; y++, r++) {
             const float *ga = g + 3 * r * nx, *gb = ga + 3 * nx;
             const size_t p = (size_t)y * w;
@@ -1374,30 +1387,12 @@ static int pk_build(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, in
 static int pk_q_chunk(void *ctx, int chunk)
 {
     eval_ctx *e = (eval_ctx *)ctx;
-    rtp_tree *t = e->t;
-    size_t i = (size_t)chunk * e->chunk, end = i + e->chunk, j, jend;
-    const uint32_t *mn = t->mat_nodes;
+    size_t i = (size_t)chunk * e->chunk, end = i + e->chunk;
     if (end > e->nlist)
         end = e->nlist;
-    if (i >= end)
-        return 0;
-    /* the material's nodes from the chunk's first sample on */
-    j = t->mat_nstart[e->mat];
-    jend = t->mat_nstart[e->mat + 1];
-    j += lower_bound(mn + j, jend - j, (size_t)t->start[e->list[i]]);
-    for (; i < end; i++) {
-        size_t k = e->list[i], b = (size_t)t->start[k + 1], j0 = j;
-        double q[3];
-        float *o;
-        while (j < jend && mn[j] < b)
-            j++;
-        rtpi_nodes_diffuse(e->shade, mn + j0, j - j0, t->ev_terms, t->ev_w, e->cv, q);
-        /* (pk_img_chunk reads q by the sample's place in the list) */
-        o = t->pk_q + 3 * (e->q_by_list ? i + 1 : k);
-        o[0] = (float)q[0];
-        o[1] = (float)q[1];
-        o[2] = (float)q[2];
-    }
+    /* (pk_img_pixels reads q by the sample's place in the list) */
+    if (i < end)
+        listed_q(e, i, end, e->t->pk_q, 0, e->q_by_list);
     return 0;
 }
 
