@@ -720,6 +720,19 @@ static void test_inside_sphere(void)
     rtp_scene_destroy(s);
 }
 
+/* Cone 0 of s as its floats make it (the float values are the geometry):
+   base B, unit axis w, height H, radii rb and ra. */
+static void cone_floats(const rtp_scene *s, rtpi_v3 *B, rtpi_v3 *w, double *H, double *rb,
+                        double *ra)
+{
+    rtpi_v3 A = v3_from_f(s->cones[0].apex);
+    *B = v3_from_f(s->cones[0].base);
+    *H = v3_len(v3_sub(A, *B));
+    *w = v3_mul(v3_sub(A, *B), 1 / *H);
+    *rb = s->cones[0].rb;
+    *ra = s->cones[0].ra;
+}
+
 static void test_cones(void)
 {
     rng g;
@@ -730,19 +743,14 @@ static void test_cones(void)
         rtpi_v3 b = v3(rndr(&g, -5, 5), rndr(&g, -5, 5), rndr(&g, -5, 5));
         rtpi_v3 a = v3_add(b, v3_mul(rnd_dir(&g), rndr(&g, 0.5, 3)));
         double rb = rndr(&g, 0.1, 1), ra = i % 3 == 0 ? rb : i % 3 == 1 ? 0 : rndr(&g, 0, 1);
-        rtpi_v3 B, A, w;
+        rtpi_v3 B, w;
         double H;
         if (i % 5 == 0) /* axis along a coordinate axis */
             a = v3(b.x, b.y + 2, b.z);
         if (i % 6 == 1) /* apex first */
             rb = 0, ra = 0.7;
         add_cone(s, b, rb, a, ra);
-        rb = s->cones[0].rb; /* the float values are the geometry */
-        ra = s->cones[0].ra;
-        B = v3_from_f(s->cones[0].base);
-        A = v3_from_f(s->cones[0].apex);
-        H = v3_len(v3_sub(A, B));
-        w = v3_mul(v3_sub(A, B), 1 / H);
+        cone_floats(s, &B, &w, &H, &rb, &ra);
         for (k = 0; k < 200; k++) {
             rtpi_v3 o = v3_madd(B, rnd_dir(&g), rndr(&g, 0.1, 20));
             rtpi_v3 d = v3_sub(v3_madd(B, w, rndr(&g, -0.2, 1.2) * H), o);
@@ -816,17 +824,12 @@ static void test_cone_bound(void)
         rtpi_v3 b = v3(rndr(&g, -5, 5), rndr(&g, -5, 5), rndr(&g, -5, 5));
         rtpi_v3 a = v3_add(b, v3_mul(rnd_dir(&g), rndr(&g, 0.5, 3)));
         double rb = rndr(&g, 0.1, 1), ra = i % 3 == 0 ? rb : i % 3 == 1 ? 0 : rndr(&g, 0, 1);
-        rtpi_v3 B, A, w;
+        rtpi_v3 B, w;
         double H;
         if (i % 2)
             rb = ra, ra = rndr(&g, 0.1, 1); /* the wider end either way */
         add_cone(s, b, rb, a, ra);
-        rb = s->cones[0].rb;
-        ra = s->cones[0].ra;
-        B = v3_from_f(s->cones[0].base);
-        A = v3_from_f(s->cones[0].apex);
-        H = v3_len(v3_sub(A, B));
-        w = v3_mul(v3_sub(A, B), 1 / H);
+        cone_floats(s, &B, &w, &H, &rb, &ra);
         for (k = 0; k < 200; k++) {
             /* a point of the surface at height hh, across the axis u */
             double hh = (k % 2 ? 1e-6 : 1 - 1e-6) * H, rad = rb + (ra - rb) * hh / H;
