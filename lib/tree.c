@@ -2255,12 +2255,20 @@ static void cp_run1(const float *restrict sp, const float *restrict k, const dou
                     float *restrict out, size_t len)
 {
     const double d0 = dc[0], d1 = dc[1], d2 = dc[2];
+    const double dd[12] = {d0, d1, d2, d0, d1, d2, d0, d1, d2, d0, d1, d2};
     size_t i;
-    /* two pixels a step: gcc 12 -O2 pairs four of the six values into
-       two-wide operations (one pixel a step paired two of three): 7%
-       fewer instructions on balls' light-colour edit; the same
-       arithmetic value by value */
-    for (i = 0; i + 2 <= len; i += 2) {
+    int c;
+    /* four pixels a step, the twelve values in one loop against the
+       colours' pattern: gcc 12 -O2 makes two-wide operations of all of
+       them (two pixels a step paired four of six); the same arithmetic
+       value by value */
+    for (i = 0; i + 4 <= len; i += 4) {
+        const float *a = sp + 3 * i, *b = k + 3 * i;
+        float *o = out + 3 * i;
+        for (c = 0; c < 12; c++)
+            o[c] = (float)(a[c] + b[c] * dd[c]);
+    }
+    for (; i + 2 <= len; i += 2) {
         const float *a = sp + 3 * i, *b = k + 3 * i;
         float *o = out + 3 * i;
         o[0] = (float)(a[0] + b[0] * d0);
