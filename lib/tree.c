@@ -846,8 +846,8 @@ static int redo_chunk(void *ctx, int chunk)
 
 /* t->ev_mark holds a byte a sample (and 8 more), then a byte a sample
    row: 1 where the row has a mark, so that mark_row passes over rows
-   without any and only those rows are cleared (tetra: a moved light
-   marks 5% of the samples, on a third of the rows). */
+   without any and only those rows are cleared (tetra at 512x512: a moved
+   light marks 5% of the samples, on 410 of the 513 rows). */
 static size_t mark_rows_at(const rtp_tree *t)
 {
     return (size_t)t->nx * t->ny + 8;
