@@ -30,7 +30,6 @@ typedef struct rtpi_wt_ray {
     int kx, ky, kz;
 } rtpi_wt_ray;
 
-/* @return 0 when the direction is zero or not finite (nothing can be hit). */
 /* Whether rtpi_wt_setup accepts r's direction: not 0, every component
    finite (written so that NaN or infinite components fail). */
 static inline int rtpi_wt_valid(const rtpi_ray *r)
@@ -70,6 +69,7 @@ static inline void rtpi_wt_make(rtpi_wt_ray *w, const rtpi_ray *r)
     w->o[2] = r->o.z;
 }
 
+/* @return 0 when the direction is zero or not finite (nothing can be hit). */
 static inline int rtpi_wt_setup(rtpi_wt_ray *w, const rtpi_ray *r)
 {
     if (!rtpi_wt_valid(r))

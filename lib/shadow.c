@@ -153,8 +153,8 @@ rtp_status rtpi_shadow_create_mt(const rtp_scene *s, const rtpi_kdtree *kd, rtpi
    about half of their tests), nor the kd-tree (trace leaves it out
    alike). */
 /* (inlined whatever the compiler's heuristics say: every query passes
-   through it, and the call with its copies of p and o cost a third of a
-   light buffer's query) */
+   through it, and the calls with their copies of p and o cost a quarter
+   of a light buffer's query on tree) */
 static RTPI_FORCE_INLINE int sh_visible(const rtpi_shadow *sh, rtpi_v3 p, rtpi_v3 o,
                                         uint32_t prim, const rtpi_ray *r, uint32_t *occ)
 {
