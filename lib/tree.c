@@ -1230,8 +1230,8 @@ static int pk_img_chunk(void *ctx, int chunk)
            nodes) in a grid of its sample rows, 0 where the material is
            not: each pixel's four corners are read without a test.  The
            grid is all 0 between bands (the entries set are put back
-           below: clearing the whole grid cost more than the rest where
-           a material is small) */
+           below: clearing the whole grid each band was a fifth of
+           tetra's edit, whose material is small) */
         if (bnd[0] < bnd[srows])
             listed_q(e, bnd[0], bnd[srows], g, (size_t)y0 * nx, 0);
         for (y = y0, r = 0; y < y1; y++, r++) {
