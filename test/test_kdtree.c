@@ -720,6 +720,16 @@ static void test_inside_sphere(void)
     rtp_scene_destroy(s);
 }
 
+/* A random cone for case i: base b, apex a, radii rb and ra (every
+   third a cylinder, every third pointed at the apex). */
+static void random_cone(rng *g, int i, rtpi_v3 *b, rtpi_v3 *a, double *rb, double *ra)
+{
+    *b = v3(rndr(g, -5, 5), rndr(g, -5, 5), rndr(g, -5, 5));
+    *a = v3_add(*b, v3_mul(rnd_dir(g), rndr(g, 0.5, 3)));
+    *rb = rndr(g, 0.1, 1);
+    *ra = i % 3 == 0 ? *rb : i % 3 == 1 ? 0 : rndr(g, 0, 1);
+}
+
 /* Cone 0 of s as its floats make it (the float values are the geometry):
    base B, unit axis w, height H, radii rb and ra. */
 static void cone_floats(const rtp_scene *s, rtpi_v3 *B, rtpi_v3 *w, double *H, double *rb,
@@ -740,11 +750,9 @@ static void test_cones(void)
     g.s = g_seed ^ 0x7777;
     for (i = 0; i < 300; i++) {
         rtp_scene *s = new_scene();
-        rtpi_v3 b = v3(rndr(&g, -5, 5), rndr(&g, -5, 5), rndr(&g, -5, 5));
-        rtpi_v3 a = v3_add(b, v3_mul(rnd_dir(&g), rndr(&g, 0.5, 3)));
-        double rb = rndr(&g, 0.1, 1), ra = i % 3 == 0 ? rb : i % 3 == 1 ? 0 : rndr(&g, 0, 1);
-        rtpi_v3 B, w;
-        double H;
+        rtpi_v3 b, a, B, w;
+        double rb, ra, H;
+        random_cone(&g, i, &b, &a, &rb, &ra);
         if (i % 5 == 0) /* axis along a coordinate axis */
             a = v3(b.x, b.y + 2, b.z);
         if (i % 6 == 1) /* apex first */
@@ -821,11 +829,9 @@ static void test_cone_bound(void)
     g.s = g_seed ^ 0x5151;
     for (i = 0; i < 200; i++) {
         rtp_scene *s = new_scene();
-        rtpi_v3 b = v3(rndr(&g, -5, 5), rndr(&g, -5, 5), rndr(&g, -5, 5));
-        rtpi_v3 a = v3_add(b, v3_mul(rnd_dir(&g), rndr(&g, 0.5, 3)));
-        double rb = rndr(&g, 0.1, 1), ra = i % 3 == 0 ? rb : i % 3 == 1 ? 0 : rndr(&g, 0, 1);
-        rtpi_v3 B, w;
-        double H;
+        rtpi_v3 b, a, B, w;
+        double rb, ra, H;
+        random_cone(&g, i, &b, &a, &rb, &ra);
         if (i % 2)
             rb = ra, ra = rndr(&g, 0.1, 1); /* the wider end either way */
         add_cone(s, b, rb, a, ra);
