@@ -572,7 +572,7 @@ typedef struct eval_ctx {
     double *acc;
     int nomem;
     int nonfinite;            /* pk_put met a plane value that is not finite */
-    float *rest;              /* pk_build_chunk, pk_img_chunk: scratch */
+    float *rest;              /* pk_build_chunk: two sample rows' rest */
     int coef_bad;             /* a coefficient made was not finite */
     unsigned long long combined; /* light_row: samples it combined */
     unsigned char *mark;      /* light_row (may be NULL): 1 for each
@@ -1184,7 +1184,8 @@ static int pk_img_span(const uint32_t *list, const size_t *bnd, size_t base, siz
    samples (e->list) reach can change: an image kept from the last
    evaluation (opt->incremental) that is the image of the coefficients
    and colours now (t->last_exact), B.  K as pk_build_chunk makes it
-   (q is read only at the listed samples: pk_q is not cleared), and P =
+   (q of the listed samples alone: with corner samples made here, band by
+   band, else read from pk_q by list place, which is not cleared), and P =
    B - xold K, so no sample's rest is summed: P differs from the rest
    pk_build_chunk sums by the rounding of B (a float ulp of the pixel),
    and pk_bad's guard (per band where its bound settles it) stops the
