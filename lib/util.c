@@ -1,6 +1,6 @@
 /* util.c — allocation hooks, errors, version: what every file needs. */
-#if defined(__linux__) && !defined(_DEFAULT_SOURCE)
-#define _DEFAULT_SOURCE /* madvise (below) */
+#if defined(__linux__) && !defined(_GNU_SOURCE)
+#define _GNU_SOURCE /* madvise, mremap (below) */
 #endif
 #include "internal.h"
 
@@ -18,63 +18,223 @@
    from start to end soon after they are made, and in a virtual machine a
    page fault costs microseconds: tens of thousands of them were a third
    of what recording added to a trace.  Where Linux has transparent huge
-   pages in "madvise" mode, the default allocator asks for them on the
-   2 MiB-aligned inside of blocks of 1 MiB and more (a user's allocator is
-   left as it is).  Why 1 MiB: on the development VM a fresh 4 KiB page
-   cost 10 us (2.5 ms a MiB) and a fresh huge page 0.13-2.3 ms (2 MiB
-   zeroed), so a block of 1 MiB touched through costs less as one huge
-   page, for at most 1 MiB more resident memory; from 4 MiB on (session
-   11) the 1-4 MiB caches of an evaluation (path weights, q, the planes'
-   pixel lists) took 400-2200 faults: half of a material's first kd edit
-   on balls (7.8 -> 3.9 ms) and most of a first light-colour edit. */
-#if defined(__linux__) && defined(MADV_HUGEPAGE)
-#define RTPI_HUGE_MIN ((size_t)1 << 20)
-#define RTPI_HUGE_PAGE ((uintptr_t)2 << 20)
-static void *huge_advice(void *p, size_t size)
-{
-    if (p && size >= RTPI_HUGE_MIN) {
-        uintptr_t a = ((uintptr_t)p + RTPI_HUGE_PAGE - 1) & ~(RTPI_HUGE_PAGE - 1);
-        uintptr_t b = ((uintptr_t)p + size) & ~(RTPI_HUGE_PAGE - 1);
-        if (b > a)
-            (void)madvise((void *)a, (size_t)(b - a), MADV_HUGEPAGE); /* advice only */
-    }
-    return p;
-}
-#else
-static void *huge_advice(void *p, size_t size)
-{
-    (void)size;
-    return p;
-}
+   pages in "madvise" mode, the default allocator asks for them on blocks
+   of 1 MiB and more (a user's allocator is left as it is).  Why 1 MiB: on
+   the development VM a fresh 4 KiB page cost 10 us (2.5 ms a MiB) and a
+   fresh huge page 0.13-2.3 ms (2 MiB zeroed), so a block of 1 MiB touched
+   through costs less as one huge page, for at most 1 MiB more resident
+   memory; from 4 MiB on (session 11) the 1-4 MiB caches of an evaluation
+   (path weights, q, the planes' pixel lists) took 400-2200 faults: half
+   of a material's first kd edit on balls (7.8 -> 3.9 ms) and most of a
+   first light-colour edit.
+
+   A block realloc makes of 1 MiB or more (a growing array: the ray
+   trees while trace records them, a kd-tree's nodes while it is built)
+   is a mapping of its own, 2 MiB-aligned, whole huge pages, advised as a
+   whole, so that growing it moves its pages with mremap instead of
+   copying them.  Memory a process touches for the first time is what
+   costs on that VM (its kernel zeroes each page while the host backs it:
+   0.6-2.7 ms a MiB measured; clear_page was a sixth of recording
+   mount_s6 at 1024x1024 in perf), and a growing tree copied into fresh
+   blocks touched 116 MB for its 63.  Recording mount_s6 at 1024x1024,
+   the best of three over the best of three traces, one process each,
+   three processes of each build in turn: +5.6..+18% copied, +1.3..+1.9%
+   moved.  Blocks malloc makes stay in malloc's heap, which hands the
+   memory of blocks freed before to the next ones: made as mappings too,
+   every large cache of a first evaluation at 1024x1024 came fresh
+   (bench_reeval: 0.13-0.30 s became 0.32-0.56 s).  Every block carries a header of two
+   words before it, so that free and realloc can tell the kinds apart and
+   know the size: the mapping's length (0: malloc's) and the size asked.
+   Not under AddressSanitizer, whose checks of the heap the mappings
+   would escape. */
+#if defined(__has_feature)
+#if __has_feature(address_sanitizer)
+#define RTPI_ASAN 1
 #endif
+#endif
+#if defined(__SANITIZE_ADDRESS__)
+#define RTPI_ASAN 1
+#endif
+#if defined(__linux__) && defined(MADV_HUGEPAGE) && defined(MREMAP_MAYMOVE) && \
+    defined(MREMAP_FIXED) && !defined(RTPI_ASAN)
+#define RTPI_HUGE_MIN ((size_t)1 << 20)
+#define RTPI_HUGE_PAGE ((size_t)2 << 20)
+/* where a block's data starts: 16 bytes in keep malloc's alignment for a
+   small block; a large one's starts a cache line in */
+#define RTPI_HDR 16
+#define RTPI_BIG_HDR 64
+
+typedef struct {
+    size_t maplen; /* the mapping's length; 0: in malloc's heap */
+    size_t size;   /* what was asked for */
+} blk_hdr;
+
+static blk_hdr *hdr_of(void *p)
+{
+    return (blk_hdr *)(void *)((char *)p - RTPI_HDR);
+}
+
+/* The start of block p as malloc or mmap gave it: large blocks (1 MiB or
+   more, heap or mapping) have their data a cache line in. */
+static char *base_of(void *p)
+{
+    const blk_hdr *h = hdr_of(p);
+    return (char *)p - (h->maplen || h->size >= RTPI_HUGE_MIN ? RTPI_BIG_HDR : RTPI_HDR);
+}
+
+/* Huge pages for the 2 MiB-aligned inside of [p, p + size). */
+static void huge_advice(char *p, size_t size)
+{
+    uintptr_t a = ((uintptr_t)p + RTPI_HUGE_PAGE - 1) & ~(uintptr_t)(RTPI_HUGE_PAGE - 1);
+    uintptr_t b = ((uintptr_t)p + size) & ~(uintptr_t)(RTPI_HUGE_PAGE - 1);
+    if (b > a)
+        (void)madvise((void *)a, (size_t)(b - a), MADV_HUGEPAGE); /* advice only */
+}
+
+/* Whole huge pages for size bytes and a large block's header; 0 when too
+   large. */
+static size_t big_len(size_t size)
+{
+    if (size > (size_t)-1 - RTPI_BIG_HDR - RTPI_HUGE_PAGE)
+        return 0;
+    return (size + RTPI_BIG_HDR + RTPI_HUGE_PAGE - 1) & ~(RTPI_HUGE_PAGE - 1);
+}
+
+/* A fresh 2 MiB-aligned mapping of len bytes (a multiple of 2 MiB),
+   advised for huge pages as a whole, or NULL. */
+static char *map_aligned(size_t len)
+{
+    char *m, *a;
+    size_t head;
+    if (len > (size_t)-1 - RTPI_HUGE_PAGE)
+        return NULL;
+    m = (char *)mmap(NULL, len + RTPI_HUGE_PAGE, PROT_READ | PROT_WRITE,
+                     MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+    if (m == (char *)MAP_FAILED)
+        return NULL;
+    a = (char *)(((uintptr_t)m + RTPI_HUGE_PAGE - 1) & ~(uintptr_t)(RTPI_HUGE_PAGE - 1));
+    head = (size_t)(a - m);
+    if (head)
+        (void)munmap(m, head);
+    (void)munmap(a + len, RTPI_HUGE_PAGE - head);
+    (void)madvise(a, len, MADV_HUGEPAGE); /* advice only */
+    return a;
+}
 
 static void *default_malloc(void *user, size_t size)
 {
+    blk_hdr *h;
+    char *b;
     (void)user;
-#if defined(__linux__) && defined(MADV_HUGEPAGE)
-    if (size >= RTPI_HUGE_MIN && size <= (size_t)-1 - RTPI_HUGE_PAGE) {
+    if (size >= RTPI_HUGE_MIN) {
         /* aligned and rounded up to whole huge pages, so that every page
            of the block can be one (a fresh block's first touch then costs
-           a fault per 2 MiB, not per 4 KiB); realloc and free take it */
-        size_t whole = (size + RTPI_HUGE_PAGE - 1) & ~(size_t)(RTPI_HUGE_PAGE - 1);
-        void *p = NULL;
-        if (posix_memalign(&p, (size_t)RTPI_HUGE_PAGE, whole) == 0)
-            return huge_advice(p, whole);
-        return NULL;
+           a fault per 2 MiB, not per 4 KiB) */
+        size_t len = big_len(size);
+        void *v = NULL;
+        if (!len || posix_memalign(&v, RTPI_HUGE_PAGE, len) != 0)
+            return NULL;
+        b = (char *)v;
+        huge_advice(b, len);
+        h = hdr_of(b + RTPI_BIG_HDR);
+        h->maplen = 0;
+        h->size = size;
+        return b + RTPI_BIG_HDR;
     }
-#endif
+    b = (char *)malloc(size + RTPI_HDR); /* (size < 1 MiB: no overflow) */
+    if (!b)
+        return NULL;
+    h = (blk_hdr *)(void *)b;
+    h->maplen = 0;
+    h->size = size;
+    return b + RTPI_HDR;
+}
+
+static void default_free(void *user, void *p)
+{
+    blk_hdr *h;
+    (void)user;
+    if (!p)
+        return;
+    h = hdr_of(p);
+    if (h->maplen)
+        (void)munmap(base_of(p), h->maplen);
+    else
+        free(base_of(p));
+}
+
+static void *default_realloc(void *user, void *p, size_t size)
+{
+    blk_hdr *h;
+    char *m;
+    size_t len;
+    if (!p)
+        return default_malloc(user, size);
+    h = hdr_of(p);
+    if (size < RTPI_HUGE_MIN && !h->maplen && h->size < RTPI_HUGE_MIN) {
+        char *b = (char *)realloc(base_of(p), size + RTPI_HDR);
+        if (!b)
+            return NULL;
+        ((blk_hdr *)(void *)b)->size = size;
+        return b + RTPI_HDR;
+    }
+    if (size < RTPI_HUGE_MIN || !h->maplen) {
+        /* into a block of the other kind (a heap block growing past 1 MiB
+           becomes a mapping): a new block, the bytes both hold */
+        void *np = size < RTPI_HUGE_MIN ? default_malloc(user, size) : NULL;
+        if (size >= RTPI_HUGE_MIN && (len = big_len(size)) != 0 && (m = map_aligned(len))) {
+            np = m + RTPI_BIG_HDR;
+            hdr_of(np)->maplen = len;
+            hdr_of(np)->size = size;
+        }
+        if (!np)
+            return NULL;
+        memcpy(np, p, h->size < size ? h->size : size);
+        default_free(user, p);
+        return np;
+    }
+    /* a mapping growing or shrinking: its pages move, none is copied, in
+       place where the addresses after it are free, else to a fresh
+       aligned range (huge pages stay whole only 2 MiB-aligned) */
+    m = base_of(p);
+    len = big_len(size);
+    if (!len)
+        return NULL;
+    if (len != h->maplen) {
+        char *to = (char *)mremap(m, h->maplen, len, 0);
+        if (to == (char *)MAP_FAILED) {
+            char *dst = map_aligned(len);
+            if (!dst)
+                return NULL;
+            to = (char *)mremap(m, h->maplen, len, MREMAP_MAYMOVE | MREMAP_FIXED, dst);
+            if (to == (char *)MAP_FAILED) {
+                (void)munmap(dst, len);
+                return NULL;
+            }
+        }
+        m = to;
+        hdr_of(m + RTPI_BIG_HDR)->maplen = len;
+    }
+    hdr_of(m + RTPI_BIG_HDR)->size = size;
+    return m + RTPI_BIG_HDR;
+}
+#else
+static void *default_malloc(void *user, size_t size)
+{
+    (void)user;
     return malloc(size);
 }
 static void *default_realloc(void *user, void *p, size_t size)
 {
     (void)user;
-    return huge_advice(realloc(p, size), size);
+    return realloc(p, size);
 }
 static void default_free(void *user, void *p)
 {
     (void)user;
     free(p);
 }
+#endif
 
 void rtpi_allocator_init(rtp_allocator *out, const rtp_allocator *in)
 {
@@ -134,22 +294,6 @@ int rtpi_grow(const rtp_allocator *a, void **p, size_t *cap, size_t need,
     }
     if (size && ncap > (size_t)-1 / size)
         return -1;
-#if defined(__linux__) && defined(MADV_HUGEPAGE)
-    if (*p && a->realloc_fn == default_realloc && ncap * size >= RTPI_HUGE_MIN) {
-        /* realloc copies into pages it touches before huge_advice can
-           ask for huge ones: one 4 KiB fault per page copied (recording
-           mount_s6 at 1024x1024: 14,500, a sixth of the trace's time).
-           A fresh block advised first, then the copy: a fault per 2 MiB. */
-        np = default_malloc(a->user, ncap * size);
-        if (!np)
-            return -1;
-        memcpy(np, *p, *cap * size);
-        default_free(a->user, *p);
-        *p = np;
-        *cap = ncap;
-        return 0;
-    }
-#endif
     np = rtpi_realloc(a, *p, ncap * size);
     if (!np)
         return -1;

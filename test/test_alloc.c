@@ -7,6 +7,7 @@
  * many allocation sites (allocations of the successful run) each
  * operation exercised.  Deterministic: no seed. */
 #include "check.h"
+#include "internal.h"
 #include "rtp.h"
 
 #include <stdint.h>
@@ -599,6 +600,83 @@ SWEEP(tree_eval_warm_spd)
 SWEEP(image_diff)
 SWEEP(heatmap)
 
+/* The default allocator (util.c): small blocks in malloc's heap, large
+   ones (1 MiB up) too when malloc makes them, as mappings of their own
+   when realloc makes them, moved rather than copied as they grow.  Every
+   change of size keeps the bytes both sizes hold, across each kind. */
+static int holds(const uint32_t *p, size_t n, uint32_t seed)
+{
+    size_t i;
+    for (i = 0; i < n; i++)
+        if (p[i] != (uint32_t)(i * 2654435761u) + seed)
+            return 0;
+    return 1;
+}
+
+static void fill(uint32_t *p, size_t from, size_t n, uint32_t seed)
+{
+    size_t i;
+    for (i = from; i < n; i++)
+        p[i] = (uint32_t)(i * 2654435761u) + seed;
+}
+
+static void test_default_allocator(void)
+{
+    static const size_t sizes[] = {1000,      300000,    (1u << 20) / 4, 3u << 20,
+                                   20u << 20, 5u << 20,  (1u << 20) / 4 - 1,
+                                   25000,     12u << 20, 100};
+    rtp_allocator a;
+    uint32_t *p, *q;
+    size_t i, n, cap = 0;
+    rtpi_allocator_init(&a, NULL);
+    /* one block through every kind: heap, mapping grown, shrunk, heap */
+    p = (uint32_t *)rtpi_malloc(&a, 16 * sizeof *p);
+    CHECK(p != NULL);
+    if (!p)
+        return;
+    n = 16;
+    fill(p, 0, n, 7);
+    for (i = 0; i < sizeof sizes / sizeof *sizes; i++) {
+        size_t m = sizes[i];
+        q = (uint32_t *)rtpi_realloc(&a, p, m * sizeof *q);
+        CHECK_MSG(q != NULL, "realloc to %zu words", m);
+        if (!q)
+            break;
+        p = q;
+        CHECK_MSG(holds(p, n < m ? n : m, 7), "%zu words kept going to %zu", n, m);
+        CHECK_MSG(((uintptr_t)p & 15u) == 0, "%zu words: aligned to 16", m);
+        fill(p, n < m ? n : m, m, 7);
+        n = m;
+    }
+    rtpi_free(&a, p);
+    /* a large block malloc made, grown and shrunk */
+    n = (2u << 20) / sizeof *p;
+    p = (uint32_t *)rtpi_malloc(&a, n * sizeof *p);
+    CHECK(p != NULL);
+    if (p) {
+        fill(p, 0, n, 3);
+        q = (uint32_t *)rtpi_realloc(&a, p, 3 * n * sizeof *q);
+        CHECK(q != NULL && holds(q, n, 3));
+        p = q ? q : p;
+        q = (uint32_t *)rtpi_realloc(&a, p, 1000 * sizeof *q);
+        CHECK(q != NULL && holds(q, 1000, 3));
+        rtpi_free(&a, q ? q : p);
+    }
+    /* rtpi_grow as trace grows the ray trees: one word at a time to
+       48 MiB, every word where it was put */
+    p = NULL;
+    for (i = 0; i < (48u << 20) / sizeof *p; i++) {
+        if (rtpi_grow(&a, (void **)&p, &cap, i + 1, sizeof *p)) {
+            CHECK_MSG(0, "rtpi_grow to %zu words", i + 1);
+            break;
+        }
+        p[i] = (uint32_t)(i * 2654435761u) + 11;
+    }
+    CHECK(p != NULL && holds(p, i, 11));
+    rtpi_free(&a, p);
+    rtpi_free(&a, NULL); /* (nothing) */
+}
+
 static void test_image_io(void)
 {
     char name[64];
@@ -660,6 +738,7 @@ int main(void)
     RUN(test_image_io);
     RUN(test_image_diff);
     RUN(test_heatmap);
+    RUN(test_default_allocator);
     cleanup();
     return check_report();
 }

@@ -754,7 +754,7 @@ static void test_spd_scenes(void)
                       prims, known[i].prims);
         }
         rtp_scene_destroy(s);
-        free(text);
+        rtpi_free(&a, text);
     }
 }
 
