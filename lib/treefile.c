@@ -5,6 +5,7 @@
 #include "internal.h"
 
 #include <errno.h>
+#include <sys/stat.h>
 #include <stdio.h>
 #include <stdlib.h>
 
@@ -606,19 +607,67 @@ rtp_status rtp_tree_write(const rtp_tree *t, const char *path,
 
 /* ------------------------------------------------------------ reading */
 
+/* A section's bytes as the parsers see them: all of them at p (a file
+   read into memory), or from a source, a window of the file at a time
+   (rd_src: the tree section of a file read from disk, which then never
+   holds the file's bytes and its nodes at once). */
+typedef struct rd_src {
+    FILE *f;
+    unsigned char *buf;
+    size_t cap;               /* buf's size: the most one need() asks */
+    uint64_t left;            /* the section's bytes not yet read */
+    uint32_t crc;             /* of the section's bytes read so far */
+    int short_read;           /* the file ended (or failed) before them */
+    uint32_t slices[8][256];  /* crc_slices' */
+} rd_src;
+
 typedef struct rd {
     const unsigned char *p;
     size_t n, at;
     int bad;
+    rd_src *src; /* NULL: every byte at p */
 } rd;
+
+/* Moves the window's unread bytes to the front of the source's buffer
+   and reads the section's next bytes behind them, summing their CRC.
+   @return 1 when at least `want` bytes are then in the window. */
+static int refill(rd *r, size_t want)
+{
+    rd_src *s = r->src;
+    size_t have = r->n - r->at;
+    if (!s || want > s->cap)
+        return 0;
+    if (have && r->p + r->at != s->buf)
+        memmove(s->buf, r->p + r->at, have);
+    while (have < want && s->left && !s->short_read) {
+        size_t get = s->cap - have, got;
+        if (get > s->left)
+            get = (size_t)s->left;
+        got = fread(s->buf + have, 1, get, s->f);
+        s->crc = crc32_sliced((const uint32_t(*)[256])s->slices, s->crc, s->buf + have, got);
+        have += got;
+        s->left -= got;
+        s->short_read = got < get;
+    }
+    r->p = s->buf;
+    r->n = have;
+    r->at = 0;
+    return have >= want;
+}
 
 static int need(rd *r, size_t n)
 {
-    if (r->bad || n > r->n - r->at) {
+    if (r->bad || (n > r->n - r->at && !refill(r, n))) {
         r->bad = 1;
         return 0;
     }
     return 1;
+}
+
+/* The section's bytes not yet parsed. */
+static uint64_t rd_left(const rd *r)
+{
+    return (uint64_t)(r->n - r->at) + (r->src ? r->src->left : 0u);
 }
 
 static unsigned get_u8(rd *r)
@@ -731,7 +780,7 @@ static rtp_status nomem(loader *L)
 /* Checks a count against what the remaining bytes can hold. */
 static int count_ok(const rd *r, uint64_t count, size_t min_bytes_each)
 {
-    return count <= MAX_COUNT && (min_bytes_each == 0 || count <= (r->n - r->at) / min_bytes_each);
+    return count <= MAX_COUNT && (min_bytes_each == 0 || count <= rd_left(r) / min_bytes_each);
 }
 
 static rtp_status read_head(loader *L, rd *r)
@@ -1088,7 +1137,7 @@ static rtp_status read_tree(loader *L, rd *r)
     uint64_t nsamples = get_u64(r), nnodes = get_u64(r), k, at = 0;
     uint32_t words = get_u32(r);
     unsigned layout = get_u8(r);
-    size_t i, nprims = rtpi_scene_nprims(s), node_bytes;
+    size_t i, nprims = rtpi_scene_nprims(s), node_bytes, chunk;
     uint32_t vis_mask;
     if (r->bad)
         return bad(L, "section too short", NULL);
@@ -1121,12 +1170,19 @@ static rtp_status read_tree(loader *L, rd *r)
     if (at != nnodes)
         return bad(L, "sample node counts do not add up", NULL);
     vis_mask = s->nlights >= 32 ? 0xffffffffu : ((1u << s->nlights) - 1u);
-    if (!need(r, t->nnodes * node_bytes))
-        return bad(L, "section too short", NULL);
-    {
-        /* the bytes are there (checked once): read the fields directly */
-        const unsigned char *c = r->p + r->at;
-        for (i = 0; i < t->nnodes; i++) {
+    /* the nodes as many at a time as the window holds (all of them when
+       the whole file is in memory) */
+    chunk = r->src ? r->src->cap / node_bytes : t->nnodes;
+    for (i = 0; i < t->nnodes;) {
+        /* the bytes are there (checked once a chunk): read the fields
+           directly */
+        size_t end = t->nnodes - i < chunk ? t->nnodes : i + chunk;
+        const unsigned char *c;
+        if (!need(r, (end - i) * node_bytes))
+            return bad(L, "section too short", NULL);
+        c = r->p + r->at;
+        r->at += (end - i) * node_bytes;
+        for (; i < end; i++) {
             rtpi_cnode *nd = &t->nodes[i];
             uint32_t u;
             int j;
@@ -1154,7 +1210,6 @@ static rtp_status read_tree(loader *L, rd *r)
             if (!finite3(nd->p) || nd->prim >= nprims || (nd->vis & ~vis_mask))
                 return bad(L, "invalid node", NULL);
         }
-        r->at += t->nnodes * node_bytes;
     }
     if (words) {
         if (!count_ok(r, (uint64_t)t->nnodes * words, 4))
@@ -1179,6 +1234,112 @@ static rtp_status read_tree(loader *L, rd *r)
     return RTP_OK;
 }
 
+/* The signature checks, on the file's first min(size, 8) bytes. */
+static rtp_status check_signature(loader *L, const unsigned char *data, size_t size)
+{
+    if (size < 8 || memcmp(data, signature, 8) != 0) {
+        if (size >= 8 && memcmp(data, "\x89PNG", 4) == 0)
+            return bad(L, "not an rtp tree file (it is a PNG image)", NULL);
+        if (size >= 4 && memcmp(data, signature, size < 8 ? size : 8) == 0)
+            return bad(L, "truncated: the file ends inside its signature", NULL);
+        return bad(L, "not an rtp tree file (wrong signature)", NULL);
+    }
+    return RTP_OK;
+}
+
+static const char *const required_sections[] = {"HEAD", "SCEN", "MATL", "LITE", "GEOM", "TREE"};
+
+/* Which section tag is (*idx: its place in required_sections, 6 for
+   TEXR, -1 for an extension a reader skips), checked against the ones
+   seen before it (added to *seen). */
+static rtp_status section_index(loader *L, const char *tag, unsigned *seen, int *idx)
+{
+    size_t i;
+    *idx = -1;
+    for (i = 0; i < sizeof required_sections / sizeof *required_sections; i++)
+        if (strcmp(tag, required_sections[i]) == 0)
+            *idx = (int)i;
+    if (*idx < 0 && strcmp(tag, "TEXR") == 0)
+        *idx = 6;
+    if (*idx < 0) {
+        /* lower-case first letter: an extension a reader may skip */
+        if (tag[0] >= 'a' && tag[0] <= 'z')
+            return RTP_OK;
+        return bad(L, "unknown required section (written by a newer rtp?)", NULL);
+    }
+    if (*seen & (1u << *idx))
+        return bad(L, "repeated section", NULL);
+    /* sections come in order: each needs what the earlier ones hold */
+    if ((*idx == 0 && *seen) || (*idx > 0 && !(*seen & 1u)) ||
+        (*idx == 4 && !(*seen & (1u << 2))) || (*idx == 5 && !(*seen & (1u << 4))) ||
+        (*idx == 5 && !(*seen & (1u << 3))) || (*idx == 6 && (*seen & (1u << 5))))
+        return bad(L, "section out of order", NULL);
+    *seen |= 1u << *idx;
+    return RTP_OK;
+}
+
+static rtp_status parse_section(loader *L, int idx, rd *body)
+{
+    rtp_status st;
+    switch (idx) {
+    case 0: st = read_head(L, body); break;
+    case 1: st = read_scen(L, body); break;
+    case 2: st = read_matl(L, body); break;
+    case 3: st = read_lite(L, body); break;
+    case 4: st = read_geom(L, body); break;
+    case 5: st = read_tree(L, body); break;
+    default: st = read_texr(L, body); break;
+    }
+    if (st == RTP_OK && rd_left(body) != 0)
+        st = bad(L, "unexpected bytes at the end", NULL);
+    return st;
+}
+
+/* A new tree for the loader, or an error. */
+static rtp_status tree_begin(loader *L, const rtp_allocator *a)
+{
+    rtp_tree *t = (rtp_tree *)rtpi_calloc_array(a, 1, sizeof *t);
+    if (!t)
+        return rtpi_error(L->err, RTP_ERR_NOMEM, L->name, 0, 0, "out of memory");
+    t->alloc = *a;
+    L->t = t;
+    L->a = &t->alloc;
+    if (rtpi_scene_create(a, &t->scene) != RTP_OK) {
+        rtp_tree_destroy(t);
+        L->t = NULL;
+        return rtpi_error(L->err, RTP_ERR_NOMEM, L->name, 0, 0, "out of memory");
+    }
+    L->s = t->scene;
+    return RTP_OK;
+}
+
+/* The checks once every section is read; the tree into *out, or freed. */
+static rtp_status tree_end(loader *L, unsigned seen, rtp_status st, rtp_tree **out)
+{
+    rtp_tree *t = L->t;
+    size_t i;
+    L->section = NULL;
+    t->nlights0 = t->scene->nlights;
+    if (st == RTP_OK && (seen & 0x3fu) != 0x3fu)
+        st = bad(L, "a required section is missing", NULL);
+    if (st == RTP_OK) {
+        for (i = 0; i < t->scene->nmats; i++) {
+            const rtpi_material *m = &t->scene->mats[i];
+            if ((m->tex == RTPI_TEX_IMAGE && m->tex_image >= t->scene->ntexs) ||
+                (m->bump == RTPI_BUMP_IMAGE && m->bump_image >= t->scene->ntexs)) {
+                st = bad(L, "a material names a missing texture", NULL);
+                break;
+            }
+        }
+    }
+    if (st != RTP_OK) {
+        rtp_tree_destroy(t);
+        return st;
+    }
+    *out = t;
+    return RTP_OK;
+}
+
 rtp_status rtp_tree_read_memory(const void *data, size_t size, const char *name,
                                 const rtp_allocator *alloc, rtp_tree **out,
                                 rtp_error *err)
@@ -1186,11 +1347,8 @@ rtp_status rtp_tree_read_memory(const void *data, size_t size, const char *name,
     rtp_allocator a;
     loader L;
     rd r;
-    rtp_tree *t;
     rtp_status st = RTP_OK;
     unsigned seen = 0;
-    static const char *const required[] = {"HEAD", "SCEN", "MATL", "LITE", "GEOM", "TREE"};
-    size_t i;
 
     if (!out || (!data && size))
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_read: NULL argument");
@@ -1205,31 +1363,18 @@ rtp_status rtp_tree_read_memory(const void *data, size_t size, const char *name,
     r.n = size;
     r.at = 0;
     r.bad = 0;
-    if (size < 8 || memcmp(data, signature, 8) != 0) {
-        if (size >= 8 && memcmp(data, "\x89PNG", 4) == 0)
-            return bad(&L, "not an rtp tree file (it is a PNG image)", NULL);
-        if (size >= 4 && memcmp(data, signature, size < 8 ? size : 8) == 0)
-            return bad(&L, "truncated: the file ends inside its signature", NULL);
-        return bad(&L, "not an rtp tree file (wrong signature)", NULL);
-    }
+    r.src = NULL;
+    if ((st = check_signature(&L, r.p, size)) != RTP_OK)
+        return st;
     r.at = 8;
-    t = (rtp_tree *)rtpi_calloc_array(&a, 1, sizeof *t);
-    if (!t)
-        return rtpi_error(err, RTP_ERR_NOMEM, name, 0, 0, "out of memory");
-    t->alloc = a;
-    L.t = t;
-    L.a = &t->alloc;
-    if (rtpi_scene_create(&a, &t->scene) != RTP_OK) {
-        rtp_tree_destroy(t);
-        return rtpi_error(err, RTP_ERR_NOMEM, name, 0, 0, "out of memory");
-    }
-    L.s = t->scene;
+    if ((st = tree_begin(&L, &a)) != RTP_OK)
+        return st;
     for (;;) {
         char tag[5];
         uint64_t len;
         size_t start = r.at;
         rd body;
-        int idx = -1;
+        int idx;
         L.section = NULL;
         if (!need(&r, 12)) {
             st = bad(&L, "truncated: missing sections or END", NULL);
@@ -1248,6 +1393,7 @@ rtp_status rtp_tree_read_memory(const void *data, size_t size, const char *name,
         body.n = (size_t)len;
         body.at = 0;
         body.bad = 0;
+        body.src = NULL;
         r.at += (size_t)len;
         if (crc32_update(0, r.p + start, r.at - start) != get_u32(&r)) {
             st = bad(&L, "checksum mismatch: the file is corrupt", NULL);
@@ -1255,64 +1401,169 @@ rtp_status rtp_tree_read_memory(const void *data, size_t size, const char *name,
         }
         if (strcmp(tag, "END ") == 0)
             break;
-        for (i = 0; i < sizeof required / sizeof *required; i++)
-            if (strcmp(tag, required[i]) == 0)
-                idx = (int)i;
-        if (idx < 0 && strcmp(tag, "TEXR") == 0)
-            idx = 6;
-        if (idx < 0) {
-            /* lower-case first letter: an extension a reader may skip */
-            if (tag[0] >= 'a' && tag[0] <= 'z')
-                continue;
-            st = bad(&L, "unknown required section (written by a newer rtp?)", NULL);
+        if ((st = section_index(&L, tag, &seen, &idx)) != RTP_OK)
             break;
-        }
-        if (seen & (1u << idx)) {
-            st = bad(&L, "repeated section", NULL);
-            break;
-        }
-        /* sections come in order: each needs what the earlier ones hold */
-        if ((idx == 0 && seen) || (idx > 0 && !(seen & 1u)) ||
-            (idx == 4 && !(seen & (1u << 2))) || (idx == 5 && !(seen & (1u << 4))) ||
-            (idx == 5 && !(seen & (1u << 3))) || (idx == 6 && (seen & (1u << 5)))) {
-            st = bad(&L, "section out of order", NULL);
-            break;
-        }
-        seen |= 1u << idx;
-        switch (idx) {
-        case 0: st = read_head(&L, &body); break;
-        case 1: st = read_scen(&L, &body); break;
-        case 2: st = read_matl(&L, &body); break;
-        case 3: st = read_lite(&L, &body); break;
-        case 4: st = read_geom(&L, &body); break;
-        case 5: st = read_tree(&L, &body); break;
-        default: st = read_texr(&L, &body); break;
-        }
-        if (st == RTP_OK && body.at != body.n)
-            st = bad(&L, "unexpected bytes at the end", NULL);
-        if (st != RTP_OK)
+        if (idx >= 0 && (st = parse_section(&L, idx, &body)) != RTP_OK)
             break;
     }
-    L.section = NULL;
-    t->nlights0 = t->scene->nlights;
-    if (st == RTP_OK && (seen & 0x3fu) != 0x3fu)
-        st = bad(&L, "a required section is missing", NULL);
-    if (st == RTP_OK) {
-        for (i = 0; i < t->scene->nmats; i++) {
-            const rtpi_material *m = &t->scene->mats[i];
-            if ((m->tex == RTPI_TEX_IMAGE && m->tex_image >= t->scene->ntexs) ||
-                (m->bump == RTPI_BUMP_IMAGE && m->bump_image >= t->scene->ntexs)) {
-                st = bad(&L, "a material names a missing texture", NULL);
+    return tree_end(&L, seen, st, out);
+}
+
+/* rtp_tree_read_memory for a regular file of `size` bytes, read section
+   by section: each section but the trees' whole (the scene's, small
+   beside them), the trees' through a window of RD_WINDOW bytes, its
+   nodes decoded as they arrive.  The file's bytes and the tree's nodes
+   are then never in memory at once: a tree of 64 MB (mount_s6 at
+   1024x1024) read into memory first took 135 MB, and on the development
+   VM memory touched for the first time costs 1-2.7 ms a MiB (the kernel
+   zeroing it while the host backs it: 60% of reading that tree).  Every
+   error is the one rtp_tree_read_memory gives for those bytes: a section
+   is checked against the file's size before it is read, and the trees'
+   CRC, summed as they pass, is compared before any error of their
+   contents is reported. */
+#define RD_WINDOW ((size_t)256 << 10)
+
+static rtp_status tree_read_stream(FILE *f, uint64_t size, const char *name,
+                                   const rtp_allocator *alloc, rtp_tree **out, rtp_error *err)
+{
+    rtp_allocator a;
+    loader L;
+    rtp_status st = RTP_OK;
+    unsigned seen = 0;
+    uint64_t pos;
+    unsigned char head[12], *sec = NULL;
+    rd_src *src = NULL;
+
+    rtpi_allocator_init(&a, alloc);
+    memset(&L, 0, sizeof L);
+    L.name = name;
+    L.err = err;
+    {
+        size_t n = size < 8 ? (size_t)size : 8;
+        if (fread(head, 1, n, f) != n)
+            return rtpi_error(err, RTP_ERR_IO, name, 0, 0, "read error");
+        if ((st = check_signature(&L, head, (size_t)size)) != RTP_OK)
+            return st;
+    }
+    pos = 8;
+    if ((st = tree_begin(&L, &a)) != RTP_OK)
+        return st;
+    for (;;) {
+        char tag[5];
+        uint64_t len;
+        uint32_t crc, want;
+        rd body;
+        int idx;
+        L.section = NULL;
+        if (size - pos < 12) {
+            st = bad(&L, "truncated: missing sections or END", NULL);
+            break;
+        }
+        if (fread(head, 1, 12, f) != 12) {
+            st = rtpi_error(err, RTP_ERR_IO, name, 0, 0, "read error");
+            break;
+        }
+        pos += 12;
+        memcpy(tag, head, 4);
+        tag[4] = '\0';
+        body.p = head + 4;
+        body.n = 8;
+        body.at = 0;
+        body.bad = 0;
+        body.src = NULL;
+        len = get_u64(&body);
+        L.section = tag;
+        if (len > size - pos || size - pos - len < 4) {
+            st = bad(&L, "truncated: section longer than the file", NULL);
+            break;
+        }
+        crc = crc32_update(0, head, 12);
+        body.p = NULL;
+        body.n = body.at = 0;
+        if (strcmp(tag, "TREE") == 0) {
+            /* through the window; the order checked now, the CRC once
+               every byte has passed, and whatever comes first in
+               rtp_tree_read_memory's order reported then */
+            rtp_error perr;
+            rtp_status ost, pst = RTP_OK;
+            if (!src && !(src = (rd_src *)rtpi_malloc(&a, sizeof *src + RD_WINDOW))) {
+                st = rtpi_error(err, RTP_ERR_NOMEM, name, 0, 0, "out of memory reading tree file");
                 break;
             }
+            src->f = f;
+            src->buf = (unsigned char *)(src + 1);
+            src->cap = RD_WINDOW;
+            src->left = len;
+            src->crc = crc;
+            src->short_read = 0;
+            crc_slices(src->slices);
+            body.src = src;
+            L.err = &perr;
+            ost = section_index(&L, tag, &seen, &idx);
+            if (ost == RTP_OK && idx >= 0)
+                pst = parse_section(&L, idx, &body);
+            L.err = err;
+            /* the rest of the section's bytes, for their CRC */
+            while (src->left && !src->short_read) {
+                body.at = body.n;
+                refill(&body, 1);
+            }
+            pos += len;
+            crc = src->crc;
+            if (src->short_read || fread(head, 1, 4, f) != 4) {
+                st = ferror(f) ? rtpi_error(err, RTP_ERR_IO, name, 0, 0, "read error")
+                               : bad(&L, "truncated: section longer than the file", NULL);
+                break;
+            }
+            pos += 4;
+            body.p = head;
+            body.n = 4;
+            body.at = 0;
+            body.bad = 0;
+            body.src = NULL;
+            if (crc != get_u32(&body)) {
+                st = bad(&L, "checksum mismatch: the file is corrupt", NULL);
+                break;
+            }
+            if (ost != RTP_OK || pst != RTP_OK) {
+                if (err)
+                    *err = perr;
+                st = ost != RTP_OK ? ost : pst;
+                break;
+            }
+            continue;
         }
+        /* the whole section and its CRC */
+        rtpi_free(&a, sec);
+        if (!(sec = (unsigned char *)rtpi_malloc(&a, (size_t)len + 4))) {
+            st = rtpi_error(err, RTP_ERR_NOMEM, name, 0, 0, "out of memory reading tree file");
+            break;
+        }
+        if (fread(sec, 1, (size_t)len + 4, f) != (size_t)len + 4) {
+            st = ferror(f) ? rtpi_error(err, RTP_ERR_IO, name, 0, 0, "read error")
+                           : bad(&L, "truncated: section longer than the file", NULL);
+            break;
+        }
+        pos += len + 4;
+        crc = crc32_update(crc, sec, (size_t)len);
+        want = (uint32_t)sec[len] | (uint32_t)sec[len + 1] << 8 | (uint32_t)sec[len + 2] << 16 |
+               (uint32_t)sec[len + 3] << 24;
+        if (crc != want) {
+            st = bad(&L, "checksum mismatch: the file is corrupt", NULL);
+            break;
+        }
+        if (strcmp(tag, "END ") == 0)
+            break;
+        body.p = sec;
+        body.n = (size_t)len;
+        if ((st = section_index(&L, tag, &seen, &idx)) != RTP_OK)
+            break;
+        if (idx >= 0 && (st = parse_section(&L, idx, &body)) != RTP_OK)
+            break;
     }
-    if (st != RTP_OK) {
-        rtp_tree_destroy(t);
-        return st;
-    }
-    *out = t;
-    return RTP_OK;
+    rtpi_free(&a, sec);
+    rtpi_free(&a, src);
+    return tree_end(&L, seen, st, out);
 }
 
 rtp_status rtp_tree_read(const char *path, const rtp_allocator *alloc, rtp_tree **out,
@@ -1324,7 +1575,20 @@ rtp_status rtp_tree_read(const char *path, const rtp_allocator *alloc, rtp_tree 
     rtp_status st;
     if (!path || !out)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_read: NULL argument");
+    *out = NULL;
     rtpi_allocator_init(&a, alloc);
+    if (strcmp(path, "-") != 0) {
+        /* a regular file whose size is known: read as it is parsed */
+        FILE *f = fopen(path, "rb");
+        struct stat sb;
+        if (f && fstat(fileno(f), &sb) == 0 && S_ISREG(sb.st_mode) && sb.st_size >= 0) {
+            st = tree_read_stream(f, (uint64_t)sb.st_size, path, &a, out, err);
+            fclose(f);
+            return st;
+        }
+        if (f)
+            fclose(f); /* (rtpi_read_file names what it is) */
+    }
     st = rtpi_read_file(&a, path, &text, &size, err);
     if (st != RTP_OK)
         return st;

@@ -1417,6 +1417,35 @@ out:
     return data;
 }
 
+/* rtp_tree_read of a regular file (read as it is parsed, the trees'
+   section through a window: treefile.c) against rtp_tree_read_memory of
+   the same bytes: the same status and message, or both a tree.  0 when
+   they agree. */
+static int file_disagrees(const unsigned char *data, size_t len, const char *file)
+{
+    rtp_tree *a = NULL, *b = NULL;
+    rtp_error ea, eb;
+    rtp_status sa, sb;
+    FILE *f = fopen(file, "wb");
+    int bad;
+    if (!f || fwrite(data, 1, len, f) != len) {
+        if (f)
+            fclose(f);
+        return 1;
+    }
+    fclose(f);
+    memset(&ea, 0, sizeof ea);
+    memset(&eb, 0, sizeof eb);
+    sa = rtp_tree_read(file, NULL, &a, &ea);
+    sb = rtp_tree_read_memory(data, len, file, NULL, &b, &eb);
+    bad = sa != sb || (sa != RTP_OK && (strcmp(ea.message, eb.message) != 0 ||
+                                        strcmp(ea.file, eb.file) != 0 || a || b)) ||
+          (sa == RTP_OK && (!a || !b));
+    rtp_tree_destroy(a);
+    rtp_tree_destroy(b);
+    return bad;
+}
+
 static void test_truncated_every_length(void)
 {
     size_t n, len, failures = 0;
@@ -1437,6 +1466,16 @@ static void test_truncated_every_length(void)
         rtp_tree_destroy(t);
     }
     CHECK_MSG(failures == 0, "%zu truncations not refused cleanly", failures);
+    /* the same from a file, with the same message */
+    {
+        char file[512];
+        snprintf(file, sizeof file, "%s/rtp-trunc-%d.rtp", tmpdir(), (int)getpid());
+        failures = 0;
+        for (len = 0; len <= n; len++)
+            failures += (size_t)file_disagrees(data, len, file);
+        CHECK_MSG(failures == 0, "%zu truncated files read otherwise than in memory", failures);
+        remove(file);
+    }
     free(data);
 }
 
@@ -1462,7 +1501,87 @@ static void test_flipped_bits(void)
         }
     }
     CHECK_MSG(failures == 0, "%zu bit flips not detected", failures);
+    /* from a file: a bit of each byte (they turn in turn) */
+    {
+        char file[512];
+        snprintf(file, sizeof file, "%s/rtp-flip-%d.rtp", tmpdir(), (int)getpid());
+        failures = 0;
+        for (i = 0; i < n; i++) {
+            data[i] ^= (unsigned char)(1u << (i % 8));
+            failures += (size_t)file_disagrees(data, n, file);
+            data[i] ^= (unsigned char)(1u << (i % 8));
+        }
+        CHECK_MSG(failures == 0, "%zu flipped files read otherwise than in memory", failures);
+        remove(file);
+    }
     free(data);
+}
+
+/* A tree whose nodes take many of the file reader's windows (256 KiB):
+   read from its file it evaluates to the very image the tree in memory
+   gives; cut inside its nodes, or with a bit flipped there, windows
+   beyond the first, the file gives the error the bytes in memory give. */
+static void test_file_windows(void)
+{
+    const char *text = "v from 0 -4 1 at 0 0 0.5 up 0 0 1 angle 40 hither 0.1 "
+                       "resolution 300 260\n"
+                       "l 2 -3 4\nl -2 -2 3 0.5 0.5 1\n"
+                       "f 0.8 0.8 0.8 0.7 0.3 20 0 1\n"
+                       "p 4 -3 -3 0 3 -3 0 3 3 0 -3 3 0\n"
+                       "f 1 0.3 0.3 0.5 0.4 50 0.5 1.4\ns 0 0 0.7 0.6\n"
+                       "f 0.3 1 0.3 0.6 0.2 10 0 1\nc 1.2 0.5 0 0.3 1.2 0.5 1 0.1\n";
+    rtp_scene *s = NULL;
+    rtp_tree *t = NULL, *back = NULL;
+    rtp_image *a = NULL, *b = NULL;
+    rtp_trace_options o;
+    rtp_tree_info ia, ib;
+    char file[512], cut[512];
+    unsigned char *data = NULL;
+    size_t n = 0, at;
+    FILE *f;
+    memset(&o, 0, sizeof o);
+    snprintf(file, sizeof file, "%s/rtp-win-%d.rtp", tmpdir(), (int)getpid());
+    snprintf(cut, sizeof cut, "%s/rtp-win-cut-%d.rtp", tmpdir(), (int)getpid());
+    CHECK(rtp_scene_load_memory(text, strlen(text), "win.nff", "nff", NULL, &s, NULL) == RTP_OK);
+    CHECK(s && rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
+    CHECK(t && rtp_tree_write(t, file, NULL, NULL) == RTP_OK);
+    CHECK(rtp_tree_read(file, NULL, &back, NULL) == RTP_OK);
+    if (!t || !back)
+        goto out;
+    rtp_tree_get_info(t, &ia);
+    rtp_tree_get_info(back, &ib);
+    CHECK(ia.nodes == ib.nodes && ia.nodes > 0);
+    CHECK(rtp_tree_eval(t, NULL, &a, NULL, NULL) == RTP_OK);
+    CHECK(rtp_tree_eval(back, NULL, &b, NULL, NULL) == RTP_OK);
+    CHECK(a && b && a->width == b->width && a->height == b->height &&
+          memcmp(a->pixels, b->pixels, (size_t)a->width * a->height * 3 * sizeof *a->pixels) == 0);
+    f = fopen(file, "rb");
+    if (f) {
+        data = (unsigned char *)malloc(16u << 20);
+        n = data ? fread(data, 1, 16u << 20, f) : 0;
+        fclose(f);
+    }
+    CHECK_MSG(n > (4u << 20) / 2, "file of %zu bytes: too small to take several windows", n);
+    if (!data || n < 4096)
+        goto out;
+    /* cuts and flips across the nodes: beyond several windows, at a
+       window's edge, and near the end */
+    for (at = n / 3; at < n; at += n / 7 + 4093) {
+        CHECK_MSG(!file_disagrees(data, at, cut), "cut at %zu of %zu", at, n);
+        data[at] ^= 0x10;
+        CHECK_MSG(!file_disagrees(data, n, cut), "bit flipped at %zu of %zu", at, n);
+        data[at] ^= 0x10;
+    }
+    CHECK(!file_disagrees(data, n, cut));
+out:
+    free(data);
+    remove(file);
+    remove(cut);
+    rtp_image_destroy(a);
+    rtp_image_destroy(b);
+    rtp_tree_destroy(back);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
 }
 
 /* Rewrites the HEAD section's major version and fixes its checksum, so
@@ -1505,6 +1624,7 @@ static void test_newer_version_and_foreign(void)
 int main(void)
 {
     RUN(test_identical_project_scenes);
+    RUN(test_file_windows);
     RUN(test_colour_edits);
     RUN(test_identical_many_lights);
     RUN(test_identical_teapot);
