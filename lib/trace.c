@@ -379,9 +379,11 @@ static int append_row(shared *sh, int y, const rtpi_cnode *nodes, const uint32_t
     size_t words = sh->shade.vis_words, k = (size_t)y * sh->gx, at = sh->tn;
     int x;
     /* Room for the rows to come at the rate so far, an eighth more:
-       doubling from small moved the nodes, tens of megabytes, many times
-       over (a realloc in the heap copies) and touched twice the pages
-       (mount_s6 at 1024x1024: 27,000 page faults, now 14,500). */
+       doubling from small copied the nodes, tens of megabytes, many times
+       over and touched twice the pages (mount_s6 at 1024x1024: 27,000
+       page faults, then 14,500).  With the default allocator a block past
+       1 MiB now grows by moving its pages (util.c), so this mostly saves
+       a user's allocator the copies. */
     size_t need = sh->tn + nn + 1, est = need / ((size_t)y + 1) * (size_t)sh->gy;
     est += est / 8;
     if (est < need)
