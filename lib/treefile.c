@@ -1423,7 +1423,39 @@ rtp_status rtp_tree_read_memory(const void *data, size_t size, const char *name,
    contents is reported. */
 #define RD_WINDOW ((size_t)256 << 10)
 
-static rtp_status tree_read_stream(FILE *f, uint64_t size, const char *name,
+/* A section's len bytes and its CRC's 4 into *sec (of *cap bytes, grown
+   as needed).  From a stream of unknown size (!known) they are read as
+   they come, so that a length no stream holds ends as a short read, not
+   as an allocation of that length.  @return 0, 1 when the file ends
+   first, 2 on a read error, 3 out of memory. */
+static int section_bytes(FILE *f, uint64_t len, int known, const rtp_allocator *a,
+                         unsigned char **sec, size_t *cap)
+{
+    size_t have = 0, want;
+    if (len > (uint64_t)((size_t)-1 - 4))
+        want = (size_t)-1; /* (more than any stream holds: a short read) */
+    else
+        want = (size_t)len + 4;
+    while (have < want) {
+        size_t step = want - have, got;
+        if (!known && step > (size_t)1 << 20 && step > have)
+            step = have > ((size_t)1 << 20) ? have : (size_t)1 << 20;
+        if (have + step > *cap) {
+            unsigned char *n = (unsigned char *)rtpi_realloc(a, *sec, have + step);
+            if (!n)
+                return 3;
+            *sec = n;
+            *cap = have + step;
+        }
+        got = fread(*sec + have, 1, step, f);
+        have += got;
+        if (got < step)
+            return ferror(f) ? 2 : 1;
+    }
+    return 0;
+}
+
+static rtp_status tree_read_stream(FILE *f, uint64_t size, int known, const char *name,
                                    const rtp_allocator *alloc, rtp_tree **out, rtp_error *err)
 {
     rtp_allocator a;
@@ -1432,6 +1464,7 @@ static rtp_status tree_read_stream(FILE *f, uint64_t size, const char *name,
     unsigned seen = 0;
     uint64_t pos;
     unsigned char head[12], *sec = NULL;
+    size_t sec_cap = 0;
     rd_src *src = NULL;
 
     rtpi_allocator_init(&a, alloc);
@@ -1439,10 +1472,12 @@ static rtp_status tree_read_stream(FILE *f, uint64_t size, const char *name,
     L.name = name;
     L.err = err;
     {
-        size_t n = size < 8 ? (size_t)size : 8;
-        if (fread(head, 1, n, f) != n)
+        /* (a stream's size: what it holds, once it holds fewer than 8) */
+        size_t n = known && size < 8 ? (size_t)size : 8, got = fread(head, 1, n, f);
+        if (ferror(f) || (known && got != n))
             return rtpi_error(err, RTP_ERR_IO, name, 0, 0, "read error");
-        if ((st = check_signature(&L, head, (size_t)size)) != RTP_OK)
+        if ((st = check_signature(&L, head, known ? (size_t)(size < 8 ? size : 8) : got)) !=
+            RTP_OK)
             return st;
     }
     pos = 8;
@@ -1455,12 +1490,9 @@ static rtp_status tree_read_stream(FILE *f, uint64_t size, const char *name,
         rd body;
         int idx;
         L.section = NULL;
-        if (size - pos < 12) {
-            st = bad(&L, "truncated: missing sections or END", NULL);
-            break;
-        }
-        if (fread(head, 1, 12, f) != 12) {
-            st = rtpi_error(err, RTP_ERR_IO, name, 0, 0, "read error");
+        if ((known && size - pos < 12) || fread(head, 1, 12, f) != 12) {
+            st = ferror(f) ? rtpi_error(err, RTP_ERR_IO, name, 0, 0, "read error")
+                           : bad(&L, "truncated: missing sections or END", NULL);
             break;
         }
         pos += 12;
@@ -1473,7 +1505,7 @@ static rtp_status tree_read_stream(FILE *f, uint64_t size, const char *name,
         body.src = NULL;
         len = get_u64(&body);
         L.section = tag;
-        if (len > size - pos || size - pos - len < 4) {
+        if (known && (len > size - pos || size - pos - len < 4)) {
             st = bad(&L, "truncated: section longer than the file", NULL);
             break;
         }
@@ -1534,15 +1566,15 @@ static rtp_status tree_read_stream(FILE *f, uint64_t size, const char *name,
             continue;
         }
         /* the whole section and its CRC */
-        rtpi_free(&a, sec);
-        if (!(sec = (unsigned char *)rtpi_malloc(&a, (size_t)len + 4))) {
-            st = rtpi_error(err, RTP_ERR_NOMEM, name, 0, 0, "out of memory reading tree file");
-            break;
-        }
-        if (fread(sec, 1, (size_t)len + 4, f) != (size_t)len + 4) {
-            st = ferror(f) ? rtpi_error(err, RTP_ERR_IO, name, 0, 0, "read error")
-                           : bad(&L, "truncated: section longer than the file", NULL);
-            break;
+        {
+            int r = section_bytes(f, len, known, &a, &sec, &sec_cap);
+            if (r) {
+                st = r == 1   ? bad(&L, "truncated: section longer than the file", NULL)
+                     : r == 2 ? rtpi_error(err, RTP_ERR_IO, name, 0, 0, "read error")
+                              : rtpi_error(err, RTP_ERR_NOMEM, name, 0, 0,
+                                           "out of memory reading tree file");
+                break;
+            }
         }
         pos += len + 4;
         crc = crc32_update(crc, sec, (size_t)len);
@@ -1570,29 +1602,34 @@ rtp_status rtp_tree_read(const char *path, const rtp_allocator *alloc, rtp_tree 
                          rtp_error *err)
 {
     rtp_allocator a;
-    char *text = NULL;
-    size_t size = 0;
     rtp_status st;
+    FILE *f;
+    struct stat sb;
+    int is_stdin, known = 0;
+    uint64_t size = 0;
     if (!path || !out)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_read: NULL argument");
     *out = NULL;
     rtpi_allocator_init(&a, alloc);
-    if (strcmp(path, "-") != 0) {
-        /* a regular file whose size is known: read as it is parsed */
-        FILE *f = fopen(path, "rb");
-        struct stat sb;
-        if (f && fstat(fileno(f), &sb) == 0 && S_ISREG(sb.st_mode) && sb.st_size >= 0) {
-            st = tree_read_stream(f, (uint64_t)sb.st_size, path, &a, out, err);
-            fclose(f);
-            return st;
+    is_stdin = strcmp(path, "-") == 0;
+    f = is_stdin ? stdin : fopen(path, "rb");
+    if (!f)
+        return rtpi_error(err, RTP_ERR_IO, path, 0, 0, "cannot open: %s", strerror(errno));
+    if (fstat(fileno(f), &sb) == 0) {
+        if (S_ISDIR(sb.st_mode)) {
+            if (!is_stdin)
+                fclose(f);
+            return rtpi_error(err, RTP_ERR_IO, path, 0, 0, "is a directory, not a file");
         }
-        if (f)
-            fclose(f); /* (rtpi_read_file names what it is) */
+        /* a regular file's size is known: each section is checked
+           against it before it is read (else a pipe's bytes as they come) */
+        if (S_ISREG(sb.st_mode) && sb.st_size >= 0 && !is_stdin) {
+            known = 1;
+            size = (uint64_t)sb.st_size;
+        }
     }
-    st = rtpi_read_file(&a, path, &text, &size, err);
-    if (st != RTP_OK)
-        return st;
-    st = rtp_tree_read_memory(text, size, path, &a, out, err);
-    rtpi_free(&a, text);
+    st = tree_read_stream(f, size, known, path, &a, out, err);
+    if (!is_stdin)
+        fclose(f);
     return st;
 }

@@ -7,8 +7,10 @@
 #include "internal.h"
 
 #include <math.h>
+#include <signal.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 static const char *tmpdir(void)
@@ -1426,8 +1428,10 @@ static int file_disagrees(const unsigned char *data, size_t len, const char *fil
     rtp_tree *a = NULL, *b = NULL;
     rtp_error ea, eb;
     rtp_status sa, sb;
-    FILE *f = fopen(file, "wb");
+    FILE *f;
     int bad;
+    remove(file); /* (not a FIFO left by fifo_disagrees: opening that blocks) */
+    f = fopen(file, "wb");
     if (!f || fwrite(data, 1, len, f) != len) {
         if (f)
             fclose(f);
@@ -1438,6 +1442,46 @@ static int file_disagrees(const unsigned char *data, size_t len, const char *fil
     memset(&eb, 0, sizeof eb);
     sa = rtp_tree_read(file, NULL, &a, &ea);
     sb = rtp_tree_read_memory(data, len, file, NULL, &b, &eb);
+    bad = sa != sb || (sa != RTP_OK && (strcmp(ea.message, eb.message) != 0 ||
+                                        strcmp(ea.file, eb.file) != 0 || a || b)) ||
+          (sa == RTP_OK && (!a || !b));
+    rtp_tree_destroy(a);
+    rtp_tree_destroy(b);
+    return bad;
+}
+
+/* The same through a FIFO a child process writes (a pipe's bytes as they
+   come, its size unknown: rtp trace -o - | rtp reeval -). */
+static int fifo_disagrees(const unsigned char *data, size_t len, const char *fifo)
+{
+    rtp_tree *a = NULL, *b = NULL;
+    rtp_error ea, eb;
+    rtp_status sa, sb;
+    pid_t pid;
+    int bad, status;
+    remove(fifo);
+    if (mkfifo(fifo, 0600) != 0)
+        return 1;
+    fflush(NULL);
+    pid = fork();
+    if (pid < 0)
+        return 1;
+    if (pid == 0) {
+        /* (the reader may stop early: its error needs no more bytes) */
+        FILE *w;
+        signal(SIGPIPE, SIG_DFL);
+        w = fopen(fifo, "wb");
+        if (w) {
+            fwrite(data, 1, len, w);
+            fclose(w);
+        }
+        _exit(0);
+    }
+    memset(&ea, 0, sizeof ea);
+    memset(&eb, 0, sizeof eb);
+    sa = rtp_tree_read(fifo, NULL, &a, &ea);
+    waitpid(pid, &status, 0);
+    sb = rtp_tree_read_memory(data, len, fifo, NULL, &b, &eb);
     bad = sa != sb || (sa != RTP_OK && (strcmp(ea.message, eb.message) != 0 ||
                                         strcmp(ea.file, eb.file) != 0 || a || b)) ||
           (sa == RTP_OK && (!a || !b));
@@ -1474,6 +1518,15 @@ static void test_truncated_every_length(void)
         for (len = 0; len <= n; len++)
             failures += (size_t)file_disagrees(data, len, file);
         CHECK_MSG(failures == 0, "%zu truncated files read otherwise than in memory", failures);
+        remove(file);
+        /* through a pipe: every length to 64, then every 13th (a child
+           process each) */
+        snprintf(file, sizeof file, "%s/rtp-trunc-fifo-%d", tmpdir(), (int)getpid());
+        failures = 0;
+        for (len = 0; len <= n; len += len < 64 ? 1 : 13)
+            failures += (size_t)fifo_disagrees(data, len, file);
+        failures += (size_t)fifo_disagrees(data, n, file);
+        CHECK_MSG(failures == 0, "%zu truncated pipes read otherwise than in memory", failures);
         remove(file);
     }
     free(data);
@@ -1513,6 +1566,15 @@ static void test_flipped_bits(void)
         }
         CHECK_MSG(failures == 0, "%zu flipped files read otherwise than in memory", failures);
         remove(file);
+        snprintf(file, sizeof file, "%s/rtp-flip-fifo-%d", tmpdir(), (int)getpid());
+        failures = 0;
+        for (i = 0; i < n; i += 11) {
+            data[i] ^= (unsigned char)(1u << (i % 8));
+            failures += (size_t)fifo_disagrees(data, n, file);
+            data[i] ^= (unsigned char)(1u << (i % 8));
+        }
+        CHECK_MSG(failures == 0, "%zu flipped pipes read otherwise than in memory", failures);
+        remove(file);
     }
     free(data);
 }
@@ -1535,13 +1597,14 @@ static void test_file_windows(void)
     rtp_image *a = NULL, *b = NULL;
     rtp_trace_options o;
     rtp_tree_info ia, ib;
-    char file[512], cut[512];
+    char file[512], cut[512], fifo[512];
     unsigned char *data = NULL;
     size_t n = 0, at;
     FILE *f;
     memset(&o, 0, sizeof o);
     snprintf(file, sizeof file, "%s/rtp-win-%d.rtp", tmpdir(), (int)getpid());
     snprintf(cut, sizeof cut, "%s/rtp-win-cut-%d.rtp", tmpdir(), (int)getpid());
+    snprintf(fifo, sizeof fifo, "%s/rtp-win-fifo-%d", tmpdir(), (int)getpid());
     CHECK(rtp_scene_load_memory(text, strlen(text), "win.nff", "nff", NULL, &s, NULL) == RTP_OK);
     CHECK(s && rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
     CHECK(t && rtp_tree_write(t, file, NULL, NULL) == RTP_OK);
@@ -1570,13 +1633,17 @@ static void test_file_windows(void)
         CHECK_MSG(!file_disagrees(data, at, cut), "cut at %zu of %zu", at, n);
         data[at] ^= 0x10;
         CHECK_MSG(!file_disagrees(data, n, cut), "bit flipped at %zu of %zu", at, n);
+        CHECK_MSG(!fifo_disagrees(data, n, fifo), "bit flipped at %zu of %zu, piped", at, n);
         data[at] ^= 0x10;
+        CHECK_MSG(!fifo_disagrees(data, at, fifo), "cut at %zu of %zu, piped", at, n);
     }
     CHECK(!file_disagrees(data, n, cut));
+    CHECK(!fifo_disagrees(data, n, fifo));
 out:
     free(data);
     remove(file);
     remove(cut);
+    remove(fifo);
     rtp_image_destroy(a);
     rtp_image_destroy(b);
     rtp_tree_destroy(back);
