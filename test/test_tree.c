@@ -1419,29 +1419,22 @@ out:
     return data;
 }
 
-/* rtp_tree_read of a regular file (read as it is parsed, the trees'
-   section through a window: treefile.c) against rtp_tree_read_memory of
-   the same bytes: the same status and message, or both a tree.  0 when
-   they agree. */
-static int file_disagrees(const unsigned char *data, size_t len, const char *file)
+/* rtp_tree_read of path (a file read as it is parsed, the trees' section
+   through a window: treefile.c) against rtp_tree_read_memory of the same
+   bytes: the same status and message, or both a tree.  0 when they
+   agree.  writer: the child process feeding a FIFO at path, or 0. */
+static int read_disagrees(const char *path, const unsigned char *data, size_t len, pid_t writer)
 {
     rtp_tree *a = NULL, *b = NULL;
     rtp_error ea, eb;
     rtp_status sa, sb;
-    FILE *f;
-    int bad;
-    remove(file); /* (not a FIFO left by fifo_disagrees: opening that blocks) */
-    f = fopen(file, "wb");
-    if (!f || fwrite(data, 1, len, f) != len) {
-        if (f)
-            fclose(f);
-        return 1;
-    }
-    fclose(f);
+    int bad, status;
     memset(&ea, 0, sizeof ea);
     memset(&eb, 0, sizeof eb);
-    sa = rtp_tree_read(file, NULL, &a, &ea);
-    sb = rtp_tree_read_memory(data, len, file, NULL, &b, &eb);
+    sa = rtp_tree_read(path, NULL, &a, &ea);
+    if (writer > 0)
+        waitpid(writer, &status, 0);
+    sb = rtp_tree_read_memory(data, len, path, NULL, &b, &eb);
     bad = sa != sb || (sa != RTP_OK && (strcmp(ea.message, eb.message) != 0 ||
                                         strcmp(ea.file, eb.file) != 0 || a || b)) ||
           (sa == RTP_OK && (!a || !b));
@@ -1450,15 +1443,26 @@ static int file_disagrees(const unsigned char *data, size_t len, const char *fil
     return bad;
 }
 
+/* read_disagrees on the bytes written to a regular file. */
+static int file_disagrees(const unsigned char *data, size_t len, const char *file)
+{
+    FILE *f;
+    remove(file); /* (not a FIFO left by fifo_disagrees: opening that blocks) */
+    f = fopen(file, "wb");
+    if (!f || fwrite(data, 1, len, f) != len) {
+        if (f)
+            fclose(f);
+        return 1;
+    }
+    fclose(f);
+    return read_disagrees(file, data, len, 0);
+}
+
 /* The same through a FIFO a child process writes (a pipe's bytes as they
    come, its size unknown: rtp trace -o - | rtp reeval -). */
 static int fifo_disagrees(const unsigned char *data, size_t len, const char *fifo)
 {
-    rtp_tree *a = NULL, *b = NULL;
-    rtp_error ea, eb;
-    rtp_status sa, sb;
     pid_t pid;
-    int bad, status;
     remove(fifo);
     if (mkfifo(fifo, 0600) != 0)
         return 1;
@@ -1477,17 +1481,7 @@ static int fifo_disagrees(const unsigned char *data, size_t len, const char *fif
         }
         _exit(0);
     }
-    memset(&ea, 0, sizeof ea);
-    memset(&eb, 0, sizeof eb);
-    sa = rtp_tree_read(fifo, NULL, &a, &ea);
-    waitpid(pid, &status, 0);
-    sb = rtp_tree_read_memory(data, len, fifo, NULL, &b, &eb);
-    bad = sa != sb || (sa != RTP_OK && (strcmp(ea.message, eb.message) != 0 ||
-                                        strcmp(ea.file, eb.file) != 0 || a || b)) ||
-          (sa == RTP_OK && (!a || !b));
-    rtp_tree_destroy(a);
-    rtp_tree_destroy(b);
-    return bad;
+    return read_disagrees(fifo, data, len, pid);
 }
 
 static void test_truncated_every_length(void)
