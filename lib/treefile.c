@@ -608,9 +608,9 @@ rtp_status rtp_tree_write(const rtp_tree *t, const char *path,
 /* ------------------------------------------------------------ reading */
 
 /* A section's bytes as the parsers see them: all of them at p (a file
-   read into memory), or from a source, a window of the file at a time
-   (rd_src: the tree section of a file read from disk, which then never
-   holds the file's bytes and its nodes at once). */
+   in memory), or from a source, a window of the file at a time (rd_src:
+   the trees' section of a file or pipe rtp_tree_read reads, so that the
+   file's bytes and its nodes are never in memory at once). */
 typedef struct rd_src {
     FILE *f;
     unsigned char *buf;
@@ -1409,18 +1409,19 @@ rtp_status rtp_tree_read_memory(const void *data, size_t size, const char *name,
     return tree_end(&L, seen, st, out);
 }
 
-/* rtp_tree_read_memory for a regular file of `size` bytes, read section
-   by section: each section but the trees' whole (the scene's, small
-   beside them), the trees' through a window of RD_WINDOW bytes, its
-   nodes decoded as they arrive.  The file's bytes and the tree's nodes
+/* rtp_tree_read_memory for a stream: a regular file of `size` bytes
+   (known), or a pipe of a size not known, read section by section: each
+   section but the trees' whole (the scene's, small beside them), the
+   trees' through a window of RD_WINDOW bytes, its nodes decoded as they
+   arrive.  The file's bytes and the tree's nodes
    are then never in memory at once: a tree of 64 MB (mount_s6 at
    1024x1024) read into memory first took 135 MB, and on the development
    VM memory touched for the first time costs 1-2.7 ms a MiB (the kernel
    zeroing it while the host backs it: 60% of reading that tree).  Every
    error is the one rtp_tree_read_memory gives for those bytes: a section
-   is checked against the file's size before it is read, and the trees'
-   CRC, summed as they pass, is compared before any error of their
-   contents is reported. */
+   is checked against a file's size before it is read (a pipe's ending
+   early gives the same message), and the trees' CRC, summed as they
+   pass, is compared before any error of their contents is reported. */
 #define RD_WINDOW ((size_t)256 << 10)
 
 /* A section's len bytes and its CRC's 4 into *sec (of *cap bytes, grown
