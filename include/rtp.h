@@ -31,8 +31,11 @@
  *    once (rtp_trace only reads it); a tree keeps evaluation caches, so one
  *    tree is used by one thread at a time (options.threads parallelise one
  *    call).
- *  - Memory comes from an rtp_allocator (NULL means malloc/realloc/free);
- *    objects remember the allocator they were created with.
+ *  - Memory comes from an rtp_allocator (NULL means the library's own on
+ *    top of malloc/realloc/free, which on Linux also maps large growing
+ *    blocks itself: free what the library made only through it, e.g.
+ *    rtp_image_destroy); objects remember the allocator they were created
+ *    with.
  *  - Images are linear RGB floats, row-major, top row first.
  */
 #ifndef RTP_H
@@ -367,7 +370,10 @@ void rtp_tree_get_info(const rtp_tree *tree, rtp_tree_info *info);
 rtp_status rtp_tree_write(const rtp_tree *tree, const char *path,
                           unsigned long long *bytes, rtp_error *err);
 /** Reads and validates a tree file; "-" is stdin.  A truncated, corrupt,
- *  foreign or newer file gives RTP_ERR_FORMAT naming what is wrong. */
+ *  foreign or newer file gives RTP_ERR_FORMAT naming what is wrong (the
+ *  same error rtp_tree_read_memory gives for the same bytes).  The file is
+ *  parsed as it is read: its bytes are not held in memory beside the
+ *  tree. */
 rtp_status rtp_tree_read(const char *path, const rtp_allocator *alloc,
                          rtp_tree **out, rtp_error *err);
 rtp_status rtp_tree_read_memory(const void *data, size_t size,
