@@ -121,6 +121,19 @@ static char *map_aligned(size_t len)
     return a;
 }
 
+/* A block of size bytes (1 MiB or more) as a mapping of its own, or
+   NULL. */
+static void *map_block(size_t size)
+{
+    size_t len = big_len(size);
+    char *m = len ? map_aligned(len) : NULL;
+    if (!m)
+        return NULL;
+    hdr_of(m + RTPI_BIG_HDR)->maplen = len;
+    hdr_of(m + RTPI_BIG_HDR)->size = size;
+    return m + RTPI_BIG_HDR;
+}
+
 static void *default_malloc(void *user, size_t size)
 {
     blk_hdr *h;
@@ -181,12 +194,7 @@ static void *default_realloc(void *user, void *p, size_t size)
     if (size < RTPI_HUGE_MIN || !h->maplen) {
         /* into a block of the other kind (a heap block growing past 1 MiB
            becomes a mapping): a new block, the bytes both hold */
-        void *np = size < RTPI_HUGE_MIN ? default_malloc(user, size) : NULL;
-        if (size >= RTPI_HUGE_MIN && (len = big_len(size)) != 0 && (m = map_aligned(len))) {
-            np = m + RTPI_BIG_HDR;
-            hdr_of(np)->maplen = len;
-            hdr_of(np)->size = size;
-        }
+        void *np = size < RTPI_HUGE_MIN ? default_malloc(user, size) : map_block(size);
         if (!np)
             return NULL;
         memcpy(np, p, h->size < size ? h->size : size);
