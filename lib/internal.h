@@ -748,7 +748,9 @@ struct rtp_tree {
                               PK_ROWS): an edit reads them in one run */
     uint32_t *pk_nz;       /* those pixels (pixels at most, in the same
                               bands): the only ones an edit of the term
-                              changes; pk_nnz of them in all */
+                              changes; pk_nnz of them in all.  In pk_c's
+                              block, right after the entries pk_c holds
+                              (pk_build), not a block of its own */
     uint32_t *pk_seg;      /* per band: how many pk_nz and pk_c hold... */
     size_t *pk_off;        /* ...from this entry on */
     int pk_part;           /* the planes are made only where the material

@@ -40,7 +40,6 @@ void rtp_tree_destroy(rtp_tree *t)
     rtpi_free(&a, t->ev_cl);
     rtpi_free(&a, t->pk);
     rtpi_free(&a, t->pk_q);
-    rtpi_free(&a, t->pk_nz);
     rtpi_free(&a, t->pk_c);
     rtpi_free(&a, t->pk_seg);
     rtpi_free(&a, t->pk_off);
@@ -1371,6 +1370,11 @@ static int pk_build(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, in
                 }
             }
         }
+        /* the pixels' list right after the entries, so that the memory
+           the planes touch is one run */
+        t->pk_nz = (uint32_t *)(void *)(t->pk_c + 6 * off);
+    } else {
+        t->pk_nz = (uint32_t *)(void *)(t->pk_c + 6 * (size_t)t->width * (size_t)t->height);
     }
     rtpi_parallel_rows(nb, nthreads, ctx, part ? pk_img_chunk : pk_build_chunk, NULL, NULL);
     for (i = 0; i < nthreads; i++) {
@@ -1710,7 +1714,6 @@ static void drop_caches(rtp_tree *t)
     rtpi_free(&t->alloc, t->ev_cl);
     rtpi_free(&t->alloc, t->pk);
     rtpi_free(&t->alloc, t->pk_q);
-    rtpi_free(&t->alloc, t->pk_nz);
     rtpi_free(&t->alloc, t->pk_c);
     rtpi_free(&t->alloc, t->pk_seg);
     rtpi_free(&t->alloc, t->pk_off);
@@ -1852,17 +1855,21 @@ static void pk_apply(rtp_tree *t, void *const *ctx, int nthreads, int sparse,
     }
 }
 
-/* The planes (and q for a material), unless they are there. */
-static int pk_alloc(rtp_tree *t, int q)
+/* The planes' memory, unless it is there: pk_c's block (pk_nz in it),
+   and with `part` 0 (every pixel's planes: pk_build_chunk) P of the
+   other pixels (pk) and q of every sample (pk_q); with `part` (only the
+   material's pixels: pk_img_chunk) q by list place where a pixel has a
+   sample of its own.  Only what the path uses: a block made and not
+   used still costs a fault as it is made, and its first use another
+   (tetra_s6 at 512, a material's first kd edit made 13 MB and used 1.5).
+   1 if it is there. */
+static int pk_alloc(rtp_tree *t, int part)
 {
     size_t np = (size_t)t->width * t->height;
-    if (!t->pk)
-        t->pk = (float *)rtpi_malloc_array(&t->alloc, np, 3 * sizeof *t->pk);
-    if (t->pk && !t->pk_c)
-        t->pk_c = (float *)rtpi_malloc_array(&t->alloc, np, 6 * sizeof *t->pk_c);
-    if (t->pk_c && !t->pk_nz)
-        t->pk_nz = (uint32_t *)rtpi_malloc_array(&t->alloc, np, sizeof *t->pk_nz);
-    if (t->pk_nz && !t->pk_seg)
+    if (!t->pk_c)
+        t->pk_c = (float *)rtpi_malloc_array(&t->alloc, np,
+                                             6 * sizeof *t->pk_c + sizeof *t->pk_nz);
+    if (t->pk_c && !t->pk_seg)
         t->pk_seg = (uint32_t *)rtpi_malloc_array(
             &t->alloc, (size_t)(t->height + PK_ROWS - 1) / PK_ROWS + 1, sizeof *t->pk_seg);
     if (t->pk_seg && !t->pk_off)
@@ -1870,12 +1877,14 @@ static int pk_alloc(rtp_tree *t, int q)
             &t->alloc, (size_t)(t->height + PK_ROWS - 1) / PK_ROWS + 1, sizeof *t->pk_off);
     if (!t->pk_off)
         return 0;
+    if (!part && !t->pk)
+        t->pk = (float *)rtpi_malloc_array(&t->alloc, np, 3 * sizeof *t->pk);
     /* (one more: q_by_list's entries start at 1, and a list may hold
        every sample) */
-    if (q && t->pk && !t->pk_q)
+    if ((!part || !t->spd) && !t->pk_q)
         t->pk_q = (float *)rtpi_malloc_array(&t->alloc, (size_t)t->nx * t->ny + 1,
                                              3 * sizeof *t->pk_q);
-    return t->pk && (!q || t->pk_q); /* else: the full combine needs no more memory */
+    return (part || t->pk) && ((part && t->spd) || t->pk_q);
 }
 
 /* May the one-term path make this image for a material edit?  Yes when
@@ -1913,7 +1922,7 @@ static int mat_term(rtp_tree *t, const double *cv, size_t nl, uint32_t *mat)
         return 0;
     if (t->pk_term != (int)(2 + nl + *mat) + 1)
         t->pk_term = 0;
-    return pk_alloc(t, 1);
+    return 1;
 }
 
 /* ------------------------------------------------------ colour planes
@@ -2772,7 +2781,6 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                 e[i].mat = mt;
                 memcpy(e[i].xold, xold, sizeof xold);
                 e[i].x = xnew;
-                e[i].kp = t->pk_q;
                 e[i].kstride = 3;
                 e[i].pixels = img->pixels;
                 e[i].list = t->mat_samples + t->mat_start[mt];
@@ -2787,19 +2795,25 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                    material's P + K x, whose other pixels show that
                    material as last edited) gets every pixel's planes
                    and is written whole. */
-                int part = sparse && t->last_exact;
-                if (!part) {
+                int part = sparse && t->last_exact, mem = pk_alloc(t, part);
+                if (!part)
                     sparse = 0;
-                    memset(t->pk_q, 0, ns * 3 * sizeof *t->pk_q);
+                t->pk_term = 0; /* (until the planes are made) */
+                if (mem) {
+                    if (!part)
+                        memset(t->pk_q, 0, ns * 3 * sizeof *t->pk_q);
+                    for (i = 0; i < nthreads; i++) {
+                        e[i].q_by_list = part;
+                        e[i].kp = t->pk_q;
+                    }
+                    /* (with corner samples pk_img_chunk makes q itself,
+                       band by band) */
+                    if (!part || !t->spd)
+                        rtpi_parallel_rows((int)((e[0].nlist + 255) / 256), nthreads, ctx,
+                                           pk_q_chunk, NULL, NULL);
                 }
-                for (i = 0; i < nthreads; i++)
-                    e[i].q_by_list = part;
-                /* (with corner samples pk_img_chunk makes q itself, band
-                   by band) */
-                if (!part || !t->spd)
-                    rtpi_parallel_rows((int)((e[0].nlist + 255) / 256), nthreads, ctx,
-                                       pk_q_chunk, NULL, NULL);
-                if (pk_build(t, e, ctx, nthreads, part)) {
+                /* (no memory for them: the full combine needs none) */
+                if (mem && pk_build(t, e, ctx, nthreads, part)) {
                     t->pk_term = (int)(2 + nl + mt) + 1;
                     t->pk_part = part;
                     applied = part;
