@@ -756,6 +756,8 @@ struct rtp_tree {
     int pk_part;           /* the planes are made only where the material
                               reaches (pk holds P nowhere else) */
     size_t pk_nnz;
+    size_t pk_cap;         /* entries pk_c's block has room for (pk_build
+                              makes it as large as the planes need) */
     /* colour planes (tree.c: cp_*): an image for other colours of the
        terms (background, ambient, lights) is S + sum K_d (c_d - cS_d) */
     float *cp_s;           /* pixels * 3: S, the full path's image for... */

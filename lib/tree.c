@@ -578,10 +578,9 @@ typedef struct eval_ctx {
                                  sample it combined (t->ev_mark) */
     unsigned long long written; /* mark_row: pixels it wrote */
     double *mv_rest;          /* light_row (may be NULL): t->mv_rest */
-    int q_by_list;            /* pk_q_chunk: q at 1 + the sample's place in the
-                                 list (pk_img_pixels') */
     size_t rest_bytes;
-    float *qgrid;             /* pk_img_chunk: a band's q, 0 between uses */
+    float *qgrid;             /* pk_img_chunk: a band's q (corner samples:
+                                 in a grid of its rows, 0 between uses) */
     double kmax[3];           /* cp_plane_chunk: largest |K| per channel */
 } eval_ctx;
 
@@ -1128,8 +1127,8 @@ static size_t pk_img_pixels(const float *kq, const uint32_t *pix, size_t m, cons
 /* q of the edited material's listed samples e->list[i0 .. i1) (i0 < i1),
    from its own nodes (rtpi_nodes_diffuse: rtpi_sample_diffuse bit for
    bit), each into out + 3 (k - base) for sample k, or with by_list into
-   out + 3 (1 + i) by its place i in the list.  (Inlined: pk_img_chunk
-   calls it for a band's samples, pk_q_chunk for a chunk of the list.) */
+   out + 3 (i - i0), one after another.  (Inlined: pk_img_chunk calls it
+   for a band's samples, pk_q_chunk for a chunk of the list.) */
 static RTPI_FORCE_INLINE void listed_q(const eval_ctx *e, size_t i0, size_t i1, float *out,
                                        size_t base, int by_list)
 {
@@ -1141,7 +1140,7 @@ static RTPI_FORCE_INLINE void listed_q(const eval_ctx *e, size_t i0, size_t i1, 
     for (i = i0; i < i1; i++) {
         size_t k = e->list[i], b = (size_t)t->start[k + 1], j0 = j;
         double q[3];
-        float *o = out + 3 * (by_list ? i + 1 : k - base);
+        float *o = out + 3 * (by_list ? i - i0 : k - base);
         /* (a listed sample has a node of the material at least: mn[j]
            is its first) */
         do
@@ -1196,7 +1195,7 @@ static int pk_img_chunk(void *ctx, int chunk)
     rtp_tree *t = e->t;
     size_t w = (size_t)t->width, nx = (size_t)t->nx, n = 0, i, lo, hi;
     int y0 = chunk * PK_ROWS, y1 = y0 + PK_ROWS, y, c, spd = t->spd;
-    const float *img = e->pixels, *pq = t->pk_q + 3; /* (pk_q_chunk's q_by_list) */
+    const float *img = e->pixels;
     const double xo[3] = {e->xold[0], e->xold[1], e->xold[2]};
     float *pc;
     uint32_t bd[2] = {0, 0}; /* bd: pk_img_one's */
@@ -1206,12 +1205,17 @@ static int pk_img_chunk(void *ctx, int chunk)
         y1 = t->height;
     if (!spd) {
         /* a pixel of its own per sample: the band's listed samples are
-           its pixels, in order, with their q as K (no map of them) */
+           its pixels, in order, with their q as K (no map of them), made
+           here for the band (made for the whole list first, they were
+           12 bytes a sample more memory, fresh: mount_s6 at 1024x1024,
+           8 of the 24 MB the edit touched) */
         pc = t->pk_c + 6 * t->pk_off[chunk];
         nz = t->pk_nz + t->pk_off[chunk];
         lo = lower_bound(e->list, e->nlist, (size_t)y0 * w);
         hi = lower_bound(e->list, e->nlist, (size_t)y1 * w);
-        n = pk_img_pixels(pq + 3 * lo, e->list + lo, hi - lo, img, xo, pc, nz, bd);
+        if (lo < hi)
+            listed_q(e, lo, hi, e->qgrid, 0, 1);
+        n = pk_img_pixels(e->qgrid, e->list + lo, hi - lo, img, xo, pc, nz, bd);
         goto check;
     }
     pc = t->pk_c + 6 * t->pk_off[chunk];
@@ -1314,10 +1318,12 @@ check:
 static int pk_build(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, int part)
 {
     int i, nb = (t->height + PK_ROWS - 1) / PK_ROWS, ok = 1;
-    /* two sample rows' rest, or with `part` and corner samples a band's
-       grid of q, all 0 (a pixel of its own per sample needs neither) */
+    size_t off; /* the planes' entries */
+    /* two sample rows' rest, or with `part` a band's q: with corner
+       samples a grid of its sample rows, all 0; a pixel of its own per
+       sample, its listed samples' one after another */
     size_t nx = (size_t)t->nx, bytes = 6 * nx * sizeof(float);
-    for (i = 0; part && t->spd && i < nthreads; i++)
+    for (i = 0; part && i < nthreads; i++)
         if (!e[i].qgrid &&
             !(e[i].qgrid = (float *)rtpi_calloc_array(&t->alloc, (PK_ROWS + 1) * nx,
                                                        3 * sizeof(float)))) {
@@ -1343,7 +1349,7 @@ static int pk_build(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, in
            at 1024x1024, 20% slower).  A pixel of its own per sample: the
            band's listed samples bound its entries; corner samples: the
            spans of its rows (pk_img_span). */
-        size_t off = 0;
+        off = 0;
         if (!t->spd) {
             size_t w = (size_t)t->width, lo = 0;
             for (i = 0; i < nb; i++) {
@@ -1370,12 +1376,24 @@ static int pk_build(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, in
                 }
             }
         }
-        /* the pixels' list right after the entries, so that the memory
-           the planes touch is one run */
-        t->pk_nz = (uint32_t *)(void *)(t->pk_c + 6 * off);
     } else {
-        t->pk_nz = (uint32_t *)(void *)(t->pk_c + 6 * (size_t)t->width * (size_t)t->height);
+        off = (size_t)t->width * (size_t)t->height;
     }
+    /* a block as large as these planes need (a material's alone: a block
+       for every pixel, made fresh each time, cost mount_s6 at 1024x1024
+       a 29 MB mapping where 8 did, which no freed memory could serve),
+       the pixels' list right after the entries: the memory the planes
+       touch is one run */
+    if (off > t->pk_cap || !t->pk_c) {
+        rtpi_free(&t->alloc, t->pk_c);
+        t->pk_cap = 0;
+        t->pk_c = (float *)rtpi_malloc_array(&t->alloc, off ? off : 1,
+                                             6 * sizeof *t->pk_c + sizeof *t->pk_nz);
+        if (!t->pk_c)
+            return 0; /* (the full path needs no more memory) */
+        t->pk_cap = off;
+    }
+    t->pk_nz = (uint32_t *)(void *)(t->pk_c + 6 * off);
     rtpi_parallel_rows(nb, nthreads, ctx, part ? pk_img_chunk : pk_build_chunk, NULL, NULL);
     for (i = 0; i < nthreads; i++) {
         ok &= !e[i].nonfinite;
@@ -1395,9 +1413,8 @@ static int pk_q_chunk(void *ctx, int chunk)
     size_t i = (size_t)chunk * e->chunk, end = i + e->chunk;
     if (end > e->nlist)
         end = e->nlist;
-    /* (pk_img_pixels reads q by the sample's place in the list) */
     if (i < end)
-        listed_q(e, i, end, e->t->pk_q, 0, e->q_by_list);
+        listed_q(e, i, end, e->t->pk_q, 0, 0);
     return 0;
 }
 
@@ -1732,6 +1749,7 @@ static void drop_caches(rtp_tree *t)
     t->hl_mat = 0;
     t->pk_nz = NULL;
     t->pk_c = NULL;
+    t->pk_cap = 0;
     t->pk_seg = NULL;
     t->pk_off = NULL;
     t->ev_cl = NULL;
@@ -1855,21 +1873,18 @@ static void pk_apply(rtp_tree *t, void *const *ctx, int nthreads, int sparse,
     }
 }
 
-/* The planes' memory, unless it is there: pk_c's block (pk_nz in it),
-   and with `part` 0 (every pixel's planes: pk_build_chunk) P of the
-   other pixels (pk) and q of every sample (pk_q); with `part` (only the
-   material's pixels: pk_img_chunk) q by list place where a pixel has a
-   sample of its own.  Only what the path uses: a block made and not
-   used still costs a fault as it is made, and its first use another
-   (tetra_s6 at 512, a material's first kd edit made 13 MB and used 1.5).
-   1 if it is there. */
+/* The planes' memory but pk_c's block (pk_build makes that), unless it
+   is there: the bands' counts and offsets, and with `part` 0 (every
+   pixel's planes: pk_build_chunk) P of the other pixels (pk) and q of
+   every sample (pk_q); `part` (only the material's pixels: pk_img_chunk)
+   needs neither.  Only what the path uses: a block made and not used
+   still costs a fault as it is made, and its first use another
+   (tetra_s6 at 512, a material's first kd edit made 13 MB and used
+   1.5).  1 if it is there. */
 static int pk_alloc(rtp_tree *t, int part)
 {
     size_t np = (size_t)t->width * t->height;
-    if (!t->pk_c)
-        t->pk_c = (float *)rtpi_malloc_array(&t->alloc, np,
-                                             6 * sizeof *t->pk_c + sizeof *t->pk_nz);
-    if (t->pk_c && !t->pk_seg)
+    if (!t->pk_seg)
         t->pk_seg = (uint32_t *)rtpi_malloc_array(
             &t->alloc, (size_t)(t->height + PK_ROWS - 1) / PK_ROWS + 1, sizeof *t->pk_seg);
     if (t->pk_seg && !t->pk_off)
@@ -1879,12 +1894,10 @@ static int pk_alloc(rtp_tree *t, int part)
         return 0;
     if (!part && !t->pk)
         t->pk = (float *)rtpi_malloc_array(&t->alloc, np, 3 * sizeof *t->pk);
-    /* (one more: q_by_list's entries start at 1, and a list may hold
-       every sample) */
-    if ((!part || !t->spd) && !t->pk_q)
-        t->pk_q = (float *)rtpi_malloc_array(&t->alloc, (size_t)t->nx * t->ny + 1,
+    if (!part && !t->pk_q)
+        t->pk_q = (float *)rtpi_malloc_array(&t->alloc, (size_t)t->nx * t->ny,
                                              3 * sizeof *t->pk_q);
-    return (part || t->pk) && ((part && t->spd) || t->pk_q);
+    return part || (t->pk && t->pk_q);
 }
 
 /* May the one-term path make this image for a material edit?  Yes when
@@ -2799,18 +2812,14 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                 if (!part)
                     sparse = 0;
                 t->pk_term = 0; /* (until the planes are made) */
-                if (mem) {
-                    if (!part)
-                        memset(t->pk_q, 0, ns * 3 * sizeof *t->pk_q);
-                    for (i = 0; i < nthreads; i++) {
-                        e[i].q_by_list = part;
+                if (mem && !part) {
+                    /* q of every sample (pk_img_chunk makes the
+                       material's band by band) */
+                    memset(t->pk_q, 0, ns * 3 * sizeof *t->pk_q);
+                    for (i = 0; i < nthreads; i++)
                         e[i].kp = t->pk_q;
-                    }
-                    /* (with corner samples pk_img_chunk makes q itself,
-                       band by band) */
-                    if (!part || !t->spd)
-                        rtpi_parallel_rows((int)((e[0].nlist + 255) / 256), nthreads, ctx,
-                                           pk_q_chunk, NULL, NULL);
+                    rtpi_parallel_rows((int)((e[0].nlist + 255) / 256), nthreads, ctx, pk_q_chunk,
+                                       NULL, NULL);
                 }
                 /* (no memory for them: the full combine needs none) */
                 if (mem && pk_build(t, e, ctx, nthreads, part)) {
