@@ -9,7 +9,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 
-#define FMT_MAJOR 1
+#define FMT_MAJOR 2
 #define FMT_MINOR 0
 #define MAX_NAME 255
 /* Limits a file may not exceed; beyond them it is rejected before any
@@ -331,11 +331,155 @@ static size_t varint_len(uint64_t v)
     return n;
 }
 
+/* Format 2 packs each node against nodes it is likely to resemble
+   (tree-format.md, "Packed nodes"): a neighbouring sample's tree mostly
+   has the same shape and hits the same surface a little further on.  A
+   is the node at the same place in the previous sample's tree, else the
+   node before it in its own; B, where A is the previous sample's, the
+   node at that place in the sample before (the position is predicted as
+   2A - B on the coordinates' bit patterns, linear along a surface).
+   NULL: none. */
+static RTPI_FORCE_INLINE void node_refs(const rtp_tree *t, size_t k, size_t j,
+                                        const rtpi_cnode **a, const rtpi_cnode **b)
+{
+    *a = *b = NULL;
+    if (k >= 1 && t->start[k] - t->start[k - 1] > j) {
+        *a = &t->nodes[t->start[k - 1] + j];
+        if (k >= 2 && t->start[k - 1] - t->start[k - 2] > j)
+            *b = &t->nodes[t->start[k - 2] + j];
+    } else if (j > 0) {
+        *a = &t->nodes[t->start[k] + j - 1];
+    }
+}
+
+/* The most bytes a packed node takes: six 32-bit varints. */
+#define PACKED_MAX 30
+
+static uint32_t f32_bits(float f)
+{
+    uint32_t u;
+    memcpy(&u, &f, 4);
+    return u;
+}
+
+/* The prediction of coordinate i of a node from its references. */
+static uint32_t pos_pred(const rtpi_cnode *a, const rtpi_cnode *b, int i)
+{
+    if (!a)
+        return 0;
+    if (!b)
+        return f32_bits(a->p[i]);
+    return 2u * f32_bits(a->p[i]) - f32_bits(b->p[i]); /* (mod 2^32) */
+}
+
+/* v as 7 bits a byte, low first, the top bit set on every byte but the
+   last (at most 5 bytes); returns the bytes written. */
+static size_t put_v32(unsigned char *c, uint32_t v)
+{
+    size_t n = 0;
+    while (v >= 0x80) {
+        c[n++] = (unsigned char)((v & 0x7f) | 0x80u);
+        v >>= 7;
+    }
+    c[n++] = (unsigned char)v;
+    return n;
+}
+
+/* A difference mod 2^32 as a small number when it is small either way
+   (0, -1, 1, -2 ... as 0, 1, 2, 3 ...). */
+static uint32_t zigzag(uint32_t d)
+{
+    return (d << 1) ^ (0u - (d >> 31));
+}
+
+static uint32_t unzigzag(uint32_t z)
+{
+    return (z >> 1) ^ (0u - (z & 1u));
+}
+
+/* Node n packed against its references into c (PACKED_MAX bytes of
+   room); returns the bytes written. */
+static size_t pack_node(const rtpi_cnode *n, const rtpi_cnode *a, const rtpi_cnode *b,
+                        unsigned layout, unsigned char *c)
+{
+    size_t at = 0;
+    int i;
+    for (i = 0; i < 3; i++)
+        at += put_v32(c + at, zigzag(f32_bits(n->p[i]) - pos_pred(a, b, i)));
+    at += put_v32(c + at, zigzag(n->prim - (a ? a->prim : 0u)));
+    if (layout & NODE_VIS)
+        at += put_v32(c + at, n->vis ^ (a ? a->vis : 0u));
+    if (layout & NODE_LINK32)
+        at += put_v32(c + at, n->link ^ (a ? a->link : 0u));
+    else
+        c[at++] = (unsigned char)((n->link ^ (a ? a->link : 0u)) & 0xffu);
+    return at;
+}
+
+/* A 32-bit varint from c (avail bytes): the bytes it took, 0 when they
+   ran out first, or (size_t)-1 when it is not one (more than 5 bytes, or
+   bits beyond 32). */
+static RTPI_FORCE_INLINE size_t get_v32(const unsigned char *c, size_t avail, uint32_t *v)
+{
+    uint32_t x = 0;
+    size_t i;
+    if (avail && c[0] < 0x80u) { /* (most: light bits, links, primitives) */
+        *v = c[0];
+        return 1;
+    }
+    for (i = 0; i < 5; i++) {
+        if (i >= avail)
+            return 0;
+        x |= (uint32_t)(c[i] & 0x7fu) << (7 * i);
+        if (!(c[i] & 0x80u)) {
+            if (i == 4 && c[i] > 0x0fu)
+                return (size_t)-1;
+            *v = x;
+            return i + 1;
+        }
+    }
+    return (size_t)-1;
+}
+
+/* Node n unpacked from c (avail bytes) against its references: the
+   bytes it took, 0 when they ran out first, (size_t)-1 when malformed. */
+static RTPI_FORCE_INLINE size_t unpack_node(const unsigned char *c, size_t avail,
+                                            const rtpi_cnode *a, const rtpi_cnode *b,
+                                            unsigned layout, rtpi_cnode *n)
+{
+    size_t at = 0, k;
+    uint32_t v[6];
+    int i, nv = 4 + ((layout & NODE_VIS) != 0) + ((layout & NODE_LINK32) != 0);
+    for (i = 0; i < nv; i++) {
+        k = get_v32(c + at, avail - at, &v[i]);
+        if (k == 0 || k == (size_t)-1)
+            return k;
+        at += k;
+    }
+    for (i = 0; i < 3; i++) {
+        uint32_t u = unzigzag(v[i]) + pos_pred(a, b, i);
+        memcpy(&n->p[i], &u, 4);
+    }
+    n->prim = unzigzag(v[3]) + (a ? a->prim : 0u);
+    i = 4;
+    n->vis = 0;
+    if (layout & NODE_VIS)
+        n->vis = v[i++] ^ (a ? a->vis : 0u);
+    if (layout & NODE_LINK32) {
+        n->link = v[i] ^ (a ? a->link : 0u);
+    } else {
+        if (at >= avail)
+            return 0;
+        n->link = (c[at++] ^ (a ? a->link : 0u)) & 0xffu;
+    }
+    return at;
+}
+
 static rtp_status serialize(const rtp_tree *t, sink *out)
 {
     const rtp_scene *s = t->scene;
     buf b;
-    size_t i, k, ns = (size_t)t->nx * t->ny, node_bytes;
+    size_t i, k, ns = (size_t)t->nx * t->ny;
     uint64_t len;
     unsigned layout = node_layout(t);
     buf head; /* the file up to TREE */
@@ -486,12 +630,19 @@ static rtp_status serialize(const rtp_tree *t, sink *out)
     }
     sink_put(out, head.p, head.n);
     rtpi_free(head.a, head.p);
-    /* TREE, streamed: its length first */
-    node_bytes = 16 + (layout & NODE_VIS ? 4 : 0) + (layout & NODE_LINK32 ? 4 : 1);
-    len = 8 + 8 + 4 + 1 + (uint64_t)t->nnodes * node_bytes +
-          (uint64_t)t->nnodes * t->vis_words * 4;
-    for (k = 0; k < ns; k++)
-        len += varint_len(t->start[k + 1] - t->start[k]);
+    /* TREE, streamed: its length first (the nodes packed once to count
+       their bytes) */
+    len = 8 + 8 + 4 + 1 + (uint64_t)t->nnodes * t->vis_words * 4;
+    for (k = 0; k < ns; k++) {
+        size_t j, n = (size_t)(t->start[k + 1] - t->start[k]);
+        unsigned char c[PACKED_MAX];
+        len += varint_len(n);
+        for (j = 0; j < n; j++) {
+            const rtpi_cnode *ra, *rb;
+            node_refs(t, k, j, &ra, &rb);
+            len += pack_node(&t->nodes[t->start[k] + j], ra, rb, layout, c);
+        }
+    }
     sink_begin(out, "TREE", len);
     sink_u32(out, (uint32_t)ns);
     sink_u32(out, (uint32_t)((uint64_t)ns >> 32));
@@ -512,27 +663,14 @@ static rtp_status serialize(const rtp_tree *t, sink *out)
         *c++ = (unsigned char)v;
         sink_advance(out, (size_t)(c - c0));
     }
-    for (i = 0; i < t->nnodes; i++) {
-        const rtpi_cnode *nd = &t->nodes[i];
-        unsigned char *c = sink_room(out, node_bytes), *c0 = c;
-        uint32_t u;
-        for (k = 0; k < 3; k++, c += 4) {
-            memcpy(&u, &nd->p[k], 4);
-            le32(c, u);
+    for (k = 0; k < ns; k++) {
+        size_t j, n = (size_t)(t->start[k + 1] - t->start[k]);
+        for (j = 0; j < n; j++) {
+            const rtpi_cnode *ra, *rb;
+            unsigned char *c = sink_room(out, PACKED_MAX);
+            node_refs(t, k, j, &ra, &rb);
+            sink_advance(out, pack_node(&t->nodes[t->start[k] + j], ra, rb, layout, c));
         }
-        le32(c, nd->prim);
-        c += 4;
-        if (layout & NODE_VIS) {
-            le32(c, nd->vis);
-            c += 4;
-        }
-        if (layout & NODE_LINK32) {
-            le32(c, nd->link);
-            c += 4;
-        } else {
-            *c++ = (unsigned char)(nd->link & 0xffu);
-        }
-        sink_advance(out, (size_t)(c - c0));
     }
     for (i = 0; i < t->nnodes * t->vis_words; i++)
         sink_u32(out, t->vis_ext[i]);
@@ -762,6 +900,7 @@ typedef struct loader {
     rtp_scene *s;
     const rtp_allocator *a;
     const char *section;
+    unsigned major; /* the file's format version (HEAD) */
 } loader;
 
 /* what: the message; detail (may be NULL) follows it. */
@@ -791,11 +930,13 @@ static rtp_status read_head(loader *L, rd *r)
     (void)minor;
     if (r->bad)
         return bad(L, "header too short", NULL);
-    if (major != FMT_MAJOR) {
+    /* (1: nodes as fixed fields; 2: packed) */
+    if (major < 1 || major > FMT_MAJOR) {
         snprintf(ver, sizeof ver, "%u", (unsigned)major);
         return bad(L, major > FMT_MAJOR ? "written by a newer rtp: format version "
                                        : "unknown format version ", ver);
     }
+    L->major = (unsigned)major;
     t->width = (int)get_u32(r);
     t->height = (int)get_u32(r);
     t->nx = (int)get_u32(r);
@@ -1150,8 +1291,11 @@ static rtp_status read_tree(loader *L, rd *r)
     if (words != (s->nlights > 32 ? (s->nlights + 31) / 32 : 0) || (layout & ~3u) ||
         ((layout & NODE_VIS) != 0) != (s->nlights > 0 && words == 0))
         return bad(L, "node layout does not match the scene", NULL);
+    /* (format 1's fixed fields; a packed node takes 5 bytes at least, 6
+       with light bits) */
     node_bytes = 16 + ((layout & NODE_VIS) ? 4 : 0) + ((layout & NODE_LINK32) ? 4 : 1);
-    if (!count_ok(r, nnodes, node_bytes) || nnodes > (uint64_t)((size_t)-1 / sizeof(rtpi_cnode)))
+    if (!count_ok(r, nnodes, L->major == 1 ? node_bytes : 5u + ((layout & NODE_VIS) != 0)) ||
+        nnodes > (uint64_t)((size_t)-1 / sizeof(rtpi_cnode)))
         return bad(L, "invalid node count", NULL);
     t->nnodes = (size_t)nnodes;
     t->vis_words = words;
@@ -1170,10 +1314,30 @@ static rtp_status read_tree(loader *L, rd *r)
     if (at != nnodes)
         return bad(L, "sample node counts do not add up", NULL);
     vis_mask = s->nlights >= 32 ? 0xffffffffu : ((1u << s->nlights) - 1u);
-    /* the nodes as many at a time as the window holds (all of them when
-       the whole file is in memory) */
+    /* packed: each node's length is known once it is read, so the window
+       is kept PACKED_MAX bytes ahead */
+    for (k = 0; L->major > 1 && k < nsamples; k++) {
+        size_t j, n = (size_t)(t->start[k + 1] - t->start[k]);
+        for (j = 0; j < n; j++) {
+            rtpi_cnode *nd = &t->nodes[t->start[k] + j];
+            const rtpi_cnode *ra, *rb;
+            size_t used;
+            if (r->src && r->n - r->at < PACKED_MAX)
+                (void)refill(r, PACKED_MAX); /* (fewer where the section ends) */
+            node_refs(t, (size_t)k, j, &ra, &rb);
+            used = unpack_node(r->p + r->at, r->n - r->at, ra, rb, layout, nd);
+            if (used == 0)
+                return bad(L, "section too short", NULL);
+            if (used == (size_t)-1 || !finite3(nd->p) || nd->prim >= nprims ||
+                (nd->vis & ~vis_mask))
+                return bad(L, "invalid node", NULL);
+            r->at += used;
+        }
+    }
+    /* format 1: the nodes as many at a time as the window holds (all of
+       them when the whole file is in memory) */
     chunk = r->src ? r->src->cap / node_bytes : t->nnodes;
-    for (i = 0; i < t->nnodes;) {
+    for (i = 0; L->major == 1 && i < t->nnodes;) {
         /* the bytes are there (checked once a chunk): read the fields
            directly */
         size_t end = t->nnodes - i < chunk ? t->nnodes : i + chunk;

@@ -1580,7 +1580,7 @@ static void test_flipped_bits(void)
 static void test_file_windows(void)
 {
     const char *text = "v from 0 -4 1 at 0 0 0.5 up 0 0 1 angle 40 hither 0.1 "
-                       "resolution 300 260\n"
+                       "resolution 440 380\n"
                        "l 2 -3 4\nl -2 -2 3 0.5 0.5 1\n"
                        "f 0.8 0.8 0.8 0.7 0.3 20 0 1\n"
                        "p 4 -3 -3 0 3 -3 0 3 3 0 -3 3 0\n"
@@ -1645,6 +1645,149 @@ out:
     rtp_scene_destroy(s);
 }
 
+/* A file of format 1 (nodes as fixed fields, test/golden/format1.rtp,
+   written by rtp before format 2) still reads; written again it is
+   format 2 (packed nodes), smaller, and reads back to the very same
+   image. */
+static void test_format1_file(void)
+{
+    const char *path = "test/golden/format1.rtp";
+    char file[512];
+    rtp_tree *a = NULL, *b = NULL;
+    rtp_image *ia = NULL, *ib = NULL;
+    rtp_tree_info na, nb;
+    rtp_error err;
+    unsigned char head[24];
+    long size1 = 0, size2 = 0;
+    FILE *f;
+    snprintf(file, sizeof file, "%s/rtp-f2-%d.rtp", tmpdir(), (int)getpid());
+    CHECK_MSG(rtp_tree_read(path, NULL, &a, &err) == RTP_OK, "%s", err.message);
+    if (!a)
+        return;
+    CHECK(rtp_tree_write(a, file, NULL, NULL) == RTP_OK);
+    CHECK_MSG(rtp_tree_read(file, NULL, &b, &err) == RTP_OK, "%s", err.message);
+    f = fopen(path, "rb");
+    if (f) {
+        CHECK(fread(head, 1, sizeof head, f) == sizeof head && head[20] == 1);
+        fseek(f, 0, SEEK_END);
+        size1 = ftell(f);
+        fclose(f);
+    }
+    f = fopen(file, "rb");
+    if (f) {
+        CHECK(fread(head, 1, sizeof head, f) == sizeof head && head[20] == 2);
+        fseek(f, 0, SEEK_END);
+        size2 = ftell(f);
+        fclose(f);
+    }
+    CHECK_MSG(size2 > 0 && size2 < size1, "format 2 %ld bytes, format 1 %ld", size2, size1);
+    if (b) {
+        rtp_tree_get_info(a, &na);
+        rtp_tree_get_info(b, &nb);
+        CHECK(na.nodes == nb.nodes && na.nodes > 0 && na.samples == nb.samples);
+        CHECK(rtp_tree_eval(a, NULL, &ia, NULL, NULL) == RTP_OK);
+        CHECK(rtp_tree_eval(b, NULL, &ib, NULL, NULL) == RTP_OK);
+        CHECK(ia && ib && same_image(ia, ib));
+    }
+    remove(file);
+    rtp_image_destroy(ia);
+    rtp_image_destroy(ib);
+    rtp_tree_destroy(a);
+    rtp_tree_destroy(b);
+}
+
+/* The TREE section's bytes with the `cut` at p replaced by the m bytes
+   at put, its length and checksum made right (so only what was put can
+   be wrong): a new buffer of *n bytes.  at: the section's tag. */
+static unsigned char *splice_tree(const unsigned char *data, size_t *n, size_t at, size_t p,
+                                  size_t cut, const unsigned char *put, size_t m)
+{
+    size_t len = (size_t)data[at + 4] | (size_t)data[at + 5] << 8 |
+                 (size_t)data[at + 6] << 16 | (size_t)data[at + 7] << 24,
+           nn = *n - cut + m, i;
+    unsigned char *c = (unsigned char *)malloc(nn);
+    uint32_t crc;
+    if (!c)
+        return NULL;
+    memcpy(c, data, p);
+    memcpy(c + p, put, m);
+    memcpy(c + p + m, data + p + cut, *n - p - cut);
+    len = len - cut + m;
+    for (i = 0; i < 8; i++)
+        c[at + 4 + i] = (unsigned char)(i < 4 ? len >> (8 * i) : 0);
+    crc = crc32_ref(c + at, 12 + len);
+    for (i = 0; i < 4; i++)
+        c[at + 12 + len + i] = (unsigned char)(crc >> (8 * i));
+    *n = nn;
+    return c;
+}
+
+/* A packed node whose number runs past 5 bytes, or past 32 bits (the
+   first node's first number written again in 5 bytes with a bit above
+   them: read as 32 bits, the file would be whole), is an invalid node. */
+static void test_malformed_packed_node(void)
+{
+    static const unsigned char ff[5] = {0xff, 0xff, 0xff, 0xff, 0xff};
+    unsigned char wide[5];
+    size_t n, at = 8, len, p, k, ns, l0 = 0;
+    unsigned char *data = small_tree_file(&n), *copy;
+    rtp_tree *t = NULL;
+    rtp_error err;
+    uint32_t v = 0;
+    int i;
+    if (!data) {
+        CHECK(data != NULL);
+        return;
+    }
+    /* the TREE section: tag, u64 length, body, CRC */
+    while (at + 12 <= n && memcmp(data + at, "TREE", 4) != 0) {
+        len = (size_t)data[at + 4] | (size_t)data[at + 5] << 8 | (size_t)data[at + 6] << 16 |
+              (size_t)data[at + 7] << 24;
+        at += 12 + len + 4;
+    }
+    CHECK(at + 12 <= n);
+    if (at + 12 > n) {
+        free(data);
+        return;
+    }
+    /* samples (u64), nodes, vis words, layout, then a varint per sample,
+       then the nodes */
+    ns = (size_t)data[at + 12] | (size_t)data[at + 13] << 8;
+    for (p = at + 12 + 21, k = 0; k < ns; k++) {
+        while (data[p] & 0x80)
+            p++;
+        p++;
+    }
+    do
+        v |= (uint32_t)(data[p + l0] & 0x7fu) << (7 * l0);
+    while (data[p + l0++] & 0x80);
+    for (i = 0; i < 4; i++)
+        wide[i] = (unsigned char)(((v >> (7 * i)) & 0x7fu) | 0x80u);
+    wide[4] = (unsigned char)((v >> 28) | 0x10u);
+    for (i = 0; i < 2; i++) {
+        size_t m = n;
+        copy = splice_tree(data, &m, at, p, i ? l0 : 5, i ? wide : ff, 5);
+        CHECK(copy != NULL);
+        if (!copy)
+            break;
+        CHECK(rtp_tree_read_memory(copy, m, "bad.rtp", NULL, &t, &err) == RTP_ERR_FORMAT);
+        CHECK_MSG(strstr(err.message, "invalid node") != NULL, "%s", err.message);
+        CHECK(t == NULL);
+        /* and the same bits in 5 bytes that stay within 32 read */
+        if (i) {
+            m = n;
+            free(copy);
+            wide[4] &= 0x0f;
+            copy = splice_tree(data, &m, at, p, l0, wide, 5);
+            CHECK(copy && rtp_tree_read_memory(copy, m, "ok.rtp", NULL, &t, &err) == RTP_OK);
+            rtp_tree_destroy(t);
+            t = NULL;
+        }
+        free(copy);
+    }
+    free(data);
+}
+
 /* Rewrites the HEAD section's major version and fixes its checksum, so
    only the version is wrong. */
 static void test_newer_version_and_foreign(void)
@@ -1662,7 +1805,7 @@ static void test_newer_version_and_foreign(void)
     }
     CHECK(memcmp(data + 8, "HEAD", 4) == 0);
     len = (size_t)data[12] | (size_t)data[13] << 8;
-    data[20] = 2; /* major version 2 */
+    data[20] = 3; /* major version 3 */
     crc = crc32_ref(data + 8, 12 + len);
     data[20 + len] = (unsigned char)crc;
     data[21 + len] = (unsigned char)(crc >> 8);
@@ -1709,5 +1852,7 @@ int main(void)
     RUN(test_truncated_every_length);
     RUN(test_flipped_bits);
     RUN(test_newer_version_and_foreign);
+    RUN(test_format1_file);
+    RUN(test_malformed_packed_node);
     return check_report();
 }
