@@ -1042,7 +1042,8 @@ static int pk_build_chunk(void *ctx, int chunk)
             for (x = 0; x < t->width; x++, sa += 3, sb += 3, ka += ks, kb += ks) {
                 for (c = 0; c < 3; c++) {
                     pk[c] = (float)(0.25 * ((double)sa[c] + sa[3 + c] + sb[c] + sb[3 + c]));
-                    pk[3 + c] = (float)(0.25 * ((double)ka[c] + ka[ks + c] + kb[c] + kb[ks + c]));
+                    pk[3 + c] = (float)(0.25 * (((double)ka[c] + kb[c]) +
+                                                ((double)ka[ks + c] + kb[ks + c])));
                 }
                 pk_put(e, pk, p + (size_t)x, pc, nz, &n);
             }
@@ -1246,15 +1247,23 @@ static int pk_img_chunk(void *ctx, int chunk)
                two rows' listed columns (pk_img_span) */
             if (!pk_img_span(list, bnd + r, (size_t)y * nx, nx, &x, &x1))
                 continue;
+            /* pk_build_chunk's sums, by columns: the corners (x, y) and
+               (x, y+1) of pixel x are its left column, the next pixel's
+               right one (each column's sum made once, not twice) */
+            double l0 = (double)ga[3 * x] + gb[3 * x], l1 = (double)ga[3 * x + 1] + gb[3 * x + 1],
+                   l2 = (double)ga[3 * x + 2] + gb[3 * x + 2];
             for (; x < x1; x++) {
-                /* pk_build_chunk's sums: (x, y), (x+1, y), (x, y+1),
-                   (x+1, y+1) */
-                const float *qa = ga + 3 * x, *qc = gb + 3 * x;
-                float k0 = (float)(0.25 * ((((double)qa[0] + qa[3]) + qc[0]) + qc[3]));
-                float k1 = (float)(0.25 * ((((double)qa[1] + qa[4]) + qc[1]) + qc[4]));
-                float k2 = (float)(0.25 * ((((double)qa[2] + qa[5]) + qc[2]) + qc[5]));
-                /* (where K is 0 the pixel stays B: nothing to keep) */
-                if (k0 == 0.0f && k1 == 0.0f && k2 == 0.0f)
+                const float *qa = ga + 3 * x + 3, *qc = gb + 3 * x + 3;
+                const double r0 = (double)qa[0] + qc[0], r1 = (double)qa[1] + qc[1],
+                             r2 = (double)qa[2] + qc[2];
+                float k0 = (float)(0.25 * (l0 + r0)), k1 = (float)(0.25 * (l1 + r1)),
+                      k2 = (float)(0.25 * (l2 + r2));
+                l0 = r0;
+                l1 = r1;
+                l2 = r2;
+                /* (where K is 0 the pixel stays B: nothing to keep; -0
+                   counts as 0) */
+                if (((abs_bits(k0) | abs_bits(k1) | abs_bits(k2))) == 0)
                     continue;
                 pk_img_one(img + 3 * (p + x), k0, k1, k2, xo0, xo1, xo2, pc + 6 * n, acc);
                 /* the edit itself (pk_apply_listed's), over B just read:
