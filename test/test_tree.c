@@ -1645,6 +1645,24 @@ out:
     rtp_scene_destroy(s);
 }
 
+/* The size of tree file path, checking that its HEAD says format
+   `major`; 0 when it cannot be read. */
+static long file_version(const char *path, unsigned major)
+{
+    unsigned char head[24];
+    long size = 0;
+    FILE *f = fopen(path, "rb");
+    CHECK_MSG(f != NULL, "%s", path);
+    if (f) {
+        CHECK_MSG(fread(head, 1, sizeof head, f) == sizeof head && head[20] == major,
+                  "%s: format %u", path, major);
+        fseek(f, 0, SEEK_END);
+        size = ftell(f);
+        fclose(f);
+    }
+    return size;
+}
+
 /* A file of format 1 (nodes as fixed fields, test/golden/format1.rtp,
    written by rtp before format 2) still reads; written again it is
    format 2 (packed nodes), smaller, and reads back to the very same
@@ -1657,29 +1675,15 @@ static void test_format1_file(void)
     rtp_image *ia = NULL, *ib = NULL;
     rtp_tree_info na, nb;
     rtp_error err;
-    unsigned char head[24];
-    long size1 = 0, size2 = 0;
-    FILE *f;
+    long size1, size2;
     snprintf(file, sizeof file, "%s/rtp-f2-%d.rtp", tmpdir(), (int)getpid());
     CHECK_MSG(rtp_tree_read(path, NULL, &a, &err) == RTP_OK, "%s", err.message);
     if (!a)
         return;
     CHECK(rtp_tree_write(a, file, NULL, NULL) == RTP_OK);
     CHECK_MSG(rtp_tree_read(file, NULL, &b, &err) == RTP_OK, "%s", err.message);
-    f = fopen(path, "rb");
-    if (f) {
-        CHECK(fread(head, 1, sizeof head, f) == sizeof head && head[20] == 1);
-        fseek(f, 0, SEEK_END);
-        size1 = ftell(f);
-        fclose(f);
-    }
-    f = fopen(file, "rb");
-    if (f) {
-        CHECK(fread(head, 1, sizeof head, f) == sizeof head && head[20] == 2);
-        fseek(f, 0, SEEK_END);
-        size2 = ftell(f);
-        fclose(f);
-    }
+    size1 = file_version(path, 1);
+    size2 = file_version(file, 2);
     CHECK_MSG(size2 > 0 && size2 < size1, "format 2 %ld bytes, format 1 %ld", size2, size1);
     if (b) {
         rtp_tree_get_info(a, &na);
