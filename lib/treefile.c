@@ -475,6 +475,37 @@ static RTPI_FORCE_INLINE size_t unpack_node(const unsigned char *c, size_t avail
     return at;
 }
 
+/* Format 2's geometry (tree-format.md, GEOM): n groups of `stride`
+   numbers (the 32 bits of an f32, or a u32), each as a zigzag varint of
+   its difference from the same number of the group before. */
+static void put_packed(buf *b, const uint32_t *v, size_t n, int stride)
+{
+    uint32_t prev[10] = {0};
+    size_t i;
+    int c;
+    for (i = 0; i < n; i++)
+        for (c = 0; c < stride; c++) {
+            unsigned char e[5];
+            uint32_t x = v[i * (size_t)stride + (size_t)c];
+            put(b, e, put_v32(e, zigzag(x - prev[c])));
+            prev[c] = x;
+        }
+}
+
+static void put_packed_f32(buf *b, const float *f, size_t n, int stride)
+{
+    uint32_t *u = n ? (uint32_t *)rtpi_malloc_array(b->a, n * (size_t)stride, sizeof *u) : NULL;
+    size_t i;
+    if (n && !u) {
+        b->bad = 1;
+        return;
+    }
+    for (i = 0; i < n * (size_t)stride; i++)
+        u[i] = f32_bits(f[i]);
+    put_packed(b, u, n, stride);
+    rtpi_free(b->a, u);
+}
+
 static rtp_status serialize(const rtp_tree *t, sink *out)
 {
     const rtp_scene *s = t->scene;
@@ -586,23 +617,29 @@ static rtp_status serialize(const rtp_tree *t, sink *out)
 
     body_reset(&b);
     put_u32(&b, (uint32_t)s->npos);
-    for (i = 0; i < s->npos * 3; i++)
-        put_f32(&b, s->pos[i]);
+    put_packed_f32(&b, s->pos, s->npos, 3);
     put_u32(&b, (uint32_t)s->nnrm);
-    for (i = 0; i < s->nnrm * 3; i++)
-        put_f32(&b, s->nrm[i]);
+    put_packed_f32(&b, s->nrm, s->nnrm, 3);
     put_u32(&b, (uint32_t)s->nuv);
-    for (i = 0; i < s->nuv * 2; i++)
-        put_f32(&b, s->uv[i]);
+    put_packed_f32(&b, s->uv, s->nuv, 2);
     put_u32(&b, (uint32_t)s->ntris);
-    for (i = 0; i < s->ntris; i++) {
-        for (k = 0; k < 3; k++)
-            put_u32(&b, s->tris[i].v[k]);
-        for (k = 0; k < 3; k++)
-            put_u32(&b, s->tris[i].n[k]);
-        for (k = 0; k < 3; k++)
-            put_u32(&b, s->tris[i].t[k]);
-        put_u32(&b, s->tris[i].mat);
+    {
+        uint32_t *u = s->ntris ? (uint32_t *)rtpi_malloc_array(b.a, s->ntris, 10 * sizeof *u)
+                               : NULL;
+        if (s->ntris && !u)
+            b.bad = 1;
+        for (i = 0; u && i < s->ntris; i++) {
+            const rtpi_tri *tr = &s->tris[i];
+            for (k = 0; k < 3; k++) {
+                u[10 * i + k] = tr->v[k];
+                u[10 * i + 3 + k] = tr->n[k];
+                u[10 * i + 6 + k] = tr->t[k];
+            }
+            u[10 * i + 9] = tr->mat;
+        }
+        if (u)
+            put_packed(&b, u, s->ntris, 10);
+        rtpi_free(b.a, u);
     }
     put_u32(&b, (uint32_t)s->nspheres);
     for (i = 0; i < s->nspheres; i++) {
@@ -1132,60 +1169,128 @@ static rtp_status read_texr(loader *L, rd *r)
     return RTP_OK;
 }
 
+/* n groups of `stride` 32-bit numbers of GEOM into v, or as the floats
+   they are the bits of into f (v NULL): format 1 as they are, format 2
+   packed (put_packed).  0, or 1 when the section ran out (r->bad set), 2
+   when a number is not a varint of 32 bits. */
+static int get_words(loader *L, rd *r, uint32_t *v, float *f, size_t n, int stride)
+{
+    uint32_t prev[10] = {0};
+    size_t i, at;
+    int c;
+    for (i = 0; i < n; i++)
+        for (c = 0; c < stride; c++) {
+            uint32_t x, z = 0;
+            size_t used;
+            if (L->major == 1) {
+                x = get_u32(r);
+                if (r->bad)
+                    return 1;
+            } else {
+                /* (fewer than 5 bytes left: get_v32 says whether they
+                   end) */
+                used = get_v32(r->p + r->at, r->n - r->at, &z);
+                if (used == 0) {
+                    r->bad = 1;
+                    return 1;
+                }
+                if (used == (size_t)-1)
+                    return 2;
+                r->at += used;
+                x = prev[c] += unzigzag(z);
+            }
+            at = i * (size_t)stride + (size_t)c;
+            if (v) {
+                v[at] = x;
+            } else {
+                float y;
+                memcpy(&y, &x, sizeof y);
+                f[at] = y;
+            }
+        }
+    return 0;
+}
+
+/* n groups of `stride` finite floats of GEOM into f (get_words), or the
+   error naming `what`. */
+static rtp_status get_floats(loader *L, rd *r, float *f, size_t n, int stride,
+                             const char *what)
+{
+    size_t i;
+    int e = get_words(L, r, NULL, f, n, stride);
+    if (e == 1)
+        return bad(L, "section too short", NULL);
+    if (e == 2)
+        return bad(L, what, " is malformed");
+    for (i = 0; i < n * (size_t)stride; i++)
+        if (!isfinite(f[i]))
+            return bad(L, what, " is not finite");
+    return RTP_OK;
+}
+
 static rtp_status read_geom(loader *L, rd *r)
 {
     rtp_scene *s = L->s;
-    uint32_t n, i;
+    uint32_t n, i, *w = NULL;
     int k;
+    rtp_status st;
+    /* the fewest bytes a number takes: a varint's 1 (format 2) or 4 */
+    const size_t nb = L->major == 1 ? 4 : 1;
 
     n = get_u32(r);
-    if (r->bad || !count_ok(r, n, 12))
+    if (r->bad || !count_ok(r, n, 3 * nb))
         return bad(L, "invalid vertex count", NULL);
     if (n && !(s->pos = (float *)rtpi_malloc_array(L->a, (size_t)n * 3, sizeof *s->pos)))
         return nomem(L);
     s->npos = s->cap_pos = n;
-    for (i = 0; i < n * 3u; i++)
-        if (!isfinite(s->pos[i] = get_f32(r)))
-            return bad(L, "vertex is not finite", NULL);
+    if ((st = get_floats(L, r, s->pos, n, 3, "vertex")) != RTP_OK)
+        return st;
 
     n = get_u32(r);
-    if (r->bad || !count_ok(r, n, 12))
+    if (r->bad || !count_ok(r, n, 3 * nb))
         return bad(L, "invalid normal count", NULL);
     if (n && !(s->nrm = (float *)rtpi_malloc_array(L->a, (size_t)n * 3, sizeof *s->nrm)))
         return nomem(L);
     s->nnrm = s->cap_nrm = n;
-    for (i = 0; i < n * 3u; i++)
-        if (!isfinite(s->nrm[i] = get_f32(r)))
-            return bad(L, "normal is not finite", NULL);
+    if ((st = get_floats(L, r, s->nrm, n, 3, "normal")) != RTP_OK)
+        return st;
 
     n = get_u32(r);
-    if (r->bad || !count_ok(r, n, 8))
+    if (r->bad || !count_ok(r, n, 2 * nb))
         return bad(L, "invalid texture-coordinate count", NULL);
     if (n && !(s->uv = (float *)rtpi_malloc_array(L->a, (size_t)n * 2, sizeof *s->uv)))
         return nomem(L);
     s->nuv = s->cap_uv = n;
-    for (i = 0; i < n * 2u; i++)
-        if (!isfinite(s->uv[i] = get_f32(r)))
-            return bad(L, "texture coordinate is not finite", NULL);
+    if ((st = get_floats(L, r, s->uv, n, 2, "texture coordinate")) != RTP_OK)
+        return st;
 
     n = get_u32(r);
-    if (r->bad || !count_ok(r, n, 40))
+    if (r->bad || !count_ok(r, n, 10 * nb))
         return bad(L, "invalid triangle count", NULL);
     if (n && !(s->tris = (rtpi_tri *)rtpi_malloc_array(L->a, n, sizeof *s->tris)))
         return nomem(L);
     s->ntris = s->cap_tris = n;
+    if (n && !(w = (uint32_t *)rtpi_malloc_array(L->a, n, 10 * sizeof *w)))
+        return nomem(L);
+    k = n ? get_words(L, r, w, NULL, n, 10) : 0;
+    for (i = 0; i < n && k == 0; i++) {
+        rtpi_tri *tr = &s->tris[i];
+        int j;
+        for (j = 0; j < 3; j++) {
+            tr->v[j] = w[10 * i + j];
+            tr->n[j] = w[10 * i + 3 + j];
+            tr->t[j] = w[10 * i + 6 + j];
+        }
+        tr->mat = w[10 * i + 9];
+    }
+    rtpi_free(L->a, w);
+    if (k == 1)
+        return bad(L, "section too short", NULL);
+    if (k == 2)
+        return bad(L, "triangle is malformed", NULL);
     for (i = 0; i < n; i++) {
         rtpi_tri *tr = &s->tris[i];
         int has_n, has_t;
-        for (k = 0; k < 3; k++)
-            tr->v[k] = get_u32(r);
-        for (k = 0; k < 3; k++)
-            tr->n[k] = get_u32(r);
-        for (k = 0; k < 3; k++)
-            tr->t[k] = get_u32(r);
-        tr->mat = get_u32(r);
-        if (r->bad)
-            return bad(L, "section too short", NULL);
         has_n = tr->n[0] != RTPI_NONE;
         has_t = tr->t[0] != RTPI_NONE;
         for (k = 0; k < 3; k++) {

@@ -1700,10 +1700,22 @@ static void test_format1_file(void)
     rtp_tree_destroy(b);
 }
 
-/* The TREE section's bytes with the `cut` at p replaced by the m bytes
-   at put, its length and checksum made right (so only what was put can
-   be wrong): a new buffer of *n bytes.  at: the section's tag. */
-static unsigned char *splice_tree(const unsigned char *data, size_t *n, size_t at, size_t p,
+/* Where section `tag` starts in the file's bytes (its tag), or n. */
+static size_t section_at(const unsigned char *data, size_t n, const char *tag)
+{
+    size_t at = 8, len;
+    while (at + 12 <= n && memcmp(data + at, tag, 4) != 0) {
+        len = (size_t)data[at + 4] | (size_t)data[at + 5] << 8 | (size_t)data[at + 6] << 16 |
+              (size_t)data[at + 7] << 24;
+        at += 12 + len + 4;
+    }
+    return at + 12 <= n ? at : n;
+}
+
+/* A section's bytes with the `cut` at p replaced by the m bytes at put,
+   its length and checksum made right (so only what was put can be
+   wrong): a new buffer of *n bytes.  at: the section's tag. */
+static unsigned char *splice_section(const unsigned char *data, size_t *n, size_t at, size_t p,
                                   size_t cut, const unsigned char *put, size_t m)
 {
     size_t len = (size_t)data[at + 4] | (size_t)data[at + 5] << 8 |
@@ -1728,12 +1740,13 @@ static unsigned char *splice_tree(const unsigned char *data, size_t *n, size_t a
 
 /* A packed node whose number runs past 5 bytes, or past 32 bits (the
    first node's first number written again in 5 bytes with a bit above
-   them: read as 32 bits, the file would be whole), is an invalid node. */
+   them: read as 32 bits, the file would be whole), is an invalid node; a
+   vertex's number past 5 bytes, a malformed vertex. */
 static void test_malformed_packed_node(void)
 {
     static const unsigned char ff[5] = {0xff, 0xff, 0xff, 0xff, 0xff};
     unsigned char wide[5];
-    size_t n, at = 8, len, p, k, ns, l0 = 0;
+    size_t n, at, p, k, ns, l0 = 0;
     unsigned char *data = small_tree_file(&n), *copy;
     rtp_tree *t = NULL;
     rtp_error err;
@@ -1744,13 +1757,9 @@ static void test_malformed_packed_node(void)
         return;
     }
     /* the TREE section: tag, u64 length, body, CRC */
-    while (at + 12 <= n && memcmp(data + at, "TREE", 4) != 0) {
-        len = (size_t)data[at + 4] | (size_t)data[at + 5] << 8 | (size_t)data[at + 6] << 16 |
-              (size_t)data[at + 7] << 24;
-        at += 12 + len + 4;
-    }
-    CHECK(at + 12 <= n);
-    if (at + 12 > n) {
+    at = section_at(data, n, "TREE");
+    CHECK(at < n);
+    if (at >= n) {
         free(data);
         return;
     }
@@ -1770,7 +1779,7 @@ static void test_malformed_packed_node(void)
     wide[4] = (unsigned char)((v >> 28) | 0x10u);
     for (i = 0; i < 2; i++) {
         size_t m = n;
-        copy = splice_tree(data, &m, at, p, i ? l0 : 5, i ? wide : ff, 5);
+        copy = splice_section(data, &m, at, p, i ? l0 : 5, i ? wide : ff, 5);
         CHECK(copy != NULL);
         if (!copy)
             break;
@@ -1782,11 +1791,22 @@ static void test_malformed_packed_node(void)
             m = n;
             free(copy);
             wide[4] &= 0x0f;
-            copy = splice_tree(data, &m, at, p, l0, wide, 5);
+            copy = splice_section(data, &m, at, p, l0, wide, 5);
             CHECK(copy && rtp_tree_read_memory(copy, m, "ok.rtp", NULL, &t, &err) == RTP_OK);
             rtp_tree_destroy(t);
             t = NULL;
         }
+        free(copy);
+    }
+    /* the geometry's numbers are packed too: the first vertex's first */
+    at = section_at(data, n, "GEOM");
+    CHECK(at < n && data[at + 12] > 0); /* (vertices: u32 count first) */
+    if (at < n) {
+        size_t m = n;
+        copy = splice_section(data, &m, at, at + 16, 5, ff, 5);
+        CHECK(copy && rtp_tree_read_memory(copy, m, "bad.rtp", NULL, &t, &err) == RTP_ERR_FORMAT);
+        CHECK_MSG(strstr(err.message, "vertex is malformed") != NULL, "%s", err.message);
+        CHECK(t == NULL);
         free(copy);
     }
     free(data);
