@@ -109,12 +109,24 @@ static double lattice(long x, long y, long z)
 
 static double smooth(double t) { return t * t * (3.0 - 2.0 * t); }
 
+/* floor(x) (f) as a lattice coordinate: wrapped into (-2^30, 2^30), so
+   that it and the next one fit a long (32 bits at least) however far out
+   the point or small the scale (a float beyond a long's range converted
+   to it is undefined: a file with a noise bump of scale 1e-20 found it);
+   not finite, 0.  The noise repeats every 2^30 cells. */
+static long lattice_coord(double f)
+{
+    if (!(fabs(f) <= DBL_MAX))
+        return 0;
+    return (long)fmod(f, 1073741824.0); /* (exact: f is an integer) */
+}
+
 /* Value noise: trilinear over the lattice with smoothstep weights. */
 static double noise3(double x, double y, double z)
 {
     double fx = floor(x), fy = floor(y), fz = floor(z), v = 0.0;
     double tx = smooth(x - fx), ty = smooth(y - fy), tz = smooth(z - fz);
-    long ix = (long)fx, iy = (long)fy, iz = (long)fz;
+    long ix = lattice_coord(fx), iy = lattice_coord(fy), iz = lattice_coord(fz);
     int c;
     for (c = 0; c < 8; c++) {
         double w = ((c & 1) ? tx : 1.0 - tx) * ((c & 2) ? ty : 1.0 - ty) * ((c & 4) ? tz : 1.0 - tz);
