@@ -475,35 +475,25 @@ static RTPI_FORCE_INLINE size_t unpack_node(const unsigned char *c, size_t avail
     return at;
 }
 
-/* Format 2's geometry (tree-format.md, GEOM): n groups of `stride`
-   numbers (the 32 bits of an f32, or a u32), each as a zigzag varint of
-   its difference from the same number of the group before. */
-static void put_packed(buf *b, const uint32_t *v, size_t n, int stride)
+/* Format 2's geometry (tree-format.md, GEOM): each number (the 32 bits
+   of an f32, or a u32) as a zigzag varint of its difference from *prev,
+   the same number of the group before, which it then becomes. */
+static void put_delta(buf *b, uint32_t *prev, uint32_t x)
 {
-    uint32_t prev[10] = {0};
+    unsigned char e[5];
+    put(b, e, put_v32(e, zigzag(x - *prev)));
+    *prev = x;
+}
+
+/* n groups of `stride` (at most 3) floats so. */
+static void put_packed_f32(buf *b, const float *f, size_t n, int stride)
+{
+    uint32_t prev[3] = {0, 0, 0};
     size_t i;
     int c;
     for (i = 0; i < n; i++)
-        for (c = 0; c < stride; c++) {
-            unsigned char e[5];
-            uint32_t x = v[i * (size_t)stride + (size_t)c];
-            put(b, e, put_v32(e, zigzag(x - prev[c])));
-            prev[c] = x;
-        }
-}
-
-static void put_packed_f32(buf *b, const float *f, size_t n, int stride)
-{
-    uint32_t *u = n ? (uint32_t *)rtpi_malloc_array(b->a, n * (size_t)stride, sizeof *u) : NULL;
-    size_t i;
-    if (n && !u) {
-        b->bad = 1;
-        return;
-    }
-    for (i = 0; i < n * (size_t)stride; i++)
-        u[i] = f32_bits(f[i]);
-    put_packed(b, u, n, stride);
-    rtpi_free(b->a, u);
+        for (c = 0; c < stride; c++)
+            put_delta(b, &prev[c], f32_bits(f[i * (size_t)stride + (size_t)c]));
 }
 
 static rtp_status serialize(const rtp_tree *t, sink *out)
@@ -624,22 +614,17 @@ static rtp_status serialize(const rtp_tree *t, sink *out)
     put_packed_f32(&b, s->uv, s->nuv, 2);
     put_u32(&b, (uint32_t)s->ntris);
     {
-        uint32_t *u = s->ntris ? (uint32_t *)rtpi_malloc_array(b.a, s->ntris, 10 * sizeof *u)
-                               : NULL;
-        if (s->ntris && !u)
-            b.bad = 1;
-        for (i = 0; u && i < s->ntris; i++) {
+        uint32_t prev[10] = {0};
+        for (i = 0; i < s->ntris; i++) {
             const rtpi_tri *tr = &s->tris[i];
-            for (k = 0; k < 3; k++) {
-                u[10 * i + k] = tr->v[k];
-                u[10 * i + 3 + k] = tr->n[k];
-                u[10 * i + 6 + k] = tr->t[k];
-            }
-            u[10 * i + 9] = tr->mat;
+            for (k = 0; k < 3; k++)
+                put_delta(&b, &prev[k], tr->v[k]);
+            for (k = 0; k < 3; k++)
+                put_delta(&b, &prev[3 + k], tr->n[k]);
+            for (k = 0; k < 3; k++)
+                put_delta(&b, &prev[6 + k], tr->t[k]);
+            put_delta(&b, &prev[9], tr->mat);
         }
-        if (u)
-            put_packed(&b, u, s->ntris, 10);
-        rtpi_free(b.a, u);
     }
     put_u32(&b, (uint32_t)s->nspheres);
     for (i = 0; i < s->nspheres; i++) {
@@ -1171,11 +1156,12 @@ static rtp_status read_texr(loader *L, rd *r)
 
 /* n groups of `stride` 32-bit numbers of GEOM into v, or as the floats
    they are the bits of into f (v NULL): format 1 as they are, format 2
-   packed (put_packed).  0, or 1 when the section ran out (r->bad set), 2
-   when a number is not a varint of 32 bits. */
-static int get_words(loader *L, rd *r, uint32_t *v, float *f, size_t n, int stride)
+   packed (put_delta; prev: the group before, stride numbers, 0 before
+   the first).  0, or 1 when the section ran out (r->bad set), 2 when a
+   number is not a varint of 32 bits. */
+static int get_words(loader *L, rd *r, uint32_t *v, float *f, size_t n, int stride,
+                     uint32_t *prev)
 {
-    uint32_t prev[10] = {0};
     size_t i, at;
     int c;
     for (i = 0; i < n; i++)
@@ -1217,7 +1203,8 @@ static rtp_status get_floats(loader *L, rd *r, float *f, size_t n, int stride,
                              const char *what)
 {
     size_t i;
-    int e = get_words(L, r, NULL, f, n, stride);
+    uint32_t prev[3] = {0, 0, 0};
+    int e = get_words(L, r, NULL, f, n, stride, prev);
     if (e == 1)
         return bad(L, "section too short", NULL);
     if (e == 2)
@@ -1231,7 +1218,7 @@ static rtp_status get_floats(loader *L, rd *r, float *f, size_t n, int stride,
 static rtp_status read_geom(loader *L, rd *r)
 {
     rtp_scene *s = L->s;
-    uint32_t n, i, *w = NULL;
+    uint32_t n, i, prev[10] = {0};
     int k;
     rtp_status st;
     /* the fewest bytes a number takes: a varint's 1 (format 2) or 4 */
@@ -1270,27 +1257,20 @@ static rtp_status read_geom(loader *L, rd *r)
     if (n && !(s->tris = (rtpi_tri *)rtpi_malloc_array(L->a, n, sizeof *s->tris)))
         return nomem(L);
     s->ntris = s->cap_tris = n;
-    if (n && !(w = (uint32_t *)rtpi_malloc_array(L->a, n, 10 * sizeof *w)))
-        return nomem(L);
-    k = n ? get_words(L, r, w, NULL, n, 10) : 0;
-    for (i = 0; i < n && k == 0; i++) {
-        rtpi_tri *tr = &s->tris[i];
-        int j;
-        for (j = 0; j < 3; j++) {
-            tr->v[j] = w[10 * i + j];
-            tr->n[j] = w[10 * i + 3 + j];
-            tr->t[j] = w[10 * i + 6 + j];
-        }
-        tr->mat = w[10 * i + 9];
-    }
-    rtpi_free(L->a, w);
-    if (k == 1)
-        return bad(L, "section too short", NULL);
-    if (k == 2)
-        return bad(L, "triangle is malformed", NULL);
     for (i = 0; i < n; i++) {
         rtpi_tri *tr = &s->tris[i];
-        int has_n, has_t;
+        uint32_t w[10];
+        int has_n, has_t, e = get_words(L, r, w, NULL, 1, 10, prev);
+        if (e == 1)
+            return bad(L, "section too short", NULL);
+        if (e == 2)
+            return bad(L, "triangle is malformed", NULL);
+        for (k = 0; k < 3; k++) {
+            tr->v[k] = w[k];
+            tr->n[k] = w[3 + k];
+            tr->t[k] = w[6 + k];
+        }
+        tr->mat = w[9];
         has_n = tr->n[0] != RTPI_NONE;
         has_t = tr->t[0] != RTPI_NONE;
         for (k = 0; k < 3; k++) {
