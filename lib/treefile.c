@@ -441,6 +441,36 @@ static RTPI_FORCE_INLINE size_t get_v32(const unsigned char *c, size_t avail, ui
     return (size_t)-1;
 }
 
+/* get_v32 where 5 bytes are there: unrolled, no count of them (reading
+   the trees, most numbers). */
+static RTPI_FORCE_INLINE size_t get_v32_5(const unsigned char *c, uint32_t *v)
+{
+    uint32_t x = c[0];
+    if (x < 0x80u) {
+        *v = x;
+        return 1;
+    }
+    x = (x & 0x7fu) | (uint32_t)c[1] << 7;
+    if (c[1] < 0x80u) {
+        *v = x;
+        return 2;
+    }
+    x = (x & 0x3fffu) | (uint32_t)c[2] << 14;
+    if (c[2] < 0x80u) {
+        *v = x;
+        return 3;
+    }
+    x = (x & 0x1fffffu) | (uint32_t)c[3] << 21;
+    if (c[3] < 0x80u) {
+        *v = x;
+        return 4;
+    }
+    if (c[4] > 0x0fu)
+        return (size_t)-1;
+    *v = (x & 0xfffffffu) | (uint32_t)c[4] << 28;
+    return 5;
+}
+
 /* Node n unpacked from c (avail bytes) against its references: the
    bytes it took, 0 when they ran out first, (size_t)-1 when malformed. */
 static RTPI_FORCE_INLINE size_t unpack_node(const unsigned char *c, size_t avail,
@@ -451,7 +481,9 @@ static RTPI_FORCE_INLINE size_t unpack_node(const unsigned char *c, size_t avail
     uint32_t v[6];
     int i, nv = 4 + ((layout & NODE_VIS) != 0) + ((layout & NODE_LINK32) != 0);
     for (i = 0; i < nv; i++) {
-        k = get_v32(c + at, avail - at, &v[i]);
+        /* (a node takes PACKED_MAX bytes at most: with as many there,
+           every number has its 5) */
+        k = avail >= PACKED_MAX ? get_v32_5(c + at, &v[i]) : get_v32(c + at, avail - at, &v[i]);
         if (k == 0 || k == (size_t)-1)
             return k;
         at += k;
