@@ -37,6 +37,17 @@ for mode in "" "--spd"; do
     cmp -s "$T/c.pfm" "$T/d.pfm" && ok || bad "region tree reeval $mode"
     rm -f "$T"/part-*
 done
+# merging one whole-frame tree rewrites it in today's format: a format-1
+# file (test/golden, written before format 2) comes out as format 2,
+# smaller, and re-evaluates to the same image
+G=test/golden/format1.rtp
+$RTP merge -o "$T/f2.rtp" "$G"
+$RTP reeval "$G" --set light.0.color=1,0.5,0.25 -i "$T/a.pfm" -q
+$RTP reeval "$T/f2.rtp" --set light.0.color=1,0.5,0.25 -i "$T/b.pfm" -q
+cmp -s "$T/a.pfm" "$T/b.pfm" && ok || bad "format-1 file merged into format 2 re-evaluates otherwise"
+[ "$(od -An -tu1 -j20 -N1 "$T/f2.rtp" | tr -d ' ')" = 2 ] &&
+    [ "$(wc -c < "$T/f2.rtp")" -lt "$(wc -c < "$G")" ] && ok ||
+    bad "merged format-1 file is not a smaller format-2 file"
 # regions that overlap or leave a gap are refused
 $RTP trace $S --size 32x32 --region 0,0,32,20 -o "$T/p1.rtp" -i "$T/p1.pfm" -q
 $RTP trace $S --size 32x32 --region 0,10,32,32 -o "$T/p2.rtp" -i "$T/p2.pfm" -q
