@@ -364,16 +364,17 @@ typedef struct rtp_tree_info {
 
 void rtp_tree_get_info(const rtp_tree *tree, rtp_tree_info *info);
 
-/** Writes the tree file (format: lib/tree-format.md); "-" is stdout.
- *  Files are written to a temporary name and renamed: nothing half
- *  written is left.  bytes (may be NULL) receives the file size. */
+/** Writes the tree file (format 2.0, nodes and meshes packed:
+ *  lib/tree-format.md); "-" is stdout.  Files are written to a temporary
+ *  name and renamed: nothing half written is left.  bytes (may be NULL)
+ *  receives the file size. */
 rtp_status rtp_tree_write(const rtp_tree *tree, const char *path,
                           unsigned long long *bytes, rtp_error *err);
-/** Reads and validates a tree file; "-" is stdin.  A truncated, corrupt,
- *  foreign or newer file gives RTP_ERR_FORMAT naming what is wrong (the
- *  same error rtp_tree_read_memory gives for the same bytes).  The file is
- *  parsed as it is read: its bytes are not held in memory beside the
- *  tree. */
+/** Reads and validates a tree file of format 1 or 2; "-" is stdin.  A
+ *  truncated, corrupt, foreign or newer file gives RTP_ERR_FORMAT naming
+ *  what is wrong (the same error rtp_tree_read_memory gives for the same
+ *  bytes).  The file is parsed as it is read: its bytes are not held in
+ *  memory beside the tree. */
 rtp_status rtp_tree_read(const char *path, const rtp_allocator *alloc,
                          rtp_tree **out, rtp_error *err);
 rtp_status rtp_tree_read_memory(const void *data, size_t size,
