@@ -22,6 +22,17 @@
 #define RTPI_FORCE_INLINE inline
 #endif
 
+/* Built with AddressSanitizer: the default allocator then leaves every
+   block to malloc (util.c), whose checks its own mappings would escape. */
+#if defined(__has_feature)
+#if __has_feature(address_sanitizer)
+#define RTPI_ASAN 1
+#endif
+#endif
+#if defined(__SANITIZE_ADDRESS__)
+#define RTPI_ASAN 1
+#endif
+
 /* ------------------------------------------------------------ allocation */
 
 void *rtpi_malloc(const rtp_allocator *a, size_t size);

@@ -46,15 +46,7 @@
    words before it, so that free and realloc can tell the kinds apart and
    know the size: the mapping's length (0: malloc's) and the size asked.
    Not under AddressSanitizer, whose checks of the heap the mappings
-   would escape. */
-#if defined(__has_feature)
-#if __has_feature(address_sanitizer)
-#define RTPI_ASAN 1
-#endif
-#endif
-#if defined(__SANITIZE_ADDRESS__)
-#define RTPI_ASAN 1
-#endif
+   would escape (RTPI_ASAN: internal.h). */
 #if defined(__linux__) && defined(MADV_HUGEPAGE) && defined(MREMAP_MAYMOVE) && \
     defined(MREMAP_FIXED) && !defined(RTPI_ASAN)
 #define RTPI_HUGE_MIN ((size_t)1 << 20)

@@ -690,19 +690,11 @@ static void test_default_allocator(void)
    a material's first kd edit made blocks it never used.)  Where util.c
    makes its own large blocks: Linux (mincore too), not under
    AddressSanitizer (plain malloc then). */
-#if defined(__has_feature)
-#if __has_feature(address_sanitizer)
-#define TEST_ASAN 1
-#endif
-#endif
-#if defined(__SANITIZE_ADDRESS__)
-#define TEST_ASAN 1
-#endif
 static void test_large_block_untouched(void)
 {
 /* (util.c's condition for its large blocks) */
 #if defined(__linux__) && defined(MADV_HUGEPAGE) && defined(MREMAP_MAYMOVE) && \
-    defined(MREMAP_FIXED) && !defined(TEST_ASAN)
+    defined(MREMAP_FIXED) && !defined(RTPI_ASAN)
     /* 64 MiB: above glibc's largest mmap threshold (32 MiB), so fresh
        memory whatever this process freed before */
     const size_t size = (size_t)64 << 20, span = (size_t)2 << 20;
