@@ -370,7 +370,7 @@ static const char trace_help[] =
     "  --spd                SPD testing procedure: 512x512 from 513x513 corner\n"
     "                       rays, depth 5, no weight cut-off, one-sided opaque\n"
     "  --depth N            maximum ray-tree depth, eye ray = 1 (default 5)\n"
-    "  --memory-limit MIB   refuse images whose image and trees need more (16384)\n"
+    "  --memory-limit MIB   stop when the image and its trees need more (16384)\n"
     "  --min-weight W       do not spawn rays weighing less than W (default 0)\n"
     "  -j, --threads N      threads (default: the processors online)\n"
     "  --stats FILE         write statistics as one JSON object ('-' = stdout)\n"
@@ -392,6 +392,17 @@ static char *default_image_name(const char *scene)
     memcpy(out, base, n);
     memcpy(out + n, ".png", 5);
     return out;
+}
+
+/* Says that rays were not followed because a sample's tree was full: the
+   image is not the full Whitted trace (the trees and the image agree, so
+   re-evaluation stays exact against them). */
+static void capped_warning(unsigned long long n)
+{
+    fprintf(stderr,
+            "rtp: warning: %llu rays were not followed: their samples' ray trees reached "
+            "2^20 nodes (lower --depth or set --min-weight)\n",
+            n);
 }
 
 static int cmd_trace(int argc, char **argv)
@@ -539,6 +550,8 @@ static int cmd_trace(int argc, char **argv)
     }
     rtp_tree_get_info(tree, &ti);
     t_write = now_seconds() - t0;
+    if (verbosity > 0 && st.capped_rays)
+        capped_warning(st.capped_rays);
     if (verbosity > 1)
         fprintf(stderr,
                 "rtp: %dx%d in %.3f s (load %.3f, build %.3f, trace %.3f, write %.3f); "
@@ -557,12 +570,12 @@ static int cmd_trace(int argc, char **argv)
                 "\"eye_rays\": %llu, \"eye_hits\": %llu, \"shadow_rays\": %llu, "
                 "\"reflected_rays\": %llu, \"refracted_rays\": %llu, "
                 "\"kd_nodes\": %llu, \"kd_leaves\": %llu, \"kd_prim_refs\": %llu, "
-                "\"kd_depth\": %d",
+                "\"kd_depth\": %d, \"capped_rays\": %llu",
                 scene_path, st.width, st.height, opt.spd ? "true" : "false",
                 opt.threads > 1 ? opt.threads : 1, t_load + t_trace + t_write, t_load,
                 st.build_seconds, st.trace_seconds, t_write, st.eye_rays, st.eye_hits,
                 st.shadow_rays, st.reflected_rays, st.refracted_rays, st.kd_nodes,
-                st.kd_leaves, st.kd_prim_refs, st.kd_depth);
+                st.kd_leaves, st.kd_prim_refs, st.kd_depth, st.capped_rays);
         if (tree)
             fprintf(f, ", \"pixels\": %llu, \"samples\": %llu, \"nodes\": %llu, "
                        "\"bytes_per_node\": %u, \"tree_bytes\": %llu, \"file_bytes\": %llu",
@@ -769,6 +782,8 @@ static const char reeval_help[] =
     "  --add-light X,Y,Z    add a white light (repeatable); it is light N, after\n"
     "                       the scene's lights, for --set light.N.*\n"
     "  --region X0,Y0,X1,Y1 write only these pixels of the frame\n"
+    "  --memory-limit MIB   stop when traced-again trees would take more, with\n"
+    "                       the trees already held (16384)\n"
     "  --reference          also trace the edited scene in full and report both\n"
     "                       times and the error of the re-evaluation\n"
     "  -j, --threads N      threads (default: the processors online)\n"
@@ -903,17 +918,20 @@ static int reeval_one(rtp_tree *tree, const rtp_eval_options *eo, rtp_image **ke
     if (verbosity > 0 && es.retraced_samples)
         fprintf(stderr, "rtp: traced %llu of %llu samples again (%llu rays) for edits that move rays\n",
                 es.retraced_samples, es.samples ? es.samples : 0ULL, es.retraced_rays);
+    if (verbosity > 0 && es.capped_rays)
+        capped_warning(es.capped_rays);
     if (stats) {
         long long fb = file_size(tree_path);
         rtp_tree_get_info(tree, &ti);
         fprintf(stats,
                 "{\"command\": \"reeval\", \"seconds\": %.6f, \"load_seconds\": %.6f, "
                 "\"shadow_seconds\": %.6f, \"moved_lights\": %d, \"shadow_queries\": %llu, "
-                "\"retraced_samples\": %llu, \"retraced_rays\": %llu, "
+                "\"retraced_samples\": %llu, \"retraced_rays\": %llu, \"capped_rays\": %llu, "
                 "\"combined_samples\": %llu, \"written_pixels\": %llu, \"pixels\": %llu, \"samples\": %llu, \"nodes\": %llu, \"bytes_per_node\": %u, "
                 "\"tree_bytes\": %llu",
                 es.seconds, load_seconds, es.shadow_seconds, es.moved_lights,
-                es.shadow_queries, es.retraced_samples, es.retraced_rays, es.combined_samples,
+                es.shadow_queries, es.retraced_samples, es.retraced_rays, es.capped_rays,
+                es.combined_samples,
                 es.written_pixels,
                 (unsigned long long)img->width * img->height,
                 ti.samples, ti.nodes, ti.bytes_per_node, ti.tree_bytes);
@@ -1014,6 +1032,14 @@ static int cmd_reeval(int argc, char **argv)
                 msg("--region: expected x0,y0,x1,y1 with x0 < x1 and y0 < y1");
                 goto usage;
             }
+        } else if (is_opt(a, "--memory-limit")) {
+            double mib;
+            if (!(v = opt_value(argc, argv, &i, "--memory-limit")) || parse_double(v, &mib) ||
+                !(mib > 0)) {
+                msg("--memory-limit: expected a size in MiB > 0");
+                goto usage;
+            }
+            eo.memory_limit = mib * 1048576.0;
         } else if (is_opt(a, "--stale")) {
             if (!(v = opt_value(argc, argv, &i, "--stale")))
                 goto usage;

@@ -191,7 +191,8 @@ typedef struct rtp_trace_options {
     int threads;        /* 0 or 1: the calling thread only */
     double memory_limit; /* bytes the image, samples and trees may take;
                             0: 16 GiB.  Past it: RTP_ERR_LIMIT, before any
-                            tracing */
+                            tracing where the image and one node a sample
+                            are over it, else when the trees outgrow it */
     int region[4];      /* x0, y0, x1, y1: trace only pixels x0 <= x < x1,
                            y0 <= y < y1 of the frame (all 0: the frame);
                            the image is the region's; see rtp_tree_merge */
@@ -209,6 +210,9 @@ typedef struct rtp_trace_stats {
     unsigned long long kd_nodes, kd_leaves, kd_prim_refs;
     int kd_depth;
     int width, height;
+    unsigned long long capped_rays; /* rays that hit but were not followed:
+                                       their sample's tree had 2^20 nodes
+                                       (the image lacks what they carried) */
 } rtp_trace_stats;
 
 /** Traces the scene into a new image.  stats may be NULL.
@@ -288,6 +292,10 @@ typedef struct rtp_eval_options {
                                there (the caller's promise): pixels an edit
                                cannot change are not written again.  Ignored
                                when that image was not the last one written. */
+    double memory_limit;    /* bytes the trees may take while samples are
+                               traced again (class D), old and new; 0:
+                               16 GiB.  Past it: RTP_ERR_LIMIT, the tree
+                               as it was */
 } rtp_eval_options;
 
 typedef struct rtp_eval_stats {
@@ -309,6 +317,9 @@ typedef struct rtp_eval_stats {
     rtp_shadow_mode shadows; /* how moved lights' shadows were decided (the
                                 mode asked, RTP_SHADOWS_AUTO resolved),
                                 where moved_lights > 0 */
+    unsigned long long capped_rays; /* re-traced rays that hit but were not
+                                       followed (a sample's tree was full,
+                                       as rtp_trace_stats says) */
 } rtp_eval_stats;
 
 /** Evaluates the trees with the current parameters into a new image.  Lights

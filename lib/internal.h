@@ -814,12 +814,19 @@ struct rtp_tree {
     rtp_allocator cube_alloc; /* the tree's allocator through blocks[] */
 };
 
+/* The memory limit of a trace or re-evaluation given none: 16 GiB. */
+#define RTPI_MEMORY_LIMIT (16.0 * 1073741824.0)
+
 /* Traces the listed samples (ascending indices) of t again in t->scene as
    it is now (materials edited; lights where they were traced) and puts
-   their new trees in place of the old; adds the rays cast to *rays.  The
-   caller drops whatever caches refer to the old nodes. */
-rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n,
-                        int threads, unsigned long long *rays, rtp_error *err);
+   their new trees in place of the old; adds the rays cast to *rays and
+   those not followed because a sample's tree was full to *capped.  The
+   trees may take limit bytes in all, the old and the new together while
+   they are spliced (RTP_ERR_LIMIT past it, t unchanged).  The caller
+   drops whatever caches refer to the old nodes. */
+rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int threads,
+                        double limit, unsigned long long *rays,
+                        unsigned long long *capped, rtp_error *err);
 
 /* Resolves samples (nx*ny RGB, from a grid of corners when spd) into
    the image; one routine for trace and reeval so both round alike. */

@@ -78,7 +78,15 @@ struct shared {
     uint32_t *tvis;    /* their visibility words (> 32 lights) */
     size_t tvis_cap;
     uint64_t *tstart;  /* gx*gy + 1 sample starts */
-    rtpi_mutex lock;   /* guards the above */
+    rtpi_mutex lock;   /* guards the above and room */
+    /* Recording and re-tracing: bytes the nodes may still take under the
+       caller's memory limit.  Workers take from it when their buffers
+       grow and when a row's nodes are copied into the tree or kept
+       waiting, so a scene whose trees would outgrow the machine (glass in
+       a mirrored room at depth 30: each sample up to 2^20 nodes) stops
+       with RTP_ERR_LIMIT instead of being killed for memory. */
+    double room;
+    int limited;       /* room applies */
     rtpi_shade_ctx shade;
     double *cl;        /* light colours as shading sees them */
     int gx, gy;        /* samples traced: the region's grid */
@@ -117,12 +125,44 @@ static void camera_init(camera *c, const rtp_scene *s, int nx, int ny)
     c->ny = ny;
 }
 
+/* Bytes a node takes with its visibility words. */
+static double node_bytes(const shared *sh)
+{
+    return (double)sizeof(rtpi_cnode) + (double)sh->shade.vis_words * sizeof(uint32_t);
+}
+
+/* Takes bytes from the room the trees have; 0, or 1 with w->status set
+   to RTP_ERR_LIMIT.  The caller must not hold sh->lock. */
+static int take_room(worker *w, double bytes)
+{
+    shared *sh = w->sh;
+    int ok;
+    if (!sh->limited)
+        return 0;
+    rtpi_mutex_lock(&sh->lock);
+    ok = bytes <= sh->room;
+    if (ok)
+        sh->room -= bytes;
+    rtpi_mutex_unlock(&sh->lock);
+    if (!ok)
+        w->status = RTP_ERR_LIMIT;
+    return !ok;
+}
+
 /* Appends a node to the current sample; returns its index within the
    sample, or -1. */
 static int32_t push_node(worker *w)
 {
     size_t words = w->sh->shade.vis_words;
-    if (w->nn - w->sample_base >= MAX_NODES_PER_SAMPLE)
+    if (w->status != RTP_OK)
+        return -1;
+    if (w->nn - w->sample_base >= MAX_NODES_PER_SAMPLE) {
+        w->n.capped++;
+        return -1;
+    }
+    /* (rtpi_grow doubles, from 16) */
+    if (w->nn + 1 > w->cap &&
+        take_room(w, (double)(w->cap ? w->cap : 16) * node_bytes(w->sh)))
         return -1;
     if (rtpi_grow(&w->sh->s->alloc, (void **)&w->nodes, &w->cap, w->nn + 1,
                   sizeof *w->nodes)) {
@@ -180,10 +220,8 @@ static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
     if (!rtpi_kd_intersect(sh->kd, ray, &hit))
         return RTPI_CHILD_MISS;
     idx = push_node(w);
-    if (idx < 0) {
-        w->n.capped++;
+    if (idx < 0)
         return RTPI_CHILD_NONE;
-    }
     {
         /* Everything below starts from the float position the tree keeps,
            with the surface derived from it exactly as shading derives it,
@@ -412,7 +450,17 @@ static int commit_row(worker *w, int y)
     shared *sh = w->sh;
     const rtp_allocator *a = &sh->s->alloc;
     int bad = 0;
+    double bytes = (double)w->nn * node_bytes(sh);
     rtpi_mutex_lock(&sh->lock);
+    /* (the row's nodes go into the tree or wait in a copy: either way
+       they take their bytes until the end) */
+    if (sh->limited && bytes > sh->room) {
+        rtpi_mutex_unlock(&sh->lock);
+        w->status = RTP_ERR_LIMIT;
+        return 1;
+    }
+    if (sh->limited)
+        sh->room -= bytes;
     if (y != sh->next_row) {
         bad = keep_row(w, &sh->rows[y], (size_t)sh->gx);
         if (!bad)
@@ -525,6 +573,18 @@ static rtp_status gather_tree(shared *sh, int w, int h, rtp_tree **out,
     return RTP_OK;
 }
 
+/* The error a worker's status stands for: over the memory limit (the
+   remedy given), or out of memory, while doing what. */
+static rtp_status worker_error(rtp_status st, double limit, const char *what,
+                               const char *remedy, rtp_error *err)
+{
+    if (st == RTP_ERR_LIMIT)
+        return rtpi_error(err, st, NULL, 0, 0,
+                          "the ray trees grew past the memory limit of %.6g MiB while %s (%s)",
+                          limit / 1048576.0, what, remedy);
+    return rtpi_error(err, st, NULL, 0, 0, "out of memory while %s", what);
+}
+
 static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in,
                              rtp_tree **tree_out, rtp_image **out,
                              rtp_trace_stats *stats, rtp_error *err)
@@ -538,7 +598,7 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
     float *samples = NULL;
     rtp_status st;
     int w, h, fw, fh, rg[4], nthreads, i, lock_made = 0;
-    double t0, t1, t2;
+    double t0, t1, t2, limit;
     rtpi_kd_stats ks;
 
     if (!s || (!out && !tree_out))
@@ -576,6 +636,7 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
     nthreads = opt.threads > 1 ? opt.threads : 1;
     if (nthreads > RTPI_MAX_THREADS)
         nthreads = RTPI_MAX_THREADS;
+    limit = opt.memory_limit > 0.0 ? opt.memory_limit : RTPI_MEMORY_LIMIT;
     if (!rtpi_image_size_ok(fw + 1, fh + 1))
         return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
                           "image size %dx%d is over the limit (2^20 a side, 2^27 pixels)", fw,
@@ -583,7 +644,6 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
     {
         /* What this trace will hold at least: the image, the samples and,
            when recording, one node per sample (most samples have one). */
-        double limit = opt.memory_limit > 0.0 ? opt.memory_limit : 16.0 * 1073741824.0;
         double need = (double)w * h * 12.0 + (double)(w + 1) * (h + 1) * 12.0 +
                       (tree_out ? (double)(w + 1) * (h + 1) * (24.0 + 8.0) : 0.0);
         if (!(need <= limit))
@@ -629,6 +689,10 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
             rtpi_free(&s->alloc, sh.rows), sh.rows = NULL;
         else
             lock_made = 1;
+        /* the image, the samples and their starts are made; the nodes
+           take the rest (the up-front check counted one a sample) */
+        sh.limited = 1;
+        sh.room = limit - ((double)w * h * 12.0 + (double)sh.gx * sh.gy * (12.0 + 8.0));
     }
     if (!samples || !ws || !sh.cl || (tree_out && !sh.rows)) {
         st = rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
@@ -663,7 +727,10 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
     t2 = now_seconds();
     for (i = 0; i < nthreads; i++)
         if (ws[i].status != RTP_OK) {
-            st = rtpi_error(err, ws[i].status, NULL, 0, 0, "out of memory while tracing");
+            st = worker_error(ws[i].status, limit, "tracing",
+                              "raise it with --memory-limit, or trace with a lower --depth "
+                              "or a --min-weight",
+                              err);
             goto done;
         }
     rtpi_resolve_samples(samples, opt.spd, img);
@@ -680,6 +747,7 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
             stats->shadow_rays += ws[i].n.shadow_rays;
             stats->reflected_rays += ws[i].n.reflected_rays;
             stats->refracted_rays += ws[i].n.refracted_rays;
+            stats->capped_rays += ws[i].n.capped;
         }
         rtpi_kd_get_stats(kd, &ks);
         stats->kd_nodes = ks.nodes;
@@ -769,11 +837,14 @@ static int retrace_chunk(void *ctx, int ci)
         if (w->status != RTP_OK)
             return 1;
     }
+    if (take_room(w, (double)w->nn * node_bytes(sh)))
+        return 1;
     return keep_row(w, r, k);
 }
 
 rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int threads,
-                        unsigned long long *rays, rtp_error *err)
+                        double limit, unsigned long long *rays,
+                        unsigned long long *capped, rtp_error *err)
 {
     const rtp_allocator *a = &t->alloc;
     rtp_scene tmp;
@@ -787,7 +858,8 @@ rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int thre
     uint64_t *start = NULL;
     uint32_t *vis = NULL;
     rtp_status st = RTP_OK;
-    int nthreads = threads > 1 ? threads : 1;
+    int nthreads = threads > 1 ? threads : 1, lock_made = 0;
+    double nb, kept;
     if (n == 0)
         return RTP_OK;
     if (nthreads > RTPI_MAX_THREADS)
@@ -822,6 +894,17 @@ rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int thre
     sh.gy = t->ny;
     sh.ox = t->rx;
     sh.oy = t->ry;
+    /* The trees now, with their starts, stay until the new ones are
+       spliced in. */
+    nb = node_bytes(&sh);
+    kept = (double)t->nnodes * nb + (double)(ns + 1) * 8.0;
+    sh.limited = 1;
+    sh.room = limit - kept;
+    if (rtpi_mutex_init(&sh.lock) != 0) {
+        st = rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+        goto done;
+    }
+    lock_made = 1;
     nchunks = (n + chunk - 1) / chunk;
     jobs = (retrace_job *)rtpi_calloc_array(a, (size_t)nthreads, sizeof *jobs);
     chunks = (row_rec *)rtpi_calloc_array(a, nchunks, sizeof *chunks);
@@ -846,13 +929,17 @@ rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int thre
     rtpi_parallel_rows((int)nchunks, nthreads, ctx, retrace_chunk, NULL, NULL);
     for (i = 0; i < (size_t)nthreads; i++)
         if (jobs[i].w.status != RTP_OK) {
-            st = rtpi_error(err, jobs[i].w.status, NULL, 0, 0, "out of memory while re-tracing");
+            st = worker_error(jobs[i].w.status, limit, "re-tracing",
+                              "raise it with --memory-limit", err);
             goto done;
         }
-    if (rays)
-        for (i = 0; i < (size_t)nthreads; i++)
+    for (i = 0; i < (size_t)nthreads; i++) {
+        if (rays)
             *rays += jobs[i].w.n.eye_rays + jobs[i].w.n.shadow_rays +
                      jobs[i].w.n.reflected_rays + jobs[i].w.n.refracted_rays;
+        if (capped)
+            *capped += jobs[i].w.n.capped;
+    }
 
     /* Splice: every sample keeps its old tree unless it was re-traced. */
     total = t->nnodes;
@@ -860,6 +947,13 @@ rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int thre
         total -= (size_t)(t->start[samples[i] + 1] - t->start[samples[i]]);
     for (i = 0; i < nchunks; i++)
         total += chunks[i].nnodes;
+    /* (the new trees' chunks, taken from the room, are freed after the
+       splice: the spliced copy is the peak) */
+    if ((double)total * nb + (double)(ns + 1) * 8.0 > sh.room) {
+        st = worker_error(RTP_ERR_LIMIT, limit, "re-tracing", "raise it with --memory-limit",
+                          err);
+        goto done;
+    }
     nodes = (rtpi_cnode *)rtpi_malloc_array(a, total + 1, sizeof *nodes);
     start = (uint64_t *)rtpi_malloc_array(a, ns + 1, sizeof *start);
     vis = words ? (uint32_t *)rtpi_malloc_array(a, total * words + 1, sizeof *vis) : NULL;
@@ -927,5 +1021,7 @@ done:
     rtpi_free(a, start);
     rtpi_free(a, vis);
     rtpi_free(a, lights);
+    if (lock_made)
+        rtpi_mutex_destroy(&sh.lock);
     return st;
 }

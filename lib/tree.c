@@ -1784,8 +1784,8 @@ static void drop_caches(rtp_tree *t)
 /* Class D: samples whose trees contain a material the recorded trees
    cannot show exactly are traced again (only those), then every cache
    that referred to the old nodes is dropped. */
-static rtp_status retrace_edited(rtp_tree *t, int threads, int stale, rtp_eval_stats *st,
-                                 rtp_error *err)
+static rtp_status retrace_edited(rtp_tree *t, int threads, int stale, double limit,
+                                 rtp_eval_stats *st, rtp_error *err)
 {
     const rtp_scene *s = t->scene;
     size_t m, k, ns = (size_t)t->nx * t->ny, n = 0;
@@ -1813,7 +1813,8 @@ static rtp_status retrace_edited(rtp_tree *t, int threads, int stale, rtp_eval_s
     for (k = 0; k < ns; k++)
         if (mark[k])
             list[n++] = (uint32_t)k;
-    rs = rtpi_retrace(t, list, n, threads, st ? &st->retraced_rays : NULL, err);
+    rs = rtpi_retrace(t, list, n, threads, limit, st ? &st->retraced_rays : NULL,
+                      st ? &st->capped_rays : NULL, err);
     rtpi_free(&t->alloc, mark);
     rtpi_free(&t->alloc, list);
     if (rs != RTP_OK)
@@ -2617,7 +2618,9 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
     shade.one_sided = t->spd;
     shade.vis_words = t->vis_words;
     vis = t->vis_words ? t->vis_ext : NULL;
-    rs = retrace_edited(t, nthreads, opt && opt->stale == RTP_STALE_RETRACE, &st, err);
+    rs = retrace_edited(t, nthreads, opt && opt->stale == RTP_STALE_RETRACE,
+                        opt && opt->memory_limit > 0.0 ? opt->memory_limit : RTPI_MEMORY_LIMIT,
+                        &st, err);
     if (rs != RTP_OK)
         return rs;
     for (l = 0; l < nl; l++)

@@ -43,6 +43,24 @@ expect_rc 3 $RTP diff "$T/a.pfm" "$T/b.png" --fail-above rmse=0.001
 expect_rc 0 $RTP diff "$T/a.pfm" "$T/b.png" --fail-above rmse=100
 expect_rc 1 $RTP diff "$T/a.pfm" scenes/spheres.nff
 
+# Trees that would outgrow --memory-limit stop with a message naming it,
+# leaving no files; a sample's tree full at 2^20 nodes is a warning and a
+# stats key (glass balls inside a mirrored sphere, the eye at its centre).
+printf 'v\nfrom 0 0 0\nat 0 0 1\nup 0 1 0\nangle 60\nhither 0.01\nresolution 4 4\nb 0.1 0.1 0.1\nl 0.5 0.5 0.5\nf 0.9 0.9 0.9 0.1 0.9 10 0 1\ns 0 0 0 10\nf 0.9 0.9 0.9 0.1 0.5 10 0.5 1.5\ns 0 0 4 2\ns 0 4 3 2\ns 3 -3 3 2\ns -3 -3 -3 2\ns 4 0 -3 2\ns -4 3 -3 2\n' > "$T/trap.nff"
+expect_rc 1 $RTP trace "$T/trap.nff" --depth 40 --memory-limit 32 -o "$T/trap.rtp" -i "$T/trap.pfm"
+grep -q "memory limit of 32 MiB" "$T/err" && ok || { bad "memory limit not named"; cat "$T/err" >&2; }
+[ ! -e "$T/trap.rtp" ] && [ ! -e "$T/trap.pfm" ] && ok || bad "files written past the memory limit"
+expect_rc 0 $RTP trace "$T/trap.nff" --size 1x1 --depth 40 -o "$T/trap.rtp" --stats "$T/trap.json"
+grep -q "warning: 16 rays were not followed" "$T/err" && ok || { bad "no warning of a full tree"; cat "$T/err" >&2; }
+grep -q '"capped_rays": 16' "$T/trap.json" && grep -q '"nodes": 1048576' "$T/trap.json" && ok || { bad "capped_rays"; cat "$T/trap.json" >&2; }
+# kt 0 traced, kt 0.5 re-traced: over 1 MiB it stops, with room it runs.
+expect_rc 0 $RTP trace "$T/trap.nff" --depth 16 --set mat.1.kt=0 -o "$T/trap.rtp"
+expect_rc 1 $RTP reeval "$T/trap.rtp" --set mat.1.kt=0.5 --memory-limit 1 -i "$T/trap.pfm"
+grep -q "memory limit of 1 MiB while re-tracing" "$T/err" && ok || { bad "re-trace limit"; cat "$T/err" >&2; }
+[ ! -e "$T/trap.pfm" ] && ok || bad "image written past the memory limit"
+expect_rc 0 $RTP reeval "$T/trap.rtp" --set mat.1.kt=0.5 -i "$T/trap.pfm" --stats "$T/trap.json"
+grep -q '"capped_rays": 0' "$T/trap.json" && ok || { bad "reeval capped_rays"; cat "$T/trap.json" >&2; }
+
 # Every SPD scene and every mesh in ../shared renders (small, fast).
 shared=""
 for d in ../shared/scenes ../../shared/scenes; do [ -d "$d/spd" ] && shared=$d && break; done

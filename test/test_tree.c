@@ -301,6 +301,111 @@ static void test_refused_edits(void)
     rtp_scene_destroy(s);
 }
 
+/* Glass balls inside a mirrored sphere, the eye at its centre: every ray
+   hits, every glass hit spawns two, so the trees grow ~1.6x a level. */
+static const char trap_nff[] =
+    "v\nfrom 0 0 0\nat 0 0 1\nup 0 1 0\nangle 60\nhither 0.01\nresolution 4 4\n"
+    "b 0.1 0.1 0.1\nl 0.5 0.5 0.5\n"
+    "f 0.9 0.9 0.9 0.1 0.9 10 0 1\ns 0 0 0 10\n"
+    "f 0.9 0.9 0.9 0.1 0.5 10 0.5 1.5\n"
+    "s 0 0 4 2\ns 0 4 3 2\ns 3 -3 3 2\ns -3 -3 -3 2\ns 4 0 -3 2\ns -4 3 -3 2\n";
+
+/* Trees that would outgrow memory stop at the memory limit with a named
+   error, when traced and when traced again for a class-D edit (the tree
+   then as it was); a sample's tree stops at 2^20 nodes and says how many
+   rays it did not follow. */
+static void test_trees_outgrow_limit(void)
+{
+    rtp_scene *s = NULL;
+    rtp_tree *t = NULL;
+    rtp_image *img = NULL, *again = NULL, *first = NULL;
+    rtp_trace_options o;
+    rtp_eval_options eo;
+    rtp_trace_stats ts;
+    rtp_eval_stats es;
+    rtp_tree_info ti;
+    rtp_diff_stats d;
+    rtp_error err;
+    rtp_status st;
+    int threads;
+    if (rtp_scene_load_memory(trap_nff, strlen(trap_nff), "trap.nff", "nff", NULL, &s, NULL) !=
+        RTP_OK) {
+        CHECK(0);
+        return;
+    }
+    /* One sample at depth 40: its tree stops at 2^20 nodes; the image is
+       the evaluation of what was kept, as ever. */
+    memset(&o, 0, sizeof o);
+    o.width = o.height = 1;
+    o.max_depth = 40;
+    memset(&ts, 0, sizeof ts);
+    CHECK(rtp_record(s, &o, &t, &img, &ts, NULL) == RTP_OK);
+    if (t) {
+        rtp_tree_get_info(t, &ti);
+        printf("  1 sample at depth 40: %llu nodes, %llu rays not followed\n", ti.nodes,
+               ts.capped_rays);
+        CHECK(ti.nodes == 1u << 20 && ts.capped_rays > 0);
+        CHECK(rtp_tree_eval(t, NULL, &again, NULL, NULL) == RTP_OK && again &&
+              memcmp(again->pixels, img->pixels, 3 * sizeof(float)) == 0);
+    }
+    rtp_image_destroy(img);
+    rtp_image_destroy(again);
+    rtp_tree_destroy(t);
+    img = again = NULL;
+    t = NULL;
+    /* 4x4 at depth 40 would take 16 times 24 MiB: over 32 MiB it stops. */
+    for (threads = 1; threads <= 2; threads++) {
+        o.width = o.height = 4;
+        o.threads = threads;
+        o.memory_limit = 32.0 * 1048576.0;
+        memset(&err, 0, sizeof err);
+        st = rtp_record(s, &o, &t, &img, NULL, &err);
+        printf("  4x4 at depth 40 in 32 MiB, %d thread(s): %s: %s\n", threads,
+               rtp_status_string(st), err.message);
+        CHECK(st == RTP_ERR_LIMIT && !t && !img && strstr(err.message, "memory limit of 32 MiB"));
+    }
+    /* Glass traced with kt 0 (a mirror chain, 16 nodes a sample at most),
+       then kt 0.5: the re-trace needs ~120,000 nodes, over 1 MiB. */
+    memset(&o, 0, sizeof o);
+    o.max_depth = 16;
+    CHECK(rtp_scene_set(s, "mat.1.kt", "0", NULL) == RTP_OK);
+    CHECK(rtp_record(s, &o, &t, &first, NULL, NULL) == RTP_OK);
+    if (t) {
+        unsigned long long nodes0;
+        rtp_tree_get_info(t, &ti);
+        nodes0 = ti.nodes;
+        CHECK(rtp_tree_set(t, "mat.1.kt", "0.5", NULL) == RTP_OK);
+        memset(&eo, 0, sizeof eo);
+        eo.memory_limit = 1048576.0;
+        memset(&err, 0, sizeof err);
+        st = rtp_tree_eval(t, &eo, &img, NULL, &err);
+        printf("  re-trace in 1 MiB: %s: %s\n", rtp_status_string(st), err.message);
+        CHECK(st == RTP_ERR_LIMIT && !img && strstr(err.message, "re-tracing"));
+        /* the tree as it was: kt 0 again evaluates to the first image */
+        rtp_tree_get_info(t, &ti);
+        CHECK(ti.nodes == nodes0);
+        CHECK(rtp_tree_set(t, "mat.1.kt", "0", NULL) == RTP_OK);
+        CHECK(rtp_tree_eval(t, NULL, &again, NULL, NULL) == RTP_OK && again &&
+              rtp_image_diff(again, first, 0.0, &d, NULL) == RTP_OK && d.max_abs == 0.0);
+        rtp_image_destroy(again);
+        again = NULL;
+        /* and with room, the edit equals a full trace of it */
+        CHECK(rtp_tree_set(t, "mat.1.kt", "0.5", NULL) == RTP_OK);
+        CHECK(rtp_scene_set(s, "mat.1.kt", "0.5", NULL) == RTP_OK);
+        eo.memory_limit = 0.0;
+        memset(&es, 0, sizeof es);
+        CHECK(rtp_tree_eval(t, &eo, &img, &es, NULL) == RTP_OK);
+        CHECK(rtp_trace(s, &o, &again, NULL, NULL) == RTP_OK);
+        CHECK(img && again && rtp_image_diff(img, again, 1e-6, &d, NULL) == RTP_OK &&
+              d.max_abs <= 1e-6 && es.retraced_samples > 0 && es.capped_rays == 0);
+    }
+    rtp_image_destroy(img);
+    rtp_image_destroy(again);
+    rtp_image_destroy(first);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+}
+
 /* Class D: ks or kt from 0, a new ior: only the samples containing the
    material are traced again, and the result equals a full trace. */
 static void test_class_d_retrace(void)
@@ -1860,6 +1965,7 @@ int main(void)
     RUN(test_class_a_edits);
     RUN(test_refused_edits);
     RUN(test_class_d_retrace);
+    RUN(test_trees_outgrow_limit);
     RUN(test_moved_light_exact);
     RUN(test_moved_light_lightbuf);
     RUN(test_shadows_auto);
