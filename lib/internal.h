@@ -580,9 +580,17 @@ void rtpi_combine_rest(const rtp_scene *s, const double *cl, const float *coeffs
                        double rest[3]);
 void rtpi_light_colors(const rtp_scene *s, double *cl);
 
-/* Surface data at a recorded hit position (normals, material, and uv when
-   want_uv). */
-void rtpi_surface_from_point(const rtp_scene *s, uint32_t prim, rtpi_v3 p,
+/* Surface data at a recorded hit position, the float position a tree
+   node keeps (normals, material, and uv when want_uv).  It takes the
+   floats themselves: gcc 12.2 at -O2 drops the rounding of
+   (double)(float)x where its SLP vectorizer pairs two coordinates, so
+   trace, handing over v3((float)pe.x, (float)pe.y, (float)pe.z), cast
+   its reflected, refracted and shadow rays from the unrounded hit while
+   re-evaluation cast them from the rounded one (images and files
+   differed from -O0's and clang's; 1e-5 apart at a reflection between
+   touching balls).  A float array in memory, read in another file, is
+   rounded whatever the optimiser does. */
+void rtpi_surface_from_point(const rtp_scene *s, uint32_t prim, const float p[3],
                              int want_uv, rtpi_surface *out);
 
 /* A triangle's geometric normal, and a sphere's outward one at p (its
@@ -652,7 +660,11 @@ static inline uint32_t rtpi_surface_normals(const rtp_scene *s, uint32_t prim, r
             return s->cones[i].mat;
         }
     }
-    rtpi_surface_from_point(s, prim, p, 0, &sf);
+    {
+        /* (p holds floats already: exact) */
+        const float pf[3] = {(float)p.x, (float)p.y, (float)p.z};
+        rtpi_surface_from_point(s, prim, pf, 0, &sf);
+    }
     *ng = sf.ng;
     *ns = sf.ns;
     return sf.mat;

@@ -62,9 +62,10 @@ void rtpi_texture_factor(const rtp_scene *s, const rtpi_material *m, rtpi_v3 p,
         f[c] = 1.0;
 }
 
-void rtpi_surface_from_point(const rtp_scene *s, uint32_t prim, rtpi_v3 p,
+void rtpi_surface_from_point(const rtp_scene *s, uint32_t prim, const float pf[3],
                              int want_uv, rtpi_surface *out)
 {
+    const rtpi_v3 p = v3_from_f(pf);
     rtpi_ray ray;
     rtpi_hit hit;
     hit.t = 0.0;
@@ -292,7 +293,7 @@ static void terms_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t 
     double tex[3];
 
     m = &s->mats[rtpi_prim_material(s, nd->prim)];
-    rtpi_surface_from_point(s, nd->prim, p,
+    rtpi_surface_from_point(s, nd->prim, nd->p,
                             m->tex == RTPI_TEX_IMAGE || m->bump == RTPI_BUMP_IMAGE, &sf);
     n = rtpi_bump_normal(s, m, nd->prim, p, sf.uv, sf.ns);
     if ((nd->link & RTPI_L_BACK) && rtpi_two_sided(s, c->one_sided, nd->prim, m))

@@ -126,7 +126,8 @@ static inline int rtpi_shadow_query_at(const rtp_scene *s, int one_sided, uint32
 {
     rtpi_surface sf;
     rtpi_v3 ng, ns;
-    rtpi_surface_from_point(s, prim, v3((float)pe.x, (float)pe.y, (float)pe.z), 0, &sf);
+    const float pf[3] = {(float)pe.x, (float)pe.y, (float)pe.z};
+    rtpi_surface_from_point(s, prim, pf, 0, &sf);
     ng = sf.ng;
     ns = sf.ns;
     if (v3_dot(d, ng) >= 0.0 && rtpi_two_sided(s, one_sided, prim, &s->mats[sf.mat])) {

@@ -228,8 +228,8 @@ static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
            so a re-evaluation that casts rays again casts these very rays. */
         rtpi_v3 pe = v3_madd(ray->o, ray->d, hit.t);
         const rtpi_material *hm = &s->mats[rtpi_prim_material(s, hit.prim)];
-        rtpi_surface_from_point(s, hit.prim, v3((float)pe.x, (float)pe.y, (float)pe.z),
-                                hm->bump == RTPI_BUMP_IMAGE, &sf);
+        const float pf[3] = {(float)pe.x, (float)pe.y, (float)pe.z};
+        rtpi_surface_from_point(s, hit.prim, pf, hm->bump == RTPI_BUMP_IMAGE, &sf);
     }
     m = &s->mats[sf.mat];
     ng = sf.ng;

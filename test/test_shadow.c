@@ -265,7 +265,10 @@ static void test_lightbuf_far_from_origin(void)
                     if (!rtpi_kd_intersect(kd, &r, &h))
                         continue;
                     pe = v3_madd(r.o, r.d, h.t);
-                    rtpi_surface_from_point(s, h.prim, v3((float)pe.x, (float)pe.y, (float)pe.z), 0, &sf);
+                    {
+                        const float pf[3] = {(float)pe.x, (float)pe.y, (float)pe.z};
+                        rtpi_surface_from_point(s, h.prim, pf, 0, &sf);
+                    }
                     ng = sf.ng;
                     ns = sf.ns;
                     if (v3_dot(r.d, ng) >= 0.0) {
