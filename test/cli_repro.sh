@@ -1,0 +1,68 @@
+#!/bin/sh
+# Reproducible across builds: rtp built by other compilers and at other
+# optimisation levels must trace the same images and write the same tree
+# files, bit for bit, and re-evaluate light moves to the same images
+# (exact and light-buffer shadows).  IEEE arithmetic in the same order
+# gives the same bits; a difference is a compiler folding what C does not
+# let it fold (gcc 12.2 at -O2 dropped the float rounding of hit
+# positions, see rtpi_surface_from_point) or an expression whose order is
+# left to the compiler.  .ci/run keeps each build's rtp and calls this.
+#   cli_repro.sh REFERENCE_RTP OTHER_RTP...
+# The project's scenes always; with ../shared the SPD scenes too (at
+# 128x128, and balls by the SPD procedure).
+[ $# -ge 2 ] || { echo "usage: cli_repro.sh REFERENCE_RTP OTHER_RTP..." >&2; exit 2; }
+T=${TMPDIR:-/tmp}/rtp-repro.$$
+mkdir -p "$T"
+trap 'rm -rf "$T"' EXIT
+pass=0; fail=0; skip=0
+shared=""
+for d in ../shared ../../shared; do [ -d "$d/scenes/spd" ] && shared=$d && break; done
+[ -n "$shared" ] || { echo "SKIP: ../shared/scenes absent: SPD scenes not compared" >&2; skip=$((skip + 1)); }
+
+# run BUILD_INDEX RTP NAME SCENE ARGS...: trace, then two moves of light 0
+run() {
+    i=$1; R=$2; n=$3; sc=$4; shift 4
+    "$R" trace "$sc" "$@" -o "$T/$n.$i.rtp" -i "$T/$n.$i.pfm" -q -j2 &&
+        "$R" reeval "$T/$n.$i.rtp" --set light.0.pos=2,3,9 --shadows exact \
+            -i "$T/$n.$i.exact.pfm" -q -j2 &&
+        "$R" reeval "$T/$n.$i.rtp" --set light.0.pos=2,3,9 --shadows lightbuf \
+            -i "$T/$n.$i.lightbuf.pfm" -q -j2
+}
+
+# compare NAME SCENE ARGS...
+compare() {
+    n=$1; sc=$2; shift 2
+    i=0
+    for R in $builds; do
+        run $i "$R" "$n" "$sc" "$@" || { fail=$((fail + 1)); echo "FAIL: $R on $n" >&2; }
+        if [ $i -gt 0 ]; then
+            diffs=""
+            for k in pfm rtp exact.pfm lightbuf.pfm; do
+                cmp -s "$T/$n.0.$k" "$T/$n.$i.$k" || diffs="$diffs $k"
+            done
+            if [ -z "$diffs" ]; then
+                pass=$((pass + 1))
+            else
+                fail=$((fail + 1))
+                echo "FAIL: $n: $R differs from $first in:$diffs" >&2
+            fi
+        fi
+        i=$((i + 1))
+    done
+}
+
+builds="$*"
+first=$1
+for sc in scenes/*.nff; do
+    # (a scene without lights has no light 0 to move)
+    grep -q '^l ' "$sc" || continue
+    compare "$(basename "$sc" .nff)" "$sc" --size 96x72
+done
+if [ -n "$shared" ]; then
+    for sc in "$shared"/scenes/spd/*.nff; do
+        compare "$(basename "$sc" .nff)" "$sc" --size 128x128
+    done
+    compare balls-spd "$shared/scenes/spd/balls_s4.nff" --spd
+fi
+echo "$pass passed, $fail failed, $skip skipped"
+[ "$fail" -eq 0 ]
