@@ -6,11 +6,12 @@
 # gives the same bits; a difference is a compiler folding what C does not
 # let it fold (gcc 12.2 at -O2 dropped the float rounding of hit
 # positions, see rtpi_surface_from_point) or an expression whose order is
-# left to the compiler.  .ci/run keeps each build's rtp and calls this.
-#   cli_repro.sh REFERENCE_RTP OTHER_RTP...
+# left to the compiler.  .ci/run keeps each build's rtp and calls this
+# (not a cli_*.sh: make test has one build).
+#   cross_build.sh REFERENCE_RTP OTHER_RTP...
 # The project's scenes always; with ../shared the SPD scenes too (at
 # 128x128, and balls by the SPD procedure).
-[ $# -ge 2 ] || { echo "usage: cli_repro.sh REFERENCE_RTP OTHER_RTP..." >&2; exit 2; }
+[ $# -ge 2 ] || { echo "usage: cross_build.sh REFERENCE_RTP OTHER_RTP..." >&2; exit 2; }
 T=${TMPDIR:-/tmp}/rtp-repro.$$
 mkdir -p "$T"
 trap 'rm -rf "$T"' EXIT
