@@ -125,9 +125,11 @@ rtp_status rtp_scene_load_memory(const char *text, size_t size,
 void rtp_scene_destroy(rtp_scene *scene);
 
 /** Sets one parameter, e.g. key "light.0.pos" value "1,2,3".  Keys:
- *  light.N.pos|color|on, mat.N.color|kd|ks|kt|shine|ior, ambient,
- *  background; N is a 0-based index in file order or a name the scene
- *  gives.  @return RTP_OK, RTP_ERR_KEY or RTP_ERR_PARSE. */
+ *  light.N.pos|color|on, mat.N.color|kd|ks|kt|shine|ior (and the texture
+ *  and bump keys the README lists), ambient, background,
+ *  camera.from|at|up|angle|hither; N is a 0-based index in file order or
+ *  a name the scene gives.  @return RTP_OK, RTP_ERR_KEY, RTP_ERR_PARSE or
+ *  RTP_ERR_ARGUMENT (a value out of range). */
 rtp_status rtp_scene_set(rtp_scene *scene, const char *key,
                          const char *value, rtp_error *err);
 
@@ -242,8 +244,9 @@ void rtp_tree_destroy(rtp_tree *tree);
  *  Edits that change where rays go — a new ior, ks or kt raised from 0 (or
  *  above the trace's weight cut-off) — make the next evaluation trace again
  *  exactly the samples whose trees contain that material (stats report how
- *  many); never an approximation.  A refused edit leaves the tree
- *  unchanged. */
+ *  many); never an approximation.  A camera key is refused
+ *  (RTP_ERR_UNSUPPORTED, naming the remedy: a full trace), as is anything
+ *  invalid; a refused edit leaves the tree unchanged. */
 rtp_status rtp_tree_set(rtp_tree *tree, const char *key, const char *value,
                         rtp_error *err);
 

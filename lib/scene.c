@@ -438,6 +438,45 @@ static rtp_status want(rtp_error *err, const char *key, const char *value, int g
     return want_n(err, key, value, got, need, need == 3);
 }
 
+/* camera.from, camera.at, camera.up (x,y,z), camera.angle (degrees, as
+   NFF's: between 0 and 180), camera.hither (>= 0): what NFF's v block
+   says.  The camera is then the scene's, not framed for an OBJ. */
+static rtp_status set_camera(rtp_scene *s, const char *key, const char *value,
+                             const double *v, int n, rtp_error *err)
+{
+    const char *field = key + 7;
+    double *dst = strcmp(field, "from") == 0 ? s->camera.from
+                  : strcmp(field, "at") == 0 ? s->camera.at
+                  : strcmp(field, "up") == 0 ? s->camera.up
+                                             : NULL;
+    rtp_status st;
+    if (dst) {
+        if ((st = want_n(err, key, value, n, 3, 0)) != RTP_OK)
+            return st;
+        dst[0] = v[0];
+        dst[1] = v[1];
+        dst[2] = v[2];
+    } else if (strcmp(field, "angle") == 0 || strcmp(field, "hither") == 0) {
+        int angle = field[0] == 'a';
+        if ((st = want_n(err, key, value, n, 1, 0)) != RTP_OK)
+            return st;
+        if (angle ? !(v[0] > 0.0 && v[0] < 180.0) : !(v[0] >= 0.0))
+            return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                              angle ? "%s: %g: the view angle must be between 0 and 180 degrees"
+                                    : "%s: %g: hither must be 0 or more",
+                              key, v[0]);
+        if (angle)
+            s->camera.angle = v[0];
+        else
+            s->camera.hither = v[0];
+    } else {
+        return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0,
+                          "unknown key '%s' (camera fields: from, at, up, angle, hither)", key);
+    }
+    s->has_camera = 1;
+    return RTP_OK;
+}
+
 static void set_rgb(float *dst, const double *v, int n)
 {
     int i;
@@ -462,6 +501,8 @@ rtp_status rtp_scene_set(rtp_scene *s, const char *key, const char *value,
         set_rgb(key[0] == 'a' ? s->ambient : s->background, v, n);
         return RTP_OK;
     }
+    if (strncmp(key, "camera.", 7) == 0)
+        return set_camera(s, key, value, v, n, err);
     dot1 = strchr(key, '.');
     dot2 = dot1 ? strchr(dot1 + 1, '.') : NULL;
     if (!dot1 || !dot2)

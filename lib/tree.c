@@ -136,6 +136,22 @@ rtp_status rtp_tree_set(rtp_tree *t, const char *key, const char *value,
     if (!t || !key || !value)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_set: NULL argument");
     s = t->scene;
+    if (strncmp(key, "camera.", 7) == 0) {
+        /* A camera edit changes every ray: the trees cannot show it.  The
+           key and value are checked as a trace would (on a copy of the
+           camera), then refused, naming the remedy. */
+        rtpi_camera cam = s->camera;
+        int had = s->has_camera;
+        st = rtp_scene_set(s, key, value, err);
+        s->camera = cam;
+        s->has_camera = had;
+        if (st != RTP_OK)
+            return st;
+        return rtpi_error(err, RTP_ERR_UNSUPPORTED, NULL, 0, 0,
+                          "%s=%s: a camera edit changes every ray, so no re-evaluation can "
+                          "show it: trace the scene again with it (rtp trace SCENE --set %s=%s)",
+                          key, value, key, value);
+    }
     /* Keep the parameters so a refused edit leaves the tree unchanged. */
     mats = (rtpi_material *)rtpi_malloc_array(&t->alloc, s->nmats ? s->nmats : 1, sizeof *mats);
     lights = (rtpi_light *)rtpi_malloc_array(&t->alloc, s->nlights ? s->nlights : 1,

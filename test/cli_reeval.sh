@@ -37,6 +37,16 @@ done
 expect_rc 0 $RTP reeval "$T/t.rtp" --set light.key.pos=-3,-4,7 --shadows exact --reference -i "$T/x.pfm" --stats "$T/ref.json"
 grep -q '"max_abs": 0' "$T/ref.json" && ok || { bad "--reference error"; cat "$T/ref.json" >&2; }
 
+# A camera edit cannot be re-evaluated: refused, naming the remedy, no
+# image; the remedy (trace with camera keys) works.
+rm -f "$T/cam.pfm"
+expect_rc 1 $RTP reeval "$T/t.rtp" --set camera.from=1,2,9 -i "$T/cam.pfm"
+grep -q "camera edit changes every ray.*rtp trace SCENE --set camera.from=1,2,9" "$T/err" && ok ||
+    { bad "camera edit message"; cat "$T/err" >&2; }
+[ ! -e "$T/cam.pfm" ] && ok || bad "image written for a refused camera edit"
+expect_rc 0 $RTP trace $S --size 40x30 --set camera.from=1,2,9 --set camera.angle=35 -i "$T/cam.pfm"
+cmp -s "$T/cam.pfm" "$T/t.pfm" && bad "camera keys did not move the camera" || ok
+
 # The default shadows (auto) say what decided a moved light: here, 40x30
 # hits of spheres.nff's few primitives, the light buffer; auto:RES parses.
 expect_rc 0 $RTP reeval "$T/t.rtp" --set light.key.pos=-3,-4,7 -i "$T/a.pfm" --stats "$T/auto.json"

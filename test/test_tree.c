@@ -271,6 +271,45 @@ static void test_class_a_edits(void)
     }
 }
 
+/* camera.* keys on a scene trace what the NFF's v block would say. */
+static void test_camera_keys(void)
+{
+    static const char a_nff[] =
+        "v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 40\nhither 0.01\nresolution 24 18\n"
+        "l 2 3 4\nf 1 0.5 0.2 0.7 0.3 20 0 1\ns 0 0 0 1\np 4\n-3 -1 -3\n3 -1 -3\n3 -1 3\n-3 -1 3\n";
+    static const char b_nff[] =
+        "v\nfrom 1 2 6\nat 0 -0.5 0\nup 0.1 1 0\nangle 28\nhither 0.5\nresolution 24 18\n"
+        "l 2 3 4\nf 1 0.5 0.2 0.7 0.3 20 0 1\ns 0 0 0 1\np 4\n-3 -1 -3\n3 -1 -3\n3 -1 3\n-3 -1 3\n";
+    rtp_scene *a = NULL, *b = NULL;
+    rtp_image *ia = NULL, *ib = NULL, *i0 = NULL;
+    rtp_trace_options o;
+    rtp_error err;
+    CHECK(rtp_scene_load_memory(a_nff, strlen(a_nff), "a.nff", "nff", NULL, &a, NULL) == RTP_OK);
+    CHECK(rtp_scene_load_memory(b_nff, strlen(b_nff), "b.nff", "nff", NULL, &b, NULL) == RTP_OK);
+    if (!a || !b) {
+        rtp_scene_destroy(a);
+        rtp_scene_destroy(b);
+        return;
+    }
+    memset(&o, 0, sizeof o);
+    CHECK(rtp_trace(a, &o, &i0, NULL, NULL) == RTP_OK);
+    CHECK(rtp_scene_set(a, "camera.from", "1,2,6", NULL) == RTP_OK);
+    CHECK(rtp_scene_set(a, "camera.at", "0,-0.5,0", NULL) == RTP_OK);
+    CHECK(rtp_scene_set(a, "camera.up", "0.1,1,0", NULL) == RTP_OK);
+    CHECK(rtp_scene_set(a, "camera.angle", "28", NULL) == RTP_OK);
+    CHECK(rtp_scene_set(a, "camera.hither", "0.5", NULL) == RTP_OK);
+    CHECK(rtp_scene_set(a, "camera.up", "1,2", &err) == RTP_ERR_PARSE);
+    CHECK(rtp_scene_set(a, "camera.hither", "-1", &err) == RTP_ERR_ARGUMENT);
+    CHECK(rtp_trace(a, &o, &ia, NULL, NULL) == RTP_OK);
+    CHECK(rtp_trace(b, &o, &ib, NULL, NULL) == RTP_OK);
+    CHECK(ia && ib && i0 && same_image(ia, ib) && !same_image(ia, i0));
+    rtp_image_destroy(ia);
+    rtp_image_destroy(ib);
+    rtp_image_destroy(i0);
+    rtp_scene_destroy(a);
+    rtp_scene_destroy(b);
+}
+
 /* Refused edits leave the tree unchanged. */
 static void test_refused_edits(void)
 {
@@ -292,6 +331,11 @@ static void test_refused_edits(void)
         CHECK(rtp_tree_set(t, "mat.0.kd", "abc", &err) == RTP_ERR_PARSE);
         CHECK(rtp_tree_set(t, "mat.0.kd", "-1", &err) == RTP_ERR_ARGUMENT);
         CHECK(rtp_tree_set(t, "light.0.pos", "1,nan,3", &err) != RTP_OK);
+        /* a camera edit: refused naming the remedy, the key checked first */
+        CHECK(rtp_tree_set(t, "camera.from", "0,1,8", &err) == RTP_ERR_UNSUPPORTED &&
+              strstr(err.message, "rtp trace SCENE --set camera.from=0,1,8"));
+        CHECK(rtp_tree_set(t, "camera.fov", "30", &err) == RTP_ERR_KEY);
+        CHECK(rtp_tree_set(t, "camera.angle", "180", &err) == RTP_ERR_ARGUMENT);
         CHECK(rtp_tree_eval(t, NULL, &b, NULL, NULL) == RTP_OK);
         CHECK(same_image(a, b));
     }
@@ -1964,6 +2008,7 @@ int main(void)
     RUN(test_identical_small_spd);
     RUN(test_class_a_edits);
     RUN(test_refused_edits);
+    RUN(test_camera_keys);
     RUN(test_class_d_retrace);
     RUN(test_trees_outgrow_limit);
     RUN(test_moved_light_exact);
