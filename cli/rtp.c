@@ -792,7 +792,9 @@ static const char reeval_help[] =
     "  -q, --quiet / -v, --verbose / -h, --help\n"
     "Edits that change where rays go (a new ior, ks or kt raised from 0) trace\n"
     "again exactly the samples that contain the material (--stats reports\n"
-    "retraced_samples and retraced_rays); the result equals a full trace.\n";
+    "retraced_samples and retraced_rays); the result equals a full trace.  A\n"
+    "camera key (camera.from|at|up|angle|hither) traces every sample again: a\n"
+    "full trace from the tree file, said so; later edits re-evaluate.\n";
 
 /* Expands a pattern with one %d or %0Nd; returns 0 or -1. */
 static int expand_pattern(const char *pat, int n, char *out, size_t size)
@@ -916,7 +918,11 @@ static int reeval_one(rtp_tree *tree, const rtp_eval_options *eo, rtp_image **ke
     } else if (verbosity > 1) {
         fprintf(stderr, "rtp: reeval %.4f s, %llu nodes\n", es.seconds, es.nodes);
     }
-    if (verbosity > 0 && es.retraced_samples)
+    if (verbosity > 0 && es.camera_moved)
+        fprintf(stderr, "rtp: traced all %llu samples again (%llu rays): the camera moved, a "
+                        "full trace\n",
+                es.retraced_samples, es.retraced_rays);
+    else if (verbosity > 0 && es.retraced_samples)
         fprintf(stderr, "rtp: traced %llu of %llu samples again (%llu rays) for edits that move rays\n",
                 es.retraced_samples, es.samples ? es.samples : 0ULL, es.retraced_rays);
     if (verbosity > 0 && es.capped_rays)

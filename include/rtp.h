@@ -244,9 +244,10 @@ void rtp_tree_destroy(rtp_tree *tree);
  *  Edits that change where rays go — a new ior, ks or kt raised from 0 (or
  *  above the trace's weight cut-off) — make the next evaluation trace again
  *  exactly the samples whose trees contain that material (stats report how
- *  many); never an approximation.  A camera key is refused
- *  (RTP_ERR_UNSUPPORTED, naming the remedy: a full trace), as is anything
- *  invalid; a refused edit leaves the tree unchanged. */
+ *  many); never an approximation.  A camera key makes the next
+ *  evaluation trace every sample again (a full trace into the tree's
+ *  trees; stats->camera_moved), and until then rtp_tree_write refuses
+ *  the tree.  A refused edit leaves the tree unchanged. */
 rtp_status rtp_tree_set(rtp_tree *tree, const char *key, const char *value,
                         rtp_error *err);
 
@@ -323,6 +324,9 @@ typedef struct rtp_eval_stats {
     unsigned long long capped_rays; /* re-traced rays that hit but were not
                                        followed (a sample's tree was full,
                                        as rtp_trace_stats says) */
+    int camera_moved;        /* 1: the camera was edited, so every sample
+                                was traced again (a full trace into the
+                                tree's trees) */
 } rtp_eval_stats;
 
 /** Evaluates the trees with the current parameters into a new image.  Lights

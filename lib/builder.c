@@ -351,6 +351,7 @@ rtp_status rtp_builder_finish(rtp_builder *b, rtp_tree **out, rtp_error *err)
     t->scene = b->scene;
     b->scene = NULL;
     t->nlights0 = t->scene->nlights;
+    t->cam0 = t->scene->camera;
     t->mats0 = (rtpi_material *)rtpi_malloc_array(a, t->scene->nmats + 1, sizeof *t->mats0);
     t->lights0 = (rtpi_light *)rtpi_malloc_array(a, t->scene->nlights + 1, sizeof *t->lights0);
     if (!t->mats0 || !t->lights0)

@@ -690,6 +690,9 @@ struct rtp_tree {
     rtp_scene *scene;      /* owned copy: parameters are edited here */
     rtpi_material *mats0;  /* materials as traced (names not kept) */
     rtpi_light *lights0;   /* lights as traced (names not kept) */
+    rtpi_camera cam0;      /* the camera as traced: where scene->camera
+                              differs, the next evaluation traces every
+                              sample again */
     int width, height;     /* image (of the region, when one was traced) */
     int nx, ny;            /* sample grid: image, or corners + 1 (SPD) */
     int full_w, full_h;    /* the whole frame the camera spans */

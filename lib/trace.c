@@ -543,6 +543,7 @@ static rtp_status gather_tree(shared *sh, int w, int h, rtp_tree **out,
     t->vis_words = words;
     t->nnodes = total;
     t->nlights0 = s->nlights;
+    t->cam0 = s->camera;
     /* the arrays the rows went into, at their exact size */
     sh->tstart[(size_t)sh->gx * sh->gy] = total;
     if (sh->tcap > total + 1 && (p = rtpi_realloc(a, sh->tnodes, (total + 1) * sizeof *t->nodes)))

@@ -136,22 +136,6 @@ rtp_status rtp_tree_set(rtp_tree *t, const char *key, const char *value,
     if (!t || !key || !value)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_set: NULL argument");
     s = t->scene;
-    if (strncmp(key, "camera.", 7) == 0) {
-        /* A camera edit changes every ray: the trees cannot show it.  The
-           key and value are checked as a trace would (on a copy of the
-           camera), then refused, naming the remedy. */
-        rtpi_camera cam = s->camera;
-        int had = s->has_camera;
-        st = rtp_scene_set(s, key, value, err);
-        s->camera = cam;
-        s->has_camera = had;
-        if (st != RTP_OK)
-            return st;
-        return rtpi_error(err, RTP_ERR_UNSUPPORTED, NULL, 0, 0,
-                          "%s=%s: a camera edit changes every ray, so no re-evaluation can "
-                          "show it: trace the scene again with it (rtp trace SCENE --set %s=%s)",
-                          key, value, key, value);
-    }
     /* Keep the parameters so a refused edit leaves the tree unchanged. */
     mats = (rtpi_material *)rtpi_malloc_array(&t->alloc, s->nmats ? s->nmats : 1, sizeof *mats);
     lights = (rtpi_light *)rtpi_malloc_array(&t->alloc, s->nlights ? s->nlights : 1,
@@ -1799,7 +1783,9 @@ static void drop_caches(rtp_tree *t)
 
 /* Class D: samples whose trees contain a material the recorded trees
    cannot show exactly are traced again (only those), then every cache
-   that referred to the old nodes is dropped. */
+   that referred to the old nodes is dropped.  A moved camera changes
+   every ray: every sample is traced again, a full trace into the same
+   trees (later edits re-evaluate them as ever). */
 static rtp_status retrace_edited(rtp_tree *t, int threads, int stale, double limit,
                                  rtp_eval_stats *st, rtp_error *err)
 {
@@ -1807,13 +1793,13 @@ static rtp_status retrace_edited(rtp_tree *t, int threads, int stale, double lim
     size_t m, k, ns = (size_t)t->nx * t->ny, n = 0;
     unsigned char *mark;
     uint32_t *list;
-    int any = 0;
+    int any = 0, camera = memcmp(&s->camera, &t->cam0, sizeof t->cam0) != 0;
     rtp_status rs;
     for (m = 0; m < s->nmats; m++)
         any |= needs_retrace(t, m, stale);
-    if (!any)
+    if (!any && !camera)
         return RTP_OK;
-    if (!t->mat_start && build_material_lists(t) != RTP_OK)
+    if (!camera && !t->mat_start && build_material_lists(t) != RTP_OK)
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
     mark = (unsigned char *)rtpi_calloc_array(&t->alloc, ns + 1, 1);
     list = (uint32_t *)rtpi_malloc_array(&t->alloc, ns + 1, sizeof *list);
@@ -1822,12 +1808,12 @@ static rtp_status retrace_edited(rtp_tree *t, int threads, int stale, double lim
         rtpi_free(&t->alloc, list);
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
     }
-    for (m = 0; m < s->nmats; m++)
+    for (m = 0; !camera && m < s->nmats; m++)
         if (needs_retrace(t, m, stale))
             for (k = t->mat_start[m]; k < t->mat_start[m + 1]; k++)
                 mark[t->mat_samples[k]] = 1;
     for (k = 0; k < ns; k++)
-        if (mark[k])
+        if (camera || mark[k])
             list[n++] = (uint32_t)k;
     rs = rtpi_retrace(t, list, n, threads, limit, st ? &st->retraced_rays : NULL,
                       st ? &st->capped_rays : NULL, err);
@@ -1835,8 +1821,11 @@ static rtp_status retrace_edited(rtp_tree *t, int threads, int stale, double lim
     rtpi_free(&t->alloc, list);
     if (rs != RTP_OK)
         return rs;
-    if (st)
+    if (st) {
         st->retraced_samples += n;
+        st->camera_moved = camera;
+    }
+    t->cam0 = s->camera;
     /* The samples just traced spawned rays with every material as it is
        now: where another material's ks or kt is lower now than when its
        own samples were traced (0: no reflected or refracted rays at all),
@@ -1844,16 +1833,17 @@ static rtp_status retrace_edited(rtp_tree *t, int threads, int stale, double lim
        again (for the samples traced before, which kept theirs, this is
        conservative).  Found by fuzz_set: ks 0, a class-D edit elsewhere,
        then ks 2 missed the glass's reflections in the re-traced samples. */
-    for (m = 0; m < s->nmats; m++)
+    for (m = 0; !camera && m < s->nmats; m++)
         if (!needs_retrace(t, m, stale)) {
             if (s->mats[m].ks < t->mats0[m].ks)
                 t->mats0[m].ks = s->mats[m].ks;
             if (s->mats[m].kt < t->mats0[m].kt)
                 t->mats0[m].kt = s->mats[m].kt;
         }
-    /* the trees now hold these materials as they are */
+    /* the trees now hold these materials (after a camera move, all) as
+       they are */
     for (m = 0; m < s->nmats; m++)
-        if (needs_retrace(t, m, stale)) {
+        if (camera || needs_retrace(t, m, stale)) {
             t->mats0[m].ks = s->mats[m].ks;
             t->mats0[m].kt = s->mats[m].kt;
             t->mats0[m].ior = s->mats[m].ior;
@@ -3109,6 +3099,7 @@ static int same_setup(const rtp_tree *a, const rtp_tree *b)
         x->nspheres != y->nspheres || x->ncones != y->ncones || x->npos != y->npos ||
         x->nnrm != y->nnrm || x->nuv != y->nuv || x->ntexs != y->ntexs ||
         memcmp(&x->camera, &y->camera, sizeof x->camera) != 0 ||
+        memcmp(&a->cam0, &b->cam0, sizeof a->cam0) != 0 ||
         memcmp(x->background, y->background, sizeof x->background) != 0 ||
         memcmp(x->ambient, y->ambient, sizeof x->ambient) != 0 ||
         x->light_scale != y->light_scale)
@@ -3225,6 +3216,7 @@ rtp_status rtp_tree_merge(rtp_tree *const *parts, size_t n, rtp_tree **out, rtp_
     t->vis_words = words;
     t->nnodes = total;
     t->nlights0 = p0->nlights0;
+    t->cam0 = p0->cam0;
     if (rtpi_scene_clone(p0->scene, &t->scene) != RTP_OK)
         goto nomem;
     t->mats0 = (rtpi_material *)rtpi_malloc_array(a, t->scene->nmats + 1, sizeof *t->mats0);

@@ -749,6 +749,10 @@ rtp_status rtp_tree_write(const rtp_tree *t, const char *path,
         return rtpi_error(err, RTP_ERR_UNSUPPORTED, path, 0, 0,
                           "a tree with added lights cannot be saved: its trees hold no "
                           "shadows for them; trace again with the lights in the scene");
+    if (memcmp(&t->scene->camera, &t->cam0, sizeof t->cam0) != 0)
+        return rtpi_error(err, RTP_ERR_UNSUPPORTED, path, 0, 0,
+                          "the camera was edited since the trees were traced: evaluate the "
+                          "tree (which traces them again) before saving it");
     memset(&out, 0, sizeof out);
     crc_slices(out.slices);
     out.p = (unsigned char *)rtpi_malloc(&t->alloc, SINK_CHUNK);
@@ -1043,6 +1047,7 @@ static rtp_status read_scen(loader *L, rd *r)
         !isfinite(s->camera.angle) || !isfinite(s->camera.hither))
         return bad(L, "scene values are not finite", NULL);
     s->has_camera = 1;
+    L->t->cam0 = s->camera;
     return RTP_OK;
 }
 

@@ -37,15 +37,21 @@ done
 expect_rc 0 $RTP reeval "$T/t.rtp" --set light.key.pos=-3,-4,7 --shadows exact --reference -i "$T/x.pfm" --stats "$T/ref.json"
 grep -q '"max_abs": 0' "$T/ref.json" && ok || { bad "--reference error"; cat "$T/ref.json" >&2; }
 
-# A camera edit cannot be re-evaluated: refused, naming the remedy, no
-# image; the remedy (trace with camera keys) works.
-rm -f "$T/cam.pfm"
-expect_rc 1 $RTP reeval "$T/t.rtp" --set camera.from=1,2,9 -i "$T/cam.pfm"
-grep -q "camera edit changes every ray.*rtp trace SCENE --set camera.from=1,2,9" "$T/err" && ok ||
-    { bad "camera edit message"; cat "$T/err" >&2; }
-[ ! -e "$T/cam.pfm" ] && ok || bad "image written for a refused camera edit"
+# A camera edit is a full trace from the tree file, said so; it equals
+# trace of the edited scene bit for bit, and a stream's later edits
+# re-evaluate the new trees.
 expect_rc 0 $RTP trace $S --size 40x30 --set camera.from=1,2,9 --set camera.angle=35 -i "$T/cam.pfm"
 cmp -s "$T/cam.pfm" "$T/t.pfm" && bad "camera keys did not move the camera" || ok
+expect_rc 0 $RTP reeval "$T/t.rtp" --set camera.from=1,2,9 --set camera.angle=35 -i "$T/cam2.pfm" --stats "$T/cam.json"
+cmp -s "$T/cam.pfm" "$T/cam2.pfm" && ok || bad "reeval with camera keys differs from trace with them"
+grep -q "traced all 1200 samples again.*the camera moved, a full trace" "$T/err" && ok ||
+    { bad "camera move not said"; cat "$T/err" >&2; }
+grep -q '"retraced_samples": 1200' "$T/cam.json" && ok || { bad "camera retraced_samples"; cat "$T/cam.json" >&2; }
+$RTP trace $S --size 40x30 --set camera.from=1,2,9 --set mat.red.kd=0.2 -i "$T/camkd.pfm" -q
+printf 'camera.from=1,2,9\nmat.red.kd=0.2\n' |
+    $RTP reeval "$T/t.rtp" --stream -i "$T/cams%d.pfm" --stats "$T/cams.json" -q
+$RTP diff "$T/cams1.pfm" "$T/camkd.pfm" --fail-above max_abs=1e-6 -q && ok || bad "stream: kd after a camera move"
+[ "$(grep -c '"retraced_samples": 0' "$T/cams.json")" = 1 ] && ok || { bad "stream: the kd edit traced"; cat "$T/cams.json" >&2; }
 
 # The default shadows (auto) say what decided a moved light: here, 40x30
 # hits of spheres.nff's few primitives, the light buffer; auto:RES parses.
