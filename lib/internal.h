@@ -837,11 +837,13 @@ struct rtp_tree {
    their new trees in place of the old; adds the rays cast to *rays and
    those not followed because a sample's tree was full to *capped.  The
    trees may take limit bytes in all, the old and the new together while
-   they are spliced (RTP_ERR_LIMIT past it, t unchanged).  The caller
+   they are spliced (RTP_ERR_LIMIT past it, t unchanged); progress (may
+   be NULL) as rtp_trace_options'.  The caller
    drops whatever caches refer to the old nodes. */
 rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int threads,
                         double limit, unsigned long long *rays,
-                        unsigned long long *capped, rtp_error *err);
+                        unsigned long long *capped, void (*progress)(void *, double),
+                        void *progress_user, rtp_error *err);
 
 /* Resolves samples (nx*ny RGB, from a grid of corners when spd) into
    the image; one routine for trace and reeval so both round alike. */

@@ -845,7 +845,8 @@ static int retrace_chunk(void *ctx, int ci)
 
 rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int threads,
                         double limit, unsigned long long *rays,
-                        unsigned long long *capped, rtp_error *err)
+                        unsigned long long *capped, void (*progress)(void *, double),
+                        void *progress_user, rtp_error *err)
 {
     const rtp_allocator *a = &t->alloc;
     rtp_scene tmp;
@@ -927,7 +928,7 @@ rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int thre
         }
         ctx[i] = &jobs[i];
     }
-    rtpi_parallel_rows((int)nchunks, nthreads, ctx, retrace_chunk, NULL, NULL);
+    rtpi_parallel_rows((int)nchunks, nthreads, ctx, retrace_chunk, progress, progress_user);
     for (i = 0; i < (size_t)nthreads; i++)
         if (jobs[i].w.status != RTP_OK) {
             st = worker_error(jobs[i].w.status, limit, "re-tracing",

@@ -1786,8 +1786,22 @@ static void drop_caches(rtp_tree *t)
    that referred to the old nodes is dropped.  A moved camera changes
    every ray: every sample is traced again, a full trace into the same
    trees (later edits re-evaluate them as ever). */
+/* Progress of one step of an evaluation, as part [lo, lo + span] of the
+   caller's. */
+typedef struct progress_part {
+    void (*fn)(void *user, double done);
+    void *user;
+    double lo, span;
+} progress_part;
+
+static void progress_part_cb(void *user, double done)
+{
+    const progress_part *p = (const progress_part *)user;
+    p->fn(p->user, p->lo + p->span * done);
+}
+
 static rtp_status retrace_edited(rtp_tree *t, int threads, int stale, double limit,
-                                 rtp_eval_stats *st, rtp_error *err)
+                                 progress_part *progress, rtp_eval_stats *st, rtp_error *err)
 {
     const rtp_scene *s = t->scene;
     size_t m, k, ns = (size_t)t->nx * t->ny, n = 0;
@@ -1816,7 +1830,8 @@ static rtp_status retrace_edited(rtp_tree *t, int threads, int stale, double lim
         if (camera || mark[k])
             list[n++] = (uint32_t)k;
     rs = rtpi_retrace(t, list, n, threads, limit, st ? &st->retraced_rays : NULL,
-                      st ? &st->capped_rays : NULL, err);
+                      st ? &st->capped_rays : NULL, progress->fn ? progress_part_cb : NULL,
+                      progress, err);
     rtpi_free(&t->alloc, mark);
     rtpi_free(&t->alloc, list);
     if (rs != RTP_OK)
@@ -2572,6 +2587,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
     void *ctx[RTPI_MAX_THREADS];
     rtp_image *img = NULL;
     rtp_eval_stats st;
+    progress_part prog;
     rtp_scene *s;
     int i, nthreads = opt && opt->threads > 1 ? opt->threads : 1, any_moved = 0, full;
     int cached, mode, res, kmode, kres, one = 0, matpath = 0, sparse, list_combine = 0, hl_used = 0;
@@ -2624,9 +2640,22 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
     shade.one_sided = t->spd;
     shade.vis_words = t->vis_words;
     vis = t->vis_words ? t->vis_ext : NULL;
+    /* (a re-trace, when there is one, is most of the time: the first 90%
+       of what progress reports; the evaluation of every sample after it
+       the rest) */
+    prog.fn = opt ? opt->progress : NULL;
+    prog.user = opt ? opt->progress_user : NULL;
+    prog.lo = 0.0;
+    prog.span = 0.9;
     rs = retrace_edited(t, nthreads, opt && opt->stale == RTP_STALE_RETRACE,
                         opt && opt->memory_limit > 0.0 ? opt->memory_limit : RTPI_MEMORY_LIMIT,
-                        &st, err);
+                        &prog, &st, err);
+    if (st.retraced_samples) {
+        prog.lo = 0.9;
+        prog.span = 0.1;
+    } else {
+        prog.span = 1.0;
+    }
     if (rs != RTP_OK)
         return rs;
     for (l = 0; l < nl; l++)
@@ -2724,8 +2753,8 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
     if (full) {
         /* every step for every sample */
         t->ev_inf = 0;
-        rtpi_parallel_rows(t->ny, nthreads, ctx, eval_row, opt ? opt->progress : NULL,
-                           opt ? opt->progress_user : NULL);
+        rtpi_parallel_rows(t->ny, nthreads, ctx, eval_row, prog.fn ? progress_part_cb : NULL,
+                           &prog);
         cp_stale(t, (size_t)-1);
         st.samples = ns;
         st.combined_samples = ns;

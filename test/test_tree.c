@@ -310,6 +310,21 @@ static void test_camera_keys(void)
     rtp_scene_destroy(b);
 }
 
+/* Progress reports an evaluation's callback saw. */
+typedef struct progress_log {
+    int calls, backwards;
+    double last;
+} progress_log;
+
+static void log_progress(void *user, double done)
+{
+    progress_log *l = (progress_log *)user;
+    if (done < l->last || done < 0.0 || done > 1.0)
+        l->backwards++;
+    l->last = done;
+    l->calls++;
+}
+
 /* A moved camera: the next evaluation traces every sample again, into
    the same trees, and equals a full trace of the edited scene bit for
    bit; later edits re-evaluate those trees.  Until then the tree cannot
@@ -348,9 +363,21 @@ static void test_camera_move(void)
     CHECK(rtp_tree_write(t, file, NULL, &err) == RTP_ERR_UNSUPPORTED &&
           strstr(err.message, "camera"));
     memset(&es, 0, sizeof es);
-    CHECK(rtp_tree_eval(t, NULL, &re, &es, NULL) == RTP_OK);
+    {
+        /* a full trace's progress: the re-trace, then the evaluation,
+           one rising report from 0 to 1 */
+        rtp_eval_options eo;
+        progress_log pl;
+        memset(&eo, 0, sizeof eo);
+        memset(&pl, 0, sizeof pl);
+        eo.progress = log_progress;
+        eo.progress_user = &pl;
+        CHECK(rtp_tree_eval(t, &eo, &re, &es, NULL) == RTP_OK);
+        printf("  camera move: %d progress reports, last %g\n", pl.calls, pl.last);
+        CHECK(pl.calls >= 30 && pl.backwards == 0 && pl.last == 1.0);
+    }
     CHECK(rtp_trace(s, &o, &full, NULL, NULL) == RTP_OK);
-    CHECK(same_image(re, full) && es.retraced_samples == 40u * 30u);
+    CHECK(same_image(re, full) && es.retraced_samples == 40u * 30u && es.camera_moved);
     /* saved now, read back: the same image without tracing */
     CHECK(rtp_tree_write(t, file, NULL, NULL) == RTP_OK);
     CHECK(rtp_tree_read(file, NULL, &back, NULL) == RTP_OK);
