@@ -395,6 +395,19 @@ static char *default_image_name(const char *scene)
     return out;
 }
 
+/* --memory-limit MIB (trace and reeval) as bytes; 0, or -1 with a message. */
+static int memory_limit_option(int argc, char **argv, int *i, double *bytes)
+{
+    const char *v = opt_value(argc, argv, i, "--memory-limit");
+    double mib;
+    if (!v || parse_double(v, &mib) || !(mib > 0)) {
+        msg("--memory-limit: expected a size in MiB > 0");
+        return -1;
+    }
+    *bytes = mib * 1048576.0;
+    return 0;
+}
+
 /* Says that rays were not followed because a sample's tree was full: the
    image is not the full Whitted trace (the trees and the image agree, so
    re-evaluation stays exact against them). */
@@ -461,13 +474,8 @@ static int cmd_trace(int argc, char **argv)
             if (!(params = opt_value(argc, argv, &i, "--params")))
                 goto usage;
         } else if (is_opt(a, "--memory-limit")) {
-            double mib;
-            if (!(v = opt_value(argc, argv, &i, "--memory-limit")) || parse_double(v, &mib) ||
-                !(mib > 0)) {
-                msg("--memory-limit: expected a size in MiB > 0");
+            if (memory_limit_option(argc, argv, &i, &opt.memory_limit))
                 goto usage;
-            }
-            opt.memory_limit = mib * 1048576.0;
         } else if (is_opt(a, "--region")) {
             if (!(v = opt_value(argc, argv, &i, "--region")) || parse_region(v, opt.region)) {
                 msg("--region: expected x0,y0,x1,y1 with x0 < x1 and y0 < y1");
@@ -1040,13 +1048,8 @@ static int cmd_reeval(int argc, char **argv)
                 goto usage;
             }
         } else if (is_opt(a, "--memory-limit")) {
-            double mib;
-            if (!(v = opt_value(argc, argv, &i, "--memory-limit")) || parse_double(v, &mib) ||
-                !(mib > 0)) {
-                msg("--memory-limit: expected a size in MiB > 0");
+            if (memory_limit_option(argc, argv, &i, &eo.memory_limit))
                 goto usage;
-            }
-            eo.memory_limit = mib * 1048576.0;
         } else if (is_opt(a, "--stale")) {
             if (!(v = opt_value(argc, argv, &i, "--stale")))
                 goto usage;
