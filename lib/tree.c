@@ -1781,11 +1781,6 @@ static void drop_caches(rtp_tree *t)
     t->ev_valid = 0;
 }
 
-/* Class D: samples whose trees contain a material the recorded trees
-   cannot show exactly are traced again (only those), then every cache
-   that referred to the old nodes is dropped.  A moved camera changes
-   every ray: every sample is traced again, a full trace into the same
-   trees (later edits re-evaluate them as ever). */
 /* Progress of one step of an evaluation, as part [lo, lo + span] of the
    caller's. */
 typedef struct progress_part {
@@ -1800,6 +1795,11 @@ static void progress_part_cb(void *user, double done)
     p->fn(p->user, p->lo + p->span * done);
 }
 
+/* Class D: samples whose trees contain a material the recorded trees
+   cannot show exactly are traced again (only those), then every cache
+   that referred to the old nodes is dropped.  A moved camera changes
+   every ray: every sample is traced again, a full trace into the same
+   trees (later edits re-evaluate them as ever). */
 static rtp_status retrace_edited(rtp_tree *t, int threads, int stale, double limit,
                                  progress_part *progress, rtp_eval_stats *st, rtp_error *err)
 {
