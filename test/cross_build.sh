@@ -6,7 +6,10 @@
 # gives the same bits; a difference is a compiler folding what C does not
 # let it fold (gcc 12.2 at -O2 dropped the float rounding of hit
 # positions, see rtpi_surface_from_point) or an expression whose order is
-# left to the compiler.  .ci/run keeps each build's rtp and calls this
+# left to the compiler, or a libm whose functions round differently on
+# another CPU (glibc picks FMA variants of pow, exp, sin... by the CPU;
+# .ci/run adds the gcc build with those turned off).  .ci/run keeps each
+# build's rtp and calls this
 # (not a cli_*.sh: make test has one build).
 #   cross_build.sh REFERENCE_RTP OTHER_RTP...
 # The project's scenes always; with ../shared the SPD scenes too (at
