@@ -1199,10 +1199,82 @@ usage:
 
 /* ----------------------------------------------------------------- info */
 
+/* Prints "KEY=VALUE" for each of fields under prefix ("" or "light.0."),
+   on one line after head. */
+static void print_fields(const rtp_scene *s, const char *head, const char *prefix,
+                         const char *const *fields, size_t n)
+{
+    char key[96], val[4096];
+    size_t i;
+    fputs(head, stdout);
+    for (i = 0; i < n; i++) {
+        snprintf(key, sizeof key, "%s%s", prefix, fields[i]);
+        if (rtp_scene_get(s, key, val, sizeof val, NULL) == RTP_OK)
+            printf(" %s=%s", fields[i], val);
+    }
+    putchar('\n');
+}
+
+/* Item i of kind ("light", "mat"): its keys' prefix ("mat.2.") and the
+   head of its line ("mat.2 (glass):", or "mat.2:" unnamed). */
+static void item_head(const rtp_scene *s, const char *kind, size_t i, char *prefix,
+                      size_t psize, char *head, size_t hsize)
+{
+    char key[96], name[300];
+    snprintf(prefix, psize, "%s.%zu.", kind, i);
+    snprintf(key, sizeof key, "%sname", prefix);
+    if (rtp_scene_get(s, key, name, sizeof name, NULL) == RTP_OK && name[0])
+        snprintf(head, hsize, "%s.%zu (%.255s):", kind, i, name);
+    else
+        snprintf(head, hsize, "%s.%zu:", kind, i);
+}
+
+/* The keys --set takes and their values now: the camera, the environment,
+   each light and material (by index and name; texture and bump fields
+   where a material uses them). */
+static void print_keys(const rtp_scene *s, const rtp_tree_info *ti)
+{
+    static const char *const camera[] = {"from", "at", "up", "angle", "hither"};
+    static const char *const env[] = {"ambient", "background"};
+    static const char *const light[] = {"pos", "color", "on"};
+    static const char *const mat[] = {"color", "kd", "ks", "kt", "shine", "ior"};
+    static const char *const checker[] = {"checker", "color2", "checker_scale"};
+    static const char *const texture[] = {"texture"};
+    static const char *const bump[] = {"bump", "bump_strength", "bump_scale"};
+    char prefix[64], head[400], val[4096];
+    size_t i;
+    print_fields(s, "camera:", "camera.", camera, 5);
+    print_fields(s, "environment:", "", env, 2);
+    for (i = 0; i < ti->lights; i++) {
+        item_head(s, "light", i, prefix, sizeof prefix, head, sizeof head);
+        print_fields(s, head, prefix, light, 3);
+    }
+    for (i = 0; i < ti->materials; i++) {
+        char line[96];
+        item_head(s, "mat", i, prefix, sizeof prefix, head, sizeof head);
+        print_fields(s, head, prefix, mat, 6);
+        /* (texture and bump fields where the material uses them, on the
+           lines after its own) */
+        snprintf(line, sizeof line, "%schecker", prefix);
+        if (rtp_scene_get(s, line, val, sizeof val, NULL) == RTP_OK && strcmp(val, "1") == 0)
+            print_fields(s, "   ", prefix, checker, 3);
+        snprintf(line, sizeof line, "%stexture", prefix);
+        if (rtp_scene_get(s, line, val, sizeof val, NULL) != RTP_ERR_KEY &&
+            strcmp(val, "none") != 0)
+            print_fields(s, "   ", prefix, texture, 1);
+        snprintf(line, sizeof line, "%sbump", prefix);
+        if (rtp_scene_get(s, line, val, sizeof val, NULL) != RTP_ERR_KEY &&
+            strcmp(val, "none") != 0)
+            print_fields(s, "   ", prefix, bump, 3);
+    }
+}
+
 static const char info_help[] =
     "usage: rtp info TREE [--stats FILE] [-q]\n"
     "Prints what a tree file holds: image and sample sizes, nodes, bytes per\n"
-    "node, file size, lights and materials (with their names).\n";
+    "node, file size, and the keys --set takes with their values now: the\n"
+    "camera, ambient and background, each light and material by index and\n"
+    "name (texture and bump fields where a material has them).\n";
 
 static int cmd_info(int argc, char **argv)
 {
@@ -1258,6 +1330,7 @@ static int cmd_info(int argc, char **argv)
             printf("region: pixels %d,%d to %d,%d of a %dx%d frame\n", ti.region_x,
                    ti.region_y, ti.region_x + ti.width, ti.region_y + ti.height,
                    ti.full_width, ti.full_height);
+        print_keys(rtp_tree_scene(tree), &ti);
     }
     if (stats_path) {
         FILE *f = stats_open(stats_path);

@@ -8,12 +8,14 @@
  *
  * The flow
  *   rtp_scene_load     NFF (with rtp's additions) or OBJ+MTL -> rtp_scene
- *   rtp_scene_set      edit a parameter by key ("light.0.pos", "mat.2.kd")
+ *   rtp_scene_set      edit a parameter by key ("light.0.pos", "mat.2.kd");
+ *                      rtp_scene_get reads one back
  *   rtp_trace          the image;  rtp_record: the image and its ray trees
  *   rtp_tree_write/read   the self-contained tree file (.rtp)
  *   rtp_tree_set       edit the tree's scene: materials, lights (moved ones
  *                      get new shadows), bumps, even ks/kt/ior (the samples
- *                      concerned are traced again, exactly)
+ *                      concerned are traced again, exactly) and the camera
+ *                      (every sample: a full trace); rtp_tree_scene reads it
  *   rtp_tree_eval      the edited image, without tracing (rtp_tree_trace:
  *                      the full trace it must equal)
  *   rtp_image_diff     the error between two images
@@ -137,6 +139,15 @@ void rtp_scene_destroy(rtp_scene *scene);
 rtp_status rtp_scene_set(rtp_scene *scene, const char *key,
                          const char *value, rtp_error *err);
 
+/** Writes the current value of a key rtp_scene_set takes into buf, as it
+ *  takes it: numbers comma-separated in the shortest form that reads back
+ *  to the same value; checker and on 0 or 1; texture and bump none, waves,
+ *  noise or the image's path.  Also light.N.name and mat.N.name (read
+ *  only; "" when unnamed).  @return RTP_OK, RTP_ERR_KEY, or
+ *  RTP_ERR_ARGUMENT when buf is too small (buf then ""). */
+rtp_status rtp_scene_get(const rtp_scene *scene, const char *key, char *buf, size_t size,
+                         rtp_error *err);
+
 typedef struct rtp_scene_info {
     size_t triangles, spheres, cones; /* primitives after triangulation */
     size_t materials, lights, textures;
@@ -242,6 +253,10 @@ rtp_status rtp_record(const rtp_scene *scene, const rtp_trace_options *opt,
                       rtp_trace_stats *stats, rtp_error *err);
 
 void rtp_tree_destroy(rtp_tree *tree);
+
+/** The tree's scene with the edits made to it, read only (rtp_scene_get,
+ *  rtp_scene_get_info); valid while the tree lives. */
+const rtp_scene *rtp_tree_scene(const rtp_tree *tree);
 
 /** Edits a parameter of the tree's scene (keys as rtp_scene_set).  A moved
  *  light is re-evaluated with new shadows (see rtp_eval_options.shadows).

@@ -406,6 +406,31 @@ static long find_index(const char *tok, size_t toklen, size_t n,
 static const char *light_name(const rtp_scene *s, size_t i) { return s->lights[i].name; }
 static const char *mat_name(const rtp_scene *s, size_t i) { return s->mats[i].name; }
 
+/* Where a material's one-number field (kd, ks, kt, shine, ior,
+   checker_scale, bump_strength, bump_scale) lies in rtpi_material, as
+   *off; 0 for another field. */
+static int mat_number(const char *field, size_t *off)
+{
+    static const struct {
+        const char *name;
+        size_t off;
+    } f[] = {{"kd", offsetof(rtpi_material, kd)},
+             {"ks", offsetof(rtpi_material, ks)},
+             {"kt", offsetof(rtpi_material, kt)},
+             {"shine", offsetof(rtpi_material, shine)},
+             {"ior", offsetof(rtpi_material, ior)},
+             {"checker_scale", offsetof(rtpi_material, tex_scale)},
+             {"bump_strength", offsetof(rtpi_material, bump_strength)},
+             {"bump_scale", offsetof(rtpi_material, bump_scale)}};
+    size_t i;
+    for (i = 0; i < sizeof f / sizeof *f; i++)
+        if (strcmp(field, f[i].name) == 0) {
+            *off = f[i].off;
+            return 1;
+        }
+    return 0;
+}
+
 /* A texture or bump map the key names could not be read: the message
    (whose file is the image's) names the key and what else it takes. */
 static rtp_status image_key_error(rtp_error *err, rtp_status st, const char *key,
@@ -436,6 +461,35 @@ static rtp_status want_n(rtp_error *err, const char *key, const char *value, int
 static rtp_status want(rtp_error *err, const char *key, const char *value, int got, int need)
 {
     return want_n(err, key, value, got, need, need == 3);
+}
+
+/* light.N.FIELD or mat.N.FIELD (N an index or a name): which (ITEM_LIGHT,
+   ITEM_MAT), N's index and FIELD; else RTP_ERR_KEY naming what is wrong. */
+enum { ITEM_LIGHT = 1, ITEM_MAT = 2 };
+static rtp_status item_key(const rtp_scene *s, const char *key, int *kind, long *idx,
+                           const char **field, rtp_error *err)
+{
+    const char *dot1 = strchr(key, '.'), *dot2 = dot1 ? strchr(dot1 + 1, '.') : NULL;
+    size_t len;
+    if (!dot1 || !dot2)
+        return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0, "unknown key '%s'", key);
+    *field = dot2 + 1;
+    len = (size_t)(dot2 - dot1 - 1);
+    if ((size_t)(dot1 - key) == 5 && memcmp(key, "light", 5) == 0) {
+        *kind = ITEM_LIGHT;
+        if ((*idx = find_index(dot1 + 1, len, s->nlights, light_name, s)) < 0)
+            return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0,
+                              "%s: no such light (the scene has %zu)", key, s->nlights);
+        return RTP_OK;
+    }
+    if ((size_t)(dot1 - key) == 3 && memcmp(key, "mat", 3) == 0) {
+        *kind = ITEM_MAT;
+        if ((*idx = find_index(dot1 + 1, len, s->nmats, mat_name, s)) < 0)
+            return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0,
+                              "%s: no such material (the scene has %zu)", key, s->nmats);
+        return RTP_OK;
+    }
+    return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0, "unknown key '%s'", key);
 }
 
 /* camera.from, camera.at, camera.up (x,y,z), camera.angle (degrees, as
@@ -488,8 +542,9 @@ rtp_status rtp_scene_set(rtp_scene *s, const char *key, const char *value,
                          rtp_error *err)
 {
     double v[4];
-    int n;
-    const char *dot1, *dot2, *field;
+    int n, kind;
+    long i;
+    const char *field;
     rtp_status st;
     if (!s || !key || !value)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
@@ -503,20 +558,10 @@ rtp_status rtp_scene_set(rtp_scene *s, const char *key, const char *value,
     }
     if (strncmp(key, "camera.", 7) == 0)
         return set_camera(s, key, value, v, n, err);
-    dot1 = strchr(key, '.');
-    dot2 = dot1 ? strchr(dot1 + 1, '.') : NULL;
-    if (!dot1 || !dot2)
-        return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0, "unknown key '%s'", key);
-    field = dot2 + 1;
-    if ((size_t)(dot1 - key) == 5 && memcmp(key, "light", 5) == 0) {
-        long i = find_index(dot1 + 1, (size_t)(dot2 - dot1 - 1), s->nlights,
-                            light_name, s);
-        rtpi_light *l;
-        if (i < 0)
-            return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0,
-                              "%s: no such light (the scene has %zu)", key,
-                              s->nlights);
-        l = &s->lights[i];
+    if ((st = item_key(s, key, &kind, &i, &field, err)) != RTP_OK)
+        return st;
+    if (kind == ITEM_LIGHT) {
+        rtpi_light *l = &s->lights[i];
         if (strcmp(field, "pos") == 0) {
             /* (a position: x,y,z, never one number for all three) */
             if ((st = want_n(err, key, value, n, 3, 0)) != RTP_OK)
@@ -538,16 +583,9 @@ rtp_status rtp_scene_set(rtp_scene *s, const char *key, const char *value,
         }
         return RTP_OK;
     }
-    if ((size_t)(dot1 - key) == 3 && memcmp(key, "mat", 3) == 0) {
-        long i = find_index(dot1 + 1, (size_t)(dot2 - dot1 - 1), s->nmats,
-                            mat_name, s);
-        rtpi_material *m;
+    {
+        rtpi_material *m = &s->mats[i];
         float *dst = NULL;
-        if (i < 0)
-            return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0,
-                              "%s: no such material (the scene has %zu)", key,
-                              s->nmats);
-        m = &s->mats[i];
         if (strcmp(field, "color") == 0 || strcmp(field, "color2") == 0) {
             if ((st = want(err, key, value, n, 3)) != RTP_OK)
                 return st;
@@ -622,11 +660,12 @@ rtp_status rtp_scene_set(rtp_scene *s, const char *key, const char *value,
                 m->bump_scale = (float)v[0];
             return RTP_OK;
         }
-        if (strcmp(field, "kd") == 0) dst = &m->kd;
-        else if (strcmp(field, "ks") == 0) dst = &m->ks;
-        else if (strcmp(field, "kt") == 0) dst = &m->kt;
-        else if (strcmp(field, "shine") == 0) dst = &m->shine;
-        else if (strcmp(field, "ior") == 0) dst = &m->ior;
+        {
+            /* (checker_scale and the bump numbers were taken above) */
+            size_t off;
+            if (mat_number(field, &off))
+                dst = (float *)(void *)((char *)m + off);
+        }
         if (!dst)
             return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0,
                               "unknown key '%s' (material fields: color, kd, ks, kt, shine, ior, "
@@ -641,7 +680,134 @@ rtp_status rtp_scene_set(rtp_scene *s, const char *key, const char *value,
         *dst = (float)v[0];
         return RTP_OK;
     }
-    return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0, "unknown key '%s'", key);
+}
+
+/* ------------------------------------------------------------------ get */
+
+/* Appends v in the shortest form that reads back to the same value (as a
+   float where is_float: the parameter's own precision), after a comma
+   unless first. */
+static void put_num(char *out, size_t size, size_t *at, double v, int is_float, int first)
+{
+    char tmp[40];
+    int prec;
+    for (prec = is_float ? 6 : 15; prec <= 17; prec++) {
+        double back;
+        snprintf(tmp, sizeof tmp, "%.*g", prec, v);
+        back = strtod(tmp, NULL);
+        if (is_float ? (float)back == (float)v : back == v)
+            break;
+    }
+    if (*at < size)
+        *at += (size_t)snprintf(out + *at, size - *at, "%s%s", first ? "" : ",", tmp);
+    else
+        *at += strlen(tmp) + !first;
+}
+
+static void put_nums(char *out, size_t size, size_t *at, const double *v, int n, int is_float)
+{
+    int i;
+    for (i = 0; i < n; i++)
+        put_num(out, size, at, v[i], is_float, i == 0);
+}
+
+static void put_floats(char *out, size_t size, size_t *at, const float *v, int n)
+{
+    int i;
+    for (i = 0; i < n; i++)
+        put_num(out, size, at, v[i], 1, i == 0);
+}
+
+static void put_str(char *out, size_t size, size_t *at, const char *str)
+{
+    if (*at < size)
+        *at += (size_t)snprintf(out + *at, size - *at, "%s", str);
+    else
+        *at += strlen(str);
+}
+
+/* The path of texture idx, or "?" if it has none. */
+static const char *texture_path(const rtp_scene *s, uint32_t idx)
+{
+    return idx < s->ntexs && s->texs[idx].path ? s->texs[idx].path : "?";
+}
+
+rtp_status rtp_scene_get(const rtp_scene *s, const char *key, char *buf, size_t size,
+                         rtp_error *err)
+{
+    const char *field;
+    size_t at = 0;
+    int kind;
+    long i;
+    rtp_status st;
+    if (!s || !key || !buf || size == 0)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_scene_get: NULL argument");
+    buf[0] = '\0';
+    if (strcmp(key, "ambient") == 0 || strcmp(key, "background") == 0) {
+        put_floats(buf, size, &at, key[0] == 'a' ? s->ambient : s->background, 3);
+    } else if (strncmp(key, "camera.", 7) == 0) {
+        const rtpi_camera *c = &s->camera;
+        field = key + 7;
+        if (strcmp(field, "from") == 0 || strcmp(field, "at") == 0 || strcmp(field, "up") == 0)
+            put_nums(buf, size, &at, field[0] == 'f' ? c->from : field[0] == 'a' ? c->at : c->up,
+                     3, 0);
+        else if (strcmp(field, "angle") == 0 || strcmp(field, "hither") == 0)
+            put_num(buf, size, &at, field[0] == 'a' ? c->angle : c->hither, 0, 1);
+        else
+            return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0,
+                              "unknown key '%s' (camera fields: from, at, up, angle, hither)",
+                              key);
+    } else if ((st = item_key(s, key, &kind, &i, &field, err)) != RTP_OK) {
+        return st;
+    } else {
+        if (kind == ITEM_LIGHT) {
+            const rtpi_light *l = &s->lights[i];
+            if (strcmp(field, "pos") == 0)
+                put_nums(buf, size, &at, l->pos, 3, 0);
+            else if (strcmp(field, "color") == 0)
+                put_floats(buf, size, &at, l->color, 3);
+            else if (strcmp(field, "on") == 0)
+                put_str(buf, size, &at, l->on ? "1" : "0");
+            else if (strcmp(field, "name") == 0)
+                put_str(buf, size, &at, l->name ? l->name : "");
+            else
+                return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0,
+                                  "unknown key '%s' (light fields: pos, color, on, name)", key);
+        } else {
+            const rtpi_material *m = &s->mats[i];
+            size_t off;
+            if (strcmp(field, "color") == 0 || strcmp(field, "color2") == 0)
+                put_floats(buf, size, &at, field[5] == '2' ? m->color2 : m->color, 3);
+            else if (mat_number(field, &off))
+                put_floats(buf, size, &at, (const float *)(const void *)((const char *)m + off),
+                           1);
+            else if (strcmp(field, "checker") == 0)
+                put_str(buf, size, &at, m->tex == RTPI_TEX_CHECKER ? "1" : "0");
+            else if (strcmp(field, "texture") == 0)
+                put_str(buf, size, &at,
+                        m->tex == RTPI_TEX_IMAGE ? texture_path(s, m->tex_image) : "none");
+            else if (strcmp(field, "bump") == 0)
+                put_str(buf, size, &at,
+                        m->bump == RTPI_BUMP_WAVES   ? "waves"
+                        : m->bump == RTPI_BUMP_NOISE ? "noise"
+                        : m->bump == RTPI_BUMP_IMAGE ? texture_path(s, m->bump_image)
+                                                     : "none");
+            else if (strcmp(field, "name") == 0)
+                put_str(buf, size, &at, m->name ? m->name : "");
+            else
+                return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0,
+                                  "unknown key '%s' (material fields: color, kd, ks, kt, shine, "
+                                  "ior, checker, color2, checker_scale, texture, bump, "
+                                  "bump_strength, bump_scale, name)",
+                                  key);
+        }
+    }
+    if (at >= size) {
+        buf[0] = '\0';
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                          "%s: the value takes %zu bytes, the buffer %zu", key, at + 1, size);
+    }
+    return RTP_OK;
 }
 
 /* ---------------------------------------------------------------- clone */

@@ -125,6 +125,11 @@ static int needs_retrace(const rtp_tree *t, size_t m, int stale_retrace)
            (t->min_weight > 0.0 && (a->ks > a0->ks || a->kt > a0->kt));
 }
 
+const rtp_scene *rtp_tree_scene(const rtp_tree *t)
+{
+    return t ? t->scene : NULL;
+}
+
 rtp_status rtp_tree_set(rtp_tree *t, const char *key, const char *value,
                         rtp_error *err)
 {

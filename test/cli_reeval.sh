@@ -73,6 +73,16 @@ $RTP diff "$T/frame01.pfm" "$T/g.pfm" --fail-above max_abs=1e-6 -q && ok || bad 
 # info
 expect_rc 0 $RTP info "$T/t.rtp" --stats "$T/info.json"
 grep -q '"bytes_per_node": 24' "$T/info.json" && ok || bad "info bytes_per_node"
+# info lists the keys --set takes with their values, as --set takes them:
+# a material by index and name, a value set on trace read back as given
+$RTP trace $S --size 40x30 --set mat.red.kd=0.35 --set light.fill.pos=1.5,-2,3.25 -o "$T/k.rtp" -q
+expect_rc 0 $RTP info "$T/k.rtp"
+grep -q '^mat.1 (red): color=0.9,0.2,0.15 kd=0.35 ks=0.2 kt=0 shine=30 ior=1$' "$T/out" && ok ||
+    { bad "info: material keys"; cat "$T/out" >&2; }
+grep -q '^light.1 (fill): pos=1.5,-2,3.25 color=0.4,0.4,0.5 on=1$' "$T/out" && ok ||
+    { bad "info: light keys"; cat "$T/out" >&2; }
+grep -q '^camera: from=0,-8,3 at=0,0,0.8 up=0,0,1 angle=40 hither=0.1$' "$T/out" && ok ||
+    { bad "info: camera keys"; cat "$T/out" >&2; }
 
 # The tree file is streamed out in 64 KiB pieces (treefile.c: sink): one
 # of several pieces written to a file and through a pipe is the same, its

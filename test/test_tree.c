@@ -403,6 +403,98 @@ static void test_camera_move(void)
     rtp_scene_destroy(s);
 }
 
+/* rtp_scene_get gives every key's value as rtp_scene_set takes it: set
+   back, nothing changes (the traced image bit for bit, the value read
+   again); names and the errors. */
+static void test_scene_get(void)
+{
+    static const char *const scenes[] = {"scenes/spheres.nff", "scenes/textured.nff"};
+    static const char *const top[] = {"ambient", "background", "camera.from", "camera.at",
+                                      "camera.up", "camera.angle", "camera.hither"};
+    static const char *const lf[] = {"pos", "color", "on"};
+    static const char *const mf[] = {"color", "kd", "ks", "kt", "shine", "ior", "checker",
+                                     "color2", "checker_scale", "texture", "bump",
+                                     "bump_strength", "bump_scale"};
+    size_t sc;
+    for (sc = 0; sc < 2; sc++) {
+        rtp_scene *s = load(scenes[sc]);
+        rtp_scene_info si;
+        rtp_trace_options o;
+        rtp_image *a = NULL, *b = NULL;
+        char key[64], val[512], again[512];
+        size_t i, k, nkeys = 0, same = 0;
+        rtp_error err;
+        if (!s) {
+            CHECK(s != NULL);
+            continue;
+        }
+        memset(&o, 0, sizeof o);
+        o.width = 32;
+        o.height = 24;
+        CHECK(rtp_trace(s, &o, &a, NULL, NULL) == RTP_OK);
+        rtp_scene_get_info(s, &si);
+        for (i = 0; i < 7 + 3 * si.lights + 13 * si.materials; i++) {
+            if (i < 7)
+                snprintf(key, sizeof key, "%s", top[i]);
+            else if ((k = i - 7) < 3 * si.lights)
+                snprintf(key, sizeof key, "light.%zu.%s", k / 3, lf[k % 3]);
+            else
+                snprintf(key, sizeof key, "mat.%zu.%s", (k - 3 * si.lights) / 13,
+                         mf[(k - 3 * si.lights) % 13]);
+            if (rtp_scene_get(s, key, val, sizeof val, &err) != RTP_OK) {
+                CHECK_MSG(0, "%s: %s", key, err.message);
+                continue;
+            }
+            nkeys++;
+            /* (an image texture's path is relative to where the scene was
+               read: set back from here it names the same file) */
+            if (rtp_scene_set(s, key, val, &err) != RTP_OK) {
+                CHECK_MSG(0, "%s=%s: %s", key, val, err.message);
+                continue;
+            }
+            same += rtp_scene_get(s, key, again, sizeof again, NULL) == RTP_OK &&
+                    strcmp(val, again) == 0;
+        }
+        printf("  %s: %zu keys read, %zu read back the same after set\n", scenes[sc], nkeys,
+               same);
+        CHECK(nkeys == same && nkeys == 7 + 3 * si.lights + 13 * si.materials);
+        CHECK(rtp_trace(s, &o, &b, NULL, NULL) == RTP_OK);
+        CHECK(same_image(a, b));
+        /* names, and what is refused */
+        CHECK(rtp_scene_get(s, "mat.1.name", val, sizeof val, NULL) == RTP_OK &&
+              strcmp(val, sc == 0 ? "red" : "floor") == 0);
+        CHECK(rtp_scene_get(s, "mat.99.kd", val, sizeof val, NULL) == RTP_ERR_KEY);
+        CHECK(rtp_scene_get(s, "mat.0.fov", val, sizeof val, NULL) == RTP_ERR_KEY);
+        CHECK(rtp_scene_get(s, "camera.fov", val, sizeof val, NULL) == RTP_ERR_KEY);
+        CHECK(rtp_scene_get(s, "camera.from", val, 4, NULL) == RTP_ERR_ARGUMENT && !val[0]);
+        rtp_image_destroy(a);
+        rtp_image_destroy(b);
+        rtp_scene_destroy(s);
+    }
+    {
+        /* a value that needs every digit reads back exactly; a tree's
+           scene answers as the tree's edits left it */
+        rtp_scene *s = load("scenes/spheres.nff");
+        rtp_tree *t = NULL;
+        rtp_trace_options o;
+        char val[128];
+        memset(&o, 0, sizeof o);
+        o.width = 8;
+        o.height = 6;
+        if (s && rtp_scene_set(s, "light.0.pos", "0.1,-1e-300,123456.7890123", NULL) == RTP_OK &&
+            rtp_scene_get(s, "light.0.pos", val, sizeof val, NULL) == RTP_OK)
+            CHECK_MSG(strcmp(val, "0.1,-1e-300,123456.7890123") == 0, "%s", val);
+        else
+            CHECK(0);
+        CHECK(s && rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
+        CHECK(t && rtp_tree_set(t, "mat.glass.ior", "1.25", NULL) == RTP_OK);
+        CHECK(t && rtp_scene_get(rtp_tree_scene(t), "mat.3.ior", val, sizeof val, NULL) ==
+                       RTP_OK && strcmp(val, "1.25") == 0);
+        rtp_tree_destroy(t);
+        rtp_scene_destroy(s);
+    }
+}
+
 /* Refused edits leave the tree unchanged. */
 static void test_refused_edits(void)
 {
@@ -2100,6 +2192,7 @@ int main(void)
     RUN(test_refused_edits);
     RUN(test_camera_keys);
     RUN(test_camera_move);
+    RUN(test_scene_get);
     RUN(test_class_d_retrace);
     RUN(test_trees_outgrow_limit);
     RUN(test_moved_light_exact);
