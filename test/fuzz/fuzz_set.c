@@ -43,9 +43,17 @@ static void apply(rtp_tree *t, rtp_tree *twin, rtp_scene *s, char *item)
     st2 = rtp_tree_set(twin, item, eq + 1, &err);
     FUZZ_ASSERT(st2 == st);
     if (st == RTP_OK) {
+        char now[8192], tree_now[8192];
         st2 = rtp_scene_set(s, item, eq + 1, &err);
         fuzz_check_error(&err, st2);
         FUZZ_ASSERT(st2 == RTP_OK);
+        /* every key set reads back, the same from the tree's scene */
+        st2 = rtp_scene_get(s, item, now, sizeof now, &err);
+        fuzz_check_error(&err, st2);
+        FUZZ_ASSERT(st2 == RTP_OK);
+        FUZZ_ASSERT(rtp_scene_get(rtp_tree_scene(t), item, tree_now, sizeof tree_now, NULL) ==
+                        RTP_OK &&
+                    strcmp(now, tree_now) == 0);
     }
     *eq = '=';
 }
