@@ -439,11 +439,34 @@ static int auto_res(const rtp_tree *t)
    is where it was traced, new decisions where it moved, by shadow mode
    `mode` (not AUTO) at `res` cells.  Only lights whose position (or the
    shadow mode's key, vis_key) changed since the last call are redone. */
+/* Progress of one step of an evaluation, as part [lo, lo + span] of the
+   caller's. */
+typedef struct progress_part {
+    void (*fn)(void *user, double done);
+    void *user;
+    double lo, span;
+} progress_part;
+
+static void progress_part_cb(void *user, double done)
+{
+    const progress_part *p = (const progress_part *)user;
+    p->fn(p->user, p->lo + p->span * done);
+}
+
+/* Whether light i's visibility in t->cur_vis is as mode and res would
+   decide it now. */
+static int vis_up_to_date(const rtp_tree *t, size_t i, int kmode, int kres)
+{
+    return !isnan(t->cur_pos[3 * i]) && light_at(t, i, t->cur_pos + 3 * i) &&
+           (!light_moved(t, i) || (t->cur_mode == kmode && t->cur_res == kres));
+}
+
 static rtp_status update_visibility(rtp_tree *t, int mode, int res, int threads,
-                                    rtp_eval_stats *st, rtp_error *err)
+                                    const progress_part *prog, rtp_eval_stats *st,
+                                    rtp_error *err)
 {
     rtp_scene *s = t->scene;
-    size_t nl = s->nlights, words = (nl + 31) / 32, i, n;
+    size_t nl = s->nlights, words = (nl + 31) / 32, i, n, todo = 0, done = 0;
     int k, kmode, kres;
     void *ctx[RTPI_MAX_THREADS];
     vis_ctx vc[RTPI_MAX_THREADS];
@@ -475,12 +498,15 @@ static rtp_status update_visibility(rtp_tree *t, int mode, int res, int threads,
         if (!t->tri_nrm && tri_normals(t) != 0)
             return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
     }
+    /* (the moved lights to decide share the progress this step reports) */
+    for (i = 0; i < nl; i++)
+        todo += light_moved(t, i) && !vis_up_to_date(t, i, kmode, kres);
     for (i = 0; i < nl; i++) {
         const double *lp = s->lights[i].pos;
         int moved = light_moved(t, i);
-        if (!isnan(t->cur_pos[3 * i]) && light_at(t, i, t->cur_pos + 3 * i) &&
-            (!moved || (t->cur_mode == kmode && t->cur_res == kres)))
-            continue; /* up to date */
+        progress_part part;
+        if (vis_up_to_date(t, i, kmode, kres))
+            continue;
         if (!moved) {
             for (n = 0; n < t->nnodes; n++) {
                 uint32_t *w = &t->cur_vis[n * words + (i >> 5)];
@@ -513,7 +539,12 @@ static rtp_status update_visibility(rtp_tree *t, int mode, int res, int threads,
                 memset(&vc[k].cache, 0, sizeof vc[k].cache);
                 ctx[k] = &vc[k];
             }
-            rtpi_parallel_rows(t->ny, threads, ctx, vis_row, NULL, NULL);
+            part = *prog;
+            part.lo = prog->lo + prog->span * (double)done / (double)todo;
+            part.span = prog->span / (double)todo;
+            done++;
+            rtpi_parallel_rows(t->ny, threads, ctx, vis_row, part.fn ? progress_part_cb : NULL,
+                               &part);
             rtpi_shadow_destroy(sh);
             if (st) {
                 st->moved_lights++;
@@ -1786,20 +1817,6 @@ static void drop_caches(rtp_tree *t)
     t->ev_valid = 0;
 }
 
-/* Progress of one step of an evaluation, as part [lo, lo + span] of the
-   caller's. */
-typedef struct progress_part {
-    void (*fn)(void *user, double done);
-    void *user;
-    double lo, span;
-} progress_part;
-
-static void progress_part_cb(void *user, double done)
-{
-    const progress_part *p = (const progress_part *)user;
-    p->fn(p->user, p->lo + p->span * done);
-}
-
 /* Class D: samples whose trees contain a material the recorded trees
    cannot show exactly are traced again (only those), then every cache
    that referred to the old nodes is dropped.  A moved camera changes
@@ -2666,9 +2683,17 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
     for (l = 0; l < nl; l++)
         any_moved |= light_moved(t, l);
     if (any_moved) {
-        rs = update_visibility(t, mode, res, nthreads, &st, err);
+        /* (deciding moved lights' shadows is most of a move: the first
+           90% of what is left to report) */
+        progress_part vp = prog;
+        vp.span = 0.9 * prog.span;
+        rs = update_visibility(t, mode, res, nthreads, &vp, &st, err);
         if (rs != RTP_OK)
             return rs;
+        if (st.moved_lights) {
+            prog.lo += vp.span;
+            prog.span -= vp.span;
+        }
         shade.vis_words = t->cur_words;
         vis = t->cur_vis;
     }
@@ -3080,6 +3105,9 @@ done:
     t->last_exact = !matpath && !hl_apply;
     if (!hl_used)
         t->hl_mat = 0; /* the list holds only while shine edits follow */
+    if (prog.fn && prog.lo > 0.0)
+        prog.fn(prog.user, 1.0); /* (the steps after a re-trace or a move
+                                    report no progress of their own) */
     if (out)
         *out = img;
     return RTP_OK;

@@ -395,6 +395,23 @@ static void test_camera_move(void)
     CHECK(rtp_tree_eval(t, NULL, &re, &es, NULL) == RTP_OK && es.retraced_samples == 0);
     CHECK(rtp_trace(s, &o, &full, NULL, NULL) == RTP_OK);
     CHECK(re && full && rtp_image_diff(re, full, 1e-6, &d, NULL) == RTP_OK && d.max_abs <= 1e-6);
+    {
+        /* two moved lights report their shadows' progress in turn, then
+           the rest, rising to 1 */
+        rtp_eval_options eo;
+        progress_log pl;
+        memset(&eo, 0, sizeof eo);
+        memset(&pl, 0, sizeof pl);
+        eo.progress = log_progress;
+        eo.progress_user = &pl;
+        eo.shadows = RTP_SHADOWS_EXACT;
+        CHECK(rtp_tree_set(t, "light.0.pos", "1,-3,6", NULL) == RTP_OK);
+        CHECK(rtp_tree_set(t, "light.1.pos", "-2,-3,5", NULL) == RTP_OK);
+        memset(&es, 0, sizeof es);
+        CHECK(rtp_tree_eval_into(t, &eo, re, &es, NULL) == RTP_OK && es.moved_lights == 2);
+        printf("  two lights moved: %d progress reports, last %g\n", pl.calls, pl.last);
+        CHECK(pl.calls >= 2 * 30 && pl.backwards == 0 && pl.last == 1.0);
+    }
     rtp_image_destroy(re);
     rtp_image_destroy(full);
     rtp_image_destroy(again);
