@@ -435,10 +435,6 @@ static int auto_res(const rtp_tree *t)
     return res;
 }
 
-/* Brings cur_vis up to date for every light: recorded bits where a light
-   is where it was traced, new decisions where it moved, by shadow mode
-   `mode` (not AUTO) at `res` cells.  Only lights whose position (or the
-   shadow mode's key, vis_key) changed since the last call are redone. */
 /* Progress of one step of an evaluation, as part [lo, lo + span] of the
    caller's. */
 typedef struct progress_part {
@@ -461,6 +457,10 @@ static int vis_up_to_date(const rtp_tree *t, size_t i, int kmode, int kres)
            (!light_moved(t, i) || (t->cur_mode == kmode && t->cur_res == kres));
 }
 
+/* Brings cur_vis up to date for every light: recorded bits where a light
+   is where it was traced, new decisions where it moved, by shadow mode
+   `mode` (not AUTO) at `res` cells.  Only lights whose position (or the
+   shadow mode's key, vis_key) changed since the last call are redone. */
 static rtp_status update_visibility(rtp_tree *t, int mode, int res, int threads,
                                     const progress_part *prog, rtp_eval_stats *st,
                                     rtp_error *err)
