@@ -360,7 +360,7 @@ static const char trace_help[] =
     "                       default: SCENE's name with .png\n"
     "  --set KEY=VALUE      edit the scene first (repeatable): light.N.pos|color|on,\n"
     "                       mat.N.color|kd|ks|kt|shine|ior|checker|color2|\n"
-    "                       checker_scale|bump|bump_strength|bump_scale,\n"
+    "                       checker_scale|texture|bump|bump_strength|bump_scale,\n"
     "                       ambient, background, camera.from|at|up|angle|hither;\n"
     "                       N is a 0-based index or a name\n"
     "  --params FILE        edits from FILE: KEY=VALUE per line, '#' comments\n"
@@ -1538,10 +1538,14 @@ int main(int argc, char **argv)
         return 0;
     }
     if (strcmp(argv[1], "version") == 0 || strcmp(argv[1], "--version") == 0) {
+        unsigned f = rtp_features();
         printf("rtp %s (library %s)\n", RTP_VERSION_NUMBER == rtp_version_number()
                                             ? rtp_version_string()
                                             : "mismatch",
                rtp_version_string());
+        printf("built with:%s%s%s\n", f & RTP_FEATURE_PNG ? " png" : " (no png)",
+               f & RTP_FEATURE_THREADS ? " threads" : " (no threads)",
+               f & RTP_FEATURE_OSMESA ? " osmesa" : " (no osmesa)");
         return 0;
     }
     if (strcmp(argv[1], "trace") == 0)

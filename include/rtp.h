@@ -70,6 +70,16 @@ unsigned rtp_version_number(void);
 /** @return the version as "MAJOR.MINOR.PATCH". */
 const char *rtp_version_string(void);
 
+/* What this build of the library has (rtp_features' bits): PNG images
+   through libpng, threads (else every call runs on the caller's thread
+   whatever its thread count), the OSMesa backend of RTP_SHADOWS_OSMESA.
+   Without one, calls that need it fail with RTP_ERR_UNSUPPORTED. */
+#define RTP_FEATURE_PNG 1u
+#define RTP_FEATURE_THREADS 2u
+#define RTP_FEATURE_OSMESA 4u
+/** @return the RTP_FEATURE_* bits of the library actually linked. */
+unsigned rtp_features(void);
+
 /* ---------------------------------------------------------------- errors */
 
 /* Values are stable once released; new codes are added at the end. */

@@ -381,6 +381,21 @@ const char *rtp_status_string(rtp_status status)
 
 unsigned rtp_version_number(void) { return RTP_VERSION_NUMBER; }
 
+unsigned rtp_features(void)
+{
+    unsigned f = 0;
+#if defined(RTP_HAVE_PNG) && RTP_HAVE_PNG
+    f |= RTP_FEATURE_PNG;
+#endif
+#ifdef RTP_HAVE_THREADS
+    f |= RTP_FEATURE_THREADS;
+#endif
+#ifdef RTP_HAVE_OSMESA
+    f |= RTP_FEATURE_OSMESA;
+#endif
+    return f;
+}
+
 #define RTPI_STR2(x) #x
 #define RTPI_STR(x) RTPI_STR2(x)
 const char *rtp_version_string(void)

@@ -539,7 +539,9 @@ static rtp_status op_heatmap(ctx *c)
     rtp_status st = RTP_ERR_IO;
     if (a && b) {
         ARM(c);
-        st = rtp_diff_heatmap(a, b, 0.0, tmp_path("heat.png"), &c->err);
+        /* (PNG where the build has it: libpng's writes allocate too) */
+        st = rtp_diff_heatmap(a, b, 0.0,
+                              tmp_path(rtp_png_supported() ? "heat.png" : "heat.ppm"), &c->err);
         DISARM(c);
     }
     rtp_image_destroy(a);

@@ -533,6 +533,8 @@ static void test_png(void)
     if (!img)
         return;
     st = rtp_image_write(img, tpath("a.png"), RTP_IMAGE_AUTO, &err);
+    CHECK(!(rtp_features() & RTP_FEATURE_PNG) == !rtp_png_supported());
+    CHECK(!(rtp_features() & RTP_FEATURE_PNG) == (st == RTP_ERR_UNSUPPORTED));
     if (!rtp_png_supported()) {
         static const unsigned char sig[] = "\x89PNG\r\n\x1a\n\0\0\0\rIHDR";
         CHECK(st == RTP_ERR_UNSUPPORTED && strstr(err.message, "PNG"));

@@ -615,6 +615,11 @@ static void test_osmesa(void)
         return;
     }
     memset(&err, 0, sizeof err);
+    /* (rtp_features says the same as the backend does) */
+    CHECK(!(rtp_features() & RTP_FEATURE_OSMESA) ==
+          (rtpi_itembuf_build_osmesa(s, v3(2, -2, 6), 16, &a, &gl, &err) == RTP_ERR_UNSUPPORTED));
+    if (rtp_features() & RTP_FEATURE_OSMESA)
+        rtpi_itembuf_free(&gl, &a);
     if (rtpi_itembuf_build_osmesa(s, v3(2, -2, 6), 64, &a, &gl, &err) == RTP_ERR_UNSUPPORTED) {
         char buf[256];
         rtpi_shadow *sh = NULL;
