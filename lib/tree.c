@@ -2660,8 +2660,6 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
     memset(&shade, 0, sizeof shade);
     shade.s = s;
     shade.one_sided = t->spd;
-    shade.vis_words = t->vis_words;
-    vis = t->vis_words ? t->vis_ext : NULL;
     /* (a re-trace, when there is one, is most of the time: the first 90%
        of what progress reports; the evaluation of every sample after it
        the rest) */
@@ -2680,6 +2678,10 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
     }
     if (rs != RTP_OK)
         return rs;
+    /* (after the re-trace: it replaces vis_ext, the visibility of trees
+       with more than 32 lights) */
+    shade.vis_words = t->vis_words;
+    vis = t->vis_words ? t->vis_ext : NULL;
     for (l = 0; l < nl; l++)
         any_moved |= light_moved(t, l);
     if (any_moved) {
