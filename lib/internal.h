@@ -45,6 +45,9 @@ void *rtpi_calloc_array(const rtp_allocator *a, size_t count, size_t size);
    @return 0 on success, -1 on overflow or allocation failure (*p kept). */
 int rtpi_grow(const rtp_allocator *a, void **p, size_t *cap, size_t need,
               size_t size);
+/* The capacity rtpi_grow gives a block of cap elements to hold need
+   (more than cap), so that a caller can count it first; 0 on overflow. */
+size_t rtpi_grow_cap(size_t cap, size_t need);
 char *rtpi_strdup(const rtp_allocator *a, const char *s);
 /* Fills `*out` with the default allocator when `in` is NULL. */
 void rtpi_allocator_init(rtp_allocator *out, const rtp_allocator *in);

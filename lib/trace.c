@@ -75,8 +75,7 @@ struct shared {
     int next_row;      /* the next row to go in */
     rtpi_cnode *tnodes;/* the tree's nodes so far, tn of them */
     size_t tn, tcap;
-    uint32_t *tvis;    /* their visibility words (> 32 lights) */
-    size_t tvis_cap;
+    uint32_t *tvis;    /* their visibility words (> 32 lights), tcap a node */
     uint64_t *tstart;  /* gx*gy + 1 sample starts */
     rtpi_mutex lock;   /* guards the above and room */
     /* Recording and re-tracing: bytes the nodes may still take under the
@@ -160,9 +159,13 @@ static int32_t push_node(worker *w)
         w->n.capped++;
         return -1;
     }
-    /* (rtpi_grow doubles, from 16) */
+    /* (the room counts what the buffers grow to: rtpi_grow_cap's) */
     if (w->nn + 1 > w->cap &&
-        take_room(w, (double)(w->cap ? w->cap : 16) * node_bytes(w->sh)))
+        take_room(w, (double)(rtpi_grow_cap(w->cap, w->nn + 1) - w->cap) * sizeof *w->nodes))
+        return -1;
+    if (words && (w->nn + 1) * words > w->vis_cap &&
+        take_room(w, (double)(rtpi_grow_cap(w->vis_cap, (w->nn + 1) * words) - w->vis_cap) *
+                         sizeof *w->vis))
         return -1;
     if (rtpi_grow(&w->sh->s->alloc, (void **)&w->nodes, &w->cap, w->nn + 1,
                   sizeof *w->nodes)) {
@@ -368,6 +371,11 @@ static void trace_sample(worker *w, int x, int y, float *rgb)
     {
         const rtp_scene *s = w->sh->s;
         size_t n = w->nn - w->sample_base, nt = RTPI_TERMS(s->nlights);
+        /* (a sample of 2^20 nodes takes 4 (3 + 2 lights) MiB of these) */
+        if (n * nt + 1 > w->terms_cap &&
+            take_room(w, (double)(rtpi_grow_cap(w->terms_cap, n * nt + 1) - w->terms_cap) *
+                             sizeof *w->terms))
+            return;
         if (rtpi_grow(&s->alloc, (void **)&w->terms, &w->terms_cap, n * nt + 1,
                       sizeof *w->terms)) {
             w->status = RTP_ERR_NOMEM;
@@ -408,29 +416,60 @@ static int keep_row(worker *w, row_rec *r, size_t nsamples)
     return 0;
 }
 
+/* Bytes a row kept waiting takes (keep_row's blocks). */
+static double row_bytes(const shared *sh, size_t nn)
+{
+    return (double)(nn + 1) * node_bytes(sh) + (double)(sh->gx + 1) * sizeof(uint32_t);
+}
+
 /* Appends row y's trees (nn nodes, per[x] of sample x) to the tree's
-   arrays; the caller holds sh->lock.  0, or 1 when out of memory. */
-static int append_row(shared *sh, int y, const rtpi_cnode *nodes, const uint32_t *vis,
-                      const uint32_t *per, size_t nn)
+   arrays; the caller holds sh->lock.  RTP_OK, RTP_ERR_NOMEM, or
+   RTP_ERR_LIMIT when the arrays cannot grow within the room. */
+static rtp_status append_row(shared *sh, int y, const rtpi_cnode *nodes, const uint32_t *vis,
+                             const uint32_t *per, size_t nn)
 {
     const rtp_allocator *a = &sh->s->alloc;
     size_t words = sh->shade.vis_words, k = (size_t)y * sh->gx, at = sh->tn;
+    size_t need = sh->tn + nn + 1;
     int x;
-    /* Room for the rows to come at the rate so far, an eighth more:
-       doubling from small copied the nodes, tens of megabytes, many times
-       over and touched twice the pages (mount_s6 at 1024x1024: 27,000
-       page faults, then 14,500).  With the default allocator a block past
-       1 MiB now grows by moving its pages (util.c), so this mostly saves
-       a user's allocator the copies. */
-    size_t need = sh->tn + nn + 1, est = need / ((size_t)y + 1) * (size_t)sh->gy;
-    est += est / 8;
-    if (est < need)
-        est = need;
-    if ((need > sh->tcap &&
-         rtpi_grow(a, (void **)&sh->tnodes, &sh->tcap, est, sizeof *sh->tnodes)) ||
-        (words && need * words > sh->tvis_cap &&
-         rtpi_grow(a, (void **)&sh->tvis, &sh->tvis_cap, est * words, sizeof *sh->tvis)))
-        return 1;
+    if (need > sh->tcap) {
+        /* Room for the rows to come at the rate so far, an eighth more:
+           doubling from small copied the nodes, tens of megabytes, many
+           times over and touched twice the pages (mount_s6 at
+           1024x1024: 27,000 page faults, then 14,500).  With the default
+           allocator a block past 1 MiB grows by moving its pages
+           (util.c), so this mostly saves a user's allocator the copies.
+           The arrays take from the room what they grow by (grown to
+           exactly est, not to a power of two, so that they hold no more
+           than the limit lets them): near the limit at most half of what
+           is left, so that workers still have room for their rows. */
+        size_t est = need / ((size_t)y + 1) * (size_t)sh->gy;
+        void *p;
+        est += est / 8;
+        if (est < need)
+            est = need;
+        if (sh->limited) {
+            double nb = node_bytes(sh), fits = sh->room / nb;
+            if ((double)(need - sh->tcap) > fits)
+                return RTP_ERR_LIMIT;
+            if ((double)(est - sh->tcap) > fits) {
+                double half = 0.5 * fits;
+                est = (double)(need - sh->tcap) > half ? need : sh->tcap + (size_t)half;
+            }
+            sh->room -= (double)(est - sh->tcap) * nb;
+        }
+        if (est > (size_t)-1 / sizeof *sh->tnodes ||
+            !(p = rtpi_realloc(a, sh->tnodes, est * sizeof *sh->tnodes)))
+            return RTP_ERR_NOMEM;
+        sh->tnodes = (rtpi_cnode *)p;
+        if (words) {
+            if (est > (size_t)-1 / (words * sizeof *sh->tvis) ||
+                !(p = rtpi_realloc(a, sh->tvis, est * words * sizeof *sh->tvis)))
+                return RTP_ERR_NOMEM;
+            sh->tvis = (uint32_t *)p;
+        }
+        sh->tcap = est;
+    }
     if (nn) /* (memcpy from a NULL buffer is undefined even for 0) */
         memcpy(sh->tnodes + sh->tn, nodes, nn * sizeof *nodes);
     if (words && nn)
@@ -440,40 +479,41 @@ static int append_row(shared *sh, int y, const rtpi_cnode *nodes, const uint32_t
         at += per[x];
     }
     sh->tn = at;
-    return 0;
+    return RTP_OK;
 }
 
 /* Puts the worker's finished row y into the tree, with every waiting row
-   after it, or makes it wait.  0, or 1 with w->status set. */
+   after it, or makes it wait (a copy, which takes its bytes from the
+   room until it goes in).  0, or 1 with w->status set. */
 static int commit_row(worker *w, int y)
 {
     shared *sh = w->sh;
     const rtp_allocator *a = &sh->s->alloc;
-    int bad = 0;
-    double bytes = (double)w->nn * node_bytes(sh);
+    rtp_status st = RTP_OK;
     rtpi_mutex_lock(&sh->lock);
-    /* (the row's nodes go into the tree or wait in a copy: either way
-       they take their bytes until the end) */
-    if (sh->limited && bytes > sh->room) {
-        rtpi_mutex_unlock(&sh->lock);
-        w->status = RTP_ERR_LIMIT;
-        return 1;
-    }
-    if (sh->limited)
-        sh->room -= bytes;
     if (y != sh->next_row) {
-        bad = keep_row(w, &sh->rows[y], (size_t)sh->gx);
-        if (!bad)
-            sh->stashed[y] = 1;
+        double bytes = row_bytes(sh, w->nn);
+        if (sh->limited && bytes > sh->room) {
+            st = RTP_ERR_LIMIT;
+        } else {
+            if (sh->limited)
+                sh->room -= bytes;
+            if (keep_row(w, &sh->rows[y], (size_t)sh->gx))
+                st = RTP_ERR_NOMEM;
+            else
+                sh->stashed[y] = 1;
+        }
     } else {
-        bad = append_row(sh, y, w->nodes, w->vis, w->counts, w->nn);
-        if (!bad)
+        st = append_row(sh, y, w->nodes, w->vis, w->counts, w->nn);
+        if (st == RTP_OK)
             sh->next_row++;
-        while (!bad && sh->next_row < sh->gy && sh->stashed[sh->next_row]) {
+        while (st == RTP_OK && sh->next_row < sh->gy && sh->stashed[sh->next_row]) {
             row_rec *r = &sh->rows[sh->next_row];
-            bad = append_row(sh, sh->next_row, r->nodes, r->vis, r->counts, r->nnodes);
-            if (bad)
+            st = append_row(sh, sh->next_row, r->nodes, r->vis, r->counts, r->nnodes);
+            if (st != RTP_OK)
                 break;
+            if (sh->limited)
+                sh->room += row_bytes(sh, r->nnodes);
             rtpi_free(a, r->nodes);
             rtpi_free(a, r->counts);
             rtpi_free(a, r->vis);
@@ -482,9 +522,9 @@ static int commit_row(worker *w, int y)
         }
     }
     rtpi_mutex_unlock(&sh->lock);
-    if (bad)
-        w->status = RTP_ERR_NOMEM;
-    return bad;
+    if (st != RTP_OK)
+        w->status = st;
+    return st != RTP_OK;
 }
 
 static int trace_row(void *ctx, int y)
@@ -686,16 +726,16 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
                                                   sizeof *sh.tstart);
         if (!sh.stashed || !sh.tstart)
             rtpi_free(&s->alloc, sh.rows), sh.rows = NULL;
-        else if (rtpi_mutex_init(&sh.lock) != 0)
-            rtpi_free(&s->alloc, sh.rows), sh.rows = NULL;
-        else
-            lock_made = 1;
-        /* the image, the samples and their starts are made; the nodes
-           take the rest (the up-front check counted one a sample) */
-        sh.limited = 1;
-        sh.room = limit - ((double)w * h * 12.0 + (double)sh.gx * sh.gy * (12.0 + 8.0));
     }
-    if (!samples || !ws || !sh.cl || (tree_out && !sh.rows)) {
+    lock_made = rtpi_mutex_init(&sh.lock) == 0;
+    /* the image, the samples and their starts are made; the nodes take
+       the rest (the up-front check counted one a sample), and without a
+       tree the workers' buffers for one sample's tree (a sample of 2^20
+       nodes and many lights: hundreds of MiB) */
+    sh.limited = 1;
+    sh.room = limit - ((double)w * h * 12.0 +
+                       (double)sh.gx * sh.gy * (12.0 + (tree_out ? 8.0 : 0.0)));
+    if (!samples || !ws || !sh.cl || !lock_made || (tree_out && !sh.rows)) {
         st = rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
         goto done;
     }
@@ -838,7 +878,7 @@ static int retrace_chunk(void *ctx, int ci)
         if (w->status != RTP_OK)
             return 1;
     }
-    if (take_room(w, (double)w->nn * node_bytes(sh)))
+    if (take_room(w, row_bytes(sh, w->nn)))
         return 1;
     return keep_row(w, r, k);
 }

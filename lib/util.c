@@ -290,6 +290,17 @@ void *rtpi_calloc_array(const rtp_allocator *a, size_t count, size_t size)
     return p;
 }
 
+size_t rtpi_grow_cap(size_t cap, size_t need)
+{
+    size_t ncap = cap ? cap : 16;
+    while (ncap < need) {
+        if (ncap > (size_t)-1 / 2)
+            return 0;
+        ncap *= 2;
+    }
+    return ncap;
+}
+
 int rtpi_grow(const rtp_allocator *a, void **p, size_t *cap, size_t need,
               size_t size)
 {
@@ -297,12 +308,8 @@ int rtpi_grow(const rtp_allocator *a, void **p, size_t *cap, size_t need,
     void *np;
     if (need <= *cap)
         return 0;
-    ncap = *cap ? *cap : 16;
-    while (ncap < need) {
-        if (ncap > (size_t)-1 / 2)
-            return -1;
-        ncap *= 2;
-    }
+    if (!(ncap = rtpi_grow_cap(*cap, need)))
+        return -1;
     if (size && ncap > (size_t)-1 / size)
         return -1;
     np = rtpi_realloc(a, *p, ncap * size);
