@@ -214,7 +214,9 @@ typedef struct rtp_trace_options {
                            corner rays, depth 5, no cut-off, one-sided
                            opaque objects */
     int max_depth;      /* ray-tree depth, eye ray = 1; 0: 5 */
-    double min_weight;  /* rays weighing less are not spawned; 0: none */
+    double min_weight;  /* rays weighing less are not spawned; 0: none
+                           (re-evaluating a ks or kt edit of such trees
+                           traces the material's samples again) */
     int threads;        /* 0 or 1: the calling thread only */
     double memory_limit; /* bytes the image, samples and trees may take;
                             0: 16 GiB.  Past it: RTP_ERR_LIMIT, before any

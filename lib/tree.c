@@ -111,7 +111,10 @@ static int bump_changed(const rtpi_material *a, const rtpi_material *b)
 /* Must material m's samples be traced again before the trees can show it
    exactly (edit class D)?  Rays the trace did not cast — reflected where
    ks was 0, refracted where kt was 0 or below the weight cut-off — or cast
-   elsewhere — refracted with another ior, one-sidedness in SPD mode. */
+   elsewhere — refracted with another ior, one-sidedness in SPD mode.
+   With a weight cut-off any ks or kt edit: raised, rays below it may now
+   be cast; lowered, rays the trees hold may now fall below it, and a full
+   trace would not cast them (their subtrees were kept and counted). */
 static int needs_retrace(const rtp_tree *t, size_t m, int stale_retrace)
 {
     const rtpi_material *a = &t->scene->mats[m], *a0 = &t->mats0[m];
@@ -122,7 +125,7 @@ static int needs_retrace(const rtp_tree *t, size_t m, int stale_retrace)
     return (a->ks > 0.0f && a0->ks == 0.0f) || (a->kt > 0.0f && a0->kt == 0.0f) ||
            (a0->kt > 0.0f && a->kt > 0.0f && a->ior != a0->ior) ||
            (t->spd && a0->kt > 0.0f && a->kt == 0.0f) ||
-           (t->min_weight > 0.0 && (a->ks > a0->ks || a->kt > a0->kt));
+           (t->min_weight > 0.0 && (a->ks != a0->ks || a->kt != a0->kt));
 }
 
 const rtp_scene *rtp_tree_scene(const rtp_tree *t)

@@ -259,6 +259,52 @@ static void test_many_lights_retrace(void)
     remove(path);
 }
 
+/* With a weight cut-off (--min-weight) a ks or kt edit moves rays'
+   weights across it either way: lowered, rays a full trace would no
+   longer cast were still in the trees and counted (0.03-0.2 off, with no
+   word); raised, rays it would now cast are missing.  A chain of such
+   edits, each against a full trace of the scene as edited so far, with
+   the samples traced again reported. */
+static void test_min_weight_edits(void)
+{
+    static const char *const chain[] = {
+        "mat.red.ks", "0.1",  "mat.mirror.ks", "0.15", "mat.glass.kt", "0.1", "mat.red.ks", "0.6",
+        "mat.mirror.ks", "0.3", "mat.glass.kt", "0.85", "mat.red.kd", "0.3", NULL};
+    rtp_scene *s = load("scenes/spheres.nff");
+    rtp_tree *t = NULL;
+    rtp_trace_options o;
+    int i, retraced = 0;
+    if (!s)
+        return;
+    memset(&o, 0, sizeof o);
+    o.width = 64;
+    o.height = 48;
+    o.min_weight = 0.2;
+    CHECK(rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
+    for (i = 0; t && chain[i]; i += 2) {
+        rtp_image *re = NULL, *full = NULL;
+        rtp_eval_stats es;
+        rtp_diff_stats d;
+        memset(&es, 0, sizeof es);
+        CHECK(rtp_tree_set(t, chain[i], chain[i + 1], NULL) == RTP_OK &&
+              rtp_scene_set(s, chain[i], chain[i + 1], NULL) == RTP_OK);
+        if (rtp_tree_eval(t, NULL, &re, &es, NULL) == RTP_OK &&
+            rtp_trace(s, &o, &full, NULL, NULL) == RTP_OK &&
+            rtp_image_diff(re, full, 1e-6, &d, NULL) == RTP_OK)
+            CHECK_MSG(d.max_abs <= 1e-6, "%s=%s: %g", chain[i], chain[i + 1], d.max_abs);
+        else
+            CHECK(0);
+        /* (kd moves no weight: nothing traced again) */
+        CHECK(strcmp(chain[i], "mat.red.kd") != 0 || es.retraced_samples == 0);
+        retraced += es.retraced_samples > 0;
+        rtp_image_destroy(re);
+        rtp_image_destroy(full);
+    }
+    CHECK(retraced == 6);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+}
+
 static void test_class_a_edits(void)
 {
     /* scenes/spheres.nff: named materials and lights, mirror and glass */
@@ -2376,6 +2422,7 @@ int main(void)
     RUN(test_camera_move);
     RUN(test_scene_get);
     RUN(test_class_d_retrace);
+    RUN(test_min_weight_edits);
     RUN(test_trees_outgrow_limit);
     RUN(test_memory_limit_holds);
     RUN(test_moved_light_exact);
