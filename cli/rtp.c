@@ -229,8 +229,13 @@ static long peak_rss_kb(void)
 static int stats_close(FILE *f, const char *path)
 {
     int bad;
-    if (f == stdout)
-        return fflush(f) != 0;
+    if (f == stdout) {
+        if (fflush(f) != 0 || ferror(f)) {
+            msg("stdout: error writing stats: %s", strerror(errno));
+            return 1;
+        }
+        return 0;
+    }
     bad = ferror(f) != 0;
     if (fclose(f) != 0 || bad) {
         msg("%s: error writing stats", path);
@@ -239,6 +244,41 @@ static int stats_close(FILE *f, const char *path)
     return 0;
 }
 
+/* Whether an image can be written to path, said before the work that
+   makes it (a trace of minutes, then "cannot tell the image format"):
+   0 after a message.  (A name without a %d in a --stream pattern is
+   the pattern's own.) */
+static int image_name_ok(const char *path)
+{
+    rtp_image_format f;
+    if (strcmp(path, "-") == 0)
+        return 1;
+    f = rtp_image_format_from_path(path);
+    if (f == RTP_IMAGE_AUTO) {
+        msg("%s: cannot tell the image format from the name: use .png, .ppm or .pfm", path);
+        return 0;
+    }
+    if (f == RTP_IMAGE_PNG && !rtp_png_supported()) {
+        msg("%s: PNG is not supported by this build of rtp (libpng was not found when it was "
+            "built); use .ppm or .pfm", path);
+        return 0;
+    }
+    return 1;
+}
+
+/* --stats - with an image or tree to stdout: the JSON would land inside
+   the binary stream (between a stream's images); 1 after a message. */
+static int stdout_taken(const char *cmd, const char *stats_path, const char *a, const char *b)
+{
+    if (!stats_path || strcmp(stats_path, "-") != 0)
+        return 0;
+    if ((a && strcmp(a, "-") == 0) || (b && strcmp(b, "-") == 0)) {
+        msg("%s: --stats - and an image or tree on stdout cannot share it: give --stats a file",
+            cmd);
+        return 1;
+    }
+    return 0;
+}
 
 /* ------------------------------------------------------------ edits */
 
@@ -312,27 +352,43 @@ static int apply_line(set_fn set, void *obj, char *text, const char *where, int 
     }
 }
 
+/* The next line of f (named `name`) into line (size n), as line number
+   *lineno: 1, 0 at the end, or -1 after a message (a line longer than
+   the buffer: cut in two it would be two edit sets; a read error, such
+   as a folder given as the file). */
+static int next_line(FILE *f, const char *name, char *line, int n, int *lineno)
+{
+    if (!fgets(line, n, f)) {
+        if (ferror(f)) {
+            msg("%s: cannot read: %s", name, strerror(errno));
+            return -1;
+        }
+        return 0;
+    }
+    ++*lineno;
+    if (!strchr(line, '\n') && !feof(f)) {
+        msg("%s:%d: line too long (at most %d characters)", name, *lineno, n - 2);
+        return -1;
+    }
+    return 1;
+}
+
 static int apply_params_file(set_fn set, void *obj, const char *path)
 {
     FILE *f = strcmp(path, "-") == 0 ? stdin : fopen(path, "r");
-    char line[4096];
-    int n = 0, rc = 0;
+    char line[8192];
+    int n = 0, rc = 0, got;
     if (!f) {
         msg("%s: cannot open: %s", path, strerror(errno));
         return 1;
     }
-    while (fgets(line, sizeof line, f)) {
-        n++;
-        if (!strchr(line, '\n') && !feof(f)) {
-            msg("%s:%d: line too long", path, n);
-            rc = 1;
-            break;
-        }
+    while ((got = next_line(f, path, line, (int)sizeof line, &n)) > 0)
         if (apply_line(set, obj, line, path, n)) {
             rc = 1;
             break;
         }
-    }
+    if (got < 0)
+        rc = 1;
     if (f != stdin)
         fclose(f);
     return rc;
@@ -357,7 +413,7 @@ static const char trace_help[] =
     "and, with -o, the ray trees that `rtp reeval` re-evaluates.\n"
     "  -o, --output TREE    write the ray trees to TREE (.rtp; '-' = stdout)\n"
     "  -i, --image FILE     image to write (.png, .ppm, .pfm; '-' = PFM on stdout);\n"
-    "                       default: SCENE's name with .png\n"
+    "                       default: SCENE's name with .png (none with -o)\n"
     "  --set KEY=VALUE      edit the scene first (repeatable): light.N.pos|color|on,\n"
     "                       mat.N.color|kd|ks|kt|shine|ior|checker|color2|\n"
     "                       checker_scale|texture|bump|bump_strength|bump_scale,\n"
@@ -514,6 +570,14 @@ static int cmd_trace(int argc, char **argv)
         msg("trace: the tree and the image cannot both go to stdout");
         goto usage;
     }
+    if (stdout_taken("trace", stats_path, tree_path, image_path))
+        goto usage;
+    if (image_path && !image_name_ok(image_path))
+        goto out;
+    if (opt.spd && (opt.width || opt.min_weight > 0.0) && verbosity > 0)
+        msg("warning: --spd traces 512x512 with no weight cut-off: %s%s%s ignored",
+            opt.width ? "--size" : "", opt.width && opt.min_weight > 0.0 ? " and " : "",
+            opt.min_weight > 0.0 ? "--min-weight" : "");
     if (!image_path && !tree_path) {
         default_image = default_image_name(scene_path);
         if (!default_image) {
@@ -1095,12 +1159,18 @@ static int cmd_reeval(int argc, char **argv)
         }
         image_path = default_image;
     }
+    if (stdout_taken("reeval", stats_path, image_path, NULL))
+        goto usage;
     if (stream && strcmp(image_path, "-") != 0) {
         char probe[4096];
         if (expand_pattern(image_path, 0, probe, sizeof probe) != 0 || !strchr(image_path, '%')) {
             msg("--stream: -i needs a pattern with one %%d (e.g. frame%%04d.png) or '-'");
             goto usage;
         }
+        if (!image_name_ok(probe))
+            goto out;
+    } else if (!image_name_ok(image_path)) {
+        goto out;
     }
     eo.threads = threads;
     /* one image: caches for later edits would only cost time */
@@ -1154,11 +1224,10 @@ static int cmd_reeval(int argc, char **argv)
         progress_end(&prog);
     } else {
         char line[8192], path[4096];
-        int n = 0;
+        int n = 0, got;
         rc = 0;
-        while (fgets(line, sizeof line, stdin)) {
-            n++;
-            if (apply_line(set_tree, tree, line, "stdin", n)) {
+        while ((got = next_line(stdin, "stdin", line, (int)sizeof line, &n)) != 0) {
+            if (got < 0 || apply_line(set_tree, tree, line, "stdin", n)) {
                 rc = 1;
                 break;
             }
@@ -1528,6 +1597,7 @@ static const char main_help[] =
 
 int main(int argc, char **argv)
 {
+    int rc;
     if (argc < 2) {
         fputs(main_help, stderr);
         return EXIT_USAGE;
@@ -1549,16 +1619,25 @@ int main(int argc, char **argv)
         return 0;
     }
     if (strcmp(argv[1], "trace") == 0)
-        return cmd_trace(argc - 2, argv + 2);
-    if (strcmp(argv[1], "diff") == 0)
-        return cmd_diff(argc - 2, argv + 2);
-    if (strcmp(argv[1], "reeval") == 0)
-        return cmd_reeval(argc - 2, argv + 2);
-    if (strcmp(argv[1], "info") == 0)
-        return cmd_info(argc - 2, argv + 2);
-    if (strcmp(argv[1], "merge") == 0)
-        return cmd_merge(argc - 2, argv + 2);
-    msg("unknown command '%s'", argv[1]);
-    fputs(main_help, stderr);
-    return EXIT_USAGE;
+        rc = cmd_trace(argc - 2, argv + 2);
+    else if (strcmp(argv[1], "diff") == 0)
+        rc = cmd_diff(argc - 2, argv + 2);
+    else if (strcmp(argv[1], "reeval") == 0)
+        rc = cmd_reeval(argc - 2, argv + 2);
+    else if (strcmp(argv[1], "info") == 0)
+        rc = cmd_info(argc - 2, argv + 2);
+    else if (strcmp(argv[1], "merge") == 0)
+        rc = cmd_merge(argc - 2, argv + 2);
+    else {
+        msg("unknown command '%s'", argv[1]);
+        fputs(main_help, stderr);
+        return EXIT_USAGE;
+    }
+    /* what went to stdout (info's summary, diff's numbers) must have
+       arrived: a full disk or a closed pipe is a failure, said so */
+    if ((fflush(stdout) != 0 || ferror(stdout)) && rc == 0) {
+        msg("stdout: write failed: %s", strerror(errno));
+        rc = 1;
+    }
+    return rc;
 }

@@ -126,6 +126,36 @@ expect_rc 0 $RTP reeval --help
 grep -q -- "--shadows MODE" "$T/out" && ok || bad "--help lists the options on stdout"
 expect_rc 0 $RTP info --help
 
+# Input and output that once went wrong without a word: --stats - inside
+# an image stream on stdout (usage error); a --stream line past the
+# buffer (cut in two, it made two images); a folder as --params (read as
+# empty); an image name whose format is unknown (said after the work);
+# stdout on a full disk (exit 0).
+expect_rc 2 $RTP reeval "$T/t.rtp" -i - --stats -
+grep -q "stdout" "$T/err" && ok || bad "--stats - with -i -: not said"
+expect_rc 2 $RTP trace $S --size 8x6 -o - --stats -
+awk 'BEGIN { s = ""; while (length(s) < 9000) s = s "mat.red.kd=0.5 "; print s }' |
+    $RTP reeval "$T/t.rtp" --stream -i "$T/long%d.pfm" 2>"$T/err"
+[ $? -eq 1 ] && grep -q "stdin:1: line too long" "$T/err" && [ ! -e "$T/long0.pfm" ] && ok ||
+    { bad "--stream: a line past the buffer"; cat "$T/err" >&2; }
+mkdir -p "$T/folder"
+expect_rc 1 $RTP reeval "$T/t.rtp" --params "$T/folder" -i "$T/f.pfm"
+grep -q "cannot read" "$T/err" && [ ! -e "$T/f.pfm" ] && ok || bad "--params FOLDER"
+expect_rc 1 $RTP trace $S --size 8x6 -o "$T/jpg.rtp" -i "$T/x.jpg"
+grep -q "x.jpg: cannot tell the image format" "$T/err" && [ ! -e "$T/jpg.rtp" ] && ok ||
+    bad "trace -i x.jpg: not said before the trace, or the tree written"
+expect_rc 1 $RTP reeval "$T/t.rtp" -i "$T/x.jpg"
+if [ -w /dev/full ]; then
+    $RTP info "$T/t.rtp" >/dev/full 2>"$T/err"
+    [ $? -eq 1 ] && grep -q "stdout: write failed" "$T/err" && ok || bad "info to a full disk"
+    $RTP diff "$T/t.pfm" "$T/r.pfm" --stats - >/dev/full 2>"$T/err"
+    [ $? -eq 1 ] && grep -q "stdout" "$T/err" && ok || bad "diff --stats - to a full disk"
+else
+    echo "SKIP: /dev/full absent: writes to a full disk not checked" >&2; skip=$((skip + 1))
+fi
+$RTP trace $S --spd --size 8x6 -i "$T/spd.pfm" 2>"$T/err"
+grep -q "warning: --spd traces 512x512.*--size" "$T/err" && ok || bad "--spd --size: no warning"
+
 rm -rf "$T"
 echo "$pass passed, $fail failed, $skip skipped"
 [ "$fail" -eq 0 ]
