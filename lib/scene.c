@@ -191,6 +191,17 @@ rtp_status rtpi_scene_add_texture(rtp_scene *s, const char *path,
     st = rtp_image_read(path, &s->alloc, &img, err);
     if (st != RTP_OK)
         return st;
+    /* (a PFM can hold NaN and infinity: every pixel it shades would be
+       NaN, and the tree file could not hold it) */
+    for (i = 0; i < 3 * (size_t)img->width * (size_t)img->height; i++)
+        if (!isfinite(img->pixels[i])) {
+            size_t px = i / 3, w = (size_t)img->width;
+            rtp_image_destroy(img);
+            return rtpi_error(err, RTP_ERR_FORMAT, path, 0, 0,
+                              "pixel (%zu, %zu) is not a finite number: a texture or bump map "
+                              "needs finite values",
+                              px % w, px / w);
+        }
     p = rtpi_strdup(&s->alloc, path);
     if (!p || GROW(s, texs, ntexs, cap_texs)) {
         rtpi_free(&s->alloc, p);

@@ -1046,6 +1046,11 @@ static rtp_status read_scen(loader *L, rd *r)
     if (!finite3(s->background) || !finite3(s->ambient) || !isfinite(s->light_scale) ||
         !isfinite(s->camera.angle) || !isfinite(s->camera.hither))
         return bad(L, "scene values are not finite", NULL);
+    /* (light_scale: 1, or 0.5/sqrt(lights) for NFF; the camera as NFF
+       and rtp_scene_set take it) */
+    if (!(s->light_scale >= 0.0 && s->light_scale <= 1.0) ||
+        !(s->camera.angle > 0.0 && s->camera.angle < 180.0) || !(s->camera.hither >= 0.0))
+        return bad(L, "scene value out of range (light scale, view angle or hither)", NULL);
     s->has_camera = 1;
     L->t->cam0 = s->camera;
     return RTP_OK;
@@ -1104,6 +1109,12 @@ static rtp_status read_matl(loader *L, rd *r)
             !isfinite(t->mats0[i].kt) || !isfinite(t->mats0[i].ior) ||
             !isfinite(t->mats0[i].bump_strength) || !isfinite(t->mats0[i].bump_scale))
             return bad(L, "material value is not finite", NULL);
+        /* what no scene can hold (rtp_scene_set, NFF and MTL refuse it):
+           a file saying so was made to, and its image would be NaN */
+        if (m->kd < 0.0f || m->ks < 0.0f || m->kt < 0.0f || m->shine < 0.0f || m->ior < 0.0f ||
+            m->tex_scale < 0.0f || m->bump_scale < 0.0f || t->mats0[i].ks < 0.0f ||
+            t->mats0[i].kt < 0.0f || t->mats0[i].ior < 0.0f || t->mats0[i].bump_scale < 0.0f)
+            return bad(L, "material value out of range (negative)", NULL);
         if ((unsigned)m->tex > RTPI_TEX_IMAGE || (unsigned)m->bump > RTPI_BUMP_NOISE ||
             (unsigned)t->mats0[i].bump > RTPI_BUMP_NOISE)
             return bad(L, "unknown texture or bump kind", NULL);

@@ -2370,6 +2370,79 @@ static void test_malformed_packed_node(void)
     free(data);
 }
 
+/* Values no scene can hold, in a file whose checksums are right (made
+   by writing a tree whose scene was changed behind rtp_scene_set's
+   back): each a named error, not an image of NaN and infinity; and a
+   texture with a NaN texel is refused where it is loaded (the reader
+   refused it in a tree file, so such a trace wrote a file it could not
+   read). */
+static void test_out_of_range_values(void)
+{
+    const char *text = "v from 0 -4 1 at 0 0 0.5 up 0 0 1 angle 40 hither 0.1 resolution 6 5\n"
+                       "l 2 -3 4\nf 1 0.3 0.3 0.5 0.4 50 0.5 1.4\ns 0 0 0.7 0.6\n";
+    char file[512];
+    int k;
+    FILE *f;
+    snprintf(file, sizeof file, "%s/rtp-range-%d.rtp", tmpdir(), (int)getpid());
+    for (k = 0; k < 5; k++) {
+        rtp_scene *s = NULL;
+        rtp_tree *t = NULL, *back = NULL;
+        rtp_trace_options o;
+        rtp_error err;
+        memset(&o, 0, sizeof o);
+        if (rtp_scene_load_memory(text, strlen(text), "r.nff", "nff", NULL, &s, NULL) ||
+            rtp_record(s, &o, &t, NULL, NULL, NULL)) {
+            CHECK(0);
+            rtp_scene_destroy(s);
+            continue;
+        }
+        if (k == 0)
+            t->scene->mats[0].shine = -200.0f;
+        else if (k == 1)
+            t->scene->light_scale = 6e307;
+        else if (k == 2) /* (cam0 too: a camera edit would be pending) */
+            t->scene->camera.angle = t->cam0.angle = 0.0;
+        else if (k == 3)
+            t->mats0[0].kt = -1.0f;
+        else
+            t->scene->mats[0].kd = -0.5f;
+        CHECK(rtp_tree_write(t, file, NULL, NULL) == RTP_OK);
+        memset(&err, 0, sizeof err);
+        CHECK_MSG(rtp_tree_read(file, NULL, &back, &err) == RTP_ERR_FORMAT && !back &&
+                      strstr(err.message, "out of range"),
+                  "case %d: %s", k, err.message);
+        rtp_tree_destroy(back);
+        rtp_tree_destroy(t);
+        rtp_scene_destroy(s);
+    }
+    remove(file);
+    /* a 2x2 PFM, one texel NaN */
+    snprintf(file, sizeof file, "%s/rtp-nan-%d.pfm", tmpdir(), (int)getpid());
+    f = fopen(file, "wb");
+    CHECK(f != NULL);
+    if (f) {
+        float px[12];
+        rtp_scene *s = NULL;
+        rtp_error err;
+        for (k = 0; k < 12; k++)
+            px[k] = 0.5f;
+        px[7] = (float)NAN;
+        fputs("PF\n2 2\n-1.0\n", f);
+        fwrite(px, sizeof px, 1, f);
+        fclose(f);
+        if (rtp_scene_load_memory(text, strlen(text), "r.nff", "nff", NULL, &s, NULL) == RTP_OK) {
+            memset(&err, 0, sizeof err);
+            CHECK(rtp_scene_set(s, "mat.0.texture", file, &err) == RTP_ERR_FORMAT &&
+                  strstr(err.message, "not a finite number"));
+            CHECK(rtp_scene_set(s, "mat.0.bump", file, &err) == RTP_ERR_FORMAT);
+        } else {
+            CHECK(0);
+        }
+        rtp_scene_destroy(s);
+        remove(file);
+    }
+}
+
 /* Rewrites the HEAD section's major version and fixes its checksum, so
    only the version is wrong. */
 static void test_newer_version_and_foreign(void)
@@ -2441,6 +2514,7 @@ int main(void)
     RUN(test_truncated_every_length);
     RUN(test_flipped_bits);
     RUN(test_newer_version_and_foreign);
+    RUN(test_out_of_range_values);
     RUN(test_format1_file);
     RUN(test_malformed_packed_node);
     return check_report();
