@@ -678,7 +678,8 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
     if (nthreads > RTPI_MAX_THREADS)
         nthreads = RTPI_MAX_THREADS;
     limit = opt.memory_limit > 0.0 ? opt.memory_limit : RTPI_MEMORY_LIMIT;
-    if (!rtpi_image_size_ok(fw + 1, fh + 1))
+    /* (the samples' grid: the image's, or SPD's 513x513) */
+    if (!rtpi_image_size_ok(fw + opt.spd, fh + opt.spd))
         return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
                           "image size %dx%d is over the limit (2^20 a side, 2^27 pixels)", fw,
                           fh);

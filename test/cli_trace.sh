@@ -79,6 +79,11 @@ else
     skip=$((skip + 1))
 fi
 
+# The largest side --size takes traces (the limit once counted a sample
+# row and column more than the image has)
+expect_rc 0 $RTP trace scenes/spheres.nff --size 1048576x1 -i "$T/wide.pfm" -q
+rm -f "$T/wide.pfm"
+
 rm -rf "$T"
 echo "$pass passed, $fail failed, $skip skipped"
 [ "$fail" -eq 0 ]
