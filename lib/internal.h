@@ -714,7 +714,8 @@ struct rtp_tree {
                               light moved or was added; else NULL */
     size_t cur_words;
     double *cur_pos;       /* 3 per light: position cur_vis holds bits for
-                              (NaN: not computed) */
+                              (NaN: not computed), cur_nl lights */
+    size_t cur_nl;
     int cur_mode, cur_res; /* shadow mode and resolution they came from */
     double *tri_nrm;       /* 3 per triangle: its rtpi_tri_normal, made at
                               the first move (vis_row asks it of every

@@ -494,12 +494,24 @@ static rtp_status update_visibility(rtp_tree *t, int mode, int res, int threads,
             return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
         }
         t->cur_words = words;
+        t->cur_nl = nl;
         for (i = 0; i < nl; i++)
             t->cur_pos[3 * i] = NAN; /* nothing decided yet */
         /* the first move: the triangles' normals (without them vis_row
            derives each hit's) */
         if (!t->tri_nrm && tri_normals(t) != 0)
             return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+    }
+    if (nl > t->cur_nl) {
+        /* lights added since (within the same visibility words): their
+           places, nothing decided */
+        double *p = (double *)rtpi_realloc(&t->alloc, t->cur_pos, nl * 3 * sizeof *t->cur_pos);
+        if (!p)
+            return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+        t->cur_pos = p;
+        for (i = t->cur_nl; i < nl; i++)
+            t->cur_pos[3 * i] = NAN;
+        t->cur_nl = nl;
     }
     /* (the moved lights to decide share the progress this step reports) */
     for (i = 0; i < nl; i++)

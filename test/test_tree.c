@@ -1541,6 +1541,22 @@ static void test_moves_rest(void)
                   seq[i].key, seq[i].value, t->mv_light);
         rtp_image_destroy(full);
     }
+    /* lights added after evaluations (the cache of where each light's
+       visibility was decided once kept the first count: ASan's
+       heap-buffer-overflow, heap corruption in a release build) */
+    for (i = 0; t && re && i < 4; i++) {
+        const double p[3] = {(double)i - 2.0, -4.0, 6.0};
+        CHECK(rtp_tree_add_light(t, p, NULL) == RTP_OK);
+    }
+    if (t && re) {
+        rtp_image *full = NULL;
+        rtp_diff_stats d;
+        CHECK(rtp_tree_set(t, "light.7.pos", "0,-4,6", NULL) == RTP_OK);
+        CHECK(rtp_tree_eval_into(t, &eo, re, NULL, NULL) == RTP_OK);
+        CHECK(rtp_tree_trace(t, 1, &full, NULL, NULL) == RTP_OK);
+        CHECK(full && rtp_image_diff(re, full, 1e-6, &d, NULL) == RTP_OK && d.max_abs <= 1e-6);
+        rtp_image_destroy(full);
+    }
     rtp_image_destroy(re);
     rtp_tree_destroy(t);
     rtp_scene_destroy(s);
