@@ -3153,8 +3153,13 @@ rtp_status rtp_tree_trace(const rtp_tree *t, int threads, rtp_image **out,
     if (!t)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_trace: NULL tree");
     memset(&o, 0, sizeof o);
-    o.width = t->width;
-    o.height = t->height;
+    /* a region's tree: the frame its camera spans, traced over the region */
+    o.width = t->full_w;
+    o.height = t->full_h;
+    o.region[0] = t->rx;
+    o.region[1] = t->ry;
+    o.region[2] = t->rx + t->width;
+    o.region[3] = t->ry + t->height;
     o.spd = t->spd;
     o.max_depth = t->max_depth;
     o.min_weight = t->min_weight;
