@@ -69,6 +69,7 @@ $(BUILD)/librtp.a: $(LIB_OBJ)
 $(BUILD)/librtp.so: $(LIB_PIC)
 	@$(if $(Q),echo "  LD      $@")
 	$(Q)$(CC) -shared -Wl,-soname,librtp.so.0 $(LDFLAGS) $^ -o $@ $(LIBS)
+	$(Q)ln -sf librtp.so $(BUILD)/librtp.so.0 # (its soname: a program linked here runs here)
 
 # ./rtp is one file for every BUILD (make asan links it with ASan, for the
 # CLI tests): .rtp-flavour holds how it was last linked, so that the next

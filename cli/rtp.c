@@ -542,8 +542,8 @@ static int cmd_trace(int argc, char **argv)
                 goto usage;
         } else if (is_opt(a, "--depth")) {
             if (!(v = opt_value(argc, argv, &i, "--depth")) ||
-                parse_int(v, 1, 1000, &opt.max_depth)) {
-                msg("--depth: expected an integer from 1 to 1000");
+                parse_int(v, 1, RTP_MAX_DEPTH, &opt.max_depth)) {
+                msg("--depth: expected an integer from 1 to %d", RTP_MAX_DEPTH);
                 goto usage;
             }
         } else if (is_opt(a, "--min-weight")) {

@@ -23,8 +23,9 @@
  *
  * Conventions
  *  - Every function that can fail returns an rtp_status; RTP_OK is 0.
- *    Where an rtp_error* is taken (it may be NULL), it receives the status,
- *    a message and, for parse errors, the file, line and column.
+ *    Where an rtp_error* is taken (it may be NULL), a failure fills it with
+ *    the status, a message and, for parse errors, the file, line and
+ *    column; a success leaves it as it was.
  *  - Stateful objects (rtp_scene, rtp_tree, rtp_builder) are opaque
  *    handles; destroy functions accept NULL.  Plain data (options, images, stats) are structs where a
  *    zero-initialised value means "defaults".
@@ -69,6 +70,10 @@ extern "C" {
 unsigned rtp_version_number(void);
 /** @return the version as "MAJOR.MINOR.PATCH". */
 const char *rtp_version_string(void);
+
+/* The deepest ray tree rtp traces, builds and reads (eye ray = 1): the
+   evaluation recurses along a tree's depth. */
+#define RTP_MAX_DEPTH 1000
 
 /* What this build of the library has (rtp_features' bits): PNG images
    through libpng, threads (else every call runs on the caller's thread
@@ -213,7 +218,8 @@ typedef struct rtp_trace_options {
     int spd;            /* SPD testing procedure: 512x512 from 513x513
                            corner rays, depth 5, no cut-off, one-sided
                            opaque objects */
-    int max_depth;      /* ray-tree depth, eye ray = 1; 0: 5 */
+    int max_depth;      /* ray-tree depth, eye ray = 1; 0: 5; at most
+                           RTP_MAX_DEPTH */
     double min_weight;  /* rays weighing less are not spawned; 0: none
                            (re-evaluating a ks or kt edit of such trees
                            traces the material's samples again) */
@@ -326,7 +332,10 @@ typedef struct rtp_eval_options {
                                holds what this tree's last evaluation wrote
                                there (the caller's promise): pixels an edit
                                cannot change are not written again.  Ignored
-                               when that image was not the last one written. */
+                               when that image (known by its pixels' address)
+                               was not the last one written; an image made
+                               anew may get the same address, so set this
+                               only for the image last written. */
     double memory_limit;    /* bytes the trees may take while samples are
                                traced again (class D), old and new; 0:
                                16 GiB.  Past it: RTP_ERR_LIMIT, the tree

@@ -4,9 +4,10 @@
  * same on them. */
 #include "internal.h"
 
+#include <float.h>
 #include <stdlib.h>
 
-#define MAX_BUILD_DEPTH 1000 /* as tree files: bounds evaluation recursion */
+#define MAX_BUILD_DEPTH RTP_MAX_DEPTH /* as tree files: bounds evaluation recursion */
 
 typedef struct bhit {
     uint32_t sample, prim, vis;
@@ -58,7 +59,11 @@ rtp_status rtp_builder_create(const rtp_scene *scene, int width, int height, int
     if (!scene || !out)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_builder_create: NULL argument");
     *out = NULL;
-    if (!rtpi_image_size_ok(width, height) || !rtpi_image_size_ok(width + 1, height + 1))
+    if (width <= 0 || height <= 0)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "image size %dx%d: not positive",
+                          width, height);
+    /* (the samples' grid, as rtp_trace counts it) */
+    if (!rtpi_image_size_ok(width + (spd != 0), height + (spd != 0)))
         return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0, "image size %dx%d not allowed", width,
                           height);
     b = (rtp_builder *)rtpi_calloc_array(&scene->alloc, 1, sizeof *b);
@@ -114,8 +119,12 @@ int rtp_builder_hit(rtp_builder *b, int x, int y, int parent, rtp_ray_kind kind,
         return -(int)rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
                                 "primitive %u: the scene has %zu", hit->prim,
                                 rtpi_scene_nprims(b->scene));
-    if (!isfinite(hit->pos[0]) || !isfinite(hit->pos[1]) || !isfinite(hit->pos[2]))
-        return -(int)rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "hit position not finite");
+    /* (kept as floats: a double past the float range would be infinite;
+       false for NaN too) */
+    if (!(fabs(hit->pos[0]) <= FLT_MAX && fabs(hit->pos[1]) <= FLT_MAX &&
+          fabs(hit->pos[2]) <= FLT_MAX))
+        return -(int)rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                                "hit position not finite as a float");
     if (b->count[sample] >= RTPI_MAX_SUBTREE)
         return -(int)rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0, "too many hits in one sample");
     nl = b->scene->nlights;
@@ -235,11 +244,12 @@ rtp_status rtp_builder_finish(rtp_builder *b, rtp_tree **out, rtp_error *err)
     a = &b->alloc;
     ns = (size_t)b->nx * b->ny;
     t = (rtp_tree *)rtpi_calloc_array(a, 1, sizeof *t);
+    if (t) /* (before anything can fail: rtp_tree_destroy frees by it) */
+        t->alloc = *a;
     first = (uint64_t *)rtpi_malloc_array(a, ns + 1, sizeof *first);
     order = (const bhit **)rtpi_malloc_array(a, b->nhits + 1, sizeof *order);
     if (!t || !first || !order)
         goto nomem;
-    t->alloc = *a;
     /* hits grouped by sample, insertion order kept (local indices) */
     first[0] = 0;
     for (k = 0; k < ns; k++) {

@@ -655,6 +655,11 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
         !(opt.min_weight >= 0.0))
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
                           "rtp_trace: negative option value");
+    /* (the trace recurses along a ray tree's depth, and a tree file
+       holds no deeper tree: 10,000 overflowed a thread's stack) */
+    if (opt.max_depth > RTP_MAX_DEPTH)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                          "rtp_trace: maximum depth %d over %d", opt.max_depth, RTP_MAX_DEPTH);
     fw = opt.width > 0 ? opt.width : s->width;
     fh = opt.height > 0 ? opt.height : s->height;
     if (opt.spd)

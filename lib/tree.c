@@ -2634,7 +2634,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
     int nset = 0, partial = 0, by_mark = 0;
     /* a moved light's rest holds only through moves of that light alone:
        every other evaluation ends it */
-    size_t mv_light = t->mv_light;
+    size_t mv_light = t ? t->mv_light : 0; /* (a NULL t is refused below) */
     uint32_t set_mats[RESOLVE_MAX];
     size_t nmat_changed = 0;
     uint32_t mt = 0;
@@ -2649,7 +2649,9 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_eval: NULL argument");
     if (out)
         *out = NULL;
-    if (into && (into->width != t->width || into->height != t->height || !into->pixels))
+    if (into && !into->pixels)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_eval_into: no pixels");
+    if (into && (into->width != t->width || into->height != t->height))
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
                           "image is %dx%d, the tree %dx%d", into->width, into->height,
                           t->width, t->height);
@@ -3222,6 +3224,9 @@ rtp_status rtp_tree_merge(rtp_tree *const *parts, size_t n, rtp_tree **out, rtp_
     if (!parts || !n || !out)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_merge: no trees");
     *out = NULL;
+    for (i = 0; i < n; i++)
+        if (!parts[i])
+            return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_merge: NULL tree");
     p0 = parts[0];
     a = &p0->alloc;
     fw = p0->full_w;
@@ -3231,8 +3236,6 @@ rtp_status rtp_tree_merge(rtp_tree *const *parts, size_t n, rtp_tree **out, rtp_
     gy = fh + spd;
     words = p0->vis_words;
     for (i = 0; i < n; i++) {
-        if (!parts[i])
-            return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_merge: NULL tree");
         if (i && !same_setup(p0, parts[i]))
             return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
                               "tree %zu was traced from another scene, frame or options", i);

@@ -15,7 +15,7 @@
 /* Limits a file may not exceed; beyond them it is rejected before any
    allocation, so a corrupt length cannot ask for absurd memory. */
 #define MAX_COUNT 0x7fffffffu
-#define MAX_DEPTH_FILE 1000
+#define MAX_DEPTH_FILE RTP_MAX_DEPTH
 
 static const unsigned char signature[8] = {0x89, 'R', 'T', 'P', '\r', '\n', 0x1a, '\n'};
 

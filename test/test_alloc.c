@@ -296,6 +296,53 @@ static rtp_status op_record(ctx *c)
     return st;
 }
 
+/* A tree handed in through the builder: eye hits on every sample, a
+   reflected hit and a miss below some (the builder finish once freed by a
+   tree whose allocator was not yet set: a jump to address 0). */
+static rtp_status op_builder(ctx *c)
+{
+    rtp_scene *s = scene(c);
+    rtp_builder *b = NULL;
+    rtp_tree *t = NULL;
+    rtp_hit_record h;
+    rtp_status st;
+    int x, y;
+    if (!s)
+        return RTP_ERR_IO;
+    memset(&h, 0, sizeof h);
+    ARM(c);
+    st = rtp_builder_create(s, 3, 2, 0, &b, &c->err);
+    for (y = 0; st == RTP_OK && y < 2; y++)
+        for (x = 0; st == RTP_OK && x < 3; x++) {
+            int root;
+            h.pos[0] = 0.1 * x;
+            h.pos[2] = 0.5 + 0.1 * y;
+            h.prim = 0;
+            root = rtp_builder_hit(b, x, y, RTP_NO_PARENT, RTP_RAY_EYE, &h, &c->err);
+            if (root < 0) {
+                st = (rtp_status)-root;
+                break;
+            }
+            if (x == 1) {
+                int r = rtp_builder_hit(b, x, y, root, RTP_RAY_REFLECTED, &h, &c->err);
+                if (r < 0)
+                    st = (rtp_status)-r;
+                else
+                    st = rtp_builder_miss(b, x, y, root, RTP_RAY_REFRACTED, &c->err);
+            }
+        }
+    if (st == RTP_OK) {
+        st = rtp_builder_finish(b, &t, &c->err);
+        b = NULL; /* (finish frees the builder, whatever it returns) */
+    }
+    DISARM(c);
+    CHECK(st == RTP_OK || !t);
+    rtp_builder_destroy(b);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+    return st;
+}
+
 /* Records the NFF scene's trees unarmed. */
 static int tree_spd; /* tree(): SPD's corner samples */
 
@@ -598,6 +645,7 @@ SWEEP(load_nff)
 SWEEP(load_obj)
 SWEEP(trace)
 SWEEP(record)
+SWEEP(builder)
 SWEEP(tree_write)
 SWEEP(tree_read)
 SWEEP(tree_eval)
@@ -779,6 +827,7 @@ int main(void)
     RUN(test_load_obj);
     RUN(test_trace);
     RUN(test_record);
+    RUN(test_builder);
     RUN(test_tree_write);
     RUN(test_tree_read);
     RUN(test_tree_eval);

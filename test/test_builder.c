@@ -233,6 +233,11 @@ static void test_builder_rejects(void)
     CHECK(rtp_builder_hit(b, 0, 0, RTP_NO_PARENT, RTP_RAY_EYE, &rec, &err) < 0);
     CHECK(strstr(err.message, "primitive") != NULL);
     rec.prim = 2;
+    /* a position past the float range the node keeps */
+    rec.pos[0] = 1e39;
+    CHECK(rtp_builder_hit(b, 0, 0, RTP_NO_PARENT, RTP_RAY_EYE, &rec, &err) < 0);
+    CHECK(strstr(err.message, "not finite") != NULL);
+    rec.pos[0] = 0.0;
     root = rtp_builder_hit(b, 0, 0, RTP_NO_PARENT, RTP_RAY_EYE, &rec, &err);
     CHECK(root == 0);
     CHECK(rtp_builder_hit(b, 0, 0, root, RTP_RAY_REFLECTED, &rec, &err) == 1);
@@ -240,6 +245,11 @@ static void test_builder_rejects(void)
     /* two reflected rays from one node: refused at finish */
     CHECK(rtp_builder_finish(b, &t, &err) == RTP_ERR_ARGUMENT);
     CHECK(t == NULL && strstr(err.message, "two reflected") != NULL);
+    /* sizes as rtp_trace takes them: not positive is an argument error,
+       the largest side rtp_trace traces is taken */
+    CHECK(rtp_builder_create(s, 0, 4, 0, &b, &err) == RTP_ERR_ARGUMENT && !b);
+    CHECK(rtp_builder_create(s, 1048576, 1, 0, &b, &err) == RTP_OK && b);
+    rtp_builder_destroy(b);
     rtp_scene_destroy(s);
 }
 

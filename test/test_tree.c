@@ -345,6 +345,59 @@ static void test_tree_trace_region(void)
     }
 }
 
+/* The deepest trees: between two facing mirrors an eye ray bounces to
+   RTP_MAX_DEPTH (on 2 threads: a worker's stack holds the recursion), the
+   tree is written and read back to the same image; one level more is an
+   argument error (the library took any depth: 1001 wrote a file its
+   reader refused, 10,000 overflowed the stack). */
+static void test_max_depth(void)
+{
+    static const char mirrors[] =
+        "v\nfrom 0 0 0\nat 0 1 0\nup 0 0 1\nangle 10\nhither 0.01\nresolution 1 1\n"
+        "l 0 0 1.5\nf 0.9 0.9 0.9 0.1 0.9 100 0 0\n"
+        "p 4\n-50 -2 -50\n50 -2 -50\n50 -2 50\n-50 -2 50\n"
+        "p 4\n-50 2 -50\n-50 2 50\n50 2 50\n50 2 -50\n";
+    char file[512];
+    rtp_scene *s = NULL;
+    rtp_tree *t = NULL, *back = NULL;
+    rtp_image *img = NULL, *again = NULL;
+    rtp_trace_options o;
+    rtp_tree_info ti;
+    rtp_error err;
+    snprintf(file, sizeof file, "%s/rtp-deep-%d.rtp", tmpdir(), (int)getpid());
+    if (rtp_scene_load_memory(mirrors, strlen(mirrors), "mirrors.nff", "nff", NULL, &s, NULL) !=
+        RTP_OK) {
+        CHECK(0);
+        return;
+    }
+    memset(&o, 0, sizeof o);
+    o.max_depth = RTP_MAX_DEPTH + 1;
+    o.threads = 2;
+    CHECK(rtp_record(s, &o, &t, &img, NULL, &err) == RTP_ERR_ARGUMENT && !t && !img);
+    /* (NULL trees are argument errors, not a read through NULL) */
+    {
+        rtp_tree *none[1] = {NULL};
+        CHECK(rtp_tree_eval(NULL, NULL, &img, NULL, &err) == RTP_ERR_ARGUMENT && !img);
+        CHECK(rtp_tree_merge(none, 1, &t, &err) == RTP_ERR_ARGUMENT && !t);
+    }
+    o.max_depth = RTP_MAX_DEPTH;
+    CHECK(rtp_record(s, &o, &t, &img, NULL, &err) == RTP_OK);
+    if (t) {
+        rtp_tree_get_info(t, &ti);
+        CHECK_MSG(ti.nodes >= RTP_MAX_DEPTH, "%llu nodes", ti.nodes);
+        CHECK(rtp_tree_write(t, file, NULL, NULL) == RTP_OK);
+        CHECK(rtp_tree_read(file, NULL, &back, &err) == RTP_OK);
+        CHECK(back && rtp_tree_eval(back, NULL, &again, NULL, NULL) == RTP_OK && again && img &&
+              memcmp(again->pixels, img->pixels, 3 * sizeof(float)) == 0);
+    }
+    remove(file);
+    rtp_image_destroy(img);
+    rtp_image_destroy(again);
+    rtp_tree_destroy(back);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+}
+
 static void test_class_a_edits(void)
 {
     /* scenes/spheres.nff: named materials and lights, mirror and glass */
@@ -2552,6 +2605,7 @@ int main(void)
     RUN(test_scene_get);
     RUN(test_class_d_retrace);
     RUN(test_tree_trace_region);
+    RUN(test_max_depth);
     RUN(test_min_weight_edits);
     RUN(test_trees_outgrow_limit);
     RUN(test_memory_limit_holds);
