@@ -1242,6 +1242,117 @@ static rtp_scene *spheres_40x30(rtp_trace_options *o, rtp_eval_options *eo)
 
 /* Editing materials, lights and the ambient one after another on one tree
    (caches in play) equals a full trace of the final scene. */
+/* A seeded random chain of edits of every class into one kept image (as
+   --stream keeps it), through the caches an edit leaves for the next,
+   each against a full trace of the scene as edited so far: colours, kd,
+   ks and kt (to 0 and back: class D), shine, ior, lights' colours, on/off
+   and moves (exact, light buffer and auto in turn), ambient, background,
+   checker and bump strength (stale subtrees traced again), and with
+   --min-weight trees.  The chains adversarial sessions ran by hand (~150
+   of them) found the weight cut-off bug; this keeps such chains running. */
+static unsigned long chain_rand(unsigned long *x)
+{
+    *x = *x * 6364136223846793005ul + 1442695040888963407ul;
+    return (*x >> 33) & 0x7fffffff;
+}
+
+static void random_chain(const char *scene, unsigned long seed, double min_weight, int steps)
+{
+    static const char *const mfield[] = {"color", "kd", "ks", "kt", "shine", "ior",
+                                         "checker", "bump_strength"};
+    static const rtp_shadow_mode modes[] = {RTP_SHADOWS_EXACT, RTP_SHADOWS_LIGHTBUF,
+                                            RTP_SHADOWS_AUTO};
+    rtp_scene *s = load(scene);
+    rtp_tree *t = NULL;
+    rtp_image *re = NULL;
+    rtp_trace_options o;
+    rtp_eval_options eo;
+    rtp_scene_info si;
+    unsigned long x = seed;
+    int i, bad = 0;
+    if (!s)
+        return;
+    rtp_scene_get_info(s, &si);
+    memset(&o, 0, sizeof o);
+    o.width = 40;
+    o.height = 30;
+    o.min_weight = min_weight;
+    memset(&eo, 0, sizeof eo);
+    eo.incremental = 1;
+    eo.stale = RTP_STALE_RETRACE;
+    eo.threads = 2;
+    CHECK(rtp_record(s, &o, &t, &re, NULL, NULL) == RTP_OK);
+    for (i = 0; t && re && i < steps && !bad; i++) {
+        char key[64], val[96];
+        unsigned long r = chain_rand(&x) % 10;
+        rtp_image *full = NULL;
+        rtp_diff_stats d;
+        rtp_error err;
+        double a = (double)(chain_rand(&x) % 1000) / 1000.0, b = (double)(chain_rand(&x) % 1000) / 1000.0;
+        if (r < 5 && si.materials) {
+            const char *f = mfield[chain_rand(&x) % 8];
+            snprintf(key, sizeof key, "mat.%lu.%s", chain_rand(&x) % si.materials, f);
+            if (strcmp(f, "color") == 0)
+                snprintf(val, sizeof val, "%.3f,%.3f,%.3f", a, b, 1.0 - a);
+            else if (strcmp(f, "shine") == 0)
+                snprintf(val, sizeof val, "%.1f", 1.0 + 200.0 * a);
+            else if (strcmp(f, "ior") == 0)
+                snprintf(val, sizeof val, "%.3f", 1.0 + a);
+            else if (strcmp(f, "checker") == 0)
+                snprintf(val, sizeof val, "%d", a < 0.5);
+            else if (strcmp(f, "bump_strength") == 0)
+                snprintf(val, sizeof val, "%.2f", a < 0.3 ? 0.0 : 2.0 * b);
+            else /* kd, ks, kt: now and then 0 */
+                snprintf(val, sizeof val, "%.3f", a < 0.25 ? 0.0 : b);
+        } else if (r < 8 && si.lights) {
+            unsigned long l = chain_rand(&x) % si.lights, k = chain_rand(&x) % 3;
+            snprintf(key, sizeof key, "light.%lu.%s", l, k == 0 ? "pos" : k == 1 ? "color" : "on");
+            if (k == 0)
+                snprintf(val, sizeof val, "%.2f,%.2f,%.2f", 8.0 * a - 4.0, -6.0 + 3.0 * b,
+                         3.0 + 4.0 * a * b);
+            else if (k == 1)
+                snprintf(val, sizeof val, "%.3f,%.3f,%.3f", b, a, 0.5);
+            else
+                snprintf(val, sizeof val, "%d", a < 0.7);
+        } else {
+            snprintf(key, sizeof key, "%s", r == 8 ? "ambient" : "background");
+            snprintf(val, sizeof val, "%.3f,%.3f,%.3f", 0.3 * a, 0.3 * b, 0.2);
+        }
+        eo.shadows = modes[i % 3];
+        memset(&err, 0, sizeof err);
+        if (rtp_tree_set(t, key, val, &err) != RTP_OK) {
+            /* (a key the scene's material refuses, such as the bump
+               strength of a material without a bump map: both refuse) */
+            CHECK(rtp_scene_set(s, key, val, NULL) != RTP_OK);
+            continue;
+        }
+        CHECK(rtp_scene_set(s, key, val, NULL) == RTP_OK);
+        if (rtp_tree_eval_into(t, &eo, re, NULL, &err) != RTP_OK ||
+            rtp_trace(s, &o, &full, NULL, NULL) != RTP_OK ||
+            rtp_image_diff(re, full, 1e-6, &d, NULL) != RTP_OK) {
+            CHECK_MSG(0, "%s seed %lu step %d %s=%s: %s", scene, seed, i, key, val, err.message);
+            bad = 1;
+        } else if (!(d.max_abs <= 1e-6)) {
+            CHECK_MSG(0, "%s seed %lu (min weight %g) step %d %s=%s: %g", scene, seed, min_weight,
+                      i, key, val, d.max_abs);
+            bad = 1;
+        }
+        rtp_image_destroy(full);
+    }
+    rtp_image_destroy(re);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+}
+
+static void test_random_chains(void)
+{
+    random_chain("scenes/spheres.nff", 1, 0.0, 60);
+    random_chain("scenes/spheres.nff", 2, 0.15, 60);
+    random_chain("scenes/prims.nff", 3, 0.0, 60);
+    random_chain("scenes/textured.nff", 4, 0.0, 60);
+    random_chain("scenes/checker.nff", 5, 0.0, 40);
+}
+
 static void test_edit_sequence(void)
 {
     static const char *const seq[][2] = {
@@ -2614,6 +2725,7 @@ int main(void)
     RUN(test_shadows_auto);
     RUN(test_moved_light_small_spd);
     RUN(test_edit_sequence);
+    RUN(test_random_chains);
     RUN(test_one_term_edits);
     RUN(test_material_planes);
     RUN(test_moves_kept_image);
