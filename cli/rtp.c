@@ -282,6 +282,18 @@ static int stdout_taken(const char *cmd, const char *stats_path, const char *a, 
 
 /* ------------------------------------------------------------ edits */
 
+/* A --set argument has the form KEY=VALUE with a key (a usage error
+   otherwise, on trace and reeval alike); 0 after a message. */
+static int set_arg_ok(const char *v)
+{
+    const char *eq = strchr(v, '=');
+    if (!eq || eq == v) {
+        msg("--set %s: expected KEY=VALUE", v);
+        return 0;
+    }
+    return 1;
+}
+
 /* Applies "KEY=VALUE" through set(); where/line name its origin. */
 typedef rtp_status (*set_fn)(void *obj, const char *key, const char *value,
                              rtp_error *err);
@@ -521,10 +533,8 @@ static int cmd_trace(int argc, char **argv)
         } else if (is_opt(a, "--set")) {
             if (!(v = opt_value(argc, argv, &i, "--set")))
                 goto usage;
-            if (!strchr(v, '=')) {
-                msg("--set %s: expected KEY=VALUE", v);
+            if (!set_arg_ok(v))
                 goto usage;
-            }
             sets[nsets++] = v;
         } else if (is_opt(a, "--params")) {
             if (!(params = opt_value(argc, argv, &i, "--params")))
@@ -1084,7 +1094,7 @@ static int cmd_reeval(int argc, char **argv)
             if (!(image_path = opt_value(argc, argv, &i, a[1] == 'i' ? "-i" : "--image")))
                 goto usage;
         } else if (is_opt(a, "--set")) {
-            if (!(v = opt_value(argc, argv, &i, "--set")))
+            if (!(v = opt_value(argc, argv, &i, "--set")) || !set_arg_ok(v))
                 goto usage;
             sets[nsets++] = v;
         } else if (is_opt(a, "--params")) {

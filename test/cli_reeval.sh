@@ -108,6 +108,7 @@ ls "$T" | grep -q "tmp-rtp" && bad "temporary tree file left behind" || ok
 
 # Refused and broken input: named errors, exit 1, no image written.
 expect_rc 1 $RTP reeval "$T/t.rtp" --set mat.nosuch.kd=1 -i "$T/no1.pfm"
+expect_rc 2 $RTP reeval "$T/t.rtp" --set mat.red.kd -i "$T/no1.pfm"
 [ ! -e "$T/no1.pfm" ] && ok || bad "image written after a bad key"
 head -c 100 "$T/t.rtp" > "$T/trunc.rtp"
 expect_rc 1 $RTP reeval "$T/trunc.rtp" -i "$T/no2.pfm"

@@ -28,7 +28,10 @@ expect_rc 1 $RTP trace "$T/bad.nff" -i "$T/bad.pfm"
 grep -q "bad.nff:8:7:" "$T/err" && ok || { bad "parse error position"; cat "$T/err" >&2; }
 [ ! -e "$T/bad.pfm" ] && ok || bad "image written on failure"
 
-# Unknown --set key: exit 1 naming the key.
+# Unknown --set key: exit 1 naming the key; no KEY=VALUE at all (no '=',
+# or no key before it): a usage error, on trace and reeval alike.
+expect_rc 2 $RTP trace scenes/spheres.nff --set =1 -i "$T/x.pfm"
+expect_rc 2 $RTP trace scenes/spheres.nff --set mat.red.kd -i "$T/x.pfm"
 expect_rc 1 $RTP trace scenes/spheres.nff --set light.99.pos=1,2,3 -i "$T/x.pfm"
 grep -q "light.99" "$T/err" && ok || bad "bad key not named"
 
