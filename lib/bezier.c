@@ -246,6 +246,14 @@ rtp_status rtpi_read_bpt(rtp_scene *s, const char *text, size_t size,
             }
         }
         rtpi_xform_point(xform, p, pts + 3 * i);
+        /* (the bound after the transform too, as for OBJ vertices) */
+        for (k = 0; k < 3; k++)
+            if (!(fabs(pts[3 * i + k]) <= 1e18)) {
+                st = rtpi_lex_error(&lx, &t,
+                                    "point %zu out of range after the transform (at most 1e18)",
+                                    i + 1);
+                goto done;
+            }
     }
     if (rtpi_lex_next(&lx, &t)) {
         st = rtpi_lex_error(&lx, &t, "unexpected '%s' after the last point",

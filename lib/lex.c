@@ -267,6 +267,13 @@ void rtpi_xform_point(const double *m, const double p[3], double out[3])
     out[2] = r[2];
 }
 
+int rtpi_xform_mirrors(const double *m)
+{
+    double det = m[0] * (m[5] * m[10] - m[6] * m[9]) - m[1] * (m[4] * m[10] - m[6] * m[8]) +
+                 m[2] * (m[4] * m[9] - m[5] * m[8]);
+    return det < 0.0;
+}
+
 int rtpi_xform_normal_matrix(const double *m, double nm[9])
 {
     /* The inverse transpose is the cofactor matrix over the determinant;
@@ -287,12 +294,15 @@ int rtpi_xform_normal_matrix(const double *m, double nm[9])
     nm[7] = c * d - a * f;
     nm[8] = a * e - b * d;
     det = a * nm[0] + b * nm[1] + c * nm[2];
-    for (i = 0; i < 9; i++)
-        if (fabs(m[i + i / 3]) > scale)
-            scale = fabs(m[i + i / 3]);
-    /* Relative test: a determinant this small against the largest entry
-       cubed is a transform that squashes a dimension to nothing. */
-    if (!isfinite(det) || fabs(det) <= 1e-12 * scale * scale * scale)
+    /* Relative test: a determinant this small against the product of the
+       rows' lengths (its bound, Hadamard's) is a transform that squashes
+       a dimension to nothing; a strong but regular stretch (scale 1e6 1
+       1) is not (against the largest entry cubed it was refused). */
+    scale = 1.0;
+    for (i = 0; i < 3; i++)
+        scale *= sqrt(m[4 * i] * m[4 * i] + m[4 * i + 1] * m[4 * i + 1] +
+                      m[4 * i + 2] * m[4 * i + 2]);
+    if (!isfinite(det) || !(fabs(det) > 1e-12 * scale))
         return -1;
     for (i = 0; i < 9; i++)
         nm[i] /= det;

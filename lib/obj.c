@@ -21,6 +21,7 @@ typedef struct obj {
     rtp_error *err;
     const double *xf;
     double nm[9];
+    int flip; /* xf mirrors: each face's corners in the other order */
     uint32_t base_p, base_n, base_t; /* scene counts before this file */
     size_t np, nn, nt;               /* vertices of each kind read so far */
     uint32_t mat;                    /* current; RTPI_NONE: the default */
@@ -355,6 +356,14 @@ static rtp_status read_vertex(obj *o, int kind)
     rtpi_lex_here(&o->lx, &here);
     if (kind == 'v') {
         rtpi_xform_point(o->xf, p, q);
+        /* (the readers' bound on coordinates, 1e18, after the include's
+           transform too: past it squares overflow, and past the float
+           range the vertex is infinite) */
+        if (!(fabs(q[0]) <= 1e18 && fabs(q[1]) <= 1e18 && fabs(q[2]) <= 1e18))
+            return rtpi_lex_error(&o->lx, &here,
+                                  "vertex (%g, %g, %g) out of range after the include's "
+                                  "transform (at most 1e18)",
+                                  q[0], q[1], q[2]);
         if (rtpi_scene_add_pos(o->s, q[0], q[1], q[2]))
             return nomem(&o->lx, &here);
         o->np++;
@@ -485,7 +494,8 @@ static rtp_status read_face(obj *o, const rtpi_tok *kw)
     for (i = 0; i < ntri; i++) {
         rtpi_tri tr;
         for (k = 0; k < 3; k++) {
-            const uint32_t *c = o->crn + 3 * (size_t)o->tri[3 * i + k];
+            /* (mirrored: corners 0, 2, 1, so the face keeps its side) */
+            const uint32_t *c = o->crn + 3 * (size_t)o->tri[3 * i + (o->flip && k ? 3 - k : k)];
             tr.v[k] = c[0];
             tr.t[k] = has_t ? c[1] : RTPI_NONE;
             tr.n[k] = has_n ? c[2] : RTPI_NONE;
@@ -532,6 +542,7 @@ rtp_status rtpi_read_obj_ex(rtp_scene *s, const char *text, size_t size,
             return rtpi_error(err, RTP_ERR_ARGUMENT, o.lx.name, 0, 0,
                               "singular transform");
         o.xf = xform;
+        o.flip = rtpi_xform_mirrors(xform);
     }
     o.base_p = (uint32_t)s->npos;
     o.base_n = (uint32_t)s->nnrm;

@@ -92,6 +92,9 @@ void rtpi_xform_point(const double *m, const double p[3], double out[3]);
 /* Normal matrix: inverse transpose of the linear part (9 doubles).
    @return -1 if the transform is singular. */
 int rtpi_xform_normal_matrix(const double *m, double nm[9]);
+/* 1 when the transform mirrors (its determinant is negative): a face's
+   corners then go round the other way, and are swapped back. */
+int rtpi_xform_mirrors(const double *m);
 
 /* Counts of what the NFF source held, before triangulation. */
 typedef struct rtpi_nff_stats {

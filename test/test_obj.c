@@ -150,6 +150,39 @@ static void test_xform(void)
     CHECK(s->tris[0].mat == 7); /* the default material given */
     CHECK(s->nmats == 0);
     rtp_scene_destroy(s);
+    {
+        /* a mirror (scale -1 1 1) turns the face's corners the other way
+           round: they are swapped back, so the geometric normal still
+           points where the mirrored vertex normal does (+z here; it
+           pointed to -z, the face lit from behind) */
+        static const double mx[12] = {-1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0};
+        const char *q = "v -1 -1 0\nv 1 -1 0\nv 1 1 0\nvn 0 0 1\nf 1//1 2//1 3//1\n";
+        s = NULL;
+        CHECK(rtpi_scene_create(NULL, &s) == RTP_OK);
+        if (s && rtpi_read_obj(s, q, strlen(q), "q.obj", mx, 0, &err) == RTP_OK) {
+            rtpi_v3 n = tri_normal(s, &s->tris[0]);
+            CHECK_MSG(n.z > 0.0 && s->nrm[2] > 0.0f, "mirrored face normal z %g", n.z);
+        } else {
+            CHECK(0);
+        }
+        rtp_scene_destroy(s);
+    }
+    {
+        /* a strong but regular stretch is taken (it was "singular"); a
+           transform taking vertices past 1e18 is an error at the vertex */
+        static const double st[12] = {1e6, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1e-3, 0};
+        static const double big[12] = {1e30, 0, 0, 0, 0, 1e30, 0, 0, 0, 0, 1, 0};
+        const char *q = "v -1 -1 0\nv 1 -1 0\nv 1 1 0\nf 1 2 3\n";
+        s = NULL;
+        CHECK(rtpi_scene_create(NULL, &s) == RTP_OK);
+        CHECK(s && rtpi_read_obj(s, q, strlen(q), "q.obj", st, 0, &err) == RTP_OK);
+        rtp_scene_destroy(s);
+        s = NULL;
+        CHECK(rtpi_scene_create(NULL, &s) == RTP_OK);
+        CHECK(s && rtpi_read_obj(s, q, strlen(q), "q.obj", big, 0, &err) == RTP_ERR_PARSE &&
+              err.line == 1 && strstr(err.message, "out of range"));
+        rtp_scene_destroy(s);
+    }
 }
 
 static void test_mtl(void)
