@@ -10,6 +10,7 @@
  * normals by its inverse transpose. */
 #include "readers.h"
 
+#include <ctype.h>
 #include <stdio.h>
 
 /* Largest magnitude accepted for a coordinate or MTL value. */
@@ -124,33 +125,91 @@ static long find_material(const rtp_scene *s, const char *name, size_t n)
 
 /* ------------------------------------------------------------------ MTL */
 
-/* map_Kd / bump: options (-name args...) then the file name last; -bm
-   gives bump strength.  @return the image index via *index. */
+/* Whether t is word, letter case aside (exporters write map_Kd, map_kd,
+   map_KD; Blender map_Bump). */
+static int tok_is_nocase(const rtpi_tok *t, const char *word)
+{
+    size_t i, n = strlen(word);
+    if (t->n != n)
+        return 0;
+    for (i = 0; i < n; i++)
+        if (tolower((unsigned char)t->s[i]) != tolower((unsigned char)word[i]))
+            return 0;
+    return 1;
+}
+
+static int tok_is_nocase_prefix(const rtpi_tok *t, const char *prefix)
+{
+    rtpi_tok head = *t;
+    if (head.n < strlen(prefix))
+        return 0;
+    head.n = strlen(prefix);
+    return tok_is_nocase(&head, prefix);
+}
+
+static int file_exists(const char *path)
+{
+    FILE *f = fopen(path, "rb");
+    if (f)
+        fclose(f);
+    return f != NULL;
+}
+
+#define MAP_TOKENS 64 /* words on a map line: options and the name */
+
+/* map_Kd / bump: options (-name args...) then the file name, which may
+   hold spaces (Blender writes them unquoted): the longest run of the
+   line's last words that names a file, else its last word (whose error
+   then names it); -bm gives bump strength.  @return the image index via
+   *index. */
 static rtp_status mtl_map(rtpi_lex *lx, rtp_scene *s, const char *what,
                           uint32_t *index, double *bm)
 {
-    rtpi_tok t, file;
-    char *path;
+    rtpi_tok tk[MAP_TOKENS], t, file;
+    char *path = NULL;
     rtp_error inner;
     rtp_status st;
-    int have = 0;
+    int n = 0, i, from;
     while (rtpi_lex_next_inline(lx, &t)) {
-        if (bm && rtpi_tok_is(&t, "-bm")) {
-            if ((st = line_num(lx, what, "-bm strength", bm, NULL)) != RTP_OK)
-                return st;
-            continue;
-        }
-        file = t;
-        have = 1;
+        if (n == MAP_TOKENS)
+            return rtpi_lex_error(lx, &t, "%s: more than %d words on the line", what,
+                                  MAP_TOKENS);
+        tk[n++] = t;
     }
-    if (!have)
+    if (!n)
         return rtpi_lex_error(lx, &t, "unexpected end of line in %s, expected a file name",
                               what);
+    for (from = 0; from < n - 1; from++) {
+        /* (options come first: a name begins past them) */
+        char *cand;
+        file.s = tk[from].s;
+        file.n = (size_t)(tk[n - 1].s + tk[n - 1].n - tk[from].s);
+        if (tk[from].s[0] == '-' || memchr(file.s, '\0', file.n))
+            continue;
+        if (!(cand = rtpi_path_join(&s->alloc, lx->name, file.s, file.n)))
+            return nomem(lx, &tk[from]);
+        if (file_exists(cand)) {
+            path = cand;
+            break;
+        }
+        rtpi_free(&s->alloc, cand);
+    }
+    if (!path) {
+        from = n - 1;
+        file = tk[from];
+    }
+    for (i = 0; bm && i < from; i++)
+        if (rtpi_tok_is(&tk[i], "-bm")) {
+            if (i + 1 >= from || rtpi_tok_number(&tk[i + 1], bm) != 0 || !isfinite(*bm)) {
+                rtpi_free(&s->alloc, path);
+                return rtpi_lex_error(lx, i + 1 < n ? &tk[i + 1] : &tk[i],
+                                      "%s: expected a number after -bm", what);
+            }
+        }
     /* A NUL would silently cut the name (the folder itself was read). */
     if (memchr(file.s, '\0', file.n))
         return rtpi_lex_error(lx, &file, "%s: a file name must not contain a NUL byte", what);
-    path = rtpi_path_join(&s->alloc, lx->name, file.s, file.n);
-    if (!path)
+    if (!path && !(path = rtpi_path_join(&s->alloc, lx->name, file.s, file.n)))
         return nomem(lx, &file);
     memset(&inner, 0, sizeof inner);
     st = rtpi_scene_add_texture(s, path, index, &inner);
@@ -205,16 +264,16 @@ static rtp_status read_mtl(rtp_scene *s, const char *text, size_t size,
             continue;
         }
         if (in_list(&kw, ignored_mtl) ||
-            (kw.n > 4 && memcmp(kw.s, "map_", 4) == 0 &&
-             !rtpi_tok_is(&kw, "map_Kd") && !rtpi_tok_is(&kw, "map_bump"))) {
+            (kw.n > 4 && tok_is_nocase_prefix(&kw, "map_") && !tok_is_nocase(&kw, "map_Kd") &&
+             !tok_is_nocase(&kw, "map_bump"))) {
             rtpi_lex_skip_line(&lx);
             continue;
         }
         if (!(rtpi_tok_is(&kw, "Kd") || rtpi_tok_is(&kw, "Ks") ||
               rtpi_tok_is(&kw, "Ns") || rtpi_tok_is(&kw, "Ni") ||
               rtpi_tok_is(&kw, "d") || rtpi_tok_is(&kw, "Tr") ||
-              rtpi_tok_is(&kw, "map_Kd") || rtpi_tok_is(&kw, "bump") ||
-              rtpi_tok_is(&kw, "map_bump")))
+              tok_is_nocase(&kw, "map_Kd") || tok_is_nocase(&kw, "bump") ||
+              tok_is_nocase(&kw, "map_bump")))
             return rtpi_lex_error(&lx, &kw, "unknown MTL keyword '%s'",
                                   rtpi_tok_show(&kw, show, sizeof show));
         if (!m)
@@ -275,7 +334,7 @@ static rtp_status read_mtl(rtp_scene *s, const char *text, size_t size,
                 double tr = what[0] == 'd' ? 1.0 - v[0] : v[0];
                 m->kt = (float)(tr < 0.0 ? 0.0 : tr > 1.0 ? 1.0 : tr);
             }
-        } else if (rtpi_tok_is(&kw, "map_Kd")) {
+        } else if (tok_is_nocase(&kw, "map_Kd")) {
             uint32_t idx;
             if ((st = mtl_map(&lx, s, "map_Kd", &idx, NULL)) != RTP_OK)
                 break;

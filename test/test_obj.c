@@ -227,6 +227,32 @@ static void test_mtl(void)
     rtp_scene_destroy(s);
     s = NULL;
 
+    /* map keywords in any letter case (Blender writes map_Bump), and file
+       names with spaces, unquoted as exporters write them: the longest
+       run of the last words that names a file (with "my t.ppm" and
+       "t.ppm" both there, the last word alone took the wrong one) */
+    CHECK(write_file(dir, "my t.ppm", "P3\n1 1\n255\n200 10 10\n") == 0);
+    CHECK(write_file(dir, "c.mtl",
+                     "newmtl sp\nmap_kd my t.ppm\nmap_Bump -bm 2 my t.ppm\n"
+                     "newmtl plain\nMAP_KD t.ppm\n") == 0);
+    CHECK(write_file(dir, "c.obj", "mtllib c.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"
+                                   "usemtl sp\nf 1 2 3\nusemtl plain\nf 1 2 3\n") == 0);
+    snprintf(path, sizeof path, "%s/c.obj", dir);
+    CHECK_MSG(rtp_scene_load(path, NULL, &s, &err) == RTP_OK, "%s",
+              rtp_error_format(&err, buf, sizeof buf));
+    if (s) {
+        const rtpi_material *a = &s->mats[0], *b = &s->mats[1];
+        CHECK(a->tex == RTPI_TEX_IMAGE && a->bump == RTPI_BUMP_IMAGE &&
+              near(a->bump_strength, 2, 1e-6) && b->tex == RTPI_TEX_IMAGE);
+        CHECK(a->tex_image != b->tex_image && s->ntexs == 2 &&
+              strstr(s->texs[a->tex_image].path, "my t.ppm") != NULL);
+    }
+    rtp_scene_destroy(s);
+    s = NULL;
+    remove_file(dir, "my t.ppm");
+    remove_file(dir, "c.mtl");
+    remove_file(dir, "c.obj");
+
     /* errors inside the MTL carry the MTL's name and position */
     CHECK(write_file(dir, "b.mtl", "newmtl x\nKd 1 1\nnewmtl y\n") == 0);
     CHECK(write_file(dir, "b.obj", "mtllib b.mtl\n") == 0);
