@@ -37,14 +37,17 @@ rtp_status rtpi_itembuf_build_osmesa_wide(const rtp_scene *s, rtpi_v3 light, int
 #define OSM_PI 3.14159265358979323846
 
 /* One face being drawn: vertices go to OpenGL in eye coordinates sheared
-   so that the window's centre lies on the axis, (x - uc z, y - vc z, -z):
-   the numbers OpenGL rounds to float are then of the scene's size, not of
-   the distance from a far light, and a symmetric frustum draws the
-   window. */
+   so that the window's centre lies on the axis, and with the depth taken
+   from the bounds' nearest depth zb, (x - uc z, y - vc z, zb - z): the
+   numbers OpenGL rounds to float are then of the scene's size, not of the
+   distance from a far light (osm_projection puts zb back).  Depth at the
+   light's full distance was rounded to float first: 0.125 apart at
+   1.7e6, where the software buffer told primitives 0.05 apart. */
 typedef struct osm_face {
     int f;
     double uc, vc;
     double ua, ub, va, vb; /* the window */
+    double zb;
     rtpi_v3 L;
 } osm_face;
 
@@ -58,7 +61,27 @@ static void osm_vertex(const osm_face *fc, rtpi_v3 p)
     x = q[(a + 1) % 3];
     y = q[(a + 2) % 3];
     z = (fc->f & 1) ? -q[a] : q[a];
-    glVertex3f((GLfloat)(x - fc->uc * z), (GLfloat)(y - fc->vc * z), (GLfloat)-z);
+    glVertex3f((GLfloat)(x - fc->uc * z), (GLfloat)(y - fc->vc * z), (GLfloat)(fc->zb - z));
+}
+
+/* The projection of glFrustum(-hu zn, hu zn, -hv zn, hv zn, zn, zf) after
+   a translation of the eye depth by -zb, made in double and loaded whole
+   (glFrustum then glTranslated multiply in float, where the depth row's
+   two terms of ~zb^2 / extent cancel: an offset of 1e4 at zb = 1e6):
+   clip z = A Z + C and w = zb - Z for the vertex depth Z = zb - z, with
+   C = (zb (N - F) + 2 F N) / (F + N), F = zf - zb, N = zb - zn. */
+static void osm_projection(double hu, double hv, double zn, double zf, double zb)
+{
+    double m[16], F = zf - zb, N = zb - zn;
+    memset(m, 0, sizeof m);
+    m[0] = 1.0 / hu;
+    m[5] = 1.0 / hv;
+    m[10] = -(zf + zn) / (zf - zn);
+    m[11] = -1.0;
+    m[14] = (zb * (N - F) + 2.0 * F * N) / (F + N);
+    m[15] = zb;
+    glMatrixMode(GL_PROJECTION);
+    glLoadMatrixd(m);
 }
 
 /* Colour id: prim + 1 in 24 bits of RGB; 0 is the empty background. */
@@ -358,7 +381,10 @@ rtp_status rtpi_itembuf_build_osmesa_wide(const rtp_scene *s, rtpi_v3 light, int
         if (!(zn > 1e-6 * ib->w.zext[f]))
             zn = 1e-6 * ib->w.zext[f];
         znear[f] = zn;
-        zfar[f] = ib->w.zbase[f] + ib->w.zext[f] * (1.0 + 1e-3) + zn;
+        /* (just past the bounds: a far plane at 2 zbase, as it was,
+           spent the depth buffer's resolution on empty space, 0.03 apart
+           at 1e6) */
+        zfar[f] = ib->w.zbase[f] + ib->w.zext[f] * (1.0 + 1e-3);
         if (ib->w.zbase[f] == 0.0) {
             zfar[f] = ib->w.zext[f] * sqrt(3.0) * (1.0 + 1e-3) + zn;
             znmax = fmax(znmax, zn);
@@ -430,9 +456,8 @@ rtp_status rtpi_itembuf_build_osmesa_wide(const rtp_scene *s, rtpi_v3 light, int
         fc.ub = ib->w.u0[f] + 2.0 * hu;
         fc.va = ib->w.v0[f];
         fc.vb = ib->w.v0[f] + 2.0 * hv;
-        glMatrixMode(GL_PROJECTION);
-        glLoadIdentity();
-        glFrustum(-hu * zn, hu * zn, -hv * zn, hv * zn, zn, zf);
+        fc.zb = ib->w.zbase[f];
+        osm_projection(hu, hv, zn, zf, fc.zb);
         glMatrixMode(GL_MODELVIEW);
         glLoadIdentity();
         glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
