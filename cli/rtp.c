@@ -857,8 +857,9 @@ static const char reeval_help[] =
     "                       rays), lightbuf[:RES] (light buffer, exact),\n"
     "                       itembuf[:RES] (item buffer, approximate at shadow\n"
     "                       edges), osmesa[:RES] (item buffer by OSMesa); RES:\n"
-    "                       direction-cube cells per face edge (default 512; for\n"
-    "                       auto, 64 to 1024 from the tree's hits)\n"
+    "                       direction-cube cells per face edge, 1 to 8192\n"
+    "                       (default 512; for auto, 64 to 1024 from the tree's\n"
+    "                       hits)\n"
     "  --stale MODE         after a bump edit, the reflected and refracted rays\n"
     "                       below changed normals: keep (the paper's way, fast,\n"
     "                       approximate; default) or retrace (exact)\n"
@@ -1110,10 +1111,10 @@ static int cmd_reeval(int argc, char **argv)
             for (m = 0; m < N_SHADOW_MODES; m++)
                 if (strlen(shadow_modes[m]) == n && strncmp(v, shadow_modes[m], n) == 0)
                     break;
-            if (m == N_SHADOW_MODES || (colon && (m < 1 || parse_int(colon + 1, 1, 16384, &eo.shadow_res)))) {
+            if (m == N_SHADOW_MODES || (colon && (m < 1 || parse_int(colon + 1, 1, RTP_MAX_SHADOW_RES, &eo.shadow_res)))) {
                 msg("--shadows %s: expected auto[:RES], exact, lightbuf[:RES], itembuf[:RES] or "
-                    "osmesa[:RES]",
-                    v);
+                    "osmesa[:RES], RES from 1 to %d",
+                    v, RTP_MAX_SHADOW_RES);
                 goto usage;
             }
             eo.shadows = (rtp_shadow_mode)m;

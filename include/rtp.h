@@ -74,6 +74,9 @@ const char *rtp_version_string(void);
 /* The deepest ray tree rtp traces, builds and reads (eye ray = 1): the
    evaluation recurses along a tree's depth. */
 #define RTP_MAX_DEPTH 1000
+/* The most direction-cube cells per face edge (rtp_eval_options.shadow_res):
+   six faces of 8192^2 cells are 400 million. */
+#define RTP_MAX_SHADOW_RES 8192
 
 /* What this build of the library has (rtp_features' bits): PNG images
    through libpng, threads (else every call runs on the caller's thread
@@ -322,7 +325,8 @@ typedef enum rtp_stale_mode {
 typedef struct rtp_eval_options {
     int threads;            /* 0 or 1: the calling thread only */
     rtp_shadow_mode shadows;
-    int shadow_res;         /* direction-cube cells per face edge; 0: 512 */
+    int shadow_res;         /* direction-cube cells per face edge; 0: 512;
+                               at most RTP_MAX_SHADOW_RES */
     rtp_stale_mode stale;
     int no_cache;           /* 1: a one-off evaluation: keep no caches for
                                later edits (faster once, slower after) */

@@ -31,7 +31,7 @@
 #include "internal.h"
 
 #define RTPI_DC_DEFAULT_RES 512
-#define RTPI_DC_MAX_RES 8192
+#define RTPI_DC_MAX_RES RTP_MAX_SHADOW_RES
 
 /* The cell index along one face edge for face coordinate u; NaN and
    values outside [-1, 1] are clamped to the edge cells. */

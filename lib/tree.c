@@ -2663,9 +2663,9 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
     if (nthreads > RTPI_MAX_THREADS)
         nthreads = RTPI_MAX_THREADS;
     if (opt && ((unsigned)opt->shadows > RTP_SHADOWS_AUTO || opt->shadow_res < 0 ||
-                opt->shadow_res > 16384))
+                opt->shadow_res > RTP_MAX_SHADOW_RES))
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                          "invalid shadow mode or resolution (1..16384)");
+                          "invalid shadow mode or resolution (1..%d)", RTP_MAX_SHADOW_RES);
     mode = opt ? (int)opt->shadows : 0;
     res = opt && opt->shadow_res > 0 ? opt->shadow_res : RTPI_DC_DEFAULT_RES;
     if (mode == RTP_SHADOWS_AUTO) {
