@@ -14,6 +14,9 @@ void rtpi_lex_init(rtpi_lex *lx, const char *text, size_t size,
     memset(lx, 0, sizeof *lx);
     lx->p = text ? text : "";
     lx->end = lx->p + (text ? size : 0);
+    /* a UTF-8 byte-order mark (Notepad writes one) is not text */
+    if (lx->end - lx->p >= 3 && memcmp(lx->p, "\xef\xbb\xbf", 3) == 0)
+        lx->p += 3;
     lx->line_start = lx->p;
     lx->line = 1;
     lx->name = name;

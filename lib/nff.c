@@ -195,6 +195,12 @@ static rtp_status read_view(nff *c, const rtpi_tok *vtok)
                     st = rtpi_lex_error(&c->lx, &tk[i],
                                         "resolution %s %g must be a whole number from 1 to %d",
                                         wh[i], v[i], RES_MAX);
+            /* (the whole image's bound too, which trace would name
+               without the file's line) */
+            if (st == RTP_OK && !rtpi_image_size_ok((int)v[0], (int)v[1]))
+                st = rtpi_lex_error(&c->lx, &tk[1],
+                                    "resolution %gx%g is over the limit of 2^27 pixels", v[0],
+                                    v[1]);
             if (st == RTP_OK) {
                 c->s->width = (int)v[0];
                 c->s->height = (int)v[1];
@@ -764,6 +770,13 @@ static rtp_status read_include(nff *c, const rtpi_tok *kw, int bezier)
         child.st = c->st;
         rtpi_lex_init(&child.lx, text, size, path, c->err);
         st = parse(&child);
+        /* name and off after the include apply to the last f or l read,
+           the child's where it has one (they named the parent's, from
+           before the include) */
+        if (child.named_kind) {
+            c->named_kind = child.named_kind;
+            c->named_index = child.named_index;
+        }
         rtpi_free(a, child.pts);
         rtpi_free(a, child.tri);
     }

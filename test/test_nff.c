@@ -431,6 +431,23 @@ static void test_files(void)
     rtp_scene_destroy(s);
     s = NULL;
 
+    /* name after an include names the last f (or l) read, the included
+       file's (it named the parent's, from before the include); a UTF-8
+       byte-order mark at the start is not text */
+    CHECK(write_file(dir, "sub/plain.nff", "f 0 1 0 1 0 100 0 0\ns 2 2 2 1\n") == 0);
+    CHECK(write_file(dir, "after.nff",
+                     "\xef\xbb\xbf" "f 1 0 0 1 0 10 0 0\nname outer\ninclude sub/plain.nff\n"
+                     "name later\ns 0 0 0 1\n") == 0);
+    snprintf(name, sizeof name, "%s/after.nff", dir);
+    CHECK(rtp_scene_load(name, NULL, &s, &err) == RTP_OK);
+    if (s)
+        CHECK(s->nmats == 2 && strcmp(s->mats[0].name, "outer") == 0 &&
+              strcmp(s->mats[1].name, "later") == 0);
+    rtp_scene_destroy(s);
+    s = NULL;
+    remove_file(dir, "after.nff");
+    remove_file(dir, "sub/plain.nff");
+
     /* a file that includes itself stops at the nesting limit */
     CHECK(write_file(dir, "self.nff", "s 0 0 0 1\ninclude self.nff\n") == 0);
     snprintf(name, sizeof name, "%s/self.nff", dir);
@@ -468,6 +485,7 @@ static const bad_case bad_nff[] = {
     {"s 0 0 0 1e999\n", RTP_ERR_PARSE, 1, 9, "expected number for sphere radius"},
     {"s 0 0 0 0x10\n", RTP_ERR_PARSE, 1, 9, "expected number for sphere radius"},
     {"s 0 0 0 1e30\n", RTP_ERR_PARSE, 1, 9, "out of range"},
+    {"v resolution 32768 32768\n", RTP_ERR_PARSE, 1, 20, "over the limit of 2^27 pixels"},
     {"p 999999999\n", RTP_ERR_PARSE, 1, 3, "exceeds the limit"},
     {"p 8193\n", RTP_ERR_PARSE, 1, 3, "vertex count 8193 exceeds the limit of 8192"},
     {"p 99999999999999999999\n", RTP_ERR_PARSE, 1, 3, "expected vertex count for polygon"},
