@@ -14,8 +14,10 @@
    whole file is read, so that material N stays the N-th `f` line. */
 #define RTPI_MAT_PENDING 0xfffffffeu
 
-/* Longest token copied for number conversion; longer is a parse error. */
-#define RTPI_NUM_MAX 63
+/* Longest token copied for number conversion; longer is a parse error
+   (exporters that print 17 significant digits and a long exponent stay
+   far below; 63 refused a valid 1.0 padded with zeros to 70 digits). */
+#define RTPI_NUM_MAX 400
 
 /* Include nesting allowed below the top-level file. */
 #define RTPI_INCLUDE_MAX 8
