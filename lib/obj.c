@@ -138,15 +138,6 @@ static int tok_is_nocase(const rtpi_tok *t, const char *word)
     return 1;
 }
 
-static int tok_is_nocase_prefix(const rtpi_tok *t, const char *prefix)
-{
-    rtpi_tok head = *t;
-    if (head.n < strlen(prefix))
-        return 0;
-    head.n = strlen(prefix);
-    return tok_is_nocase(&head, prefix);
-}
-
 static int file_exists(const char *path)
 {
     FILE *f = fopen(path, "rb");
@@ -263,8 +254,10 @@ static rtp_status read_mtl(rtp_scene *s, const char *text, size_t size,
             }
             continue;
         }
+        rtpi_tok head = kw; /* (its first 4 letters: map_ in any case) */
+        head.n = 4;
         if (in_list(&kw, ignored_mtl) ||
-            (kw.n > 4 && tok_is_nocase_prefix(&kw, "map_") && !tok_is_nocase(&kw, "map_Kd") &&
+            (kw.n > 4 && tok_is_nocase(&head, "map_") && !tok_is_nocase(&kw, "map_Kd") &&
              !tok_is_nocase(&kw, "map_bump"))) {
             rtpi_lex_skip_line(&lx);
             continue;

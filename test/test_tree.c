@@ -1240,8 +1240,6 @@ static rtp_scene *spheres_40x30(rtp_trace_options *o, rtp_eval_options *eo)
     return s;
 }
 
-/* Editing materials, lights and the ambient one after another on one tree
-   (caches in play) equals a full trace of the final scene. */
 /* A seeded random chain of edits of every class into one kept image (as
    --stream keeps it), through the caches an edit leaves for the next,
    each against a full trace of the scene as edited so far: colours, kd,
@@ -1353,6 +1351,8 @@ static void test_random_chains(void)
     random_chain("scenes/checker.nff", 5, 0.0, 40);
 }
 
+/* Editing materials, lights and the ambient one after another on one tree
+   (caches in play) equals a full trace of the final scene. */
 static void test_edit_sequence(void)
 {
     static const char *const seq[][2] = {
