@@ -639,12 +639,12 @@ static int dc_res_ok(int res)
 }
 
 /* Sets each face's window to the projection of the bounds of every
-   hittable primitive (grown by 1e-6 of the scene's scale, far above the
-   rounding of bounds and projection) within the face's frustum widened
+   hittable primitive (grown by 1e-6 of the geometry's scale and 1e-12
+   of the light's, far above the rounding of bounds and projection) within the face's frustum widened
    to lim, clamped to the face; to the whole face when the light is
    inside those bounds; to no cells when the bounds miss the face.  A
-   window is never narrower than 1e-9 (a flat scene seen edge-on), so
-   cell sizes stay positive. */
+   window is never narrower than 1e-6 of its other side nor than 1e-14
+   (a flat scene seen edge-on), so cell sizes stay positive. */
 void rtpi_dc_windows(const rtp_scene *s, rtpi_v3 light, int res, double lim,
                      rtpi_dc_window *w)
 {
@@ -682,8 +682,23 @@ static void dc_windows_some(const rtp_scene *s, const unsigned char *sel, unsign
     }
     if (!any)
         goto done;
+    /* The margin covers the rounding of the bounds (1e-16 of the
+       geometry's coordinates) and of their corners' offsets from the
+       light (1e-16 of the light's), a millionfold and ten thousandfold.
+       It is not what
+       keeps the light buffer exact (a direction past a window's edge is
+       clamped to the edge cells, whose slabs run to infinity), so it
+       need not grow with the light's distance beyond that rounding: a
+       margin of 1e-6 of the light's coordinates made a light at 1e8 see
+       a scene of size 2 in 1% of each face's cells, and its moves 8-16x
+       slower (balls_s2). */
     S = dc_scale(s, light);
-    g = 1e-6 * S + 1e-30;
+    {
+        double SL = fmax(fabs(L[0]), fmax(fabs(L[1]), fabs(L[2]))), SG = 0.0;
+        for (k = 0; k < 3; k++)
+            SG = fmax(SG, fmax(fabs(lo[k]), fabs(hi[k])));
+        g = 1e-6 * SG + 1e-12 * SL + 1e-30;
+    }
     for (k = 0; k < 3; k++) {
         lo[k] -= g;
         hi[k] += g;
@@ -739,10 +754,27 @@ static void dc_windows_some(const rtp_scene *s, const unsigned char *sel, unsign
             present[f] = 0; /* the scene is not on this face */
             continue;
         }
-        umin = fmax(-1.0, umin);
-        vmin = fmax(-1.0, vmin);
-        umax = fmin(1.0, fmax(umax, umin + 1e-9));
-        vmax = fmin(1.0, fmax(vmax, vmin + 1e-9));
+        /* Within the face, and never narrower than a millionth of the
+           other side (a flat scene seen edge-on) nor than 1e-14 (a
+           hundred roundings of a face coordinate), so cell sizes stay
+           positive; below every primitive's widening (lb_ang), so a
+           window that narrow is listed as one.  (An absolute 1e-9 until
+           session 19: a scene of size 10 at 1e11 covered 1% of it.) */
+        umin = fmin(fmax(-1.0, umin), 1.0);
+        vmin = fmin(fmax(-1.0, vmin), 1.0);
+        umax = fmin(fmax(-1.0, umax), 1.0);
+        vmax = fmin(fmax(-1.0, vmax), 1.0);
+        {
+            double mw = fmax(1e-14, 1e-6 * fmax(umax - umin, vmax - vmin));
+            if (umax - umin < mw) {
+                umax = fmin(1.0, umin + mw);
+                umin = umax - mw;
+            }
+            if (vmax - vmin < mw) {
+                vmax = fmin(1.0, vmin + mw);
+                vmin = vmax - mw;
+            }
+        }
         w->u0[f] = umin;
         w->v0[f] = vmin;
         w->du[f] = (umax - umin) / (double)res;
@@ -769,16 +801,19 @@ done:
    direction is (light - o)/dist, rounded).  The hit's direction from the
    light therefore differs from the ray's by at most
    (delta + lambda) / near(prim) radians.  Each primitive is projected
-   widened by ang = 1e-7 + 1e-13 S / near: the first term covers the
-   rounding of face coordinates (~1e-16), the second the above with a
-   hundredfold margin.  A primitive so close to the light that the bound
+   widened by ang = 1e-12 + 1e-13 S / near: the first term covers the
+   rounding of face coordinates (a few 1e-16) with a thousandfold margin,
+   the second the above with a hundredfold one.  (The first was 1e-7 until
+   session 19: at a light 1e8 away that widened every primitive by 10
+   units, a scene of size 2 listed all its primitives in every cell, and a
+   move took 8-16x as long as at 1e6.)  A primitive so close to the light that the bound
    grows past LB_ANG_MAX (1e-3, near < 1e-10 S) is listed in every cell.
    Windows and absent faces keep this: a window is the bounds' projection
    through frusta widened by more than any listed primitive's widening,
    and a direction beyond a window's edge is clamped to the edge cell,
    which lists everything whose widened projection reaches past the edge
    (the edge rows' slabs run to infinity). */
-#define LB_ANG_BASE 1e-7
+#define LB_ANG_BASE 1e-12
 #define LB_ANG_SCALE 1e-13
 #define LB_ANG_MAX 1e-3
 

@@ -61,6 +61,8 @@ static const light_case lights[] = {
     {"inside the inside-only sphere", {-2.4, 2.5, 1.2}},
     {"inside the cylinder", {2, -1.5, 1.0}},
     {"far away", {1e4, -2e4, 3e4}},
+    {"very far away", {3e7, -1e7, 1e8}},
+    {"as far as the sun, in metres", {1e11, 5e10, 6e10}},
     {"on a floor corner", {5, 5, 0}},
     {"just inside a cone's tip", {3, 2.5, 1.2}},
 };
@@ -402,6 +404,45 @@ static void ib_same(const rtp_scene *s, rtpi_v3 lp, int res, const char *what)
     rtpi_itembuf_free(&a, &al);
     free(ta);
     free(tb);
+}
+
+/* From far away a scene looks the same whatever the distance (the
+   orthographic limit), so its light buffer's lists should be about as
+   long at 1e10 as at 1e4.  Until session 19 each primitive was widened
+   by 1e-7 radians (10 units at 1e8) and each window by 1e-6 of the
+   light's coordinates: from 1e8 on every cell listed nearly every
+   primitive, and moves took 8-16 times as long. */
+static void test_lightbuf_far_light_lists(void)
+{
+    static const double dist[] = {1e4, 1e6, 1e8, 1e10};
+    rtp_scene *s = load(scene_text, sizeof scene_text - 1);
+    rtp_allocator al;
+    double base = 0.0;
+    size_t k;
+    CHECK(s != NULL);
+    if (!s)
+        return;
+    rtpi_allocator_init(&al, NULL);
+    for (k = 0; k < sizeof dist / sizeof *dist; k++) {
+        rtpi_lightbuf lb;
+        rtpi_v3 lp = v3_mul(v3_norm(v3(3, -1, 10)), dist[k]);
+        double per_cell;
+        if (rtpi_lightbuf_build(s, lp, 64, &al, &lb, NULL) != RTP_OK) {
+            CHECK_MSG(0, "light buffer at %g failed", dist[k]);
+            continue;
+        }
+        per_cell = (double)lb.nrefs / (double)lb.w.ncells;
+        printf("  light at %-6g: %lu candidates, %.2f listed a cell\n", dist[k],
+               (unsigned long)lb.ncand, per_cell);
+        if (k == 0)
+            base = per_cell;
+        else
+            CHECK_MSG(per_cell <= 1.5 * base + 0.01,
+                      "light at %g: %.2f candidates a cell, %.2f at 1e4", dist[k], per_cell,
+                      base);
+        rtpi_lightbuf_free(&lb, &al);
+    }
+    rtp_scene_destroy(s);
 }
 
 static void test_lightbuf_threads(void)
@@ -800,6 +841,7 @@ int main(void)
     RUN(test_alloc_failures);
     RUN(test_lightbuf_equals_exact);
     RUN(test_lightbuf_far_from_origin);
+    RUN(test_lightbuf_far_light_lists);
     RUN(test_lightbuf_threads);
     RUN(test_spd_scene);
     RUN(test_osmesa);
