@@ -463,6 +463,20 @@ static char *default_image_name(const char *scene)
     return out;
 }
 
+/* "X,Y,Z" (--add-light) into pos; 0, or -1. */
+static int parse_xyz(const char *p, double pos[3])
+{
+    char *end;
+    int k;
+    for (k = 0; k < 3; k++) {
+        pos[k] = strtod(p, &end);
+        if (end == p || (k < 2 && *end != ',') || (k == 2 && *end != '\0'))
+            return -1;
+        p = end + 1;
+    }
+    return 0;
+}
+
 /* --memory-limit MIB (trace and reeval) as bytes; 0, or -1 with a message. */
 static int memory_limit_option(int argc, char **argv, int *i, double *bytes)
 {
@@ -584,12 +598,28 @@ static int cmd_trace(int argc, char **argv)
         goto usage;
     if (image_path && !image_name_ok(image_path))
         goto out;
-    if (opt.spd && (opt.width || opt.min_weight > 0.0) && verbosity > 0)
-        msg("warning: --spd traces 512x512 with no weight cut-off: %s%s%s ignored",
-            opt.width ? "--size" : "", opt.width && opt.min_weight > 0.0 ? " and " : "",
-            opt.min_weight > 0.0 ? "--min-weight" : "");
+    if (opt.spd && verbosity > 0) {
+        const char *ign[3];
+        int n = 0;
+        if (opt.width)
+            ign[n++] = "--size";
+        if (opt.max_depth && opt.max_depth != 5)
+            ign[n++] = "--depth";
+        if (opt.min_weight > 0.0)
+            ign[n++] = "--min-weight";
+        if (n)
+            msg("warning: --spd traces 512x512 to depth 5 with no weight cut-off: %s%s%s%s%s "
+                "ignored", ign[0], n > 1 ? ", " : "", n > 1 ? ign[1] : "", n > 2 ? ", " : "",
+                n > 2 ? ign[2] : "");
+    }
+    if (opt.spd) {
+        /* (a size given with spd is the library's to trace: a builder's
+           tree of corner samples) */
+        opt.width = opt.height = 0;
+        opt.max_depth = 5;
+    }
     if (!image_path && !tree_path) {
-        default_image = default_image_name(scene_path);
+        default_image = default_image_name(strcmp(scene_path, "-") ? scene_path : "trace");
         if (!default_image) {
             msg("out of memory");
             goto out;
@@ -695,7 +725,10 @@ static const char diff_help[] =
     "                          or psnr: below V) is worse than V\n"
     "  --stats FILE            write the metrics as one JSON object ('-' = stdout)\n"
     "  -q, --quiet             print nothing on success\n"
-    "  -h, --help              this help\n";
+    "  -v, --verbose           accepted (diff has nothing more to say)\n"
+    "  -h, --help              this help\n"
+    "With --heatmap - the heat map is the PNG on stdout and the line of metrics\n"
+    "goes to stderr.\n";
 
 static void json_number(FILE *f, const char *key, double v)
 {
@@ -775,6 +808,8 @@ static int cmd_diff(int argc, char **argv)
         msg("diff: only one image can come from stdin");
         goto usage;
     }
+    if (stdout_taken("diff", stats_path, heat, NULL))
+        goto usage;
     if (rtp_image_read(pa, NULL, &a, &err) != RTP_OK ||
         rtp_image_read(pb, NULL, &b, &err) != RTP_OK) {
         fail_err(&err);
@@ -797,7 +832,9 @@ static int cmd_diff(int argc, char **argv)
         over = strcmp(fail_metric, "psnr") == 0 ? got < fail_value : got > fail_value;
     }
     if (verbosity > 0 && !(stats_path && strcmp(stats_path, "-") == 0)) {
-        printf("pixels %zu  mae %.6g  rmse %.6g  psnr %s%.6g dB  max_abs %.6g  above %.4f%%\n",
+        /* (to stderr when the heat map takes stdout) */
+        fprintf(heat && strcmp(heat, "-") == 0 ? stderr : stdout,
+               "pixels %zu  mae %.6g  rmse %.6g  psnr %s%.6g dB  max_abs %.6g  above %.4f%%\n",
                d.pixels, d.mae, d.rmse, isinf(d.psnr) ? "" : "", d.psnr, d.max_abs,
                100.0 * d.share_above);
     }
@@ -874,8 +911,9 @@ static const char reeval_help[] =
     "  -j, --threads N      threads (default: the processors online)\n"
     "  --stats FILE         write statistics as one JSON object ('-' = stdout)\n"
     "  -q, --quiet / -v, --verbose / -h, --help\n"
-    "Edits that change where rays go (a new ior, ks or kt raised from 0) trace\n"
-    "again exactly the samples that contain the material (--stats reports\n"
+    "Edits that change where rays go (a new ior, ks or kt raised from 0, any\n"
+    "ks or kt edit of a tree traced with --min-weight) trace again exactly\n"
+    "the samples that contain the material (--stats reports\n"
     "retraced_samples and retraced_rays); the result equals a full trace.  A\n"
     "camera key (camera.from|at|up|angle|hither) traces every sample again: a\n"
     "full trace from the tree file, said so; later edits re-evaluate.\n";
@@ -1024,7 +1062,9 @@ static int reeval_one(rtp_tree *tree, const rtp_eval_options *eo, rtp_image **ke
                 es.shadow_queries, es.retraced_samples, es.retraced_rays, es.capped_rays,
                 es.combined_samples,
                 es.written_pixels,
-                (unsigned long long)img->width * img->height,
+                region[2] > 0 ? (unsigned long long)(region[2] - region[0]) *
+                                    (unsigned long long)(region[3] - region[1])
+                              : (unsigned long long)img->width * img->height,
                 ti.samples, ti.nodes, ti.bytes_per_node, ti.tree_bytes);
         if (fb >= 0)
             fprintf(stats, ", \"file_bytes\": %lld", fb);
@@ -1138,8 +1178,13 @@ static int cmd_reeval(int argc, char **argv)
                 goto usage;
             }
         } else if (is_opt(a, "--add-light")) {
+            double pos[3];
             if (!(v = opt_value(argc, argv, &i, "--add-light")))
                 goto usage;
+            if (parse_xyz(v, pos)) {
+                msg("--add-light %s: expected X,Y,Z", v);
+                goto usage;
+            }
             add_lights[nadd++] = v;
         } else if (a[0] == '-' && a[1] != '\0') {
             msg("reeval: unknown option '%s'", a);
@@ -1205,19 +1250,7 @@ static int cmd_reeval(int argc, char **argv)
     t_load = now_seconds() - t0;
     for (i = 0; i < nadd; i++) {
         double pos[3];
-        char *end;
-        const char *p = add_lights[i];
-        int k;
-        for (k = 0; k < 3; k++) {
-            pos[k] = strtod(p, &end);
-            if (end == p || (k < 2 && *end != ',') || (k == 2 && *end != '\0'))
-                break;
-            p = end + 1;
-        }
-        if (k < 3) {
-            msg("--add-light %s: expected X,Y,Z", add_lights[i]);
-            goto out;
-        }
+        parse_xyz(add_lights[i], pos); /* (checked with the options) */
         if (rtp_tree_add_light(tree, pos, &err) != RTP_OK) {
             fail_err(&err);
             goto out;
@@ -1351,7 +1384,7 @@ static void print_keys(const rtp_scene *s, const rtp_tree_info *ti)
 }
 
 static const char info_help[] =
-    "usage: rtp info TREE [--stats FILE] [-q]\n"
+    "usage: rtp info TREE [--stats FILE] [-q] [-v] [-h]\n"
     "Prints what a tree file holds: image and sample sizes, nodes, bytes per\n"
     "node, file size, and the keys --set takes with their values now: the\n"
     "camera, ambient and background, each light and material by index and\n"
@@ -1422,10 +1455,14 @@ static int cmd_info(int argc, char **argv)
         fprintf(f,
                 "{\"command\": \"info\", \"width\": %d, \"height\": %d, \"spd\": %s, "
                 "\"pixels\": %llu, \"samples\": %llu, \"nodes\": %llu, \"bytes_per_node\": %u, "
-                "\"tree_bytes\": %llu, \"file_bytes\": %lld, \"lights\": %zu, \"materials\": %zu}\n",
+                "\"tree_bytes\": %llu, \"lights\": %zu, \"materials\": %zu",
                 ti.width, ti.height, ti.spd ? "true" : "false",
                 (unsigned long long)ti.width * ti.height, ti.samples, ti.nodes,
-                ti.bytes_per_node, ti.tree_bytes, fb, ti.lights, ti.materials);
+                ti.bytes_per_node, ti.tree_bytes, ti.lights, ti.materials);
+        /* (a pipe has no size: left out, as reeval leaves it out) */
+        if (fb >= 0)
+            fprintf(f, ", \"file_bytes\": %lld", fb);
+        fputs("}\n", f);
         if (stats_close(f, stats_path)) {
             rtp_tree_destroy(tree);
             return 1;
@@ -1447,8 +1484,9 @@ static const char merge_help[] =
     "  -o, --output TREE    the joined tree file ('-' = stdout)\n"
     "  -i, --image FILE     the joined image (.png .ppm .pfm; '-' = PFM on stdout)\n"
     "  --size WxH           the frame's size (image mode)\n"
-    "  -j N                 threads for evaluating the joined tree (default: the\n"
+    "  -j, --threads N      threads for evaluating the joined tree (default: the\n"
     "                       processors online)\n"
+    "  -q, --quiet / -v, --verbose / -h, --help\n"
     "Regions must cover the frame without overlapping.\n";
 
 static int cmd_merge(int argc, char **argv)
@@ -1496,6 +1534,21 @@ static int cmd_merge(int argc, char **argv)
             "--size and -i");
         goto usage;
     }
+    if (out_tree && out_image && strcmp(out_tree, "-") == 0 && strcmp(out_image, "-") == 0) {
+        msg("merge: the tree and the image cannot both go to stdout");
+        goto usage;
+    }
+    for (i = 0; images && i < n; i++) {
+        const char *at = strrchr(in[i], '@');
+        int x0, y0;
+        char end;
+        if (!at || at == in[i] || sscanf(at + 1, "%d,%d%c", &x0, &y0, &end) != 2) {
+            msg("merge: %s: expected IMAGE@X,Y", in[i]);
+            goto usage;
+        }
+    }
+    if (out_image && !image_name_ok(out_image))
+        goto out;
     if (images) {
         int x0, y0, x, y;
         if (rtp_image_create(fw, fh, NULL, &img, &err) != RTP_OK) {
@@ -1621,6 +1674,17 @@ int main(int argc, char **argv)
     }
     if (strcmp(argv[1], "version") == 0 || strcmp(argv[1], "--version") == 0) {
         unsigned f = rtp_features();
+        if (argc > 2 && (strcmp(argv[2], "-h") == 0 || strcmp(argv[2], "--help") == 0)) {
+            fputs("usage: rtp version\nPrints the versions of rtp and of its library, and what "
+                  "this build has\n(png, threads, osmesa).\n",
+                  stdout);
+            return 0;
+        }
+        if (argc > 2) {
+            msg("version: unexpected argument '%s'", argv[2]);
+            fputs("usage: rtp version\n", stderr);
+            return EXIT_USAGE;
+        }
         printf("rtp %s (library %s)\n", RTP_VERSION_NUMBER == rtp_version_number()
                                             ? rtp_version_string()
                                             : "mismatch",

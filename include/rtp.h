@@ -218,9 +218,11 @@ int rtp_png_supported(void);
 
 typedef struct rtp_trace_options {
     int width, height;  /* 0: the scene's resolution */
-    int spd;            /* SPD testing procedure: 512x512 from 513x513
-                           corner rays, depth 5, no cut-off, one-sided
-                           opaque objects */
+    int spd;            /* nonzero: SPD testing procedure, 512x512
+                           (whatever width and height say) from 513x513
+                           corner rays, no cut-off, one-sided opaque
+                           objects, to max_depth (SPD's is 5, the
+                           default) */
     int max_depth;      /* ray-tree depth, eye ray = 1; 0: 5; at most
                            RTP_MAX_DEPTH */
     double min_weight;  /* rays weighing less are not spawned; 0: none
@@ -281,8 +283,9 @@ const rtp_scene *rtp_tree_scene(const rtp_tree *tree);
 
 /** Edits a parameter of the tree's scene (keys as rtp_scene_set).  A moved
  *  light is re-evaluated with new shadows (see rtp_eval_options.shadows).
- *  Edits that change where rays go — a new ior, ks or kt raised from 0 (or
- *  above the trace's weight cut-off) — make the next evaluation trace again
+ *  Edits that change where rays go — a new ior, ks or kt raised from 0, or
+ *  any ks or kt edit of a tree traced with a weight cut-off (min_weight) —
+ *  make the next evaluation trace again
  *  exactly the samples whose trees contain that material (stats report how
  *  many); never an approximation.  A camera key makes the next
  *  evaluation trace every sample again (a full trace into the tree's

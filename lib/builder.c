@@ -63,7 +63,8 @@ rtp_status rtp_builder_create(const rtp_scene *scene, int width, int height, int
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "image size %dx%d: not positive",
                           width, height);
     /* (the samples' grid, as rtp_trace counts it) */
-    if (!rtpi_image_size_ok(width + (spd != 0), height + (spd != 0)))
+    if (!rtpi_image_size_ok(width, height) ||
+        !rtpi_image_size_ok(width + (spd != 0), height + (spd != 0)))
         return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0, "image size %dx%d not allowed", width,
                           height);
     b = (rtp_builder *)rtpi_calloc_array(&scene->alloc, 1, sizeof *b);

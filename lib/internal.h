@@ -844,6 +844,10 @@ struct rtp_tree {
    they are spliced (RTP_ERR_LIMIT past it, t unchanged); progress (may
    be NULL) as rtp_trace_options'.  The caller
    drops whatever caches refer to the old nodes. */
+/* rtp_trace, with opt's width and height the frame even with spd (a
+   builder's tree of corner samples need not be 512x512). */
+rtp_status rtpi_trace_sized(const rtp_scene *s, const rtp_trace_options *opt,
+                            rtp_image **out, rtp_trace_stats *stats, rtp_error *err);
 rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int threads,
                         double limit, unsigned long long *rays,
                         unsigned long long *capped, void (*progress)(void *, double),

@@ -626,7 +626,10 @@ static rtp_status worker_error(rtp_status st, double limit, const char *what,
     return rtpi_error(err, st, NULL, 0, 0, "out of memory while %s", what);
 }
 
-static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in,
+/* sized: opt's width and height are the frame even with spd (a
+   builder's tree of corner samples, traced again by rtp_tree_trace);
+   otherwise spd is SPD's 512x512 whatever they say, as rtp.h has it. */
+static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in, int sized,
                              rtp_tree **tree_out, rtp_image **out,
                              rtp_trace_stats *stats, rtp_error *err)
 {
@@ -651,6 +654,9 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
     memset(&opt, 0, sizeof opt);
     if (opt_in)
         opt = *opt_in;
+    /* (on or off: the sample grid is the image's plus spd, so any other
+       value read past the samples or made a grid no reader takes) */
+    opt.spd = opt.spd != 0;
     if (opt.max_depth < 0 || opt.width < 0 || opt.height < 0 || opt.threads < 0 ||
         !(opt.min_weight >= 0.0))
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
@@ -662,7 +668,7 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
                           "rtp_trace: maximum depth %d over %d", opt.max_depth, RTP_MAX_DEPTH);
     fw = opt.width > 0 ? opt.width : s->width;
     fh = opt.height > 0 ? opt.height : s->height;
-    if (opt.spd)
+    if (opt.spd && !sized)
         fw = fh = 512;
     rg[0] = opt.region[0];
     rg[1] = opt.region[1];
@@ -684,7 +690,7 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
         nthreads = RTPI_MAX_THREADS;
     limit = opt.memory_limit > 0.0 ? opt.memory_limit : RTPI_MEMORY_LIMIT;
     /* (the samples' grid: the image's, or SPD's 513x513) */
-    if (!rtpi_image_size_ok(fw + opt.spd, fh + opt.spd))
+    if (!rtpi_image_size_ok(fw, fh) || !rtpi_image_size_ok(fw + opt.spd, fh + opt.spd))
         return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
                           "image size %dx%d is over the limit (2^20 a side, 2^27 pixels)", fw,
                           fh);
@@ -846,7 +852,13 @@ done:
 rtp_status rtp_trace(const rtp_scene *s, const rtp_trace_options *opt,
                      rtp_image **out, rtp_trace_stats *stats, rtp_error *err)
 {
-    return trace_impl(s, opt, NULL, out, stats, err);
+    return trace_impl(s, opt, 0, NULL, out, stats, err);
+}
+
+rtp_status rtpi_trace_sized(const rtp_scene *s, const rtp_trace_options *opt,
+                            rtp_image **out, rtp_trace_stats *stats, rtp_error *err)
+{
+    return trace_impl(s, opt, 1, NULL, out, stats, err);
 }
 
 rtp_status rtp_record(const rtp_scene *s, const rtp_trace_options *opt,
@@ -855,7 +867,7 @@ rtp_status rtp_record(const rtp_scene *s, const rtp_trace_options *opt,
 {
     if (!tree)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_record: NULL tree");
-    return trace_impl(s, opt, tree, image, stats, err);
+    return trace_impl(s, opt, 0, tree, image, stats, err);
 }
 
 /* ------------------------------------------------------------ re-trace */

@@ -3166,7 +3166,9 @@ rtp_status rtp_tree_trace(const rtp_tree *t, int threads, rtp_image **out,
     o.max_depth = t->max_depth;
     o.min_weight = t->min_weight;
     o.threads = threads;
-    return rtp_trace(t->scene, &o, out, stats, err);
+    /* (the tree's frame: a builder's corner samples need not be SPD's
+       512x512) */
+    return rtpi_trace_sized(t->scene, &o, out, stats, err);
 }
 
 /* ---------------------------------------------------------------- merge */

@@ -1537,7 +1537,9 @@ static rtp_status check_signature(loader *L, const unsigned char *data, size_t s
     if (size < 8 || memcmp(data, signature, 8) != 0) {
         if (size >= 8 && memcmp(data, "\x89PNG", 4) == 0)
             return bad(L, "not an rtp tree file (it is a PNG image)", NULL);
-        if (size >= 4 && memcmp(data, signature, size < 8 ? size : 8) == 0)
+        if (size == 0)
+            return bad(L, "empty: not an rtp tree file", NULL);
+        if (memcmp(data, signature, size < 8 ? size : 8) == 0)
             return bad(L, "truncated: the file ends inside its signature", NULL);
         return bad(L, "not an rtp tree file (wrong signature)", NULL);
     }

@@ -118,14 +118,18 @@ static void add_hit(rtp_builder *b, int x, int y, int parent, rtp_ray_kind kind,
     }
 }
 
-static rtp_tree *build(const rtp_scene *s, int w, int h)
+/* A w x h image's samples: its pixels, or with spd its (w+1) x (h+1)
+   corners. */
+static rtp_tree *build(const rtp_scene *s, int w, int h, int spd)
 {
     rtp_builder *b = NULL;
     rtp_tree *t = NULL;
     rtp_error err;
     const double pi = 3.14159265358979323846;
     double from[3] = {0, -6, 2.5}, at[3] = {0, 0, 0.6}, dir[3], right[3], up[3], step, len;
-    int x, y, k, bad = 0;
+    int x, y, k, bad = 0, iw = w, ih = h;
+    w += spd;
+    h += spd;
     for (k = 0; k < 3; k++)
         dir[k] = at[k] - from[k];
     len = sqrt(dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]);
@@ -142,7 +146,7 @@ static rtp_tree *build(const rtp_scene *s, int w, int h)
     up[1] = right[2] * dir[0] - right[0] * dir[2];
     up[2] = right[0] * dir[1] - right[1] * dir[0];
     step = 2 * tan(40.0 * pi / 360.0) / (double)((w > h ? w : h) - 1);
-    CHECK(rtp_builder_create(s, w, h, 0, &b, &err) == RTP_OK);
+    CHECK(rtp_builder_create(s, iw, ih, spd, &b, &err) == RTP_OK);
     for (y = 0; b && y < h; y++)
         for (x = 0; x < w; x++) {
             double sx = (x - 0.5 * (w - 1)) * step, sy = (0.5 * (h - 1) - y) * step, d[3];
@@ -172,7 +176,7 @@ static void test_builder_matches_trace(void)
     if (!s)
         return;
     memset(&o, 0, sizeof o);
-    t = build(s, 40, 30);
+    t = build(s, 40, 30, 0);
     CHECK(t != NULL);
     if (!t)
         goto out;
@@ -209,6 +213,51 @@ out:
     rtp_image_destroy(again);
     rtp_tree_destroy(t);
     rtp_tree_destroy(t2);
+    rtp_scene_destroy(s);
+}
+
+/* A tree of corner samples (spd) of a size other than SPD's 512x512:
+   rtp_tree_trace, the reference of `reeval --reference`, traces that
+   size (it traced the top-left 40x30 of a 512x512 frame, or refused a
+   tree wider than 512), and rtp_trace takes spd as on or off. */
+static void test_builder_corner_samples(void)
+{
+    rtp_scene *s = NULL;
+    rtp_tree *t = NULL;
+    rtp_image *mine = NULL, *theirs = NULL, *two = NULL, *mine2 = NULL, *big = NULL;
+    rtp_trace_options o;
+    rtp_diff_stats d;
+    rtp_error err;
+    CHECK(rtp_scene_load_memory(scene_text, strlen(scene_text), "b.nff", "nff", NULL, &s,
+                                NULL) == RTP_OK);
+    if (!s)
+        return;
+    t = build(s, 40, 30, 1);
+    CHECK(t != NULL);
+    CHECK(t && rtp_tree_eval(t, NULL, &mine, NULL, NULL) == RTP_OK);
+    CHECK(t && rtp_tree_trace(t, 1, &theirs, NULL, &err) == RTP_OK);
+    CHECK(mine && theirs && theirs->width == 40 && theirs->height == 30 &&
+          rtp_image_diff(mine, theirs, 1e-3, &d, NULL) == RTP_OK);
+    CHECK_MSG(mine && theirs && d.share_above < 0.01 && d.mae < 1e-3,
+              "corner samples: share above 1e-3 %g, mae %g", d.share_above, d.mae);
+    /* spd = 2 is spd = 1 (it read past the samples) */
+    memset(&o, 0, sizeof o);
+    o.spd = 1;
+    CHECK(rtp_trace(s, &o, &mine2, NULL, &err) == RTP_OK);
+    o.spd = 2;
+    CHECK(rtp_trace(s, &o, &two, NULL, &err) == RTP_OK);
+    CHECK(two && mine2 && two->width == 512 &&
+          memcmp(two->pixels, mine2->pixels, sizeof(float) * 3 * 512 * 512) == 0);
+    /* a side past the limit is refused */
+    o.width = 2147483647;
+    o.height = 1;
+    o.spd = 0;
+    CHECK(rtp_trace(s, &o, &big, NULL, &err) == RTP_ERR_LIMIT && !big);
+    rtp_image_destroy(mine);
+    rtp_image_destroy(theirs);
+    rtp_image_destroy(two);
+    rtp_image_destroy(mine2);
+    rtp_tree_destroy(t);
     rtp_scene_destroy(s);
 }
 
@@ -250,12 +299,15 @@ static void test_builder_rejects(void)
     CHECK(rtp_builder_create(s, 0, 4, 0, &b, &err) == RTP_ERR_ARGUMENT && !b);
     CHECK(rtp_builder_create(s, 1048576, 1, 0, &b, &err) == RTP_OK && b);
     rtp_builder_destroy(b);
+    b = NULL;
+    CHECK(rtp_builder_create(s, 2147483647, 1, 1, &b, &err) == RTP_ERR_LIMIT && !b);
     rtp_scene_destroy(s);
 }
 
 int main(void)
 {
     RUN(test_builder_matches_trace);
+    RUN(test_builder_corner_samples);
     RUN(test_builder_rejects);
     return check_report();
 }
