@@ -226,6 +226,9 @@ rtp_status rtpi_scene_add_texture(rtp_scene *s, const char *path,
                                   uint32_t *index, rtp_error *err);
 /* A deep copy of s with the same allocator. */
 rtp_status rtpi_scene_clone(const rtp_scene *s, rtp_scene **out);
+/* What is wrong with s's camera for a frame to be made (at equal to
+   from, up along the view), or NULL. */
+const char *rtpi_camera_problem(const rtp_scene *s);
 /* A material with default values (white, kd 1). */
 void rtpi_material_default(rtpi_material *m);
 

@@ -188,6 +188,12 @@ rtp_status rtpi_scene_add_texture(rtp_scene *s, const char *path,
             return RTP_OK;
         }
     }
+    /* (a tree file names each texture in a string of at most 255 bytes:
+       a longer path was cut there, naming a file that is not there) */
+    if (strlen(path) > 255)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, path, 0, 0,
+                          "texture path longer than 255 bytes (a tree file cannot name it): "
+                          "move the image or the scene to a shorter path");
     st = rtp_image_read(path, &s->alloc, &img, err);
     if (st != RTP_OK)
         return st;
@@ -465,7 +471,7 @@ static rtp_status want_n(rtp_error *err, const char *key, const char *value, int
     if (got == need || (broadcast && got == 1))
         return RTP_OK;
     return rtpi_error(err, RTP_ERR_PARSE, NULL, 0, 0,
-                      "%s: expected %d comma-separated finite number%s%s, got '%s'", key, need,
+                      "%s: expected %d comma-separated number%s%s (|x| <= 3.4e38), got '%s'", key, need,
                       need > 1 ? "s" : "", broadcast ? " (or one for all three)" : "", value);
 }
 
@@ -501,6 +507,23 @@ static rtp_status item_key(const rtp_scene *s, const char *key, int *kind, long 
         return RTP_OK;
     }
     return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0, "unknown key '%s'", key);
+}
+
+/* What is wrong with s's camera for a frame to be made, or NULL: at
+   equal to from, or up without a part across the view direction (1e-9 of
+   the lengths' product: far below any intended tilt), as NFF's v block
+   refuses them.  Checked where a frame is made (trace, a camera edit's
+   re-trace) and where a tree file is read, not at each key: setting
+   from and then at may pass through from == at. */
+const char *rtpi_camera_problem(const rtp_scene *s)
+{
+    const double *f = s->camera.from, *a = s->camera.at, *u = s->camera.up;
+    rtpi_v3 dir = v3(a[0] - f[0], a[1] - f[1], a[2] - f[2]), up = v3(u[0], u[1], u[2]);
+    if (!(v3_len(dir) > 0.0))
+        return "camera.at equals camera.from";
+    if (!(v3_len(v3_cross(dir, up)) > 1e-9 * v3_len(dir) * v3_len(up)))
+        return "camera.up is zero or parallel to the view direction";
+    return NULL;
 }
 
 /* camera.from, camera.at, camera.up (x,y,z), camera.angle (degrees, as
@@ -542,6 +565,27 @@ static rtp_status set_camera(rtp_scene *s, const char *key, const char *value,
     return RTP_OK;
 }
 
+/* Colours are 0 or more, as NFF takes them (a negative colour made
+   negative pixels). */
+static rtp_status want_rgb(rtp_error *err, const char *key, const double *v, int n)
+{
+    int i;
+    for (i = 0; i < n; i++)
+        if (v[i] < 0.0)
+            return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                              "%s: %g: a colour's components must be 0 or more", key, v[i]);
+    return RTP_OK;
+}
+
+/* On and off keys take 0 or 1. */
+static rtp_status want_01(rtp_error *err, const char *key, double v)
+{
+    if (v == 0.0 || v == 1.0)
+        return RTP_OK;
+    return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "%s: %g: expected 0 (off) or 1 (on)",
+                      key, v);
+}
+
 static void set_rgb(float *dst, const double *v, int n)
 {
     int i;
@@ -562,7 +606,8 @@ rtp_status rtp_scene_set(rtp_scene *s, const char *key, const char *value,
                           "rtp_scene_set: NULL argument");
     n = parse_numbers(value, v, 4);
     if (strcmp(key, "ambient") == 0 || strcmp(key, "background") == 0) {
-        if ((st = want(err, key, value, n, 3)) != RTP_OK)
+        if ((st = want(err, key, value, n, 3)) != RTP_OK ||
+            (st = want_rgb(err, key, v, n)) != RTP_OK)
             return st;
         set_rgb(key[0] == 'a' ? s->ambient : s->background, v, n);
         return RTP_OK;
@@ -581,11 +626,13 @@ rtp_status rtp_scene_set(rtp_scene *s, const char *key, const char *value,
             l->pos[1] = v[1];
             l->pos[2] = v[2];
         } else if (strcmp(field, "color") == 0) {
-            if ((st = want(err, key, value, n, 3)) != RTP_OK)
+            if ((st = want(err, key, value, n, 3)) != RTP_OK ||
+                (st = want_rgb(err, key, v, n)) != RTP_OK)
                 return st;
             set_rgb(l->color, v, n);
         } else if (strcmp(field, "on") == 0) {
-            if ((st = want(err, key, value, n, 1)) != RTP_OK)
+            if ((st = want(err, key, value, n, 1)) != RTP_OK ||
+                (st = want_01(err, key, v[0])) != RTP_OK)
                 return st;
             l->on = v[0] != 0.0;
         } else {
@@ -598,7 +645,8 @@ rtp_status rtp_scene_set(rtp_scene *s, const char *key, const char *value,
         rtpi_material *m = &s->mats[i];
         float *dst = NULL;
         if (strcmp(field, "color") == 0 || strcmp(field, "color2") == 0) {
-            if ((st = want(err, key, value, n, 3)) != RTP_OK)
+            if ((st = want(err, key, value, n, 3)) != RTP_OK ||
+                (st = want_rgb(err, key, v, n)) != RTP_OK)
                 return st;
             set_rgb(field[5] == '2' ? m->color2 : m->color, v, n);
             return RTP_OK;
@@ -614,7 +662,8 @@ rtp_status rtp_scene_set(rtp_scene *s, const char *key, const char *value,
         }
         if (strcmp(field, "checker") == 0) {
             /* turns the solid checker on (1) or off (0) */
-            if ((st = want(err, key, value, n, 1)) != RTP_OK)
+            if ((st = want(err, key, value, n, 1)) != RTP_OK ||
+                (st = want_01(err, key, v[0])) != RTP_OK)
                 return st;
             if (v[0] != 0.0) {
                 m->tex = RTPI_TEX_CHECKER;
@@ -687,7 +736,9 @@ rtp_status rtp_scene_set(rtp_scene *s, const char *key, const char *value,
             return st;
         if (v[0] < 0.0 || (dst == &m->ior && v[0] <= 0.0))
             return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                              "%s: value %g out of range", key, v[0]);
+                              dst == &m->ior ? "%s: %g: an index of refraction must be > 0"
+                                             : "%s: %g: must be 0 or more",
+                              key, v[0]);
         *dst = (float)v[0];
         return RTP_OK;
     }

@@ -1051,6 +1051,11 @@ static rtp_status read_scen(loader *L, rd *r)
     if (!(s->light_scale >= 0.0 && s->light_scale <= 1.0) ||
         !(s->camera.angle > 0.0 && s->camera.angle < 180.0) || !(s->camera.hither >= 0.0))
         return bad(L, "scene value out of range (light scale, view angle or hither)", NULL);
+    if (rtpi_camera_problem(s))
+        return bad(L, rtpi_camera_problem(s), NULL);
+    if (s->background[0] < 0.0f || s->background[1] < 0.0f || s->background[2] < 0.0f ||
+        s->ambient[0] < 0.0f || s->ambient[1] < 0.0f || s->ambient[2] < 0.0f)
+        return bad(L, "negative colour (background or ambient)", NULL);
     s->has_camera = 1;
     L->t->cam0 = s->camera;
     return RTP_OK;
@@ -1112,6 +1117,8 @@ static rtp_status read_matl(loader *L, rd *r)
         /* what no scene can hold (rtp_scene_set, NFF and MTL refuse it):
            a file saying so was made to, and its image would be NaN */
         if (m->kd < 0.0f || m->ks < 0.0f || m->kt < 0.0f || m->shine < 0.0f || m->ior < 0.0f ||
+            m->color[0] < 0.0f || m->color[1] < 0.0f || m->color[2] < 0.0f ||
+            m->color2[0] < 0.0f || m->color2[1] < 0.0f || m->color2[2] < 0.0f ||
             m->tex_scale < 0.0f || m->bump_scale < 0.0f || t->mats0[i].ks < 0.0f ||
             t->mats0[i].kt < 0.0f || t->mats0[i].ior < 0.0f || t->mats0[i].bump_scale < 0.0f)
             return bad(L, "material value out of range (negative)", NULL);
@@ -1128,6 +1135,7 @@ static rtp_status read_lite(loader *L, rd *r)
     rtp_tree *t = L->t;
     uint32_t n = get_u32(r), i;
     int k, oom = 0;
+    unsigned on;
     if (r->bad || !count_ok(r, n, 62))
         return bad(L, "invalid light count", NULL);
     s->lights = (rtpi_light *)rtpi_calloc_array(L->a, n ? n : 1, sizeof *s->lights);
@@ -1141,7 +1149,8 @@ static rtp_status read_lite(loader *L, rd *r)
             l->pos[k] = get_f64(r);
         for (k = 0; k < 3; k++)
             l->color[k] = get_f32(r);
-        l->on = get_u8(r) != 0;
+        on = get_u8(r);
+        l->on = on != 0;
         l->name = get_str(r, L->a, &oom);
         s->nlights = i + 1;
         for (k = 0; k < 3; k++)
@@ -1155,6 +1164,8 @@ static rtp_status read_lite(loader *L, rd *r)
                 return bad(L, "light position is not finite", NULL);
         if (!finite3(l->color))
             return bad(L, "light colour is not finite", NULL);
+        if (l->color[0] < 0.0f || l->color[1] < 0.0f || l->color[2] < 0.0f || on > 1)
+            return bad(L, "light value out of range (a negative colour, or on not 0 or 1)", NULL);
     }
     return RTP_OK;
 }
@@ -1344,7 +1355,8 @@ static rtp_status read_geom(loader *L, rd *r)
         sp->mat = get_u32(r);
         if (r->bad)
             return bad(L, "section too short", NULL);
-        if (!finite3(sp->c) || !isfinite(sp->r) || sp->mat >= s->nmats)
+        /* (radius 0: NFF refuses it; nothing could hit it) */
+        if (!finite3(sp->c) || !isfinite(sp->r) || sp->r == 0.0f || sp->mat >= s->nmats)
             return bad(L, "invalid sphere", NULL);
     }
 
@@ -1568,11 +1580,21 @@ static rtp_status section_index(loader *L, const char *tag, unsigned *seen, int 
     }
     if (*seen & (1u << *idx))
         return bad(L, "repeated section", NULL);
-    /* sections come in order: each needs what the earlier ones hold */
-    if ((*idx == 0 && *seen) || (*idx > 0 && !(*seen & 1u)) ||
-        (*idx == 4 && !(*seen & (1u << 2))) || (*idx == 5 && !(*seen & (1u << 4))) ||
-        (*idx == 5 && !(*seen & (1u << 3))) || (*idx == 6 && (*seen & (1u << 5))))
-        return bad(L, "section out of order", NULL);
+    {
+        /* The specification's order, HEAD SCEN MATL LITE [TEXR] GEOM TREE
+           (rank by *idx): nothing of a later rank seen yet, every
+           required section of an earlier rank seen.  (Until session 19
+           only what each section needs of the earlier ones was checked,
+           so files a reader following the specification refuses were
+           taken.) */
+        static const int rank[7] = {0, 1, 2, 3, 5, 6, 4};
+        int j;
+        for (j = 0; j < 7; j++) {
+            int had = (*seen >> j) & 1u;
+            if ((had && rank[j] > rank[*idx]) || (!had && j < 6 && rank[j] < rank[*idx]))
+                return bad(L, "section out of order", NULL);
+        }
+    }
     *seen |= 1u << *idx;
     return RTP_OK;
 }
@@ -1698,8 +1720,14 @@ rtp_status rtp_tree_read_memory(const void *data, size_t size, const char *name,
             st = bad(&L, "checksum mismatch: the file is corrupt", NULL);
             break;
         }
-        if (strcmp(tag, "END ") == 0)
+        if (strcmp(tag, "END ") == 0) {
+            /* empty and last */
+            if (len != 0)
+                st = bad(&L, "END is not empty", NULL);
+            else if (r.at != r.n)
+                st = bad(&L, "bytes after END", NULL);
             break;
+        }
         if ((st = section_index(&L, tag, &seen, &idx)) != RTP_OK)
             break;
         if (idx >= 0 && (st = parse_section(&L, idx, &body)) != RTP_OK)
@@ -1884,8 +1912,16 @@ static rtp_status tree_read_stream(FILE *f, uint64_t size, int known, const char
             st = bad(&L, "checksum mismatch: the file is corrupt", NULL);
             break;
         }
-        if (strcmp(tag, "END ") == 0)
+        if (strcmp(tag, "END ") == 0) {
+            /* empty and last (past it only where the size is known: a
+               pipe's writer may keep it open, and waiting for its end
+               would hang) */
+            if (len != 0)
+                st = bad(&L, "END is not empty", NULL);
+            else if (known && pos != size)
+                st = bad(&L, "bytes after END", NULL);
             break;
+        }
         body.p = sec;
         body.n = (size_t)len;
         if ((st = section_index(&L, tag, &seen, &idx)) != RTP_OK)

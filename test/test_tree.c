@@ -2700,6 +2700,126 @@ static void test_newer_version_and_foreign(void)
     free(data);
 }
 
+/* The sections' order and END as tree-format.md has them: a file with two
+   sections swapped, END not empty, or bytes after END is refused (each
+   was read until session 19), from memory and from a file alike; an
+   extension section before END is skipped. */
+static size_t sec_len(const unsigned char *d, size_t at)
+{
+    return 12 + ((size_t)d[at + 4] | (size_t)d[at + 5] << 8 | (size_t)d[at + 6] << 16 |
+                 (size_t)d[at + 7] << 24) + 4;
+}
+
+static void expect_read(const unsigned char *d, size_t n, const char *want, const char *what)
+{
+    rtp_tree *t = NULL;
+    rtp_error err;
+    char file[512];
+    rtp_status st;
+    memset(&err, 0, sizeof err);
+    st = rtp_tree_read_memory(d, n, "sec.rtp", NULL, &t, &err);
+    if (want)
+        CHECK_MSG(st == RTP_ERR_FORMAT && !t && strstr(err.message, want) != NULL,
+                  "%s: status %d, '%s'", what, (int)st, err.message);
+    else
+        CHECK_MSG(st == RTP_OK && t, "%s: status %d, '%s'", what, (int)st, err.message);
+    rtp_tree_destroy(t);
+    snprintf(file, sizeof file, "%s/rtp-sec-%d.rtp", tmpdir(), (int)getpid());
+    CHECK_MSG(file_disagrees(d, n, file) == 0, "%s: the file reads otherwise", what);
+    remove(file);
+}
+
+static void test_section_order_and_end(void)
+{
+    size_t n, scen, matl, end, ls, lm, i;
+    unsigned char *data = small_tree_file(&n), *c;
+    uint32_t crc;
+    CHECK(data != NULL);
+    if (!data)
+        return;
+    c = (unsigned char *)malloc(2 * n + 64); /* (the file and a section more) */
+    scen = section_at(data, n, "SCEN");
+    matl = section_at(data, n, "MATL");
+    end = section_at(data, n, "END ");
+    CHECK(c && scen < n && matl == scen + sec_len(data, scen) && end + 16 == n);
+    if (!c || scen >= n || matl >= n || end + 16 != n) {
+        free(c);
+        free(data);
+        return;
+    }
+    expect_read(data, n, NULL, "as written");
+    /* MATL before SCEN */
+    ls = sec_len(data, scen);
+    lm = sec_len(data, matl);
+    memcpy(c, data, scen);
+    memcpy(c + scen, data + matl, lm);
+    memcpy(c + scen + lm, data + scen, ls);
+    memcpy(c + scen + lm + ls, data + matl + lm, n - matl - lm);
+    expect_read(c, n, "out of order", "MATL before SCEN");
+    /* END with 3 bytes */
+    memcpy(c, data, end);
+    memcpy(c + end, "END \3\0\0\0\0\0\0\0abc", 15);
+    crc = crc32_ref(c + end, 15);
+    for (i = 0; i < 4; i++)
+        c[end + 15 + i] = (unsigned char)(crc >> (8 * i));
+    expect_read(c, end + 19, "END is not empty", "END of 3 bytes");
+    /* a byte after END, and a whole section */
+    memcpy(c, data, n);
+    c[n] = 0;
+    expect_read(c, n + 1, "after END", "a byte after END");
+    memcpy(c + n, data + matl, lm);
+    expect_read(c, n + lm, "after END", "MATL after END");
+    /* an extension before END: skipped */
+    memcpy(c, data, end);
+    memcpy(c + end, "xtra\2\0\0\0\0\0\0\0hi", 14);
+    crc = crc32_ref(c + end, 14);
+    for (i = 0; i < 4; i++)
+        c[end + 14 + i] = (unsigned char)(crc >> (8 * i));
+    memcpy(c + end + 18, data + end, 16);
+    expect_read(c, n + 18, NULL, "an extension before END");
+    free(c);
+    free(data);
+}
+
+/* Values a scene cannot hold, in files whose checksums are right: a
+   camera with at equal to from, a light on = 2 or with a negative
+   colour (NFF and rtp_scene_set refuse each; the reader took them until
+   session 19). */
+static void test_reader_scene_values(void)
+{
+    static const unsigned char two = 2;
+    static const unsigned char neg[4] = {0x00, 0x00, 0x80, 0xbf}; /* -1.0f */
+    size_t n, m, scen, lite;
+    unsigned char *data = small_tree_file(&n), *c;
+    rtp_tree *t = NULL;
+    rtp_error err;
+    CHECK(data != NULL);
+    if (!data)
+        return;
+    scen = section_at(data, n, "SCEN");
+    lite = section_at(data, n, "LITE");
+    CHECK(scen < n && lite < n);
+    /* from := at */
+    m = n;
+    c = splice_section(data, &m, scen, scen + 12, 24, data + scen + 12 + 24, 24);
+    CHECK(c && rtp_tree_read_memory(c, m, "cam.rtp", NULL, &t, &err) == RTP_ERR_FORMAT && !t &&
+          strstr(err.message, "camera.at equals camera.from") != NULL);
+    free(c);
+    /* light 0: on = 2 (after count u32, pos 3 f64, colour 3 f32) */
+    m = n;
+    c = splice_section(data, &m, lite, lite + 12 + 4 + 24 + 12, 1, &two, 1);
+    CHECK(c && rtp_tree_read_memory(c, m, "on.rtp", NULL, &t, &err) == RTP_ERR_FORMAT && !t &&
+          strstr(err.message, "light value out of range") != NULL);
+    free(c);
+    /* light 0's red = -1 */
+    m = n;
+    c = splice_section(data, &m, lite, lite + 12 + 4 + 24, 4, neg, 4);
+    CHECK(c && rtp_tree_read_memory(c, m, "neg.rtp", NULL, &t, &err) == RTP_ERR_FORMAT && !t &&
+          strstr(err.message, "light value out of range") != NULL);
+    free(c);
+    free(data);
+}
+
 int main(void)
 {
     RUN(test_identical_project_scenes);
@@ -2736,6 +2856,8 @@ int main(void)
     RUN(test_bump_edits);
     RUN(test_truncated_every_length);
     RUN(test_flipped_bits);
+    RUN(test_section_order_and_end);
+    RUN(test_reader_scene_values);
     RUN(test_newer_version_and_foreign);
     RUN(test_out_of_range_values);
     RUN(test_format1_file);
