@@ -518,7 +518,7 @@ rtp_status rtp_image_write_stream(const rtp_image *image, FILE *stream,
    for strlen(path) + 32).  Permissions are those of the file it will
    replace, else the usual 0666 minus umask.
    @return the stream, or NULL with errno set. */
-static FILE *open_temp(const char *path, char *tmp, size_t tmpsize)
+FILE *rtpi_open_temp(const char *path, char *tmp, size_t tmpsize)
 {
 #ifdef RTPI_POSIX_FILES
     struct stat sb;
@@ -571,7 +571,7 @@ static FILE *open_temp(const char *path, char *tmp, size_t tmpsize)
 
 /* Whether path names something other than a regular file (a device, a
    FIFO): those are written in place, never replaced by a rename. */
-static int is_special_file(const char *path)
+int rtpi_is_special_file(const char *path)
 {
 #ifdef RTPI_POSIX_FILES
     struct stat sb;
@@ -617,7 +617,7 @@ rtp_status rtp_image_write(const rtp_image *image, const char *path,
     if (format == RTP_IMAGE_PNG)
         return no_png(err, path);
 #endif
-    if (is_special_file(path)) {
+    if (rtpi_is_special_file(path)) {
         f = fopen(path, "wb");
         if (!f)
             return rtpi_error(err, RTP_ERR_IO, path, 0, 0,
@@ -634,7 +634,7 @@ rtp_status rtp_image_write(const rtp_image *image, const char *path,
     tmp = (char *)rtpi_malloc(&a, tmpsize);
     if (!tmp)
         return rtpi_error(err, RTP_ERR_NOMEM, path, 0, 0, "out of memory");
-    f = open_temp(path, tmp, tmpsize);
+    f = rtpi_open_temp(path, tmp, tmpsize);
     if (!f) {
         e = errno;
         rtpi_free(&a, tmp);

@@ -226,6 +226,15 @@ rtp_status rtpi_scene_add_texture(rtp_scene *s, const char *path,
                                   uint32_t *index, rtp_error *err);
 /* A deep copy of s with the same allocator. */
 rtp_status rtpi_scene_clone(const rtp_scene *s, rtp_scene **out);
+/* A new file beside path to write and then rename over it: a name of
+   its own (tmp, tmpsize >= strlen(path) + 32 bytes) made with O_EXCL,
+   so writers of one path at once never share it; the mode of a file
+   already at path.  NULL with errno on failure. */
+FILE *rtpi_open_temp(const char *path, char *tmp, size_t tmpsize);
+/* Whether path names something other than a regular file (a device, a
+   FIFO): written in place, never replaced by a rename. */
+int rtpi_is_special_file(const char *path);
+
 /* What is wrong with s's camera for a frame to be made (at equal to
    from, up along the view), or NULL. */
 const char *rtpi_camera_problem(const rtp_scene *s);

@@ -742,7 +742,7 @@ rtp_status rtp_tree_write(const rtp_tree *t, const char *path,
     sink out;
     rtp_status st = RTP_OK;
     char *tmp = NULL;
-    int to_stdout;
+    int to_stdout, special;
     if (!t || !path)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_write: NULL argument");
     if (t->scene->nlights != t->nlights0)
@@ -759,22 +759,32 @@ rtp_status rtp_tree_write(const rtp_tree *t, const char *path,
     if (!out.p)
         return rtpi_error(err, RTP_ERR_NOMEM, path, 0, 0, "out of memory writing tree file");
     to_stdout = strcmp(path, "-") == 0;
+    special = !to_stdout && rtpi_is_special_file(path);
     if (to_stdout) {
         out.f = stdout;
+    } else if (special) {
+        /* a FIFO or a device: written in place */
+        out.f = fopen(path, "wb");
+        if (!out.f) {
+            st = rtpi_error(err, RTP_ERR_IO, path, 0, 0, "cannot write: %s", strerror(errno));
+            rtpi_free(&t->alloc, out.p);
+            return st;
+        }
     } else {
-        /* written beside the file and renamed into place once whole: a
-           failed write leaves no half file and an old file as it was */
-        size_t n = strlen(path);
-        tmp = (char *)rtpi_malloc(&t->alloc, n + 16);
+        /* written beside the file under a name of its own (two writers
+           of one path once shared ".tmp-rtp" and left a corrupt file)
+           and renamed into place once whole: a failed write leaves no
+           half file and an old file as it was */
+        size_t n = strlen(path) + 32;
+        tmp = (char *)rtpi_malloc(&t->alloc, n);
         if (!tmp) {
             rtpi_free(&t->alloc, out.p);
             return rtpi_error(err, RTP_ERR_NOMEM, path, 0, 0, "out of memory");
         }
-        memcpy(tmp, path, n);
-        memcpy(tmp + n, ".tmp-rtp", 9);
-        out.f = fopen(tmp, "wb");
+        out.f = rtpi_open_temp(path, tmp, n);
         if (!out.f) {
-            st = rtpi_error(err, RTP_ERR_IO, path, 0, 0, "cannot write: %s", strerror(errno));
+            st = rtpi_error(err, RTP_ERR_IO, path, 0, 0,
+                            "cannot create a temporary file beside it: %s", strerror(errno));
             rtpi_free(&t->alloc, tmp);
             rtpi_free(&t->alloc, out.p);
             return st;
@@ -785,7 +795,10 @@ rtp_status rtp_tree_write(const rtp_tree *t, const char *path,
     else if (out.bad || fflush(out.f) != 0)
         st = rtpi_error(err, RTP_ERR_IO, path, 0, 0, "write failed: %s",
                         strerror(out.bad ? out.err : errno));
-    if (!to_stdout) {
+    if (special) {
+        if (fclose(out.f) != 0 && st == RTP_OK)
+            st = rtpi_error(err, RTP_ERR_IO, path, 0, 0, "write failed: %s", strerror(errno));
+    } else if (!to_stdout) {
         if (fclose(out.f) != 0 && st == RTP_OK)
             st = rtpi_error(err, RTP_ERR_IO, path, 0, 0, "write failed: %s", strerror(errno));
         if (st == RTP_OK && rename(tmp, path) != 0)

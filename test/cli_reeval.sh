@@ -104,7 +104,7 @@ fi
 expect_rc 1 $RTP trace $S --size 40x30 -o "$T/nodir/t.rtp" -q
 grep -q "nodir/t.rtp" "$T/err" && ok || bad "unwritable tree path not named"
 [ ! -e "$T/nodir" ] && ok || bad "something written for an unwritable path"
-ls "$T" | grep -q "tmp-rtp" && bad "temporary tree file left behind" || ok
+ls "$T" | grep -q '\.tmp$' && bad "temporary tree file left behind" || ok
 
 # Refused and broken input: named errors, exit 1, no image written.
 expect_rc 1 $RTP reeval "$T/t.rtp" --set mat.nosuch.kd=1 -i "$T/no1.pfm"
@@ -158,6 +158,52 @@ else
 fi
 $RTP trace $S --spd --size 8x6 -i "$T/spd.pfm" 2>"$T/err"
 grep -q "warning: --spd traces 512x512.*--size" "$T/err" && ok || bad "--spd --size: no warning"
+
+# session 19: two writers of one tree path at once each leave a whole file
+# (they shared one temporary name: a corrupt file or a failed rename)
+expect_rc 0 $RTP trace $S --size 40x30 -o "$T/w1.rtp" -q
+expect_rc 0 $RTP trace $S --size 24x20 -o "$T/w2.rtp" -q
+wbad=0
+for i in 1 2 3 4 5 6; do
+    rm -f "$T/same.rtp"
+    $RTP merge -o "$T/same.rtp" "$T/w1.rtp" -q -j 1 2>>"$T/werr" &
+    $RTP merge -o "$T/same.rtp" "$T/w2.rtp" -q -j 1 2>>"$T/werr" &
+    wait
+    $RTP info "$T/same.rtp" -q --stats /dev/null 2>>"$T/werr" || wbad=$((wbad + 1))
+done
+[ "$wbad" -eq 0 ] && [ ! -s "$T/werr" ] && ok || { bad "concurrent tree writes: $wbad bad files"; cat "$T/werr" >&2; }
+ls "$T" | grep -q '\.tmp$' && bad "temporary file left by concurrent writes" || ok
+# outputs that would share stdout are usage errors; names checked first
+expect_rc 2 $RTP merge -o - -i - "$T/w1.rtp"
+expect_rc 2 $RTP diff "$T/t.pfm" "$T/r.pfm" --heatmap - --stats -
+expect_rc 0 sh -c "$RTP diff '$T/t.pfm' '$T/r.pfm' --heatmap - > '$T/hm.png'"
+head -c 8 "$T/hm.png" | od -c | grep -q "P   N   G" && ! grep -q "pixels" "$T/hm.png" && ok || bad "diff --heatmap -: not a PNG alone on stdout"
+expect_rc 1 $RTP merge -o "$T/j.rtp" -i "$T/j.xyz" "$T/w1.rtp"
+[ ! -e "$T/j.rtp" ] && ok || bad "merge wrote the tree before refusing the image name"
+expect_rc 2 $RTP merge -i "$T/j.pfm" --size 40x30 "$T/t.pfm@0,0" "$T/t.pfm"
+expect_rc 2 $RTP reeval "$T/t.rtp" --add-light a,b,c
+expect_rc 2 $RTP version extra
+expect_rc 0 $RTP version --help
+grep -q "usage: rtp version" "$T/out" && ok || bad "version --help"
+# an empty tree file says so; a pipe has no file_bytes
+: > "$T/empty.rtp"
+expect_rc 1 $RTP info "$T/empty.rtp"
+grep -q "empty: not an rtp" "$T/err" && ok || bad "empty tree file not named as empty"
+cat "$T/t.rtp" | $RTP info - --stats - -q | grep -q '"file_bytes"' && bad "info from a pipe: file_bytes" || ok
+# --region: pixels are the region's
+expect_rc 0 $RTP reeval "$T/t.rtp" --region 10,10,30,20 -i "$T/reg.pfm" --stats "$T/reg.json"
+grep -q '"pixels": 200' "$T/reg.json" && ok || bad "reeval --region: pixels not the region's"
+# trace from stdin without -i/-o writes trace.png
+if $RTP version | grep -q " png"; then
+    rtp_abs=$(cd "$(dirname "$RTP")" && pwd)/$(basename "$RTP")
+    (cd "$T" && "$rtp_abs" trace - --size 8x6 -q) < "$S" && [ -f "$T/trace.png" ] && ok ||
+        bad "trace - did not write trace.png"
+fi
+# --spd ignores --depth, saying so
+expect_rc 0 $RTP trace ../shared/scenes/spd/tetra_s1.nff --spd --depth 2 -i "$T/sd.pfm" 2>/dev/null || true
+if [ -f ../shared/scenes/spd/tetra_s1.nff ]; then
+    grep -q "warning: --spd.*--depth" "$T/err" && ok || bad "--spd --depth: no warning"
+fi
 
 rm -rf "$T"
 echo "$pass passed, $fail failed, $skip skipped"
