@@ -89,9 +89,13 @@ static rtp_status read_int(rtpi_lex *lx, const char *what, long lo, long hi,
     return RTP_OK;
 }
 
+/* flip: the transform mirrors, so dP/dv x dP/du (and the winding made
+   from it) points inwards: the normals are turned and each triangle's
+   corners taken in the other order, as for a mirrored OBJ (a glass
+   teapot mirrored was refracted as if seen from inside) */
 static rtp_status tessellate(rtp_scene *s, const patch *pa, int div,
                              uint32_t mat, rtpi_v3 *gp, rtpi_v3 *gn,
-                             const rtpi_lex *lx)
+                             const rtpi_lex *lx, int flip)
 {
     int i, j, n1 = div + 1;
     uint32_t base_p = (uint32_t)s->npos, base_n = (uint32_t)s->nnrm;
@@ -130,6 +134,8 @@ static rtp_status tessellate(rtp_scene *s, const patch *pa, int div,
         }
     }
     for (i = 0; i < n1 * n1; i++) {
+        if (flip)
+            gn[i] = v3_mul(gn[i], -1.0);
         if (rtpi_scene_add_pos(s, gp[i].x, gp[i].y, gp[i].z) ||
             rtpi_scene_add_nrm(s, gn[i].x, gn[i].y, gn[i].z))
             return rtpi_error(lx->err, RTP_ERR_NOMEM, lx->name, here.line,
@@ -152,8 +158,8 @@ static rtp_status tessellate(rtp_scene *s, const patch *pa, int div,
                 if (degenerate(pa, v3_mul(g, (double)div * div)))
                     continue;
                 tr.v[0] = base_p + a;
-                tr.v[1] = base_p + b;
-                tr.v[2] = base_p + c;
+                tr.v[1] = base_p + (flip ? c : b);
+                tr.v[2] = base_p + (flip ? b : c);
                 for (k = 0; k < 3; k++) {
                     tr.n[k] = base_n + (tr.v[k] - base_p);
                     tr.t[k] = RTPI_NONE;
@@ -278,7 +284,8 @@ rtp_status rtpi_read_bpt(rtp_scene *s, const char *text, size_t size,
                    (hi[2] - lo[2]) * (hi[2] - lo[2]);
         if (pa.size2 == 0.0)
             continue; /* a patch collapsed to a point shows nothing */
-        st = tessellate(s, &pa, div, mat, grid, grid + (size_t)(div + 1) * (div + 1), &lx);
+        st = tessellate(s, &pa, div, mat, grid, grid + (size_t)(div + 1) * (div + 1), &lx,
+                        xform && rtpi_xform_mirrors(xform));
         if (st != RTP_OK)
             goto done;
     }

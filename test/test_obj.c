@@ -389,6 +389,47 @@ static void test_shared_meshes(void)
     }
 }
 
+/* A Bezier patch under a mirror (scale -1 1 1) keeps its side: its
+   triangles' normals and vertex normals point as the unmirrored
+   patch's do in z (both pointed the other way: a mirrored glass teapot
+   was refracted as if seen from inside, 0.5 off its mirror image). */
+static void test_bezier_mirrored(void)
+{
+    static const double id[12] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0};
+    static const double mx[12] = {-1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0};
+    char bpt[1024];
+    size_t o = 0;
+    int k, pass;
+    double z[2] = {0, 0};
+    o += (size_t)snprintf(bpt + o, sizeof bpt - o, "1\n");
+    for (k = 1; k <= 16; k++)
+        o += (size_t)snprintf(bpt + o, sizeof bpt - o, "%d%s", k, k < 16 ? "," : "\n");
+    o += (size_t)snprintf(bpt + o, sizeof bpt - o, "16\n");
+    for (k = 0; k < 16; k++) /* a gently curved patch */
+        o += (size_t)snprintf(bpt + o, sizeof bpt - o, "%g,%g,%g\n", (k / 4) / 3.0,
+                              (k % 4) / 3.0, ((k / 4) % 3 ? 0.2 : 0.0));
+    for (pass = 0; pass < 2; pass++) {
+        rtp_scene *s = NULL;
+        rtp_error err;
+        size_t i, agree = 0;
+        CHECK(rtpi_scene_create(NULL, &s) == RTP_OK);
+        if (!s)
+            return;
+        CHECK(rtpi_read_bpt(s, bpt, o, "p.bpt", 4, pass ? mx : id, 0, &err) == RTP_OK);
+        for (i = 0; i < s->ntris; i++) {
+            rtpi_v3 g = tri_normal(s, &s->tris[i]);
+            const float *vn = s->nrm + 3 * (size_t)s->tris[i].n[0];
+            agree += g.x * vn[0] + g.y * vn[1] + g.z * vn[2] > 0.0;
+            z[pass] += g.z;
+        }
+        CHECK_MSG(s->ntris > 0 && agree == s->ntris,
+                  "%s: %lu of %lu triangles agree with their normals", pass ? "mirrored" : "plain",
+                  (unsigned long)agree, (unsigned long)s->ntris);
+        rtp_scene_destroy(s);
+    }
+    CHECK_MSG(z[0] * z[1] > 0.0, "mirrored patch faces z %g, plain %g", z[1], z[0]);
+}
+
 int main(void)
 {
     RUN(test_faces);
@@ -400,5 +441,6 @@ int main(void)
     RUN(test_shared_meshes);
     if (tmpdir[0])
         rmdir(tmpdir);
+    RUN(test_bezier_mirrored);
     return check_report();
 }
