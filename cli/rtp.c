@@ -493,6 +493,8 @@ static int memory_limit_option(int argc, char **argv, int *i, double *bytes)
 /* Says that rays were not followed because a sample's tree was full: the
    image is not the full Whitted trace (the trees and the image agree, so
    re-evaluation stays exact against them). */
+static int stale_warned; /* the stale-subtree warning said (once a run) */
+
 static void capped_warning(unsigned long long n)
 {
     fprintf(stderr,
@@ -1049,6 +1051,15 @@ static int reeval_one(rtp_tree *tree, const rtp_eval_options *eo, rtp_image **ke
                 es.retraced_samples, es.samples ? es.samples : 0ULL, es.retraced_rays);
     if (verbosity > 0 && es.capped_rays)
         capped_warning(es.capped_rays);
+    /* (once a run: a stream of bump edits would say it every frame) */
+    if (verbosity > 0 && es.stale_samples && !stale_warned) {
+        fprintf(stderr,
+                "rtp: warning: %llu samples keep reflected or refracted rays traced before "
+                "the bump edit (--stale keep, the default: approximate there; --stale retrace "
+                "is exact, --reference measures the error)\n",
+                es.stale_samples);
+        stale_warned = 1;
+    }
     if (stats) {
         long long fb = file_size(tree_path);
         rtp_tree_get_info(tree, &ti);
@@ -1056,11 +1067,12 @@ static int reeval_one(rtp_tree *tree, const rtp_eval_options *eo, rtp_image **ke
                 "{\"command\": \"reeval\", \"seconds\": %.6f, \"load_seconds\": %.6f, "
                 "\"shadow_seconds\": %.6f, \"moved_lights\": %d, \"shadow_queries\": %llu, "
                 "\"retraced_samples\": %llu, \"retraced_rays\": %llu, \"capped_rays\": %llu, "
+                "\"stale_samples\": %llu, "
                 "\"combined_samples\": %llu, \"written_pixels\": %llu, \"pixels\": %llu, \"samples\": %llu, \"nodes\": %llu, \"bytes_per_node\": %u, "
                 "\"tree_bytes\": %llu",
                 es.seconds, load_seconds, es.shadow_seconds, es.moved_lights,
                 es.shadow_queries, es.retraced_samples, es.retraced_rays, es.capped_rays,
-                es.combined_samples,
+                es.stale_samples, es.combined_samples,
                 es.written_pixels,
                 region[2] > 0 ? (unsigned long long)(region[2] - region[0]) *
                                     (unsigned long long)(region[3] - region[1])

@@ -374,6 +374,10 @@ typedef struct rtp_eval_stats {
     int camera_moved;        /* 1: the camera was edited, so every sample
                                 was traced again (a full trace into the
                                 tree's trees) */
+    unsigned long long stale_samples; /* samples whose reflected or
+                                refracted subtrees below a changed bump
+                                map were kept (RTP_STALE_KEEP): the image
+                                is approximate there; 0 otherwise */
 } rtp_eval_stats;
 
 /** Evaluates the trees with the current parameters into a new image.  Lights

@@ -128,6 +128,41 @@ static int needs_retrace(const rtp_tree *t, size_t m, int stale_retrace)
            (t->min_weight > 0.0 && (a->ks != a0->ks || a->kt != a0->kt));
 }
 
+/* Samples holding a reflected or refracted ray (a subtree, or a ray that
+   left the scene) below a material whose
+   bump map changed since its samples were traced, kept there (--stale
+   keep: the paper's way, approximate): stats->stale_samples, so the
+   approximation is said, not silent. */
+static unsigned long long count_stale(const rtp_tree *t)
+{
+    const rtp_scene *s = t->scene;
+    size_t m, k, ns = (size_t)t->nx * t->ny;
+    unsigned long long n = 0;
+    int any = 0;
+    for (m = 0; m < s->nmats; m++)
+        any |= bump_changed(&s->mats[m], &t->mats0[m]) &&
+               (t->mats0[m].ks > 0.0f || t->mats0[m].kt > 0.0f);
+    if (!any)
+        return 0;
+    for (k = 0; k < ns; k++) {
+        size_t i;
+        for (i = (size_t)t->start[k]; i < (size_t)t->start[k + 1]; i++) {
+            const rtpi_cnode *nd = &t->nodes[i];
+            uint32_t mat;
+            /* (a ray that left the scene is as stale: bent, it may hit) */
+            if (!(nd->link & (RTPI_L_REFL | RTPI_L_REFL_MISS | RTPI_L_REFR | RTPI_L_REFR_MISS |
+                              RTPI_L_TIR)))
+                continue;
+            mat = rtpi_prim_material(s, nd->prim);
+            if (bump_changed(&s->mats[mat], &t->mats0[mat])) {
+                n++;
+                break;
+            }
+        }
+    }
+    return n;
+}
+
 const rtp_scene *rtp_tree_scene(const rtp_tree *t)
 {
     return t ? t->scene : NULL;
@@ -2695,6 +2730,8 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
     }
     if (rs != RTP_OK)
         return rs;
+    if (!(opt && opt->stale == RTP_STALE_RETRACE))
+        st.stale_samples = count_stale(t);
     /* (after the re-trace: it replaces vis_ext, the visibility of trees
        with more than 32 lights) */
     shade.vis_words = t->vis_words;

@@ -2033,7 +2033,8 @@ static void test_colour_edits(void)
    a mirror, --stale retrace is exact and keep has an error (reported by
    comparison). */
 static double bump_error(const char *const *before, const char *const *after,
-                         rtp_stale_mode stale, unsigned long long *retraced)
+                         rtp_stale_mode stale, unsigned long long *retraced,
+                         unsigned long long *stale_samples, unsigned long long *wrong)
 {
     rtp_scene *s = load("scenes/spheres.nff");
     rtp_tree *t = NULL;
@@ -2064,9 +2065,18 @@ static double bump_error(const char *const *before, const char *const *after,
             goto out;
     if (rtp_tree_eval(t, &eo, &re, &es, NULL) == RTP_OK &&
         rtp_trace(s, &o, &full, NULL, NULL) == RTP_OK &&
-        rtp_image_diff(re, full, 1e-6, &d, NULL) == RTP_OK)
+        rtp_image_diff(re, full, 1e-6, &d, NULL) == RTP_OK) {
+        size_t k;
         e = d.max_abs;
+        /* pixels (one sample each) off the full trace */
+        *wrong = 0;
+        for (k = 0; k < (size_t)re->width * (size_t)re->height; k++)
+            *wrong += fabsf(re->pixels[3 * k] - full->pixels[3 * k]) > 1e-6f ||
+                      fabsf(re->pixels[3 * k + 1] - full->pixels[3 * k + 1]) > 1e-6f ||
+                      fabsf(re->pixels[3 * k + 2] - full->pixels[3 * k + 2]) > 1e-6f;
+    }
     *retraced = es.retraced_samples;
+    *stale_samples = es.stale_samples;
 out:
     rtp_image_destroy(re);
     rtp_image_destroy(full);
@@ -2085,19 +2095,24 @@ static void test_bump_edits(void)
                                                "mat.mirror.bump_scale", "0.4",
                                                "mat.mirror.bump_strength", "0.05", NULL};
     static const char *const mirror_more[] = {"mat.mirror.bump_strength", "0.3", NULL};
-    unsigned long long rt = 0;
+    unsigned long long rt = 0, st = 0, wrong = 0;
     double e;
     /* floor: no reflected or refracted rays below it */
-    e = bump_error(none, floor_noise, RTP_STALE_KEEP, &rt);
-    CHECK_MSG(e <= 1e-6 && rt == 0, "floor bump, keep: %g (%llu re-traced)", e, rt);
+    e = bump_error(none, floor_noise, RTP_STALE_KEEP, &rt, &st, &wrong);
+    CHECK_MSG(e <= 1e-6 && rt == 0 && st == 0, "floor bump, keep: %g (%llu re-traced, %llu stale)",
+              e, rt, st);
     /* mirror: kept subtrees are stale, re-traced ones exact */
-    e = bump_error(mirror_waves, mirror_more, RTP_STALE_RETRACE, &rt);
-    CHECK_MSG(e <= 1e-6 && rt > 0, "mirror bump, retrace: %g (%llu re-traced)", e, rt);
-    e = bump_error(mirror_waves, mirror_more, RTP_STALE_KEEP, &rt);
+    e = bump_error(mirror_waves, mirror_more, RTP_STALE_RETRACE, &rt, &st, &wrong);
+    CHECK_MSG(e <= 1e-6 && rt > 0 && st == 0, "mirror bump, retrace: %g (%llu re-traced)", e, rt);
+    /* keep: approximate, and said so: every pixel off the full trace is a
+       sample counted stale (stale_samples was not there: keep was silent) */
+    e = bump_error(mirror_waves, mirror_more, RTP_STALE_KEEP, &rt, &st, &wrong);
     CHECK_MSG(e > 1e-3 && isfinite(e) && rt == 0, "mirror bump, keep: %g", e);
+    CHECK_MSG(wrong > 0 && st >= wrong, "mirror bump, keep: %llu pixels off, %llu stale", wrong,
+              st);
     /* a bump present at the trace is reproduced exactly without edits */
-    e = bump_error(mirror_waves, none, RTP_STALE_KEEP, &rt);
-    CHECK_MSG(e <= 1e-6, "bumped trace vs reeval: %g", e);
+    e = bump_error(mirror_waves, none, RTP_STALE_KEEP, &rt, &st, &wrong);
+    CHECK_MSG(e <= 1e-6 && st == 0, "bumped trace vs reeval: %g (%llu stale)", e, st);
 }
 
 /* A light moved on warm caches (only its terms and coefficients redone,
