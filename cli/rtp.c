@@ -42,6 +42,17 @@ static int fail_err(const rtp_error *err)
     return 1;
 }
 
+/* fail_err, naming the --stream line whose edits failed (line 0: none). */
+static int fail_line(const rtp_error *err, int line)
+{
+    char buf[600];
+    if (line > 0)
+        fprintf(stderr, "rtp: stdin:%d: %s\n", line, rtp_error_format(err, buf, sizeof buf));
+    else
+        fail_err(err);
+    return 1;
+}
+
 static double now_seconds(void)
 {
     struct timespec ts;
@@ -370,6 +381,10 @@ static int apply_line(set_fn set, void *obj, char *text, const char *where, int 
    as a folder given as the file). */
 static int next_line(FILE *f, const char *name, char *line, int n, int *lineno)
 {
+    const char *nl;
+    /* (filled first, so a newline found is this line's: fgets says
+       nothing of a NUL byte before it, which ended the line early) */
+    memset(line, 1, (size_t)n);
     if (!fgets(line, n, f)) {
         if (ferror(f)) {
             msg("%s: cannot read: %s", name, strerror(errno));
@@ -378,10 +393,18 @@ static int next_line(FILE *f, const char *name, char *line, int n, int *lineno)
         return 0;
     }
     ++*lineno;
-    if (!strchr(line, '\n') && !feof(f)) {
+    nl = (const char *)memchr(line, '\n', (size_t)n);
+    if (nl && strlen(line) < (size_t)(nl - line)) {
+        msg("%s:%d: a NUL byte in the line", name, *lineno);
+        return -1;
+    }
+    if (!nl && !feof(f)) {
         msg("%s:%d: line too long (at most %d characters)", name, *lineno, n - 2);
         return -1;
     }
+    /* a UTF-8 byte-order mark at the start, as the scene readers skip it */
+    if (*lineno == 1 && memcmp(line, "\xef\xbb\xbf", 3) == 0)
+        memmove(line, line + 3, strlen(line + 3) + 1);
     return 1;
 }
 
@@ -992,7 +1015,7 @@ static rtp_image *crop(const rtp_tree *tree, const rtp_image *img, const int *re
 
 static int reeval_one(rtp_tree *tree, const rtp_eval_options *eo, rtp_image **keep,
                       const char *image_path, const int *region, int reference, int threads,
-                      FILE *stats, const char *tree_path, double load_seconds)
+                      FILE *stats, const char *tree_path, double load_seconds, int line)
 {
     rtp_image *img = *keep, *ref = NULL;
     rtp_eval_stats es;
@@ -1006,7 +1029,7 @@ static int reeval_one(rtp_tree *tree, const rtp_eval_options *eo, rtp_image **ke
     /* a stream of edits reuses one image */
     if ((img ? rtp_tree_eval_into(tree, eo, img, &es, &err)
              : rtp_tree_eval(tree, eo, &img, &es, &err)) != RTP_OK) {
-        fail_err(&err);
+        fail_line(&err, line);
         goto out;
     }
     *keep = img;
@@ -1018,18 +1041,18 @@ static int reeval_one(rtp_tree *tree, const rtp_eval_options *eo, rtp_image **ke
         ws = rtp_image_write(c, image_path, RTP_IMAGE_AUTO, &err);
         rtp_image_destroy(c);
         if (ws != RTP_OK) {
-            fail_err(&err);
+            fail_line(&err, line);
             goto out;
         }
     } else if (image_path && rtp_image_write(img, image_path, RTP_IMAGE_AUTO, &err) != RTP_OK) {
-        fail_err(&err);
+        fail_line(&err, line);
         goto out;
     }
     if (reference) {
         double t0 = now_seconds();
         if (rtp_tree_trace(tree, threads, &ref, &ts, &err) != RTP_OK ||
             rtp_image_diff(img, ref, 1.0 / 255.0, &d, &err) != RTP_OK) {
-            fail_err(&err);
+            fail_line(&err, line);
             goto out;
         }
         t_ref = now_seconds() - t0;
@@ -1277,7 +1300,7 @@ static int cmd_reeval(int argc, char **argv)
         goto out;
     if (!stream) {
         rc = reeval_one(tree, &eo, &img, image_path, region, reference, threads, stats,
-                        tree_path, t_load);
+                        tree_path, t_load, 0);
         progress_end(&prog);
     } else {
         char line[8192], path[4096];
@@ -1296,7 +1319,7 @@ static int cmd_reeval(int argc, char **argv)
                 break;
             }
             if (reeval_one(tree, &eo, &img, path, region, reference, threads, stats, tree_path,
-                           t_load)) {
+                           t_load, n)) {
                 rc = 1;
                 break;
             }

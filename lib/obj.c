@@ -188,6 +188,14 @@ static rtp_status mtl_map(rtpi_lex *lx, rtp_scene *s, const char *what,
     if (!path) {
         from = n - 1;
         file = tk[from];
+        /* an option where the name should be: "bump -bm" lacks its
+           number and its file, and "-bm" is no image to look for */
+        if (file.s[0] == '-')
+            return rtpi_lex_error(lx, &file,
+                                  bm && rtpi_tok_is(&file, "-bm")
+                                      ? "%s: expected a number after -bm, then a file name"
+                                      : "%s: expected a file name after the options",
+                                  what);
     }
     for (i = 0; bm && i < from; i++)
         if (rtpi_tok_is(&tk[i], "-bm")) {

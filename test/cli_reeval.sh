@@ -205,6 +205,17 @@ if [ -f ../shared/scenes/spd/tetra_s1.nff ]; then
     grep -q "warning: --spd.*--depth" "$T/err" && ok || bad "--spd --depth: no warning"
 fi
 
+# a --stream edit that fails when evaluated names its line; --params and
+# --stream take a byte-order mark and refuse a NUL byte, naming the line
+printf 'mat.0.kd=0.5\nmat.1.kt=0.9\n' > "$T/lines"
+expect_rc 1 sh -c "$RTP reeval '$T/t.rtp' --stream --memory-limit 0.01 -i '$T/ln_%d.pfm' < '$T/lines'"
+grep -q "stdin:2: the ray trees" "$T/err" && ok || { bad "stream failure without its line"; cat "$T/err" >&2; }
+printf '\357\273\277# edits\nmat.0.kd=0.3\n' > "$T/bom.txt"
+expect_rc 0 $RTP reeval "$T/t.rtp" --params "$T/bom.txt" -i "$T/bom.pfm"
+printf 'mat.0.kd=0.3\000x\n' > "$T/nul.txt"
+expect_rc 1 $RTP reeval "$T/t.rtp" --params "$T/nul.txt" -i "$T/nul.pfm"
+grep -q "nul.txt:1: a NUL byte" "$T/err" && ok || bad "NUL byte in --params not named"
+
 rm -rf "$T"
 echo "$pass passed, $fail failed, $skip skipped"
 [ "$fail" -eq 0 ]

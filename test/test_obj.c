@@ -269,6 +269,14 @@ static void test_mtl(void)
     CHECK(write_file(dir, "b.mtl", "newmtl x\nmap_Kd missing.png\n") == 0);
     CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_IO);
     CHECK(err.line == 2 && err.column == 8 && strstr(err.message, "missing.png"));
+    /* an option where the file name should be (it looked for an image
+       named "-bm") */
+    CHECK(write_file(dir, "b.mtl", "newmtl x\nbump -bm\n") == 0);
+    CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_PARSE);
+    CHECK(err.line == 2 && strstr(err.message, "expected a number after -bm"));
+    CHECK(write_file(dir, "b.mtl", "newmtl x\nmap_Kd -clamp\n") == 0);
+    CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_PARSE);
+    CHECK(err.line == 2 && strstr(err.message, "expected a file name after the options"));
     /* a missing mtllib is named */
     CHECK(write_file(dir, "b.obj", "v 0 0 0\nmtllib nothere.mtl\n") == 0);
     CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_IO);
