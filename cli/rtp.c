@@ -379,51 +379,59 @@ static int apply_line(set_fn set, void *obj, char *text, const char *where, int 
    *lineno: 1, 0 at the end, or -1 after a message (a line longer than
    the buffer: cut in two it would be two edit sets; a read error, such
    as a folder given as the file). */
-static int next_line(FILE *f, const char *name, char *line, int n, int *lineno)
+/* The next line of f into *buf (getline's buffer, *cap bytes): 1, 0 at
+   the end, -1 after a message naming name:line (a read error, a line
+   longer than MAX_LINE characters, a NUL byte in it: fgets could not
+   tell one from the line's end, so what followed it was dropped).  A
+   UTF-8 byte-order mark before the first line is skipped, as the scene
+   readers skip it. */
+#define MAX_LINE 8190
+static int next_line(FILE *f, const char *name, char **buf, size_t *cap, int *lineno)
 {
-    const char *nl;
-    /* (filled first, so a newline found is this line's: fgets says
-       nothing of a NUL byte before it, which ended the line early) */
-    memset(line, 1, (size_t)n);
-    if (!fgets(line, n, f)) {
-        if (ferror(f)) {
-            msg("%s: cannot read: %s", name, strerror(errno));
+    ssize_t len;
+    errno = 0;
+    len = getline(buf, cap, f);
+    if (len < 0) {
+        if (ferror(f) || errno == ENOMEM) {
+            msg("%s: cannot read: %s", name, strerror(errno ? errno : EIO));
             return -1;
         }
         return 0;
     }
     ++*lineno;
-    nl = (const char *)memchr(line, '\n', (size_t)n);
-    if (nl && strlen(line) < (size_t)(nl - line)) {
+    if (len > 0 && (*buf)[len - 1] == '\n')
+        (*buf)[--len] = '\0';
+    if (len > MAX_LINE) {
+        msg("%s:%d: line too long (at most %d characters)", name, *lineno, MAX_LINE);
+        return -1;
+    }
+    if (memchr(*buf, '\0', (size_t)len)) {
         msg("%s:%d: a NUL byte in the line", name, *lineno);
         return -1;
     }
-    if (!nl && !feof(f)) {
-        msg("%s:%d: line too long (at most %d characters)", name, *lineno, n - 2);
-        return -1;
-    }
-    /* a UTF-8 byte-order mark at the start, as the scene readers skip it */
-    if (*lineno == 1 && memcmp(line, "\xef\xbb\xbf", 3) == 0)
-        memmove(line, line + 3, strlen(line + 3) + 1);
+    if (*lineno == 1 && len >= 3 && memcmp(*buf, "\xef\xbb\xbf", 3) == 0)
+        memmove(*buf, *buf + 3, (size_t)len - 2);
     return 1;
 }
 
 static int apply_params_file(set_fn set, void *obj, const char *path)
 {
     FILE *f = strcmp(path, "-") == 0 ? stdin : fopen(path, "r");
-    char line[8192];
+    char *line = NULL;
+    size_t cap = 0;
     int n = 0, rc = 0, got;
     if (!f) {
         msg("%s: cannot open: %s", path, strerror(errno));
         return 1;
     }
-    while ((got = next_line(f, path, line, (int)sizeof line, &n)) > 0)
+    while ((got = next_line(f, path, &line, &cap, &n)) > 0)
         if (apply_line(set, obj, line, path, n)) {
             rc = 1;
             break;
         }
     if (got < 0)
         rc = 1;
+    free(line);
     if (f != stdin)
         fclose(f);
     return rc;
@@ -1303,10 +1311,11 @@ static int cmd_reeval(int argc, char **argv)
                         tree_path, t_load, 0);
         progress_end(&prog);
     } else {
-        char line[8192], path[4096];
+        char *line = NULL, path[4096];
+        size_t cap = 0;
         int n = 0, got;
         rc = 0;
-        while ((got = next_line(stdin, "stdin", line, (int)sizeof line, &n)) != 0) {
+        while ((got = next_line(stdin, "stdin", &line, &cap, &n)) != 0) {
             if (got < 0 || apply_line(set_tree, tree, line, "stdin", n)) {
                 rc = 1;
                 break;
@@ -1325,6 +1334,7 @@ static int cmd_reeval(int argc, char **argv)
             }
             fflush(stdout);
         }
+        free(line);
     }
     if (stats && stats_close(stats, stats_path))
         rc = 1;

@@ -375,9 +375,11 @@ typedef struct rtp_eval_stats {
                                 was traced again (a full trace into the
                                 tree's trees) */
     unsigned long long stale_samples; /* samples whose reflected or
-                                refracted subtrees below a changed bump
-                                map were kept (RTP_STALE_KEEP): the image
-                                is approximate there; 0 otherwise */
+                                refracted rays below a changed bump map
+                                were kept (RTP_STALE_KEEP): the image is
+                                approximate there; 0 otherwise.  An upper
+                                bound where another edit traced some of
+                                them again (they are counted still) */
 } rtp_eval_stats;
 
 /** Evaluates the trees with the current parameters into a new image.  Lights

@@ -317,8 +317,10 @@ static rtp_status read_sphere(nff *c)
     rtp_status st = nums(c, "s (sphere)", "sphere", f, 4, v, tk);
     if (st != RTP_OK)
         return st;
-    if (v[3] == 0.0)
-        return rtpi_lex_error(&c->lx, &tk[3], "sphere radius is 0");
+    /* (as the float it is kept as: 1e-46 became 0, a sphere the tree
+       file's reader refuses) */
+    if ((float)v[3] == 0.0f)
+        return rtpi_lex_error(&c->lx, &tk[3], "sphere radius is 0 (as a float)");
     sp.c[0] = (float)v[0];
     sp.c[1] = (float)v[1];
     sp.c[2] = (float)v[2];
@@ -346,7 +348,7 @@ static rtp_status read_cone(nff *c)
     if ((st = nonneg(c, &tk[3], "cone", f[3], v[3])) != RTP_OK ||
         (st = nonneg(c, &tk[7], "cone", f[7], v[7])) != RTP_OK)
         return st;
-    if (v[3] == 0.0 && v[7] == 0.0)
+    if ((float)v[3] == 0.0f && (float)v[7] == 0.0f)
         return rtpi_lex_error(&c->lx, &tk[7], "cone radii are both 0");
     if (v[0] == v[4] && v[1] == v[5] && v[2] == v[6])
         return rtpi_lex_error(&c->lx, &tk[4], "cone apex equals its base");

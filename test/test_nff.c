@@ -515,6 +515,8 @@ static const bad_case bad_nff[] = {
     {"c 0 0 0 0 0 0 1 0\n", RTP_ERR_PARSE, 1, 17, "cone radii are both 0"},
     {"c 0 0 0 -1 0 0 1 0\n", RTP_ERR_PARSE, 1, 9, "cone base radius must not be negative"},
     {"s 0 0 0 0\n", RTP_ERR_PARSE, 1, 9, "sphere radius is 0"},
+    /* 0 as the float it is kept as: the tree file's reader refused it */
+    {"s 0 0 0 1e-46\n", RTP_ERR_PARSE, 1, 9, "sphere radius is 0"},
     {"s 1 2 3 4 # comment\ns 1 2 3 x", RTP_ERR_PARSE, 2, 9, "got 'x'"},
     {"s 1 2 3 4\r\ns 1 2\tabc 3 4\r\n", RTP_ERR_PARSE, 2, 7,
      "expected number for sphere z, got 'abc'"},
