@@ -102,9 +102,15 @@ static rtp_status check_exact(const rtp_tree *t, const char *key,
     return RTP_OK;
 }
 
+/* (the image index only where an image is the bump map, strength and
+   scale only where there is one: what a tree file keeps of them) */
 static int bump_changed(const rtpi_material *a, const rtpi_material *b)
 {
-    return a->bump != b->bump || a->bump_image != b->bump_image ||
+    if (a->bump != b->bump)
+        return 1;
+    if (a->bump == RTPI_BUMP_NONE)
+        return 0;
+    return (a->bump == RTPI_BUMP_IMAGE && a->bump_image != b->bump_image) ||
            a->bump_strength != b->bump_strength || a->bump_scale != b->bump_scale;
 }
 

@@ -528,6 +528,40 @@ static void put_packed_f32(buf *b, const float *f, size_t n, int stride)
             put_delta(b, &prev[c], f32_bits(f[i * (size_t)stride + (size_t)c]));
 }
 
+/* Textures a material uses now (an image texture, an image bump map)
+   get the file's indices 0, 1, ... in order (remap[i]; RTPI_NONE for the
+   others, left out of the file: a texture replaced or turned off took
+   12 bytes a texel still, a 1024x1024 one 12.6 MB); *used their count.
+   NULL when out of memory. */
+static uint32_t *texture_remap(const rtp_tree *t, uint32_t *used)
+{
+    const rtp_scene *s = t->scene;
+    uint32_t *remap = (uint32_t *)rtpi_malloc_array(&t->alloc, s->ntexs + 1, sizeof *remap);
+    size_t i, m;
+    *used = 0;
+    if (!remap)
+        return NULL;
+    for (i = 0; i < s->ntexs; i++)
+        remap[i] = RTPI_NONE;
+    for (m = 0; m < s->nmats; m++) {
+        const rtpi_material *mt = &s->mats[m];
+        if (mt->tex == RTPI_TEX_IMAGE && mt->tex_image < s->ntexs)
+            remap[mt->tex_image] = 0;
+        if (mt->bump == RTPI_BUMP_IMAGE && mt->bump_image < s->ntexs)
+            remap[mt->bump_image] = 0;
+    }
+    for (i = 0; i < s->ntexs; i++)
+        if (remap[i] == 0)
+            remap[i] = (*used)++;
+    return remap;
+}
+
+/* Index i in the file: its new place, or RTPI_NONE (not in use). */
+static uint32_t tex_index(const uint32_t *remap, size_t ntexs, int in_use, uint32_t i)
+{
+    return in_use && i < ntexs ? remap[i] : RTPI_NONE;
+}
+
 static rtp_status serialize(const rtp_tree *t, sink *out)
 {
     const rtp_scene *s = t->scene;
@@ -536,6 +570,9 @@ static rtp_status serialize(const rtp_tree *t, sink *out)
     uint64_t len;
     unsigned layout = node_layout(t);
     buf head; /* the file up to TREE */
+    uint32_t ntex_used, *remap = texture_remap(t, &ntex_used);
+    if (!remap)
+        return RTP_ERR_NOMEM;
     memset(&b, 0, sizeof b);
     b.a = &t->alloc;
     memset(&head, 0, sizeof head);
@@ -590,9 +627,9 @@ static rtp_status serialize(const rtp_tree *t, sink *out)
         for (k = 0; k < 3; k++)
             put_f32(&b, m->color2[k]);
         put_f32(&b, m->tex_scale);
-        put_u32(&b, m->tex_image);
+        put_u32(&b, tex_index(remap, s->ntexs, m->tex == RTPI_TEX_IMAGE, m->tex_image));
         put_u8(&b, (unsigned)m->bump);
-        put_u32(&b, m->bump_image);
+        put_u32(&b, tex_index(remap, s->ntexs, m->bump == RTPI_BUMP_IMAGE, m->bump_image));
         put_f32(&b, m->bump_strength);
         put_f32(&b, m->bump_scale);
         put_str(&b, m->name);
@@ -600,8 +637,10 @@ static rtp_status serialize(const rtp_tree *t, sink *out)
         put_f32(&b, m0->ks);
         put_f32(&b, m0->kt);
         put_f32(&b, m0->ior);
+        /* (compared with bump_image only: an image no longer in use is
+           RTPI_NONE, unequal to any index in use) */
         put_u8(&b, (unsigned)m0->bump);
-        put_u32(&b, m0->bump_image);
+        put_u32(&b, tex_index(remap, s->ntexs, m0->bump == RTPI_BUMP_IMAGE, m0->bump_image));
         put_f32(&b, m0->bump_strength);
         put_f32(&b, m0->bump_scale);
     }
@@ -622,12 +661,14 @@ static rtp_status serialize(const rtp_tree *t, sink *out)
     }
     put_section(&head, "LITE", &b);
 
-    if (s->ntexs) {
+    if (ntex_used) {
         body_reset(&b);
-        put_u32(&b, (uint32_t)s->ntexs);
+        put_u32(&b, ntex_used);
         for (i = 0; i < s->ntexs; i++) {
             const rtp_image *img = s->texs[i].image;
             size_t n = (size_t)img->width * img->height * 3;
+            if (remap[i] == RTPI_NONE)
+                continue;
             put_str(&b, s->texs[i].path);
             put_u32(&b, (uint32_t)img->width);
             put_u32(&b, (uint32_t)img->height);
@@ -678,6 +719,7 @@ static rtp_status serialize(const rtp_tree *t, sink *out)
     put_section(&head, "GEOM", &b);
 
     rtpi_free(b.a, b.p);
+    rtpi_free(&t->alloc, remap);
     if (head.bad) {
         rtpi_free(head.a, head.p);
         return RTP_ERR_NOMEM;

@@ -2835,6 +2835,68 @@ static void test_reader_scene_values(void)
     free(data);
 }
 
+/* A tree file holds the textures its materials use now, no other: one
+   replaced, or turned off, took 12 bytes a texel still.  Read back, the
+   tree evaluates to the image the tree in memory gives, with image bump
+   maps edited since the trace (as traced: compared, never looked up). */
+static void write_read_same(rtp_tree *t, const char *what, unsigned long long *bytes)
+{
+    char file[512];
+    rtp_tree *back = NULL;
+    rtp_image *a = NULL, *b = NULL;
+    rtp_eval_stats ea, eb;
+    memset(&ea, 0, sizeof ea);
+    memset(&eb, 0, sizeof eb);
+    snprintf(file, sizeof file, "%s/rtp-tex-%d.rtp", tmpdir(), (int)getpid());
+    CHECK_MSG(rtp_tree_write(t, file, bytes, NULL) == RTP_OK, "%s: write", what);
+    CHECK_MSG(rtp_tree_read(file, NULL, &back, NULL) == RTP_OK, "%s: read back", what);
+    CHECK(rtp_tree_eval(t, NULL, &a, &ea, NULL) == RTP_OK);
+    CHECK(back && rtp_tree_eval(back, NULL, &b, &eb, NULL) == RTP_OK);
+    CHECK_MSG(a && b && same_image(a, b) && ea.stale_samples == eb.stale_samples,
+              "%s: read back, another image (stale %llu, %llu)", what, ea.stale_samples,
+              eb.stale_samples);
+    remove(file);
+    rtp_image_destroy(a);
+    rtp_image_destroy(b);
+    rtp_tree_destroy(back);
+}
+
+static void test_unused_textures_left_out(void)
+{
+    rtp_scene *s = load("scenes/textured.nff");
+    rtp_tree *t = NULL;
+    rtp_trace_options o;
+    unsigned long long with = 0, none = 0, other = 0, bumps = 0;
+    if (!s)
+        return;
+    memset(&o, 0, sizeof o);
+    o.width = 32;
+    o.height = 24;
+    CHECK(rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
+    if (!t) {
+        rtp_scene_destroy(s);
+        return;
+    }
+    write_read_same(t, "as traced", &with);
+    CHECK(rtp_tree_set(t, "mat.picture.texture", "none", NULL) == RTP_OK);
+    write_read_same(t, "texture none", &none);
+    CHECK(rtp_tree_set(t, "mat.picture.texture", "scenes/tex4b.ppm", NULL) == RTP_OK);
+    write_read_same(t, "another texture", &other);
+    /* image bump maps, one of them as traced nowhere */
+    CHECK(rtp_tree_set(t, "mat.ball.bump", "scenes/tex4.ppm", NULL) == RTP_OK);
+    CHECK(rtp_tree_set(t, "mat.floor.bump", "scenes/tex4b.ppm", NULL) == RTP_OK);
+    write_read_same(t, "image bump maps", &bumps);
+    printf("  tree file: %llu bytes with the texture, %llu without, %llu with another, "
+           "%llu with two bump maps\n", with, none, other, bumps);
+    /* tex4.ppm (4x4 texels, 12 bytes each, and its path) left out */
+    CHECK_MSG(none + 4 * 4 * 12 <= with, "texture none: %llu bytes, %llu with it", none, with);
+    /* the replaced texture left out: one texture's bytes, not two */
+    CHECK_MSG(other < with + 4 * 4 * 12, "another texture: %llu bytes, %llu with the first",
+              other, with);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+}
+
 int main(void)
 {
     RUN(test_identical_project_scenes);
@@ -2873,6 +2935,7 @@ int main(void)
     RUN(test_flipped_bits);
     RUN(test_section_order_and_end);
     RUN(test_reader_scene_values);
+    RUN(test_unused_textures_left_out);
     RUN(test_newer_version_and_foreign);
     RUN(test_out_of_range_values);
     RUN(test_format1_file);
