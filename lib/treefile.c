@@ -528,6 +528,17 @@ static void put_packed_f32(buf *b, const float *f, size_t n, int stride)
             put_delta(b, &prev[c], f32_bits(f[i * (size_t)stride + (size_t)c]));
 }
 
+/* The byte k whose k / 255 (as float, as the 8-bit image readers make
+   texels) is exactly v, or -1. */
+static int texel_byte(float v)
+{
+    long k;
+    if (!(v >= 0.0f && v <= 1.0f))
+        return -1;
+    k = lrintf(v * 255.0f);
+    return (float)k / 255.0f == v ? (int)k : -1;
+}
+
 /* Textures a material uses now (an image texture, an image bump map)
    get the file's indices 0, 1, ... in order (remap[i]; RTPI_NONE for the
    others, left out of the file: a texture replaced or turned off took
@@ -662,6 +673,16 @@ static rtp_status serialize(const rtp_tree *t, sink *out)
     put_section(&head, "LITE", &b);
 
     if (ntex_used) {
+        /* TEXB, a byte a texel, where every texel of every texture in use
+           is one of an 8-bit image's (k / 255 as the image readers make
+           it: the byte gives back the very float); else TEXR, four */
+        int bytes = 1;
+        for (i = 0; bytes && i < s->ntexs; i++) {
+            const rtp_image *img = s->texs[i].image;
+            size_t n = (size_t)img->width * img->height * 3;
+            for (k = 0; remap[i] != RTPI_NONE && bytes && k < n; k++)
+                bytes = texel_byte(img->pixels[k]) >= 0;
+        }
         body_reset(&b);
         put_u32(&b, ntex_used);
         for (i = 0; i < s->ntexs; i++) {
@@ -672,10 +693,14 @@ static rtp_status serialize(const rtp_tree *t, sink *out)
             put_str(&b, s->texs[i].path);
             put_u32(&b, (uint32_t)img->width);
             put_u32(&b, (uint32_t)img->height);
-            for (k = 0; k < n; k++)
-                put_f32(&b, img->pixels[k]);
+            for (k = 0; k < n; k++) {
+                if (bytes)
+                    put_u8(&b, (unsigned)texel_byte(img->pixels[k]));
+                else
+                    put_f32(&b, img->pixels[k]);
+            }
         }
-        put_section(&head, "TEXR", &b);
+        put_section(&head, bytes ? "TEXB" : "TEXR", &b);
     }
 
     body_reset(&b);
@@ -1230,6 +1255,8 @@ static rtp_status read_texr(loader *L, rd *r)
     rtp_scene *s = L->s;
     uint32_t n = get_u32(r), i;
     int oom = 0;
+    /* TEXB: a byte a texel (k / 255), TEXR: an f32 */
+    int bytes = L->section && strcmp(L->section, "TEXB") == 0;
     if (r->bad || !count_ok(r, n, 9))
         return bad(L, "invalid texture count", NULL);
     s->texs = (rtpi_texture *)rtpi_calloc_array(L->a, n ? n : 1, sizeof *s->texs);
@@ -1251,13 +1278,13 @@ static rtp_status read_texr(loader *L, rd *r)
         w = get_u32(r);
         h = get_u32(r);
         if (r->bad || !rtpi_image_size_ok((int)w, (int)h) || w > 0x7fffffffu || h > 0x7fffffffu ||
-            !count_ok(r, (uint64_t)w * h, 12))
+            !count_ok(r, (uint64_t)w * h, bytes ? 3 : 12))
             return bad(L, "invalid texture size", NULL);
         if (rtp_image_create((int)w, (int)h, L->a, &tx->image, NULL) != RTP_OK)
             return nomem(L);
         count = (size_t)w * h * 3;
         for (k = 0; k < count; k++) {
-            float f = get_f32(r);
+            float f = bytes ? (float)get_u8(r) / 255.0f : get_f32(r);
             if (!isfinite(f))
                 return bad(L, "texture value is not finite", NULL);
             tx->image->pixels[k] = f;
@@ -1625,8 +1652,8 @@ static rtp_status section_index(loader *L, const char *tag, unsigned *seen, int 
     for (i = 0; i < sizeof required_sections / sizeof *required_sections; i++)
         if (strcmp(tag, required_sections[i]) == 0)
             *idx = (int)i;
-    if (*idx < 0 && strcmp(tag, "TEXR") == 0)
-        *idx = 6;
+    if (*idx < 0 && (strcmp(tag, "TEXR") == 0 || strcmp(tag, "TEXB") == 0))
+        *idx = 6; /* (one or the other: a second is a repeated section) */
     if (*idx < 0) {
         /* lower-case first letter: an extension a reader may skip */
         if (tag[0] >= 'a' && tag[0] <= 'z')

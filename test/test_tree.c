@@ -2888,13 +2888,89 @@ static void test_unused_textures_left_out(void)
     write_read_same(t, "image bump maps", &bumps);
     printf("  tree file: %llu bytes with the texture, %llu without, %llu with another, "
            "%llu with two bump maps\n", with, none, other, bumps);
-    /* tex4.ppm (4x4 texels, 12 bytes each, and its path) left out */
-    CHECK_MSG(none + 4 * 4 * 12 <= with, "texture none: %llu bytes, %llu with it", none, with);
+    /* tex4.ppm (4x4 texels, 3 bytes each in TEXB, and its path) left out */
+    CHECK_MSG(none + 4 * 4 * 3 <= with, "texture none: %llu bytes, %llu with it", none, with);
     /* the replaced texture left out: one texture's bytes, not two */
-    CHECK_MSG(other < with + 4 * 4 * 12, "another texture: %llu bytes, %llu with the first",
+    CHECK_MSG(other < with + 4 * 4 * 3, "another texture: %llu bytes, %llu with the first",
               other, with);
     rtp_tree_destroy(t);
     rtp_scene_destroy(s);
+}
+
+/* Whether the tree file at path holds a section tagged tag. */
+static int file_has_section(const char *path, const char *tag)
+{
+    FILE *f = fopen(path, "rb");
+    unsigned char h[12];
+    int found = 0;
+    if (!f)
+        return 0;
+    if (fseek(f, 8, SEEK_SET) == 0)
+        while (!found && fread(h, 1, 12, f) == 12) {
+            unsigned long long len = 0;
+            int k;
+            for (k = 7; k >= 0; k--)
+                len = len << 8 | h[4 + k];
+            found = memcmp(h, tag, 4) == 0;
+            if (fseek(f, (long)(len + 4), SEEK_CUR) != 0)
+                break;
+        }
+    fclose(f);
+    return found;
+}
+
+/* Textures of 8-bit images go a byte a texel (TEXB), others as floats
+   (TEXR); each reads back to the very texels: a tree of a PFM texture
+   and of a PPM one evaluate read back as in memory. */
+static void test_texture_bytes(void)
+{
+    static const char *const names[] = {"tex.pfm", "tex.ppm"};
+    char nff[512], img[512], file[512];
+    int k;
+    for (k = 0; k < 2; k++) {
+        rtp_scene *s = NULL;
+        rtp_tree *t = NULL, *back = NULL;
+        rtp_image *tex = NULL, *a = NULL, *b = NULL;
+        rtp_trace_options o;
+        FILE *f;
+        int x;
+        snprintf(img, sizeof img, "%s/rtp-%d-%s", tmpdir(), (int)getpid(), names[k]);
+        snprintf(nff, sizeof nff, "%s/rtp-tex-%d.nff", tmpdir(), (int)getpid());
+        snprintf(file, sizeof file, "%s/rtp-texb-%d.rtp", tmpdir(), (int)getpid());
+        CHECK(rtp_image_create(8, 8, NULL, &tex, NULL) == RTP_OK);
+        if (!tex)
+            return;
+        for (x = 0; x < 8 * 8 * 3; x++) /* a PFM's values off any byte's k/255 */
+            tex->pixels[x] = (float)((x * 37) % 256) / 255.0f + (k == 0 ? 0.001f : 0.0f);
+        CHECK(rtp_image_write(tex, img, RTP_IMAGE_AUTO, NULL) == RTP_OK);
+        rtp_image_destroy(tex);
+        f = fopen(nff, "w");
+        if (!f)
+            return;
+        fprintf(f, "v from 0 -4 0 at 0 0 0 up 0 0 1 angle 40 hither 0.1 resolution 24 24\n"
+                   "l 1 -3 2\nf 1 1 1 1 0 0 0 1\ntexture %s\n"
+                   "p 4 -1 0 -1 1 0 -1 1 0 1 -1 0 1\n",
+                img);
+        fclose(f);
+        memset(&o, 0, sizeof o);
+        CHECK(rtp_scene_load(nff, NULL, &s, NULL) == RTP_OK);
+        CHECK(s && rtp_record(s, &o, &t, &a, NULL, NULL) == RTP_OK);
+        CHECK(t && rtp_tree_write(t, file, NULL, NULL) == RTP_OK);
+        CHECK_MSG(file_has_section(file, k ? "TEXB" : "TEXR") &&
+                      !file_has_section(file, k ? "TEXR" : "TEXB"),
+                  "%s: not in %s", names[k], k ? "TEXB" : "TEXR");
+        CHECK(rtp_tree_read(file, NULL, &back, NULL) == RTP_OK);
+        CHECK(back && rtp_tree_eval(back, NULL, &b, NULL, NULL) == RTP_OK);
+        CHECK_MSG(a && b && same_image(a, b), "%s: read back, another image", names[k]);
+        rtp_image_destroy(a);
+        rtp_image_destroy(b);
+        rtp_tree_destroy(t);
+        rtp_tree_destroy(back);
+        rtp_scene_destroy(s);
+        remove(img);
+        remove(nff);
+        remove(file);
+    }
 }
 
 int main(void)
@@ -2936,6 +3012,7 @@ int main(void)
     RUN(test_section_order_and_end);
     RUN(test_reader_scene_values);
     RUN(test_unused_textures_left_out);
+    RUN(test_texture_bytes);
     RUN(test_newer_version_and_foreign);
     RUN(test_out_of_range_values);
     RUN(test_format1_file);
