@@ -35,6 +35,23 @@ static void msg(const char *fmt, ...)
     fputc('\n', stderr);
 }
 
+/* s as a JSON string: quotes, backslashes and control characters
+   escaped (a scene path may hold any of them). */
+static void json_string(FILE *f, const char *s)
+{
+    fputc('"', f);
+    for (; *s; s++) {
+        unsigned char c = (unsigned char)*s;
+        if (c == '"' || c == '\\')
+            fprintf(f, "\\%c", c);
+        else if (c < 0x20)
+            fprintf(f, "\\u%04x", c);
+        else
+            fputc(c, f);
+    }
+    fputc('"', f);
+}
+
 static int fail_err(const rtp_error *err)
 {
     char buf[600];
@@ -709,23 +726,26 @@ static int cmd_trace(int argc, char **argv)
         FILE *f = stats_open(stats_path);
         if (!f)
             goto out;
+        fputs("{\"command\": \"trace\", \"scene\": ", f);
+        json_string(f, scene_path);
         fprintf(f,
-                "{\"command\": \"trace\", \"scene\": \"%s\", \"width\": %d, \"height\": %d, "
+                ", \"width\": %d, \"height\": %d, "
                 "\"spd\": %s, \"threads\": %d, \"seconds\": %.6f, \"load_seconds\": %.6f, "
                 "\"build_seconds\": %.6f, \"trace_seconds\": %.6f, \"write_seconds\": %.6f, "
                 "\"eye_rays\": %llu, \"eye_hits\": %llu, \"shadow_rays\": %llu, "
                 "\"reflected_rays\": %llu, \"refracted_rays\": %llu, "
                 "\"kd_nodes\": %llu, \"kd_leaves\": %llu, \"kd_prim_refs\": %llu, "
                 "\"kd_depth\": %d, \"capped_rays\": %llu",
-                scene_path, st.width, st.height, opt.spd ? "true" : "false",
+                st.width, st.height, opt.spd ? "true" : "false",
                 opt.threads > 1 ? opt.threads : 1, t_load + t_trace + t_write, t_load,
                 st.build_seconds, st.trace_seconds, t_write, st.eye_rays, st.eye_hits,
                 st.shadow_rays, st.reflected_rays, st.refracted_rays, st.kd_nodes,
                 st.kd_leaves, st.kd_prim_refs, st.kd_depth, st.capped_rays);
+        fprintf(f, ", \"pixels\": %llu",
+                (unsigned long long)st.width * (unsigned long long)st.height);
         if (tree)
-            fprintf(f, ", \"pixels\": %llu, \"samples\": %llu, \"nodes\": %llu, "
+            fprintf(f, ", \"samples\": %llu, \"nodes\": %llu, "
                        "\"bytes_per_node\": %u, \"tree_bytes\": %llu, \"file_bytes\": %llu",
-                    (unsigned long long)st.width * (unsigned long long)st.height,
                     ti.samples, ti.nodes, ti.bytes_per_node, ti.tree_bytes, file_bytes);
         fprintf(f, ", \"peak_rss_kb\": %ld}\n", peak_rss_kb());
         if (stats_close(f, stats_path))

@@ -219,6 +219,12 @@ printf 'light.0.on=0\000light.1.on=0' > "$T/nul2.txt"
 expect_rc 1 $RTP reeval "$T/t.rtp" --params "$T/nul2.txt" -i "$T/nul2.pfm"
 grep -q "a NUL byte" "$T/err" && ok || bad "NUL byte in a last line without newline not named"
 
+# trace --stats: pixels without -o too; the scene's path a JSON string
+cp $S "$T/we\"ird\\name.nff"
+expect_rc 0 $RTP trace "$T/we\"ird\\name.nff" --size 8x8 -i "$T/w.pfm" --stats "$T/w.json"
+grep -q '"pixels": 64' "$T/w.json" && ok || bad "trace --stats without -o: no pixels"
+grep -q 'we\\"ird\\\\name.nff"' "$T/w.json" && ok || { bad "scene path not escaped in JSON"; cat "$T/w.json" >&2; }
+
 rm -rf "$T"
 echo "$pass passed, $fail failed, $skip skipped"
 [ "$fail" -eq 0 ]
