@@ -35,19 +35,51 @@ static void msg(const char *fmt, ...)
     fputc('\n', stderr);
 }
 
+/* Bytes of the well-formed UTF-8 sequence at s (1-4), or 0. */
+static int utf8_len(const unsigned char *s)
+{
+    int n, k;
+    unsigned cp;
+    if (s[0] < 0x80)
+        return 1;
+    if (s[0] >= 0xc2 && s[0] <= 0xdf)
+        n = 2, cp = s[0] & 0x1fu;
+    else if (s[0] >= 0xe0 && s[0] <= 0xef)
+        n = 3, cp = s[0] & 0x0fu;
+    else if (s[0] >= 0xf0 && s[0] <= 0xf4)
+        n = 4, cp = s[0] & 0x07u;
+    else
+        return 0;
+    for (k = 1; k < n; k++) {
+        if ((s[k] & 0xc0u) != 0x80u)
+            return 0;
+        cp = cp << 6 | (s[k] & 0x3fu);
+    }
+    /* overlong forms, surrogates and past U+10FFFF are not UTF-8 */
+    if ((n == 3 && cp < 0x800) || (n == 4 && (cp < 0x10000 || cp > 0x10ffff)) ||
+        (cp >= 0xd800 && cp <= 0xdfff))
+        return 0;
+    return n;
+}
+
 /* s as a JSON string: quotes, backslashes and control characters
-   escaped (a scene path may hold any of them). */
+   escaped (a scene path may hold any of them), and a byte that is not
+   part of well-formed UTF-8 written as the code point of the same value
+   (\u00XX: JSON must be UTF-8; such a path reads back as another name,
+   not as invalid JSON). */
 static void json_string(FILE *f, const char *s)
 {
+    const unsigned char *p = (const unsigned char *)s;
     fputc('"', f);
-    for (; *s; s++) {
-        unsigned char c = (unsigned char)*s;
-        if (c == '"' || c == '\\')
-            fprintf(f, "\\%c", c);
-        else if (c < 0x20)
-            fprintf(f, "\\u%04x", c);
+    while (*p) {
+        int n = utf8_len(p);
+        if (*p == '"' || *p == '\\')
+            fprintf(f, "\\%c", *p);
+        else if (*p < 0x20 || n == 0)
+            fprintf(f, "\\u%04x", *p);
         else
-            fputc(c, f);
+            fwrite(p, 1, (size_t)n, f);
+        p += n ? n : 1;
     }
     fputc('"', f);
 }
@@ -392,63 +424,60 @@ static int apply_line(set_fn set, void *obj, char *text, const char *where, int 
     }
 }
 
-/* The next line of f (named `name`) into line (size n), as line number
-   *lineno: 1, 0 at the end, or -1 after a message (a line longer than
-   the buffer: cut in two it would be two edit sets; a read error, such
-   as a folder given as the file). */
-/* The next line of f into *buf (getline's buffer, *cap bytes): 1, 0 at
-   the end, -1 after a message naming name:line (a read error, a line
-   longer than MAX_LINE characters, a NUL byte in it: fgets could not
-   tell one from the line's end, so what followed it was dropped).  A
-   UTF-8 byte-order mark before the first line is skipped, as the scene
-   readers skip it. */
+/* The next line of f into line (MAX_LINE + 1 bytes), read a byte at a
+   time so that no line takes more than that (getline held a line of
+   /dev/zero whole), as line number *lineno: 1, 0 at the end, -1 after a
+   message naming name:line (a read error, such as a folder given as the
+   file; a line longer than MAX_LINE characters: cut in two it would be
+   two edit sets; a NUL byte in it — fgets could not tell one from the
+   line's end, so what followed was dropped).  A UTF-8 byte-order mark before the first line
+   is skipped, as the scene readers skip it. */
 #define MAX_LINE 8190
-static int next_line(FILE *f, const char *name, char **buf, size_t *cap, int *lineno)
+static int next_line(FILE *f, const char *name, char *line, int *lineno)
 {
-    ssize_t len;
-    errno = 0;
-    len = getline(buf, cap, f);
-    if (len < 0) {
-        if (ferror(f) || errno == ENOMEM) {
-            msg("%s: cannot read: %s", name, strerror(errno ? errno : EIO));
+    size_t n = 0;
+    int c, nul = 0;
+    while ((c = getc(f)) != EOF && c != '\n') {
+        if (n == MAX_LINE) {
+            msg("%s:%d: line too long (at most %d characters)", name, *lineno + 1, MAX_LINE);
             return -1;
         }
-        return 0;
+        nul |= c == '\0';
+        line[n++] = (char)c;
     }
-    ++*lineno;
-    if (len > 0 && (*buf)[len - 1] == '\n')
-        (*buf)[--len] = '\0';
-    if (len > MAX_LINE) {
-        msg("%s:%d: line too long (at most %d characters)", name, *lineno, MAX_LINE);
+    if (c == EOF && ferror(f)) {
+        msg("%s: cannot read: %s", name, strerror(errno ? errno : EIO));
         return -1;
     }
-    if (memchr(*buf, '\0', (size_t)len)) {
+    if (c == EOF && n == 0)
+        return 0;
+    line[n] = '\0';
+    ++*lineno;
+    if (nul) {
         msg("%s:%d: a NUL byte in the line", name, *lineno);
         return -1;
     }
-    if (*lineno == 1 && len >= 3 && memcmp(*buf, "\xef\xbb\xbf", 3) == 0)
-        memmove(*buf, *buf + 3, (size_t)len - 2);
+    if (*lineno == 1 && n >= 3 && memcmp(line, "\xef\xbb\xbf", 3) == 0)
+        memmove(line, line + 3, n - 2);
     return 1;
 }
 
 static int apply_params_file(set_fn set, void *obj, const char *path)
 {
     FILE *f = strcmp(path, "-") == 0 ? stdin : fopen(path, "r");
-    char *line = NULL;
-    size_t cap = 0;
+    char line[MAX_LINE + 1];
     int n = 0, rc = 0, got;
     if (!f) {
         msg("%s: cannot open: %s", path, strerror(errno));
         return 1;
     }
-    while ((got = next_line(f, path, &line, &cap, &n)) > 0)
+    while ((got = next_line(f, path, line, &n)) > 0)
         if (apply_line(set, obj, line, path, n)) {
             rc = 1;
             break;
         }
     if (got < 0)
         rc = 1;
-    free(line);
     if (f != stdin)
         fclose(f);
     return rc;
@@ -1331,11 +1360,10 @@ static int cmd_reeval(int argc, char **argv)
                         tree_path, t_load, 0);
         progress_end(&prog);
     } else {
-        char *line = NULL, path[4096];
-        size_t cap = 0;
+        char line[MAX_LINE + 1], path[4096];
         int n = 0, got;
         rc = 0;
-        while ((got = next_line(stdin, "stdin", &line, &cap, &n)) != 0) {
+        while ((got = next_line(stdin, "stdin", line, &n)) != 0) {
             if (got < 0 || apply_line(set_tree, tree, line, "stdin", n)) {
                 rc = 1;
                 break;
@@ -1354,7 +1382,6 @@ static int cmd_reeval(int argc, char **argv)
             }
             fflush(stdout);
         }
-        free(line);
     }
     if (stats && stats_close(stats, stats_path))
         rc = 1;

@@ -536,7 +536,14 @@ FILE *rtpi_open_temp(const char *path, char *tmp, size_t tmpsize)
         /* A 32-bit LCG step: names differ between attempts and between
            processes; O_EXCL settles any collision. */
         seed = (seed * 1103515245UL + 12345UL) & 0xffffffffUL;
-        snprintf(tmp, tmpsize, "%s.%08lx.tmp", path, seed);
+        /* in the file's folder (a rename stays within one file system),
+           named apart from the file: a name of its own length plus 13
+           passed the 255 bytes a name may have for names of 243 up */
+        {
+            const char *slash = strrchr(path, '/');
+            int dir = slash ? (int)(slash - path) + 1 : 0;
+            snprintf(tmp, tmpsize, "%.*s.rtp-%08lx.tmp", dir, path, seed);
+        }
 #ifdef RTPI_POSIX_FILES
         {
             int fd = open(tmp, O_WRONLY | O_CREAT | O_EXCL, 0666);

@@ -540,7 +540,8 @@ static int texel_byte(float v)
 }
 
 /* Textures a material uses now (an image texture, an image bump map)
-   get the file's indices 0, 1, ... in order (remap[i]; RTPI_NONE for the
+   or was traced with (an image bump map) get the file's indices 0, 1,
+   ... in order (remap[i]; RTPI_NONE for the
    others, left out of the file: a texture replaced or turned off took
    12 bytes a texel still, a 1024x1024 one 12.6 MB); *used their count.
    NULL when out of memory. */
@@ -555,11 +556,16 @@ static uint32_t *texture_remap(const rtp_tree *t, uint32_t *used)
     for (i = 0; i < s->ntexs; i++)
         remap[i] = RTPI_NONE;
     for (m = 0; m < s->nmats; m++) {
-        const rtpi_material *mt = &s->mats[m];
+        const rtpi_material *mt = &s->mats[m], *m0 = &t->mats0[m];
         if (mt->tex == RTPI_TEX_IMAGE && mt->tex_image < s->ntexs)
             remap[mt->tex_image] = 0;
         if (mt->bump == RTPI_BUMP_IMAGE && mt->bump_image < s->ntexs)
             remap[mt->bump_image] = 0;
+        /* the bump map the trees were traced with, too: a bump set back
+           to it must read back as unchanged (its index left out, the
+           trees read back as stale) */
+        if (m0->bump == RTPI_BUMP_IMAGE && m0->bump_image < s->ntexs)
+            remap[m0->bump_image] = 0;
     }
     for (i = 0; i < s->ntexs; i++)
         if (remap[i] == 0)

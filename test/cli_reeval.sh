@@ -104,7 +104,7 @@ fi
 expect_rc 1 $RTP trace $S --size 40x30 -o "$T/nodir/t.rtp" -q
 grep -q "nodir/t.rtp" "$T/err" && ok || bad "unwritable tree path not named"
 [ ! -e "$T/nodir" ] && ok || bad "something written for an unwritable path"
-ls "$T" | grep -q '\.tmp$' && bad "temporary tree file left behind" || ok
+ls -A "$T" | grep -q '\.tmp$' && bad "temporary tree file left behind" || ok
 
 # Refused and broken input: named errors, exit 1, no image written.
 expect_rc 1 $RTP reeval "$T/t.rtp" --set mat.nosuch.kd=1 -i "$T/no1.pfm"
@@ -172,7 +172,12 @@ for i in 1 2 3 4 5 6; do
     $RTP info "$T/same.rtp" -q --stats /dev/null 2>>"$T/werr" || wbad=$((wbad + 1))
 done
 [ "$wbad" -eq 0 ] && [ ! -s "$T/werr" ] && ok || { bad "concurrent tree writes: $wbad bad files"; cat "$T/werr" >&2; }
-ls "$T" | grep -q '\.tmp$' && bad "temporary file left by concurrent writes" || ok
+ls -A "$T" | grep -q '\.tmp$' && bad "temporary file left by concurrent writes" || ok
+# a file name near the 255-byte limit is written (the temporary beside it
+# was its name plus 13 bytes: ENAMETOOLONG from 243 on)
+long=$(printf '%0249d' 0)
+expect_rc 0 $RTP trace $S --size 8x6 -o "$T/$long.rtp" -i "$T/$long.pfm" -q
+[ -f "$T/$long.rtp" ] && [ -f "$T/$long.pfm" ] && ok || bad "long file names not written"
 # outputs that would share stdout are usage errors; names checked first
 expect_rc 2 $RTP merge -o - -i - "$T/w1.rtp"
 expect_rc 2 $RTP diff "$T/t.pfm" "$T/r.pfm" --heatmap - --stats -
@@ -203,8 +208,8 @@ if $RTP version | grep -q "with: png"; then
         bad "trace - did not write trace.png"
 fi
 # --spd ignores --depth, saying so
-expect_rc 0 $RTP trace ../shared/scenes/spd/tetra_s1.nff --spd --depth 2 -i "$T/sd.pfm" 2>/dev/null || true
 if [ -f ../shared/scenes/spd/tetra_s1.nff ]; then
+    expect_rc 0 $RTP trace ../shared/scenes/spd/tetra_s1.nff --spd --depth 2 -i "$T/sd.pfm"
     grep -q "warning: --spd.*--depth" "$T/err" && ok || bad "--spd --depth: no warning"
 fi
 
@@ -221,12 +226,20 @@ grep -q "nul.txt:1: a NUL byte" "$T/err" && ok || bad "NUL byte in --params not 
 printf 'light.0.on=0\000light.1.on=0' > "$T/nul2.txt"
 expect_rc 1 $RTP reeval "$T/t.rtp" --params "$T/nul2.txt" -i "$T/nul2.pfm"
 grep -q "a NUL byte" "$T/err" && ok || bad "NUL byte in a last line without newline not named"
+# a line of /dev/zero is refused at its 8191st byte, not read whole
+if [ -r /dev/zero ]; then
+    expect_rc 1 timeout 20 $RTP reeval "$T/t.rtp" --params /dev/zero -i "$T/z.pfm"
+    grep -q "line too long" "$T/err" && ok || bad "--params /dev/zero: no line-too-long"
+fi
 
 # trace --stats: pixels without -o too; the scene's path a JSON string
 cp $S "$T/we\"ird\\name.nff"
 expect_rc 0 $RTP trace "$T/we\"ird\\name.nff" --size 8x8 -i "$T/w.pfm" --stats "$T/w.json"
 grep -q '"pixels": 64' "$T/w.json" && ok || bad "trace --stats without -o: no pixels"
 grep -q 'we\\"ird\\\\name.nff"' "$T/w.json" && ok || { bad "scene path not escaped in JSON"; cat "$T/w.json" >&2; }
+cp $S "$T/$(printf 'lat\351.nff')"
+expect_rc 0 $RTP trace "$T/$(printf 'lat\351.nff')" --size 8x8 -i "$T/w.pfm" --stats "$T/w2.json"
+grep -q 'lat\\u00e9.nff"' "$T/w2.json" && ok || { bad "a path not UTF-8 not escaped in JSON"; cat "$T/w2.json" >&2; }
 
 rm -rf "$T"
 echo "$pass passed, $fail failed, $skip skipped"

@@ -2888,6 +2888,32 @@ static void test_unused_textures_left_out(void)
     write_read_same(t, "image bump maps", &bumps);
     printf("  tree file: %llu bytes with the texture, %llu without, %llu with another, "
            "%llu with two bump maps\n", with, none, other, bumps);
+    /* a bump map set back to the image traced with reads back as unchanged
+       (that image left out, the trees read back counted stale) */
+    {
+        rtp_scene *s2 = load("scenes/textured.nff");
+        rtp_tree *t2 = NULL, *back = NULL;
+        rtp_image *img = NULL;
+        rtp_eval_stats es;
+        char file[512];
+        memset(&es, 0, sizeof es);
+        snprintf(file, sizeof file, "%s/rtp-bump0-%d.rtp", tmpdir(), (int)getpid());
+        /* (tex4b.ppm: no other material uses it; the picture uses tex4) */
+        CHECK(s2 && rtp_scene_set(s2, "mat.ball.bump", "scenes/tex4b.ppm", NULL) == RTP_OK);
+        CHECK(s2 && rtp_record(s2, &o, &t2, NULL, NULL, NULL) == RTP_OK);
+        CHECK(t2 && rtp_tree_set(t2, "mat.ball.bump", "scenes/tex4.ppm", NULL) == RTP_OK);
+        CHECK(t2 && rtp_tree_write(t2, file, NULL, NULL) == RTP_OK);
+        CHECK(rtp_tree_read(file, NULL, &back, NULL) == RTP_OK);
+        CHECK(back && rtp_tree_set(back, "mat.ball.bump", "scenes/tex4b.ppm", NULL) == RTP_OK);
+        CHECK(back && rtp_tree_eval(back, NULL, &img, &es, NULL) == RTP_OK);
+        CHECK_MSG(es.stale_samples == 0 && es.retraced_samples == 0,
+                  "bump set back after a read: %llu stale", es.stale_samples);
+        remove(file);
+        rtp_image_destroy(img);
+        rtp_tree_destroy(back);
+        rtp_tree_destroy(t2);
+        rtp_scene_destroy(s2);
+    }
     /* tex4.ppm (4x4 texels, 3 bytes each in TEXB, and its path) left out */
     CHECK_MSG(none + 4 * 4 * 3 <= with, "texture none: %llu bytes, %llu with it", none, with);
     /* the replaced texture left out: one texture's bytes, not two */
