@@ -708,6 +708,11 @@ struct rtp_tree {
     rtpi_camera cam0;      /* the camera as traced: where scene->camera
                               differs, the next evaluation traces every
                               sample again */
+    unsigned long long stale_n; /* count_stale's last count (tree.c), valid
+                              while stale_ok: a bump key or a re-trace
+                              clears it, so the scan of every node is not
+                              made again at each light or colour edit */
+    int stale_ok;
     int width, height;     /* image (of the region, when one was traced) */
     int nx, ny;            /* sample grid: image, or corners + 1 (SPD) */
     int full_w, full_h;    /* the whole frame the camera spans */

@@ -135,11 +135,11 @@ static int needs_retrace(const rtp_tree *t, size_t m, int stale_retrace)
 }
 
 /* Samples holding a reflected or refracted ray (a subtree, or a ray that
-   left the scene) below a material whose
-   bump map changed since its samples were traced, kept there (--stale
-   keep: the paper's way, approximate): stats->stale_samples, so the
-   approximation is said, not silent. */
-static unsigned long long count_stale(const rtp_tree *t)
+   left the scene) below a material whose bump map changed since its
+   samples were traced, kept there (--stale keep: the paper's way,
+   approximate): stats->stale_samples, so the approximation is said, not
+   silent.  Counted once after a bump key or a re-trace (t->stale_ok). */
+static unsigned long long count_stale(rtp_tree *t)
 {
     const rtp_scene *s = t->scene;
     size_t m, k, ns = (size_t)t->nx * t->ny;
@@ -150,6 +150,8 @@ static unsigned long long count_stale(const rtp_tree *t)
                (t->mats0[m].ks > 0.0f || t->mats0[m].kt > 0.0f);
     if (!any)
         return 0;
+    if (t->stale_ok)
+        return t->stale_n;
     for (k = 0; k < ns; k++) {
         size_t i;
         for (i = (size_t)t->start[k]; i < (size_t)t->start[k + 1]; i++) {
@@ -166,6 +168,8 @@ static unsigned long long count_stale(const rtp_tree *t)
             }
         }
     }
+    t->stale_n = n;
+    t->stale_ok = 1;
     return n;
 }
 
@@ -203,6 +207,8 @@ rtp_status rtp_tree_set(rtp_tree *t, const char *key, const char *value,
     st = rtp_scene_set(s, key, value, err);
     if (st == RTP_OK)
         st = check_exact(t, key, value, err);
+    if (strstr(key, ".bump"))
+        t->stale_ok = 0;
     if (st != RTP_OK) {
         /* names are untouched by rtp_scene_set: the copies' pointers are
            the scene's own */
@@ -1946,6 +1952,7 @@ static rtp_status retrace_edited(rtp_tree *t, int threads, int stale, double lim
             t->mats0[m].bump_scale = s->mats[m].bump_scale;
         }
     drop_caches(t);
+    t->stale_ok = 0;
     rtpi_free(&t->alloc, t->cur_vis);
     rtpi_free(&t->alloc, t->cur_pos);
     free_material_lists(t);
