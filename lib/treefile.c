@@ -541,10 +541,9 @@ static int texel_byte(float v)
 
 /* Textures a material uses now (an image texture, an image bump map)
    or was traced with (an image bump map) get the file's indices 0, 1,
-   ... in order (remap[i]; RTPI_NONE for the
-   others, left out of the file: a texture replaced or turned off took
-   12 bytes a texel still, a 1024x1024 one 12.6 MB); *used their count.
-   NULL when out of memory. */
+   ... in order (remap[i]); the others are RTPI_NONE, left out of the
+   file (a texture replaced or turned off took 12 bytes a texel still, a
+   1024x1024 one 12.6 MB).  *used: their count; NULL when out of memory. */
 static uint32_t *texture_remap(const rtp_tree *t, uint32_t *used)
 {
     const rtp_scene *s = t->scene;
@@ -654,8 +653,7 @@ static rtp_status serialize(const rtp_tree *t, sink *out)
         put_f32(&b, m0->ks);
         put_f32(&b, m0->kt);
         put_f32(&b, m0->ior);
-        /* (compared with bump_image only: an image no longer in use is
-           RTPI_NONE, unequal to any index in use) */
+        /* (compared with bump_image only; its image is kept in the file) */
         put_u8(&b, (unsigned)m0->bump);
         put_u32(&b, tex_index(remap, s->ntexs, m0->bump == RTPI_BUMP_IMAGE, m0->bump_image));
         put_f32(&b, m0->bump_strength);
