@@ -58,10 +58,11 @@ extern "C" {
 
 /* Before 1.0 a minor version may add fields at the end of the public
    structs (0.2: rtp_trace_stats.capped_rays, rtp_eval_options.memory_limit,
-   rtp_eval_stats.capped_rays and camera_moved): a program compares
-   rtp_version_number() with the RTP_VERSION_NUMBER it was built with. */
+   rtp_eval_stats.capped_rays and camera_moved; 0.3:
+   rtp_eval_stats.stale_samples): a program compares rtp_version_number()
+   with the RTP_VERSION_NUMBER it was built with. */
 #define RTP_VERSION_MAJOR 0
-#define RTP_VERSION_MINOR 2
+#define RTP_VERSION_MINOR 3
 #define RTP_VERSION_PATCH 0
 #define RTP_VERSION_NUMBER \
     (RTP_VERSION_MAJOR * 10000 + RTP_VERSION_MINOR * 100 + RTP_VERSION_PATCH)
