@@ -692,12 +692,13 @@ static void dc_windows_some(const rtp_scene *s, const unsigned char *sel, unsign
        margin of 1e-6 of the light's coordinates made a light at 1e8 see
        a scene of size 2 in 1% of each face's cells, and its moves 8-16x
        slower (balls_s2). */
-    S = dc_scale(s, light);
     {
         double SL = fmax(fabs(L[0]), fmax(fabs(L[1]), fabs(L[2]))), SG = 0.0;
         for (k = 0; k < 3; k++)
             SG = fmax(SG, fmax(fabs(lo[k]), fabs(hi[k])));
         g = 1e-6 * SG + 1e-12 * SL + 1e-30;
+        S = fmax(SL, SG); /* (the bounds' and the light's: no pass over the
+                             primitives again, as dc_scale makes) */
     }
     for (k = 0; k < 3; k++) {
         lo[k] -= g;
