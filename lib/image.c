@@ -673,6 +673,9 @@ typedef struct reader {
     FILE *f;
     const char *name;
     rtp_error *err;
+    /* a regular file's size in bytes (rtp_image_read), or -1 (a stream,
+       which may hold more after the image) */
+    long long size;
 } reader;
 
 /* A format error in the file being read. */
@@ -929,10 +932,23 @@ static rtp_status read_pfm(const reader *r, int grey,
         return ended(r, "header");
     if (parse_scale(tok, &little) != 0)
         return BAD(r, "PFM: the scale \"%s\" is not a nonzero number", tok);
+    nin = grey ? (size_t)w : 3 * (size_t)w;
+    if (c == '\r' && r->size >= 0) {
+        /* A header written with CRLF line ends (a text-mode writer on
+           Windows): the '\n' after the '\r' is the header's when the file
+           holds exactly one byte more than the header and pixels.  (A
+           stream cannot tell it from a first pixel byte 0x0a, and keeps
+           to the format's single whitespace character.) */
+        long pos = ftell(r->f);
+        int d = getc(r->f);
+        if (!(d == '\n' && pos >= 0 &&
+              r->size - pos == 1 + (long long)nin * 4 * (long long)h) &&
+            d != EOF)
+            ungetc(d, r->f);
+    }
     if (image_shell(w, h, alloc, &img) != RTP_OK)
         return out_of_memory(r);
     n = row_floats(img);
-    nin = grey ? (size_t)w : n;
     buf = (unsigned char *)rtpi_malloc_array(&img->alloc, nin, 4);
     if (!buf) {
         st = out_of_memory(r);
@@ -967,6 +983,19 @@ static rtp_status read_pfm(const reader *r, int grey,
                 row[3 * i] = row[3 * i + 1] = row[3 * i + 2] = v;
             else
                 row[i] = v;
+        }
+    }
+    if (r->size >= 0) {
+        /* A file's header tells its length: bytes beyond it mean the
+           header does not describe the data ("Pf" over colour pixels, a
+           wrong size), and the image read would be wrong silently.  (A
+           stream may carry the next image: --stream writes them so.) */
+        long pos = ftell(r->f);
+        if (pos >= 0 && r->size > pos) {
+            st = BAD(r, "PFM: %lld bytes after the pixel data: the header (%s %dx%d) "
+                        "does not describe the data",
+                     r->size - pos, grey ? "Pf, grey" : "PF, colour", w, h);
+            goto done;
         }
     }
     for (y = 0; y < h / 2; y++) {
@@ -1158,7 +1187,7 @@ static rtp_status read_png(const reader *r, const rtp_allocator *alloc,
 static const unsigned char png_signature[8] = {0x89, 'P',  'N',  'G',
                                                '\r', '\n', 0x1a, '\n'};
 
-static rtp_status read_from(FILE *f, const char *name,
+static rtp_status read_from(FILE *f, const char *name, long long size,
                             const rtp_allocator *alloc, rtp_image **out,
                             rtp_error *err)
 {
@@ -1168,6 +1197,7 @@ static rtp_status read_from(FILE *f, const char *name,
     r.f = f;
     r.name = name;
     r.err = err;
+    r.size = size;
     errno = 0;
     got = fread(sig, 1, 2, f);
     if (got < 2) {
@@ -1214,7 +1244,7 @@ rtp_status rtp_image_read_stream(FILE *stream, const char *name,
     if (!stream)
         return rtpi_error(err, RTP_ERR_ARGUMENT, name, 0, 0,
                           "no stream to read from");
-    return read_from(stream, name ? name : "<stream>", alloc, out, err);
+    return read_from(stream, name ? name : "<stream>", -1, alloc, out, err);
 }
 
 rtp_status rtp_image_read(const char *path, const rtp_allocator *alloc,
@@ -1230,12 +1260,19 @@ rtp_status rtp_image_read(const char *path, const rtp_allocator *alloc,
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
                           "no image file name");
     if (strcmp(path, "-") == 0)
-        return read_from(stdin, "<stdin>", alloc, out, err);
+        return read_from(stdin, "<stdin>", -1, alloc, out, err);
     f = fopen(path, "rb");
     if (!f)
         return rtpi_error(err, RTP_ERR_IO, path, 0, 0, "cannot open: %s",
                           strerror(errno));
-    st = read_from(f, path, alloc, out, err);
+    {
+        /* a regular file's size, for PFM's checks (read_pfm) */
+        struct stat sb;
+        long long size = fstat(fileno(f), &sb) == 0 && S_ISREG(sb.st_mode)
+                             ? (long long)sb.st_size
+                             : -1;
+        st = read_from(f, path, size, alloc, out, err);
+    }
     fclose(f);
     return st;
 }

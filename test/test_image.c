@@ -466,6 +466,62 @@ static void test_pfm_layout(void)
     rtp_image_destroy(back);
 }
 
+/* A PFM file's length is the header's: a CRLF header is read as its
+   writer meant (the '\n' a header byte, not a pixel's), bytes beyond the
+   pixels are an error naming the header ("Pf" over colour data read a
+   third of it silently before), and a stream may go on past the image. */
+static void test_pfm_file_length(void)
+{
+    unsigned char file[128];
+    rtp_image *back = NULL;
+    rtp_error err;
+    size_t h, i;
+    FILE *f;
+
+    h = (size_t)sprintf((char *)file, "PF\r\n2 1\r\n-1.0\r\n");
+    for (i = 0; i < 6; i++)
+        put_le(file + h + 4 * i, 0.125f * (float)(i + 1));
+    CHECK(read_mem(file, h + 24, &back, &err) == RTP_OK);
+    CHECK(back && back->pixels[0] == 0.125f && back->pixels[5] == 0.75f);
+    rtp_image_destroy(back);
+    back = NULL;
+    /* a first pixel byte 0x0a after a lone '\r' is the pixel's */
+    h = (size_t)sprintf((char *)file, "PF\n1 1\n-1.0\r");
+    memcpy(file + h, "\n\0\x80\x3e", 4);
+    put_le(file + h + 4, 2.0f);
+    put_le(file + h + 8, 3.0f);
+    CHECK(read_mem(file, h + 12, &back, &err) == RTP_OK);
+    if (back) {
+        float v;
+        uint32_t u = 0x3e80000au;
+        memcpy(&v, &u, 4);
+        CHECK(back->pixels[0] == v && back->pixels[2] == 3.0f);
+    }
+    rtp_image_destroy(back);
+    back = NULL;
+
+    h = (size_t)sprintf((char *)file, "Pf\n2 1\n-1.0\n");
+    for (i = 0; i < 6; i++)
+        put_le(file + h + 4 * i, 0.5f);
+    CHECK(read_mem(file, h + 24, &back, &err) == RTP_ERR_FORMAT);
+    CHECK(!back && strstr(err.message, "16 bytes after the pixel data") &&
+          strstr(err.message, "Pf"));
+    h = (size_t)sprintf((char *)file, "PF\n2 1\n-1.0\n");
+    for (i = 0; i < 12; i++)
+        put_le(file + h + 4 * i, 0.5f);
+    CHECK(read_mem(file, h + 48, &back, &err) == RTP_ERR_FORMAT);
+    CHECK(!back && strstr(err.message, "24 bytes after"));
+    /* a stream: the image, and the rest left for the next read */
+    f = fopen(tpath("mem.bin"), "rb");
+    CHECK(f != NULL);
+    if (f) {
+        CHECK(rtp_image_read_stream(f, "s", NULL, &back, &err) == RTP_OK);
+        CHECK(back && back->width == 2 && getc(f) != EOF);
+        rtp_image_destroy(back);
+        fclose(f);
+    }
+}
+
 static void test_ppm(void)
 {
     rtp_image *img = make_test_image(9, 4), *back = NULL;
@@ -1183,6 +1239,7 @@ int main(void)
     RUN(test_format_from_path);
     RUN(test_pfm_exact);
     RUN(test_pfm_layout);
+    RUN(test_pfm_file_length);
     RUN(test_ppm);
     RUN(test_png);
 #ifdef TEST_PNG
