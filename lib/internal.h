@@ -55,6 +55,14 @@ void rtpi_allocator_init(rtp_allocator *out, const rtp_allocator *in);
 /* ---------------------------------------------------------------- errors */
 
 /* Sets err (if not NULL) and returns status.  file may be NULL. */
+/* Numbers in scene files, keys and values are written with '.' whatever
+   the C library's LC_NUMERIC says: a host program may have set a locale
+   whose decimal point is ',' (setlocale(LC_ALL, "")), where strtod stops
+   at the '.' and printf writes ','.  rtpi_strtod is strtod reading '.',
+   rtpi_fmt_g is snprintf's "%.*g" writing '.' (util.c). */
+double rtpi_strtod(const char *s, char **end);
+void rtpi_fmt_g(char *out, size_t size, int prec, double v);
+
 rtp_status rtpi_error(rtp_error *err, rtp_status status, const char *file,
                       int line, int col, const char *fmt, ...)
 #if defined(__GNUC__)

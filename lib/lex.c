@@ -134,7 +134,7 @@ int rtpi_tok_number(const rtpi_tok *t, double *out)
         buf[i] = c;
     }
     buf[t->n] = '\0';
-    d = strtod(buf, &end);
+    d = rtpi_strtod(buf, &end);
     if (end != buf + t->n || !isfinite(d))
         return -1;
     *out = d;

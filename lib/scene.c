@@ -379,7 +379,7 @@ static int parse_numbers(const char *v, double *out, int max)
         while (*v == ' ' || *v == '\t')
             v++;
         errno = 0;
-        d = strtod(v, &end);
+        d = rtpi_strtod(v, &end);
         /* values are stored as floats (colours, coefficients): beyond
            float's range they would become infinite */
         if (end == v || errno == ERANGE || !isfinite(d) || fabs(d) > 3.4e38)
@@ -755,8 +755,8 @@ static void put_num(char *out, size_t size, size_t *at, double v, int is_float, 
     int prec;
     for (prec = is_float ? 6 : 15; prec <= 17; prec++) {
         double back;
-        snprintf(tmp, sizeof tmp, "%.*g", prec, v);
-        back = strtod(tmp, NULL);
+        rtpi_fmt_g(tmp, sizeof tmp, prec, v);
+        back = rtpi_strtod(tmp, NULL);
         if (is_float ? (float)back == (float)v : back == v)
             break;
     }

@@ -5,6 +5,7 @@
 #include "internal.h"
 
 #include <errno.h>
+#include <langinfo.h>
 #include <stdarg.h>
 #include <sys/stat.h>
 #include <stdio.h>
@@ -555,4 +556,66 @@ int rtpi_locked_alloc_init(rtpi_locked_alloc *l, const rtp_allocator *inner)
 void rtpi_locked_alloc_destroy(rtpi_locked_alloc *l)
 {
     rtpi_mutex_destroy(&l->m);
+}
+
+/* ------------------------------------------------------------ numbers */
+
+/* The current decimal point when it is not ".", else NULL.  nl_langinfo
+   follows the thread's locale (uselocale) as strtod and printf do, and
+   unlike localeconv writes no shared state. */
+static const char *other_point(void)
+{
+    const char *dp = nl_langinfo(RADIXCHAR);
+    return dp && *dp && strcmp(dp, ".") != 0 ? dp : NULL;
+}
+
+double rtpi_strtod(const char *s, char **end)
+{
+    const char *dp = other_point(), *dot;
+    char buf[512], *e;
+    size_t n, dl, at, used;
+    double d;
+    if (!dp)
+        return strtod(s, end);
+    /* A copy of the number's characters, its '.' the locale's point; the
+       copy ends where they do, so that strtod never meets the locale's
+       point in s ("1,5" is two numbers in a key's value, not 1.5).  A
+       number longer than any float needs is cut at the buffer. */
+    for (n = 0; n < sizeof buf - 8 && s[n] && strchr("0123456789+-.eExXpPaAbBcCdDfFiInNtTyY", s[n]);
+         n++)
+        ;
+    dot = (const char *)memchr(s, '.', n);
+    dl = strlen(dp);
+    if (dl > 7)
+        dl = 7; /* (no locale has one that long) */
+    at = dot ? (size_t)(dot - s) : n;
+    memcpy(buf, s, at);
+    if (dot) {
+        memcpy(buf + at, dp, dl);
+        memcpy(buf + at + dl, dot + 1, n - at - 1);
+        buf[n - 1 + dl] = '\0';
+    } else {
+        buf[n] = '\0';
+    }
+    d = strtod(buf, &e);
+    used = (size_t)(e - buf);
+    /* back to s's characters: the point took dl bytes for one */
+    if (dot && used > at)
+        used -= dl - 1;
+    if (end)
+        *end = (char *)(uintptr_t)(s + used);
+    return d;
+}
+
+void rtpi_fmt_g(char *out, size_t size, int prec, double v)
+{
+    const char *dp;
+    char *p;
+    snprintf(out, size, "%.*g", prec, v);
+    dp = other_point();
+    if (dp && (p = strstr(out, dp)) != NULL) {
+        size_t dl = strlen(dp);
+        *p = '.';
+        memmove(p + 1, p + dl, strlen(p + dl) + 1);
+    }
 }

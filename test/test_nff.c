@@ -6,6 +6,7 @@
 
 #include <stdio.h>
 #include <stdlib.h>
+#include <locale.h>
 #include <string.h>
 #include <unistd.h>
 
@@ -811,6 +812,53 @@ static void test_spd_gears_triangulation(void)
     CHECK(polys == 1169);
 }
 
+/* A host program's locale whose decimal point is ',' (setlocale(LC_ALL,
+   "") in a GUI) must not change how scene files and key values read, nor
+   how rtp_scene_get writes: '.' always.  Before, strtod followed the
+   locale: "0.5" was a parse error and get wrote "1,0,5,0". */
+static void test_numbers_whatever_the_locale(void)
+{
+    static const char *const names[] = {"de_DE.UTF-8", "de_DE.utf8", "fr_FR.UTF-8",
+                                        "fr_FR.utf8", "de_DE", "fr_FR"};
+    static const char text[] = "v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 40.5\n"
+                               "hither 0.25\nresolution 8 8\nl 1.5 -2.25 3e1\n"
+                               "f 1 0.5 0 0.75 0.125 20.5 0 1.5\ns 0 0 0 .5\n";
+    rtp_scene *sc = NULL;
+    rtp_error err;
+    char buf[128], saved[128];
+    const char *old = setlocale(LC_NUMERIC, NULL);
+    size_t i;
+    snprintf(saved, sizeof saved, "%s", old ? old : "C");
+    for (i = 0; i < sizeof names / sizeof *names; i++)
+        if (setlocale(LC_NUMERIC, names[i]))
+            break;
+    if (i == sizeof names / sizeof *names)
+        SKIP("no locale with a decimal comma installed (de_DE.UTF-8: .ci/run makes one)");
+    snprintf(buf, sizeof buf, "%.1f", 1.5);
+    CHECK(strcmp(buf, "1,5") == 0); /* the locale does what the test needs */
+    CHECK(rtp_scene_load_memory(text, sizeof text - 1, "loc.nff", "nff", NULL, &sc, &err) == RTP_OK);
+    if (sc) {
+        CHECK(rtp_scene_get(sc, "mat.0.color", buf, sizeof buf, &err) == RTP_OK &&
+              strcmp(buf, "1,0.5,0") == 0);
+        CHECK(rtp_scene_get(sc, "light.0.pos", buf, sizeof buf, &err) == RTP_OK &&
+              strcmp(buf, "1.5,-2.25,30") == 0);
+        CHECK(rtp_scene_get(sc, "camera.angle", buf, sizeof buf, &err) == RTP_OK &&
+              strcmp(buf, "40.5") == 0);
+        CHECK(rtp_scene_get(sc, "mat.0.ior", buf, sizeof buf, &err) == RTP_OK &&
+              strcmp(buf, "1.5") == 0);
+        CHECK(rtp_scene_set(sc, "mat.0.color", "0.25,0.5,1", &err) == RTP_OK);
+        CHECK(rtp_scene_get(sc, "mat.0.color", buf, sizeof buf, &err) == RTP_OK &&
+              strcmp(buf, "0.25,0.5,1") == 0);
+        /* "1,5" is still two numbers, not one and a half */
+        CHECK(rtp_scene_set(sc, "mat.0.kd", "1,5", &err) != RTP_OK);
+        CHECK(rtp_scene_set(sc, "light.0.pos", "1,5,2.5e-1", &err) == RTP_OK);
+        CHECK(rtp_scene_get(sc, "light.0.pos", buf, sizeof buf, &err) == RTP_OK &&
+              strcmp(buf, "1,5,0.25") == 0);
+    }
+    rtp_scene_destroy(sc);
+    setlocale(LC_NUMERIC, saved);
+}
+
 int main(void)
 {
     RUN(test_every_keyword);
@@ -823,6 +871,7 @@ int main(void)
     RUN(test_bad_inputs);
     RUN(test_truncation);
     RUN(test_mutations);
+    RUN(test_numbers_whatever_the_locale);
     RUN(test_project_scenes);
     RUN(test_teapot_scene);
     RUN(test_spd_scenes);
