@@ -66,10 +66,19 @@ $(BUILD)/librtp.a: $(LIB_OBJ)
 	@$(if $(Q),echo "  AR      $@")
 	$(Q)rm -f $@ && ar rcs $@ $^
 
-$(BUILD)/librtp.so: $(LIB_PIC)
+# The shared library's soname changes whenever its ABI may: before 1.0 a
+# minor version may add fields to the public structs (rtp.h), so a program
+# built against 0.2 must not load 0.3, which would write a larger
+# rtp_eval_stats than the program made room for: librtp.so.0.MINOR; from
+# 1.0 on librtp.so.MAJOR.
+VMAJOR := $(shell sed -nE 's/^\#define RTP_VERSION_MAJOR ([0-9]+).*/\1/p' include/rtp.h)
+VMINOR := $(shell sed -nE 's/^\#define RTP_VERSION_MINOR ([0-9]+).*/\1/p' include/rtp.h)
+SONAME := librtp.so.$(if $(filter 0,$(VMAJOR)),0.$(VMINOR),$(VMAJOR))
+
+$(BUILD)/librtp.so: $(LIB_PIC) include/rtp.h
 	@$(if $(Q),echo "  LD      $@")
-	$(Q)$(CC) -shared -Wl,-soname,librtp.so.0 $(LDFLAGS) $^ -o $@ $(LIBS)
-	$(Q)ln -sf librtp.so $(BUILD)/librtp.so.0 # (its soname: a program linked here runs here)
+	$(Q)$(CC) -shared -Wl,-soname,$(SONAME) $(LDFLAGS) $(LIB_PIC) -o $@ $(LIBS)
+	$(Q)ln -sf librtp.so $(BUILD)/$(SONAME) # (its soname: a program linked here runs here)
 
 # ./rtp is one file for every BUILD (make asan links it with ASan, for the
 # CLI tests): .rtp-flavour holds how it was last linked, so that the next
@@ -124,17 +133,19 @@ VERSION = $(shell sed -nE 's/^\#define RTP_VERSION_(MAJOR|MINOR|PATCH) ([0-9]+).
 
 install: all
 	install -d $(DESTDIR)$(PREFIX)/lib/pkgconfig $(DESTDIR)$(PREFIX)/include $(DESTDIR)$(PREFIX)/bin
-	sed -e 's|@PREFIX@|$(PREFIX)|' -e 's|@VERSION@|$(VERSION)|' -e 's|@LIBS@|$(LIBS)|' lib/rtp.pc.in > $(DESTDIR)$(PREFIX)/lib/pkgconfig/rtp.pc
+	sed -e 's|@PREFIX@|$(PREFIX)|' -e 's|@VERSION@|$(VERSION)|' \
+	    -e 's|@REQUIRES@|$(if $(PNG_LIBS),libpng)|' -e 's|@LIBS@|$(THREAD_LIBS) $(OSMESA_LIBS) -lm|' \
+	    lib/rtp.pc.in > $(DESTDIR)$(PREFIX)/lib/pkgconfig/rtp.pc
 	install -m 644 $(BUILD)/librtp.a $(DESTDIR)$(PREFIX)/lib/
-	install -m 755 $(BUILD)/librtp.so $(DESTDIR)$(PREFIX)/lib/librtp.so.0
-	ln -sf librtp.so.0 $(DESTDIR)$(PREFIX)/lib/librtp.so
+	install -m 755 $(BUILD)/librtp.so $(DESTDIR)$(PREFIX)/lib/$(SONAME)
+	ln -sf $(SONAME) $(DESTDIR)$(PREFIX)/lib/librtp.so
 	install -m 644 include/rtp.h $(DESTDIR)$(PREFIX)/include/
 	install -m 755 rtp $(DESTDIR)$(PREFIX)/bin/
 
 uninstall:
 	rm -f $(DESTDIR)$(PREFIX)/lib/librtp.a $(DESTDIR)$(PREFIX)/lib/librtp.so \
 	      $(DESTDIR)$(PREFIX)/lib/pkgconfig/rtp.pc \
-	      $(DESTDIR)$(PREFIX)/lib/librtp.so.0 $(DESTDIR)$(PREFIX)/include/rtp.h \
+	      $(DESTDIR)$(PREFIX)/lib/$(SONAME) $(DESTDIR)$(PREFIX)/include/rtp.h \
 	      $(DESTDIR)$(PREFIX)/bin/rtp
 
 clean:

@@ -13,7 +13,12 @@ CC=${CC:-cc}
 if make -s install BUILD="${RTP_BUILD:-build}" ${RTP_CFLAGS:+CFLAGS="$RTP_CFLAGS"} \
         ${RTP_LDFLAGS:+LDFLAGS="$RTP_LDFLAGS"} DESTDIR="$T/stage" PREFIX=/opt/rtp >"$T/log" 2>&1; then ok
 else bad "make install"; cat "$T/log" >&2; fi
-for f in lib/librtp.a lib/librtp.so lib/librtp.so.0 include/rtp.h bin/rtp lib/pkgconfig/rtp.pc; do
+# the soname: librtp.so.0.MINOR before 1.0 (a minor version may grow the
+# public structs), librtp.so.MAJOR after
+maj=$(sed -nE 's/^#define RTP_VERSION_MAJOR ([0-9]+).*/\1/p' include/rtp.h)
+min=$(sed -nE 's/^#define RTP_VERSION_MINOR ([0-9]+).*/\1/p' include/rtp.h)
+if [ "$maj" = 0 ]; then soname=librtp.so.0.$min; else soname=librtp.so.$maj; fi
+for f in lib/librtp.a lib/librtp.so lib/$soname include/rtp.h bin/rtp lib/pkgconfig/rtp.pc; do
     [ -e "$T/stage/opt/rtp/$f" ] && ok || bad "not installed: $f"
 done
 
@@ -38,6 +43,20 @@ if command -v pkg-config >/dev/null 2>&1; then
            "$T/stage/opt/rtp/lib/librtp.a" $(pkg-config --static --libs rtp | sed 's/-lrtp//') 2>"$T/err"; then
         "$T/prog" >"$T/out" && grep -q "4x3" "$T/out" && ok || bad "static program run"
     else bad "build against installed static library"; cat "$T/err" >&2; fi
+    # fully static, as pkg-config gives it: libpng's own needs (zlib) come
+    # through Requires.private (a bare -lpng16 in Libs.private left
+    # deflate undefined); not with sanitizers, nor without static libpng
+    pngs=$($CC -print-file-name=libpng16.a 2>/dev/null)
+    if [ -n "${RTP_CFLAGS##*-fsanitize*}" ] || [ -z "$RTP_CFLAGS" ]; then
+        if [ -f "$pngs" ] || ! pkg-config --print-requires-private rtp | grep -q libpng; then
+            if $CC -std=c99 -static -o "$T/prog_static" "$T/prog.c" $(pkg-config --cflags rtp) \
+                   $(pkg-config --static --libs rtp) 2>"$T/err"; then
+                "$T/prog_static" >"$T/out" && grep -q "4x3" "$T/out" && ok || bad "fully static program run"
+            else bad "fully static link with pkg-config --static --libs rtp"; cat "$T/err" >&2; fi
+        else
+            echo "skip: no static libpng (libpng16.a): fully static link not tried" >&2; skip=$((skip + 1))
+        fi
+    fi
     if $CC -std=c99 $RTP_CFLAGS $RTP_LDFLAGS -o "$T/prog_so" "$T/prog.c" $(pkg-config --cflags --libs rtp) 2>"$T/err"; then
         LD_LIBRARY_PATH="$T/stage/opt/rtp/lib" "$T/prog_so" >"$T/out" && grep -q "4x3" "$T/out" && ok || bad "shared program run"
     else bad "build against installed shared library"; cat "$T/err" >&2; fi
