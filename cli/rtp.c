@@ -1588,6 +1588,7 @@ static int cmd_merge(int argc, char **argv)
     const char **in = (const char **)calloc((size_t)argc + 1, sizeof *in);
     rtp_tree **parts = NULL, *joined = NULL;
     rtp_image *img = NULL;
+    unsigned char *covered = NULL;
     rtp_error err;
     memset(&err, 0, sizeof err);
     if (!in) {
@@ -1647,15 +1648,20 @@ static int cmd_merge(int argc, char **argv)
             fail_err(&err);
             goto out;
         }
-        /* NaN marks what no region has covered yet */
-        for (i = 0; i < fw * fh * 3; i++)
-            img->pixels[i] = NAN;
+        /* what the regions have covered so far (a region's own pixels may
+           be anything, NaN too) */
+        covered = (unsigned char *)calloc((size_t)fw * (size_t)fh, 1);
+        if (!covered) {
+            msg("out of memory");
+            goto out;
+        }
         for (i = 0; i < n; i++) {
             char path[4096];
             const char *at = strrchr(in[i], '@');
             rtp_image *part = NULL;
-            size_t pl = (size_t)(at - in[i]);
-            if (!at || pl >= sizeof path || sscanf(at + 1, "%d,%d", &x0, &y0) != 2) {
+            size_t pl;
+            if (!at || (pl = (size_t)(at - in[i])) >= sizeof path ||
+                sscanf(at + 1, "%d,%d", &x0, &y0) != 2) {
                 msg("merge: %s: expected IMAGE@X,Y", in[i]);
                 goto out;
             }
@@ -1673,13 +1679,15 @@ static int cmd_merge(int argc, char **argv)
             }
             for (y = 0; y < part->height; y++)
                 for (x = 0; x < part->width; x++) {
-                    float *d = img->pixels + 3 * ((size_t)(y0 + y) * fw + (size_t)(x0 + x));
+                    size_t k = (size_t)(y0 + y) * (size_t)fw + (size_t)(x0 + x);
+                    float *d = img->pixels + 3 * k;
                     const float *sp = part->pixels + 3 * ((size_t)y * part->width + x);
-                    if (!isnan(d[0])) {
+                    if (covered[k]) {
                         msg("merge: %s overlaps another region at %d,%d", path, x0 + x, y0 + y);
                         rtp_image_destroy(part);
                         goto out;
                     }
+                    covered[k] = 1;
                     d[0] = sp[0];
                     d[1] = sp[1];
                     d[2] = sp[2];
@@ -1687,7 +1695,7 @@ static int cmd_merge(int argc, char **argv)
             rtp_image_destroy(part);
         }
         for (i = 0; i < fw * fh; i++)
-            if (isnan(img->pixels[3 * i])) {
+            if (!covered[i]) {
                 msg("merge: pixel %d,%d is in no region", i % fw, i / fw);
                 goto out;
             }
@@ -1731,6 +1739,7 @@ out:
     free(parts);
     rtp_tree_destroy(joined);
     rtp_image_destroy(img);
+    free(covered);
     free(in);
     return rc;
 usage:

@@ -300,8 +300,11 @@ rtp_status rtp_tree_add_light(rtp_tree *t, const double pos[3], rtp_error *err)
     size_t cap0;
     if (!t || !pos)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_add_light: NULL argument");
-    if (!isfinite(pos[0]) || !isfinite(pos[1]) || !isfinite(pos[2]))
-        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "light position must be finite");
+    /* the range a key's value has (rtp_scene_set), so that the position
+       rtp_scene_get gives back can be set again */
+    if (!(fabs(pos[0]) <= 3.4e38 && fabs(pos[1]) <= 3.4e38 && fabs(pos[2]) <= 3.4e38))
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                          "light position must be finite, |x| <= 3.4e38");
     s = t->scene;
     cap0 = s->nlights;
     if (rtpi_grow(&t->alloc, (void **)&t->lights0, &cap0, s->nlights + 1, sizeof *t->lights0))

@@ -55,6 +55,18 @@ $RTP merge -o "$T/x.rtp" "$T/p1.rtp" "$T/p2.rtp" 2>"$T/err"
 [ $? -eq 1 ] && grep -q overlap "$T/err" && ok || bad "overlap not refused"
 $RTP merge -o "$T/x.rtp" "$T/p1.rtp" 2>"$T/err"
 [ $? -eq 1 ] && grep -q uncovered "$T/err" && ok || bad "gap not refused"
+# image regions holding NaN (a region's pixels may be anything) merge as
+# they are, and an overlap on a NaN pixel is still found (NaN once marked
+# "not covered yet")
+printf 'PF\n2 1\n-1.0\n' >"$T/nan.pfm"
+printf '\000\000\300\177\000\000\000\000\000\000\000\000\000\000\200\077\000\000\200\077\000\000\200\077' >>"$T/nan.pfm"
+tail -c 24 "$T/nan.pfm" >"$T/row"
+cat "$T/row" "$T/row" >"$T/rows"
+$RTP merge -i "$T/mnan.pfm" --size 2x2 "$T/nan.pfm@0,0" "$T/nan.pfm@0,1" 2>"$T/err" &&
+    tail -c 48 "$T/mnan.pfm" | cmp -s - "$T/rows" &&
+    ok || bad "merge of regions holding NaN: $(cat "$T/err")"
+$RTP merge -i "$T/mnan.pfm" --size 2x2 "$T/nan.pfm@0,0" "$T/nan.pfm@0,0" "$T/nan.pfm@0,1" 2>"$T/err"
+[ $? -eq 1 ] && grep -q overlaps "$T/err" && ok || bad "overlap on a NaN pixel not found"
 $RTP trace $S --size 32x32 --region 0,0,99,9 -i "$T/p3.pfm" -q 2>/dev/null
 [ $? -eq 1 ] && ok || bad "region outside the frame accepted"
 

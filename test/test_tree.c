@@ -1752,6 +1752,15 @@ static void test_moves_rest(void)
         const double p[3] = {(double)i - 2.0, -4.0, 6.0};
         CHECK(rtp_tree_add_light(t, p, NULL) == RTP_OK);
     }
+    /* a position a key could not take back (rtp_scene_get then gave
+       1e+300,0,5, which rtp_scene_set refuses) is refused here too */
+    if (t) {
+        const double far[3] = {1e300, 0.0, 5.0}, inf[3] = {0.0, INFINITY, 5.0};
+        size_t nl = rtp_tree_scene(t)->nlights;
+        CHECK(rtp_tree_add_light(t, far, NULL) == RTP_ERR_ARGUMENT);
+        CHECK(rtp_tree_add_light(t, inf, NULL) == RTP_ERR_ARGUMENT);
+        CHECK(rtp_tree_scene(t)->nlights == nl);
+    }
     if (t && re) {
         rtp_image *full = NULL;
         rtp_diff_stats d;
