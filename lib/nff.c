@@ -32,6 +32,7 @@ typedef struct nff {
     int named_kind;   /* 'f' or 'l': what `name` applies to; 0 none */
     size_t named_index;
     rtpi_nff_stats *st;
+    rtpi_mtl_reg *mtl; /* the MTL files the load's OBJ includes read */
     double *pts;      /* polygon scratch: xyz (and normals for pp) */
     size_t cap_pts;
     uint32_t *tri;
@@ -758,8 +759,8 @@ static rtp_status read_include(nff *c, const rtpi_tok *kw, int bezier)
         st = rtpi_read_bpt(c->s, text, size, path, (int)div, any ? m : NULL,
                            c->mat, c->err);
     } else if (is_obj) {
-        st = rtpi_read_obj_ex(c->s, text, size, path, any ? m : NULL, c->mat,
-                              NULL, c->err);
+        st = rtpi_read_obj_reg(c->s, text, size, path, any ? m : NULL, c->mat,
+                               NULL, c->mtl, c->err);
     } else {
         nff child;
         memset(&child, 0, sizeof child);
@@ -768,6 +769,7 @@ static rtp_status read_include(nff *c, const rtpi_tok *kw, int bezier)
         child.depth = c->depth + 1;
         child.mat = c->mat;
         child.st = c->st;
+        child.mtl = c->mtl;
         rtpi_lex_init(&child.lx, text, size, path, c->err);
         st = parse(&child);
         /* name and off after the include apply to the last f or l read,
@@ -897,7 +899,10 @@ rtp_status rtpi_read_nff_stats(rtp_scene *s, const char *text, size_t size,
     nff c;
     rtp_status st;
     size_t t0 = s->ntris, s0 = s->nspheres, c0 = s->ncones, i;
+    rtpi_mtl_reg mtl;
     memset(&c, 0, sizeof c);
+    memset(&mtl, 0, sizeof mtl);
+    c.mtl = &mtl;
     if (stats)
         memset(stats, 0, sizeof *stats);
     c.s = s;
@@ -909,6 +914,7 @@ rtp_status rtpi_read_nff_stats(rtp_scene *s, const char *text, size_t size,
     st = parse(&c);
     rtpi_free(&s->alloc, c.pts);
     rtpi_free(&s->alloc, c.tri);
+    rtpi_mtl_reg_free(&mtl, &s->alloc);
     if (st != RTP_OK)
         return st;
     /* Objects before the first f line: a default material, appended last

@@ -34,6 +34,9 @@ typedef struct obj {
     size_t cap_crn;
     uint32_t *tri;
     size_t cap_tri;
+    uint32_t *own;   /* the materials this file's mtllibs named, first wins */
+    size_t nown, cap_own;
+    rtpi_mtl_reg *reg; /* the load's MTL files (never NULL while reading) */
 } obj;
 
 static rtp_status nomem(const rtpi_lex *lx, const rtpi_tok *t)
@@ -123,6 +126,54 @@ static long find_material(const rtp_scene *s, const char *name, size_t n)
     return -1;
 }
 
+/* The material of that name this OBJ file's mtllibs gave, or -1. */
+static long own_material(const obj *o, const char *name, size_t n)
+{
+    size_t i;
+    for (i = 0; i < o->nown; i++) {
+        const char *m = o->s->mats[o->own[i]].name;
+        if (m && strlen(m) == n && memcmp(m, name, n) == 0)
+            return (long)o->own[i];
+    }
+    return -1;
+}
+
+/* Which of the scene's materials named so a newmtl in MTL file `path` is
+   (an earlier read of the same file made it, or an NFF `name` did, to
+   override a mesh's material), or -1 for a new one: a material that
+   another MTL file made is another material of the same name. */
+static long mtl_existing(const obj *o, const char *path, const char *name, size_t n)
+{
+    const rtp_scene *s = o->s;
+    size_t i, k;
+    for (i = 0; i < s->nmats; i++) {
+        const char *m = s->mats[i].name;
+        int from_mtl = 0;
+        if (!m || strlen(m) != n || memcmp(m, name, n) != 0)
+            continue;
+        for (k = 0; k < o->reg->n; k++) {
+            const rtpi_mtl_seen *e = &o->reg->v[k];
+            if (i >= e->first && i < e->end) {
+                if (strcmp(e->path, path) == 0)
+                    return (long)i;
+                from_mtl = 1;
+            }
+        }
+        if (!from_mtl)
+            return (long)i;
+    }
+    return -1;
+}
+
+void rtpi_mtl_reg_free(rtpi_mtl_reg *r, const rtp_allocator *a)
+{
+    size_t i;
+    for (i = 0; i < r->n; i++)
+        rtpi_free(a, r->v[i].path);
+    rtpi_free(a, r->v);
+    memset(r, 0, sizeof *r);
+}
+
 /* ------------------------------------------------------------------ MTL */
 
 /* Whether t is word, letter case aside (exporters write map_Kd, map_kd,
@@ -148,10 +199,42 @@ static int file_exists(const char *path)
 
 #define MAP_TOKENS 64 /* words on a map line: options and the name */
 
+/* Where the file name begins on a map line of n words (at least 1): past
+   MTL's options and their arguments (-o, -s and -t take one to three
+   numbers; -mm two; the others one).  An unknown option is taken to have
+   none, and *unknown set.  The name is at least the last word. */
+static int map_name_start(const rtpi_tok *tk, int n, int *unknown)
+{
+    static const char *const one[] = {"-blendu", "-blendv", "-bm", "-boost", "-cc",
+                                      "-clamp", "-imfchan", "-texres", "-type"};
+    int i = 0;
+    *unknown = 0;
+    while (i < n - 1 && tk[i].s[0] == '-') {
+        const rtpi_tok *o = &tk[i++];
+        size_t k;
+        if (rtpi_tok_is(o, "-o") || rtpi_tok_is(o, "-s") || rtpi_tok_is(o, "-t")) {
+            double d;
+            for (k = 0; k < 3 && i < n - 1 && rtpi_tok_number(&tk[i], &d) == 0; k++)
+                i++;
+        } else if (rtpi_tok_is(o, "-mm")) {
+            i += 2;
+        } else {
+            for (k = 0; k < sizeof one / sizeof *one; k++)
+                if (rtpi_tok_is(o, one[k]))
+                    break;
+            if (k < sizeof one / sizeof *one)
+                i++;
+            else
+                *unknown = 1;
+        }
+    }
+    return i < n ? i : n - 1;
+}
+
 /* map_Kd / bump: options (-name args...) then the file name, which may
    hold spaces (Blender writes them unquoted): the longest run of the
-   line's last words that names a file, else its last word (whose error
-   then names it); -bm gives bump strength.  @return the image index via
+   line's last words that names a file, else the name past the options
+   (map_name_start), whose error then names it; -bm gives bump strength.  @return the image index via
    *index. */
 static rtp_status mtl_map(rtpi_lex *lx, rtp_scene *s, const char *what,
                           uint32_t *index, double *bm)
@@ -160,7 +243,7 @@ static rtp_status mtl_map(rtpi_lex *lx, rtp_scene *s, const char *what,
     char *path = NULL;
     rtp_error inner;
     rtp_status st;
-    int n = 0, i, from;
+    int n = 0, i, from, start, unknown;
     while (rtpi_lex_next_inline(lx, &t)) {
         if (n == MAP_TOKENS)
             return rtpi_lex_error(lx, &t, "%s: more than %d words on the line", what,
@@ -170,8 +253,12 @@ static rtp_status mtl_map(rtpi_lex *lx, rtp_scene *s, const char *what,
     if (!n)
         return rtpi_lex_error(lx, &t, "unexpected end of line in %s, expected a file name",
                               what);
-    for (from = 0; from < n - 1; from++) {
-        /* (options come first: a name begins past them) */
+    /* The name is the rest of the line past the options (spaces and all:
+       "map_Kd my tex.png" is never "tex.png"); after an option this
+       reader does not know, whose arguments it cannot count, the longest
+       run of the last words that names a file. */
+    start = map_name_start(tk, n, &unknown);
+    for (from = start; from <= (unknown ? n - 1 : start); from++) {
         char *cand;
         file.s = tk[from].s;
         file.n = (size_t)(tk[n - 1].s + tk[n - 1].n - tk[from].s);
@@ -186,8 +273,10 @@ static rtp_status mtl_map(rtpi_lex *lx, rtp_scene *s, const char *what,
         rtpi_free(&s->alloc, cand);
     }
     if (!path) {
-        from = n - 1;
+        /* the error names the whole name */
+        from = start;
         file = tk[from];
+        file.n = (size_t)(tk[n - 1].s + tk[n - 1].n - tk[from].s);
         /* an option where the name should be: "bump -bm" lacks its
            number and its file, and "-bm" is no image to look for */
         if (file.s[0] == '-')
@@ -218,9 +307,18 @@ static rtp_status mtl_map(rtpi_lex *lx, rtp_scene *s, const char *what,
     return RTP_OK;
 }
 
-static rtp_status read_mtl(rtp_scene *s, const char *text, size_t size,
-                           const char *name, rtp_error *err)
+static int own_add(obj *o, uint32_t m)
 {
+    if (rtpi_grow(&o->s->alloc, (void **)&o->own, &o->cap_own, o->nown + 1, sizeof *o->own))
+        return -1;
+    o->own[o->nown++] = m;
+    return 0;
+}
+
+static rtp_status read_mtl(obj *o, const char *text, size_t size, const char *name)
+{
+    rtp_scene *s = o->s;
+    rtp_error *err = o->err;
     rtpi_lex lx;
     rtpi_tok kw;
     char show[48];
@@ -242,12 +340,20 @@ static rtp_status read_mtl(rtp_scene *s, const char *text, size_t size,
                 st = rtpi_lex_error(&lx, &nt, "material name longer than 255 characters");
                 break;
             }
-            /* A name the scene already has (an NFF material, or the same
-               MTL read twice) is that material: the first one wins. */
-            cur = find_material(s, nt.s, nt.n);
+            /* A name this OBJ's mtllibs gave already (the first wins), an
+               NFF material's, or one this MTL file made when read before
+               is that material; another MTL file's is not (mtl_existing) */
+            cur = own_material(o, nt.s, nt.n);
             skipping = cur >= 0;
             if (skipping)
                 continue;
+            cur = mtl_existing(o, name, nt.s, nt.n);
+            skipping = cur >= 0;
+            if (skipping) {
+                if (own_add(o, (uint32_t)cur) != 0)
+                    return nomem(&lx, &nt);
+                continue;
+            }
             nm = (char *)rtpi_malloc(&s->alloc, nt.n + 1);
             if (!nm)
                 return nomem(&lx, &nt);
@@ -260,6 +366,8 @@ static rtp_status read_mtl(rtp_scene *s, const char *text, size_t size,
                 rtpi_free(&s->alloc, nm);
                 return nomem(&lx, &nt);
             }
+            if (own_add(o, (uint32_t)cur) != 0)
+                return nomem(&lx, &nt);
             continue;
         }
         rtpi_tok head = kw; /* (its first 4 letters: map_ in any case) */
@@ -356,31 +464,69 @@ static rtp_status read_mtl(rtp_scene *s, const char *text, size_t size,
     return st;
 }
 
+/* One MTL file, `path` its name from the OBJ's folder; t its words. */
+static rtp_status read_one_mtl(obj *o, const rtpi_tok *t, char *path)
+{
+    char *text = NULL;
+    size_t size = 0;
+    rtp_error inner;
+    rtp_status st;
+    uint32_t first = (uint32_t)o->s->nmats;
+    memset(&inner, 0, sizeof inner);
+    st = rtpi_read_file(&o->s->alloc, path, &text, &size, &inner);
+    if (st != RTP_OK) {
+        rtpi_free(&o->s->alloc, path);
+        return rtpi_lex_wrap(&o->lx, t, st, &inner, "cannot read mtllib");
+    }
+    st = read_mtl(o, text, size, path);
+    rtpi_free(&o->s->alloc, text);
+    if (st == RTP_OK && o->s->nmats > first) {
+        rtpi_mtl_reg *r = o->reg;
+        if (rtpi_grow(&o->s->alloc, (void **)&r->v, &r->cap, r->n + 1, sizeof *r->v)) {
+            rtpi_free(&o->s->alloc, path);
+            return nomem(&o->lx, t);
+        }
+        r->v[r->n].path = path; /* the registry's now */
+        r->v[r->n].first = first;
+        r->v[r->n].end = (uint32_t)o->s->nmats;
+        r->n++;
+        return RTP_OK;
+    }
+    rtpi_free(&o->s->alloc, path);
+    return st;
+}
+
+/* mtllib FILE...: several names, or one holding spaces (Blender writes
+   the OBJ's own name unquoted: "mtllib my model.mtl"), read whole when
+   the whole rest of the line names a file. */
 static rtp_status read_mtllib(obj *o)
 {
-    rtpi_tok t;
+    rtpi_tok t, tk[MAP_TOKENS], whole;
     rtp_status st;
+    int n = 0, i;
+    char *path;
     while (rtpi_lex_next_inline(&o->lx, &t)) {
-        char *path = NULL;
-        char *text = NULL;
-        size_t size = 0;
-        rtp_error inner;
+        if (n == MAP_TOKENS)
+            return rtpi_lex_error(&o->lx, &t, "mtllib: more than %d words on the line",
+                                  MAP_TOKENS);
         /* A NUL would silently cut the name (the folder itself was read). */
         if (memchr(t.s, '\0', t.n))
             return rtpi_lex_error(&o->lx, &t, "mtllib: a file name must not contain a NUL byte");
-        path = rtpi_path_join(&o->s->alloc, o->lx.name, t.s, t.n);
-        if (!path)
-            return nomem(&o->lx, &t);
-        memset(&inner, 0, sizeof inner);
-        st = rtpi_read_file(&o->s->alloc, path, &text, &size, &inner);
-        if (st != RTP_OK) {
-            rtpi_free(&o->s->alloc, path);
-            return rtpi_lex_wrap(&o->lx, &t, st, &inner, "cannot read mtllib");
-        }
-        st = read_mtl(o->s, text, size, path, o->err);
-        rtpi_free(&o->s->alloc, text);
+        tk[n++] = t;
+    }
+    if (n > 1) {
+        whole = tk[0];
+        whole.n = (size_t)(tk[n - 1].s + tk[n - 1].n - tk[0].s);
+        if (!(path = rtpi_path_join(&o->s->alloc, o->lx.name, whole.s, whole.n)))
+            return nomem(&o->lx, &whole);
+        if (file_exists(path))
+            return read_one_mtl(o, &whole, path);
         rtpi_free(&o->s->alloc, path);
-        if (st != RTP_OK)
+    }
+    for (i = 0; i < n; i++) {
+        if (!(path = rtpi_path_join(&o->s->alloc, o->lx.name, tk[i].s, tk[i].n)))
+            return nomem(&o->lx, &tk[i]);
+        if ((st = read_one_mtl(o, &tk[i], path)) != RTP_OK)
             return st;
     }
     return RTP_OK;
@@ -575,7 +721,11 @@ static rtp_status read_usemtl(obj *o)
     rtp_status st = line_string(&o->lx, "usemtl", &t);
     if (st != RTP_OK)
         return st;
-    m = find_material(o->s, t.s, t.n);
+    /* this file's MTL's material first, then any of the name (an NFF
+       material's, or one an MTL read before gave) */
+    m = own_material(o, t.s, t.n);
+    if (m < 0)
+        m = find_material(o->s, t.s, t.n);
     if (m < 0)
         return rtpi_lex_error(&o->lx, &t,
                               "unknown material '%s' (no newmtl of that name in the mtllib files read so far)",
@@ -584,18 +734,21 @@ static rtp_status read_usemtl(obj *o)
     return RTP_OK;
 }
 
-rtp_status rtpi_read_obj_ex(rtp_scene *s, const char *text, size_t size,
-                            const char *name, const double *xform,
-                            uint32_t default_mat, size_t *faces,
-                            rtp_error *err)
+rtp_status rtpi_read_obj_reg(rtp_scene *s, const char *text, size_t size,
+                             const char *name, const double *xform,
+                             uint32_t default_mat, size_t *faces,
+                             rtpi_mtl_reg *reg, rtp_error *err)
 {
     obj o;
     rtpi_tok kw;
     char show[48];
     rtp_status st = RTP_OK;
+    rtpi_mtl_reg local;
     memset(&o, 0, sizeof o);
+    memset(&local, 0, sizeof local);
     o.s = s;
     o.err = err;
+    o.reg = reg ? reg : &local;
     rtpi_lex_init(&o.lx, text, size, name ? name : "<memory>", err);
     if (xform) {
         if (rtpi_xform_normal_matrix(xform, o.nm) != 0)
@@ -631,9 +784,19 @@ rtp_status rtpi_read_obj_ex(rtp_scene *s, const char *text, size_t size,
     rtpi_free(&s->alloc, o.pts);
     rtpi_free(&s->alloc, o.crn);
     rtpi_free(&s->alloc, o.tri);
+    rtpi_free(&s->alloc, o.own);
+    rtpi_mtl_reg_free(&local, &s->alloc);
     if (faces)
         *faces = o.faces;
     return st;
+}
+
+rtp_status rtpi_read_obj_ex(rtp_scene *s, const char *text, size_t size,
+                            const char *name, const double *xform,
+                            uint32_t default_mat, size_t *faces,
+                            rtp_error *err)
+{
+    return rtpi_read_obj_reg(s, text, size, name, xform, default_mat, faces, NULL, err);
 }
 
 rtp_status rtpi_read_obj(rtp_scene *s, const char *text, size_t size,

@@ -118,4 +118,26 @@ rtp_status rtpi_read_obj_ex(rtp_scene *s, const char *text, size_t size,
                             uint32_t default_mat, size_t *faces,
                             rtp_error *err);
 
+/* The MTL files one scene load has read and the materials each made,
+   [first, end) of the scene's: two exports' MTL files both defining
+   "Material" make two materials, each OBJ's usemtl finding its own
+   MTL's; an MTL read again (the same OBJ included twice) gives its
+   materials again, not copies (obj.c). */
+typedef struct rtpi_mtl_seen {
+    char *path;
+    uint32_t first, end;
+} rtpi_mtl_seen;
+typedef struct rtpi_mtl_reg {
+    rtpi_mtl_seen *v;
+    size_t n, cap;
+} rtpi_mtl_reg;
+void rtpi_mtl_reg_free(rtpi_mtl_reg *r, const rtp_allocator *a);
+
+/* rtpi_read_obj_ex within a load that has read other OBJ files (an NFF
+   scene's includes): `reg` the MTL files read so far, or NULL. */
+rtp_status rtpi_read_obj_reg(rtp_scene *s, const char *text, size_t size,
+                             const char *name, const double *xform,
+                             uint32_t default_mat, size_t *faces,
+                             rtpi_mtl_reg *reg, rtp_error *err);
+
 #endif /* RTP_READERS_H */

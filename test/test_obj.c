@@ -290,6 +290,91 @@ static void test_mtl(void)
     remove_file(dir, "b.obj");
 }
 
+/* Real exports: two Blender files' MTLs both define "Material" (each
+   OBJ's faces take their own MTL's: the first file's red had taken both);
+   the same OBJ included twice makes no copies; an NFF `name` still
+   overrides both; "mtllib my model.mtl" (the OBJ's own name, unquoted)
+   is one file; "map_Kd my missing tex.png" beside a tex.png is an error
+   naming the whole name (it took tex.png silently). */
+static void test_mtl_exports(void)
+{
+    const char *dir = tmp_folder();
+    char path[512], buf[600];
+    rtp_scene *s = NULL;
+    rtp_error err;
+    if (!dir[0])
+        SKIP("cannot make a temporary folder");
+    CHECK(write_file(dir, "ea.mtl", "newmtl Material\nKd 0.8 0 0\n") == 0);
+    CHECK(write_file(dir, "eb.mtl", "newmtl Material\nKd 0 0 0.8\n") == 0);
+    CHECK(write_file(dir, "ea.obj", "mtllib ea.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"
+                                    "usemtl Material\nf 1 2 3\n") == 0);
+    CHECK(write_file(dir, "eb.obj", "mtllib eb.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"
+                                    "usemtl Material\nf 1 2 3\n") == 0);
+    CHECK(write_file(dir, "two.nff", "include ea.obj\ninclude eb.obj\n"
+                                     "include ea.obj translate 0 0 1\n") == 0);
+    snprintf(path, sizeof path, "%s/two.nff", dir);
+    CHECK_MSG(rtp_scene_load(path, NULL, &s, &err) == RTP_OK, "%s",
+              rtp_error_format(&err, buf, sizeof buf));
+    if (s) {
+        CHECK(s->nmats == 2 && s->ntris == 3);
+        CHECK(s->mats[s->tris[0].mat].color[0] == 1 && s->mats[s->tris[1].mat].color[2] == 1 &&
+              s->tris[0].mat != s->tris[1].mat && s->tris[2].mat == s->tris[0].mat);
+    }
+    rtp_scene_destroy(s);
+    s = NULL;
+    CHECK(write_file(dir, "ov.nff", "f 0 1 0 1 0 10 0 1\nname Material\ns 0 0 0 1\n"
+                                    "include ea.obj\ninclude eb.obj\n") == 0);
+    snprintf(path, sizeof path, "%s/ov.nff", dir);
+    CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_OK);
+    CHECK(s && s->nmats == 1 && s->tris[0].mat == 0 && s->tris[1].mat == 0);
+    rtp_scene_destroy(s);
+    s = NULL;
+
+    CHECK(write_file(dir, "my model.mtl", "newmtl X\nKd 0 1 0\n") == 0);
+    CHECK(write_file(dir, "my model.obj", "mtllib my model.mtl\nv 0 0 0\nv 1 0 0\n"
+                                          "v 0 1 0\nusemtl X\nf 1 2 3\n") == 0);
+    snprintf(path, sizeof path, "%s/my model.obj", dir);
+    CHECK_MSG(rtp_scene_load(path, NULL, &s, &err) == RTP_OK, "%s",
+              rtp_error_format(&err, buf, sizeof buf));
+    CHECK(s && s->nmats == 1 && s->mats[0].color[1] == 1);
+    rtp_scene_destroy(s);
+    s = NULL;
+    /* several names still are several files */
+    CHECK(write_file(dir, "m2.obj", "mtllib ea.mtl my\nv 0 0 0\n") == 0);
+    snprintf(path, sizeof path, "%s/m2.obj", dir);
+    CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_IO);
+    CHECK(err.line == 1 && err.column == 15 && strstr(err.message, "'my'"));
+
+    CHECK(write_file(dir, "tex.ppm", "P3\n1 1\n255\n10 20 30\n") == 0);
+    CHECK(write_file(dir, "mt.mtl", "newmtl a\nmap_Kd -s 1 1 -blendu on my missing tex.ppm\n") == 0);
+    CHECK(write_file(dir, "mt.obj", "mtllib mt.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"
+                                    "usemtl a\nf 1 2 3\n") == 0);
+    snprintf(path, sizeof path, "%s/mt.obj", dir);
+    CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_IO);
+    CHECK_MSG(err.line == 2 && err.column == 26 && strstr(err.message, "'my missing tex.ppm'"),
+              "%s", rtp_error_format(&err, buf, sizeof buf));
+    /* after an option this reader cannot count, the last words that name
+       a file */
+    CHECK(write_file(dir, "mt.mtl", "newmtl a\nmap_Kd -zz 3 tex.ppm\n") == 0);
+    CHECK_MSG(rtp_scene_load(path, NULL, &s, &err) == RTP_OK, "%s",
+              rtp_error_format(&err, buf, sizeof buf));
+    CHECK(s && s->mats[0].tex == RTPI_TEX_IMAGE);
+    rtp_scene_destroy(s);
+
+    remove_file(dir, "ea.mtl");
+    remove_file(dir, "eb.mtl");
+    remove_file(dir, "ea.obj");
+    remove_file(dir, "eb.obj");
+    remove_file(dir, "two.nff");
+    remove_file(dir, "ov.nff");
+    remove_file(dir, "my model.mtl");
+    remove_file(dir, "my model.obj");
+    remove_file(dir, "m2.obj");
+    remove_file(dir, "tex.ppm");
+    remove_file(dir, "mt.mtl");
+    remove_file(dir, "mt.obj");
+}
+
 typedef struct bad_case {
     const char *text;
     int line, col;
@@ -444,6 +529,7 @@ int main(void)
     RUN(test_ngon);
     RUN(test_xform);
     RUN(test_mtl);
+    RUN(test_mtl_exports);
     RUN(test_bad_inputs);
     RUN(test_truncation);
     RUN(test_shared_meshes);
