@@ -969,6 +969,41 @@ static void test_nomem(void)
     rtp_scene_destroy(s);
 }
 
+/* A fan of slivers in the plane y = 0 (a convex polygon triangulated from
+   one corner): SAH alone asked for cells a sliver wide near the apex, N^2
+   of them (4,000 slivers: 5.8 M references; 64,000: 829 M and 11 GB).
+   The reference budget holds it to KD_REF_BUDGET a primitive, and the
+   tree still answers as the brute force does. */
+static void test_fan_budget(void)
+{
+    rng g;
+    rtp_scene *s = new_scene();
+    rtpi_kdtree *kd = NULL;
+    rtpi_kd_stats st;
+    const int n = 4000;
+    int i;
+    uint32_t apex, prev;
+    g.s = g_seed ^ 0x7777;
+    apex = add_v(s, 3.0, 0.0, 0.0);
+    prev = add_v(s, 3.0 * cos(2.0 * 3.14159265358979 / (n + 2)), 0.0,
+                 3.0 * sin(2.0 * 3.14159265358979 / (n + 2)));
+    for (i = 2; i <= n + 1; i++) {
+        double a = 2.0 * 3.14159265358979 * i / (n + 2);
+        uint32_t v = add_v(s, 3.0 * cos(a), 0.0, 3.0 * sin(a));
+        add_t(s, apex, prev, v);
+        prev = v;
+    }
+    CHECK(rtpi_kd_build(s, NULL, &kd, NULL) == RTP_OK);
+    if (kd) {
+        rtpi_kd_get_stats(kd, &st);
+        CHECK_MSG(st.prim_refs <= 16 * (size_t)n, "%lu references for %d slivers",
+                  (unsigned long)st.prim_refs, n);
+        rtpi_kd_destroy(kd);
+    }
+    check_scene_vs_brute(s, &g, 3000, 0);
+    rtp_scene_destroy(s);
+}
+
 static void test_stats(void)
 {
     rtp_scene *s = new_scene();
@@ -1014,6 +1049,7 @@ int main(void)
     RUN(test_cone_bound);
     RUN(test_shading_normal);
     RUN(test_nomem);
+    RUN(test_fan_budget);
     RUN(test_stats);
     return check_report();
 }
