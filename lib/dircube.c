@@ -684,7 +684,10 @@ static void dc_windows_some(const rtp_scene *s, const unsigned char *sel, unsign
         goto done;
     /* The margin covers the rounding of the bounds (1e-16 of the
        geometry's coordinates) and of their corners' offsets from the
-       light (1e-16 of the light's), a millionfold and ten thousandfold.
+       light (1e-16 of the light's), a millionfold and a hundredfold
+       (ten thousandfold until session 20: 1e-12 of a light at 1e13 is
+       10 units, five times a scene of size 2, and the scene shrank to a
+       fifth of its window).
        It is not what
        keeps the light buffer exact (a direction past a window's edge is
        clamped to the edge cells, whose slabs run to infinity), so it
@@ -696,7 +699,7 @@ static void dc_windows_some(const rtp_scene *s, const unsigned char *sel, unsign
         double SL = fmax(fabs(L[0]), fmax(fabs(L[1]), fabs(L[2]))), SG = 0.0;
         for (k = 0; k < 3; k++)
             SG = fmax(SG, fmax(fabs(lo[k]), fabs(hi[k])));
-        g = 1e-6 * SG + 1e-12 * SL + 1e-30;
+        g = 1e-6 * SG + 1e-14 * SL + 1e-30;
         S = fmax(SL, SG); /* (the bounds' and the light's: no pass over the
                              primitives again, as dc_scale makes) */
     }
@@ -802,20 +805,27 @@ done:
    direction is (light - o)/dist, rounded).  The hit's direction from the
    light therefore differs from the ray's by at most
    (delta + lambda) / near(prim) radians.  Each primitive is projected
-   widened by ang = 1e-12 + 1e-13 S / near: the first term covers the
-   rounding of face coordinates (a few 1e-16) with a thousandfold margin,
-   the second the above with a hundredfold one.  (The first was 1e-7 until
-   session 19: at a light 1e8 away that widened every primitive by 10
-   units, a scene of size 2 listed all its primitives in every cell, and a
-   move took 8-16x as long as at 1e6.)  A primitive so close to the light that the bound
+   widened by ang = 1e-14 + 1e-14 S / near: the first term covers the
+   rounding of face coordinates (one or two roundings of a quotient of
+   magnitude <= 1, 1.1e-16 each) with a fiftyfold margin, the second the
+   above with a fiftyfold one.  (The first was 1e-7 until session 19: at
+   a light 1e8 away that widened every primitive by 10 units, a scene of
+   size 2 listed all its primitives in every cell, and a move took 8-16x
+   as long as at 1e6; then 1e-12 + 1e-13 S / near until session 20, when
+   a scene of size 2 spans 2e-12 radians from a light at 1e12: every
+   triangle of a terrain listed in every cell, 2 GB.)  Beyond some
+   distance the scene's window is as narrow as the widening itself,
+   which no cell size below it can sharpen: the light buffer then has
+   fewer cells (lb_res), so that its entries stay near one a primitive
+   instead of growing as res^2 each.  A primitive so close to the light that the bound
    grows past LB_ANG_MAX (1e-3, near < 1e-10 S) is listed in every cell.
    Windows and absent faces keep this: a window is the bounds' projection
    through frusta widened by more than any listed primitive's widening,
    and a direction beyond a window's edge is clamped to the edge cell,
    which lists everything whose widened projection reaches past the edge
    (the edge rows' slabs run to infinity). */
-#define LB_ANG_BASE 1e-12
-#define LB_ANG_SCALE 1e-13
+#define LB_ANG_BASE 1e-14
+#define LB_ANG_SCALE 1e-14
 #define LB_ANG_MAX 1e-3
 
 #define LB_MAX_PARTS 16 /* threads of a light buffer's counting pass */
@@ -963,6 +973,31 @@ static double lb_ang(double S, double near)
     return near > 0.0 ? LB_ANG_BASE + LB_ANG_SCALE * S / near : HUGE_VAL;
 }
 
+/* The cells a face edge worth having for windows w made at res: cells
+   narrower than the smallest widening any primitive gets (lb_ang at the
+   farthest point of the windows) only list each primitive in more of
+   them (terrain of 8k triangles, light at 1e12: as fast with cells that
+   wide, in 14 MB instead of 31; at half of it 9.7 MB, a tenth slower
+   from 3e12).  Far lights: a scene of size 2 at 1e16 spans 2e-16 radians, all
+   of it within one widening. */
+static int lb_res(const rtpi_dc_window *w, int res, double S)
+{
+    double wmax = 0.0, zmax = 0.0, ang, cap;
+    int f;
+    for (f = 0; f < 6; f++)
+        if (w->fbase[f] != RTPI_DC_ABSENT) {
+            wmax = fmax(wmax, fmax(w->du[f], w->dv[f]) * (double)res);
+            zmax = fmax(zmax, w->zbase[f] + w->zext[f]);
+        }
+    /* A point in a face's frustum (|u|, |v| <= 1.02) at depth z lies at
+       most z sqrt(1 + 2 1.02^2) < 1.75 z from the light. */
+    ang = lb_ang(S, 1.75 * zmax);
+    if (!(wmax > 0.0) || !(ang > 0.0) || !(ang < HUGE_VAL))
+        return res;
+    cap = ceil(wmax / ang);
+    return cap < (double)res ? (cap < 1.0 ? 1 : (int)cap) : res;
+}
+
 /* The cone entry of candidate prim, a sphere or a cone (see
    rtpi_lightbuf): a ball B(C, R) holding it (a sphere itself, a cone its
    bounds' box), R grown by 1e-9 of itself and 1e-12 S for the
@@ -1102,6 +1137,15 @@ static int lb_cells_fn(void *ctx, int part)
     return 0;
 }
 
+int rtpi_lightbuf_res(const rtp_scene *s, rtpi_v3 light, int res)
+{
+    rtpi_dc_window w;
+    if (res <= 0)
+        res = RTPI_DC_DEFAULT_RES;
+    dc_windows_some(s, NULL, 0, light, res, 1.02, &w);
+    return lb_res(&w, res, dc_scale(s, light));
+}
+
 rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
                                     const unsigned char *sel, unsigned char want, int threads,
                                     const rtp_allocator *a, rtpi_lightbuf *lb,
@@ -1128,8 +1172,15 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
        any primitive's widening (4 LB_ANG_MAX), so a primitive that can
        be hit through a face lies in that face's window. */
     dc_windows_some(s, sel, want, light, res, 1.02, &lb->w);
-    ncells = lb->w.ncells;
     S = dc_scale(s, light);
+    {
+        int r = lb_res(&lb->w, res, S);
+        if (r < res) {
+            res = lb->res = r;
+            dc_windows_some(s, sel, want, light, res, 1.02, &lb->w);
+        }
+    }
+    ncells = lb->w.ncells;
     /* Early stop: a primitive can be hit on the segment from o to the
        light only if near <= dist + delta + lambda (see above); 1e-12 S
        bounds delta + lambda with room to spare. */

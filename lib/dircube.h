@@ -183,6 +183,13 @@ typedef struct rtpi_lightbuf {
 rtp_status rtpi_lightbuf_build(const rtp_scene *s, rtpi_v3 light, int res,
                                const rtp_allocator *a, rtpi_lightbuf *lb,
                                rtp_error *err);
+/* The cells a face edge a light buffer for a light at `light` would have
+   when asked for res: fewer where the light is so far that the scene lies
+   within a few of the lists' widenings (lb_res in dircube.c), and such a
+   buffer lists most primitives in every cell: RTP_SHADOWS_AUTO then
+   takes shadow rays. */
+int rtpi_lightbuf_res(const rtp_scene *s, rtpi_v3 light, int res);
+
 /* The same over the primitives i with sel[i] == want only (sel NULL:
    all): its answers are the kd-tree's over those primitives.  Projects
    the primitives on up to `threads` threads (the same buffer for any

@@ -63,6 +63,8 @@ static const light_case lights[] = {
     {"far away", {1e4, -2e4, 3e4}},
     {"very far away", {3e7, -1e7, 1e8}},
     {"as far as the sun, in metres", {1e11, 5e10, 6e10}},
+    {"a hundred times farther", {1e13, -3e12, 5e12}},
+    {"so far the scene fits in one widening", {2e15, 1e15, 1e16}},
     {"on a floor corner", {5, 5, 0}},
     {"just inside a cone's tip", {3, 2.5, 1.2}},
 };
@@ -408,17 +410,22 @@ static void ib_same(const rtp_scene *s, rtpi_v3 lp, int res, const char *what)
 
 /* From far away a scene looks the same whatever the distance (the
    orthographic limit), so its light buffer's lists should be about as
-   long at 1e10 as at 1e4.  Until session 19 each primitive was widened
-   by 1e-7 radians (10 units at 1e8) and each window by 1e-6 of the
-   light's coordinates: from 1e8 on every cell listed nearly every
-   primitive, and moves took 8-16 times as long. */
+   long at 1e10 as at 1e4, and it should hold no more entries however far
+   the light.  Until session 19 each primitive was widened by 1e-7
+   radians (10 units at 1e8) and each window by 1e-6 of the light's
+   coordinates: from 1e8 on every cell listed nearly every primitive, and
+   moves took 8-16 times as long; until session 20 by 1e-12 radians, and
+   from 1e12 on the same happened (a terrain of 8k triangles: 2 GB).  So
+   far that the scene lies within a few widenings, the buffer has fewer
+   cells (a finer grid would only list every primitive in more of them),
+   and RTP_SHADOWS_AUTO takes shadow rays (rtpi_lightbuf_res). */
 static void test_lightbuf_far_light_lists(void)
 {
-    static const double dist[] = {1e4, 1e6, 1e8, 1e10};
+    static const double dist[] = {1e4, 1e6, 1e8, 1e10, 1e12, 1e13, 1e14, 1e16, 1e20, 1e30};
     rtp_scene *s = load(scene_text, sizeof scene_text - 1);
     rtp_allocator al;
     double base = 0.0;
-    size_t k;
+    size_t k, base_refs = 0;
     CHECK(s != NULL);
     if (!s)
         return;
@@ -427,19 +434,32 @@ static void test_lightbuf_far_light_lists(void)
         rtpi_lightbuf lb;
         rtpi_v3 lp = v3_mul(v3_norm(v3(3, -1, 10)), dist[k]);
         double per_cell;
+        int useful = rtpi_lightbuf_res(s, lp, 64);
         if (rtpi_lightbuf_build(s, lp, 64, &al, &lb, NULL) != RTP_OK) {
             CHECK_MSG(0, "light buffer at %g failed", dist[k]);
             continue;
         }
         per_cell = (double)lb.nrefs / (double)lb.w.ncells;
-        printf("  light at %-6g: %lu candidates, %.2f listed a cell\n", dist[k],
-               (unsigned long)lb.ncand, per_cell);
-        if (k == 0)
+        printf("  light at %-6g: %lu candidates, %d cells a face edge, %lu entries, %.2f listed "
+               "a cell\n",
+               dist[k], (unsigned long)lb.ncand, lb.res, (unsigned long)lb.nrefs, per_cell);
+        CHECK(lb.res == useful);
+        if (k == 0) {
             base = per_cell;
-        else
+            base_refs = lb.nrefs;
+        } else if (dist[k] <= 1e10) {
             CHECK_MSG(per_cell <= 1.5 * base + 0.01,
                       "light at %g: %.2f candidates a cell, %.2f at 1e4", dist[k], per_cell,
                       base);
+        }
+        CHECK_MSG(lb.nrefs <= 3 * base_refs, "light at %g: %lu entries, %lu at 1e4",
+                  dist[k], (unsigned long)lb.nrefs, (unsigned long)base_refs);
+        /* full resolution while it sharpens the lists; shadow rays for
+           auto once the scene is within a few widenings */
+        if (dist[k] <= 1e12)
+            CHECK_MSG(useful == 64, "light at %g: %d cells", dist[k], useful);
+        if (dist[k] >= 1e16)
+            CHECK_MSG(useful < 16, "light at %g: %d cells", dist[k], useful);
         rtpi_lightbuf_free(&lb, &al);
     }
     rtp_scene_destroy(s);
