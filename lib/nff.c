@@ -458,7 +458,7 @@ static rtp_status read_name(nff *c, const rtpi_tok *kw)
 {
     rtpi_tok t;
     char show[80], *nm;
-    size_t i, n;
+    size_t i;
     char **slot;
     const char *kind = c->named_kind == 'f' ? "material" : "light";
     rtp_status st = need(c, &t, "name", "a name");
@@ -477,22 +477,19 @@ static rtp_status read_name(nff *c, const rtpi_tok *kw)
     if (t.n > NAME_MAX_LEN)
         return rtpi_lex_error(&c->lx, &t, "name '%s' is longer than %d characters",
                               show, NAME_MAX_LEN);
-    if (c->named_kind == 'f') {
-        n = c->s->nmats;
+    if (c->named_kind == 'f')
         slot = &c->s->mats[c->named_index].name;
-    } else {
-        n = c->s->nlights;
+    else
         slot = &c->s->lights[c->named_index].name;
-    }
     if (*slot)
         return rtpi_lex_error(&c->lx, &t, "%s %zu is already named '%s'", kind,
                               c->named_index, *slot);
-    for (i = 0; i < n; i++) {
-        const char *other = c->named_kind == 'f' ? c->s->mats[i].name
-                                                 : c->s->lights[i].name;
-        if (other && strlen(other) == t.n && memcmp(other, t.s, t.n) == 0)
-            return rtpi_lex_error(&c->lx, &t, "%s name '%s' is already used by %s %zu",
-                                  kind, show, kind, i);
+    {
+        size_t at = 0;
+        long other = rtpi_reg_find(c->mtl, c->s, c->named_kind, t.s, t.n, &at);
+        if (other >= 0)
+            return rtpi_lex_error(&c->lx, &t, "%s name '%s' is already used by %s %ld",
+                                  kind, show, kind, other);
     }
     nm = (char *)rtpi_malloc(&c->s->alloc, t.n + 1);
     if (!nm)
@@ -500,6 +497,8 @@ static rtp_status read_name(nff *c, const rtpi_tok *kw)
     memcpy(nm, t.s, t.n);
     nm[t.n] = '\0';
     *slot = nm;
+    if (rtpi_reg_add(c->mtl, c->s, c->named_kind, (uint32_t)c->named_index) != 0)
+        return nomem(c, &t);
     return RTP_OK;
 }
 

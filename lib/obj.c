@@ -12,6 +12,7 @@
 
 #include <ctype.h>
 #include <stdio.h>
+#include <stdlib.h>
 
 /* Largest magnitude accepted for a coordinate or MTL value. */
 #define NUM_LIMIT 1e18
@@ -34,8 +35,7 @@ typedef struct obj {
     size_t cap_crn;
     uint32_t *tri;
     size_t cap_tri;
-    uint32_t *own;   /* the materials this file's mtllibs named, first wins */
-    size_t nown, cap_own;
+    rtpi_names own;  /* the materials this file's mtllibs named, first wins */
     rtpi_mtl_reg *reg; /* the load's MTL files (never NULL while reading) */
 } obj;
 
@@ -115,52 +115,160 @@ static int in_list(const rtpi_tok *t, const char *const *list)
     return 0;
 }
 
-static long find_material(const rtp_scene *s, const char *name, size_t n)
+static const char *reg_name(const rtp_scene *s, int kind, uint32_t i)
+{
+    return kind == 'l' ? s->lights[i].name : s->mats[i].name;
+}
+
+static size_t name_hash(const char *p, size_t n)
+{
+    size_t h = 2166136261u, i; /* FNV-1a */
+    for (i = 0; i < n; i++)
+        h = (h ^ (unsigned char)p[i]) * 16777619u;
+    return h;
+}
+
+static int cmp_u32(const void *a, const void *b)
+{
+    uint32_t x = *(const uint32_t *)a, y = *(const uint32_t *)b;
+    return x < y ? -1 : x > y;
+}
+
+/* Adds entry i (named) to h: after the entries of its name already
+   there, so that probing meets them in the order added. */
+static int names_put(rtpi_names *h, const rtp_allocator *a, const rtp_scene *s, int kind,
+                     uint32_t i)
+{
+    const char *nm = reg_name(s, kind, i);
+    size_t k;
+    if (!nm)
+        return 0;
+    if (2 * (h->n + 1) > h->cap) {
+        /* twice the size, the entries put again in the order added (their
+           indices rise with it: materials and lights are only appended) */
+        rtpi_names g;
+        size_t j, m = 0;
+        uint32_t *all = h->n ? (uint32_t *)rtpi_malloc_array(a, h->n, sizeof *all) : NULL;
+        if (h->n && !all)
+            return -1;
+        for (j = 0; j < h->cap; j++)
+            if (h->slot[j])
+                all[m++] = h->slot[j];
+        g.cap = h->cap ? 2 * h->cap : 64;
+        g.n = 0;
+        g.slot = (uint32_t *)rtpi_calloc_array(a, g.cap, sizeof *g.slot);
+        if (!g.slot) {
+            rtpi_free(a, all);
+            return -1;
+        }
+        /* (by index: entries of one name were added in rising index
+           order, and slot order may have wrapped round past them) */
+        qsort(all, m, sizeof *all, cmp_u32);
+        for (j = 0; j < m; j++) {
+            const char *o = reg_name(s, kind, all[j] - 1);
+            k = name_hash(o, strlen(o)) & (g.cap - 1);
+            while (g.slot[k])
+                k = (k + 1) & (g.cap - 1);
+            g.slot[k] = all[j];
+            g.n++;
+        }
+        rtpi_free(a, all);
+        rtpi_free(a, h->slot);
+        *h = g;
+    }
+    k = name_hash(nm, strlen(nm)) & (h->cap - 1);
+    while (h->slot[k])
+        k = (k + 1) & (h->cap - 1);
+    h->slot[k] = i + 1u;
+    h->n++;
+    return 0;
+}
+
+/* The names the scene had before this load's first lookup. */
+static int reg_sync(rtpi_mtl_reg *r, const rtp_scene *s)
 {
     size_t i;
-    for (i = 0; i < s->nmats; i++) {
-        const char *m = s->mats[i].name;
-        if (m && strlen(m) == n && memcmp(m, name, n) == 0)
-            return (long)i;
+    if (r->synced)
+        return 0;
+    r->synced = 1;
+    for (i = 0; i < s->nmats; i++)
+        if (names_put(&r->mats, &s->alloc, s, 'f', (uint32_t)i) != 0)
+            return -1;
+    for (i = 0; i < s->nlights; i++)
+        if (names_put(&r->lights, &s->alloc, s, 'l', (uint32_t)i) != 0)
+            return -1;
+    return 0;
+}
+
+int rtpi_reg_add(rtpi_mtl_reg *r, const rtp_scene *s, int kind, uint32_t i)
+{
+    if (!r->synced)
+        return reg_sync(r, s); /* (i is among them) */
+    return names_put(kind == 'l' ? &r->lights : &r->mats, &s->alloc, s, kind, i);
+}
+
+/* The next entry of h named name[0..n) after *at. */
+static long names_find(const rtpi_names *h, const rtp_scene *s, int kind, const char *name,
+                       size_t n, size_t *at)
+{
+    size_t k, step;
+    if (!h->cap)
+        return -1;
+    k = (name_hash(name, n) + *at) & (h->cap - 1);
+    for (step = *at; step < h->cap && h->slot[k]; step++, k = (k + 1) & (h->cap - 1)) {
+        const char *m = reg_name(s, kind, h->slot[k] - 1);
+        if (strlen(m) == n && memcmp(m, name, n) == 0) {
+            *at = step + 1;
+            return (long)h->slot[k] - 1;
+        }
     }
+    *at = h->cap;
     return -1;
+}
+
+long rtpi_reg_find(rtpi_mtl_reg *r, const rtp_scene *s, int kind, const char *name,
+                   size_t n, size_t *at)
+{
+    if (reg_sync(r, s) != 0)
+        return -1; /* (out of memory: nothing found; the load then fails on
+                      a name it cannot find, or makes a material anew) */
+    return names_find(kind == 'l' ? &r->lights : &r->mats, s, kind, name, n, at);
+}
+
+/* The first material of that name, or -1. */
+static long find_material(obj *o, const char *name, size_t n)
+{
+    size_t at = 0;
+    return rtpi_reg_find(o->reg, o->s, 'f', name, n, &at);
 }
 
 /* The material of that name this OBJ file's mtllibs gave, or -1. */
 static long own_material(const obj *o, const char *name, size_t n)
 {
-    size_t i;
-    for (i = 0; i < o->nown; i++) {
-        const char *m = o->s->mats[o->own[i]].name;
-        if (m && strlen(m) == n && memcmp(m, name, n) == 0)
-            return (long)o->own[i];
-    }
-    return -1;
+    size_t at = 0;
+    return names_find(&o->own, o->s, 'f', name, n, &at);
 }
 
 /* Which of the scene's materials named so a newmtl in MTL file `path` is
    (an earlier read of the same file made it, or an NFF `name` did, to
    override a mesh's material), or -1 for a new one: a material that
    another MTL file made is another material of the same name. */
-static long mtl_existing(const obj *o, const char *path, const char *name, size_t n)
+static long mtl_existing(obj *o, const char *path, const char *name, size_t n)
 {
-    const rtp_scene *s = o->s;
-    size_t i, k;
-    for (i = 0; i < s->nmats; i++) {
-        const char *m = s->mats[i].name;
+    size_t at = 0, k;
+    long i;
+    while ((i = rtpi_reg_find(o->reg, o->s, 'f', name, n, &at)) >= 0) {
         int from_mtl = 0;
-        if (!m || strlen(m) != n || memcmp(m, name, n) != 0)
-            continue;
         for (k = 0; k < o->reg->n; k++) {
             const rtpi_mtl_seen *e = &o->reg->v[k];
-            if (i >= e->first && i < e->end) {
+            if ((uint32_t)i >= e->first && (uint32_t)i < e->end) {
                 if (strcmp(e->path, path) == 0)
-                    return (long)i;
+                    return i;
                 from_mtl = 1;
             }
         }
         if (!from_mtl)
-            return (long)i;
+            return i;
     }
     return -1;
 }
@@ -171,6 +279,8 @@ void rtpi_mtl_reg_free(rtpi_mtl_reg *r, const rtp_allocator *a)
     for (i = 0; i < r->n; i++)
         rtpi_free(a, r->v[i].path);
     rtpi_free(a, r->v);
+    rtpi_free(a, r->mats.slot);
+    rtpi_free(a, r->lights.slot);
     memset(r, 0, sizeof *r);
 }
 
@@ -309,10 +419,7 @@ static rtp_status mtl_map(rtpi_lex *lx, rtp_scene *s, const char *what,
 
 static int own_add(obj *o, uint32_t m)
 {
-    if (rtpi_grow(&o->s->alloc, (void **)&o->own, &o->cap_own, o->nown + 1, sizeof *o->own))
-        return -1;
-    o->own[o->nown++] = m;
-    return 0;
+    return names_put(&o->own, &o->s->alloc, o->s, 'f', m);
 }
 
 static rtp_status read_mtl(obj *o, const char *text, size_t size, const char *name)
@@ -366,7 +473,8 @@ static rtp_status read_mtl(obj *o, const char *text, size_t size, const char *na
                 rtpi_free(&s->alloc, nm);
                 return nomem(&lx, &nt);
             }
-            if (own_add(o, (uint32_t)cur) != 0)
+            if (own_add(o, (uint32_t)cur) != 0 ||
+                rtpi_reg_add(o->reg, s, 'f', (uint32_t)cur) != 0)
                 return nomem(&lx, &nt);
             continue;
         }
@@ -725,7 +833,7 @@ static rtp_status read_usemtl(obj *o)
        material's, or one an MTL read before gave) */
     m = own_material(o, t.s, t.n);
     if (m < 0)
-        m = find_material(o->s, t.s, t.n);
+        m = find_material(o, t.s, t.n);
     if (m < 0)
         return rtpi_lex_error(&o->lx, &t,
                               "unknown material '%s' (no newmtl of that name in the mtllib files read so far)",
@@ -784,7 +892,7 @@ rtp_status rtpi_read_obj_reg(rtp_scene *s, const char *text, size_t size,
     rtpi_free(&s->alloc, o.pts);
     rtpi_free(&s->alloc, o.crn);
     rtpi_free(&s->alloc, o.tri);
-    rtpi_free(&s->alloc, o.own);
+    rtpi_free(&s->alloc, o.own.slot);
     rtpi_mtl_reg_free(&local, &s->alloc);
     if (faces)
         *faces = o.faces;

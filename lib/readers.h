@@ -127,11 +127,31 @@ typedef struct rtpi_mtl_seen {
     char *path;
     uint32_t first, end;
 } rtpi_mtl_seen;
+/* Names to indices, open addressing (index + 1 in a slot, 0 empty): the
+   named materials ('f') or lights ('l') of the scene being loaded, so that
+   a load of 80,000 named materials looks each up in constant time (a
+   scan of all of them at each newmtl, usemtl and NFF name made it 21 s).
+   Several entries may share a name; probing meets them in the order they
+   were added. */
+typedef struct rtpi_names {
+    uint32_t *slot;
+    size_t cap, n;
+} rtpi_names;
+
 typedef struct rtpi_mtl_reg {
     rtpi_mtl_seen *v;
     size_t n, cap;
+    rtpi_names mats, lights;
+    int synced; /* the scene's names before the load are in */
 } rtpi_mtl_reg;
 void rtpi_mtl_reg_free(rtpi_mtl_reg *r, const rtp_allocator *a);
+/* Adds material or light i (kind 'f' or 'l'), named, to r's index;
+   0, or -1 when out of memory. */
+int rtpi_reg_add(rtpi_mtl_reg *r, const rtp_scene *s, int kind, uint32_t i);
+/* The next material or light of that name after *at (start with *at = 0),
+   in the order added: its index, or -1. */
+long rtpi_reg_find(rtpi_mtl_reg *r, const rtp_scene *s, int kind, const char *name,
+                   size_t n, size_t *at);
 
 /* rtpi_read_obj_ex within a load that has read other OBJ files (an NFF
    scene's includes): `reg` the MTL files read so far, or NULL. */

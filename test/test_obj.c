@@ -375,6 +375,62 @@ static void test_mtl_exports(void)
     remove_file(dir, "mt.obj");
 }
 
+/* Thousands of names (the index that replaced a scan of every material
+   at each newmtl and usemtl grows and rehashes many times): each face
+   takes the material its usemtl names, duplicates across files stay
+   apart, and the NFF reader still refuses a name used twice. */
+static void test_many_names(void)
+{
+    const char *dir = tmp_folder();
+    char path[512], line[128];
+    size_t i, len = 0, cap = 1 << 20;
+    char *mtl = (char *)malloc(cap), *objt = (char *)malloc(4 * cap);
+    rtp_scene *s = NULL;
+    rtp_error err;
+    const int n = 3000;
+    if (!dir[0] || !mtl || !objt) {
+        free(mtl);
+        free(objt);
+        SKIP("cannot make a temporary folder");
+    }
+    for (i = 0; i < (size_t)n; i++)
+        len += (size_t)snprintf(mtl + len, cap - len, "newmtl m%zu\nKd %g 0.5 0.5\n", i,
+                                (double)i / n);
+    CHECK(write_file(dir, "many.mtl", mtl) == 0);
+    len = (size_t)snprintf(objt, 4 * cap, "mtllib many.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\n");
+    for (i = 0; i < (size_t)n; i++) /* in another order: 7 is prime to 3000 */
+        len += (size_t)snprintf(objt + len, 4 * cap - len, "usemtl m%zu\nf 1 2 3\n",
+                                (i * 7) % (size_t)n);
+    CHECK(write_file(dir, "many.obj", objt) == 0);
+    snprintf(path, sizeof path, "%s/many.obj", dir);
+    CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_OK);
+    if (s) {
+        int ok = s->nmats == (size_t)n && s->ntris == (size_t)n;
+        for (i = 0; ok && i < (size_t)n; i++) {
+            snprintf(line, sizeof line, "m%zu", (i * 7) % (size_t)n);
+            ok = strcmp(s->mats[s->tris[i].mat].name, line) == 0;
+        }
+        CHECK(ok);
+    }
+    rtp_scene_destroy(s);
+    s = NULL;
+    /* NFF: every material named; the last name repeats the first */
+    len = 0;
+    for (i = 0; i < (size_t)n; i++)
+        len += (size_t)snprintf(objt + len, 4 * cap - len, "f 1 1 1 1 0 1 0 1\nname n%zu\n", i);
+    CHECK(rtp_scene_load_memory(objt, len, "names.nff", "nff", NULL, &s, &err) == RTP_OK);
+    CHECK(s && s->nmats == (size_t)n);
+    rtp_scene_destroy(s);
+    s = NULL;
+    len += (size_t)snprintf(objt + len, 4 * cap - len, "f 1 1 1 1 0 1 0 1\nname n0\n");
+    CHECK(rtp_scene_load_memory(objt, len, "names.nff", "nff", NULL, &s, &err) == RTP_ERR_PARSE);
+    CHECK(strstr(err.message, "already used by material 0") != NULL);
+    remove_file(dir, "many.mtl");
+    remove_file(dir, "many.obj");
+    free(mtl);
+    free(objt);
+}
+
 typedef struct bad_case {
     const char *text;
     int line, col;
@@ -530,6 +586,7 @@ int main(void)
     RUN(test_xform);
     RUN(test_mtl);
     RUN(test_mtl_exports);
+    RUN(test_many_names);
     RUN(test_bad_inputs);
     RUN(test_truncation);
     RUN(test_shared_meshes);
