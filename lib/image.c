@@ -1259,8 +1259,15 @@ rtp_status rtp_image_read(const char *path, const rtp_allocator *alloc,
     if (!path || !*path)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
                           "no image file name");
-    if (strcmp(path, "-") == 0)
-        return read_from(stdin, "<stdin>", -1, alloc, out, err);
+    if (strcmp(path, "-") == 0) {
+        /* stdin redirected from a file is measured as a file is (a CRLF
+           PFM read through '-' was read a byte off) */
+        struct stat sb;
+        long long size = fstat(fileno(stdin), &sb) == 0 && S_ISREG(sb.st_mode)
+                             ? (long long)sb.st_size
+                             : -1;
+        return read_from(stdin, "<stdin>", size, alloc, out, err);
+    }
     f = fopen(path, "rb");
     if (!f)
         return rtpi_error(err, RTP_ERR_IO, path, 0, 0, "cannot open: %s",

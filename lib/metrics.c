@@ -159,14 +159,11 @@ static const unsigned char *glyph(char ch)
 #define GLYPH_H 7
 #define GLYPH_ADVANCE 6
 
-/* Formats v like "%.3g" with '.' whatever the locale. */
+/* Formats v like "%.3g" with '.' whatever the locale (a decimal point
+   of two bytes, as ps_AF's U+066B, printed as two dots before). */
 static void format_number(double v, char *buf, size_t size)
 {
-    char *p;
-    snprintf(buf, size, "%.3g", v);
-    for (p = buf; *p; p++)
-        if (!glyph(*p) && *p != ' ')
-            *p = '.'; /* the locale's decimal separator */
+    rtpi_fmt_g(buf, size, 3, v);
 }
 
 static int text_width(const char *s, int fs)

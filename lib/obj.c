@@ -13,6 +13,7 @@
 #include <ctype.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <sys/stat.h>
 
 /* Largest magnitude accepted for a coordinate or MTL value. */
 #define NUM_LIMIT 1e18
@@ -163,7 +164,8 @@ static int names_put(rtpi_names *h, const rtp_allocator *a, const rtp_scene *s, 
         }
         /* (by index: entries of one name were added in rising index
            order, and slot order may have wrapped round past them) */
-        qsort(all, m, sizeof *all, cmp_u32);
+        if (m > 1) /* (qsort's array must not be NULL, even for 0) */
+            qsort(all, m, sizeof *all, cmp_u32);
         for (j = 0; j < m; j++) {
             const char *o = reg_name(s, kind, all[j] - 1);
             k = name_hash(o, strlen(o)) & (g.cap - 1);
@@ -249,28 +251,64 @@ static long own_material(const obj *o, const char *name, size_t n)
     return names_find(&o->own, o->s, 'f', name, n, &at);
 }
 
-/* Which of the scene's materials named so a newmtl in MTL file `path` is
-   (an earlier read of the same file made it, or an NFF `name` did, to
-   override a mesh's material), or -1 for a new one: a material that
-   another MTL file made is another material of the same name. */
-static long mtl_existing(obj *o, const char *path, const char *name, size_t n)
+/* Which of the scene's materials named so a newmtl in MTL file `file`
+   (its index in the registry) is (an earlier read of the same file made
+   it, or an NFF `name` did, to override a mesh's material), or -1 for a
+   new one: a material that another MTL file made is another material of
+   the same name. */
+static long mtl_existing(obj *o, size_t file, const char *name, size_t n)
 {
-    size_t at = 0, k;
+    size_t at = 0;
     long i;
     while ((i = rtpi_reg_find(o->reg, o->s, 'f', name, n, &at)) >= 0) {
-        int from_mtl = 0;
-        for (k = 0; k < o->reg->n; k++) {
-            const rtpi_mtl_seen *e = &o->reg->v[k];
-            if ((uint32_t)i >= e->first && (uint32_t)i < e->end) {
-                if (strcmp(e->path, path) == 0)
-                    return i;
-                from_mtl = 1;
-            }
-        }
-        if (!from_mtl)
+        uint32_t src = (size_t)i < o->reg->nsrc ? o->reg->src[i] : 0u;
+        if (src == 0u || src == file + 1u)
             return i;
     }
     return -1;
+}
+
+/* Records that MTL file `file` made material m; 0, or -1. */
+static int mtl_made(obj *o, size_t file, uint32_t m)
+{
+    rtpi_mtl_reg *r = o->reg;
+    if (m >= r->nsrc) {
+        if (rtpi_grow(&o->s->alloc, (void **)&r->src, &r->cap_src, (size_t)m + 1, sizeof *r->src))
+            return -1;
+        memset(r->src + r->nsrc, 0, ((size_t)m + 1 - r->nsrc) * sizeof *r->src);
+        r->nsrc = (size_t)m + 1;
+    }
+    r->src[m] = (uint32_t)file + 1u;
+    return 0;
+}
+
+/* The registry's index of MTL file `path` (taking it over) or of the same
+   file under another spelling ("d/./x.mtl", "d/sub/../x.mtl": compared by
+   device and inode), added if new; -1 when out of memory. */
+static long mtl_file(obj *o, char *path)
+{
+    rtpi_mtl_reg *r = o->reg;
+    struct stat sb;
+    int has_id = stat(path, &sb) == 0;
+    size_t k;
+    for (k = 0; k < r->n; k++) {
+        const rtpi_mtl_seen *e = &r->v[k];
+        if (has_id && e->has_id ? e->dev == (unsigned long long)sb.st_dev &&
+                                      e->ino == (unsigned long long)sb.st_ino
+                                : strcmp(e->path, path) == 0) {
+            rtpi_free(&o->s->alloc, path);
+            return (long)k;
+        }
+    }
+    if (rtpi_grow(&o->s->alloc, (void **)&r->v, &r->cap, r->n + 1, sizeof *r->v)) {
+        rtpi_free(&o->s->alloc, path);
+        return -1;
+    }
+    r->v[r->n].path = path;
+    r->v[r->n].has_id = has_id;
+    r->v[r->n].dev = has_id ? (unsigned long long)sb.st_dev : 0;
+    r->v[r->n].ino = has_id ? (unsigned long long)sb.st_ino : 0;
+    return (long)r->n++;
 }
 
 void rtpi_mtl_reg_free(rtpi_mtl_reg *r, const rtp_allocator *a)
@@ -279,6 +317,7 @@ void rtpi_mtl_reg_free(rtpi_mtl_reg *r, const rtp_allocator *a)
     for (i = 0; i < r->n; i++)
         rtpi_free(a, r->v[i].path);
     rtpi_free(a, r->v);
+    rtpi_free(a, r->src);
     rtpi_free(a, r->mats.slot);
     rtpi_free(a, r->lights.slot);
     memset(r, 0, sizeof *r);
@@ -422,7 +461,8 @@ static int own_add(obj *o, uint32_t m)
     return names_put(&o->own, &o->s->alloc, o->s, 'f', m);
 }
 
-static rtp_status read_mtl(obj *o, const char *text, size_t size, const char *name)
+static rtp_status read_mtl(obj *o, const char *text, size_t size, const char *name,
+                           size_t file)
 {
     rtp_scene *s = o->s;
     rtp_error *err = o->err;
@@ -454,7 +494,7 @@ static rtp_status read_mtl(obj *o, const char *text, size_t size, const char *na
             skipping = cur >= 0;
             if (skipping)
                 continue;
-            cur = mtl_existing(o, name, nt.s, nt.n);
+            cur = mtl_existing(o, file, nt.s, nt.n);
             skipping = cur >= 0;
             if (skipping) {
                 if (own_add(o, (uint32_t)cur) != 0)
@@ -474,7 +514,8 @@ static rtp_status read_mtl(obj *o, const char *text, size_t size, const char *na
                 return nomem(&lx, &nt);
             }
             if (own_add(o, (uint32_t)cur) != 0 ||
-                rtpi_reg_add(o->reg, s, 'f', (uint32_t)cur) != 0)
+                rtpi_reg_add(o->reg, s, 'f', (uint32_t)cur) != 0 ||
+                mtl_made(o, file, (uint32_t)cur) != 0)
                 return nomem(&lx, &nt);
             continue;
         }
@@ -579,28 +620,22 @@ static rtp_status read_one_mtl(obj *o, const rtpi_tok *t, char *path)
     size_t size = 0;
     rtp_error inner;
     rtp_status st;
-    uint32_t first = (uint32_t)o->s->nmats;
+    long file;
+    const char *name;
     memset(&inner, 0, sizeof inner);
     st = rtpi_read_file(&o->s->alloc, path, &text, &size, &inner);
     if (st != RTP_OK) {
         rtpi_free(&o->s->alloc, path);
         return rtpi_lex_wrap(&o->lx, t, st, &inner, "cannot read mtllib");
     }
-    st = read_mtl(o, text, size, path);
-    rtpi_free(&o->s->alloc, text);
-    if (st == RTP_OK && o->s->nmats > first) {
-        rtpi_mtl_reg *r = o->reg;
-        if (rtpi_grow(&o->s->alloc, (void **)&r->v, &r->cap, r->n + 1, sizeof *r->v)) {
-            rtpi_free(&o->s->alloc, path);
-            return nomem(&o->lx, t);
-        }
-        r->v[r->n].path = path; /* the registry's now */
-        r->v[r->n].first = first;
-        r->v[r->n].end = (uint32_t)o->s->nmats;
-        r->n++;
-        return RTP_OK;
+    /* (the registry takes path over; errors name the spelling read first) */
+    if ((file = mtl_file(o, path)) < 0) {
+        rtpi_free(&o->s->alloc, text);
+        return nomem(&o->lx, t);
     }
-    rtpi_free(&o->s->alloc, path);
+    name = o->reg->v[file].path;
+    st = read_mtl(o, text, size, name, (size_t)file);
+    rtpi_free(&o->s->alloc, text);
     return st;
 }
 

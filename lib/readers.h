@@ -125,7 +125,8 @@ rtp_status rtpi_read_obj_ex(rtp_scene *s, const char *text, size_t size,
    materials again, not copies (obj.c). */
 typedef struct rtpi_mtl_seen {
     char *path;
-    uint32_t first, end;
+    unsigned long long dev, ino; /* the file's identity (stat), where known */
+    int has_id;
 } rtpi_mtl_seen;
 /* Names to indices, open addressing (index + 1 in a slot, 0 empty): the
    named materials ('f') or lights ('l') of the scene being loaded, so that
@@ -139,8 +140,10 @@ typedef struct rtpi_names {
 } rtpi_names;
 
 typedef struct rtpi_mtl_reg {
-    rtpi_mtl_seen *v;
+    rtpi_mtl_seen *v; /* the MTL files read, each once whatever its path's spelling */
     size_t n, cap;
+    uint32_t *src;    /* by material: 1 + the MTL file that made it, 0 none */
+    size_t nsrc, cap_src;
     rtpi_names mats, lights;
     int synced; /* the scene's names before the load are in */
 } rtpi_mtl_reg;

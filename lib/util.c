@@ -571,12 +571,16 @@ static const char *other_point(void)
 
 double rtpi_strtod(const char *s, char **end)
 {
-    const char *dp = other_point(), *dot;
+    const char *dp = other_point(), *dot, *s0;
     char buf[512], *e;
     size_t n, dl, at, used;
     double d;
     if (!dp)
         return strtod(s, end);
+    /* strtod's leading white space (the C locale's isspace) */
+    s0 = s;
+    while (*s == ' ' || (*s >= '\t' && *s <= '\r'))
+        s++;
     /* A copy of the number's characters, its '.' the locale's point; the
        copy ends where they do, so that strtod never meets the locale's
        point in s ("1,5" is two numbers in a key's value, not 1.5).  A
@@ -602,8 +606,8 @@ double rtpi_strtod(const char *s, char **end)
     /* back to s's characters: the point took dl bytes for one */
     if (dot && used > at)
         used -= dl - 1;
-    if (end)
-        *end = (char *)(uintptr_t)(s + used);
+    if (end) /* (no number: strtod's end is where it began) */
+        *end = (char *)(uintptr_t)(used ? s + used : s0);
     return d;
 }
 

@@ -67,6 +67,11 @@ $RTP merge -i "$T/mnan.pfm" --size 2x2 "$T/nan.pfm@0,0" "$T/nan.pfm@0,1" 2>"$T/e
     ok || bad "merge of regions holding NaN: $(cat "$T/err")"
 $RTP merge -i "$T/mnan.pfm" --size 2x2 "$T/nan.pfm@0,0" "$T/nan.pfm@0,0" "$T/nan.pfm@0,1" 2>"$T/err"
 [ $? -eq 1 ] && grep -q overlaps "$T/err" && ok || bad "overlap on a NaN pixel not found"
+# a CRLF PFM (a text-mode writer's header) reads alike from its path and
+# from stdin redirected from it (stdin read it a byte off)
+printf 'PF\r\n2 1\r\n-1.0\r\n' >"$T/crlf.pfm"
+printf '\000\000\200\076\000\000\000\077\000\000\100\077\315\314\314\075\315\314\114\076\232\231\231\076' >>"$T/crlf.pfm"
+$RTP diff "$T/crlf.pfm" - --fail-above max_abs=0 -q <"$T/crlf.pfm" && ok || bad "CRLF PFM from stdin differs"
 $RTP trace $S --size 32x32 --region 0,0,99,9 -i "$T/p3.pfm" -q 2>/dev/null
 [ $? -eq 1 ] && ok || bad "region outside the frame accepted"
 

@@ -849,6 +849,11 @@ static void test_numbers_whatever_the_locale(void)
         CHECK(rtp_scene_set(sc, "mat.0.color", "0.25,0.5,1", &err) == RTP_OK);
         CHECK(rtp_scene_get(sc, "mat.0.color", buf, sizeof buf, &err) == RTP_OK &&
               strcmp(buf, "0.25,0.5,1") == 0);
+        /* strtod's leading white space, as under "C" */
+        CHECK(rtp_scene_set(sc, "mat.0.kd", "\r0.5", &err) == RTP_OK);
+        CHECK(rtp_scene_get(sc, "mat.0.kd", buf, sizeof buf, &err) == RTP_OK &&
+              strcmp(buf, "0.5") == 0);
+        CHECK(rtp_scene_set(sc, "mat.0.kd", " ", &err) != RTP_OK);
         /* "1,5" is still two numbers, not one and a half */
         CHECK(rtp_scene_set(sc, "mat.0.kd", "1,5", &err) != RTP_OK);
         CHECK(rtp_scene_set(sc, "light.0.pos", "1,5,2.5e-1", &err) == RTP_OK);

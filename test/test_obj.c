@@ -322,6 +322,15 @@ static void test_mtl_exports(void)
     }
     rtp_scene_destroy(s);
     s = NULL;
+    /* one MTL reached by two spellings of its path is one file (string
+       comparison made a copy of its materials per spelling) */
+    CHECK(write_file(dir, "sp.nff", "include ea.obj\ninclude ./ea.obj\n") == 0);
+    snprintf(path, sizeof path, "%s/sp.nff", dir);
+    CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_OK);
+    CHECK(s && s->nmats == 1 && s->tris[0].mat == 0 && s->tris[1].mat == 0);
+    rtp_scene_destroy(s);
+    s = NULL;
+    remove_file(dir, "sp.nff");
     CHECK(write_file(dir, "ov.nff", "f 0 1 0 1 0 10 0 1\nname Material\ns 0 0 0 1\n"
                                     "include ea.obj\ninclude eb.obj\n") == 0);
     snprintf(path, sizeof path, "%s/ov.nff", dir);
