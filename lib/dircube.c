@@ -980,22 +980,66 @@ static double lb_ang(double S, double near)
    wide, in 14 MB instead of 31; at half of it 9.7 MB, a tenth slower
    from 3e12).  Far lights: a scene of size 2 at 1e16 spans 2e-16 radians, all
    of it within one widening. */
-static int lb_res(const rtpi_dc_window *w, int res, double S)
+/* The smallest widening lb_ang gives any primitive in windows w: at the
+   farthest point of them.  A point in a face's frustum (|u|, |v| <= 1.02)
+   at depth z lies at most z sqrt(1 + 2 1.02^2) < 1.75 z from the light. */
+static double lb_ang_min(const rtpi_dc_window *w, double S)
 {
-    double wmax = 0.0, zmax = 0.0, ang, cap;
+    double zmax = 0.0;
     int f;
     for (f = 0; f < 6; f++)
-        if (w->fbase[f] != RTPI_DC_ABSENT) {
-            wmax = fmax(wmax, fmax(w->du[f], w->dv[f]) * (double)res);
+        if (w->fbase[f] != RTPI_DC_ABSENT)
             zmax = fmax(zmax, w->zbase[f] + w->zext[f]);
-        }
-    /* A point in a face's frustum (|u|, |v| <= 1.02) at depth z lies at
-       most z sqrt(1 + 2 1.02^2) < 1.75 z from the light. */
-    ang = lb_ang(S, 1.75 * zmax);
+    return lb_ang(S, 1.75 * zmax);
+}
+
+static int lb_res(const rtpi_dc_window *w, int res, double S)
+{
+    double wmax = 0.0, ang = lb_ang_min(w, S), cap;
+    int f;
+    for (f = 0; f < 6; f++)
+        if (w->fbase[f] != RTPI_DC_ABSENT)
+            wmax = fmax(wmax, fmax(w->du[f], w->dv[f]) * (double)res);
     if (!(wmax > 0.0) || !(ang > 0.0) || !(ang < HUGE_VAL))
         return res;
     cap = ceil(wmax / ang);
     return cap < (double)res ? (cap < 1.0 ? 1 : (int)cap) : res;
+}
+
+/* One side of a window [*o, *o + res *d] made no narrower than res cells
+   of `ang` (within the face [-1, 1]), around its middle. */
+static void lb_grow_side(double *o, double *d, int res, double ang)
+{
+    double want = (double)res * ang, mid;
+    if (!(*d < ang))
+        return;
+    if (!(want < 2.0)) {
+        *o = -1.0;
+        *d = 2.0 / (double)res;
+        return;
+    }
+    mid = *o + 0.5 * (double)res * *d;
+    *o = fmin(fmax(mid - 0.5 * want, -1.0), 1.0 - want);
+    *d = want / (double)res;
+}
+
+/* A flat scene seen edge-on has a window a millionth as tall as it is
+   wide (dc_windows_some), its rows far narrower than a widening: each
+   primitive was listed in every row (51,200 triangles edge-on from 1e8
+   away at 2048: 1.2 G entries, 5 GB).  Each side of each window is made
+   at least res cells of the smallest widening wide; a window wider than
+   the projection it holds keeps the lists exact (it still holds it). */
+static void lb_narrow(rtpi_dc_window *w, int res, double S)
+{
+    double ang = lb_ang_min(w, S);
+    int f;
+    if (!(ang > 0.0) || !(ang < HUGE_VAL))
+        return;
+    for (f = 0; f < 6; f++)
+        if (w->fbase[f] != RTPI_DC_ABSENT) {
+            lb_grow_side(&w->u0[f], &w->du[f], res, ang);
+            lb_grow_side(&w->v0[f], &w->dv[f], res, ang);
+        }
 }
 
 /* The cone entry of candidate prim, a sphere or a cone (see
@@ -1179,6 +1223,7 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
             res = lb->res = r;
             dc_windows_some(s, sel, want, light, res, 1.02, &lb->w);
         }
+        lb_narrow(&lb->w, res, S);
     }
     ncells = lb->w.ncells;
     /* Early stop: a primitive can be hit on the segment from o to the

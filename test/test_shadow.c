@@ -465,6 +465,73 @@ static void test_lightbuf_far_light_lists(void)
     rtp_scene_destroy(s);
 }
 
+/* A flat mesh seen edge-on from far away: its window is a millionth as
+   tall as it is wide, and its rows were far narrower than a widening, so
+   every triangle was listed in every row (51,200 triangles, 2048 cells,
+   light at 1e8: 1.2 G entries, 5 GB).  Each side of a window is now at
+   least res widenings wide; the lists stay exact. */
+static void test_lightbuf_edge_on(void)
+{
+    static const double dist[] = {1e2, 1e6, 1e8, 1e10};
+    char *text = (char *)malloc(1 << 20);
+    size_t len = 0, k;
+    int i, j;
+    const int g = 30;
+    rtp_scene *s;
+    rtpi_kdtree *kd = NULL;
+    rtp_allocator al;
+    size_t near_refs = 0;
+    if (!text)
+        return;
+    len += (size_t)sprintf(text + len, "v\nfrom 0 -3 2\nat 0 0 0\nup 0 0 1\nangle 40\n"
+                                       "resolution 32 32\nl 0 0 5\nf 1 1 1 1 0 1 0 1\n");
+    for (j = 0; j < g; j++)
+        for (i = 0; i < g; i++) {
+            double x0 = -1 + 2.0 * i / g, x1 = -1 + 2.0 * (i + 1) / g;
+            double y0 = -1 + 2.0 * j / g, y1 = -1 + 2.0 * (j + 1) / g;
+            len += (size_t)sprintf(text + len, "p 3\n%g %g 0\n%g %g 0\n%g %g 0\n", x0, y0, x1,
+                                   y0, x1, y1);
+            len += (size_t)sprintf(text + len, "p 3\n%g %g 0\n%g %g 0\n%g %g 0\n", x0, y0, x1,
+                                   y1, x0, y1);
+        }
+    /* grains on the floor, low enough to keep the scene flat from afar,
+       so that some grazing queries meet an occluder */
+    for (i = 0; i < 25; i++)
+        len += (size_t)sprintf(text + len, "s %g %g 0.0004 0.0004\n", -0.9 + 0.07 * i,
+                               -0.8 + 0.061 * i);
+    s = load(text, len);
+    free(text);
+    CHECK(s != NULL);
+    if (!s)
+        return;
+    rtpi_allocator_init(&al, NULL);
+    CHECK(rtpi_kd_build(s, NULL, &kd, NULL) == RTP_OK);
+    for (k = 0; kd && k < sizeof dist / sizeof *dist; k++) {
+        rtpi_lightbuf lb;
+        rtpi_v3 lp = v3_mul(v3_norm(v3(1, 0.3, 1e-3)), dist[k]);
+        static sample sm[2000];
+        size_t n, bad, lit = 0;
+        if (rtpi_lightbuf_build(s, lp, 512, &al, &lb, NULL) != RTP_OK) {
+            CHECK_MSG(0, "light buffer at %g failed", dist[k]);
+            continue;
+        }
+        printf("  edge-on at %-6g: %lu triangles, %lu entries\n", dist[k],
+               (unsigned long)s->ntris, (unsigned long)lb.nrefs);
+        if (k == 0)
+            near_refs = lb.nrefs;
+        CHECK_MSG(lb.nrefs <= 2 * near_refs, "edge-on at %g: %lu entries, %lu at 100",
+                  dist[k], (unsigned long)lb.nrefs, (unsigned long)near_refs);
+        rtpi_lightbuf_free(&lb, &al);
+        n = make_samples(s, kd, lp, sm, sizeof sm / sizeof *sm);
+        bad = compare(s, kd, lp, RTPI_SHADOW_LIGHTBUF, 512, sm, n, &lit);
+        printf("    %lu queries, %lu lit\n", (unsigned long)n, (unsigned long)lit);
+        CHECK_MSG(bad == 0, "edge-on at %g: %lu of %lu decisions differ from shadow rays",
+                  dist[k], (unsigned long)bad, (unsigned long)n);
+    }
+    rtpi_kd_destroy(kd);
+    rtp_scene_destroy(s);
+}
+
 static void test_lightbuf_threads(void)
 {
     const char *dir = check_shared_scenes();
@@ -862,6 +929,7 @@ int main(void)
     RUN(test_lightbuf_equals_exact);
     RUN(test_lightbuf_far_from_origin);
     RUN(test_lightbuf_far_light_lists);
+    RUN(test_lightbuf_edge_on);
     RUN(test_lightbuf_threads);
     RUN(test_spd_scene);
     RUN(test_osmesa);
