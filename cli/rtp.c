@@ -11,8 +11,10 @@
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <signal.h>
 #include <string.h>
 #include <sys/resource.h>
+#include <sys/stat.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -264,17 +266,143 @@ static int common_option(int argc, char **argv, int *i, int *threads, const char
     return 0;
 }
 
+/* ------------------------------------------------------------ signals */
+
+/* SIGINT, SIGTERM, SIGHUP and SIGQUIT end rtp as they would, without
+   leaving a temporary file behind: they wait while an image or tree file
+   is written (the library writes it beside the file and renames it into
+   place), and a stats file's temporary name is removed before the signal
+   takes its course.  SIGXFSZ (a file size limit) is ignored, so that the
+   write fails with "File too large" and cleans up instead of killing rtp
+   half way. */
+static sigset_t term_signals, saved_mask;
+static char stats_tmp[4096];
+static volatile sig_atomic_t stats_tmp_live;
+
+static void on_term(int sig)
+{
+    if (stats_tmp_live)
+        unlink(stats_tmp); /* (async-signal-safe) */
+    signal(sig, SIG_DFL);
+    raise(sig);
+}
+
+static void install_signals(void)
+{
+    static const int sigs[] = {SIGINT, SIGTERM, SIGHUP, SIGQUIT};
+    size_t k;
+    sigemptyset(&term_signals);
+    for (k = 0; k < sizeof sigs / sizeof *sigs; k++) {
+        struct sigaction sa, old;
+        sigaddset(&term_signals, sigs[k]);
+        memset(&sa, 0, sizeof sa);
+        sa.sa_handler = on_term;
+        sigemptyset(&sa.sa_mask);
+        /* (a signal ignored by who started rtp, as nohup does, stays so) */
+        if (sigaction(sigs[k], NULL, &old) == 0 && old.sa_handler != SIG_IGN)
+            sigaction(sigs[k], &sa, NULL);
+    }
+    signal(SIGXFSZ, SIG_IGN);
+}
+
+/* Holds the signals off while a file at path is written and renamed into
+   place (not for stdout, a FIFO or a device, where a reader that stalls
+   would make rtp deaf to Ctrl-C); @return whether they were held. */
+static int hold_signals(const char *path)
+{
+    struct stat sb;
+    if (!path || strcmp(path, "-") == 0 || (stat(path, &sb) == 0 && !S_ISREG(sb.st_mode)))
+        return 0;
+    return sigprocmask(SIG_BLOCK, &term_signals, &saved_mask) == 0;
+}
+
+static void release_signals(int held)
+{
+    if (held)
+        sigprocmask(SIG_SETMASK, &saved_mask, NULL);
+}
+
+static rtp_status write_image(const rtp_image *img, const char *path, rtp_error *err)
+{
+    int held = hold_signals(path);
+    rtp_status st = rtp_image_write(img, path, RTP_IMAGE_AUTO, err);
+    release_signals(held);
+    return st;
+}
+
+static rtp_status write_tree(const rtp_tree *t, const char *path, unsigned long long *bytes,
+                             rtp_error *err)
+{
+    int held = hold_signals(path);
+    rtp_status st = rtp_tree_write(t, path, bytes, err);
+    release_signals(held);
+    return st;
+}
+
 /* ---------------------------------------------------------------- stats */
+
+static mode_t stats_umask(void)
+{
+    mode_t m = umask(022);
+    umask(m);
+    return m;
+}
+
+/* A stats file goes to a temporary file beside it, renamed into place when
+   the command succeeds: a failure keeps the old file (it had been emptied
+   as the command began) and leaves no half file.  stdout, FIFOs and
+   devices are written as they are.  One a command. */
+static const char *stats_final;
 
 static FILE *stats_open(const char *path)
 {
     FILE *f;
+    struct stat sb;
+    int fd;
+    const char *slash;
     if (strcmp(path, "-") == 0)
         return stdout;
-    f = fopen(path, "w");
-    if (!f)
+    if (stat(path, &sb) == 0 && !S_ISREG(sb.st_mode)) {
+        f = fopen(path, "w");
+        if (!f)
+            msg("%s: cannot write stats: %s", path, strerror(errno));
+        return f;
+    }
+    slash = strrchr(path, '/');
+    if (snprintf(stats_tmp, sizeof stats_tmp, "%.*s.rtp-stats-XXXXXX",
+                 slash ? (int)(slash - path) + 1 : 0, path) >= (int)sizeof stats_tmp) {
+        msg("%s: cannot write stats: %s", path, strerror(ENAMETOOLONG));
+        return NULL;
+    }
+    fd = mkstemp(stats_tmp);
+    if (fd < 0) {
         msg("%s: cannot write stats: %s", path, strerror(errno));
+        return NULL;
+    }
+    stats_tmp_live = 1;
+    f = fdopen(fd, "w");
+    if (!f) {
+        msg("%s: cannot write stats: %s", path, strerror(errno));
+        stats_tmp_live = 0;
+        close(fd);
+        unlink(stats_tmp);
+        return NULL;
+    }
+    (void)fchmod(fd, 0644 & ~stats_umask()); /* (mkstemp makes it 0600) */
+    stats_final = path;
     return f;
+}
+
+/* A stats file given up: the command failed, the old file stays. */
+static void stats_discard(FILE *f)
+{
+    if (!f || f == stdout)
+        return;
+    fclose(f);
+    if (stats_tmp_live) {
+        stats_tmp_live = 0;
+        unlink(stats_tmp);
+    }
 }
 
 /* Peak resident memory of this process in KiB, or -1. */
@@ -288,7 +416,7 @@ static long peak_rss_kb(void)
 
 static int stats_close(FILE *f, const char *path)
 {
-    int bad;
+    int bad, e, tmp = stats_tmp_live && stats_final == path;
     if (f == stdout) {
         if (fflush(f) != 0 || ferror(f)) {
             msg("stdout: error writing stats: %s", strerror(errno));
@@ -296,9 +424,24 @@ static int stats_close(FILE *f, const char *path)
         }
         return 0;
     }
-    bad = ferror(f) != 0;
-    if (fclose(f) != 0 || bad) {
-        msg("%s: error writing stats", path);
+    errno = 0;
+    bad = fflush(f) != 0 || ferror(f) != 0;
+    e = errno;
+    if (fclose(f) != 0 && !bad) {
+        bad = 1;
+        e = errno;
+    }
+    if (!bad && tmp && rename(stats_tmp, path) != 0) {
+        bad = 1;
+        e = errno;
+    }
+    if (tmp) {
+        if (bad)
+            unlink(stats_tmp);
+        stats_tmp_live = 0;
+    }
+    if (bad) {
+        msg("%s: error writing stats: %s", path, e ? strerror(e) : "write failed");
         return 1;
     }
     return 0;
@@ -321,6 +464,41 @@ static int image_name_ok(const char *path)
     if (f == RTP_IMAGE_PNG && !rtp_png_supported()) {
         msg("%s: PNG is not supported by this build of rtp (libpng was not found when it was "
             "built); use .ppm or .pfm", path);
+        return 0;
+    }
+    return 1;
+}
+
+/* Whether a file can be made at path, said before the work (a trace of
+   minutes then "cannot create a temporary file beside it"): its folder
+   exists and may be written, and path is not a folder.  0 after a
+   message.  (A FIFO, a device or stdout is written as it is.) */
+static int output_ok(const char *path)
+{
+    struct stat sb;
+    char dir[4096];
+    const char *slash;
+    if (!path || strcmp(path, "-") == 0)
+        return 1;
+    if (stat(path, &sb) == 0) {
+        if (S_ISDIR(sb.st_mode)) {
+            msg("%s: cannot write: %s", path, strerror(EISDIR));
+            return 0;
+        }
+        if (!S_ISREG(sb.st_mode))
+            return 1;
+    }
+    slash = strrchr(path, '/');
+    if (!slash) {
+        strcpy(dir, ".");
+    } else {
+        if ((size_t)(slash - path) + 2 > sizeof dir)
+            return 1; /* (the write will say) */
+        memcpy(dir, path, (size_t)(slash - path) + 1);
+        dir[slash - path + 1] = '\0';
+    }
+    if (access(dir, W_OK | X_OK) != 0) {
+        msg("%s: cannot write in folder %s: %s", path, dir, strerror(errno));
         return 0;
     }
     return 1;
@@ -677,6 +855,8 @@ static int cmd_trace(int argc, char **argv)
         goto usage;
     if (image_path && !image_name_ok(image_path))
         goto out;
+    if (!output_ok(tree_path) || !output_ok(image_path) || !output_ok(stats_path))
+        goto out;
     if (opt.spd && verbosity > 0) {
         const char *ign[3];
         int n = 0;
@@ -732,11 +912,11 @@ static int cmd_trace(int argc, char **argv)
     progress_end(&prog);
     t_trace = now_seconds() - prog.start;
     t0 = now_seconds();
-    if (tree_path && rtp_tree_write(tree, tree_path, &file_bytes, &err) != RTP_OK) {
+    if (tree_path && write_tree(tree, tree_path, &file_bytes, &err) != RTP_OK) {
         fail_err(&err);
         goto out;
     }
-    if (image_path && rtp_image_write(img, image_path, RTP_IMAGE_AUTO, &err) != RTP_OK) {
+    if (image_path && write_image(img, image_path, &err) != RTP_OK) {
         fail_err(&err);
         goto out;
     }
@@ -828,7 +1008,8 @@ static int cmd_diff(int argc, char **argv)
     rtp_image *a = NULL, *b = NULL;
     rtp_diff_stats d;
     rtp_error err;
-    int i, rc = 1, over = 0, c;
+    int i, rc = 1, over = 0, c, held;
+    rtp_status hs;
     char metric[32];
 
     memset(&err, 0, sizeof err);
@@ -901,7 +1082,10 @@ static int cmd_diff(int argc, char **argv)
         fail_err(&err);
         goto out;
     }
-    if (heat && rtp_diff_heatmap(a, b, 0.0, heat, &err) != RTP_OK) {
+    held = heat ? hold_signals(heat) : 0;
+    hs = heat ? rtp_diff_heatmap(a, b, 0.0, heat, &err) : RTP_OK;
+    release_signals(held);
+    if (hs != RTP_OK) {
         fail_err(&err);
         goto out;
     }
@@ -1027,19 +1211,14 @@ static int expand_pattern(const char *pat, int n, char *out, size_t size)
 static const char *const shadow_modes[] = {"exact", "lightbuf", "itembuf", "osmesa", "auto"};
 #define N_SHADOW_MODES (sizeof shadow_modes / sizeof *shadow_modes)
 
+/* A regular file's size, else -1 (a FIFO is not opened again: that waited
+   for a writer that never came). */
 static long long file_size(const char *path)
 {
-    FILE *f;
-    long long n;
-    if (strcmp(path, "-") == 0 || !(f = fopen(path, "rb")))
+    struct stat sb;
+    if (strcmp(path, "-") == 0 || stat(path, &sb) != 0 || !S_ISREG(sb.st_mode))
         return -1;
-    if (fseek(f, 0, SEEK_END) != 0) {
-        fclose(f);
-        return -1;
-    }
-    n = ftell(f);
-    fclose(f);
-    return n;
+    return (long long)sb.st_size;
 }
 
 /* The part of img (the tree's region of the frame) inside `region` (frame
@@ -1095,13 +1274,13 @@ static int reeval_one(rtp_tree *tree, const rtp_eval_options *eo, rtp_image **ke
         rtp_status ws;
         if (!c)
             goto out;
-        ws = rtp_image_write(c, image_path, RTP_IMAGE_AUTO, &err);
+        ws = write_image(c, image_path, &err);
         rtp_image_destroy(c);
         if (ws != RTP_OK) {
             fail_line(&err, line);
             goto out;
         }
-    } else if (image_path && rtp_image_write(img, image_path, RTP_IMAGE_AUTO, &err) != RTP_OK) {
+    } else if (image_path && write_image(img, image_path, &err) != RTP_OK) {
         fail_line(&err, line);
         goto out;
     }
@@ -1316,11 +1495,13 @@ static int cmd_reeval(int argc, char **argv)
             msg("--stream: -i needs a pattern with one %%d (e.g. frame%%04d.png) or '-'");
             goto usage;
         }
-        if (!image_name_ok(probe))
+        if (!image_name_ok(probe) || !output_ok(probe))
             goto out;
-    } else if (!image_name_ok(image_path)) {
+    } else if (!image_name_ok(image_path) || !output_ok(image_path)) {
         goto out;
     }
+    if (!output_ok(stats_path))
+        goto out;
     eo.threads = threads;
     /* one image: caches for later edits would only cost time */
     eo.no_cache = !stream;
@@ -1383,12 +1564,11 @@ static int cmd_reeval(int argc, char **argv)
             fflush(stdout);
         }
     }
-    if (stats && stats_close(stats, stats_path))
+    if (stats && (rc != 0 ? (stats_discard(stats), 0) : stats_close(stats, stats_path)))
         rc = 1;
     stats = NULL;
 out:
-    if (stats && stats != stdout)
-        fclose(stats);
+    stats_discard(stats);
     rtp_image_destroy(img);
     rtp_tree_destroy(tree);
     free(default_image);
@@ -1640,7 +1820,8 @@ static int cmd_merge(int argc, char **argv)
             goto usage;
         }
     }
-    if (out_image && !image_name_ok(out_image))
+    if ((out_image && !image_name_ok(out_image)) || !output_ok(out_image) ||
+        !output_ok(out_tree))
         goto out;
     if (images) {
         int x0, y0, x, y;
@@ -1715,7 +1896,7 @@ static int cmd_merge(int argc, char **argv)
             fail_err(&err);
             goto out;
         }
-        if (out_tree && rtp_tree_write(joined, out_tree, NULL, &err) != RTP_OK) {
+        if (out_tree && write_tree(joined, out_tree, NULL, &err) != RTP_OK) {
             fail_err(&err);
             goto out;
         }
@@ -1727,7 +1908,7 @@ static int cmd_merge(int argc, char **argv)
             goto out;
         }
     }
-    if (out_image && rtp_image_write(img, out_image, RTP_IMAGE_AUTO, &err) != RTP_OK) {
+    if (out_image && write_image(img, out_image, &err) != RTP_OK) {
         fail_err(&err);
         goto out;
     }
@@ -1761,6 +1942,17 @@ static const char main_help[] =
     "  version       print the version\n"
     "Exit status: 0 ok, 1 failure, 2 usage error, 3 diff over --fail-above.\n";
 
+/* What went to stdout (info's summary, diff's numbers, version, help) must
+   have arrived: a full disk or a closed stdout is a failure, said so. */
+static int stdout_done(int rc)
+{
+    if ((fflush(stdout) != 0 || ferror(stdout)) && rc == 0) {
+        msg("stdout: write failed: %s", strerror(errno));
+        rc = 1;
+    }
+    return rc;
+}
+
 int main(int argc, char **argv)
 {
     int rc;
@@ -1771,7 +1963,7 @@ int main(int argc, char **argv)
     if (strcmp(argv[1], "-h") == 0 || strcmp(argv[1], "--help") == 0 ||
         strcmp(argv[1], "help") == 0) {
         fputs(main_help, stdout);
-        return 0;
+        return stdout_done(0);
     }
     if (strcmp(argv[1], "version") == 0 || strcmp(argv[1], "--version") == 0) {
         unsigned f = rtp_features();
@@ -1779,7 +1971,7 @@ int main(int argc, char **argv)
             fputs("usage: rtp version\nPrints the versions of rtp and of its library, and what "
                   "this build has\n(png, threads, osmesa).\n",
                   stdout);
-            return 0;
+            return stdout_done(0);
         }
         if (argc > 2) {
             msg("version: unexpected argument '%s'", argv[2]);
@@ -1793,8 +1985,9 @@ int main(int argc, char **argv)
         printf("built with:%s%s%s\n", f & RTP_FEATURE_PNG ? " png" : " (no png)",
                f & RTP_FEATURE_THREADS ? " threads" : " (no threads)",
                f & RTP_FEATURE_OSMESA ? " osmesa" : " (no osmesa)");
-        return 0;
+        return stdout_done(0);
     }
+    install_signals();
     if (strcmp(argv[1], "trace") == 0)
         rc = cmd_trace(argc - 2, argv + 2);
     else if (strcmp(argv[1], "diff") == 0)
@@ -1810,11 +2003,5 @@ int main(int argc, char **argv)
         fputs(main_help, stderr);
         return EXIT_USAGE;
     }
-    /* what went to stdout (info's summary, diff's numbers) must have
-       arrived: a full disk or a closed pipe is a failure, said so */
-    if ((fflush(stdout) != 0 || ferror(stdout)) && rc == 0) {
-        msg("stdout: write failed: %s", strerror(errno));
-        rc = 1;
-    }
-    return rc;
+    return stdout_done(rc);
 }

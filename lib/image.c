@@ -576,6 +576,53 @@ FILE *rtpi_open_temp(const char *path, char *tmp, size_t tmpsize)
     return NULL;
 }
 
+char *rtpi_write_target(const rtp_allocator *a, const char *path, rtp_error *err)
+{
+    char *cur = rtpi_strdup(a, path);
+#ifdef RTPI_POSIX_FILES
+    int hops;
+    struct stat sb;
+    for (hops = 0; cur && lstat(cur, &sb) == 0 && S_ISLNK(sb.st_mode); hops++) {
+        char link[4096], *next;
+        ssize_t n;
+        const char *slash;
+        size_t dir;
+        if (hops == 40) {
+            rtpi_free(a, cur);
+            rtpi_error(err, RTP_ERR_IO, path, 0, 0, "cannot write: %s", strerror(ELOOP));
+            return NULL;
+        }
+        n = readlink(cur, link, sizeof link - 1);
+        if (n < 0) {
+            int e = errno;
+            rtpi_free(a, cur);
+            rtpi_error(err, RTP_ERR_IO, path, 0, 0, "cannot read the link: %s", strerror(e));
+            return NULL;
+        }
+        link[n] = '\0';
+        /* a relative target is relative to the link's folder */
+        slash = strrchr(cur, '/');
+        dir = link[0] != '/' && slash ? (size_t)(slash - cur) + 1 : 0;
+        next = (char *)rtpi_malloc(a, dir + (size_t)n + 1);
+        if (next) {
+            memcpy(next, cur, dir);
+            memcpy(next + dir, link, (size_t)n + 1);
+        }
+        rtpi_free(a, cur);
+        cur = next;
+    }
+    if (cur && stat(cur, &sb) == 0 && S_ISREG(sb.st_mode) && access(cur, W_OK) != 0) {
+        int e = errno;
+        rtpi_free(a, cur);
+        rtpi_error(err, RTP_ERR_IO, path, 0, 0, "cannot write: %s", strerror(e));
+        return NULL;
+    }
+#endif
+    if (!cur)
+        rtpi_error(err, RTP_ERR_NOMEM, path, 0, 0, "out of memory");
+    return cur;
+}
+
 /* Whether path names something other than a regular file (a device, a
    FIFO): those are written in place, never replaced by a rename. */
 int rtpi_is_special_file(const char *path)
@@ -594,7 +641,7 @@ rtp_status rtp_image_write(const rtp_image *image, const char *path,
 {
     rtp_allocator a;
     rtp_status st;
-    char *tmp;
+    char *tmp, *target;
     size_t tmpsize;
     FILE *f;
     int e;
@@ -624,8 +671,13 @@ rtp_status rtp_image_write(const rtp_image *image, const char *path,
     if (format == RTP_IMAGE_PNG)
         return no_png(err, path);
 #endif
-    if (rtpi_is_special_file(path)) {
-        f = fopen(path, "wb");
+    rtpi_allocator_init(&a, &image->alloc);
+    /* (through a symbolic link: the file it names) */
+    if (!(target = rtpi_write_target(&a, path, err)))
+        return err ? err->status : RTP_ERR_IO;
+    if (rtpi_is_special_file(target)) {
+        f = fopen(target, "wb");
+        rtpi_free(&a, target);
         if (!f)
             return rtpi_error(err, RTP_ERR_IO, path, 0, 0,
                               "cannot open for writing: %s", strerror(errno));
@@ -636,15 +688,17 @@ rtp_status rtp_image_write(const rtp_image *image, const char *path,
         return st;
     }
 
-    rtpi_allocator_init(&a, &image->alloc);
-    tmpsize = strlen(path) + 32;
+    tmpsize = strlen(target) + 32;
     tmp = (char *)rtpi_malloc(&a, tmpsize);
-    if (!tmp)
+    if (!tmp) {
+        rtpi_free(&a, target);
         return rtpi_error(err, RTP_ERR_NOMEM, path, 0, 0, "out of memory");
-    f = rtpi_open_temp(path, tmp, tmpsize);
+    }
+    f = rtpi_open_temp(target, tmp, tmpsize);
     if (!f) {
         e = errno;
         rtpi_free(&a, tmp);
+        rtpi_free(&a, target);
         return rtpi_error(err, RTP_ERR_IO, path, 0, 0,
                           "cannot create a temporary file beside it: %s",
                           strerror(e));
@@ -653,7 +707,7 @@ rtp_status rtp_image_write(const rtp_image *image, const char *path,
     errno = 0;
     if (fclose(f) != 0 && st == RTP_OK)
         st = write_failed(err, path, errno);
-    if (st == RTP_OK && rename(tmp, path) != 0) {
+    if (st == RTP_OK && rename(tmp, target) != 0) {
         e = errno;
         st = rtpi_error(err, RTP_ERR_IO, path, 0, 0,
                         "cannot rename the temporary file %s over it: %s",
@@ -662,6 +716,7 @@ rtp_status rtp_image_write(const rtp_image *image, const char *path,
     if (st != RTP_OK)
         remove(tmp);
     rtpi_free(&a, tmp);
+    rtpi_free(&a, target);
     return st;
 }
 

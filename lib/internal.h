@@ -242,6 +242,14 @@ FILE *rtpi_open_temp(const char *path, char *tmp, size_t tmpsize);
 /* Whether path names something other than a regular file (a device, a
    FIFO): written in place, never replaced by a rename. */
 int rtpi_is_special_file(const char *path);
+/* The file a write to `path` replaces: path itself, or where a symbolic
+   link at path leads (a chain followed; a dangling link's target name),
+   so that a write through a link changes the file it names rather than
+   turning the link into a file.  Allocated with a; NULL and err set when
+   out of memory, when the chain loops, or when the file there may not
+   be written (a read-only file in a writable folder: what the shell's
+   '>' refuses, rename would have replaced). */
+char *rtpi_write_target(const rtp_allocator *a, const char *path, rtp_error *err);
 
 /* What is wrong with s's camera for a frame to be made (at equal to
    from, up along the view), or NULL. */

@@ -812,7 +812,7 @@ rtp_status rtp_tree_write(const rtp_tree *t, const char *path,
 {
     sink out;
     rtp_status st = RTP_OK;
-    char *tmp = NULL;
+    char *tmp = NULL, *target = NULL;
     int to_stdout, special;
     if (!t || !path)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_write: NULL argument");
@@ -830,15 +830,21 @@ rtp_status rtp_tree_write(const rtp_tree *t, const char *path,
     if (!out.p)
         return rtpi_error(err, RTP_ERR_NOMEM, path, 0, 0, "out of memory writing tree file");
     to_stdout = strcmp(path, "-") == 0;
-    special = !to_stdout && rtpi_is_special_file(path);
+    /* (through a symbolic link: the file it names) */
+    if (!to_stdout && !(target = rtpi_write_target(&t->alloc, path, err))) {
+        rtpi_free(&t->alloc, out.p);
+        return err ? err->status : RTP_ERR_IO;
+    }
+    special = !to_stdout && rtpi_is_special_file(target);
     if (to_stdout) {
         out.f = stdout;
     } else if (special) {
         /* a FIFO or a device: written in place */
-        out.f = fopen(path, "wb");
+        out.f = fopen(target, "wb");
         if (!out.f) {
             st = rtpi_error(err, RTP_ERR_IO, path, 0, 0, "cannot write: %s", strerror(errno));
             rtpi_free(&t->alloc, out.p);
+            rtpi_free(&t->alloc, target);
             return st;
         }
     } else {
@@ -846,18 +852,20 @@ rtp_status rtp_tree_write(const rtp_tree *t, const char *path,
            of one path once shared ".tmp-rtp" and left a corrupt file)
            and renamed into place once whole: a failed write leaves no
            half file and an old file as it was */
-        size_t n = strlen(path) + 32;
+        size_t n = strlen(target) + 32;
         tmp = (char *)rtpi_malloc(&t->alloc, n);
         if (!tmp) {
             rtpi_free(&t->alloc, out.p);
+            rtpi_free(&t->alloc, target);
             return rtpi_error(err, RTP_ERR_NOMEM, path, 0, 0, "out of memory");
         }
-        out.f = rtpi_open_temp(path, tmp, n);
+        out.f = rtpi_open_temp(target, tmp, n);
         if (!out.f) {
             st = rtpi_error(err, RTP_ERR_IO, path, 0, 0,
                             "cannot create a temporary file beside it: %s", strerror(errno));
             rtpi_free(&t->alloc, tmp);
             rtpi_free(&t->alloc, out.p);
+            rtpi_free(&t->alloc, target);
             return st;
         }
     }
@@ -872,7 +880,7 @@ rtp_status rtp_tree_write(const rtp_tree *t, const char *path,
     } else if (!to_stdout) {
         if (fclose(out.f) != 0 && st == RTP_OK)
             st = rtpi_error(err, RTP_ERR_IO, path, 0, 0, "write failed: %s", strerror(errno));
-        if (st == RTP_OK && rename(tmp, path) != 0)
+        if (st == RTP_OK && rename(tmp, target) != 0)
             st = rtpi_error(err, RTP_ERR_IO, path, 0, 0, "cannot rename into place: %s",
                             strerror(errno));
         if (st != RTP_OK)
@@ -882,6 +890,7 @@ rtp_status rtp_tree_write(const rtp_tree *t, const char *path,
     if (bytes)
         *bytes = out.total;
     rtpi_free(&t->alloc, out.p);
+    rtpi_free(&t->alloc, target);
     return st;
 }
 

@@ -370,8 +370,19 @@ rtp_status rtpi_error(rtp_error *err, rtp_status status, const char *file,
     err->status = status;
     err->file[0] = '\0';
     if (file) {
-        strncpy(err->file, file, sizeof err->file - 1);
-        err->file[sizeof err->file - 1] = '\0';
+        size_t n = strlen(file);
+        if (n < sizeof err->file) {
+            memcpy(err->file, file, n + 1);
+        } else {
+            /* too long: its end, which names the file ("...dir/x.png"),
+               from a character's first byte on (a cut ".pn" named
+               another file) */
+            const char *tail = file + n - (sizeof err->file - 4);
+            while ((unsigned char)*tail >= 0x80 && (unsigned char)*tail < 0xc0)
+                tail++;
+            memcpy(err->file, "...", 3);
+            memcpy(err->file + 3, tail, strlen(tail) + 1);
+        }
     }
     err->line = line;
     err->column = col;

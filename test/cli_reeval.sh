@@ -241,6 +241,52 @@ cp $S "$T/$(printf 'lat\351.nff')"
 expect_rc 0 $RTP trace "$T/$(printf 'lat\351.nff')" --size 8x8 -i "$T/w.pfm" --stats "$T/w2.json"
 grep -q 'lat\\u00e9.nff"' "$T/w2.json" && ok || { bad "a path not UTF-8 not escaped in JSON"; cat "$T/w2.json" >&2; }
 
+# Outputs as a user expects them (session 20):
+# a failed command keeps an old stats file (it was emptied as reeval began)
+echo OLDSTATS >"$T/ks.json"
+expect_rc 1 sh -c "$RTP reeval '$T/t.rtp' --stream --memory-limit 0.01 -i '$T/ks_%d.pfm' --stats '$T/ks.json' < '$T/lines'"
+[ "$(cat "$T/ks.json")" = OLDSTATS ] && ok || bad "a failed reeval emptied its stats file"
+ls -a "$T" | grep -q 'rtp-stats' && bad "a stats temporary file left" || ok
+expect_rc 0 $RTP reeval "$T/t.rtp" -i "$T/ks.pfm" --stats "$T/ks.json"
+grep -q '"command": "reeval"' "$T/ks.json" && ok || bad "stats not written on success"
+# a write through a symbolic link writes the file it names
+echo OLD >"$T/real.png"
+ln -s real.png "$T/link.png"
+expect_rc 0 $RTP reeval "$T/t.rtp" -i "$T/link.png"
+[ -L "$T/link.png" ] && [ "$(head -c 4 "$T/real.png" | tail -c 3)" = PNG ] && ok ||
+    bad "writing through a link replaced the link"
+# an output folder that is missing, or a folder as the output, is said
+# before the trace (after it, once)
+expect_rc 1 $RTP trace $S --size 8x8 -o "$T/nodir/x.rtp"
+grep -q "cannot write in folder" "$T/err" && ok || bad "missing output folder not said"
+mkdir "$T/d.png"
+expect_rc 1 $RTP trace $S --size 8x8 -i "$T/d.png"
+grep -q "Is a directory" "$T/err" && ok || bad "a folder as the output not said"
+# a file size limit (SIGXFSZ) fails the write, leaving no temporary file
+mkdir -p "$T/fs"
+expect_rc 1 sh -c "ulimit -f 1; exec $RTP trace $S --size 64x64 -o '$T/fs/big.rtp'"
+grep -q "File too large" "$T/err" && ok || bad "file size limit: $(cat "$T/err")"
+[ -z "$(ls -A "$T/fs")" ] && ok || bad "file size limit left $(ls -A "$T/fs")"
+# info and reeval --stats of a FIFO (a second open waited for a writer)
+if mkfifo "$T/fifo.rtp" 2>/dev/null; then
+    (cat "$T/t.rtp" >"$T/fifo.rtp" &)
+    expect_rc 0 timeout 20 $RTP info "$T/fifo.rtp"
+    (cat "$T/t.rtp" >"$T/fifo.rtp" &)
+    expect_rc 0 timeout 20 $RTP reeval "$T/fifo.rtp" -i "$T/ff.pfm" --stats "$T/ff.json"
+else
+    echo "skip: mkfifo failed: FIFO input not tried" >&2; skip=$((skip + 1))
+fi
+# a name too long for an error's file field is shown by its end, which
+# names the file (it was cut to "ccc...c.pn")
+long=$(printf 'c%.0s' $(seq 300))
+expect_rc 1 $RTP reeval "$T/t.rtp" -i "$T/$long.png"
+grep -q '\.\.\.c*\.png: ' "$T/err" && ok || { bad "a long name not shown by its end"; cat "$T/err" >&2; }
+# stdout that cannot be written fails version and --help too
+if [ -w /dev/full ]; then
+    expect_rc 1 sh -c "$RTP version >/dev/full"
+    expect_rc 1 sh -c "$RTP --help >/dev/full"
+fi
+
 rm -rf "$T"
 echo "$pass passed, $fail failed, $skip skipped"
 [ "$fail" -eq 0 ]
