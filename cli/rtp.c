@@ -348,32 +348,99 @@ static mode_t stats_umask(void)
     return m;
 }
 
+/* The file a write to path replaces: path, or where a chain of symbolic
+   links at path leads (as the library's writers follow it).  0, or -1
+   with errno. */
+static int link_target(const char *path, char *buf, size_t size)
+{
+    struct stat sb;
+    int hops;
+    if (strlen(path) >= size) {
+        errno = ENAMETOOLONG;
+        return -1;
+    }
+    strcpy(buf, path);
+    for (hops = 0; lstat(buf, &sb) == 0 && S_ISLNK(sb.st_mode); hops++) {
+        char link[4096];
+        ssize_t n;
+        const char *slash = strrchr(buf, '/');
+        size_t dir;
+        if (hops == 40) {
+            errno = ELOOP;
+            return -1;
+        }
+        n = readlink(buf, link, sizeof link - 1);
+        if (n < 0)
+            return -1;
+        link[n] = '\0';
+        dir = link[0] != '/' && slash ? (size_t)(slash - buf) + 1 : 0;
+        if (dir + (size_t)n >= size) {
+            errno = ENAMETOOLONG;
+            return -1;
+        }
+        memmove(buf + dir, link, (size_t)n + 1);
+    }
+    return 0;
+}
+
+/* Whether path is the file stdout or stderr writes ("/dev/stderr" when
+   it goes to a file): @return that stream, or NULL. */
+static FILE *std_stream(const struct stat *sb)
+{
+    struct stat so;
+    if (fstat(fileno(stdout), &so) == 0 && so.st_dev == sb->st_dev && so.st_ino == sb->st_ino)
+        return stdout;
+    if (fstat(fileno(stderr), &so) == 0 && so.st_dev == sb->st_dev && so.st_ino == sb->st_ino)
+        return stderr;
+    return NULL;
+}
+
 /* A stats file goes to a temporary file beside it, renamed into place when
    the command succeeds: a failure keeps the old file (it had been emptied
    as the command began) and leaves no half file.  stdout, FIFOs and
    devices are written as they are.  One a command. */
 static const char *stats_final;
+static char stats_dest[4096]; /* where the temporary file goes: path's link target */
 
 static FILE *stats_open(const char *path)
 {
     FILE *f;
     struct stat sb;
-    int fd;
+    int fd, exists;
     const char *slash;
+    char target[4096];
     if (strcmp(path, "-") == 0)
         return stdout;
-    if (stat(path, &sb) == 0 && !S_ISREG(sb.st_mode)) {
-        f = fopen(path, "w");
-        if (!f)
-            msg("%s: cannot write stats: %s", path, strerror(errno));
-        return f;
+    if (stat(path, &sb) == 0) {
+        FILE *std = S_ISREG(sb.st_mode) ? std_stream(&sb) : NULL;
+        if (std)
+            return std; /* (closed as stdout is: flushed, not closed) */
+        if (!S_ISREG(sb.st_mode)) {
+            f = fopen(path, "w"); /* a FIFO, a device: in place */
+            if (!f)
+                msg("%s: cannot write stats: %s", path, strerror(errno));
+            return f;
+        }
     }
-    slash = strrchr(path, '/');
+    /* as the library writes images and trees: the file a link names, a
+       read-only file refused, its mode kept */
+    if (link_target(path, target, sizeof target) != 0) {
+        msg("%s: cannot write stats: %s", path, strerror(errno));
+        return NULL;
+    }
+    exists = stat(target, &sb) == 0;
+    if (exists && access(target, W_OK) != 0) {
+        msg("%s: cannot write stats: %s", path, strerror(errno));
+        return NULL;
+    }
+    slash = strrchr(target, '/');
     if (snprintf(stats_tmp, sizeof stats_tmp, "%.*s.rtp-stats-XXXXXX",
-                 slash ? (int)(slash - path) + 1 : 0, path) >= (int)sizeof stats_tmp) {
+                 slash ? (int)(slash - target) + 1 : 0, target) >= (int)sizeof stats_tmp ||
+        strlen(target) >= sizeof stats_dest) {
         msg("%s: cannot write stats: %s", path, strerror(ENAMETOOLONG));
         return NULL;
     }
+    strcpy(stats_dest, target);
     fd = mkstemp(stats_tmp);
     if (fd < 0) {
         msg("%s: cannot write stats: %s", path, strerror(errno));
@@ -388,7 +455,8 @@ static FILE *stats_open(const char *path)
         unlink(stats_tmp);
         return NULL;
     }
-    (void)fchmod(fd, 0644 & ~stats_umask()); /* (mkstemp makes it 0600) */
+    /* (mkstemp makes it 0600) */
+    (void)fchmod(fd, exists ? sb.st_mode & 07777 : 0666 & ~stats_umask());
     stats_final = path;
     return f;
 }
@@ -396,7 +464,7 @@ static FILE *stats_open(const char *path)
 /* A stats file given up: the command failed, the old file stays. */
 static void stats_discard(FILE *f)
 {
-    if (!f || f == stdout)
+    if (!f || f == stdout || f == stderr)
         return;
     fclose(f);
     if (stats_tmp_live) {
@@ -417,9 +485,10 @@ static long peak_rss_kb(void)
 static int stats_close(FILE *f, const char *path)
 {
     int bad, e, tmp = stats_tmp_live && stats_final == path;
-    if (f == stdout) {
+    if (f == stdout || f == stderr) {
         if (fflush(f) != 0 || ferror(f)) {
-            msg("stdout: error writing stats: %s", strerror(errno));
+            msg("%s: error writing stats: %s", f == stdout ? "stdout" : "stderr",
+                strerror(errno));
             return 1;
         }
         return 0;
@@ -431,7 +500,7 @@ static int stats_close(FILE *f, const char *path)
         bad = 1;
         e = errno;
     }
-    if (!bad && tmp && rename(stats_tmp, path) != 0) {
+    if (!bad && tmp && rename(stats_tmp, stats_dest) != 0) {
         bad = 1;
         e = errno;
     }
@@ -476,7 +545,7 @@ static int image_name_ok(const char *path)
 static int output_ok(const char *path)
 {
     struct stat sb;
-    char dir[4096];
+    char dir[4096], target[4096];
     const char *slash;
     if (!path || strcmp(path, "-") == 0)
         return 1;
@@ -486,16 +555,23 @@ static int output_ok(const char *path)
             return 0;
         }
         if (!S_ISREG(sb.st_mode))
-            return 1;
+            return 1; /* (a FIFO, a device: written in place) */
     }
-    slash = strrchr(path, '/');
+    /* the file a link names is the one written (rtpi_write_target) */
+    if (link_target(path, target, sizeof target) != 0) {
+        msg("%s: cannot write: %s", path, strerror(errno));
+        return 0;
+    }
+    if (stat(target, &sb) == 0 && access(target, W_OK) != 0) {
+        msg("%s: cannot write: %s", path, strerror(errno));
+        return 0;
+    }
+    slash = strrchr(target, '/');
     if (!slash) {
         strcpy(dir, ".");
     } else {
-        if ((size_t)(slash - path) + 2 > sizeof dir)
-            return 1; /* (the write will say) */
-        memcpy(dir, path, (size_t)(slash - path) + 1);
-        dir[slash - path + 1] = '\0';
+        memcpy(dir, target, (size_t)(slash - target) + 1);
+        dir[slash - target + 1] = '\0';
     }
     if (access(dir, W_OK | X_OK) != 0) {
         msg("%s: cannot write in folder %s: %s", path, dir, strerror(errno));

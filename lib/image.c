@@ -576,12 +576,16 @@ FILE *rtpi_open_temp(const char *path, char *tmp, size_t tmpsize)
     return NULL;
 }
 
-char *rtpi_write_target(const rtp_allocator *a, const char *path, rtp_error *err)
+rtp_status rtpi_write_target(const rtp_allocator *a, const char *path, char **out,
+                             rtp_error *err)
 {
     char *cur = rtpi_strdup(a, path);
 #ifdef RTPI_POSIX_FILES
     int hops;
     struct stat sb;
+#endif
+    *out = NULL;
+#ifdef RTPI_POSIX_FILES
     for (hops = 0; cur && lstat(cur, &sb) == 0 && S_ISLNK(sb.st_mode); hops++) {
         char link[4096], *next;
         ssize_t n;
@@ -589,15 +593,14 @@ char *rtpi_write_target(const rtp_allocator *a, const char *path, rtp_error *err
         size_t dir;
         if (hops == 40) {
             rtpi_free(a, cur);
-            rtpi_error(err, RTP_ERR_IO, path, 0, 0, "cannot write: %s", strerror(ELOOP));
-            return NULL;
+            return rtpi_error(err, RTP_ERR_IO, path, 0, 0, "cannot write: %s", strerror(ELOOP));
         }
         n = readlink(cur, link, sizeof link - 1);
         if (n < 0) {
             int e = errno;
             rtpi_free(a, cur);
-            rtpi_error(err, RTP_ERR_IO, path, 0, 0, "cannot read the link: %s", strerror(e));
-            return NULL;
+            return rtpi_error(err, RTP_ERR_IO, path, 0, 0, "cannot read the link: %s",
+                              strerror(e));
         }
         link[n] = '\0';
         /* a relative target is relative to the link's folder */
@@ -614,26 +617,29 @@ char *rtpi_write_target(const rtp_allocator *a, const char *path, rtp_error *err
     if (cur && stat(cur, &sb) == 0 && S_ISREG(sb.st_mode) && access(cur, W_OK) != 0) {
         int e = errno;
         rtpi_free(a, cur);
-        rtpi_error(err, RTP_ERR_IO, path, 0, 0, "cannot write: %s", strerror(e));
-        return NULL;
+        return rtpi_error(err, RTP_ERR_IO, path, 0, 0, "cannot write: %s", strerror(e));
     }
 #endif
     if (!cur)
-        rtpi_error(err, RTP_ERR_NOMEM, path, 0, 0, "out of memory");
-    return cur;
+        return rtpi_error(err, RTP_ERR_NOMEM, path, 0, 0, "out of memory");
+    *out = cur;
+    return RTP_OK;
 }
 
-/* Whether path names something other than a regular file (a device, a
-   FIFO): those are written in place, never replaced by a rename. */
-int rtpi_is_special_file(const char *path)
+int rtpi_write_kind(const char *path)
 {
 #ifdef RTPI_POSIX_FILES
-    struct stat sb;
-    return stat(path, &sb) == 0 && !S_ISREG(sb.st_mode);
+    struct stat sb, so;
+    if (stat(path, &sb) != 0)
+        return RTPI_WRITE_FILE;
+    if (!S_ISREG(sb.st_mode))
+        return RTPI_WRITE_IN_PLACE;
+    if (fstat(fileno(stdout), &so) == 0 && so.st_dev == sb.st_dev && so.st_ino == sb.st_ino)
+        return RTPI_WRITE_STDOUT;
 #else
     (void)path;
-    return 0;
 #endif
+    return RTPI_WRITE_FILE;
 }
 
 rtp_status rtp_image_write(const rtp_image *image, const char *path,
@@ -642,6 +648,7 @@ rtp_status rtp_image_write(const rtp_image *image, const char *path,
     rtp_allocator a;
     rtp_status st;
     char *tmp, *target;
+    int kind;
     size_t tmpsize;
     FILE *f;
     int e;
@@ -672,12 +679,15 @@ rtp_status rtp_image_write(const rtp_image *image, const char *path,
         return no_png(err, path);
 #endif
     rtpi_allocator_init(&a, &image->alloc);
-    /* (through a symbolic link: the file it names) */
-    if (!(target = rtpi_write_target(&a, path, err)))
-        return err ? err->status : RTP_ERR_IO;
-    if (rtpi_is_special_file(target)) {
-        f = fopen(target, "wb");
-        rtpi_free(&a, target);
+    kind = rtpi_write_kind(path);
+    if (kind == RTPI_WRITE_STDOUT) {
+        st = write_to(image, stdout, format, path, err);
+        if (fflush(stdout) != 0 && st == RTP_OK)
+            st = write_failed(err, path, errno);
+        return st;
+    }
+    if (kind == RTPI_WRITE_IN_PLACE) {
+        f = fopen(path, "wb");
         if (!f)
             return rtpi_error(err, RTP_ERR_IO, path, 0, 0,
                               "cannot open for writing: %s", strerror(errno));
@@ -688,6 +698,9 @@ rtp_status rtp_image_write(const rtp_image *image, const char *path,
         return st;
     }
 
+    /* (through a symbolic link: the file it names) */
+    if ((st = rtpi_write_target(&a, path, &target, err)) != RTP_OK)
+        return st;
     tmpsize = strlen(target) + 32;
     tmp = (char *)rtpi_malloc(&a, tmpsize);
     if (!tmp) {

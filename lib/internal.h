@@ -239,17 +239,23 @@ rtp_status rtpi_scene_clone(const rtp_scene *s, rtp_scene **out);
    so writers of one path at once never share it; the mode of a file
    already at path.  NULL with errno on failure. */
 FILE *rtpi_open_temp(const char *path, char *tmp, size_t tmpsize);
-/* Whether path names something other than a regular file (a device, a
-   FIFO): written in place, never replaced by a rename. */
-int rtpi_is_special_file(const char *path);
+/* How a file at path is written: RTPI_WRITE_FILE beside it and renamed
+   over it (a regular file or none yet), RTPI_WRITE_IN_PLACE (a FIFO, a
+   device, a pipe behind /dev/fd/N: never replaced by a rename), or
+   RTPI_WRITE_STDOUT (the very file stdout is, as /dev/stdout names it
+   when stdout goes to a file: written through stdout, so that '>>' still
+   appends and no link in /dev is replaced). */
+enum { RTPI_WRITE_FILE, RTPI_WRITE_IN_PLACE, RTPI_WRITE_STDOUT };
+int rtpi_write_kind(const char *path);
 /* The file a write to `path` replaces: path itself, or where a symbolic
    link at path leads (a chain followed; a dangling link's target name),
    so that a write through a link changes the file it names rather than
-   turning the link into a file.  Allocated with a; NULL and err set when
+   turning the link into a file, in *out (allocated with a); err set when
    out of memory, when the chain loops, or when the file there may not
    be written (a read-only file in a writable folder: what the shell's
    '>' refuses, rename would have replaced). */
-char *rtpi_write_target(const rtp_allocator *a, const char *path, rtp_error *err);
+rtp_status rtpi_write_target(const rtp_allocator *a, const char *path, char **out,
+                             rtp_error *err);
 
 /* What is wrong with s's camera for a frame to be made (at equal to
    from, up along the view), or NULL. */

@@ -813,7 +813,7 @@ rtp_status rtp_tree_write(const rtp_tree *t, const char *path,
     sink out;
     rtp_status st = RTP_OK;
     char *tmp = NULL, *target = NULL;
-    int to_stdout, special;
+    int to_stdout, special, kind;
     if (!t || !path)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_write: NULL argument");
     if (t->scene->nlights != t->nlights0)
@@ -829,18 +829,20 @@ rtp_status rtp_tree_write(const rtp_tree *t, const char *path,
     out.p = (unsigned char *)rtpi_malloc(&t->alloc, SINK_CHUNK);
     if (!out.p)
         return rtpi_error(err, RTP_ERR_NOMEM, path, 0, 0, "out of memory writing tree file");
-    to_stdout = strcmp(path, "-") == 0;
+    kind = strcmp(path, "-") == 0 ? RTPI_WRITE_STDOUT : rtpi_write_kind(path);
+    to_stdout = kind == RTPI_WRITE_STDOUT;
+    special = kind == RTPI_WRITE_IN_PLACE;
     /* (through a symbolic link: the file it names) */
-    if (!to_stdout && !(target = rtpi_write_target(&t->alloc, path, err))) {
+    if (kind == RTPI_WRITE_FILE &&
+        (st = rtpi_write_target(&t->alloc, path, &target, err)) != RTP_OK) {
         rtpi_free(&t->alloc, out.p);
-        return err ? err->status : RTP_ERR_IO;
+        return st;
     }
-    special = !to_stdout && rtpi_is_special_file(target);
     if (to_stdout) {
         out.f = stdout;
     } else if (special) {
         /* a FIFO or a device: written in place */
-        out.f = fopen(target, "wb");
+        out.f = fopen(path, "wb");
         if (!out.f) {
             st = rtpi_error(err, RTP_ERR_IO, path, 0, 0, "cannot write: %s", strerror(errno));
             rtpi_free(&t->alloc, out.p);

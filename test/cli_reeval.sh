@@ -255,6 +255,31 @@ ln -s real.png "$T/link.png"
 expect_rc 0 $RTP reeval "$T/t.rtp" -i "$T/link.png"
 [ -L "$T/link.png" ] && [ "$(head -c 4 "$T/real.png" | tail -c 3)" = PNG ] && ok ||
     bad "writing through a link replaced the link"
+# /dev/stdout (here a link of the test's own to /proc/self/fd/1, so that a
+# regression cannot replace the system's /dev/stdout as root): a pipe
+# behind it is written in place (a link to pipe:[N] was followed, after
+# the trace), a file behind it through stdout, so that '>>' appends;
+# --stats to /proc/self/fd/2 going to a file writes that file; a stats file
+# through a link writes its target, keeping its mode
+ln -s /proc/self/fd/1 "$T/out1"
+ln -s /proc/self/fd/2 "$T/err2"
+$RTP trace $S --size 8x8 -q -o "$T/t8.rtp"
+$RTP trace $S --size 8x8 -q -o "$T/out1" | cmp -s - "$T/t8.rtp" && ok ||
+    bad "-o a link to /proc/self/fd/1 into a pipe"
+echo HEADER >"$T/all.bin"
+$RTP trace $S --size 8x8 -q -o "$T/out1" >>"$T/all.bin"
+[ "$(head -n 1 "$T/all.bin")" = HEADER ] && tail -c +8 "$T/all.bin" | cmp -s - "$T/t8.rtp" && ok ||
+    bad "-o /dev/stdout >> FILE did not append"
+expect_rc 0 sh -c "$RTP trace $S --size 8x8 -q -i '$T/se.pfm' --stats '$T/err2' 2>'$T/se.json'"
+[ -L "$T/err2" ] && ok || bad "a link to /proc/self/fd/2 replaced"
+grep -q '"command": "trace"' "$T/se.json" && ok || bad "--stats /dev/stderr not written"
+mkdir -p "$T/sd"
+echo OLD >"$T/sd/real.json"
+chmod 600 "$T/sd/real.json"
+ln -s sd/real.json "$T/sl.json"
+expect_rc 0 $RTP trace $S --size 8x8 -q -i "$T/sl.pfm" --stats "$T/sl.json"
+[ -L "$T/sl.json" ] && grep -q '"command"' "$T/sd/real.json" && ok || bad "stats through a link"
+[ "$(ls -l "$T/sd/real.json" | cut -c1-10)" = "-rw-------" ] && ok || bad "stats file mode not kept"
 # an output folder that is missing, or a folder as the output, is said
 # before the trace (after it, once)
 expect_rc 1 $RTP trace $S --size 8x8 -o "$T/nodir/x.rtp"
