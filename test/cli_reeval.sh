@@ -250,10 +250,10 @@ ls -a "$T" | grep -q 'rtp-stats' && bad "a stats temporary file left" || ok
 expect_rc 0 $RTP reeval "$T/t.rtp" -i "$T/ks.pfm" --stats "$T/ks.json"
 grep -q '"command": "reeval"' "$T/ks.json" && ok || bad "stats not written on success"
 # a write through a symbolic link writes the file it names
-echo OLD >"$T/real.png"
-ln -s real.png "$T/link.png"
-expect_rc 0 $RTP reeval "$T/t.rtp" -i "$T/link.png"
-[ -L "$T/link.png" ] && [ "$(head -c 4 "$T/real.png" | tail -c 3)" = PNG ] && ok ||
+echo OLD >"$T/real.pfm"
+ln -s real.pfm "$T/link.pfm"
+expect_rc 0 $RTP reeval "$T/t.rtp" -i "$T/link.pfm"
+[ -L "$T/link.pfm" ] && [ "$(head -c 2 "$T/real.pfm")" = PF ] && ok ||
     bad "writing through a link replaced the link"
 # /dev/stdout (here a link of the test's own to /proc/self/fd/1, so that a
 # regression cannot replace the system's /dev/stdout as root): a pipe
@@ -284,8 +284,8 @@ expect_rc 0 $RTP trace $S --size 8x8 -q -i "$T/sl.pfm" --stats "$T/sl.json"
 # before the trace (after it, once)
 expect_rc 1 $RTP trace $S --size 8x8 -o "$T/nodir/x.rtp"
 grep -q "cannot write in folder" "$T/err" && ok || bad "missing output folder not said"
-mkdir "$T/d.png"
-expect_rc 1 $RTP trace $S --size 8x8 -i "$T/d.png"
+mkdir "$T/d.pfm"
+expect_rc 1 $RTP trace $S --size 8x8 -i "$T/d.pfm"
 grep -q "Is a directory" "$T/err" && ok || bad "a folder as the output not said"
 # a file size limit (SIGXFSZ) fails the write, leaving no temporary file
 mkdir -p "$T/fs"
@@ -304,8 +304,8 @@ fi
 # a name too long for an error's file field is shown by its end, which
 # names the file (it was cut to "ccc...c.pn")
 long=$(printf 'c%.0s' $(seq 300))
-expect_rc 1 $RTP reeval "$T/t.rtp" -i "$T/$long.png"
-grep -q '\.\.\.c*\.png: ' "$T/err" && ok || { bad "a long name not shown by its end"; cat "$T/err" >&2; }
+expect_rc 1 $RTP reeval "$T/t.rtp" -i "$T/$long.pfm"
+grep -q '\.\.\.c*\.pfm: ' "$T/err" && ok || { bad "a long name not shown by its end"; cat "$T/err" >&2; }
 # stdout that cannot be written fails version and --help too
 if [ -w /dev/full ]; then
     expect_rc 1 sh -c "$RTP version >/dev/full"
