@@ -805,27 +805,30 @@ done:
    direction is (light - o)/dist, rounded).  The hit's direction from the
    light therefore differs from the ray's by at most
    (delta + lambda) / near(prim) radians.  Each primitive is projected
-   widened by ang = 1e-14 + 1e-14 S / near: the first term covers the
-   rounding of face coordinates (one or two roundings of a quotient of
-   magnitude <= 1, 1.1e-16 each) with a fiftyfold margin, the second the
-   above with a fiftyfold one.  (The first was 1e-7 until session 19: at
-   a light 1e8 away that widened every primitive by 10 units, a scene of
-   size 2 listed all its primitives in every cell, and a move took 8-16x
-   as long as at 1e6; then 1e-12 + 1e-13 S / near until session 20, when
-   a scene of size 2 spans 2e-12 radians from a light at 1e12: every
-   triangle of a terrain listed in every cell, 2 GB.)  Beyond some
-   distance the scene's window is as narrow as the widening itself,
-   which no cell size below it can sharpen: the light buffer then has
-   fewer cells (lb_res), so that its entries stay near one a primitive
-   instead of growing as res^2 each.  A primitive so close to the light that the bound
+   widened by ang = 1e-12 + 1e-13 S / near: the first term covers the
+   rounding of face coordinates (a few 1e-16) with a thousandfold margin,
+   the second the above with a hundredfold one.  (The first was 1e-7 until
+   session 19: at a light 1e8 away that widened every primitive by 10
+   units, a scene of size 2 listed all its primitives in every cell, and a
+   move took 8-16x as long as at 1e6.)  delta is larger for a grazing hit
+   of a sphere or a cone, whose quadratic loses digits as its discriminant
+   nears 0: a harness (session 20) found a cone hit 1.3e-3 off the cone at
+   coordinates of 3e5, 9e-14 rad from the ray seen from a light 8e9 away,
+   5 times the widening then tried (1e-14 + 1e-14 S / near) and a tenth of
+   this one, which is kept.  From about 1e11 a scene of size 2 spans
+   little more than the widening (2e-11 rad against 1.1e-12); beyond it
+   cells finer than a widening list each primitive in more of them only,
+   so the light buffer then has fewer (lb_res), its entries staying near
+   one a primitive instead of growing as res^2 each, and RTP_SHADOWS_AUTO
+   and the item buffer take shadow rays (rtpi_lightbuf_res).  A primitive so close to the light that the bound
    grows past LB_ANG_MAX (1e-3, near < 1e-10 S) is listed in every cell.
    Windows and absent faces keep this: a window is the bounds' projection
    through frusta widened by more than any listed primitive's widening,
    and a direction beyond a window's edge is clamped to the edge cell,
    which lists everything whose widened projection reaches past the edge
    (the edge rows' slabs run to infinity). */
-#define LB_ANG_BASE 1e-14
-#define LB_ANG_SCALE 1e-14
+#define LB_ANG_BASE 1e-12
+#define LB_ANG_SCALE 1e-13
 #define LB_ANG_MAX 1e-3
 
 #define LB_MAX_PARTS 16 /* threads of a light buffer's counting pass */
