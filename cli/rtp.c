@@ -268,7 +268,7 @@ static int common_option(int argc, char **argv, int *i, int *threads, const char
 
 /* ------------------------------------------------------------ signals */
 
-/* SIGINT, SIGTERM, SIGHUP and SIGQUIT end rtp as they would, without
+/* SIGINT, SIGTERM, SIGHUP, SIGQUIT and SIGPIPE end rtp as they would, without
    leaving a temporary file behind: they wait while an image or tree file
    is written (the library writes it beside the file and renames it into
    place), and a stats file's temporary name is removed before the signal
@@ -289,7 +289,7 @@ static void on_term(int sig)
 
 static void install_signals(void)
 {
-    static const int sigs[] = {SIGINT, SIGTERM, SIGHUP, SIGQUIT};
+    static const int sigs[] = {SIGINT, SIGTERM, SIGHUP, SIGQUIT, SIGPIPE};
     size_t k;
     sigemptyset(&term_signals);
     for (k = 0; k < sizeof sigs / sizeof *sigs; k++) {
@@ -455,8 +455,10 @@ static FILE *stats_open(const char *path)
         unlink(stats_tmp);
         return NULL;
     }
-    /* (mkstemp makes it 0600) */
+    /* (mkstemp makes it 0600; a file root replaces keeps its owner) */
     (void)fchmod(fd, exists ? sb.st_mode & 07777 : 0666 & ~stats_umask());
+    if (exists && geteuid() == 0)
+        (void)fchown(fd, sb.st_uid, sb.st_gid);
     stats_final = path;
     return f;
 }
@@ -577,16 +579,61 @@ static int output_ok(const char *path)
         msg("%s: cannot write in folder %s: %s", path, dir, strerror(errno));
         return 0;
     }
+    {
+        /* A sticky folder (/tmp) lets only a file's owner (or the
+           folder's) replace it, and files are replaced by a rename: said
+           now, not after the work */
+        struct stat sd, sf;
+        uid_t me = geteuid();
+        if (me != 0 && stat(dir, &sd) == 0 && (sd.st_mode & 01000) /* S_ISVTX (XSI) */ &&
+            stat(target, &sf) == 0 &&
+            sf.st_uid != me && sd.st_uid != me) {
+            msg("%s: cannot replace another user's file in the sticky folder %s", path, dir);
+            return 0;
+        }
+    }
     return 1;
+}
+
+/* Whether path is stdout: '-', or the file stdout writes (a link to
+   /proc/self/fd/1, /dev/stdout). */
+static int is_stdout(const char *path)
+{
+    struct stat sb, so;
+    if (!path)
+        return 0;
+    if (strcmp(path, "-") == 0)
+        return 1;
+    return stat(path, &sb) == 0 && fstat(fileno(stdout), &so) == 0 &&
+           sb.st_dev == so.st_dev && sb.st_ino == so.st_ino;
+}
+
+/* Whether two outputs are one file (-o x -i x, --stats x): the last
+   written would replace the other silently.  1 after a message. */
+static int same_output(const char *cmd, const char *a, const char *b)
+{
+    char ta[4096], tb[4096];
+    struct stat sa, sb;
+    if (!a || !b || strcmp(a, "-") == 0 || strcmp(b, "-") == 0)
+        return 0;
+    if (link_target(a, ta, sizeof ta) != 0 || link_target(b, tb, sizeof tb) != 0)
+        return 0;
+    if (strcmp(ta, tb) == 0 || (stat(ta, &sa) == 0 && stat(tb, &sb) == 0 &&
+                                S_ISREG(sa.st_mode) && sa.st_dev == sb.st_dev &&
+                                sa.st_ino == sb.st_ino)) {
+        msg("%s: %s and %s are one file: give each output its own", cmd, a, b);
+        return 1;
+    }
+    return 0;
 }
 
 /* --stats - with an image or tree to stdout: the JSON would land inside
    the binary stream (between a stream's images); 1 after a message. */
 static int stdout_taken(const char *cmd, const char *stats_path, const char *a, const char *b)
 {
-    if (!stats_path || strcmp(stats_path, "-") != 0)
+    if (!is_stdout(stats_path))
         return 0;
-    if ((a && strcmp(a, "-") == 0) || (b && strcmp(b, "-") == 0)) {
+    if (is_stdout(a) || is_stdout(b)) {
         msg("%s: --stats - and an image or tree on stdout cannot share it: give --stats a file",
             cmd);
         return 1;
@@ -923,7 +970,7 @@ static int cmd_trace(int argc, char **argv)
         msg("trace: no scene given");
         goto usage;
     }
-    if (tree_path && image_path && strcmp(tree_path, "-") == 0 && strcmp(image_path, "-") == 0) {
+    if (tree_path && image_path && is_stdout(tree_path) && is_stdout(image_path)) {
         msg("trace: the tree and the image cannot both go to stdout");
         goto usage;
     }
@@ -931,7 +978,10 @@ static int cmd_trace(int argc, char **argv)
         goto usage;
     if (image_path && !image_name_ok(image_path))
         goto out;
-    if (!output_ok(tree_path) || !output_ok(image_path) || !output_ok(stats_path))
+    if (!output_ok(tree_path) || !output_ok(image_path) || !output_ok(stats_path) ||
+        same_output("trace", tree_path, image_path) ||
+        same_output("trace", tree_path, stats_path) ||
+        same_output("trace", image_path, stats_path))
         goto out;
     if (opt.spd && verbosity > 0) {
         const char *ign[3];
@@ -1175,7 +1225,7 @@ static int cmd_diff(int argc, char **argv)
     }
     if (verbosity > 0 && !(stats_path && strcmp(stats_path, "-") == 0)) {
         /* (to stderr when the heat map takes stdout) */
-        fprintf(heat && strcmp(heat, "-") == 0 ? stderr : stdout,
+        fprintf(is_stdout(heat) ? stderr : stdout,
                "pixels %zu  mae %.6g  rmse %.6g  psnr %s%.6g dB  max_abs %.6g  above %.4f%%\n",
                d.pixels, d.mae, d.rmse, isinf(d.psnr) ? "" : "", d.psnr, d.max_abs,
                100.0 * d.share_above);
@@ -1576,7 +1626,7 @@ static int cmd_reeval(int argc, char **argv)
     } else if (!image_name_ok(image_path) || !output_ok(image_path)) {
         goto out;
     }
-    if (!output_ok(stats_path))
+    if (!output_ok(stats_path) || (!stream && same_output("reeval", image_path, stats_path)))
         goto out;
     eo.threads = threads;
     /* one image: caches for later edits would only cost time */
@@ -1883,7 +1933,7 @@ static int cmd_merge(int argc, char **argv)
             "--size and -i");
         goto usage;
     }
-    if (out_tree && out_image && strcmp(out_tree, "-") == 0 && strcmp(out_image, "-") == 0) {
+    if (out_tree && out_image && is_stdout(out_tree) && is_stdout(out_image)) {
         msg("merge: the tree and the image cannot both go to stdout");
         goto usage;
     }

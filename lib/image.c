@@ -552,8 +552,13 @@ FILE *rtpi_open_temp(const char *path, char *tmp, size_t tmpsize)
                     continue;
                 return NULL;
             }
-            if (keep)
-                (void)fchmod(fd, sb.st_mode & 07777); /* best effort */
+            if (keep) {
+                /* best effort: the mode, and the owner where rtp may set
+                   it (root replacing a user's file left it root's) */
+                (void)fchmod(fd, sb.st_mode & 07777);
+                if (geteuid() == 0)
+                    (void)fchown(fd, sb.st_uid, sb.st_gid);
+            }
             f = fdopen(fd, "wb");
             if (!f) {
                 int e = errno;
@@ -626,6 +631,41 @@ rtp_status rtpi_write_target(const rtp_allocator *a, const char *path, char **ou
     return RTP_OK;
 }
 
+#ifdef RTPI_POSIX_FILES
+/* Whether path, or a link on its way, is an open file's own name in
+   /proc/PID/fd or /dev/fd (the file a descriptor writes, as a shell's
+   2>>log makes it): written through it, never replaced. */
+static int fd_link(const char *path)
+{
+    char cur[4096], link[4096];
+    int hops;
+    struct stat sb;
+    if (strlen(path) >= sizeof cur)
+        return 0;
+    strcpy(cur, path);
+    for (hops = 0; hops < 40; hops++) {
+        ssize_t n;
+        const char *slash;
+        size_t dir;
+        if (strncmp(cur, "/dev/fd/", 8) == 0 ||
+            (strncmp(cur, "/proc/", 6) == 0 && strstr(cur, "/fd/")))
+            return 1;
+        if (lstat(cur, &sb) != 0 || !S_ISLNK(sb.st_mode))
+            return 0;
+        n = readlink(cur, link, sizeof link - 1);
+        if (n < 0)
+            return 0;
+        link[n] = '\0';
+        slash = strrchr(cur, '/');
+        dir = link[0] != '/' && slash ? (size_t)(slash - cur) + 1 : 0;
+        if (dir + (size_t)n >= sizeof cur)
+            return 0;
+        memmove(cur + dir, link, (size_t)n + 1);
+    }
+    return 0;
+}
+#endif
+
 int rtpi_write_kind(const char *path)
 {
 #ifdef RTPI_POSIX_FILES
@@ -636,6 +676,8 @@ int rtpi_write_kind(const char *path)
         return RTPI_WRITE_IN_PLACE;
     if (fstat(fileno(stdout), &so) == 0 && so.st_dev == sb.st_dev && so.st_ino == sb.st_ino)
         return RTPI_WRITE_STDOUT;
+    if (fd_link(path))
+        return RTPI_WRITE_APPEND;
 #else
     (void)path;
 #endif
@@ -686,8 +728,8 @@ rtp_status rtp_image_write(const rtp_image *image, const char *path,
             st = write_failed(err, path, errno);
         return st;
     }
-    if (kind == RTPI_WRITE_IN_PLACE) {
-        f = fopen(path, "wb");
+    if (kind == RTPI_WRITE_IN_PLACE || kind == RTPI_WRITE_APPEND) {
+        f = fopen(path, kind == RTPI_WRITE_APPEND ? "ab" : "wb");
         if (!f)
             return rtpi_error(err, RTP_ERR_IO, path, 0, 0,
                               "cannot open for writing: %s", strerror(errno));

@@ -244,8 +244,10 @@ FILE *rtpi_open_temp(const char *path, char *tmp, size_t tmpsize);
    device, a pipe behind /dev/fd/N: never replaced by a rename), or
    RTPI_WRITE_STDOUT (the very file stdout is, as /dev/stdout names it
    when stdout goes to a file: written through stdout, so that '>>' still
-   appends and no link in /dev is replaced). */
-enum { RTPI_WRITE_FILE, RTPI_WRITE_IN_PLACE, RTPI_WRITE_STDOUT };
+   appends and no link in /dev is replaced), or RTPI_WRITE_APPEND (a
+   regular file named through /proc/PID/fd or /dev/fd: another open
+   file, as 2>>log makes stderr: appended to, never replaced). */
+enum { RTPI_WRITE_FILE, RTPI_WRITE_IN_PLACE, RTPI_WRITE_STDOUT, RTPI_WRITE_APPEND };
 int rtpi_write_kind(const char *path);
 /* The file a write to `path` replaces: path itself, or where a symbolic
    link at path leads (a chain followed; a dangling link's target name),

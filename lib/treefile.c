@@ -831,7 +831,7 @@ rtp_status rtp_tree_write(const rtp_tree *t, const char *path,
         return rtpi_error(err, RTP_ERR_NOMEM, path, 0, 0, "out of memory writing tree file");
     kind = strcmp(path, "-") == 0 ? RTPI_WRITE_STDOUT : rtpi_write_kind(path);
     to_stdout = kind == RTPI_WRITE_STDOUT;
-    special = kind == RTPI_WRITE_IN_PLACE;
+    special = kind == RTPI_WRITE_IN_PLACE || kind == RTPI_WRITE_APPEND;
     /* (through a symbolic link: the file it names) */
     if (kind == RTPI_WRITE_FILE &&
         (st = rtpi_write_target(&t->alloc, path, &target, err)) != RTP_OK) {
@@ -841,8 +841,9 @@ rtp_status rtp_tree_write(const rtp_tree *t, const char *path,
     if (to_stdout) {
         out.f = stdout;
     } else if (special) {
-        /* a FIFO or a device: written in place */
-        out.f = fopen(path, "wb");
+        /* a FIFO or a device: written in place; another open file's
+           /proc/self/fd name: appended to */
+        out.f = fopen(path, kind == RTPI_WRITE_APPEND ? "ab" : "wb");
         if (!out.f) {
             st = rtpi_error(err, RTP_ERR_IO, path, 0, 0, "cannot write: %s", strerror(errno));
             rtpi_free(&t->alloc, out.p);

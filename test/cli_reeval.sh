@@ -273,6 +273,20 @@ $RTP trace $S --size 8x8 -q -o "$T/out1" >>"$T/all.bin"
 expect_rc 0 sh -c "$RTP trace $S --size 8x8 -q -i '$T/se.pfm' --stats '$T/err2' 2>'$T/se.json'"
 [ -L "$T/err2" ] && ok || bad "a link to /proc/self/fd/2 replaced"
 grep -q '"command": "trace"' "$T/se.json" && ok || bad "--stats /dev/stderr not written"
+# another open file named through /proc/self/fd (2>>log): appended to,
+# not replaced; two outputs on one file refused; a reader that stops
+# (SIGPIPE) leaves no stats temporary file
+echo OLDLOG >"$T/e.log"
+ln -s /proc/self/fd/2 "$T/err2.pfm"
+expect_rc 0 sh -c "$RTP trace $S --size 4x4 -q -i '$T/err2.pfm' 2>>'$T/e.log'"
+[ "$(head -n 1 "$T/e.log")" = OLDLOG ] && [ "$(wc -c <"$T/e.log")" -gt 7 ] && ok ||
+    bad "an image to a /proc/self/fd link replaced the file instead of appending"
+expect_rc 1 $RTP trace $S --size 4x4 -i "$T/one.pfm" --stats "$T/one.pfm"
+grep -q "one file" "$T/err" && ok || bad "two outputs on one file not refused"
+mkdir -p "$T/pp"
+(echo light.0.pos=1,1,1; sleep 1; echo light.0.pos=1,2,1) |
+    $RTP reeval "$T/t.rtp" --stream -i - --stats "$T/pp/s.json" 2>/dev/null | head -c 10 >/dev/null
+ls -A "$T/pp" | grep -q rtp-stats && bad "SIGPIPE left $(ls -A "$T/pp")" || ok
 mkdir -p "$T/sd"
 echo OLD >"$T/sd/real.json"
 chmod 600 "$T/sd/real.json"
