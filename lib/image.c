@@ -581,53 +581,59 @@ FILE *rtpi_open_temp(const char *path, char *tmp, size_t tmpsize)
     return NULL;
 }
 
+#ifdef RTPI_POSIX_FILES
+/* One step along a chain of symbolic links: cur (a buffer of size bytes)
+   becomes the target of the link it names, a relative target taken from
+   the link's folder.  1 when it was a link, 0 when not, -1 with errno. */
+static int link_step(char *cur, size_t size)
+{
+    char link[4096];
+    struct stat sb;
+    ssize_t n;
+    const char *slash;
+    size_t dir;
+    if (lstat(cur, &sb) != 0 || !S_ISLNK(sb.st_mode))
+        return 0;
+    n = readlink(cur, link, sizeof link - 1);
+    if (n < 0)
+        return -1;
+    link[n] = '\0';
+    slash = strrchr(cur, '/');
+    dir = link[0] != '/' && slash ? (size_t)(slash - cur) + 1 : 0;
+    if (dir + (size_t)n >= size) {
+        errno = ENAMETOOLONG;
+        return -1;
+    }
+    memmove(cur + dir, link, (size_t)n + 1);
+    return 1;
+}
+#endif
+
 rtp_status rtpi_write_target(const rtp_allocator *a, const char *path, char **out,
                              rtp_error *err)
 {
-    char *cur = rtpi_strdup(a, path);
 #ifdef RTPI_POSIX_FILES
-    int hops;
+    char cur[4096];
     struct stat sb;
-#endif
+    int hops, r;
     *out = NULL;
-#ifdef RTPI_POSIX_FILES
-    for (hops = 0; cur && lstat(cur, &sb) == 0 && S_ISLNK(sb.st_mode); hops++) {
-        char link[4096], *next;
-        ssize_t n;
-        const char *slash;
-        size_t dir;
-        if (hops == 40) {
-            rtpi_free(a, cur);
+    if (strlen(path) >= sizeof cur)
+        return rtpi_error(err, RTP_ERR_IO, path, 0, 0, "cannot write: %s", strerror(ENAMETOOLONG));
+    strcpy(cur, path);
+    for (hops = 0; (r = link_step(cur, sizeof cur)) > 0; hops++)
+        if (hops == 40)
             return rtpi_error(err, RTP_ERR_IO, path, 0, 0, "cannot write: %s", strerror(ELOOP));
-        }
-        n = readlink(cur, link, sizeof link - 1);
-        if (n < 0) {
-            int e = errno;
-            rtpi_free(a, cur);
-            return rtpi_error(err, RTP_ERR_IO, path, 0, 0, "cannot read the link: %s",
-                              strerror(e));
-        }
-        link[n] = '\0';
-        /* a relative target is relative to the link's folder */
-        slash = strrchr(cur, '/');
-        dir = link[0] != '/' && slash ? (size_t)(slash - cur) + 1 : 0;
-        next = (char *)rtpi_malloc(a, dir + (size_t)n + 1);
-        if (next) {
-            memcpy(next, cur, dir);
-            memcpy(next + dir, link, (size_t)n + 1);
-        }
-        rtpi_free(a, cur);
-        cur = next;
-    }
-    if (cur && stat(cur, &sb) == 0 && S_ISREG(sb.st_mode) && access(cur, W_OK) != 0) {
-        int e = errno;
-        rtpi_free(a, cur);
-        return rtpi_error(err, RTP_ERR_IO, path, 0, 0, "cannot write: %s", strerror(e));
-    }
+    if (r < 0)
+        return rtpi_error(err, RTP_ERR_IO, path, 0, 0, "cannot read the link: %s",
+                          strerror(errno));
+    if (stat(cur, &sb) == 0 && S_ISREG(sb.st_mode) && access(cur, W_OK) != 0)
+        return rtpi_error(err, RTP_ERR_IO, path, 0, 0, "cannot write: %s", strerror(errno));
+    *out = rtpi_strdup(a, cur);
+#else
+    *out = rtpi_strdup(a, path);
 #endif
-    if (!cur)
+    if (!*out)
         return rtpi_error(err, RTP_ERR_NOMEM, path, 0, 0, "out of memory");
-    *out = cur;
     return RTP_OK;
 }
 
@@ -637,30 +643,17 @@ rtp_status rtpi_write_target(const rtp_allocator *a, const char *path, char **ou
    2>>log makes it): written through it, never replaced. */
 static int fd_link(const char *path)
 {
-    char cur[4096], link[4096];
+    char cur[4096];
     int hops;
-    struct stat sb;
     if (strlen(path) >= sizeof cur)
         return 0;
     strcpy(cur, path);
     for (hops = 0; hops < 40; hops++) {
-        ssize_t n;
-        const char *slash;
-        size_t dir;
         if (strncmp(cur, "/dev/fd/", 8) == 0 ||
             (strncmp(cur, "/proc/", 6) == 0 && strstr(cur, "/fd/")))
             return 1;
-        if (lstat(cur, &sb) != 0 || !S_ISLNK(sb.st_mode))
+        if (link_step(cur, sizeof cur) <= 0)
             return 0;
-        n = readlink(cur, link, sizeof link - 1);
-        if (n < 0)
-            return 0;
-        link[n] = '\0';
-        slash = strrchr(cur, '/');
-        dir = link[0] != '/' && slash ? (size_t)(slash - cur) + 1 : 0;
-        if (dir + (size_t)n >= sizeof cur)
-            return 0;
-        memmove(cur + dir, link, (size_t)n + 1);
     }
     return 0;
 }
