@@ -66,10 +66,12 @@ static rtp_status num(nff *c, const char *what, const char *noun,
     if (rtpi_tok_number(&t, out) != 0)
         return rtpi_lex_error(&c->lx, &t, "expected number for %s %s, got '%s'",
                               noun, field, rtpi_tok_show(&t, show, sizeof show));
-    if (fabs(*out) > NUM_LIMIT)
-        return rtpi_lex_error(&c->lx, &t, "%s %s %s is out of range (|x| <= %g)",
-                              noun, field, rtpi_tok_show(&t, show, sizeof show),
-                              NUM_LIMIT);
+    if (fabs(*out) > NUM_LIMIT) {
+        char lim[32];
+        rtpi_fmt_g(lim, sizeof lim, 6, NUM_LIMIT);
+        return rtpi_lex_error(&c->lx, &t, "%s %s %s is out of range (|x| <= %s)",
+                              noun, field, rtpi_tok_show(&t, show, sizeof show), lim);
+    }
     if (tok)
         *tok = t;
     return RTP_OK;
@@ -94,10 +96,11 @@ static rtp_status nums(nff *c, const char *what, const char *noun,
 static rtp_status nonneg(nff *c, const rtpi_tok *t, const char *noun,
                          const char *field, double v)
 {
+    char g[32];
     if (v >= 0.0)
         return RTP_OK;
-    return rtpi_lex_error(&c->lx, t, "%s %s must not be negative, got %g",
-                          noun, field, v);
+    rtpi_fmt_g(g, sizeof g, 6, v);
+    return rtpi_lex_error(&c->lx, t, "%s %s must not be negative, got %s", noun, field, g);
 }
 
 /* Whether the next token is a number (without consuming it). */
@@ -167,6 +170,7 @@ static rtp_status read_view(nff *c, const rtpi_tok *vtok)
     rtp_status st = RTP_OK;
     int i;
     const char *why;
+    char g0[32]; /* a number in a message, '.' whatever the locale */
     for (;;) {
         if (accept(c, "from", &t)) {
             st = nums(c, "v (view) from", "view from", xyz, 3, cam->from, NULL);
@@ -178,10 +182,11 @@ static rtp_status read_view(nff *c, const rtpi_tok *vtok)
             st = nums(c, "v (view) up", "view up", xyz, 3, cam->up, NULL);
         } else if (accept(c, "angle", &t)) {
             st = num(c, "v (view) angle", "view", "angle", &v[0], &tk[0]);
-            if (st == RTP_OK && !(v[0] > 0.0 && v[0] < 180.0))
+            if (st == RTP_OK && !(v[0] > 0.0 && v[0] < 180.0)) {
+                rtpi_fmt_g(g0, sizeof g0, 6, v[0]);
                 st = rtpi_lex_error(&c->lx, &tk[0],
-                                    "view angle %g must be between 0 and 180 degrees",
-                                    v[0]);
+                                    "view angle %s must be between 0 and 180 degrees", g0);
+            }
             cam->angle = v[0];
         } else if (accept(c, "hither", &t)) {
             st = num(c, "v (view) hither", "view", "hither", &v[0], &tk[0]);
@@ -192,16 +197,18 @@ static rtp_status read_view(nff *c, const rtpi_tok *vtok)
             static const char *const wh[] = {"width", "height"};
             st = nums(c, "v (view) resolution", "resolution", wh, 2, v, tk);
             for (i = 0; st == RTP_OK && i < 2; i++)
-                if (!(v[i] >= 1 && v[i] <= RES_MAX && v[i] == floor(v[i])))
+                if (!(v[i] >= 1 && v[i] <= RES_MAX && v[i] == floor(v[i]))) {
+                    rtpi_fmt_g(g0, sizeof g0, 6, v[i]);
                     st = rtpi_lex_error(&c->lx, &tk[i],
-                                        "resolution %s %g must be a whole number from 1 to %d",
-                                        wh[i], v[i], RES_MAX);
+                                        "resolution %s %s must be a whole number from 1 to %d",
+                                        wh[i], g0, RES_MAX);
+                }
             /* (the whole image's bound too, which trace would name
                without the file's line) */
             if (st == RTP_OK && !rtpi_image_size_ok((int)v[0], (int)v[1]))
                 st = rtpi_lex_error(&c->lx, &tk[1],
-                                    "resolution %gx%g is over the limit of 2^27 pixels", v[0],
-                                    v[1]);
+                                    "resolution %dx%d is over the limit of 2^27 pixels",
+                                    (int)v[0], (int)v[1]);
             if (st == RTP_OK) {
                 c->s->width = (int)v[0];
                 c->s->height = (int)v[1];
@@ -525,9 +532,11 @@ static rtp_status read_checker(nff *c, const rtpi_tok *kw)
     if (st != RTP_OK || (st = read_rgb(c, "checker", "checker", col)) != RTP_OK ||
         (st = num(c, "checker", "checker", "scale", &scale, &tk)) != RTP_OK)
         return st;
-    if (!(scale > 0.0))
-        return rtpi_lex_error(&c->lx, &tk, "checker scale must be positive, got %g",
-                              scale);
+    if (!(scale > 0.0)) {
+        char g[32];
+        rtpi_fmt_g(g, sizeof g, 6, scale);
+        return rtpi_lex_error(&c->lx, &tk, "checker scale must be positive, got %s", g);
+    }
     m = &c->s->mats[c->mat];
     m->tex = RTPI_TEX_CHECKER;
     memcpy(m->color2, col, sizeof col);
@@ -593,9 +602,11 @@ static rtp_status read_bump(nff *c, const rtpi_tok *kw)
         st = num(c, "bump", "bump", "scale", &scale, &t);
         if (st != RTP_OK)
             return st;
-        if (!(scale > 0.0))
-            return rtpi_lex_error(&c->lx, &t, "bump scale must be positive, got %g",
-                                  scale);
+        if (!(scale > 0.0)) {
+            char g[32];
+            rtpi_fmt_g(g, sizeof g, 6, scale);
+            return rtpi_lex_error(&c->lx, &t, "bump scale must be positive, got %s", g);
+        }
     } else {
         kind = RTPI_BUMP_IMAGE;
         if ((st = load_texture(c, "bump", &idx)) != RTP_OK)

@@ -708,11 +708,16 @@ static rtp_status read_vertex(obj *o, int kind)
         /* (the readers' bound on coordinates, 1e18, after the include's
            transform too: past it squares overflow, and past the float
            range the vertex is infinite) */
-        if (!(fabs(q[0]) <= 1e18 && fabs(q[1]) <= 1e18 && fabs(q[2]) <= 1e18))
+        if (!(fabs(q[0]) <= 1e18 && fabs(q[1]) <= 1e18 && fabs(q[2]) <= 1e18)) {
+            char g[3][32]; /* '.' whatever the locale */
+            rtpi_fmt_g(g[0], sizeof g[0], 6, q[0]);
+            rtpi_fmt_g(g[1], sizeof g[1], 6, q[1]);
+            rtpi_fmt_g(g[2], sizeof g[2], 6, q[2]);
             return rtpi_lex_error(&o->lx, &here,
-                                  "vertex (%g, %g, %g) out of range after the include's "
+                                  "vertex (%s, %s, %s) out of range after the include's "
                                   "transform (at most 1e18)",
-                                  q[0], q[1], q[2]);
+                                  g[0], g[1], g[2]);
+        }
         if (rtpi_scene_add_pos(o->s, q[0], q[1], q[2]))
             return nomem(&o->lx, &here);
         o->np++;

@@ -548,11 +548,14 @@ static rtp_status set_camera(rtp_scene *s, const char *key, const char *value,
         int angle = field[0] == 'a';
         if ((st = want_n(err, key, value, n, 1, 0)) != RTP_OK)
             return st;
-        if (angle ? !(v[0] > 0.0 && v[0] < 180.0) : !(v[0] >= 0.0))
+        if (angle ? !(v[0] > 0.0 && v[0] < 180.0) : !(v[0] >= 0.0)) {
+            char g[32]; /* '.' whatever the locale */
+            rtpi_fmt_g(g, sizeof g, 6, v[0]);
             return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                              angle ? "%s: %g: the view angle must be between 0 and 180 degrees"
-                                    : "%s: %g: hither must be 0 or more",
-                              key, v[0]);
+                              angle ? "%s: %s: the view angle must be between 0 and 180 degrees"
+                                    : "%s: %s: hither must be 0 or more",
+                              key, g);
+        }
         if (angle)
             s->camera.angle = v[0];
         else
@@ -570,20 +573,25 @@ static rtp_status set_camera(rtp_scene *s, const char *key, const char *value,
 static rtp_status want_rgb(rtp_error *err, const char *key, const double *v, int n)
 {
     int i;
+    char g[32]; /* '.' whatever the locale */
     for (i = 0; i < n; i++)
-        if (v[i] < 0.0)
+        if (v[i] < 0.0) {
+            rtpi_fmt_g(g, sizeof g, 6, v[i]);
             return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                              "%s: %g: a colour's components must be 0 or more", key, v[i]);
+                              "%s: %s: a colour's components must be 0 or more", key, g);
+        }
     return RTP_OK;
 }
 
 /* On and off keys take 0 or 1. */
 static rtp_status want_01(rtp_error *err, const char *key, double v)
 {
+    char g[32]; /* '.' whatever the locale */
     if (v == 0.0 || v == 1.0)
         return RTP_OK;
-    return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "%s: %g: expected 0 (off) or 1 (on)",
-                      key, v);
+    rtpi_fmt_g(g, sizeof g, 6, v);
+    return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "%s: %s: expected 0 (off) or 1 (on)",
+                      key, g);
 }
 
 static void set_rgb(float *dst, const double *v, int n)
@@ -734,11 +742,14 @@ rtp_status rtp_scene_set(rtp_scene *s, const char *key, const char *value,
                               key);
         if ((st = want(err, key, value, n, 1)) != RTP_OK)
             return st;
-        if (v[0] < 0.0 || (dst == &m->ior && v[0] <= 0.0))
+        if (v[0] < 0.0 || (dst == &m->ior && v[0] <= 0.0)) {
+            char g[32]; /* '.' whatever the locale */
+            rtpi_fmt_g(g, sizeof g, 6, v[0]);
             return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                              dst == &m->ior ? "%s: %g: an index of refraction must be > 0"
-                                             : "%s: %g: must be 0 or more",
-                              key, v[0]);
+                              dst == &m->ior ? "%s: %s: an index of refraction must be > 0"
+                                             : "%s: %s: must be 0 or more",
+                              key, g);
+        }
         *dst = (float)v[0];
         return RTP_OK;
     }

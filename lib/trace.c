@@ -619,10 +619,13 @@ static rtp_status gather_tree(shared *sh, int w, int h, rtp_tree **out,
 static rtp_status worker_error(rtp_status st, double limit, const char *what,
                                const char *remedy, rtp_error *err)
 {
-    if (st == RTP_ERR_LIMIT)
+    if (st == RTP_ERR_LIMIT) {
+        char g[32]; /* '.' whatever the locale */
+        rtpi_fmt_g(g, sizeof g, 6, limit / 1048576.0);
         return rtpi_error(err, st, NULL, 0, 0,
-                          "the ray trees grew past the memory limit of %.6g MiB while %s (%s)",
-                          limit / 1048576.0, what, remedy);
+                          "the ray trees grew past the memory limit of %s MiB while %s (%s)", g,
+                          what, remedy);
+    }
     return rtpi_error(err, st, NULL, 0, 0, "out of memory while %s", what);
 }
 
@@ -702,12 +705,16 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
            when recording, one node per sample (most samples have one). */
         double need = (double)w * h * 12.0 + (double)(w + 1) * (h + 1) * 12.0 +
                       (tree_out ? (double)(w + 1) * (h + 1) * (24.0 + 8.0) : 0.0);
-        if (!(need <= limit))
+        if (!(need <= limit)) {
+            char g[2][32]; /* '.' whatever the locale */
+            rtpi_fmt_g(g[0], sizeof g[0], 3, need / 1048576.0);
+            rtpi_fmt_g(g[1], sizeof g[1], 3, limit / 1048576.0);
             return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
-                              "a %dx%d %s needs at least %.3g MiB, over the memory limit of "
-                              "%.3g MiB (raise it with --memory-limit)",
+                              "a %dx%d %s needs at least %s MiB, over the memory limit of "
+                              "%s MiB (raise it with --memory-limit)",
                               w, h, tree_out ? "traced image with its trees" : "traced image",
-                              need / 1048576.0, limit / 1048576.0);
+                              g[0], g[1]);
+        }
     }
     st = rtp_image_create(w, h, &s->alloc, &img, err);
     if (st != RTP_OK)

@@ -859,8 +859,35 @@ static void test_numbers_whatever_the_locale(void)
         CHECK(rtp_scene_set(sc, "light.0.pos", "1,5,2.5e-1", &err) == RTP_OK);
         CHECK(rtp_scene_get(sc, "light.0.pos", buf, sizeof buf, &err) == RTP_OK &&
               strcmp(buf, "1,5,0.25") == 0);
+        /* numbers in error messages too (they were printed by %g:
+           "mat.0.kd: -0,5: must be 0 or more") */
+        CHECK(rtp_scene_set(sc, "mat.0.kd", "-0.5", &err) != RTP_OK &&
+              strstr(err.message, "-0.5") != NULL);
+        CHECK(rtp_scene_set(sc, "camera.angle", "190.5", &err) != RTP_OK &&
+              strstr(err.message, "190.5") != NULL);
+        CHECK(rtp_scene_set(sc, "light.0.on", "0.5", &err) != RTP_OK &&
+              strstr(err.message, "0.5") != NULL);
+        CHECK(rtp_scene_set(sc, "mat.0.color", "1,-0.25,0", &err) != RTP_OK &&
+              strstr(err.message, "-0.25") != NULL);
     }
     rtp_scene_destroy(sc);
+    {
+        static const char bad[] = "v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 190.5\n"
+                                  "hither 0.25\nresolution 8 8\n";
+        static const char badc[] = "v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 40\n"
+                                   "hither 0.25\nresolution 8 8\n"
+                                   "f 1 1 1 1 0 0 0 1\nchecker 0 0 0 -2.5\n";
+        sc = NULL;
+        CHECK(rtp_scene_load_memory(bad, sizeof bad - 1, "loc.nff", "nff", NULL, &sc, &err) !=
+                  RTP_OK &&
+              strstr(err.message, "190.5") != NULL);
+        rtp_scene_destroy(sc);
+        sc = NULL;
+        CHECK(rtp_scene_load_memory(badc, sizeof badc - 1, "loc.nff", "nff", NULL, &sc, &err) !=
+                  RTP_OK &&
+              strstr(err.message, "-2.5") != NULL);
+        rtp_scene_destroy(sc);
+    }
     setlocale(LC_NUMERIC, saved);
 }
 
