@@ -22,6 +22,10 @@
 #define EXIT_OVER 3
 
 static int verbosity = 1; /* 0 quiet, 1 normal, 2 verbose; CLI-only state */
+/* What stdin serves when a command reads it for an input ("the scene",
+   "--stream's edits"), else NULL: a value '-' (an image from stdin) is
+   then refused */
+static const char *stdin_user;
 
 #if defined(__GNUC__)
 __attribute__((format(printf, 1, 2)))
@@ -131,10 +135,13 @@ static void progress_cb(void *user, double done)
     p->shown = 1;
 }
 
+/* Ends the progress line (once), so that what follows starts a line of
+   its own. */
 static void progress_end(progress *p)
 {
     if (p->shown)
         fputc('\n', stderr);
+    p->shown = 0;
 }
 
 /* ------------------------------------------------------------ arguments */
@@ -188,7 +195,9 @@ static int is_opt(const char *arg, const char *name)
 static int parse_size(const char *v, int *w, int *h)
 {
     char buf[64], *x;
-    if (!v || strlen(v) >= sizeof buf) {
+    if (!v)
+        return -1; /* (opt_value said it) */
+    if (strlen(v) >= sizeof buf) {
         msg("--size: expected WxH");
         return -1;
     }
@@ -251,8 +260,9 @@ static int common_option(int argc, char **argv, int *i, int *threads, const char
         return 1;
     }
     if (threads && (strncmp(a, "-j", 2) == 0 || is_opt(a, "--threads"))) {
-        if (!(v = opt_value(argc, argv, i, a[1] == 'j' ? "-j" : "--threads")) ||
-            parse_int(v, 1, 256, threads)) {
+        if (!(v = opt_value(argc, argv, i, a[1] == 'j' ? "-j" : "--threads")))
+            return -1;
+        if (parse_int(v, 1, 256, threads)) {
             msg("-j: expected a thread count from 1 to 256");
             return -1;
         }
@@ -551,6 +561,12 @@ static int output_ok(const char *path)
     const char *slash;
     if (!path || strcmp(path, "-") == 0)
         return 1;
+    if (!*path) {
+        /* ('' from an unset shell variable: it failed after the work, at
+           the rename, naming nothing) */
+        msg("an output's file name is empty");
+        return 0;
+    }
     if (stat(path, &sb) == 0) {
         if (S_ISDIR(sb.st_mode)) {
             msg("%s: cannot write: %s", path, strerror(EISDIR));
@@ -690,6 +706,16 @@ static int apply_kv(set_fn set, void *obj, const char *kv, const char *where, in
     }
     memcpy(key, kv, kn);
     key[kn] = '\0';
+    if (stdin_user && strcmp(eq + 1, "-") == 0) {
+        /* an image (mat.N.texture=-) read from stdin would take the
+           stream's next lines, or the rest of the tree, as its bytes */
+        if (line)
+            msg("%s:%d: %s=-: stdin already serves %s; name the file", where, line, key,
+                stdin_user);
+        else
+            msg("%s %s=-: stdin already serves %s; name the file", where, key, stdin_user);
+        return 1;
+    }
     if (set(obj, key, eq + 1, &err) != RTP_OK) {
         char buf[600];
         rtp_error_format(&err, buf, sizeof buf);
@@ -739,6 +765,16 @@ static int next_line(FILE *f, const char *name, char *line, int *lineno)
     size_t n = 0;
     int c, nul = 0;
     while ((c = getc(f)) != EOF && c != '\n') {
+        if (n == MAX_LINE && c == '\r') {
+            /* a CRLF line of MAX_LINE characters: its CR is no character
+               of the line (apply_line drops it) */
+            int d = getc(f);
+            if (d == '\n' || d == EOF) {
+                c = d;
+                break;
+            }
+            ungetc(d, f);
+        }
         if (n == MAX_LINE) {
             msg("%s:%d: line too long (at most %d characters)", name, *lineno + 1, MAX_LINE);
             return -1;
@@ -782,6 +818,46 @@ static int apply_params_file(set_fn set, void *obj, const char *path)
     if (f != stdin)
         fclose(f);
     return rc;
+}
+
+/* stdin serves one input: the command's file (the scene or tree, when
+   it is '-'), one --params file, --stream's edits (stream: its name, or
+   NULL), or an image a --set value '-' names.  Two of them read it in
+   turn, the second finding it empty or in the middle of the first (a
+   scene read whole, then "--params -" read nothing and the trace went on
+   unedited).  Sets stdin_user for the edits read later; 1 after a
+   message. */
+static int stdin_inputs(const char *cmd, const char *file, const char *file_what,
+                        const char *const *params, int nparams, const char *const *sets,
+                        int nsets, const char *stream)
+{
+    const char *users[3];
+    int n = 0, i, np = 0;
+    if (strcmp(file, "-") == 0)
+        users[n++] = file_what;
+    for (i = 0; i < nparams; i++)
+        np += strcmp(params[i], "-") == 0;
+    if (np)
+        users[n++] = "--params";
+    if (stream)
+        users[n++] = stream;
+    if (np > 1) {
+        msg("%s: --params - given twice: stdin can serve only one", cmd);
+        return 1;
+    }
+    if (n > 1) {
+        msg("%s: stdin can serve only one of %s and %s", cmd, users[0], users[1]);
+        return 1;
+    }
+    stdin_user = n ? users[0] : NULL;
+    for (i = 0; stdin_user && i < nsets; i++) {
+        const char *eq = strchr(sets[i], '=');
+        if (eq && strcmp(eq + 1, "-") == 0) {
+            msg("--set %s: stdin already serves %s; name the file", sets[i], stdin_user);
+            return 1;
+        }
+    }
+    return 0;
 }
 
 /* ---------------------------------------------------------------- trace */
@@ -860,7 +936,9 @@ static int memory_limit_option(int argc, char **argv, int *i, double *bytes)
 {
     const char *v = opt_value(argc, argv, i, "--memory-limit");
     double mib;
-    if (!v || parse_double(v, &mib) || !(mib > 0)) {
+    if (!v)
+        return -1; /* (said) */
+    if (parse_double(v, &mib) || !(mib > 0)) {
         msg("--memory-limit: expected a size in MiB > 0");
         return -1;
     }
@@ -884,7 +962,7 @@ static void capped_warning(unsigned long long n)
 static int cmd_trace(int argc, char **argv)
 {
     const char *scene_path = NULL, *image_path = NULL, *stats_path = NULL;
-    const char *tree_path = NULL, *params = NULL;
+    const char *tree_path = NULL;
     char *default_image = NULL;
     rtp_trace_options opt;
     rtp_trace_stats st;
@@ -895,18 +973,19 @@ static int cmd_trace(int argc, char **argv)
     rtp_image *img = NULL;
     rtp_error err;
     progress prog;
-    int i, rc = 1, nsets = 0, c;
-    const char **sets;
+    int i, rc = 1, nsets = 0, nparams = 0, c;
+    const char **sets, **params;
     double t0, t_load, t_trace, t_write;
 
     memset(&opt, 0, sizeof opt);
     opt.threads = default_threads();
     memset(&err, 0, sizeof err);
-    sets = (const char **)calloc((size_t)argc + 1, sizeof *sets);
+    sets = (const char **)calloc(2 * ((size_t)argc + 1), sizeof *sets);
     if (!sets) {
         msg("out of memory");
         return 1;
     }
+    params = sets + argc + 1;
     for (i = 0; i < argc; i++) {
         const char *a = argv[i], *v;
         if (strcmp(a, "-h") == 0 || strcmp(a, "--help") == 0) {
@@ -931,13 +1010,15 @@ static int cmd_trace(int argc, char **argv)
                 goto usage;
             sets[nsets++] = v;
         } else if (is_opt(a, "--params")) {
-            if (!(params = opt_value(argc, argv, &i, "--params")))
+            if (!(params[nparams++] = opt_value(argc, argv, &i, "--params")))
                 goto usage;
         } else if (is_opt(a, "--memory-limit")) {
             if (memory_limit_option(argc, argv, &i, &opt.memory_limit))
                 goto usage;
         } else if (is_opt(a, "--region")) {
-            if (!(v = opt_value(argc, argv, &i, "--region")) || parse_region(v, opt.region)) {
+            if (!(v = opt_value(argc, argv, &i, "--region")))
+                goto usage;
+            if (parse_region(v, opt.region)) {
                 msg("--region: expected x0,y0,x1,y1 with x0 < x1 and y0 < y1");
                 goto usage;
             }
@@ -945,14 +1026,16 @@ static int cmd_trace(int argc, char **argv)
             if (parse_size(opt_value(argc, argv, &i, "--size"), &opt.width, &opt.height))
                 goto usage;
         } else if (is_opt(a, "--depth")) {
-            if (!(v = opt_value(argc, argv, &i, "--depth")) ||
-                parse_int(v, 1, RTP_MAX_DEPTH, &opt.max_depth)) {
+            if (!(v = opt_value(argc, argv, &i, "--depth")))
+                goto usage;
+            if (parse_int(v, 1, RTP_MAX_DEPTH, &opt.max_depth)) {
                 msg("--depth: expected an integer from 1 to %d", RTP_MAX_DEPTH);
                 goto usage;
             }
         } else if (is_opt(a, "--min-weight")) {
-            if (!(v = opt_value(argc, argv, &i, "--min-weight")) ||
-                parse_double(v, &opt.min_weight) || opt.min_weight < 0) {
+            if (!(v = opt_value(argc, argv, &i, "--min-weight")))
+                goto usage;
+            if (parse_double(v, &opt.min_weight) || opt.min_weight < 0) {
                 msg("--min-weight: expected a number >= 0");
                 goto usage;
             }
@@ -970,6 +1053,8 @@ static int cmd_trace(int argc, char **argv)
         msg("trace: no scene given");
         goto usage;
     }
+    if (stdin_inputs("trace", scene_path, "the scene", params, nparams, sets, nsets, NULL))
+        goto usage;
     if (tree_path && image_path && is_stdout(tree_path) && is_stdout(image_path)) {
         msg("trace: the tree and the image cannot both go to stdout");
         goto usage;
@@ -1017,8 +1102,11 @@ static int cmd_trace(int argc, char **argv)
         fail_err(&err);
         goto out;
     }
-    if (params && apply_params_file(set_scene, scene, params))
-        goto out;
+    /* the --params files in turn, then the --set edits: a later edit of a
+       key wins */
+    for (i = 0; i < nparams; i++)
+        if (apply_params_file(set_scene, scene, params[i]))
+            goto out;
     for (i = 0; i < nsets; i++)
         if (apply_kv(set_scene, scene, sets[i], "--set", 0))
             goto out;
@@ -1110,7 +1198,9 @@ static const char diff_help[] =
     "  --threshold T           per-pixel error counted in 'above' (default 1/255)\n"
     "  --heatmap PNG           write a heat map of the per-pixel error\n"
     "  --fail-above METRIC=V   exit 3 when METRIC (mae, rmse, max_abs, above,\n"
-    "                          or psnr: below V) is worse than V\n"
+    "                          or psnr: below V) is worse than V; repeatable,\n"
+    "                          every one checked; above is a share from 0 to 1\n"
+    "                          or a percent with '%' (above=0.5, above=50%)\n"
     "  --stats FILE            write the metrics as one JSON object ('-' = stdout)\n"
     "  -q, --quiet             print nothing on success\n"
     "  -v, --verbose           accepted (diff has nothing more to say)\n"
@@ -1126,23 +1216,34 @@ static void json_number(FILE *f, const char *key, double v)
         fprintf(f, "\"%s\": %.9g", key, v);
 }
 
+/* One --fail-above: its metric and limit. */
+typedef struct fail_limit {
+    char metric[32];
+    double value;
+} fail_limit;
+
 static int cmd_diff(int argc, char **argv)
 {
     const char *pa = NULL, *pb = NULL, *heat = NULL, *stats_path = NULL;
-    const char *fail_metric = NULL;
-    double fail_value = 0.0, threshold = 1.0 / 255.0, got = 0.0;
+    double threshold = 1.0 / 255.0;
     rtp_image *a = NULL, *b = NULL;
     rtp_diff_stats d;
     rtp_error err;
-    int i, rc = 1, over = 0, c, held;
+    int i, rc = 1, over = 0, c, held, nfail = 0, k;
     rtp_status hs;
-    char metric[32];
+    fail_limit *fails;
 
     memset(&err, 0, sizeof err);
+    fails = (fail_limit *)calloc((size_t)argc + 1, sizeof *fails);
+    if (!fails) {
+        msg("out of memory");
+        return 1;
+    }
     for (i = 0; i < argc; i++) {
         const char *arg = argv[i], *v;
         if (strcmp(arg, "-h") == 0 || strcmp(arg, "--help") == 0) {
             fputs(diff_help, stdout);
+            free(fails);
             return 0;
         } else if ((c = common_option(argc, argv, &i, NULL, &stats_path)) != 0) {
             if (c < 0)
@@ -1151,32 +1252,63 @@ static int cmd_diff(int argc, char **argv)
             if (!(heat = opt_value(argc, argv, &i, "--heatmap")))
                 goto usage;
         } else if (is_opt(arg, "--threshold")) {
-            if (!(v = opt_value(argc, argv, &i, "--threshold")) ||
-                parse_double(v, &threshold) || threshold < 0) {
+            if (!(v = opt_value(argc, argv, &i, "--threshold")))
+                goto usage;
+            if (parse_double(v, &threshold) || threshold < 0) {
                 msg("--threshold: expected a number >= 0");
                 goto usage;
             }
         } else if (is_opt(arg, "--fail-above")) {
+            /* repeatable: every limit is checked (a second one had
+               silently replaced the first, so a regression the first
+               caught exited 0) */
+            fail_limit *fl = &fails[nfail];
             const char *eq;
-            size_t n;
+            char num[64];
+            size_t n, vn;
+            int percent;
             if (!(v = opt_value(argc, argv, &i, "--fail-above")))
                 goto usage;
             eq = strchr(v, '=');
             n = eq ? (size_t)(eq - v) : 0;
-            if (!eq || n >= sizeof metric || parse_double(eq + 1, &fail_value)) {
+            vn = eq ? strlen(eq + 1) : 0;
+            percent = vn > 0 && eq[vn] == '%';
+            if (percent)
+                vn--;
+            if (eq && vn < sizeof num) {
+                memcpy(num, eq + 1, vn);
+                num[vn] = '\0';
+            }
+            if (!eq || n >= sizeof fl->metric || vn >= sizeof num ||
+                parse_double(num, &fl->value)) {
                 msg("--fail-above %s: expected METRIC=VALUE", v);
                 goto usage;
             }
-            memcpy(metric, v, n);
-            metric[n] = '\0';
-            if (strcmp(metric, "mae") && strcmp(metric, "rmse") &&
-                strcmp(metric, "max_abs") && strcmp(metric, "psnr") &&
-                strcmp(metric, "above")) {
+            memcpy(fl->metric, v, n);
+            fl->metric[n] = '\0';
+            if (strcmp(fl->metric, "mae") && strcmp(fl->metric, "rmse") &&
+                strcmp(fl->metric, "max_abs") && strcmp(fl->metric, "psnr") &&
+                strcmp(fl->metric, "above")) {
                 msg("--fail-above: unknown metric '%s' (mae, rmse, psnr, max_abs, above)",
-                    metric);
+                    fl->metric);
                 goto usage;
             }
-            fail_metric = metric;
+            if (percent && strcmp(fl->metric, "above") != 0) {
+                msg("--fail-above %s: only above takes a percent", v);
+                goto usage;
+            }
+            /* above: the share of pixels over --threshold, which the
+               line of metrics prints as a percent and JSON as a share;
+               a limit over 1 without '%' was one that never failed */
+            if (percent)
+                fl->value /= 100.0;
+            else if (strcmp(fl->metric, "above") == 0 && !(fl->value <= 1.0)) {
+                msg("--fail-above %s: above is a share from 0 to 1, or a percent with '%%' "
+                    "(above=%s%%)",
+                    v, num);
+                goto usage;
+            }
+            nfail++;
         } else if (arg[0] == '-' && arg[1] != '\0') {
             msg("diff: unknown option '%s'", arg);
             goto usage;
@@ -1199,6 +1331,9 @@ static int cmd_diff(int argc, char **argv)
     }
     if (stdout_taken("diff", stats_path, heat, NULL))
         goto usage;
+    /* outputs checked before the inputs are read, as trace's are */
+    if (!output_ok(heat) || !output_ok(stats_path) || same_output("diff", heat, stats_path))
+        goto out;
     if (rtp_image_read(pa, NULL, &a, &err) != RTP_OK ||
         rtp_image_read(pb, NULL, &b, &err) != RTP_OK) {
         fail_err(&err);
@@ -1214,14 +1349,6 @@ static int cmd_diff(int argc, char **argv)
     if (hs != RTP_OK) {
         fail_err(&err);
         goto out;
-    }
-    if (fail_metric) {
-        if (strcmp(fail_metric, "mae") == 0) got = d.mae;
-        else if (strcmp(fail_metric, "rmse") == 0) got = d.rmse;
-        else if (strcmp(fail_metric, "max_abs") == 0) got = d.max_abs;
-        else if (strcmp(fail_metric, "above") == 0) got = d.share_above;
-        else got = d.psnr;
-        over = strcmp(fail_metric, "psnr") == 0 ? got < fail_value : got > fail_value;
     }
     if (verbosity > 0 && !(stats_path && strcmp(stats_path, "-") == 0)) {
         /* (to stderr when the heat map takes stdout) */
@@ -1248,20 +1375,30 @@ static int cmd_diff(int argc, char **argv)
         if (stats_close(f, stats_path))
             goto out;
     }
-    if (over) {
-        if (verbosity > 0)
-            msg("diff: %s = %.6g is %s the limit %.6g", fail_metric, got,
-                strcmp(fail_metric, "psnr") == 0 ? "below" : "above", fail_value);
-        rc = EXIT_OVER;
-    } else {
-        rc = 0;
+    for (k = 0; k < nfail; k++) {
+        const char *m = fails[k].metric;
+        double got = strcmp(m, "mae") == 0       ? d.mae
+                     : strcmp(m, "rmse") == 0    ? d.rmse
+                     : strcmp(m, "max_abs") == 0 ? d.max_abs
+                     : strcmp(m, "above") == 0   ? d.share_above
+                                                 : d.psnr;
+        int psnr = strcmp(m, "psnr") == 0;
+        if (psnr ? got < fails[k].value : got > fails[k].value) {
+            /* said under -q too: quiet is for success */
+            msg("diff: %s = %.6g is %s the limit %.6g", m, got, psnr ? "below" : "above",
+                fails[k].value);
+            over = 1;
+        }
     }
+    rc = over ? EXIT_OVER : 0;
 out:
     rtp_image_destroy(a);
     rtp_image_destroy(b);
+    free(fails);
     return rc;
 usage:
     usage_hint(diff_help);
+    free(fails);
     return EXIT_USAGE;
 }
 
@@ -1387,10 +1524,14 @@ static int reeval_one(rtp_tree *tree, const rtp_eval_options *eo, rtp_image **ke
     rtp_error err;
     double t_ref = 0.0;
     int rc = 1;
+    rtp_status st;
     memset(&err, 0, sizeof err);
     /* a stream of edits reuses one image */
-    if ((img ? rtp_tree_eval_into(tree, eo, img, &es, &err)
-             : rtp_tree_eval(tree, eo, &img, &es, &err)) != RTP_OK) {
+    st = img ? rtp_tree_eval_into(tree, eo, img, &es, &err)
+             : rtp_tree_eval(tree, eo, &img, &es, &err);
+    if (eo->progress == progress_cb) /* (its line ended before any other) */
+        progress_end((progress *)eo->progress_user);
+    if (st != RTP_OK) {
         fail_line(&err, line);
         goto out;
     }
@@ -1490,12 +1631,12 @@ out:
 static int cmd_reeval(int argc, char **argv)
 {
     const char *tree_path = NULL, *image_path = NULL, *stats_path = NULL;
-    const char *params = NULL;
     char *default_image = NULL;
-    const char **sets, **add_lights;
+    const char **sets, **add_lights, **params;
     rtp_image *img = NULL;
     int region[4] = {0, 0, 0, 0};
-    int i, nsets = 0, nadd = 0, rc = 1, stream = 0, reference = 0, threads = default_threads(), c;
+    int i, nsets = 0, nadd = 0, nparams = 0, rc = 1, stream = 0, reference = 0,
+        threads = default_threads(), c, frames = 0;
     rtp_tree *tree = NULL;
     rtp_error err;
     rtp_eval_options eo;
@@ -1506,8 +1647,9 @@ static int cmd_reeval(int argc, char **argv)
     memset(&err, 0, sizeof err);
     memset(&eo, 0, sizeof eo);
     eo.shadows = RTP_SHADOWS_AUTO; /* exact, by whichever is faster for the tree */
-    sets = (const char **)calloc((size_t)argc + 1, sizeof *sets);
+    sets = (const char **)calloc(2 * ((size_t)argc + 1), sizeof *sets);
     add_lights = (const char **)calloc((size_t)argc + 1, sizeof *add_lights);
+    params = sets ? sets + argc + 1 : NULL;
     if (!sets || !add_lights) {
         free(sets);
         free(add_lights);
@@ -1536,7 +1678,7 @@ static int cmd_reeval(int argc, char **argv)
                 goto usage;
             sets[nsets++] = v;
         } else if (is_opt(a, "--params")) {
-            if (!(params = opt_value(argc, argv, &i, "--params")))
+            if (!(params[nparams++] = opt_value(argc, argv, &i, "--params")))
                 goto usage;
         } else if (is_opt(a, "--shadows")) {
             const char *colon;
@@ -1556,7 +1698,9 @@ static int cmd_reeval(int argc, char **argv)
             }
             eo.shadows = (rtp_shadow_mode)m;
         } else if (is_opt(a, "--region")) {
-            if (!(v = opt_value(argc, argv, &i, "--region")) || parse_region(v, region)) {
+            if (!(v = opt_value(argc, argv, &i, "--region")))
+                goto usage;
+            if (parse_region(v, region)) {
                 msg("--region: expected x0,y0,x1,y1 with x0 < x1 and y0 < y1");
                 goto usage;
             }
@@ -1601,10 +1745,9 @@ static int cmd_reeval(int argc, char **argv)
         msg("reeval: --stream reads edits from stdin, so the tree cannot come from it");
         goto usage;
     }
-    if (params && strcmp(params, "-") == 0 && (stream || strcmp(tree_path, "-") == 0)) {
-        msg("reeval: stdin can serve only one of the tree, --params and --stream");
+    if (stdin_inputs("reeval", tree_path, "the tree", params, nparams, sets, nsets,
+                     stream ? "--stream's edits" : NULL))
         goto usage;
-    }
     if (!image_path) {
         default_image = default_image_name(strcmp(tree_path, "-") ? tree_path : "reeval");
         if (!default_image) {
@@ -1655,8 +1798,11 @@ static int cmd_reeval(int argc, char **argv)
             goto out;
         }
     }
-    if (params && apply_params_file(set_tree, tree, params))
-        goto out;
+    /* the --params files in turn, then the --set edits: a later edit of a
+       key wins */
+    for (i = 0; i < nparams; i++)
+        if (apply_params_file(set_tree, tree, params[i]))
+            goto out;
     for (i = 0; i < nsets; i++)
         if (apply_kv(set_tree, tree, sets[i], "--set", 0))
             goto out;
@@ -1670,6 +1816,7 @@ static int cmd_reeval(int argc, char **argv)
         char line[MAX_LINE + 1], path[4096];
         int n = 0, got;
         rc = 0;
+        frames = 0;
         while ((got = next_line(stdin, "stdin", line, &n)) != 0) {
             if (got < 0 || apply_line(set_tree, tree, line, "stdin", n)) {
                 rc = 1;
@@ -1687,10 +1834,13 @@ static int cmd_reeval(int argc, char **argv)
                 rc = 1;
                 break;
             }
+            frames++;
             fflush(stdout);
         }
     }
-    if (stats && (rc != 0 ? (stats_discard(stats), 0) : stats_close(stats, stats_path)))
+    /* A stream stopped by a bad line keeps the images written before it,
+       and so the statistics of those images: a line each */
+    if (stats && (rc != 0 && !frames ? (stats_discard(stats), 0) : stats_close(stats, stats_path)))
         rc = 1;
     stats = NULL;
 out:
@@ -1887,6 +2037,28 @@ static const char merge_help[] =
     "  -q, --quiet / -v, --verbose / -h, --help\n"
     "Regions must cover the frame without overlapping.\n";
 
+/* The library names a part by its index, "parts[K]": here it is the
+   K-th file given, named ("tree 1" had meant the second). */
+static void name_parts(rtp_error *err, const char *const *in, int n)
+{
+    char out[sizeof err->message], *p = err->message;
+    size_t o = 0;
+    while (*p && o + 1 < sizeof out) {
+        char *end;
+        long k;
+        if (strncmp(p, "parts[", 6) == 0 && (k = strtol(p + 6, &end, 10), *end == ']') &&
+            end > p + 6 && k >= 0 && k < n) {
+            int w = snprintf(out + o, sizeof out - o, "%s", in[k]);
+            o = w < 0 ? o : o + (size_t)w < sizeof out ? o + (size_t)w : sizeof out - 1;
+            p = end + 1;
+        } else {
+            out[o++] = *p++;
+        }
+    }
+    out[o] = '\0';
+    memcpy(err->message, out, o + 1);
+}
+
 static int cmd_merge(int argc, char **argv)
 {
     const char *out_tree = NULL, *out_image = NULL;
@@ -1936,6 +2108,17 @@ static int cmd_merge(int argc, char **argv)
     if (out_tree && out_image && is_stdout(out_tree) && is_stdout(out_image)) {
         msg("merge: the tree and the image cannot both go to stdout");
         goto usage;
+    }
+    {
+        /* stdin holds one input: a second '-' read it empty ("-: empty:
+           not an rtp tree file") */
+        int nstdin = 0;
+        for (i = 0; i < n; i++)
+            nstdin += strcmp(in[i], "-") == 0 || strncmp(in[i], "-@", 2) == 0;
+        if (nstdin > 1) {
+            msg("merge: only one part can come from stdin");
+            goto usage;
+        }
     }
     for (i = 0; images && i < n; i++) {
         const char *at = strrchr(in[i], '@');
@@ -2019,6 +2202,7 @@ static int cmd_merge(int argc, char **argv)
                 goto out;
             }
         if (rtp_tree_merge(parts, (size_t)n, &joined, &err) != RTP_OK) {
+            name_parts(&err, in, n);
             fail_err(&err);
             goto out;
         }
@@ -2099,10 +2283,17 @@ int main(int argc, char **argv)
                   stdout);
             return stdout_done(0);
         }
-        if (argc > 2) {
-            msg("version: unexpected argument '%s'", argv[2]);
-            fputs("usage: rtp version\n", stderr);
-            return EXIT_USAGE;
+        {
+            /* -q and -v as every command takes them (it prints what it
+               always prints) */
+            int k;
+            for (k = 2; k < argc; k++)
+                if (strcmp(argv[k], "-q") && strcmp(argv[k], "--quiet") &&
+                    strcmp(argv[k], "-v") && strcmp(argv[k], "--verbose")) {
+                    msg("version: unexpected argument '%s'", argv[k]);
+                    fputs("usage: rtp version\n", stderr);
+                    return EXIT_USAGE;
+                }
         }
         printf("rtp %s (library %s)\n", RTP_VERSION_NUMBER == rtp_version_number()
                                             ? rtp_version_string()

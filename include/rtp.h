@@ -407,7 +407,10 @@ rtp_status rtp_tree_eval_into(rtp_tree *tree, const rtp_eval_options *opt,
                               rtp_error *err);
 
 /** Adds a light (white, on) at the given position; it gets the next index.
- *  Its shadows are decided at evaluation like those of a moved light. */
+ *  Its shadows are decided at evaluation like those of a moved light.  A
+ *  tree with an added light cannot be written (rtp_tree_write:
+ *  RTP_ERR_UNSUPPORTED; the file holds the lights the trees were traced
+ *  with, their visibility recorded) nor merged. */
 rtp_status rtp_tree_add_light(rtp_tree *tree, const double pos[3],
                               rtp_error *err);
 
@@ -420,7 +423,8 @@ rtp_status rtp_tree_trace(const rtp_tree *tree, int threads, rtp_image **out,
 /** Joins trees traced from regions of one frame (rtp_trace_options.region)
  *  of the same scene with the same options into the whole frame's tree;
  *  the regions must cover the frame without overlapping.  Its evaluation
- *  equals a whole-frame trace bit for bit. */
+ *  equals a whole-frame trace bit for bit.  An error names a part by its
+ *  index, "parts[K]". */
 rtp_status rtp_tree_merge(rtp_tree *const *parts, size_t n, rtp_tree **out,
                           rtp_error *err);
 

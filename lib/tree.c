@@ -3304,10 +3304,12 @@ rtp_status rtp_tree_merge(rtp_tree *const *parts, size_t n, rtp_tree **out, rtp_
     for (i = 0; i < n; i++) {
         if (i && !same_setup(p0, parts[i]))
             return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                              "tree %zu was traced from another scene, frame or options", i);
+                              "parts[%zu] was traced from another scene, frame or options "
+                              "than parts[0]",
+                              i);
         if (parts[i]->scene->nlights != parts[i]->nlights0)
             return rtpi_error(err, RTP_ERR_UNSUPPORTED, NULL, 0, 0,
-                              "tree %zu has added lights", i);
+                              "parts[%zu] has added lights", i);
     }
     ns = (size_t)gx * gy;
     owner = (int32_t *)rtpi_malloc_array(a, ns, sizeof *owner);
@@ -3330,7 +3332,7 @@ rtp_status rtp_tree_merge(rtp_tree *const *parts, size_t n, rtp_tree **out, rtp_
                     unsigned char *c = &px[(size_t)(p->ry + y) * fw + (size_t)(p->rx + x)];
                     if (*c) {
                         st = rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                                        "regions overlap at pixel %d,%d (tree %zu)", p->rx + x,
+                                        "regions overlap at pixel %d,%d (parts[%zu])", p->rx + x,
                                         p->ry + y, i);
                         break;
                     }

@@ -242,10 +242,14 @@ expect_rc 0 $RTP trace "$T/$(printf 'lat\351.nff')" --size 8x8 -i "$T/w.pfm" --s
 grep -q 'lat\\u00e9.nff"' "$T/w2.json" && ok || { bad "a path not UTF-8 not escaped in JSON"; cat "$T/w2.json" >&2; }
 
 # Outputs as a user expects them (session 20):
-# a failed command keeps an old stats file (it was emptied as reeval began)
+# a failed command keeps an old stats file (it was emptied as reeval began);
+# a stream that fails after images were written replaces it with their
+# lines (session 21: they were thrown away with the images on disk)
 echo OLDSTATS >"$T/ks.json"
-expect_rc 1 sh -c "$RTP reeval '$T/t.rtp' --stream --memory-limit 0.01 -i '$T/ks_%d.pfm' --stats '$T/ks.json' < '$T/lines'"
+expect_rc 1 $RTP reeval "$T/t.rtp" --memory-limit 0.01 --set mat.1.kt=0.9 -i "$T/ks1.pfm" --stats "$T/ks.json"
 [ "$(cat "$T/ks.json")" = OLDSTATS ] && ok || bad "a failed reeval emptied its stats file"
+expect_rc 1 sh -c "$RTP reeval '$T/t.rtp' --stream --memory-limit 0.01 -i '$T/ks_%d.pfm' --stats '$T/ks.json' < '$T/lines'"
+[ "$(grep -c '"command": "reeval"' "$T/ks.json")" = 1 ] && [ -f "$T/ks_0.pfm" ] && ok || bad "a failed stream's stats: $(cat "$T/ks.json")"
 ls -a "$T" | grep -q 'rtp-stats' && bad "a stats temporary file left" || ok
 expect_rc 0 $RTP reeval "$T/t.rtp" -i "$T/ks.pfm" --stats "$T/ks.json"
 grep -q '"command": "reeval"' "$T/ks.json" && ok || bad "stats not written on success"
@@ -325,6 +329,55 @@ if [ -w /dev/full ]; then
     expect_rc 1 sh -c "$RTP version >/dev/full"
     expect_rc 1 sh -c "$RTP --help >/dev/full"
 fi
+
+# stdin serves one input (session 21; each of these read stdin twice)
+printf 'ambient=0.9\n' >"$T/a9.txt"
+printf 'mat.0.kd=0.1\n' >"$T/kd1.txt"
+expect_rc 2 sh -c "cat $S | $RTP trace - --params - --size 8x8 -i '$T/s1.pfm'"
+grep -q "stdin can serve only one of the scene and --params" "$T/err" && ok || bad "trace - --params -: $(cat "$T/err")"
+expect_rc 2 sh -c "$RTP reeval '$T/t.rtp' --params - --params - -i '$T/s1.pfm' <'$T/a9.txt'"
+expect_rc 2 sh -c "cat '$T/t.rtp' | $RTP reeval - --set mat.0.texture=- -i '$T/s1.pfm'"
+grep -q "stdin already serves the tree" "$T/err" && ok || bad "texture=- with the tree on stdin: $(cat "$T/err")"
+mkdir -p "$T/sx"
+expect_rc 1 sh -c "printf 'mat.0.texture=-\nambient=0.2\n' | $RTP reeval '$T/t.rtp' --stream -i '$T/sx/f%d.pfm'"
+grep -q "stdin:1: mat.0.texture=-: stdin already serves" "$T/err" && ok || bad "texture=- in a stream: $(cat "$T/err")"
+expect_rc 2 sh -c "$RTP merge -o '$T/m2.rtp' - - <'$T/t.rtp'"
+grep -q "only one part can come from stdin" "$T/err" && ok || bad "merge - -: $(cat "$T/err")"
+# --params repeated: every file, in turn (the last alone was applied)
+expect_rc 0 $RTP trace $S --size 40x30 --params "$T/a9.txt" --params "$T/kd1.txt" -i "$T/pp1.pfm"
+expect_rc 0 $RTP trace $S --size 40x30 --set ambient=0.9 --set mat.0.kd=0.1 -i "$T/pp2.pfm"
+cmp -s "$T/pp1.pfm" "$T/pp2.pfm" && ok || bad "trace with two --params files"
+expect_rc 0 $RTP reeval "$T/t.rtp" --params "$T/a9.txt" --params "$T/kd1.txt" -i "$T/pp3.pfm"
+expect_rc 0 $RTP diff "$T/pp3.pfm" "$T/pp2.pfm" --fail-above max_abs=1e-6
+# a stream stopped by a bad line keeps its frames' stats
+printf 'ambient=0.1\nambient=0.2\nbogus=1\nambient=0.3\n' >"$T/bad.txt"
+expect_rc 1 sh -c "$RTP reeval '$T/t.rtp' --stream -i '$T/sx/g%d.pfm' --stats '$T/gs.json' <'$T/bad.txt'"
+[ "$(grep -c '"command": "reeval"' "$T/gs.json" 2>/dev/null)" = 2 ] && [ -f "$T/sx/g1.pfm" ] && [ ! -f "$T/sx/g2.pfm" ] && ok || bad "stream stopped at a bad line: stats $(cat "$T/gs.json" 2>&1)"
+# an empty output name, before the work (it failed at the rename, naming nothing)
+expect_rc 1 $RTP trace $S --size 8x8 -o ''
+grep -q "file name is empty" "$T/err" && ok || bad "empty -o: $(cat "$T/err")"
+expect_rc 1 $RTP trace $S --size 8x8 -i "$T/e1.pfm" --stats ''
+[ ! -f "$T/e1.pfm" ] && ok || bad "empty --stats: the image was written first"
+# diff: every --fail-above checked; above as a share or a percent
+$RTP trace $S --size 40x30 --set ambient=0.3 -i "$T/amb.pfm" -q
+expect_rc 3 $RTP diff "$T/t.pfm" "$T/amb.pfm" -q --fail-above max_abs=0.001 --fail-above psnr=1
+grep -q "max_abs = .* is above the limit" "$T/err" && ok || bad "diff -q over a limit said nothing"
+expect_rc 2 $RTP diff "$T/t.pfm" "$T/amb.pfm" --fail-above above=50
+expect_rc 3 $RTP diff "$T/t.pfm" "$T/amb.pfm" -q --fail-above above=1%
+expect_rc 0 $RTP diff "$T/t.pfm" "$T/amb.pfm" -q --fail-above above=100%
+expect_rc 2 $RTP diff "$T/t.pfm" "$T/amb.pfm" --fail-above mae=5%
+expect_rc 1 $RTP diff "$T/t.pfm" "$T/amb.pfm" --stats "$T/nodir/x.json"
+[ ! -s "$T/out" ] && ok || bad "diff printed its metrics before finding its stats folder missing"
+# one message for a missing value (two before: "needs a value", "expected WxH")
+expect_rc 2 $RTP trace $S --size
+[ "$(grep -c '^rtp: ' "$T/err")" = 1 ] && ok || bad "--size without a value: $(cat "$T/err")"
+expect_rc 0 $RTP version -q
+expect_rc 0 $RTP version -v
+# merge names a part by its file (it said "tree 1" for the second)
+expect_rc 0 $RTP trace $S --size 40x30 --region 0,0,40,15 -o "$T/top.rtp"
+expect_rc 0 $RTP trace $S --size 40x30 --region 0,10,40,30 -o "$T/bot.rtp"
+expect_rc 1 $RTP merge -o "$T/mm.rtp" "$T/top.rtp" "$T/bot.rtp"
+grep -q "bot.rtp" "$T/err" && ok || bad "merge overlap does not name the file: $(cat "$T/err")"
 
 rm -rf "$T"
 echo "$pass passed, $fail failed, $skip skipped"
