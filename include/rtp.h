@@ -38,7 +38,9 @@
  *    top of malloc/realloc/free, which on Linux also maps large growing
  *    blocks itself: free what the library made only through it, e.g.
  *    rtp_image_destroy); objects remember the allocator they were created
- *    with.
+ *    with.  A caller's allocator need not be thread-safe: calls with
+ *    options.threads > 1 take a lock around it (two calls of the library
+ *    on different threads with one allocator still need it to be).
  *  - Images are linear RGB floats, row-major, top row first.
  */
 #ifndef RTP_H

@@ -933,6 +933,9 @@ static inline void rtpi_mutex_destroy(rtpi_mutex *m) { (void)m; }
 
 /* An allocator for threads over one that need not be thread-safe: every
    call through a (the one to hand out) takes one lock. */
+/* Whether a is the library's own (thread-safe: malloc's, and mappings). */
+int rtpi_allocator_is_default(const rtp_allocator *a);
+
 typedef struct rtpi_locked_alloc {
     rtp_allocator a, inner;
     rtpi_mutex m;

@@ -60,6 +60,11 @@ typedef struct worker {
 
 struct shared {
     const rtp_scene *s;
+    /* What the workers allocate with: the scene's allocator, behind a lock
+       when a caller's own runs on several threads (rtp.h promises nothing
+       of it: an arena or a counting wrapper was called from two threads
+       at once); the library's own is malloc's and needs none. */
+    const rtp_allocator *wa;
     const rtpi_kdtree *kd;
     camera cam;
     int spd, max_depth;
@@ -167,12 +172,12 @@ static int32_t push_node(worker *w)
         take_room(w, (double)(rtpi_grow_cap(w->vis_cap, (w->nn + 1) * words) - w->vis_cap) *
                          sizeof *w->vis))
         return -1;
-    if (rtpi_grow(&w->sh->s->alloc, (void **)&w->nodes, &w->cap, w->nn + 1,
+    if (rtpi_grow(w->sh->wa, (void **)&w->nodes, &w->cap, w->nn + 1,
                   sizeof *w->nodes)) {
         w->status = RTP_ERR_NOMEM;
         return -1;
     }
-    if (words && rtpi_grow(&w->sh->s->alloc, (void **)&w->vis, &w->vis_cap,
+    if (words && rtpi_grow(w->sh->wa, (void **)&w->vis, &w->vis_cap,
                            (w->nn + 1) * words, sizeof *w->vis)) {
         w->status = RTP_ERR_NOMEM;
         return -1;
@@ -376,7 +381,7 @@ static void trace_sample(worker *w, int x, int y, float *rgb)
             take_room(w, (double)(rtpi_grow_cap(w->terms_cap, n * nt + 1) - w->terms_cap) *
                              sizeof *w->terms))
             return;
-        if (rtpi_grow(&s->alloc, (void **)&w->terms, &w->terms_cap, n * nt + 1,
+        if (rtpi_grow(w->sh->wa, (void **)&w->terms, &w->terms_cap, n * nt + 1,
                       sizeof *w->terms)) {
             w->status = RTP_ERR_NOMEM;
             return;
@@ -397,7 +402,7 @@ static void trace_sample(worker *w, int x, int y, float *rgb)
    their exact size; 0, or 1 with w->status set. */
 static int keep_row(worker *w, row_rec *r, size_t nsamples)
 {
-    const rtp_allocator *a = &w->sh->s->alloc;
+    const rtp_allocator *a = w->sh->wa;
     size_t words = w->sh->shade.vis_words;
     r->nnodes = w->nn;
     r->nodes = (rtpi_cnode *)rtpi_malloc_array(a, w->nn + 1, sizeof *r->nodes);
@@ -428,7 +433,7 @@ static double row_bytes(const shared *sh, size_t nn)
 static rtp_status append_row(shared *sh, int y, const rtpi_cnode *nodes, const uint32_t *vis,
                              const uint32_t *per, size_t nn)
 {
-    const rtp_allocator *a = &sh->s->alloc;
+    const rtp_allocator *a = sh->wa;
     size_t words = sh->shade.vis_words, k = (size_t)y * sh->gx, at = sh->tn;
     size_t need = sh->tn + nn + 1;
     int x;
@@ -488,7 +493,7 @@ static rtp_status append_row(shared *sh, int y, const rtpi_cnode *nodes, const u
 static int commit_row(worker *w, int y)
 {
     shared *sh = w->sh;
-    const rtp_allocator *a = &sh->s->alloc;
+    const rtp_allocator *a = sh->wa;
     rtp_status st = RTP_OK;
     rtpi_mutex_lock(&sh->lock);
     if (y != sh->next_row) {
@@ -644,7 +649,8 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
     rtp_image *img = NULL;
     float *samples = NULL;
     rtp_status st;
-    int w, h, fw, fh, rg[4], nthreads, i, lock_made = 0;
+    int w, h, fw, fh, rg[4], nthreads, i, lock_made = 0, la_made = 0;
+    rtpi_locked_alloc la;
     double t0, t1, t2, limit;
     rtpi_kd_stats ks;
 
@@ -660,8 +666,10 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
     /* (on or off: the sample grid is the image's plus spd, so any other
        value read past the samples or made a grid no reader takes) */
     opt.spd = opt.spd != 0;
+    /* (memory_limit 0 is the default; a negative or NaN one had fallen
+       back to it silently) */
     if (opt.max_depth < 0 || opt.width < 0 || opt.height < 0 || opt.threads < 0 ||
-        !(opt.min_weight >= 0.0))
+        !(opt.min_weight >= 0.0) || !(opt.memory_limit >= 0.0))
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
                           "rtp_trace: negative option value");
     /* (the trace recurses along a ray tree's depth, and a tree file
@@ -722,6 +730,15 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
 
     memset(&sh, 0, sizeof sh);
     sh.s = s;
+    sh.wa = &s->alloc;
+    if (nthreads > 1 && !rtpi_allocator_is_default(&s->alloc)) {
+        if (rtpi_locked_alloc_init(&la, &s->alloc) == 0) {
+            la_made = 1;
+            sh.wa = &la.a;
+        } else {
+            nthreads = 1; /* (no lock: one thread needs none) */
+        }
+    }
     sh.spd = opt.spd;
     sh.max_depth = opt.max_depth > 0 ? opt.max_depth : 5;
     sh.min_weight = opt.spd ? 0.0 : opt.min_weight;
@@ -844,6 +861,8 @@ done:
     }
     if (lock_made)
         rtpi_mutex_destroy(&sh.lock);
+    if (la_made)
+        rtpi_locked_alloc_destroy(&la);
     rtpi_free(&s->alloc, sh.stashed);
     rtpi_free(&s->alloc, sh.tnodes);
     rtpi_free(&s->alloc, sh.tvis);
@@ -928,7 +947,8 @@ rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int thre
     uint64_t *start = NULL;
     uint32_t *vis = NULL;
     rtp_status st = RTP_OK;
-    int nthreads = threads > 1 ? threads : 1, lock_made = 0;
+    int nthreads = threads > 1 ? threads : 1, lock_made = 0, la_made = 0;
+    rtpi_locked_alloc la;
     double nb, kept;
     if (n == 0)
         return RTP_OK;
@@ -955,6 +975,15 @@ rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int thre
 
     memset(&sh, 0, sizeof sh);
     sh.s = &tmp;
+    sh.wa = &tmp.alloc;
+    if (nthreads > 1 && !rtpi_allocator_is_default(&tmp.alloc)) {
+        if (rtpi_locked_alloc_init(&la, &tmp.alloc) == 0) {
+            la_made = 1;
+            sh.wa = &la.a;
+        } else {
+            nthreads = 1; /* (no lock: one thread needs none) */
+        }
+    }
     sh.kd = t->kd;
     sh.spd = t->spd;
     sh.max_depth = t->max_depth;
@@ -1096,5 +1125,7 @@ done:
     rtpi_free(a, lights);
     if (lock_made)
         rtpi_mutex_destroy(&sh.lock);
+    if (la_made)
+        rtpi_locked_alloc_destroy(&la);
     return st;
 }

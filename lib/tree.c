@@ -2717,6 +2717,12 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                 opt->shadow_res > RTP_MAX_SHADOW_RES))
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
                           "invalid shadow mode or resolution (1..%d)", RTP_MAX_SHADOW_RES);
+    /* (each had been taken for the default: a stale mode of 7 for keep,
+       the approximate one) */
+    if (opt && ((unsigned)opt->stale > RTP_STALE_RETRACE || opt->threads < 0 ||
+                !(opt->memory_limit >= 0.0)))
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                          "invalid stale mode, thread count or memory limit");
     mode = opt ? (int)opt->shadows : 0;
     res = opt && opt->shadow_res > 0 ? opt->shadow_res : RTPI_DC_DEFAULT_RES;
     if (mode == RTP_SHADOWS_AUTO) {

@@ -291,6 +291,11 @@ void rtpi_allocator_init(rtp_allocator *out, const rtp_allocator *in)
     }
 }
 
+int rtpi_allocator_is_default(const rtp_allocator *a)
+{
+    return a->malloc_fn == default_malloc;
+}
+
 void *rtpi_malloc(const rtp_allocator *a, size_t size)
 {
     return a->malloc_fn(a->user, size ? size : 1);

@@ -380,9 +380,29 @@ static void test_max_depth(void)
         CHECK(rtp_tree_eval(NULL, NULL, &img, NULL, &err) == RTP_ERR_ARGUMENT && !img);
         CHECK(rtp_tree_merge(none, 1, &t, &err) == RTP_ERR_ARGUMENT && !t);
     }
+    /* a memory limit below 0 or NaN is an error, not the default */
+    o.max_depth = 4;
+    o.memory_limit = -5.0;
+    CHECK(rtp_record(s, &o, &t, &img, NULL, &err) == RTP_ERR_ARGUMENT && !t && !img);
+    o.memory_limit = NAN;
+    CHECK(rtp_trace(s, &o, &img, NULL, &err) == RTP_ERR_ARGUMENT && !img);
+    o.memory_limit = 0.0;
     o.max_depth = RTP_MAX_DEPTH;
     CHECK(rtp_record(s, &o, &t, &img, NULL, &err) == RTP_OK);
     if (t) {
+        /* and so are eval options no mode or count has (a stale mode of 7
+           was taken for keep, the approximate one) */
+        rtp_eval_options eo;
+        rtp_image *bad = NULL;
+        memset(&eo, 0, sizeof eo);
+        eo.stale = (rtp_stale_mode)7;
+        CHECK(rtp_tree_eval(t, &eo, &bad, NULL, &err) == RTP_ERR_ARGUMENT && !bad);
+        eo.stale = RTP_STALE_KEEP;
+        eo.threads = -1;
+        CHECK(rtp_tree_eval(t, &eo, &bad, NULL, &err) == RTP_ERR_ARGUMENT && !bad);
+        eo.threads = 0;
+        eo.memory_limit = -1.0;
+        CHECK(rtp_tree_eval(t, &eo, &bad, NULL, &err) == RTP_ERR_ARGUMENT && !bad);
         rtp_tree_get_info(t, &ti);
         CHECK_MSG(ti.nodes >= RTP_MAX_DEPTH, "%llu nodes", ti.nodes);
         CHECK(rtp_tree_write(t, file, NULL, NULL) == RTP_OK);
@@ -782,6 +802,106 @@ static void *cnt_realloc(void *user, void *q, size_t n)
     counted_add((counted *)user, n, old);
     return (char *)p + 16;
 }
+
+#ifdef RTP_HAVE_THREADS
+/* An allocator that is not thread-safe and says when it is used as if it
+   were: a call finding another inside it counts an overlap (trylock on
+   the allocator's own mutex; the library's lock, when it takes one, is
+   another).  Each call lingers a little, so that two threads meeting in
+   it are seen. */
+typedef struct {
+    pthread_mutex_t inside;
+    long overlaps, live;
+} lonely;
+
+static int lonely_enter(lonely *l)
+{
+    volatile int i;
+    if (pthread_mutex_trylock(&l->inside) != 0) {
+        l->overlaps++; /* (a race on the count itself: it only has to leave 0) */
+        return 0;
+    }
+    for (i = 0; i < 20000; i++)
+        ;
+    return 1;
+}
+
+static void *lonely_malloc(void *u, size_t n)
+{
+    lonely *l = (lonely *)u;
+    int in = lonely_enter(l);
+    void *p = malloc(n);
+    l->live += p != NULL;
+    if (in)
+        pthread_mutex_unlock(&l->inside);
+    return p;
+}
+
+static void *lonely_realloc(void *u, void *q, size_t n)
+{
+    lonely *l = (lonely *)u;
+    int in = lonely_enter(l);
+    void *p = realloc(q, n);
+    l->live += q == NULL && p != NULL;
+    if (in)
+        pthread_mutex_unlock(&l->inside);
+    return p;
+}
+
+static void lonely_free(void *u, void *q)
+{
+    lonely *l = (lonely *)u;
+    int in = lonely_enter(l);
+    l->live -= q != NULL;
+    free(q);
+    if (in)
+        pthread_mutex_unlock(&l->inside);
+}
+
+/* A caller's allocator is called by one thread at a time, whatever the
+   thread count: rtp.h asks nothing of it.  Recording on 4 threads, then
+   re-traces for an ior edit and a camera move: trace.c's workers grew
+   their buffers through it unlocked (34 overlaps in one camera re-trace
+   of 128x128). */
+static void test_allocator_one_thread_at_a_time(void)
+{
+    lonely l;
+    rtp_allocator a;
+    rtp_scene *s = NULL;
+    rtp_tree *t = NULL;
+    rtp_image *img = NULL;
+    rtp_trace_options o;
+    rtp_eval_options eo;
+    rtp_error err;
+    memset(&l, 0, sizeof l);
+    pthread_mutex_init(&l.inside, NULL);
+    a.malloc_fn = lonely_malloc;
+    a.realloc_fn = lonely_realloc;
+    a.free_fn = lonely_free;
+    a.user = &l;
+    memset(&o, 0, sizeof o);
+    memset(&eo, 0, sizeof eo);
+    o.threads = eo.threads = 4;
+    o.width = o.height = 96;
+    o.max_depth = 8;
+    CHECK(rtp_scene_load_memory(trap_nff, sizeof trap_nff - 1, "trap.nff", "nff", &a, &s,
+                                &err) == RTP_OK);
+    CHECK(s && rtp_record(s, &o, &t, &img, NULL, &err) == RTP_OK);
+    CHECK_MSG(l.overlaps == 0, "recording: %ld overlapping allocator calls", l.overlaps);
+    if (t && img) {
+        CHECK(rtp_tree_set(t, "mat.1.ior", "1.3", &err) == RTP_OK);
+        CHECK(rtp_tree_eval_into(t, &eo, img, NULL, &err) == RTP_OK);
+        CHECK(rtp_tree_set(t, "camera.from", "0.5,0.2,0", &err) == RTP_OK);
+        CHECK(rtp_tree_eval_into(t, &eo, img, NULL, &err) == RTP_OK);
+        CHECK_MSG(l.overlaps == 0, "re-traces: %ld overlapping allocator calls", l.overlaps);
+    }
+    rtp_image_destroy(img);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+    CHECK_MSG(l.live == 0, "%ld blocks left", l.live);
+    pthread_mutex_destroy(&l.inside);
+}
+#endif
 
 /* What a recording holds stays under its memory limit: the tree's arrays
    (grown ahead by the rate of the rows so far), the workers' buffers and
@@ -3028,6 +3148,9 @@ int main(void)
     RUN(test_min_weight_edits);
     RUN(test_trees_outgrow_limit);
     RUN(test_memory_limit_holds);
+#ifdef RTP_HAVE_THREADS
+    RUN(test_allocator_one_thread_at_a_time);
+#endif
     RUN(test_moved_light_exact);
     RUN(test_moved_light_lightbuf);
     RUN(test_shadows_auto);
