@@ -685,6 +685,14 @@ static rtp_status set_tree(void *obj, const char *k, const char *v, rtp_error *e
     return rtp_tree_set((rtp_tree *)obj, k, v, e);
 }
 
+/* Whether key's value may name an image file (mat.N.texture, mat.N.bump),
+   which '-' reads from stdin. */
+static int image_key(const char *key)
+{
+    const char *dot = strrchr(key, '.');
+    return dot && (strcmp(dot, ".texture") == 0 || strcmp(dot, ".bump") == 0);
+}
+
 static int apply_kv(set_fn set, void *obj, const char *kv, const char *where, int line)
 {
     char key[256];
@@ -706,7 +714,7 @@ static int apply_kv(set_fn set, void *obj, const char *kv, const char *where, in
     }
     memcpy(key, kv, kn);
     key[kn] = '\0';
-    if (stdin_user && strcmp(eq + 1, "-") == 0) {
+    if (stdin_user && strcmp(eq + 1, "-") == 0 && image_key(key)) {
         /* an image (mat.N.texture=-) read from stdin would take the
            stream's next lines, or the rest of the tree, as its bytes */
         if (line)
@@ -852,7 +860,13 @@ static int stdin_inputs(const char *cmd, const char *file, const char *file_what
     stdin_user = n ? users[0] : NULL;
     for (i = 0; stdin_user && i < nsets; i++) {
         const char *eq = strchr(sets[i], '=');
-        if (eq && strcmp(eq + 1, "-") == 0) {
+        char key[256];
+        size_t kn = eq ? (size_t)(eq - sets[i]) : 0;
+        if (!eq || kn >= sizeof key)
+            continue;
+        memcpy(key, sets[i], kn);
+        key[kn] = '\0';
+        if (strcmp(eq + 1, "-") == 0 && image_key(key)) {
             msg("--set %s: stdin already serves %s; name the file", sets[i], stdin_user);
             return 1;
         }
@@ -1302,10 +1316,10 @@ static int cmd_diff(int argc, char **argv)
                a limit over 1 without '%' was one that never failed */
             if (percent)
                 fl->value /= 100.0;
-            else if (strcmp(fl->metric, "above") == 0 && !(fl->value <= 1.0)) {
-                msg("--fail-above %s: above is a share from 0 to 1, or a percent with '%%' "
-                    "(above=%s%%)",
-                    v, num);
+            if (strcmp(fl->metric, "above") == 0 && !(fl->value >= 0.0 && fl->value <= 1.0)) {
+                msg("--fail-above %s: above is a share from 0 to 1, or a percent from 0%% to "
+                    "100%% (above=0.05 or above=5%%)",
+                    v);
                 goto usage;
             }
             nfail++;

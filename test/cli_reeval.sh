@@ -366,6 +366,10 @@ expect_rc 2 $RTP diff "$T/t.pfm" "$T/amb.pfm" --fail-above above=50
 expect_rc 3 $RTP diff "$T/t.pfm" "$T/amb.pfm" -q --fail-above above=1%
 expect_rc 0 $RTP diff "$T/t.pfm" "$T/amb.pfm" -q --fail-above above=100%
 expect_rc 2 $RTP diff "$T/t.pfm" "$T/amb.pfm" --fail-above mae=5%
+expect_rc 2 $RTP diff "$T/t.pfm" "$T/amb.pfm" --fail-above above=150%
+# a number key's '-' is a bad number, not "stdin taken" (reviewer)
+expect_rc 1 sh -c "$RTP reeval - -i '$T/s1.pfm' --set light.0.on=- <'$T/t.rtp'"
+grep -q "expected 1 comma-separated number" "$T/err" && ok || bad "light.0.on=-: $(cat "$T/err")"
 expect_rc 1 $RTP diff "$T/t.pfm" "$T/amb.pfm" --stats "$T/nodir/x.json"
 [ ! -s "$T/out" ] && ok || bad "diff printed its metrics before finding its stats folder missing"
 # one message for a missing value (two before: "needs a value", "expected WxH")
