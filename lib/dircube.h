@@ -226,6 +226,8 @@ typedef struct rtpi_itembuf {
                              (unset where id is RTPI_NONE):
                              float keeps ~1e-7 of the scene's extent, not
                              of the distance from a far light */
+    unsigned long long casts; /* rays cast at round shapes while drawing
+                                 (their cells' centres): the build's work */
 } rtpi_itembuf;
 
 /* The cell of direction d (from the light) and its face, or
