@@ -35,6 +35,8 @@ rtp_status rtpi_itembuf_build_osmesa_wide(const rtp_scene *s, rtpi_v3 light, int
 #include <GL/osmesa.h>
 
 #define OSM_PI 3.14159265358979323846
+#define OSM_2M24 (1.0 / 16777216.0) /* a step of the 24-bit depth buffer */
+#define OSM_DEPTH_STEP 1e-5         /* the largest step, of the extent */
 
 /* One face being drawn: vertices go to OpenGL in eye coordinates sheared
    so that the window's centre lies on the axis, and with the depth taken
@@ -375,23 +377,39 @@ rtp_status rtpi_itembuf_build_osmesa_wide(const rtp_scene *s, rtpi_v3 light, int
        its extent outside them, for rounding), so the 24-bit depth buffer
        resolves ~1e-7 of that extent near the front. */
     for (f = 0; f < 6; f++) {
-        double zn = ib->w.zbase[f] - 1e-3 * ib->w.zext[f];
+        double zn = ib->w.zbase[f] - 1e-3 * ib->w.zext[f], zf, zres, ze = ib->w.zext[f];
+        int cut = ib->w.zbase[f] == 0.0;
         if (!(zn > 0.0))
             zn = dmin / sqrt(3.0) * 0.5;
-        if (!(zn > 1e-6 * ib->w.zext[f]))
-            zn = 1e-6 * ib->w.zext[f];
-        znear[f] = zn;
+        if (!(zn > 1e-6 * ze))
+            zn = 1e-6 * ze;
         /* (just past the bounds: a far plane at 2 zbase, as it was,
            spent the depth buffer's resolution on empty space, 0.03 apart
            at 1e6) */
-        zfar[f] = ib->w.zbase[f] + ib->w.zext[f] * (1.0 + 1e-3);
-        if (ib->w.zbase[f] == 0.0) {
-            zfar[f] = ib->w.zext[f] * sqrt(3.0) * (1.0 + 1e-3) + zn;
-            znmax = fmax(znmax, zn);
+        zf = cut ? ze * sqrt(3.0) * (1.0 + 1e-3) + zn : ib->w.zbase[f] + ze * (1.0 + 1e-3);
+        /* The depth buffer's step at the far plane, 2^-24 (zf - zn) zf /
+           zn, at most OSM_DEPTH_STEP of the extent (IB_BIAS, what the
+           item buffer takes as "in front", is 1e-4 of it): a primitive
+           1e-6 from the light had put the near plane at 1e-5, the steps
+           at the far side at 0.5, and a plate 0.02 over a floor 10 away
+           lost to it: the shadow under the plate was gone (23 dB).  A
+           nearer near plane is moved out, and what it may cut is drawn
+           in software (soft, below). */
+        zres = OSM_2M24 * zf * zf / (OSM_DEPTH_STEP * ze + OSM_2M24 * zf);
+        if (zn < zres) {
+            zn = zres;
+            cut = 1;
+            if (ib->w.zbase[f] == 0.0)
+                zf = ze * sqrt(3.0) * (1.0 + 1e-3) + zn;
         }
+        znear[f] = zn;
+        zfar[f] = zf;
+        if (cut)
+            znmax = fmax(znmax, zn);
     }
     /* With the light outside the bounds every primitive lies behind the
-       near planes.  Inside them, a primitive nearer the light than
+       near planes unless one was moved out for the depth buffer's sake.
+       Inside them (or past such a plane), a primitive nearer the light than
        2 sqrt(3) znmax (depth >= distance / sqrt 3, and a factor of 2) may
        reach in front of a near plane and be cut: the software z-buffer
        draws those after OpenGL, into the same cells. */

@@ -310,6 +310,31 @@ static void test_spd(void)
     }
 }
 
+/* A moved light a millionth from a small triangle, over a plate 0.02
+   above a floor 10 away: OSMesa's near plane went to 1e-5 with the
+   nearest primitive, its depth steps at the floor to 0.5, and the plate
+   lost the depth test to the floor behind it: the shadow under the plate
+   was gone (4.9% of the decisions wrong, 23 dB).  Also from inside a
+   sphere 1e-4 from its surface. */
+static void test_light_near_a_primitive(void)
+{
+    static const char text[] =
+        "v\nfrom 0 -2.6 0.05\nat 0 0 0.01\nup 0 0 1\nangle 40\nhither 0.01\n"
+        "resolution 64 64\nb 0.1 0.1 0.1\nl 0 -20 0.3\nf 0.8 0.8 0.8 0.8 0 1 0 0\n"
+        "p 4\n-5 -5 0\n5 -5 0\n5 5 0\n-5 5 0\nf 0.2 0.8 0.2 0.8 0 1 0 0\n"
+        "p 4\n-2 -2 0.02\n2 -2 0.02\n2 2 0.02\n-2 2 0.02\nf 0.9 0.3 0.2 0.8 0 1 0 0\n"
+        "p 3\n0.3 0.2 10.000001\n0.301 0.2 10.000001\n0.3 0.201 10.000001\n"
+        "s 1.3005 0.2003 10 0.9999\n";
+    rtp_scene *s = load(text, sizeof text - 1);
+    rtpi_v3 lp = v3(0.3005, 0.2003, 10);
+    if (!s) {
+        CHECK(0);
+        return;
+    }
+    run("light near a primitive", s, &lp, 1, 1.0);
+    rtp_scene_destroy(s);
+}
+
 /* The rays cast at round shapes while the item buffer is drawn stay
    near the cells they cover, wherever the light is: each sphere and cone
    was widened by an absolute 1e-9 radians, and seen from 2e9 a scene of
@@ -362,5 +387,6 @@ int main(void)
     RUN(test_fine_mesh);
     RUN(test_spd);
     RUN(test_far_light_casts);
+    RUN(test_light_near_a_primitive);
     return check_report();
 }
