@@ -72,6 +72,15 @@ static int same_point(const ring *r, size_t a, size_t b)
     return px(r, a) == px(r, b) && py(r, a) == py(r, b);
 }
 
+/* p on the left of a->b or on it, within corner()'s tolerance: a vertex
+   that lies on a diagonal in exact numbers may be a rounding off it (a
+   polygon of collinear runs in a tilted plane), and taken for outside it
+   let the diagonal run through it: a fold, triangles over a notch. */
+static int on_left(const ring *r, size_t a, size_t b, size_t p)
+{
+    return area2(r, a, b, p) >= -1e-12 * sqrt(dist2(r, a, b) * dist2(r, a, p));
+}
+
 /* An ear: a convex corner whose triangle holds no other non-convex vertex
    (points on its border count as inside, so no diagonal runs through a
    vertex).  Only non-convex vertices can lie inside a convex corner's
@@ -87,8 +96,7 @@ static int is_ear(const ring *r, size_t b, size_t nreflex)
         if (!(r->v[p] & REFLEX) || same_point(r, p, a) ||
             same_point(r, p, b) || same_point(r, p, c))
             continue;
-        if (area2(r, a, b, p) >= 0 && area2(r, b, c, p) >= 0 &&
-            area2(r, c, a, p) >= 0)
+        if (on_left(r, a, b, p) && on_left(r, b, c, p) && on_left(r, c, a, p))
             return 0;
     }
     return 1;
