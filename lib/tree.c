@@ -629,10 +629,22 @@ static rtp_status update_visibility(rtp_tree *t, int mode, int res, int threads,
 
 /* ----------------------------------------------------------- evaluation */
 
-/* Caches are kept when they stay below this many floats per node and
-   sample: beyond (hundreds of lights) every evaluation works per sample
-   from scratch, as trace does. */
+/* Caches are kept for up to this many lights, or for more where they
+   take at most EV_CACHE_BYTES (ev_cache_bytes): beyond, every evaluation
+   works per sample from scratch, as trace does.  (A count alone dropped
+   them for 65 lights on any tree: every line of a stream evaluated the
+   whole frame, a blank one too, 250-1450 ms at 512x512 against a few;
+   1000 lights at 64x64 take 80 MB of them.) */
 #define EV_MAX_LIGHTS 64
+#define EV_CACHE_BYTES (1024.0 * 1048576.0)
+
+/* Bytes the evaluation caches take for nl lights (ev_terms, ev_coeffs,
+   ev_nv, ev_w). */
+static double ev_cache_bytes(const rtp_tree *t, size_t nl, size_t ns)
+{
+    return (double)t->nnodes * ((double)RTPI_TERMS(nl) * 4.0 + 6.0 * 4.0 + 8.0) +
+           (double)ns * (double)RTPI_COEFFS(nl) * 4.0;
+}
 
 /* Float images carry 2^-24 of the magnitudes they are summed from: where
    those pass CP_SPAN times a value (and CP_SPAN * 2: below, the error
@@ -2789,7 +2801,8 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
     t1 = seconds_now();
 
     /* What the caches hold versus what is asked now. */
-    cached = nl <= EV_MAX_LIGHTS && !(opt && opt->no_cache);
+    cached = (nl <= EV_MAX_LIGHTS || ev_cache_bytes(t, nl, ns) <= EV_CACHE_BYTES) &&
+             !(opt && opt->no_cache);
     if (t->ev_valid && t->ev_nlights != nl)
         drop_caches(t);
     if (cached && !t->ev_terms) {
