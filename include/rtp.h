@@ -347,9 +347,11 @@ typedef struct rtp_eval_options {
                                anew may get the same address, so set this
                                only for the image last written. */
     double memory_limit;    /* bytes the trees may take while samples are
-                               traced again (class D), old and new; 0:
-                               16 GiB.  Past it: RTP_ERR_LIMIT, the tree
-                               as it was */
+                               traced again (class D), old and new, and a
+                               moved light's direction cube's cells (6
+                               shadow_res^2, 8 bytes each for an item
+                               buffer, 4 for a light buffer); 0: 16 GiB.
+                               Past it: RTP_ERR_LIMIT, the tree as it was */
 } rtp_eval_options;
 
 typedef struct rtp_eval_stats {

@@ -2753,6 +2753,29 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
             rtpi_lightbuf_res(s, v3(lp[0], lp[1], lp[2]), res) < res / 4)
             mode = RTP_SHADOWS_EXACT;
     }
+    /* A direction cube's cells against the memory limit, before it is
+       made: 8 bytes a cell for an item buffer (id and depth; OSMesa's
+       colour and depth buffers for a face on top), 4 for a light buffer's
+       cell starts (its lists come on top), six whole faces (a far light's
+       window has fewer: an upper bound).  itembuf:8192 took 2.9 GB of a
+       64x64 tree's move under --memory-limit 100. */
+    if (mode != RTP_SHADOWS_EXACT) {
+        double lim = opt && opt->memory_limit > 0.0 ? opt->memory_limit : RTPI_MEMORY_LIMIT;
+        double cells = 6.0 * (double)res * (double)res;
+        double need = cells * (mode == RTP_SHADOWS_LIGHTBUF ? 4.0 : 8.0) +
+                      (mode == RTP_SHADOWS_OSMESA ? cells / 6.0 * 8.0 : 0.0);
+        for (l = 0; l < s->nlights; l++)
+            if (light_moved(t, l) && !(need <= lim)) {
+                char g[2][32]; /* '.' whatever the locale */
+                rtpi_fmt_g(g[0], sizeof g[0], 6, ceil(need / 1048576.0));
+                rtpi_fmt_g(g[1], sizeof g[1], 6, lim / 1048576.0);
+                return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
+                                  "a direction cube of %d cells a face takes up to %s MiB, "
+                                  "over the memory limit of %s MiB (lower its resolution or "
+                                  "raise --memory-limit)",
+                                  res, g[0], g[1]);
+            }
+    }
     vis_key(mode, res, &kmode, &kres);
     memset(&shade, 0, sizeof shade);
     shade.s = s;

@@ -377,6 +377,11 @@ expect_rc 2 $RTP trace $S --size
 [ "$(grep -c '^rtp: ' "$T/err")" = 1 ] && ok || bad "--size without a value: $(cat "$T/err")"
 expect_rc 0 $RTP version -q
 expect_rc 0 $RTP version -v
+# a direction cube over the memory limit is refused before it is made
+# (itembuf:8192 took 2.9 GB under --memory-limit 100), nothing written
+expect_rc 1 $RTP reeval "$T/t.rtp" --set light.key.pos=1,2,6 --shadows itembuf:8192 --memory-limit 100 -i "$T/cube.pfm"
+grep -q "direction cube of 8192 cells a face takes up to 3072 MiB" "$T/err" && [ ! -f "$T/cube.pfm" ] && ok || bad "itembuf:8192 under 100 MiB: $(cat "$T/err")"
+expect_rc 0 $RTP reeval "$T/t.rtp" --set light.key.pos=1,2,6 --shadows itembuf:256 --memory-limit 100 -i "$T/cube.pfm"
 # merge names a part by its file (it said "tree 1" for the second)
 expect_rc 0 $RTP trace $S --size 40x30 --region 0,0,40,15 -o "$T/top.rtp"
 expect_rc 0 $RTP trace $S --size 40x30 --region 0,10,40,30 -o "$T/bot.rtp"
