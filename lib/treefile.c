@@ -917,6 +917,7 @@ typedef struct rd {
     const unsigned char *p;
     size_t n, at;
     int bad;
+    int nul;     /* a string held a NUL byte (get_str) */
     rd_src *src; /* NULL: every byte at p */
 } rd;
 
@@ -1039,6 +1040,12 @@ static char *get_str(rd *r, const rtp_allocator *a, int *nomem)
     memcpy(s, r->p + r->at, n);
     s[n] = '\0';
     r->at += n;
+    if (strlen(s) != n) {
+        /* a NUL inside: C would cut the name there (no writer puts one) */
+        rtpi_free(a, s);
+        r->nul = 1;
+        return NULL;
+    }
     return s;
 }
 
@@ -1189,6 +1196,8 @@ static rtp_status read_matl(loader *L, rd *r)
         m->bump_strength = get_f32(r);
         m->bump_scale = get_f32(r);
         m->name = get_str(r, L->a, &oom);
+        if (r->nul)
+            return bad(L, "a material's name holds a NUL byte", NULL);
         s->nmats = i + 1;
         t->mats0[i] = *m;
         t->mats0[i].name = NULL;
@@ -1212,12 +1221,12 @@ static rtp_status read_matl(loader *L, rd *r)
             return bad(L, "material value is not finite", NULL);
         /* what no scene can hold (rtp_scene_set, NFF and MTL refuse it):
            a file saying so was made to, and its image would be NaN */
-        if (m->kd < 0.0f || m->ks < 0.0f || m->kt < 0.0f || m->shine < 0.0f || m->ior < 0.0f ||
+        if (m->kd < 0.0f || m->ks < 0.0f || m->kt < 0.0f || m->shine < 0.0f || m->ior <= 0.0f ||
             m->color[0] < 0.0f || m->color[1] < 0.0f || m->color[2] < 0.0f ||
             m->color2[0] < 0.0f || m->color2[1] < 0.0f || m->color2[2] < 0.0f ||
             m->tex_scale < 0.0f || m->bump_scale < 0.0f || t->mats0[i].ks < 0.0f ||
-            t->mats0[i].kt < 0.0f || t->mats0[i].ior < 0.0f || t->mats0[i].bump_scale < 0.0f)
-            return bad(L, "material value out of range (negative)", NULL);
+            t->mats0[i].kt < 0.0f || t->mats0[i].ior <= 0.0f || t->mats0[i].bump_scale < 0.0f)
+            return bad(L, "material value out of range (negative, or an ior of 0)", NULL);
         if ((unsigned)m->tex > RTPI_TEX_IMAGE || (unsigned)m->bump > RTPI_BUMP_NOISE ||
             (unsigned)t->mats0[i].bump > RTPI_BUMP_NOISE)
             return bad(L, "unknown texture or bump kind", NULL);
@@ -1248,6 +1257,8 @@ static rtp_status read_lite(loader *L, rd *r)
         on = get_u8(r);
         l->on = on != 0;
         l->name = get_str(r, L->a, &oom);
+        if (r->nul)
+            return bad(L, "a light's name holds a NUL byte", NULL);
         s->nlights = i + 1;
         for (k = 0; k < 3; k++)
             t->lights0[i].pos[k] = get_f64(r);
@@ -1287,6 +1298,8 @@ static rtp_status read_texr(loader *L, rd *r)
         tx->path = get_str(r, L->a, &oom);
         if (oom)
             return nomem(L);
+        if (r->nul)
+            return bad(L, "a texture's name holds a NUL byte", NULL);
         if (!tx->path)
             tx->path = rtpi_strdup(L->a, "");
         if (!tx->path)
@@ -1475,8 +1488,12 @@ static rtp_status read_geom(loader *L, rd *r)
         c->mat = get_u32(r);
         if (r->bad)
             return bad(L, "section too short", NULL);
+        /* (and what NFF refuses: a negative radius, both 0, the apex on
+           the base) */
         if (!finite3(c->base) || !finite3(c->apex) || !isfinite(c->rb) || !isfinite(c->ra) ||
-            c->mat >= s->nmats)
+            c->mat >= s->nmats || c->rb < 0.0f || c->ra < 0.0f ||
+            (c->rb == 0.0f && c->ra == 0.0f) ||
+            (c->base[0] == c->apex[0] && c->base[1] == c->apex[1] && c->base[2] == c->apex[2]))
             return bad(L, "invalid cone", NULL);
     }
     if (rtpi_scene_cone_frames(s))
@@ -1782,6 +1799,7 @@ rtp_status rtp_tree_read_memory(const void *data, size_t size, const char *name,
     r.n = size;
     r.at = 0;
     r.bad = 0;
+    r.nul = 0;
     r.src = NULL;
     if ((st = check_signature(&L, r.p, size)) != RTP_OK)
         return st;
@@ -1812,6 +1830,7 @@ rtp_status rtp_tree_read_memory(const void *data, size_t size, const char *name,
         body.n = (size_t)len;
         body.at = 0;
         body.bad = 0;
+        body.nul = 0;
         body.src = NULL;
         r.at += (size_t)len;
         if (crc32_update(0, r.p + start, r.at - start) != get_u32(&r)) {
@@ -1928,6 +1947,7 @@ static rtp_status tree_read_stream(FILE *f, uint64_t size, int known, const char
         body.n = 8;
         body.at = 0;
         body.bad = 0;
+        body.nul = 0;
         body.src = NULL;
         len = get_u64(&body);
         L.section = tag;
@@ -1978,6 +1998,7 @@ static rtp_status tree_read_stream(FILE *f, uint64_t size, int known, const char
             body.n = 4;
             body.at = 0;
             body.bad = 0;
+            body.nul = 0;
             body.src = NULL;
             if (crc != get_u32(&body)) {
                 st = bad(&L, "checksum mismatch: the file is corrupt", NULL);

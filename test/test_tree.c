@@ -2733,6 +2733,80 @@ static unsigned char *splice_section(const unsigned char *data, size_t *n, size_
     return c;
 }
 
+/* The first place in section `tag` (of the file's n bytes) holding the
+   m bytes at pat, or n. */
+static size_t find_in_section(const unsigned char *data, size_t n, const char *tag,
+                              const void *pat, size_t m)
+{
+    size_t at = section_at(data, n, tag), len, p;
+    if (at >= n)
+        return n;
+    len = (size_t)data[at + 4] | (size_t)data[at + 5] << 8 | (size_t)data[at + 6] << 16 |
+          (size_t)data[at + 7] << 24;
+    for (p = at + 12; p + m <= at + 12 + len && p + m <= n; p++)
+        if (memcmp(data + p, pat, m) == 0)
+            return p;
+    return n;
+}
+
+/* What no scene holds is refused in a file with right checksums, as the
+   scene readers refuse it (an independent reader written from the spec
+   found these accepted): an ior of 0 (NFF reads SPD's 0 as 1), a cone
+   with a negative radius, a NUL inside a name (C would cut it). */
+static void test_reader_refuses_what_no_scene_holds(void)
+{
+    unsigned char *data;
+    size_t n, k;
+    float f;
+    unsigned char fb[4], zero[4] = {0, 0, 0, 0}, neg[4];
+    static const struct {
+        const char *tag, *what;
+        float from;
+        int to; /* 0: 0.0f, 1: negated, 2: a NUL for the name's 2nd byte */
+    } cases[] = {{"MATL", "out of range", 1.4f, 0},
+                 {"GEOM", "invalid cone", 0.3f, 1},
+                 {"MATL", "NUL", 0.0f, 2}};
+    data = small_tree_file(&n);
+    if (!data) {
+        CHECK(data != NULL);
+        return;
+    }
+    for (k = 0; k < sizeof cases / sizeof *cases; k++) {
+        size_t p, m = n, at = section_at(data, n, cases[k].tag);
+        unsigned char *copy;
+        rtp_tree *t = NULL;
+        rtp_error err;
+        if (cases[k].to == 2) {
+            p = find_in_section(data, n, cases[k].tag, "floor", 5);
+            CHECK_MSG(p < n, "no name 'floor' in %s", cases[k].tag);
+            if (p >= n)
+                continue;
+            p++;
+            copy = splice_section(data, &m, at, p, 1, zero, 1);
+        } else {
+            f = cases[k].from;
+            memcpy(fb, &f, 4); /* (little-endian hosts, as the file) */
+            f = -f;
+            memcpy(neg, &f, 4);
+            p = find_in_section(data, n, cases[k].tag, fb, 4);
+            CHECK_MSG(p < n, "no %g in %s", (double)cases[k].from, cases[k].tag);
+            if (p >= n)
+                continue;
+            copy = splice_section(data, &m, at, p, 4, cases[k].to ? neg : zero, 4);
+        }
+        CHECK(copy != NULL);
+        if (!copy)
+            continue;
+        CHECK_MSG(rtp_tree_read_memory(copy, m, "bad.rtp", NULL, &t, &err) == RTP_ERR_FORMAT &&
+                      strstr(err.message, cases[k].what) != NULL,
+                  "%s: %s", cases[k].what, err.message);
+        CHECK(t == NULL);
+        rtp_tree_destroy(t);
+        free(copy);
+    }
+    free(data);
+}
+
 /* A packed node whose number runs past 5 bytes, or past 32 bits (the
    first node's first number written again in 5 bytes with a bit above
    them: read as 32 bits, the file would be whole), is an invalid node; a
@@ -3249,5 +3323,6 @@ int main(void)
     RUN(test_out_of_range_values);
     RUN(test_format1_file);
     RUN(test_malformed_packed_node);
+    RUN(test_reader_refuses_what_no_scene_holds);
     return check_report();
 }
