@@ -1111,8 +1111,10 @@ static rtp_status read_head(loader *L, rd *r)
     t->ry = (int)get_u32(r);
     if (r->bad)
         return bad(L, "header too short", NULL);
-    if (!rtpi_image_size_ok(t->full_w, t->full_h) || t->rx < 0 || t->ry < 0 ||
-        t->width > t->full_w - t->rx || t->height > t->full_h - t->ry)
+    if (!rtpi_image_size_ok(t->full_w, t->full_h))
+        return bad(L, "frame size over the limit (2^20 a side, 2^27 pixels)", NULL);
+    if (t->rx < 0 || t->ry < 0 || t->width > t->full_w - t->rx ||
+        t->height > t->full_h - t->ry)
         return bad(L, "region outside the frame", NULL);
     if (!rtpi_image_size_ok(t->width, t->height) || t->spd < 0 || t->spd > 1 ||
         t->nx != t->width + t->spd || t->ny != t->height + t->spd)
