@@ -7,6 +7,7 @@
 #include "rtp.h"
 
 #include <errno.h>
+#include <fcntl.h>
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -22,6 +23,7 @@
 #define EXIT_OVER 3
 
 static int verbosity = 1; /* 0 quiet, 1 normal, 2 verbose; CLI-only state */
+static int std_closed[3];  /* stdin, stdout, stderr were closed (hold_std_fds) */
 /* What stdin serves when a command reads it for an input ("the scene",
    "--stream's edits"), else NULL: a value '-' (an image from stdin) is
    then refused */
@@ -567,6 +569,21 @@ static int output_ok(const char *path)
         msg("an output's file name is empty");
         return 0;
     }
+    {
+        /* a name for a standard stream the caller closed (it holds
+           /dev/null, where the file would vanish) */
+        static const char *const names[][3] = {{"/dev/stdin", "/proc/self/fd/0", "/dev/fd/0"},
+                                               {"/dev/stdout", "/proc/self/fd/1", "/dev/fd/1"},
+                                               {"/dev/stderr", "/proc/self/fd/2", "/dev/fd/2"}};
+        int f, k;
+        for (f = 0; f < 3; f++)
+            for (k = 0; k < 3; k++)
+                if (std_closed[f] && strcmp(path, names[f][k]) == 0) {
+                    msg("%s: cannot write: %s is closed", path,
+                        f == 0 ? "stdin" : f == 1 ? "stdout" : "stderr");
+                    return 0;
+                }
+    }
     if (stat(path, &sb) == 0) {
         if (S_ISDIR(sb.st_mode)) {
             msg("%s: cannot write: %s", path, strerror(EISDIR));
@@ -620,7 +637,8 @@ static int is_stdout(const char *path)
         return 0;
     if (strcmp(path, "-") == 0)
         return 1;
-    return stat(path, &sb) == 0 && fstat(fileno(stdout), &so) == 0 &&
+    /* (a closed stdout holds /dev/null: no file named is stdout then) */
+    return !std_closed[1] && stat(path, &sb) == 0 && fstat(fileno(stdout), &so) == 0 &&
            sb.st_dev == so.st_dev && sb.st_ino == so.st_ino;
 }
 
@@ -2278,9 +2296,28 @@ static int stdout_done(int rc)
     return rc;
 }
 
+/* A standard stream closed by the caller (>&-) is opened on /dev/null
+   the other way round (stdout and stderr read-only, stdin write-only), so
+   that using it fails as before with EBADF, and a file rtp opens never
+   gets its number: with stdout closed the stats file's temporary took fd
+   1, and `reeval -i - --stats s.json >&-` wrote the image into s.json,
+   exit 0. */
+static void hold_std_fds(void)
+{
+    int fd;
+    for (fd = 0; fd <= 2; fd++)
+        if (fcntl(fd, F_GETFD) == -1 && errno == EBADF) {
+            int got = open("/dev/null", fd == 0 ? O_WRONLY : O_RDONLY);
+            std_closed[fd] = 1;
+            if (got >= 0 && got != fd)
+                close(got); /* (a lower one was closed too: it took it) */
+        }
+}
+
 int main(int argc, char **argv)
 {
     int rc;
+    hold_std_fds();
     if (argc < 2) {
         fputs(main_help, stderr);
         return EXIT_USAGE;

@@ -382,6 +382,13 @@ expect_rc 0 $RTP version -v
 expect_rc 1 $RTP reeval "$T/t.rtp" --set light.key.pos=1,2,6 --shadows itembuf:8192 --memory-limit 100 -i "$T/cube.pfm"
 grep -q "direction cube of 8192 cells a face takes up to 3072 MiB" "$T/err" && [ ! -f "$T/cube.pfm" ] && ok || bad "itembuf:8192 under 100 MiB: $(cat "$T/err")"
 expect_rc 0 $RTP reeval "$T/t.rtp" --set light.key.pos=1,2,6 --shadows itembuf:256 --memory-limit 100 -i "$T/cube.pfm"
+# stdout closed (>&-): a file rtp opened took fd 1 and the image meant for
+# stdout went into the stats file, exit 0; now the write fails, nothing made
+rm -f "$T/closed.json"
+expect_rc 1 sh -c "$RTP reeval '$T/t.rtp' -i - --stats '$T/closed.json' >&-"
+[ ! -f "$T/closed.json" ] && ok || bad "stdout closed: $(head -c 20 "$T/closed.json" | od -c | head -1)"
+expect_rc 0 sh -c "$RTP reeval '$T/t.rtp' -i '$T/closed.pfm' --stats '$T/closed.json' >&-"
+grep -q '"command": "reeval"' "$T/closed.json" && ok || bad "stats with stdout closed"
 # merge names a part by its file (it said "tree 1" for the second)
 expect_rc 0 $RTP trace $S --size 40x30 --region 0,0,40,15 -o "$T/top.rtp"
 expect_rc 0 $RTP trace $S --size 40x30 --region 0,10,40,30 -o "$T/bot.rtp"
