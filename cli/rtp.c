@@ -320,17 +320,26 @@ static void install_signals(void)
 /* Holds the signals off while a file at path is written and renamed into
    place (not for stdout, a FIFO or a device, where a reader that stalls
    would make rtp deaf to Ctrl-C); @return whether they were held. */
+static int held_depth; /* holds nest (trace's pair of outputs, each write) */
+
 static int hold_signals(const char *path)
 {
     struct stat sb;
     if (!path || strcmp(path, "-") == 0 || (stat(path, &sb) == 0 && !S_ISREG(sb.st_mode)))
         return 0;
-    return sigprocmask(SIG_BLOCK, &term_signals, &saved_mask) == 0;
+    if (held_depth > 0) {
+        held_depth++;
+        return 1;
+    }
+    if (sigprocmask(SIG_BLOCK, &term_signals, &saved_mask) != 0)
+        return 0;
+    held_depth = 1;
+    return 1;
 }
 
 static void release_signals(int held)
 {
-    if (held)
+    if (held && --held_depth == 0)
         sigprocmask(SIG_SETMASK, &saved_mask, NULL);
 }
 
@@ -349,6 +358,74 @@ static rtp_status write_tree(const rtp_tree *t, const char *path, unsigned long 
     rtp_status st = rtp_tree_write(t, path, bytes, err);
     release_signals(held);
     return st;
+}
+
+/* trace -o TREE -i IMAGE writes two files: when the second fails (a full
+   disk) the first is put back as it was — its old contents kept under a
+   hard link beside it until both are written, or removed when it was
+   new — so the pair never mixes a new tree with an old image.  Only for
+   two regular files (a FIFO or stdout cannot be taken back). */
+static int is_stdout(const char *path);
+static int link_target(const char *path, char *buf, size_t size);
+
+typedef struct keep_old {
+    char dest[4096]; /* the file the write replaces (a link's target) */
+    char old[4096];  /* its old contents' hard link, when state is 1 */
+    int state;       /* 0 nothing to undo, 1 old kept, 2 it was new */
+} keep_old;
+
+static int output_is_file(const char *path)
+{
+    struct stat sb;
+    return path && strcmp(path, "-") != 0 && !is_stdout(path) &&
+           (stat(path, &sb) != 0 ? errno == ENOENT : S_ISREG(sb.st_mode));
+}
+
+static void keep_take(keep_old *k, const char *path)
+{
+    struct stat sb;
+    const char *slash;
+    size_t dl;
+    int tries;
+    k->state = 0;
+    if (link_target(path, k->dest, sizeof k->dest) != 0)
+        return;
+    if (lstat(k->dest, &sb) != 0) {
+        k->state = errno == ENOENT ? 2 : 0;
+        return;
+    }
+    if (!S_ISREG(sb.st_mode))
+        return;
+    slash = strrchr(k->dest, '/');
+    dl = slash ? (size_t)(slash - k->dest) + 1 : 0;
+    if (dl + 32 > sizeof k->old)
+        return;
+    for (tries = 0; tries < 16; tries++) {
+        memcpy(k->old, k->dest, dl);
+        snprintf(k->old + dl, sizeof k->old - dl, ".rtp-%ld-%d.old", (long)getpid(), tries);
+        if (link(k->dest, k->old) == 0) {
+            k->state = 1;
+            return;
+        }
+        if (errno != EEXIST)
+            return; /* (no hard links here: nothing kept, as before) */
+    }
+}
+
+static void keep_undo(keep_old *k)
+{
+    if (k->state == 1 && rename(k->old, k->dest) != 0)
+        unlink(k->old);
+    else if (k->state == 2)
+        unlink(k->dest);
+    k->state = 0;
+}
+
+static void keep_drop(keep_old *k)
+{
+    if (k->state == 1)
+        unlink(k->old);
+    k->state = 0;
 }
 
 /* ---------------------------------------------------------------- stats */
@@ -1005,13 +1082,15 @@ static int cmd_trace(int argc, char **argv)
     rtp_image *img = NULL;
     rtp_error err;
     progress prog;
-    int i, rc = 1, nsets = 0, nparams = 0, c;
+    int i, rc = 1, nsets = 0, nparams = 0, c, pair = 0, pair_held = 0;
     const char **sets, **params;
     double t0, t_load, t_trace, t_write;
+    keep_old keep;
 
     memset(&opt, 0, sizeof opt);
     opt.threads = default_threads();
     memset(&err, 0, sizeof err);
+    keep.state = 0;
     sets = (const char **)calloc(2 * ((size_t)argc + 1), sizeof *sets);
     if (!sets) {
         msg("out of memory");
@@ -1158,14 +1237,30 @@ static int cmd_trace(int argc, char **argv)
     progress_end(&prog);
     t_trace = now_seconds() - prog.start;
     t0 = now_seconds();
+    pair = tree_path && image_path && output_is_file(tree_path) && output_is_file(image_path);
+    if (pair) {
+        /* (signals held over both writes: Ctrl-C between them would
+           leave the new tree with the old image) */
+        pair_held = hold_signals(tree_path);
+        keep_take(&keep, tree_path);
+    }
     if (tree_path && write_tree(tree, tree_path, &file_bytes, &err) != RTP_OK) {
         fail_err(&err);
+        keep_drop(&keep);
+        release_signals(pair_held);
         goto out;
     }
     if (image_path && write_image(img, image_path, &err) != RTP_OK) {
         fail_err(&err);
+        if (keep.state)
+            msg("%s: %s: the image could not be written", tree_path,
+                keep.state == 1 ? "put back as it was" : "removed");
+        keep_undo(&keep);
+        release_signals(pair_held);
         goto out;
     }
+    keep_drop(&keep);
+    release_signals(pair_held);
     rtp_tree_get_info(tree, &ti);
     t_write = now_seconds() - t0;
     if (verbosity > 0 && st.capped_rays)

@@ -310,6 +310,16 @@ mkdir -p "$T/fs"
 expect_rc 1 sh -c "ulimit -f 1; exec $RTP trace $S --size 64x64 -o '$T/fs/big.rtp'"
 grep -q "File too large" "$T/err" && ok || bad "file size limit: $(cat "$T/err")"
 [ -z "$(ls -A "$T/fs")" ] && ok || bad "file size limit left $(ls -A "$T/fs")"
+# trace -o T -i I where the image fails after the tree was written: the
+# tree is put back (or removed when new), so the pair never mixes (session 21)
+A="--size 128x128 --set camera.angle=170"
+echo oldtree >"$T/fs/pt.rtp"; echo oldimage >"$T/fs/pt.pfm"
+expect_rc 1 sh -c "ulimit -f 200; exec $RTP trace $S $A -o '$T/fs/pt.rtp' -i '$T/fs/pt.pfm'"
+[ "$(cat "$T/fs/pt.rtp")" = oldtree ] && [ "$(cat "$T/fs/pt.pfm")" = oldimage ] && ok || bad "a failed image left the new tree: $(head -c 8 "$T/fs/pt.rtp" | od -c | head -1)"
+expect_rc 1 sh -c "ulimit -f 200; exec $RTP trace $S $A -o '$T/fs/pn.rtp' -i '$T/fs/pn.pfm'"
+[ ! -e "$T/fs/pn.rtp" ] && [ ! -e "$T/fs/pn.pfm" ] && ok || bad "a failed image left a new tree"
+[ -z "$(ls -A "$T/fs" | grep -v '^p[tn]\.')" ] && ok || bad "the pair left $(ls -A "$T/fs")"
+rm -f "$T/fs/pt.rtp" "$T/fs/pt.pfm"
 # info and reeval --stats of a FIFO (a second open waited for a writer)
 if mkfifo "$T/fifo.rtp" 2>/dev/null; then
     (cat "$T/t.rtp" >"$T/fifo.rtp" &)
