@@ -303,8 +303,9 @@ static rtp_status read_material(nff *c)
     m.ks = (float)v[4];
     m.shine = (float)v[5];
     m.kt = (float)v[6];
-    /* SPD writes ior 0 for opaque materials. */
-    m.ior = v[7] > 0.0 ? (float)v[7] : 1.0f;
+    /* SPD writes ior 0 for opaque materials (and one below the float
+       range, 1e-50, is 0 as the scene keeps it) */
+    m.ior = (float)v[7] > 0.0f ? (float)v[7] : 1.0f;
     idx = rtpi_scene_add_material(c->s, &m);
     if (idx < 0)
         return nomem(c, &tk[7]);
@@ -356,8 +357,10 @@ static rtp_status read_cone(nff *c)
         return st;
     if ((float)v[3] == 0.0f && (float)v[7] == 0.0f)
         return rtpi_lex_error(&c->lx, &tk[7], "cone radii are both 0");
-    if (v[0] == v[4] && v[1] == v[5] && v[2] == v[6])
-        return rtpi_lex_error(&c->lx, &tk[4], "cone apex equals its base");
+    /* (as floats, as the scene keeps them and a tree file's reader checks
+       them: 1 and 1.00000001 are one point) */
+    if ((float)v[0] == (float)v[4] && (float)v[1] == (float)v[5] && (float)v[2] == (float)v[6])
+        return rtpi_lex_error(&c->lx, &tk[4], "cone apex equals its base (as a float)");
     for (i = 0; i < 3; i++) {
         cn.base[i] = (float)v[i];
         cn.apex[i] = (float)v[4 + i];

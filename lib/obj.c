@@ -586,7 +586,8 @@ static rtp_status read_mtl(obj *o, const char *text, size_t size, const char *na
             if (what[0] == 'N' && what[1] == 's') {
                 m->shine = (float)v[0];
             } else if (what[0] == 'N') {
-                m->ior = v[0] > 0.0 ? (float)v[0] : 1.0f;
+                /* (0, or below the float range: 1, as NFF has it) */
+                m->ior = (float)v[0] > 0.0f ? (float)v[0] : 1.0f;
             } else {
                 /* d is opacity, Tr transparency; both in [0, 1]. */
                 double tr = what[0] == 'd' ? 1.0 - v[0] : v[0];

@@ -742,7 +742,8 @@ rtp_status rtp_scene_set(rtp_scene *s, const char *key, const char *value,
                               key);
         if ((st = want(err, key, value, n, 1)) != RTP_OK)
             return st;
-        if (v[0] < 0.0 || (dst == &m->ior && v[0] <= 0.0)) {
+        /* (an ior is kept as a float: one that rounds to 0 is 0) */
+        if (v[0] < 0.0 || (dst == &m->ior && !((float)v[0] > 0.0f))) {
             char g[32]; /* '.' whatever the locale */
             rtpi_fmt_g(g, sizeof g, 6, v[0]);
             return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,

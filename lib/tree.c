@@ -2747,8 +2747,12 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
        rays' time; 524k triangles at 1e11 took 49 s and 5.4 GB before
        lb_res): shadow rays, as exact, which --stats names.  The item
        buffer does the same in rtpi_shadow_create. */
-    for (l = 0; mode == RTP_SHADOWS_LIGHTBUF && l < s->nlights; l++) {
+    for (l = 0; mode != RTP_SHADOWS_EXACT && l < s->nlights; l++) {
         const double *lp = s->lights[l].pos;
+        /* (the item buffers too, as rtpi_shadow_create decides them: here
+           so that --stats says so and no cube is charged to the memory
+           limit; itembuf:8192 from 1e13 was refused under 100 MiB while
+           it took 3 MB) */
         if (light_moved(t, l) && s->lights[l].on &&
             rtpi_lightbuf_res(s, v3(lp[0], lp[1], lp[2]), res) < res / 4)
             mode = RTP_SHADOWS_EXACT;

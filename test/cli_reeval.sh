@@ -399,6 +399,20 @@ expect_rc 1 sh -c "$RTP reeval '$T/t.rtp' -i - --stats '$T/closed.json' >&-"
 [ ! -f "$T/closed.json" ] && ok || bad "stdout closed: $(head -c 20 "$T/closed.json" | od -c | head -1)"
 expect_rc 0 sh -c "$RTP reeval '$T/t.rtp' -i '$T/closed.pfm' --stats '$T/closed.json' >&-"
 grep -q '"command": "reeval"' "$T/closed.json" && ok || bad "stats with stdout closed"
+# far lights are decided by shadow rays in the item buffer modes too: no
+# cube charged to the limit, and --stats says exact (reviewer: refused)
+expect_rc 0 $RTP reeval "$T/t.rtp" --set light.key.pos=3e13,-5e13,8e13 --shadows itembuf:8192 --memory-limit 100 -i "$T/far.pfm" --stats "$T/far.json"
+grep -q '"shadows": "exact"' "$T/far.json" && ok || bad "far itembuf: $(cat "$T/far.json")"
+# what a trace writes reads back: values that are 0 or one point only as
+# floats are taken as the scene keeps them (the reader refused the file)
+printf 'v\nfrom 0 -5 2\nat 0 0 0\nup 0 0 1\nangle 40\nhither 0.1\nresolution 8 8\nl 2 -3 4\nf 0.9 0.4 0.3 0.7 0.2 30 0.5 1e-50\ns 0 0 0 1\n' >"$T/tiny.nff"
+expect_rc 0 $RTP trace "$T/tiny.nff" -o "$T/tiny.rtp" -i "$T/tiny.pfm"
+expect_rc 0 $RTP info "$T/tiny.rtp"
+grep -q "ior=1\b" "$T/out" && ok || bad "ior 1e-50: $(grep mat "$T/out")"
+expect_rc 1 $RTP trace "$T/tiny.nff" --set mat.0.ior=1e-46 -i "$T/tiny2.pfm"
+printf 'v\nfrom 0 -5 2\nat 0 0 0\nup 0 0 1\nangle 40\nhither 0.1\nresolution 8 8\nl 2 -3 4\nf 0.9 0.4 0.3 0.7 0.2 30 0 1\nc\n0 0 1 0.5\n0 0 1.00000001 0.3\n' >"$T/cone.nff"
+expect_rc 1 $RTP trace "$T/cone.nff" -o "$T/cone.rtp"
+grep -q "apex equals its base" "$T/err" && ok || bad "a cone one point as floats: $(cat "$T/err")"
 # merge names a part by its file (it said "tree 1" for the second)
 expect_rc 0 $RTP trace $S --size 40x30 --region 0,0,40,15 -o "$T/top.rtp"
 expect_rc 0 $RTP trace $S --size 40x30 --region 0,10,40,30 -o "$T/bot.rtp"
