@@ -371,13 +371,46 @@ static int link_target(const char *path, char *buf, size_t size);
 typedef struct keep_old {
     char dest[4096]; /* the file the write replaces (a link's target) */
     char old[4096];  /* its old contents' hard link, when state is 1 */
-    int state;       /* 0 nothing to undo, 1 old kept, 2 it was new */
+    int state;       /* 0 nothing to undo, 1 old kept, 2 it was new,
+                        3 it could not be kept (errno in why) */
+    int why;
 } keep_old;
+
+/* Whether a link chain at path passes through /proc or /dev/fd (another
+   open file: the library appends to it, nothing can be taken back). */
+static int via_fd_link(const char *path)
+{
+    char buf[4096], link[4096];
+    struct stat sb;
+    int hops;
+    if (strlen(path) >= sizeof buf)
+        return 1;
+    strcpy(buf, path);
+    for (hops = 0; hops < 40; hops++) {
+        ssize_t n;
+        const char *slash;
+        size_t dir;
+        if (strncmp(buf, "/proc/", 6) == 0 || strncmp(buf, "/dev/fd/", 8) == 0)
+            return 1;
+        if (lstat(buf, &sb) != 0 || !S_ISLNK(sb.st_mode))
+            return 0;
+        n = readlink(buf, link, sizeof link - 1);
+        if (n < 0)
+            return 1;
+        link[n] = '\0';
+        slash = strrchr(buf, '/');
+        dir = link[0] != '/' && slash ? (size_t)(slash - buf) + 1 : 0;
+        if (dir + (size_t)n >= sizeof buf)
+            return 1;
+        memmove(buf + dir, link, (size_t)n + 1);
+    }
+    return 1;
+}
 
 static int output_is_file(const char *path)
 {
     struct stat sb;
-    return path && strcmp(path, "-") != 0 && !is_stdout(path) &&
+    return path && strcmp(path, "-") != 0 && !is_stdout(path) && !via_fd_link(path) &&
            (stat(path, &sb) != 0 ? errno == ENOENT : S_ISREG(sb.st_mode));
 }
 
@@ -400,7 +433,7 @@ static void keep_take(keep_old *k, const char *path)
     dl = slash ? (size_t)(slash - k->dest) + 1 : 0;
     if (dl + 32 > sizeof k->old)
         return;
-    for (tries = 0; tries < 16; tries++) {
+    for (tries = 0; tries < 64; tries++) {
         memcpy(k->old, k->dest, dl);
         snprintf(k->old + dl, sizeof k->old - dl, ".rtp-%ld-%d.old", (long)getpid(), tries);
         if (link(k->dest, k->old) == 0) {
@@ -408,16 +441,23 @@ static void keep_take(keep_old *k, const char *path)
             return;
         }
         if (errno != EEXIST)
-            return; /* (no hard links here: nothing kept, as before) */
+            break; /* (no hard links here, or too many: said if needed) */
     }
+    k->why = errno;
+    k->state = 3;
 }
 
-static void keep_undo(keep_old *k)
+static void keep_undo(keep_old *k, const char *path)
 {
-    if (k->state == 1 && rename(k->old, k->dest) != 0)
+    if (k->state == 1 && rename(k->old, k->dest) == 0)
+        msg("%s: put back as it was: the image could not be written", path);
+    else if (k->state == 1)
         unlink(k->old);
-    else if (k->state == 2)
-        unlink(k->dest);
+    if (k->state == 2 && unlink(k->dest) == 0)
+        msg("%s: removed: the image could not be written", path);
+    if (k->state == 3)
+        msg("%s: the new tree stays: its old contents could not be kept beside it (%s)",
+            path, strerror(k->why));
     k->state = 0;
 }
 
@@ -647,19 +687,17 @@ static int output_ok(const char *path)
         return 0;
     }
     {
-        /* a name for a standard stream the caller closed (it holds
-           /dev/null, where the file would vanish) */
-        static const char *const names[][3] = {{"/dev/stdin", "/proc/self/fd/0", "/dev/fd/0"},
-                                               {"/dev/stdout", "/proc/self/fd/1", "/dev/fd/1"},
-                                               {"/dev/stderr", "/proc/self/fd/2", "/dev/fd/2"}};
-        int f, k;
+        /* a name for a standard stream the caller closed (hold_std_fds:
+           it is the root folder now; said as what it is) */
+        struct stat sp, sh;
+        int f;
         for (f = 0; f < 3; f++)
-            for (k = 0; k < 3; k++)
-                if (std_closed[f] && strcmp(path, names[f][k]) == 0) {
-                    msg("%s: cannot write: %s is closed", path,
-                        f == 0 ? "stdin" : f == 1 ? "stdout" : "stderr");
-                    return 0;
-                }
+            if (std_closed[f] && stat(path, &sp) == 0 && fstat(f, &sh) == 0 &&
+                sp.st_dev == sh.st_dev && sp.st_ino == sh.st_ino && strcmp(path, "/") != 0) {
+                msg("%s: cannot write: %s is closed", path,
+                    f == 0 ? "stdin" : f == 1 ? "stdout" : "stderr");
+                return 0;
+            }
     }
     if (stat(path, &sb) == 0) {
         if (S_ISDIR(sb.st_mode)) {
@@ -1252,10 +1290,7 @@ static int cmd_trace(int argc, char **argv)
     }
     if (image_path && write_image(img, image_path, &err) != RTP_OK) {
         fail_err(&err);
-        if (keep.state)
-            msg("%s: %s: the image could not be written", tree_path,
-                keep.state == 1 ? "put back as it was" : "removed");
-        keep_undo(&keep);
+        keep_undo(&keep, tree_path);
         release_signals(pair_held);
         goto out;
     }
@@ -2100,6 +2135,8 @@ static int cmd_info(int argc, char **argv)
         usage_hint(info_help);
         return EXIT_USAGE;
     }
+    if (!output_ok(stats_path))
+        return 1;
     if (rtp_tree_read(tree_path, NULL, &tree, &err) != RTP_OK)
         return fail_err(&err);
     rtp_tree_get_info(tree, &ti);
@@ -2391,18 +2428,20 @@ static int stdout_done(int rc)
     return rc;
 }
 
-/* A standard stream closed by the caller (>&-) is opened on /dev/null
-   the other way round (stdout and stderr read-only, stdin write-only), so
-   that using it fails as before with EBADF, and a file rtp opens never
-   gets its number: with stdout closed the stats file's temporary took fd
-   1, and `reeval -i - --stats s.json >&-` wrote the image into s.json,
-   exit 0. */
+/* A standard stream closed by the caller (>&-) is held open on the root
+   folder, read-only, so that a file rtp opens never gets its number
+   (with stdout closed the stats file's temporary took fd 1, and `reeval
+   -i - --stats s.json >&-` wrote the image into s.json, exit 0), while
+   using the stream still fails (writing: EBADF; reading: EISDIR) and so
+   does any name that reaches it (/proc/self/fd/1 through a link: a
+   folder, which cannot be written; /dev/null there had taken the image
+   silently). */
 static void hold_std_fds(void)
 {
     int fd;
     for (fd = 0; fd <= 2; fd++)
         if (fcntl(fd, F_GETFD) == -1 && errno == EBADF) {
-            int got = open("/dev/null", fd == 0 ? O_WRONLY : O_RDONLY);
+            int got = open("/", O_RDONLY);
             std_closed[fd] = 1;
             if (got >= 0 && got != fd)
                 close(got); /* (a lower one was closed too: it took it) */

@@ -320,6 +320,19 @@ expect_rc 1 sh -c "ulimit -f 200; exec $RTP trace $S $A -o '$T/fs/pn.rtp' -i '$T
 [ ! -e "$T/fs/pn.rtp" ] && [ ! -e "$T/fs/pn.pfm" ] && ok || bad "a failed image left a new tree"
 [ -z "$(ls -A "$T/fs" | grep -v '^p[tn]\.')" ] && ok || bad "the pair left $(ls -A "$T/fs")"
 rm -f "$T/fs/pt.rtp" "$T/fs/pt.pfm"
+# a tree named through an fd link is appended to: nothing to put back, no
+# hard link left beside it (a reviewer: .old left, "put back" said)
+: >"$T/fs/app.rtp"
+expect_rc 1 sh -c "ulimit -f 200; exec $RTP trace $S $A -o /proc/self/fd/3 -i '$T/fs/app.pfm' 3>>'$T/fs/app.rtp'"
+[ -z "$(ls -A "$T/fs" | grep '\.old$')" ] && ok || bad "an fd-link tree left $(ls -A "$T/fs")"
+! grep -q "put back" "$T/err" && ok || bad "an appended tree said put back"
+rm -f "$T/fs/app.rtp" "$T/fs/app.pfm"
+# when the old tree cannot be kept (no hard link: here every name taken),
+# the failure says the new tree stays
+echo oldtree >"$T/fs/nk.rtp"
+expect_rc 1 sh -c "for n in \$(seq 0 63); do : >'$T/fs/.rtp-'\$\$-\$n.old; done; ulimit -f 200; exec $RTP trace $S $A -o '$T/fs/nk.rtp' -i '$T/fs/nk.pfm'"
+grep -q "nk.rtp: the new tree stays" "$T/err" && ok || bad "no hard link, not said: $(cat "$T/err")"
+rm -f "$T/fs"/.rtp-*.old "$T/fs/nk.rtp" "$T/fs/nk.pfm"
 # info and reeval --stats of a FIFO (a second open waited for a writer)
 if mkfifo "$T/fifo.rtp" 2>/dev/null; then
     (cat "$T/t.rtp" >"$T/fifo.rtp" &)
@@ -399,6 +412,13 @@ expect_rc 1 sh -c "$RTP reeval '$T/t.rtp' -i - --stats '$T/closed.json' >&-"
 [ ! -f "$T/closed.json" ] && ok || bad "stdout closed: $(head -c 20 "$T/closed.json" | od -c | head -1)"
 expect_rc 0 sh -c "$RTP reeval '$T/t.rtp' -i '$T/closed.pfm' --stats '$T/closed.json' >&-"
 grep -q '"command": "reeval"' "$T/closed.json" && ok || bad "stats with stdout closed"
+# a name that reaches the closed stdout (a link of the test's own) is
+# refused, not written into nothing with exit 0 (a reviewer)
+ln -sf /proc/self/fd/1 "$T/so.pfm"
+expect_rc 1 sh -c "$RTP reeval '$T/t.rtp' -i '$T/so.pfm' >&-"
+grep -q "stdout is closed" "$T/err" && ok || bad "a link to closed stdout: $(cat "$T/err")"
+expect_rc 1 sh -c "$RTP info '$T/t.rtp' -q --stats '$T/so.pfm' >&-"
+rm -f "$T/so.pfm"
 # far lights are decided by shadow rays in the item buffer modes too: no
 # cube charged to the limit, and --stats says exact (reviewer: refused)
 expect_rc 0 $RTP reeval "$T/t.rtp" --set light.key.pos=3e13,-5e13,8e13 --shadows itembuf:8192 --memory-limit 100 -i "$T/far.pfm" --stats "$T/far.json"
