@@ -2828,7 +2828,11 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
     t1 = seconds_now();
 
     /* What the caches hold versus what is asked now. */
-    cached = (nl <= EV_MAX_LIGHTS || ev_cache_bytes(t, nl, ns) <= EV_CACHE_BYTES) &&
+    /* (past 64 lights within the memory limit too, when it is lower) */
+    cached = (nl <= EV_MAX_LIGHTS ||
+              ev_cache_bytes(t, nl, ns) <=
+                  fmin(EV_CACHE_BYTES, opt && opt->memory_limit > 0.0 ? opt->memory_limit
+                                                                      : RTPI_MEMORY_LIMIT)) &&
              !(opt && opt->no_cache);
     if (t->ev_valid && t->ev_nlights != nl)
         drop_caches(t);

@@ -1626,6 +1626,16 @@ static void test_many_lights_cached(void)
                       es.combined_samples);
         rtp_image_destroy(full);
     }
+    if (t && re) {
+        /* within a memory limit lower than the caches: none, every sample
+           summed, the same image as a full trace */
+        rtp_eval_stats es;
+        eo.memory_limit = 65536.0;
+        CHECK(rtp_tree_set(t, "light.3.color", "0.6,0.6,0.1", NULL) == RTP_OK);
+        CHECK(rtp_tree_eval_into(t, &eo, re, &es, NULL) == RTP_OK);
+        CHECK_MSG(es.combined_samples == 24 * 24, "under a 64 KiB limit: %llu summed",
+                  es.combined_samples);
+    }
     rtp_image_destroy(re);
     rtp_tree_destroy(t);
     rtp_scene_destroy(s);
