@@ -367,6 +367,7 @@ static rtp_status write_tree(const rtp_tree *t, const char *path, unsigned long 
    two regular files (a FIFO or stdout cannot be taken back). */
 static int is_stdout(const char *path);
 static int link_target(const char *path, char *buf, size_t size);
+static int link_walk(const char *path, char *buf, size_t size, int *via_fd);
 
 typedef struct keep_old {
     char dest[4096]; /* the file the write replaces (a link's target) */
@@ -380,31 +381,9 @@ typedef struct keep_old {
    open file: the library appends to it, nothing can be taken back). */
 static int via_fd_link(const char *path)
 {
-    char buf[4096], link[4096];
-    struct stat sb;
-    int hops;
-    if (strlen(path) >= sizeof buf)
-        return 1;
-    strcpy(buf, path);
-    for (hops = 0; hops < 40; hops++) {
-        ssize_t n;
-        const char *slash;
-        size_t dir;
-        if (strncmp(buf, "/proc/", 6) == 0 || strncmp(buf, "/dev/fd/", 8) == 0)
-            return 1;
-        if (lstat(buf, &sb) != 0 || !S_ISLNK(sb.st_mode))
-            return 0;
-        n = readlink(buf, link, sizeof link - 1);
-        if (n < 0)
-            return 1;
-        link[n] = '\0';
-        slash = strrchr(buf, '/');
-        dir = link[0] != '/' && slash ? (size_t)(slash - buf) + 1 : 0;
-        if (dir + (size_t)n >= sizeof buf)
-            return 1;
-        memmove(buf + dir, link, (size_t)n + 1);
-    }
-    return 1;
+    char buf[4096];
+    int via;
+    return link_walk(path, buf, sizeof buf, &via) != 0 || via;
 }
 
 static int output_is_file(const char *path)
@@ -478,22 +457,30 @@ static mode_t stats_umask(void)
 }
 
 /* The file a write to path replaces: path, or where a chain of symbolic
-   links at path leads (as the library's writers follow it).  0, or -1
-   with errno. */
-static int link_target(const char *path, char *buf, size_t size)
+   links at path leads (as the library's writers follow it).  via_fd (may
+   be NULL): set when a name on the way lies in /proc or /dev/fd (another
+   open file, which the library appends to).  0, or -1 with errno. */
+static int link_walk(const char *path, char *buf, size_t size, int *via_fd)
 {
     struct stat sb;
+    char link[4096];
+    ssize_t n;
+    const char *slash;
+    size_t dir;
     int hops;
     if (strlen(path) >= size) {
         errno = ENAMETOOLONG;
         return -1;
     }
     strcpy(buf, path);
-    for (hops = 0; lstat(buf, &sb) == 0 && S_ISLNK(sb.st_mode); hops++) {
-        char link[4096];
-        ssize_t n;
-        const char *slash = strrchr(buf, '/');
-        size_t dir;
+    if (via_fd)
+        *via_fd = 0;
+    for (hops = 0;; hops++) {
+        if (via_fd && (strncmp(buf, "/proc/", 6) == 0 || strncmp(buf, "/dev/fd/", 8) == 0))
+            *via_fd = 1;
+        if (lstat(buf, &sb) != 0 || !S_ISLNK(sb.st_mode))
+            break;
+        slash = strrchr(buf, '/');
         if (hops == 40) {
             errno = ELOOP;
             return -1;
@@ -510,6 +497,11 @@ static int link_target(const char *path, char *buf, size_t size)
         memmove(buf + dir, link, (size_t)n + 1);
     }
     return 0;
+}
+
+static int link_target(const char *path, char *buf, size_t size)
+{
+    return link_walk(path, buf, size, NULL);
 }
 
 /* Whether path is the file stdout or stderr writes ("/dev/stderr" when

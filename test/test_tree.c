@@ -1558,6 +1558,27 @@ static int edit_start(int spd, rtp_scene **s, rtp_tree **t, rtp_trace_options *o
     return edit_start_on("scenes/spheres.nff", spd, s, t, o, eo, re);
 }
 
+/* Sets key=value on the tree and the scene, evaluates into re and checks
+   it against a full trace of the scene (1e-6); 0 when a step failed. */
+static int edit_equals_trace(rtp_tree *t, rtp_scene *s, const rtp_trace_options *o,
+                             const rtp_eval_options *eo, rtp_image *re, const char *key,
+                             const char *value, rtp_eval_stats *es)
+{
+    rtp_image *full = NULL;
+    rtp_diff_stats d;
+    int ok;
+    CHECK(rtp_tree_set(t, key, value, NULL) == RTP_OK);
+    CHECK(rtp_scene_set(s, key, value, NULL) == RTP_OK);
+    ok = rtp_tree_eval_into(t, eo, re, es, NULL) == RTP_OK &&
+         rtp_trace(s, o, &full, NULL, NULL) == RTP_OK &&
+         rtp_image_diff(re, full, 1e-6, &d, NULL) == RTP_OK;
+    CHECK_MSG(ok, "after %s=%s: a step failed", key, value);
+    if (ok)
+        CHECK_MSG(d.max_abs <= 1e-6, "after %s=%s: %g", key, value, d.max_abs);
+    rtp_image_destroy(full);
+    return ok;
+}
+
 /* More than 64 lights where the caches are small: a stream's light edits
    come from planes, as with few (the caches were dropped past 64 lights
    whatever their size, and every evaluation summed every sample: 1.03 s
@@ -1591,40 +1612,18 @@ static void test_many_lights_cached(void)
         static const char *const col[] = {"0.2,0.4,1", "1,0.5,0.25", "0.3,0.3,0.3"};
         char key[32];
         rtp_eval_stats es;
-        rtp_image *full = NULL;
-        rtp_diff_stats d;
         snprintf(key, sizeof key, "light.%d.color", (int)(i * 13 % 70));
-        CHECK(rtp_tree_set(t, key, col[i % 3], NULL) == RTP_OK);
-        CHECK(rtp_scene_set(s, key, col[i % 3], NULL) == RTP_OK);
-        if (rtp_tree_eval_into(t, &eo, re, &es, NULL) != RTP_OK ||
-            rtp_trace(s, &o, &full, NULL, NULL) != RTP_OK ||
-            rtp_image_diff(re, full, 1e-6, &d, NULL) != RTP_OK) {
-            CHECK(0);
-            rtp_image_destroy(full);
+        if (!edit_equals_trace(t, s, &o, &eo, re, key, col[i % 3], &es))
             break;
-        }
-        CHECK_MSG(d.max_abs <= 1e-6, "after %s: %g", key, d.max_abs);
-        rtp_image_destroy(full);
-        full = NULL;
-        /* and a move of a light past the second visibility word, twice
-           (the second keeps the rest of the sums) */
-        snprintf(key, sizeof key, "light.%d.pos", 64 + (int)(i % 6));
-        CHECK(rtp_tree_set(t, key, i % 2 ? "1,-2,4" : "-2,1,3", NULL) == RTP_OK);
-        CHECK(rtp_scene_set(s, key, i % 2 ? "1,-2,4" : "-2,1,3", NULL) == RTP_OK);
-        if (rtp_tree_eval_into(t, &eo, re, NULL, NULL) != RTP_OK ||
-            rtp_trace(s, &o, &full, NULL, NULL) != RTP_OK ||
-            rtp_image_diff(re, full, 1e-6, &d, NULL) != RTP_OK) {
-            CHECK(0);
-            rtp_image_destroy(full);
-            break;
-        }
-        CHECK_MSG(d.max_abs <= 1e-6, "after %s: %g", key, d.max_abs);
-        snprintf(key, sizeof key, "light.%d.color", (int)(i * 13 % 70));
         /* (the first evaluation after the recording makes the caches) */
         if (i > 0)
             CHECK_MSG(es.combined_samples == 0, "%s summed %llu samples", key,
                       es.combined_samples);
-        rtp_image_destroy(full);
+        /* and a move of a light past the second visibility word, twice
+           (the second keeps the rest of the sums) */
+        snprintf(key, sizeof key, "light.%d.pos", 64 + (int)(i % 6));
+        if (!edit_equals_trace(t, s, &o, &eo, re, key, i % 2 ? "1,-2,4" : "-2,1,3", NULL))
+            break;
     }
     if (t && re) {
         /* within a memory limit lower than the caches: none, every sample
