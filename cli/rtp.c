@@ -1588,7 +1588,8 @@ static const char reeval_help[] =
     "  --add-light X,Y,Z    add a white light (repeatable); it is light N, after\n"
     "                       the scene's lights, for --set light.N.*; as bright\n"
     "                       as each of them (their intensity is not rescaled)\n"
-    "  --region X0,Y0,X1,Y1 write only these pixels of the frame\n"
+    "  --region X0,Y0,X1,Y1 evaluate and write only these pixels of the frame\n"
+    "                       (edits cost in proportion to the region)\n"
     "  --memory-limit MIB   stop when traced-again trees would take more, with\n"
     "                       the trees already held, or a moved light's direction\n"
     "                       cube could (16384)\n"
@@ -1641,36 +1642,8 @@ static long long file_size(const char *path)
     return (long long)sb.st_size;
 }
 
-/* The part of img (the tree's region of the frame) inside `region` (frame
-   coordinates), or NULL with a message. */
-static rtp_image *crop(const rtp_tree *tree, const rtp_image *img, const int *region)
-{
-    rtp_tree_info ti;
-    rtp_image *c = NULL;
-    int y, x0, y0;
-    rtp_tree_get_info(tree, &ti);
-    x0 = region[0] - ti.region_x;
-    y0 = region[1] - ti.region_y;
-    if (x0 < 0 || y0 < 0 || region[2] - ti.region_x > img->width ||
-        region[3] - ti.region_y > img->height) {
-        msg("--region %d,%d,%d,%d is not inside the tree's pixels %d,%d,%d,%d", region[0],
-            region[1], region[2], region[3], ti.region_x, ti.region_y,
-            ti.region_x + img->width, ti.region_y + img->height);
-        return NULL;
-    }
-    if (rtp_image_create(region[2] - region[0], region[3] - region[1], NULL, &c, NULL) != RTP_OK) {
-        msg("out of memory");
-        return NULL;
-    }
-    for (y = 0; y < c->height; y++)
-        memcpy(c->pixels + 3 * (size_t)y * c->width,
-               img->pixels + 3 * ((size_t)(y0 + y) * img->width + (size_t)x0),
-               sizeof(float) * 3 * (size_t)c->width);
-    return c;
-}
-
 static int reeval_one(rtp_tree *tree, const rtp_eval_options *eo, rtp_image **keep,
-                      const char *image_path, const int *region, int reference, int threads,
+                      const char *image_path, int reference, int threads,
                       FILE *stats, const char *tree_path, double load_seconds, int line)
 {
     rtp_image *img = *keep, *ref = NULL;
@@ -1693,18 +1666,7 @@ static int reeval_one(rtp_tree *tree, const rtp_eval_options *eo, rtp_image **ke
         goto out;
     }
     *keep = img;
-    if (region[2] > 0) {
-        rtp_image *c = crop(tree, img, region);
-        rtp_status ws;
-        if (!c)
-            goto out;
-        ws = write_image(c, image_path, &err);
-        rtp_image_destroy(c);
-        if (ws != RTP_OK) {
-            fail_line(&err, line);
-            goto out;
-        }
-    } else if (image_path && write_image(img, image_path, &err) != RTP_OK) {
+    if (image_path && write_image(img, image_path, &err) != RTP_OK) {
         fail_line(&err, line);
         goto out;
     }
@@ -1757,9 +1719,7 @@ static int reeval_one(rtp_tree *tree, const rtp_eval_options *eo, rtp_image **ke
                 es.shadow_queries, es.retraced_samples, es.retraced_rays, es.capped_rays,
                 es.stale_samples, es.combined_samples,
                 es.written_pixels,
-                region[2] > 0 ? (unsigned long long)(region[2] - region[0]) *
-                                    (unsigned long long)(region[3] - region[1])
-                              : (unsigned long long)img->width * img->height,
+                (unsigned long long)img->width * img->height,
                 ti.samples, ti.nodes, ti.bytes_per_node, ti.tree_bytes);
         if (fb >= 0)
             fprintf(stats, ", \"file_bytes\": %lld", fb);
@@ -1946,6 +1906,17 @@ static int cmd_reeval(int argc, char **argv)
         fail_err(&err);
         goto out;
     }
+    /* --region: the tree of those pixels only, so every evaluation, move
+       and re-trace costs in proportion to the region */
+    if (region[2] > 0) {
+        rtp_tree *part = NULL;
+        if (rtp_tree_crop(tree, region, &part, &err) != RTP_OK) {
+            fail_err(&err);
+            goto out;
+        }
+        rtp_tree_destroy(tree);
+        tree = part;
+    }
     t_load = now_seconds() - t0;
     for (i = 0; i < nadd; i++) {
         double pos[3];
@@ -1966,7 +1937,7 @@ static int cmd_reeval(int argc, char **argv)
     if (stats_path && !(stats = stats_open(stats_path)))
         goto out;
     if (!stream) {
-        rc = reeval_one(tree, &eo, &img, image_path, region, reference, threads, stats,
+        rc = reeval_one(tree, &eo, &img, image_path, reference, threads, stats,
                         tree_path, t_load, 0);
         progress_end(&prog);
     } else {
@@ -1986,7 +1957,7 @@ static int cmd_reeval(int argc, char **argv)
                 rc = 1;
                 break;
             }
-            if (reeval_one(tree, &eo, &img, path, region, reference, threads, stats, tree_path,
+            if (reeval_one(tree, &eo, &img, path, reference, threads, stats, tree_path,
                            t_load, n)) {
                 rc = 1;
                 break;

@@ -431,6 +431,14 @@ rtp_status rtp_tree_trace(const rtp_tree *tree, int threads, rtp_image **out,
  *  index, "parts[K]". */
 rtp_status rtp_tree_merge(rtp_tree *const *parts, size_t n, rtp_tree **out,
                           rtp_error *err);
+/** The inverse: a new tree of the pixels x0 <= x < x1, y0 <= y < y1
+ *  (region = {x0, y0, x1, y1}, frame coordinates) of a tree's pixels, as
+ *  tracing that region would have made it (SPD: with the corner samples
+ *  around them), edits and added lights included, caches not.  Its
+ *  evaluation is that region of the tree's evaluation, bit for bit, at a
+ *  cost in proportion to the region. */
+rtp_status rtp_tree_crop(const rtp_tree *tree, const int region[4], rtp_tree **out,
+                         rtp_error *err);
 
 typedef struct rtp_tree_info {
     int width, height, spd, max_depth;

@@ -3458,3 +3458,88 @@ fail:
     rtp_tree_destroy(t);
     return st;
 }
+
+/* ----------------------------------------------------------------- crop */
+
+rtp_status rtp_tree_crop(const rtp_tree *src, const int region[4], rtp_tree **out,
+                         rtp_error *err)
+{
+    const rtp_allocator *a;
+    rtp_tree *t = NULL;
+    size_t words, total = 0, at = 0, nl;
+    int x0, y0, w, h, nx, ny, x, y;
+    if (!src || !region || !out)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_crop: NULL argument");
+    *out = NULL;
+    if (!(region[0] >= src->rx && region[1] >= src->ry && region[0] < region[2] &&
+          region[1] < region[3] && region[2] - src->rx <= src->width &&
+          region[3] - src->ry <= src->height))
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                          "region %d,%d,%d,%d is not inside the tree's pixels %d,%d,%d,%d",
+                          region[0], region[1], region[2], region[3], src->rx, src->ry,
+                          src->rx + src->width, src->ry + src->height);
+    a = &src->alloc;
+    x0 = region[0] - src->rx; /* in the source's sample grid */
+    y0 = region[1] - src->ry;
+    w = region[2] - region[0];
+    h = region[3] - region[1];
+    nx = w + src->spd; /* SPD: the corners around the region's pixels */
+    ny = h + src->spd;
+    words = src->vis_words;
+    for (y = 0; y < ny; y++) {
+        size_t r = (size_t)(y0 + y) * (size_t)src->nx + (size_t)x0;
+        total += (size_t)(src->start[r + (size_t)nx] - src->start[r]);
+    }
+    t = (rtp_tree *)rtpi_calloc_array(a, 1, sizeof *t);
+    if (!t)
+        return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+    t->alloc = *a;
+    t->width = w;
+    t->height = h;
+    t->nx = nx;
+    t->ny = ny;
+    t->full_w = src->full_w;
+    t->full_h = src->full_h;
+    t->rx = region[0];
+    t->ry = region[1];
+    t->spd = src->spd;
+    t->max_depth = src->max_depth;
+    t->min_weight = src->min_weight;
+    t->vis_words = words;
+    t->nnodes = total;
+    t->nlights0 = src->nlights0;
+    t->cam0 = src->cam0;
+    if (rtpi_scene_clone(src->scene, &t->scene) != RTP_OK)
+        goto nomem;
+    /* (lights0 has an entry for every light, added ones too: their
+       positions NaN, so they are decided anew as in the source) */
+    nl = t->scene->nlights;
+    t->mats0 = (rtpi_material *)rtpi_malloc_array(a, t->scene->nmats + 1, sizeof *t->mats0);
+    t->lights0 = (rtpi_light *)rtpi_malloc_array(a, nl + 1, sizeof *t->lights0);
+    t->nodes = (rtpi_cnode *)rtpi_malloc_array(a, total + 1, sizeof *t->nodes);
+    t->start = (uint64_t *)rtpi_malloc_array(a, (size_t)nx * (size_t)ny + 1, sizeof *t->start);
+    if (words)
+        t->vis_ext = (uint32_t *)rtpi_malloc_array(a, total * words + 1, sizeof *t->vis_ext);
+    if (!t->mats0 || !t->lights0 || !t->nodes || !t->start || (words && !t->vis_ext))
+        goto nomem;
+    memcpy(t->mats0, src->mats0, t->scene->nmats * sizeof *t->mats0);
+    memcpy(t->lights0, src->lights0, nl * sizeof *t->lights0);
+    for (y = 0; y < ny; y++) {
+        size_t r = (size_t)(y0 + y) * (size_t)src->nx + (size_t)x0;
+        size_t first = (size_t)src->start[r], cnt = (size_t)src->start[r + (size_t)nx] - first;
+        for (x = 0; x < nx; x++)
+            t->start[(size_t)y * (size_t)nx + (size_t)x] =
+                at + (size_t)(src->start[r + (size_t)x] - first);
+        memcpy(t->nodes + at, src->nodes + first, cnt * sizeof *t->nodes);
+        if (words)
+            memcpy(t->vis_ext + at * words, src->vis_ext + first * words,
+                   cnt * words * sizeof *t->vis_ext);
+        at += cnt;
+    }
+    t->start[(size_t)nx * (size_t)ny] = at;
+    *out = t;
+    return RTP_OK;
+nomem:
+    rtp_tree_destroy(t);
+    return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+}

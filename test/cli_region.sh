@@ -35,6 +35,22 @@ for mode in "" "--spd"; do
     $RTP reeval "$T/part-$r.rtp" --set light.key.pos=1,-4,5 -i "$T/c.pfm" -q
     $RTP reeval "$T/full.rtp" --set light.key.pos=1,-4,5 --region $r -i "$T/d.pfm" -q
     cmp -s "$T/c.pfm" "$T/d.pfm" && ok || bad "region tree reeval $mode"
+    # ... from work on the region only (it evaluated the whole frame and
+    # cut the image: samples, shadow queries and re-traces the frame's),
+    # in a stream too (the third region: the floor, traced again for ks)
+    r=$(echo $regions | cut -d' ' -f3)
+    printf 'light.key.pos=1,-4,5\nmat.floor.ks=0.3\nlight.key.color=1,0,0\n' >"$T/ed"
+    $RTP reeval "$T/part-$r.rtp" --stream -i "$T/e%d.pfm" --stats "$T/e.json" -q <"$T/ed"
+    $RTP reeval "$T/full.rtp" --region $r --stream -i "$T/f%d.pfm" --stats "$T/f.json" -q <"$T/ed"
+    for i in 0 1 2; do
+        cmp -s "$T/e$i.pfm" "$T/f$i.pfm" && ok || bad "region stream $mode: frame $i differs"
+    done
+    sed 's/"seconds[^,]*, //; s/"load_seconds[^,]*, //; s/"shadow_seconds[^,]*, //; s/, "file_bytes.*//' \
+        "$T/e.json" >"$T/e.work"
+    sed 's/"seconds[^,]*, //; s/"load_seconds[^,]*, //; s/"shadow_seconds[^,]*, //; s/, "file_bytes.*//' \
+        "$T/f.json" >"$T/f.work"
+    cmp -s "$T/e.work" "$T/f.work" && grep -q '"retraced_samples": [1-9]' "$T/f.work" && ok ||
+        bad "reeval --region $mode did other work than the region's tree: $(diff "$T/e.work" "$T/f.work" | cut -c 1-400 | head -4)"
     rm -f "$T"/part-*
 done
 # merging one whole-frame tree rewrites it in today's format: a format-1

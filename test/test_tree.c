@@ -345,6 +345,133 @@ static void test_tree_trace_region(void)
     }
 }
 
+/* rtp_tree_crop: a region of a frame's tree is the tree that tracing
+   the region makes (the same samples, nodes and image, SPD's corners
+   too), a region of a region too; after edits (a moved light, an added
+   one, a kd, an ior that traces again) its evaluation is that region of
+   the whole tree's, bit for bit, from work in proportion to it (shadow
+   queries and re-traced samples: the region's); a region outside the
+   tree's pixels is an argument error. */
+static int same_region(const rtp_image *whole, int x0, int y0, const rtp_image *part)
+{
+    int y;
+    for (y = 0; y < part->height; y++)
+        if (memcmp(part->pixels + 3 * (size_t)y * part->width,
+                   whole->pixels + 3 * ((size_t)(y0 + y) * whole->width + (size_t)x0),
+                   3 * sizeof(float) * (size_t)part->width) != 0)
+            return 0;
+    return 1;
+}
+
+static void test_tree_crop(void)
+{
+    int spd;
+    for (spd = 0; spd <= 1; spd++) {
+        rtp_scene *s = load("scenes/spheres.nff");
+        rtp_tree *t = NULL, *r = NULL, *c = NULL, *cc = NULL, *c2 = NULL;
+        rtp_image *whole = NULL, *rec = NULL, *part = NULL, *part2 = NULL;
+        rtp_trace_options o;
+        rtp_tree_info ti, ri;
+        rtp_eval_stats es, cs;
+        const double add[3] = {0.5, -3.0, 4.0};
+        int reg[4], bad[4], sub[4];
+        if (!s)
+            return;
+        memset(&o, 0, sizeof o);
+        o.width = spd ? 0 : 48;
+        o.height = spd ? 0 : 40;
+        o.spd = spd;
+        reg[0] = spd ? 250 : 8; /* (glass in both: re-traced) */
+        reg[1] = spd ? 250 : 4;
+        reg[2] = spd ? 400 : 30;
+        reg[3] = spd ? 400 : 21;
+        CHECK(rtp_record(s, &o, &t, &whole, NULL, NULL) == RTP_OK);
+        memcpy(o.region, reg, sizeof reg);
+        CHECK(rtp_record(s, &o, &r, &rec, NULL, NULL) == RTP_OK);
+        if (!t || !r) {
+            rtp_tree_destroy(t);
+            rtp_tree_destroy(r);
+            rtp_image_destroy(whole);
+            rtp_image_destroy(rec);
+            rtp_scene_destroy(s);
+            return;
+        }
+        CHECK(rtp_tree_crop(t, reg, &c, NULL) == RTP_OK);
+        rtp_tree_get_info(c, &ti);
+        rtp_tree_get_info(r, &ri);
+        CHECK_MSG(c && ti.samples == ri.samples && ti.nodes == ri.nodes &&
+                      ti.width == reg[2] - reg[0] && ti.region_x == reg[0] &&
+                      ti.region_y == reg[1] && ti.full_width == ri.full_width,
+                  "spd %d: %llu samples %llu nodes, traced %llu %llu", spd, ti.samples, ti.nodes,
+                  ri.samples, ri.nodes);
+        CHECK(rtp_tree_eval(c, NULL, &part, NULL, NULL) == RTP_OK);
+        CHECK_MSG(part && rec && part->width == rec->width && part->height == rec->height &&
+                      memcmp(part->pixels, rec->pixels,
+                             3 * sizeof(float) * (size_t)rec->width * (size_t)rec->height) == 0 &&
+                      same_region(whole, reg[0], reg[1], part),
+                  "spd %d: the crop's image", spd);
+        rtp_image_destroy(part);
+        part = NULL;
+        /* edited, then cropped: the region of the edited whole */
+        CHECK(rtp_tree_set(t, "light.0.pos", "1,-2,3", NULL) == RTP_OK);
+        CHECK(rtp_tree_add_light(t, add, NULL) == RTP_OK);
+        CHECK(rtp_tree_set(t, "mat.0.kd", "0.3", NULL) == RTP_OK);
+        CHECK(rtp_tree_set(t, "mat.glass.ior", "1.7", NULL) == RTP_OK);
+        rtp_image_destroy(whole);
+        whole = NULL;
+        memset(&es, 0, sizeof es);
+        memset(&cs, 0, sizeof cs);
+        CHECK(rtp_tree_crop(t, reg, &cc, NULL) == RTP_OK);
+        CHECK(rtp_tree_eval(t, NULL, &whole, &es, NULL) == RTP_OK);
+        CHECK(cc && rtp_tree_eval(cc, NULL, &part, &cs, NULL) == RTP_OK);
+        CHECK_MSG(whole && part && same_region(whole, reg[0], reg[1], part), "spd %d: edited",
+                  spd);
+        CHECK_MSG(cs.shadow_queries > 0 && cs.shadow_queries < es.shadow_queries &&
+                      cs.samples == ri.samples && cs.retraced_samples > 0 &&
+                      cs.retraced_samples < es.retraced_samples,
+                  "spd %d: queries %llu of %llu, samples %llu, re-traced %llu of %llu", spd,
+                  cs.shadow_queries, es.shadow_queries, cs.samples, cs.retraced_samples,
+                  es.retraced_samples);
+        /* a region of the cropped tree */
+        sub[0] = reg[0] + 3;
+        sub[1] = reg[1] + 2;
+        sub[2] = reg[2] - 1;
+        sub[3] = reg[1] + 9;
+        rtp_tree_destroy(r);
+        r = NULL;
+        CHECK(rtp_tree_crop(cc, sub, &r, NULL) == RTP_OK);
+        CHECK(r && rtp_tree_eval(r, NULL, &part2, NULL, NULL) == RTP_OK);
+        CHECK_MSG(part2 && part2->width == sub[2] - sub[0] && part2->height == sub[3] - sub[1] &&
+                      same_region(whole, sub[0], sub[1], part2),
+                  "spd %d: a region of a region", spd);
+        /* outside: one pixel past each side */
+        {
+            int k;
+            for (k = 0; k < 4; k++) {
+                rtp_tree *x = NULL;
+                rtp_error err;
+                memcpy(bad, reg, sizeof bad);
+                bad[k] += k < 2 ? -1 : 1;
+                CHECK_MSG(rtp_tree_crop(cc, bad, &x, &err) == RTP_ERR_ARGUMENT && !x &&
+                              strstr(err.message, "not inside"),
+                          "side %d", k);
+            }
+            memcpy(bad, reg, sizeof bad);
+            bad[2] = bad[0];
+            CHECK(rtp_tree_crop(t, bad, &c2, NULL) == RTP_ERR_ARGUMENT && !c2);
+        }
+        rtp_image_destroy(whole);
+        rtp_image_destroy(rec);
+        rtp_image_destroy(part);
+        rtp_image_destroy(part2);
+        rtp_tree_destroy(t);
+        rtp_tree_destroy(r);
+        rtp_tree_destroy(c);
+        rtp_tree_destroy(cc);
+        rtp_scene_destroy(s);
+    }
+}
+
 /* The deepest trees: between two facing mirrors an eye ray bounces to
    RTP_MAX_DEPTH (on 2 threads: a worker's stack holds the recursion), the
    tree is written and read back to the same image; one level more is an
@@ -3300,6 +3427,7 @@ int main(void)
     RUN(test_scene_get);
     RUN(test_class_d_retrace);
     RUN(test_tree_trace_region);
+    RUN(test_tree_crop);
     RUN(test_max_depth);
     RUN(test_min_weight_edits);
     RUN(test_trees_outgrow_limit);
