@@ -28,9 +28,30 @@ static int is_space(char c)
     return c == ' ' || c == '\t' || c == '\r' || c == '\f' || c == '\v';
 }
 
+/* '#' starts a comment only where a word could start: inside one it is
+   part of it (a material "Material#25", as 3ds Max names them), so a
+   value such as MSVC's "-1.#IND00" is one word, not a number, and not -1
+   followed by a comment. */
 static int is_sep(const rtpi_lex *lx, char c)
 {
-    return is_space(c) || c == '\n' || c == '#' || (lx->commas && c == ',');
+    return is_space(c) || c == '\n' || (lx->commas && c == ',');
+}
+
+/* At p: a backslash ending its line (OBJ's continuation), when the reader
+   allows them; *len the bytes up to the newline. */
+static int continues(const rtpi_lex *lx, const char *p, size_t *len)
+{
+    if (!lx->continuation || *p != '\\')
+        return 0;
+    if (p + 1 < lx->end && p[1] == '\n') {
+        *len = 1;
+        return 1;
+    }
+    if (p + 2 < lx->end && p[1] == '\r' && p[2] == '\n') {
+        *len = 2;
+        return 1;
+    }
+    return 0;
 }
 
 static void newline(rtpi_lex *lx)
@@ -56,8 +77,9 @@ static void skip_comment(rtpi_lex *lx)
 
 static void take(rtpi_lex *lx, rtpi_tok *t)
 {
+    size_t len;
     rtpi_lex_here(lx, t);
-    while (lx->p < lx->end && !is_sep(lx, *lx->p))
+    while (lx->p < lx->end && !is_sep(lx, *lx->p) && !continues(lx, lx->p, &len))
         lx->p++;
     t->n = (size_t)(lx->p - t->s);
 }
@@ -83,11 +105,15 @@ int rtpi_lex_next(rtpi_lex *lx, rtpi_tok *t)
 
 int rtpi_lex_next_inline(rtpi_lex *lx, rtpi_tok *t)
 {
+    size_t len;
     while (lx->p < lx->end) {
         char c = *lx->p;
         if (c == '\n')
             break;
-        if (is_space(c) || (lx->commas && c == ','))
+        if (continues(lx, lx->p, &len)) {
+            lx->p += len; /* at the newline: the statement goes on */
+            newline(lx);
+        } else if (is_space(c) || (lx->commas && c == ','))
             lx->p++;
         else if (c == '#')
             skip_comment(lx);
@@ -102,9 +128,23 @@ int rtpi_lex_next_inline(rtpi_lex *lx, rtpi_tok *t)
 
 void rtpi_lex_skip_line(rtpi_lex *lx)
 {
-    skip_comment(lx);
-    if (lx->p < lx->end)
+    size_t len;
+    for (;;) {
+        skip_comment(lx);
+        if (lx->p >= lx->end)
+            return;
+        /* a statement read past goes on after a continuation */
+        if (lx->p - lx->line_start >= 1 && continues(lx, lx->p - 1, &len)) {
+            newline(lx);
+            continue;
+        }
+        if (lx->p - lx->line_start >= 2 && lx->p[-1] == '\r' && continues(lx, lx->p - 2, &len)) {
+            newline(lx);
+            continue;
+        }
         newline(lx);
+        return;
+    }
 }
 
 int rtpi_tok_is(const rtpi_tok *t, const char *word)
@@ -135,8 +175,10 @@ int rtpi_tok_number(const rtpi_tok *t, double *out)
     }
     buf[t->n] = '\0';
     d = rtpi_strtod(buf, &end);
-    if (end != buf + t->n || !isfinite(d))
+    if (end != buf + t->n)
         return -1;
+    if (!isfinite(d))
+        return -2; /* a decimal number beyond a double's range (1e400) */
     *out = d;
     return 0;
 }

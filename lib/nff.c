@@ -60,13 +60,15 @@ static rtp_status num(nff *c, const char *what, const char *noun,
 {
     rtpi_tok t;
     char show[48];
+    int r;
     rtp_status st = need(c, &t, what, field);
     if (st != RTP_OK)
         return st;
-    if (rtpi_tok_number(&t, out) != 0)
+    r = rtpi_tok_number(&t, out);
+    if (r == -1)
         return rtpi_lex_error(&c->lx, &t, "expected number for %s %s, got '%s'",
                               noun, field, rtpi_tok_show(&t, show, sizeof show));
-    if (fabs(*out) > NUM_LIMIT) {
+    if (r != 0 || fabs(*out) > NUM_LIMIT) {
         char lim[32];
         rtpi_fmt_g(lim, sizeof lim, 6, NUM_LIMIT);
         return rtpi_lex_error(&c->lx, &t, "%s %s %s is out of range (|x| <= %s)",

@@ -52,13 +52,15 @@ static rtp_status line_num(rtpi_lex *lx, const char *what, const char *field,
 {
     rtpi_tok t;
     char show[48];
+    int r;
     if (!rtpi_lex_next_inline(lx, &t))
         return rtpi_lex_error(lx, &t, "unexpected end of %s in %s, expected %s",
                               lx->p < lx->end ? "line" : "file", what, field);
-    if (rtpi_tok_number(&t, out) != 0)
+    r = rtpi_tok_number(&t, out);
+    if (r == -1)
         return rtpi_lex_error(lx, &t, "expected number for %s %s, got '%s'", what,
                               field, rtpi_tok_show(&t, show, sizeof show));
-    if (fabs(*out) > NUM_LIMIT)
+    if (r != 0 || fabs(*out) > NUM_LIMIT)
         return rtpi_lex_error(lx, &t, "%s %s %s is out of range", what, field,
                               rtpi_tok_show(&t, show, sizeof show));
     if (tok)
@@ -473,6 +475,7 @@ static rtp_status read_mtl(obj *o, const char *text, size_t size, const char *na
     int skipping = 0;  /* newmtl of a name the scene already has */
     rtp_status st = RTP_OK;
     rtpi_lex_init(&lx, text, size, name, err);
+    lx.continuation = 1;
     while (st == RTP_OK && rtpi_lex_next(&lx, &kw)) {
         rtpi_material *m = cur >= 0 ? &s->mats[cur] : NULL;
         double v[3];
@@ -544,23 +547,27 @@ static rtp_status read_mtl(obj *o, const char *text, size_t size, const char *na
         if (rtpi_tok_is(&kw, "Kd") || rtpi_tok_is(&kw, "Ks")) {
             const char *what = kw.s[1] == 'd' ? "Kd" : "Ks";
             int i;
-            if ((st = line_num(&lx, what, "red", &v[0], &tk)) != RTP_OK)
+            static const char *const rgb[3] = {"red", "green", "blue"};
+            rtpi_tok ct[3];
+            if ((st = line_num(&lx, what, "red", &v[0], &ct[0])) != RTP_OK)
                 break;
             v[1] = v[2] = v[0];
+            ct[1] = ct[2] = ct[0];
             {
                 rtpi_lex save = lx;
                 rtpi_tok peek;
                 double d;
                 if (rtpi_lex_next_inline(&save, &peek) &&
-                    rtpi_tok_number(&peek, &d) == 0) {
-                    if ((st = line_num(&lx, what, "green", &v[1], NULL)) != RTP_OK ||
-                        (st = line_num(&lx, what, "blue", &v[2], NULL)) != RTP_OK)
+                    rtpi_tok_number(&peek, &d) != -1) {
+                    if ((st = line_num(&lx, what, "green", &v[1], &ct[1])) != RTP_OK ||
+                        (st = line_num(&lx, what, "blue", &v[2], &ct[2])) != RTP_OK)
                         break;
                 }
             }
             for (i = 0; i < 3; i++)
                 if (v[i] < 0.0)
-                    return rtpi_lex_error(&lx, &tk, "%s must not be negative", what);
+                    return rtpi_lex_error(&lx, &ct[i], "%s %s must not be negative, got %s",
+                                          what, rgb[i], rtpi_tok_show(&ct[i], show, sizeof show));
             if ((st = line_rest(&lx, what, 0)) != RTP_OK)
                 break;
             if (what[1] == 'd') {
@@ -899,6 +906,7 @@ rtp_status rtpi_read_obj_reg(rtp_scene *s, const char *text, size_t size,
     o.err = err;
     o.reg = reg ? reg : &local;
     rtpi_lex_init(&o.lx, text, size, name ? name : "<memory>", err);
+    o.lx.continuation = 1;
     if (xform) {
         if (rtpi_xform_normal_matrix(xform, o.nm) != 0)
             return rtpi_error(err, RTP_ERR_ARGUMENT, o.lx.name, 0, 0,

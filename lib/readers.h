@@ -39,6 +39,7 @@ typedef struct rtpi_lex {
     const char *line_start;
     int line;
     int commas;      /* ',' separates tokens too (Newell's .bpt) */
+    int continuation; /* a '\\' ending a line joins the next (OBJ, MTL) */
     const char *name; /* file name for messages */
     rtp_error *err;
 } rtpi_lex;
@@ -58,7 +59,8 @@ void rtpi_lex_here(const rtpi_lex *lx, rtpi_tok *t);
 
 /* Token equals the NUL-terminated word. */
 int rtpi_tok_is(const rtpi_tok *t, const char *word);
-/* A finite number; @return 0 or -1 if the token is not one. */
+/* A finite number; @return 0, -1 if the token is not one, -2 if it is a
+   decimal number beyond a double's range. */
 int rtpi_tok_number(const rtpi_tok *t, double *out);
 /* A decimal integer with an optional sign, |v| <= 2^31-1; @return 0/-1. */
 int rtpi_tok_int(const rtpi_tok *t, long *out);

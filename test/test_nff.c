@@ -536,7 +536,11 @@ static const bad_case bad_nff[] = {
      "unexpected end of file in f (material) line, expected ior"},
     {"s 0 0 0 nan\n", RTP_ERR_PARSE, 1, 9, "expected number for sphere radius, got 'nan'"},
     {"s 0 0 inf 1\n", RTP_ERR_PARSE, 1, 7, "expected number for sphere z, got 'inf'"},
-    {"s 0 0 0 1e999\n", RTP_ERR_PARSE, 1, 9, "expected number for sphere radius"},
+    {"s 0 0 0 1e999\n", RTP_ERR_PARSE, 1, 9, "sphere radius 1e999 is out of range"},
+    /* MSVC's NaN and infinity: one word, not 1 and a comment */
+    {"s 0 0 0 1.#INF00\n", RTP_ERR_PARSE, 1, 9,
+     "expected number for sphere radius, got '1.#INF00'"},
+    {"s 0 0 -1.#IND00 1\n", RTP_ERR_PARSE, 1, 7, "expected number for sphere z, got '-1.#IND00'"},
     {"s 0 0 0 0x10\n", RTP_ERR_PARSE, 1, 9, "expected number for sphere radius"},
     {"s 0 0 0 1e30\n", RTP_ERR_PARSE, 1, 9, "out of range"},
     {"v resolution 32768 32768\n", RTP_ERR_PARSE, 1, 20, "over the limit of 2^27 pixels"},

@@ -388,6 +388,45 @@ static void test_mtl_exports(void)
    at each newmtl and usemtl grows and rehashes many times): each face
    takes the material its usemtl names, duplicates across files stay
    apart, and the NFF reader still refuses a name used twice. */
+/* '#' inside a word is part of it: 3ds Max's "Material#25" names stay
+   two materials (the word ended at '#' and the rest of the line was a
+   comment: one material "Mat", the second face red); a comment still
+   starts a word.  A backslash ending a line continues the statement
+   (the OBJ specification's continuation), LF or CRLF, in statements read
+   past too; a face's error on the continued line names that line. */
+static void test_hash_and_continuation(void)
+{
+    const char *dir = tmp_folder();
+    char path[512], buf[600];
+    rtp_scene *s = NULL;
+    rtp_error err;
+    if (!dir[0])
+        SKIP("cannot make a temporary folder");
+    CHECK(write_file(dir, "h.mtl", "newmtl Mat#1 # red\nKd 1 0 0\nnewmtl Mat#2\nKd 0 1 0\n") == 0);
+    CHECK(write_file(dir, "h.obj",
+                     "mtllib h.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
+                     "usemtl Mat#1\nf 1 2 3 #first\nusemtl Mat#2\nf 1 \\\n 3 \\\r\n 4\n"
+                     "vp 0.5 \\\n 0.5\ng one \\\r\n two\nf 2 3 4\n") == 0);
+    snprintf(path, sizeof path, "%s/h.obj", dir);
+    CHECK_MSG(rtp_scene_load(path, NULL, &s, &err) == RTP_OK, "%s",
+              rtp_error_format(&err, buf, sizeof buf));
+    if (s) {
+        CHECK_MSG(s->nmats == 2 && s->ntris == 3 && s->tris[0].mat != s->tris[1].mat &&
+                      s->tris[2].mat == s->tris[1].mat,
+                  "%zu materials, %zu triangles", s->nmats, s->ntris);
+        CHECK(s->nmats == 2 && strcmp(s->mats[s->tris[0].mat].name, "Mat#1") == 0 &&
+              s->mats[s->tris[0].mat].color[0] == 1 &&
+              strcmp(s->mats[s->tris[1].mat].name, "Mat#2") == 0 &&
+              s->mats[s->tris[1].mat].color[1] == 1);
+        /* the continued face: corners 1, 3, 4 */
+        CHECK(s->ntris == 3 && s->pos[3 * s->tris[1].v[1] + 1] == 1.0 &&
+              s->pos[3 * s->tris[1].v[2] + 0] == 0.0);
+    }
+    rtp_scene_destroy(s);
+    remove_file(dir, "h.mtl");
+    remove_file(dir, "h.obj");
+}
+
 static void test_many_names(void)
 {
     const char *dir = tmp_folder();
@@ -471,6 +510,13 @@ static const bad_case bad_obj[] = {
     {"usemtl\n", 1, 7, "expected a name"},
     {"bogus 1\n", 1, 1, "unknown OBJ keyword 'bogus'"},
     {"v 0 0 0\r\nv 1 0 0\r\nv 0 1 0\r\nf 1 2 x\r\n", 4, 7, "got 'x'"},
+    /* MSVC's NaN and infinity are words, not -1 and a comment (it read
+       the vertex as z = -1, the normal as z = 1) */
+    {"v 1 1 -1.#IND00\n", 1, 7, "expected number for v (vertex) z, got '-1.#IND00'"},
+    {"vn 0 0 1.#QNAN0\n", 1, 8, "expected number for vn (normal) z, got '1.#QNAN0'"},
+    {"v 1 2 1e400\n", 1, 7, "v (vertex) z 1e400 is out of range"},
+    /* a continued line goes on to the next; its errors name that line */
+    {TRI "f 1 2 \\\n  x\n", 5, 3, "got 'x'"},
 };
 
 static void test_bad_inputs(void)
@@ -596,6 +642,7 @@ int main(void)
     RUN(test_mtl);
     RUN(test_mtl_exports);
     RUN(test_many_names);
+    RUN(test_hash_and_continuation);
     RUN(test_bad_inputs);
     RUN(test_truncation);
     RUN(test_shared_meshes);
