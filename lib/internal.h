@@ -336,6 +336,13 @@ void rtpi_surface_at(const rtp_scene *s, const rtpi_ray *ray,
 void rtpi_surface_at_ex(const rtp_scene *s, const rtpi_ray *ray,
                         const rtpi_hit *hit, int want_uv, rtpi_surface *out);
 
+/* The derivatives P_u, P_v of position by uv at p on prim, for a bump
+   map (Blinn): triangles with uvs by their corners; spheres and cones by
+   the uv rtpi_surface_at gives them (longitude and latitude; angle and
+   height).  @return 0 where there are none: no uvs, degenerate uvs, a
+   sphere's pole, a cone's apex. */
+int rtpi_uv_tangents(const rtp_scene *s, uint32_t prim, rtpi_v3 p, rtpi_v3 *pu, rtpi_v3 *pv);
+
 /* A ray origin for a ray leaving surface point p, moved off the surface
    along the geometric normal ng (unit) to the side `side` (+1: the side ng
    points to, -1: the other) by an amount that scales with |p|, so that the

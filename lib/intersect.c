@@ -349,6 +349,69 @@ void rtpi_surface_at_ex(const rtp_scene *s, const rtpi_ray *ray,
     out->ng = out->ns = v3(0.0, 0.0, 1.0);
 }
 
+int rtpi_uv_tangents(const rtp_scene *s, uint32_t prim, rtpi_v3 p, rtpi_v3 *pu, rtpi_v3 *pv)
+{
+    size_t i = prim;
+    if (i < s->ntris) {
+        const rtpi_tri *t = &s->tris[i];
+        const float *t0, *t1, *t2;
+        rtpi_v3 p0, e1, e2;
+        double du1, dv1, du2, dv2, det;
+        if (t->t[0] == RTPI_NONE || t->t[1] == RTPI_NONE || t->t[2] == RTPI_NONE)
+            return 0;
+        t0 = s->uv + 2 * (size_t)t->t[0];
+        t1 = s->uv + 2 * (size_t)t->t[1];
+        t2 = s->uv + 2 * (size_t)t->t[2];
+        p0 = v3_from_f(s->pos + 3 * (size_t)t->v[0]);
+        e1 = v3_sub(v3_from_f(s->pos + 3 * (size_t)t->v[1]), p0);
+        e2 = v3_sub(v3_from_f(s->pos + 3 * (size_t)t->v[2]), p0);
+        du1 = t1[0] - t0[0];
+        dv1 = t1[1] - t0[1];
+        du2 = t2[0] - t0[0];
+        dv2 = t2[1] - t0[1];
+        det = du1 * dv2 - du2 * dv1;
+        if (det == 0.0)
+            return 0;
+        *pu = v3_mul(v3_sub(v3_mul(e1, dv2), v3_mul(e2, dv1)), 1.0 / det);
+        *pv = v3_mul(v3_sub(v3_mul(e2, du1), v3_mul(e1, du2)), 1.0 / det);
+        return 1;
+    }
+    if ((i -= s->ntris) < s->nspheres) {
+        /* u = longitude / 2 pi, v = 1/2 + latitude / pi (rtpi_surface_at):
+           P_u = 2 pi r cos(lat) east, P_v = pi r north */
+        const rtpi_sphere *sp = &s->spheres[i];
+        double r = fabs((double)sp->r), cl;
+        rtpi_v3 d = v3_sub(p, v3_from_f(sp->c));
+        if (!(v3_dot(d, d) > 0.0))
+            return 0;
+        d = v3_norm(d);
+        cl = sqrt(d.x * d.x + d.y * d.y);
+        if (!(cl > 0.0))
+            return 0; /* a pole: longitude has no derivative */
+        *pu = v3(-2.0 * RTPI_PI * r * d.y, 2.0 * RTPI_PI * r * d.x, 0.0);
+        *pv = v3(-RTPI_PI * r * d.z * d.x / cl, -RTPI_PI * r * d.z * d.y / cl, RTPI_PI * r * cl);
+        return 1;
+    }
+    if ((i -= s->nspheres) < s->ncones) {
+        /* u = the angle around the axis / 2 pi from the frame's e1, v =
+           height / h: P_u = 2 pi rho(h) (w x q), P_v = h (w + k q) */
+        const rtpi_cone_frame *cf = &s->cframes[i];
+        rtpi_v3 q, n, e1, e2, t;
+        double h, rho;
+        if (!cf->ok || !rtpi_cone_normal(cf, p, &n, &q, &h))
+            return 0;
+        rho = cf->rb + cf->k * h;
+        if (!(rho > 0.0))
+            return 0; /* the apex */
+        basis(cf->w, &e1, &e2);
+        t = v3_add(v3_mul(e1, -v3_dot(q, e2)), v3_mul(e2, v3_dot(q, e1)));
+        *pu = v3_mul(t, 2.0 * RTPI_PI * rho);
+        *pv = v3_mul(v3_madd(cf->w, q, cf->k), cf->h);
+        return 1;
+    }
+    return 0;
+}
+
 void rtpi_prim_bounds_kept(const rtp_scene *s, uint32_t prim, double lo[3], double hi[3])
 {
     if (s->pbounds && s->npbounds == rtpi_scene_nprims(s)) {

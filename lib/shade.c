@@ -175,34 +175,16 @@ rtpi_v3 rtpi_bump_normal(const rtp_scene *s, const rtpi_material *m, uint32_t pr
         return n;
     if (m->bump == RTPI_BUMP_IMAGE) {
         /* Blinn 1978: n' = n + (h_u (n x P_v) - h_v (n x P_u)) / |P_u x P_v|,
-           with P_u, P_v from the triangle's positions and uvs and the height
-           differences one texel apart; only triangles carry uvs to do it. */
-        const rtpi_tri *t;
+           with P_u, P_v the surface's derivatives by uv (triangles with
+           uvs, spheres, cones) and the height differences one texel
+           apart. */
         const rtp_image *img;
-        rtpi_v3 p0, e1, e2, pu, pv, d;
-        const float *t0, *t1, *t2;
-        double du1, dv1, du2, dv2, det, hu, hv, a, eu, ev;
-        if (prim >= s->ntris || m->bump_image >= s->ntexs || !s->texs[m->bump_image].image)
-            return n;
-        t = &s->tris[prim];
-        if (t->t[0] == RTPI_NONE)
+        rtpi_v3 pu, pv, d;
+        double hu, hv, a, eu, ev;
+        if (m->bump_image >= s->ntexs || !s->texs[m->bump_image].image ||
+            !rtpi_uv_tangents(s, prim, p, &pu, &pv))
             return n;
         img = s->texs[m->bump_image].image;
-        t0 = s->uv + 2 * (size_t)t->t[0];
-        t1 = s->uv + 2 * (size_t)t->t[1];
-        t2 = s->uv + 2 * (size_t)t->t[2];
-        p0 = v3_from_f(s->pos + 3 * (size_t)t->v[0]);
-        e1 = v3_sub(v3_from_f(s->pos + 3 * (size_t)t->v[1]), p0);
-        e2 = v3_sub(v3_from_f(s->pos + 3 * (size_t)t->v[2]), p0);
-        du1 = t1[0] - t0[0];
-        dv1 = t1[1] - t0[1];
-        du2 = t2[0] - t0[0];
-        dv2 = t2[1] - t0[1];
-        det = du1 * dv2 - du2 * dv1;
-        if (det == 0.0)
-            return n;
-        pu = v3_mul(v3_sub(v3_mul(e1, dv2), v3_mul(e2, dv1)), 1.0 / det);
-        pv = v3_mul(v3_sub(v3_mul(e2, du1), v3_mul(e1, du2)), 1.0 / det);
         a = v3_len(v3_cross(pu, pv));
         if (!(a > 0.0))
             return n;

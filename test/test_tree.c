@@ -2453,6 +2453,50 @@ static void test_bump_edits(void)
     CHECK_MSG(e <= 1e-6 && st == 0, "bumped trace vs reeval: %g (%llu stale)", e, st);
 }
 
+/* Image bump maps on spheres (outside and inside-only) and cones, by the
+   uv their textures use (they bent only triangles with uvs: the image
+   was the unbumped one, bit for bit, with samples said stale); an edit
+   to them with --stale retrace equals a full trace. */
+static void test_image_bump_round_shapes(void)
+{
+    static const char *const kv[] = {"mat.blue.bump", "scenes/tex4.ppm", "mat.blue.bump_strength",
+                                     "2", "mat.5.bump", "scenes/tex4.ppm", "mat.5.bump_strength",
+                                     "2", "mat.backdrop.bump", "scenes/tex4.ppm", NULL};
+    rtp_scene *s = load("scenes/prims.nff");
+    rtp_tree *t = NULL;
+    rtp_image *plain = NULL, *bumped = NULL, *re = NULL;
+    rtp_trace_options o;
+    rtp_eval_options eo;
+    size_t i, k, differ = 0;
+    if (!s)
+        return;
+    memset(&o, 0, sizeof o);
+    memset(&eo, 0, sizeof eo);
+    o.width = 64;
+    o.height = 64;
+    eo.stale = RTP_STALE_RETRACE;
+    CHECK(rtp_record(s, &o, &t, &plain, NULL, NULL) == RTP_OK);
+    for (i = 0; kv[i]; i += 2)
+        CHECK(rtp_scene_set(s, kv[i], kv[i + 1], NULL) == RTP_OK &&
+              (!t || rtp_tree_set(t, kv[i], kv[i + 1], NULL) == RTP_OK));
+    CHECK(rtp_trace(s, &o, &bumped, NULL, NULL) == RTP_OK);
+    for (k = 0; plain && bumped && k < 3 * (size_t)64 * 64; k++)
+        differ += plain->pixels[k] != bumped->pixels[k];
+    CHECK_MSG(differ > 500, "%zu channels bumped", differ);
+    fprintf(stderr, "  image bumps on round shapes: %zu channels of %d changed\n", differ, 3 * 64 * 64);
+    if (t && bumped) {
+        rtp_diff_stats d;
+        CHECK(rtp_tree_eval(t, &eo, &re, NULL, NULL) == RTP_OK);
+        CHECK_MSG(re && rtp_image_diff(re, bumped, 1e-6, &d, NULL) == RTP_OK && d.max_abs <= 1e-6,
+                  "bumped round shapes: %g off a full trace", re ? d.max_abs : -1.0);
+    }
+    rtp_image_destroy(plain);
+    rtp_image_destroy(bumped);
+    rtp_image_destroy(re);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+}
+
 /* A bump kept stale (--stale keep) while another material's class-D
    edit traces samples again: those samples spawn their rays below the
    bumped material as its other samples did, so when the bump goes back
@@ -3510,6 +3554,7 @@ int main(void)
     RUN(test_warm_light_move_bitwise);
     RUN(test_bump_edits);
     RUN(test_bump_kept_through_retrace);
+    RUN(test_image_bump_round_shapes);
     RUN(test_truncated_every_length);
     RUN(test_flipped_bits);
     RUN(test_section_order_and_end);
