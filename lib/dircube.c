@@ -1504,7 +1504,7 @@ void rtpi_lightbuf_free(rtpi_lightbuf *lb, const rtp_allocator *a)
         exactly by shadow.c's light buffer; too narrow to hide a wide
         primitive from all 9 samples).  The shadow ray is intersected, by
         the kd-tree's own routine, with each primitive sampled there in
-        front of p (depth below zp - IB_BIAS zext; one sampled at or
+        front of p (depth below zp - B; one sampled at or
         beyond it is not tested: in a mesh those are mostly prim's
         neighbours, which the ray misses, and testing them cost more than
         the rest of the decision): a hit is in shadow, exactly.
@@ -1512,17 +1512,17 @@ void rtpi_lightbuf_free(rtpi_lightbuf *lb, const rtp_allocator *a)
         the light; when one does (a shadow edge: something in front,
         beside the ray), the answer is left open (-1) for an exact
         query.
-   "Clearly in front": depth along the face axis zs < zp - (IB_BIAS zext
-   + zp e tan(theta)), theta the angle between the surface normal and the
+   "Clearly in front": depth along the face axis zs < zp - (B + zp e
+   tan(theta)), theta the angle between the surface normal and the
    light, e the sample's distance from the ray's direction in face
-   coordinates (>= the angle between them), zext the scene's depth extent
-   on the face.  On a plane tilted by theta depth changes by ~zp e
+   coordinates (>= the angle between them), B the bias below.  On a plane tilted by theta depth changes by ~zp e
    tan(theta) over that angle: that term keeps the neighbours of prim in
    one mesh from counting; tan(theta) is capped at IB_TAN_MAX so that
-   grazing surfaces still see real occluders.  IB_BIAS (1e-4 of the
-   scene's depth extent, not of the distance: a far light keeps its
-   precision) covers the float depths of the buffer and OSMesa's 24-bit
-   ones.  The normal comes free: o - p is rtpi_offset_origin's step along
+   grazing surfaces still see real occluders.  B, IB_BIAS (1e-4) of p's
+   depth beyond the nearest on the face (zp - zbase: not of the distance,
+   so a far light keeps its precision, nor of the face's whole extent, so
+   a far speck does not blur the rest), covers the float depths of the
+   buffer; OSMesa's 24-bit ones take 1e-4 of the extent at least (zq).  The normal comes free: o - p is rtpi_offset_origin's step along
    the geometric normal, towards the light (~1e-9 relative error).
    What can still be wrong: "sees the light" where a wide primitive blocks
    the ray yet shows at none of the 9 samples in front of p while nothing
@@ -1615,7 +1615,12 @@ int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
             return 1;
     }
     zp = rtpi_dc_depth(f, v3_sub(p, ib->light));
-    zlim = zp - IB_BIAS * ib->w.zext[f]; /* nothing at or beyond is in front */
+    /* nothing at or beyond zlim is in front: float depths are kept to
+       ~1e-7 of z - zbase, so the bias is IB_BIAS of that, not of the
+       face's whole depth extent (one speck 1e5 away made it 10, more than
+       the scene: every real occluder behind the bias, 37% of the pixels
+       lit in shadow); OSMesa's depths carry their own quantum (zq) */
+    zlim = zp - fmax(ib->zq[f], IB_BIAS * fabs(zp - ib->w.zbase[f]));
     for (dj = -1; dj <= 1; dj++) {
         for (di = -1; di <= 1; di++) {
             int g;

@@ -228,6 +228,10 @@ typedef struct rtpi_itembuf {
                              of the distance from a far light */
     unsigned long long casts; /* rays cast at round shapes while drawing
                                  (their cells' centres): the build's work */
+    double zq[6];         /* per face: the depths' quantum where it is one
+                             for the whole face (OSMesa's 24-bit buffer:
+                             IB_BIAS of the extent); 0: float depths,
+                             whose error is relative to z - w.zbase */
 } rtpi_itembuf;
 
 /* The cell of direction d (from the light) and its face, or

@@ -475,6 +475,9 @@ rtp_status rtpi_itembuf_build_osmesa_wide(const rtp_scene *s, rtpi_v3 light, int
         fc.va = ib->w.v0[f];
         fc.vb = ib->w.v0[f] + 2.0 * hv;
         fc.zb = ib->w.zbase[f];
+        /* (24-bit depths: a quantum of the extent, IB_BIAS's 1e-4 of it
+           as before, rtpi_itembuf_visible) */
+        ib->zq[f] = 1e-4 * ib->w.zext[f];
         osm_projection(hu, hv, zn, zf, fc.zb);
         glMatrixMode(GL_MODELVIEW);
         glLoadIdentity();
