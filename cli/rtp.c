@@ -160,10 +160,24 @@ static int parse_int(const char *s, int lo, int hi, int *out)
     return 0;
 }
 
+/* Does s (up to a ',' or its end) look like a decimal number?  strtod
+   also takes hex, "nan" and "inf", which scene files and --set refuse. */
+static int decimal_start(const char *s)
+{
+    if (!(*s == '-' || *s == '+' || *s == '.' || (*s >= '0' && *s <= '9')))
+        return 0;
+    for (; *s && *s != ','; s++)
+        if (strchr("xXnNiI", *s))
+            return 0;
+    return 1;
+}
+
 static int parse_double(const char *s, double *out)
 {
     char *end;
     double v;
+    if (!decimal_start(s))
+        return -1;
     errno = 0;
     v = strtod(s, &end);
     if (end == s || *end || errno || !isfinite(v))
@@ -1063,8 +1077,11 @@ static int parse_xyz(const char *p, double pos[3])
     char *end;
     int k;
     for (k = 0; k < 3; k++) {
+        if (!decimal_start(p))
+            return -1;
         pos[k] = strtod(p, &end);
-        if (end == p || (k < 2 && *end != ',') || (k == 2 && *end != '\0'))
+        if (end == p || !isfinite(pos[k]) || (k < 2 && *end != ',') ||
+            (k == 2 && *end != '\0'))
             return -1;
         p = end + 1;
     }

@@ -378,11 +378,21 @@ static int parse_numbers(const char *v, double *out, int max)
         double d;
         while (*v == ' ' || *v == '\t')
             v++;
-        errno = 0;
+        const char *c;
+        while (*v && strchr(" \t\r\n\v\f", *v))
+            v++; /* (strtod's white space) */
+        /* decimal numbers only, as the scene readers take them
+           (rtpi_tok_number): strtod's hex, "nan" and "inf" are not */
+        if (!(*v == '-' || *v == '+' || *v == '.' || (*v >= '0' && *v <= '9')))
+            return -1;
+        for (c = v; *c && *c != ','; c++)
+            if (*c == 'x' || *c == 'X' || *c == 'n' || *c == 'N' || *c == 'i' || *c == 'I')
+                return -1;
         d = rtpi_strtod(v, &end);
         /* values are stored as floats (colours, coefficients): beyond
-           float's range they would become infinite */
-        if (end == v || errno == ERANGE || !isfinite(d) || fabs(d) > 3.4e38)
+           float's range they would become infinite; below it (1e-400,
+           strtod's ERANGE too) they are 0, as the readers have them */
+        if (end == v || !isfinite(d) || fabs(d) > 3.4e38)
             return -1;
         if (n == max)
             return -1;

@@ -190,6 +190,10 @@ expect_rc 1 $RTP merge -o "$T/j.rtp" -i "$T/j.xyz" "$T/w1.rtp"
 [ ! -e "$T/j.rtp" ] && ok || bad "merge wrote the tree before refusing the image name"
 expect_rc 2 $RTP merge -i "$T/j.pfm" --size 40x30 "$T/t.pfm@0,0" "$T/t.pfm"
 expect_rc 2 $RTP reeval "$T/t.rtp" --add-light a,b,c
+# decimal numbers only, as scene files have them (strtod took hex and nan)
+expect_rc 2 $RTP reeval "$T/t.rtp" --add-light 0x10,0,0
+expect_rc 2 $RTP reeval "$T/t.rtp" --add-light 1,nan,0
+expect_rc 2 $RTP diff "$T/t.pfm" "$T/t.pfm" --fail-above max_abs=0x1
 expect_rc 2 $RTP version extra
 expect_rc 0 $RTP version --help
 grep -q "usage: rtp version" "$T/out" && ok || bad "version --help"

@@ -423,6 +423,21 @@ static void test_set_values_as_nff(void)
         CHECK(rtp_scene_get(s, bad[i][0], after, sizeof after, NULL) == RTP_OK &&
               strcmp(before, after) == 0);
     }
+    /* numbers as the readers take them: decimal (hex was taken), below
+       float's range 0 (1e-400 was refused as if too large) */
+    {
+        static const char *const notdec[][2] = {{"mat.0.kd", "0x1p-2"},
+                                                {"light.0.pos", "0x10,0,0"},
+                                                {"mat.0.shine", "infinity"},
+                                                {"ambient", "nan"}};
+        for (i = 0; i < sizeof notdec / sizeof *notdec; i++)
+            CHECK_MSG(rtp_scene_set(s, notdec[i][0], notdec[i][1], &err) == RTP_ERR_PARSE,
+                      "%s=%s taken", notdec[i][0], notdec[i][1]);
+        CHECK(rtp_scene_set(s, "mat.0.kd", "1e-400", NULL) == RTP_OK &&
+              rtp_scene_get(s, "mat.0.kd", after, sizeof after, NULL) == RTP_OK &&
+              strcmp(after, "0") == 0);
+        CHECK(rtp_scene_set(s, "mat.0.kd", "1", NULL) == RTP_OK);
+    }
     CHECK(rtp_scene_set(s, "light.0.on", "0", NULL) == RTP_OK);
     CHECK(rtp_scene_set(s, "mat.0.checker", "1", NULL) == RTP_OK);
     CHECK(rtp_scene_set(s, "camera.up", "0,0,0", NULL) == RTP_OK);
