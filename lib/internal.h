@@ -811,6 +811,9 @@ struct rtp_tree {
                               there, P + K c elsewhere: pk_c) */
     int hl_mat;            /* 0, or 1 + the material whose highlights are
                               listed (tree.c: consecutive shine edits) */
+    unsigned char *mat_uv; /* per material: 1 where some primitive of it
+                              has uvs (an image bump can bend it), made
+                              when first asked (tree.c: bump_bends) */
     size_t *hl_idx;        /* their terms' indices in ev_terms */
     double *hl_lrv;        /* log2 (r.v) of each */
     float *hl_w;           /* 4 each: W = path weight * ks * light colour,

@@ -44,6 +44,7 @@ void rtp_tree_destroy(rtp_tree *t)
     rtpi_free(&a, t->pk_seg);
     rtpi_free(&a, t->pk_off);
     cp_free(t);
+    rtpi_free(&a, t->mat_uv);
     rtpi_free(&a, t->hl_idx);
     rtpi_free(&a, t->hl_lrv);
     rtpi_free(&a, t->hl_w);
@@ -114,6 +115,47 @@ static int bump_changed(const rtpi_material *a, const rtpi_material *b)
            a->bump_strength != b->bump_strength || a->bump_scale != b->bump_scale;
 }
 
+/* Does material a (material m of the tree's scene) bend normals at all?
+   Not with strength 0, nor an image on primitives without uvs
+   (rtpi_bump_normal leaves those alone). */
+static int bump_bends(rtp_tree *t, size_t m, const rtpi_material *a)
+{
+    const rtp_scene *s = t->scene;
+    if (a->bump == RTPI_BUMP_NONE || a->bump_strength == 0.0f)
+        return 0;
+    if (a->bump != RTPI_BUMP_IMAGE)
+        return 1;
+    if (a->bump_image >= s->ntexs || !s->texs[a->bump_image].image || a->bump_scale == 0.0f)
+        return 0; /* (an image's heights are scaled by bump_scale too) */
+    if (!t->mat_uv) {
+        size_t i;
+        t->mat_uv = (unsigned char *)rtpi_calloc_array(&t->alloc, s->nmats + 1, 1);
+        if (!t->mat_uv)
+            return 1; /* (cannot tell: as if it did) */
+        for (i = 0; i < s->ntris; i++) {
+            const rtpi_tri *tr = &s->tris[i];
+            if (tr->t[0] != RTPI_NONE && tr->t[1] != RTPI_NONE && tr->t[2] != RTPI_NONE &&
+                tr->mat < s->nmats)
+                t->mat_uv[tr->mat] = 1;
+        }
+        for (i = 0; i < s->nspheres; i++)
+            if (s->spheres[i].mat < s->nmats)
+                t->mat_uv[s->spheres[i].mat] = 1;
+        for (i = 0; i < s->ncones; i++)
+            if (s->cones[i].mat < s->nmats)
+                t->mat_uv[s->cones[i].mat] = 1;
+    }
+    return t->mat_uv[m];
+}
+
+/* Has material m's bump changed since its subtrees were traced in a way
+   that bends their rays (bump_changed, and one of the two bends)? */
+static int bump_stale(rtp_tree *t, size_t m)
+{
+    const rtpi_material *a = &t->scene->mats[m], *a0 = &t->mats0[m];
+    return bump_changed(a, a0) && (bump_bends(t, m, a) || bump_bends(t, m, a0));
+}
+
 /* Must material m's samples be traced again before the trees can show it
    exactly (edit class D)?  Rays the trace did not cast — reflected where
    ks was 0, refracted where kt was 0 or below the weight cut-off — or cast
@@ -121,12 +163,12 @@ static int bump_changed(const rtpi_material *a, const rtpi_material *b)
    With a weight cut-off any ks or kt edit: raised, rays below it may now
    be cast; lowered, rays the trees hold may now fall below it, and a full
    trace would not cast them (their subtrees were kept and counted). */
-static int needs_retrace(const rtp_tree *t, size_t m, int stale_retrace)
+static int needs_retrace(rtp_tree *t, size_t m, int stale_retrace)
 {
     const rtpi_material *a = &t->scene->mats[m], *a0 = &t->mats0[m];
     /* a new bump bends the reflected and refracted rays below it: those
        subtrees are stale; kept (the paper's way) unless asked otherwise */
-    if (stale_retrace && bump_changed(a, a0) && (a0->ks > 0.0f || a0->kt > 0.0f))
+    if (stale_retrace && (a0->ks > 0.0f || a0->kt > 0.0f) && bump_stale(t, m))
         return 1;
     return (a->ks > 0.0f && a0->ks == 0.0f) || (a->kt > 0.0f && a0->kt == 0.0f) ||
            (a0->kt > 0.0f && a->kt > 0.0f && a->ior != a0->ior) ||
@@ -146,8 +188,7 @@ static unsigned long long count_stale(rtp_tree *t)
     unsigned long long n = 0;
     int any = 0;
     for (m = 0; m < s->nmats; m++)
-        any |= bump_changed(&s->mats[m], &t->mats0[m]) &&
-               (t->mats0[m].ks > 0.0f || t->mats0[m].kt > 0.0f);
+        any |= (t->mats0[m].ks > 0.0f || t->mats0[m].kt > 0.0f) && bump_stale(t, m);
     if (!any)
         return 0;
     if (t->stale_ok)
@@ -162,7 +203,7 @@ static unsigned long long count_stale(rtp_tree *t)
                               RTPI_L_TIR)))
                 continue;
             mat = rtpi_prim_material(s, nd->prim);
-            if (bump_changed(&s->mats[mat], &t->mats0[mat])) {
+            if (bump_stale(t, mat)) {
                 n++;
                 break;
             }
@@ -1956,7 +1997,7 @@ static rtp_status retrace_edited(rtp_tree *t, int threads, int stale, double lim
             return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
         }
         for (m = 0; m < s->nmats; m++)
-            if (!needs_retrace(t, m, stale) && bump_changed(&s->mats[m], &t->mats0[m])) {
+            if (!needs_retrace(t, m, stale) && bump_stale(t, m)) {
                 swap_bump(&t->scene->mats[m], &t->mats0[m]);
                 swapped[m] = 1;
             }

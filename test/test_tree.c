@@ -2497,6 +2497,55 @@ static void test_image_bump_round_shapes(void)
     rtp_scene_destroy(s);
 }
 
+/* A bump that bends nothing leaves no subtree stale: an image on a
+   polygon without uvs, a strength of 0.  --stale keep says 0 stale
+   samples (it said every mirror sample), --stale retrace traces nothing
+   again (it traced them all), and the image is a full trace's. */
+static void test_bump_that_bends_nothing(void)
+{
+    static const char text[] =
+        "v from 0 -6 3 at 0 0 0.5 up 0 0 1 angle 45 hither 0.1 resolution 40 30\n"
+        "l 2 -3 5\nf 0.8 0.8 0.8 0.6 0.4 30 0 1\nname floor\n"
+        "p 4 -4 -4 0 4 -4 0 4 4 0 -4 4 0\nf 0.9 0.2 0.2 0.8 0.2 20 0 1\ns 0 0 1 1\n";
+    static const char *const kv[][4] = {
+        {"mat.floor.bump", "scenes/tex4.ppm", "mat.floor.bump_strength", "3"},
+        {"mat.floor.bump", "waves", "mat.floor.bump_strength", "0"}};
+    int k, stale;
+    for (k = 0; k < 2; k++)
+        for (stale = 0; stale < 2; stale++) {
+            rtp_scene *s = NULL;
+            rtp_tree *t = NULL;
+            rtp_image *re = NULL, *full = NULL;
+            rtp_trace_options o;
+            rtp_eval_options eo;
+            rtp_eval_stats es;
+            rtp_diff_stats d;
+            memset(&o, 0, sizeof o);
+            memset(&eo, 0, sizeof eo);
+            memset(&es, 0, sizeof es);
+            eo.stale = stale ? RTP_STALE_RETRACE : RTP_STALE_KEEP;
+            CHECK(rtp_scene_load_memory(text, sizeof text - 1, "b.nff", "nff", NULL, &s, NULL) ==
+                  RTP_OK);
+            if (!s)
+                return;
+            CHECK(rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
+            CHECK(rtp_scene_set(s, kv[k][0], kv[k][1], NULL) == RTP_OK &&
+                  rtp_scene_set(s, kv[k][2], kv[k][3], NULL) == RTP_OK);
+            CHECK(t && rtp_tree_set(t, kv[k][0], kv[k][1], NULL) == RTP_OK &&
+                  rtp_tree_set(t, kv[k][2], kv[k][3], NULL) == RTP_OK);
+            CHECK(t && rtp_tree_eval(t, &eo, &re, &es, NULL) == RTP_OK);
+            CHECK(rtp_trace(s, &o, &full, NULL, NULL) == RTP_OK);
+            CHECK_MSG(re && full && rtp_image_diff(re, full, 1e-6, &d, NULL) == RTP_OK &&
+                          d.max_abs <= 1e-6 && es.stale_samples == 0 && es.retraced_samples == 0,
+                      "%s %s, %s: %llu stale, %llu re-traced", kv[k][1], kv[k][3],
+                      stale ? "retrace" : "keep", es.stale_samples, es.retraced_samples);
+            rtp_image_destroy(re);
+            rtp_image_destroy(full);
+            rtp_tree_destroy(t);
+            rtp_scene_destroy(s);
+        }
+}
+
 /* A bump kept stale (--stale keep) while another material's class-D
    edit traces samples again: those samples spawn their rays below the
    bumped material as its other samples did, so when the bump goes back
@@ -3555,6 +3604,7 @@ int main(void)
     RUN(test_bump_edits);
     RUN(test_bump_kept_through_retrace);
     RUN(test_image_bump_round_shapes);
+    RUN(test_bump_that_bends_nothing);
     RUN(test_truncated_every_length);
     RUN(test_flipped_bits);
     RUN(test_section_order_and_end);
