@@ -1581,9 +1581,9 @@ int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
                          rtpi_v3 p, rtpi_v3 o, uint32_t prim, int self,
                          const rtpi_ray *r, const unsigned char *thin, uint32_t *occ)
 {
-    int f, res = ib->res, i, j, di, dj, k, n = 0, m = 0;
+    int f, res = ib->res, i, j, di, dj, k, n = 0, m = 0, coarse;
     uint32_t cand[9];
-    double u, v, x, y, zp, zlim, tn = -1.0;
+    double u, v, x, y, zp, zlim, bias, tn = -1.0;
     rtpi_ray rr;
     rtpi_hit h;
     lb_tri_ray w;
@@ -1620,7 +1620,13 @@ int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
        face's whole depth extent (one speck 1e5 away made it 10, more than
        the scene: every real occluder behind the bias, 37% of the pixels
        lit in shadow); OSMesa's depths carry their own quantum (zq) */
-    zlim = zp - fmax(ib->zq[f], IB_BIAS * fabs(zp - ib->w.zbase[f]));
+    bias = IB_BIAS * fabs(zp - ib->w.zbase[f]);
+    zlim = zp - fmax(ib->zq[f], bias);
+    /* OSMesa's quantum far coarser than p's own bias (a face whose depth
+       extent dwarfs p's depth in it: one speck far away): its depths
+       cannot tell what lies in front of p, so every sample is tested
+       and, none hitting, an exact query decides */
+    coarse = ib->zq[f] > 100.0 * bias;
     for (dj = -1; dj <= 1; dj++) {
         for (di = -1; di <= 1; di++) {
             int g;
@@ -1630,7 +1636,7 @@ int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
             if (c == RTPI_DC_ABSENT || (id = ib->id[c]) == RTPI_NONE ||
                 (id == prim && self == 0) || (thin && thin[id]))
                 continue;
-            if (g == f && !((zc = ib->z[c] + ib->w.zbase[g]) < zlim))
+            if (g == f && !((zc = ib->z[c] + ib->w.zbase[g]) < zlim) && !coarse)
                 continue;
             for (k = 0; k < n && cand[k] != id; k++)
                 ;
@@ -1663,7 +1669,7 @@ int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
             *occ = cand[k];
             return 0;
         }
-    return m ? -1 : 1;
+    return m || coarse ? -1 : 1;
 }
 
 /* A lower bound, roughly, of the angle (radians) a primitive's
