@@ -164,6 +164,8 @@ static int parse_int(const char *s, int lo, int hi, int *out)
    also takes hex, "nan" and "inf", which scene files and --set refuse. */
 static int decimal_start(const char *s)
 {
+    while (*s && strchr(" \t\r\n\v\f", *s))
+        s++; /* (strtod's white space) */
     if (!(*s == '-' || *s == '+' || *s == '.' || (*s >= '0' && *s <= '9')))
         return 0;
     for (; *s && *s != ','; s++)

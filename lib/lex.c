@@ -88,9 +88,13 @@ int rtpi_lex_next(rtpi_lex *lx, rtpi_tok *t)
 {
     while (lx->p < lx->end) {
         char c = *lx->p;
+        size_t len;
         if (c == '\n')
             newline(lx);
-        else if (is_space(c) || (lx->commas && c == ','))
+        else if (continues(lx, lx->p, &len)) {
+            lx->p += len; /* (a lone continuation: white space) */
+            newline(lx);
+        } else if (is_space(c) || (lx->commas && c == ','))
             lx->p++;
         else if (c == '#')
             skip_comment(lx);
@@ -130,9 +134,22 @@ void rtpi_lex_skip_line(rtpi_lex *lx)
 {
     size_t len;
     for (;;) {
+        /* a '#' where a word could start makes the rest a comment, whose
+           last backslash continues nothing (as on a line read) */
+        const char *q = lx->p;
+        int comment = 0;
+        for (; q < lx->end && *q != '\n'; q++)
+            if (*q == '#' && (q == lx->line_start || is_space(q[-1]))) {
+                comment = 1;
+                break;
+            }
         skip_comment(lx);
         if (lx->p >= lx->end)
             return;
+        if (comment) {
+            newline(lx);
+            return;
+        }
         /* a statement read past goes on after a continuation */
         if (lx->p - lx->line_start >= 1 && continues(lx, lx->p - 1, &len)) {
             newline(lx);

@@ -111,7 +111,7 @@ static int peek_number(const nff *c)
     rtpi_lex save = c->lx;
     rtpi_tok t;
     double d;
-    return rtpi_lex_next(&save, &t) && rtpi_tok_number(&t, &d) == 0;
+    return rtpi_lex_next(&save, &t) && rtpi_tok_number(&t, &d) != -1; /* (-2: out of range, said by num) */
 }
 
 /* Consumes the next token if it is `word`. */

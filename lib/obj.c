@@ -76,7 +76,11 @@ static rtp_status line_rest(rtpi_lex *lx, const char *what, int max)
     double d;
     int n = 0;
     while (rtpi_lex_next_inline(lx, &t)) {
-        if (rtpi_tok_number(&t, &d) != 0 || n++ >= max)
+        int r = rtpi_tok_number(&t, &d);
+        if (r == -2 && n < max)
+            return rtpi_lex_error(lx, &t, "%s value %s is out of range", what,
+                                  rtpi_tok_show(&t, show, sizeof show));
+        if (r != 0 || n++ >= max)
             return rtpi_lex_error(lx, &t, "unexpected '%s' at the end of %s",
                                   rtpi_tok_show(&t, show, sizeof show), what);
     }
@@ -703,7 +707,7 @@ static rtp_status read_vertex(obj *o, int kind)
         rtpi_lex save = o->lx;
         rtpi_tok peek;
         double d;
-        if (rtpi_lex_next_inline(&save, &peek) && rtpi_tok_number(&peek, &d) == 0 &&
+        if (rtpi_lex_next_inline(&save, &peek) && rtpi_tok_number(&peek, &d) != -1 &&
             (st = line_num(&o->lx, what, "v", &p[1], NULL)) != RTP_OK)
             return st;
     }

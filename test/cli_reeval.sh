@@ -193,6 +193,7 @@ expect_rc 2 $RTP reeval "$T/t.rtp" --add-light a,b,c
 # decimal numbers only, as scene files have them (strtod took hex and nan)
 expect_rc 2 $RTP reeval "$T/t.rtp" --add-light 0x10,0,0
 expect_rc 2 $RTP reeval "$T/t.rtp" --add-light 1,nan,0
+expect_rc 0 $RTP reeval "$T/t.rtp" --add-light " 1, 2, 3" --memory-limit " 100" -i "$T/al.pfm"
 expect_rc 2 $RTP diff "$T/t.pfm" "$T/t.pfm" --fail-above max_abs=0x1
 expect_rc 2 $RTP version extra
 expect_rc 0 $RTP version --help
