@@ -3363,6 +3363,58 @@ rtp_status rtp_tree_trace(const rtp_tree *t, int threads, rtp_image **out,
     return rtpi_trace_sized(t->scene, &o, out, stats, err);
 }
 
+/* ------------------------------------------------ merge and crop */
+
+/* A new tree of w x h pixels at rx, ry of like's frame, with like's scene
+   (cloned, edits included), options and as-traced materials and lights,
+   and room for nnodes nodes and their visibility words (nodes, start and
+   vis_ext left for the caller to fill); NULL when out of memory. */
+static rtp_tree *tree_shell(const rtp_tree *like, int w, int h, int rx, int ry, size_t nnodes)
+{
+    const rtp_allocator *a = &like->alloc;
+    size_t words = like->vis_words, nl;
+    rtp_tree *t = (rtp_tree *)rtpi_calloc_array(a, 1, sizeof *t);
+    if (!t)
+        return NULL;
+    t->alloc = *a;
+    t->width = w;
+    t->height = h;
+    t->nx = w + like->spd; /* SPD: the corners around the pixels */
+    t->ny = h + like->spd;
+    t->full_w = like->full_w;
+    t->full_h = like->full_h;
+    t->rx = rx;
+    t->ry = ry;
+    t->spd = like->spd;
+    t->max_depth = like->max_depth;
+    t->min_weight = like->min_weight;
+    t->vis_words = words;
+    t->nnodes = nnodes;
+    t->nlights0 = like->nlights0;
+    t->cam0 = like->cam0;
+    if (rtpi_scene_clone(like->scene, &t->scene) != RTP_OK) {
+        rtp_tree_destroy(t);
+        return NULL;
+    }
+    /* (lights0 has an entry for every light, added ones too: their
+       positions NaN, so they are decided anew as in like) */
+    nl = t->scene->nlights;
+    t->mats0 = (rtpi_material *)rtpi_malloc_array(a, t->scene->nmats + 1, sizeof *t->mats0);
+    t->lights0 = (rtpi_light *)rtpi_malloc_array(a, nl + 1, sizeof *t->lights0);
+    t->nodes = (rtpi_cnode *)rtpi_malloc_array(a, nnodes + 1, sizeof *t->nodes);
+    t->start = (uint64_t *)rtpi_malloc_array(a, (size_t)t->nx * (size_t)t->ny + 1,
+                                             sizeof *t->start);
+    if (words)
+        t->vis_ext = (uint32_t *)rtpi_malloc_array(a, nnodes * words + 1, sizeof *t->vis_ext);
+    if (!t->mats0 || !t->lights0 || !t->nodes || !t->start || (words && !t->vis_ext)) {
+        rtp_tree_destroy(t);
+        return NULL;
+    }
+    memcpy(t->mats0, like->mats0, t->scene->nmats * sizeof *t->mats0);
+    memcpy(t->lights0, like->lights0, nl * sizeof *t->lights0);
+    return t;
+}
+
 /* ---------------------------------------------------------------- merge */
 
 /* Same scene and options?  The parts of one frame were traced from one
@@ -3485,33 +3537,8 @@ rtp_status rtp_tree_merge(rtp_tree *const *parts, size_t n, rtp_tree **out, rtp_
     }
     if (st != RTP_OK)
         goto fail;
-    t = (rtp_tree *)rtpi_calloc_array(a, 1, sizeof *t);
-    if (!t)
+    if (!(t = tree_shell(p0, fw, fh, 0, 0, total)))
         goto nomem;
-    t->alloc = *a;
-    t->width = t->full_w = fw;
-    t->height = t->full_h = fh;
-    t->nx = gx;
-    t->ny = gy;
-    t->spd = spd;
-    t->max_depth = p0->max_depth;
-    t->min_weight = p0->min_weight;
-    t->vis_words = words;
-    t->nnodes = total;
-    t->nlights0 = p0->nlights0;
-    t->cam0 = p0->cam0;
-    if (rtpi_scene_clone(p0->scene, &t->scene) != RTP_OK)
-        goto nomem;
-    t->mats0 = (rtpi_material *)rtpi_malloc_array(a, t->scene->nmats + 1, sizeof *t->mats0);
-    t->lights0 = (rtpi_light *)rtpi_malloc_array(a, t->scene->nlights + 1, sizeof *t->lights0);
-    t->nodes = (rtpi_cnode *)rtpi_malloc_array(a, total + 1, sizeof *t->nodes);
-    t->start = (uint64_t *)rtpi_malloc_array(a, ns + 1, sizeof *t->start);
-    if (words)
-        t->vis_ext = (uint32_t *)rtpi_malloc_array(a, total * words + 1, sizeof *t->vis_ext);
-    if (!t->mats0 || !t->lights0 || !t->nodes || !t->start || (words && !t->vis_ext))
-        goto nomem;
-    memcpy(t->mats0, p0->mats0, t->scene->nmats * sizeof *t->mats0);
-    memcpy(t->lights0, p0->lights0, t->scene->nlights * sizeof *t->lights0);
     for (y = 0; y < gy; y++)
         for (x = 0; x < gx; x++) {
             size_t f = (size_t)y * gx + x, ls, cnt;
@@ -3542,9 +3569,8 @@ fail:
 rtp_status rtp_tree_crop(const rtp_tree *src, const int region[4], rtp_tree **out,
                          rtp_error *err)
 {
-    const rtp_allocator *a;
     rtp_tree *t = NULL;
-    size_t words, total = 0, at = 0, nl;
+    size_t words, total = 0, at = 0;
     int x0, y0, w, h, nx, ny, x, y;
     if (!src || !region || !out)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_crop: NULL argument");
@@ -3556,7 +3582,6 @@ rtp_status rtp_tree_crop(const rtp_tree *src, const int region[4], rtp_tree **ou
                           "region %d,%d,%d,%d is not inside the tree's pixels %d,%d,%d,%d",
                           region[0], region[1], region[2], region[3], src->rx, src->ry,
                           src->rx + src->width, src->ry + src->height);
-    a = &src->alloc;
     x0 = region[0] - src->rx; /* in the source's sample grid */
     y0 = region[1] - src->ry;
     w = region[2] - region[0];
@@ -3568,40 +3593,8 @@ rtp_status rtp_tree_crop(const rtp_tree *src, const int region[4], rtp_tree **ou
         size_t r = (size_t)(y0 + y) * (size_t)src->nx + (size_t)x0;
         total += (size_t)(src->start[r + (size_t)nx] - src->start[r]);
     }
-    t = (rtp_tree *)rtpi_calloc_array(a, 1, sizeof *t);
-    if (!t)
+    if (!(t = tree_shell(src, w, h, region[0], region[1], total)))
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
-    t->alloc = *a;
-    t->width = w;
-    t->height = h;
-    t->nx = nx;
-    t->ny = ny;
-    t->full_w = src->full_w;
-    t->full_h = src->full_h;
-    t->rx = region[0];
-    t->ry = region[1];
-    t->spd = src->spd;
-    t->max_depth = src->max_depth;
-    t->min_weight = src->min_weight;
-    t->vis_words = words;
-    t->nnodes = total;
-    t->nlights0 = src->nlights0;
-    t->cam0 = src->cam0;
-    if (rtpi_scene_clone(src->scene, &t->scene) != RTP_OK)
-        goto nomem;
-    /* (lights0 has an entry for every light, added ones too: their
-       positions NaN, so they are decided anew as in the source) */
-    nl = t->scene->nlights;
-    t->mats0 = (rtpi_material *)rtpi_malloc_array(a, t->scene->nmats + 1, sizeof *t->mats0);
-    t->lights0 = (rtpi_light *)rtpi_malloc_array(a, nl + 1, sizeof *t->lights0);
-    t->nodes = (rtpi_cnode *)rtpi_malloc_array(a, total + 1, sizeof *t->nodes);
-    t->start = (uint64_t *)rtpi_malloc_array(a, (size_t)nx * (size_t)ny + 1, sizeof *t->start);
-    if (words)
-        t->vis_ext = (uint32_t *)rtpi_malloc_array(a, total * words + 1, sizeof *t->vis_ext);
-    if (!t->mats0 || !t->lights0 || !t->nodes || !t->start || (words && !t->vis_ext))
-        goto nomem;
-    memcpy(t->mats0, src->mats0, t->scene->nmats * sizeof *t->mats0);
-    memcpy(t->lights0, src->lights0, nl * sizeof *t->lights0);
     for (y = 0; y < ny; y++) {
         size_t r = (size_t)(y0 + y) * (size_t)src->nx + (size_t)x0;
         size_t first = (size_t)src->start[r], cnt = (size_t)src->start[r + (size_t)nx] - first;
@@ -3617,7 +3610,4 @@ rtp_status rtp_tree_crop(const rtp_tree *src, const int region[4], rtp_tree **ou
     t->start[(size_t)nx * (size_t)ny] = at;
     *out = t;
     return RTP_OK;
-nomem:
-    rtp_tree_destroy(t);
-    return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
 }

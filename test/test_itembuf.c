@@ -192,6 +192,19 @@ static rtp_scene *load(const char *text, size_t len)
     return s;
 }
 
+/* run() on a scene given as NFF text. */
+static void run_text(const char *label, const char *text, size_t len, const rtpi_v3 *lights,
+                     size_t nl)
+{
+    rtp_scene *s = load(text, len);
+    if (!s) {
+        CHECK(0);
+        return;
+    }
+    run(label, s, lights, nl, 1.0);
+    rtp_scene_destroy(s);
+}
+
 /* A wide floor, thin branches (cones of radius 0.004 to 0.03, far below a
    cell from a light 50 away), twigs ending in small spheres, slivers. */
 static void test_thin_branches(void)
@@ -325,14 +338,8 @@ static void test_light_near_a_primitive(void)
         "p 4\n-2 -2 0.02\n2 -2 0.02\n2 2 0.02\n-2 2 0.02\nf 0.9 0.3 0.2 0.8 0 1 0 0\n"
         "p 3\n0.3 0.2 10.000001\n0.301 0.2 10.000001\n0.3 0.201 10.000001\n"
         "s 1.3005 0.2003 10 0.9999\n";
-    rtp_scene *s = load(text, sizeof text - 1);
     rtpi_v3 lp = v3(0.3005, 0.2003, 10);
-    if (!s) {
-        CHECK(0);
-        return;
-    }
-    run("light near a primitive", s, &lp, 1, 1.0);
-    rtp_scene_destroy(s);
+    run_text("light near a primitive", text, sizeof text - 1, &lp, 1);
 }
 
 /* A light exactly on a sphere: on a glass ball (points inside it, reached
@@ -349,13 +356,7 @@ static void test_light_on_a_sphere(void)
         "p 4\n-4 -4 0\n4 -4 0\n4 4 0\n-4 4 0\nf 0.3 0.3 0.9 0.5 0.5 50 0.5 1.4\n"
         "s 0 0 1 1\nf 0.3 0.3 0.35 0.6 0 100000 0 0\ns 0 0 0 -16\n";
     const rtpi_v3 lights[] = {{0, 0, 2}, {1, 0, 1}, {0, 0, 16}, {0, 16, 0}};
-    rtp_scene *s = load(text, sizeof text - 1);
-    if (!s) {
-        CHECK(0);
-        return;
-    }
-    run("light on a sphere", s, lights, sizeof lights / sizeof *lights, 1.0);
-    rtp_scene_destroy(s);
+    run_text("light on a sphere", text, sizeof text - 1, lights, sizeof lights / sizeof *lights);
 }
 
 /* One speck far away (1e5 above a scene of size 8) took the depth bias to
@@ -369,13 +370,7 @@ static void test_far_speck(void)
         "p 4\n-4 -4 0\n4 -4 0\n4 4 0\n-4 4 0\nf 0.2 0.9 0.2 0.5 0.2 30 0.6 1.5\n"
         "s 0 1 1 0.8\ns -1 -2 0.7 0.3\nc -2 2 0 1 -2 2 1.5 0\ns 2 0 1e5 1e-4\n";
     const rtpi_v3 lights[] = {{-1, 0, 1}, {3, -4, 5}};
-    rtp_scene *s = load(text, sizeof text - 1);
-    if (!s) {
-        CHECK(0);
-        return;
-    }
-    run("far speck", s, lights, sizeof lights / sizeof *lights, 1.0);
-    rtp_scene_destroy(s);
+    run_text("far speck", text, sizeof text - 1, lights, sizeof lights / sizeof *lights);
 }
 
 /* The rays cast at round shapes while the item buffer is drawn stay
