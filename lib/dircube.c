@@ -1515,15 +1515,17 @@ void rtpi_lightbuf_free(rtpi_lightbuf *lb, const rtp_allocator *a)
    "Clearly in front": depth along the face axis zs < zp - (B + zp e
    tan(theta)), theta the angle between the surface normal and the
    light, e the sample's distance from the ray's direction in face
-   coordinates (>= the angle between them), B the bias below.  On a plane tilted by theta depth changes by ~zp e
-   tan(theta) over that angle: that term keeps the neighbours of prim in
-   one mesh from counting; tan(theta) is capped at IB_TAN_MAX so that
-   grazing surfaces still see real occluders.  B, IB_BIAS (1e-4) of p's
-   depth beyond the nearest on the face (zp - zbase: not of the distance,
-   so a far light keeps its precision, nor of the face's whole extent, so
-   a far speck does not blur the rest), covers the float depths of the
-   buffer; OSMesa's 24-bit ones take 1e-4 of the extent at least (zq).  The normal comes free: o - p is rtpi_offset_origin's step along
-   the geometric normal, towards the light (~1e-9 relative error).
+   coordinates (>= the angle between them), B the bias below.  On a plane
+   tilted by theta depth changes by ~zp e tan(theta) over that angle:
+   that term keeps the neighbours of prim in one mesh from counting;
+   tan(theta) is capped at IB_TAN_MAX so that grazing surfaces still see
+   real occluders.  B, IB_BIAS (1e-4) of p's depth beyond the nearest on
+   the face (zp - zbase: not of the distance, so a far light keeps its
+   precision, nor of the face's whole extent, so a far speck does not
+   blur the rest), covers the float depths of the buffer; OSMesa's 24-bit
+   ones take 1e-4 of the extent at least (zq).  The normal comes free:
+   o - p is rtpi_offset_origin's step along the geometric normal, towards
+   the light (~1e-9 relative error).
    What can still be wrong: "sees the light" where a wide primitive blocks
    the ray yet shows at none of the 9 samples in front of p while nothing
    else there lies in front of p: a part of it narrower than the samples'
