@@ -220,17 +220,24 @@ int rtpi_prim_shadows_own_solid(const rtp_scene *s, uint32_t prim, rtpi_v3 o, rt
         return 0;
     if ((i -= s->ntris) < s->nspheres) {
         const rtpi_sphere *sp = &s->spheres[i];
-        rtpi_v3 c = v3_from_f(sp->c);
-        double r = fabs((double)sp->r), dl = v3_len(v3_sub(L, c));
-        int oin = v3_len(v3_sub(o, c)) < r, lin = dl < r;
+        rtpi_v3 c = v3_from_f(sp->c), oc = v3_sub(o, c), lc = v3_sub(L, c);
+        double r = fabs((double)sp->r), r2 = r * r, d2o = v3_dot(oc, oc), d2l = v3_dot(lc, lc);
+        double big = d2o > d2l ? d2o : d2l;
+        int oin = d2o < r2, lin = d2l < r2;
         /* A light on the surface: a shadow ray stops 1e-9 of its length
            short of the light (rtpi_shadow_ray), so a crossing that close
            to it does not count, whichever side the light rounds to (an
            item buffer took the glass ball's inside as shadowed by the
            ball for a light on it: 0.24 off).  Within twice that, and
-           double rounding's few 1e-16 of the sizes, say cannot tell. */
-        if (fabs(dl - r) <= 2e-9 * v3_len(v3_sub(L, o)) + 1e-14 * (r + dl))
-            return -1;
+           double rounding's few 1e-16 of the sizes, say cannot tell.
+           (Squares first: |dl^2 - r^2| beyond 1e-8 of the largest square
+           is beyond that band, with no square root; o lies a float
+           offset off its surface, far outside any rounding.) */
+        if (fabs(d2l - r2) <= 1e-8 * (big > r2 ? big : r2)) {
+            double dl = sqrt(d2l);
+            if (fabs(dl - r) <= 2e-9 * v3_len(v3_sub(L, o)) + 1e-14 * (r + dl))
+                return -1;
+        }
         return sp->r > 0.0f ? oin != lin : oin && !lin;
     }
     if ((i -= s->nspheres) < s->ncones) {
