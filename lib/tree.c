@@ -694,6 +694,16 @@ static double ev_cache_bytes(const rtp_tree *t, size_t nl, size_t ns)
    the full path makes the image instead (hl_build, pk_put, cp_lost). */
 #define CP_SPAN 4.0
 
+/* The full path sums an image's parts in floats (terms, a pixel's
+   corners) where the planes sum P + K x in doubles and round once: near
+   the float range (a kd of 1e38) a pixel came out finite from the planes
+   (1.9e38) and infinite from a full trace, or a float step apart.  A
+   value past PLANE_MAX (2^100, 1.3e30: 2^28 below the range, so no sum
+   of a pixel's few parts that the planes leave finite and below it can
+   overflow in the full path) is left to the full path, which is then the
+   full trace's arithmetic bit for bit (pk_pixel, cp_lost). */
+#define PLANE_MAX 0x1p100
+
 typedef struct eval_ctx {
     rtp_tree *t;
     const rtpi_shade_ctx *shade;
@@ -812,12 +822,16 @@ static void rest_of(const double *cv, size_t nc, const float *coeffs, double v[3
     v[2] = a2;
 }
 
-/* One pixel: P + K x. */
-static void pk_pixel(const float *pk, const double *x, float *out)
+/* One pixel: P + K x; 1 where a value passes PLANE_MAX or is NaN (the
+   full path makes the image then). */
+static int pk_pixel(const float *pk, const double *x, float *out)
 {
-    out[0] = (float)(pk[0] + pk[3] * x[0]);
-    out[1] = (float)(pk[1] + pk[4] * x[1]);
-    out[2] = (float)(pk[2] + pk[5] * x[2]);
+    const double v0 = pk[0] + pk[3] * x[0], v1 = pk[1] + pk[4] * x[1],
+                 v2 = pk[2] + pk[5] * x[2];
+    out[0] = (float)v0;
+    out[1] = (float)v1;
+    out[2] = (float)v2;
+    return !(fabs(v0) <= PLANE_MAX) | !(fabs(v1) <= PLANE_MAX) | !(fabs(v2) <= PLANE_MAX);
 }
 
 /* ------------------------------------------------------- highlights
@@ -1423,7 +1437,7 @@ static int pk_img_chunk(void *ctx, int chunk)
                 /* the edit itself (pk_apply_listed's), over B just read:
                    where the band's planes turn out not to be used (the
                    check below), the full path writes every pixel anew */
-                pk_pixel(pc + 6 * n, xn, e->pixels + 3 * (p + x));
+                bad |= pk_pixel(pc + 6 * n, xn, e->pixels + 3 * (p + x));
                 nz[n++] = (uint32_t)(p + x);
             }
         }
@@ -1469,7 +1483,7 @@ check:
         const double xn[3] = {e->x[0], e->x[1], e->x[2]};
         float *out = e->pixels;
         for (i = 0; i < n; i++)
-            pk_pixel(pc + 6 * i, xn, out + 3 * (size_t)nz[i]);
+            e->nonfinite |= pk_pixel(pc + 6 * i, xn, out + 3 * (size_t)nz[i]);
     }
     return 0;
 }
@@ -1595,7 +1609,7 @@ static int pk_apply_band(void *ctx, int chunk)
         end = (size_t)t->width * t->height;
     for (; p < end; p++)
         if (j < n && nz[j] == p) {
-            pk_pixel(pc + 6 * j, e->x, e->pixels + 3 * p);
+            e->nonfinite |= pk_pixel(pc + 6 * j, e->x, e->pixels + 3 * p);
             j++;
         } else {
             memcpy(e->pixels + 3 * p, t->pk + 3 * p, 3 * sizeof *t->pk);
@@ -1613,7 +1627,7 @@ static int pk_apply_listed(void *ctx, int chunk)
     const uint32_t *nz = t->pk_nz + t->pk_off[chunk];
     const double *c = e->x;
     for (j = 0; j < n; j++)
-        pk_pixel(pc + 6 * j, c, e->pixels + 3 * (size_t)nz[j]);
+        e->nonfinite |= pk_pixel(pc + 6 * j, c, e->pixels + 3 * (size_t)nz[j]);
     return 0;
 }
 static void free_material_lists(rtp_tree *t)
@@ -2066,11 +2080,12 @@ static int threads_for(double bytes, int nthreads)
 
 /* P + K x into the image: every pixel, or with `sparse` (the image holds
    the last evaluation, which differed in this term alone) the pixels
-   whose K is not 0. */
-static void pk_apply(rtp_tree *t, void *const *ctx, int nthreads, int sparse,
-                     rtp_eval_stats *st)
+   whose K is not 0.  0 where a value passed PLANE_MAX: the full path
+   then writes every pixel. */
+static int pk_apply(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, int sparse,
+                    rtp_eval_stats *st)
 {
-    int nb = (t->height + PK_ROWS - 1) / PK_ROWS;
+    int nb = (t->height + PK_ROWS - 1) / PK_ROWS, i, ok = 1;
     if (sparse) {
         rtpi_parallel_rows(nb, threads_for(40.0 * (double)t->pk_nnz, nthreads), ctx,
                            pk_apply_listed, NULL, NULL);
@@ -2080,6 +2095,13 @@ static void pk_apply(rtp_tree *t, void *const *ctx, int nthreads, int sparse,
                            ctx, pk_apply_band, NULL, NULL);
         st->written_pixels = (unsigned long long)t->width * t->height;
     }
+    for (i = 0; i < nthreads; i++) {
+        ok &= !e[i].nonfinite;
+        e[i].nonfinite = 0;
+    }
+    if (!ok)
+        st->written_pixels = (unsigned long long)t->width * t->height;
+    return ok;
 }
 
 /* The planes' memory but pk_c's block (pk_build makes that), unless it
@@ -2427,7 +2449,7 @@ static int cp_snapshot(rtp_tree *t, const float *samples, const float *last, siz
 static int cp_lost(double s, double kc, double v)
 {
     double a = fabs(v);
-    return !(fabs(s) + kc <= CP_SPAN * (a > 2.0 ? a : 2.0));
+    return !(fabs(s) + kc <= CP_SPAN * (a > 2.0 ? a : 2.0)) | !(a <= PLANE_MAX);
 }
 
 /* S + sum K_d (c_d - cS_d) at pixel p over the differing terms but
@@ -3117,14 +3139,15 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                     st.combined_samples = part ? 0 : ns;
                 }
             }
-            if (t->pk_term == (int)(2 + nl + mt) + 1) {
+            if (t->pk_term == (int)(2 + nl + mt) + 1 &&
+                (applied || pk_apply(t, e, ctx, nthreads, sparse, &st))) {
                 if (applied) /* (pk_img_chunk wrote them as it made their planes) */
                     st.written_pixels = t->pk_nnz;
-                else
-                    pk_apply(t, ctx, nthreads, sparse, &st);
                 one = 1;
                 matpath = 1; /* the coefficients stay those of the material before */
             } else {
+                /* (or an image past PLANE_MAX from them: the full path
+                   makes this one, and the planes are dropped) */
                 /* planes not finite (or no memory for them): the
                    material's samples below, then every sample */
                 list_combine = 0;

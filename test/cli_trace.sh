@@ -41,6 +41,13 @@ grep -q '"eye_rays": 1200' "$T/s.json" && ok || { bad "stats eye_rays"; cat "$T/
 $RTP trace scenes/spheres.nff --size 40x30 -i - 2>"$T/err" | $RTP diff - "$T/a.pfm" --stats "$T/d.json" >/dev/null 2>&1
 [ $? -eq 0 ] && ok || bad "pipe trace | diff"
 grep -q '"psnr": "inf"' "$T/d.json" && ok || { bad "identical images not inf psnr"; cat "$T/d.json" >&2; }
+# An infinite pixel against a finite one: every error metric "inf", psnr "-inf"
+# (JSON has no infinity), and the printed line says the same.
+printf 'PF\n1 1\n-1.0\n\000\000\200\077\000\000\200\077\000\000\200\077' > "$T/one.pfm"
+printf 'PF\n1 1\n-1.0\n\000\000\200\177\000\000\200\077\000\000\200\077' > "$T/inf.pfm"
+$RTP diff "$T/one.pfm" "$T/inf.pfm" --stats "$T/di.json" >"$T/out" 2>"$T/err"
+grep -q '"mae": "inf", "rmse": "inf", "psnr": "-inf", "max_abs": "inf"' "$T/di.json" &&
+    grep -q 'psnr -inf dB' "$T/out" && ok || { bad "diff against an infinite pixel"; cat "$T/di.json" "$T/out" "$T/err" >&2; }
 # (an 8-bit image: PNG where the build has libpng, which `rtp version` says)
 $RTP version >"$T/ver" 2>&1 && grep -q "^built with:" "$T/ver" && ok || bad "version: no 'built with' line"
 b8=b.ppm

@@ -1706,6 +1706,57 @@ static int edit_equals_trace(rtp_tree *t, rtp_scene *s, const rtp_trace_options 
     return ok;
 }
 
+/* Values near the float range, from the planes (a material's P + K x, the
+   colours' S + K (c - cS)) and from a full trace: the full path sums in
+   floats and overflowed where the planes, summing in doubles, gave a
+   finite 1.9e38 (or a float step apart): past PLANE_MAX the full path
+   makes the image, so the two are the same, infinities included. */
+static void near_float_max_run(int spd)
+{
+    static const char *const seq[][2] = {
+        {"mat.0.kd", "0.5"},         {"mat.0.kd", "1e38"},
+        {"mat.0.kd", "3e38"},        {"mat.0.kd", "0.7"},
+        {"mat.1.color", "3e38,1,1"}, {"mat.1.color", "0.9,0.2,0.15"},
+        {"light.0.color", "0.5,0.5,0.5"}, {"light.0.color", "1e38,1e38,1e38"},
+        {"light.1.color", "3e38,0,0"}, {"light.0.color", "0.7,0.7,0.7"},
+        {"ambient", "3e38,3e38,3e38"}, {"light.1.color", "0.4,0.4,0.5"},
+    };
+    rtp_scene *s;
+    rtp_tree *t;
+    rtp_trace_options o;
+    rtp_eval_options eo;
+    rtp_image *re;
+    size_t i;
+    if (!edit_start(spd, &s, &t, &o, &eo, &re))
+        return;
+    for (i = 0; t && re && i < sizeof seq / sizeof *seq; i++) {
+        rtp_eval_stats es;
+        rtp_image *full = NULL;
+        rtp_diff_stats d;
+        CHECK(rtp_tree_set(t, seq[i][0], seq[i][1], NULL) == RTP_OK);
+        CHECK(rtp_scene_set(s, seq[i][0], seq[i][1], NULL) == RTP_OK);
+        if (rtp_tree_eval_into(t, &eo, re, &es, NULL) == RTP_OK &&
+            rtp_trace(s, &o, &full, NULL, NULL) == RTP_OK &&
+            rtp_image_diff(re, full, 1e-6, &d, NULL) == RTP_OK)
+            /* (an infinity against an equal one counts 0, against a
+               finite value infinite; a float step of 1e38 is 1e31) */
+            CHECK_MSG(d.max_abs <= 1e-6, "spd %d, after %s=%s: max_abs %g", spd, seq[i][0],
+                      seq[i][1], d.max_abs);
+        else
+            CHECK(0);
+        rtp_image_destroy(full);
+    }
+    rtp_image_destroy(re);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+}
+
+static void test_near_float_max(void)
+{
+    near_float_max_run(0);
+    near_float_max_run(1);
+}
+
 /* More than 64 lights where the caches are small: a stream's light edits
    come from planes, as with few (the caches were dropped past 64 lights
    whatever their size, and every evaluation summed every sample: 1.03 s
@@ -3568,6 +3619,7 @@ int main(void)
     RUN(test_identical_project_scenes);
     RUN(test_file_windows);
     RUN(test_colour_edits);
+    RUN(test_near_float_max);
     RUN(test_identical_many_lights);
     RUN(test_many_lights_retrace);
     RUN(test_identical_teapot);
