@@ -428,15 +428,25 @@ rtp_status rtp_tree_trace(const rtp_tree *tree, int threads, rtp_image **out,
  *  of the same scene with the same options into the whole frame's tree;
  *  the regions must cover the frame without overlapping.  Its evaluation
  *  equals a whole-frame trace bit for bit.  An error names a part by its
- *  index, "parts[K]". */
+ *  index, "parts[K]".  @return RTP_ERR_ARGUMENT (no parts, a NULL one,
+ *  parts of different scenes, frames, options or edits, overlaps or
+ *  gaps), RTP_ERR_UNSUPPORTED (a part with an added light),
+ *  RTP_ERR_NOMEM; *out is NULL on any failure. */
 rtp_status rtp_tree_merge(rtp_tree *const *parts, size_t n, rtp_tree **out,
                           rtp_error *err);
 /** The inverse: a new tree of the pixels x0 <= x < x1, y0 <= y < y1
- *  (region = {x0, y0, x1, y1}, frame coordinates) of a tree's pixels, as
- *  tracing that region would have made it (SPD: with the corner samples
- *  around them), edits and added lights included, caches not.  Its
- *  evaluation is that region of the tree's evaluation, bit for bit, at a
- *  cost in proportion to the region. */
+ *  (region = {x0, y0, x1, y1}, frame coordinates; all 0: the tree's own
+ *  pixels) of a tree's pixels, as tracing that region would have made it
+ *  (SPD: with the corner samples around them), edits and added lights
+ *  included, caches not.  Evaluated, it gives that region of the tree's
+ *  own first evaluation with the same edits, bit for bit, at a cost in
+ *  proportion to the region (the tree's scene is copied whole, a small
+ *  part).  A tree evaluated before keeps planes from which later edits
+ *  are made (README: "Exact"), so its images may come a float rounding
+ *  apart from the crop's; both stay within 1e-6 of a full trace.
+ *  @return RTP_ERR_ARGUMENT (a NULL argument, a region empty or not
+ *  inside the tree's pixels), RTP_ERR_NOMEM; *out is NULL on any
+ *  failure. */
 rtp_status rtp_tree_crop(const rtp_tree *tree, const int region[4], rtp_tree **out,
                          rtp_error *err);
 

@@ -3490,9 +3490,10 @@ rtp_status rtp_tree_merge(rtp_tree *const *parts, size_t n, rtp_tree **out, rtp_
     int fw, fh, gx, gy, x, y, spd;
     int32_t *owner = NULL; /* per frame sample: which part has it */
     rtp_status st = RTP_OK;
+    if (out)
+        *out = NULL;
     if (!parts || !n || !out)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_merge: no trees");
-    *out = NULL;
     for (i = 0; i < n; i++)
         if (!parts[i])
             return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_merge: NULL tree");
@@ -3508,7 +3509,7 @@ rtp_status rtp_tree_merge(rtp_tree *const *parts, size_t n, rtp_tree **out, rtp_
         if (i && !same_setup(p0, parts[i]))
             return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
                               "parts[%zu] was traced from another scene, frame or options "
-                              "than parts[0]",
+                              "than parts[0], or edited otherwise",
                               i);
         if (parts[i]->scene->nlights != parts[i]->nlights0)
             return rtpi_error(err, RTP_ERR_UNSUPPORTED, NULL, 0, 0,
@@ -3594,12 +3595,25 @@ rtp_status rtp_tree_crop(const rtp_tree *src, const int region[4], rtp_tree **ou
 {
     rtp_tree *t = NULL;
     size_t words, total = 0, at = 0;
-    int x0, y0, w, h, nx, ny, x, y;
+    int x0, y0, w, h, nx, ny, x, y, whole[4];
+    if (out)
+        *out = NULL;
     if (!src || !region || !out)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_crop: NULL argument");
-    *out = NULL;
-    if (!(region[0] >= src->rx && region[1] >= src->ry && region[0] < region[2] &&
-          region[1] < region[3] && region[2] - src->rx <= src->width &&
+    if (!region[0] && !region[1] && !region[2] && !region[3]) {
+        /* all 0: the tree's own pixels, as rtp_trace_options.region's
+           all 0 is the frame */
+        whole[0] = src->rx;
+        whole[1] = src->ry;
+        whole[2] = src->rx + src->width;
+        whole[3] = src->ry + src->height;
+        region = whole;
+    }
+    if (!(region[0] < region[2] && region[1] < region[3]))
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                          "region %d,%d,%d,%d is empty (x0 < x1 and y0 < y1 are needed)",
+                          region[0], region[1], region[2], region[3]);
+    if (!(region[0] >= src->rx && region[1] >= src->ry && region[2] - src->rx <= src->width &&
           region[3] - src->ry <= src->height))
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
                           "region %d,%d,%d,%d is not inside the tree's pixels %d,%d,%d,%d",

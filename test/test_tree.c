@@ -458,7 +458,27 @@ static void test_tree_crop(void)
             }
             memcpy(bad, reg, sizeof bad);
             bad[2] = bad[0];
-            CHECK(rtp_tree_crop(t, bad, &c2, NULL) == RTP_ERR_ARGUMENT && !c2);
+            {
+                rtp_error err;
+                CHECK(rtp_tree_crop(t, bad, &c2, &err) == RTP_ERR_ARGUMENT && !c2 &&
+                      strstr(err.message, "is empty"));
+            }
+            /* *out is NULL on every failure, a NULL tree's too */
+            c2 = (rtp_tree *)(void *)&bad;
+            CHECK(rtp_tree_crop(NULL, reg, &c2, NULL) == RTP_ERR_ARGUMENT && !c2);
+            /* all 0: the tree's own pixels (as a trace's region) */
+            {
+                static const int zero[4] = {0, 0, 0, 0};
+                rtp_tree *z = NULL;
+                rtp_image *zi = NULL;
+                CHECK(rtp_tree_crop(cc, zero, &z, NULL) == RTP_OK);
+                CHECK(z && rtp_tree_eval(z, NULL, &zi, NULL, NULL) == RTP_OK);
+                CHECK_MSG(zi && zi->width == reg[2] - reg[0] && zi->height == reg[3] - reg[1] &&
+                              same_region(whole, reg[0], reg[1], zi),
+                          "spd %d: all 0 crops the tree's own pixels", spd);
+                rtp_image_destroy(zi);
+                rtp_tree_destroy(z);
+            }
         }
         rtp_image_destroy(whole);
         rtp_image_destroy(rec);
