@@ -182,6 +182,7 @@ typedef struct rtpi_camera {
 typedef struct rtpi_texture {
     char *path;
     rtp_image *image;
+    double max_abs; /* the largest |texel|: the plane paths' bound (tree.c x_in_range) */
 } rtpi_texture;
 
 struct rtp_scene {

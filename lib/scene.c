@@ -179,6 +179,7 @@ rtp_status rtpi_scene_add_texture(rtp_scene *s, const char *path,
                                   uint32_t *index, rtp_error *err)
 {
     size_t i;
+    double mx;
     rtp_image *img = NULL;
     rtp_status st;
     char *p;
@@ -199,7 +200,9 @@ rtp_status rtpi_scene_add_texture(rtp_scene *s, const char *path,
         return st;
     /* (a PFM can hold NaN and infinity: every pixel it shades would be
        NaN, and the tree file could not hold it) */
-    for (i = 0; i < 3 * (size_t)img->width * (size_t)img->height; i++)
+    for (i = 0, mx = 0.0; i < 3 * (size_t)img->width * (size_t)img->height; i++) {
+        if (fabs(img->pixels[i]) > mx)
+            mx = fabs(img->pixels[i]);
         if (!isfinite(img->pixels[i])) {
             size_t px = i / 3, w = (size_t)img->width;
             rtp_image_destroy(img);
@@ -208,6 +211,7 @@ rtp_status rtpi_scene_add_texture(rtp_scene *s, const char *path,
                               "needs finite values",
                               px % w, px / w);
         }
+    }
     p = rtpi_strdup(&s->alloc, path);
     if (!p || GROW(s, texs, ntexs, cap_texs)) {
         rtpi_free(&s->alloc, p);
@@ -216,6 +220,7 @@ rtp_status rtpi_scene_add_texture(rtp_scene *s, const char *path,
     }
     s->texs[s->ntexs].path = p;
     s->texs[s->ntexs].image = img;
+    s->texs[s->ntexs].max_abs = mx;
     *index = (uint32_t)s->ntexs++;
     return RTP_OK;
 }
@@ -1001,6 +1006,7 @@ rtp_status rtpi_scene_clone(const rtp_scene *s, rtp_scene **out)
                 }
                 memcpy(c->texs[i].image->pixels, src->pixels,
                        sizeof(float) * 3 * (size_t)src->width * src->height);
+                c->texs[i].max_abs = s->texs[i].max_abs;
             }
         }
     }

@@ -960,6 +960,7 @@ static int hl_chunk(void *ctx, int chunk)
    shine and their colours P + sum W s. */
 static int hl_apply_chunk(void *ctx, int chunk)
 {
+    int big = 0;
     eval_ctx *e = (eval_ctx *)ctx;
     rtp_tree *t = e->t;
     size_t j = (size_t)chunk * 256, end = j + 256, q;
@@ -980,7 +981,11 @@ static int hl_apply_chunk(void *ctx, int chunk)
         out[0] = (float)v0;
         out[1] = (float)v1;
         out[2] = (float)v2;
+        big |= !(fabs(v0) <= PLANE_MAX) | !(fabs(v1) <= PLANE_MAX) | !(fabs(v2) <= PLANE_MAX);
     }
+    /* (past PLANE_MAX: the caller has the full path make the colours
+       from the terms set here) */
+    e->nonfinite |= big;
     return 0;
 }
 
@@ -2136,6 +2141,20 @@ static int pk_alloc(rtp_tree *t, int part)
    have them, and one material without a checker differs from them in kd
    or colour alone: the image is then affine in x = kd * colour of that
    material (rtpi_sample_diffuse).  *mat: the material. */
+/* kd c_obj of a material within PLANE_MAX in every channel (a texture's
+   texels multiply it: taken at their largest, 1 for 8-bit images). */
+static int x_in_range(const rtp_scene *s, const rtpi_material *m)
+{
+    double tex = 1.0;
+    int c;
+    if (m->tex == RTPI_TEX_IMAGE && m->tex_image < s->ntexs)
+        tex = s->texs[m->tex_image].max_abs;
+    for (c = 0; c < 3; c++)
+        if (!(fabs((double)m->kd * m->color[c]) * tex <= PLANE_MAX))
+            return 0;
+    return 1;
+}
+
 static int mat_term(rtp_tree *t, const double *cv, size_t nl, uint32_t *mat)
 {
     const rtp_scene *s = t->scene;
@@ -2162,7 +2181,12 @@ static int mat_term(rtp_tree *t, const double *cv, size_t nl, uint32_t *mat)
             return 0;
         *mat = (uint32_t)j;
     }
-    if (!found)
+    /* a sample's coefficient is kd c_obj times path weights and dot
+       products, rounded to a float: the full path made it infinite where
+       kd c_obj passed the float range, while K x from the planes, the
+       lights' colours taken in, stayed finite (kd 2, colour 3e38, lights
+       1e-20: 5e18 for infinity) */
+    if (!found || !x_in_range(s, &t->ev_mats[*mat]) || !x_in_range(s, &s->mats[*mat]))
         return 0;
     if (t->pk_term != (int)(2 + nl + *mat) + 1)
         t->pk_term = 0;
@@ -3186,16 +3210,25 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                 if (list_combine) {
                     /* every other sample's colour holds: the material's
                        samples from their highlights alone */
+                    int big = 0;
                     rtpi_parallel_rows((int)((n + 255) / 256),
                                        threads_for(28.0 * (double)t->hl_n + 28.0 * (double)n,
                                                    nthreads),
                                        ctx, hl_apply_chunk, NULL, NULL);
-                    hl_used = 1;
-                    hl_apply = 1;
-                    t->hl_shine = s->mats[m].shine;
-                    st.combined_samples = n;
-                    note_set(set_mats, &nset, (uint32_t)m);
-                    continue;
+                    for (i = 0; i < nthreads; i++) {
+                        big |= e[i].nonfinite;
+                        e[i].nonfinite = 0;
+                    }
+                    if (!big) {
+                        hl_used = 1;
+                        hl_apply = 1;
+                        t->hl_shine = s->mats[m].shine;
+                        st.combined_samples = n;
+                        note_set(set_mats, &nset, (uint32_t)m);
+                        continue;
+                    }
+                    /* a colour past PLANE_MAX: as without the samples'
+                       colours, below (the full path's arithmetic) */
                 }
                 /* the listed highlights for the new shine, then step 2
                    below; the list is made again once the samples are

@@ -1319,6 +1319,8 @@ static rtp_status read_texr(loader *L, rd *r)
             if (!isfinite(f))
                 return bad(L, "texture value is not finite", NULL);
             tx->image->pixels[k] = f;
+            if (fabs(f) > tx->max_abs)
+                tx->max_abs = fabs(f);
         }
         if (r->bad)
             return bad(L, "section too short", NULL);

@@ -1727,34 +1727,38 @@ static int edit_equals_trace(rtp_tree *t, rtp_scene *s, const rtp_trace_options 
 }
 
 /* Values near the float range, from the planes (a material's P + K x, the
-   colours' S + K (c - cS)) and from a full trace: the full path sums in
-   floats and overflowed where the planes, summing in doubles, gave a
-   finite 1.9e38 (or a float step apart): past PLANE_MAX the full path
-   makes the image, so the two are the same, infinities included. */
-static void near_float_max_run(int spd)
+   colours' S + K (c - cS), the listed highlights' P + sum W s) and from a
+   full trace: the full path sums in floats and overflowed where the
+   planes, summing in doubles, gave a finite 1.9e38 (or a float step
+   apart); past PLANE_MAX the full path makes the image, so the two are
+   the same, infinities included.  `pre` is set before the trace, each
+   line of `seq` (NULL-ended) is one evaluation of one or two edits. */
+static void near_float_max_run(int spd, const char *const *pre, const char *const (*seq)[4])
 {
-    static const char *const seq[][2] = {
-        {"mat.0.kd", "0.5"},         {"mat.0.kd", "1e38"},
-        {"mat.0.kd", "3e38"},        {"mat.0.kd", "0.7"},
-        {"mat.1.color", "3e38,1,1"}, {"mat.1.color", "0.9,0.2,0.15"},
-        {"light.0.color", "0.5,0.5,0.5"}, {"light.0.color", "1e38,1e38,1e38"},
-        {"light.1.color", "3e38,0,0"}, {"light.0.color", "0.7,0.7,0.7"},
-        {"ambient", "3e38,3e38,3e38"}, {"light.1.color", "0.4,0.4,0.5"},
-    };
-    rtp_scene *s;
-    rtp_tree *t;
+    rtp_scene *s = load("scenes/spheres.nff");
+    rtp_tree *t = NULL;
     rtp_trace_options o;
     rtp_eval_options eo;
-    rtp_image *re;
+    rtp_image *re = NULL;
     size_t i;
-    if (!edit_start(spd, &s, &t, &o, &eo, &re))
+    int k;
+    if (!s) {
+        CHECK(s != NULL);
         return;
-    for (i = 0; t && re && i < sizeof seq / sizeof *seq; i++) {
+    }
+    edit_options(spd, &o, &eo);
+    for (i = 0; pre[i]; i += 2)
+        CHECK(rtp_scene_set(s, pre[i], pre[i + 1], NULL) == RTP_OK);
+    CHECK(rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
+    CHECK(t && rtp_tree_eval(t, &eo, &re, NULL, NULL) == RTP_OK);
+    for (i = 0; t && re && seq[i][0]; i++) {
         rtp_eval_stats es;
         rtp_image *full = NULL;
         rtp_diff_stats d;
-        CHECK(rtp_tree_set(t, seq[i][0], seq[i][1], NULL) == RTP_OK);
-        CHECK(rtp_scene_set(s, seq[i][0], seq[i][1], NULL) == RTP_OK);
+        for (k = 0; k < 4 && seq[i][k]; k += 2) {
+            CHECK(rtp_tree_set(t, seq[i][k], seq[i][k + 1], NULL) == RTP_OK);
+            CHECK(rtp_scene_set(s, seq[i][k], seq[i][k + 1], NULL) == RTP_OK);
+        }
         if (rtp_tree_eval_into(t, &eo, re, &es, NULL) == RTP_OK &&
             rtp_trace(s, &o, &full, NULL, NULL) == RTP_OK &&
             rtp_image_diff(re, full, 1e-6, &d, NULL) == RTP_OK)
@@ -1773,8 +1777,34 @@ static void near_float_max_run(int spd)
 
 static void test_near_float_max(void)
 {
-    near_float_max_run(0);
-    near_float_max_run(1);
+    static const char *const none[] = {NULL};
+    static const char *const seq[][4] = {
+        {"mat.0.kd", "0.5"},         {"mat.0.kd", "1e38"},
+        {"mat.0.kd", "3e38"},        {"mat.0.kd", "0.7"},
+        {"mat.1.color", "3e38,1,1"}, {"mat.1.color", "0.9,0.2,0.15"},
+        {"light.0.color", "0.5,0.5,0.5"}, {"light.0.color", "1e38,1e38,1e38"},
+        {"light.1.color", "3e38,0,0"}, {"light.0.color", "0.7,0.7,0.7"},
+        {"ambient", "3e38,3e38,3e38"}, {"light.1.color", "0.4,0.4,0.5"},
+        /* consecutive shine edits from the listed highlights, the
+           colours past 2^100 (they were a float step off, or infinite
+           where a full trace gave the largest float) */
+        {"ambient", "0.1,0.1,0.1"},  {"mat.1.shine", "1e38"},
+        {"light.1.color", "1,1,6.6e35"}, {"mat.1.shine", "0.28"},
+        {"mat.1.shine", "3"},        {NULL},
+    };
+    /* kd c_obj past the float range under lights of 1e-20: a full trace's
+       float coefficients overflow where K x from the planes stayed 5e18 */
+    static const char *const dim[] = {"ambient", "1e-20,1e-20,1e-20", "light.0.color",
+                                      "1e-20,1e-20,1e-20", "light.1.color", "1e-20,1e-20,1e-20",
+                                      NULL};
+    static const char *const dim_seq[][4] = {
+        {"mat.1.kd", "0.5"}, {"mat.1.kd", "2", "mat.1.color", "3e38,1,1"}, {"mat.1.kd", "0.7"},
+        {NULL},
+    };
+    near_float_max_run(0, none, seq);
+    near_float_max_run(1, none, seq);
+    near_float_max_run(0, dim, dim_seq);
+    near_float_max_run(1, dim, dim_seq);
 }
 
 /* More than 64 lights where the caches are small: a stream's light edits
