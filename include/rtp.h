@@ -43,8 +43,8 @@
  *    on different threads with one allocator still need it to be).
  *  - Images are linear RGB floats, row-major, top row first.
  */
-#ifndef RTP_H
-#define RTP_H
+#ifndef RTP_RAYTRACE_RTP_H
+#define RTP_RAYTRACE_RTP_H
 
 #include <stddef.h>
 #include <stdio.h>
@@ -559,4 +559,4 @@ rtp_status rtp_diff_heatmap(const rtp_image *a, const rtp_image *b,
 #ifdef __cplusplus
 }
 #endif
-#endif /* RTP_H */
+#endif /* RTP_RAYTRACE_RTP_H */

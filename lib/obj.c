@@ -415,7 +415,7 @@ static rtp_status mtl_map(rtpi_lex *lx, rtp_scene *s, const char *what,
     start = map_name_start(tk, n, &unknown);
     for (from = start; from <= (unknown ? n - 1 : start); from++) {
         char *cand;
-        file.s = tk[from].s;
+        file = tk[from]; /* (its line and column for a message) */
         file.n = (size_t)(tk[n - 1].s + tk[n - 1].n - tk[from].s);
         if (tk[from].s[0] == '-' || memchr(file.s, '\0', file.n))
             continue;

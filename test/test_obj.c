@@ -269,6 +269,15 @@ static void test_mtl(void)
     CHECK(write_file(dir, "b.mtl", "newmtl x\nmap_Kd missing.png\n") == 0);
     CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_IO);
     CHECK(err.line == 2 && err.column == 8 && strstr(err.message, "missing.png"));
+    /* an image that is there but cannot be read: its line and column too
+       (they were left unset: garbage) */
+    CHECK(write_file(dir, "short.ppm", "P6\n4 4\n255\nabc") == 0);
+    CHECK(write_file(dir, "b.mtl", "newmtl x\nmap_Kd -s 1 1 1 short.ppm\n") == 0);
+    memset(&err, 0x55, sizeof err);
+    CHECK(rtp_scene_load(path, NULL, &s, &err) != RTP_OK);
+    CHECK_MSG(err.line == 2 && err.column == 17 && strstr(err.message, "short.ppm"),
+              "%d:%d %s", err.line, err.column, err.message);
+    remove_file(dir, "short.ppm");
     /* an option where the file name should be (it looked for an image
        named "-bm") */
     CHECK(write_file(dir, "b.mtl", "newmtl x\nbump -bm\n") == 0);
