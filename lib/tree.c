@@ -2141,16 +2141,31 @@ static int pk_alloc(rtp_tree *t, int part)
    have them, and one material without a checker differs from them in kd
    or colour alone: the image is then affine in x = kd * colour of that
    material (rtpi_sample_diffuse).  *mat: the material. */
-/* kd c_obj of a material within PLANE_MAX in every channel (a texture's
-   texels multiply it: taken at their largest, 1 for 8-bit images). */
-static int x_in_range(const rtp_scene *s, const rtpi_material *m)
+/* Does a material's part of a sample's coefficients stay within
+   PLANE_MAX, so that the full path's float coefficients cannot overflow
+   where a plane's value stays finite?  Each node adds w (kd c_obj d +
+   ks s), d and s at most 1, c_obj the colour times a texel (at most the
+   texture's largest, 1 for 8-bit images), and w a path weight: a product
+   of one ks or kt (ks + kt on total internal reflection) a bounce, so at
+   most M^(depth - 1) for M the largest ks + kt, and summed over a tree's
+   levels at most depth times that (1 each level where M <= 1, as in
+   every physical scene).  A mirror of ks 1e10 under a colour of 1e29
+   overflowed a full trace's coefficients where the planes gave 5.8e18
+   under lights of 1e-30. */
+static int mat_in_range(const rtp_tree *t, const rtpi_material *m)
 {
-    double tex = 1.0;
+    const rtp_scene *s = t->scene;
+    double tex = 1.0, big = 1.0, wsum;
+    size_t j;
     int c;
+    for (j = 0; j < s->nmats; j++)
+        big = fmax(big, (double)s->mats[j].ks + s->mats[j].kt);
+    wsum = (big > 1.0 ? pow(big, t->max_depth - 1) : 1.0) * t->max_depth;
     if (m->tex == RTPI_TEX_IMAGE && m->tex_image < s->ntexs)
         tex = s->texs[m->tex_image].max_abs;
     for (c = 0; c < 3; c++)
-        if (!(fabs((double)m->kd * m->color[c]) * tex <= PLANE_MAX))
+        if (!((fabs((double)m->kd * m->color[c]) * tex + fabs((double)m->ks)) * wsum <=
+              PLANE_MAX))
             return 0;
     return 1;
 }
@@ -2185,8 +2200,8 @@ static int mat_term(rtp_tree *t, const double *cv, size_t nl, uint32_t *mat)
        products, rounded to a float: the full path made it infinite where
        kd c_obj passed the float range, while K x from the planes, the
        lights' colours taken in, stayed finite (kd 2, colour 3e38, lights
-       1e-20: 5e18 for infinity) */
-    if (!found || !x_in_range(s, &t->ev_mats[*mat]) || !x_in_range(s, &s->mats[*mat]))
+       1e-20: 5e18 for infinity): mat_in_range */
+    if (!found || !mat_in_range(t, &t->ev_mats[*mat]) || !mat_in_range(t, &s->mats[*mat]))
         return 0;
     if (t->pk_term != (int)(2 + nl + *mat) + 1)
         t->pk_term = 0;
@@ -3194,7 +3209,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
             redo = terms_changed(&s->mats[m], &t->ev_mats[m]) || pend;
             n = t->mat_start[m + 1] - t->mat_start[m];
             if (redo && nmat_changed == 1 && !coeffs_dirty &&
-                shine_only(&t->ev_mats[m], &s->mats[m]) &&
+                shine_only(&t->ev_mats[m], &s->mats[m]) && mat_in_range(t, &s->mats[m]) &&
                 (t->hl_mat == (int)m + 1 || hl_build(t, &shade, vis, (uint32_t)m, cl, cv) == 0)) {
                 for (i = 0; i < nthreads; i++) {
                     e[i].mat = (uint32_t)m;

@@ -1733,7 +1733,8 @@ static int edit_equals_trace(rtp_tree *t, rtp_scene *s, const rtp_trace_options 
    apart); past PLANE_MAX the full path makes the image, so the two are
    the same, infinities included.  `pre` is set before the trace, each
    line of `seq` (NULL-ended) is one evaluation of one or two edits. */
-static void near_float_max_run(int spd, const char *const *pre, const char *const (*seq)[4])
+static void near_float_max_run(int spd, int depth, const char *const *pre,
+                               const char *const (*seq)[4])
 {
     rtp_scene *s = load("scenes/spheres.nff");
     rtp_tree *t = NULL;
@@ -1747,6 +1748,8 @@ static void near_float_max_run(int spd, const char *const *pre, const char *cons
         return;
     }
     edit_options(spd, &o, &eo);
+    if (depth)
+        o.max_depth = depth;
     for (i = 0; pre[i]; i += 2)
         CHECK(rtp_scene_set(s, pre[i], pre[i + 1], NULL) == RTP_OK);
     CHECK(rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
@@ -1801,10 +1804,24 @@ static void test_near_float_max(void)
         {"mat.1.kd", "0.5"}, {"mat.1.kd", "2", "mat.1.color", "3e38,1,1"}, {"mat.1.kd", "0.7"},
         {NULL},
     };
-    near_float_max_run(0, none, seq);
-    near_float_max_run(1, none, seq);
-    near_float_max_run(0, dim, dim_seq);
-    near_float_max_run(1, dim, dim_seq);
+    /* path weights past 1 (a mirror's ks of 1e10, a ks of 1.7e38 over
+       one of 4): a colour of 1e29, or a shine edit from the listed
+       highlights, overflowed a full trace's coefficients where the planes
+       stayed finite (5.8e18, 1.3e8) */
+    static const char *const heavy[] = {"ambient", "1e-30,1e-30,1e-30", "background",
+                                        "1e-30,1e-30,1e-30", "light.0.color", "1e-30,1e-30,1e-30",
+                                        "light.1.color", "1e-30,1e-30,1e-30", NULL};
+    static const char *const heavy_seq[][4] = {
+        {"mat.3.ks", "1e10"}, {"mat.1.color", "1e29,1e29,1e29"}, {"mat.1.color", "0.9,0.2,0.15"},
+        {"mat.3.ks", "4", "mat.1.ks", "1.7e38"}, {"mat.1.shine", "100000"}, {"mat.1.shine", "3"},
+        {NULL},
+    };
+    near_float_max_run(0, 0, none, seq);
+    near_float_max_run(1, 0, none, seq);
+    near_float_max_run(0, 0, dim, dim_seq);
+    near_float_max_run(1, 0, dim, dim_seq);
+    near_float_max_run(0, 2, heavy, heavy_seq);
+    near_float_max_run(0, 0, heavy, heavy_seq);
 }
 
 /* More than 64 lights where the caches are small: a stream's light edits
