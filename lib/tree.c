@@ -2136,11 +2136,6 @@ static int pk_alloc(rtp_tree *t, int part)
     return part || (t->pk && t->pk_q);
 }
 
-/* May the one-term path make this image for a material edit?  Yes when
-   the lights, their colours and every other material are as the caches
-   have them, and one material without a checker differs from them in kd
-   or colour alone: the image is then affine in x = kd * colour of that
-   material (rtpi_sample_diffuse).  *mat: the material. */
 /* Does a material's part of a sample's coefficients stay within
    PLANE_MAX, so that the full path's float coefficients cannot overflow
    where a plane's value stays finite?  Each node adds w (kd c_obj d +
@@ -2170,6 +2165,11 @@ static int mat_in_range(const rtp_tree *t, const rtpi_material *m)
     return 1;
 }
 
+/* May the one-term path make this image for a material edit?  Yes when
+   the lights, their colours and every other material are as the caches
+   have them, and one material without a checker differs from them in kd
+   or colour alone: the image is then affine in x = kd * colour of that
+   material (rtpi_sample_diffuse).  *mat: the material. */
 static int mat_term(rtp_tree *t, const double *cv, size_t nl, uint32_t *mat)
 {
     const rtp_scene *s = t->scene;
@@ -3185,9 +3185,8 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                 one = 1;
                 matpath = 1; /* the coefficients stay those of the material before */
             } else {
-                /* (or an image past PLANE_MAX from them: the full path
-                   makes this one, and the planes are dropped) */
-                /* planes not finite (or no memory for them): the
+                /* planes not finite, no memory for them, or an image
+                   past PLANE_MAX from them (then dropped): the
                    material's samples below, then every sample */
                 list_combine = 0;
                 t->ev_samples_ok = 0;
