@@ -502,8 +502,19 @@ void rtpi_sample_terms(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
 /* coeffs: RTPI_COEFFS(nlights) floats: G, A, then K_i; acc: as many
    doubles of scratch (sums are kept in double, then rounded once).  w
    (NULL: not wanted): the path weight step 2 reaches each of the n nodes
-   with, as rtpi_sample_weights gives it.  0 where a coefficient is not
-   finite (or they sum beyond the float range), else 1. */
+   with, as rtpi_sample_weights gives it.  0 where the coefficients'
+   magnitudes sum past RTPI_COEFF_MAX (or one is not finite), else 1. */
+/* The largest sum of a sample's |coefficients| with which re-evaluation
+   makes images from planes (tree.c): with the colours' magnitudes summing
+   to no more than it too, every sum the full path makes stays below
+   2^100, far inside the float range, so planes and full path cannot
+   part at an overflow (a mirror of ks 1.5 carrying a colour of 2.3e38
+   into one coefficient, another material's edit adding 4e28 to it: the
+   full path's float coefficient overflowed, the planes' sum did not;
+   coefficients of +-1e29 whose corners cancel in an SPD pixel's plane,
+   times an ambient of 1e20: NaN against a finite value).  Physical
+   scenes stay near 1. */
+#define RTPI_COEFF_MAX 0x1p50
 int rtpi_sample_coeffs(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
                        size_t n, const float *terms, double *acc,
                        float *coeffs, double *w);

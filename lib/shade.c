@@ -364,12 +364,11 @@ unsigned long long rtpi_light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *no
                same colour: that sample holds */
             const float f[3] = {(float)a0, (float)a1, (float)a2};
             float *cf = co + 6 + 3 * light;
-            /* each finite as a float where their magnitudes sum to no
-               more than FLT_MAX (a NaN fails the test; so, needlessly but
-               safely, do three near the float range, as in
-               rtpi_sample_coeffs): one test, not three classifications
-               (a tenth of a move's sums on tetra) */
-            nonfinite |= !(fabs(a0) + fabs(a1) + fabs(a2) <= FLT_MAX);
+            /* their magnitudes within RTPI_COEFF_MAX, as in
+               rtpi_sample_coeffs (a NaN fails the test): one test, not
+               three classifications (a tenth of a move's sums on
+               tetra) */
+            nonfinite |= !(fabs(a0) + fabs(a1) + fabs(a2) <= RTPI_COEFF_MAX);
             if (samples && memcmp(cf, f, sizeof f) == 0)
                 continue;
             memcpy(cf, f, sizeof f);
@@ -512,7 +511,7 @@ int rtpi_sample_coeffs(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t 
                        const float *terms, double *acc, float *coeffs, double *w)
 {
     size_t m = RTPI_COEFFS(c->s->nlights), i;
-    float sum = 0.0f;
+    double sum = 0.0;
     for (i = 0; i < m; i++)
         acc[i] = 0.0;
     if (w)
@@ -524,11 +523,10 @@ int rtpi_sample_coeffs(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t 
         coeffs_node(c, nodes, 0, terms, 1.0, acc, w);
     for (i = 0; i < m; i++) {
         coeffs[i] = (float)acc[i];
-        sum += coeffs[i];
+        sum += fabsf(coeffs[i]);
     }
-    /* a coefficient not finite makes the sum so (as may finite ones near
-       the float range, which the caller then treats alike) */
-    return fabsf(sum) <= FLT_MAX;
+    /* (a coefficient not finite makes the sum so) */
+    return sum <= RTPI_COEFF_MAX;
 }
 
 void rtpi_light_colors(const rtp_scene *s, double *cl)

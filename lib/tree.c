@@ -2137,8 +2137,8 @@ static int pk_alloc(rtp_tree *t, int part)
 }
 
 /* Does a material's part of a sample's coefficients stay within
-   PLANE_MAX, so that the full path's float coefficients cannot overflow
-   where a plane's value stays finite?  Each node adds w (kd c_obj d +
+   RTPI_COEFF_MAX, so that the full path's float coefficients cannot
+   overflow where a plane's value stays finite?  Each node adds w (kd c_obj d +
    ks s), d and s at most 1, c_obj the colour times a texel (at most the
    texture's largest, 1 for 8-bit images), and w a path weight: a product
    of one ks or kt (ks + kt on total internal reflection) a bounce, so at
@@ -2160,9 +2160,21 @@ static int mat_in_range(const rtp_tree *t, const rtpi_material *m)
         tex = s->texs[m->tex_image].max_abs;
     for (c = 0; c < 3; c++)
         if (!((fabs((double)m->kd * m->color[c]) * tex + fabs((double)m->ks)) * wsum <=
-              PLANE_MAX))
+              RTPI_COEFF_MAX))
             return 0;
     return 1;
+}
+
+/* May planes make images at all: the kept coefficients within
+   RTPI_COEFF_MAX (t->ev_inf: one passed it since the last full
+   evaluation) and the colours cv (nc of them) summing within it too. */
+static int planes_in_range(const rtp_tree *t, const double *cv, size_t nc)
+{
+    double sum = 0.0;
+    size_t j;
+    for (j = 0; j < nc; j++)
+        sum += fabs(cv[j]);
+    return !t->ev_inf && sum <= RTPI_COEFF_MAX;
 }
 
 /* May the one-term path make this image for a material edit?  Yes when
@@ -2174,10 +2186,10 @@ static int mat_term(rtp_tree *t, const double *cv, size_t nl, uint32_t *mat)
 {
     const rtp_scene *s = t->scene;
     size_t j, found = 0;
-    /* (coefficients beyond the float range: the planes' values can be
-       finite where the image the coefficients make is not, so the
+    /* (coefficients or colours past RTPI_COEFF_MAX: the planes' values
+       can be finite where the image the coefficients make is not, so the
        samples are summed as trace sums them) */
-    if (!t->ev_valid || !t->ev_cl || t->ev_inf)
+    if (!t->ev_valid || !t->ev_cl || !planes_in_range(t, cv, RTPI_COEFFS(nl)))
         return 0;
     for (j = 0; j < RTPI_COEFFS(nl); j++)
         if (cv[j] != t->ev_cl[j])
@@ -3209,6 +3221,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
             n = t->mat_start[m + 1] - t->mat_start[m];
             if (redo && nmat_changed == 1 && !coeffs_dirty &&
                 shine_only(&t->ev_mats[m], &s->mats[m]) && mat_in_range(t, &s->mats[m]) &&
+                planes_in_range(t, cv, RTPI_COEFFS(nl)) &&
                 (t->hl_mat == (int)m + 1 || hl_build(t, &shade, vis, (uint32_t)m, cl, cv) == 0)) {
                 for (i = 0; i < nthreads; i++) {
                     e[i].mat = (uint32_t)m;
@@ -3293,7 +3306,8 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                 st.combined_samples = ns;
             t->pk_term = 0;
             by_mark = e[0].mark != NULL;
-        } else if (!coeffs_dirty && cp_eval(t, e, ctx, nthreads, cv, samples, img->pixels, sparse, &st)) {
+        } else if (!coeffs_dirty && planes_in_range(t, cv, RTPI_COEFFS(nl)) &&
+                   cp_eval(t, e, ctx, nthreads, cv, samples, img->pixels, sparse, &st)) {
             /* colours alone changed: S + K (c - cS) per pixel */
             one = 1;
             t->pk_term = 0; /* (a material's planes hold the colours before) */

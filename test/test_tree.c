@@ -1733,10 +1733,10 @@ static int edit_equals_trace(rtp_tree *t, rtp_scene *s, const rtp_trace_options 
    apart); past PLANE_MAX the full path makes the image, so the two are
    the same, infinities included.  `pre` is set before the trace, each
    line of `seq` (NULL-ended) is one evaluation of one or two edits. */
-static void near_float_max_run(int spd, int depth, const char *const *pre,
-                               const char *const (*seq)[4])
+static void near_float_max_on(const char *path, int spd, int depth, const int *region,
+                              const char *const *pre, const char *const (*seq)[4])
 {
-    rtp_scene *s = load("scenes/spheres.nff");
+    rtp_scene *s = load(path);
     rtp_tree *t = NULL;
     rtp_trace_options o;
     rtp_eval_options eo;
@@ -1750,6 +1750,8 @@ static void near_float_max_run(int spd, int depth, const char *const *pre,
     edit_options(spd, &o, &eo);
     if (depth)
         o.max_depth = depth;
+    if (region)
+        memcpy(o.region, region, sizeof o.region);
     for (i = 0; pre[i]; i += 2)
         CHECK(rtp_scene_set(s, pre[i], pre[i + 1], NULL) == RTP_OK);
     CHECK(rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
@@ -1768,6 +1770,12 @@ static void near_float_max_run(int spd, int depth, const char *const *pre,
     rtp_image_destroy(re);
     rtp_tree_destroy(t);
     rtp_scene_destroy(s);
+}
+
+static void near_float_max_run(int spd, int depth, const char *const *pre,
+                               const char *const (*seq)[4])
+{
+    near_float_max_on("scenes/spheres.nff", spd, depth, NULL, pre, seq);
 }
 
 static void test_near_float_max(void)
@@ -1812,8 +1820,45 @@ static void test_near_float_max(void)
     near_float_max_run(1, 0, none, seq);
     near_float_max_run(0, 0, dim, dim_seq);
     near_float_max_run(1, 0, dim, dim_seq);
+    /* a coefficient within a float rounding of the range (a mirror of
+       ks 1.5 carrying a colour of 2.27e38), another material's edit
+       adding 4e28 to it: the full path's float coefficient overflowed,
+       the planes' sum did not (3.4e8 for infinity) */
+    static const char *const edge[] = {
+        "ambient", "1e-30,1e-30,1e-30", "background", "1e-30,1e-30,1e-30",
+        "light.0.color", "1e-30,1e-30,1e-30", "light.1.color", "1e-30,1e-30,1e-30",
+        "light.0.pos", "0,0,-100", "light.1.pos", "0,0,-100",
+        "mat.1.kd", "0.99999099969863892", "mat.1.color", "2.2685694628238921e+38,0,0",
+        "mat.1.ks", "0", "mat.1.kt", "0", "mat.3.ks", "1.5", "mat.3.color", "0,0,0", NULL};
+    static const char *const edge_seq[][4] = {{"mat.3.color", "4e29,4e29,4e29"}, {NULL}};
+    /* corner coefficients of +-1e29 (a texture of negative texels) that
+       cancel in an SPD pixel's plane, times an ambient of 1e20: NaN from
+       the full path, a finite value from the plane */
+    static const int column[4] = {134, 312, 135, 355};
+    static const char *const neg_seq[][4] = {{"ambient", "1e20,1e20,1e20"}, {NULL}};
+    char tex[512];
+    FILE *f;
     near_float_max_run(0, 2, heavy, heavy_seq);
     near_float_max_run(0, 0, heavy, heavy_seq);
+    near_float_max_run(0, 3, edge, edge_seq);
+    snprintf(tex, sizeof tex, "%s/rtp-neg-%d.pfm", tmpdir(), (int)getpid());
+    f = fopen(tex, "wb");
+    CHECK(f != NULL);
+    if (f) {
+        static const float neg[12] = {-1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1};
+        const char *const negpre[] = {
+            "mat.0.texture", tex, "mat.0.kd", "1", "mat.0.color", "1e29,1e29,1e29",
+            "mat.1.kd", "1", "mat.1.color", "1e29,1e29,1e29", "mat.1.ks", "0", "mat.2.ks", "0",
+            "ambient", "1e-30,1e-30,1e-30", "background", "1e-30,1e-30,1e-30",
+            "light.0.color", "1e-30,1e-30,1e-30", NULL};
+        int le = 1;
+        /* (PFM: a negative scale is little-endian floats) */
+        CHECK(fputs(*(const char *)&le ? "PF\n2 2\n-1.0\n" : "PF\n2 2\n1.0\n", f) >= 0 &&
+              fwrite(neg, sizeof neg, 1, f) == 1);
+        CHECK(fclose(f) == 0);
+        near_float_max_on("scenes/textured.nff", 1, 0, column, negpre, neg_seq);
+        remove(tex);
+    }
 }
 
 /* More than 64 lights where the caches are small: a stream's light edits
