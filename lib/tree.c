@@ -694,16 +694,6 @@ static double ev_cache_bytes(const rtp_tree *t, size_t nl, size_t ns)
    the full path makes the image instead (hl_build, pk_put, cp_lost). */
 #define CP_SPAN 4.0
 
-/* The full path sums an image's parts in floats (terms, a pixel's
-   corners) where the planes sum P + K x in doubles and round once: near
-   the float range (a kd of 1e38) a pixel came out finite from the planes
-   (1.9e38) and infinite from a full trace, or a float step apart.  A
-   value past PLANE_MAX (2^100, 1.3e30: 2^28 below the range, so no sum
-   of a pixel's few parts that the planes leave finite and below it can
-   overflow in the full path) is left to the full path, which is then the
-   full trace's arithmetic bit for bit (pk_pixel, cp_lost). */
-#define PLANE_MAX 0x1p100
-
 typedef struct eval_ctx {
     rtp_tree *t;
     const rtpi_shade_ctx *shade;
@@ -822,16 +812,12 @@ static void rest_of(const double *cv, size_t nc, const float *coeffs, double v[3
     v[2] = a2;
 }
 
-/* One pixel: P + K x; 1 where a value passes PLANE_MAX or is NaN (the
-   full path makes the image then). */
-static int pk_pixel(const float *pk, const double *x, float *out)
+/* One pixel: P + K x. */
+static void pk_pixel(const float *pk, const double *x, float *out)
 {
-    const double v0 = pk[0] + pk[3] * x[0], v1 = pk[1] + pk[4] * x[1],
-                 v2 = pk[2] + pk[5] * x[2];
-    out[0] = (float)v0;
-    out[1] = (float)v1;
-    out[2] = (float)v2;
-    return !(fabs(v0) <= PLANE_MAX) | !(fabs(v1) <= PLANE_MAX) | !(fabs(v2) <= PLANE_MAX);
+    out[0] = (float)(pk[0] + pk[3] * x[0]);
+    out[1] = (float)(pk[1] + pk[4] * x[1]);
+    out[2] = (float)(pk[2] + pk[5] * x[2]);
 }
 
 /* ------------------------------------------------------- highlights
@@ -960,7 +946,6 @@ static int hl_chunk(void *ctx, int chunk)
    shine and their colours P + sum W s. */
 static int hl_apply_chunk(void *ctx, int chunk)
 {
-    int big = 0;
     eval_ctx *e = (eval_ctx *)ctx;
     rtp_tree *t = e->t;
     size_t j = (size_t)chunk * 256, end = j + 256, q;
@@ -981,11 +966,7 @@ static int hl_apply_chunk(void *ctx, int chunk)
         out[0] = (float)v0;
         out[1] = (float)v1;
         out[2] = (float)v2;
-        big |= !(fabs(v0) <= PLANE_MAX) | !(fabs(v1) <= PLANE_MAX) | !(fabs(v2) <= PLANE_MAX);
     }
-    /* (past PLANE_MAX: the caller has the full path make the colours
-       from the terms set here) */
-    e->nonfinite |= big;
     return 0;
 }
 
@@ -1442,7 +1423,7 @@ static int pk_img_chunk(void *ctx, int chunk)
                 /* the edit itself (pk_apply_listed's), over B just read:
                    where the band's planes turn out not to be used (the
                    check below), the full path writes every pixel anew */
-                bad |= pk_pixel(pc + 6 * n, xn, e->pixels + 3 * (p + x));
+                pk_pixel(pc + 6 * n, xn, e->pixels + 3 * (p + x));
                 nz[n++] = (uint32_t)(p + x);
             }
         }
@@ -1488,7 +1469,7 @@ check:
         const double xn[3] = {e->x[0], e->x[1], e->x[2]};
         float *out = e->pixels;
         for (i = 0; i < n; i++)
-            e->nonfinite |= pk_pixel(pc + 6 * i, xn, out + 3 * (size_t)nz[i]);
+            pk_pixel(pc + 6 * i, xn, out + 3 * (size_t)nz[i]);
     }
     return 0;
 }
@@ -1614,7 +1595,7 @@ static int pk_apply_band(void *ctx, int chunk)
         end = (size_t)t->width * t->height;
     for (; p < end; p++)
         if (j < n && nz[j] == p) {
-            e->nonfinite |= pk_pixel(pc + 6 * j, e->x, e->pixels + 3 * p);
+            pk_pixel(pc + 6 * j, e->x, e->pixels + 3 * p);
             j++;
         } else {
             memcpy(e->pixels + 3 * p, t->pk + 3 * p, 3 * sizeof *t->pk);
@@ -1632,7 +1613,7 @@ static int pk_apply_listed(void *ctx, int chunk)
     const uint32_t *nz = t->pk_nz + t->pk_off[chunk];
     const double *c = e->x;
     for (j = 0; j < n; j++)
-        e->nonfinite |= pk_pixel(pc + 6 * j, c, e->pixels + 3 * (size_t)nz[j]);
+        pk_pixel(pc + 6 * j, c, e->pixels + 3 * (size_t)nz[j]);
     return 0;
 }
 static void free_material_lists(rtp_tree *t)
@@ -2085,12 +2066,11 @@ static int threads_for(double bytes, int nthreads)
 
 /* P + K x into the image: every pixel, or with `sparse` (the image holds
    the last evaluation, which differed in this term alone) the pixels
-   whose K is not 0.  0 where a value passed PLANE_MAX: the full path
-   then writes every pixel. */
-static int pk_apply(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, int sparse,
-                    rtp_eval_stats *st)
+   whose K is not 0. */
+static void pk_apply(rtp_tree *t, void *const *ctx, int nthreads, int sparse,
+                     rtp_eval_stats *st)
 {
-    int nb = (t->height + PK_ROWS - 1) / PK_ROWS, i, ok = 1;
+    int nb = (t->height + PK_ROWS - 1) / PK_ROWS;
     if (sparse) {
         rtpi_parallel_rows(nb, threads_for(40.0 * (double)t->pk_nnz, nthreads), ctx,
                            pk_apply_listed, NULL, NULL);
@@ -2100,13 +2080,6 @@ static int pk_apply(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, in
                            ctx, pk_apply_band, NULL, NULL);
         st->written_pixels = (unsigned long long)t->width * t->height;
     }
-    for (i = 0; i < nthreads; i++) {
-        ok &= !e[i].nonfinite;
-        e[i].nonfinite = 0;
-    }
-    if (!ok)
-        st->written_pixels = (unsigned long long)t->width * t->height;
-    return ok;
 }
 
 /* The planes' memory but pk_c's block (pk_build makes that), unless it
@@ -2500,7 +2473,7 @@ static int cp_snapshot(rtp_tree *t, const float *samples, const float *last, siz
 static int cp_lost(double s, double kc, double v)
 {
     double a = fabs(v);
-    return !(fabs(s) + kc <= CP_SPAN * (a > 2.0 ? a : 2.0)) | !(a <= PLANE_MAX);
+    return !(fabs(s) + kc <= CP_SPAN * (a > 2.0 ? a : 2.0));
 }
 
 /* S + sum K_d (c_d - cS_d) at pixel p over the differing terms but
@@ -3190,15 +3163,15 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                     st.combined_samples = part ? 0 : ns;
                 }
             }
-            if (t->pk_term == (int)(2 + nl + mt) + 1 &&
-                (applied || pk_apply(t, e, ctx, nthreads, sparse, &st))) {
+            if (t->pk_term == (int)(2 + nl + mt) + 1) {
                 if (applied) /* (pk_img_chunk wrote them as it made their planes) */
                     st.written_pixels = t->pk_nnz;
+                else
+                    pk_apply(t, ctx, nthreads, sparse, &st);
                 one = 1;
                 matpath = 1; /* the coefficients stay those of the material before */
             } else {
-                /* planes not finite, no memory for them, or an image
-                   past PLANE_MAX from them (then dropped): the
+                /* planes not finite (or no memory for them): the
                    material's samples below, then every sample */
                 list_combine = 0;
                 t->ev_samples_ok = 0;
@@ -3237,25 +3210,16 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                 if (list_combine) {
                     /* every other sample's colour holds: the material's
                        samples from their highlights alone */
-                    int big = 0;
                     rtpi_parallel_rows((int)((n + 255) / 256),
                                        threads_for(28.0 * (double)t->hl_n + 28.0 * (double)n,
                                                    nthreads),
                                        ctx, hl_apply_chunk, NULL, NULL);
-                    for (i = 0; i < nthreads; i++) {
-                        big |= e[i].nonfinite;
-                        e[i].nonfinite = 0;
-                    }
-                    if (!big) {
-                        hl_used = 1;
-                        hl_apply = 1;
-                        t->hl_shine = s->mats[m].shine;
-                        st.combined_samples = n;
-                        note_set(set_mats, &nset, (uint32_t)m);
-                        continue;
-                    }
-                    /* a colour past PLANE_MAX: as without the samples'
-                       colours, below (the full path's arithmetic) */
+                    hl_used = 1;
+                    hl_apply = 1;
+                    t->hl_shine = s->mats[m].shine;
+                    st.combined_samples = n;
+                    note_set(set_mats, &nset, (uint32_t)m);
+                    continue;
                 }
                 /* the listed highlights for the new shine, then step 2
                    below; the list is made again once the samples are

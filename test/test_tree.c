@@ -1730,7 +1730,7 @@ static int edit_equals_trace(rtp_tree *t, rtp_scene *s, const rtp_trace_options 
    colours' S + K (c - cS), the listed highlights' P + sum W s) and from a
    full trace: the full path sums in floats and overflowed where the
    planes, summing in doubles, gave a finite 1.9e38 (or a float step
-   apart); past PLANE_MAX the full path makes the image, so the two are
+   apart); past RTPI_COEFF_MAX the full path makes the image, so the two are
    the same, infinities included.  `pre` is set before the trace, each
    line of `seq` (NULL-ended) is one evaluation of one or two edits. */
 static void near_float_max_on(const char *path, int spd, int depth, const int *region,
