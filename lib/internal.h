@@ -182,7 +182,7 @@ typedef struct rtpi_camera {
 typedef struct rtpi_texture {
     char *path;
     rtp_image *image;
-    double max_abs; /* the largest |texel|: the plane paths' bound (tree.c x_in_range) */
+    double max_abs; /* the largest |texel|: the plane paths' bound (tree.c mat_in_range) */
 } rtpi_texture;
 
 struct rtp_scene {
@@ -499,22 +499,23 @@ typedef struct rtpi_shade_ctx {
 void rtpi_sample_terms(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
                        size_t n, const uint32_t *vis_ext, rtpi_v3 eye,
                        float *terms, float *nv);
+/* The largest sum of a sample's |coefficients| with which re-evaluation
+   makes images from planes (tree.c): with the colours' magnitudes summing
+   to no more than it too, and an edited material's new part within it,
+   every sum either path makes stays below 2^101, far inside the float
+   range, so planes and full path cannot part at an overflow (a mirror
+   of ks 1.5 carrying a colour of 2.3e38 into one coefficient, another
+   material's edit adding 4e28 to it: the full path's float coefficient
+   overflowed, the planes' sum did not;
+   coefficients of +-1e29 whose corners cancel in an SPD pixel's plane,
+   times an ambient of 1e20: NaN against a finite value).  Physical
+   scenes stay near 1. */
+#define RTPI_COEFF_MAX 0x1p50
 /* coeffs: RTPI_COEFFS(nlights) floats: G, A, then K_i; acc: as many
    doubles of scratch (sums are kept in double, then rounded once).  w
    (NULL: not wanted): the path weight step 2 reaches each of the n nodes
    with, as rtpi_sample_weights gives it.  0 where the coefficients'
    magnitudes sum past RTPI_COEFF_MAX (or one is not finite), else 1. */
-/* The largest sum of a sample's |coefficients| with which re-evaluation
-   makes images from planes (tree.c): with the colours' magnitudes summing
-   to no more than it too, every sum the full path makes stays below
-   2^100, far inside the float range, so planes and full path cannot
-   part at an overflow (a mirror of ks 1.5 carrying a colour of 2.3e38
-   into one coefficient, another material's edit adding 4e28 to it: the
-   full path's float coefficient overflowed, the planes' sum did not;
-   coefficients of +-1e29 whose corners cancel in an SPD pixel's plane,
-   times an ambient of 1e20: NaN against a finite value).  Physical
-   scenes stay near 1. */
-#define RTPI_COEFF_MAX 0x1p50
 int rtpi_sample_coeffs(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
                        size_t n, const float *terms, double *acc,
                        float *coeffs, double *w);
@@ -804,8 +805,9 @@ struct rtp_tree {
                               all 0 between evaluations: the samples a
                               moved light's pass combined, and the rows
                               that have any (tree.c: mark_row) */
-    int ev_inf;            /* some coefficient is beyond the float range
-                              (a kt of 1e19): no material planes */
+    int ev_inf;            /* some coefficient passed RTPI_COEFF_MAX (a kt
+                              of 1e19) since the last full evaluation: no
+                              planes (tree.c planes_in_range) */
     size_t ev_nlights;
     double *ev_pos;        /* 3 per light: positions the terms are for */
     int ev_vis_mode, ev_vis_res;

@@ -2111,8 +2111,8 @@ static int pk_alloc(rtp_tree *t, int part)
 
 /* Does a material's part of a sample's coefficients stay within
    RTPI_COEFF_MAX, so that the full path's float coefficients cannot
-   overflow where a plane's value stays finite?  Each node adds w (kd c_obj d +
-   ks s), d and s at most 1, c_obj the colour times a texel (at most the
+   overflow where a plane's value stays finite?  Each node adds
+   w (kd c_obj d + ks s), d and s at most 1, c_obj the colour times a texel (at most the
    texture's largest, 1 for 8-bit images), and w a path weight: a product
    of one ks or kt (ks + kt on total internal reflection) a bounce, so at
    most M^(depth - 1) for M the largest ks + kt, and summed over a tree's
