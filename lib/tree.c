@@ -2314,9 +2314,21 @@ static int cp_plane_chunk(void *ctx, int chunk)
     for (y = y0; y < y1; y++) {
         size_t p = (size_t)y * w;
         const float *ka = t->ev_coeffs + (spd ? (size_t)y * nx : p) * ks + 3 * j;
+        /* the node ranges of the pixel's samples (its corners: sample
+           rows y and y + 1) */
+        const uint64_t *sa = t->start + (spd ? (size_t)y * nx : p), *sb = sa + nx;
         float *kp = k + 3 * p;
-        for (x = 0; x < t->width; x++, p++, ka += ks, kp += 3) {
+        for (x = 0; x < t->width; x++, p++, ka += ks, kp += 3, sa++, sb++) {
             float k0, k1, k2;
+            if (j > 0 && (spd ? sa[2] == sa[0] && sb[2] == sb[0] : sa[1] == sa[0])) {
+                /* Samples without nodes (the eye ray saw the background)
+                   have no term but the background's: 0 here, known
+                   without reading their coefficients (tetra: 81% of the
+                   samples, whose coefficients were most of the bytes a
+                   light's first colour edit read) */
+                kp[0] = kp[1] = kp[2] = 0.0f;
+                continue;
+            }
             if (spd) {
                 const float *kb = ka + nx * ks; /* the corners below */
                 k0 = (float)(0.25 * ((double)ka[0] + ka[ks] + kb[0] + kb[ks]));
