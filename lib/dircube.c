@@ -1926,6 +1926,7 @@ typedef struct ib_cast {
     const rtp_scene *s;
     uint32_t prim;
     int sphere, inside;
+    double near2; /* the square of dc_near's bound, less 2e-9 of it */
     const ib_part *pt;
     unsigned long long *casts;
 } ib_cast;
@@ -1950,6 +1951,18 @@ static void ib_cast_run(void *user, size_t cell, int count)
         rtpi_v3 d = rtpi_dc_world(f, ib->w.u0[f] + ib->w.du[f] * (i + 0.5), vc, 1.0);
         size_t cc = cell + (size_t)(i - i0);
         double t;
+        if (ib->id[cc] != RTPI_NONE) {
+            /* A hit at t along d (depth t: d's component along the face's
+               axis is 1) lies t |d| from the light, at least dc_near's
+               bound: where the cell holds a depth zs with zs |d| below
+               that bound (by 1e-9 of it, far beyond the roundings of
+               either side), no hit can be nearer and none is stored, so
+               the ray is not cast (rings at 1024 cells: nine in ten of
+               the cones' rays met a cell holding something nearer) */
+            double zs = (double)ib->z[cc] + ib->w.zbase[f];
+            if (zs >= 0.0 && zs * zs * v3_dot(d, d) < ic->near2)
+                continue;
+        }
         if (ic->sphere) {
             if (ib_sphere_t(&ic->s->spheres[ic->prim - ic->s->ntris], ib->light, d,
                             ic->inside, &t))
@@ -2002,7 +2015,9 @@ static void ib_draw(rtpi_itembuf *ib, const rtp_scene *s, dc_ctx *c, uint32_t pr
         ib_cast ic;
         if (c->S < 0.0)
             c->S = dc_scale(s, ib->light);
-        ang = fmin(1e-9, lb_ang(c->S, dc_near(s, prim, ib->light)));
+        ic.near2 = dc_near(s, prim, ib->light);
+        ang = fmin(1e-9, lb_ang(c->S, ic.near2));
+        ic.near2 *= ic.near2 * (1.0 - 2e-9);
         ic.ib = ib;
         ic.s = s;
         ic.prim = prim;
