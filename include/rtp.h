@@ -515,9 +515,18 @@ typedef struct rtp_hit_record {
 } rtp_hit_record;
 
 /** Starts a tree of width x height samples (spd: corner samples of a
- *  width x height image, i.e. (width+1) x (height+1), averaged). */
+ *  width x height image, i.e. (width+1) x (height+1), averaged).  The
+ *  scene's camera must give a view (as rtp_trace's): the tree keeps it. */
 rtp_status rtp_builder_create(const rtp_scene *scene, int width, int height,
                               int spd, rtp_builder **out, rtp_error *err);
+/** The renderer's ray-tree depth limit (eye ray = 1, as
+ *  rtp_trace_options.max_depth), 1..RTP_MAX_DEPTH: re-traces of class-D
+ *  edits (a ks or kt raised from 0, an ior) and rtp_tree_trace trace to
+ *  it.  Without it the tree's depth is its deepest ray handed in, a miss
+ *  counting as a ray of its level: a scene whose rays all stop at the
+ *  first hit then re-traces a mirror made later one level deep.
+ *  rtp_builder_finish refuses rays deeper than the depth set. */
+rtp_status rtp_builder_set_depth(rtp_builder *b, int max_depth, rtp_error *err);
 /** Adds a hit to sample (x, y) as the given child of node `parent` (an
  *  index returned earlier for the same sample).  @return the new node's
  *  index (>= 0) or a negative rtp_status (see err). */

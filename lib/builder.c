@@ -28,7 +28,9 @@ struct rtp_builder {
     rtp_scene *scene;
     int width, height, nx, ny, spd;
     size_t words;         /* visibility words per hit when > 32 lights */
+    int max_depth;        /* the renderer's depth (rtp_builder_set_depth), 0: the deepest ray */
     uint32_t *count;      /* hits per sample so far */
+    unsigned char *eye_miss; /* per sample: its eye ray was given as a miss */
     bhit *hits;
     size_t nhits, cap_hits;
     bmiss *misses;
@@ -45,6 +47,7 @@ void rtp_builder_destroy(rtp_builder *b)
     a = b->alloc;
     rtp_scene_destroy(b->scene);
     rtpi_free(&a, b->count);
+    rtpi_free(&a, b->eye_miss);
     rtpi_free(&a, b->hits);
     rtpi_free(&a, b->misses);
     rtpi_free(&a, b->ext);
@@ -67,6 +70,11 @@ rtp_status rtp_builder_create(const rtp_scene *scene, int width, int height, int
         !rtpi_image_size_ok(width + (spd != 0), height + (spd != 0)))
         return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0, "image size %dx%d not allowed", width,
                           height);
+    /* (a tree keeps its camera: one with no view could be written but
+       not read back, nor traced again) */
+    if (rtpi_camera_problem(scene))
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "%s: no view to build trees for",
+                          rtpi_camera_problem(scene));
     b = (rtp_builder *)rtpi_calloc_array(&scene->alloc, 1, sizeof *b);
     if (!b)
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
@@ -79,11 +87,23 @@ rtp_status rtp_builder_create(const rtp_scene *scene, int width, int height, int
     b->words = scene->nlights > 32 ? (scene->nlights + 31) / 32 : 0;
     ns = (size_t)b->nx * b->ny;
     b->count = (uint32_t *)rtpi_calloc_array(&b->alloc, ns, sizeof *b->count);
-    if (!b->count || rtpi_scene_clone(scene, &b->scene) != RTP_OK) {
+    b->eye_miss = (unsigned char *)rtpi_calloc_array(&b->alloc, ns, 1);
+    if (!b->count || !b->eye_miss || rtpi_scene_clone(scene, &b->scene) != RTP_OK) {
         rtp_builder_destroy(b);
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
     }
     *out = b;
+    return RTP_OK;
+}
+
+rtp_status rtp_builder_set_depth(rtp_builder *b, int max_depth, rtp_error *err)
+{
+    if (!b)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_builder_set_depth: NULL builder");
+    if (max_depth < 1 || max_depth > RTP_MAX_DEPTH)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                          "ray-tree depth %d: not within 1..%d", max_depth, RTP_MAX_DEPTH);
+    b->max_depth = max_depth;
     return RTP_OK;
 }
 
@@ -96,7 +116,11 @@ static rtp_status check_link(rtp_builder *b, int x, int y, int parent, rtp_ray_k
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
                           "sample (%d, %d) outside the %dx%d samples", x, y, b->nx, b->ny);
     *sample = (uint32_t)((size_t)y * b->nx + x);
-    if ((unsigned)kind > RTP_RAY_REFRACTED || (kind == RTP_RAY_EYE) != (parent == RTP_NO_PARENT))
+    if ((unsigned)kind > RTP_RAY_REFRACTED)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                          "ray kind %d: not RTP_RAY_EYE, RTP_RAY_REFLECTED or RTP_RAY_REFRACTED",
+                          (int)kind);
+    if ((kind == RTP_RAY_EYE) != (parent == RTP_NO_PARENT))
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
                           "an eye ray has no parent; reflected and refracted rays have one");
     if (parent != RTP_NO_PARENT && (parent < 0 || (uint32_t)parent >= b->count[*sample]))
@@ -167,8 +191,12 @@ rtp_status rtp_builder_miss(rtp_builder *b, int x, int y, int parent, rtp_ray_ki
     bmiss *m;
     if (st != RTP_OK)
         return st;
-    if (kind == RTP_RAY_EYE)
-        return RTP_OK; /* no hit at all: the sample shows the background */
+    if (kind == RTP_RAY_EYE) {
+        /* no hit at all: the sample shows the background (an eye hit
+           given too contradicts it: finish says so) */
+        b->eye_miss[sample] = 1;
+        return RTP_OK;
+    }
     if (rtpi_grow(&b->alloc, (void **)&b->misses, &b->cap_misses, b->nmisses + 1,
                   sizeof *b->misses))
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
@@ -208,23 +236,33 @@ static size_t emit_node(emit *e, int32_t i, int depth, size_t at)
         end = emit_node(e, e->refl[i], depth + 1, end);
     } else if (e->refl[i] == -2) {
         link |= RTPI_L_REFL_MISS;
+        /* (a miss is a ray of the next level: a re-trace or a full
+           trace of the tree must cast it too) */
+        if (depth + 1 > e->depth)
+            e->depth = depth + 1;
     }
     if (e->refr[i] >= 0) {
         link |= RTPI_L_REFR | (uint32_t)(end - at) << RTPI_L_SHIFT;
         end = emit_node(e, e->refr[i], depth + 1, end);
     } else if (e->refr[i] == -2) {
         link |= RTPI_L_REFR_MISS;
+        if (depth + 1 > e->depth)
+            e->depth = depth + 1;
     }
     e->out[at].link = link;
     return end;
 }
 
-static int depth_ok(const emit *e, int32_t i, int depth)
+/* Does node i's subtree (i at `depth`) stay within `limit` levels,
+   counting a miss as a ray of the next level? */
+static int depth_ok(const emit *e, int32_t i, int depth, int limit)
 {
-    if (depth > MAX_BUILD_DEPTH)
+    if (depth > limit)
         return 0;
-    return (e->refl[i] < 0 || depth_ok(e, e->refl[i], depth + 1)) &&
-           (e->refr[i] < 0 || depth_ok(e, e->refr[i], depth + 1));
+    return (e->refl[i] == -1 || (e->refl[i] == -2 ? depth < limit
+                                                   : depth_ok(e, e->refl[i], depth + 1, limit))) &&
+           (e->refr[i] == -1 || (e->refr[i] == -2 ? depth < limit
+                                                   : depth_ok(e, e->refr[i], depth + 1, limit)));
 }
 
 rtp_status rtp_builder_finish(rtp_builder *b, rtp_tree **out, rtp_error *err)
@@ -303,6 +341,7 @@ rtp_status rtp_builder_finish(rtp_builder *b, rtp_tree **out, rtp_error *err)
         for (k = 0; k < ns && st == RTP_OK; k++) {
             size_t n = b->count[k], roots = 0, m;
             int32_t root = -1;
+            const int sx = (int)(k % (size_t)b->nx), sy = (int)(k / (size_t)b->nx);
             e.h = order + first[k];
             e.n = n;
             for (i = 0; i < n; i++)
@@ -318,7 +357,8 @@ rtp_status rtp_builder_finish(rtp_builder *b, rtp_tree **out, rtp_error *err)
                 slot = h->kind == RTP_RAY_REFLECTED ? &refl[h->parent] : &refr[h->parent];
                 if (*slot != -1)
                     st = rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                                    "sample %zu: node %d has two %s rays", k, (int)h->parent,
+                                    "sample (%d, %d): node %d has two %s rays",
+                                    sx, sy, (int)h->parent,
                                     h->kind == RTP_RAY_REFLECTED ? "reflected" : "refracted");
                 *slot = (int32_t)i;
             }
@@ -327,20 +367,32 @@ rtp_status rtp_builder_finish(rtp_builder *b, rtp_tree **out, rtp_error *err)
                 int32_t *slot = ms->kind == RTP_RAY_REFLECTED ? &refl[ms->parent] : &refr[ms->parent];
                 if (*slot != -1)
                     st = rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                                    "sample %zu: node %d has two %s rays", k, (int)ms->parent,
+                                    "sample (%d, %d): node %d has two %s rays",
+                                    sx, sy, (int)ms->parent,
                                     ms->kind == RTP_RAY_REFLECTED ? "reflected" : "refracted");
                 *slot = -2;
             }
             if (st == RTP_OK && n && roots != 1)
                 st = rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                                "sample %zu: %zu eye-ray hits (one expected)", k, roots);
-            if (st == RTP_OK && n && !depth_ok(&e, root, 1))
+                                "sample (%d, %d): %zu eye-ray hits (one expected)", sx, sy, roots);
+            if (st == RTP_OK && roots && b->eye_miss[k])
+                st = rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                                "sample (%d, %d): its eye ray given as a miss and as a hit", sx,
+                                sy);
+            if (st == RTP_OK && n && !depth_ok(&e, root, 1, MAX_BUILD_DEPTH))
                 st = rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
-                                "sample %zu: tree deeper than %d", k, MAX_BUILD_DEPTH);
+                                "sample (%d, %d): tree deeper than %d (a miss counts as a ray "
+                                "of the next level)",
+                                sx, sy, MAX_BUILD_DEPTH);
+            if (st == RTP_OK && n && b->max_depth && !depth_ok(&e, root, 1, b->max_depth))
+                st = rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                                "sample (%d, %d): rays deeper than the depth %d set "
+                                "(rtp_builder_set_depth)",
+                                sx, sy, b->max_depth);
             t->start[k] = first[k];
             if (st == RTP_OK && n && emit_node(&e, root, 1, (size_t)first[k]) != first[k] + n)
                 st = rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                                "sample %zu: hits not connected to the eye ray", k);
+                                "sample (%d, %d): hits not connected to the eye ray", sx, sy);
         }
         t->start[ns] = first[ns];
         rtpi_free(a, mfirst);
@@ -357,7 +409,9 @@ rtp_status rtp_builder_finish(rtp_builder *b, rtp_tree **out, rtp_error *err)
     t->nx = b->nx;
     t->ny = b->ny;
     t->spd = b->spd;
-    t->max_depth = e.depth > 0 ? e.depth : 1;
+    /* the renderer's depth where it said, else the deepest ray handed in
+       (misses too): re-traces and rtp_tree_trace go as deep */
+    t->max_depth = b->max_depth ? b->max_depth : e.depth > 0 ? e.depth : 1;
     t->min_weight = 0.0;
     t->scene = b->scene;
     b->scene = NULL;

@@ -824,6 +824,13 @@ rtp_status rtp_tree_write(const rtp_tree *t, const char *path,
         return rtpi_error(err, RTP_ERR_UNSUPPORTED, path, 0, 0,
                           "the camera was edited since the trees were traced: evaluate the "
                           "tree (which traces them again) before saving it");
+    /* (what rtp_tree_read takes: a larger tree would be written, and
+       then refused) */
+    if ((uint64_t)t->nnodes > MAX_COUNT ||
+        (t->vis_words && (uint64_t)t->nnodes * t->vis_words > MAX_COUNT))
+        return rtpi_error(err, RTP_ERR_LIMIT, path, 0, 0,
+                          "%zu nodes%s: a tree file holds at most %u", t->nnodes,
+                          t->vis_words ? " (times their light words)" : "", MAX_COUNT);
     memset(&out, 0, sizeof out);
     crc_slices(out.slices);
     out.p = (unsigned char *)rtpi_malloc(&t->alloc, SINK_CHUNK);

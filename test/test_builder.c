@@ -304,10 +304,153 @@ static void test_builder_rejects(void)
     rtp_scene_destroy(s);
 }
 
+/* One pixel of a mirror plane (ks 0.5) whose renderer cast the mirror ray
+   and saw it leave the scene.  The miss is a ray of the second level:
+   the tree's depth is 2, so that rtp_tree_trace and a class-D re-trace
+   cast it too (they traced one level only, losing the reflected
+   background: 0.73 0.49 0.37 against 0.83 0.64 0.57). */
+static const char mirror_text[] =
+    "v from 0 0 5 at 0 0 0 up 0 1 0 angle 40 hither 0.1 resolution 1 1\n"
+    "b 0.2 0.3 0.4\nambient 0.1 0.1 0.1\n"
+    "l 0 0 5\n"
+    "f 1 0.5 0.25 0.8 0.5 10 0 1\n"
+    "p 3 -10 -10 0 10 -10 0 0 10 0\n";
+
+static rtp_tree *mirror_tree(rtp_scene *s, int depth, int expect)
+{
+    rtp_builder *b = NULL;
+    rtp_tree *t = NULL;
+    rtp_hit_record rec;
+    rtp_error err;
+    unsigned char lit = 1;
+    int root;
+    memset(&rec, 0, sizeof rec);
+    rec.lights = &lit;
+    CHECK(rtp_builder_create(s, 1, 1, 0, &b, &err) == RTP_OK);
+    if (!b)
+        return NULL;
+    if (depth)
+        CHECK(rtp_builder_set_depth(b, depth, &err) == RTP_OK);
+    root = rtp_builder_hit(b, 0, 0, RTP_NO_PARENT, RTP_RAY_EYE, &rec, &err);
+    CHECK(root == 0);
+    CHECK(rtp_builder_miss(b, 0, 0, root, RTP_RAY_REFLECTED, &err) == RTP_OK);
+    CHECK(rtp_builder_finish(b, &t, &err) == (rtp_status)expect);
+    if (expect != RTP_OK)
+        CHECK(t == NULL && strstr(err.message, "deeper than the depth 1 set") != NULL);
+    return t;
+}
+
+static void pixel_near(const rtp_image *a, const rtp_image *b, double tol)
+{
+    int c;
+    if (!a || !b)
+        return;
+    for (c = 0; c < 3; c++)
+        CHECK_MSG(fabs((double)a->pixels[c] - b->pixels[c]) <= tol, "channel %d: %.9g against %.9g",
+                  c, a->pixels[c], b->pixels[c]);
+}
+
+static void test_builder_depth(void)
+{
+    rtp_scene *s = NULL;
+    rtp_tree *t, *rec = NULL;
+    rtp_image *a = NULL, *b = NULL;
+    rtp_tree_info ti;
+    rtp_trace_options o;
+    rtp_error err;
+    CHECK(rtp_scene_load_memory(mirror_text, strlen(mirror_text), "m.nff", "nff", NULL, &s,
+                                NULL) == RTP_OK);
+    if (!s)
+        return;
+    t = mirror_tree(s, 0, RTP_OK);
+    memset(&o, 0, sizeof o);
+    CHECK(rtp_record(s, &o, &rec, NULL, NULL, &err) == RTP_OK);
+    if (!t || !rec)
+        goto out;
+    rtp_tree_get_info(t, &ti);
+    CHECK(ti.max_depth == 2);
+    /* its evaluation is the full trace's, and rtp_tree_trace's */
+    CHECK(rtp_tree_eval(t, NULL, &a, NULL, &err) == RTP_OK);
+    CHECK(rtp_tree_trace(t, 1, &b, NULL, &err) == RTP_OK);
+    pixel_near(a, b, 1e-6);
+    /* (by hand: 0.83 0.64 0.57) */
+    CHECK_MSG(a && fabs(a->pixels[0] - 0.83) < 0.01, "red %.6g", a ? a->pixels[0] : 0.0f);
+    rtp_image_destroy(a);
+    rtp_image_destroy(b);
+    a = b = NULL;
+    /* kt raised from 0: the sample is traced again to the tree's depth,
+       reflected background included, as the recorded tree does */
+    CHECK(rtp_tree_set(t, "mat.0.kt", "0.3", &err) == RTP_OK);
+    CHECK(rtp_tree_set(rec, "mat.0.kt", "0.3", &err) == RTP_OK);
+    CHECK(rtp_tree_eval(t, NULL, &a, NULL, &err) == RTP_OK);
+    CHECK(rtp_tree_eval(rec, NULL, &b, NULL, &err) == RTP_OK);
+    pixel_near(a, b, 1e-6);
+    rtp_image_destroy(a);
+    rtp_image_destroy(b);
+    a = b = NULL;
+    rtp_tree_destroy(t);
+    /* the renderer's own depth where it says: kept, and a ray deeper than
+       it refused */
+    t = mirror_tree(s, 5, RTP_OK);
+    if (t) {
+        rtp_tree_get_info(t, &ti);
+        CHECK(ti.max_depth == 5);
+    }
+    rtp_tree_destroy(t);
+    t = mirror_tree(s, 1, RTP_ERR_ARGUMENT);
+    rtp_tree_destroy(t);
+    {
+        rtp_builder *bb = NULL;
+        CHECK(rtp_builder_create(s, 1, 1, 0, &bb, &err) == RTP_OK);
+        CHECK(rtp_builder_set_depth(bb, 0, &err) == RTP_ERR_ARGUMENT);
+        CHECK(rtp_builder_set_depth(bb, RTP_MAX_DEPTH + 1, &err) == RTP_ERR_ARGUMENT);
+        CHECK(rtp_builder_set_depth(NULL, 3, &err) == RTP_ERR_ARGUMENT);
+        rtp_builder_destroy(bb);
+    }
+out:
+    rtp_tree_destroy(rec);
+    rtp_scene_destroy(s);
+}
+
+/* A scene without a view: refused as rtp_trace refuses it (a tree of it
+   was written and then refused by rtp_tree_read); a ray kind that is
+   none named as such; an eye ray given both as a miss and as a hit. */
+static void test_builder_misuse(void)
+{
+    rtp_scene *s = NULL;
+    rtp_builder *b = NULL;
+    rtp_tree *t = NULL;
+    rtp_hit_record rec;
+    rtp_error err;
+    CHECK(rtp_scene_load_memory(mirror_text, strlen(mirror_text), "m.nff", "nff", NULL, &s,
+                                NULL) == RTP_OK);
+    if (!s)
+        return;
+    CHECK(rtp_scene_set(s, "camera.at", "0,0,5", &err) == RTP_OK);
+    CHECK(rtp_builder_create(s, 1, 1, 0, &b, &err) == RTP_ERR_ARGUMENT && !b);
+    CHECK(strstr(err.message, "no view") != NULL);
+    CHECK(rtp_scene_set(s, "camera.at", "0,0,0", &err) == RTP_OK);
+    CHECK(rtp_builder_create(s, 2, 1, 0, &b, &err) == RTP_OK);
+    if (!b)
+        goto out;
+    memset(&rec, 0, sizeof rec);
+    CHECK(rtp_builder_hit(b, 0, 0, RTP_NO_PARENT, (rtp_ray_kind)7, &rec, &err) < 0);
+    CHECK(strstr(err.message, "ray kind 7") != NULL);
+    CHECK(rtp_builder_miss(b, 1, 0, RTP_NO_PARENT, RTP_RAY_EYE, &err) == RTP_OK);
+    CHECK(rtp_builder_hit(b, 1, 0, RTP_NO_PARENT, RTP_RAY_EYE, &rec, &err) == 0);
+    CHECK(rtp_builder_finish(b, &t, &err) == RTP_ERR_ARGUMENT && !t);
+    CHECK(strstr(err.message, "sample (1, 0)") != NULL &&
+          strstr(err.message, "as a miss and as a hit") != NULL);
+out:
+    rtp_scene_destroy(s);
+}
+
 int main(void)
 {
     RUN(test_builder_matches_trace);
     RUN(test_builder_corner_samples);
     RUN(test_builder_rejects);
+    RUN(test_builder_depth);
+    RUN(test_builder_misuse);
     return check_report();
 }
