@@ -1287,7 +1287,10 @@ static int cmd_trace(int argc, char **argv)
     progress_end(&prog);
     t_trace = now_seconds() - prog.start;
     t0 = now_seconds();
-    pair = tree_path && image_path && output_is_file(tree_path) && output_is_file(image_path);
+    /* (the image of any kind: one written to a full device or a pipe
+       whose reader left fails as a file's does, and the tree is put
+       back then too) */
+    pair = tree_path && image_path && output_is_file(tree_path);
     if (pair) {
         /* (signals held over both writes: Ctrl-C between them would
            leave the new tree with the old image) */

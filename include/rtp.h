@@ -193,7 +193,8 @@ void rtp_image_destroy(rtp_image *image);
 
 typedef enum rtp_image_format {
     RTP_IMAGE_AUTO = 0, /* from the file extension; stdout "-" means PFM */
-    RTP_IMAGE_PNG = 1,  /* 8-bit sRGB-free: values clamped to [0,1], *255 */
+    RTP_IMAGE_PNG = 1,  /* 8-bit sRGB-free: values clamped to [0,1], *255;
+                           NaN and +-infinity 0 (a bad pixel shows black) */
     RTP_IMAGE_PPM = 2,  /* binary P6, 8-bit, like PNG */
     RTP_IMAGE_PFM = 3   /* float RGB, little-endian, exact */
 } rtp_image_format;

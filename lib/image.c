@@ -198,6 +198,21 @@ static rtp_status no_png(rtp_error *err, const char *name)
 }
 #endif
 
+#ifdef RTPI_PNG
+/* libpng's own default limit is 1,000,000 pixels a side (PNG allows
+   2^31 - 1): images 1,000,001 to 2^20 wide, which rtp makes and reads as
+   PFM, failed as PNG ("Invalid IHDR data").  Sizes are rtp's to limit
+   (rtpi_image_size_ok, with its own message). */
+static void png_sizes(png_structp png)
+{
+#ifdef PNG_SET_USER_LIMITS_SUPPORTED
+    png_set_user_limits(png, 0x7fffffffu, 0x7fffffffu);
+#else
+    (void)png;
+#endif
+}
+#endif
+
 /* 8-bit quantisation shared by PNG and PPM: clamp to [0,1], round half up;
    NaN and infinities become 0 so that a bad pixel stands out as black. */
 static unsigned char quantize8(float x)
@@ -429,8 +444,10 @@ static rtp_status write_png(const rtp_image *img, FILE *f,
     c.png = png_create_write_struct(PNG_LIBPNG_VER_STRING, &c.io,
                                     png_err_fn, png_warn_fn);
 #endif
-    if (c.png)
+    if (c.png) {
+        png_sizes(c.png);
         c.info = png_create_info_struct(c.png);
+    }
     if (!c.row || !c.png || !c.info) {
         st = rtpi_error(err, RTP_ERR_NOMEM, name, 0, 0,
                         "out of memory writing PNG");
@@ -839,7 +856,10 @@ static rtp_status read_number(const reader *r, int flags, const char *what,
     if (!is_digit(c))
         return BAD(r, "expected a number for the %s", what);
     while (is_digit(c)) {
-        if (v > (max - (c - '0')) / 10)
+        /* (a digit above max first: max - digit is negative, and its
+           division by 10 rounds to 0, which let P3's 5 under a maxval of
+           1 through) */
+        if (c - '0' > max || v > (max - (c - '0')) / 10)
             big = 1;
         else
             v = v * 10 + (c - '0');
@@ -848,6 +868,12 @@ static rtp_status read_number(const reader *r, int flags, const char *what,
     if (big)
         return rtpi_error(r->err, over, r->name, 0, 0,
                           "the %s is too large (at most %ld)", what, max);
+    if (c == '#' && (flags & NUM_COMMENTS)) {
+        /* a comment right after a header number ("1 1#size"): netpbm
+           ends it at the line's end, which then ends the number */
+        while (c != EOF && c != '\n' && c != '\r')
+            c = getc(r->f);
+    }
     if (c == EOF && !((flags & NUM_EOF_OK) && !ferror(r->f)))
         return ended(r, what);
     if (c != EOF && !is_space(c))
@@ -1088,11 +1114,12 @@ static rtp_status read_pfm(const reader *r, int grey,
                 row[i] = v;
         }
     }
-    if (r->size >= 0) {
+    if (r->size >= 0 && r->f != stdin) {
         /* A file's header tells its length: bytes beyond it mean the
            header does not describe the data ("Pf" over colour pixels, a
            wrong size), and the image read would be wrong silently.  (A
-           stream may carry the next image: --stream writes them so.) */
+           stream may carry the next image: --stream writes them so, and
+           stdin redirected from such a file is that stream.) */
         long pos = ftell(r->f);
         if (pos >= 0 && r->size > pos) {
             st = BAD(r, "PFM: %lld bytes after the pixel data: the header (%s %dx%d) "
@@ -1251,8 +1278,10 @@ static rtp_status read_png(const reader *r, const rtp_allocator *alloc,
     c.png = png_create_read_struct(PNG_LIBPNG_VER_STRING, &c.io, png_err_fn,
                                    png_warn_fn);
 #endif
-    if (c.png)
+    if (c.png) {
+        png_sizes(c.png);
         c.info = png_create_info_struct(c.png);
+    }
     if (!c.png || !c.info) {
         st = out_of_memory(r);
     } else if (png_read_body(&c) != 0) {

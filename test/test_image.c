@@ -568,6 +568,20 @@ static void test_ppm(void)
     rtp_image_destroy(back);
     back = NULL;
 
+    /* A P3 sample above a maxval below 9 (its digit alone above it: the
+       check let 5 under a maxval of 1 through as 5.0) */
+    CHECK(read_str("P3\n1 1\n1\n5 0 1\n", &back) == RTP_ERR_FORMAT && !back);
+    CHECK(read_str("P3\n1 1\n8\n9 0 1\n", &back) == RTP_ERR_FORMAT && !back);
+    CHECK(read_str("P3\n1 1\n9\n9 0 1\n", &back) == RTP_OK);
+    CHECK(back && back->pixels[0] == 1.0f);
+    rtp_image_destroy(back);
+    back = NULL;
+    /* A comment right after a header number, as netpbm allows */
+    CHECK(read_str("P3\n1 1#size\n255# max\n255 0 51\n", &back) == RTP_OK);
+    CHECK(back && back->pixels[0] == 1.0f && back->pixels[2] == 0.2f);
+    rtp_image_destroy(back);
+    back = NULL;
+
     /* 16-bit P6, big-endian samples. */
     CHECK(read_mem(p6_16, sizeof p6_16 - 1, &back, NULL) == RTP_OK);
     if (back) {
@@ -654,6 +668,25 @@ static int write_png_raw(const char *path, int w, int h, int color_type,
     png_write_end(png, info);
     png_destroy_write_struct(&png, &info);
     return fclose(f) == 0 ? 0 : -1;
+}
+
+/* Widths past libpng's default limit of 1,000,000, within rtp's 2^20:
+   written and read as PFM was (they failed "Invalid IHDR data"). */
+static void test_png_wide(void)
+{
+    rtp_image *img = NULL, *back = NULL;
+    int i;
+    CHECK(rtp_image_create(1040000, 1, NULL, &img, NULL) == RTP_OK);
+    if (!img)
+        return;
+    for (i = 0; i < 3 * 1040000; i++)
+        img->pixels[i] = (float)(i % 256) / 255.0f;
+    CHECK(rtp_image_write(img, tpath("wide.png"), RTP_IMAGE_AUTO, NULL) == RTP_OK);
+    CHECK(rtp_image_read(tpath("wide.png"), NULL, &back, NULL) == RTP_OK);
+    CHECK(back && back->width == 1040000 && back->height == 1);
+    CHECK(back && back->pixels[3 * 1039999 + 2] == img->pixels[3 * 1039999 + 2]);
+    rtp_image_destroy(back);
+    rtp_image_destroy(img);
 }
 
 static void test_png_kinds(void)
@@ -1244,6 +1277,7 @@ int main(void)
     RUN(test_png);
 #ifdef TEST_PNG
     RUN(test_png_kinds);
+    RUN(test_png_wide);
 #endif
     RUN(test_sniff);
     RUN(test_truncated);
