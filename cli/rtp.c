@@ -1516,6 +1516,12 @@ static int cmd_diff(int argc, char **argv)
         fail_err(&err);
         goto out;
     }
+    if (a->width != b->width || a->height != b->height) {
+        /* (the library's message has the sizes; the names are here) */
+        msg("%s is %dx%d, %s %dx%d: image sizes differ", pa, a->width, a->height, pb, b->width,
+            b->height);
+        goto out;
+    }
     if (rtp_image_diff(a, b, threshold, &d, &err) != RTP_OK) {
         fail_err(&err);
         goto out;

@@ -57,6 +57,10 @@ expect_rc 0 $RTP trace scenes/spheres.nff --size 40x30 -i "$T/$b8" --set mat.0.c
 expect_rc 3 $RTP diff "$T/a.pfm" "$T/$b8" --fail-above rmse=0.001
 expect_rc 0 $RTP diff "$T/a.pfm" "$T/$b8" --fail-above rmse=100
 expect_rc 1 $RTP diff "$T/a.pfm" scenes/spheres.nff
+# images of different sizes: both named with their sizes
+expect_rc 0 $RTP trace scenes/spheres.nff --size 30x40 -i "$T/tall.pfm"
+expect_rc 1 $RTP diff "$T/a.pfm" "$T/tall.pfm"
+grep -q "a.pfm is 40x30, .*tall.pfm 30x40: image sizes differ" "$T/err" && ok || bad "sizes differ: files not named: $(cat "$T/err")"
 
 # Trees that would outgrow --memory-limit stop with a message naming it,
 # leaving no files; a sample's tree full at 2^20 nodes is a warning and a
