@@ -2316,7 +2316,7 @@ static int cp_plane_chunk(void *ctx, int chunk)
         const float *ka = t->ev_coeffs + (spd ? (size_t)y * nx : p) * ks + 3 * j;
         /* the node ranges of the pixel's samples (its corners: sample
            rows y and y + 1) */
-        const uint64_t *sa = t->start + (spd ? (size_t)y * nx : p), *sb = sa + nx;
+        const uint64_t *sa = t->start + (spd ? (size_t)y * nx : p), *sb = spd ? sa + nx : sa;
         float *kp = k + 3 * p;
         for (x = 0; x < t->width; x++, p++, ka += ks, kp += 3, sa++, sb++) {
             float k0, k1, k2;
