@@ -400,6 +400,22 @@ static void test_builder_depth(void)
     t = mirror_tree(s, 1, RTP_ERR_ARGUMENT);
     rtp_tree_destroy(t);
     {
+        /* a chain of hits RTP_MAX_DEPTH deep is a tree; a miss below its
+           last hit is a ray one level deeper, past what a tree holds */
+        rtp_builder *bb = NULL;
+        rtp_hit_record hr;
+        int k, parent = RTP_NO_PARENT;
+        memset(&hr, 0, sizeof hr);
+        CHECK(rtp_builder_create(s, 1, 1, 0, &bb, &err) == RTP_OK);
+        for (k = 0; bb && k < RTP_MAX_DEPTH; k++)
+            parent = rtp_builder_hit(bb, 0, 0, parent,
+                                     k ? RTP_RAY_REFLECTED : RTP_RAY_EYE, &hr, &err);
+        CHECK(parent == RTP_MAX_DEPTH - 1);
+        CHECK(rtp_builder_miss(bb, 0, 0, parent, RTP_RAY_REFRACTED, &err) == RTP_OK);
+        t = NULL;
+        CHECK(rtp_builder_finish(bb, &t, &err) == RTP_ERR_LIMIT && !t);
+    }
+    {
         rtp_builder *bb = NULL;
         CHECK(rtp_builder_create(s, 1, 1, 0, &bb, &err) == RTP_OK);
         CHECK(rtp_builder_set_depth(bb, 0, &err) == RTP_ERR_ARGUMENT);
