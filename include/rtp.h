@@ -309,7 +309,8 @@ typedef enum rtp_shadow_mode {
                                  checks make it no faster than the light
                                  buffer on the SPD scenes (README) */
     RTP_SHADOWS_OSMESA = 3,   /* the item buffer drawn by OSMesa (builds
-                                 with OSMESA=1) */
+                                 with OSMESA=1), from a thread of its own:
+                                 the caller's OpenGL binding is untouched */
     RTP_SHADOWS_AUTO = 4      /* exact: the light buffer where the tree has
                                  at least 4 recorded hits a primitive (or no
                                  kd-tree yet and no move before: a first

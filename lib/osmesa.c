@@ -33,6 +33,9 @@ rtp_status rtpi_itembuf_build_osmesa_wide(const rtp_scene *s, rtpi_v3 light, int
 
 #include <GL/gl.h>
 #include <GL/osmesa.h>
+#ifdef RTP_HAVE_THREADS
+#include <pthread.h>
+#endif
 
 #define OSM_PI 3.14159265358979323846
 #define OSM_2M24 (1.0 / 16777216.0) /* a step of the 24-bit depth buffer */
@@ -312,6 +315,120 @@ static void osm_draw(const osm_face *fc, const rtp_scene *s, double cell,
     }
 }
 
+/* What osm_render draws with, and how it ended. */
+enum { OSM_OK, OSM_NO_CONTEXT, OSM_SMALL_VIEWPORT };
+typedef struct osm_job {
+    const rtp_scene *s;
+    rtpi_v3 light;
+    rtpi_itembuf *ib;
+    int res;
+    unsigned char *rgba;
+    float *depth;
+    const unsigned char *soft, *thin;
+    const double *znear, *zfar;
+    size_t n, npix;
+    int status, max_dim;
+} osm_job;
+
+/* The six faces through an OSMesa context made, bound and destroyed
+   here, on the thread that runs it (a pthread start routine). */
+static void *osm_render(void *arg)
+{
+    osm_job *j = (osm_job *)arg;
+    const rtp_scene *s = j->s;
+    const rtpi_v3 light = j->light;
+    rtpi_itembuf *ib = j->ib;
+    const int res = j->res;
+    unsigned char *rgba = j->rgba;
+    float *depth = j->depth;
+    const unsigned char *soft = j->soft, *thin = j->thin;
+    const double *znear = j->znear, *zfar = j->zfar;
+    const size_t n = j->n, npix = j->npix;
+    OSMesaContext ctx;
+    GLint dims[2] = {0, 0};
+    size_t k;
+    int f;
+    ctx = OSMesaCreateContextExt(OSMESA_RGBA, 24, 0, 0, NULL);
+    if (!ctx || !OSMesaMakeCurrent(ctx, rgba, GL_UNSIGNED_BYTE, res, res)) {
+        if (ctx)
+            OSMesaDestroyContext(ctx);
+        j->status = OSM_NO_CONTEXT;
+        return NULL;
+    }
+    glGetIntegerv(GL_MAX_VIEWPORT_DIMS, dims);
+    if (dims[0] < res || dims[1] < res) {
+        OSMesaMakeCurrent(NULL, NULL, 0, 0, 0);
+        OSMesaDestroyContext(ctx);
+        j->status = OSM_SMALL_VIEWPORT;
+        j->max_dim = (int)dims[0];
+        return NULL;
+    }
+    /* Ids, not colours: nothing may blend, dither or smooth them. */
+    glDisable(GL_LIGHTING);
+    glDisable(GL_DITHER);
+    glDisable(GL_BLEND);
+    glDisable(GL_LINE_SMOOTH);
+    glDisable(GL_POLYGON_SMOOTH);
+    glDisable(GL_MULTISAMPLE);
+    glDisable(GL_CULL_FACE); /* primitives are hit from both sides */
+    glDisable(GL_FOG);
+    glDisable(GL_TEXTURE_2D);
+    glShadeModel(GL_FLAT);
+    glEnable(GL_DEPTH_TEST);
+    glDepthFunc(GL_LESS);
+    glDepthMask(GL_TRUE);
+    glPixelStorei(GL_PACK_ALIGNMENT, 1);
+    glViewport(0, 0, res, res);
+    glClearColor(0.0f, 0.0f, 0.0f, 0.0f);
+    glClearDepth(1.0);
+    for (f = 0; f < 6; f++) {
+        osm_face fc;
+        double hu = 0.5 * res * ib->w.du[f], hv = 0.5 * res * ib->w.dv[f];
+        double zn = znear[f], zf = zfar[f], cell = fmin(ib->w.du[f], ib->w.dv[f]);
+        size_t base = ib->w.fbase[f];
+        if (base == RTPI_DC_ABSENT)
+            continue;
+        fc.f = f;
+        fc.L = light;
+        fc.uc = ib->w.u0[f] + hu;
+        fc.vc = ib->w.v0[f] + hv;
+        fc.ua = ib->w.u0[f];
+        fc.ub = ib->w.u0[f] + 2.0 * hu;
+        fc.va = ib->w.v0[f];
+        fc.vb = ib->w.v0[f] + 2.0 * hv;
+        fc.zb = ib->w.zbase[f];
+        /* (24-bit depths: a quantum of the extent, IB_BIAS's 1e-4 of it
+           as before, rtpi_itembuf_visible) */
+        ib->zq[f] = 1e-4 * ib->w.zext[f];
+        osm_projection(hu, hv, zn, zf, fc.zb);
+        glMatrixMode(GL_MODELVIEW);
+        glLoadIdentity();
+        glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
+        osm_draw(&fc, s, cell, soft, thin);
+        glFinish();
+        glReadPixels(0, 0, res, res, GL_RGBA, GL_UNSIGNED_BYTE, rgba);
+        glReadPixels(0, 0, res, res, GL_DEPTH_COMPONENT, GL_FLOAT, depth);
+        /* OSMesa's rows run bottom-up (OSMESA_Y_UP): row j is v0 + j dv,
+           as in the software buffer. */
+        for (k = 0; k < npix; k++) {
+            uint32_t id = (uint32_t)rgba[4 * k] | (uint32_t)rgba[4 * k + 1] << 8 |
+                          (uint32_t)rgba[4 * k + 2] << 16;
+            if (id == 0u || id > n)
+                continue;
+            {
+                double dz = depth[k];
+                double z = zn * zf / (zf - dz * (zf - zn)); /* window depth -> eye */
+                ib->id[base + k] = id - 1u;
+                ib->z[base + k] = (float)(z - ib->w.zbase[f]);
+            }
+        }
+    }
+    OSMesaMakeCurrent(NULL, NULL, 0, 0, 0);
+    OSMesaDestroyContext(ctx);
+    j->status = OSM_OK;
+    return NULL;
+}
+
 rtp_status rtpi_itembuf_build_osmesa(const rtp_scene *s, rtpi_v3 light,
                                      int res, const rtp_allocator *a,
                                      rtpi_itembuf *ib, rtp_error *err)
@@ -324,15 +441,13 @@ rtp_status rtpi_itembuf_build_osmesa_wide(const rtp_scene *s, rtpi_v3 light, int
                                           const rtp_allocator *a, rtpi_itembuf *ib,
                                           rtp_error *err)
 {
-    OSMesaContext ctx;
     unsigned char *rgba = NULL, *soft = NULL;
     float *depth = NULL;
     double *pdist = NULL, znear[6], zfar[6], znmax = 0.0;
     size_t nsoft = 0;
     size_t npix, k, n = rtpi_scene_nprims(s);
     double dmin = HUGE_VAL;
-    GLint dims[2] = {0, 0};
-    rtp_status st;
+    rtp_status st = RTP_OK;
     int f;
     if (n >= 0xffffffu)
         return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
@@ -418,91 +533,59 @@ rtp_status rtpi_itembuf_build_osmesa_wide(const rtp_scene *s, rtpi_v3 light, int
                                   !(thin && thin[k]) && pdist[k] < 2.0 * sqrt(3.0) * znmax);
         nsoft += soft[k];
     }
-    ctx = OSMesaCreateContextExt(OSMESA_RGBA, 24, 0, 0, NULL);
-    if (!ctx || !OSMesaMakeCurrent(ctx, rgba, GL_UNSIGNED_BYTE, res, res)) {
-        if (ctx)
-            OSMesaDestroyContext(ctx);
-        rtpi_free(a, rgba);
-        rtpi_free(a, depth);
-        rtpi_free(a, soft);
-        rtpi_free(a, pdist);
-        rtpi_itembuf_free(ib, a);
-        return rtpi_error(err, RTP_ERR_UNSUPPORTED, NULL, 0, 0,
-                          "osmesa shadows: cannot make a %dx%d OSMesa context", res, res);
-    }
-    glGetIntegerv(GL_MAX_VIEWPORT_DIMS, dims);
-    if (dims[0] < res || dims[1] < res) {
-        OSMesaDestroyContext(ctx);
-        rtpi_free(a, rgba);
-        rtpi_free(a, depth);
-        rtpi_free(a, soft);
-        rtpi_free(a, pdist);
-        rtpi_itembuf_free(ib, a);
-        return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
-                          "osmesa shadows: resolution %d above OpenGL's %d", res, (int)dims[0]);
-    }
-    /* Ids, not colours: nothing may blend, dither or smooth them. */
-    glDisable(GL_LIGHTING);
-    glDisable(GL_DITHER);
-    glDisable(GL_BLEND);
-    glDisable(GL_LINE_SMOOTH);
-    glDisable(GL_POLYGON_SMOOTH);
-    glDisable(GL_MULTISAMPLE);
-    glDisable(GL_CULL_FACE); /* primitives are hit from both sides */
-    glDisable(GL_FOG);
-    glDisable(GL_TEXTURE_2D);
-    glShadeModel(GL_FLAT);
-    glEnable(GL_DEPTH_TEST);
-    glDepthFunc(GL_LESS);
-    glDepthMask(GL_TRUE);
-    glPixelStorei(GL_PACK_ALIGNMENT, 1);
-    glViewport(0, 0, res, res);
-    glClearColor(0.0f, 0.0f, 0.0f, 0.0f);
-    glClearDepth(1.0);
-    for (f = 0; f < 6; f++) {
-        osm_face fc;
-        double hu = 0.5 * res * ib->w.du[f], hv = 0.5 * res * ib->w.dv[f];
-        double zn = znear[f], zf = zfar[f], cell = fmin(ib->w.du[f], ib->w.dv[f]);
-        size_t base = ib->w.fbase[f];
-        if (base == RTPI_DC_ABSENT)
-            continue;
-        fc.f = f;
-        fc.L = light;
-        fc.uc = ib->w.u0[f] + hu;
-        fc.vc = ib->w.v0[f] + hv;
-        fc.ua = ib->w.u0[f];
-        fc.ub = ib->w.u0[f] + 2.0 * hu;
-        fc.va = ib->w.v0[f];
-        fc.vb = ib->w.v0[f] + 2.0 * hv;
-        fc.zb = ib->w.zbase[f];
-        /* (24-bit depths: a quantum of the extent, IB_BIAS's 1e-4 of it
-           as before, rtpi_itembuf_visible) */
-        ib->zq[f] = 1e-4 * ib->w.zext[f];
-        osm_projection(hu, hv, zn, zf, fc.zb);
-        glMatrixMode(GL_MODELVIEW);
-        glLoadIdentity();
-        glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
-        osm_draw(&fc, s, cell, soft, thin);
-        glFinish();
-        glReadPixels(0, 0, res, res, GL_RGBA, GL_UNSIGNED_BYTE, rgba);
-        glReadPixels(0, 0, res, res, GL_DEPTH_COMPONENT, GL_FLOAT, depth);
-        /* OSMesa's rows run bottom-up (OSMESA_Y_UP): row j is v0 + j dv,
-           as in the software buffer. */
-        for (k = 0; k < npix; k++) {
-            uint32_t id = (uint32_t)rgba[4 * k] | (uint32_t)rgba[4 * k + 1] << 8 |
-                          (uint32_t)rgba[4 * k + 2] << 16;
-            if (id == 0u || id > n)
-                continue;
-            {
-                double dz = depth[k];
-                double z = zn * zf / (zf - dz * (zf - zn)); /* window depth -> eye */
-                ib->id[base + k] = id - 1u;
-                ib->z[base + k] = (float)(z - ib->w.zbase[f]);
+    {
+        osm_job job;
+        int started = 0;
+        job.s = s;
+        job.light = light;
+        job.ib = ib;
+        job.res = res;
+        job.rgba = rgba;
+        job.depth = depth;
+        job.soft = soft;
+        job.thin = thin;
+        job.znear = znear;
+        job.zfar = zfar;
+        job.n = n;
+        job.npix = npix;
+        job.status = OSM_NO_CONTEXT;
+        job.max_dim = 0;
+#ifdef RTP_HAVE_THREADS
+        /* OpenGL's current context is the calling thread's: bound and
+           unbound here, it took the caller's own away (a host drawing
+           with Mesa, EGL or OSMesa found nothing bound after a move).  A
+           thread of its own leaves the caller's binding alone. */
+        {
+            pthread_t tid;
+            if (pthread_create(&tid, NULL, osm_render, &job) == 0) {
+                pthread_join(tid, NULL);
+                started = 1;
             }
         }
+#endif
+        if (!started)
+            osm_render(&job); /* (builds without threads: see rtp.h) */
+        if (job.status != OSM_OK) {
+            rtpi_free(a, rgba);
+            rtpi_free(a, depth);
+            rtpi_free(a, soft);
+            rtpi_free(a, pdist);
+            rtpi_itembuf_free(ib, a);
+            if (job.status == OSM_SMALL_VIEWPORT && job.max_dim <= 0)
+                /* (no answer at all: the calls went to another OpenGL,
+                   a GLVND libGL loaded first, with nothing bound there) */
+                return rtpi_error(err, RTP_ERR_UNSUPPORTED, NULL, 0, 0,
+                                  "osmesa shadows: OpenGL calls do not reach the OSMesa "
+                                  "context (another libGL loaded before libOSMesa?); "
+                                  "itembuf makes the same item buffer in software");
+            if (job.status == OSM_SMALL_VIEWPORT)
+                return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
+                                  "osmesa shadows: resolution %d above OpenGL's %d", res,
+                                  job.max_dim);
+            return rtpi_error(err, RTP_ERR_UNSUPPORTED, NULL, 0, 0,
+                              "osmesa shadows: cannot make a %dx%d OSMesa context", res, res);
+        }
     }
-    OSMesaMakeCurrent(NULL, NULL, 0, 0, 0);
-    OSMesaDestroyContext(ctx);
     rtpi_free(a, rgba);
     rtpi_free(a, depth);
     if (nsoft) {

@@ -2865,6 +2865,16 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                 opt->shadow_res > RTP_MAX_SHADOW_RES))
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
                           "invalid shadow mode or resolution (1..%d)", RTP_MAX_SHADOW_RES);
+#ifndef RTP_HAVE_OSMESA
+    /* (refused whether or not a light moves: the stub that said so was
+       reached only by a moved light decided by the item buffer, and a
+       far light or none went on in another mode, exit 0) */
+    if (opt && opt->shadows == RTP_SHADOWS_OSMESA)
+        return rtpi_error(err, RTP_ERR_UNSUPPORTED, NULL, 0, 0,
+                          "osmesa shadows: this build has no OSMesa (rebuild with make "
+                          "OSMESA=1 and libosmesa6-dev); use itembuf for the same item "
+                          "buffer in software");
+#endif
     /* (each had been taken for the default: a stale mode of 7 for keep,
        the approximate one) */
     if (opt && ((unsigned)opt->stale > RTP_STALE_RETRACE || opt->threads < 0 ||

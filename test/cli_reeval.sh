@@ -129,6 +129,15 @@ expect_rc 0 $RTP reeval --help
 grep -q -- "--shadows MODE" "$T/out" && ok || bad "--help lists the options on stdout"
 expect_rc 0 $RTP info --help
 
+# A build without OSMesa refuses --shadows osmesa whatever moves (with no
+# light moved, or a far one decided by shadow rays, it went on, exit 0)
+if $RTP version | grep -q "no osmesa"; then
+    expect_rc 1 $RTP reeval "$T/t.rtp" --shadows osmesa -i "$T/osm.pfm"
+    grep -q "no OSMesa" "$T/err" && [ ! -e "$T/osm.pfm" ] && ok || bad "osmesa without OSMesa: $(cat "$T/err")"
+    expect_rc 1 $RTP reeval "$T/t.rtp" --shadows osmesa --set light.key.pos=4e12,3e12,2e12 -i "$T/osm.pfm"
+    [ ! -e "$T/osm.pfm" ] && ok || bad "osmesa without OSMesa, a far light: an image written"
+fi
+
 # A stream of PFM frames saved to a file and given on stdin: its first
 # frame is read, as through a pipe (it was refused as a file whose header
 # does not describe its data: helper 46)

@@ -413,6 +413,37 @@ static void test_far_light_casts(void)
     rtp_scene_destroy(s);
 }
 
+#ifdef RTP_HAVE_OSMESA
+#include <GL/osmesa.h>
+/* A host with an OSMesa context of its own bound on its thread keeps it
+   through a buffer drawn by OSMesa (it found none bound after: every GL
+   call it made then was lost). */
+static void test_osmesa_leaves_the_callers_context(void)
+{
+    static const char sc[] = "v from 0 0 5 at 0 0 0 up 0 1 0 angle 40 hither 0.1 "
+                             "resolution 8 8\nl 0 0 5\nf 1 1 1 1 0 1 0 1\n"
+                             "p 3 -1 -1 0 1 -1 0 0 1 0\n";
+    rtp_scene *s = NULL;
+    static unsigned char buf[4 * 4 * 4];
+    OSMesaContext mine = OSMesaCreateContextExt(OSMESA_RGBA, 16, 0, 0, NULL);
+    rtpi_itembuf ib;
+    rtp_allocator a;
+    rtpi_allocator_init(&a, NULL);
+    CHECK(rtp_scene_load_memory(sc, strlen(sc), "t.nff", "nff", NULL, &s, NULL) == RTP_OK);
+    CHECK(mine && OSMesaMakeCurrent(mine, buf, GL_UNSIGNED_BYTE, 4, 4));
+    if (s && mine && rtpi_itembuf_build_osmesa(s, v3(0, 0, 3), 16, &a, &ib, NULL) == RTP_OK) {
+        CHECK(OSMesaGetCurrentContext() == mine);
+        rtpi_itembuf_free(&ib, &a);
+    } else {
+        CHECK(0);
+    }
+    OSMesaMakeCurrent(NULL, NULL, 0, 0, 0);
+    if (mine)
+        OSMesaDestroyContext(mine);
+    rtp_scene_destroy(s);
+}
+#endif
+
 int main(void)
 {
     const char *env = getenv("RTP_TEST_SEED");
@@ -428,5 +459,8 @@ int main(void)
     RUN(test_light_near_a_primitive);
     RUN(test_light_on_a_sphere);
     RUN(test_far_speck);
+#ifdef RTP_HAVE_OSMESA
+    RUN(test_osmesa_leaves_the_callers_context);
+#endif
     return check_report();
 }
