@@ -907,8 +907,10 @@ static int apply_line(set_fn set, void *obj, char *text, const char *where, int 
    file; a line longer than MAX_LINE characters: cut in two it would be
    two edit sets; a NUL byte in it — fgets could not tell one from the
    line's end, so what followed was dropped).  A UTF-8 byte-order mark before the first line
-   is skipped, as the scene readers skip it. */
-#define MAX_LINE 8190
+   is skipped, as the scene readers skip it.  (A mebibyte: one line may set
+   every light of a scene of thousands; 8190 stopped a stream setting 300
+   lights' colours in one line.) */
+#define MAX_LINE 1048575
 static int next_line(FILE *f, const char *name, char *line, int *lineno)
 {
     size_t n = 0;
@@ -951,10 +953,16 @@ static int next_line(FILE *f, const char *name, char *line, int *lineno)
 static int apply_params_file(set_fn set, void *obj, const char *path)
 {
     FILE *f = strcmp(path, "-") == 0 ? stdin : fopen(path, "r");
-    char line[MAX_LINE + 1];
+    char *line = (char *)malloc(MAX_LINE + 1);
     int n = 0, rc = 0, got;
-    if (!f) {
-        msg("%s: cannot open: %s", path, strerror(errno));
+    if (!f || !line) {
+        if (!f)
+            msg("%s: cannot open: %s", path, strerror(errno));
+        else
+            msg("%s: out of memory", path);
+        if (f && f != stdin)
+            fclose(f);
+        free(line);
         return 1;
     }
     while ((got = next_line(f, path, line, &n)) > 0)
@@ -966,6 +974,7 @@ static int apply_params_file(set_fn set, void *obj, const char *path)
         rc = 1;
     if (f != stdin)
         fclose(f);
+    free(line);
     return rc;
 }
 
@@ -1969,11 +1978,15 @@ static int cmd_reeval(int argc, char **argv)
                         tree_path, t_load, 0);
         progress_end(&prog);
     } else {
-        char line[MAX_LINE + 1], path[4096];
+        char *line = (char *)malloc(MAX_LINE + 1), path[4096];
         int n = 0, got;
         rc = 0;
         frames = 0;
-        while ((got = next_line(stdin, "stdin", line, &n)) != 0) {
+        if (!line) {
+            msg("--stream: out of memory");
+            rc = 1;
+        }
+        while (line && (got = next_line(stdin, "stdin", line, &n)) != 0) {
             if (got < 0 || apply_line(set_tree, tree, line, "stdin", n)) {
                 rc = 1;
                 break;
@@ -1993,6 +2006,7 @@ static int cmd_reeval(int argc, char **argv)
             frames++;
             fflush(stdout);
         }
+        free(line);
     }
     /* A stream stopped by a bad line keeps the images written before it,
        and so the statistics of those images: a line each */

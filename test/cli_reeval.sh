@@ -153,7 +153,12 @@ expect_rc 0 sh -c "$RTP diff - '$T/f0.pfm' --fail-above max_abs=0 < '$T/frames.p
 expect_rc 2 $RTP reeval "$T/t.rtp" -i - --stats -
 grep -q "stdout" "$T/err" && ok || bad "--stats - with -i -: not said"
 expect_rc 2 $RTP trace $S --size 8x6 -o - --stats -
-awk 'BEGIN { s = ""; while (length(s) < 9000) s = s "mat.red.kd=0.5 "; print s }' |
+# (a line may take a mebibyte: 300 lights' colours in one line, 12.8k
+# characters, had stopped a stream: helper 48)
+awk 'BEGIN { s = ""; for (i = 0; i < 20000; i++) s = s "mat.red.kd=0.5 "; print s }' |
+    $RTP reeval "$T/t.rtp" --stream -i "$T/longok%d.pfm" 2>"$T/err"
+[ $? -eq 0 ] && [ -e "$T/longok0.pfm" ] && ok || { bad "--stream: a 300k-character line"; cat "$T/err" >&2; }
+awk 'BEGIN { s = ""; while (length(s) < 1100000) s = s "mat.red.kd=0.5 "; print s }' |
     $RTP reeval "$T/t.rtp" --stream -i "$T/long%d.pfm" 2>"$T/err"
 [ $? -eq 1 ] && grep -q "stdin:1: line too long" "$T/err" && [ ! -e "$T/long0.pfm" ] && ok ||
     { bad "--stream: a line past the buffer"; cat "$T/err" >&2; }
@@ -247,7 +252,7 @@ grep -q "nul.txt:1: a NUL byte" "$T/err" && ok || bad "NUL byte in --params not 
 printf 'light.0.on=0\000light.1.on=0' > "$T/nul2.txt"
 expect_rc 1 $RTP reeval "$T/t.rtp" --params "$T/nul2.txt" -i "$T/nul2.pfm"
 grep -q "a NUL byte" "$T/err" && ok || bad "NUL byte in a last line without newline not named"
-# a line of /dev/zero is refused at its 8191st byte, not read whole
+# a line of /dev/zero is refused at its 1048576th byte, not read whole
 if [ -r /dev/zero ]; then
     expect_rc 1 timeout 20 $RTP reeval "$T/t.rtp" --params /dev/zero -i "$T/z.pfm"
     grep -q "line too long" "$T/err" && ok || bad "--params /dev/zero: no line-too-long"
