@@ -344,12 +344,18 @@ void rtpi_surface_at_ex(const rtp_scene *s, const rtpi_ray *ray,
    sphere's pole, a cone's apex. */
 int rtpi_uv_tangents(const rtp_scene *s, uint32_t prim, rtpi_v3 p, rtpi_v3 *pu, rtpi_v3 *pv);
 
+/* The least step rtpi_offset_origin takes in scene s: 1e-12, or 1e-9 of
+   the largest coordinate of s's geometry where that is below 1e-3 (see
+   there).  A scan of the geometry: made once a trace or a move. */
+double rtpi_offset_floor(const rtp_scene *s);
+
 /* A ray origin for a ray leaving surface point p, moved off the surface
    along the geometric normal ng (unit) to the side `side` (+1: the side ng
    points to, -1: the other) by an amount that scales with |p|, so that the
    new ray cannot hit the surface it starts on at any scale or distance
-   from the origin, yet does not skip nearby geometry. */
-static inline rtpi_v3 rtpi_offset_origin(rtpi_v3 p, rtpi_v3 ng, double side)
+   from the origin, yet does not skip nearby geometry; `floor`:
+   rtpi_offset_floor of the scene. */
+static inline rtpi_v3 rtpi_offset_origin(rtpi_v3 p, rtpi_v3 ng, double side, double floor)
 {
     /* (inline, without fmax's calls: every hit and shadow query takes
        this step; a NaN p gives a NaN origin either way) */
@@ -362,11 +368,14 @@ static inline rtpi_v3 rtpi_offset_origin(rtpi_v3 p, rtpi_v3 ng, double side)
        along the normal (double rounding, ~1e-15, adds nothing).  4e-7 *
        max|p| clears that with a factor of four, at every scale and
        distance from the origin; surfaces closer than that to each other
-       cannot be told apart by float positions anyway.  The absolute 1e-12
-       keeps the offset non-zero near the origin, where the error comes
-       from the vertices (double rounding of unit-size geometry, ~1e-16)
-       rather than from p. */
-    eps = 4e-7 * m + 1e-12;
+       cannot be told apart by float positions anyway.  The floor keeps
+       the offset non-zero near the origin, where the error comes from the
+       vertices (double rounding of the geometry, ~1e-16 of its size)
+       rather than from p: 1e-12, or for a scene smaller than 1e-3 1e-9 of
+       its size (an absolute 1e-12 was 0.1% of a scene 1e-9 across, all
+       of one 1e-12 across: its shadow rays started off the surface, and
+       false shadows grew as the scene shrank, 26.6 dB at 1e-12). */
+    eps = 4e-7 * m + floor;
     return v3_madd(p, ng, side >= 0.0 ? eps : -eps);
 }
 

@@ -442,6 +442,32 @@ void rtpi_prim_bounds_kept(const rtp_scene *s, uint32_t prim, double lo[3], doub
     rtpi_prim_bounds(s, prim, lo, hi);
 }
 
+double rtpi_offset_floor(const rtp_scene *s)
+{
+    double m = 0.0;
+    float mp = 0.0f;
+    size_t i;
+    int k;
+    /* (without fmax's calls: a mesh's every coordinate) */
+    for (i = 0; i < 3 * s->npos; i++) {
+        float a = fabsf(s->pos[i]);
+        mp = a > mp ? a : mp;
+    }
+    m = mp;
+    for (i = 0; i < s->nspheres; i++)
+        for (k = 0; k < 3; k++)
+            m = fmax(m, fabs((double)s->spheres[i].c[k]) + fabs((double)s->spheres[i].r));
+    for (i = 0; i < s->ncones; i++) {
+        const rtpi_cone *c = &s->cones[i];
+        double r = fmax(fabs((double)c->rb), fabs((double)c->ra));
+        for (k = 0; k < 3; k++)
+            m = fmax(m, fmax(fabs((double)c->base[k]), fabs((double)c->apex[k])) + r);
+    }
+    /* (a scene of 1e-3 and more: 1e-12 as it always was; no geometry or
+       none off the origin: the same) */
+    return m > 0.0 && 1e-9 * m < 1e-12 ? 1e-9 * m : 1e-12;
+}
+
 int rtpi_scene_bounds(rtp_scene *s)
 {
     size_t i, n = rtpi_scene_nprims(s);

@@ -105,12 +105,12 @@ static inline rtpi_ray rtpi_shadow_ray(rtpi_v3 o, rtpi_v3 lp)
    p moved off the surface (geometric normal ng) towards the light.  Trace
    and re-evaluation both call this, so they cast identical rays. */
 static inline int rtpi_shadow_setup(rtpi_v3 p, rtpi_v3 ng, rtpi_v3 ns, rtpi_v3 lp,
-                                    rtpi_v3 *o)
+                                    double floor, rtpi_v3 *o)
 {
     rtpi_v3 l = v3_sub(lp, p);
     if (v3_dot(ns, l) <= 0.0)
         return 0;
-    *o = rtpi_offset_origin(p, ng, v3_dot(ng, l) >= 0.0 ? 1.0 : -1.0);
+    *o = rtpi_offset_origin(p, ng, v3_dot(ng, l) >= 0.0 ? 1.0 : -1.0, floor);
     return 1;
 }
 
@@ -118,11 +118,12 @@ static inline int rtpi_shadow_setup(rtpi_v3 p, rtpi_v3 ng, rtpi_v3 ns, rtpi_v3 l
    at pe: pe rounded to float as the tree keeps it, the surface derived
    from that, the normals turned towards the ray where the material is
    two-sided (one_sided: SPD's rule), then rtpi_shadow_setup.  0 where the
-   surface faces away from the light, else 1 with the query's p and o.
-   For tests and benchmarks that ask what trace would ask. */
+   surface faces away from the light, else 1 with the query's p and o
+   (floor: rtpi_offset_floor(s)).  For tests and benchmarks that ask what
+   trace would ask. */
 static inline int rtpi_shadow_query_at(const rtp_scene *s, int one_sided, uint32_t prim,
-                                       rtpi_v3 pe, rtpi_v3 d, rtpi_v3 lp, rtpi_v3 *p,
-                                       rtpi_v3 *o)
+                                       rtpi_v3 pe, rtpi_v3 d, rtpi_v3 lp, double floor,
+                                       rtpi_v3 *p, rtpi_v3 *o)
 {
     rtpi_surface sf;
     rtpi_v3 ng, ns;
@@ -135,7 +136,7 @@ static inline int rtpi_shadow_query_at(const rtp_scene *s, int one_sided, uint32
         ns = v3_mul(ns, -1.0);
     }
     *p = sf.p;
-    return rtpi_shadow_setup(sf.p, ng, ns, lp, o);
+    return rtpi_shadow_setup(sf.p, ng, ns, lp, floor, o);
 }
 
 #endif

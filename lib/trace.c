@@ -69,6 +69,7 @@ struct shared {
     camera cam;
     int spd, max_depth;
     double min_weight;
+    double off_floor; /* rtpi_offset_floor of s */
     float *out;        /* nx*ny samples, RGB */
     /* Recording: finished rows go into the tree's arrays in row order, so
        each node is copied once, from its worker's row buffer (reused and
@@ -195,7 +196,7 @@ static int32_t spawn(worker *w, rtpi_v3 p, rtpi_v3 ng, rtpi_v3 dir, int depth,
                      double weight)
 {
     rtpi_ray r;
-    r.o = rtpi_offset_origin(p, ng, v3_dot(ng, dir) >= 0.0 ? 1.0 : -1.0);
+    r.o = rtpi_offset_origin(p, ng, v3_dot(ng, dir) >= 0.0 ? 1.0 : -1.0, w->sh->off_floor);
     r.d = dir;
     r.tmin = 0.0;
     r.tmax = HUGE_VAL;
@@ -260,7 +261,7 @@ static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
         const rtpi_light *L = &s->lights[i];
         rtpi_v3 lp = v3(L->pos[0], L->pos[1], L->pos[2]), o;
         rtpi_ray sr;
-        if (!rtpi_shadow_setup(sf.p, ng, ns, lp, &o))
+        if (!rtpi_shadow_setup(sf.p, ng, ns, lp, sh->off_floor, &o))
             continue;
         sr = rtpi_shadow_ray(o, lp);
         w->n.shadow_rays++;
@@ -730,6 +731,7 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
 
     memset(&sh, 0, sizeof sh);
     sh.s = s;
+    sh.off_floor = rtpi_offset_floor(s);
     sh.wa = &s->alloc;
     if (nthreads > 1 && !rtpi_allocator_is_default(&s->alloc)) {
         if (rtpi_locked_alloc_init(&la, &s->alloc) == 0) {
@@ -975,6 +977,7 @@ rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int thre
 
     memset(&sh, 0, sizeof sh);
     sh.s = &tmp;
+    sh.off_floor = rtpi_offset_floor(&tmp);
     sh.wa = &tmp.alloc;
     if (nthreads > 1 && !rtpi_allocator_is_default(&tmp.alloc)) {
         if (rtpi_locked_alloc_init(&la, &tmp.alloc) == 0) {

@@ -235,6 +235,7 @@ static void rays_bunny(const rtp_scene *s, const rtpi_kdtree *kd)
     light = v3(c[0] + ext, c[1] + 1.5 * ext, c[2] + ext);
     {
         size_t m = 0;
+        const double floor = rtpi_offset_floor(s);
         for (i = 0; i < n; i++) {
             rtpi_surface su;
             double side;
@@ -242,7 +243,7 @@ static void rays_bunny(const rtp_scene *s, const rtpi_kdtree *kd)
                 continue;
             rtpi_surface_at(s, &rays[i], &hits[i], &su);
             side = v3_dot(rays[i].d, su.ng) < 0 ? 1.0 : -1.0;
-            rays[m].o = rtpi_offset_origin(su.p, su.ng, side);
+            rays[m].o = rtpi_offset_origin(su.p, su.ng, side, floor);
             rays[m].d = v3_sub(light, rays[m].o);
             rays[m].tmin = 0;
             rays[m].tmax = 1; /* up to the light */
