@@ -296,6 +296,16 @@ static int common_option(int argc, char **argv, int *i, int *threads, const char
 
 /* ------------------------------------------------------------ signals */
 
+/* trace's tree as it was before its write (keep_take, below) */
+typedef struct keep_old {
+    char dest[4096]; /* the file the write replaces (a link's target) */
+    char old[4096];  /* its old contents' hard link, when state is 1 */
+    int state;       /* 0 nothing to undo, 1 old kept, 2 it was new,
+                        3 it could not be kept (errno in why) */
+    int why;
+} keep_old;
+
+
 /* SIGINT, SIGTERM, SIGHUP, SIGQUIT and SIGPIPE end rtp as they would, without
    leaving a temporary file behind: they wait while an image or tree file
    is written (the library writes it beside the file and renames it into
@@ -306,11 +316,25 @@ static int common_option(int argc, char **argv, int *i, int *threads, const char
 static sigset_t term_signals, saved_mask;
 static char stats_tmp[4096];
 static volatile sig_atomic_t stats_tmp_live;
+/* trace -o TREE -i IMAGE with the image a pipe, device or stdout: its
+   write may block as long as its reader, so signals stay live through it;
+   one arriving then puts the tree back as keep_undo would (pair_keep: the
+   keep_old of the tree, set while pair_live) */
+static const struct keep_old *pair_keep;
+static volatile sig_atomic_t pair_live;
 
 static void on_term(int sig)
 {
     if (stats_tmp_live)
         unlink(stats_tmp); /* (async-signal-safe) */
+    if (pair_live && pair_keep) {
+        /* (rename and unlink are async-signal-safe; keep_old's fields
+           were set before pair_live) */
+        if (pair_keep->state == 1)
+            rename(pair_keep->old, pair_keep->dest);
+        else if (pair_keep->state == 2)
+            unlink(pair_keep->dest);
+    }
     signal(sig, SIG_DFL);
     raise(sig);
 }
@@ -379,19 +403,12 @@ static rtp_status write_tree(const rtp_tree *t, const char *path, unsigned long 
 /* trace -o TREE -i IMAGE writes two files: when the second fails (a full
    disk) the first is put back as it was — its old contents kept under a
    hard link beside it until both are written, or removed when it was
-   new — so the pair never mixes a new tree with an old image.  Only for
-   two regular files (a FIFO or stdout cannot be taken back). */
+   new — so the pair never mixes a new tree with an old image.  For a
+   tree that is a regular file (a FIFO or stdout cannot be taken back);
+   the image may be anything. */
 static int is_stdout(const char *path);
 static int link_target(const char *path, char *buf, size_t size);
 static int link_walk(const char *path, char *buf, size_t size, int *via_fd);
-
-typedef struct keep_old {
-    char dest[4096]; /* the file the write replaces (a link's target) */
-    char old[4096];  /* its old contents' hard link, when state is 1 */
-    int state;       /* 0 nothing to undo, 1 old kept, 2 it was new,
-                        3 it could not be kept (errno in why) */
-    int why;
-} keep_old;
 
 /* Whether a link chain at path passes through /proc or /dev/fd (another
    open file: the library appends to it, nothing can be taken back). */
@@ -1302,8 +1319,10 @@ static int cmd_trace(int argc, char **argv)
     pair = tree_path && image_path && output_is_file(tree_path);
     if (pair) {
         /* (signals held over both writes: Ctrl-C between them would
-           leave the new tree with the old image) */
-        pair_held = hold_signals(tree_path);
+           leave the new tree with the old image; not over an image to a
+           pipe, device or stdout, whose write may block as long as its
+           reader: Ctrl-C then puts the tree back, on_term) */
+        pair_held = output_is_file(image_path) ? hold_signals(tree_path) : 0;
         keep_take(&keep, tree_path);
     }
     if (tree_path && write_tree(tree, tree_path, &file_bytes, &err) != RTP_OK) {
@@ -1312,12 +1331,18 @@ static int cmd_trace(int argc, char **argv)
         release_signals(pair_held);
         goto out;
     }
+    if (pair && !pair_held) {
+        pair_keep = &keep;
+        pair_live = 1;
+    }
     if (image_path && write_image(img, image_path, &err) != RTP_OK) {
+        pair_live = 0;
         fail_err(&err);
         keep_undo(&keep, tree_path);
         release_signals(pair_held);
         goto out;
     }
+    pair_live = 0;
     keep_drop(&keep);
     release_signals(pair_held);
     rtp_tree_get_info(tree, &ti);

@@ -356,6 +356,28 @@ if [ -w /dev/full ]; then
     expect_rc 1 $RTP trace $S --size 16x16 -o "$T/fs/dn.rtp" -i "$T/fs/full.pfm"
     [ ! -e "$T/fs/dn.rtp" ] && ok || bad "a failed device image left a new tree"
     rm -f "$T/fs/full.pfm" "$T/fs/dv.rtp" "$T/fs/dn.rtp"
+    # an image to a FIFO nobody reads blocks: SIGTERM still ends rtp (the
+    # signals had been held over the pair's writes, and rtp waited as long
+    # as the reader: helper 50) and puts the tree back
+    if mkfifo "$T/fs/ff.pfm" 2>/dev/null; then
+        echo oldtree >"$T/fs/sg.rtp"
+        $RTP trace $S --size 16x16 -o "$T/fs/sg.rtp" -i "$T/fs/ff.pfm" 2>"$T/err" &
+        pid=$!
+        i=0
+        while [ "$(head -c 7 "$T/fs/sg.rtp")" = oldtree ] && [ $i -lt 300 ]; do sleep 0.1; i=$((i + 1)); done
+        kill -TERM $pid 2>/dev/null
+        i=0
+        while kill -0 $pid 2>/dev/null && [ $i -lt 100 ]; do sleep 0.1; i=$((i + 1)); done
+        if kill -0 $pid 2>/dev/null; then
+            kill -KILL $pid; bad "SIGTERM while the image's FIFO blocks: rtp went on"
+        else
+            ok
+        fi
+        wait $pid 2>/dev/null
+        [ "$(cat "$T/fs/sg.rtp")" = oldtree ] && ok || bad "SIGTERM while the image blocked left the new tree"
+        [ -z "$(ls -A "$T/fs" | grep -v '^ff.pfm$' | grep -v '^sg.rtp$')" ] && ok || bad "SIGTERM left $(ls -A "$T/fs")"
+        rm -f "$T/fs/ff.pfm" "$T/fs/sg.rtp"
+    fi
 else
     skip=$((skip + 1)); echo "skip: /dev/full not writable"
 fi
