@@ -1926,7 +1926,7 @@ typedef struct ib_cast {
     const rtp_scene *s;
     uint32_t prim;
     int sphere, inside;
-    double near2; /* the square of dc_near's bound, less 2e-9 of it */
+    double near2; /* the square of dc_near's bound, less its roundings */
     const ib_part *pt;
     unsigned long long *casts;
 } ib_cast;
@@ -1955,10 +1955,10 @@ static void ib_cast_run(void *user, size_t cell, int count)
             /* A hit at t along d (depth t: d's component along the face's
                axis is 1) lies t |d| from the light, at least dc_near's
                bound: where the cell holds a depth zs with zs |d| below
-               that bound (by 1e-9 of it, far beyond the roundings of
-               either side), no hit can be nearer and none is stored, so
-               the ray is not cast (rings at 1024 cells: nine in ten of
-               the cones' rays met a cell holding something nearer) */
+               that bound (less the roundings of either side: near2), no
+               hit can be nearer and none is stored, so the ray is not
+               cast (rings at 1024 cells: nine in ten of the cones' rays
+               met a cell holding something nearer) */
             double zs = (double)ib->z[cc] + ib->w.zbase[f];
             if (zs >= 0.0 && zs * zs * v3_dot(d, d) < ic->near2)
                 continue;
@@ -2015,9 +2015,19 @@ static void ib_draw(rtpi_itembuf *ib, const rtp_scene *s, dc_ctx *c, uint32_t pr
         ib_cast ic;
         if (c->S < 0.0)
             c->S = dc_scale(s, ib->light);
-        ic.near2 = dc_near(s, prim, ib->light);
-        ang = fmin(1e-9, lb_ang(c->S, ic.near2));
-        ic.near2 *= ic.near2 * (1.0 - 2e-9);
+        double near = dc_near(s, prim, ib->light), lo[3], hi[3], ext;
+        ang = fmin(1e-9, lb_ang(c->S, near));
+        /* The cast's t and dc_near's bound both carry roundings of about
+           1e-16 of the distances they are made of (|c - L| + r for a
+           sphere: of the shape's size too, where the light is close to
+           it): the bound is lowered by 1e-9 of near plus the shape's
+           extent, far beyond them, and where that leaves nothing every
+           ray is cast. */
+        rtpi_prim_bounds_kept(s, prim, lo, hi);
+        ext = sqrt((hi[0] - lo[0]) * (hi[0] - lo[0]) + (hi[1] - lo[1]) * (hi[1] - lo[1]) +
+                   (hi[2] - lo[2]) * (hi[2] - lo[2]));
+        near -= 1e-9 * (near + ext);
+        ic.near2 = near > 0.0 ? near * near : 0.0;
         ic.ib = ib;
         ic.s = s;
         ic.prim = prim;
