@@ -911,8 +911,11 @@ struct rtp_tree {
 #define RTPI_MEMORY_LIMIT (16.0 * 1073741824.0)
 
 /* Traces the listed samples (ascending indices) of t again in t->scene as
-   it is now (materials edited; lights where they were traced) and puts
-   their new trees in place of the old; adds the rays cast to *rays and
+   it is now (materials edited; lights where they were traced, or with
+   nlights_now > 0 the scene's first nlights_now lights where they are now
+   and no others: every sample traced again, the caller then records them
+   as traced) and puts their new trees in place of the old; adds the rays
+   cast to *rays and
    those not followed because a sample's tree was full to *capped.  The
    trees may take limit bytes in all, the old and the new together while
    they are spliced (RTP_ERR_LIMIT past it, t unchanged); progress (may
@@ -923,7 +926,7 @@ struct rtp_tree {
 rtp_status rtpi_trace_sized(const rtp_scene *s, const rtp_trace_options *opt,
                             rtp_image **out, rtp_trace_stats *stats, rtp_error *err);
 rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int threads,
-                        double limit, unsigned long long *rays,
+                        size_t nlights_now, double limit, unsigned long long *rays,
                         unsigned long long *capped, void (*progress)(void *, double),
                         void *progress_user, rtp_error *err);
 

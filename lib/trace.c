@@ -933,7 +933,7 @@ static int retrace_chunk(void *ctx, int ci)
 }
 
 rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int threads,
-                        double limit, unsigned long long *rays,
+                        size_t nlights_now, double limit, unsigned long long *rays,
                         unsigned long long *capped, void (*progress)(void *, double),
                         void *progress_user, rtp_error *err)
 {
@@ -944,7 +944,7 @@ rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int thre
     retrace_job *jobs = NULL;
     void *ctx[RTPI_MAX_THREADS];
     row_rec *chunks = NULL;
-    size_t nchunks, chunk = 64, i, k, ns = (size_t)t->nx * t->ny, total, words = t->vis_words;
+    size_t nchunks, chunk = 64, i, k, ns = (size_t)t->nx * t->ny, total, words = t->vis_words, nl;
     rtpi_cnode *nodes = NULL;
     uint64_t *start = NULL;
     uint32_t *vis = NULL;
@@ -963,17 +963,21 @@ rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int thre
         return st;
     /* The trees record visibility of the lights where they were traced:
        trace the new samples with the lights there (moved lights are
-       decided anew at evaluation, as for every other sample). */
+       decided anew at evaluation, as for every other sample), or where
+       every sample is traced again, with them where they are now (the
+       caller records them as traced there). */
     tmp = *t->scene;
-    lights = (rtpi_light *)rtpi_malloc_array(a, t->nlights0 + 1, sizeof *lights);
+    nl = nlights_now ? nlights_now : t->nlights0;
+    lights = (rtpi_light *)rtpi_malloc_array(a, nl + 1, sizeof *lights);
     if (!lights)
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
-    for (i = 0; i < t->nlights0; i++) {
+    for (i = 0; i < nl; i++) {
         lights[i] = t->scene->lights[i];
-        memcpy(lights[i].pos, t->lights0[i].pos, sizeof lights[i].pos);
+        if (!nlights_now)
+            memcpy(lights[i].pos, t->lights0[i].pos, sizeof lights[i].pos);
     }
     tmp.lights = lights;
-    tmp.nlights = t->nlights0;
+    tmp.nlights = nl;
 
     memset(&sh, 0, sizeof sh);
     sh.s = &tmp;

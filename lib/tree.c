@@ -1963,7 +1963,7 @@ static rtp_status retrace_edited(rtp_tree *t, int threads, int stale, double lim
                                  progress_part *progress, rtp_eval_stats *st, rtp_error *err)
 {
     const rtp_scene *s = t->scene;
-    size_t m, k, ns = (size_t)t->nx * t->ny, n = 0;
+    size_t m, k, ns = (size_t)t->nx * t->ny, n = 0, nl_now = 0;
     unsigned char *mark, *swapped = NULL;
     uint32_t *list;
     int any = 0, camera = memcmp(&s->camera, &t->cam0, sizeof t->cam0) != 0;
@@ -2007,7 +2007,19 @@ static rtp_status retrace_edited(rtp_tree *t, int threads, int stale, double lim
                 swapped[m] = 1;
             }
     }
-    rs = rtpi_retrace(t, list, n, threads, limit, st ? &st->retraced_rays : NULL,
+    /* A moved camera traces every sample again: with the lights where
+       they are now, added ones too where the trees' light bits have room
+       for them (else the traced ones alone), which the trees then record
+       as traced.  With the lights where they were traced, a moved light
+       was decided again for every node after this full trace, by
+       --shadows: an item buffer's error stayed in an image called a full
+       trace, and every node paid a query. */
+    if (camera) {
+        nl_now = s->nlights;
+        if (!(nl_now <= 32 ? t->vis_words == 0 : t->vis_words == (nl_now + 31) / 32))
+            nl_now = t->nlights0;
+    }
+    rs = rtpi_retrace(t, list, n, threads, nl_now, limit, st ? &st->retraced_rays : NULL,
                       st ? &st->capped_rays : NULL, progress->fn ? progress_part_cb : NULL,
                       progress, err);
     for (m = 0; swapped && m < s->nmats; m++)
@@ -2023,6 +2035,10 @@ static rtp_status retrace_edited(rtp_tree *t, int threads, int stale, double lim
         st->camera_moved = camera;
     }
     t->cam0 = s->camera;
+    for (k = 0; k < nl_now; k++)
+        memcpy(t->lights0[k].pos, s->lights[k].pos, sizeof t->lights0[k].pos);
+    if (nl_now)
+        t->nlights0 = nl_now;
     /* The samples just traced spawned rays with every material as it is
        now: where another material's ks or kt is lower now than when its
        own samples were traced (0: no reflected or refracted rays at all),

@@ -760,6 +760,78 @@ static void test_camera_move(void)
     rtp_scene_destroy(s);
 }
 
+/* A camera move after a moved and an added light: every sample is traced
+   again with the lights where they are now, so the image is the full
+   trace's whatever --shadows says (before, the moved lights were decided
+   again by the item buffer after that trace: its error stayed in an image
+   called a full trace) and no node is queried; the added light is then
+   traced like the others, and the tree can be saved. */
+static void test_camera_after_light_edits(void)
+{
+    rtp_scene *s = load("scenes/spheres.nff");
+    rtp_tree *t = NULL, *back = NULL;
+    rtp_image *re = NULL, *full = NULL, *again = NULL;
+    rtp_trace_options o;
+    rtp_eval_options eo;
+    rtp_eval_stats es;
+    rtp_trace_stats ts;
+    char file[512];
+    static const double add[3] = {2.0, -3.0, 4.0};
+    if (!s) {
+        CHECK(s != NULL);
+        return;
+    }
+    memset(&o, 0, sizeof o);
+    o.width = 48;
+    o.height = 36;
+    CHECK(rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
+    if (!t) {
+        rtp_scene_destroy(s);
+        return;
+    }
+    memset(&eo, 0, sizeof eo);
+    eo.shadows = RTP_SHADOWS_ITEMBUF;
+    eo.shadow_res = 4; /* (coarse: approximate at every shadow edge) */
+    CHECK(rtp_tree_set(t, "light.0.pos", "1,-3,6", NULL) == RTP_OK);
+    CHECK(rtp_tree_add_light(t, add, NULL) == RTP_OK);
+    CHECK(rtp_tree_eval(t, &eo, &re, NULL, NULL) == RTP_OK);
+    CHECK(rtp_tree_set(t, "camera.angle", "38", NULL) == RTP_OK);
+    memset(&es, 0, sizeof es);
+    CHECK(rtp_tree_eval_into(t, &eo, re, &es, NULL) == RTP_OK);
+    CHECK(rtp_tree_trace(t, 1, &full, &ts, NULL) == RTP_OK);
+    printf("  camera after a moved and an added light: %llu queries, %llu of %llu rays\n",
+           es.shadow_queries, es.retraced_rays,
+           ts.eye_rays + ts.shadow_rays + ts.reflected_rays + ts.refracted_rays);
+    CHECK(same_image(re, full) && es.camera_moved && es.shadow_queries == 0 &&
+          es.moved_lights == 0);
+    CHECK(es.retraced_rays == ts.eye_rays + ts.shadow_rays + ts.reflected_rays +
+                                  ts.refracted_rays);
+    /* the added light is now traced: the tree saves and reads back as
+       such, the same image with no query */
+    snprintf(file, sizeof file, "%s/rtp-camlights-%d.rtp", tmpdir(), (int)getpid());
+    CHECK(rtp_tree_write(t, file, NULL, NULL) == RTP_OK);
+    CHECK(rtp_tree_read(file, NULL, &back, NULL) == RTP_OK);
+    memset(&es, 0, sizeof es);
+    CHECK(back && rtp_tree_eval(back, &eo, &again, &es, NULL) == RTP_OK &&
+          same_image(again, full) && es.shadow_queries == 0);
+    remove(file);
+    /* and a light moved after it is decided as ever: exactly by shadow
+       rays */
+    rtp_image_destroy(full);
+    full = NULL;
+    eo.shadows = RTP_SHADOWS_EXACT;
+    CHECK(rtp_tree_set(t, "light.1.pos", "-2,-3,5", NULL) == RTP_OK);
+    memset(&es, 0, sizeof es);
+    CHECK(rtp_tree_eval_into(t, &eo, re, &es, NULL) == RTP_OK && es.moved_lights == 1);
+    CHECK(rtp_tree_trace(t, 1, &full, NULL, NULL) == RTP_OK && same_image(re, full));
+    rtp_image_destroy(re);
+    rtp_image_destroy(full);
+    rtp_image_destroy(again);
+    rtp_tree_destroy(back);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+}
+
 /* rtp_scene_get gives every key's value as rtp_scene_set takes it: set
    back, nothing changes (the traced image bit for bit, the value read
    again); names and the errors. */
@@ -3732,6 +3804,7 @@ int main(void)
     RUN(test_refused_edits);
     RUN(test_camera_keys);
     RUN(test_camera_move);
+    RUN(test_camera_after_light_edits);
     RUN(test_scene_get);
     RUN(test_class_d_retrace);
     RUN(test_tree_trace_region);
