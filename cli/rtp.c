@@ -1060,7 +1060,9 @@ static const char trace_help[] =
     "and, with -o, the ray trees that `rtp reeval` re-evaluates.\n"
     "  -o, --output TREE    write the ray trees to TREE (.rtp; '-' = stdout)\n"
     "  -i, --image FILE     image to write (.png, .ppm, .pfm; '-' = PFM on stdout);\n"
-    "                       default: SCENE's name with .png (none with -o)\n"
+    "                       default: SCENE's name with .png ('-': trace.png;\n"
+    "                       .ppm in a build without PNG), in the current folder\n"
+    "                       (none with -o)\n"
     "  --set KEY=VALUE      edit the scene first (repeatable): light.N.pos|color|on,\n"
     "                       mat.N.color|kd|ks|kt|shine|ior|checker|color2|\n"
     "                       checker_scale|texture|bump|bump_strength|bump_scale,\n"
@@ -1082,6 +1084,9 @@ static const char trace_help[] =
     "  -q, --quiet          no messages but errors;  -v, --verbose  more\n"
     "  -h, --help           this help\n";
 
+/* The image written where none is named: the input's name without its
+   folder and extension (the current folder's), with .png, or .ppm where
+   the library was built without libpng (a default that could only fail). */
 static char *default_image_name(const char *scene)
 {
     const char *base = strrchr(scene, '/');
@@ -1095,7 +1100,7 @@ static char *default_image_name(const char *scene)
     if (!out)
         return NULL;
     memcpy(out, base, n);
-    memcpy(out + n, ".png", 5);
+    memcpy(out + n, rtp_png_supported() ? ".png" : ".ppm", 5);
     return out;
 }
 
@@ -1627,7 +1632,8 @@ static const char reeval_help[] =
     "Re-evaluates the ray trees in TREE ('-' = stdin) with edited parameters\n"
     "and writes the image, without tracing a ray.\n"
     "  -i, --image FILE     image to write (.png .ppm .pfm; '-' = PFM on stdout);\n"
-    "                       default: TREE's name with .png\n"
+    "                       default: TREE's name with .png ('-': reeval.png;\n"
+    "                       .ppm in a build without PNG), in the current folder\n"
     "  --set KEY=VALUE      edit a parameter (repeatable); keys as for trace\n"
     "  --params FILE        edits from FILE: KEY=VALUE per line, '#' comments;\n"
     "                       repeatable (files in turn, then the --set edits)\n"
@@ -1637,11 +1643,12 @@ static const char reeval_help[] =
     "                       stream of PFM images on stdout\n"
     "  --shadows MODE       shadows of moved or added lights: auto[:RES] (exact:\n"
     "                       the light buffer where the tree has 4 or more hits a\n"
-    "                       primitive, else shadow rays; default), exact (shadow\n"
-    "                       rays), lightbuf[:RES] (light buffer, exact),\n"
-    "                       itembuf[:RES] (item buffer, approximate at shadow\n"
-    "                       edges), osmesa[:RES] (item buffer by OSMesa); RES:\n"
-    "                       direction-cube cells per face edge, 1 to 8192\n"
+    "                       primitive, else shadow rays, but the light buffer for\n"
+    "                       a first move, before a kd-tree is built; default),\n"
+    "                       exact (shadow rays), lightbuf[:RES] (light buffer,\n"
+    "                       exact), itembuf[:RES] (item buffer, approximate at\n"
+    "                       shadow edges), osmesa[:RES] (item buffer by OSMesa);\n"
+    "                       RES: direction-cube cells per face edge, 1 to 8192\n"
     "                       (default 512; for auto, 64 to 1024 from the tree's\n"
     "                       hits)\n"
     "  --stale MODE         after a bump edit, the reflected and refracted rays\n"
@@ -1733,13 +1740,18 @@ static int reeval_one(rtp_tree *tree, const rtp_eval_options *eo, rtp_image **ke
         goto out;
     }
     if (reference) {
+        /* the full trace alone, as `seconds` is the evaluation alone
+           (the comparison after it was timed with it) */
         double t0 = now_seconds();
-        if (rtp_tree_trace(tree, threads, &ref, &ts, &err) != RTP_OK ||
-            rtp_image_diff(img, ref, 1.0 / 255.0, &d, &err) != RTP_OK) {
+        if (rtp_tree_trace(tree, threads, &ref, &ts, &err) != RTP_OK) {
             fail_line(&err, line);
             goto out;
         }
         t_ref = now_seconds() - t0;
+        if (rtp_image_diff(img, ref, 1.0 / 255.0, &d, &err) != RTP_OK) {
+            fail_line(&err, line);
+            goto out;
+        }
         if (verbosity > 0)
             fprintf(stderr,
                     "rtp: reeval %.4f s, full trace %.4f s (%.1fx); error: rmse %.3g, "
