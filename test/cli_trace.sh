@@ -54,6 +54,15 @@ b8=b.ppm
 awk '/^built with:/ { for (i = 3; i <= NF; i++) if ($i == "png") f = 1 } END { exit !f }' "$T/ver" &&
     b8=b.png
 expect_rc 0 $RTP trace scenes/spheres.nff --size 40x30 -i "$T/$b8" --set mat.0.color=0,1,0
+# with no -i, the image is the scene's name with .png (.ppm without PNG)
+# in the current folder, and written; from stdin, trace.png
+mkdir -p "$T/cwd"
+here=$(pwd)
+case $RTP in /*) rtp_abs=$RTP ;; *) rtp_abs=$here/$RTP ;; esac
+(cd "$T/cwd" && "$rtp_abs" trace "$here/scenes/spheres.nff" --size 8x6 -q) &&
+    [ -s "$T/cwd/spheres.${b8#b.}" ] && ok || bad "default image spheres.${b8#b.} not written"
+(cd "$T/cwd" && "$rtp_abs" trace - --size 8x6 -q <"$here/scenes/spheres.nff") &&
+    [ -s "$T/cwd/trace.${b8#b.}" ] && ok || bad "default image trace.${b8#b.} not written"
 expect_rc 3 $RTP diff "$T/a.pfm" "$T/$b8" --fail-above rmse=0.001
 expect_rc 0 $RTP diff "$T/a.pfm" "$T/$b8" --fail-above rmse=100
 expect_rc 1 $RTP diff "$T/a.pfm" scenes/spheres.nff
