@@ -802,9 +802,20 @@ static int same_output(const char *cmd, const char *a, const char *b)
 }
 
 /* --stats - with an image or tree to stdout: the JSON would land inside
-   the binary stream (between a stream's images); 1 after a message. */
+   the binary stream (between a stream's images); an image or tree '-'
+   where stdout is a terminal: its bytes would go to the screen (as gzip
+   refuses them; a terminal named as a file is written); 1 after a
+   message. */
 static int stdout_taken(const char *cmd, const char *stats_path, const char *a, const char *b)
 {
+    if ((a && strcmp(a, "-") == 0) || (b && strcmp(b, "-") == 0)) {
+        if (!std_closed[1] && isatty(fileno(stdout))) {
+            msg("%s: stdout is a terminal: send the image or tree on '-' to a file or a pipe "
+                "(> or |)",
+                cmd);
+            return 1;
+        }
+    }
     if (!is_stdout(stats_path))
         return 0;
     if (is_stdout(a) || is_stdout(b)) {
@@ -1303,6 +1314,15 @@ static int cmd_trace(int argc, char **argv)
         if (apply_kv(set_scene, scene, sets[i], "--set", 0))
             goto out;
     t_load = now_seconds() - t0;
+    if (verbosity > 0) {
+        /* (a valid scene, but from a generator whose output went missing
+           or an empty file, most likely a mistake: said, not refused) */
+        rtp_scene_info si;
+        rtp_scene_get_info(scene, &si);
+        if (si.triangles + si.spheres + si.cones == 0)
+            fprintf(stderr, "rtp: warning: %s has no objects: the image is the background\n",
+                    strcmp(scene_path, "-") ? scene_path : "the scene on stdin");
+    }
     prog.start = now_seconds();
     prog.shown = 0;
     if (verbosity > 0 && isatty(2)) {
@@ -2212,10 +2232,12 @@ static int cmd_info(int argc, char **argv)
         fprintf(f,
                 "{\"command\": \"info\", \"width\": %d, \"height\": %d, \"spd\": %s, "
                 "\"pixels\": %llu, \"samples\": %llu, \"nodes\": %llu, \"bytes_per_node\": %u, "
-                "\"tree_bytes\": %llu, \"lights\": %zu, \"materials\": %zu",
+                "\"tree_bytes\": %llu, \"lights\": %zu, \"materials\": %zu, \"depth\": %d, "
+                "\"full_width\": %d, \"full_height\": %d, \"region_x\": %d, \"region_y\": %d",
                 ti.width, ti.height, ti.spd ? "true" : "false",
                 (unsigned long long)ti.width * ti.height, ti.samples, ti.nodes,
-                ti.bytes_per_node, ti.tree_bytes, ti.lights, ti.materials);
+                ti.bytes_per_node, ti.tree_bytes, ti.lights, ti.materials, ti.max_depth,
+                ti.full_width, ti.full_height, ti.region_x, ti.region_y);
         /* (a pipe has no size: left out, as reeval leaves it out) */
         if (fb >= 0)
             fprintf(f, ", \"file_bytes\": %lld", fb);
@@ -2318,6 +2340,8 @@ static int cmd_merge(int argc, char **argv)
         msg("merge: the tree and the image cannot both go to stdout");
         goto usage;
     }
+    if (stdout_taken("merge", NULL, out_tree, out_image))
+        goto usage;
     {
         /* stdin holds one input: a second '-' read it empty ("-: empty:
            not an rtp tree file") */

@@ -67,6 +67,11 @@ cmp -s "$T/a.pfm" "$T/b.pfm" && ok || bad "format-1 file merged into format 2 re
 # regions that overlap or leave a gap are refused
 $RTP trace $S --size 32x32 --region 0,0,32,20 -o "$T/p1.rtp" -i "$T/p1.pfm" -q
 $RTP trace $S --size 32x32 --region 0,10,32,32 -o "$T/p2.rtp" -i "$T/p2.pfm" -q
+# info says which part of which frame a region tree holds, in --stats too
+$RTP info "$T/p2.rtp" | grep -q "region: pixels 0,10 to 32,32 of a 32x32 frame" && ok ||
+    bad "info: no region line"
+$RTP info "$T/p2.rtp" --stats - | grep -q '"width": 32, "height": 22, .*"full_width": 32, "full_height": 32, "region_x": 0, "region_y": 10' &&
+    ok || bad "info --stats: no region keys: $($RTP info "$T/p2.rtp" --stats -)"
 $RTP merge -o "$T/x.rtp" "$T/p1.rtp" "$T/p2.rtp" 2>"$T/err"
 [ $? -eq 1 ] && grep -q overlap "$T/err" && ok || bad "overlap not refused"
 $RTP merge -o "$T/x.rtp" "$T/p1.rtp" 2>"$T/err"

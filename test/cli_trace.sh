@@ -54,6 +54,25 @@ b8=b.ppm
 awk '/^built with:/ { for (i = 3; i <= NF; i++) if ($i == "png") f = 1 } END { exit !f }' "$T/ver" &&
     b8=b.png
 expect_rc 0 $RTP trace scenes/spheres.nff --size 40x30 -i "$T/$b8" --set mat.0.color=0,1,0
+# An empty scene traces (the background) but says so; -q keeps quiet.
+expect_rc 0 $RTP trace - --size 8x6 -i "$T/empty.pfm" </dev/null
+grep -q "the scene on stdin has no objects" "$T/err" && ok || bad "empty scene: no warning: $(cat "$T/err")"
+expect_rc 0 $RTP trace - --size 8x6 -i "$T/empty.pfm" -q </dev/null
+[ ! -s "$T/err" ] && ok || bad "empty scene with -q: $(cat "$T/err")"
+# An image or tree '-' with stdout a terminal is a usage error (its bytes
+# would go to the screen); into a pipe it is written.  (script(1) gives
+# the terminal, where there is one to run.)
+if command -v script >/dev/null 2>&1 && script -qc true /dev/null >/dev/null 2>&1; then
+    script -qc "$RTP trace scenes/spheres.nff --size 8x6 -i -; echo rc=\$?" /dev/null >"$T/tty" 2>&1
+    grep -q "stdout is a terminal" "$T/tty" && grep -q "rc=2" "$T/tty" && ok ||
+        bad "image to a terminal not refused: $(cat "$T/tty")"
+    script -qc "$RTP trace scenes/spheres.nff --size 8x6 -i - | wc -c; echo rc=\$?" /dev/null >"$T/tty" 2>&1
+    grep -q "^ *588" "$T/tty" && grep -q "rc=0" "$T/tty" && ok ||
+        bad "image to a pipe from a terminal: $(cat "$T/tty")"
+else
+    echo "cli_trace.sh: no script(1) terminal here: the terminal checks skipped"
+    skip=$((skip + 2))
+fi
 # with no -i, the image is the scene's name with .png (.ppm without PNG)
 # in the current folder, and written; from stdin, trace.png
 mkdir -p "$T/cwd"
