@@ -418,8 +418,7 @@ rtp_status rtp_tree_eval_into(rtp_tree *tree, const rtp_eval_options *opt,
  *  RTP_ERR_UNSUPPORTED; the file holds the lights the trees were traced
  *  with, their visibility recorded) nor merged, until a camera edit's
  *  evaluation traces every sample again: that trace casts the shadow rays
- *  of every light where it is then (added ones too, up to 32 lights in
- *  all, or as many as the trees' light words hold), and the trees record
+ *  of every light where it is then, added ones too, and the trees record
  *  them as traced. */
 rtp_status rtp_tree_add_light(rtp_tree *tree, const double pos[3],
                               rtp_error *err);

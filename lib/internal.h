@@ -913,8 +913,9 @@ struct rtp_tree {
 /* Traces the listed samples (ascending indices) of t again in t->scene as
    it is now (materials edited; lights where they were traced, or with
    nlights_now > 0 the scene's first nlights_now lights where they are now
-   and no others: every sample traced again, the caller then records them
-   as traced) and puts their new trees in place of the old; adds the rays
+   and no others, with light words for as many: every sample traced again,
+   the caller then records them as traced) and puts their new trees in
+   place of the old; adds the rays
    cast to *rays and
    those not followed because a sample's tree was full to *capped.  The
    trees may take limit bytes in all, the old and the new together while

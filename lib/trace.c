@@ -978,6 +978,11 @@ rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int thre
     }
     tmp.lights = lights;
     tmp.nlights = nl;
+    /* every sample traced anew keeps no old node: its light words are
+       those of the lights it is traced with (as a trace makes them),
+       which may be more than the old trees' */
+    if (nlights_now)
+        words = nl > 32 ? (nl + 31) / 32 : 0;
 
     memset(&sh, 0, sizeof sh);
     sh.s = &tmp;
@@ -1006,7 +1011,8 @@ rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int thre
     /* The trees now, with their starts, stay until the new ones are
        spliced in. */
     nb = node_bytes(&sh);
-    kept = (double)t->nnodes * nb + (double)(ns + 1) * 8.0;
+    kept = (double)t->nnodes * ((double)sizeof(rtpi_cnode) + 4.0 * (double)t->vis_words) +
+           (double)(ns + 1) * 8.0;
     sh.limited = 1;
     sh.room = limit - kept;
     if (rtpi_mutex_init(&sh.lock) != 0) {
@@ -1105,6 +1111,7 @@ rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int thre
     t->nodes = nodes;
     t->start = start;
     t->vis_ext = vis;
+    t->vis_words = words;
     t->nnodes = total;
     nodes = NULL;
     start = NULL;

@@ -2007,18 +2007,15 @@ static rtp_status retrace_edited(rtp_tree *t, int threads, int stale, double lim
                 swapped[m] = 1;
             }
     }
-    /* A moved camera traces every sample again: with the lights where
-       they are now, added ones too where the trees' light bits have room
-       for them (else the traced ones alone), which the trees then record
-       as traced.  With the lights where they were traced, a moved light
-       was decided again for every node after this full trace, by
-       --shadows: an item buffer's error stayed in an image called a full
-       trace, and every node paid a query. */
-    if (camera) {
+    /* A moved camera traces every sample again: with every light where
+       it is now, added ones too (the new trees' light words as many as
+       they need), which the trees then record as traced.  With the lights
+       where they were traced, a moved light was decided again for every
+       node after this full trace, by --shadows: an item buffer's error
+       stayed in an image called a full trace, and every node paid a
+       query. */
+    if (camera)
         nl_now = s->nlights;
-        if (!(nl_now <= 32 ? t->vis_words == 0 : t->vis_words == (nl_now + 31) / 32))
-            nl_now = t->nlights0;
-    }
     rs = rtpi_retrace(t, list, n, threads, nl_now, limit, st ? &st->retraced_rays : NULL,
                       st ? &st->capped_rays : NULL, progress->fn ? progress_part_cb : NULL,
                       progress, err);
@@ -2848,7 +2845,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
     rtp_scene *s;
     int i, nthreads = opt && opt->threads > 1 ? opt->threads : 1, any_moved = 0, full;
     int cached, mode, res, kmode, kres, one = 0, matpath = 0, sparse, list_combine = 0, hl_used = 0;
-    int hl_apply = 0, hl_after = 0, restored = -1;
+    int hl_apply = 0, hl_after = 0, restored = -1, cam_pending;
     /* the materials whose samples alone step 3 set (RESOLVE_MAX at most;
        more: -1), so an incremental evaluation averages only their pixels */
     int nset = 0, partial = 0, by_mark = 0;
@@ -2914,7 +2911,10 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
        rays' time; 524k triangles at 1e11 took 49 s and 5.4 GB before
        lb_res): shadow rays, as exact, which --stats names.  The item
        buffer does the same in rtpi_shadow_create. */
-    for (l = 0; mode != RTP_SHADOWS_EXACT && l < s->nlights; l++) {
+    /* (a moved camera's re-trace below traces every light where it is:
+       none is decided by a cube then, whatever its distance or cells) */
+    cam_pending = memcmp(&s->camera, &t->cam0, sizeof t->cam0) != 0;
+    for (l = 0; mode != RTP_SHADOWS_EXACT && !cam_pending && l < s->nlights; l++) {
         const double *lp = s->lights[l].pos;
         /* (the item buffers too, as rtpi_shadow_create decides them: here
            so that --stats says so and no cube is charged to the memory
@@ -2935,7 +2935,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
         double cells = 6.0 * (double)res * (double)res;
         double need = cells * (mode == RTP_SHADOWS_LIGHTBUF ? 4.0 : 8.0) +
                       (mode == RTP_SHADOWS_OSMESA ? cells / 6.0 * 8.0 : 0.0);
-        for (l = 0; l < s->nlights; l++)
+        for (l = 0; !cam_pending && l < s->nlights; l++)
             if (light_moved(t, l) && !(need <= lim)) {
                 char g[2][32]; /* '.' whatever the locale */
                 rtpi_fmt_g(g[0], sizeof g[0], 6, ceil(need / 1048576.0));

@@ -824,6 +824,45 @@ static void test_camera_after_light_edits(void)
     memset(&es, 0, sizeof es);
     CHECK(rtp_tree_eval_into(t, &eo, re, &es, NULL) == RTP_OK && es.moved_lights == 1);
     CHECK(rtp_tree_trace(t, 1, &full, NULL, NULL) == RTP_OK && same_image(re, full));
+    {
+        /* lights added past 32 (the trees' light bits then take words of
+           their own): a camera edit traces them all too; and the moved
+           lights' direction cubes, which that re-trace makes needless, are
+           not charged to the memory limit (itembuf:8192 is 3 GiB) */
+        rtp_eval_options e2 = eo;
+        int j;
+        for (j = 0; j < 31; j++) {
+            const double p[3] = {-3.0 + 0.2 * j, -4.0 + 0.1 * j, 5.0 + 0.05 * j};
+            CHECK(rtp_tree_add_light(t, p, NULL) == RTP_OK);
+        }
+        CHECK(rtp_tree_set(t, "light.0.pos", "0.5,-3,6", NULL) == RTP_OK);
+        CHECK(rtp_tree_set(t, "camera.angle", "41", NULL) == RTP_OK);
+        e2.shadows = RTP_SHADOWS_ITEMBUF;
+        e2.shadow_res = 8192;
+        e2.memory_limit = 1000.0 * 1048576.0;
+        memset(&es, 0, sizeof es);
+        CHECK(rtp_tree_eval_into(t, &e2, re, &es, NULL) == RTP_OK);
+        rtp_image_destroy(full);
+        full = NULL;
+        CHECK(rtp_tree_trace(t, 1, &full, NULL, NULL) == RTP_OK);
+        {
+            rtp_tree_info ti;
+            rtp_tree_get_info(t, &ti);
+            printf("  camera with %zu lights (31 added past 32): %llu queries\n", ti.lights,
+                   es.shadow_queries);
+            CHECK(ti.lights > 32);
+        }
+        CHECK(same_image(re, full) && es.shadow_queries == 0 && es.moved_lights == 0);
+        CHECK(rtp_tree_write(t, file, NULL, NULL) == RTP_OK);
+        rtp_tree_destroy(back);
+        back = NULL;
+        rtp_image_destroy(again);
+        again = NULL;
+        CHECK(rtp_tree_read(file, NULL, &back, NULL) == RTP_OK);
+        CHECK(back && rtp_tree_eval(back, &eo, &again, NULL, NULL) == RTP_OK &&
+              same_image(again, full));
+        remove(file);
+    }
     rtp_image_destroy(re);
     rtp_image_destroy(full);
     rtp_image_destroy(again);
