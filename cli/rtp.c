@@ -801,6 +801,25 @@ static int same_output(const char *cmd, const char *a, const char *b)
     return 0;
 }
 
+/* An output that is the input file itself (a tree named t.png, whose
+   default image is t.png; -i naming the scene): written, it replaced the
+   input, which cannot be had back.  1 after a message. */
+static int overwrites_input(const char *cmd, const char *in, const char *out, int dflt)
+{
+    struct stat si, so;
+    if (!in || !out || strcmp(in, "-") == 0 || strcmp(out, "-") == 0)
+        return 0;
+    if (stat(in, &si) != 0 || stat(out, &so) != 0 || !S_ISREG(si.st_mode) ||
+        si.st_dev != so.st_dev || si.st_ino != so.st_ino)
+        return 0;
+    if (dflt)
+        msg("%s: the default image %s is the input itself: name the image with -i", cmd, out);
+    else
+        msg("%s: %s is the input %s: writing it would replace it; name another file", cmd, out,
+            in);
+    return 1;
+}
+
 /* --stats - with an image or tree to stdout: the JSON would land inside
    the binary stream (between a stream's images); an image or tree '-'
    where stdout is a terminal: its bytes would go to the screen (as gzip
@@ -1299,6 +1318,9 @@ static int cmd_trace(int argc, char **argv)
         }
         image_path = default_image;
     }
+    if (overwrites_input("trace", scene_path, image_path, image_path == default_image) ||
+        overwrites_input("trace", scene_path, tree_path, 0))
+        goto usage;
 
     t0 = now_seconds();
     if (rtp_scene_load(scene_path, NULL, &scene, &err) != RTP_OK) {
@@ -1969,6 +1991,8 @@ static int cmd_reeval(int argc, char **argv)
         }
         image_path = default_image;
     }
+    if (!stream && overwrites_input("reeval", tree_path, image_path, image_path == default_image))
+        goto usage;
     if (stdout_taken("reeval", stats_path, image_path, NULL))
         goto usage;
     if (stream && strcmp(image_path, "-") != 0) {

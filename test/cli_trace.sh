@@ -82,6 +82,19 @@ case $RTP in /*) rtp_abs=$RTP ;; *) rtp_abs=$here/$RTP ;; esac
     [ -s "$T/cwd/spheres.${b8#b.}" ] && ok || bad "default image spheres.${b8#b.} not written"
 (cd "$T/cwd" && "$rtp_abs" trace - --size 8x6 -q <"$here/scenes/spheres.nff") &&
     [ -s "$T/cwd/trace.${b8#b.}" ] && ok || bad "default image trace.${b8#b.} not written"
+# ... but never over the input itself (a scene or tree named like its
+# image): a usage error, the input kept
+cp scenes/spheres.nff "$T/cwd/s.$b8"
+(cd "$T/cwd" && "$rtp_abs" trace "s.$b8" --size 8x6 -q 2>"$T/err"); rc=$?
+[ $rc -eq 2 ] && cmp -s scenes/spheres.nff "$T/cwd/s.$b8" && grep -q "is the input itself" "$T/err" &&
+    ok || bad "trace's default image over its scene: exit $rc, $(cat "$T/err")"
+$RTP trace scenes/spheres.nff --size 8x6 -o "$T/cwd/t.rtp" -q
+cp "$T/cwd/t.rtp" "$T/cwd/t.$b8"
+(cd "$T/cwd" && "$rtp_abs" reeval "t.$b8" -q 2>"$T/err"); rc=$?
+[ $rc -eq 2 ] && cmp -s "$T/cwd/t.rtp" "$T/cwd/t.$b8" && ok ||
+    bad "reeval's default image over its tree: exit $rc, $(cat "$T/err")"
+expect_rc 2 $RTP reeval "$T/cwd/t.rtp" -i "$T/cwd/t.rtp"
+cmp -s "$T/cwd/t.rtp" "$T/cwd/t.$b8" && ok || bad "reeval -i over its tree wrote it"
 expect_rc 3 $RTP diff "$T/a.pfm" "$T/$b8" --fail-above rmse=0.001
 expect_rc 0 $RTP diff "$T/a.pfm" "$T/$b8" --fail-above rmse=100
 expect_rc 1 $RTP diff "$T/a.pfm" scenes/spheres.nff
