@@ -230,8 +230,10 @@ int rtpi_scene_cone_frames(rtp_scene *s);
 /* Adds a material with NFF defaults; returns its index or -1. */
 long rtpi_scene_add_material(rtp_scene *s, const rtpi_material *m);
 long rtpi_scene_add_light(rtp_scene *s, const rtpi_light *l);
-/* Loads (once per path) a PNG texture; returns its index via *index. */
-rtp_status rtpi_scene_add_texture(rtp_scene *s, const char *path,
+/* Loads (once per path, or with fresh each time: a key's image, kept
+   apart unless the scene holds the same pixels under that name) a PNG,
+   PPM or PFM texture; returns its index via *index. */
+rtp_status rtpi_scene_add_texture(rtp_scene *s, const char *path, int fresh,
                                   uint32_t *index, rtp_error *err);
 /* A deep copy of s with the same allocator. */
 rtp_status rtpi_scene_clone(const rtp_scene *s, rtp_scene **out);

@@ -572,7 +572,7 @@ static rtp_status load_texture(nff *c, const char *what, uint32_t *index)
     if (st != RTP_OK)
         return st;
     memset(&inner, 0, sizeof inner);
-    st = rtpi_scene_add_texture(c->s, path, index, &inner);
+    st = rtpi_scene_add_texture(c->s, path, 0, index, &inner);
     rtpi_free(&c->s->alloc, path);
     if (st != RTP_OK)
         return rtpi_lex_wrap(&c->lx, &t, st, &inner, "cannot load image");

@@ -455,7 +455,7 @@ static rtp_status mtl_map(rtpi_lex *lx, rtp_scene *s, const char *what,
     if (!path && !(path = rtpi_path_join(&s->alloc, lx->name, file.s, file.n)))
         return nomem(lx, &file);
     memset(&inner, 0, sizeof inner);
-    st = rtpi_scene_add_texture(s, path, index, &inner);
+    st = rtpi_scene_add_texture(s, path, 0, index, &inner);
     rtpi_free(&s->alloc, path);
     if (st != RTP_OK)
         return rtpi_lex_wrap(lx, &file, st, &inner, "cannot load image");

@@ -175,7 +175,7 @@ long rtpi_scene_add_light(rtp_scene *s, const rtpi_light *l)
     return (long)s->nlights++;
 }
 
-rtp_status rtpi_scene_add_texture(rtp_scene *s, const char *path,
+rtp_status rtpi_scene_add_texture(rtp_scene *s, const char *path, int fresh,
                                   uint32_t *index, rtp_error *err)
 {
     size_t i;
@@ -183,7 +183,7 @@ rtp_status rtpi_scene_add_texture(rtp_scene *s, const char *path,
     rtp_image *img = NULL;
     rtp_status st;
     char *p;
-    for (i = 0; i < s->ntexs; i++) {
+    for (i = 0; !fresh && i < s->ntexs; i++) {
         if (strcmp(s->texs[i].path, path) == 0) {
             *index = (uint32_t)i;
             return RTP_OK;
@@ -210,6 +210,22 @@ rtp_status rtpi_scene_add_texture(rtp_scene *s, const char *path,
                               "pixel (%zu, %zu) is not a finite number: a texture or bump map "
                               "needs finite values",
                               px % w, px / w);
+        }
+    }
+    /* read afresh (a key's image: the file may have changed since, or be
+       another file from another folder, or stdin's next image): where it
+       is an image the scene holds under that name, pixel for pixel, that
+       one (a stream setting the same image again adds nothing, and the
+       edit changes nothing) */
+    for (i = 0; fresh && i < s->ntexs; i++) {
+        const rtp_image *o = s->texs[i].image;
+        if (strcmp(s->texs[i].path, path) == 0 && o && o->width == img->width &&
+            o->height == img->height &&
+            memcmp(o->pixels, img->pixels,
+                   3 * (size_t)img->width * (size_t)img->height * sizeof *img->pixels) == 0) {
+            rtp_image_destroy(img);
+            *index = (uint32_t)i;
+            return RTP_OK;
         }
     }
     p = rtpi_strdup(&s->alloc, path);
@@ -702,7 +718,7 @@ rtp_status rtp_scene_set(rtp_scene *s, const char *key, const char *value,
                     m->tex = RTPI_TEX_NONE;
             } else {
                 uint32_t idx;
-                if ((st = rtpi_scene_add_texture(s, value, &idx, err)) != RTP_OK)
+                if ((st = rtpi_scene_add_texture(s, value, 1, &idx, err)) != RTP_OK)
                     return image_key_error(err, st, key, "none, or a PNG, PPM or PFM image");
                 m = &s->mats[i];
                 m->tex = RTPI_TEX_IMAGE;
@@ -720,7 +736,7 @@ rtp_status rtp_scene_set(rtp_scene *s, const char *key, const char *value,
                 m->bump = RTPI_BUMP_NOISE;
             } else {
                 uint32_t idx;
-                if ((st = rtpi_scene_add_texture(s, value, &idx, err)) != RTP_OK)
+                if ((st = rtpi_scene_add_texture(s, value, 1, &idx, err)) != RTP_OK)
                     return image_key_error(err, st, key,
                                            "none, waves, noise, or a height map image");
                 m = &s->mats[i]; /* (textures live apart; m is still valid) */
