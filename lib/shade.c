@@ -193,7 +193,21 @@ rtpi_v3 rtpi_bump_normal(const rtp_scene *s, const rtpi_material *m, uint32_t pr
         hu = (height_at(img, uv[0] + eu, uv[1]) - height_at(img, uv[0] - eu, uv[1])) / (2.0 * eu);
         hv = (height_at(img, uv[0], uv[1] + ev) - height_at(img, uv[0], uv[1] - ev)) / (2.0 * ev);
         d = v3_sub(v3_mul(v3_cross(n, pv), hu), v3_mul(v3_cross(n, pu), hv));
-        return v3_norm(v3_madd(n, d, m->bump_strength * m->bump_scale / a));
+        {
+            /* strength x scale as a float product (what every image was
+               made with), but in double where that overflows (keys take
+               each up to 3.4e38: 1e20 x 1e20 made the normal NaN); and
+               where n + k d would square past the double range, the same
+               direction from n / k + d */
+            float sk = m->bump_strength * m->bump_scale;
+            double k = (isinf(sk) ? (double)m->bump_strength * (double)m->bump_scale
+                                  : (double)sk) /
+                       a;
+            rtpi_v3 r = v3_madd(n, d, k);
+            if (!(v3_dot(r, r) < 1e300) && k != 0.0)
+                r = v3_madd(v3_mul(n, 1.0 / k), d, 1.0);
+            return v3_norm(r);
+        }
     } else {
         /* a solid height field: tilt n against the surface part of its
            gradient */

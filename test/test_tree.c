@@ -3839,6 +3839,44 @@ static void test_texture_file_changed(void)
     rtp_scene_destroy(s);
 }
 
+/* An image bump's strength x scale past the float range (keys take each
+   up to 3.4e38): the normals stay finite (a float product made them NaN
+   from 1e20 x 1e20), and a re-trace of the bump equals the full trace. */
+static void test_bump_beyond_float(void)
+{
+    static const char *const v[] = {"1e20", "3e38"};
+    size_t i, j, bad;
+    for (j = 0; j < 2; j++) {
+        rtp_scene *s = load("scenes/textured.nff");
+        rtp_tree *t = NULL;
+        rtp_image *a = NULL, *b = NULL;
+        rtp_trace_options o;
+        rtp_eval_options eo;
+        memset(&o, 0, sizeof o);
+        o.width = 32;
+        o.height = 24;
+        memset(&eo, 0, sizeof eo);
+        eo.stale = RTP_STALE_RETRACE;
+        CHECK(s && rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
+        CHECK(s && rtp_scene_set(s, "mat.ball.bump", "scenes/tex4.ppm", NULL) == RTP_OK &&
+              rtp_scene_set(s, "mat.ball.bump_strength", v[j], NULL) == RTP_OK &&
+              rtp_scene_set(s, "mat.ball.bump_scale", v[j], NULL) == RTP_OK);
+        CHECK(t && rtp_tree_set(t, "mat.ball.bump", "scenes/tex4.ppm", NULL) == RTP_OK &&
+              rtp_tree_set(t, "mat.ball.bump_strength", v[j], NULL) == RTP_OK &&
+              rtp_tree_set(t, "mat.ball.bump_scale", v[j], NULL) == RTP_OK);
+        CHECK(s && rtp_trace(s, &o, &b, NULL, NULL) == RTP_OK);
+        CHECK(t && rtp_tree_eval(t, &eo, &a, NULL, NULL) == RTP_OK);
+        for (i = 0, bad = 0; b && i < 3 * (size_t)b->width * (size_t)b->height; i++)
+            bad += !isfinite(b->pixels[i]);
+        CHECK_MSG(b && bad == 0, "bump %s x %s: %zu values not finite", v[j], v[j], bad);
+        CHECK(a && b && same_image(a, b));
+        rtp_image_destroy(a);
+        rtp_image_destroy(b);
+        rtp_tree_destroy(t);
+        rtp_scene_destroy(s);
+    }
+}
+
 /* Whether the tree file at path holds a section tagged tag. */
 static int file_has_section(const char *path, const char *tag)
 {
@@ -3965,6 +4003,7 @@ int main(void)
     RUN(test_reader_scene_values);
     RUN(test_unused_textures_left_out);
     RUN(test_texture_file_changed);
+    RUN(test_bump_beyond_float);
     RUN(test_texture_bytes);
     RUN(test_newer_version_and_foreign);
     RUN(test_out_of_range_values);
