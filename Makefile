@@ -1,5 +1,5 @@
 # rtp — top-level Makefile.  Targets: all test bench bench-build instr
-# install uninstall clean asan ubsan.  Honours CC, CFLAGS, LDFLAGS, PREFIX,
+# install uninstall clean asan ubsan tsan.  Honours CC, CFLAGS, LDFLAGS, PREFIX,
 # DESTDIR; V=1 shows the commands; THREADS=0 leaves POSIX threads out;
 # WERROR=0 drops -Werror.
 
@@ -50,7 +50,7 @@ TEST_BIN = $(TEST_SRC:%.c=$(BUILD)/%)
 BENCH_SRC = $(sort $(wildcard test/bench/*.c))
 BENCH_BIN = $(BENCH_SRC:test/bench/%.c=$(BUILD)/bench/%)
 
-.PHONY: all test bench bench-build instr install uninstall clean asan ubsan demo FORCE
+.PHONY: all test bench bench-build instr install uninstall clean asan ubsan tsan demo FORCE
 all: $(BUILD)/librtp.a $(BUILD)/librtp.so rtp
 
 $(BUILD)/%.o: %.c include/rtp.h $(wildcard lib/*.h)
@@ -129,6 +129,21 @@ asan:
 ubsan:
 	$(MAKE) BUILD=build-ubsan CFLAGS="-O1 -g -fsanitize=undefined -fno-sanitize-recover=undefined" LDFLAGS="-fsanitize=undefined" test
 
+# ThreadSanitizer over the whole suite.  Reports go to files (a CLI test
+# does not check every rtp's exit status, and the status of a program that
+# reported is 66 only at its end), and any file fails the target.
+# test/tsan.supp holds what is not rtp's (Mesa's llvmpipe, OSMESA=1).
+# TSan needs clang or gcc with libtsan: make CC=clang tsan.
+TSAN_LOG = $(CURDIR)/build-tsan/tsan-report
+tsan:
+	@mkdir -p build-tsan && rm -f $(TSAN_LOG).*
+	@TSAN_OPTIONS="halt_on_error=0 second_deadlock_stack=1 suppressions=$(CURDIR)/test/tsan.supp log_path=$(TSAN_LOG) $$TSAN_OPTIONS" \
+	    $(MAKE) BUILD=build-tsan CFLAGS="-O1 -g -fsanitize=thread" LDFLAGS="-fsanitize=thread" test; \
+	rc=$$?; \
+	if ls $(TSAN_LOG).* >/dev/null 2>&1; then \
+	    cat $(TSAN_LOG).*; echo "tsan: $$(ls $(TSAN_LOG).* | wc -l) process(es) reported races: $(TSAN_LOG).*"; exit 1; \
+	fi; exit $$rc
+
 VERSION = $(shell sed -nE 's/^\#define RTP_VERSION_(MAJOR|MINOR|PATCH) ([0-9]+).*/\2/p' include/rtp.h | paste -sd.)
 
 install: all
@@ -149,7 +164,7 @@ uninstall:
 	      $(DESTDIR)$(PREFIX)/bin/rtp
 
 clean:
-	rm -rf build build-asan build-ubsan build-fuzz rtp .rtp-flavour demo
+	rm -rf build build-asan build-ubsan build-tsan build-fuzz rtp .rtp-flavour demo
 
 # ------------------------------------------------------------------ fuzzing
 # Every test/fuzz/fuzz_*.c is a libFuzzer target that, built without libFuzzer,
