@@ -1038,6 +1038,22 @@ static int stdin_inputs(const char *cmd, const char *file, const char *file_what
 {
     const char *users[3];
     int n = 0, i, np = 0;
+    if (std_closed[0]) {
+        /* (held by a directory: each reader said "is a directory") */
+        const char *what = strcmp(file, "-") == 0 ? file_what : stream;
+        for (i = 0; !what && i < nparams; i++)
+            if (strcmp(params[i], "-") == 0)
+                what = "--params -";
+        for (i = 0; !what && i < nsets; i++) {
+            const char *eq = strchr(sets[i], '=');
+            if (eq && strcmp(eq + 1, "-") == 0)
+                what = sets[i];
+        }
+        if (what) {
+            msg("%s: stdin is closed: nothing there for %s", cmd, what);
+            return 1;
+        }
+    }
     if (strcmp(file, "-") == 0)
         users[n++] = file_what;
     for (i = 0; i < nparams; i++)

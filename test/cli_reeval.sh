@@ -480,6 +480,12 @@ expect_rc 1 sh -c "$RTP reeval '$T/t.rtp' -i '$T/so.pfm' >&-"
 grep -q "stdout is closed" "$T/err" && ok || bad "a link to closed stdout: $(cat "$T/err")"
 expect_rc 1 sh -c "$RTP info '$T/t.rtp' -q --stats '$T/so.pfm' >&-"
 rm -f "$T/so.pfm"
+# stdin closed (<&-) where an input is '-': said so (it read as a directory)
+expect_rc 2 sh -c "$RTP reeval - -i '$T/sc.pfm' <&-"
+grep -q "stdin is closed: nothing there for the tree" "$T/err" && ok || bad "stdin closed: $(cat "$T/err")"
+expect_rc 2 sh -c "$RTP reeval '$T/t.rtp' --set mat.red.texture=- -i '$T/sc.pfm' <&-"
+grep -q "stdin is closed" "$T/err" && ok || bad "stdin closed, texture: $(cat "$T/err")"
+expect_rc 0 sh -c "$RTP reeval '$T/t.rtp' -i '$T/sc.pfm' <&-"
 # far lights are decided by shadow rays in the item buffer modes too: no
 # cube charged to the limit, and --stats says exact (reviewer: refused)
 expect_rc 0 $RTP reeval "$T/t.rtp" --set light.key.pos=3e13,-5e13,8e13 --shadows itembuf:8192 --memory-limit 100 -i "$T/far.pfm" --stats "$T/far.json"
