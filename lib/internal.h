@@ -917,9 +917,8 @@ struct rtp_tree {
    nlights_now > 0 the scene's first nlights_now lights where they are now
    and no others, with light words for as many: every sample traced again,
    the caller then records them as traced) and puts their new trees in
-   place of the old; adds the rays
-   cast to *rays and
-   those not followed because a sample's tree was full to *capped.  The
+   place of the old; adds the rays cast to *rays and those not followed
+   because a sample's tree was full to *capped.  The
    trees may take limit bytes in all, the old and the new together while
    they are spliced (RTP_ERR_LIMIT past it, t unchanged); progress (may
    be NULL) as rtp_trace_options'.  The caller
