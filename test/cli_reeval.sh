@@ -5,6 +5,10 @@
 RTP=${RTP:-./rtp}
 T=${TMPDIR:-/tmp}/rtp-reeval.$$
 mkdir -p "$T"
+# (a run cut short by Ctrl-C or a CI timeout leaves nothing behind either)
+trap 'rm -rf "$T"' EXIT
+trap 'exit 130' INT
+trap 'exit 143' TERM
 pass=0; fail=0; skip=0
 ok()  { pass=$((pass + 1)); }
 bad() { fail=$((fail + 1)); echo "FAIL: $*" >&2; }

@@ -4,6 +4,9 @@
 dir=${1:-build/test}
 pass=0; fail=0; skip=0
 tmp=${TMPDIR:-/tmp}/rtp-test.$$
+trap 'rm -f "$tmp" "$tmp.err"' EXIT
+trap 'exit 130' INT
+trap 'exit 143' TERM
 for t in "$dir"/test_* test/cli_*.sh; do
     [ -e "$t" ] || continue
     case "$t" in *.sh) cmd="sh $t";; *) cmd="$t";; esac
