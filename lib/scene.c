@@ -517,9 +517,11 @@ enum { ITEM_LIGHT = 1, ITEM_MAT = 2 };
 static rtp_status item_key(const rtp_scene *s, const char *key, int *kind, long *idx,
                            const char **field, rtp_error *err)
 {
-    const char *dot1 = strchr(key, '.'), *dot2 = dot1 ? strchr(dot1 + 1, '.') : NULL;
+    /* (the field is after the last dot: a name may hold dots, as MTL
+       names often do, "Material.001") */
+    const char *dot1 = strchr(key, '.'), *dot2 = strrchr(key, '.');
     size_t len;
-    if (!dot1 || !dot2)
+    if (!dot1 || dot2 == dot1)
         return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0, "unknown key '%s'", key);
     *field = dot2 + 1;
     len = (size_t)(dot2 - dot1 - 1);

@@ -340,6 +340,31 @@ static void test_mtl_exports(void)
     rtp_scene_destroy(s);
     s = NULL;
     remove_file(dir, "sp.nff");
+    /* names with dots, as exporters make them ("Material.001"): a key's
+       field is after its last dot (mat.Material.001.kd said "no such
+       material") */
+    CHECK(write_file(dir, "dot.mtl", "newmtl Material.001\nKd 0.8 0 0\n"
+                                     "newmtl glass.red.kd\nKd 0 1 0\n") == 0);
+    CHECK(write_file(dir, "dot.obj", "mtllib dot.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"
+                                     "usemtl Material.001\nf 1 2 3\nusemtl glass.red.kd\n"
+                                     "f 1 3 2\n") == 0);
+    snprintf(path, sizeof path, "%s/dot.obj", dir);
+    CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_OK);
+    if (s) {
+        CHECK_MSG(rtp_scene_set(s, "mat.Material.001.kd", "0.25", &err) == RTP_OK, "%s",
+                  rtp_error_format(&err, buf, sizeof buf));
+        CHECK(rtp_scene_set(s, "mat.glass.red.kd.color", "0.5,0.25,0", &err) == RTP_OK);
+        CHECK(rtp_scene_get(s, "mat.Material.001.kd", buf, sizeof buf, &err) == RTP_OK &&
+              strcmp(buf, "0.25") == 0);
+        CHECK(s->mats[s->tris[0].mat].kd == 0.25f && s->mats[s->tris[1].mat].color[1] == 0.25f &&
+              s->mats[s->tris[1].mat].kd != 0.25f);
+        CHECK(rtp_scene_set(s, "mat.Material.kd", "0.5", &err) == RTP_ERR_KEY);
+        CHECK(rtp_scene_set(s, "mat.Material.001.", "0.5", &err) == RTP_ERR_KEY);
+    }
+    rtp_scene_destroy(s);
+    s = NULL;
+    remove_file(dir, "dot.obj");
+    remove_file(dir, "dot.mtl");
     CHECK(write_file(dir, "ov.nff", "f 0 1 0 1 0 10 0 1\nname Material\ns 0 0 0 1\n"
                                     "include ea.obj\ninclude eb.obj\n") == 0);
     snprintf(path, sizeof path, "%s/ov.nff", dir);
