@@ -2405,7 +2405,7 @@ static int cmd_merge(int argc, char **argv)
         }
     }
     if ((out_image && !image_name_ok(out_image)) || !output_ok(out_image) ||
-        !output_ok(out_tree))
+        !output_ok(out_tree) || same_output("merge", out_tree, out_image))
         goto out;
     if (images) {
         int x0, y0, x, y;

@@ -220,7 +220,12 @@ int rtpi_shadow_visible_cached(const rtpi_shadow *sh, rtpi_shadow_cache *c, cons
     uint32_t occ;
     int v;
     rtpi_ray r;
-    if (c->last && c->last - 1u != prim) {
+    /* Only where it cannot change the answer: an item buffer may call a
+       blocked point lit, and whether the previous query's occluder is
+       tested first then depends on the query before it -- on how the
+       frame was split into regions and on the threads' rows. */
+    if (c->last && c->last - 1u != prim &&
+        (sh->mode == RTPI_SHADOW_EXACT || sh->mode == RTPI_SHADOW_LIGHTBUF)) {
         /* A hit is a hit: the primitive is in the way whichever mode
            asks, and every exact mode's lists would hold it (the kd-tree's
            too: the same intersection tests).  Not the point's own

@@ -3534,6 +3534,17 @@ static int same_setup(const rtp_tree *a, const rtp_tree *b)
         (x->nspheres && memcmp(x->spheres, y->spheres, x->nspheres * sizeof *x->spheres)) ||
         (x->ncones && memcmp(x->cones, y->cones, x->ncones * sizeof *x->cones)))
         return 0;
+    /* (the images themselves: parts may have loaded different files into
+       the same slot by a texture or bump edit) */
+    for (i = 0; i < x->ntexs; i++) {
+        const rtp_image *u = x->texs[i].image, *v = y->texs[i].image;
+        if ((u == NULL) != (v == NULL))
+            return 0;
+        if (u && (u->width != v->width || u->height != v->height ||
+                  memcmp(u->pixels, v->pixels,
+                         (size_t)u->width * (size_t)u->height * 3 * sizeof *u->pixels) != 0))
+            return 0;
+    }
     for (i = 0; i < x->nmats; i++) {
         rtpi_material m = x->mats[i], n = y->mats[i];
         m.name = n.name = NULL;
@@ -3542,6 +3553,15 @@ static int same_setup(const rtp_tree *a, const rtp_tree *b)
     }
     for (i = 0; i < x->nlights; i++) {
         rtpi_light l = x->lights[i], k = y->lights[i];
+        l.name = k.name = NULL;
+        if (memcmp(&l, &k, sizeof l) != 0)
+            return 0;
+    }
+    /* the lights as traced: each part's visibility bits were decided
+       there (a part written after a move holds its bits for the traced
+       place, and its lights now where they were moved) */
+    for (i = 0; i < a->nlights0; i++) {
+        rtpi_light l = a->lights0[i], k = b->lights0[i];
         l.name = k.name = NULL;
         if (memcmp(&l, &k, sizeof l) != 0)
             return 0;

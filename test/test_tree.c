@@ -497,6 +497,65 @@ static void test_tree_crop(void)
    tree is written and read back to the same image; one level more is an
    argument error (the library took any depth: 1001 wrote a file its
    reader refused, 10,000 overflowed the stack). */
+/* rtp_tree_merge takes parts of one setup only: parts whose texture
+   slot holds other pixels (a texture edit, or the file changed between
+   two jobs), or whose visibility bits were decided for a light elsewhere
+   (one part written after a move), merged without a word and gave an
+   image that depended on the parts' order. */
+static int copy_file(const char *a, const char *b);
+
+static void test_merge_other_setups(void)
+{
+    int which;
+    char tex[512];
+    snprintf(tex, sizeof tex, "%s/rtp-merge-tex-%d.ppm", tmpdir(), (int)getpid());
+    for (which = 0; which < 2; which++) {
+        rtp_scene *s = load(which ? "scenes/spheres.nff" : "scenes/textured.nff");
+        rtp_tree *top = NULL, *bot = NULL, *m = NULL;
+        rtp_tree *parts[2];
+        rtp_trace_options o;
+        rtp_error err;
+        int k;
+        if (!s)
+            return;
+        memset(&o, 0, sizeof o);
+        o.width = 24;
+        o.height = 16;
+        o.region[2] = 24;
+        o.region[3] = 8;
+        CHECK(rtp_record(s, &o, &top, NULL, NULL, NULL) == RTP_OK);
+        if (which) {
+            /* the top part's light moved after its trace; the bottom
+               traced with the light already there */
+            CHECK(top && rtp_tree_set(top, "light.0.pos", "1,2,3", NULL) == RTP_OK);
+            CHECK(rtp_scene_set(s, "light.0.pos", "1,2,3", NULL) == RTP_OK);
+        }
+        o.region[1] = 8;
+        o.region[3] = 16;
+        CHECK(rtp_record(s, &o, &bot, NULL, NULL, NULL) == RTP_OK);
+        if (!which && top && bot) {
+            /* both parts given "the same" texture file, which changed in
+               between: slots alike by count, name and material */
+            CHECK(copy_file("scenes/tex4.ppm", tex) == 0);
+            CHECK(rtp_tree_set(top, "mat.0.texture", tex, NULL) == RTP_OK);
+            CHECK(copy_file("scenes/tex4b.ppm", tex) == 0);
+            CHECK(rtp_tree_set(bot, "mat.0.texture", tex, NULL) == RTP_OK);
+        }
+        for (k = 0; k < 2 && top && bot; k++) {
+            parts[0] = k ? bot : top;
+            parts[1] = k ? top : bot;
+            m = NULL;
+            CHECK_MSG(rtp_tree_merge(parts, 2, &m, &err) == RTP_ERR_ARGUMENT && !m,
+                      "%s part order %d: merged", which ? "moved light" : "texture", k);
+            rtp_tree_destroy(m);
+        }
+        rtp_tree_destroy(top);
+        rtp_tree_destroy(bot);
+        rtp_scene_destroy(s);
+    }
+    remove(tex);
+}
+
 static void test_max_depth(void)
 {
     static const char mirrors[] =
@@ -3973,6 +4032,7 @@ int main(void)
     RUN(test_tree_trace_region);
     RUN(test_tree_crop);
     RUN(test_max_depth);
+    RUN(test_merge_other_setups);
     RUN(test_min_weight_edits);
     RUN(test_trees_outgrow_limit);
     RUN(test_memory_limit_holds);
