@@ -41,6 +41,13 @@
  *    with.  A caller's allocator need not be thread-safe: calls with
  *    options.threads > 1 take a lock around it (two calls of the library
  *    on different threads with one allocator still need it to be).
+ *  - Stack: any call fits in a thread of 128 KiB (musl's default).
+ *    Tracing recurses about 1 KiB a ray-tree level, so rays of trees
+ *    deeper than 32 levels (max_depth; up to RTP_MAX_DEPTH) are traced on
+ *    threads the library starts with the stack they need, even with
+ *    threads 0 or 1; the calling thread waits, and still makes every
+ *    progress call.  A build without threads traces on the calling
+ *    thread: give it 1 KiB (more under sanitizers) a level.
  *  - Images are linear RGB floats, row-major, top row first.
  */
 #ifndef RTP_RAYTRACE_RTP_H
@@ -232,7 +239,8 @@ typedef struct rtp_trace_options {
     double min_weight;  /* rays weighing less are not spawned; 0: none
                            (re-evaluating a ks or kt edit of such trees
                            traces the material's samples again) */
-    int threads;        /* 0 or 1: the calling thread only */
+    int threads;        /* 0 or 1: one thread, the calling one (deep
+                           trees aside: see Stack above) */
     double memory_limit; /* bytes the image, samples and trees may take;
                             0: 16 GiB.  Past it: RTP_ERR_LIMIT, before any
                             tracing where the image and one node a sample
@@ -331,7 +339,8 @@ typedef enum rtp_stale_mode {
 } rtp_stale_mode;
 
 typedef struct rtp_eval_options {
-    int threads;            /* 0 or 1: the calling thread only */
+    int threads;            /* 0 or 1: one thread, the calling one (a
+                               deep tree's re-trace aside: Stack above) */
     rtp_shadow_mode shadows;
     int shadow_res;         /* direction-cube cells per face edge; 0: 512;
                                at most RTP_MAX_SHADOW_RES */

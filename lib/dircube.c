@@ -1203,7 +1203,7 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
                                     rtp_error *err)
 {
     size_t n = rtpi_scene_nprims(s), ncells, i, nc = 0;
-    lb_worker wk[LB_MAX_PARTS];
+    lb_worker *wk = NULL; /* (on the heap: 16 were a 72 KB frame) */
     lb_fill parts[LB_MAX_PARTS];
     void *ctx[LB_MAX_PARTS];
     rtpi_locked_alloc la;
@@ -1300,7 +1300,8 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
         parts[k].r1 = (uint32_t)(nc * (size_t)(k + 1) / (size_t)np);
         parts[k].a = ta;
     }
-    for (nw = 0; nw < np; nw++) {
+    wk = (lb_worker *)rtpi_malloc_array(a, (size_t)np, sizeof *wk);
+    for (nw = 0; wk && nw < np; nw++) {
         if (dc_ctx_init(&wk[nw].c, s, light, res, a) != RTP_OK)
             break;
         dc_ctx_window(&wk[nw].c, &lb->w);
@@ -1312,6 +1313,7 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
     failed = nw < np || rtpi_parallel_rows(np, np, ctx, lb_part, NULL, NULL) != 0;
     for (k = 0; k < nw; k++)
         dc_ctx_free(&wk[k].c, a);
+    rtpi_free(a, wk);
     if (ta != a)
         rtpi_locked_alloc_destroy(&la);
     for (k = 0; k < np; k++)
@@ -2100,8 +2102,10 @@ rtp_status rtpi_itembuf_build_wide_mt(const rtp_scene *s, rtpi_v3 light, int res
                                       unsigned char *thin, int threads, const rtp_allocator *a,
                                       rtpi_itembuf *ib, rtp_error *err)
 {
-    ib_job jobs[RTPI_MAX_THREADS];
-    void *ctx[RTPI_MAX_THREADS];
+    /* (the jobs on the heap: 256 of them on the stack were a 1.1 MB
+       frame, more than a host's thread may have) */
+    ib_job *jobs;
+    void **ctx;
     int k, nparts = threads < 1 ? 1 : threads > RTPI_MAX_THREADS ? RTPI_MAX_THREADS : threads;
     rtp_status st = rtpi_itembuf_alloc(ib, s, light, res, a, err);
     if (st != RTP_OK)
@@ -2109,10 +2113,14 @@ rtp_status rtpi_itembuf_build_wide_mt(const rtp_scene *s, rtpi_v3 light, int res
     /* no more parts than bands of rows */
     if (nparts > (ib->res + IB_BAND - 1) / IB_BAND)
         nparts = (ib->res + IB_BAND - 1) / IB_BAND;
+    jobs = (ib_job *)rtpi_malloc_array(a, (size_t)nparts, sizeof *jobs);
+    ctx = (void **)rtpi_malloc_array(a, (size_t)nparts, sizeof *ctx);
     for (k = 0; k < nparts; k++) {
-        if (dc_ctx_init(&jobs[k].c, s, light, ib->res, a) != RTP_OK) {
-            while (k-- > 0)
+        if (!jobs || !ctx || dc_ctx_init(&jobs[k].c, s, light, ib->res, a) != RTP_OK) {
+            while (jobs && k-- > 0)
                 dc_ctx_free(&jobs[k].c, a);
+            rtpi_free(a, jobs);
+            rtpi_free(a, ctx);
             rtpi_itembuf_free(ib, a);
             return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0,
                               "out of memory for the item buffer");
@@ -2134,5 +2142,7 @@ rtp_status rtpi_itembuf_build_wide_mt(const rtp_scene *s, rtpi_v3 light, int res
         ib->casts += jobs[k].c.casts;
         dc_ctx_free(&jobs[k].c, a);
     }
+    rtpi_free(a, jobs);
+    rtpi_free(a, ctx);
     return RTP_OK;
 }

@@ -991,6 +991,16 @@ typedef int (*rtpi_row_fn)(void *ctx, int row);
 int rtpi_parallel_rows(int nrows, int nthreads, void *const *ctx,
                        rtpi_row_fn fn, void (*progress)(void *, double),
                        void *progress_user);
+/* The same for work that needs `stack` bytes of stack (0: as above):
+   every row then runs on threads of rtp's own with at least that stack,
+   the calling thread waiting and calling progress (where threads can be
+   had; else the calling thread runs them, as above). */
+int rtpi_parallel_rows_stack(int nrows, int nthreads, void *const *ctx, rtpi_row_fn fn,
+                             void (*progress)(void *, double), void *progress_user,
+                             size_t stack);
+/* The stack a ray tree of max_depth levels needs traced, where it is
+   more than a host's thread can be counted on to have (0 otherwise). */
+size_t rtpi_trace_stack(int max_depth);
 
 /* ----------------------------------------------------------------- images */
 

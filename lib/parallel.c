@@ -9,12 +9,15 @@
 
 typedef struct pool {
     int nrows, next, done, stop;
+    int relay, finished; /* the caller relays progress; workers ended */
+    int locking;         /* the lock was made (else one thread alone) */
     rtpi_row_fn fn;
     void *const *ctx;
     void (*progress)(void *user, double done);
     void *progress_user;
 #ifdef RTP_HAVE_THREADS
     pthread_mutex_t lock;
+    pthread_cond_t cv; /* (relay: a row done, a worker ended) */
 #endif
 } pool;
 
@@ -27,7 +30,8 @@ typedef struct job {
 static void pool_lock(pool *p)
 {
 #ifdef RTP_HAVE_THREADS
-    pthread_mutex_lock(&p->lock);
+    if (p->locking)
+        pthread_mutex_lock(&p->lock);
 #else
     (void)p;
 #endif
@@ -36,7 +40,8 @@ static void pool_lock(pool *p)
 static void pool_unlock(pool *p)
 {
 #ifdef RTP_HAVE_THREADS
-    pthread_mutex_unlock(&p->lock);
+    if (p->locking)
+        pthread_mutex_unlock(&p->lock);
 #else
     (void)p;
 #endif
@@ -57,6 +62,10 @@ static void run(job *j)
         done = ++p->done;
         if (stop)
             p->stop = 1;
+#ifdef RTP_HAVE_THREADS
+        if (p->relay)
+            pthread_cond_signal(&p->cv);
+#endif
         pool_unlock(p);
         if (j->is_main && p->progress)
             p->progress(p->progress_user, (double)done / p->nrows);
@@ -66,14 +75,48 @@ static void run(job *j)
 #ifdef RTP_HAVE_THREADS
 static void *thread_main(void *arg)
 {
-    run((job *)arg);
+    job *j = (job *)arg;
+    run(j);
+    if (j->p->relay) {
+        pool_lock(j->p);
+        j->p->finished++;
+        pthread_cond_signal(&j->p->cv);
+        pool_unlock(j->p);
+    }
     return NULL;
+}
+
+/* Starts workers for jobs[first..nthreads) with at least `stack` bytes
+   of stack each (0: the platform's default); @return how many started. */
+static int start_workers(pthread_t *tid, job *jobs, int first, int nthreads, size_t stack)
+{
+    pthread_attr_t attr;
+    size_t have = 0;
+    int k, use_attr = stack > 0 && pthread_attr_init(&attr) == 0;
+    if (use_attr && (pthread_attr_getstacksize(&attr, &have) != 0 || have < stack) &&
+        pthread_attr_setstacksize(&attr, stack) != 0) {
+        pthread_attr_destroy(&attr);
+        use_attr = 0; /* (the default, then: as before) */
+    }
+    for (k = first; k < nthreads; k++)
+        if (pthread_create(&tid[k], use_attr ? &attr : NULL, thread_main, &jobs[k]) != 0)
+            break; /* fewer threads: the rows still all get done */
+    if (use_attr)
+        pthread_attr_destroy(&attr);
+    return k - first;
 }
 #endif
 
 int rtpi_parallel_rows(int nrows, int nthreads, void *const *ctx,
                        rtpi_row_fn fn, void (*progress)(void *, double),
                        void *progress_user)
+{
+    return rtpi_parallel_rows_stack(nrows, nthreads, ctx, fn, progress, progress_user, 0);
+}
+
+int rtpi_parallel_rows_stack(int nrows, int nthreads, void *const *ctx, rtpi_row_fn fn,
+                             void (*progress)(void *, double), void *progress_user,
+                             size_t stack)
 {
     pool p;
     job jobs[RTPI_MAX_THREADS];
@@ -94,19 +137,57 @@ int rtpi_parallel_rows(int nrows, int nthreads, void *const *ctx,
         jobs[i].is_main = i == 0;
     }
 #ifdef RTP_HAVE_THREADS
-    if (nthreads > 1) {
+    if (stack > 0 && pthread_mutex_init(&p.lock, NULL) == 0) {
+        p.locking = 1;
+        /* Work that needs a deep stack (a ray tree of many levels) runs
+           on workers of rtp's own with that stack, all of it: the
+           calling thread's stack is the host's and may be small (a
+           thread of 128 KiB on musl, 512 KiB on macOS).  The caller
+           waits and relays the progress. */
         pthread_t tid[RTPI_MAX_THREADS];
-        int started;
-        pthread_mutex_init(&p.lock, NULL);
-        for (started = 1; started < nthreads; started++)
-            if (pthread_create(&tid[started], NULL, thread_main, &jobs[started]) != 0)
-                break; /* fewer threads: the rows still all get done */
+        int started = 0, reported = -1;
+        if (pthread_cond_init(&p.cv, NULL) == 0) {
+            p.relay = 1;
+            for (i = 0; i < nthreads; i++)
+                jobs[i].is_main = 0;
+            started = start_workers(tid, jobs, 0, nthreads, stack);
+            pool_lock(&p);
+            while (p.finished < started) {
+                if (p.progress && p.done != reported) {
+                    int d = reported = p.done;
+                    pool_unlock(&p);
+                    p.progress(p.progress_user, (double)d / p.nrows);
+                    pool_lock(&p);
+                    continue;
+                }
+                pthread_cond_wait(&p.cv, &p.lock);
+            }
+            pool_unlock(&p);
+            for (i = 0; i < started; i++)
+                pthread_join(tid[i], NULL);
+            pthread_cond_destroy(&p.cv);
+            p.relay = 0;
+            if (started > 0 && p.progress && p.done != reported)
+                p.progress(p.progress_user, (double)p.done / p.nrows);
+        }
+        jobs[0].is_main = 1;
+        if (started == 0)
+            run(&jobs[0]); /* no thread to be had: here, as before */
+        pthread_mutex_destroy(&p.lock);
+        return p.stop;
+    }
+    if (nthreads > 1 && pthread_mutex_init(&p.lock, NULL) == 0) {
+        pthread_t tid[RTPI_MAX_THREADS];
+        p.locking = 1;
+        int started = 1 + start_workers(tid, jobs, 1, nthreads, 0);
         run(&jobs[0]);
         for (i = 1; i < started; i++)
             pthread_join(tid[i], NULL);
         pthread_mutex_destroy(&p.lock);
         return p.stop;
     }
+#else
+    (void)stack;
 #endif
     run(&jobs[0]);
     return p.stop;

@@ -188,6 +188,19 @@ static int32_t push_node(worker *w)
     return (int32_t)(w->nn++ - w->sample_base);
 }
 
+/* Tracing recurses a level a ray of the tree: trace_ray and spawn take
+   about 0.9 KiB of stack a level at -O2 (gcc -fstack-usage), more at -O0
+   or under a sanitizer.  Up to RTPI_CALLER_DEPTH levels the calling
+   thread's stack is used (a host thread has 128 KiB on musl, 512 KiB on
+   macOS); deeper trees, up to RTP_MAX_DEPTH's 1000 (about 1 MiB), run on
+   threads of rtp's own with 4 KiB a level and 256 KiB to spare. */
+#define RTPI_CALLER_DEPTH 32
+
+size_t rtpi_trace_stack(int max_depth)
+{
+    return max_depth > RTPI_CALLER_DEPTH ? ((size_t)256 << 10) + ((size_t)max_depth << 12) : 0;
+}
+
 static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
                          double weight);
 
@@ -805,7 +818,8 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
         goto done;
     sh.kd = kd;
     t1 = now_seconds();
-    rtpi_parallel_rows(sh.gy, nthreads, ctx, trace_row, opt.progress, opt.progress_user);
+    rtpi_parallel_rows_stack(sh.gy, nthreads, ctx, trace_row, opt.progress, opt.progress_user,
+                             rtpi_trace_stack(sh.max_depth));
     t2 = now_seconds();
     for (i = 0; i < nthreads; i++)
         if (ws[i].status != RTP_OK) {
@@ -1041,7 +1055,8 @@ rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int thre
         }
         ctx[i] = &jobs[i];
     }
-    rtpi_parallel_rows((int)nchunks, nthreads, ctx, retrace_chunk, progress, progress_user);
+    rtpi_parallel_rows_stack((int)nchunks, nthreads, ctx, retrace_chunk, progress, progress_user,
+                             rtpi_trace_stack(sh.max_depth));
     for (i = 0; i < (size_t)nthreads; i++)
         if (jobs[i].w.status != RTP_OK) {
             st = worker_error(jobs[i].w.status, limit, "re-tracing",

@@ -564,9 +564,9 @@ static rtp_status update_visibility(rtp_tree *t, int mode, int res, int threads,
     size_t nl = s->nlights, words = (nl + 31) / 32, i, n, todo = 0, done = 0;
     double off_floor;
     int k, kmode, kres;
-    void *ctx[RTPI_MAX_THREADS];
-    vis_ctx vc[RTPI_MAX_THREADS];
     vis_key(mode, res, &kmode, &kres);
+    if (threads < 1)
+        threads = 1;
     if (threads > RTPI_MAX_THREADS)
         threads = RTPI_MAX_THREADS;
     if (t->cur_vis && (t->cur_words != words)) {
@@ -625,6 +625,8 @@ static rtp_status update_visibility(rtp_tree *t, int mode, int res, int threads,
         } else {
             rtpi_shadow *sh = NULL;
             rtp_status rs;
+            vis_ctx *vc;
+            void **ctx;
             if (mode != RTP_SHADOWS_EXACT && rtpi_scene_bounds(s) != 0)
                 return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
             /* only shadow rays need the kd-tree; the cubes draw the scene */
@@ -640,6 +642,15 @@ static rtp_status update_visibility(rtp_tree *t, int mode, int res, int threads,
                                        err);
             if (rs != RTP_OK)
                 return rs;
+            /* (on the heap: 256 on the stack were a 37 KB frame) */
+            vc = (vis_ctx *)rtpi_malloc_array(&t->alloc, (size_t)threads, sizeof *vc);
+            ctx = (void **)rtpi_malloc_array(&t->alloc, (size_t)threads, sizeof *ctx);
+            if (!vc || !ctx) {
+                rtpi_free(&t->alloc, vc);
+                rtpi_free(&t->alloc, ctx);
+                rtpi_shadow_destroy(sh);
+                return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+            }
             for (k = 0; k < threads; k++) {
                 vc[k].t = t;
                 vc[k].sh = sh;
@@ -663,6 +674,8 @@ static rtp_status update_visibility(rtp_tree *t, int mode, int res, int threads,
                 for (k = 0; k < threads; k++)
                     st->shadow_queries += vc[k].queries;
             }
+            rtpi_free(&t->alloc, vc);
+            rtpi_free(&t->alloc, ctx);
         }
         t->cur_pos[3 * i] = lp[0];
         t->cur_pos[3 * i + 1] = lp[1];
@@ -2837,8 +2850,10 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                             rtp_image **out, rtp_eval_stats *stats, rtp_error *err)
 {
     rtpi_shade_ctx shade;
-    eval_ctx e[RTPI_MAX_THREADS];
-    void *ctx[RTPI_MAX_THREADS];
+    /* (on the heap: 256 of them were an 85 KB frame, which a host's
+       thread of 96 KiB stack could not hold) */
+    eval_ctx *e = NULL;
+    void **ctx = NULL;
     rtp_image *img = NULL;
     rtp_eval_stats st;
     progress_part prog;
@@ -3033,12 +3048,16 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
        order of the coefficients; cl: the lights' part of it */
     cv = (double *)rtpi_malloc_array(&t->alloc, RTPI_COEFFS(nl), sizeof *cv);
     cl = cv ? cv + 6 : NULL;
+    e = (eval_ctx *)rtpi_malloc_array(&t->alloc, (size_t)nthreads, sizeof *e);
+    ctx = (void **)rtpi_malloc_array(&t->alloc, (size_t)nthreads, sizeof *ctx);
     if (into)
         img = into;
     else
         rs = rtp_image_create(t->width, t->height, &t->alloc, &img, err);
-    if (rs != RTP_OK || !cv) {
+    if (rs != RTP_OK || !cv || !e || !ctx) {
         rtpi_free(&t->alloc, cv);
+        rtpi_free(&t->alloc, e);
+        rtpi_free(&t->alloc, ctx);
         if (img != into)
             rtp_image_destroy(img);
         return rs != RTP_OK ? rs : rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
@@ -3387,6 +3406,8 @@ done:
         rtpi_free(&t->alloc, e[i].rest);
         rtpi_free(&t->alloc, e[i].qgrid);
     }
+    rtpi_free(&t->alloc, e);
+    rtpi_free(&t->alloc, ctx);
     rtpi_free(&t->alloc, cv);
     if (rs != RTP_OK) {
         /* a half-made cache must not be trusted next time */

@@ -6,6 +6,7 @@
 #define RTP_CHECK_H
 #include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
 
 #if defined(__GNUC__)
 #define CHECK_UNUSED __attribute__((unused))
@@ -43,8 +44,12 @@ CHECK_UNUSED static int check_passed, check_failed, check_skipped;
         return;                                                             \
     } while (0)
 
+/* (RTP_TEST_ONLY=NAME runs that test alone, when working on it) */
 #define RUN(fn)                                                             \
     do {                                                                    \
+        const char *only_ = getenv("RTP_TEST_ONLY");                        \
+        if (only_ && *only_ && strcmp(only_, #fn) != 0)                     \
+            break;                                                          \
         check_failed_now = 0;                                               \
         check_skipped_now = 0;                                              \
         fn();                                                               \

@@ -556,6 +556,144 @@ static void test_merge_other_setups(void)
     remove(tex);
 }
 
+#ifdef RTP_HAVE_THREADS
+/* A host's thread with a small stack (musl's 128 KiB, macOS's 512 KiB)
+   traces, re-traces and moves lights in trees RTP_MAX_DEPTH deep: the
+   deep recursion runs on threads of rtp's own (it took ~0.9 KiB a level
+   on the caller's stack: 1000 levels in 128 KiB killed the process, and
+   an evaluation's 85 KB frame of thread contexts too), progress still
+   comes from the calling thread. */
+typedef struct small_stack_run {
+    int threads;
+    pthread_t caller;
+    int calls, wrong_thread, backwards;
+    double last;
+    int ok_trace, ok_retrace, ok_move, ok_camera;
+    double max_diff;
+} small_stack_run;
+
+static void small_stack_progress(void *user, double done)
+{
+    small_stack_run *r = (small_stack_run *)user;
+    r->calls++;
+    r->wrong_thread += !pthread_equal(pthread_self(), r->caller);
+    r->backwards += done < r->last;
+    r->last = done;
+}
+
+static void *small_stack_main(void *arg)
+{
+    static const char mirrors[] =
+        "v\nfrom 0 0 0\nat 0 1 0\nup 0 0 1\nangle 10\nhither 0.01\nresolution 2 2\n"
+        "l 0 0 1.5\nf 0.9 0.9 0.9 0.1 0.9 100 0 0\n"
+        "p 4\n-50 -2 -50\n50 -2 -50\n50 -2 50\n-50 -2 50\n"
+        "p 4\n-50 2 -50\n-50 2 50\n50 2 50\n50 2 -50\n";
+    small_stack_run *r = (small_stack_run *)arg;
+    rtp_scene *s = NULL;
+    rtp_tree *t = NULL;
+    rtp_image *img = NULL, *re = NULL, *full = NULL;
+    rtp_trace_options o;
+    rtp_eval_options eo;
+    rtp_diff_stats d;
+    r->caller = pthread_self();
+    if (rtp_scene_load_memory(mirrors, strlen(mirrors), "mirrors.nff", "nff", NULL, &s, NULL) !=
+        RTP_OK)
+        return NULL;
+    memset(&o, 0, sizeof o);
+    o.max_depth = RTP_MAX_DEPTH;
+    o.threads = r->threads;
+    o.progress = small_stack_progress;
+    o.progress_user = r;
+    r->ok_trace = (r->last = 0, rtp_record(s, &o, &t, &img, NULL, NULL)) == RTP_OK;
+    /* the tree and a PNG written and read back there too (libpng's
+       stack is the caller's) */
+    if (r->ok_trace) {
+        char file[512];
+        rtp_tree *back = NULL;
+        rtp_image *png = NULL;
+        snprintf(file, sizeof file, "%s/rtp-small-stack-%d.rtp", tmpdir(), (int)getpid());
+        r->ok_trace = rtp_tree_write(t, file, NULL, NULL) == RTP_OK &&
+                      rtp_tree_read(file, NULL, &back, NULL) == RTP_OK;
+        remove(file);
+        snprintf(file, sizeof file, "%s/rtp-small-stack-%d.%s", tmpdir(), (int)getpid(),
+                 rtp_png_supported() ? "png" : "ppm");
+        r->ok_trace = r->ok_trace && rtp_image_write(img, file, RTP_IMAGE_AUTO, NULL) == RTP_OK &&
+                      rtp_image_read(file, NULL, &png, NULL) == RTP_OK;
+        remove(file);
+        rtp_image_destroy(png);
+        rtp_tree_destroy(back);
+    }
+    memset(&eo, 0, sizeof eo);
+    eo.threads = r->threads;
+    eo.progress = small_stack_progress;
+    eo.progress_user = r;
+    /* kt from 0: every sample's mirror paths traced again (class D) */
+    if (t && rtp_tree_set(t, "mat.0.kt", "0.05", NULL) == RTP_OK &&
+        rtp_scene_set(s, "mat.0.kt", "0.05", NULL) == RTP_OK) {
+        r->ok_retrace = (r->last = 0, rtp_tree_eval(t, &eo, &re, NULL, NULL)) == RTP_OK &&
+                        (r->last = 0, rtp_trace(s, &o, &full, NULL, NULL)) == RTP_OK &&
+                        rtp_image_diff(re, full, 1e-6, &d, NULL) == RTP_OK;
+        if (r->ok_retrace && d.max_abs > r->max_diff)
+            r->max_diff = d.max_abs;
+    }
+    rtp_image_destroy(re);
+    rtp_image_destroy(full);
+    re = full = NULL;
+    /* a moved light through the item buffer (its build's thread jobs
+       were a 1.1 MB frame) */
+    eo.shadows = RTP_SHADOWS_ITEMBUF;
+    if (t && rtp_tree_set(t, "light.0.pos", "0.5,0,1.2", NULL) == RTP_OK &&
+        rtp_scene_set(s, "light.0.pos", "0.5,0,1.2", NULL) == RTP_OK)
+        r->ok_move = (r->last = 0, rtp_tree_eval(t, &eo, &re, NULL, NULL)) == RTP_OK;
+    rtp_image_destroy(re);
+    re = NULL;
+    /* a camera edit: every sample traced again */
+    eo.shadows = RTP_SHADOWS_EXACT;
+    if (t && rtp_tree_set(t, "camera.at", "0.01,1,0", NULL) == RTP_OK &&
+        rtp_scene_set(s, "camera.at", "0.01,1,0", NULL) == RTP_OK) {
+        r->ok_camera = (r->last = 0, rtp_tree_eval(t, &eo, &re, NULL, NULL)) == RTP_OK &&
+                       (r->last = 0, rtp_trace(s, &o, &full, NULL, NULL)) == RTP_OK &&
+                       rtp_image_diff(re, full, 1e-6, &d, NULL) == RTP_OK;
+        if (r->ok_camera && d.max_abs > r->max_diff)
+            r->max_diff = d.max_abs;
+    }
+    rtp_image_destroy(re);
+    rtp_image_destroy(full);
+    rtp_image_destroy(img);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+    return NULL;
+}
+
+static void test_small_stack_host(void)
+{
+    int threads;
+    for (threads = 1; threads <= 2; threads++) {
+        small_stack_run r;
+        pthread_attr_t attr;
+        pthread_t th;
+        memset(&r, 0, sizeof r);
+        r.threads = threads;
+        CHECK(pthread_attr_init(&attr) == 0);
+        CHECK(pthread_attr_setstacksize(&attr, (size_t)128 << 10) == 0);
+        if (pthread_create(&th, &attr, small_stack_main, &r) != 0) {
+            pthread_attr_destroy(&attr);
+            SKIP("no thread of 128 KiB stack to be had");
+        }
+        pthread_join(th, NULL);
+        pthread_attr_destroy(&attr);
+        CHECK_MSG(r.ok_trace && r.ok_retrace && r.ok_move && r.ok_camera,
+                  "threads %d: trace %d, re-trace %d, move %d, camera %d", threads, r.ok_trace,
+                  r.ok_retrace, r.ok_move, r.ok_camera);
+        CHECK_MSG(r.max_diff <= 1e-6, "threads %d: re-trace against trace %g", threads,
+                  r.max_diff);
+        CHECK_MSG(r.calls > 0 && r.wrong_thread == 0 && r.backwards == 0 && r.last == 1.0,
+                  "threads %d: %d progress calls, %d from another thread, %d backwards, last %g",
+                  threads, r.calls, r.wrong_thread, r.backwards, r.last);
+    }
+}
+#endif
+
 static void test_max_depth(void)
 {
     static const char mirrors[] =
@@ -4033,6 +4171,9 @@ int main(void)
     RUN(test_tree_crop);
     RUN(test_max_depth);
     RUN(test_merge_other_setups);
+#ifdef RTP_HAVE_THREADS
+    RUN(test_small_stack_host);
+#endif
     RUN(test_min_weight_edits);
     RUN(test_trees_outgrow_limit);
     RUN(test_memory_limit_holds);
