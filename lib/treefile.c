@@ -1233,9 +1233,10 @@ static rtp_status read_matl(loader *L, rd *r)
         if (m->kd < 0.0f || m->ks < 0.0f || m->kt < 0.0f || m->shine < 0.0f || m->ior <= 0.0f ||
             m->color[0] < 0.0f || m->color[1] < 0.0f || m->color[2] < 0.0f ||
             m->color2[0] < 0.0f || m->color2[1] < 0.0f || m->color2[2] < 0.0f ||
-            m->tex_scale < 0.0f || m->bump_scale < 0.0f || t->mats0[i].ks < 0.0f ||
-            t->mats0[i].kt < 0.0f || t->mats0[i].ior <= 0.0f || t->mats0[i].bump_scale < 0.0f)
-            return bad(L, "material value out of range (negative, or an ior of 0)", NULL);
+            m->tex_scale <= 0.0f || m->bump_scale <= 0.0f || t->mats0[i].ks < 0.0f ||
+            t->mats0[i].kt < 0.0f || t->mats0[i].ior <= 0.0f || t->mats0[i].bump_scale <= 0.0f)
+            return bad(L, "material value out of range (negative, or an ior or scale of 0)",
+                       NULL);
         if ((unsigned)m->tex > RTPI_TEX_IMAGE || (unsigned)m->bump > RTPI_BUMP_NOISE ||
             (unsigned)t->mats0[i].bump > RTPI_BUMP_NOISE)
             return bad(L, "unknown texture or bump kind", NULL);

@@ -3646,7 +3646,7 @@ static void test_out_of_range_values(void)
     int k;
     FILE *f;
     snprintf(file, sizeof file, "%s/rtp-range-%d.rtp", tmpdir(), (int)getpid());
-    for (k = 0; k < 5; k++) {
+    for (k = 0; k < 8; k++) {
         rtp_scene *s = NULL;
         rtp_tree *t = NULL, *back = NULL;
         rtp_trace_options o;
@@ -3666,8 +3666,14 @@ static void test_out_of_range_values(void)
             t->scene->camera.angle = t->cam0.angle = 0.0;
         else if (k == 3)
             t->mats0[0].kt = -1.0f;
-        else
+        else if (k == 4)
             t->scene->mats[0].kd = -0.5f;
+        else if (k == 5) /* (scales of 0 no scene holds either: read) */
+            t->scene->mats[0].tex_scale = 0.0f;
+        else if (k == 6)
+            t->scene->mats[0].bump_scale = 0.0f;
+        else
+            t->mats0[0].bump_scale = 0.0f;
         CHECK(rtp_tree_write(t, file, NULL, NULL) == RTP_OK);
         memset(&err, 0, sizeof err);
         CHECK_MSG(rtp_tree_read(file, NULL, &back, &err) == RTP_ERR_FORMAT && !back &&
