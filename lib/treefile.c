@@ -1687,6 +1687,18 @@ static rtp_status check_signature(loader *L, const unsigned char *data, size_t s
 
 static const char *const required_sections[] = {"HEAD", "SCEN", "MATL", "LITE", "GEOM", "TREE"};
 
+/* Whether a tag is 4 printable ASCII bytes, as every tag is: other bytes
+   are a corrupt file (and would go to a terminal in the message naming
+   the section). */
+static int tag_ascii(const char *tag)
+{
+    int i;
+    for (i = 0; i < 4; i++)
+        if ((unsigned char)tag[i] < 0x20 || (unsigned char)tag[i] > 0x7e)
+            return 0;
+    return 1;
+}
+
 /* Which section tag is (*idx: its place in required_sections, 6 for
    TEXR, -1 for an extension a reader skips), checked against the ones
    seen before it (added to *seen). */
@@ -1833,6 +1845,10 @@ rtp_status rtp_tree_read_memory(const void *data, size_t size, const char *name,
         tag[4] = '\0';
         r.at += 4;
         len = get_u64(&r);
+        if (!tag_ascii(tag)) {
+            st = bad(&L, "a section tag of bytes other than ASCII: the file is corrupt", NULL);
+            break;
+        }
         L.section = tag;
         if (len > r.n - r.at || r.n - r.at - (size_t)len < 4) {
             st = bad(&L, "truncated: section longer than the file", NULL);
@@ -1962,6 +1978,11 @@ static rtp_status tree_read_stream(FILE *f, uint64_t size, int known, const char
         body.nul = 0;
         body.src = NULL;
         len = get_u64(&body);
+        L.section = NULL;
+        if (!tag_ascii(tag)) {
+            st = bad(&L, "a section tag of bytes other than ASCII: the file is corrupt", NULL);
+            break;
+        }
         L.section = tag;
         if (known && (len > size - pos || size - pos - len < 4)) {
             st = bad(&L, "truncated: section longer than the file", NULL);
@@ -1970,10 +1991,13 @@ static rtp_status tree_read_stream(FILE *f, uint64_t size, int known, const char
         crc = crc32_update(0, head, 12);
         body.p = NULL;
         body.n = body.at = 0;
-        if (strcmp(tag, "TREE") == 0) {
+        if (strcmp(tag, "TREE") == 0 || (tag[0] >= 'a' && tag[0] <= 'z')) {
             /* through the window; the order checked now, the CRC once
                every byte has passed, and whatever comes first in
-               rtp_tree_read_memory's order reported then */
+               rtp_tree_read_memory's order reported then.  An extension
+               too, passing unparsed: it is skipped, not held (a 100 MB
+               one took 100 MB, and one claiming more than a pipe brings
+               grew as its bytes came) */
             rtp_error perr;
             rtp_status ost, pst = RTP_OK;
             if (!src && !(src = (rd_src *)rtpi_malloc(&a, sizeof *src + RD_WINDOW))) {

@@ -3230,6 +3230,93 @@ static int fifo_disagrees(const unsigned char *data, size_t len, const char *fif
     return read_disagrees(fifo, data, len, pid);
 }
 
+/* An extension section is skipped, not held: a 16 MB one through a pipe
+   took 16 MB (and one claiming more than the pipe brought grew with its
+   bytes); a tag of bytes other than ASCII is a corrupt file, not echoed
+   (an escape sequence went to the terminal in the message). */
+static void test_extension_skipped(void)
+{
+    size_t n, big = (size_t)16 << 20, m, i;
+    unsigned char *data = small_tree_file(&n), *x;
+    char fifo[512];
+    counted c;
+    rtp_allocator a;
+    rtp_tree *t = NULL;
+    rtp_error err;
+    uint32_t crc;
+    pid_t pid;
+    int status;
+    if (!data || !(x = (unsigned char *)calloc(n + big + 16, 1))) {
+        CHECK(0);
+        free(data);
+        return;
+    }
+    /* signature, "zext" of 16 MB, the rest */
+    memcpy(x, data, 8);
+    memcpy(x + 8, "zext", 4);
+    for (i = 0; i < 8; i++)
+        x[12 + i] = (unsigned char)((uint64_t)big >> (8 * i));
+    crc = crc32_ref(x + 8, 12 + big);
+    for (i = 0; i < 4; i++)
+        x[20 + big + i] = (unsigned char)(crc >> (8 * i));
+    memcpy(x + 24 + big, data + 8, n - 8);
+    m = n + big + 16;
+    memset(&c, 0, sizeof c);
+#ifdef RTP_HAVE_THREADS
+    pthread_mutex_init(&c.lock, NULL);
+#endif
+    a.malloc_fn = cnt_malloc;
+    a.realloc_fn = cnt_realloc;
+    a.free_fn = cnt_free;
+    a.user = &c;
+    snprintf(fifo, sizeof fifo, "%s/rtp-ext-fifo-%d", tmpdir(), (int)getpid());
+    remove(fifo);
+    if (mkfifo(fifo, 0600) != 0) {
+        free(x);
+        free(data);
+        SKIP("no FIFO to be made");
+    }
+    fflush(NULL);
+    pid = fork();
+    if (pid == 0) {
+        FILE *w;
+        signal(SIGPIPE, SIG_DFL);
+        w = fopen(fifo, "wb");
+        if (w) {
+            fwrite(x, 1, m, w);
+            fclose(w);
+        }
+        _exit(0);
+    }
+    CHECK(pid > 0);
+    if (pid > 0) {
+        CHECK_MSG(rtp_tree_read(fifo, &a, &t, &err) == RTP_OK, "%s", err.message);
+        waitpid(pid, &status, 0);
+        CHECK_MSG(c.peak < (size_t)4 << 20, "peak %zu bytes reading past a 16 MB extension",
+                  c.peak);
+        rtp_tree_destroy(t);
+        t = NULL;
+    }
+    remove(fifo);
+    /* the same bytes from memory and as a file: alike */
+    CHECK(rtp_tree_read_memory(x, m, "ext.rtp", NULL, &t, NULL) == RTP_OK);
+    rtp_tree_destroy(t);
+    t = NULL;
+    /* a tag with an escape byte: refused, the byte not in the message */
+    memcpy(x + 8, "a\033[7", 4);
+    crc = crc32_ref(x + 8, 12 + big);
+    for (i = 0; i < 4; i++)
+        x[20 + big + i] = (unsigned char)(crc >> (8 * i));
+    memset(&err, 0, sizeof err);
+    CHECK(rtp_tree_read_memory(x, m, "ext.rtp", NULL, &t, &err) == RTP_ERR_FORMAT && !t &&
+          strstr(err.message, "ASCII") && !strchr(err.message, '\033'));
+    snprintf(fifo, sizeof fifo, "%s/rtp-ext-%d.rtp", tmpdir(), (int)getpid());
+    CHECK(file_disagrees(x, m, fifo) == 0);
+    remove(fifo);
+    free(x);
+    free(data);
+}
+
 static void test_truncated_every_length(void)
 {
     size_t n, len, failures = 0;
@@ -4205,6 +4292,7 @@ int main(void)
     RUN(test_image_bump_round_shapes);
     RUN(test_bump_that_bends_nothing);
     RUN(test_truncated_every_length);
+    RUN(test_extension_skipped);
     RUN(test_flipped_bits);
     RUN(test_section_order_and_end);
     RUN(test_reader_scene_values);
