@@ -204,6 +204,23 @@ size_t rtpi_trace_stack(int max_depth)
 static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
                          double weight);
 
+/* d mirrored about the shading normal nb; where a bumped
+   normal would send it through the surface (on the incoming ray's side
+   of the geometric normal ng: it would go on into the surface), its ng
+   part mirrored, so a reflection never sees what lies behind an opaque
+   surface (a floor with the README's waves 0.5 showed a plane 1 below
+   it in 36% of its pixels).  Only for bumped materials: interpolated
+   normals (pp) bend mildly, and the images of such scenes stay as they
+   were. */
+static rtpi_v3 reflect_dir(rtpi_v3 d, rtpi_v3 nb, rtpi_v3 ng, int bumped)
+{
+    rtpi_v3 r = v3_madd(d, nb, -2.0 * v3_dot(d, nb));
+    double rn = v3_dot(r, ng), dn = v3_dot(d, ng);
+    if (bumped && (rn < 0.0) == (dn < 0.0) && rn != 0.0)
+        r = v3_madd(r, ng, -2.0 * rn);
+    return v3_norm(r);
+}
+
 /* Traces a secondary ray from p in unit direction dir. */
 static int32_t spawn(worker *w, rtpi_v3 p, rtpi_v3 ng, rtpi_v3 dir, int depth,
                      double weight)
@@ -308,7 +325,7 @@ static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
     if (depth < sh->max_depth &&
         ((m->ks > 0.0f && weight * m->ks >= sh->min_weight) ||
          (sh->spd && m->kt > 0.0f))) {
-        rtpi_v3 r = v3_norm(v3_madd(d, nb, -2.0 * v3_dot(d, nb)));
+        rtpi_v3 r = reflect_dir(d, nb, ng, m->bump != RTPI_BUMP_NONE);
         size_t nn = w->nn;
         w->n.reflected_rays++;
         refl = spawn(w, sf.p, ng, r, depth + 1, weight * m->ks);
@@ -326,7 +343,7 @@ static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
             /* Total internal reflection: the transmitted share follows
                the reflected ray; trace it if ks did not already. */
             if (refl == RTPI_CHILD_NONE) {
-                rtpi_v3 r = v3_norm(v3_madd(d, nb, -2.0 * v3_dot(d, nb)));
+                rtpi_v3 r = reflect_dir(d, nb, ng, m->bump != RTPI_BUMP_NONE);
                 w->n.reflected_rays++;
                 refl = spawn(w, sf.p, ng, r, depth + 1, weight * m->kt);
                 link |= child_flags(refl, RTPI_L_REFL, RTPI_L_REFL_MISS);

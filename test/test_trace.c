@@ -278,6 +278,45 @@ static void test_total_internal_reflection(void)
     rtp_scene_destroy(s);
 }
 
+/* A reflection off a bumped opaque floor never sees what lies under it:
+   mirrored about a bumped normal the ray went on into the floor, and
+   the plane 1 below showed through (waves of strength 0.2 seen from 1.4
+   degrees): its colour changed the image. */
+static void test_bump_reflection_stays_above(void)
+{
+    const char *scene =
+        "v from 0 -20 12 at 0 0 0 up 0 0 1 angle 30 hither 0.01 resolution 40 40\n"
+        "b 0.1 0.15 0.3\nl 4 -6 3\n"
+        "f 0.8 0.8 0.8 0.3 0.7 30 0 0\nbump waves 0.2 0.3\n"
+        "p 4 -50 -50 0 50 -50 0 50 50 0 -50 50 0\n"
+        "f 1 0 0 1 0 100000 0 0\n"
+        "p 4 -50 -50 -1 -50 50 -1 50 50 -1 50 -50 -1\n"
+        "f 0.2 0.8 0.3 0.8 0.2 20 0 0\ns 0 0 1 1\n";
+    rtp_scene *s = load_text(scene);
+    rtp_image *a = NULL, *b = NULL;
+    rtp_trace_stats st;
+    int cam;
+    if (!s) {
+        CHECK(s != NULL);
+        return;
+    }
+    for (cam = 0; cam < 2; cam++) {
+        /* (and from 1.4 degrees: grazing) */
+        if (cam)
+            CHECK(rtp_scene_set(s, "camera.from", "0,-20,0.5", NULL) == RTP_OK);
+        CHECK(rtp_scene_set(s, "mat.1.color", "1,0,0", NULL) == RTP_OK);
+        a = trace(s, 40, 40, 1, 0, &st);
+        CHECK(st.reflected_rays > 0);
+        CHECK(rtp_scene_set(s, "mat.1.color", "0,0,1", NULL) == RTP_OK);
+        b = trace(s, 40, 40, 1, 0, &st);
+        CHECK_MSG(a && b && memcmp(a->pixels, b->pixels, sizeof(float) * 3 * 40 * 40) == 0,
+                  "camera %d: the plane under the floor shows", cam);
+        rtp_image_destroy(a);
+        rtp_image_destroy(b);
+    }
+    rtp_scene_destroy(s);
+}
+
 /* SPD casts a reflection ray off every transmitting surface, ks 0 or
    not (its statistics count them).  With ks 0 that subtree weighs 0 in
    every evaluation (a ks edit from 0 traces again), so it is not kept,
@@ -512,6 +551,7 @@ int main(void)
     RUN(test_threads_identical);
     RUN(test_spd_counts);
     RUN(test_total_internal_reflection);
+    RUN(test_bump_reflection_stays_above);
     RUN(test_spd_zero_ks_subtrees);
     RUN(test_tiny_scale);
     RUN(test_golden_spheres);
