@@ -442,7 +442,50 @@ void rtpi_prim_bounds_kept(const rtp_scene *s, uint32_t prim, double lo[3], doub
     rtpi_prim_bounds(s, prim, lo, hi);
 }
 
+double rtpi_prim_offset_floor(const rtp_scene *s, uint32_t prim, double floor)
+{
+    double m = 0.0, f;
+    size_t i = prim;
+    int j, k;
+    if (i < s->ntris) {
+        const rtpi_tri *tr = &s->tris[i];
+        for (j = 0; j < 3; j++)
+            for (k = 0; k < 3; k++)
+                m = fmax(m, fabs((double)s->pos[3 * (size_t)tr->v[j] + k]));
+    } else if ((i -= s->ntris) < s->nspheres) {
+        const rtpi_sphere *sp = &s->spheres[i];
+        for (k = 0; k < 3; k++)
+            m = fmax(m, fabs((double)sp->c[k]) + fabs((double)sp->r));
+    } else if ((i -= s->nspheres) < s->ncones) {
+        const rtpi_cone *c = &s->cones[i];
+        double r = fmax(fabs((double)c->rb), fabs((double)c->ra));
+        for (k = 0; k < 3; k++)
+            m = fmax(m, fmax(fabs((double)c->base[k]), fabs((double)c->apex[k])) + r);
+    }
+    /* (4e-15: a few double ulps, 2.2e-16 each, of the coordinates the hit
+       was computed from, with room for the solver's roundings) */
+    f = 4e-15 * m;
+    return f > floor ? f : floor;
+}
+
+static double scene_extent(const rtp_scene *s);
+
+int rtpi_offset_per_prim(const rtp_scene *s, double floor)
+{
+    return 4e-15 * scene_extent(s) > floor;
+}
+
 double rtpi_offset_floor(const rtp_scene *s)
+{
+    double m = scene_extent(s);
+    /* (a scene of 1e-3 and more: 1e-12 as it always was; no geometry or
+       none off the origin: the same) */
+    return m > 0.0 && 1e-9 * m < 1e-12 ? 1e-9 * m : 1e-12;
+}
+
+/* The largest coordinate of s's geometry (spheres and cones with their
+   radii), as rtpi_prim_offset_floor counts it. */
+static double scene_extent(const rtp_scene *s)
 {
     double m = 0.0;
     float mp = 0.0f;
@@ -463,9 +506,7 @@ double rtpi_offset_floor(const rtp_scene *s)
         for (k = 0; k < 3; k++)
             m = fmax(m, fmax(fabs((double)c->base[k]), fabs((double)c->apex[k])) + r);
     }
-    /* (a scene of 1e-3 and more: 1e-12 as it always was; no geometry or
-       none off the origin: the same) */
-    return m > 0.0 && 1e-9 * m < 1e-12 ? 1e-9 * m : 1e-12;
+    return m;
 }
 
 int rtpi_scene_bounds(rtp_scene *s)

@@ -136,7 +136,7 @@ static inline int rtpi_shadow_query_at(const rtp_scene *s, int one_sided, uint32
         ns = v3_mul(ns, -1.0);
     }
     *p = sf.p;
-    return rtpi_shadow_setup(sf.p, ng, ns, lp, floor, o);
+    return rtpi_shadow_setup(sf.p, ng, ns, lp, rtpi_prim_offset_floor(s, prim, floor), o);
 }
 
 #endif

@@ -70,6 +70,7 @@ struct shared {
     int spd, max_depth;
     double min_weight;
     double off_floor; /* rtpi_offset_floor of s */
+    int prim_floor;   /* rtpi_offset_per_prim: ask each hit's primitive */
     float *out;        /* nx*ny samples, RGB */
     /* Recording: finished rows go into the tree's arrays in row order, so
        each node is copied once, from its worker's row buffer (reused and
@@ -223,10 +224,10 @@ static rtpi_v3 reflect_dir(rtpi_v3 d, rtpi_v3 nb, rtpi_v3 ng, int bumped)
 
 /* Traces a secondary ray from p in unit direction dir. */
 static int32_t spawn(worker *w, rtpi_v3 p, rtpi_v3 ng, rtpi_v3 dir, int depth,
-                     double weight)
+                     double weight, double floor)
 {
     rtpi_ray r;
-    r.o = rtpi_offset_origin(p, ng, v3_dot(ng, dir) >= 0.0 ? 1.0 : -1.0, w->sh->off_floor);
+    r.o = rtpi_offset_origin(p, ng, v3_dot(ng, dir) >= 0.0 ? 1.0 : -1.0, floor);
     r.d = dir;
     r.tmin = 0.0;
     r.tmax = HUGE_VAL;
@@ -254,6 +255,7 @@ static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
     int refracts = 0;
     uint32_t link = 0, vis = 0;
     int front;
+    double pfloor;
     size_t i, nl = s->nlights, words = sh->shade.vis_words;
 
     if (!rtpi_kd_intersect(sh->kd, ray, &hit))
@@ -271,6 +273,7 @@ static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
         rtpi_surface_from_point(s, hit.prim, pf, hm->bump == RTPI_BUMP_IMAGE, &sf);
     }
     m = &s->mats[sf.mat];
+    pfloor = sh->prim_floor ? rtpi_prim_offset_floor(s, hit.prim, sh->off_floor) : sh->off_floor;
     ng = sf.ng;
     ns = sf.ns;
     /* Bumps bend the reflected and refracted rays; shadow rays follow the
@@ -291,7 +294,7 @@ static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
         const rtpi_light *L = &s->lights[i];
         rtpi_v3 lp = v3(L->pos[0], L->pos[1], L->pos[2]), o;
         rtpi_ray sr;
-        if (!rtpi_shadow_setup(sf.p, ng, ns, lp, sh->off_floor, &o))
+        if (!rtpi_shadow_setup(sf.p, ng, ns, lp, pfloor, &o))
             continue;
         sr = rtpi_shadow_ray(o, lp);
         w->n.shadow_rays++;
@@ -328,7 +331,7 @@ static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
         rtpi_v3 r = reflect_dir(d, nb, ng, m->bump != RTPI_BUMP_NONE);
         size_t nn = w->nn;
         w->n.reflected_rays++;
-        refl = spawn(w, sf.p, ng, r, depth + 1, weight * m->ks);
+        refl = spawn(w, sf.p, ng, r, depth + 1, weight * m->ks, pfloor);
         if (m->ks > 0.0f || (refracts && k < 0.0)) {
             link |= child_flags(refl, RTPI_L_REFL, RTPI_L_REFL_MISS);
         } else {
@@ -345,7 +348,7 @@ static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
             if (refl == RTPI_CHILD_NONE) {
                 rtpi_v3 r = reflect_dir(d, nb, ng, m->bump != RTPI_BUMP_NONE);
                 w->n.reflected_rays++;
-                refl = spawn(w, sf.p, ng, r, depth + 1, weight * m->kt);
+                refl = spawn(w, sf.p, ng, r, depth + 1, weight * m->kt, pfloor);
                 link |= child_flags(refl, RTPI_L_REFL, RTPI_L_REFL_MISS);
             }
             link |= RTPI_L_TIR;
@@ -354,7 +357,7 @@ static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
                                        v3_mul(nb, eta * cosi - sqrt(k))));
             int32_t refr;
             w->n.refracted_rays++;
-            refr = spawn(w, sf.p, ng, t, depth + 1, weight * m->kt);
+            refr = spawn(w, sf.p, ng, t, depth + 1, weight * m->kt, pfloor);
             link |= child_flags(refr, RTPI_L_REFR, RTPI_L_REFR_MISS);
             if (refr >= 0)
                 link |= (uint32_t)(refr - idx) << RTPI_L_SHIFT;
@@ -762,6 +765,7 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
     memset(&sh, 0, sizeof sh);
     sh.s = s;
     sh.off_floor = rtpi_offset_floor(s);
+    sh.prim_floor = rtpi_offset_per_prim(s, sh.off_floor);
     sh.wa = &s->alloc;
     if (nthreads > 1 && !rtpi_allocator_is_default(&s->alloc)) {
         if (rtpi_locked_alloc_init(&la, &s->alloc) == 0) {
@@ -1018,6 +1022,7 @@ rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int thre
     memset(&sh, 0, sizeof sh);
     sh.s = &tmp;
     sh.off_floor = rtpi_offset_floor(&tmp);
+    sh.prim_floor = rtpi_offset_per_prim(&tmp, sh.off_floor);
     sh.wa = &tmp.alloc;
     if (nthreads > 1 && !rtpi_allocator_is_default(&tmp.alloc)) {
         if (rtpi_locked_alloc_init(&la, &tmp.alloc) == 0) {

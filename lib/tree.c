@@ -381,6 +381,7 @@ typedef struct vis_ctx {
     const rtpi_shadow *sh;
     rtpi_v3 lp;
     double off_floor; /* rtpi_offset_floor of the scene */
+    int prim_floor;   /* rtpi_offset_per_prim */
     size_t light;
     unsigned long long queries;
     rtpi_shadow_cache cache; /* the thread's last occluder */
@@ -440,7 +441,10 @@ static int vis_row(void *ctx, int y)
             ns = v3_mul(ns, -1.0);
         }
         *w &= ~bit;
-        if (!rtpi_shadow_setup(p, ng, ns, v->lp, v->off_floor, &o))
+        if (!rtpi_shadow_setup(p, ng, ns, v->lp,
+                               v->prim_floor ? rtpi_prim_offset_floor(s, nd->prim, v->off_floor)
+                                             : v->off_floor,
+                               &o))
             continue;
         queries++;
         if (rtpi_shadow_visible_cached(v->sh, &cache, &p, &o, nd->prim))
@@ -563,6 +567,7 @@ static rtp_status update_visibility(rtp_tree *t, int mode, int res, int threads,
     rtp_scene *s = t->scene;
     size_t nl = s->nlights, words = (nl + 31) / 32, i, n, todo = 0, done = 0;
     double off_floor;
+    int prim_floor;
     int k, kmode, kres;
     vis_key(mode, res, &kmode, &kres);
     if (threads < 1)
@@ -611,6 +616,7 @@ static rtp_status update_visibility(rtp_tree *t, int mode, int res, int threads,
         todo += light_moved(t, i) && !vis_up_to_date(t, i, kmode, kres);
     /* (trace's floor for the shadow rays' origins: the same rays) */
     off_floor = todo ? rtpi_offset_floor(s) : 0.0;
+    prim_floor = todo ? rtpi_offset_per_prim(s, off_floor) : 0;
     for (i = 0; i < nl; i++) {
         const double *lp = s->lights[i].pos;
         int moved = light_moved(t, i);
@@ -656,6 +662,7 @@ static rtp_status update_visibility(rtp_tree *t, int mode, int res, int threads,
                 vc[k].sh = sh;
                 vc[k].lp = v3(lp[0], lp[1], lp[2]);
                 vc[k].off_floor = off_floor;
+                vc[k].prim_floor = prim_floor;
                 vc[k].light = i;
                 vc[k].queries = 0;
                 memset(&vc[k].cache, 0, sizeof vc[k].cache);
