@@ -38,7 +38,9 @@
  *    top of malloc/realloc/free, which on Linux also maps large growing
  *    blocks itself: free what the library made only through it, e.g.
  *    rtp_image_destroy); objects remember the allocator they were created
- *    with.  A caller's allocator need not be thread-safe: calls with
+ *    with.  A caller's allocator gives all three functions (one with some
+ *    and not others is RTP_ERR_ARGUMENT; all NULL, the library's own).  A
+ *    caller's allocator need not be thread-safe: calls with
  *    options.threads > 1 take a lock around it (two calls of the library
  *    on different threads with one allocator still need it to be).
  *  - Stack: any call fits in a thread of 128 KiB (musl's default).
@@ -144,8 +146,11 @@ typedef struct rtp_scene rtp_scene;
  *  OBJ (+MTL), anything else NFF with rtp's additions (see README.md).
  *  `path` "-" reads NFF from stdin.  Relative paths inside the scene
  *  (include, textures, mtllib) are resolved against the scene's folder.
- *  @return RTP_OK, RTP_ERR_IO, RTP_ERR_PARSE (err has file:line:col) or
- *  RTP_ERR_NOMEM. */
+ *  @return RTP_OK, RTP_ERR_IO, RTP_ERR_PARSE (err has file:line:col),
+ *  RTP_ERR_FORMAT (a texture or bump image that cannot be used),
+ *  RTP_ERR_LIMIT (an image past the size limit), RTP_ERR_UNSUPPORTED (a PNG
+ *  without libpng), RTP_ERR_ARGUMENT or RTP_ERR_NOMEM; *out is NULL on any
+ *  failure. */
 rtp_status rtp_scene_load(const char *path, const rtp_allocator *alloc,
                           rtp_scene **out, rtp_error *err);
 
@@ -210,7 +215,10 @@ typedef enum rtp_image_format {
 rtp_image_format rtp_image_format_from_path(const char *path);
 
 /** Writes an image; path "-" is stdout.  Nothing is left behind on
- *  failure: files are written to a temporary name and renamed. */
+ *  failure: files are written to a temporary name and renamed (a path
+ *  that is not a regular file, as a pipe, a device or /dev/fd/N, is
+ *  written in place, and a path naming the process's stdout is written
+ *  through stdout). */
 rtp_status rtp_image_write(const rtp_image *image, const char *path,
                            rtp_image_format format, rtp_error *err);
 /** Writes to an open stream. */
@@ -445,7 +453,8 @@ rtp_status rtp_tree_trace(const rtp_tree *tree, int threads, rtp_image **out,
  *  index, "parts[K]".  @return RTP_ERR_ARGUMENT (no parts, a NULL one,
  *  parts of different scenes, frames, options or edits, overlaps or
  *  gaps), RTP_ERR_UNSUPPORTED (a part with an added light),
- *  RTP_ERR_NOMEM; *out is NULL on any failure. */
+ *  RTP_ERR_NOMEM; *out is NULL on any failure.  The merged tree takes
+ *  parts[0]'s allocator. */
 rtp_status rtp_tree_merge(rtp_tree *const *parts, size_t n, rtp_tree **out,
                           rtp_error *err);
 /** The inverse: a new tree of the pixels x0 <= x < x1, y0 <= y < y1
@@ -500,9 +509,9 @@ rtp_status rtp_tree_read_memory(const void *data, size_t size,
  *
  *   rtp_builder_create(scene, w, h, 0, &b, &err);
  *   for each sample (x, y), row by row or in any order:
- *       root = rtp_builder_hit(b, x, y, RTP_NO_PARENT, RTP_RAY_EYE, &hit);
- *       refl = rtp_builder_hit(b, x, y, root, RTP_RAY_REFLECTED, &hit2);
- *       rtp_builder_miss(b, x, y, root, RTP_RAY_REFRACTED);   background
+ *       root = rtp_builder_hit(b, x, y, RTP_NO_PARENT, RTP_RAY_EYE, &hit, &err);
+ *       refl = rtp_builder_hit(b, x, y, root, RTP_RAY_REFLECTED, &hit2, &err);
+ *       rtp_builder_miss(b, x, y, root, RTP_RAY_REFRACTED, &err);   background
  *   rtp_builder_finish(b, &tree, &err);
  *
  * A sample with no eye-ray hit shows the background.  The scene gives the
@@ -523,7 +532,8 @@ typedef struct rtp_hit_record {
                             then spheres, then cones, in scene order */
     int back;            /* the ray hit the back of the surface */
     int total_internal;  /* total internal reflection at this hit: the
-                            transmitted share follows the reflected ray */
+                            transmitted share follows the reflected ray
+                            (no refracted ray: finish refuses one) */
     const unsigned char *lights; /* bit i (LSB first): light i seen from
                             here; NULL: none */
 } rtp_hit_record;
@@ -569,8 +579,9 @@ rtp_status rtp_image_diff(const rtp_image *a, const rtp_image *b,
                           double threshold, rtp_diff_stats *stats,
                           rtp_error *err);
 
-/** Writes a heat map of the per-pixel error of a against b to a PNG with a
- *  colour legend; `scale` is the error shown at full heat (0: max_abs). */
+/** Writes a heat map of the per-pixel error of a against b with a colour
+ *  legend, in the format the path's extension names (.png, .ppm, .pfm; none:
+ *  PNG); `scale` is the error shown at full heat (0: max_abs). */
 rtp_status rtp_diff_heatmap(const rtp_image *a, const rtp_image *b,
                             double scale, const char *png_path,
                             rtp_error *err);

@@ -372,6 +372,14 @@ rtp_status rtp_builder_finish(rtp_builder *b, rtp_tree **out, rtp_error *err)
                                     ms->kind == RTP_RAY_REFLECTED ? "reflected" : "refracted");
                 *slot = -2;
             }
+            /* (total internal reflection sends no ray through: its
+               transmitted share follows the reflected ray) */
+            for (i = 0; i < n && st == RTP_OK; i++)
+                if (e.h[i]->tir && refr[i] != -1)
+                    st = rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                                    "sample (%d, %d): node %d reflects totally and has a "
+                                    "refracted ray",
+                                    sx, sy, (int)i);
             if (st == RTP_OK && n && roots != 1)
                 st = rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
                                 "sample (%d, %d): %zu eye-ray hits (one expected)", sx, sy, roots);

@@ -81,6 +81,8 @@ rtp_status rtp_image_create(int width, int height, const rtp_allocator *alloc,
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
                           "rtp_image_create: out is NULL");
     *out = NULL;
+    if (rtpi_allocator_partial(alloc))
+        return rtpi_allocator_refused(err, "rtp_image_create");
     if (width <= 0 || height <= 0)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
                           "image size %dx%d: both sides must be positive",
@@ -1373,6 +1375,8 @@ rtp_status rtp_image_read_stream(FILE *stream, const char *name,
         return rtpi_error(err, RTP_ERR_ARGUMENT, name, 0, 0,
                           "rtp_image_read_stream: out is NULL");
     *out = NULL;
+    if (rtpi_allocator_partial(alloc))
+        return rtpi_allocator_refused(err, "rtp_image_read_stream");
     if (!stream)
         return rtpi_error(err, RTP_ERR_ARGUMENT, name, 0, 0,
                           "no stream to read from");
@@ -1388,6 +1392,8 @@ rtp_status rtp_image_read(const char *path, const rtp_allocator *alloc,
         return rtpi_error(err, RTP_ERR_ARGUMENT, path, 0, 0,
                           "rtp_image_read: out is NULL");
     *out = NULL;
+    if (rtpi_allocator_partial(alloc))
+        return rtpi_allocator_refused(err, "rtp_image_read");
     if (!path || !*path)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
                           "no image file name");

@@ -50,6 +50,11 @@ int rtpi_grow(const rtp_allocator *a, void **p, size_t *cap, size_t need,
 size_t rtpi_grow_cap(size_t cap, size_t need);
 char *rtpi_strdup(const rtp_allocator *a, const char *s);
 /* Fills `*out` with the default allocator when `in` is NULL. */
+/* Whether an allocator has some of its three functions and not all (a
+   zeroed one is the library's own, as NULL is); rtpi_allocator_refused
+   says so as RTP_ERR_ARGUMENT for function fn. */
+int rtpi_allocator_partial(const rtp_allocator *a);
+rtp_status rtpi_allocator_refused(rtp_error *err, const char *fn);
 void rtpi_allocator_init(rtp_allocator *out, const rtp_allocator *in);
 
 /* ---------------------------------------------------------------- errors */

@@ -319,6 +319,8 @@ rtp_status rtp_scene_load_memory(const char *text, size_t size,
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
                           "rtp_scene_load_memory: NULL argument");
     *out = NULL;
+    if (rtpi_allocator_partial(alloc))
+        return rtpi_allocator_refused(err, "rtp_scene_load_memory");
     if (!name)
         name = "<memory>";
     st = rtpi_scene_create(alloc, &s);
@@ -362,6 +364,9 @@ rtp_status rtp_scene_load(const char *path, const rtp_allocator *alloc,
     if (!path || !out)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
                           "rtp_scene_load: NULL argument");
+    *out = NULL;
+    if (rtpi_allocator_partial(alloc))
+        return rtpi_allocator_refused(err, "rtp_scene_load");
     rtpi_allocator_init(&a, alloc);
     st = rtpi_read_file(&a, path, &text, &size, err);
     if (st != RTP_OK)

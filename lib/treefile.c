@@ -1813,6 +1813,8 @@ rtp_status rtp_tree_read_memory(const void *data, size_t size, const char *name,
     if (!out || (!data && size))
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_read: NULL argument");
     *out = NULL;
+    if (rtpi_allocator_partial(alloc))
+        return rtpi_allocator_refused(err, "rtp_tree_read_memory");
     if (!name)
         name = "<memory>";
     rtpi_allocator_init(&a, alloc);
@@ -2101,6 +2103,8 @@ rtp_status rtp_tree_read(const char *path, const rtp_allocator *alloc, rtp_tree 
     if (!path || !out)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_read: NULL argument");
     *out = NULL;
+    if (rtpi_allocator_partial(alloc))
+        return rtpi_allocator_refused(err, "rtp_tree_read");
     rtpi_allocator_init(&a, alloc);
     is_stdin = strcmp(path, "-") == 0;
     f = is_stdin ? stdin : fopen(path, "rb");

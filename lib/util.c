@@ -279,6 +279,20 @@ static void default_free(void *user, void *p)
 }
 #endif
 
+int rtpi_allocator_partial(const rtp_allocator *a)
+{
+    int n = a ? !!a->malloc_fn + !!a->realloc_fn + !!a->free_fn : 0;
+    return n > 0 && n < 3;
+}
+
+rtp_status rtpi_allocator_refused(rtp_error *err, const char *fn)
+{
+    return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                      "%s: an allocator needs malloc_fn, realloc_fn and free_fn all three "
+                      "(or none, or NULL: the library's own)",
+                      fn);
+}
+
 void rtpi_allocator_init(rtp_allocator *out, const rtp_allocator *in)
 {
     if (in && in->malloc_fn && in->realloc_fn && in->free_fn) {

@@ -457,6 +457,19 @@ static void test_builder_misuse(void)
     CHECK(rtp_builder_finish(b, &t, &err) == RTP_ERR_ARGUMENT && !t);
     CHECK(strstr(err.message, "sample (1, 0)") != NULL &&
           strstr(err.message, "as a miss and as a hit") != NULL);
+    /* total internal reflection and a refracted ray: one or the other
+       (it was taken, the refracted subtree used as well) */
+    b = NULL;
+    CHECK(rtp_builder_create(s, 1, 1, 0, &b, &err) == RTP_OK);
+    if (b) {
+        rec.total_internal = 1;
+        CHECK(rtp_builder_hit(b, 0, 0, RTP_NO_PARENT, RTP_RAY_EYE, &rec, &err) == 0);
+        rec.total_internal = 0;
+        CHECK(rtp_builder_hit(b, 0, 0, 0, RTP_RAY_REFLECTED, &rec, &err) == 1);
+        CHECK(rtp_builder_miss(b, 0, 0, 0, RTP_RAY_REFRACTED, &err) == RTP_OK);
+        CHECK(rtp_builder_finish(b, &t, &err) == RTP_ERR_ARGUMENT && !t);
+        CHECK(strstr(err.message, "reflects totally") != NULL);
+    }
 out:
     rtp_scene_destroy(s);
 }

@@ -502,6 +502,57 @@ static void test_tree_crop(void)
    two jobs), or whose visibility bits were decided for a light elsewhere
    (one part written after a move), merged without a word and gave an
    image that depended on the parts' order. */
+static void *only_malloc(void *user, size_t n)
+{
+    (void)user;
+    return malloc(n);
+}
+
+static void only_free(void *user, void *p)
+{
+    (void)user;
+    free(p);
+}
+
+/* An allocator with some functions and not all is refused by every call
+   that takes one (it was replaced by the library's own without a word),
+   and the out-parameter is NULL on failure, as on every failure (a
+   scene load of a missing file left it as it was). */
+static void test_partial_allocator(void)
+{
+    static const char nff[] = "v from 0 -4 1 at 0 0 0 up 0 0 1 angle 40 hither 0.1 "
+                              "resolution 4 4\nl 1 1 1\nf 1 1 1 1 0 1 0 1\ns 0 0 0 1\n";
+    rtp_allocator part, zero;
+    rtp_scene *s = (rtp_scene *)&part;
+    rtp_image *img = (rtp_image *)&part;
+    rtp_tree *t = (rtp_tree *)&part;
+    rtp_error err;
+    unsigned char byte = 0;
+    memset(&part, 0, sizeof part);
+    memset(&zero, 0, sizeof zero);
+    part.malloc_fn = only_malloc;
+    part.free_fn = only_free;
+    CHECK(rtp_scene_load_memory(nff, strlen(nff), "p.nff", "nff", &part, &s, &err) ==
+              RTP_ERR_ARGUMENT &&
+          !s && strstr(err.message, "allocator"));
+    s = (rtp_scene *)&part;
+    CHECK(rtp_scene_load("scenes/spheres.nff", &part, &s, &err) == RTP_ERR_ARGUMENT && !s);
+    CHECK(rtp_image_create(2, 2, &part, &img, &err) == RTP_ERR_ARGUMENT && !img);
+    img = (rtp_image *)&part;
+    CHECK(rtp_image_read("scenes/tex4.ppm", &part, &img, &err) == RTP_ERR_ARGUMENT && !img);
+    img = (rtp_image *)&part;
+    CHECK(rtp_image_read_stream(stdin, "x", &part, &img, &err) == RTP_ERR_ARGUMENT && !img);
+    CHECK(rtp_tree_read("test/golden/format1.rtp", &part, &t, &err) == RTP_ERR_ARGUMENT && !t);
+    t = (rtp_tree *)&part;
+    CHECK(rtp_tree_read_memory(&byte, 1, "x", &part, &t, &err) == RTP_ERR_ARGUMENT && !t);
+    /* a zeroed one is the library's own */
+    CHECK(rtp_image_create(2, 2, &zero, &img, &err) == RTP_OK && img);
+    rtp_image_destroy(img);
+    /* a missing file: *out NULL */
+    s = (rtp_scene *)&part;
+    CHECK(rtp_scene_load("no/such/scene.nff", NULL, &s, &err) == RTP_ERR_IO && !s);
+}
+
 static int copy_file(const char *a, const char *b);
 
 static void test_merge_other_setups(void)
@@ -4264,6 +4315,7 @@ int main(void)
     RUN(test_tree_crop);
     RUN(test_max_depth);
     RUN(test_merge_other_setups);
+    RUN(test_partial_allocator);
 #ifdef RTP_HAVE_THREADS
     RUN(test_small_stack_host);
 #endif
