@@ -59,9 +59,10 @@ rtp_status rtp_builder_create(const rtp_scene *scene, int width, int height, int
 {
     rtp_builder *b;
     size_t ns;
+    if (out)
+        *out = NULL;
     if (!scene || !out)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_builder_create: NULL argument");
-    *out = NULL;
     if (width <= 0 || height <= 0)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "image size %dx%d: not positive",
                           width, height);
@@ -275,6 +276,8 @@ rtp_status rtp_builder_finish(rtp_builder *b, rtp_tree **out, rtp_error *err)
     int32_t *refl = NULL, *refr = NULL;
     rtp_status st = RTP_OK;
     emit e;
+    if (out)
+        *out = NULL;
     if (!b || !out) {
         rtp_builder_destroy(b);
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_builder_finish: NULL argument");

@@ -688,12 +688,12 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
     double t0, t1, t2, limit;
     rtpi_kd_stats ks;
 
-    if (!s || (!out && !tree_out))
-        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_trace: NULL argument");
     if (out)
         *out = NULL;
     if (tree_out)
         *tree_out = NULL;
+    if (!s || (!out && !tree_out))
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_trace: NULL argument");
     memset(&opt, 0, sizeof opt);
     if (opt_in)
         opt = *opt_in;
@@ -931,8 +931,11 @@ rtp_status rtp_record(const rtp_scene *s, const rtp_trace_options *opt,
                       rtp_tree **tree, rtp_image **image,
                       rtp_trace_stats *stats, rtp_error *err)
 {
-    if (!tree)
+    if (!tree) {
+        if (image)
+            *image = NULL;
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_record: NULL tree");
+    }
     return trace_impl(s, opt, 0, tree, image, stats, err);
 }
 

@@ -3448,6 +3448,7 @@ rtp_status rtp_tree_eval(rtp_tree *t, const rtp_eval_options *opt, rtp_image **o
 {
     if (!out)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_eval: NULL argument");
+    *out = NULL;
     return eval_impl(t, opt, NULL, out, stats, err);
 }
 

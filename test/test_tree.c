@@ -518,7 +518,7 @@ static void only_free(void *user, void *p)
    that takes one (it was replaced by the library's own without a word),
    and the out-parameter is NULL on failure, as on every failure (a
    scene load of a missing file left it as it was). */
-static void test_partial_allocator(void)
+static void test_partial_allocator(void) /* (and out-parameters) */
 {
     static const char nff[] = "v from 0 -4 1 at 0 0 0 up 0 0 1 angle 40 hither 0.1 "
                               "resolution 4 4\nl 1 1 1\nf 1 1 1 1 0 1 0 1\ns 0 0 0 1\n";
@@ -551,6 +551,22 @@ static void test_partial_allocator(void)
     /* a missing file: *out NULL */
     s = (rtp_scene *)&part;
     CHECK(rtp_scene_load("no/such/scene.nff", NULL, &s, &err) == RTP_ERR_IO && !s);
+    /* NULL arguments: the out-parameters NULL too, as on every failure */
+    img = (rtp_image *)&part;
+    CHECK(rtp_trace(NULL, NULL, &img, NULL, &err) == RTP_ERR_ARGUMENT && !img);
+    img = (rtp_image *)&part;
+    t = (rtp_tree *)&part;
+    CHECK(rtp_record(NULL, NULL, &t, &img, NULL, &err) == RTP_ERR_ARGUMENT && !t && !img);
+    img = (rtp_image *)&part;
+    CHECK(rtp_record(NULL, NULL, NULL, &img, NULL, &err) == RTP_ERR_ARGUMENT && !img);
+    img = (rtp_image *)&part;
+    CHECK(rtp_tree_eval(NULL, NULL, &img, NULL, &err) == RTP_ERR_ARGUMENT && !img);
+    {
+        rtp_builder *b = (rtp_builder *)&part;
+        CHECK(rtp_builder_create(NULL, 2, 2, 0, &b, &err) == RTP_ERR_ARGUMENT && !b);
+        t = (rtp_tree *)&part;
+        CHECK(rtp_builder_finish(NULL, &t, &err) == RTP_ERR_ARGUMENT && !t);
+    }
 }
 
 static int copy_file(const char *a, const char *b);
