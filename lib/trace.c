@@ -753,7 +753,7 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
             rtpi_fmt_g(g[1], sizeof g[1], 3, limit / 1048576.0);
             return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
                               "a %dx%d %s needs at least %s MiB, over the memory limit of "
-                              "%s MiB (raise it with --memory-limit)",
+                              "%s MiB (raise memory_limit: rtp's --memory-limit)",
                               w, h, tree_out ? "traced image with its trees" : "traced image",
                               g[0], g[1]);
         }
@@ -845,8 +845,8 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
     for (i = 0; i < nthreads; i++)
         if (ws[i].status != RTP_OK) {
             st = worker_error(ws[i].status, limit, "tracing",
-                              "raise it with --memory-limit, or trace with a lower --depth "
-                              "or a --min-weight",
+                              "raise memory_limit (rtp's --memory-limit), or trace with a lower "
+                              "max_depth (--depth) or a min_weight (--min-weight)",
                               err);
             goto done;
         }
@@ -1085,7 +1085,7 @@ rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int thre
     for (i = 0; i < (size_t)nthreads; i++)
         if (jobs[i].w.status != RTP_OK) {
             st = worker_error(jobs[i].w.status, limit, "re-tracing",
-                              "raise it with --memory-limit", err);
+                              "raise memory_limit (rtp's --memory-limit)", err);
             goto done;
         }
     for (i = 0; i < (size_t)nthreads; i++) {
@@ -1105,8 +1105,8 @@ rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int thre
     /* (the new trees' chunks, taken from the room, are freed after the
        splice: the spliced copy is the peak) */
     if ((double)total * nb + (double)(ns + 1) * 8.0 > sh.room) {
-        st = worker_error(RTP_ERR_LIMIT, limit, "re-tracing", "raise it with --memory-limit",
-                          err);
+        st = worker_error(RTP_ERR_LIMIT, limit, "re-tracing",
+                          "raise memory_limit (rtp's --memory-limit)", err);
         goto done;
     }
     nodes = (rtpi_cnode *)rtpi_malloc_array(a, total + 1, sizeof *nodes);

@@ -2965,7 +2965,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                 return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
                                   "a direction cube of %d cells a face takes up to %s MiB, "
                                   "over the memory limit of %s MiB (lower its resolution or "
-                                  "raise --memory-limit)",
+                                  "raise memory_limit: rtp's --memory-limit)",
                                   res, g[0], g[1]);
             }
     }
