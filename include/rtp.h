@@ -167,15 +167,20 @@ void rtp_scene_destroy(rtp_scene *scene);
  *  light.N.pos|color|on, mat.N.color|kd|ks|kt|shine|ior (and the texture
  *  and bump keys the README lists), ambient, background,
  *  camera.from|at|up|angle|hither; N is a 0-based index in file order or
- *  a name the scene gives.  @return RTP_OK, RTP_ERR_KEY, RTP_ERR_PARSE or
- *  RTP_ERR_ARGUMENT (a value out of range). */
+ *  a name the scene gives (a name may hold dots: the field follows the
+ *  last).  An image key (mat.N.texture, mat.N.bump) reads its file each
+ *  time, "-" the next image on stdin; an image no material uses any more
+ *  is freed.  @return RTP_OK, RTP_ERR_KEY, RTP_ERR_PARSE, RTP_ERR_IO or
+ *  RTP_ERR_FORMAT (an image key's file), or RTP_ERR_ARGUMENT (a value out
+ *  of range). */
 rtp_status rtp_scene_set(rtp_scene *scene, const char *key,
                          const char *value, rtp_error *err);
 
 /** Writes the current value of a key rtp_scene_set takes into buf, as it
  *  takes it: numbers comma-separated in the shortest form that reads back
  *  to the same value; checker and on 0 or 1; texture and bump none, waves,
- *  noise or the image's path.  Also light.N.name and mat.N.name (read
+ *  noise or the image's path ("-" for one read from stdin: setting that
+ *  again reads stdin's next image).  Also light.N.name and mat.N.name (read
  *  only; "" when unnamed).  @return RTP_OK, RTP_ERR_KEY, or
  *  RTP_ERR_ARGUMENT when buf is too small (buf then ""). */
 rtp_status rtp_scene_get(const rtp_scene *scene, const char *key, char *buf, size_t size,

@@ -242,6 +242,14 @@ rtp_status rtpi_scene_add_texture(rtp_scene *s, const char *path, int fresh,
                                   uint32_t *index, rtp_error *err);
 /* A deep copy of s with the same allocator. */
 rtp_status rtpi_scene_clone(const rtp_scene *s, rtp_scene **out);
+/* rtp_scene_set without what follows it there: */
+rtp_status rtpi_scene_set(rtp_scene *s, const char *key, const char *value, rtp_error *err);
+/* Frees the pixels of textures no material uses (an image texture or
+   bump map now; mats0, when given: a tree's bump maps as traced, which
+   --stale keep and class-D re-traces still use): a stream of texture
+   edits kept every image it replaced.  The slot stays, its index never
+   reused (caches compare materials by index), its image NULL. */
+void rtpi_scene_drop_textures(rtp_scene *s, const rtpi_material *mats0);
 /* A new file beside path to write and then rename over it: a name of
    its own (tmp, tmpsize >= strlen(path) + 32 bytes) made with O_EXCL,
    so writers of one path at once never share it; the mode of a file

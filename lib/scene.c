@@ -184,7 +184,7 @@ rtp_status rtpi_scene_add_texture(rtp_scene *s, const char *path, int fresh,
     rtp_status st;
     char *p;
     for (i = 0; !fresh && i < s->ntexs; i++) {
-        if (strcmp(s->texs[i].path, path) == 0) {
+        if (s->texs[i].image && strcmp(s->texs[i].path, path) == 0) {
             *index = (uint32_t)i;
             return RTP_OK;
         }
@@ -380,6 +380,7 @@ rtp_status rtp_scene_load(const char *path, const rtp_allocator *alloc,
 
 void rtp_scene_get_info(const rtp_scene *s, rtp_scene_info *info)
 {
+    size_t i;
     memset(info, 0, sizeof *info);
     if (!s)
         return;
@@ -388,7 +389,9 @@ void rtp_scene_get_info(const rtp_scene *s, rtp_scene_info *info)
     info->cones = s->ncones;
     info->materials = s->nmats;
     info->lights = s->nlights;
-    info->textures = s->ntexs;
+    info->textures = 0;
+    for (i = 0; i < s->ntexs; i++)
+        info->textures += s->texs[i].image != NULL; /* (not those edits replaced) */
     info->width = s->width;
     info->height = s->height;
 }
@@ -639,8 +642,8 @@ static void set_rgb(float *dst, const double *v, int n)
         dst[i] = (float)v[n == 1 ? 0 : i];
 }
 
-rtp_status rtp_scene_set(rtp_scene *s, const char *key, const char *value,
-                         rtp_error *err)
+rtp_status rtpi_scene_set(rtp_scene *s, const char *key, const char *value,
+                          rtp_error *err)
 {
     double v[4];
     int n, kind;
@@ -844,6 +847,36 @@ static const char *texture_path(const rtp_scene *s, uint32_t idx)
     return idx < s->ntexs && s->texs[idx].path ? s->texs[idx].path : "?";
 }
 
+void rtpi_scene_drop_textures(rtp_scene *s, const rtpi_material *mats0)
+{
+    size_t i, m;
+    for (i = 0; i < s->ntexs; i++) {
+        int used = 0;
+        if (!s->texs[i].image)
+            continue;
+        for (m = 0; m < s->nmats && !used; m++) {
+            const rtpi_material *a = &s->mats[m];
+            used = (a->tex == RTPI_TEX_IMAGE && a->tex_image == i) ||
+                   (a->bump == RTPI_BUMP_IMAGE && a->bump_image == i) ||
+                   (mats0 && mats0[m].bump == RTPI_BUMP_IMAGE && mats0[m].bump_image == i);
+        }
+        if (!used) {
+            rtp_image_destroy(s->texs[i].image);
+            s->texs[i].image = NULL;
+        }
+    }
+}
+
+rtp_status rtp_scene_set(rtp_scene *s, const char *key, const char *value,
+                         rtp_error *err)
+{
+    rtp_status st = rtpi_scene_set(s, key, value, err);
+    /* (an image replaced by a texture or bump key: its pixels go) */
+    if (s && key && (strstr(key, ".texture") || strstr(key, ".bump")))
+        rtpi_scene_drop_textures(s, NULL);
+    return st;
+}
+
 rtp_status rtp_scene_get(const rtp_scene *s, const char *key, char *buf, size_t size,
                          rtp_error *err)
 {
@@ -1022,14 +1055,20 @@ rtp_status rtpi_scene_clone(const rtp_scene *s, rtp_scene **out)
             for (i = 0; i < s->ntexs && !bad; i++) {
                 const rtp_image *src = s->texs[i].image;
                 c->texs[i].path = rtpi_strdup(a, s->texs[i].path);
-                if (!c->texs[i].path ||
-                    rtp_image_create(src->width, src->height, a, &c->texs[i].image, NULL) != RTP_OK) {
+                c->texs[i].max_abs = s->texs[i].max_abs;
+                if (!c->texs[i].path) {
+                    bad = 1;
+                    break;
+                }
+                if (!src)
+                    continue; /* (replaced by an edit: rtpi_scene_drop_textures) */
+                if (rtp_image_create(src->width, src->height, a, &c->texs[i].image, NULL) !=
+                    RTP_OK) {
                     bad = 1;
                     break;
                 }
                 memcpy(c->texs[i].image->pixels, src->pixels,
                        sizeof(float) * 3 * (size_t)src->width * src->height);
-                c->texs[i].max_abs = s->texs[i].max_abs;
             }
         }
     }

@@ -245,7 +245,7 @@ rtp_status rtp_tree_set(rtp_tree *t, const char *key, const char *value,
         memcpy(lights, s->lights, s->nlights * sizeof *lights);
     memcpy(amb, s->ambient, sizeof amb);
     memcpy(bg, s->background, sizeof bg);
-    st = rtp_scene_set(s, key, value, err);
+    st = rtpi_scene_set(s, key, value, err);
     if (st == RTP_OK)
         st = check_exact(t, key, value, err);
     if (strstr(key, ".bump"))
@@ -262,6 +262,8 @@ rtp_status rtp_tree_set(rtp_tree *t, const char *key, const char *value,
     }
     rtpi_free(&t->alloc, mats);
     rtpi_free(&t->alloc, lights);
+    if (strstr(key, ".texture") || strstr(key, ".bump"))
+        rtpi_scene_drop_textures(s, t->mats0);
     return st;
 }
 

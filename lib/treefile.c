@@ -683,17 +683,18 @@ static rtp_status serialize(const rtp_tree *t, sink *out)
         int bytes = 1;
         for (i = 0; bytes && i < s->ntexs; i++) {
             const rtp_image *img = s->texs[i].image;
-            size_t n = (size_t)img->width * img->height * 3;
-            for (k = 0; remap[i] != RTPI_NONE && bytes && k < n; k++)
+            size_t n = remap[i] != RTPI_NONE ? (size_t)img->width * img->height * 3 : 0;
+            for (k = 0; bytes && k < n; k++)
                 bytes = texel_byte(img->pixels[k]) >= 0;
         }
         body_reset(&b);
         put_u32(&b, ntex_used);
         for (i = 0; i < s->ntexs; i++) {
             const rtp_image *img = s->texs[i].image;
-            size_t n = (size_t)img->width * img->height * 3;
+            size_t n;
             if (remap[i] == RTPI_NONE)
                 continue;
+            n = (size_t)img->width * img->height * 3;
             put_str(&b, s->texs[i].path);
             put_u32(&b, (uint32_t)img->width);
             put_u32(&b, (uint32_t)img->height);
