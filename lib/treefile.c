@@ -1781,14 +1781,20 @@ static rtp_status tree_end(loader *L, unsigned seen, rtp_status st, rtp_tree **o
     size_t i;
     L->section = NULL;
     t->nlights0 = t->scene->nlights;
-    if (st == RTP_OK && (seen & 0x3fu) != 0x3fu)
-        st = bad(L, "a required section is missing", NULL);
+    if (st == RTP_OK && (seen & 0x3fu) != 0x3fu) {
+        for (i = 0; (seen >> i) & 1u; i++)
+            ;
+        st = bad(L, "a required section is missing: ", required_sections[i]);
+    }
     if (st == RTP_OK) {
         for (i = 0; i < t->scene->nmats; i++) {
             const rtpi_material *m = &t->scene->mats[i];
             if ((m->tex == RTPI_TEX_IMAGE && m->tex_image >= t->scene->ntexs) ||
                 (m->bump == RTPI_BUMP_IMAGE && m->bump_image >= t->scene->ntexs)) {
-                st = bad(L, "a material names a missing texture", NULL);
+                char what[64];
+                snprintf(what, sizeof what, "%zu", i);
+                L->section = "MATL";
+                st = bad(L, "a texture the file does not hold named by material ", what);
                 break;
             }
         }

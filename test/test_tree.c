@@ -3979,6 +3979,16 @@ static void test_section_order_and_end(void)
         c[end + 14 + i] = (unsigned char)(crc >> (8 * i));
     memcpy(c + end + 18, data + end, 16);
     expect_read(c, n + 18, NULL, "an extension before END");
+    /* TREE left out: the message names it */
+    {
+        size_t tree = section_at(data, n, "TREE");
+        CHECK(tree < n);
+        if (tree < n) {
+            memcpy(c, data, tree);
+            memcpy(c + tree, data + end, 16);
+            expect_read(c, tree + 16, "a required section is missing: TREE", "no TREE");
+        }
+    }
     free(c);
     free(data);
 }
