@@ -44,12 +44,14 @@
  *    options.threads > 1 take a lock around it (two calls of the library
  *    on different threads with one allocator still need it to be).
  *  - Stack: any call fits in a thread of 128 KiB (musl's default).
- *    Tracing recurses about 1 KiB a ray-tree level, so rays of trees
- *    deeper than 32 levels (max_depth; up to RTP_MAX_DEPTH) are traced on
- *    threads the library starts with the stack they need, even with
- *    threads 0 or 1; the calling thread waits, and still makes every
- *    progress call.  A build without threads traces on the calling
- *    thread: give it 1 KiB (more under sanitizers) a level.
+ *    Tracing and evaluating recurse up to 1 KiB a ray-tree level, so the
+ *    rays and trees of a max_depth above 32 (up to RTP_MAX_DEPTH) are
+ *    traced and evaluated on threads the library starts with the stack
+ *    they need, even with threads 0 or 1 (the allocator is then called
+ *    from that thread, never from two at once); the calling thread waits,
+ *    and still makes every progress call.  A build without threads works
+ *    on the calling thread: give it 1 KiB (more under sanitizers) a
+ *    level.
  *  - Images are linear RGB floats, row-major, top row first.
  */
 #ifndef RTP_RAYTRACE_RTP_H
@@ -585,8 +587,8 @@ rtp_status rtp_image_diff(const rtp_image *a, const rtp_image *b,
                           rtp_error *err);
 
 /** Writes a heat map of the per-pixel error of a against b with a colour
- *  legend, in the format the path's extension names (.png, .ppm, .pfm; none:
- *  PNG); `scale` is the error shown at full heat (0: max_abs). */
+ *  legend, in the format the path's extension names (.ppm, .pfm; any other
+ *  name: PNG); `scale` is the error shown at full heat (0: max_abs). */
 rtp_status rtp_diff_heatmap(const rtp_image *a, const rtp_image *b,
                             double scale, const char *png_path,
                             rtp_error *err);

@@ -537,7 +537,7 @@ static rtp_status read_checker(nff *c, const rtpi_tok *kw)
     if (st != RTP_OK || (st = read_rgb(c, "checker", "checker", col)) != RTP_OK ||
         (st = num(c, "checker", "checker", "scale", &scale, &tk)) != RTP_OK)
         return st;
-    if (!(scale > 0.0)) {
+    if (!((float)scale > 0.0f)) { /* (kept as a float: see rtpi_material) */
         char g[32];
         rtpi_fmt_g(g, sizeof g, 6, scale);
         return rtpi_lex_error(&c->lx, &tk, "checker scale must be positive, got %s", g);
@@ -607,7 +607,7 @@ static rtp_status read_bump(nff *c, const rtpi_tok *kw)
         st = num(c, "bump", "bump", "scale", &scale, &t);
         if (st != RTP_OK)
             return st;
-        if (!(scale > 0.0)) {
+        if (!((float)scale > 0.0f)) {
             char g[32];
             rtpi_fmt_g(g, sizeof g, 6, scale);
             return rtpi_lex_error(&c->lx, &t, "bump scale must be positive, got %s", g);

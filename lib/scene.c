@@ -315,10 +315,11 @@ rtp_status rtp_scene_load_memory(const char *text, size_t size,
 {
     rtp_scene *s = NULL;
     rtp_status st;
+    if (out)
+        *out = NULL;
     if (!out || (!text && size))
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
                           "rtp_scene_load_memory: NULL argument");
-    *out = NULL;
     if (rtpi_allocator_partial(alloc))
         return rtpi_allocator_refused(err, "rtp_scene_load_memory");
     if (!name)
@@ -361,10 +362,11 @@ rtp_status rtp_scene_load(const char *path, const rtp_allocator *alloc,
     char *text = NULL;
     size_t size = 0;
     rtp_status st;
+    if (out)
+        *out = NULL;
     if (!path || !out)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
                           "rtp_scene_load: NULL argument");
-    *out = NULL;
     if (rtpi_allocator_partial(alloc))
         return rtpi_allocator_refused(err, "rtp_scene_load");
     rtpi_allocator_init(&a, alloc);
@@ -703,9 +705,11 @@ rtp_status rtpi_scene_set(rtp_scene *s, const char *key, const char *value,
         if (strcmp(field, "checker_scale") == 0) {
             if ((st = want(err, key, value, n, 1)) != RTP_OK)
                 return st;
-            if (!(v[0] > 0.0))
+            /* (kept as a float: one that rounds to 0 is 0, which a tree
+               file refuses) */
+            if (!((float)v[0] > 0.0f))
                 return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                                  "%s: the checker cell size must be > 0", key);
+                                  "%s: the checker cell size must be > 0 (as a float)", key);
             m->tex_scale = (float)v[0];
             return RTP_OK;
         }
@@ -760,9 +764,9 @@ rtp_status rtpi_scene_set(rtp_scene *s, const char *key, const char *value,
         if (strcmp(field, "bump_strength") == 0 || strcmp(field, "bump_scale") == 0) {
             if ((st = want(err, key, value, n, 1)) != RTP_OK)
                 return st;
-            if (field[5] == 's' && field[6] == 'c' && !(v[0] > 0.0))
+            if (field[5] == 's' && field[6] == 'c' && !((float)v[0] > 0.0f))
                 return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                                  "%s: the bump scale must be > 0", key);
+                                  "%s: the bump scale must be > 0 (as a float)", key);
             if (field[6] == 't')
                 m->bump_strength = (float)v[0];
             else

@@ -210,9 +210,9 @@ static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
    of the geometric normal ng: it would go on into the surface), its ng
    part mirrored, so a reflection never sees what lies behind an opaque
    surface (a floor with the README's waves 0.5 showed a plane 1 below
-   it in 36% of its pixels).  Only for bumped materials: interpolated
-   normals (pp) bend mildly, and the images of such scenes stay as they
-   were. */
+   it in 36% of its pixels).  Only where a bump bent the normal:
+   interpolated normals (pp) bend mildly, and the images of such scenes
+   stay as they were. */
 static rtpi_v3 reflect_dir(rtpi_v3 d, rtpi_v3 nb, rtpi_v3 ng, int bumped)
 {
     rtpi_v3 r = v3_madd(d, nb, -2.0 * v3_dot(d, nb));
@@ -254,7 +254,7 @@ static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
     double eta = 1.0, cosi = 0.0, k = 0.0;
     int refracts = 0;
     uint32_t link = 0, vis = 0;
-    int front;
+    int front, bent;
     double pfloor;
     size_t i, nl = s->nlights, words = sh->shade.vis_words;
 
@@ -280,6 +280,11 @@ static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
        unbumped surface, so the recorded visibility holds for any bump a
        re-evaluation may set. */
     nb = rtpi_bump_normal(s, m, hit.prim, sf.p, sf.uv, ns);
+    /* (bent: the bump changed the normal here.  A bump that bends nothing
+       — strength 0, an image on a primitive without uvs — leaves it as
+       it was, bit for bit, and the rays as without a bump, which is what
+       the trees keep when such a bump is set: bump_bends) */
+    bent = nb.x != ns.x || nb.y != ns.y || nb.z != ns.z;
     front = v3_dot(d, ng) < 0.0;
     if (!front)
         link |= RTPI_L_BACK;
@@ -328,7 +333,7 @@ static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
     if (depth < sh->max_depth &&
         ((m->ks > 0.0f && weight * m->ks >= sh->min_weight) ||
          (sh->spd && m->kt > 0.0f))) {
-        rtpi_v3 r = reflect_dir(d, nb, ng, m->bump != RTPI_BUMP_NONE);
+        rtpi_v3 r = reflect_dir(d, nb, ng, bent);
         size_t nn = w->nn;
         w->n.reflected_rays++;
         refl = spawn(w, sf.p, ng, r, depth + 1, weight * m->ks, pfloor);
@@ -346,7 +351,7 @@ static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
             /* Total internal reflection: the transmitted share follows
                the reflected ray; trace it if ks did not already. */
             if (refl == RTPI_CHILD_NONE) {
-                rtpi_v3 r = reflect_dir(d, nb, ng, m->bump != RTPI_BUMP_NONE);
+                rtpi_v3 r = reflect_dir(d, nb, ng, bent);
                 w->n.reflected_rays++;
                 refl = spawn(w, sf.p, ng, r, depth + 1, weight * m->kt, pfloor);
                 link |= child_flags(refl, RTPI_L_REFL, RTPI_L_REFL_MISS);

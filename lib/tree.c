@@ -378,6 +378,19 @@ static int light_moved(const rtp_tree *t, size_t i)
     return i >= t->nlights0 || !light_at(t, i, t->lights0[i].pos);
 }
 
+/* rtpi_parallel_rows for the tree's work: evaluating a sample recurses
+   a level a ray of its tree (rtpi_sample_terms and the others: up to
+   ~0.6 KiB a level), so the rows of a tree deeper than a host's thread
+   can be counted on to hold run on threads of rtp's own
+   (rtpi_trace_stack; a 1000-level tree's evaluation overflowed a
+   thread of 128 KiB). */
+static int tree_rows(const rtp_tree *t, int nrows, int nthreads, void *const *ctx,
+                     rtpi_row_fn fn, void (*progress)(void *, double), void *progress_user)
+{
+    return rtpi_parallel_rows_stack(nrows, nthreads, ctx, fn, progress, progress_user,
+                                    rtpi_trace_stack(t->max_depth));
+}
+
 typedef struct vis_ctx {
     rtp_tree *t;
     const rtpi_shadow *sh;
@@ -674,7 +687,7 @@ static rtp_status update_visibility(rtp_tree *t, int mode, int res, int threads,
             part.lo = prog->lo + prog->span * (double)done / (double)todo;
             part.span = prog->span / (double)todo;
             done++;
-            rtpi_parallel_rows(t->ny, threads, ctx, vis_row, part.fn ? progress_part_cb : NULL,
+            tree_rows(t, t->ny, threads, ctx, vis_row, part.fn ? progress_part_cb : NULL,
                                &part);
             rtpi_shadow_destroy(sh);
             if (st) {
@@ -1584,7 +1597,7 @@ static int pk_build(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, in
         t->pk_cap = off;
     }
     t->pk_nz = (uint32_t *)(void *)(t->pk_c + 6 * off);
-    rtpi_parallel_rows(nb, nthreads, ctx, part ? pk_img_chunk : pk_build_chunk, NULL, NULL);
+    tree_rows(t, nb, nthreads, ctx, part ? pk_img_chunk : pk_build_chunk, NULL, NULL);
     for (i = 0; i < nthreads; i++) {
         ok &= !e[i].nonfinite;
         e[i].nonfinite = 0;
@@ -2112,11 +2125,11 @@ static void pk_apply(rtp_tree *t, void *const *ctx, int nthreads, int sparse,
 {
     int nb = (t->height + PK_ROWS - 1) / PK_ROWS;
     if (sparse) {
-        rtpi_parallel_rows(nb, threads_for(40.0 * (double)t->pk_nnz, nthreads), ctx,
+        tree_rows(t, nb, threads_for(40.0 * (double)t->pk_nnz, nthreads), ctx,
                            pk_apply_listed, NULL, NULL);
         st->written_pixels = t->pk_nnz;
     } else {
-        rtpi_parallel_rows(nb, threads_for(36.0 * (double)t->width * (double)t->height, nthreads),
+        tree_rows(t, nb, threads_for(36.0 * (double)t->width * (double)t->height, nthreads),
                            ctx, pk_apply_band, NULL, NULL);
         st->written_pixels = (unsigned long long)t->width * t->height;
     }
@@ -2446,7 +2459,7 @@ static int cp_plane(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, si
         e[i].term = j;
         e[i].kmax[0] = e[i].kmax[1] = e[i].kmax[2] = 0.0;
     }
-    rtpi_parallel_rows(nb, threads_for(16.0 * (double)np * RTPI_COEFFS(t->scene->nlights) / 3.0,
+    tree_rows(t, nb, threads_for(16.0 * (double)np * RTPI_COEFFS(t->scene->nlights) / 3.0,
                                        nthreads),
                        ctx, cp_plane_chunk, NULL, NULL);
     for (c = 0; c < 3; c++)
@@ -2819,7 +2832,7 @@ static int cp_eval(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, con
                                                                   3 * sizeof *t->cb_p)))) {
                 /* other terms differ from S too: their sum once a chain */
                 if (!cb_holds(t, changed, cv)) {
-                    rtpi_parallel_rows(nb, threads_for(16.0 * (1.0 + (double)nd) * (double)nw,
+                    tree_rows(t, nb, threads_for(16.0 * (1.0 + (double)nd) * (double)nw,
                                                        nthreads),
                                        ctx, cb_chunk, NULL, NULL);
                     t->cb_term = changed + 1;
@@ -2828,17 +2841,17 @@ static int cp_eval(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, con
                 }
                 for (c = 0; c < 3; c++)
                     t->cb_dc[c] = cv[3 * changed + c] - t->cp_cl[3 * changed + c];
-                rtpi_parallel_rows(nb, threads_for(28.0 * (double)nw, nthreads), ctx, cb_apply,
+                tree_rows(t, nb, threads_for(28.0 * (double)nw, nthreads), ctx, cb_apply,
                                    NULL, NULL);
             } else {
-                rtpi_parallel_rows(nb, threads_for(16.0 * (1.0 + (double)nd) * (double)nw,
+                tree_rows(t, nb, threads_for(16.0 * (1.0 + (double)nd) * (double)nw,
                                                    nthreads),
                                    ctx, cp_apply_listed, NULL, NULL);
             }
         }
         st->written_pixels = nw;
     } else {
-        rtpi_parallel_rows(nb, threads_for(12.0 * (2.0 + (double)nd) * (double)np, nthreads), ctx,
+        tree_rows(t, nb, threads_for(12.0 * (2.0 + (double)nd) * (double)np, nthreads), ctx,
                            cp_apply_band, NULL, NULL);
         st->written_pixels = np;
     }
@@ -3111,7 +3124,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
     if (full) {
         /* every step for every sample */
         t->ev_inf = 0;
-        rtpi_parallel_rows(t->ny, nthreads, ctx, eval_row, prog.fn ? progress_part_cb : NULL,
+        tree_rows(t, t->ny, nthreads, ctx, eval_row, prog.fn ? progress_part_cb : NULL,
                            &prog);
         cp_stale(t, (size_t)-1);
         st.samples = ns;
@@ -3177,7 +3190,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                 e[i].light = l;
                 e[i].combine_too = moved_combined;
             }
-            rtpi_parallel_rows(t->ny, nthreads, ctx, light_row, NULL, NULL);
+            tree_rows(t, t->ny, nthreads, ctx, light_row, NULL, NULL);
             cp_stale(t, 2 + l);
             st.samples += ns;
             coeffs_dirty = 1;
@@ -3223,7 +3236,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                     memset(t->pk_q, 0, ns * 3 * sizeof *t->pk_q);
                     for (i = 0; i < nthreads; i++)
                         e[i].kp = t->pk_q;
-                    rtpi_parallel_rows((int)((e[0].nlist + 255) / 256), nthreads, ctx, pk_q_chunk,
+                    tree_rows(t, (int)((e[0].nlist + 255) / 256), nthreads, ctx, pk_q_chunk,
                                        NULL, NULL);
                 }
                 /* (no memory for them: the full combine needs none) */
@@ -3281,7 +3294,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                 if (list_combine) {
                     /* every other sample's colour holds: the material's
                        samples from their highlights alone */
-                    rtpi_parallel_rows((int)((n + 255) / 256),
+                    tree_rows(t, (int)((n + 255) / 256),
                                        threads_for(28.0 * (double)t->hl_n + 28.0 * (double)n,
                                                    nthreads),
                                        ctx, hl_apply_chunk, NULL, NULL);
@@ -3296,7 +3309,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                    below; the list is made again once the samples are
                    (its P and W are those of the coefficients and colours
                    now), so the next shine edit applies it */
-                rtpi_parallel_rows((int)((t->hl_n + 4095) / 4096), nthreads, ctx, hl_chunk, NULL,
+                tree_rows(t, (int)((t->hl_n + 4095) / 4096), nthreads, ctx, hl_chunk, NULL,
                                    NULL);
                 redo = 0;
                 hl_after = (int)m + 1;
@@ -3313,7 +3326,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
             }
             if (list_combine)
                 note_set(set_mats, &nset, (uint32_t)m);
-            rtpi_parallel_rows((int)((n + 255) / 256), nthreads, ctx, redo_chunk, NULL, NULL);
+            tree_rows(t, (int)((n + 255) / 256), nthreads, ctx, redo_chunk, NULL, NULL);
             cp_stale(t, (size_t)-1);
             st.samples += n;
             coeffs_dirty = 1;
@@ -3348,7 +3361,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
             t->pk_term = 0; /* (a material's planes hold the colours before) */
         } else {
             /* step 3 for every sample */
-            rtpi_parallel_rows(t->ny, nthreads, ctx, combine_row, NULL, NULL);
+            tree_rows(t, t->ny, nthreads, ctx, combine_row, NULL, NULL);
             st.combined_samples = ns;
             t->pk_term = 0;
             t->ev_samples_ok = cached;
@@ -3398,7 +3411,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                 e[i].pixels = img->pixels;
                 e[i].written = 0;
             }
-            rtpi_parallel_rows(t->height, nthreads, ctx, by_mark ? mark_row : resolve_row, NULL,
+            tree_rows(t, t->height, nthreads, ctx, by_mark ? mark_row : resolve_row, NULL,
                                NULL);
             if (by_mark) {
                 for (st.written_pixels = 0, i = 0; i < nthreads; i++)
@@ -3466,6 +3479,8 @@ rtp_status rtp_tree_trace(const rtp_tree *t, int threads, rtp_image **out,
                           rtp_trace_stats *stats, rtp_error *err)
 {
     rtp_trace_options o;
+    if (out)
+        *out = NULL;
     if (!t)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_trace: NULL tree");
     memset(&o, 0, sizeof o);
@@ -3591,12 +3606,9 @@ static int same_setup(const rtp_tree *a, const rtp_tree *b)
     /* the lights as traced: each part's visibility bits were decided
        there (a part written after a move holds its bits for the traced
        place, and its lights now where they were moved) */
-    for (i = 0; i < a->nlights0; i++) {
-        rtpi_light l = a->lights0[i], k = b->lights0[i];
-        l.name = k.name = NULL;
-        if (memcmp(&l, &k, sizeof l) != 0)
-            return 0;
-    }
+    for (i = 0; i < a->nlights0; i++)
+        if (memcmp(a->lights0[i].pos, b->lights0[i].pos, sizeof a->lights0[i].pos) != 0)
+            return 0; /* (positions alone: a file keeps no more of them) */
     return 1;
 }
 

@@ -1817,9 +1817,10 @@ rtp_status rtp_tree_read_memory(const void *data, size_t size, const char *name,
     rtp_status st = RTP_OK;
     unsigned seen = 0;
 
+    if (out)
+        *out = NULL;
     if (!out || (!data && size))
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_read: NULL argument");
-    *out = NULL;
     if (rtpi_allocator_partial(alloc))
         return rtpi_allocator_refused(err, "rtp_tree_read_memory");
     if (!name)
@@ -2107,9 +2108,10 @@ rtp_status rtp_tree_read(const char *path, const rtp_allocator *alloc, rtp_tree 
     struct stat sb;
     int is_stdin, known = 0;
     uint64_t size = 0;
+    if (out)
+        *out = NULL;
     if (!path || !out)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_read: NULL argument");
-    *out = NULL;
     if (rtpi_allocator_partial(alloc))
         return rtpi_allocator_refused(err, "rtp_tree_read");
     rtpi_allocator_init(&a, alloc);

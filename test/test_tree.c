@@ -561,6 +561,16 @@ static void test_partial_allocator(void) /* (and out-parameters) */
     CHECK(rtp_record(NULL, NULL, NULL, &img, NULL, &err) == RTP_ERR_ARGUMENT && !img);
     img = (rtp_image *)&part;
     CHECK(rtp_tree_eval(NULL, NULL, &img, NULL, &err) == RTP_ERR_ARGUMENT && !img);
+    img = (rtp_image *)&part;
+    CHECK(rtp_tree_trace(NULL, 1, &img, NULL, &err) == RTP_ERR_ARGUMENT && !img);
+    s = (rtp_scene *)&part;
+    CHECK(rtp_scene_load(NULL, NULL, &s, &err) == RTP_ERR_ARGUMENT && !s);
+    s = (rtp_scene *)&part;
+    CHECK(rtp_scene_load_memory(NULL, 5, "x", "nff", NULL, &s, &err) == RTP_ERR_ARGUMENT && !s);
+    t = (rtp_tree *)&part;
+    CHECK(rtp_tree_read(NULL, NULL, &t, &err) == RTP_ERR_ARGUMENT && !t);
+    t = (rtp_tree *)&part;
+    CHECK(rtp_tree_read_memory(NULL, 5, "x", NULL, &t, &err) == RTP_ERR_ARGUMENT && !t);
     {
         rtp_builder *b = (rtp_builder *)&part;
         CHECK(rtp_builder_create(NULL, 2, 2, 0, &b, &err) == RTP_ERR_ARGUMENT && !b);
@@ -621,6 +631,39 @@ static void test_merge_other_setups(void)
         rtp_scene_destroy(s);
     }
     remove(tex);
+    /* and parts alike merge, one of them read from its file (which keeps
+       only the traced lights' positions: comparing the whole records
+       refused it) */
+    {
+        rtp_scene *s = load("scenes/spheres.nff");
+        rtp_tree *top = NULL, *bot = NULL, *back = NULL, *m = NULL;
+        rtp_tree *parts[2];
+        rtp_trace_options o;
+        rtp_error err;
+        if (!s)
+            return;
+        memset(&o, 0, sizeof o);
+        o.width = 24;
+        o.height = 16;
+        o.region[2] = 24;
+        o.region[3] = 8;
+        CHECK(rtp_record(s, &o, &top, NULL, NULL, NULL) == RTP_OK);
+        o.region[1] = 8;
+        o.region[3] = 16;
+        CHECK(rtp_record(s, &o, &bot, NULL, NULL, NULL) == RTP_OK);
+        CHECK(bot && rtp_tree_write(bot, tex, NULL, NULL) == RTP_OK &&
+              rtp_tree_read(tex, NULL, &back, NULL) == RTP_OK);
+        parts[0] = top;
+        parts[1] = back;
+        CHECK_MSG(top && back && rtp_tree_merge(parts, 2, &m, &err) == RTP_OK && m, "%s",
+                  err.message);
+        rtp_tree_destroy(m);
+        rtp_tree_destroy(back);
+        rtp_tree_destroy(top);
+        rtp_tree_destroy(bot);
+        rtp_scene_destroy(s);
+        remove(tex);
+    }
 }
 
 #ifdef RTP_HAVE_THREADS
@@ -651,7 +694,7 @@ static void small_stack_progress(void *user, double done)
 static void *small_stack_main(void *arg)
 {
     static const char mirrors[] =
-        "v\nfrom 0 0 0\nat 0 1 0\nup 0 0 1\nangle 10\nhither 0.01\nresolution 2 2\n"
+        "v\nfrom 0 0 0\nat 0 1 0\nup 0 0 1\nangle 10\nhither 0.01\nresolution 1 1\n"
         "l 0 0 1.5\nf 0.9 0.9 0.9 0.1 0.9 100 0 0\n"
         "p 4\n-50 -2 -50\n50 -2 -50\n50 -2 50\n-50 -2 50\n"
         "p 4\n-50 2 -50\n-50 2 50\n50 2 50\n50 2 -50\n";
@@ -732,6 +775,24 @@ static void *small_stack_main(void *arg)
     return NULL;
 }
 
+/* The host thread's stack: 128 KiB (musl's default), as rtp.h promises,
+   or RTP_TEST_STACK_KIB; sanitizers' frames are several times larger
+   (a 1 MiB thread then, still far below a 1000-level trace's need). */
+static size_t small_stack_bytes(void)
+{
+    const char *e = getenv("RTP_TEST_STACK_KIB");
+    if (e && atoi(e) > 0)
+        return (size_t)atoi(e) << 10;
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+    return (size_t)1 << 20;
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer) || __has_feature(thread_sanitizer)
+    return (size_t)1 << 20;
+#endif
+#endif
+    return (size_t)128 << 10;
+}
+
 static void test_small_stack_host(void)
 {
     int threads;
@@ -742,7 +803,7 @@ static void test_small_stack_host(void)
         memset(&r, 0, sizeof r);
         r.threads = threads;
         CHECK(pthread_attr_init(&attr) == 0);
-        CHECK(pthread_attr_setstacksize(&attr, (size_t)128 << 10) == 0);
+        CHECK(pthread_attr_setstacksize(&attr, small_stack_bytes()) == 0);
         if (pthread_create(&th, &attr, small_stack_main, &r) != 0) {
             pthread_attr_destroy(&attr);
             SKIP("no thread of 128 KiB stack to be had");
@@ -3076,6 +3137,52 @@ static void test_bump_that_bends_nothing(void)
         }
 }
 
+/* A bump that bends nothing (strength 0; an image on a primitive without
+   uvs) keeps the rays as they were, in the tree and in a full trace
+   alike: the full trace had turned reflections off interpolated normals
+   back above the surface for any bump set, the tree kept them (28% of
+   the pixels 0.53 off, 0 samples re-traced, with --stale retrace). */
+static void test_bump_that_bends_nothing_traces_alike(void)
+{
+    static const char pp[] =
+        "v from 0 -6 1 at 0 0 0 up 0 0 1 angle 40 hither 0.01 resolution 24 24\n"
+        "l 0 -3 5\nb 0.2 0.3 0.8\nf 0.8 0.8 0.8 0.3 0.7 50 0 1\n"
+        "pp 4 -3 -3 0 0 0.9 0.44 3 -3 0 0 0.9 0.44 3 3 0 0 0.9 0.44 -3 3 0 0 0.9 0.44\n"
+        "f 1 0.2 0.1 0.9 0 10 0 1\np 4 -20 -20 -1 20 -20 -1 20 20 -1 -20 20 -1\n";
+    static const char *const sets[][2] = {{"mat.0.bump", "waves"}, {"mat.0.bump", "scenes/tex4.ppm"}};
+    size_t k;
+    for (k = 0; k < 2; k++) {
+        rtp_scene *s = NULL;
+        rtp_tree *t = NULL;
+        rtp_image *re = NULL, *full = NULL;
+        rtp_trace_options o;
+        rtp_eval_options eo;
+        rtp_diff_stats d;
+        memset(&o, 0, sizeof o);
+        memset(&eo, 0, sizeof eo);
+        eo.stale = RTP_STALE_RETRACE;
+        CHECK(rtp_scene_load_memory(pp, strlen(pp), "pp.nff", "nff", NULL, &s, NULL) == RTP_OK);
+        CHECK(s && rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
+        if (t) {
+            CHECK(rtp_tree_set(t, sets[k][0], sets[k][1], NULL) == RTP_OK);
+            CHECK(rtp_scene_set(s, sets[k][0], sets[k][1], NULL) == RTP_OK);
+            if (k == 0) {
+                CHECK(rtp_tree_set(t, "mat.0.bump_strength", "0", NULL) == RTP_OK);
+                CHECK(rtp_scene_set(s, "mat.0.bump_strength", "0", NULL) == RTP_OK);
+            }
+            CHECK(rtp_tree_eval(t, &eo, &re, NULL, NULL) == RTP_OK &&
+                  rtp_trace(s, &o, &full, NULL, NULL) == RTP_OK &&
+                  rtp_image_diff(re, full, 1e-6, &d, NULL) == RTP_OK);
+            CHECK_MSG(re && full && d.max_abs <= 1e-6, "%s=%s: %g against a full trace",
+                      sets[k][0], sets[k][1], d.max_abs);
+        }
+        rtp_image_destroy(re);
+        rtp_image_destroy(full);
+        rtp_tree_destroy(t);
+        rtp_scene_destroy(s);
+    }
+}
+
 /* A bump kept stale (--stale keep) while another material's class-D
    edit traces samples again: those samples spawn their rays below the
    bumped material as its other samples did, so when the bump goes back
@@ -3838,6 +3945,24 @@ static void test_out_of_range_values(void)
         rtp_scene_destroy(s);
     }
     remove(file);
+    /* a scale that rounds to float 0 is refused where it is set (it was
+       taken and written, and the file then refused) */
+    {
+        static const char chk[] = "v from 0 -4 1 at 0 0 0.5 up 0 0 1 angle 40 hither 0.1 "
+                                  "resolution 6 5\nl 2 -3 4\nf 1 0.3 0.3 0.5 0.4 50 0.5 1.4\n"
+                                  "checker 0 0 0 1e-46\ns 0 0 0.7 0.6\n";
+        rtp_scene *s = NULL;
+        rtp_error err;
+        CHECK(rtp_scene_load_memory(chk, strlen(chk), "c.nff", "nff", NULL, &s, &err) ==
+                  RTP_ERR_PARSE &&
+              !s);
+        CHECK(rtp_scene_load_memory(text, strlen(text), "r.nff", "nff", NULL, &s, NULL) ==
+              RTP_OK);
+        CHECK(s && rtp_scene_set(s, "mat.0.checker_scale", "1e-46", &err) == RTP_ERR_ARGUMENT);
+        CHECK(s && rtp_scene_set(s, "mat.0.bump_scale", "1e-46", &err) == RTP_ERR_ARGUMENT);
+        CHECK(s && rtp_scene_set(s, "mat.0.bump_scale", "1e-40", &err) == RTP_OK);
+        rtp_scene_destroy(s);
+    }
     /* a 2x2 PFM, one texel NaN */
     snprintf(file, sizeof file, "%s/rtp-nan-%d.pfm", tmpdir(), (int)getpid());
     f = fopen(file, "wb");
@@ -4458,6 +4583,7 @@ int main(void)
     RUN(test_warm_light_move_bitwise);
     RUN(test_bump_edits);
     RUN(test_bump_kept_through_retrace);
+    RUN(test_bump_that_bends_nothing_traces_alike);
     RUN(test_image_bump_round_shapes);
     RUN(test_bump_that_bends_nothing);
     RUN(test_truncated_every_length);
