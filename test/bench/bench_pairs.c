@@ -10,9 +10,11 @@
  * node's decision for light 0 (the tree's visibility bits) is compared
  * with the exact one; the share that differ is of the pairs decided (hits
  * facing the light).  PSNR and RMSE are the image's against the exact
- * move's (both evaluations on one thread: a thread's queries first test
- * the primitive that blocked its previous one, so the item buffer's
- * answers can depend on the order they are asked in).  The issue's target:
+ * move's (both evaluations on one thread, as before session 26, when the
+ * item buffer's answers depended on the order they were asked in: the
+ * blocker of a thread's previous query, tested first, corrected some of
+ * its wrong "lit" calls; that cache is now the exact modes' alone, and the
+ * figures are the item buffer's own).  The issue's target:
  * at most 0.1% wrong and at least 45 dB at 1024.  Reports; never fails. */
 #include "internal.h"
 #include "../check.h"
