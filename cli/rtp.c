@@ -1872,6 +1872,9 @@ static int reeval_one(rtp_tree *tree, const rtp_eval_options *eo, rtp_image **ke
             json_number(stats, "max_abs", d.max_abs);
         }
         fprintf(stats, ", \"peak_rss_kb\": %ld}\n", peak_rss_kb());
+        /* (each frame's line as its image goes out: a UI reading --stats
+           from a pipe or FIFO got them ten at a time, 4 KiB of buffer) */
+        fflush(stats);
     }
     rc = 0;
 out:

@@ -510,6 +510,23 @@ expect_rc 0 $RTP trace $S --size 40x30 --region 0,10,40,30 -o "$T/bot.rtp"
 expect_rc 1 $RTP merge -o "$T/mm.rtp" "$T/top.rtp" "$T/bot.rtp"
 grep -q "bot.rtp" "$T/err" && ok || bad "merge overlap does not name the file: $(cat "$T/err")"
 
+# --stats to a FIFO in a stream: each frame's line arrives with its image,
+# so a UI can read them in step (they came ten at a time, 4 KiB buffered)
+$RTP trace scenes/spheres.nff --size 16x16 -o "$T/ui.rtp" -q
+if mkfifo "$T/in" "$T/st" 2>/dev/null; then
+    $RTP reeval "$T/ui.rtp" --stream -i "$T/ff%d.pfm" --stats "$T/st" -q <"$T/in" 2>/dev/null &
+    rp=$!
+    exec 7>"$T/in"
+    echo "light.0.color=1,0,0" >&7
+    timeout 10 head -n 1 "$T/st" >"$T/stline"
+    exec 7>&-
+    wait $rp
+    grep -q '"seconds"' "$T/stline" && ok || bad "--stats to a FIFO: no line with its frame"
+else
+    echo "skip: no FIFO to be made: --stats to a FIFO not checked" >&2
+    skip=$((skip + 1))
+fi
+
 rm -rf "$T"
 echo "$pass passed, $fail failed, $skip skipped"
 [ "$fail" -eq 0 ]
