@@ -581,6 +581,19 @@ static void test_partial_allocator(void) /* (and out-parameters) */
 
 static int copy_file(const char *a, const char *b);
 
+/* The options of the top (0) or bottom (1) half of a 24x16 frame. */
+static rtp_trace_options half_frame(int bottom)
+{
+    rtp_trace_options o;
+    memset(&o, 0, sizeof o);
+    o.width = 24;
+    o.height = 16;
+    o.region[1] = bottom ? 8 : 0;
+    o.region[2] = 24;
+    o.region[3] = bottom ? 16 : 8;
+    return o;
+}
+
 static void test_merge_other_setups(void)
 {
     int which;
@@ -595,11 +608,7 @@ static void test_merge_other_setups(void)
         int k;
         if (!s)
             return;
-        memset(&o, 0, sizeof o);
-        o.width = 24;
-        o.height = 16;
-        o.region[2] = 24;
-        o.region[3] = 8;
+        o = half_frame(0);
         CHECK(rtp_record(s, &o, &top, NULL, NULL, NULL) == RTP_OK);
         if (which) {
             /* the top part's light moved after its trace; the bottom
@@ -607,8 +616,7 @@ static void test_merge_other_setups(void)
             CHECK(top && rtp_tree_set(top, "light.0.pos", "1,2,3", NULL) == RTP_OK);
             CHECK(rtp_scene_set(s, "light.0.pos", "1,2,3", NULL) == RTP_OK);
         }
-        o.region[1] = 8;
-        o.region[3] = 16;
+        o = half_frame(1);
         CHECK(rtp_record(s, &o, &bot, NULL, NULL, NULL) == RTP_OK);
         if (!which && top && bot) {
             /* both parts given "the same" texture file, which changed in
@@ -642,14 +650,9 @@ static void test_merge_other_setups(void)
         rtp_error err;
         if (!s)
             return;
-        memset(&o, 0, sizeof o);
-        o.width = 24;
-        o.height = 16;
-        o.region[2] = 24;
-        o.region[3] = 8;
+        o = half_frame(0);
         CHECK(rtp_record(s, &o, &top, NULL, NULL, NULL) == RTP_OK);
-        o.region[1] = 8;
-        o.region[3] = 16;
+        o = half_frame(1);
         CHECK(rtp_record(s, &o, &bot, NULL, NULL, NULL) == RTP_OK);
         CHECK(bot && rtp_tree_write(bot, tex, NULL, NULL) == RTP_OK &&
               rtp_tree_read(tex, NULL, &back, NULL) == RTP_OK);
@@ -691,6 +694,27 @@ static void small_stack_progress(void *user, double done)
     r->last = done;
 }
 
+/* Sets key to value in the tree and the scene, evaluates the tree and
+   traces the scene: 1 when both went, with their difference counted in
+   r->max_diff. */
+static int small_stack_edit(small_stack_run *r, rtp_tree *t, rtp_scene *s,
+                            const rtp_trace_options *o, const rtp_eval_options *eo,
+                            const char *key, const char *value)
+{
+    rtp_image *re = NULL, *full = NULL;
+    rtp_diff_stats d;
+    int ok = t && rtp_tree_set(t, key, value, NULL) == RTP_OK &&
+             rtp_scene_set(s, key, value, NULL) == RTP_OK &&
+             (r->last = 0, rtp_tree_eval(t, eo, &re, NULL, NULL)) == RTP_OK &&
+             (r->last = 0, rtp_trace(s, o, &full, NULL, NULL)) == RTP_OK &&
+             rtp_image_diff(re, full, 1e-6, &d, NULL) == RTP_OK;
+    if (ok && d.max_abs > r->max_diff)
+        r->max_diff = d.max_abs;
+    rtp_image_destroy(re);
+    rtp_image_destroy(full);
+    return ok;
+}
+
 static void *small_stack_main(void *arg)
 {
     static const char mirrors[] =
@@ -701,10 +725,9 @@ static void *small_stack_main(void *arg)
     small_stack_run *r = (small_stack_run *)arg;
     rtp_scene *s = NULL;
     rtp_tree *t = NULL;
-    rtp_image *img = NULL, *re = NULL, *full = NULL;
+    rtp_image *img = NULL, *re = NULL;
     rtp_trace_options o;
     rtp_eval_options eo;
-    rtp_diff_stats d;
     r->caller = pthread_self();
     if (rtp_scene_load_memory(mirrors, strlen(mirrors), "mirrors.nff", "nff", NULL, &s, NULL) !=
         RTP_OK)
@@ -738,17 +761,7 @@ static void *small_stack_main(void *arg)
     eo.progress = small_stack_progress;
     eo.progress_user = r;
     /* kt from 0: every sample's mirror paths traced again (class D) */
-    if (t && rtp_tree_set(t, "mat.0.kt", "0.05", NULL) == RTP_OK &&
-        rtp_scene_set(s, "mat.0.kt", "0.05", NULL) == RTP_OK) {
-        r->ok_retrace = (r->last = 0, rtp_tree_eval(t, &eo, &re, NULL, NULL)) == RTP_OK &&
-                        (r->last = 0, rtp_trace(s, &o, &full, NULL, NULL)) == RTP_OK &&
-                        rtp_image_diff(re, full, 1e-6, &d, NULL) == RTP_OK;
-        if (r->ok_retrace && d.max_abs > r->max_diff)
-            r->max_diff = d.max_abs;
-    }
-    rtp_image_destroy(re);
-    rtp_image_destroy(full);
-    re = full = NULL;
+    r->ok_retrace = small_stack_edit(r, t, s, &o, &eo, "mat.0.kt", "0.05");
     /* a moved light through the item buffer (its build's thread jobs
        were a 1.1 MB frame) */
     eo.shadows = RTP_SHADOWS_ITEMBUF;
@@ -759,16 +772,7 @@ static void *small_stack_main(void *arg)
     re = NULL;
     /* a camera edit: every sample traced again */
     eo.shadows = RTP_SHADOWS_EXACT;
-    if (t && rtp_tree_set(t, "camera.at", "0.01,1,0", NULL) == RTP_OK &&
-        rtp_scene_set(s, "camera.at", "0.01,1,0", NULL) == RTP_OK) {
-        r->ok_camera = (r->last = 0, rtp_tree_eval(t, &eo, &re, NULL, NULL)) == RTP_OK &&
-                       (r->last = 0, rtp_trace(s, &o, &full, NULL, NULL)) == RTP_OK &&
-                       rtp_image_diff(re, full, 1e-6, &d, NULL) == RTP_OK;
-        if (r->ok_camera && d.max_abs > r->max_diff)
-            r->max_diff = d.max_abs;
-    }
-    rtp_image_destroy(re);
-    rtp_image_destroy(full);
+    r->ok_camera = small_stack_edit(r, t, s, &o, &eo, "camera.at", "0.01,1,0");
     rtp_image_destroy(img);
     rtp_tree_destroy(t);
     rtp_scene_destroy(s);
@@ -1386,6 +1390,21 @@ static void *cnt_realloc(void *user, void *q, size_t n)
     return (char *)p + 16;
 }
 
+/* An allocator counting into c (zeroed). */
+static rtp_allocator counted_allocator(counted *c)
+{
+    rtp_allocator a;
+    memset(c, 0, sizeof *c);
+#ifdef RTP_HAVE_THREADS
+    pthread_mutex_init(&c->lock, NULL);
+#endif
+    a.malloc_fn = cnt_malloc;
+    a.realloc_fn = cnt_realloc;
+    a.free_fn = cnt_free;
+    a.user = c;
+    return a;
+}
+
 #ifdef RTP_HAVE_THREADS
 /* An allocator that is not thread-safe and says when it is used as if it
    were: a call finding another inside it counts an overlap (trylock on
@@ -1509,14 +1528,7 @@ static void test_memory_limit_holds(void)
     rtp_allocator a;
     size_t i;
     int threads, held = 0, stopped = 0;
-    memset(&c, 0, sizeof c);
-#ifdef RTP_HAVE_THREADS
-    pthread_mutex_init(&c.lock, NULL);
-#endif
-    a.malloc_fn = cnt_malloc;
-    a.realloc_fn = cnt_realloc;
-    a.free_fn = cnt_free;
-    a.user = &c;
+    a = counted_allocator(&c);
     for (i = 0; i < sizeof cases / sizeof *cases; i++)
         for (threads = 1; threads <= 2; threads++) {
             rtp_scene *s = NULL;
@@ -3441,20 +3453,15 @@ static int file_disagrees(const unsigned char *data, size_t len, const char *fil
     return read_disagrees(file, data, len, 0);
 }
 
-/* The same through a FIFO a child process writes (a pipe's bytes as they
-   come, its size unknown: rtp trace -o - | rtp reeval -). */
-static int fifo_disagrees(const unsigned char *data, size_t len, const char *fifo)
+/* A child process that writes len bytes of data to the FIFO and ends
+   (the reader may stop early: its error needs no more bytes); its pid,
+   or -1. */
+static pid_t fifo_writer(const char *fifo, const void *data, size_t len)
 {
     pid_t pid;
-    remove(fifo);
-    if (mkfifo(fifo, 0600) != 0)
-        return 1;
     fflush(NULL);
     pid = fork();
-    if (pid < 0)
-        return 1;
     if (pid == 0) {
-        /* (the reader may stop early: its error needs no more bytes) */
         FILE *w;
         signal(SIGPIPE, SIG_DFL);
         w = fopen(fifo, "wb");
@@ -3464,6 +3471,20 @@ static int fifo_disagrees(const unsigned char *data, size_t len, const char *fif
         }
         _exit(0);
     }
+    return pid;
+}
+
+/* The same through a FIFO a child process writes (a pipe's bytes as they
+   come, its size unknown: rtp trace -o - | rtp reeval -). */
+static int fifo_disagrees(const unsigned char *data, size_t len, const char *fifo)
+{
+    pid_t pid;
+    remove(fifo);
+    if (mkfifo(fifo, 0600) != 0)
+        return 1;
+    pid = fifo_writer(fifo, data, len);
+    if (pid < 0)
+        return 1;
     return read_disagrees(fifo, data, len, pid);
 }
 
@@ -3498,14 +3519,7 @@ static void test_extension_skipped(void)
         x[20 + big + i] = (unsigned char)(crc >> (8 * i));
     memcpy(x + 24 + big, data + 8, n - 8);
     m = n + big + 16;
-    memset(&c, 0, sizeof c);
-#ifdef RTP_HAVE_THREADS
-    pthread_mutex_init(&c.lock, NULL);
-#endif
-    a.malloc_fn = cnt_malloc;
-    a.realloc_fn = cnt_realloc;
-    a.free_fn = cnt_free;
-    a.user = &c;
+    a = counted_allocator(&c);
     snprintf(fifo, sizeof fifo, "%s/rtp-ext-fifo-%d", tmpdir(), (int)getpid());
     remove(fifo);
     if (mkfifo(fifo, 0600) != 0) {
@@ -3513,18 +3527,7 @@ static void test_extension_skipped(void)
         free(data);
         SKIP("no FIFO to be made");
     }
-    fflush(NULL);
-    pid = fork();
-    if (pid == 0) {
-        FILE *w;
-        signal(SIGPIPE, SIG_DFL);
-        w = fopen(fifo, "wb");
-        if (w) {
-            fwrite(x, 1, m, w);
-            fclose(w);
-        }
-        _exit(0);
-    }
+    pid = fifo_writer(fifo, x, m);
     CHECK(pid > 0);
     if (pid > 0) {
         CHECK_MSG(rtp_tree_read(fifo, &a, &t, &err) == RTP_OK, "%s", err.message);
@@ -4360,14 +4363,7 @@ static void test_texture_edits_free_images(void)
     int k;
     snprintf(img, sizeof img, "%s/rtp-texedit-%d.ppm", tmpdir(), (int)getpid());
     snprintf(bump0, sizeof bump0, "%s/rtp-texbump-%d.ppm", tmpdir(), (int)getpid());
-    memset(&c, 0, sizeof c);
-#ifdef RTP_HAVE_THREADS
-    pthread_mutex_init(&c.lock, NULL);
-#endif
-    a.malloc_fn = cnt_malloc;
-    a.realloc_fn = cnt_realloc;
-    a.free_fn = cnt_free;
-    a.user = &c;
+    a = counted_allocator(&c);
     CHECK(write_ppm_256(bump0, 99) == 0);
     CHECK(rtp_scene_load("scenes/textured.nff", &a, &s, NULL) == RTP_OK);
     if (!s)
