@@ -361,8 +361,11 @@ int rtpi_uv_tangents(const rtp_scene *s, uint32_t prim, rtpi_v3 p, rtpi_v3 *pu, 
 
 /* The least step rtpi_offset_origin takes in scene s: 1e-12, or 1e-9 of
    the largest coordinate of s's geometry where that is below 1e-3 (see
-   there).  A scan of the geometry: made once a trace or a move. */
-double rtpi_offset_floor(const rtp_scene *s);
+   there).  per_prim (may be NULL): whether some primitive's
+   rtpi_prim_offset_floor exceeds it (else it is the floor for every one,
+   and need not be asked: no scene coordinate reaches 250 where the floor
+   is 1e-12).  One scan of the geometry: made once a trace or a move. */
+double rtpi_offset_floor(const rtp_scene *s, int *per_prim);
 /* The least step off primitive prim: floor (rtpi_offset_floor), or 4e-15
    of the primitive's largest coordinate where that is more.  A hit is
    computed in double from the primitive's coordinates, so it may lie a
@@ -371,10 +374,6 @@ double rtpi_offset_floor(const rtp_scene *s);
    1e10 across under a scene of size 1 reflected and shadowed itself in
    40% of its pixels). */
 double rtpi_prim_offset_floor(const rtp_scene *s, uint32_t prim, double floor);
-/* Whether some primitive's rtpi_prim_offset_floor exceeds floor (else it
-   is floor for every one, and need not be asked: no scene coordinate
-   reaches 250 where floor is 1e-12).  A scan, like rtpi_offset_floor. */
-int rtpi_offset_per_prim(const rtp_scene *s, double floor);
 
 /* A ray origin for a ray leaving surface point p, moved off the surface
    along the geometric normal ng (unit) to the side `side` (+1: the side ng

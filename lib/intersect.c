@@ -470,17 +470,15 @@ double rtpi_prim_offset_floor(const rtp_scene *s, uint32_t prim, double floor)
 
 static double scene_extent(const rtp_scene *s);
 
-int rtpi_offset_per_prim(const rtp_scene *s, double floor)
-{
-    return 4e-15 * scene_extent(s) > floor;
-}
-
-double rtpi_offset_floor(const rtp_scene *s)
+double rtpi_offset_floor(const rtp_scene *s, int *per_prim)
 {
     double m = scene_extent(s);
     /* (a scene of 1e-3 and more: 1e-12 as it always was; no geometry or
        none off the origin: the same) */
-    return m > 0.0 && 1e-9 * m < 1e-12 ? 1e-9 * m : 1e-12;
+    double floor = m > 0.0 && 1e-9 * m < 1e-12 ? 1e-9 * m : 1e-12;
+    if (per_prim)
+        *per_prim = 4e-15 * m > floor;
+    return floor;
 }
 
 /* The largest coordinate of s's geometry (spheres and cones with their

@@ -119,7 +119,7 @@ static inline int rtpi_shadow_setup(rtpi_v3 p, rtpi_v3 ng, rtpi_v3 ns, rtpi_v3 l
    from that, the normals turned towards the ray where the material is
    two-sided (one_sided: SPD's rule), then rtpi_shadow_setup.  0 where the
    surface faces away from the light, else 1 with the query's p and o
-   (floor: rtpi_offset_floor(s)).  For tests and benchmarks that ask what
+   (floor: rtpi_offset_floor(s, NULL)).  For tests and benchmarks that ask what
    trace would ask. */
 static inline int rtpi_shadow_query_at(const rtp_scene *s, int one_sided, uint32_t prim,
                                        rtpi_v3 pe, rtpi_v3 d, rtpi_v3 lp, double floor,

@@ -70,7 +70,7 @@ struct shared {
     int spd, max_depth;
     double min_weight;
     double off_floor; /* rtpi_offset_floor of s */
-    int prim_floor;   /* rtpi_offset_per_prim: ask each hit's primitive */
+    int prim_floor;   /* rtpi_offset_floor said: ask each hit's primitive */
     float *out;        /* nx*ny samples, RGB */
     /* Recording: finished rows go into the tree's arrays in row order, so
        each node is copied once, from its worker's row buffer (reused and
@@ -769,8 +769,7 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
 
     memset(&sh, 0, sizeof sh);
     sh.s = s;
-    sh.off_floor = rtpi_offset_floor(s);
-    sh.prim_floor = rtpi_offset_per_prim(s, sh.off_floor);
+    sh.off_floor = rtpi_offset_floor(s, &sh.prim_floor);
     sh.wa = &s->alloc;
     if (nthreads > 1 && !rtpi_allocator_is_default(&s->alloc)) {
         if (rtpi_locked_alloc_init(&la, &s->alloc) == 0) {
@@ -1029,8 +1028,7 @@ rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int thre
 
     memset(&sh, 0, sizeof sh);
     sh.s = &tmp;
-    sh.off_floor = rtpi_offset_floor(&tmp);
-    sh.prim_floor = rtpi_offset_per_prim(&tmp, sh.off_floor);
+    sh.off_floor = rtpi_offset_floor(&tmp, &sh.prim_floor);
     sh.wa = &tmp.alloc;
     if (nthreads > 1 && !rtpi_allocator_is_default(&tmp.alloc)) {
         if (rtpi_locked_alloc_init(&la, &tmp.alloc) == 0) {

@@ -419,7 +419,7 @@ typedef struct vis_ctx {
     const rtpi_shadow *sh;
     rtpi_v3 lp;
     double off_floor; /* rtpi_offset_floor of the scene */
-    int prim_floor;   /* rtpi_offset_per_prim */
+    int prim_floor;   /* rtpi_offset_floor said: ask each primitive */
     size_t light;
     unsigned long long queries;
     rtpi_shadow_cache cache; /* the thread's last occluder */
@@ -653,8 +653,8 @@ static rtp_status update_visibility(rtp_tree *t, int mode, int res, int threads,
     for (i = 0; i < nl; i++)
         todo += light_moved(t, i) && !vis_up_to_date(t, i, kmode, kres);
     /* (trace's floor for the shadow rays' origins: the same rays) */
-    off_floor = todo ? rtpi_offset_floor(s) : 0.0;
-    prim_floor = todo ? rtpi_offset_per_prim(s, off_floor) : 0;
+    prim_floor = 0;
+    off_floor = todo ? rtpi_offset_floor(s, &prim_floor) : 0.0;
     for (i = 0; i < nl; i++) {
         const double *lp = s->lights[i].pos;
         int moved = light_moved(t, i);

@@ -57,7 +57,7 @@ static size_t make_samples(const rtp_scene *s, const rtpi_kdtree *kd, rtpi_v3 lp
         r.tmin = 0.0;
         r.tmax = HUGE_VAL;
         if (!rtpi_kd_intersect(kd, &r, &h) ||
-            !rtpi_shadow_query_at(s, 0, h.prim, v3_madd(r.o, r.d, h.t), r.d, lp, rtpi_offset_floor(s),
+            !rtpi_shadow_query_at(s, 0, h.prim, v3_madd(r.o, r.d, h.t), r.d, lp, rtpi_offset_floor(s, NULL),
                                   &out[n].p,
                                   &out[n].o))
             continue;

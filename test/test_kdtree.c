@@ -573,9 +573,9 @@ static void self_case(rng *g, double sz, double off, int *self_hits,
             if (j == 3 && v3_dot(dir, su.ng) * side < 0)
                 dir = v3_madd(dir, su.ng, -2 * v3_dot(dir, su.ng));
             if (j == 4) { /* transmitted: straight on through */
-                r2 = mkray(rtpi_offset_origin(su.p, su.ng, -side, rtpi_offset_floor(s)), d);
+                r2 = mkray(rtpi_offset_origin(su.p, su.ng, -side, rtpi_offset_floor(s, NULL)), d);
             } else {
-                r2 = mkray(rtpi_offset_origin(su.p, su.ng, side, rtpi_offset_floor(s)), dir);
+                r2 = mkray(rtpi_offset_origin(su.p, su.ng, side, rtpi_offset_floor(s, NULL)), dir);
             }
             (*tests)++;
             if (rtpi_kd_intersect(kd, &r2, &h2) && h2.prim == 0)
@@ -587,7 +587,7 @@ static void self_case(rng *g, double sz, double off, int *self_hits,
         if (side > 0) {
             rtpi_v3 nq = v3_from_f(s->pos + 9), nb = v3_from_f(s->pos + 3), nc = v3_from_f(s->pos + 6);
             rtpi_v3 aim = v3_mul(v3_add(nq, v3_add(nb, nc)), 1.0 / 3.0);
-            rtpi_ray r3 = mkray(rtpi_offset_origin(su.p, su.ng, side, rtpi_offset_floor(s)), v3_sub(aim, su.p));
+            rtpi_ray r3 = mkray(rtpi_offset_origin(su.p, su.ng, side, rtpi_offset_floor(s, NULL)), v3_sub(aim, su.p));
             rtpi_v3 nn = v3_norm(v3_cross(v3_sub(nb, nq), v3_sub(nc, nq)));
             /* "Nearby" means farther than the offset itself: geometry
                closer than that is what the offset is meant to jump.  So

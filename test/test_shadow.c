@@ -99,7 +99,7 @@ static size_t make_samples(const rtp_scene *s, const rtpi_kdtree *kd, rtpi_v3 lp
         r.tmin = 0.0;
         r.tmax = HUGE_VAL;
         if (!rtpi_kd_intersect(kd, &r, &h) ||
-            !rtpi_shadow_query_at(s, 0, h.prim, v3_madd(r.o, r.d, h.t), r.d, lp, rtpi_offset_floor(s),
+            !rtpi_shadow_query_at(s, 0, h.prim, v3_madd(r.o, r.d, h.t), r.d, lp, rtpi_offset_floor(s, NULL),
                                   &out[n].p,
                                   &out[n].o))
             continue;
@@ -280,7 +280,7 @@ static void test_lightbuf_far_from_origin(void)
                         ng = v3_mul(ng, -1.0);
                         ns = v3_mul(ns, -1.0);
                     }
-                    if (!rtpi_shadow_setup(sf.p, ng, ns, lp, rtpi_offset_floor(s), &o))
+                    if (!rtpi_shadow_setup(sf.p, ng, ns, lp, rtpi_offset_floor(s, NULL), &o))
                         continue;
                     sm[n].p = sf.p;
                     sm[n].o = o;

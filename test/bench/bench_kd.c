@@ -235,7 +235,7 @@ static void rays_bunny(const rtp_scene *s, const rtpi_kdtree *kd)
     light = v3(c[0] + ext, c[1] + 1.5 * ext, c[2] + ext);
     {
         size_t m = 0;
-        const double floor = rtpi_offset_floor(s);
+        const double floor = rtpi_offset_floor(s, NULL);
         for (i = 0; i < n; i++) {
             rtpi_surface su;
             double side;

@@ -61,7 +61,7 @@ static size_t make_queries(const rtp_scene *s, const rtpi_kdtree *kd, rtpi_v3 lp
             r.tmin = (s->camera.hither > 0.0 ? s->camera.hither : 0.0) * len;
             r.tmax = HUGE_VAL;
             if (!rtpi_kd_intersect(kd, &r, &h) ||
-                !rtpi_shadow_query_at(s, 1, h.prim, v3_madd(r.o, r.d, h.t), r.d, lp, rtpi_offset_floor(s),
+                !rtpi_shadow_query_at(s, 1, h.prim, v3_madd(r.o, r.d, h.t), r.d, lp, rtpi_offset_floor(s, NULL),
                                   &q[m].p,
                                       &q[m].o))
                 continue;
