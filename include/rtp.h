@@ -75,7 +75,7 @@ extern "C" {
    rtp_eval_stats.stale_samples): a program compares rtp_version_number()
    with the RTP_VERSION_NUMBER it was built with. */
 #define RTP_VERSION_MAJOR 0
-#define RTP_VERSION_MINOR 3
+#define RTP_VERSION_MINOR 4
 #define RTP_VERSION_PATCH 0
 #define RTP_VERSION_NUMBER \
     (RTP_VERSION_MAJOR * 10000 + RTP_VERSION_MINOR * 100 + RTP_VERSION_PATCH)
@@ -114,7 +114,8 @@ typedef enum rtp_status {
     RTP_ERR_UNSUPPORTED = 5, /* valid, but not supported (e.g. no libpng) */
     RTP_ERR_FORMAT = 6,      /* a binary file is corrupt, truncated or foreign */
     RTP_ERR_LIMIT = 7,       /* a size or memory limit would be exceeded */
-    RTP_ERR_KEY = 8          /* unknown parameter key or index */
+    RTP_ERR_KEY = 8,         /* unknown parameter key or index */
+    RTP_ERR_CANCELLED = 9    /* the caller's cancel callback said to stop */
 } rtp_status;
 
 /** @return a short constant description of a status ("out of memory"). */
@@ -267,6 +268,12 @@ typedef struct rtp_trace_options {
        NULL for none. */
     void (*progress)(void *user, double done);
     void *progress_user;
+    /* Asked now and then from the calling thread (with progress_user, at
+       least as often as progress: after each row of the image done, and
+       before and after the kd-tree's build); nonzero stops the trace as
+       soon as the rows being traced end: RTP_ERR_CANCELLED, nothing made
+       (out-parameters NULL).  NULL: never. */
+    int (*cancel)(void *user);
 } rtp_trace_options;
 
 typedef struct rtp_trace_stats {
@@ -378,6 +385,13 @@ typedef struct rtp_eval_options {
                                shadow_res^2, 8 bytes each for an item
                                buffer, 4 for a light buffer); 0: 16 GiB.
                                Past it: RTP_ERR_LIMIT, the tree as it was */
+    /* Asked now and then from the calling thread (with progress_user)
+       while samples are traced again (class-D edits, RTP_STALE_RETRACE, a
+       moved camera: the long evaluations); nonzero stops it as soon as
+       the rows being traced end: RTP_ERR_CANCELLED, the tree as it was
+       (the edits stay set: the next evaluation traces them).  NULL:
+       never. */
+    int (*cancel)(void *user);
 } rtp_eval_options;
 
 typedef struct rtp_eval_stats {

@@ -954,7 +954,7 @@ rtp_status rtpi_trace_sized(const rtp_scene *s, const rtp_trace_options *opt,
 rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int threads,
                         size_t nlights_now, double limit, unsigned long long *rays,
                         unsigned long long *capped, void (*progress)(void *, double),
-                        void *progress_user, rtp_error *err);
+                        int (*cancel)(void *), void *progress_user, rtp_error *err);
 
 /* Resolves samples (nx*ny RGB, from a grid of corners when spd) into
    the image; one routine for trace and reeval so both round alike. */
@@ -1022,6 +1022,12 @@ int rtpi_parallel_rows(int nrows, int nthreads, void *const *ctx,
 int rtpi_parallel_rows_stack(int nrows, int nthreads, void *const *ctx, rtpi_row_fn fn,
                              void (*progress)(void *, double), void *progress_user,
                              size_t stack);
+/* The same with the caller's cancel, asked after each row the calling
+   thread does or relays (with `user`, as progress): nonzero stops the
+   rows not yet begun.  @return 2 when cancel stopped it, else as above. */
+int rtpi_parallel_rows_cancel(int nrows, int nthreads, void *const *ctx, rtpi_row_fn fn,
+                              void (*progress)(void *, double), int (*cancel)(void *),
+                              void *user, size_t stack);
 /* The stack a ray tree of max_depth levels needs traced, where it is
    more than a host's thread can be counted on to have (0 otherwise). */
 size_t rtpi_trace_stack(int max_depth);

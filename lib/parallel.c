@@ -11,9 +11,11 @@ typedef struct pool {
     int nrows, next, done, stop;
     int relay, finished; /* the caller relays progress; workers ended */
     int locking;         /* the lock was made (else one thread alone) */
+    int cancelled;       /* cancel said to stop (stop is set too) */
     rtpi_row_fn fn;
     void *const *ctx;
     void (*progress)(void *user, double done);
+    int (*cancel)(void *user);
     void *progress_user;
 #ifdef RTP_HAVE_THREADS
     pthread_mutex_t lock;
@@ -47,6 +49,18 @@ static void pool_unlock(pool *p)
 #endif
 }
 
+/* Asks the caller's cancel (from the calling thread, as progress); a yes
+   stops the rows not yet begun. */
+static void poll_cancel(pool *p)
+{
+    if (p->cancel && !p->cancelled && p->cancel(p->progress_user)) {
+        pool_lock(p);
+        p->stop = 1;
+        p->cancelled = 1;
+        pool_unlock(p);
+    }
+}
+
 static void run(job *j)
 {
     pool *p = j->p;
@@ -69,6 +83,8 @@ static void run(job *j)
         pool_unlock(p);
         if (j->is_main && p->progress)
             p->progress(p->progress_user, (double)done / p->nrows);
+        if (j->is_main)
+            poll_cancel(p);
     }
 }
 
@@ -111,12 +127,20 @@ int rtpi_parallel_rows(int nrows, int nthreads, void *const *ctx,
                        rtpi_row_fn fn, void (*progress)(void *, double),
                        void *progress_user)
 {
-    return rtpi_parallel_rows_stack(nrows, nthreads, ctx, fn, progress, progress_user, 0);
+    return rtpi_parallel_rows_cancel(nrows, nthreads, ctx, fn, progress, NULL, progress_user, 0);
 }
 
 int rtpi_parallel_rows_stack(int nrows, int nthreads, void *const *ctx, rtpi_row_fn fn,
                              void (*progress)(void *, double), void *progress_user,
                              size_t stack)
+{
+    return rtpi_parallel_rows_cancel(nrows, nthreads, ctx, fn, progress, NULL, progress_user,
+                                     stack);
+}
+
+int rtpi_parallel_rows_cancel(int nrows, int nthreads, void *const *ctx, rtpi_row_fn fn,
+                              void (*progress)(void *, double), int (*cancel)(void *),
+                              void *user, size_t stack)
 {
     pool p;
     job jobs[RTPI_MAX_THREADS];
@@ -126,7 +150,8 @@ int rtpi_parallel_rows_stack(int nrows, int nthreads, void *const *ctx, rtpi_row
     p.fn = fn;
     p.ctx = ctx;
     p.progress = progress;
-    p.progress_user = progress_user;
+    p.cancel = cancel;
+    p.progress_user = user;
     if (nthreads < 1)
         nthreads = 1;
     if (nthreads > RTPI_MAX_THREADS)
@@ -153,10 +178,12 @@ int rtpi_parallel_rows_stack(int nrows, int nthreads, void *const *ctx, rtpi_row
             started = start_workers(tid, jobs, 0, nthreads, stack);
             pool_lock(&p);
             while (p.finished < started) {
-                if (p.progress && p.done != reported) {
+                if ((p.progress || p.cancel) && p.done != reported) {
                     int d = reported = p.done;
                     pool_unlock(&p);
-                    p.progress(p.progress_user, (double)d / p.nrows);
+                    if (p.progress)
+                        p.progress(p.progress_user, (double)d / p.nrows);
+                    poll_cancel(&p);
                     pool_lock(&p);
                     continue;
                 }
@@ -174,7 +201,7 @@ int rtpi_parallel_rows_stack(int nrows, int nthreads, void *const *ctx, rtpi_row
         if (started == 0)
             run(&jobs[0]); /* no thread to be had: here, as before */
         pthread_mutex_destroy(&p.lock);
-        return p.stop;
+        return p.cancelled ? 2 : p.stop;
     }
     if (nthreads > 1 && pthread_mutex_init(&p.lock, NULL) == 0) {
         pthread_t tid[RTPI_MAX_THREADS];
@@ -184,11 +211,11 @@ int rtpi_parallel_rows_stack(int nrows, int nthreads, void *const *ctx, rtpi_row
         for (i = 1; i < started; i++)
             pthread_join(tid[i], NULL);
         pthread_mutex_destroy(&p.lock);
-        return p.stop;
+        return p.cancelled ? 2 : p.stop;
     }
 #else
     (void)stack;
 #endif
     run(&jobs[0]);
-    return p.stop;
+    return p.cancelled ? 2 : p.stop;
 }

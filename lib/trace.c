@@ -676,6 +676,11 @@ static rtp_status worker_error(rtp_status st, double limit, const char *what,
 /* sized: opt's width and height are the frame even with spd (a
    builder's tree of corner samples, traced again by rtp_tree_trace);
    otherwise spd is SPD's 512x512 whatever they say, as rtp.h has it. */
+static rtp_status cancelled(rtp_error *err)
+{
+    return rtpi_error(err, RTP_ERR_CANCELLED, NULL, 0, 0, "cancelled by the caller");
+}
+
 static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in, int sized,
                              rtp_tree **tree_out, rtp_image **out,
                              rtp_trace_stats *stats, rtp_error *err)
@@ -838,13 +843,23 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
     }
 
     t0 = now_seconds();
+    /* (the kd-tree's build of a large mesh takes a second or more: the
+       caller's cancel is asked on either side of it) */
+    if (opt.cancel && opt.cancel(opt.progress_user)) {
+        st = cancelled(err);
+        goto done;
+    }
     st = rtpi_kd_build_mt(s, &s->alloc, nthreads, &kd, err);
     if (st != RTP_OK)
         goto done;
     sh.kd = kd;
     t1 = now_seconds();
-    rtpi_parallel_rows_stack(sh.gy, nthreads, ctx, trace_row, opt.progress, opt.progress_user,
-                             rtpi_trace_stack(sh.max_depth));
+    if ((opt.cancel && opt.cancel(opt.progress_user)) ||
+        rtpi_parallel_rows_cancel(sh.gy, nthreads, ctx, trace_row, opt.progress, opt.cancel,
+                                  opt.progress_user, rtpi_trace_stack(sh.max_depth)) == 2) {
+        st = cancelled(err);
+        goto done;
+    }
     t2 = now_seconds();
     for (i = 0; i < nthreads; i++)
         if (ws[i].status != RTP_OK) {
@@ -977,7 +992,7 @@ static int retrace_chunk(void *ctx, int ci)
 rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int threads,
                         size_t nlights_now, double limit, unsigned long long *rays,
                         unsigned long long *capped, void (*progress)(void *, double),
-                        void *progress_user, rtp_error *err)
+                        int (*cancel)(void *), void *progress_user, rtp_error *err)
 {
     const rtp_allocator *a = &t->alloc;
     rtp_scene tmp;
@@ -1083,8 +1098,11 @@ rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int thre
         }
         ctx[i] = &jobs[i];
     }
-    rtpi_parallel_rows_stack((int)nchunks, nthreads, ctx, retrace_chunk, progress, progress_user,
-                             rtpi_trace_stack(sh.max_depth));
+    if (rtpi_parallel_rows_cancel((int)nchunks, nthreads, ctx, retrace_chunk, progress, cancel,
+                                  progress_user, rtpi_trace_stack(sh.max_depth)) == 2) {
+        st = cancelled(err); /* (before the splice: the trees as they were) */
+        goto done;
+    }
     for (i = 0; i < (size_t)nthreads; i++)
         if (jobs[i].w.status != RTP_OK) {
             st = worker_error(jobs[i].w.status, limit, "re-tracing",

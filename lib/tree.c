@@ -578,12 +578,19 @@ typedef struct progress_part {
     void (*fn)(void *user, double done);
     void *user;
     double lo, span;
+    int (*cancel)(void *user); /* the caller's (re-traces ask it) */
 } progress_part;
 
 static void progress_part_cb(void *user, double done)
 {
     const progress_part *p = (const progress_part *)user;
     p->fn(p->user, p->lo + p->span * done);
+}
+
+static int progress_part_cancel(void *user)
+{
+    const progress_part *p = (const progress_part *)user;
+    return p->cancel(p->user);
 }
 
 /* Whether light i's visibility in t->cur_vis is as mode and res would
@@ -2076,7 +2083,7 @@ static rtp_status retrace_edited(rtp_tree *t, int threads, int stale, double lim
         nl_now = s->nlights;
     rs = rtpi_retrace(t, list, n, threads, nl_now, limit, st ? &st->retraced_rays : NULL,
                       st ? &st->capped_rays : NULL, progress->fn ? progress_part_cb : NULL,
-                      progress, err);
+                      progress->cancel ? progress_part_cancel : NULL, progress, err);
     for (m = 0; swapped && m < s->nmats; m++)
         if (swapped[m])
             swap_bump(&t->scene->mats[m], &t->mats0[m]);
@@ -3016,6 +3023,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
        the rest) */
     prog.fn = opt ? opt->progress : NULL;
     prog.user = opt ? opt->progress_user : NULL;
+    prog.cancel = opt ? opt->cancel : NULL;
     prog.lo = 0.0;
     prog.span = 0.9;
     rs = retrace_edited(t, nthreads, opt && opt->stale == RTP_STALE_RETRACE,

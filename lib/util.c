@@ -444,6 +444,7 @@ const char *rtp_status_string(rtp_status status)
     case RTP_ERR_FORMAT: return "corrupt, truncated or foreign file";
     case RTP_ERR_LIMIT: return "size limit exceeded";
     case RTP_ERR_KEY: return "unknown parameter key";
+    case RTP_ERR_CANCELLED: return "cancelled";
     }
     return "unknown status";
 }

@@ -596,6 +596,189 @@ static rtp_status op_heatmap(ctx *c)
     return st;
 }
 
+
+/* ------------------------------------------------------------- cancel */
+
+/* A caller's cancel that says yes at its at-th question (0: never), and
+   counts the progress calls made after it did. */
+typedef struct asker {
+    long asked, at, progress_after;
+    int said;
+} asker;
+
+static int ask_cancel(void *user)
+{
+    asker *k = (asker *)user;
+    k->asked++;
+    if (k->at && k->asked >= k->at)
+        k->said = 1;
+    return k->said;
+}
+
+static void ask_progress(void *user, double done)
+{
+    asker *k = (asker *)user;
+    (void)done;
+    k->progress_after += k->said;
+}
+
+static void same_image(const rtp_image *a, const rtp_image *b, double tol, const char *what)
+{
+    rtp_diff_stats d;
+    CHECK_MSG(a && b && rtp_image_diff(a, b, 0.0, &d, NULL) == RTP_OK && d.max_abs <= tol,
+              "%s: not the same image", what);
+}
+
+/* rtp_trace and rtp_record with options.cancel: a yes at any point (before
+   or after the kd-tree's build, after some rows, on one thread or two,
+   with the caller relaying a deep tree's workers) stops the trace with
+   RTP_ERR_CANCELLED, nothing made or leaked, no row begun after it; a
+   cancel that never says yes changes no bit. */
+static void test_cancel_trace(void)
+{
+    static const long ats[] = {1, 2, 3, 7, 0};
+    failing f;
+    rtp_allocator a;
+    rtp_scene *s = NULL;
+    rtp_image *ref = NULL;
+    rtp_error err;
+    rtp_trace_options o = small_opt();
+    int threads, rec, deep;
+    size_t i;
+    memset(&f, 0, sizeof f);
+    a.malloc_fn = fa_malloc;
+    a.realloc_fn = fa_realloc;
+    a.free_fn = fa_free;
+    a.user = &f;
+    o.width = 40;
+    o.height = 30;
+    if (rtp_scene_load(tmp_path("scene.nff"), &a, &s, &err) != RTP_OK ||
+        rtp_trace(s, &o, &ref, NULL, &err) != RTP_OK) {
+        CHECK_MSG(0, "fixture: %s", err.message);
+        rtp_scene_destroy(s);
+        return;
+    }
+    for (deep = 0; deep < 2; deep++)
+        for (threads = 1; threads <= 2; threads++)
+            for (rec = 0; rec < 2; rec++)
+                for (i = 0; i < sizeof ats / sizeof *ats; i++) {
+                    asker k;
+                    rtp_image *img = NULL;
+                    rtp_tree *t = NULL;
+                    rtp_status st;
+                    long live = f.live;
+                    memset(&k, 0, sizeof k);
+                    k.at = ats[i];
+                    o.threads = threads;
+                    /* (past 32 levels the rows run on rtp's own threads,
+                       the caller relaying progress and cancel) */
+                    o.max_depth = deep ? 40 : 0;
+                    o.progress = ask_progress;
+                    o.cancel = ask_cancel;
+                    o.progress_user = &k;
+                    memset(&err, 0, sizeof err);
+                    st = rec ? rtp_record(s, &o, &t, &img, NULL, &err)
+                             : rtp_trace(s, &o, &img, NULL, &err);
+                    if (k.at) {
+                        CHECK_MSG(st == RTP_ERR_CANCELLED && err.status == st && !img && !t,
+                                  "deep %d threads %d record %d at %ld: status %d", deep,
+                                  threads, rec, k.at, (int)st);
+                        CHECK_MSG(k.asked == k.at, "at %ld: asked %ld times", k.at, k.asked);
+                        /* (relayed workers end the rows they are in) */
+                        CHECK_MSG(k.progress_after <= (deep ? threads : 0),
+                                  "deep %d threads %d at %ld: %ld rows after the yes", deep,
+                                  threads, k.at, k.progress_after);
+                    } else {
+                        CHECK_MSG(st == RTP_OK, "%s", err.message);
+                        /* (one thread: after each row and on either side of
+                           the kd-tree's build; the calling thread of two
+                           asks after its own rows) */
+                        CHECK_MSG(threads > 1 || deep ? k.asked >= 3 : k.asked == o.height + 2,
+                                  "threads %d deep %d: asked %ld times", threads, deep, k.asked);
+                        /* (a deep trace is another trace: the depth differs) */
+                        if (!deep)
+                            same_image(img, ref, 0.0, "a cancel that never said yes");
+                    }
+                    rtp_image_destroy(img);
+                    rtp_tree_destroy(t);
+                    CHECK_MSG(f.live == live, "at %ld: %ld block(s) leaked", k.at, f.live - live);
+                }
+    rtp_image_destroy(ref);
+    rtp_scene_destroy(s);
+    CHECK(f.live == 0 && f.bad_frees == 0);
+}
+
+/* rtp_tree_eval with options.cancel through a class-D re-trace and a
+   camera edit's: a yes gives RTP_ERR_CANCELLED, the tree as it was (the
+   next evaluation, uncancelled, equals a full trace of the edited scene),
+   nothing leaked; an evaluation that traces nothing does not ask. */
+static void test_cancel_eval(void)
+{
+    static const char *const keys[][2] = {{"mat.glass.ior", "1.3"},
+                                          {"camera.from", "0.5,-6,2.5"}};
+    failing f;
+    rtp_allocator a;
+    rtp_scene *s = NULL;
+    rtp_error err;
+    rtp_trace_options o = small_opt();
+    size_t i;
+    int threads;
+    memset(&f, 0, sizeof f);
+    a.malloc_fn = fa_malloc;
+    a.realloc_fn = fa_realloc;
+    a.free_fn = fa_free;
+    a.user = &f;
+    o.width = 40;
+    o.height = 30;
+    if (rtp_scene_load(tmp_path("scene.nff"), &a, &s, &err) != RTP_OK) {
+        CHECK_MSG(0, "fixture: %s", err.message);
+        return;
+    }
+    for (threads = 1; threads <= 2; threads++)
+        for (i = 0; i < sizeof keys / sizeof *keys; i++) {
+            rtp_tree *t = NULL;
+            rtp_image *img = NULL, *ref = NULL;
+            rtp_eval_options eo;
+            rtp_eval_stats es;
+            asker k;
+            o.threads = threads;
+            if (rtp_record(s, &o, &t, NULL, NULL, &err) != RTP_OK) {
+                CHECK_MSG(0, "record: %s", err.message);
+                break;
+            }
+            memset(&eo, 0, sizeof eo);
+            memset(&k, 0, sizeof k);
+            eo.threads = threads;
+            eo.cancel = ask_cancel;
+            eo.progress_user = &k;
+            CHECK(rtp_tree_eval(t, &eo, &img, NULL, &err) == RTP_OK);
+            CHECK_MSG(k.asked == 0, "an evaluation without a re-trace asked %ld times",
+                      k.asked);
+            rtp_image_destroy(img);
+            img = NULL;
+            CHECK(rtp_tree_set(t, keys[i][0], keys[i][1], &err) == RTP_OK);
+            /* the second question says yes: after the first chunk */
+            k.at = 2;
+            memset(&err, 0, sizeof err);
+            CHECK_MSG(rtp_tree_eval(t, &eo, &img, NULL, &err) == RTP_ERR_CANCELLED &&
+                          err.status == RTP_ERR_CANCELLED && !img,
+                      "%s: %s", keys[i][0], err.message);
+            CHECK_MSG(k.asked == 2, "%s: asked %ld times", keys[i][0], k.asked);
+            /* the tree as it was: traced again now, as a full trace */
+            memset(&k, 0, sizeof k);
+            memset(&es, 0, sizeof es);
+            CHECK_MSG(rtp_tree_eval(t, &eo, &img, &es, &err) == RTP_OK, "%s", err.message);
+            CHECK(es.retraced_samples > 0 && k.asked > 1 && !k.said);
+            CHECK(rtp_tree_trace(t, threads, &ref, NULL, &err) == RTP_OK);
+            same_image(img, ref, 1e-6, keys[i][0]);
+            rtp_image_destroy(img);
+            rtp_image_destroy(ref);
+            rtp_tree_destroy(t);
+        }
+    rtp_scene_destroy(s);
+    CHECK(f.live == 0 && f.bad_frees == 0);
+}
+
 /* -------------------------------------------------------------- driver */
 
 /* Runs op with the 1st, 2nd, ... allocation failing until a run meets no
@@ -840,6 +1023,8 @@ int main(void)
     RUN(test_heatmap);
     RUN(test_default_allocator);
     RUN(test_large_block_untouched);
+    RUN(test_cancel_trace);
+    RUN(test_cancel_eval);
     cleanup();
     return check_report();
 }
