@@ -1098,7 +1098,8 @@ rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int thre
         }
         ctx[i] = &jobs[i];
     }
-    if (rtpi_parallel_rows_cancel((int)nchunks, nthreads, ctx, retrace_chunk, progress, cancel,
+    if ((cancel && cancel(progress_user)) ||
+        rtpi_parallel_rows_cancel((int)nchunks, nthreads, ctx, retrace_chunk, progress, cancel,
                                   progress_user, rtpi_trace_stack(sh.max_depth)) == 2) {
         st = cancelled(err); /* (before the splice: the trees as they were) */
         goto done;

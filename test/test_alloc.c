@@ -667,6 +667,10 @@ static void test_cancel_trace(void)
                     rtp_tree *t = NULL;
                     rtp_status st;
                     long live = f.live;
+                    /* (the calling thread of two asks after its own rows
+                       alone: a late yes might never be asked) */
+                    if (threads > 1 && ats[i] > 3)
+                        continue;
                     memset(&k, 0, sizeof k);
                     k.at = ats[i];
                     o.threads = threads;
@@ -757,18 +761,21 @@ static void test_cancel_eval(void)
             rtp_image_destroy(img);
             img = NULL;
             CHECK(rtp_tree_set(t, keys[i][0], keys[i][1], &err) == RTP_OK);
-            /* the second question says yes: after the first chunk */
-            k.at = 2;
+            /* asked before the first chunk and after each the calling
+               thread traces: one thread says yes after two chunks, two
+               before any (the calling thread of two may trace one chunk
+               only: a later yes might never be asked) */
+            k.at = threads == 1 ? 3 : 1;
             memset(&err, 0, sizeof err);
             CHECK_MSG(rtp_tree_eval(t, &eo, &img, NULL, &err) == RTP_ERR_CANCELLED &&
                           err.status == RTP_ERR_CANCELLED && !img,
                       "%s: %s", keys[i][0], err.message);
-            CHECK_MSG(k.asked == 2, "%s: asked %ld times", keys[i][0], k.asked);
+            CHECK_MSG(k.asked == k.at, "%s: asked %ld times", keys[i][0], k.asked);
             /* the tree as it was: traced again now, as a full trace */
             memset(&k, 0, sizeof k);
             memset(&es, 0, sizeof es);
             CHECK_MSG(rtp_tree_eval(t, &eo, &img, &es, &err) == RTP_OK, "%s", err.message);
-            CHECK(es.retraced_samples > 0 && k.asked > 1 && !k.said);
+            CHECK(es.retraced_samples > 0 && k.asked >= 1 && !k.said);
             CHECK(rtp_tree_trace(t, threads, &ref, NULL, &err) == RTP_OK);
             same_image(img, ref, 1e-6, keys[i][0]);
             rtp_image_destroy(img);
