@@ -2252,8 +2252,11 @@ static int cmd_info(int argc, char **argv)
     fb = file_size(tree_path);
     if ((!stats_path || strcmp(stats_path, "-") != 0) && verbosity > 0) {
         unsigned long long px = (unsigned long long)ti.width * ti.height;
-        printf("%s: %dx%d image%s, %llu samples, depth %d\n", tree_path, ti.width, ti.height,
+        printf("%s: %dx%d image%s, %llu samples, depth %d", tree_path, ti.width, ti.height,
                ti.spd ? " (SPD: corner samples)" : "", ti.samples, ti.max_depth);
+        if (ti.min_weight > 0.0)
+            printf(", min weight %.9g", ti.min_weight);
+        printf("\n");
         printf("nodes %llu (%.3f per sample), %u bytes per node, trees %llu bytes\n", ti.nodes,
                ti.samples ? (double)ti.nodes / (double)ti.samples : 0.0, ti.bytes_per_node,
                ti.tree_bytes);
@@ -2278,11 +2281,12 @@ static int cmd_info(int argc, char **argv)
                 "{\"command\": \"info\", \"width\": %d, \"height\": %d, \"spd\": %s, "
                 "\"pixels\": %llu, \"samples\": %llu, \"nodes\": %llu, \"bytes_per_node\": %u, "
                 "\"tree_bytes\": %llu, \"lights\": %zu, \"materials\": %zu, \"depth\": %d, "
-                "\"full_width\": %d, \"full_height\": %d, \"region_x\": %d, \"region_y\": %d",
+                "\"full_width\": %d, \"full_height\": %d, \"region_x\": %d, \"region_y\": %d, "
+                "\"min_weight\": %.17g",
                 ti.width, ti.height, ti.spd ? "true" : "false",
                 (unsigned long long)ti.width * ti.height, ti.samples, ti.nodes,
                 ti.bytes_per_node, ti.tree_bytes, ti.lights, ti.materials, ti.max_depth,
-                ti.full_width, ti.full_height, ti.region_x, ti.region_y);
+                ti.full_width, ti.full_height, ti.region_x, ti.region_y, ti.min_weight);
         /* (a pipe has no size: left out, as reeval leaves it out) */
         if (fb >= 0)
             fprintf(f, ", \"file_bytes\": %lld", fb);

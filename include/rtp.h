@@ -502,6 +502,8 @@ typedef struct rtp_tree_info {
     unsigned bytes_per_node;  /* size of one node record */
     unsigned long long tree_bytes; /* nodes, visibility and sample index */
     size_t lights, materials, triangles, spheres, cones;
+    double min_weight;        /* the trace's cut-off (0: none): a ks or kt
+                                 edit of such trees traces again */
 } rtp_tree_info;
 
 void rtp_tree_get_info(const rtp_tree *tree, rtp_tree_info *info);

@@ -83,6 +83,7 @@ void rtp_tree_get_info(const rtp_tree *t, rtp_tree_info *info)
     info->triangles = t->scene->ntris;
     info->spheres = t->scene->nspheres;
     info->cones = t->scene->ncones;
+    info->min_weight = t->min_weight;
 }
 
 /* ---------------------------------------------------------------- edits */

@@ -77,6 +77,12 @@ $RTP diff "$T/frame01.pfm" "$T/g.pfm" --fail-above max_abs=1e-6 -q && ok || bad 
 # info
 expect_rc 0 $RTP info "$T/t.rtp" --stats "$T/info.json"
 grep -q '"bytes_per_node": 24' "$T/info.json" && ok || bad "info bytes_per_node"
+grep -q '"min_weight": 0[,}]' "$T/info.json" && ok || bad "info min_weight 0"
+# what the trees were traced with: the weight cut-off too (a ks or kt edit
+# of such trees traces again)
+$RTP trace $S --size 40x30 --min-weight 0.01 -o "$T/mw.rtp" -q
+$RTP info "$T/mw.rtp" --stats - -q | grep -q '"min_weight": 0.01[,}]' && ok || bad "info --stats min_weight"
+$RTP info "$T/mw.rtp" | grep -q ', depth 5, min weight 0.01$' && ok || bad "info: min weight"
 # info lists the keys --set takes with their values, as --set takes them:
 # a material by index and name, a value set on trace read back as given
 $RTP trace $S --size 40x30 --set mat.red.kd=0.35 --set light.fill.pos=1.5,-2,3.25 -o "$T/k.rtp" -q
