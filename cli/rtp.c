@@ -883,13 +883,20 @@ static int image_key(const char *key)
 
 static int apply_kv(set_fn set, void *obj, const char *kv, const char *where, int line)
 {
-    char key[256];
+    char key[512]; /* (mat. + a name of up to 255 characters + a field) */
     const char *eq = strchr(kv, '=');
     size_t kn;
     rtp_error err;
     memset(&err, 0, sizeof err);
     if (!eq || eq == kv) {
-        if (line)
+        /* (a line's pairs are separated by blanks: "mat.Floor Mat.kd=0.3"
+           is two words, the first no pair) */
+        if (line && (strncmp(kv, "mat.", 4) == 0 || strncmp(kv, "light.", 6) == 0))
+            msg("%s:%d: expected KEY=VALUE, got '%s' (blanks separate a line's edits: a name "
+                "holding a blank is reached by its index, mat.N or light.N, as 'rtp info "
+                "TREE' lists them)",
+                where, line, kv);
+        else if (line)
             msg("%s:%d: expected KEY=VALUE, got '%s'", where, line, kv);
         else
             msg("%s %s: expected KEY=VALUE", where, kv);
@@ -924,13 +931,19 @@ static int apply_kv(set_fn set, void *obj, const char *kv, const char *where, in
     return 0;
 }
 
-/* Applies every KEY=VALUE of a line (separated by blanks); '#' starts a
-   comment.  Returns 0 or 1. */
+/* Applies every KEY=VALUE of a line (separated by blanks); a '#' where a
+   word could start (the line's start, after a blank) starts a comment, as
+   in the scene readers: inside a word it is part of it (a material
+   "Material#25", as 3ds Max names them).  Returns 0 or 1. */
 static int apply_line(set_fn set, void *obj, char *text, const char *where, int line)
 {
-    char *p = text, *hash = strchr(text, '#');
-    if (hash)
-        *hash = '\0';
+    char *p = text, *hash;
+    for (hash = text; *hash; hash++)
+        if (*hash == '#' && (hash == text || hash[-1] == ' ' || hash[-1] == '\t' ||
+                             hash[-1] == '\r' || hash[-1] == '\n')) {
+            *hash = '\0';
+            break;
+        }
     for (;;) {
         char *tok;
         while (*p == ' ' || *p == '\t' || *p == '\r' || *p == '\n')

@@ -352,6 +352,49 @@ static int file_exists(const char *path)
     return f != NULL;
 }
 
+/* The file a name in an OBJ or MTL file means, from the folder of base:
+   the name as written, else with Windows' '\' read as '/' (3ds Max and
+   Blender on Windows write "maps\brick.png"), else, for a Windows
+   absolute name ("C:\Users\me\maps\brick.png", "\\server\maps\x.png"),
+   its last part beside base, where such exports are usually copied with
+   their textures.  @return the path (from the allocator) of a file that
+   exists, NULL when none does or memory ran out (*nomem then 1). */
+static char *find_file(const rtp_allocator *a, const char *base, const char *name, size_t n,
+                       int *nomem)
+{
+    char *path = rtpi_path_join(a, base, name, n), *fixed;
+    size_t i, last = 0;
+    int abs;
+    *nomem = path == NULL;
+    if (!path || file_exists(path))
+        return path;
+    rtpi_free(a, path);
+    if (!memchr(name, '\\', n))
+        return NULL;
+    fixed = (char *)rtpi_malloc(a, n + 1);
+    if (!fixed) {
+        *nomem = 1;
+        return NULL;
+    }
+    for (i = 0; i < n; i++) {
+        fixed[i] = name[i] == '\\' ? '/' : name[i];
+        if (fixed[i] == '/')
+            last = i + 1;
+    }
+    fixed[n] = '\0';
+    abs = (n >= 3 && isalpha((unsigned char)name[0]) && name[1] == ':' && name[2] == '\\') ||
+          (n >= 2 && name[0] == '\\' && name[1] == '\\');
+    path = abs ? rtpi_path_join(a, base, fixed + last, n - last)
+               : rtpi_path_join(a, base, fixed, n);
+    rtpi_free(a, fixed);
+    *nomem = path == NULL;
+    if (path && !file_exists(path)) {
+        rtpi_free(a, path);
+        return NULL;
+    }
+    return path;
+}
+
 #define MAP_TOKENS 64 /* words on a map line: options and the name */
 
 /* Where the file name begins on a map line of n words (at least 1): past
@@ -398,7 +441,7 @@ static rtp_status mtl_map(rtpi_lex *lx, rtp_scene *s, const char *what,
     char *path = NULL;
     rtp_error inner;
     rtp_status st;
-    int n = 0, i, from, start, unknown;
+    int n = 0, i, from, start, unknown, oom;
     while (rtpi_lex_next_inline(lx, &t)) {
         if (n == MAP_TOKENS)
             return rtpi_lex_error(lx, &t, "%s: more than %d words on the line", what,
@@ -419,13 +462,12 @@ static rtp_status mtl_map(rtpi_lex *lx, rtp_scene *s, const char *what,
         file.n = (size_t)(tk[n - 1].s + tk[n - 1].n - tk[from].s);
         if (tk[from].s[0] == '-' || memchr(file.s, '\0', file.n))
             continue;
-        if (!(cand = rtpi_path_join(&s->alloc, lx->name, file.s, file.n)))
-            return nomem(lx, &tk[from]);
-        if (file_exists(cand)) {
+        if ((cand = find_file(&s->alloc, lx->name, file.s, file.n, &oom)) != NULL) {
             path = cand;
             break;
         }
-        rtpi_free(&s->alloc, cand);
+        if (oom)
+            return nomem(lx, &tk[from]);
     }
     if (!path) {
         /* the error names the whole name */
@@ -447,6 +489,16 @@ static rtp_status mtl_map(rtpi_lex *lx, rtp_scene *s, const char *what,
                 rtpi_free(&s->alloc, path);
                 return rtpi_lex_error(lx, i + 1 < n ? &tk[i + 1] : &tk[i],
                                       "%s: expected a number after -bm", what);
+            }
+            /* (as every number these readers take: a strength past the
+               float range was stored as inf, and the tree file written
+               from it could not be read) */
+            if (fabs(*bm) > NUM_LIMIT) {
+                char show[48];
+                rtpi_free(&s->alloc, path);
+                return rtpi_lex_error(lx, &tk[i + 1], "%s: -bm %s is out of range (|x| <= %g)",
+                                      what, rtpi_tok_show(&tk[i + 1], show, sizeof show),
+                                      NUM_LIMIT);
             }
         }
     /* A NUL would silently cut the name (the folder itself was read). */
@@ -499,6 +551,17 @@ static rtp_status read_mtl(obj *o, const char *text, size_t size, const char *na
                is that material; another MTL file's is not (mtl_existing) */
             cur = own_material(o, nt.s, nt.n);
             skipping = cur >= 0;
+            if (skipping && memchr(nt.s + nt.n, '#', (size_t)(lx.p - (nt.s + nt.n)))) {
+                /* "newmtl Material #26" after "newmtl Material #25": both
+                   read "Material" (the comment cut them), and the second
+                   was dropped, its faces in the first's colour */
+                st = rtpi_lex_error(&lx, &nt,
+                                    "newmtl '%.*s': a material of that name is defined "
+                                    "already; a '#' after a blank starts a comment, which cut "
+                                    "the name here (write it without the blank: '%.*s#...')",
+                                    (int)nt.n, nt.s, (int)nt.n, nt.s);
+                break;
+            }
             if (skipping)
                 continue;
             cur = mtl_existing(o, file, nt.s, nt.n);
@@ -658,7 +721,7 @@ static rtp_status read_mtllib(obj *o)
 {
     rtpi_tok t, tk[MAP_TOKENS], whole;
     rtp_status st;
-    int n = 0, i;
+    int n = 0, i, oom;
     char *path;
     while (rtpi_lex_next_inline(&o->lx, &t)) {
         if (n == MAP_TOKENS)
@@ -670,16 +733,31 @@ static rtp_status read_mtllib(obj *o)
         tk[n++] = t;
     }
     if (n > 1) {
+        int some = 0;
         whole = tk[0];
         whole.n = (size_t)(tk[n - 1].s + tk[n - 1].n - tk[0].s);
-        if (!(path = rtpi_path_join(&o->s->alloc, o->lx.name, whole.s, whole.n)))
-            return nomem(&o->lx, &whole);
-        if (file_exists(path))
+        if ((path = find_file(&o->s->alloc, o->lx.name, whole.s, whole.n, &oom)) != NULL)
             return read_one_mtl(o, &whole, path);
-        rtpi_free(&o->s->alloc, path);
+        if (oom)
+            return nomem(&o->lx, &whole);
+        for (i = 0; i < n && !some; i++) {
+            path = find_file(&o->s->alloc, o->lx.name, tk[i].s, tk[i].n, &oom);
+            if (oom)
+                return nomem(&o->lx, &tk[i]);
+            some = path != NULL;
+            rtpi_free(&o->s->alloc, path);
+        }
+        /* no word names a file either: the error names the whole name
+           ("cannot read mtllib 'my model.mtl'", not 'my') */
+        if (!some) {
+            tk[0] = whole;
+            n = 1;
+        }
     }
     for (i = 0; i < n; i++) {
-        if (!(path = rtpi_path_join(&o->s->alloc, o->lx.name, tk[i].s, tk[i].n)))
+        path = find_file(&o->s->alloc, o->lx.name, tk[i].s, tk[i].n, &oom);
+        if (!path && (oom || !(path = rtpi_path_join(&o->s->alloc, o->lx.name, tk[i].s,
+                                                     tk[i].n))))
             return nomem(&o->lx, &tk[i]);
         if ((st = read_one_mtl(o, &tk[i], path)) != RTP_OK)
             return st;

@@ -437,6 +437,22 @@ expect_rc 1 sh -c "printf 'mat.0.texture=-\nambient=0.2\n' | $RTP reeval '$T/t.r
 grep -q "stdin:1: mat.0.texture=-: stdin already serves" "$T/err" && ok || bad "texture=- in a stream: $(cat "$T/err")"
 expect_rc 2 sh -c "$RTP merge -o '$T/m2.rtp' - - <'$T/t.rtp'"
 grep -q "only one part can come from stdin" "$T/err" && ok || bad "merge - -: $(cat "$T/err")"
+# a '#' inside a word is part of it, in a params line as in the scene
+# readers (a material "Material#25" could not be named there: the line was
+# cut at its '#'); a blank splits a name in two, and the error says what
+# reaches it
+printf 'newmtl Material#25\nKd 1 0 0\n' > "$T/hash.mtl"
+printf 'mtllib hash.mtl\nv -1 -1 0\nv 1 -1 0\nv 0 1 0\nusemtl Material#25\nf 1 2 3\n' > "$T/hash.obj"
+$RTP trace "$T/hash.obj" --size 16x16 -o "$T/hash.rtp" -q
+printf 'mat.Material#25.kd=0.5 # half\n' > "$T/hash.txt"
+expect_rc 0 $RTP reeval "$T/hash.rtp" --params "$T/hash.txt" -i "$T/hash1.pfm"
+$RTP trace "$T/hash.obj" --size 16x16 --set mat.0.kd=0.5 -i "$T/hash2.pfm" -q
+cmp -s "$T/hash1.pfm" "$T/hash2.pfm" && ok || bad "params: a name with '#'"
+printf 'mat.Floor Mat.kd=0.3\n' > "$T/blank.txt"
+expect_rc 1 $RTP reeval "$T/hash.rtp" --params "$T/blank.txt" -i "$T/hash3.pfm"
+grep -q "blank.txt:1: expected KEY=VALUE, got 'mat.Floor' (blanks separate .*mat.N" "$T/err" && ok ||
+    bad "params: a name with a blank: $(cat "$T/err")"
+
 # --params repeated: every file, in turn (the last alone was applied)
 expect_rc 0 $RTP trace $S --size 40x30 --params "$T/a9.txt" --params "$T/kd1.txt" -i "$T/pp1.pfm"
 expect_rc 0 $RTP trace $S --size 40x30 --set ambient=0.9 --set mat.0.kd=0.1 -i "$T/pp2.pfm"

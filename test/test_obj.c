@@ -7,6 +7,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 static rtp_status load(const char *text, const char *name, rtp_scene **s,
@@ -403,6 +404,75 @@ static void test_mtl_exports(void)
               rtp_error_format(&err, buf, sizeof buf));
     CHECK(s && s->mats[0].tex == RTPI_TEX_IMAGE);
     rtp_scene_destroy(s);
+    s = NULL;
+
+    /* Windows exporters' names: "maps\tex.ppm", "mats\w.mtl" name files
+       in sub-folders; "C:\Users\me\tex.ppm" the file beside the MTL (the
+       scene was refused: no such file) */
+    snprintf(path, sizeof path, "%s/maps", dir);
+    CHECK(mkdir(path, 0700) == 0);
+    snprintf(path, sizeof path, "%s/mats", dir);
+    CHECK(mkdir(path, 0700) == 0);
+    CHECK(write_file(dir, "maps/t2.ppm", "P3\n1 1\n255\n40 50 60\n") == 0);
+    CHECK(write_file(dir, "mats/w.mtl",
+                     "newmtl a\nmap_Kd ..\\maps\\t2.ppm\nnewmtl b\n"
+                     "map_Kd C:\\Users\\me\\Documents\\tex.ppm\n") == 0);
+    CHECK(write_file(dir, "mats/tex.ppm", "P3\n1 1\n255\n10 20 30\n") == 0);
+    CHECK(write_file(dir, "w.obj", "mtllib mats\\w.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"
+                                   "usemtl a\nf 1 2 3\nusemtl b\nf 1 3 2\n") == 0);
+    snprintf(path, sizeof path, "%s/w.obj", dir);
+    CHECK_MSG(rtp_scene_load(path, NULL, &s, &err) == RTP_OK, "%s",
+              rtp_error_format(&err, buf, sizeof buf));
+    if (s) {
+        CHECK(s->ntexs == 2 && s->mats[s->tris[0].mat].tex == RTPI_TEX_IMAGE &&
+              s->mats[s->tris[1].mat].tex == RTPI_TEX_IMAGE &&
+              s->mats[s->tris[0].mat].tex_image != s->mats[s->tris[1].mat].tex_image);
+    }
+    rtp_scene_destroy(s);
+    s = NULL;
+    /* a name that names nothing either way is still an error naming it */
+    CHECK(write_file(dir, "mats/w.mtl", "newmtl a\nmap_Kd maps\\none.ppm\n") == 0);
+    CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_IO && !s &&
+          strstr(err.message, "'maps\\none.ppm'"));
+    remove_file(dir, "mats/w.mtl");
+    remove_file(dir, "mats/tex.ppm");
+    remove_file(dir, "maps/t2.ppm");
+    remove_file(dir, "w.obj");
+    remove_file(dir, "mats");
+    remove_file(dir, "maps");
+
+    /* a missing "mtllib my model.mtl" is named whole (it was 'my') */
+    CHECK(write_file(dir, "m3.obj", "mtllib no model.mtl\nv 0 0 0\n") == 0);
+    snprintf(path, sizeof path, "%s/m3.obj", dir);
+    CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_IO);
+    CHECK_MSG(err.line == 1 && err.column == 8 && strstr(err.message, "'no model.mtl'"), "%s",
+              rtp_error_format(&err, buf, sizeof buf));
+    remove_file(dir, "m3.obj");
+
+    /* a bump strength past the float range (-bm 1e40: stored as inf, the
+       tree file written from it unreadable) is refused as NFF's is */
+    CHECK(write_file(dir, "bm.mtl", "newmtl a\nbump -bm 1e40 tex.ppm\n") == 0);
+    CHECK(write_file(dir, "bm.obj", "mtllib bm.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"
+                                    "usemtl a\nf 1 2 3\n") == 0);
+    snprintf(path, sizeof path, "%s/bm.obj", dir);
+    CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_PARSE && !s);
+    CHECK_MSG(err.line == 2 && err.column == 10 && strstr(err.message, "out of range"), "%s",
+              rtp_error_format(&err, buf, sizeof buf));
+    remove_file(dir, "bm.mtl");
+    remove_file(dir, "bm.obj");
+
+    /* "newmtl Material #25", "newmtl Material #26": the comment cut both
+       to "Material", and the second was dropped without a word */
+    CHECK(write_file(dir, "hh.mtl", "newmtl Material #25\nKd 1 0 0\nnewmtl Material #26\n"
+                                    "Kd 0 0 1\n") == 0);
+    CHECK(write_file(dir, "hh.obj", "mtllib hh.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"
+                                    "usemtl Material #25\nf 1 2 3\n") == 0);
+    snprintf(path, sizeof path, "%s/hh.obj", dir);
+    CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_PARSE && !s);
+    CHECK_MSG(err.line == 3 && strstr(err.message, "'#' after a blank"), "%s",
+              rtp_error_format(&err, buf, sizeof buf));
+    remove_file(dir, "hh.mtl");
+    remove_file(dir, "hh.obj");
 
     remove_file(dir, "ea.mtl");
     remove_file(dir, "eb.mtl");
