@@ -175,6 +175,18 @@ static RTPI_FORCE_INLINE int sh_visible(const rtpi_shadow *sh, rtpi_v3 p, rtpi_v
     int own = rtpi_prim_shadows_own(sh->s, prim, o, sh->light), v;
     uint32_t skip = own == 0 ? prim : RTPI_NONE;
     *occ = RTPI_NONE;
+    if (own == 1) {
+        /* The point's own primitive is in the way for certain (a point
+           inside a glass ball, the light outside: most of mount's
+           queries on its balls): every mode's intersection test reports
+           the crossing, which rtpi_prim_shadows_own_solid answers 1 for
+           only where it lies more than 1e-9 of the ray's length (and
+           1e-14 of the ball's size) short of the light: within tmax,
+           far beyond the test's rounding.  The walk of a list or of the
+           kd-tree to find it, or something nearer, is not needed. */
+        *occ = prim;
+        return 0;
+    }
     switch (sh->mode) {
     case RTPI_SHADOW_LIGHTBUF:
         break;
