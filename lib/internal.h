@@ -410,6 +410,20 @@ static inline rtpi_v3 rtpi_offset_origin(rtpi_v3 p, rtpi_v3 ng, double side, dou
    yes, -1 cannot tell (see intersect.c).  Where 0, shadow queries leave
    prim out. */
 int rtpi_prim_shadows_own_solid(const rtp_scene *s, uint32_t prim, rtpi_v3 o, rtpi_v3 L);
+/* out[i] (one a sphere): 1 where rtpi_prim_shadows_own_solid answers 1
+   for sphere i and light L at every o inside it (rtpi_ball_holds): the
+   light outside it, beyond the band around its surface where that
+   function cannot tell.  A shadow query from inside such a ball needs no
+   other test (moved lights: vis_row). */
+void rtpi_balls_around(const rtp_scene *s, rtpi_v3 L, unsigned char *out);
+/* Whether o lies inside sphere sp as rtpi_prim_shadows_own_solid decides
+   it (the same operations). */
+static inline int rtpi_ball_holds(const rtpi_sphere *sp, rtpi_v3 o)
+{
+    rtpi_v3 oc = v3_sub(o, v3_from_f(sp->c));
+    double r = fabs((double)sp->r);
+    return v3_dot(oc, oc) < r * r;
+}
 /* (a triangle answered inline: every shadow query asks, and for a mesh
    the call was most of the answer) */
 static inline int rtpi_prim_shadows_own(const rtp_scene *s, uint32_t prim, rtpi_v3 o, rtpi_v3 L)

@@ -269,6 +269,19 @@ int rtpi_prim_shadows_own_solid(const rtp_scene *s, uint32_t prim, rtpi_v3 o, rt
     return -1;
 }
 
+void rtpi_balls_around(const rtp_scene *s, rtpi_v3 L, unsigned char *out)
+{
+    size_t i;
+    for (i = 0; i < s->nspheres; i++) {
+        const rtpi_sphere *sp = &s->spheres[i];
+        rtpi_v3 lc = v3_sub(L, v3_from_f(sp->c));
+        double r = fabs((double)sp->r), r2 = r * r, d2l = v3_dot(lc, lc);
+        /* rtpi_prim_shadows_own_solid's operations: with o inside (its
+           square below r2) its band's bound is 1e-8 max(d2l, r2) */
+        out[i] = !(d2l < r2) && !(fabs(d2l - r2) <= 1e-8 * (d2l > r2 ? d2l : r2));
+    }
+}
+
 static double wrap01(double x)
 {
     x -= floor(x);

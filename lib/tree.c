@@ -423,6 +423,8 @@ typedef struct vis_ctx {
     int prim_floor;   /* rtpi_offset_floor said: ask each primitive */
     size_t light;
     unsigned long long queries;
+    const unsigned char *balls; /* rtpi_balls_around for the light (NULL:
+                                   no spheres) */
     rtpi_shadow_cache cache; /* the thread's last occluder */
     char pad[64];            /* the contexts lie side by side (vis_row) */
 } vis_ctx;
@@ -486,6 +488,20 @@ static int vis_row(void *ctx, int y)
                                &o))
             continue;
         queries++;
+        if ((nd->link & RTPI_L_BACK) && v->balls && nd->prim - s->ntris < s->nspheres &&
+            v->balls[nd->prim - s->ntris] &&
+            rtpi_ball_holds(&s->spheres[nd->prim - s->ntris], o)) {
+            /* inside a ball the light is outside of: the ball is in the
+               way (rtpi_prim_shadows_own_solid 1), which every mode
+               answers without a test (sh_visible).  Here before the
+               query's call and its own arithmetic (mount, whose glass
+               balls hold three quarters of its nodes: 7% of a move), for
+               back hits only (a front hit's o lies outside: balls' 7381
+               spheres paid 2% for the test); the cache as the query
+               leaves it */
+            cache.last = nd->prim + 1u;
+            continue;
+        }
         if (rtpi_shadow_visible_cached(v->sh, &cache, &p, &o, nd->prim))
             *w |= bit;
     }
@@ -679,6 +695,7 @@ static rtp_status update_visibility(rtp_tree *t, int mode, int res, int threads,
             rtp_status rs;
             vis_ctx *vc;
             void **ctx;
+            unsigned char *balls = NULL;
             if (mode != RTP_SHADOWS_EXACT && rtpi_scene_bounds(s) != 0)
                 return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
             /* only shadow rays need the kd-tree; the cubes draw the scene */
@@ -697,12 +714,17 @@ static rtp_status update_visibility(rtp_tree *t, int mode, int res, int threads,
             /* (on the heap: 256 on the stack were a 37 KB frame) */
             vc = (vis_ctx *)rtpi_malloc_array(&t->alloc, (size_t)threads, sizeof *vc);
             ctx = (void **)rtpi_malloc_array(&t->alloc, (size_t)threads, sizeof *ctx);
-            if (!vc || !ctx) {
+            if (s->nspheres)
+                balls = (unsigned char *)rtpi_malloc_array(&t->alloc, s->nspheres, 1);
+            if (!vc || !ctx || (s->nspheres && !balls)) {
                 rtpi_free(&t->alloc, vc);
                 rtpi_free(&t->alloc, ctx);
+                rtpi_free(&t->alloc, balls);
                 rtpi_shadow_destroy(sh);
                 return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
             }
+            if (balls)
+                rtpi_balls_around(s, v3(lp[0], lp[1], lp[2]), balls);
             for (k = 0; k < threads; k++) {
                 vc[k].t = t;
                 vc[k].sh = sh;
@@ -711,6 +733,7 @@ static rtp_status update_visibility(rtp_tree *t, int mode, int res, int threads,
                 vc[k].prim_floor = prim_floor;
                 vc[k].light = i;
                 vc[k].queries = 0;
+                vc[k].balls = balls;
                 memset(&vc[k].cache, 0, sizeof vc[k].cache);
                 ctx[k] = &vc[k];
             }
@@ -729,6 +752,7 @@ static rtp_status update_visibility(rtp_tree *t, int mode, int res, int threads,
             }
             rtpi_free(&t->alloc, vc);
             rtpi_free(&t->alloc, ctx);
+            rtpi_free(&t->alloc, balls);
         }
         t->cur_pos[3 * i] = lp[0];
         t->cur_pos[3 * i + 1] = lp[1];
