@@ -41,6 +41,11 @@ typedef struct dc_ctx {
     rtpi_v3 L;
     int res;
     int *rlo, *rhi; /* per row: first and last cell of the run (scratch) */
+    double *ulo, *uhi; /* per row: a polygon's extent (dc_spans_conservative) */
+    /* per face f and row j, at [f res + j]: the row's slab before its
+       widening, v0 + dv j and v0 + dv (j + 1), -HUGE_VAL and HUGE_VAL
+       at the window's edges (dc_ctx_borders) */
+    double *blo, *bhi;
     int jmin, jmax;
     double u0[6], v0[6], du[6], dv[6]; /* faces' windows (see dircube.h) */
     size_t fbase[6];
@@ -152,13 +157,22 @@ static void dc_row_add(dc_ctx *c, int j, int i0, int i1)
 /* Adds the cells that the convex polygon uv[0..n) grown by m (in face
    coordinates, both axes) touches: per row, the polygon's extent within
    the row's slab widened by m, found from the vertices inside the slab
-   and the edges' crossings of its borders. */
+   and the edges' crossings of its borders.  Edge by edge, each over the
+   rows its own v range reaches (a row whose slab holds a vertex or has
+   a border strictly inside an edge's v range lies there, the slab being
+   widened by m on both sides as the range is), the extents gathered in
+   c->ulo, c->uhi: a triangle's rows then see about two edges each rather
+   than all three, with the same crossings computed the same way, so the
+   same cells (row by row over every edge, this was a fifth of tetra's
+   light-buffer move). */
 static void dc_spans_conservative(dc_ctx *c, int f, const double uv[][2], int n,
                                   double m)
 {
     int res = c->res, j, j0, j1, k;
     double vmin = uv[0][1], vmax = uv[0][1];
     double u0 = c->u0[f], v0 = c->v0[f], du = c->du[f], dv = c->dv[f];
+    double *ulo = c->ulo, *uhi = c->uhi;
+    const double *blo = c->blo + (size_t)f * (size_t)res, *bhi = c->bhi + (size_t)f * (size_t)res;
     for (k = 1; k < n; k++) {
         vmin = uv[k][1] < vmin ? uv[k][1] : vmin;
         vmax = uv[k][1] > vmax ? uv[k][1] : vmax;
@@ -166,31 +180,44 @@ static void dc_spans_conservative(dc_ctx *c, int f, const double uv[][2], int n,
     j0 = rtpi_dc_wcoord(vmin - m, v0, dv, res);
     j1 = rtpi_dc_wcoord(vmax + m, v0, dv, res);
     for (j = j0; j <= j1; j++) {
-        /* The edge rows reach to infinity: directions beyond a window's
-           edge are clamped to its edge cells (rtpi_dc_wcoord), which
-           must then list whatever lies there. */
-        double lo = j == 0 ? -HUGE_VAL : v0 + dv * (double)j - m;
-        double hi = j == res - 1 ? HUGE_VAL : v0 + dv * (double)(j + 1) + m;
-        double umin = DBL_MAX, umax = -DBL_MAX;
-        for (k = 0; k < n; k++) {
-            const double *P = uv[k], *Q = uv[k + 1 < n ? k + 1 : 0];
-            int e;
-            if (P[1] >= lo && P[1] <= hi) {
-                umin = P[0] < umin ? P[0] : umin;
-                umax = P[0] > umax ? P[0] : umax;
-            }
-            for (e = 0; e < 2; e++) {
-                double b = e ? hi : lo;
-                if ((P[1] < b && Q[1] > b) || (P[1] > b && Q[1] < b)) {
-                    double u = P[0] + (Q[0] - P[0]) * ((b - P[1]) / (Q[1] - P[1]));
-                    umin = u < umin ? u : umin;
-                    umax = u > umax ? u : umax;
-                }
-            }
-        }
-        if (umin <= umax)
-            dc_row_add(c, j, rtpi_dc_wcoord(umin - m, u0, du, res), rtpi_dc_wcoord(umax + m, u0, du, res));
+        ulo[j] = DBL_MAX;
+        uhi[j] = -DBL_MAX;
     }
+    for (k = 0; k < n; k++) {
+        const double *P = uv[k], *Q = uv[k + 1 < n ? k + 1 : 0];
+        double emin = P[1] < Q[1] ? P[1] : Q[1], emax = P[1] < Q[1] ? Q[1] : P[1];
+        int ja = rtpi_dc_wcoord(emin - m, v0, dv, res), jb = rtpi_dc_wcoord(emax + m, v0, dv, res);
+        /* (within [j0, j1]: the same mapping of values within vmin - m,
+           vmax + m; and a NaN, which every test below fails, maps to
+           row 0 as vmin's would) */
+        ja = ja < j0 ? j0 : ja;
+        jb = jb > j1 ? j1 : jb;
+        for (j = ja; j <= jb; j++) {
+            /* (the edge rows' slabs reach to infinity: dc_ctx_borders) */
+            double lo = blo[j] - m, hi = bhi[j] + m;
+            double mn = ulo[j], mx = uhi[j];
+            if (P[1] >= lo && P[1] <= hi) {
+                mn = P[0] < mn ? P[0] : mn;
+                mx = P[0] > mx ? P[0] : mx;
+            }
+            if (emin < lo && lo < emax) {
+                double u = P[0] + (Q[0] - P[0]) * ((lo - P[1]) / (Q[1] - P[1]));
+                mn = u < mn ? u : mn;
+                mx = u > mx ? u : mx;
+            }
+            if (emin < hi && hi < emax) {
+                double u = P[0] + (Q[0] - P[0]) * ((hi - P[1]) / (Q[1] - P[1]));
+                mn = u < mn ? u : mn;
+                mx = u > mx ? u : mx;
+            }
+            ulo[j] = mn;
+            uhi[j] = mx;
+        }
+    }
+    for (j = j0; j <= j1; j++)
+        if (ulo[j] <= uhi[j])
+            dc_row_add(c, j, rtpi_dc_wcoord(ulo[j] - m, u0, du, res),
+                       rtpi_dc_wcoord(uhi[j] + m, u0, du, res));
 }
 
 static void dc_emit_rows(dc_ctx *c, int f, dc_emit_fn fn, void *user)
@@ -211,6 +238,25 @@ static void dc_emit_face(dc_ctx *c, int f, dc_emit_fn fn, void *user)
         fn(user, c->fbase[f] + (size_t)j * res, c->res);
 }
 
+/* The rows' borders of c's windows (c->blo, c->bhi), made once a window
+   rather than twice a row of every polygon (lo, hi in
+   dc_spans_conservative; the same values, so the same cells).  The edge
+   rows reach to infinity: directions beyond a window's edge are clamped
+   to its edge cells (rtpi_dc_wcoord), which must then list whatever lies
+   there. */
+static void dc_ctx_borders(dc_ctx *c)
+{
+    int f, j, res = c->res;
+    for (f = 0; f < 6; f++) {
+        double *lo = c->blo + (size_t)f * (size_t)res, *hi = c->bhi + (size_t)f * (size_t)res;
+        double v0 = c->v0[f], dv = c->dv[f];
+        for (j = 0; j < res; j++) {
+            lo[j] = j == 0 ? -HUGE_VAL : v0 + dv * (double)j;
+            hi[j] = j == res - 1 ? HUGE_VAL : v0 + dv * (double)(j + 1);
+        }
+    }
+}
+
 static void dc_ctx_window(dc_ctx *c, const rtpi_dc_window *w)
 {
     memcpy(c->u0, w->u0, sizeof c->u0);
@@ -218,6 +264,7 @@ static void dc_ctx_window(dc_ctx *c, const rtpi_dc_window *w)
     memcpy(c->du, w->du, sizeof c->du);
     memcpy(c->dv, w->dv, sizeof c->dv);
     memcpy(c->fbase, w->fbase, sizeof c->fbase);
+    dc_ctx_borders(c);
 }
 
 static void dc_windows_some(const rtp_scene *s, const unsigned char *sel, unsigned char want,
@@ -607,6 +654,8 @@ static double dc_scale(const rtp_scene *s, rtpi_v3 L)
     return S;
 }
 
+static void dc_ctx_free(dc_ctx *c, const rtp_allocator *a);
+
 static rtp_status dc_ctx_init(dc_ctx *c, const rtp_scene *s, rtpi_v3 L, int res,
                               const rtp_allocator *a)
 {
@@ -623,11 +672,15 @@ static rtp_status dc_ctx_init(dc_ctx *c, const rtp_scene *s, rtpi_v3 L, int res,
     }
     c->rlo = (int *)rtpi_malloc_array(a, (size_t)res, sizeof *c->rlo);
     c->rhi = (int *)rtpi_malloc_array(a, (size_t)res, sizeof *c->rhi);
-    if (!c->rlo || !c->rhi) {
-        rtpi_free(a, c->rlo);
-        rtpi_free(a, c->rhi);
+    c->ulo = (double *)rtpi_malloc_array(a, (size_t)res, sizeof *c->ulo);
+    c->uhi = (double *)rtpi_malloc_array(a, (size_t)res, sizeof *c->uhi);
+    c->blo = (double *)rtpi_malloc_array(a, 6 * (size_t)res, sizeof *c->blo);
+    c->bhi = (double *)rtpi_malloc_array(a, 6 * (size_t)res, sizeof *c->bhi);
+    if (!c->rlo || !c->rhi || !c->ulo || !c->uhi || !c->blo || !c->bhi) {
+        dc_ctx_free(c, a);
         return RTP_ERR_NOMEM;
     }
+    dc_ctx_borders(c);
     return RTP_OK;
 }
 
@@ -635,6 +688,10 @@ static void dc_ctx_free(dc_ctx *c, const rtp_allocator *a)
 {
     rtpi_free(a, c->rlo);
     rtpi_free(a, c->rhi);
+    rtpi_free(a, c->ulo);
+    rtpi_free(a, c->uhi);
+    rtpi_free(a, c->blo);
+    rtpi_free(a, c->bhi);
 }
 
 static int dc_res_ok(int res)
@@ -1127,12 +1184,18 @@ static int lb_part(void *ctx, int part)
 
 /* One range of cells [lo, hi) of the lists, in three phases over every
    run (each range's own cells only, so the ranges run side by side and
-   the buffer is the same for any number of them).  Cell c's count goes
-   to off[c + 2]; phase 1 makes those the running sums (from the range's
-   first start, in `sum`), so that off[c + 1] is cell c's start; phase 2
-   fills each cell's list with off[c + 1] as its cursor, the runs taken
-   in ascending rank (each list in ascending near), which leaves off[c]
-   at cell c's start: the starts without a pass to shift them. */
+   the buffer is the same for any number of them).  Phase 0 marks each
+   run's clipped part [a, b) by +1 at off[a + 2] and -1 at off[b + 2]
+   (b < hi), two writes a run where counting its cells had been one a
+   cell (half of lb_cells_fn on tetra, whose triangles span hundreds of
+   cells each); phase 1 turns those differences into each cell's count
+   and the counts into running sums (from the range's first start, in
+   `sum`), so that off[c + 1] is cell c's start; phase 2 fills each
+   cell's list with off[c + 1] as its cursor, the runs taken in ascending
+   rank (each list in ascending near), which leaves off[c] at cell c's
+   start: the starts without a pass to shift them.  (Differences and
+   sums are uint32_t: -1 wraps, and the running count is back in range
+   at every cell.) */
 typedef struct lb_cells {
     rtpi_lightbuf *lb;
     const lb_fill *parts;
@@ -1155,36 +1218,40 @@ static int lb_cells_fn(void *ctx, int part)
     uint32_t *off = lc->lb->off;
     size_t lo = lc->lo, hi = lc->hi, i, c;
     int k;
-    uint32_t *ref = lc->lb->ref, sum = lc->sum;
+    uint32_t *ref = lc->lb->ref, sum = lc->sum, d = 0;
     if (lc->phase == 1) {
         if (lo == 0)
             off[1] = 0;
         for (c = lo; c < hi; c++) {
-            sum += off[c + 2];
+            d += off[c + 2];
+            sum += d;
             off[c + 2] = sum;
         }
         return 0;
     }
-    if (lc->phase == 0)
+    if (lc->phase == 0) {
         memset(off + lo + 2, 0, (hi - lo) * sizeof *off);
-    /* phase 0 counts the runs' cells, phase 2 lists the runs' ranks */
+        sum = 0;
+    }
+    /* phase 0 marks the runs' ends, phase 2 lists the runs' ranks */
     for (k = 0; k < lc->nparts; k++)
         for (i = 0; i < lc->parts[k].nruns; i++) {
             const lb_run *r = &lc->parts[k].runs[i];
             size_t a, b;
             lb_clip(r, lo, hi, &a, &b);
-            if (lc->phase == 0)
-                for (c = a; c < b; c++)
-                    off[c + 2]++;
-            else
+            if (a >= b)
+                continue;
+            if (lc->phase == 0) {
+                off[a + 2]++;
+                if (b < hi)
+                    off[b + 2]--;
+                sum += (uint32_t)(b - a);
+            } else
                 for (c = a; c < b; c++)
                     ref[off[c + 1]++] = r->rank;
         }
-    if (lc->phase == 0) {
-        for (sum = 0, c = lo; c < hi; c++)
-            sum += off[c + 2];
+    if (lc->phase == 0)
         lc->sum = sum;
-    }
     return 0;
 }
 
