@@ -46,6 +46,10 @@ typedef struct dc_ctx {
        widening, v0 + dv j and v0 + dv (j + 1), -HUGE_VAL and HUGE_VAL
        at the window's edges (dc_ctx_borders) */
     double *blo, *bhi;
+    /* where dc_spans_conservative may emit its rows itself (emit_fn non-
+       NULL: a bound of one polygon, dc_cover_fast) */
+    dc_emit_fn emit_fn;
+    void *emit_user;
     int jmin, jmax;
     double u0[6], v0[6], du[6], dv[6]; /* faces' windows (see dircube.h) */
     size_t fbase[6];
@@ -213,6 +217,19 @@ static void dc_spans_conservative(dc_ctx *c, int f, const double uv[][2], int n,
             ulo[j] = mn;
             uhi[j] = mx;
         }
+    }
+    if (c->emit_fn) {
+        /* One polygon: its rows are the runs, in the order dc_emit_rows
+           gives them, without dc_row_add's merging (a third of the cost
+           of a small triangle's rows) */
+        size_t base = c->fbase[f];
+        for (j = j0; j <= j1; j++)
+            if (ulo[j] <= uhi[j]) {
+                int i0 = rtpi_dc_wcoord(ulo[j] - m, u0, du, res);
+                c->emit_fn(c->emit_user, base + (size_t)j * (size_t)res + (size_t)i0,
+                           rtpi_dc_wcoord(uhi[j] + m, u0, du, res) - i0 + 1);
+            }
+        return;
     }
     for (j = j0; j <= j1; j++)
         if (ulo[j] <= uhi[j])
@@ -460,12 +477,13 @@ static int dc_hull2(double pts[][2], int n, double hull[][2])
    projection of the bound's convex hull is the 2D hull of its points'
    projections, drawn without clipping (parts beyond the face land on its
    edge cells, which is still a cover).  pts: the points (light-relative);
-   @return 0 if they do not qualify, 1 when done (culled or drawn). */
+   @return 0 if they do not qualify, 1 when done (culled, or drawn into
+   c's rows), 2 when the runs went to fn already. */
 #define DC_FAST_UV 10.0
 #define DC_BOX_EDGE 2   /* a bound this many cells wide or high, */
 #define DC_BOX_CELLS 16 /* or of this many cells: its box (dc_cover_fast) */
 static int dc_cover_fast(dc_ctx *c, int f, const double (*pts)[3], int n, double m,
-                         double lim)
+                         double lim, dc_emit_fn fn, void *user)
 {
     double uv[2 * DC_N][2], hull[2 * DC_N + 1][2];
     double umin = HUGE_VAL, umax = -HUGE_VAL, vmin = HUGE_VAL, vmax = -HUGE_VAL;
@@ -508,8 +526,11 @@ static int dc_cover_fast(dc_ctx *c, int f, const double (*pts)[3], int n, double
         }
     }
     if (c->b.npoly == 1) { /* one convex polygon: a triangle or a sphere's bound */
+        c->emit_fn = fn;
+        c->emit_user = user;
         dc_spans_conservative(c, f, (const double(*)[2])uv, n, m);
-        return 1;
+        c->emit_fn = NULL;
+        return 2;
     }
     nh = dc_hull2(uv, n, hull);
     dc_spans_conservative(c, f, (const double(*)[2])hull, nh, m);
@@ -564,7 +585,7 @@ static void dc_cover(dc_ctx *c, uint32_t prim, double ang, dc_emit_fn fn,
     double uv[DC_MAXV][2];
     int f, k;
     double pts[2 * DC_N][3];
-    int npts = 0, live = 0x3f;
+    int npts = 0, live = 0x3f, r;
     dc_bound_prim(c, prim, ang);
     if (!c->b.full) {
         /* the bound's points: a cone's two end polygons span its hull */
@@ -579,8 +600,9 @@ static void dc_cover(dc_ctx *c, uint32_t prim, double ang, dc_emit_fn fn,
         if (c->fbase[f] == RTPI_DC_ABSENT || !((live >> f) & 1))
             continue;
         dc_rows_reset(c);
-        if (!whole && dc_cover_fast(c, f, (const double(*)[3])pts, npts, m, lim)) {
-            dc_emit_rows(c, f, fn, user);
+        if (!whole && (r = dc_cover_fast(c, f, (const double(*)[3])pts, npts, m, lim, fn, user))) {
+            if (r == 1)
+                dc_emit_rows(c, f, fn, user);
             continue;
         }
         if (!whole && c->b.sides)
@@ -665,6 +687,8 @@ static rtp_status dc_ctx_init(dc_ctx *c, const rtp_scene *s, rtpi_v3 L, int res,
     c->res = res;
     c->S = -1.0;
     c->casts = 0;
+    c->emit_fn = NULL;
+    c->emit_user = NULL;
     for (f = 0; f < 6; f++) { /* whole faces */
         c->u0[f] = c->v0[f] = -1.0;
         c->du[f] = c->dv[f] = 2.0 / (double)res;
