@@ -396,7 +396,9 @@ typedef struct rtp_eval_options {
 
 typedef struct rtp_eval_stats {
     double seconds;          /* the whole evaluation */
-    double shadow_seconds;   /* of which: visibility of moved lights */
+    double shadow_seconds;   /* of which: deciding moved lights' visibility
+                                (0 when none was decided; a re-trace is not
+                                counted) */
     unsigned long long samples, nodes;
     unsigned long long shadow_queries; /* node-light pairs decided anew */
     int moved_lights;        /* lights whose visibility was recomputed */

@@ -297,6 +297,10 @@ static void test_min_weight_edits(void)
         /* (kd moves no weight: nothing traced again) */
         CHECK(strcmp(chain[i], "mat.red.kd") != 0 || es.retraced_samples == 0);
         retraced += es.retraced_samples > 0;
+        /* (no light moved: no time deciding shadows; it counted the
+           re-trace's) */
+        CHECK_MSG(es.moved_lights == 0 && es.shadow_seconds == 0.0, "%s: shadow_seconds %g",
+                  chain[i], es.shadow_seconds);
         rtp_image_destroy(re);
         rtp_image_destroy(full);
     }
