@@ -73,9 +73,14 @@ if command -v script >/dev/null 2>&1 && script -qc true /dev/null >/dev/null 2>&
     script -qc "$RTP trace scenes/spheres.nff --size 8x6 -i - | wc -c; echo rc=\$?" /dev/null >"$T/tty" 2>&1
     grep -q "^ *588" "$T/tty" && grep -q "rc=0" "$T/tty" && ok ||
         bad "image to a pipe from a terminal: $(cat "$T/tty")"
+    # progress on a terminal says at once that work began (a large mesh's
+    # load and kd-tree were seconds of silence), and ends its line
+    script -qc "$RTP trace scenes/spheres.nff --size 8x6 -i '$T/tty.pfm'" /dev/null >"$T/tty" 2>&1
+    grep -q "  0.0%  preparing" "$T/tty" && grep -q "100.0%" "$T/tty" && ok ||
+        bad "progress on a terminal: $(od -c "$T/tty" | head)"
 else
     echo "cli_trace.sh: no script(1) terminal here: the terminal checks skipped"
-    skip=$((skip + 2))
+    skip=$((skip + 3))
 fi
 # with no -i, the image is the scene's name with .png (.ppm without PNG)
 # in the current folder, and written; from stdin, trace.png
