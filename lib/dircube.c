@@ -1181,7 +1181,7 @@ rtp_status rtpi_lightbuf_build(const rtp_scene *s, rtpi_v3 light, int res,
                                const rtp_allocator *a, rtpi_lightbuf *lb,
                                rtp_error *err)
 {
-    return rtpi_lightbuf_build_some(s, light, res, NULL, 0, 1, a, lb, err);
+    return rtpi_lightbuf_build_some(s, light, res, NULL, 0, 1, HUGE_VAL, a, lb, err);
 }
 
 /* A thread of the counting pass: its projection scratch, and the parts
@@ -1290,7 +1290,7 @@ int rtpi_lightbuf_res(const rtp_scene *s, rtpi_v3 light, int res)
 
 rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
                                     const unsigned char *sel, unsigned char want, int threads,
-                                    const rtp_allocator *a, rtpi_lightbuf *lb,
+                                    double limit, const rtp_allocator *a, rtpi_lightbuf *lb,
                                     rtp_error *err)
 {
     size_t n = rtpi_scene_nprims(s), ncells, i, nc = 0;
@@ -1415,6 +1415,28 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
         rtpi_lightbuf_free(lb, a);
         return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
                           "light buffer would hold more than 2^32 entries; lower the resolution");
+    }
+    /* The lists against the memory limit before they are made: 4 bytes an
+       entry, with the cell starts and the candidates' records (the runs
+       counted are freed first).  200k coplanar triangles seen edge on
+       listed 3.6 GB at 4096 cells under --memory-limit 500. */
+    if (!failed) {
+        double need = 4.0 * ((double)total + (double)ncells) +
+                      (double)nc * (sizeof *lb->cand + (lb->plane ? 40.0 : 0.0) +
+                                    (lb->cone ? 32.0 : 0.0));
+        if (!(need <= limit)) {
+            char g[2][32]; /* '.' whatever the locale */
+            for (k = 0; k < np; k++)
+                rtpi_free(a, parts[k].runs);
+            rtpi_lightbuf_free(lb, a);
+            rtpi_fmt_g(g[0], sizeof g[0], 6, ceil(need / 1048576.0));
+            rtpi_fmt_g(g[1], sizeof g[1], 6, limit / 1048576.0);
+            return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
+                              "a light buffer of %d cells a face lists %s MiB, over the memory "
+                              "limit of %s MiB (lower its resolution, take --shadows exact, or "
+                              "raise memory_limit: rtp's --memory-limit)",
+                              res, g[0], g[1]);
+        }
     }
     lb->nrefs = (size_t)total;
     lb->ref = failed ? NULL

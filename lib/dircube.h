@@ -193,10 +193,12 @@ int rtpi_lightbuf_res(const rtp_scene *s, rtpi_v3 light, int res);
 /* The same over the primitives i with sel[i] == want only (sel NULL:
    all): its answers are the kd-tree's over those primitives.  Projects
    the primitives on up to `threads` threads (the same buffer for any
-   number; a's calls are then serialised by a lock). */
+   number; a's calls are then serialised by a lock).  limit: bytes the
+   buffer may take, its lists counted before they are made (HUGE_VAL:
+   none): past it RTP_ERR_LIMIT. */
 rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
                                     const unsigned char *sel, unsigned char want, int threads,
-                                    const rtp_allocator *a, rtpi_lightbuf *lb,
+                                    double limit, const rtp_allocator *a, rtpi_lightbuf *lb,
                                     rtp_error *err);
 /* 1 when no candidate of ray's cell hits ray in [tmin, tmax]; ray must run
    towards the light (rtpi_shadow_ray). */

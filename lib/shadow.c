@@ -32,6 +32,7 @@ struct rtpi_shadow {
     rtpi_itembuf ib;
     unsigned char *thin; /* per primitive: 1 if in lb */
     uint64_t *thin_cells; /* bit c: lb's cell c lists a thin primitive */
+    double limit;         /* bytes the light buffers may list (HUGE_VAL: no bound) */
 };
 
 /* Marks the cells of the thin light buffer whose lists are not empty.  A
@@ -84,13 +85,13 @@ static rtp_status sh_itembuf(rtpi_shadow *sh, int res, int threads, const rtp_al
                                           a, &sh->ib, err);
     if (st == RTP_OK)
         st = rtpi_lightbuf_build_some(sh->s, sh->light, (sh->ib.res + 1) / SH_THIN_DIV, sh->thin,
-                                      1, threads, a, &sh->lb, err);
+                                      1, threads, sh->limit, a, &sh->lb, err);
     if (st == RTP_OK && sh->lb.ncand)
         st = sh_thin_cells(sh, a, err);
     if (st == RTP_OK)
         st = rtpi_lightbuf_build_some(sh->s, sh->light,
                                       sh->ib.res < SH_WIDE_RES ? sh->ib.res : SH_WIDE_RES,
-                                      sh->thin, 0, threads, a, &sh->wide, err);
+                                      sh->thin, 0, threads, sh->limit, a, &sh->wide, err);
     return st;
 }
 
@@ -99,11 +100,11 @@ rtp_status rtpi_shadow_create(const rtp_scene *s, const rtpi_kdtree *kd,
                               const rtp_allocator *a, rtpi_shadow **out,
                               rtp_error *err)
 {
-    return rtpi_shadow_create_mt(s, kd, light, mode, res, 1, a, out, err);
+    return rtpi_shadow_create_mt(s, kd, light, mode, res, 1, HUGE_VAL, a, out, err);
 }
 
 rtp_status rtpi_shadow_create_mt(const rtp_scene *s, const rtpi_kdtree *kd, rtpi_v3 light,
-                                 rtpi_shadow_mode mode, int res, int threads,
+                                 rtpi_shadow_mode mode, int res, int threads, double limit,
                                  const rtp_allocator *a, rtpi_shadow **out, rtp_error *err)
 {
     rtpi_shadow *sh;
@@ -124,9 +125,10 @@ rtp_status rtpi_shadow_create_mt(const rtp_scene *s, const rtpi_kdtree *kd, rtpi
     sh->s = s;
     sh->kd = kd;
     sh->light = light;
+    sh->limit = limit;
     switch (mode) {
     case RTPI_SHADOW_LIGHTBUF:
-        st = rtpi_lightbuf_build_some(s, light, res, NULL, 0, threads, a, &sh->lb, err);
+        st = rtpi_lightbuf_build_some(s, light, res, NULL, 0, threads, limit, a, &sh->lb, err);
         break;
     case RTPI_SHADOW_ITEMBUF:
     case RTPI_SHADOW_OSMESA:
@@ -139,8 +141,8 @@ rtp_status rtpi_shadow_create_mt(const rtp_scene *s, const rtpi_kdtree *kd, rtpi
         if (rtpi_lightbuf_res(s, light, res) < (res <= 0 ? RTPI_DC_DEFAULT_RES : res) / 4) {
             sh->mode = kd ? RTPI_SHADOW_EXACT : RTPI_SHADOW_LIGHTBUF;
             if (!kd)
-                st = rtpi_lightbuf_build_some(s, light, res, NULL, 0, threads, a, &sh->lb,
-                                              err);
+                st = rtpi_lightbuf_build_some(s, light, res, NULL, 0, threads, limit, a,
+                                              &sh->lb, err);
             break;
         }
         st = sh_itembuf(sh, res, threads, a, err);

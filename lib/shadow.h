@@ -54,9 +54,10 @@ rtp_status rtpi_shadow_create(const rtp_scene *s, const rtpi_kdtree *kd,
                               const rtp_allocator *a, rtpi_shadow **out,
                               rtp_error *err);
 /* The same, building the direction cube's light buffers on up to
-   `threads` threads (the same buffers for any number). */
+   `threads` threads (the same buffers for any number), their lists within
+   `limit` bytes (HUGE_VAL: no bound; past it RTP_ERR_LIMIT). */
 rtp_status rtpi_shadow_create_mt(const rtp_scene *s, const rtpi_kdtree *kd, rtpi_v3 light,
-                                 rtpi_shadow_mode mode, int res, int threads,
+                                 rtpi_shadow_mode mode, int res, int threads, double limit,
                                  const rtp_allocator *a, rtpi_shadow **out, rtp_error *err);
 
 /* Does the recorded hit at p (a float position, as the tree keeps it) on

@@ -621,11 +621,15 @@ static int vis_up_to_date(const rtp_tree *t, size_t i, int kmode, int kres)
 /* Brings cur_vis up to date for every light: recorded bits where a light
    is where it was traced, new decisions where it moved, by shadow mode
    `mode` (not AUTO) at `res` cells.  Only lights whose position (or the
-   shadow mode's key, vis_key) changed since the last call are redone. */
+   shadow mode's key, vis_key) changed since the last call are redone.
+   limit: the bytes a light buffer's lists may take; where they would take
+   more, `fallback` (the mode was AUTO) takes shadow rays for that light,
+   else RTP_ERR_LIMIT. */
 static rtp_status update_visibility(rtp_tree *t, int mode, int res, int threads,
-                                    const progress_part *prog, rtp_eval_stats *st,
-                                    rtp_error *err)
+                                    double limit, int fallback, const progress_part *prog,
+                                    rtp_eval_stats *st, rtp_error *err)
 {
+    const int mode_asked = mode;
     rtp_scene *s = t->scene;
     size_t nl = s->nlights, words = (nl + 31) / 32, i, n, todo = 0, done = 0;
     double off_floor;
@@ -696,6 +700,7 @@ static rtp_status update_visibility(rtp_tree *t, int mode, int res, int threads,
             vis_ctx *vc;
             void **ctx;
             unsigned char *balls = NULL;
+            mode = mode_asked;
             if (mode != RTP_SHADOWS_EXACT && rtpi_scene_bounds(s) != 0)
                 return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
             /* only shadow rays need the kd-tree; the cubes draw the scene */
@@ -707,8 +712,18 @@ static rtp_status update_visibility(rtp_tree *t, int mode, int res, int threads,
             t->cube_alloc.free_fn = blk_free;
             t->cube_alloc.user = t;
             rs = rtpi_shadow_create_mt(s, t->kd, v3(lp[0], lp[1], lp[2]),
-                                       (rtpi_shadow_mode)mode, res, threads, &t->cube_alloc, &sh,
-                                       err);
+                                       (rtpi_shadow_mode)mode, res, threads, limit,
+                                       &t->cube_alloc, &sh, err);
+            if (rs == RTP_ERR_LIMIT && fallback && mode != RTP_SHADOWS_EXACT) {
+                /* AUTO: shadow rays where the lists would not fit (a mesh
+                   seen edge on lists every triangle in a row of cells) */
+                mode = RTP_SHADOWS_EXACT;
+                if (!t->kd && (rs = rtpi_kd_build_mt(s, &t->alloc, threads, &t->kd, err)) != RTP_OK)
+                    return rs;
+                rs = rtpi_shadow_create_mt(s, t->kd, v3(lp[0], lp[1], lp[2]),
+                                           RTPI_SHADOW_EXACT, res, threads, limit,
+                                           &t->cube_alloc, &sh, err);
+            }
             if (rs != RTP_OK)
                 return rs;
             /* (on the heap: 256 on the stack were a 37 KB frame) */
@@ -2936,6 +2951,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
     progress_part prog;
     rtp_scene *s;
     int i, nthreads = opt && opt->threads > 1 ? opt->threads : 1, any_moved = 0, full;
+    int asked_auto;
     int cached, mode, res, kmode, kres, one = 0, matpath = 0, sparse, list_combine = 0, hl_used = 0;
     int hl_apply = 0, hl_after = 0, restored = -1, cam_pending;
     /* the materials whose samples alone step 3 set (RESOLVE_MAX at most;
@@ -2993,6 +3009,7 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                           "invalid stale mode, thread count or memory limit");
     mode = opt ? (int)opt->shadows : 0;
     res = opt && opt->shadow_res > 0 ? opt->shadow_res : RTPI_DC_DEFAULT_RES;
+    asked_auto = mode == RTP_SHADOWS_AUTO;
     if (mode == RTP_SHADOWS_AUTO) {
         mode = auto_shadows(t);
         if (mode == RTP_SHADOWS_LIGHTBUF && !(opt && opt->shadow_res > 0))
@@ -3079,7 +3096,10 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
            90% of what is left to report) */
         progress_part vp = prog;
         vp.span = 0.9 * prog.span;
-        rs = update_visibility(t, mode, res, nthreads, &vp, &st, err);
+        rs = update_visibility(t, mode, res, nthreads,
+                               opt && opt->memory_limit > 0.0 ? opt->memory_limit
+                                                              : RTPI_MEMORY_LIMIT,
+                               asked_auto, &vp, &st, err);
         if (rs != RTP_OK)
             return rs;
         if (st.moved_lights) {

@@ -453,6 +453,22 @@ expect_rc 1 $RTP reeval "$T/hash.rtp" --params "$T/blank.txt" -i "$T/hash3.pfm"
 grep -q "blank.txt:1: expected KEY=VALUE, got 'mat.Floor' (blanks separate .*mat.N" "$T/err" && ok ||
     bad "params: a name with a blank: $(cat "$T/err")"
 
+# a light buffer's lists count against --memory-limit (a flat mesh seen
+# edge on lists every triangle along a row of cells: 3.6 GB under a limit
+# of 500 MiB): lightbuf is refused, auto takes shadow rays and is exact
+awk 'BEGIN { print "v from 0.5 -1.5 1 at 0.5 0.5 0 up 0 0 1 angle 45\nl 0.5 0.5 1\nf 0.8 0.8 0.8 1 0 0 0 0";
+    n = 60; d = 1 / n
+    for (i = 0; i < n; i++) for (j = 0; j < n; j++) { x = i / n; y = j / n
+        printf "p 3\n%g %g 0\n%g %g 0\n%g %g 0\np 3\n%g %g 0\n%g %g 0\n%g %g 0\n", x, y, x + d, y, x + d, y + d, x, y, x + d, y + d, x, y + d } }' > "$T/flat.nff"
+$RTP trace "$T/flat.nff" --size 32x32 -o "$T/flat.rtp" -q
+expect_rc 1 $RTP reeval "$T/flat.rtp" --set light.0.pos=0.5,0.5,0 --shadows lightbuf:256 --memory-limit 2 -i "$T/flat1.pfm"
+grep -q "light buffer of 256 cells a face lists .* MiB, over the memory limit of 2 MiB" "$T/err" && [ ! -e "$T/flat1.pfm" ] && ok ||
+    bad "light buffer lists past --memory-limit: $(cat "$T/err")"
+expect_rc 0 $RTP reeval "$T/flat.rtp" --set light.0.pos=0.5,0.5,0 --shadows auto:256 --memory-limit 2 -i "$T/flat2.pfm" --stats "$T/flat.json"
+grep -q '"shadows": "exact"' "$T/flat.json" && ok || bad "auto past the lists' limit: $(cat "$T/flat.json")"
+$RTP trace "$T/flat.nff" --size 32x32 --set light.0.pos=0.5,0.5,0 -i "$T/flat3.pfm" -q
+$RTP diff "$T/flat2.pfm" "$T/flat3.pfm" --fail-above max_abs=1e-6 -q && ok || bad "auto past the lists' limit: not exact"
+
 # --params repeated: every file, in turn (the last alone was applied)
 expect_rc 0 $RTP trace $S --size 40x30 --params "$T/a9.txt" --params "$T/kd1.txt" -i "$T/pp1.pfm"
 expect_rc 0 $RTP trace $S --size 40x30 --set ambient=0.9 --set mat.0.kd=0.1 -i "$T/pp2.pfm"

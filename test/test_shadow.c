@@ -352,13 +352,14 @@ static void lb_same(const rtp_scene *s, rtpi_v3 lp, int res, const char *what)
     size_t k;
     int threads;
     rtpi_allocator_init(&al, NULL);
-    if (rtpi_lightbuf_build_some(s, lp, res, NULL, 0, 1, &al, &a, NULL) != RTP_OK) {
+    if (rtpi_lightbuf_build_some(s, lp, res, NULL, 0, 1, HUGE_VAL, &al, &a, NULL) != RTP_OK) {
         CHECK_MSG(0, "%s: build failed", what);
         return;
     }
     for (threads = 2; threads <= 5; threads += 3) {
         int same;
-        if (rtpi_lightbuf_build_some(s, lp, res, NULL, 0, threads, &al, &b, NULL) != RTP_OK) {
+        if (rtpi_lightbuf_build_some(s, lp, res, NULL, 0, threads, HUGE_VAL, &al, &b,
+                                     NULL) != RTP_OK) {
             CHECK_MSG(0, "%s: build on %d threads failed", what, threads);
             continue;
         }
@@ -651,7 +652,7 @@ static int fail_each(const rtp_scene *s, const rtpi_kdtree *kd, rtpi_v3 lp, rtpi
         c.calls = 0;
         c.live = 0;
         c.fail_at = fail;
-        st = rtpi_shadow_create_mt(s, kd, lp, mode, res, threads, &a, &sh, NULL);
+        st = rtpi_shadow_create_mt(s, kd, lp, mode, res, threads, HUGE_VAL, &a, &sh, NULL);
         if (c.calls <= fail) {
             bad += st != RTP_OK;
             rtpi_shadow_destroy(sh);
