@@ -1826,12 +1826,13 @@ static void test_moved_light_lightbuf(void)
 /* One evaluation of t with shadow mode `mode` after key=value (none when
    key is NULL); its stats in *st, 0 on success. */
 static int eval_with(rtp_tree *t, rtp_shadow_mode mode, const char *key, const char *value,
-                     rtp_image **img, rtp_eval_stats *st)
+                     rtp_image **img, rtp_eval_stats *st, int one_off)
 {
     rtp_eval_options eo;
     rtp_error err;
     memset(&eo, 0, sizeof eo);
     eo.threads = 2;
+    eo.no_cache = one_off;
     eo.shadows = mode;
     rtp_image_destroy(*img);
     *img = NULL;
@@ -1842,8 +1843,10 @@ static int eval_with(rtp_tree *t, rtp_shadow_mode mode, const char *key, const c
 
 /* RTP_SHADOWS_AUTO is exact, and takes the light buffer where the tree
    holds 4 or more recorded hits a primitive, else (few hits: a small
-   image of many primitives) the light buffer for a first move and shadow
-   rays from the second on.  Visibility decided by either exact mode is
+   image of many primitives) the light buffer for a first move of a
+   one-off evaluation (no_cache) of one or two lights, and shadow rays
+   otherwise: from the second move on, for a first that more evaluations
+   follow (a stream), for many lights moved at once.  Visibility decided by either exact mode is
    kept when the mode switches to the other (no new decisions), not when
    it switches to the item buffer. */
 static void test_shadows_auto(void)
@@ -1886,16 +1889,48 @@ static void test_shadows_auto(void)
         /* the case is what it claims to be */
         CHECK_MSG((ti.nodes >= 4 * prims) == (cases[c].second == RTP_SHADOWS_LIGHTBUF),
                   "%dx%d: %llu nodes for %llu primitives", o.width, o.height, ti.nodes, prims);
-        CHECK(eval_with(t, RTP_SHADOWS_AUTO, NULL, NULL, &img, &st) == 0);
-        CHECK(eval_with(t, RTP_SHADOWS_AUTO, "light.0.pos", "-2,-4,6", &img, &st) == 0);
+        CHECK(eval_with(t, RTP_SHADOWS_AUTO, NULL, NULL, &img, &st, 0) == 0);
+        {
+            /* a first move with more to follow, and one of three lights
+               at once, take shadow rays where hits are few; a one-off
+               move of one light the light buffer */
+            rtp_tree *t2 = NULL;
+            rtp_image *img2 = NULL;
+            rtp_eval_options eo;
+            memset(&eo, 0, sizeof eo);
+            memset(&st, 0, sizeof st);
+            eo.shadows = RTP_SHADOWS_AUTO;
+            CHECK(rtp_record(s, &o, &t2, NULL, NULL, NULL) == RTP_OK &&
+                  rtp_tree_set(t2, "light.0.pos", "-2,-4,6", NULL) == RTP_OK &&
+                  rtp_tree_eval(t2, &eo, &img2, &st, NULL) == RTP_OK);
+            rtp_image_destroy(img2);
+            img2 = NULL;
+            CHECK_MSG(st.moved_lights == 1 && st.shadows == cases[c].second,
+                      "%dx%d, a first move with more to follow: mode %d", o.width, o.height,
+                      (int)st.shadows);
+            rtp_tree_destroy(t2);
+            t2 = NULL;
+            eo.no_cache = 1;
+            CHECK(rtp_record(s, &o, &t2, NULL, NULL, NULL) == RTP_OK &&
+                  rtp_tree_add_light(t2, (const double[3]){1, 1, 5}, NULL) == RTP_OK &&
+                  rtp_tree_add_light(t2, (const double[3]){-1, 1, 5}, NULL) == RTP_OK &&
+                  rtp_tree_set(t2, "light.0.pos", "-2,-4,6", NULL) == RTP_OK &&
+                  rtp_tree_eval(t2, &eo, &img2, &st, NULL) == RTP_OK);
+            rtp_image_destroy(img2);
+            CHECK_MSG(st.moved_lights == 3 && st.shadows == cases[c].second,
+                      "%dx%d, three lights at once: %d moved, mode %d", o.width, o.height,
+                      st.moved_lights, (int)st.shadows);
+            rtp_tree_destroy(t2);
+        }
+        CHECK(eval_with(t, RTP_SHADOWS_AUTO, "light.0.pos", "-2,-4,6", &img, &st, 1) == 0);
         CHECK_MSG(st.moved_lights == 1 && st.shadows == RTP_SHADOWS_LIGHTBUF,
                   "%dx%d, first move: %d moved, mode %d", o.width, o.height, st.moved_lights,
                   (int)st.shadows);
         /* a colour edit decides nothing anew */
-        CHECK(eval_with(t, RTP_SHADOWS_AUTO, "light.0.color", "0.5,0.7,0.9", &img, &st) == 0);
+        CHECK(eval_with(t, RTP_SHADOWS_AUTO, "light.0.color", "0.5,0.7,0.9", &img, &st, 0) == 0);
         CHECK_MSG(st.moved_lights == 0, "%dx%d, colour edit: %d moved", o.width, o.height,
                   st.moved_lights);
-        CHECK(eval_with(t, RTP_SHADOWS_AUTO, "light.0.pos", "1,-3,2", &img, &st) == 0);
+        CHECK(eval_with(t, RTP_SHADOWS_AUTO, "light.0.pos", "1,-3,2", &img, &st, 0) == 0);
         CHECK_MSG(st.moved_lights == 1 && st.shadows == cases[c].second,
                   "%dx%d, second move: %d moved, mode %d", o.width, o.height, st.moved_lights,
                   (int)st.shadows);
@@ -1903,7 +1938,7 @@ static void test_shadows_auto(void)
         CHECK(eval_with(t,
                         cases[c].second == RTP_SHADOWS_EXACT ? RTP_SHADOWS_LIGHTBUF
                                                              : RTP_SHADOWS_EXACT,
-                        NULL, NULL, &img, &st) == 0);
+                        NULL, NULL, &img, &st, 0) == 0);
         CHECK_MSG(st.moved_lights == 0, "%dx%d, other exact mode: %d moved", o.width, o.height,
                   st.moved_lights);
         if (rtp_scene_set(s, "light.0.pos", "1,-3,2", NULL) != RTP_OK ||
@@ -1914,7 +1949,7 @@ static void test_shadows_auto(void)
         else
             CHECK_MSG(d.max_abs <= 1e-6, "%dx%d: %g from a full trace", o.width, o.height,
                       d.max_abs);
-        CHECK(eval_with(t, RTP_SHADOWS_ITEMBUF, NULL, NULL, &img, &st) == 0);
+        CHECK(eval_with(t, RTP_SHADOWS_ITEMBUF, NULL, NULL, &img, &st, 0) == 0);
         CHECK_MSG(st.moved_lights == 1 && st.shadows == RTP_SHADOWS_ITEMBUF,
                   "%dx%d, item buffer: %d moved", o.width, o.height, st.moved_lights);
         rtp_image_destroy(img);
