@@ -462,6 +462,99 @@ static int split_ref(const kd_build *b, const kd_ref *r, int axis, float pos,
     return ret;
 }
 
+/* The best cost of the node [lo,hi] holding the n references r: its
+   leaf's, or its best split's if that is lower (by the same rules as
+   build_node's choice, without the look-ahead). */
+static double node_cost(const kd_ref *r, size_t n, const float *lo,
+                        const float *hi)
+{
+    kd_split sp;
+    double d[3], area, leaf = KD_COST_ISECT * (double)n;
+    int k;
+    for (k = 0; k < 3; k++)
+        d[k] = (double)hi[k] - lo[k];
+    area = d[0] * d[1] + d[1] * d[2] + d[2] * d[0];
+    sp.cost = HUGE_VAL;
+    if (n >= KD_MIN_SPLIT && area > 0.0) {
+        if (n <= KD_SMALL_MAX)
+            split_small(r, n, lo, hi, d, area, &sp);
+        else
+            split_binned(r, n, lo, hi, d, area, &sp);
+    }
+    return sp.cost < KD_LEAF_MARGIN * leaf ? sp.cost : leaf;
+}
+
+/* The look-ahead for a node that the box SAH leaves a leaf although it is
+   large.  Long thin triangles that run diagonally (a pipe or hair along
+   (1,1,0)) each have a box that spans the whole node in two axes, so
+   every plane straddles them all and no single split pays, though two
+   do: a cut at the middle of x whose clipped parts lie in one half of y,
+   then the cut that drops the (nearly) empty half.  So for the middle
+   plane of each axis this clips every straddler (split_ref, as the
+   partition would) into the free arena above the node's list and prices
+   the split with each child's own best cost (node_cost) rather than its
+   leaf's: a two-level SAH.  Only where the binned SAH failed on more
+   than KD_SMALL_MAX references: such leaves are rare in ordinary scenes,
+   and the cost there is 3 n clips and 6 binned passes.
+   @return 0, or -1 when out of memory. */
+static int split_lookahead(kd_build *b, size_t off, size_t n,
+                           const float *lo, const float *hi, double area,
+                           kd_split *best)
+{
+    int k;
+    size_t i;
+    if (rtpi_grow(b->a, (void **)&b->ref, &b->ref_cap, off + 3 * n,
+                  sizeof *b->ref))
+        return -1;
+    for (k = 0; k < 3; k++) {
+        const kd_ref *r = b->ref + off;
+        kd_ref *pl = b->ref + off + n, *pr = pl + n;
+        float p = (float)(0.5 * ((double)lo[k] + hi[k]));
+        float clo[3], chi[3];
+        size_t nl = 0, nr = 0;
+        double c, d = (double)hi[k] - lo[k], o1, o2, x, cap, perim;
+        int m;
+        if (!(p > lo[k] && p < hi[k]))
+            continue;
+        for (i = 0; i < n; i++) {
+            float a0 = r[i].lo[k], a1 = r[i].hi[k];
+            if (a1 < p || (a1 == p && a0 <= p)) { /* as planar_left */
+                pl[nl++] = r[i];
+            } else if (a0 >= p) {
+                pr[nr++] = r[i];
+            } else {
+                kd_ref lp, rp;
+                int s = split_ref(b, &r[i], k, p, &lp, &rp);
+                if (s & 1)
+                    pl[nl++] = lp;
+                if (s & 2)
+                    pr[nr++] = rp;
+            }
+        }
+        o1 = (double)hi[(k + 1) % 3] - lo[(k + 1) % 3];
+        o2 = (double)hi[(k + 2) % 3] - lo[(k + 2) % 3];
+        cap = o1 * o2 / area;
+        perim = (o1 + o2) / area;
+        x = (double)p - lo[k];
+        for (m = 0; m < 3; m++) {
+            clo[m] = lo[m];
+            chi[m] = hi[m];
+        }
+        chi[k] = p;
+        c = KD_COST_TRAV + (cap + x * perim) * node_cost(pl, nl, clo, chi);
+        clo[k] = p;
+        chi[k] = hi[k];
+        c += (cap + (d - x) * perim) * node_cost(pr, nr, clo, chi);
+        if (c < best->cost) {
+            best->cost = c;
+            best->axis = k;
+            best->pos = p;
+            best->planar_left = 1;
+        }
+    }
+    return 0;
+}
+
 static int push_node(kd_build *b, uint32_t *idx)
 {
     if (b->nnodes >= KD_MAX_PRIMS ||
@@ -562,6 +655,10 @@ static int build_node(kd_build *b, const float *lo, const float *hi,
         else
             split_binned(b->ref + off, n, lo, hi, d, area, &sp);
     }
+    if (!(sp.cost < KD_LEAF_MARGIN * KD_COST_ISECT * (double)n) &&
+        depth < b->max_depth && n > KD_SMALL_MAX && area > 0.0)
+        if (split_lookahead(b, off, n, lo, hi, area, &sp))
+            return -1;
     if (!(sp.cost < KD_LEAF_MARGIN * KD_COST_ISECT * (double)n)) {
         if (b->task_max) /* the task decides the same again */
             return make_task(b, lo, hi, off, n, depth, budget);
