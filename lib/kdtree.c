@@ -114,9 +114,21 @@
    axis-aligned plane (a convex n-gon triangulated from one corner) asks
    for cells one sliver wide near the fan's apex, N^2 of them: 64,000
    triangles made 829 M references (11 GB).  The SPD scenes hold 1.5 to
-   6 references a primitive, the bunny 3.3; no path in them is cut. */
+   6 references a primitive, the bunny 3.3; no path in them is cut.
+   KD_REF_FLOOR more are allowed whatever the scene's size (8 MB of leaf
+   lists, 28 bytes a reference of build arena, three times that while a
+   look-ahead clips): long thin triangles that run
+   diagonally need cells about as short as they are thin to be told apart
+   (a pipe of 4,000 triangles 20 long and 0.05 thick along (1,1,0): 1.1 M
+   references, 0.26 s a frame; at 16 a triangle 32 k, leaves of 4,000 and
+   4 s; 20,000 diagonal slivers: 1.9 M, 4 s rather than 19; a floor of
+   4 M made the slivers 3.6 s and the pipe no faster), and a small scene
+   can afford that; a large one keeps its 16 a primitive. */
 #ifndef KD_REF_BUDGET
 #define KD_REF_BUDGET 16.0
+#endif
+#ifndef KD_REF_FLOOR
+#define KD_REF_FLOOR 2097152.0
 #endif
 /* Hard cap on the depth; the traversal stack holds one entry per level. */
 #define KD_DEPTH_CAP 60
@@ -955,7 +967,8 @@ rtp_status rtpi_kd_build_mt(const rtp_scene *s, const rtp_allocator *alloc,
     top.task_max = nvalid / KD_TASKS;
     if (top.task_max < KD_TASK_MIN)
         top.task_max = KD_TASK_MIN;
-    if (build_node(&top, lo, hi, 0, nvalid, 0, KD_REF_BUDGET * (double)nvalid))
+    if (build_node(&top, lo, hi, 0, nvalid, 0,
+                   KD_REF_BUDGET * (double)nvalid + KD_REF_FLOOR))
         goto nomem;
     rtpi_free(top.a, top.ref); /* the tasks have their own copies */
     top.ref = NULL;
