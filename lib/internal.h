@@ -908,10 +908,17 @@ struct rtp_tree {
     double *cp_cl;         /* ...the colours cS (3 per term) */
     int cp_s_ok;           /* S holds for the coefficients now */
     size_t cp_nt;          /* terms: 2 + lights */
-    float **cp_k;          /* per term: pixels * 3, K (NULL: not made yet) */
-    uint32_t **cp_nz;      /* per term: the pixels whose K is not 0, in
-                              bands of rows as pk_nz */
-    uint32_t **cp_seg;     /* per term, per band: how many */
+    float **cp_k;          /* per term: K of the pixels whose K is not 0,
+                              3 floats each, in bands of rows as pk_c
+                              (NULL: not made yet), then in the same
+                              block their runs (cp_run) */
+    uint32_t **cp_run;     /* per term: runs of consecutive such pixels,
+                              2 words each (first pixel, length), in the
+                              same bands; in cp_k's block, not owned */
+    uint32_t **cp_seg;     /* per term, 4 words a band: its first entry
+                              of cp_k, their count, its first run, their
+                              count (tree.c: CP_KOFF...) */
+    size_t *cp_cap;        /* per term: the bytes cp_k's block holds */
     unsigned char *cp_ok;  /* per term: its plane holds */
     size_t *cp_d, cp_nd;   /* the terms whose colour differs from cS... */
     double *cp_dc;         /* ...and by how much (3 each) */
@@ -922,7 +929,9 @@ struct rtp_tree {
     unsigned cp_gen;       /* counts the snapshots and stale planes */
     unsigned *cp_used;     /* per term: cp_clock when its plane was last used */
     unsigned cp_clock;     /* counts the evaluations by colour planes */
-    float *cb_p;           /* a chain's P' (tree.c: cb_chunk) for... */
+    float *cb_p;           /* a chain's P' (tree.c: cb_chunk), as cp_k's
+                              entries of the term, cb_cap of them, for... */
+    size_t cb_cap;
     size_t cb_term;        /* ...1 + term j (0: none), with... */
     double *cb_cl;         /* ...the other terms' colours, and... */
     unsigned cb_gen;       /* ...made at this cp_gen */
