@@ -889,12 +889,13 @@ struct rtp_tree {
     float *hl_p;           /* per sample of the material: colour less them */
     float *pk_c;           /* pixels * 6 at most: P and K of the pixels
                               whose K is not 0, in bands of rows (tree.c,
-                              PK_ROWS): an edit reads them in one run */
+                              PK_ROWS): an edit reads them in one run.
+                              In pk_nz's block, right after the room of
+                              the list (pk_build), not a block of its own */
     uint32_t *pk_nz;       /* those pixels (pixels at most, in the same
                               bands): the only ones an edit of the term
-                              changes; pk_nnz of them in all.  In pk_c's
-                              block, right after the entries pk_c holds
-                              (pk_build), not a block of its own */
+                              changes; pk_nnz of them in all.  The block
+                              pk_c lies in (its start: freed as pk_nz) */
     uint32_t *pk_seg;      /* per band: how many pk_nz and pk_c hold... */
     size_t *pk_off;        /* ...from this entry on */
     int pk_part;           /* the planes are made only where the material
