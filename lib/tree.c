@@ -2411,7 +2411,6 @@ static void cp_free(rtp_tree *t)
     rtpi_free(&t->alloc, t->cb_cl);
     rtpi_free(&t->alloc, t->cp_used);
     rtpi_free(&t->alloc, t->cb_p);
-    rtpi_free(&t->alloc, t->cp_s);
     t->cp_k = NULL;
     t->cp_run = t->cp_seg = NULL;
     t->cp_cap = NULL;
@@ -2749,31 +2748,45 @@ static int cp_copy_max(float *restrict dst, const float *restrict src, size_t n,
 
 /* S from the samples (which hold the colours ev_cl for the coefficients
    now), unless it holds: the image `last` when it holds the last
-   evaluation (made from those samples), else the samples resolved.  0
-   where it cannot be made (no memory, a value beyond the float range). */
-static int cp_snapshot(rtp_tree *t, const float *samples, const float *last, size_t nt)
+   evaluation (made from those samples), else the samples resolved; in
+   the samples' own block (ev_samples), which holds S from then on (cp_s
+   points into it).  The samples are used up: every colour edit leaves
+   them holding the colours before (cp_eval), so the next thing to read
+   them makes them all anew first (eval_row, combine_row), and S goes with
+   them (cp_stale, and combine_row's branch of eval_impl).  A block of its
+   own for S was 3 MB of fresh memory at 512x512, two huge pages the
+   kernel zeroed: tetra_s6's first light-colour edit took 7 page faults,
+   now 3.  0 where it cannot be made (a value beyond the float range; the
+   samples are used up all the same). */
+static int cp_snapshot(rtp_tree *t, float *samples, const float *last, size_t nt)
 {
-    size_t np = (size_t)t->width * t->height;
+    size_t np = (size_t)t->width * t->height, w = (size_t)t->width, x, y;
     int c, finite;
     if (t->cp_s_ok)
         return 1;
-    if (!t->ev_samples_ok || !samples)
+    if (!t->ev_samples_ok || !samples || samples != t->ev_samples)
         return 0;
-    if (!t->cp_s)
-        t->cp_s = (float *)rtpi_malloc_array(&t->alloc, np, 3 * sizeof *t->cp_s);
-    if (!t->cp_s)
-        return 0;
+    t->ev_samples_ok = 0;
     if (last) {
-        finite = cp_copy_max(t->cp_s, last, np, t->cp_smax);
+        finite = cp_copy_max(samples, last, np, t->cp_smax);
     } else {
-        rtp_image im;
-        memset(&im, 0, sizeof im);
-        im.width = t->width;
-        im.height = t->height;
-        im.pixels = t->cp_s;
-        rtpi_resolve_samples(samples, t->spd, &im);
-        finite = cp_copy_max(NULL, t->cp_s, np, t->cp_smax);
+        if (t->spd)
+            /* each pixel the average of its four corners (rtpi_resolve_pixel's
+               sum), in place: pixel (x, y) goes to 3 (y w + x), below where
+               every pixel after it reads, at 3 (y (w + 1) + x) and on (its
+               own first corner there when y is 0, each channel read before
+               it is written) */
+            for (y = 0; y < (size_t)t->height; y++) {
+                const float *a = samples + 3 * y * (w + 1), *b = a + 3 * (w + 1);
+                float *o = samples + 3 * y * w;
+                for (x = 0; x < w; x++, a += 3, b += 3, o += 3)
+                    for (c = 0; c < 3; c++)
+                        o[c] = 0.25f * (a[c] + a[3 + c] + b[c] + b[3 + c]);
+            }
+        /* (a pixel of its own per sample: the samples are S as they are) */
+        finite = cp_copy_max(NULL, samples, np, t->cp_smax);
     }
+    t->cp_s = samples;
     for (c = 0; c < 3; c++)
         finite &= isfinite(t->cp_smax[c]) != 0;
     if (!finite)
@@ -3055,7 +3068,7 @@ static int cp_differs(const rtp_tree *t, const double *cv, size_t j)
    make it (the coefficients as the last evaluation left them; `sparse`:
    pixels hold that evaluation).  1 when done. */
 static int cp_eval(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, const double *cv,
-                   const float *samples, float *pixels, int sparse, rtp_eval_stats *st)
+                   float *samples, float *pixels, int sparse, rtp_eval_stats *st)
 {
     size_t nt = 2 + t->scene->nlights, j, nd = 0, nc = 0, changed = 0;
     size_t np = (size_t)t->width * t->height;
@@ -3664,7 +3677,9 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
             one = 1;
             t->pk_term = 0; /* (a material's planes hold the colours before) */
         } else {
-            /* step 3 for every sample */
+            /* step 3 for every sample (S, which lives in the samples'
+               block, goes: cp_snapshot) */
+            t->cp_s_ok = 0;
             tree_rows(t, t->ny, nthreads, ctx, combine_row, NULL, NULL);
             st.combined_samples = ns;
             t->pk_term = 0;
