@@ -12,6 +12,7 @@ typedef struct pool {
     int relay, finished; /* the caller relays progress; workers ended */
     int locking;         /* the lock was made (else one thread alone) */
     int cancelled;       /* cancel said to stop (stop is set too) */
+    int reported;        /* rows done at the calling thread's last report */
     rtpi_row_fn fn;
     void *const *ctx;
     void (*progress)(void *user, double done);
@@ -81,8 +82,10 @@ static void run(job *j)
             pthread_cond_signal(&p->cv);
 #endif
         pool_unlock(p);
-        if (j->is_main && p->progress)
+        if (j->is_main && p->progress) {
+            p->reported = done;
             p->progress(p->progress_user, (double)done / p->nrows);
+        }
         if (j->is_main)
             poll_cancel(p);
     }
@@ -210,6 +213,10 @@ int rtpi_parallel_rows_cancel(int nrows, int nthreads, void *const *ctx, rtpi_ro
         run(&jobs[0]);
         for (i = 1; i < started; i++)
             pthread_join(tid[i], NULL);
+        /* the rows the workers ended after the calling thread's last
+           report: a last one (a trace's progress stopped at 67%) */
+        if (p.progress && p.reported != p.done)
+            p.progress(p.progress_user, (double)p.done / p.nrows);
         pthread_mutex_destroy(&p.lock);
         return p.cancelled ? 2 : p.stop;
     }

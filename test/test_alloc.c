@@ -604,6 +604,7 @@ static rtp_status op_heatmap(ctx *c)
 typedef struct asker {
     long asked, at, progress_after;
     int said;
+    double last; /* the last progress reported */
 } asker;
 
 static int ask_cancel(void *user)
@@ -618,7 +619,7 @@ static int ask_cancel(void *user)
 static void ask_progress(void *user, double done)
 {
     asker *k = (asker *)user;
-    (void)done;
+    k->last = done;
     k->progress_after += k->said;
 }
 
@@ -694,6 +695,11 @@ static void test_cancel_trace(void)
                                   threads, k.at, k.progress_after);
                     } else {
                         CHECK_MSG(st == RTP_OK, "%s", err.message);
+                        /* (the last report says all is done, however the
+                           rows fell to the threads: with two it could stop
+                           at the calling thread's last row) */
+                        CHECK_MSG(k.last == 1.0, "threads %d deep %d: progress ended at %g",
+                                  threads, deep, k.last);
                         /* (one thread: after each row and on either side of
                            the kd-tree's build; the calling thread of two
                            asks after its own rows) */
