@@ -1136,35 +1136,52 @@ static void marks_clear(rtp_tree *t)
         }
 }
 
+/* The columns *lo .. *hi - 1 of sample row r from its first sample with
+   nodes to its last (*lo == *hi: none).  start rises with the sample and
+   a sample has nodes where it rises after it, so two bisections find
+   them. */
+static void row_nodes(const rtp_tree *t, size_t r, size_t *lo, size_t *hi)
+{
+    const uint64_t *st = t->start;
+    size_t k0 = r * (size_t)t->nx, k1 = k0 + (size_t)t->nx, a, b;
+    const uint64_t s0 = st[k0], s1 = st[k1];
+    *lo = *hi = 0;
+    if (s0 == s1)
+        return; /* a row of background */
+    for (a = k0 + 1, b = k1; a < b;) {
+        size_t mid = a + (b - a) / 2;
+        if (st[mid] > s0)
+            b = mid;
+        else
+            a = mid + 1;
+    }
+    *lo = a - 1 - k0; /* st[a] > s0: sample a - 1 has nodes, none before */
+    for (a = k0 + *lo, b = k1; a < b;) {
+        size_t mid = a + (b - a) / 2;
+        if (st[mid] < s1)
+            a = mid + 1;
+        else
+            b = mid;
+    }
+    *hi = a - k0; /* st[a - 1] < s1: sample a - 1 has nodes, none after */
+}
+
 /* One light's terms and coefficients for a row of samples, from the
    cached normals and view vectors: what a moved light changes. */
 static int light_row(void *ctx, int y)
 {
     eval_ctx *e = (eval_ctx *)ctx;
     rtp_tree *t = e->t;
-    size_t k0 = (size_t)y * t->nx, k1 = k0 + (size_t)t->nx, lo, hi;
-    const uint64_t *st = t->start, a = st[k0], b = st[k1];
+    size_t k0 = (size_t)y * t->nx, k1, lo, hi;
+    const uint64_t *st = t->start;
     unsigned long long n;
-    if (a == b)
+    /* the row's first and last samples with nodes: the background on
+       either side of the scene is not walked */
+    row_nodes(t, (size_t)y, &lo, &hi);
+    if (lo == hi)
         return 0; /* a row of background */
-    /* the row's first and last samples with nodes (start rises with k):
-       the background on either side of the scene is not walked */
-    for (lo = k0 + 1, hi = k1; lo < hi;) {
-        size_t mid = lo + (hi - lo) / 2;
-        if (st[mid] > a)
-            hi = mid;
-        else
-            lo = mid + 1;
-    }
-    k0 = lo - 1; /* st[lo] > a: sample lo - 1 has nodes */
-    for (lo = k0, hi = k1; lo < hi;) {
-        size_t mid = lo + (hi - lo) / 2;
-        if (st[mid] < b)
-            lo = mid + 1;
-        else
-            hi = mid;
-    }
-    k1 = lo; /* st[lo - 1] < b: sample lo - 1 has nodes, none after it */
+    k1 = k0 + hi;
+    k0 += lo;
     n = rtpi_light_redo(e->shade, t->nodes, st, k0, k1, e->vis, t->ev_nv, t->ev_w, e->light,
                         t->ev_terms, t->ev_coeffs, e->cl, e->combine_too ? e->samples : NULL,
                         &e->coef_bad, e->mark, e->mv_rest, t->mv_ok);
@@ -2468,35 +2485,6 @@ static void cp_stale(rtp_tree *t, size_t i)
         t->cp_ok[i] = 0;
 }
 
-/* The columns *lo .. *hi - 1 of sample row r from its first sample with
-   nodes to its last (*lo == *hi: none).  start rises with the sample and
-   a sample has nodes where it rises after it, so two bisections find
-   them. */
-static void cp_row_nodes(const rtp_tree *t, size_t r, size_t *lo, size_t *hi)
-{
-    const uint64_t *st = t->start;
-    size_t k0 = r * (size_t)t->nx, k1 = k0 + (size_t)t->nx, a, b;
-    const uint64_t s0 = st[k0], s1 = st[k1];
-    *lo = *hi = 0;
-    if (s0 == s1)
-        return; /* a row of background */
-    for (a = k0 + 1, b = k1; a < b;) {
-        size_t mid = a + (b - a) / 2;
-        if (st[mid] > s0)
-            b = mid;
-        else
-            a = mid + 1;
-    }
-    *lo = a - 1 - k0; /* st[a] > s0: sample a - 1 has nodes, none before */
-    for (a = k0 + *lo, b = k1; a < b;) {
-        size_t mid = a + (b - a) / 2;
-        if (st[mid] < s1)
-            a = mid + 1;
-        else
-            b = mid;
-    }
-    *hi = a - k0; /* st[a - 1] < s1: sample a - 1 has nodes, none after */
-}
 
 /* The pixels *x0 .. *x1 - 1 of pixel row y where term j's K can be other
    than 0: the background's, every pixel; any other term's, the pixels
@@ -2509,10 +2497,10 @@ static void cp_span(const rtp_tree *t, size_t j, int y, size_t *x0, size_t *x1)
     *x1 = w;
     if (j == 0)
         return;
-    cp_row_nodes(t, (size_t)y, &lo, &hi);
+    row_nodes(t, (size_t)y, &lo, &hi);
     if (t->spd) {
         /* pixel x: the corners x and x + 1 of sample rows y and y + 1 */
-        cp_row_nodes(t, (size_t)y + 1, &lo2, &hi2);
+        row_nodes(t, (size_t)y + 1, &lo2, &hi2);
         if (lo2 < hi2) {
             lo = lo < hi && lo < lo2 ? lo : lo2;
             hi = hi > hi2 ? hi : hi2;

@@ -101,6 +101,17 @@ static void *fa_realloc(void *user, void *ptr, size_t size)
     return p ? p + HDR : NULL;
 }
 
+/* An allocator over f that fails nothing (f->fail_at 0) and counts live
+   blocks. */
+static void failing_init(failing *f, rtp_allocator *a)
+{
+    memset(f, 0, sizeof *f);
+    a->malloc_fn = fa_malloc;
+    a->realloc_fn = fa_realloc;
+    a->free_fn = fa_free;
+    a->user = f;
+}
+
 /* ------------------------------------------------------------- fixtures */
 
 static char dir[512];
@@ -646,11 +657,7 @@ static void test_cancel_trace(void)
     rtp_trace_options o = small_opt();
     int threads, rec, deep;
     size_t i;
-    memset(&f, 0, sizeof f);
-    a.malloc_fn = fa_malloc;
-    a.realloc_fn = fa_realloc;
-    a.free_fn = fa_free;
-    a.user = &f;
+    failing_init(&f, &a);
     o.width = 40;
     o.height = 30;
     if (rtp_scene_load(tmp_path("scene.nff"), &a, &s, &err) != RTP_OK ||
@@ -734,11 +741,7 @@ static void test_cancel_eval(void)
     rtp_trace_options o = small_opt();
     size_t i;
     int threads;
-    memset(&f, 0, sizeof f);
-    a.malloc_fn = fa_malloc;
-    a.realloc_fn = fa_realloc;
-    a.free_fn = fa_free;
-    a.user = &f;
+    failing_init(&f, &a);
     o.width = 40;
     o.height = 30;
     if (rtp_scene_load(tmp_path("scene.nff"), &a, &s, &err) != RTP_OK) {
@@ -805,12 +808,8 @@ static long sweep(const char *name, rtp_status (*op)(ctx *))
         rtp_allocator a;
         ctx c;
         rtp_status st;
-        memset(&f, 0, sizeof f);
+        failing_init(&f, &a);
         f.fail_at = n;
-        a.malloc_fn = fa_malloc;
-        a.realloc_fn = fa_realloc;
-        a.free_fn = fa_free;
-        a.user = &f;
         memset(&c, 0, sizeof c);
         c.f = &f;
         c.a = &a;
