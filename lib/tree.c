@@ -617,6 +617,17 @@ static int progress_part_cancel(void *user)
     return p->cancel(p->user);
 }
 
+/* Whether the caller's cancel says to stop now. */
+static int part_cancelled(const progress_part *p)
+{
+    return p->cancel && p->cancel(p->user);
+}
+
+static rtp_status cancelled_error(rtp_error *err)
+{
+    return rtpi_error(err, RTP_ERR_CANCELLED, NULL, 0, 0, "cancelled by the caller");
+}
+
 /* Whether light i's visibility in t->cur_vis is as mode and res would
    decide it now. */
 static int vis_up_to_date(const rtp_tree *t, size_t i, int kmode, int kres)
@@ -707,7 +718,13 @@ static rtp_status update_visibility(rtp_tree *t, int mode, int res, int threads,
             vis_ctx *vc;
             void **ctx;
             unsigned char *balls = NULL;
+            int rows;
             mode = mode_asked;
+            /* (the caller's cancel on either side of the kd-tree's or the
+               buffer's build and after each row: a moved light of a
+               large mesh takes seconds) */
+            if (part_cancelled(prog))
+                return cancelled_error(err);
             if (mode != RTP_SHADOWS_EXACT && rtpi_scene_bounds(s) != 0)
                 return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
             /* only shadow rays need the kd-tree; the cubes draw the scene */
@@ -733,6 +750,10 @@ static rtp_status update_visibility(rtp_tree *t, int mode, int res, int threads,
             }
             if (rs != RTP_OK)
                 return rs;
+            if (part_cancelled(prog)) {
+                rtpi_shadow_destroy(sh);
+                return cancelled_error(err);
+            }
             /* (on the heap: 256 on the stack were a 37 KB frame) */
             vc = (vis_ctx *)rtpi_malloc_array(&t->alloc, (size_t)threads, sizeof *vc);
             ctx = (void **)rtpi_malloc_array(&t->alloc, (size_t)threads, sizeof *ctx);
@@ -763,9 +784,21 @@ static rtp_status update_visibility(rtp_tree *t, int mode, int res, int threads,
             part.lo = prog->lo + prog->span * (double)done / (double)todo;
             part.span = prog->span / (double)todo;
             done++;
-            tree_rows(t, t->ny, threads, ctx, vis_row, part.fn ? progress_part_cb : NULL,
-                               &part);
+            rows = rtpi_parallel_rows_cancel(t->ny, threads, ctx, vis_row,
+                                             part.fn ? progress_part_cb : NULL,
+                                             part.cancel ? progress_part_cancel : NULL, &part,
+                                             rtpi_trace_stack(t->max_depth));
             rtpi_shadow_destroy(sh);
+            if (rows == 2) {
+                /* some rows hold the new decisions, the rest the old: the
+                   light is decided anew at the next evaluation, wherever
+                   it then is (its place as nothing decided) */
+                t->cur_pos[3 * i] = NAN;
+                rtpi_free(&t->alloc, vc);
+                rtpi_free(&t->alloc, ctx);
+                rtpi_free(&t->alloc, balls);
+                return cancelled_error(err);
+            }
             if (st) {
                 st->moved_lights++;
                 st->shadows = (rtp_shadow_mode)mode;

@@ -796,6 +796,94 @@ static void test_cancel_eval(void)
     CHECK(f.live == 0 && f.bad_frees == 0);
 }
 
+/* rtp_tree_eval with options.cancel through a moved light: a yes before
+   the shadow structure's build, after it, or after some rows gives
+   RTP_ERR_CANCELLED and leaks nothing; half-decided rows are not taken
+   for the light's new place: moved back to where it was last decided
+   with one thread's rows cut short, the next evaluation equals a full
+   trace (the light's place as decided stays that of the rows' old
+   half otherwise). */
+static void test_cancel_move(void)
+{
+    static const rtp_shadow_mode modes[] = {RTP_SHADOWS_EXACT, RTP_SHADOWS_LIGHTBUF};
+    static const long ats[] = {1, 2, 20};
+    failing f;
+    rtp_allocator a;
+    rtp_scene *s = NULL;
+    rtp_error err;
+    rtp_trace_options o = small_opt();
+    size_t m, i;
+    int threads;
+    failing_init(&f, &a);
+    o.width = 40;
+    o.height = 30;
+    if (rtp_scene_load(tmp_path("scene.nff"), &a, &s, &err) != RTP_OK) {
+        CHECK_MSG(0, "fixture: %s", err.message);
+        return;
+    }
+    for (threads = 1; threads <= 2; threads++)
+        for (m = 0; m < sizeof modes / sizeof *modes; m++)
+            for (i = 0; i < sizeof ats / sizeof *ats; i++) {
+                rtp_tree *t = NULL;
+                rtp_image *img = NULL, *ref = NULL;
+                rtp_eval_options eo;
+                rtp_eval_stats es;
+                asker k;
+                long live;
+                /* (the calling thread of two may decide one row only: a
+                   later yes might never be asked) */
+                if (threads > 1 && ats[i] > 2)
+                    continue;
+                o.threads = threads;
+                if (rtp_record(s, &o, &t, NULL, NULL, &err) != RTP_OK) {
+                    CHECK_MSG(0, "record: %s", err.message);
+                    break;
+                }
+                memset(&eo, 0, sizeof eo);
+                memset(&k, 0, sizeof k);
+                eo.threads = threads;
+                eo.shadows = modes[m];
+                eo.shadow_res = 32;
+                eo.cancel = ask_cancel;
+                eo.progress = ask_progress;
+                eo.progress_user = &k;
+                /* decided at one place (the caches made) */
+                CHECK(rtp_tree_set(t, "light.lamp.pos", "-1,-5,4", &err) == RTP_OK);
+                CHECK_MSG(rtp_tree_eval(t, &eo, &img, NULL, &err) == RTP_OK, "%s", err.message);
+                CHECK_MSG(k.asked >= 2 && !k.said, "a move asked %ld times", k.asked);
+                rtp_image_destroy(img);
+                img = NULL;
+                /* a move to another, cancelled */
+                CHECK(rtp_tree_set(t, "light.lamp.pos", "2,-3,7", &err) == RTP_OK);
+                memset(&k, 0, sizeof k);
+                k.at = ats[i];
+                live = f.live;
+                memset(&err, 0, sizeof err);
+                CHECK_MSG(rtp_tree_eval(t, &eo, &img, NULL, &err) == RTP_ERR_CANCELLED &&
+                              err.status == RTP_ERR_CANCELLED && !img,
+                          "threads %d mode %d at %ld: %s", threads, (int)modes[m], k.at,
+                          err.message);
+                CHECK_MSG(k.asked == k.at, "at %ld: asked %ld times", k.at, k.asked);
+                CHECK_MSG(f.live == live, "at %ld: %ld block(s) leaked", k.at, f.live - live);
+                /* back where it was last decided: decided anew, as a full
+                   trace */
+                CHECK(rtp_tree_set(t, "light.lamp.pos", "-1,-5,4", &err) == RTP_OK);
+                memset(&k, 0, sizeof k);
+                memset(&es, 0, sizeof es);
+                CHECK_MSG(rtp_tree_eval(t, &eo, &img, &es, &err) == RTP_OK, "%s", err.message);
+                /* (a yes before the rows left the last decisions whole) */
+                CHECK_MSG(ats[i] <= 2 || (es.moved_lights == 1 && es.shadow_queries > 0),
+                          "at %ld: the light not decided anew", ats[i]);
+                CHECK(rtp_tree_trace(t, threads, &ref, NULL, &err) == RTP_OK);
+                same_image(img, ref, 1e-6, "moved back after a cancelled move");
+                rtp_image_destroy(img);
+                rtp_image_destroy(ref);
+                rtp_tree_destroy(t);
+            }
+    rtp_scene_destroy(s);
+    CHECK(f.live == 0 && f.bad_frees == 0);
+}
+
 /* -------------------------------------------------------------- driver */
 
 /* Runs op with the 1st, 2nd, ... allocation failing until a run meets no
@@ -1038,6 +1126,7 @@ int main(void)
     RUN(test_large_block_untouched);
     RUN(test_cancel_trace);
     RUN(test_cancel_eval);
+    RUN(test_cancel_move);
     cleanup();
     return check_report();
 }
