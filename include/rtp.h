@@ -265,14 +265,17 @@ typedef struct rtp_trace_options {
                            y0 <= y < y1 of the frame (all 0: the frame);
                            the image is the region's; see rtp_tree_merge */
     /* Called now and then from the calling thread with done in [0,1];
-       NULL for none. */
+       NULL for none.  It and cancel must not modify or destroy the scene
+       being traced (rtp_scene_set): the rows traced before and after
+       would belong to two scenes. */
     void (*progress)(void *user, double done);
     void *progress_user;
-    /* Asked now and then from the calling thread (with progress_user, at
-       least as often as progress: after each row of the image done, and
-       before and after the kd-tree's build); nonzero stops the trace as
-       soon as the rows being traced end: RTP_ERR_CANCELLED, nothing made
-       (out-parameters NULL).  NULL: never. */
+    /* Asked now and then from the calling thread (with progress_user):
+       before and after the kd-tree's build and after each row the calling
+       thread traces (with several threads it traces a share of them; with
+       max_depth above 32 it asks as the workers' rows end); nonzero stops
+       the trace as soon as the rows being traced end: RTP_ERR_CANCELLED,
+       nothing made (out-parameters NULL).  NULL: never. */
     int (*cancel)(void *user);
 } rtp_trace_options;
 
@@ -369,6 +372,12 @@ typedef struct rtp_eval_options {
     rtp_stale_mode stale;
     int no_cache;           /* 1: a one-off evaluation: keep no caches for
                                later edits (faster once, slower after) */
+    /* Called now and then from the calling thread with done in [0,1];
+       NULL for none.  It and cancel may not use the tree being evaluated:
+       rtp_tree_set, _add_light, _eval, _eval_into, _trace, _write, _crop
+       and _merge on it return RTP_ERR_ARGUMENT until the evaluation
+       returns (rtp_tree_get_info may be called; rtp_tree_destroy may
+       not). */
     void (*progress)(void *user, double done);
     void *progress_user;
     int incremental;        /* 1: the image given to rtp_tree_eval_into still

@@ -795,6 +795,8 @@ void rtpi_texture_factor(const rtp_scene *s, const rtpi_material *m,
    (rtp_tree in rtp.h).  Sample k's nodes are nodes[start[k] .. start[k+1]). */
 struct rtp_tree {
     rtp_allocator alloc;
+    int busy; /* an evaluation is under way: its progress or cancel
+                 callback must not use the tree (rtpi_tree_busy) */
     rtp_scene *scene;      /* owned copy: parameters are edited here */
     rtpi_material *mats0;  /* materials as traced (names not kept) */
     rtpi_light *lights0;   /* lights as traced (names not kept) */
@@ -1060,5 +1062,11 @@ size_t rtpi_trace_stack(int max_depth);
 
 /* Allocation-size check shared by everything that makes w*h*3 floats. */
 int rtpi_image_size_ok(int width, int height);
+
+/* RTP_ERR_ARGUMENT naming fn when t is in the middle of an evaluation
+   (called from that evaluation's progress or cancel callback: an edit or
+   a write there would be lost or see the tree half changed); else
+   RTP_OK. */
+rtp_status rtpi_tree_busy(const rtp_tree *t, const char *fn, rtp_error *err);
 
 #endif /* RTP_INTERNAL_H */

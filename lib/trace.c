@@ -712,10 +712,19 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
     opt.spd = opt.spd != 0;
     /* (memory_limit 0 is the default; a negative or NaN one had fallen
        back to it silently) */
-    if (opt.max_depth < 0 || opt.width < 0 || opt.height < 0 || opt.threads < 0 ||
-        !(opt.min_weight >= 0.0) || !(opt.memory_limit >= 0.0))
-        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                          "rtp_trace: negative option value");
+    {
+        const char *bad = opt.max_depth < 0           ? "max_depth"
+                          : opt.width < 0              ? "width"
+                          : opt.height < 0             ? "height"
+                          : opt.threads < 0            ? "threads"
+                          : !(opt.min_weight >= 0.0)   ? "min_weight"
+                          : !(opt.memory_limit >= 0.0) ? "memory_limit"
+                                                       : NULL;
+        if (bad)
+            return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                              "%s: option %s is negative or not a number (0: the default)",
+                              tree_out ? "rtp_record" : "rtp_trace", bad);
+    }
     /* (the trace recurses along a ray tree's depth, and a tree file
        holds no deeper tree: 10,000 overflowed a thread's stack) */
     if (opt.max_depth > RTP_MAX_DEPTH)

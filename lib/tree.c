@@ -220,6 +220,16 @@ const rtp_scene *rtp_tree_scene(const rtp_tree *t)
     return t ? t->scene : NULL;
 }
 
+rtp_status rtpi_tree_busy(const rtp_tree *t, const char *fn, rtp_error *err)
+{
+    if (!t->busy)
+        return RTP_OK;
+    return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                      "%s: the tree is being evaluated (called from the evaluation's "
+                      "progress or cancel callback): call it after rtp_tree_eval returns",
+                      fn);
+}
+
 rtp_status rtp_tree_set(rtp_tree *t, const char *key, const char *value,
                         rtp_error *err)
 {
@@ -230,6 +240,8 @@ rtp_status rtp_tree_set(rtp_tree *t, const char *key, const char *value,
     rtp_status st;
     if (!t || !key || !value)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_set: NULL argument");
+    if ((st = rtpi_tree_busy(t, "rtp_tree_set", err)) != RTP_OK)
+        return st;
     s = t->scene;
     /* Keep the parameters so a refused edit leaves the tree unchanged. */
     mats = (rtpi_material *)rtpi_malloc_array(&t->alloc, s->nmats ? s->nmats : 1, sizeof *mats);
@@ -367,6 +379,8 @@ rtp_status rtp_tree_add_light(rtp_tree *t, const double pos[3], rtp_error *err)
     size_t cap0;
     if (!t || !pos)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_add_light: NULL argument");
+    if (t->busy)
+        return rtpi_tree_busy(t, "rtp_tree_add_light", err);
     /* the range a key's value has (rtp_scene_set), so that the position
        rtp_scene_get gives back can be set again */
     if (!(fabs(pos[0]) <= 3.4e38 && fabs(pos[1]) <= 3.4e38 && fabs(pos[2]) <= 3.4e38))
@@ -3193,7 +3207,28 @@ static int cp_eval(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, con
     return 1;
 }
 
+static rtp_status eval_body(rtp_tree *t, const rtp_eval_options *opt, rtp_image *into,
+                            rtp_image **out, rtp_eval_stats *stats, rtp_error *err);
+
+/* eval_body with the tree marked busy while it runs (its callbacks may
+   not use it) */
 static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image *into,
+                            rtp_image **out, rtp_eval_stats *stats, rtp_error *err)
+{
+    rtp_status st;
+    if (out)
+        *out = NULL;
+    if (t && t->busy)
+        return rtpi_tree_busy(t, into ? "rtp_tree_eval_into" : "rtp_tree_eval", err);
+    if (t)
+        t->busy = 1;
+    st = eval_body(t, opt, into, out, stats, err);
+    if (t)
+        t->busy = 0;
+    return st;
+}
+
+static rtp_status eval_body(rtp_tree *t, const rtp_eval_options *opt, rtp_image *into,
                             rtp_image **out, rtp_eval_stats *stats, rtp_error *err)
 {
     rtpi_shade_ctx shade;
@@ -3258,10 +3293,15 @@ static rtp_status eval_impl(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
 #endif
     /* (each had been taken for the default: a stale mode of 7 for keep,
        the approximate one) */
-    if (opt && ((unsigned)opt->stale > RTP_STALE_RETRACE || opt->threads < 0 ||
-                !(opt->memory_limit >= 0.0)))
+    if (opt && (unsigned)opt->stale > RTP_STALE_RETRACE)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "stale: unknown mode %d",
+                          (int)opt->stale);
+    if (opt && opt->threads < 0)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                          "invalid stale mode, thread count or memory limit");
+                          "threads: %d is negative (0 or 1: the calling thread)", opt->threads);
+    if (opt && !(opt->memory_limit >= 0.0))
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                          "memory_limit: negative or not a number (0: the default)");
     mode = opt ? (int)opt->shadows : 0;
     res = opt && opt->shadow_res > 0 ? opt->shadow_res : RTPI_DC_DEFAULT_RES;
     asked_auto = mode == RTP_SHADOWS_AUTO;
@@ -3823,6 +3863,12 @@ rtp_status rtp_tree_trace(const rtp_tree *t, int threads, rtp_image **out,
         *out = NULL;
     if (!t)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_trace: NULL tree");
+    if (t->busy)
+        return rtpi_tree_busy(t, "rtp_tree_trace", err);
+    if (threads < 0)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                          "rtp_tree_trace: threads %d is negative (0 or 1: the calling thread)",
+                          threads);
     memset(&o, 0, sizeof o);
     /* a region's tree: the frame its camera spans, traced over the region */
     o.width = t->full_w;
@@ -3968,6 +4014,8 @@ rtp_status rtp_tree_merge(rtp_tree *const *parts, size_t n, rtp_tree **out, rtp_
     for (i = 0; i < n; i++)
         if (!parts[i])
             return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_merge: NULL tree");
+        else if (parts[i]->busy)
+            return rtpi_tree_busy(parts[i], "rtp_tree_merge", err);
     p0 = parts[0];
     a = &p0->alloc;
     fw = p0->full_w;
@@ -4071,6 +4119,8 @@ rtp_status rtp_tree_crop(const rtp_tree *src, const int region[4], rtp_tree **ou
         *out = NULL;
     if (!src || !region || !out)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_crop: NULL argument");
+    if (src->busy)
+        return rtpi_tree_busy(src, "rtp_tree_crop", err);
     if (!region[0] && !region[1] && !region[2] && !region[3]) {
         /* all 0: the tree's own pixels, as rtp_trace_options.region's
            all 0 is the frame */

@@ -817,6 +817,8 @@ rtp_status rtp_tree_write(const rtp_tree *t, const char *path,
     int to_stdout, special, kind;
     if (!t || !path)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_write: NULL argument");
+    if (t->busy)
+        return rtpi_tree_busy(t, "rtp_tree_write", err);
     if (t->scene->nlights != t->nlights0)
         return rtpi_error(err, RTP_ERR_UNSUPPORTED, path, 0, 0,
                           "a tree with added lights cannot be saved: its trees hold no "

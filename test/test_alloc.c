@@ -884,6 +884,90 @@ static void test_cancel_move(void)
     CHECK(f.live == 0 && f.bad_frees == 0);
 }
 
+/* A UI running its event loop in the progress or cancel callback may
+   call the library on the tree being evaluated: each such call is
+   refused with RTP_ERR_ARGUMENT (an edit there was lost, the call
+   returned OK, and the tree, off its scene by 0.38, could be written),
+   and the evaluation goes on to equal a full trace. */
+typedef struct reenter {
+    rtp_tree *t;
+    int calls;
+    int refused; /* calls refused with RTP_ERR_ARGUMENT */
+} reenter;
+
+static int reenter_cb(void *user)
+{
+    reenter *r = (reenter *)user;
+    rtp_error e;
+    rtp_image *img = NULL;
+    rtp_tree *crop = NULL;
+    const double pos[3] = {1, 1, 1};
+    static const int region[4] = {0, 0, 4, 4};
+    r->calls++;
+    r->refused += rtp_tree_set(r->t, "camera.from", "0.5,-6,2.5", &e) == RTP_ERR_ARGUMENT;
+    r->refused += rtp_tree_set(r->t, "mat.glass.ior", "1.7", &e) == RTP_ERR_ARGUMENT;
+    r->refused += rtp_tree_add_light(r->t, pos, &e) == RTP_ERR_ARGUMENT;
+    r->refused += rtp_tree_eval(r->t, NULL, &img, NULL, &e) == RTP_ERR_ARGUMENT && !img;
+    r->refused += rtp_tree_trace(r->t, 1, &img, NULL, &e) == RTP_ERR_ARGUMENT && !img;
+    r->refused += rtp_tree_write(r->t, tmp_path("reenter.rtp"), NULL, &e) == RTP_ERR_ARGUMENT;
+    r->refused += rtp_tree_crop(r->t, region, &crop, &e) == RTP_ERR_ARGUMENT && !crop;
+    r->refused += rtp_tree_merge(&r->t, 1, &crop, &e) == RTP_ERR_ARGUMENT && !crop;
+    return 0;
+}
+
+static void reenter_progress(void *user, double done)
+{
+    (void)done;
+    (void)reenter_cb(user);
+}
+
+static void test_callback_reentry(void)
+{
+    rtp_scene *s = NULL;
+    rtp_tree *t = NULL;
+    rtp_image *img = NULL, *ref = NULL;
+    rtp_error err;
+    rtp_trace_options o = small_opt();
+    rtp_eval_options eo;
+    reenter r;
+    int cb;
+    o.width = 40;
+    o.height = 30;
+    if (rtp_scene_load(tmp_path("scene.nff"), NULL, &s, &err) != RTP_OK ||
+        rtp_record(s, &o, &t, NULL, NULL, &err) != RTP_OK) {
+        CHECK_MSG(0, "fixture: %s", err.message);
+        rtp_scene_destroy(s);
+        return;
+    }
+    for (cb = 0; cb < 2; cb++) {
+        memset(&r, 0, sizeof r);
+        r.t = t;
+        memset(&eo, 0, sizeof eo);
+        eo.threads = 1;
+        if (cb)
+            eo.progress = reenter_progress;
+        else
+            eo.cancel = reenter_cb;
+        eo.progress_user = &r;
+        /* a class-D edit and a moved light: both callbacks are called */
+        CHECK(rtp_tree_set(t, "mat.glass.ior", cb ? "1.4" : "1.3", &err) == RTP_OK);
+        CHECK(rtp_tree_set(t, "light.lamp.pos", cb ? "2,-3,7" : "-1,-5,4", &err) == RTP_OK);
+        CHECK_MSG(rtp_tree_eval(t, &eo, &img, NULL, &err) == RTP_OK, "%s", err.message);
+        CHECK_MSG(r.calls > 0 && r.refused == 8 * r.calls, "%s: %d of %d calls refused",
+                  cb ? "progress" : "cancel", r.refused, 8 * r.calls);
+        /* nothing the callback asked was done: the tree is its scene's */
+        CHECK(rtp_tree_trace(t, 1, &ref, NULL, &err) == RTP_OK);
+        same_image(img, ref, 1e-6, "evaluated with refused calls from its callback");
+        rtp_image_destroy(img);
+        rtp_image_destroy(ref);
+        img = ref = NULL;
+    }
+    /* and after it, the same calls are taken */
+    CHECK(rtp_tree_set(t, "camera.from", "0.5,-6,2.5", &err) == RTP_OK);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+}
+
 /* -------------------------------------------------------------- driver */
 
 /* Runs op with the 1st, 2nd, ... allocation failing until a run meets no
@@ -1127,6 +1211,7 @@ int main(void)
     RUN(test_cancel_trace);
     RUN(test_cancel_eval);
     RUN(test_cancel_move);
+    RUN(test_callback_reentry);
     cleanup();
     return check_report();
 }
