@@ -372,8 +372,10 @@ typedef struct rtp_eval_options {
     rtp_stale_mode stale;
     int no_cache;           /* 1: a one-off evaluation: keep no caches for
                                later edits (faster once, slower after) */
-    /* Called now and then from the calling thread with done in [0,1];
-       NULL for none.  It and cancel may not use the tree being evaluated:
+    /* Called now and then from the calling thread with done in [0,1]
+       (at most about a thousand times a step: a re-trace, each moved
+       light, the evaluation); NULL for none.  It and cancel may not use
+       the tree being evaluated:
        rtp_tree_set, _add_light, _eval, _eval_into, _trace, _write, _crop
        and _merge on it return RTP_ERR_ARGUMENT until the evaluation
        returns (rtp_tree_get_info may be called; rtp_tree_destroy may

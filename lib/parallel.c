@@ -62,6 +62,20 @@ static void poll_cancel(pool *p)
     }
 }
 
+/* Progress and cancel are called at most about this many times a call:
+   a re-trace's chunks of 64 samples were 16,385 calls for a 1024x1024
+   camera edit, and a UI's progress of 1 ms made that 1.5 s edit 21.9 s
+   on one thread. */
+#define REPORTS 1000
+
+/* Whether `done` rows are worth a report after a report at `last` (a
+   new thousandth, or the end). */
+static int worth_report(const pool *p, int done, int last)
+{
+    return done == p->nrows || last < 0 ||
+           (long long)done * REPORTS / p->nrows != (long long)last * REPORTS / p->nrows;
+}
+
 static void run(job *j)
 {
     pool *p = j->p;
@@ -82,12 +96,12 @@ static void run(job *j)
             pthread_cond_signal(&p->cv);
 #endif
         pool_unlock(p);
-        if (j->is_main && p->progress) {
+        if (j->is_main && worth_report(p, done, p->reported)) {
+            if (p->progress)
+                p->progress(p->progress_user, (double)done / p->nrows);
             p->reported = done;
-            p->progress(p->progress_user, (double)done / p->nrows);
-        }
-        if (j->is_main)
             poll_cancel(p);
+        }
     }
 }
 
@@ -181,7 +195,8 @@ int rtpi_parallel_rows_cancel(int nrows, int nthreads, void *const *ctx, rtpi_ro
             started = start_workers(tid, jobs, 0, nthreads, stack);
             pool_lock(&p);
             while (p.finished < started) {
-                if ((p.progress || p.cancel) && p.done != reported) {
+                if ((p.progress || p.cancel) && p.done != reported &&
+                    worth_report(&p, p.done, reported)) {
                     int d = reported = p.done;
                     pool_unlock(&p);
                     if (p.progress)
