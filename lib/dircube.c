@@ -331,25 +331,18 @@ static void dc_ngon(dc_poly *p, rtpi_v3 c, rtpi_v3 e1, rtpi_v3 e2, double r)
         dc_put(p->v[k], v3_madd(v3_madd(c, e1, R * cs[k][0]), e2, R * cs[k][1]));
 }
 
-/* Can the primitive be hit at all (rtpi_intersect_prim)?  Degenerate
-   triangles, zero spheres and cones without height or radius never are. */
+/* Has rtpi_scene_bounds kept what a move asks of every primitive (the
+   same numbers as made here)? */
+static int dc_kept(const rtp_scene *s)
+{
+    return s->pbounds && s->phit && s->npbounds == rtpi_scene_nprims(s);
+}
+
+/* rtpi_prim_hittable, from the scene's kept flags where rtpi_scene_bounds
+   made them. */
 static int dc_hittable(const rtp_scene *s, uint32_t prim)
 {
-    size_t i = prim;
-    if (i < s->ntris) {
-        const rtpi_tri *t = &s->tris[i];
-        return !rtpi_tri_degenerate(s->pos + 3 * (size_t)t->v[0],
-                                    s->pos + 3 * (size_t)t->v[1],
-                                    s->pos + 3 * (size_t)t->v[2]);
-    }
-    if ((i -= s->ntris) < s->nspheres)
-        return s->spheres[i].r != 0.0f;
-    if ((i -= s->nspheres) < s->ncones) {
-        const rtpi_cone *cn = &s->cones[i];
-        double h = v3_len(v3_sub(v3_from_f(cn->apex), v3_from_f(cn->base)));
-        return h > 0.0 && h < 1e300 && fabs((double)cn->rb) + fabs((double)cn->ra) > 0.0;
-    }
-    return 0;
+    return dc_kept(s) ? s->phit[prim] : rtpi_prim_hittable(s, prim);
 }
 
 /* Polygons (light-relative) whose projections from the light cover the
@@ -664,6 +657,8 @@ static double dc_scale(const rtp_scene *s, rtpi_v3 L)
 {
     double S = fmax(fabs(L.x), fmax(fabs(L.y), fabs(L.z)));
     size_t i, n = rtpi_scene_nprims(s);
+    if (dc_kept(s)) /* (the fold below over the same bounds: their maximum) */
+        return s->pbabs > S ? s->pbabs : S;
     for (i = 0; i < n; i++) {
         double lo[3], hi[3];
         int k;
@@ -753,6 +748,15 @@ static void dc_windows_some(const rtp_scene *s, const unsigned char *sel, unsign
         w->du[f] = w->dv[f] = 2.0 / (double)res;
         w->zbase[f] = 0.0;
         w->zext[f] = 1.0;
+    }
+    if (!sel && dc_kept(s)) {
+        /* every primitive: the bounds rtpi_scene_bounds folded alike */
+        for (k = 0; k < 3; k++) {
+            lo[k] = s->phlo[k];
+            hi[k] = s->phhi[k];
+        }
+        any = s->phany;
+        n = 0;
     }
     for (i = 0; i < n; i++) {
         double pl[3], ph[3];

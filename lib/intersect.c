@@ -520,21 +520,70 @@ static double scene_extent(const rtp_scene *s)
     return m;
 }
 
+int rtpi_prim_hittable(const rtp_scene *s, uint32_t prim)
+{
+    size_t i = prim;
+    if (i < s->ntris) {
+        const rtpi_tri *t = &s->tris[i];
+        return !rtpi_tri_degenerate(s->pos + 3 * (size_t)t->v[0],
+                                    s->pos + 3 * (size_t)t->v[1],
+                                    s->pos + 3 * (size_t)t->v[2]);
+    }
+    if ((i -= s->ntris) < s->nspheres)
+        return s->spheres[i].r != 0.0f;
+    if ((i -= s->nspheres) < s->ncones) {
+        const rtpi_cone *cn = &s->cones[i];
+        double h = v3_len(v3_sub(v3_from_f(cn->apex), v3_from_f(cn->base)));
+        return h > 0.0 && h < 1e300 && fabs((double)cn->rb) + fabs((double)cn->ra) > 0.0;
+    }
+    return 0;
+}
+
 int rtpi_scene_bounds(rtp_scene *s)
 {
     size_t i, n = rtpi_scene_nprims(s);
-    double *b;
+    double *b, m = 0.0;
+    unsigned char *h;
+    int k;
     if (s->pbounds && s->npbounds == n)
         return 0;
     rtpi_free(&s->alloc, s->pbounds);
+    rtpi_free(&s->alloc, s->phit);
     s->pbounds = NULL;
+    s->phit = NULL;
     s->npbounds = 0;
     b = (double *)rtpi_malloc_array(&s->alloc, n ? n : 1, 6 * sizeof *b);
-    if (!b)
+    h = (unsigned char *)rtpi_malloc_array(&s->alloc, n ? n : 1, 1);
+    if (!b || !h) {
+        rtpi_free(&s->alloc, b);
+        rtpi_free(&s->alloc, h);
         return -1;
-    for (i = 0; i < n; i++)
-        rtpi_prim_bounds(s, (uint32_t)i, b + 6 * i, b + 6 * i + 3);
+    }
+    for (k = 0; k < 3; k++) {
+        s->phlo[k] = HUGE_VAL;
+        s->phhi[k] = -HUGE_VAL;
+    }
+    /* (the folds dircube.c made at every move, in the same order and
+       with the same comparisons: the same numbers) */
+    for (i = 0; i < n; i++) {
+        double *lo = b + 6 * i, *hi = lo + 3;
+        rtpi_prim_bounds(s, (uint32_t)i, lo, hi);
+        h[i] = (unsigned char)rtpi_prim_hittable(s, (uint32_t)i);
+        for (k = 0; k < 3; k++) {
+            m = fabs(lo[k]) > m ? fabs(lo[k]) : m;
+            m = fabs(hi[k]) > m ? fabs(hi[k]) : m;
+            if (h[i]) {
+                s->phlo[k] = lo[k] < s->phlo[k] ? lo[k] : s->phlo[k];
+                s->phhi[k] = hi[k] > s->phhi[k] ? hi[k] : s->phhi[k];
+            }
+        }
+    }
+    s->pbabs = m;
+    s->phany = 0;
+    for (i = 0; i < n && !s->phany; i++)
+        s->phany = h[i];
     s->pbounds = b;
+    s->phit = h;
     s->npbounds = n;
     return 0;
 }

@@ -64,6 +64,7 @@ void rtp_scene_destroy(rtp_scene *s)
     rtpi_free(&a, s->cones);
     rtpi_free(&a, s->cframes);
     rtpi_free(&a, s->pbounds);
+    rtpi_free(&a, s->phit);
     rtpi_free(&a, s->mats);
     rtpi_free(&a, s->lights);
     rtpi_free(&a, s->texs);
@@ -999,6 +1000,7 @@ rtp_status rtpi_scene_clone(const rtp_scene *s, rtp_scene **out)
     c->cones = NULL;
     c->cframes = NULL;
     c->pbounds = NULL; /* (made again where needed) */
+    c->phit = NULL;
     c->npbounds = 0;
     c->mats = NULL;
     c->lights = NULL;
