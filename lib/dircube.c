@@ -1524,7 +1524,7 @@ static int lb_tri_hit(const rtp_scene *s, uint32_t prim, const rtpi_ray *ray, lb
    more). */
 static RTPI_FORCE_INLINE uint32_t lb_walk(const rtpi_lightbuf *lb, const rtp_scene *s,
                                           const rtpi_ray *ray, uint32_t skip, size_t k,
-                                          size_t end, rtpi_v3 dn, int round)
+                                          size_t end, rtpi_v3 dn, int round, lb_tri_ray *wp)
 {
     /* tmax = dist (1 - 1e-9): the segment reaches no farther than dist. */
     double lim = ray->tmax * (1.0 + 2e-9) + lb->slack;
@@ -1535,8 +1535,6 @@ static RTPI_FORCE_INLINE uint32_t lb_walk(const rtpi_lightbuf *lb, const rtp_sce
                            : NULL;
     size_t ntris = s->ntris;
     rtpi_hit h;
-    lb_tri_ray w;
-    w.made = -1;
     for (; k < end; k++) {
         uint32_t rank = lb->ref[k];
         const rtpi_lb_cand *cd = &lb->cand[rank];
@@ -1562,7 +1560,7 @@ static RTPI_FORCE_INLINE uint32_t lb_walk(const rtpi_lightbuf *lb, const rtp_sce
             if (dn.x * cn[0] + dn.y * cn[1] + dn.z * cn[2] < cn[3])
                 continue;
         }
-        if (cd->prim < ntris ? lb_tri_hit(s, cd->prim, ray, &w)
+        if (cd->prim < ntris ? lb_tri_hit(s, cd->prim, ray, wp)
                              : rtpi_intersect_prim(s, cd->prim, ray, &h))
             return cd->prim;
     }
@@ -1572,9 +1570,24 @@ static RTPI_FORCE_INLINE uint32_t lb_walk(const rtpi_lightbuf *lb, const rtp_sce
 uint32_t rtpi_lightbuf_occluder(const rtpi_lightbuf *lb, const rtp_scene *s,
                                 const rtpi_ray *ray, uint32_t skip)
 {
+    return rtpi_lightbuf_occluder_first(lb, s, ray, skip, RTPI_NONE);
+}
+
+uint32_t rtpi_lightbuf_occluder_first(const rtpi_lightbuf *lb, const rtp_scene *s,
+                                      const rtpi_ray *ray, uint32_t skip, uint32_t first)
+{
     size_t cell, k;
     rtpi_v3 dn;
     rtpi_hit h;
+    lb_tri_ray w;
+    w.made = -1;
+    if (first != RTPI_NONE) {
+        /* (rtpi_intersect_prim's answer: a triangle that cannot be hit
+           is a degenerate one, which it reports missed) */
+        if (first < s->ntris ? dc_hittable(s, first) && lb_tri_hit(s, first, ray, &w)
+                             : rtpi_intersect_prim(s, first, ray, &h))
+            return first;
+    }
     if (!(ray->tmax > 0.0)) {
         /* The origin is at the light: the direction means nothing; ask
            every candidate (never happens with real hits). */
@@ -1587,8 +1600,8 @@ uint32_t rtpi_lightbuf_occluder(const rtpi_lightbuf *lb, const rtp_scene *s,
     cell = rtpi_dc_wcell(&lb->w, lb->res, dn);
     if (cell == RTPI_DC_ABSENT)
         return RTPI_NONE; /* no primitive can be met in these directions */
-    return lb->cone ? lb_walk(lb, s, ray, skip, lb->off[cell], lb->off[cell + 1], dn, 1)
-                    : lb_walk(lb, s, ray, skip, lb->off[cell], lb->off[cell + 1], dn, 0);
+    return lb->cone ? lb_walk(lb, s, ray, skip, lb->off[cell], lb->off[cell + 1], dn, 1, &w)
+                    : lb_walk(lb, s, ray, skip, lb->off[cell], lb->off[cell + 1], dn, 0, &w);
 }
 
 void rtpi_lightbuf_free(rtpi_lightbuf *lb, const rtp_allocator *a)

@@ -209,6 +209,12 @@ int rtpi_lightbuf_visible(const rtpi_lightbuf *lb, const rtp_scene *s,
    in the way (rtpi_prim_shadows_own). */
 uint32_t rtpi_lightbuf_occluder(const rtpi_lightbuf *lb, const rtp_scene *s,
                                 const rtpi_ray *ray, uint32_t skip);
+/* The same, with primitive `first` (RTPI_NONE: none; not skip) asked
+   before the cell's list: a hit of it is returned as rtpi_intersect_prim
+   would find it, and a triangle's test shares the watertight set-up the
+   list's walk makes (a shadow query's last occluder, rtpi_shadow_cache). */
+uint32_t rtpi_lightbuf_occluder_first(const rtpi_lightbuf *lb, const rtp_scene *s,
+                                      const rtpi_ray *ray, uint32_t skip, uint32_t first);
 
 void rtpi_lightbuf_free(rtpi_lightbuf *lb, const rtp_allocator *a);
 
