@@ -1287,7 +1287,20 @@ static int lb_cells_fn(void *ctx, int part)
     if (lc->phase == 1) {
         if (lo == 0)
             off[1] = 0;
-        for (c = lo; c < hi; c++) {
+        /* (four cells a step: a pass over every cell of the cube, whose
+           loop's own instructions had been half of it; tree 1.3 M cells) */
+        for (c = lo; c + 4 <= hi; c += 4) {
+            uint32_t *o = off + c + 2;
+            d += o[0];
+            o[0] = sum += d;
+            d += o[1];
+            o[1] = sum += d;
+            d += o[2];
+            o[2] = sum += d;
+            d += o[3];
+            o[3] = sum += d;
+        }
+        for (; c < hi; c++) {
             d += off[c + 2];
             sum += d;
             off[c + 2] = sum;
@@ -1314,9 +1327,14 @@ static int lb_cells_fn(void *ctx, int part)
             } else {
                 /* (the rank in a local: ref's stores may alias it for
                    all the compiler knows, which reloaded it an entry) */
-                uint32_t rank = r->rank;
-                for (c = a; c < b; c++)
-                    ref[off[c + 1]++] = rank;
+                uint32_t rank = r->rank, *o = off + 1;
+                /* (two cells a step: the floor's runs in every row) */
+                for (c = a; c + 2 <= b; c += 2) {
+                    ref[o[c]++] = rank;
+                    ref[o[c + 1]++] = rank;
+                }
+                if (c < b)
+                    ref[o[c]++] = rank;
             }
         }
     if (lc->phase == 0)
