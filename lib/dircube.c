@@ -190,7 +190,11 @@ static void dc_spans_conservative(dc_ctx *c, int f, const double uv[][2], int n,
     }
     for (k = 0; k < n; k++) {
         const double *P = uv[k], *Q = uv[k + 1 < n ? k + 1 : 0];
-        double emin = P[1] < Q[1] ? P[1] : Q[1], emax = P[1] < Q[1] ? Q[1] : P[1];
+        /* (the edge in locals, its differences made once: ulo's and
+           uhi's stores may alias uv for all the compiler knows, and it
+           loaded and subtracted them again a row; the same numbers) */
+        const double px = P[0], py = P[1], ex = Q[0] - px, ey = Q[1] - py;
+        double emin = py < Q[1] ? py : Q[1], emax = py < Q[1] ? Q[1] : py;
         int ja = rtpi_dc_wcoord(emin - m, v0, dv, res), jb = rtpi_dc_wcoord(emax + m, v0, dv, res);
         /* (within [j0, j1]: the same mapping of values within vmin - m,
            vmax + m; and a NaN, which every test below fails, maps to
@@ -201,17 +205,17 @@ static void dc_spans_conservative(dc_ctx *c, int f, const double uv[][2], int n,
             /* (the edge rows' slabs reach to infinity: dc_ctx_borders) */
             double lo = blo[j] - m, hi = bhi[j] + m;
             double mn = ulo[j], mx = uhi[j];
-            if (P[1] >= lo && P[1] <= hi) {
-                mn = P[0] < mn ? P[0] : mn;
-                mx = P[0] > mx ? P[0] : mx;
+            if (py >= lo && py <= hi) {
+                mn = px < mn ? px : mn;
+                mx = px > mx ? px : mx;
             }
             if (emin < lo && lo < emax) {
-                double u = P[0] + (Q[0] - P[0]) * ((lo - P[1]) / (Q[1] - P[1]));
+                double u = px + ex * ((lo - py) / ey);
                 mn = u < mn ? u : mn;
                 mx = u > mx ? u : mx;
             }
             if (emin < hi && hi < emax) {
-                double u = P[0] + (Q[0] - P[0]) * ((hi - P[1]) / (Q[1] - P[1]));
+                double u = px + ex * ((hi - py) / ey);
                 mn = u < mn ? u : mn;
                 mx = u > mx ? u : mx;
             }
@@ -224,11 +228,13 @@ static void dc_spans_conservative(dc_ctx *c, int f, const double uv[][2], int n,
            gives them, without dc_row_add's merging (a third of the cost
            of a small triangle's rows) */
         size_t base = c->fbase[f];
+        dc_emit_fn fn = c->emit_fn; /* (not loaded again after each call) */
+        void *user = c->emit_user;
         for (j = j0; j <= j1; j++)
             if (ulo[j] <= uhi[j]) {
                 int i0 = rtpi_dc_wcoord(ulo[j] - m, u0, du, res);
-                c->emit_fn(c->emit_user, base + (size_t)j * (size_t)res + (size_t)i0,
-                           rtpi_dc_wcoord(uhi[j] + m, u0, du, res) - i0 + 1);
+                fn(user, base + (size_t)j * (size_t)res + (size_t)i0,
+                   rtpi_dc_wcoord(uhi[j] + m, u0, du, res) - i0 + 1);
             }
         return;
     }
