@@ -108,20 +108,19 @@ static void basis(rtpi_v3 n, rtpi_v3 *e1, rtpi_v3 *e2)
     *e2 = v3(b, sg + n.y * n.y * a, -n.y);
 }
 
-static int hit_cone(const cone_frame *cfp, const rtpi_ray *ray, rtpi_hit *hit)
+static int hit_cone(const cone_frame *cf, const rtpi_ray *ray, rtpi_hit *hit)
 {
-    const cone_frame cf = *cfp;
     rtpi_v3 mid, o2, f, q0, qd;
     double a, tc, h0, hd, s0, sd, qa, qb, qc, disc, q, r[2];
     int n = 0, i;
-    if (!cf.ok)
+    if (!cf->ok)
         return 0;
     a = v3_dot(ray->d, ray->d);
     if (!(a > 0.0))
         return 0;
     /* As for spheres: move the origin next to the cone's middle first so the
        quadratic sees numbers of the cone's size, then add tc back. */
-    mid = cf.mid;
+    mid = cf->mid;
     tc = v3_dot(v3_sub(mid, ray->o), ray->d) / a;
     o2 = v3_madd(ray->o, ray->d, tc);
     /* A line farther from mid than the cone's bound misses it: most
@@ -132,19 +131,19 @@ static int hit_cone(const cone_frame *cfp, const rtpi_ray *ray, rtpi_hit *hit)
        the quadratic would find a hit on is turned away. */
     {
         rtpi_v3 g = v3_sub(o2, mid);
-        double lim = cf.bound + 1e-9 * fabs(tc) * sqrt(a);
+        double lim = cf->bound + 1e-9 * fabs(tc) * sqrt(a);
         if (v3_dot(g, g) > lim * lim)
             return 0;
     }
-    f = v3_sub(o2, cf.b);
+    f = v3_sub(o2, cf->b);
     /* Point o2 + t d: height h0 + t hd, offset from the axis q0 + t qd,
        cone radius there s0 + t sd.  Surface: |q|^2 = s^2. */
-    h0 = v3_dot(f, cf.w);
-    hd = v3_dot(ray->d, cf.w);
-    q0 = v3_madd(f, cf.w, -h0);
-    qd = v3_madd(ray->d, cf.w, -hd);
-    s0 = cf.rb + cf.k * h0;
-    sd = cf.k * hd;
+    h0 = v3_dot(f, cf->w);
+    hd = v3_dot(ray->d, cf->w);
+    q0 = v3_madd(f, cf->w, -h0);
+    qd = v3_madd(ray->d, cf->w, -hd);
+    s0 = cf->rb + cf->k * h0;
+    sd = cf->k * hd;
     qa = v3_dot(qd, qd) - sd * sd;
     qb = v3_dot(q0, qd) - s0 * sd;
     qc = v3_dot(q0, q0) - s0 * s0;
@@ -173,7 +172,7 @@ static int hit_cone(const cone_frame *cfp, const rtpi_ray *ray, rtpi_hit *hit)
         double hh = h0 + r[i] * hd;
         /* Keeps to the nappe between base and apex (the quadratic also
            describes the mirrored cone beyond the apex). */
-        if (t >= ray->tmin && t <= ray->tmax && hh >= 0.0 && hh <= cf.h) {
+        if (t >= ray->tmin && t <= ray->tmax && hh >= 0.0 && hh <= cf->h) {
             hit->t = t;
             hit->u = hit->v = 0.0;
             return 1;
