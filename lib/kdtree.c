@@ -1044,7 +1044,7 @@ typedef struct kd_item {
 
 /* Prepares the ray and clips it to the root box.
    @return 0 when it misses the box or its interval is empty. */
-static int kd_ray_setup(const rtpi_kdtree *kd, const rtpi_ray *r, kd_ray *kr,
+static RTPI_FORCE_INLINE int kd_ray_setup(const rtpi_kdtree *kd, const rtpi_ray *r, kd_ray *kr,
                         double *t0, double *t1)
 {
     double d[3], a0 = r->tmin, a1 = r->tmax;
