@@ -22,49 +22,11 @@ static int hit_tri(const rtp_scene *s, const rtpi_tri *tr, const rtpi_ray *ray,
 
 /* ------------------------------------------------------------- spheres */
 
-/* Roots of |o + t d - c|^2 = r^2, t0 <= t1.  The origin is first moved to
- * the point of the ray closest to the centre (parameter tc), so the
- * quadratic is solved with numbers of the size of r instead of the size of
- * the distance (Ray Tracing Gems, ch. 7: the discriminant comes from the
- * squared distance of the centre to the line, never from b^2 - ac), and tc
- * is added back.  At distance/radius 1e5 this keeps ~1e-11 relative error
- * in the hit point, where the textbook formula loses all digits. */
-static int sphere_roots(const rtpi_sphere *sp, const rtpi_ray *ray, double *t0,
-                        double *t1)
-{
-    rtpi_v3 c = v3_from_f(sp->c), o2, f, l;
-    double r = fabs((double)sp->r);
-    double a = v3_dot(ray->d, ray->d), tc, b, disc, half;
-    if (!(a > 0.0) || !(r > 0.0))
-        return 0;
-    tc = v3_dot(v3_sub(c, ray->o), ray->d) / a;
-    o2 = v3_madd(ray->o, ray->d, tc);
-    f = v3_sub(o2, c);
-    b = -v3_dot(f, ray->d); /* ~0 by construction; kept for exactness */
-    l = v3_madd(f, ray->d, b / a); /* centre -> closest point of the line */
-    disc = r * r - v3_dot(l, l);
-    if (!(disc >= 0.0))
-        return 0;
-    half = sqrt(disc / a);
-    *t0 = tc + b / a - half;
-    *t1 = tc + b / a + half;
-    return 1;
-}
-
 static int hit_sphere(const rtpi_sphere *sp, const rtpi_ray *ray,
                       rtpi_hit *hit)
 {
-    double t0, t1;
-    if (!sphere_roots(sp, ray, &t0, &t1))
+    if (!rtpi_sphere_t(sp, ray, &hit->t))
         return 0;
-    /* r < 0: only the inside is visible, i.e. only where the ray leaves. */
-    if (sp->r > 0.0f && t0 >= ray->tmin && t0 <= ray->tmax) {
-        hit->t = t0;
-    } else if (t1 >= ray->tmin && t1 <= ray->tmax) {
-        hit->t = t1;
-    } else {
-        return 0;
-    }
     hit->u = hit->v = 0.0;
     return 1;
 }
@@ -108,33 +70,13 @@ static void basis(rtpi_v3 n, rtpi_v3 *e1, rtpi_v3 *e2)
     *e2 = v3(b, sg + n.y * n.y * a, -n.y);
 }
 
-static int hit_cone(const cone_frame *cf, const rtpi_ray *ray, rtpi_hit *hit)
+int rtpi_cone_t(const rtpi_cone_frame *cf, const rtpi_ray *ray, double a, double tc,
+                rtpi_v3 o2, double *t)
 {
-    rtpi_v3 mid, o2, f, q0, qd;
-    double a, tc, h0, hd, s0, sd, qa, qb, qc, disc, q, r[2];
+    rtpi_v3 f, q0, qd;
+    double h0, hd, s0, sd, qa, qb, qc, disc, q, r[2];
     int n = 0, i;
-    if (!cf->ok)
-        return 0;
-    a = v3_dot(ray->d, ray->d);
-    if (!(a > 0.0))
-        return 0;
-    /* As for spheres: move the origin next to the cone's middle first so the
-       quadratic sees numbers of the cone's size, then add tc back. */
-    mid = cf->mid;
-    tc = v3_dot(v3_sub(mid, ray->o), ray->d) / a;
-    o2 = v3_madd(ray->o, ray->d, tc);
-    /* A line farther from mid than the cone's bound misses it: most
-       tests of a shadow ray among cones end here, before the quadratic.
-       o2 is the line's point nearest mid up to rounding of the size of
-       |tc| |d| 2^-52 (its offset from mid and the direction are then not
-       quite perpendicular): 1e-9 |tc| |d| more covers that, so no line
-       the quadratic would find a hit on is turned away. */
-    {
-        rtpi_v3 g = v3_sub(o2, mid);
-        double lim = cf->bound + 1e-9 * fabs(tc) * sqrt(a);
-        if (v3_dot(g, g) > lim * lim)
-            return 0;
-    }
+    (void)a; /* (the quadratic's own coefficients carry the direction) */
     f = v3_sub(o2, cf->b);
     /* Point o2 + t d: height h0 + t hd, offset from the axis q0 + t qd,
        cone radius there s0 + t sd.  Surface: |q|^2 = s^2. */
@@ -163,22 +105,31 @@ static int hit_cone(const cone_frame *cf, const rtpi_ray *ray, rtpi_hit *hit)
         r[n++] = 0.0; /* qb == 0 and qc == 0: tangent at o2 */
     }
     if (n == 2 && r[1] < r[0]) {
-        double t = r[0];
+        double x = r[0];
         r[0] = r[1];
-        r[1] = t;
+        r[1] = x;
     }
     for (i = 0; i < n; i++) {
-        double t = tc + r[i];
+        double tt = tc + r[i];
         double hh = h0 + r[i] * hd;
         /* Keeps to the nappe between base and apex (the quadratic also
            describes the mirrored cone beyond the apex). */
-        if (t >= ray->tmin && t <= ray->tmax && hh >= 0.0 && hh <= cf->h) {
-            hit->t = t;
-            hit->u = hit->v = 0.0;
+        if (tt >= ray->tmin && tt <= ray->tmax && hh >= 0.0 && hh <= cf->h) {
+            *t = tt;
             return 1;
         }
     }
     return 0;
+}
+
+static int hit_cone(const cone_frame *cf, const rtpi_ray *ray, rtpi_hit *hit)
+{
+    rtpi_v3 o2;
+    double a, tc;
+    if (!rtpi_cone_near(cf, ray, &a, &tc, &o2) || !rtpi_cone_t(cf, ray, a, tc, o2, &hit->t))
+        return 0;
+    hit->u = hit->v = 0.0;
+    return 1;
 }
 
 /* ------------------------------------------------------------ interface */

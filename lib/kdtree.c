@@ -1245,7 +1245,8 @@ static RTPI_FORCE_INLINE uint32_t kd_occluder(const rtpi_kdtree *kd, const rtpi_
     const kd_node *nodes = kd->nodes;
     const float *tri = kd->tri;
     const uint32_t *refs = kd->refs;
-    uint32_t ntris = (uint32_t)kd->ntris;
+    const rtp_scene *s = kd->scene;
+    uint32_t ntris = (uint32_t)kd->ntris, nspheres = (uint32_t)s->nspheres;
     double t0, t1, tmin = ray->tmin, tmax = ray->tmax;
     uint32_t node = 0;
     int sp = 0, wt = !lazy; /* wt: w made */
@@ -1279,9 +1280,17 @@ static RTPI_FORCE_INLINE uint32_t kd_occluder(const rtpi_kdtree *kd, const rtpi_
                     if (rtpi_wt_tri(&w, v, v + 3, v + 6, tmin, tmax, &t, &u,
                                     &v2))
                         return prim;
-                } else {
-                    rtpi_hit h;
-                    if (rtpi_intersect_prim(kd->scene, prim, ray, &h))
+                } else if (prim - ntris < nspheres) {
+                    double t;
+                    if (rtpi_sphere_t(&s->spheres[prim - ntris], ray, &t))
+                        return prim;
+                } else if (prim - ntris - nspheres < s->ncones) {
+                    /* (a cone's first test inline: most end there) */
+                    const rtpi_cone_frame *cf = &s->cframes[prim - ntris - nspheres];
+                    rtpi_v3 o2;
+                    double a, tc, t;
+                    if (rtpi_cone_near(cf, ray, &a, &tc, &o2) &&
+                        rtpi_cone_t(cf, ray, a, tc, o2, &t))
                         return prim;
                 }
             }
