@@ -1098,12 +1098,14 @@ static RTPI_FORCE_INLINE int kd_ray_setup(const rtpi_kdtree *kd, const rtpi_ray 
    meet, pushing the far children it will need later.  One interior step:
    a plane crossed outside the interval (widened by the slack) leaves one
    child, else both are visited, the near one first; a ray parallel to
-   the plane stays on its side, or runs in it and visits both.
+   the plane stays on its side, or runs in it and visits both.  par: 0
+   where kr->par is 0 (the direction is 0 on no axis: nearly every ray),
+   which leaves its test out of each step.
    @return the leaf's index. */
 static RTPI_FORCE_INLINE uint32_t kd_descend(const kd_node *nodes,
                                              const kd_ray *kr, uint32_t node,
                                              double *t0p, double *t1p,
-                                             kd_item *stack, int *spp)
+                                             kd_item *stack, int *spp, int par)
 {
     double t0 = *t0p, t1 = *t1p;
     int sp = *spp;
@@ -1115,7 +1117,7 @@ static RTPI_FORCE_INLINE uint32_t kd_descend(const kd_node *nodes,
         if (ax == 3)
             break;
         KD_CNT(0);
-        if (kr->par >> ax & 1) {
+        if (par && (kr->par >> ax & 1)) {
             double dd = split - kr->o[ax];
             if (dd > kr->tol[ax]) {
                 node = below;
@@ -1174,7 +1176,8 @@ int rtpi_kd_intersect(const rtpi_kdtree *kd, const rtpi_ray *ray,
     if (!kd_ray_setup(kd, ray, &kr, &t0, &t1) || !rtpi_wt_setup(&w, ray))
         return 0;
     for (;;) {
-        node = kd_descend(nodes, &kr, node, &t0, &t1, stack, &sp);
+        node = kr.par ? kd_descend(nodes, &kr, node, &t0, &t1, stack, &sp, 1)
+                      : kd_descend(nodes, &kr, node, &t0, &t1, stack, &sp, 0);
         KD_CNT(1);
         {
             const kd_node *nd = &nodes[node];
@@ -1259,7 +1262,8 @@ static RTPI_FORCE_INLINE uint32_t kd_occluder(const rtpi_kdtree *kd, const rtpi_
     if (!lazy)
         rtpi_wt_make(&w, ray);
     for (;;) {
-        node = kd_descend(nodes, &kr, node, &t0, &t1, stack, &sp);
+        node = kr.par ? kd_descend(nodes, &kr, node, &t0, &t1, stack, &sp, 1)
+                      : kd_descend(nodes, &kr, node, &t0, &t1, stack, &sp, 0);
         KD_CNT(1);
         {
             const kd_node *nd = &nodes[node];
