@@ -3,6 +3,7 @@
  * software or by OSMesa (dircube.c, osmesa.c). */
 #include "shadow.h"
 #include "dircube.h"
+#include "kdtree.h"
 
 /* Item-buffer modes: a primitive narrower than SH_THIN_CELLS cells of the
    item buffer may slip between its samples, so such primitives are left
@@ -252,9 +253,19 @@ int rtpi_shadow_visible_cached(const rtpi_shadow *sh, rtpi_shadow_cache *c, cons
            asks, and every exact mode's lists would hold it (the kd-tree's
            too: the same intersection tests).  Not the point's own
            primitive, which the queries may leave out (sh_visible). */
-        rtpi_hit h;
+        const rtp_scene *s = sh->s;
+        uint32_t q = c->last - 1u;
+        int hit;
         r = rtpi_shadow_ray(o, sh->light);
-        if (rtpi_intersect_prim(sh->s, c->last - 1u, &r, &h))
+        if (q - s->ntris < s->nspheres) {
+            /* (a sphere inline, as the kd-tree's walk tests it) */
+            double t;
+            hit = rtpi_sphere_t(&s->spheres[q - s->ntris], &r, &t);
+        } else {
+            rtpi_hit h;
+            hit = rtpi_intersect_prim(s, q, &r, &h);
+        }
+        if (hit)
             return 0;
         v = sh_visible(sh, p, o, prim, &r, &occ);
     } else if (c->last && c->last - 1u != prim && sh->mode == RTPI_SHADOW_LIGHTBUF) {
