@@ -25,7 +25,7 @@ static int hit_tri(const rtp_scene *s, const rtpi_tri *tr, const rtpi_ray *ray,
 static int hit_sphere(const rtpi_sphere *sp, const rtpi_ray *ray,
                       rtpi_hit *hit)
 {
-    if (!rtpi_sphere_t(sp, ray, &hit->t))
+    if (!rtpi_sphere_t(sp, ray, v3_dot(ray->d, ray->d), &hit->t))
         return 0;
     hit->u = hit->v = 0.0;
     return 1;
@@ -125,8 +125,8 @@ int rtpi_cone_t(const rtpi_cone_frame *cf, const rtpi_ray *ray, double a, double
 static int hit_cone(const cone_frame *cf, const rtpi_ray *ray, rtpi_hit *hit)
 {
     rtpi_v3 o2;
-    double a, tc;
-    if (!rtpi_cone_near(cf, ray, &a, &tc, &o2) || !rtpi_cone_t(cf, ray, a, tc, o2, &hit->t))
+    double a = v3_dot(ray->d, ray->d), tc;
+    if (!rtpi_cone_near(cf, ray, a, &tc, &o2) || !rtpi_cone_t(cf, ray, a, tc, o2, &hit->t))
         return 0;
     hit->u = hit->v = 0.0;
     return 1;

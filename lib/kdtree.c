@@ -1251,6 +1251,7 @@ static RTPI_FORCE_INLINE uint32_t kd_occluder(const rtpi_kdtree *kd, const rtpi_
     const rtp_scene *s = kd->scene;
     uint32_t ntris = (uint32_t)kd->ntris, nspheres = (uint32_t)s->nspheres;
     double t0, t1, tmin = ray->tmin, tmax = ray->tmax;
+    const double dd = v3_dot(ray->d, ray->d); /* (spheres' and cones' a) */
     uint32_t node = 0;
     int sp = 0, wt = !lazy; /* wt: w made */
 
@@ -1286,15 +1287,15 @@ static RTPI_FORCE_INLINE uint32_t kd_occluder(const rtpi_kdtree *kd, const rtpi_
                         return prim;
                 } else if (prim - ntris < nspheres) {
                     double t;
-                    if (rtpi_sphere_t(&s->spheres[prim - ntris], ray, &t))
+                    if (rtpi_sphere_t(&s->spheres[prim - ntris], ray, dd, &t))
                         return prim;
                 } else if (prim - ntris - nspheres < s->ncones) {
                     /* (a cone's first test inline: most end there) */
                     const rtpi_cone_frame *cf = &s->cframes[prim - ntris - nspheres];
                     rtpi_v3 o2;
-                    double a, tc, t;
-                    if (rtpi_cone_near(cf, ray, &a, &tc, &o2) &&
-                        rtpi_cone_t(cf, ray, a, tc, o2, &t))
+                    double tc, t;
+                    if (rtpi_cone_near(cf, ray, dd, &tc, &o2) &&
+                        rtpi_cone_t(cf, ray, dd, tc, o2, &t))
                         return prim;
                 }
             }

@@ -144,11 +144,11 @@ static inline int rtpi_tri_degenerate(const float *p0, const float *p1,
  * is added back.  At distance/radius 1e5 this keeps ~1e-11 relative error
  * in the hit point, where the textbook formula loses all digits. */
 static RTPI_FORCE_INLINE int rtpi_sphere_roots(const rtpi_sphere *sp, const rtpi_ray *ray,
-                                               double *t0, double *t1)
+                                               double a, double *t0, double *t1)
 {
     rtpi_v3 c = v3_from_f(sp->c), o2, f, l;
     double r = fabs((double)sp->r);
-    double a = v3_dot(ray->d, ray->d), tc, b, disc, half;
+    double tc, b, disc, half;
     if (!(a > 0.0) || !(r > 0.0))
         return 0;
     tc = v3_dot(v3_sub(c, ray->o), ray->d) / a;
@@ -165,15 +165,17 @@ static RTPI_FORCE_INLINE int rtpi_sphere_roots(const rtpi_sphere *sp, const rtpi
     return 1;
 }
 
-/* Where ray meets sphere sp within [tmin, tmax]: 1 with *t, else 0.
-   Here, not in intersect.c alone, so that a shadow ray's walk through
-   the kd-tree tests spheres inline, by this very code (the call through
-   rtpi_intersect_prim was a fifth of a sphere's test). */
-static RTPI_FORCE_INLINE int rtpi_sphere_t(const rtpi_sphere *sp, const rtpi_ray *ray,
+/* Where ray meets sphere sp within [tmin, tmax]: 1 with *t, else 0.  a:
+   v3_dot(ray->d, ray->d), made once a ray by the callers that test many
+   primitives (a tenth of a sphere's test).  Here, not in intersect.c
+   alone, so that a shadow ray's walk through the kd-tree tests spheres
+   inline, by this very code (the call through rtpi_intersect_prim was a
+   fifth of a sphere's test). */
+static RTPI_FORCE_INLINE int rtpi_sphere_t(const rtpi_sphere *sp, const rtpi_ray *ray, double a,
                                            double *t)
 {
     double t0, t1;
-    if (!rtpi_sphere_roots(sp, ray, &t0, &t1))
+    if (!rtpi_sphere_roots(sp, ray, a, &t0, &t1))
         return 0;
     /* r < 0: only the inside is visible, i.e. only where the ray leaves. */
     if (sp->r > 0.0f && t0 >= ray->tmin && t0 <= ray->tmax) {
@@ -188,24 +190,24 @@ static RTPI_FORCE_INLINE int rtpi_sphere_t(const rtpi_sphere *sp, const rtpi_ray
 
 /* A cone's (frame cf's) first test for ray: 0 where the cone or the
    direction is degenerate or the ray's line passes farther from the
-   cone's middle than its bound, so the ray misses it; else 1 with
-   a = d.d, tc and o2 = o + tc d, the line's point nearest the middle.
-   hit_cone (intersect.c) starts with it, and shadow rays in the kd-tree
-   ask it inline before that call (most of their cones end here). */
+   cone's middle than its bound, so the ray misses it; else 1 with tc
+   and o2 = o + tc d, the line's point nearest the middle.  a:
+   v3_dot(ray->d, ray->d) (as for rtpi_sphere_t).  hit_cone
+   (intersect.c) starts with it, and shadow rays in the kd-tree ask it
+   inline before rtpi_cone_t (most of their cones end here). */
 static RTPI_FORCE_INLINE int rtpi_cone_near(const rtpi_cone_frame *cf, const rtpi_ray *ray,
-                                            double *a, double *tc, rtpi_v3 *o2)
+                                            double a, double *tc, rtpi_v3 *o2)
 {
     rtpi_v3 mid, g;
     double lim;
     if (!cf->ok)
         return 0;
-    *a = v3_dot(ray->d, ray->d);
-    if (!(*a > 0.0))
+    if (!(a > 0.0))
         return 0;
     /* As for spheres: move the origin next to the cone's middle first so the
        quadratic sees numbers of the cone's size, then add tc back. */
     mid = cf->mid;
-    *tc = v3_dot(v3_sub(mid, ray->o), ray->d) / *a;
+    *tc = v3_dot(v3_sub(mid, ray->o), ray->d) / a;
     *o2 = v3_madd(ray->o, ray->d, *tc);
     /* A line farther from mid than the cone's bound misses it: most
        tests of a shadow ray among cones end here, before the quadratic.
@@ -214,7 +216,7 @@ static RTPI_FORCE_INLINE int rtpi_cone_near(const rtpi_cone_frame *cf, const rtp
        quite perpendicular): 1e-9 |tc| |d| more covers that, so no line
        the quadratic would find a hit on is turned away. */
     g = v3_sub(*o2, mid);
-    lim = cf->bound + 1e-9 * fabs(*tc) * sqrt(*a);
+    lim = cf->bound + 1e-9 * fabs(*tc) * sqrt(a);
     return !(v3_dot(g, g) > lim * lim);
 }
 

@@ -260,7 +260,7 @@ int rtpi_shadow_visible_cached(const rtpi_shadow *sh, rtpi_shadow_cache *c, cons
         if (q - s->ntris < s->nspheres) {
             /* (a sphere inline, as the kd-tree's walk tests it) */
             double t;
-            hit = rtpi_sphere_t(&s->spheres[q - s->ntris], &r, &t);
+            hit = rtpi_sphere_t(&s->spheres[q - s->ntris], &r, v3_dot(r.d, r.d), &t);
         } else {
             rtpi_hit h;
             hit = rtpi_intersect_prim(s, q, &r, &h);
