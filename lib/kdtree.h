@@ -25,7 +25,9 @@
 /* A ray prepared for the watertight test: the axis where the direction is
    largest becomes z, and the shear that maps the direction onto +z. */
 typedef struct rtpi_wt_ray {
-    double o[3];
+    double ox, oy, oz; /* the origin's coordinates on axes kx, ky, kz (read
+                          by each triangle's test: by index they were
+                          reloaded there, 4 instructions of its 80) */
     double sx, sy, sz;
     int kx, ky, kz;
 } rtpi_wt_ray;
@@ -64,9 +66,12 @@ static inline void rtpi_wt_make(rtpi_wt_ray *w, const rtpi_ray *r)
     w->sx = d[kx] / d[kz];
     w->sy = d[ky] / d[kz];
     w->sz = 1.0 / d[kz];
-    w->o[0] = r->o.x;
-    w->o[1] = r->o.y;
-    w->o[2] = r->o.z;
+    {
+        const double o[3] = {r->o.x, r->o.y, r->o.z};
+        w->ox = o[kx];
+        w->oy = o[ky];
+        w->oz = o[kz];
+    }
 }
 
 /* @return 0 when the direction is zero or not finite (nothing can be hit). */
@@ -92,7 +97,7 @@ static RTPI_FORCE_INLINE int rtpi_wt_tri(const rtpi_wt_ray *w, const float *p0,
                               double tmax, double *t, double *u, double *v)
 {
     const int kx = w->kx, ky = w->ky, kz = w->kz;
-    const double ox = w->o[kx], oy = w->o[ky], oz = w->o[kz];
+    const double ox = w->ox, oy = w->oy, oz = w->oz;
     double az = p0[kz] - oz, bz = p1[kz] - oz, cz = p2[kz] - oz;
     double ax = (p0[kx] - ox) - w->sx * az, ay = (p0[ky] - oy) - w->sy * az;
     double bx = (p1[kx] - ox) - w->sx * bz, by = (p1[ky] - oy) - w->sy * bz;
