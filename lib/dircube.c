@@ -1727,6 +1727,39 @@ void rtpi_lightbuf_free(rtpi_lightbuf *lb, const rtp_allocator *a)
     lb->plane = lb->cone = NULL;
 }
 
+rtp_status rtpi_tri_planes(const rtp_scene *s, rtpi_v3 light, const rtp_allocator *a,
+                           double **out, double *scale, rtp_error *err)
+{
+    size_t i;
+    *out = NULL;
+    *scale = 0.0;
+    if (!s->ntris)
+        return RTP_OK;
+    *out = (double *)rtpi_malloc_array(a, 4 * s->ntris, sizeof **out);
+    if (!*out)
+        return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+    *scale = dc_scale(s, light);
+    for (i = 0; i < s->ntris; i++) {
+        double q[5], *o = *out + 4 * i, sg;
+        lb_plane(s, (uint32_t)i, light, *scale, q);
+        if (q[4] == 0.0) { /* no test: n.o > inf never holds */
+            o[0] = o[1] = o[2] = 0.0;
+            o[3] = HUGE_VAL;
+            continue;
+        }
+        /* Turned to the light's side (negating n and n.p0 is exact), the
+           margin added to n.p0: n.o > n.p0 + t, the sum's rounding
+           (~1e-16 of it) far below t (1e-9 S |n|, against n.p0's at most
+           ~1.7 S |n|), so lb_plane's argument holds unchanged. */
+        sg = q[4] > 0.0 ? 1.0 : -1.0;
+        o[0] = sg * q[0];
+        o[1] = sg * q[1];
+        o[2] = sg * q[2];
+        o[3] = sg * q[3] + fabs(q[4]);
+    }
+    return RTP_OK;
+}
+
 /* -------------------------------------------------------- item buffer */
 
 /* The ITEMBUF rule (rtpi_itembuf_visible; shadow.c adds the light

@@ -218,6 +218,18 @@ uint32_t rtpi_lightbuf_occluder_first(const rtpi_lightbuf *lb, const rtp_scene *
 
 void rtpi_lightbuf_free(rtpi_lightbuf *lb, const rtp_allocator *a);
 
+/* The light buffer's plane test (rtpi_lightbuf.plane) for every
+   triangle of s and a light at `light`, by primitive, 4 doubles each: n
+   and m, where n.o > m for a shadow ray's origin o (within *scale on
+   every axis: the scene's and light's largest |coordinate|, as
+   rtpi_lightbuf.scale) says that o and the light lie on one side of the
+   triangle's plane, each farther from it than the watertight test's
+   rounding could bridge: the ray misses the triangle (n = 0, m = inf
+   where that cannot be told).  For shadow rays through the kd-tree
+   (rtpi_kd_occluder_planes).  *out NULL where s has no triangles. */
+rtp_status rtpi_tri_planes(const rtp_scene *s, rtpi_v3 light, const rtp_allocator *a,
+                           double **out, double *scale, rtp_error *err);
+
 /* -------------------------------------------------------- item buffer */
 
 /* The item buffer's cells sample the ray through their centres,

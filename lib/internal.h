@@ -490,6 +490,13 @@ int rtpi_kd_intersect(const rtpi_kdtree *kd, const rtpi_ray *ray,
 int rtpi_kd_occluded(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t skip);
 /* The same, naming the first primitive found in the way (RTPI_NONE: none). */
 uint32_t rtpi_kd_occluder(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t skip);
+/* The same for a shadow ray towards the light that rtpi_tri_planes made
+   planes and scale for (planes NULL: none): a triangle whose plane has
+   the light and the ray's origin on one side, by the light buffer's
+   margin, is not tested (the segment between them misses it: the same
+   answer). */
+uint32_t rtpi_kd_occluder_planes(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t skip,
+                                 const double *planes, double scale);
 
 /* ------------------------------------------------------------- ray trees */
 

@@ -1239,8 +1239,10 @@ int rtpi_kd_intersect(const rtpi_kdtree *kd, const rtpi_ray *ray,
    mostly of spheres and cones, whose shadow rays may test none), else at
    once (a test for it at every triangle cost mesh scenes 5% of a shadow
    ray: tetra). */
+/* pl: rtpi_tri_planes' planes, the ray's origin within their scale, or
+   NULL. */
 static RTPI_FORCE_INLINE uint32_t kd_occluder(const rtpi_kdtree *kd, const rtpi_ray *ray,
-                                              uint32_t skip, int lazy)
+                                              uint32_t skip, int lazy, const double *pl)
 {
     kd_item stack[KD_DEPTH_CAP + 4];
     kd_ray kr;
@@ -1278,6 +1280,15 @@ static RTPI_FORCE_INLINE uint32_t kd_occluder(const rtpi_kdtree *kd, const rtpi_
                 if (prim < ntris) {
                     const float *v = tri + 9 * (size_t)prim;
                     double t, u, v2;
+                    if (pl) {
+                        /* the light on one side of its plane, the
+                           origin too: missed (a terrain's shadow rays
+                           leave half its tests so; as
+                           rtpi_lightbuf_occluder's lists ask them) */
+                        const double *q = pl + 4 * (size_t)prim;
+                        if (q[0] * ray->o.x + q[1] * ray->o.y + q[2] * ray->o.z > q[3])
+                            continue;
+                    }
                     if (lazy && !wt) {
                         rtpi_wt_make(&w, ray);
                         wt = 1;
@@ -1313,8 +1324,21 @@ uint32_t rtpi_kd_occluder(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t s
 {
     const rtp_scene *s = kd->scene;
     if (s->ntris < s->nspheres + s->ncones)
-        return kd_occluder(kd, ray, skip, 1);
-    return kd_occluder(kd, ray, skip, 0);
+        return kd_occluder(kd, ray, skip, 1, NULL);
+    return kd_occluder(kd, ray, skip, 0, NULL);
+}
+
+uint32_t rtpi_kd_occluder_planes(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t skip,
+                                 const double *planes, double scale)
+{
+    /* the planes' test holds for origins within the scale (lb_plane in
+       dircube.c) */
+    if (!planes || !(fabs(ray->o.x) <= scale && fabs(ray->o.y) <= scale &&
+                     fabs(ray->o.z) <= scale))
+        return rtpi_kd_occluder(kd, ray, skip);
+    if (kd->scene->ntris < kd->scene->nspheres + kd->scene->ncones)
+        return kd_occluder(kd, ray, skip, 1, planes);
+    return kd_occluder(kd, ray, skip, 0, planes);
 }
 
 int rtpi_kd_occluded(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t skip)

@@ -39,6 +39,11 @@ struct rtpi_shadow {
     unsigned char *thin; /* per primitive: 1 if in lb */
     uint64_t *thin_cells; /* bit c: lb's cell c lists a thin primitive */
     double limit;         /* bytes the light buffers may list (HUGE_VAL: no bound) */
+    /* EXACT: rtpi_tri_planes for the light (32 bytes a triangle while
+       the light's queries run: a lit shadow ray among a terrain's
+       triangles tests most of them in vain otherwise) */
+    double *planes;
+    double pscale;
 };
 
 /* Marks the cells of the thin light buffer whose lists are not empty.  A
@@ -158,6 +163,8 @@ rtp_status rtpi_shadow_create_mt(const rtp_scene *s, const rtpi_kdtree *kd, rtpi
     case RTPI_SHADOW_EXACT:
         break;
     }
+    if (st == RTP_OK && sh->mode == RTPI_SHADOW_EXACT)
+        st = rtpi_tri_planes(s, light, a, &sh->planes, &sh->pscale, err);
     if (st != RTP_OK) {
         rtpi_shadow_destroy(sh);
         return st;
@@ -226,7 +233,8 @@ static RTPI_FORCE_INLINE int sh_visible(const rtpi_shadow *sh, rtpi_v3 p, rtpi_v
     }
     if (sh->mode == RTPI_SHADOW_LIGHTBUF)
         return (*occ = rtpi_lightbuf_occluder(&sh->lb, sh->s, r, skip)) == RTPI_NONE;
-    return (*occ = rtpi_kd_occluder(sh->kd, r, skip)) == RTPI_NONE;
+    return (*occ = rtpi_kd_occluder_planes(sh->kd, r, skip, sh->planes, sh->pscale)) ==
+           RTPI_NONE;
 }
 
 int rtpi_shadow_visible(const rtpi_shadow *sh, rtpi_v3 p, rtpi_v3 o, uint32_t prim)
@@ -305,5 +313,6 @@ void rtpi_shadow_destroy(rtpi_shadow *sh)
     rtpi_itembuf_free(&sh->ib, &a);
     rtpi_free(&a, sh->thin);
     rtpi_free(&a, sh->thin_cells);
+    rtpi_free(&a, sh->planes);
     rtpi_free(&a, sh);
 }
