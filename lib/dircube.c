@@ -1732,13 +1732,12 @@ rtp_status rtpi_tri_planes(const rtp_scene *s, rtpi_v3 light, const rtp_allocato
 {
     size_t i;
     *out = NULL;
-    *scale = 0.0;
+    *scale = dc_scale(s, light);
     if (!s->ntris)
         return RTP_OK;
     *out = (double *)rtpi_malloc_array(a, 4 * s->ntris, sizeof **out);
     if (!*out)
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
-    *scale = dc_scale(s, light);
     for (i = 0; i < s->ntris; i++) {
         double q[5], *o = *out + 4 * i, sg;
         lb_plane(s, (uint32_t)i, light, *scale, q);
@@ -1756,6 +1755,23 @@ rtp_status rtpi_tri_planes(const rtp_scene *s, rtpi_v3 light, const rtp_allocato
         o[1] = sg * q[1];
         o[2] = sg * q[2];
         o[3] = sg * q[3] + fabs(q[4]);
+    }
+    return RTP_OK;
+}
+
+rtp_status rtpi_round_cones(const rtp_scene *s, rtpi_v3 light, double scale,
+                            const rtp_allocator *a, double **out, rtp_error *err)
+{
+    size_t i, n = s->nspheres + s->ncones;
+    *out = NULL;
+    if (!n)
+        return RTP_OK;
+    *out = (double *)rtpi_malloc_array(a, 4 * n, sizeof **out);
+    if (!*out)
+        return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+    for (i = 0; i < n; i++) {
+        uint32_t prim = (uint32_t)(s->ntris + i);
+        lb_cone(s, prim, light, scale, dc_near(s, prim, light), *out + 4 * i);
     }
     return RTP_OK;
 }

@@ -229,6 +229,13 @@ void rtpi_lightbuf_free(rtpi_lightbuf *lb, const rtp_allocator *a);
    (rtpi_kd_occluder_planes).  *out NULL where s has no triangles. */
 rtp_status rtpi_tri_planes(const rtp_scene *s, rtpi_v3 light, const rtp_allocator *a,
                            double **out, double *scale, rtp_error *err);
+/* The light buffer's cone test (rtpi_lightbuf.cone) for every sphere and
+   cone of s (primitive ntris + i: entry i, 4 doubles) and a light at
+   `light`, scale as rtpi_tri_planes gives it: a shadow ray whose
+   direction d has -d.c < c[3] with the entry's c misses the primitive.
+   *out NULL where s has none. */
+rtp_status rtpi_round_cones(const rtp_scene *s, rtpi_v3 light, double scale,
+                            const rtp_allocator *a, double **out, rtp_error *err);
 
 /* -------------------------------------------------------- item buffer */
 

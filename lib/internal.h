@@ -491,12 +491,13 @@ int rtpi_kd_occluded(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t skip);
 /* The same, naming the first primitive found in the way (RTPI_NONE: none). */
 uint32_t rtpi_kd_occluder(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t skip);
 /* The same for a shadow ray towards the light that rtpi_tri_planes made
-   planes and scale for (planes NULL: none): a triangle whose plane has
-   the light and the ray's origin on one side, by the light buffer's
-   margin, is not tested (the segment between them misses it: the same
-   answer). */
+   planes and scale for, and rtpi_round_cones cones (each NULL: none): a
+   triangle whose plane has the light and the ray's origin on one side,
+   by the light buffer's margin, or a sphere or cone outside the cone of
+   directions it can be hit in, is not tested (the ray misses it: the
+   same answer). */
 uint32_t rtpi_kd_occluder_planes(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t skip,
-                                 const double *planes, double scale);
+                                 const double *planes, const double *cones, double scale);
 
 /* ------------------------------------------------------------- ray trees */
 

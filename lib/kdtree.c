@@ -1240,9 +1240,10 @@ int rtpi_kd_intersect(const rtpi_kdtree *kd, const rtpi_ray *ray,
    once (a test for it at every triangle cost mesh scenes 5% of a shadow
    ray: tetra). */
 /* pl: rtpi_tri_planes' planes, the ray's origin within their scale, or
-   NULL. */
+   NULL; pc: rtpi_round_cones' cones or NULL. */
 static RTPI_FORCE_INLINE uint32_t kd_occluder(const rtpi_kdtree *kd, const rtpi_ray *ray,
-                                              uint32_t skip, int lazy, const double *pl)
+                                              uint32_t skip, int lazy, const double *pl,
+                                              const double *pc)
 {
     kd_item stack[KD_DEPTH_CAP + 4];
     kd_ray kr;
@@ -1254,6 +1255,7 @@ static RTPI_FORCE_INLINE uint32_t kd_occluder(const rtpi_kdtree *kd, const rtpi_
     uint32_t ntris = (uint32_t)kd->ntris, nspheres = (uint32_t)s->nspheres;
     double t0, t1, tmin = ray->tmin, tmax = ray->tmax;
     const double dd = v3_dot(ray->d, ray->d); /* (spheres' and cones' a) */
+    const rtpi_v3 dn = v3_mul(ray->d, -1.0);   /* (the cones' test, as the light buffer's) */
     uint32_t node = 0;
     int sp = 0, wt = !lazy; /* wt: w made */
 
@@ -1296,6 +1298,14 @@ static RTPI_FORCE_INLINE uint32_t kd_occluder(const rtpi_kdtree *kd, const rtpi_
                     if (rtpi_wt_tri(&w, v, v + 3, v + 6, tmin, tmax, &t, &u,
                                     &v2))
                         return prim;
+                } else if (pc && dn.x * pc[4 * (size_t)(prim - ntris)] +
+                                         dn.y * pc[4 * (size_t)(prim - ntris) + 1] +
+                                         dn.z * pc[4 * (size_t)(prim - ntris) + 2] <
+                                     pc[4 * (size_t)(prim - ntris) + 3]) {
+                    /* outside the directions it can be hit in from the
+                       light (lb_cone: a dot product where the test takes
+                       tens of operations and a square root) */
+                    continue;
                 } else if (prim - ntris < nspheres) {
                     double t;
                     if (rtpi_sphere_t(&s->spheres[prim - ntris], ray, dd, &t))
@@ -1324,21 +1334,26 @@ uint32_t rtpi_kd_occluder(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t s
 {
     const rtp_scene *s = kd->scene;
     if (s->ntris < s->nspheres + s->ncones)
-        return kd_occluder(kd, ray, skip, 1, NULL);
-    return kd_occluder(kd, ray, skip, 0, NULL);
+        return kd_occluder(kd, ray, skip, 1, NULL, NULL);
+    return kd_occluder(kd, ray, skip, 0, NULL, NULL);
 }
 
 uint32_t rtpi_kd_occluder_planes(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t skip,
-                                 const double *planes, double scale)
+                                 const double *planes, const double *cones, double scale)
 {
+    const rtp_scene *s = kd->scene;
     /* the planes' test holds for origins within the scale (lb_plane in
        dircube.c) */
-    if (!planes || !(fabs(ray->o.x) <= scale && fabs(ray->o.y) <= scale &&
-                     fabs(ray->o.z) <= scale))
-        return rtpi_kd_occluder(kd, ray, skip);
-    if (kd->scene->ntris < kd->scene->nspheres + kd->scene->ncones)
-        return kd_occluder(kd, ray, skip, 1, planes);
-    return kd_occluder(kd, ray, skip, 0, planes);
+    if (!(fabs(ray->o.x) <= scale && fabs(ray->o.y) <= scale && fabs(ray->o.z) <= scale))
+        planes = NULL;
+    /* (spheres and cones: lazy, as rtpi_kd_occluder) */
+    if (s->ntris < s->nspheres + s->ncones)
+        return cones ? kd_occluder(kd, ray, skip, 1, NULL, cones)
+                     : kd_occluder(kd, ray, skip, 1, NULL, NULL);
+    if (planes)
+        return cones ? kd_occluder(kd, ray, skip, 0, planes, cones)
+                     : kd_occluder(kd, ray, skip, 0, planes, NULL);
+    return rtpi_kd_occluder(kd, ray, skip);
 }
 
 int rtpi_kd_occluded(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t skip)

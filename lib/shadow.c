@@ -43,6 +43,7 @@ struct rtpi_shadow {
        the light's queries run: a lit shadow ray among a terrain's
        triangles tests most of them in vain otherwise) */
     double *planes;
+    double *cones; /* EXACT: rtpi_round_cones for the light */
     double pscale;
 };
 
@@ -165,6 +166,8 @@ rtp_status rtpi_shadow_create_mt(const rtp_scene *s, const rtpi_kdtree *kd, rtpi
     }
     if (st == RTP_OK && sh->mode == RTPI_SHADOW_EXACT)
         st = rtpi_tri_planes(s, light, a, &sh->planes, &sh->pscale, err);
+    if (st == RTP_OK && sh->mode == RTPI_SHADOW_EXACT)
+        st = rtpi_round_cones(s, light, sh->pscale, a, &sh->cones, err);
     if (st != RTP_OK) {
         rtpi_shadow_destroy(sh);
         return st;
@@ -233,8 +236,8 @@ static RTPI_FORCE_INLINE int sh_visible(const rtpi_shadow *sh, rtpi_v3 p, rtpi_v
     }
     if (sh->mode == RTPI_SHADOW_LIGHTBUF)
         return (*occ = rtpi_lightbuf_occluder(&sh->lb, sh->s, r, skip)) == RTPI_NONE;
-    return (*occ = rtpi_kd_occluder_planes(sh->kd, r, skip, sh->planes, sh->pscale)) ==
-           RTPI_NONE;
+    return (*occ = rtpi_kd_occluder_planes(sh->kd, r, skip, sh->planes, sh->cones,
+                                           sh->pscale)) == RTPI_NONE;
 }
 
 int rtpi_shadow_visible(const rtpi_shadow *sh, rtpi_v3 p, rtpi_v3 o, uint32_t prim)
@@ -314,5 +317,6 @@ void rtpi_shadow_destroy(rtpi_shadow *sh)
     rtpi_free(&a, sh->thin);
     rtpi_free(&a, sh->thin_cells);
     rtpi_free(&a, sh->planes);
+    rtpi_free(&a, sh->cones);
     rtpi_free(&a, sh);
 }
