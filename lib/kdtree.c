@@ -1348,7 +1348,7 @@ uint32_t rtpi_kd_occluder_planes(const rtpi_kdtree *kd, const rtpi_ray *ray, uin
         planes = NULL;
     /* (spheres and cones: lazy, as rtpi_kd_occluder) */
     if (s->ntris < s->nspheres + s->ncones)
-        return cones ? kd_occluder(kd, ray, skip, 1, NULL, cones)
+        return cones ? kd_occluder(kd, ray, skip, 1, planes, cones)
                      : kd_occluder(kd, ray, skip, 1, NULL, NULL);
     if (planes)
         return cones ? kd_occluder(kd, ray, skip, 0, planes, cones)
