@@ -676,8 +676,11 @@ static void test_cancel_trace(void)
                     rtp_status st;
                     long live = f.live;
                     /* (the calling thread of two asks after its own rows
-                       alone: a late yes might never be asked) */
-                    if (threads > 1 && ats[i] > 3)
+                       alone, and a relaying one as it sees rows end: on a
+                       busy machine the other threads may trace every row
+                       first, so only the questions on either side of the
+                       kd-tree's build are sure to be asked) */
+                    if ((threads > 1 || deep) && ats[i] > 2)
                         continue;
                     memset(&k, 0, sizeof k);
                     k.at = ats[i];
@@ -711,7 +714,7 @@ static void test_cancel_trace(void)
                         /* (one thread: after each row and on either side of
                            the kd-tree's build; the calling thread of two
                            asks after its own rows) */
-                        CHECK_MSG(threads > 1 || deep ? k.asked >= 3 : k.asked == o.height + 2,
+                        CHECK_MSG(threads > 1 || deep ? k.asked >= 2 : k.asked == o.height + 2,
                                   "threads %d deep %d: asked %ld times", threads, deep, k.asked);
                         /* (a deep trace is another trace: the depth differs) */
                         if (!deep)
