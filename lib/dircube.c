@@ -962,6 +962,8 @@ typedef struct lb_fill {
     size_t nruns, cap;
     const rtp_allocator *a;
     int oom;
+    double room; /* bytes its runs may take (the memory limit's share) */
+    int over;    /* they would take more (oom is set too: the pass stops) */
 } lb_fill;
 
 static void lb_put(lb_fill *lf, size_t cell, int n)
@@ -983,6 +985,13 @@ static void lb_count_grow(lb_fill *lf, size_t cell, int n)
     lb_run *r;
     if (lf->oom)
         return;
+    if (!((double)cap * sizeof *r <= lf->room)) {
+        /* (runs are 16 bytes a primitive a row of cells: 10,000 stacked
+           quads at 4096 cells took 5.1 GB before the lists were counted
+           against a limit of 500 MiB) */
+        lf->over = lf->oom = 1;
+        return;
+    }
     r = cap <= (size_t)-1 / sizeof *r ? (lb_run *)rtpi_realloc(lf->a, lf->runs, cap * sizeof *r)
                                       : NULL;
     if (!r) {
@@ -1499,6 +1508,11 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
         parts[k].r0 = (uint32_t)(nc * (size_t)k / (size_t)np);
         parts[k].r1 = (uint32_t)(nc * (size_t)(k + 1) / (size_t)np);
         parts[k].a = ta;
+        /* the runs within the limit too, less what is made already */
+        parts[k].room = (limit - 4.0 * ((double)ncells + 2.0) -
+                         (double)nc * (sizeof *lb->cand + (lb->plane ? 40.0 : 0.0) +
+                                       (lb->cone ? 32.0 : 0.0))) /
+                        np;
     }
     wk = (lb_worker *)rtpi_malloc_array(a, (size_t)np, sizeof *wk);
     for (nw = 0; wk && nw < np; nw++) {
@@ -1518,8 +1532,22 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
     rtpi_free(a, wk);
     if (ta != a)
         rtpi_locked_alloc_destroy(&la);
-    for (k = 0; k < np; k++)
+    for (k = 0; k < np; k++) {
         total += parts[k].total;
+        if (parts[k].over) {
+            char g[32]; /* '.' whatever the locale */
+            int q;
+            for (q = 0; q < np; q++)
+                rtpi_free(a, parts[q].runs);
+            rtpi_lightbuf_free(lb, a);
+            rtpi_fmt_g(g, sizeof g, 6, limit / 1048576.0);
+            return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
+                              "a light buffer of %d cells a face: counting its lists passed the "
+                              "memory limit of %s MiB (lower its resolution, take --shadows "
+                              "exact, or raise memory_limit: rtp's --memory-limit)",
+                              res, g);
+        }
+    }
     if (!failed && total > 0xffffffffu) {
         for (k = 0; k < np; k++)
             rtpi_free(a, parts[k].runs);

@@ -469,6 +469,19 @@ grep -q '"shadows": "exact"' "$T/flat.json" && ok || bad "auto past the lists' l
 $RTP trace "$T/flat.nff" --size 32x32 --set light.0.pos=0.5,0.5,0 -i "$T/flat3.pfm" -q
 $RTP diff "$T/flat2.pfm" "$T/flat3.pfm" --fail-above max_abs=1e-6 -q && ok || bad "auto past the lists' limit: not exact"
 
+# ... and so do the runs its lists are counted from (16 bytes a primitive a
+# row of cells: 10,000 stacked quads took 5.1 GB under a limit of 500 MiB
+# before the lists' count came): refused while counting, auto exact
+awk 'BEGIN { print "v from 0 -3 2 at 0 0 -1 up 0 0 1 angle 60\nl 0 0 1\nf 0.8 0.6 0.4 0.8 0.2 20 0 1";
+    for (i = 0; i < 400; i++) { z = -1 - i * 0.0001
+        printf "p 4\n-100 -100 %g\n100 -100 %g\n100 100 %g\n-100 100 %g\n", z, z, z, z } }' > "$T/stack.nff"
+$RTP trace "$T/stack.nff" --size 24x24 -o "$T/stack.rtp" -q
+expect_rc 1 $RTP reeval "$T/stack.rtp" --set light.0.pos=0,0,0 --shadows lightbuf:256 --memory-limit 3 -i "$T/stack1.pfm"
+grep -q "light buffer of 256 cells a face: counting its lists passed the memory limit of 3 MiB" "$T/err" &&
+    [ ! -e "$T/stack1.pfm" ] && ok || bad "light buffer runs past --memory-limit: $(cat "$T/err")"
+expect_rc 0 $RTP reeval "$T/stack.rtp" --set light.0.pos=0,0,0 --shadows auto:256 --memory-limit 3 -i "$T/stack2.pfm" --stats "$T/stack.json"
+grep -q '"shadows": "exact"' "$T/stack.json" && ok || bad "auto past the runs' limit: $(cat "$T/stack.json")"
+
 # --params repeated: every file, in turn (the last alone was applied)
 expect_rc 0 $RTP trace $S --size 40x30 --params "$T/a9.txt" --params "$T/kd1.txt" -i "$T/pp1.pfm"
 expect_rc 0 $RTP trace $S --size 40x30 --set ambient=0.9 --set mat.0.kd=0.1 -i "$T/pp2.pfm"
