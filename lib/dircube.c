@@ -954,6 +954,13 @@ typedef struct lb_run {
     uint32_t n, rank;
 } lb_run;
 
+/* The bytes the runs of every part may take (the memory limit less the
+   buffer's other blocks) and have taken, as the parts grow them. */
+typedef struct lb_budget {
+    rtpi_mutex lock;
+    double room, stored;
+} lb_budget;
+
 /* The runs of one part of the candidates (ranks [r0, r1)). */
 typedef struct lb_fill {
     uint32_t rank, r0, r1;
@@ -962,8 +969,10 @@ typedef struct lb_fill {
     size_t nruns, cap;
     const rtp_allocator *a;
     int oom;
-    double room; /* bytes its runs may take (the memory limit's share) */
-    int over;    /* they would take more (oom is set too: the pass stops) */
+    lb_budget *bud;
+    size_t counted; /* runs added to bud->stored */
+    int over;       /* the runs of all parts passed bud->room (oom is set
+                       too: the pass stops) */
 } lb_fill;
 
 static void lb_put(lb_fill *lf, size_t cell, int n)
@@ -985,11 +994,22 @@ static void lb_count_grow(lb_fill *lf, size_t cell, int n)
     lb_run *r;
     if (lf->oom)
         return;
-    if (!((double)cap * sizeof *r <= lf->room)) {
-        /* (runs are 16 bytes a primitive a row of cells: 10,000 stacked
-           quads at 4096 cells took 5.1 GB before the lists were counted
-           against a limit of 500 MiB) */
-        lf->over = lf->oom = 1;
+    /* The runs stored so far, of every part, against the room (runs are
+       16 bytes a primitive a row of cells: 10,000 stacked quads at 4096
+       cells took 5.1 GB before the lists were counted against a limit of
+       500 MiB).  Only runs really made are counted, so a part stops only
+       where the whole pass would pass the room: the verdict is the same
+       for any number of parts (a share of the room each, against their
+       doubled blocks, refused at 100 MiB with two threads what one
+       built); the blocks, doubled as they grow, may take up to twice
+       that for the moment. */
+    rtpi_mutex_lock(&lf->bud->lock);
+    lf->bud->stored += (double)(lf->nruns - lf->counted) * sizeof *r;
+    lf->counted = lf->nruns;
+    lf->over = !(lf->bud->stored <= lf->bud->room);
+    rtpi_mutex_unlock(&lf->bud->lock);
+    if (lf->over) {
+        lf->oom = 1;
         return;
     }
     r = cap <= (size_t)-1 / sizeof *r ? (lb_run *)rtpi_realloc(lf->a, lf->runs, cap * sizeof *r)
@@ -1416,7 +1436,9 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
     rtpi_locked_alloc la;
     const rtp_allocator *ta = a;
     uint64_t total = 0;
-    int np, k, nw = 0, failed = 0;
+    size_t runs = 0;
+    lb_budget bud;
+    int np, k, nw = 0, failed = 0, over = 0;
     unsigned used = 0; /* faces whose cells the runs reach (dc_ctx.faces) */
     double S;
     const unsigned char *hit = dc_kept(s) ? s->phit : NULL; /* (dc_hittable's) */
@@ -1508,11 +1530,17 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
         parts[k].r0 = (uint32_t)(nc * (size_t)k / (size_t)np);
         parts[k].r1 = (uint32_t)(nc * (size_t)(k + 1) / (size_t)np);
         parts[k].a = ta;
-        /* the runs within the limit too, less what is made already */
-        parts[k].room = (limit - 4.0 * ((double)ncells + 2.0) -
-                         (double)nc * (sizeof *lb->cand + (lb->plane ? 40.0 : 0.0) +
-                                       (lb->cone ? 32.0 : 0.0))) /
-                        np;
+        parts[k].bud = &bud;
+    }
+    /* the runs within the limit too, less what is made already */
+    bud.room = limit - 4.0 * ((double)ncells + 2.0) -
+               (double)nc * (sizeof *lb->cand + (lb->plane ? 40.0 : 0.0) + (lb->cone ? 32.0 : 0.0));
+    bud.stored = 0.0;
+    if (rtpi_mutex_init(&bud.lock) != 0) {
+        if (ta != a)
+            rtpi_locked_alloc_destroy(&la);
+        rtpi_lightbuf_free(lb, a);
+        return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory for the light buffer");
     }
     wk = (lb_worker *)rtpi_malloc_array(a, (size_t)np, sizeof *wk);
     for (nw = 0; wk && nw < np; nw++) {
@@ -1532,21 +1560,24 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
     rtpi_free(a, wk);
     if (ta != a)
         rtpi_locked_alloc_destroy(&la);
+    rtpi_mutex_destroy(&bud.lock);
     for (k = 0; k < np; k++) {
         total += parts[k].total;
-        if (parts[k].over) {
-            char g[32]; /* '.' whatever the locale */
-            int q;
-            for (q = 0; q < np; q++)
-                rtpi_free(a, parts[q].runs);
-            rtpi_lightbuf_free(lb, a);
-            rtpi_fmt_g(g, sizeof g, 6, limit / 1048576.0);
-            return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
-                              "a light buffer of %d cells a face: counting its lists passed the "
-                              "memory limit of %s MiB (lower its resolution, take --shadows "
-                              "exact, or raise memory_limit: rtp's --memory-limit)",
-                              res, g);
-        }
+        runs += parts[k].nruns;
+        over |= parts[k].over;
+    }
+    /* (a whole pass: its runs, all made, against the room) */
+    if (over || (!failed && !((double)runs * sizeof(lb_run) <= bud.room))) {
+        char g[32]; /* '.' whatever the locale */
+        for (k = 0; k < np; k++)
+            rtpi_free(a, parts[k].runs);
+        rtpi_lightbuf_free(lb, a);
+        rtpi_fmt_g(g, sizeof g, 6, limit / 1048576.0);
+        return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
+                          "a light buffer of %d cells a face: counting its lists passed the "
+                          "memory limit of %s MiB (lower its resolution, take --shadows exact, or "
+                          "raise memory_limit: rtp's --memory-limit)",
+                          res, g);
     }
     if (!failed && total > 0xffffffffu) {
         for (k = 0; k < np; k++)

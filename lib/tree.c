@@ -661,9 +661,37 @@ static int vis_up_to_date(const rtp_tree *t, size_t i, int kmode, int kres)
    limit: the bytes a light buffer's lists may take; where they would take
    more, `fallback` (the mode was AUTO) takes shadow rays for that light,
    else RTP_ERR_LIMIT. */
+static rtp_status update_visibility_body(rtp_tree *t, int mode, int res, int threads,
+                                         double limit, int fallback, const progress_part *prog,
+                                         rtp_eval_stats *st, rtp_error *err);
+
 static rtp_status update_visibility(rtp_tree *t, int mode, int res, int threads,
                                     double limit, int fallback, const progress_part *prog,
                                     rtp_eval_stats *st, rtp_error *err)
+{
+    int kmode, kres, same;
+    size_t i;
+    rtp_status rs;
+    vis_key(mode, res, &kmode, &kres);
+    same = t->cur_vis && t->cur_mode == kmode && t->cur_res == kres;
+    rs = update_visibility_body(t, mode, res, threads, limit, fallback, prog, st, err);
+    if (rs != RTP_OK && !same && t->cur_vis) {
+        /* The lights decided before it stopped (cancelled, out of memory,
+           over the limit) were decided by this mode, while the mode on
+           file (cur_mode, cur_res) is the last whole call's: as nothing
+           decided, every moved light (an exact evaluation after a
+           cancelled item-buffer one had kept a light's item-buffer
+           bits). */
+        for (i = 0; i < t->cur_nl; i++)
+            if (light_moved(t, i))
+                t->cur_pos[3 * i] = NAN;
+    }
+    return rs;
+}
+
+static rtp_status update_visibility_body(rtp_tree *t, int mode, int res, int threads,
+                                         double limit, int fallback, const progress_part *prog,
+                                         rtp_eval_stats *st, rtp_error *err)
 {
     const int mode_asked = mode;
     rtp_scene *s = t->scene;

@@ -887,6 +887,61 @@ static void test_cancel_move(void)
     CHECK(f.live == 0 && f.bad_frees == 0);
 }
 
+/* A move of two lights by the item buffer cancelled after the first was
+   decided: those decisions are the item buffer's, while the mode on file
+   stayed the last whole evaluation's, and an exact evaluation after it
+   kept them (a moved light decided 1 of 2).  Both are decided anew. */
+static void test_cancel_move_mode(void)
+{
+    rtp_scene *s = NULL;
+    rtp_tree *t = NULL;
+    rtp_image *img = NULL, *ref = NULL;
+    rtp_error err;
+    rtp_trace_options o = small_opt();
+    rtp_eval_options eo;
+    rtp_eval_stats es;
+    asker k;
+    o.width = 40;
+    o.height = 30;
+    if (rtp_scene_load(tmp_path("scene.nff"), NULL, &s, &err) != RTP_OK ||
+        rtp_record(s, &o, &t, NULL, NULL, &err) != RTP_OK) {
+        CHECK_MSG(0, "fixture: %s", err.message);
+        rtp_scene_destroy(s);
+        return;
+    }
+    memset(&eo, 0, sizeof eo);
+    eo.threads = 1;
+    eo.shadows = RTP_SHADOWS_EXACT;
+    CHECK(rtp_tree_set(t, "light.lamp.pos", "-1,-5,4", &err) == RTP_OK);
+    CHECK(rtp_tree_set(t, "light.1.pos", "-2,-4,6", &err) == RTP_OK);
+    CHECK_MSG(rtp_tree_eval(t, &eo, &img, NULL, &err) == RTP_OK, "%s", err.message);
+    rtp_image_destroy(img);
+    img = NULL;
+    /* the item buffer, cancelled before the second light's build: two
+       questions and one a row for the first */
+    memset(&k, 0, sizeof k);
+    k.at = 2 + 30 + 1;
+    eo.shadows = RTP_SHADOWS_ITEMBUF;
+    eo.shadow_res = 8; /* (coarse: its decisions differ from exact ones) */
+    eo.cancel = ask_cancel;
+    eo.progress_user = &k;
+    CHECK(rtp_tree_eval(t, &eo, &img, NULL, &err) == RTP_ERR_CANCELLED);
+    CHECK_MSG(k.asked == k.at, "asked %ld times", k.asked);
+    /* exact again: both lights decided anew, as a full trace */
+    eo.shadows = RTP_SHADOWS_EXACT;
+    eo.shadow_res = 0;
+    eo.cancel = NULL;
+    memset(&es, 0, sizeof es);
+    CHECK_MSG(rtp_tree_eval(t, &eo, &img, &es, &err) == RTP_OK, "%s", err.message);
+    CHECK_MSG(es.moved_lights == 2, "%d of 2 moved lights decided anew", es.moved_lights);
+    CHECK(rtp_tree_trace(t, 1, &ref, NULL, &err) == RTP_OK);
+    same_image(img, ref, 1e-6, "exact after a cancelled item-buffer move");
+    rtp_image_destroy(img);
+    rtp_image_destroy(ref);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+}
+
 /* A UI running its event loop in the progress or cancel callback may
    call the library on the tree being evaluated: each such call is
    refused with RTP_ERR_ARGUMENT (an edit there was lost, the call
@@ -1254,6 +1309,7 @@ int main(void)
     RUN(test_cancel_trace);
     RUN(test_cancel_eval);
     RUN(test_cancel_move);
+    RUN(test_cancel_move_mode);
     RUN(test_callback_reentry);
     RUN(test_progress_calls_bounded);
     cleanup();

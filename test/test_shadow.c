@@ -733,6 +733,61 @@ static void test_bad_arguments(void)
 }
 
 /* OSMesa draws the same item buffer as the software z-buffer. */
+/* Whether a light buffer fits a memory limit does not depend on the
+   threads that count its runs: a share of the limit each, checked on
+   their doubled blocks, refused with two threads (at 6-10x the lists'
+   need) what one thread built. */
+static void test_lightbuf_limit_threads(void)
+{
+    static char text[400000];
+    size_t len = 0;
+    unsigned st = 12345;
+    int i, thr, j, ok[3];
+    rtp_scene *s;
+    len += (size_t)sprintf(text + len, "v\nfrom 0 -9 6\nat 0 0 0\nup 0 0 1\nangle 50\n"
+                                       "hither 0.01\nresolution 8 8\nl 0 0 10\n"
+                                       "f 1 1 1 1 0 0 0 1\n");
+    /* slivers near the light first (the first part's ranks: most runs),
+       then small triangles far below */
+    for (i = 0; i < 600; i++) {
+        double x = -4 + 8.0 * i / 600;
+        len += (size_t)sprintf(text + len, "p 3\n%g -4 5\n%g -4 5\n%g 4 5\n", x, x + 0.0005, x);
+    }
+    for (i = 0; i < 1200; i++) {
+        double x, y;
+        st = st * 1103515245u + 12345u;
+        x = ((st >> 8) % 10000) / 1000.0 - 5;
+        st = st * 1103515245u + 12345u;
+        y = ((st >> 8) % 10000) / 1000.0 - 5;
+        len += (size_t)sprintf(text + len, "p 3\n%g %g 0\n%g %g 0\n%g %g 0\n", x, y, x + 0.001,
+                               y, x, y + 0.001);
+    }
+    s = load(text, len);
+    if (!s || rtpi_scene_bounds(s) != 0) {
+        CHECK(0);
+        rtp_scene_destroy(s);
+        return;
+    }
+    for (j = 0; j < 16; j++) {
+        double lim = 1048576.0 * pow(2.0, j / 3.0); /* 1 .. 32 MiB */
+        for (thr = 1; thr <= 4; thr *= 2) {
+            rtp_allocator a;
+            rtpi_lightbuf lb;
+            rtp_error err;
+            int k = thr == 1 ? 0 : thr == 2 ? 1 : 2;
+            rtpi_allocator_init(&a, NULL);
+            ok[k] = rtpi_lightbuf_build_some(s, v3(0, 0, 10), 256, NULL, 0, thr, lim, &a, &lb,
+                                             &err) == RTP_OK;
+            if (ok[k])
+                rtpi_lightbuf_free(&lb, &a);
+        }
+        CHECK_MSG(ok[0] == ok[1] && ok[0] == ok[2],
+                  "limit %.0f: built with 1, 2, 4 threads: %d %d %d", lim, ok[0], ok[1], ok[2]);
+    }
+    CHECK(ok[0]); /* (32 MiB is enough) */
+    rtp_scene_destroy(s);
+}
+
 /* A light at a pointed cone's tip: the cone's quadratic about its middle
    gave a line passing within ~2e-8 of the tip its mirror image's root, so
    a trace shadowed speckles of the floor (7.8% of pixels 0.36 off the
@@ -1004,6 +1059,7 @@ int main(void)
     RUN(test_lightbuf_threads);
     RUN(test_spd_scene);
     RUN(test_light_at_cone_tip);
+    RUN(test_lightbuf_limit_threads);
     RUN(test_osmesa);
     RUN(test_osmesa_curved);
     return check_report();
