@@ -887,6 +887,26 @@ static void test_cancel_move(void)
     CHECK(f.live == 0 && f.bad_frees == 0);
 }
 
+/* The test scene recorded at w x h on one thread (the library's own
+   allocator): 0, or -1 with a failed check and nothing left. */
+static int recorded(int w, int h, rtp_scene **s, rtp_tree **t)
+{
+    rtp_trace_options o = small_opt();
+    rtp_error err;
+    o.width = w;
+    o.height = h;
+    *s = NULL;
+    *t = NULL;
+    if (rtp_scene_load(tmp_path("scene.nff"), NULL, s, &err) != RTP_OK ||
+        rtp_record(*s, &o, t, NULL, NULL, &err) != RTP_OK) {
+        CHECK_MSG(0, "fixture: %s", err.message);
+        rtp_scene_destroy(*s);
+        *s = NULL;
+        return -1;
+    }
+    return 0;
+}
+
 /* A move of two lights by the item buffer cancelled after the first was
    decided: those decisions are the item buffer's, while the mode on file
    stayed the last whole evaluation's, and an exact evaluation after it
@@ -897,18 +917,11 @@ static void test_cancel_move_mode(void)
     rtp_tree *t = NULL;
     rtp_image *img = NULL, *ref = NULL;
     rtp_error err;
-    rtp_trace_options o = small_opt();
     rtp_eval_options eo;
     rtp_eval_stats es;
     asker k;
-    o.width = 40;
-    o.height = 30;
-    if (rtp_scene_load(tmp_path("scene.nff"), NULL, &s, &err) != RTP_OK ||
-        rtp_record(s, &o, &t, NULL, NULL, &err) != RTP_OK) {
-        CHECK_MSG(0, "fixture: %s", err.message);
-        rtp_scene_destroy(s);
+    if (recorded(40, 30, &s, &t) != 0)
         return;
-    }
     memset(&eo, 0, sizeof eo);
     eo.threads = 1;
     eo.shadows = RTP_SHADOWS_EXACT;
@@ -985,18 +998,11 @@ static void test_callback_reentry(void)
     rtp_tree *t = NULL;
     rtp_image *img = NULL, *ref = NULL;
     rtp_error err;
-    rtp_trace_options o = small_opt();
     rtp_eval_options eo;
     reenter r;
     int cb;
-    o.width = 40;
-    o.height = 30;
-    if (rtp_scene_load(tmp_path("scene.nff"), NULL, &s, &err) != RTP_OK ||
-        rtp_record(s, &o, &t, NULL, NULL, &err) != RTP_OK) {
-        CHECK_MSG(0, "fixture: %s", err.message);
-        rtp_scene_destroy(s);
+    if (recorded(40, 30, &s, &t) != 0)
         return;
-    }
     for (cb = 0; cb < 2; cb++) {
         memset(&r, 0, sizeof r);
         r.t = t;
@@ -1036,18 +1042,11 @@ static void test_progress_calls_bounded(void)
     rtp_tree *t = NULL;
     rtp_image *img = NULL;
     rtp_error err;
-    rtp_trace_options o = small_opt();
     rtp_eval_options eo;
     rtp_eval_stats es;
     asker k;
-    o.width = 320;
-    o.height = 240;
-    if (rtp_scene_load(tmp_path("scene.nff"), NULL, &s, &err) != RTP_OK ||
-        rtp_record(s, &o, &t, NULL, NULL, &err) != RTP_OK) {
-        CHECK_MSG(0, "fixture: %s", err.message);
-        rtp_scene_destroy(s);
+    if (recorded(320, 240, &s, &t) != 0)
         return;
-    }
     memset(&eo, 0, sizeof eo);
     memset(&k, 0, sizeof k);
     memset(&es, 0, sizeof es);
