@@ -1084,6 +1084,9 @@ size_t rtpi_trace_stack(int max_depth);
 /* Allocation-size check shared by everything that makes w*h*3 floats. */
 int rtpi_image_size_ok(int width, int height);
 
+/* RTP_ERR_CANCELLED: the caller's cancel said to stop (trace.c). */
+rtp_status rtpi_cancelled(rtp_error *err);
+
 /* RTP_ERR_ARGUMENT naming fn when t is in the middle of an evaluation
    (called from that evaluation's progress or cancel callback: an edit or
    a write there would be lost or see the tree half changed); else

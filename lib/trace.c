@@ -676,7 +676,7 @@ static rtp_status worker_error(rtp_status st, double limit, const char *what,
 /* sized: opt's width and height are the frame even with spd (a
    builder's tree of corner samples, traced again by rtp_tree_trace);
    otherwise spd is SPD's 512x512 whatever they say, as rtp.h has it. */
-static rtp_status cancelled(rtp_error *err)
+rtp_status rtpi_cancelled(rtp_error *err)
 {
     return rtpi_error(err, RTP_ERR_CANCELLED, NULL, 0, 0, "cancelled by the caller");
 }
@@ -855,7 +855,7 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
     /* (the kd-tree's build of a large mesh takes a second or more: the
        caller's cancel is asked on either side of it) */
     if (opt.cancel && opt.cancel(opt.progress_user)) {
-        st = cancelled(err);
+        st = rtpi_cancelled(err);
         goto done;
     }
     st = rtpi_kd_build_mt(s, &s->alloc, nthreads, &kd, err);
@@ -866,7 +866,7 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
     if ((opt.cancel && opt.cancel(opt.progress_user)) ||
         rtpi_parallel_rows_cancel(sh.gy, nthreads, ctx, trace_row, opt.progress, opt.cancel,
                                   opt.progress_user, rtpi_trace_stack(sh.max_depth)) == 2) {
-        st = cancelled(err);
+        st = rtpi_cancelled(err);
         goto done;
     }
     t2 = now_seconds();
@@ -1110,7 +1110,7 @@ rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int thre
     if ((cancel && cancel(progress_user)) ||
         rtpi_parallel_rows_cancel((int)nchunks, nthreads, ctx, retrace_chunk, progress, cancel,
                                   progress_user, rtpi_trace_stack(sh.max_depth)) == 2) {
-        st = cancelled(err); /* (before the splice: the trees as they were) */
+        st = rtpi_cancelled(err); /* (before the splice: the trees as they were) */
         goto done;
     }
     for (i = 0; i < (size_t)nthreads; i++)

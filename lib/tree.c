@@ -641,11 +641,6 @@ static int part_cancelled(const progress_part *p)
     return p->cancel && p->cancel(p->user);
 }
 
-static rtp_status cancelled_error(rtp_error *err)
-{
-    return rtpi_error(err, RTP_ERR_CANCELLED, NULL, 0, 0, "cancelled by the caller");
-}
-
 /* Whether light i's visibility in t->cur_vis is as mode and res would
    decide it now. */
 static int vis_up_to_date(const rtp_tree *t, size_t i, int kmode, int kres)
@@ -770,7 +765,7 @@ static rtp_status update_visibility_body(rtp_tree *t, int mode, int res, int thr
                buffer's build and after each row: a moved light of a
                large mesh takes seconds) */
             if (part_cancelled(prog))
-                return cancelled_error(err);
+                return rtpi_cancelled(err);
             if (mode != RTP_SHADOWS_EXACT && rtpi_scene_bounds(s) != 0)
                 return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
             /* only shadow rays need the kd-tree; the cubes draw the scene */
@@ -798,7 +793,7 @@ static rtp_status update_visibility_body(rtp_tree *t, int mode, int res, int thr
                 return rs;
             if (part_cancelled(prog)) {
                 rtpi_shadow_destroy(sh);
-                return cancelled_error(err);
+                return rtpi_cancelled(err);
             }
             /* (on the heap: 256 on the stack were a 37 KB frame) */
             vc = (vis_ctx *)rtpi_malloc_array(&t->alloc, (size_t)threads, sizeof *vc);
@@ -844,7 +839,7 @@ static rtp_status update_visibility_body(rtp_tree *t, int mode, int res, int thr
                 rtpi_free(&t->alloc, vc);
                 rtpi_free(&t->alloc, ctx);
                 rtpi_free(&t->alloc, balls);
-                return cancelled_error(err);
+                return rtpi_cancelled(err);
             }
             if (st) {
                 st->moved_lights++;
