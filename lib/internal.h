@@ -978,6 +978,9 @@ struct rtp_tree {
         int live;
     } blocks[16];
     rtp_allocator cube_alloc; /* the tree's allocator through blocks[] */
+    int auto_long;            /* RTP_SHADOWS_AUTO found a light buffer's
+                                 lists too long (tree.c auto_lb_bytes): its
+                                 later moves take shadow rays at once */
 };
 
 /* The memory limit of a trace or re-evaluation given none: 16 GiB. */

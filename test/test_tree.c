@@ -1841,6 +1841,78 @@ static int eval_with(rtp_tree *t, rtp_shadow_mode mode, const char *key, const c
     return rtp_tree_eval(t, &eo, img, st, &err) == RTP_OK ? 0 : -1;
 }
 
+/* RTP_SHADOWS_AUTO takes shadow rays where a light buffer's lists would
+   be long: primitives that overlap as seen from the light list each
+   other in every cell they share (auto_lb_bytes).  600 stacked quads
+   under the light, 96x96: 7.7 hits a primitive, so the light buffer by
+   the hits' rule, but about 820 entries a triangle at 64 cells, 59 a
+   hit; the move, one-off or in a stream, is decided by shadow rays and
+   equals a full trace.  The light asked for by name takes the light
+   buffer all the same. */
+static void test_shadows_auto_overlap(void)
+{
+    const int nq = 600;
+    char *text = (char *)malloc((size_t)nq * 200 + 512);
+    size_t len = 0;
+    rtp_scene *s = NULL, *s2 = NULL;
+    rtp_tree *t = NULL;
+    rtp_image *img = NULL, *full = NULL;
+    rtp_trace_options o;
+    rtp_eval_stats st;
+    rtp_tree_info ti;
+    rtp_diff_stats d;
+    int i, k;
+    if (!text) {
+        CHECK(text != NULL);
+        return;
+    }
+    len += (size_t)sprintf(text + len, "v\nfrom 0 -3 2.5\nat 0 0 0.5\nup 0 0 1\nangle 40\n"
+                                       "hither 0.01\nresolution 96 96\nb 0.1 0.1 0.1\n"
+                                       "l 0.3 0.2 3\nf 0.8 0.6 0.3 0.7 0.3 20 0 1\n");
+    for (i = 0; i < nq; i++) {
+        double z = (double)i / nq, h = 1.0 - 0.5 * i / nq;
+        len += (size_t)sprintf(text + len, "p 4\n%.9g %.9g %.9g\n%.9g %.9g %.9g\n%.9g %.9g %.9g\n"
+                                           "%.9g %.9g %.9g\n",
+                               -h, -h, z, h, -h, z, h, h, z, -h, h, z);
+    }
+    memset(&o, 0, sizeof o);
+    o.width = o.height = 96;
+    if (rtp_scene_load_memory(text, len, "stack.nff", NULL, NULL, &s, NULL) != RTP_OK ||
+        rtp_scene_load_memory(text, len, "stack.nff", NULL, NULL, &s2, NULL) != RTP_OK ||
+        rtp_record(s, &o, &t, NULL, NULL, NULL) != RTP_OK) {
+        CHECK_MSG(0, "stacked quads: cannot load or record");
+        goto out;
+    }
+    rtp_tree_get_info(t, &ti);
+    /* the case is what it claims to be: the hits' rule alone says lightbuf */
+    CHECK_MSG(ti.nodes >= 4 * (ti.triangles + ti.spheres + ti.cones), "%llu nodes, %llu tris",
+              ti.nodes, (unsigned long long)ti.triangles);
+    CHECK(rtp_scene_set(s2, "light.0.pos", "0.5,0.1,3", NULL) == RTP_OK &&
+          rtp_trace(s2, &o, &full, NULL, NULL) == RTP_OK);
+    for (k = 0; k < 3; k++) {
+        /* a one-off move, then a stream's two */
+        const char *pos = k == 1 ? "-0.4,0.3,2.8" : "0.5,0.1,3";
+        CHECK(eval_with(t, RTP_SHADOWS_AUTO, "light.0.pos", pos, &img, &st, k == 0) == 0);
+        CHECK_MSG(st.moved_lights == 1 && st.shadows == RTP_SHADOWS_EXACT,
+                  "stacked quads, move %d: %d moved, mode %d", k, st.moved_lights,
+                  (int)st.shadows);
+        if (k != 1) {
+            CHECK(img && full && rtp_image_diff(img, full, 1e-6, &d, NULL) == RTP_OK);
+            CHECK_MSG(d.max_abs <= 1e-6, "stacked quads, move %d: max_abs %g", k, d.max_abs);
+        }
+    }
+    CHECK(eval_with(t, RTP_SHADOWS_LIGHTBUF, "light.0.pos", "0.4,0.1,3", &img, &st, 0) == 0);
+    CHECK_MSG(st.moved_lights == 1 && st.shadows == RTP_SHADOWS_LIGHTBUF,
+              "stacked quads, lightbuf asked: mode %d", (int)st.shadows);
+out:
+    rtp_image_destroy(img);
+    rtp_image_destroy(full);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+    rtp_scene_destroy(s2);
+    free(text);
+}
+
 /* RTP_SHADOWS_AUTO is exact, and takes the light buffer where the tree
    holds 4 or more recorded hits a primitive, else (few hits: a small
    image of many primitives) the light buffer for a first move of a
@@ -4669,6 +4741,7 @@ int main(void)
     RUN(test_moved_light_exact);
     RUN(test_moved_light_lightbuf);
     RUN(test_shadows_auto);
+    RUN(test_shadows_auto_overlap);
     RUN(test_moved_light_small_spd);
     RUN(test_edit_sequence);
     RUN(test_random_chains);
