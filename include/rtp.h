@@ -401,8 +401,8 @@ typedef struct rtp_eval_options {
     /* Asked now and then from the calling thread (with progress_user)
        while samples are traced again (class-D edits, RTP_STALE_RETRACE, a
        moved camera) and while moved lights' shadows are decided (on
-       either side of a shadow structure's build and after rows): the
-       long evaluations; nonzero stops it as soon as the rows being traced
+       either side of a shadow structure's build, inside a light or item
+       buffer's build but OSMesa's, and after rows): the long evaluations; nonzero stops it as soon as the rows being traced
        or decided end: RTP_ERR_CANCELLED, the tree as it was (the edits
        stay set: the next evaluation traces or decides them).  NULL:
        never. */

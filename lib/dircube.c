@@ -945,7 +945,8 @@ done:
 #define LB_ANG_SCALE 1e-13
 #define LB_ANG_MAX 1e-3
 
-#define LB_MAX_PARTS 16 /* threads of a light buffer's counting pass */
+#define LB_MAX_THREADS 16 /* threads of a light buffer's passes */
+#define LB_MAX_PARTS 64   /* parts of its counting pass (rows: progress and cancel between) */
 
 /* A run of cells [cell, cell + n) listing candidate `rank`: recorded by
    the counting pass so the filling pass need not project again. */
@@ -1257,7 +1258,7 @@ rtp_status rtpi_lightbuf_build(const rtp_scene *s, rtpi_v3 light, int res,
                                const rtp_allocator *a, rtpi_lightbuf *lb,
                                rtp_error *err)
 {
-    return rtpi_lightbuf_build_some(s, light, res, NULL, 0, 1, HUGE_VAL, a, lb, err);
+    return rtpi_lightbuf_build_some(s, light, res, NULL, 0, 1, HUGE_VAL, NULL, a, lb, err);
 }
 
 /* A thread of the counting pass: its projection scratch, and the parts
@@ -1312,45 +1313,79 @@ static inline void lb_clip(const lb_run *r, size_t lo, size_t hi, size_t *a, siz
     *b = r->cell + r->n < hi ? r->cell + r->n : hi;
 }
 
+/* A thread of lb_cells_fn: the ranges, and the caller's progress and
+   cancel, which the calling thread (is_main) asks every LB_POLL_CELLS
+   cells or runs of its range: at 8192 cells a face the bunny's cube
+   passes over 400 M cells, 3 s. */
+typedef struct lb_cells_thr {
+    lb_cells *lc;
+    rtpi_stopper *stp;
+    int is_main;
+} lb_cells_thr;
+
+#define LB_POLL_CELLS ((size_t)1 << 20)
+
 static int lb_cells_fn(void *ctx, int part)
 {
-    lb_cells *lc = (lb_cells *)ctx + part; /* (every thread: the array) */
+    const lb_cells_thr *th = (const lb_cells_thr *)ctx;
+    lb_cells *lc = th->lc + part;
     uint32_t *off = lc->lb->off;
-    size_t lo = lc->lo, hi = lc->hi, i, c;
+    size_t lo = lc->lo, hi = lc->hi, i, c, done = 0, span = hi > lo ? hi - lo : 1, all = 0;
     int k;
     uint32_t *ref = lc->lb->ref, sum = lc->sum, d = 0;
     if (lc->phase == 1) {
+        size_t c1;
         if (lo == 0)
             off[1] = 0;
-        /* (four cells a step: a pass over every cell of the cube, whose
-           loop's own instructions had been half of it; tree 1.3 M cells) */
-        for (c = lo; c + 4 <= hi; c += 4) {
-            uint32_t *o = off + c + 2;
-            d += o[0];
-            o[0] = sum += d;
-            d += o[1];
-            o[1] = sum += d;
-            d += o[2];
-            o[2] = sum += d;
-            d += o[3];
-            o[3] = sum += d;
-        }
-        for (; c < hi; c++) {
-            d += off[c + 2];
-            sum += d;
-            off[c + 2] = sum;
+        for (c = lo; c < hi; c = c1) {
+            c1 = hi - c > LB_POLL_CELLS ? c + LB_POLL_CELLS : hi;
+            if (c > lo && rtpi_stopper_poll(th->stp, th->is_main, (double)(c - lo) / (double)span))
+                return 1;
+            /* (four cells a step: a pass over every cell of the cube, whose
+               loop's own instructions had been half of it; tree 1.3 M cells) */
+            for (; c + 4 <= c1; c += 4) {
+                uint32_t *o = off + c + 2;
+                d += o[0];
+                o[0] = sum += d;
+                d += o[1];
+                o[1] = sum += d;
+                d += o[2];
+                o[2] = sum += d;
+                d += o[3];
+                o[3] = sum += d;
+            }
+            for (; c < c1; c++) {
+                d += off[c + 2];
+                sum += d;
+                off[c + 2] = sum;
+            }
         }
         return 0;
     }
     if (lc->phase == 0) {
-        memset(off + lo + 2, 0, (hi - lo) * sizeof *off);
+        /* (the first touch of the cells' memory: most of a fine cube's
+           build, so asked between blocks too) */
+        for (c = lo; c < hi; c += LB_POLL_CELLS) {
+            size_t n = hi - c > LB_POLL_CELLS ? LB_POLL_CELLS : hi - c;
+            if (c > lo &&
+                rtpi_stopper_poll(th->stp, th->is_main, 0.5 * (double)(c - lo) / (double)span))
+                return 1;
+            memset(off + c + 2, 0, n * sizeof *off);
+        }
         sum = 0;
     }
+    for (k = 0; k < lc->nparts; k++)
+        all += lc->parts[k].nruns;
     /* phase 0 marks the runs' ends, phase 2 lists the runs' ranks */
     for (k = 0; k < lc->nparts; k++)
         for (i = 0; i < lc->parts[k].nruns; i++) {
             const lb_run *r = &lc->parts[k].runs[i];
             size_t a, b;
+            if ((++done & (LB_POLL_CELLS / 16 - 1)) == 0 &&
+                rtpi_stopper_poll(th->stp, th->is_main,
+                                  (lc->phase == 0 ? 0.5 : 0.0) +
+                                      (lc->phase == 0 ? 0.5 : 1.0) * (double)done / (double)all))
+                return 1;
             lb_clip(r, lo, hi, &a, &b);
             if (a >= b)
                 continue;
@@ -1426,19 +1461,19 @@ int rtpi_lightbuf_res(const rtp_scene *s, rtpi_v3 light, int res)
 
 rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
                                     const unsigned char *sel, unsigned char want, int threads,
-                                    double limit, const rtp_allocator *a, rtpi_lightbuf *lb,
-                                    rtp_error *err)
+                                    double limit, const rtpi_poll *poll, const rtp_allocator *a,
+                                    rtpi_lightbuf *lb, rtp_error *err)
 {
     size_t n = rtpi_scene_nprims(s), ncells, i, nc = 0;
     lb_worker *wk = NULL; /* (on the heap: 16 were a 72 KB frame) */
     lb_fill parts[LB_MAX_PARTS];
-    void *ctx[LB_MAX_PARTS];
+    void *ctx[LB_MAX_THREADS];
     rtpi_locked_alloc la;
     const rtp_allocator *ta = a;
     uint64_t total = 0;
     size_t runs = 0;
     lb_budget bud;
-    int np, k, nw = 0, failed = 0, over = 0;
+    int np, nt, k, nw = 0, failed = 0, over = 0, rows;
     unsigned used = 0; /* faces whose cells the runs reach (dc_ctx.faces) */
     double S;
     const unsigned char *hit = dc_kept(s) ? s->phit : NULL; /* (dc_hittable's) */
@@ -1518,14 +1553,22 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
        recorded, in parts of consecutive ranks on up to `threads` threads
        (the parts' runs, taken in order, are the one-thread pass's runs:
        the same buffer for any thread count). */
-    np = threads < 1 ? 1 : threads > LB_MAX_PARTS ? LB_MAX_PARTS : threads;
-    if ((size_t)np > nc / 256 + 1)
-        np = (int)(nc / 256 + 1); /* small scenes: not worth a thread */
+    nt = threads < 1 ? 1 : threads > LB_MAX_THREADS ? LB_MAX_THREADS : threads;
+    if ((size_t)nt > nc / 256 + 1)
+        nt = (int)(nc / 256 + 1); /* small scenes: not worth a thread */
+    /* (parts of 1024 candidates and more, up to LB_MAX_PARTS: the
+       caller's progress and cancel between them; the bunny's 69k
+       triangles 64 parts) */
+    np = (int)(nc / 1024 < LB_MAX_PARTS ? nc / 1024 : LB_MAX_PARTS);
+    np = np > nt ? np : nt;
     memset(parts, 0, sizeof parts);
-    if (np > 1 && rtpi_locked_alloc_init(&la, a) == 0)
+    if (nt > 1 && rtpi_locked_alloc_init(&la, a) == 0) {
         ta = &la.a;
-    else
-        np = 1;
+    } else {
+        nt = 1;
+        np = (int)(nc / 1024 < LB_MAX_PARTS ? nc / 1024 : LB_MAX_PARTS);
+        np = np > 1 ? np : 1;
+    }
     for (k = 0; k < np; k++) {
         parts[k].r0 = (uint32_t)(nc * (size_t)k / (size_t)np);
         parts[k].r1 = (uint32_t)(nc * (size_t)(k + 1) / (size_t)np);
@@ -1542,8 +1585,8 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
         rtpi_lightbuf_free(lb, a);
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory for the light buffer");
     }
-    wk = (lb_worker *)rtpi_malloc_array(a, (size_t)np, sizeof *wk);
-    for (nw = 0; wk && nw < np; nw++) {
+    wk = (lb_worker *)rtpi_malloc_array(a, (size_t)nt, sizeof *wk);
+    for (nw = 0; wk && nw < nt; nw++) {
         if (dc_ctx_init(&wk[nw].c, s, light, res, a) != RTP_OK)
             break;
         dc_ctx_window(&wk[nw].c, &lb->w);
@@ -1552,7 +1595,8 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
         wk[nw].S = S;
         ctx[nw] = &wk[nw];
     }
-    failed = nw < np || rtpi_parallel_rows(np, np, ctx, lb_part, NULL, NULL) != 0;
+    rows = nw < nt ? 1 : rtpi_parallel_rows_poll(np, nt, ctx, lb_part, poll, 0.0, 0.4);
+    failed = rows != 0;
     for (k = 0; k < nw; k++) {
         used |= wk[k].c.faces;
         dc_ctx_free(&wk[k].c, a);
@@ -1565,6 +1609,12 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
         total += parts[k].total;
         runs += parts[k].nruns;
         over |= parts[k].over;
+    }
+    if (rows == 2) { /* (cancelled: before any limit's verdict, as asked) */
+        for (k = 0; k < np; k++)
+            rtpi_free(a, parts[k].runs);
+        rtpi_lightbuf_free(lb, a);
+        return rtpi_cancelled(err);
     }
     /* (a whole pass: its runs, all made, against the room) */
     if (over || (!failed && !((double)runs * sizeof(lb_run) <= bud.room))) {
@@ -1622,23 +1672,42 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
     /* The lists from the runs, by ranges of cells on up to `threads`
        threads (lb_cells) */
     {
-        lb_cells lc[LB_MAX_PARTS];
-        int nr = threads < 1 ? 1 : threads > LB_MAX_PARTS ? LB_MAX_PARTS : threads;
+        lb_cells lc[LB_MAX_THREADS];
+        lb_cells_thr th[LB_MAX_THREADS];
+        rtpi_stopper stp;
+        /* (the phases' shares of the build's progress after the counting
+           pass's 0.4: marking with the cells' first touch, summing,
+           listing) */
+        static const double plo[3] = {0.4, 0.65, 0.75}, pspan[3] = {0.25, 0.1, 0.25};
+        int nr = threads < 1 ? 1 : threads > LB_MAX_THREADS ? LB_MAX_THREADS : threads;
         uint32_t base = 0;
         if ((size_t)nr > ncells / 4096 + 1)
             nr = (int)(ncells / 4096 + 1); /* small buffers: not worth a thread */
+        if (rtpi_stopper_init(&stp, poll, 0.0, 0.0) != 0) {
+            for (k = 0; k < np; k++)
+                rtpi_free(a, parts[k].runs);
+            rtpi_lightbuf_free(lb, a);
+            return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0,
+                              "out of memory for the light buffer");
+        }
         for (k = 0; k < nr; k++) {
             lc[k].lb = lb;
             lc[k].parts = parts;
             lc[k].nparts = np;
             lc[k].lo = ncells * (size_t)k / (size_t)nr;
             lc[k].hi = ncells * (size_t)(k + 1) / (size_t)nr;
-            ctx[k] = lc;
+            th[k].lc = lc;
+            th[k].stp = &stp;
+            th[k].is_main = k == 0; /* (ctx[0]: the calling thread's) */
+            ctx[k] = &th[k];
         }
-        for (k = 0; k < 3; k++) {
+        for (k = 0; k < 3 && !stp.stop; k++) {
             int q;
             for (q = 0; q < nr; q++)
                 lc[q].phase = k;
+            stp.lo = plo[k];
+            stp.span = pspan[k];
+            stp.last = -1.0;
             rtpi_parallel_rows(nr, nr, ctx, lb_cells_fn, NULL, NULL);
             if (k == 0)
                 for (q = 0; q < nr; q++) { /* each range's first start */
@@ -1646,6 +1715,13 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
                     lc[q].sum = base;
                     base += c;
                 }
+        }
+        rtpi_stopper_destroy(&stp);
+        if (stp.stop) {
+            for (k = 0; k < np; k++)
+                rtpi_free(a, parts[k].runs);
+            rtpi_lightbuf_free(lb, a);
+            return rtpi_cancelled(err);
         }
         lb->off[0] = 0;
     }
@@ -2421,7 +2497,7 @@ rtp_status rtpi_itembuf_build_wide(const rtp_scene *s, rtpi_v3 light, int res,
                                    const rtp_allocator *a, rtpi_itembuf *ib,
                                    rtp_error *err)
 {
-    return rtpi_itembuf_build_wide_mt(s, light, res, cells, thin, 1, a, ib, err);
+    return rtpi_itembuf_build_wide_mt(s, light, res, cells, thin, 1, NULL, a, ib, err);
 }
 
 typedef struct ib_job {
@@ -2430,8 +2506,14 @@ typedef struct ib_job {
     const unsigned char *thin;
     dc_ctx c;
     ib_part pt;
+    rtpi_stopper *stp; /* the caller's progress and cancel */
+    int is_main;       /* the calling thread's job (ctx[0]) */
     char pad[64]; /* the jobs lie side by side: no cache line shared */
 } ib_job;
+
+/* Primitives an item buffer's part draws between asking the caller's
+   cancel (10,000 stacked quads at 2048 cells: 300 s a build). */
+#define IB_POLL_PRIMS 256
 
 /* One part: every primitive into the part's rows. */
 static int ib_job_run(void *ctx, int part)
@@ -2439,16 +2521,21 @@ static int ib_job_run(void *ctx, int part)
     ib_job *jb = (ib_job *)ctx;
     size_t n = rtpi_scene_nprims(jb->s), i;
     jb->pt.part = part;
-    for (i = 0; i < n; i++)
+    for (i = 0; i < n; i++) {
+        if (i % IB_POLL_PRIMS == IB_POLL_PRIMS - 1 &&
+            rtpi_stopper_poll(jb->stp, jb->is_main, (double)i / (double)n))
+            return 1;
         if (!jb->thin || !jb->thin[i])
             ib_draw(jb->ib, jb->s, &jb->c, (uint32_t)i, &jb->pt);
+    }
     return 0;
 }
 
 rtp_status rtpi_itembuf_build_wide_mt(const rtp_scene *s, rtpi_v3 light, int res, double cells,
-                                      unsigned char *thin, int threads, const rtp_allocator *a,
-                                      rtpi_itembuf *ib, rtp_error *err)
+                                      unsigned char *thin, int threads, const rtpi_poll *poll,
+                                      const rtp_allocator *a, rtpi_itembuf *ib, rtp_error *err)
 {
+    rtpi_stopper stp;
     /* (the jobs on the heap: 256 of them on the stack were a 1.1 MB
        frame, more than a host's thread may have) */
     ib_job *jobs;
@@ -2460,6 +2547,12 @@ rtp_status rtpi_itembuf_build_wide_mt(const rtp_scene *s, rtpi_v3 light, int res
     /* no more parts than bands of rows */
     if (nparts > (ib->res + IB_BAND - 1) / IB_BAND)
         nparts = (ib->res + IB_BAND - 1) / IB_BAND;
+    /* (the item buffer's drawing: the first 0.8 of its build's progress,
+       the thin primitives' light buffers the rest) */
+    if (rtpi_stopper_init(&stp, poll, 0.0, 0.8) != 0) {
+        rtpi_itembuf_free(ib, a);
+        return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory for the item buffer");
+    }
     jobs = (ib_job *)rtpi_malloc_array(a, (size_t)nparts, sizeof *jobs);
     ctx = (void **)rtpi_malloc_array(a, (size_t)nparts, sizeof *ctx);
     for (k = 0; k < nparts; k++) {
@@ -2469,6 +2562,7 @@ rtp_status rtpi_itembuf_build_wide_mt(const rtp_scene *s, rtpi_v3 light, int res
             rtpi_free(a, jobs);
             rtpi_free(a, ctx);
             rtpi_itembuf_free(ib, a);
+            rtpi_stopper_destroy(&stp);
             return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0,
                               "out of memory for the item buffer");
         }
@@ -2476,6 +2570,8 @@ rtp_status rtpi_itembuf_build_wide_mt(const rtp_scene *s, rtpi_v3 light, int res
         jobs[k].ib = ib;
         jobs[k].s = s;
         jobs[k].thin = thin;
+        jobs[k].stp = &stp;
+        jobs[k].is_main = k == 0; /* (ctx[0]: the calling thread's) */
         jobs[k].pt.part = k;
         jobs[k].pt.nparts = nparts;
         ctx[k] = &jobs[k];
@@ -2491,5 +2587,10 @@ rtp_status rtpi_itembuf_build_wide_mt(const rtp_scene *s, rtpi_v3 light, int res
     }
     rtpi_free(a, jobs);
     rtpi_free(a, ctx);
+    rtpi_stopper_destroy(&stp);
+    if (stp.stop) {
+        rtpi_itembuf_free(ib, a);
+        return rtpi_cancelled(err);
+    }
     return RTP_OK;
 }

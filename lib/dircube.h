@@ -195,11 +195,12 @@ int rtpi_lightbuf_res(const rtp_scene *s, rtpi_v3 light, int res);
    the primitives on up to `threads` threads (the same buffer for any
    number; a's calls are then serialised by a lock).  limit: bytes the
    buffer may take, its lists counted before they are made (HUGE_VAL:
-   none): past it RTP_ERR_LIMIT. */
+   none): past it RTP_ERR_LIMIT.  poll (NULL: none): the build's progress,
+   and its cancel asked between parts of it (RTP_ERR_CANCELLED). */
 rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
                                     const unsigned char *sel, unsigned char want, int threads,
-                                    double limit, const rtp_allocator *a, rtpi_lightbuf *lb,
-                                    rtp_error *err);
+                                    double limit, const rtpi_poll *poll, const rtp_allocator *a,
+                                    rtpi_lightbuf *lb, rtp_error *err);
 /* 1 when no candidate of ray's cell hits ray in [tmin, tmax]; ray must run
    towards the light (rtpi_shadow_ray). */
 int rtpi_lightbuf_visible(const rtpi_lightbuf *lb, const rtp_scene *s,
@@ -296,8 +297,8 @@ rtp_status rtpi_itembuf_build_wide(const rtp_scene *s, rtpi_v3 light, int res,
 /* The same drawn on up to `threads` threads (the same buffer for any
    number; a's functions are called from the calling thread only). */
 rtp_status rtpi_itembuf_build_wide_mt(const rtp_scene *s, rtpi_v3 light, int res, double cells,
-                                      unsigned char *thin, int threads, const rtp_allocator *a,
-                                      rtpi_itembuf *ib, rtp_error *err);
+                                      unsigned char *thin, int threads, const rtpi_poll *poll,
+                                      const rtp_allocator *a, rtpi_itembuf *ib, rtp_error *err);
 /* The same buffers drawn by OSMesa (osmesa.c); RTP_ERR_UNSUPPORTED in
    builds without it. */
 rtp_status rtpi_itembuf_build_osmesa(const rtp_scene *s, rtpi_v3 light,

@@ -1078,6 +1078,39 @@ int rtpi_parallel_rows_stack(int nrows, int nthreads, void *const *ctx, rtpi_row
 int rtpi_parallel_rows_cancel(int nrows, int nthreads, void *const *ctx, rtpi_row_fn fn,
                               void (*progress)(void *, double), int (*cancel)(void *),
                               void *user, size_t stack);
+/* The caller's progress and cancel for a long step inside a call (a
+   direction cube's build): progress of the step in [0,1], asked from the
+   calling thread only (as rtpi_parallel_rows_cancel's); NULL members:
+   none. */
+typedef struct rtpi_poll {
+    void (*progress)(void *user, double done);
+    int (*cancel)(void *user);
+    void *user;
+} rtpi_poll;
+/* rtpi_parallel_rows_cancel with poll's callbacks, the rows' progress
+   reported as [lo, lo + span] of the step's (poll NULL: none).  @return
+   2 when cancel stopped it, else as rtpi_parallel_rows. */
+int rtpi_parallel_rows_poll(int nrows, int nthreads, void *const *ctx, rtpi_row_fn fn,
+                            const rtpi_poll *poll, double lo, double span);
+/* Whether poll's cancel says to stop now (calling thread only). */
+int rtpi_poll_cancelled(const rtpi_poll *poll);
+/* A stop shared by the threads of a long row (a direction cube's rows of
+   cells, an item buffer's bands): the calling thread reports progress
+   and asks cancel now and then from inside its rows, every thread reads
+   whether to stop. */
+typedef struct rtpi_stopper {
+    const rtpi_poll *poll; /* NULL: never stops, nothing reported */
+    double lo, span, last; /* the rows' share of the step; last reported */
+    int stop;              /* cancel said yes (under lock) */
+    rtpi_mutex lock;
+} rtpi_stopper;
+/* 0, or -1 when the lock cannot be made. */
+int rtpi_stopper_init(rtpi_stopper *st, const rtpi_poll *poll, double lo, double span);
+void rtpi_stopper_destroy(rtpi_stopper *st);
+/* From inside a row: on the calling thread (is_main), progress at `done`
+   of the rows (reported only forward) and the caller's cancel; on any,
+   whether to stop. */
+int rtpi_stopper_poll(rtpi_stopper *st, int is_main, double done);
 /* The stack a ray tree of max_depth levels needs traced, where it is
    more than a host's thread can be counted on to have (0 otherwise). */
 size_t rtpi_trace_stack(int max_depth);

@@ -241,3 +241,80 @@ int rtpi_parallel_rows_cancel(int nrows, int nthreads, void *const *ctx, rtpi_ro
     run(&jobs[0]);
     return p.cancelled ? 2 : p.stop;
 }
+
+/* rtpi_parallel_rows_poll's scaling of the rows' progress. */
+typedef struct poll_part {
+    const rtpi_poll *p;
+    double lo, span;
+} poll_part;
+
+static void poll_part_progress(void *user, double done)
+{
+    const poll_part *q = (const poll_part *)user;
+    q->p->progress(q->p->user, q->lo + q->span * done);
+}
+
+static int poll_part_cancel(void *user)
+{
+    const poll_part *q = (const poll_part *)user;
+    return q->p->cancel(q->p->user);
+}
+
+int rtpi_parallel_rows_poll(int nrows, int nthreads, void *const *ctx, rtpi_row_fn fn,
+                            const rtpi_poll *poll, double lo, double span)
+{
+    poll_part q;
+    if (!poll || (!poll->progress && !poll->cancel))
+        return rtpi_parallel_rows(nrows, nthreads, ctx, fn, NULL, NULL);
+    q.p = poll;
+    q.lo = lo;
+    q.span = span;
+    return rtpi_parallel_rows_cancel(nrows, nthreads, ctx, fn,
+                                     poll->progress ? poll_part_progress : NULL,
+                                     poll->cancel ? poll_part_cancel : NULL, &q, 0);
+}
+
+int rtpi_poll_cancelled(const rtpi_poll *poll)
+{
+    return poll && poll->cancel && poll->cancel(poll->user) != 0;
+}
+
+int rtpi_stopper_init(rtpi_stopper *st, const rtpi_poll *poll, double lo, double span)
+{
+    st->poll = poll && (poll->progress || poll->cancel) ? poll : NULL;
+    st->lo = lo;
+    st->span = span;
+    st->last = -1.0;
+    st->stop = 0;
+    if (!st->poll)
+        return 0;
+    return rtpi_mutex_init(&st->lock) == 0 ? 0 : -1;
+}
+
+void rtpi_stopper_destroy(rtpi_stopper *st)
+{
+    if (st->poll)
+        rtpi_mutex_destroy(&st->lock);
+}
+
+int rtpi_stopper_poll(rtpi_stopper *st, int is_main, double done)
+{
+    int stop;
+    if (!st->poll)
+        return 0;
+    if (is_main) {
+        if (st->poll->progress && done > st->last) {
+            st->poll->progress(st->poll->user, st->lo + st->span * (done < 1.0 ? done : 1.0));
+            st->last = done;
+        }
+        if (rtpi_poll_cancelled(st->poll)) {
+            rtpi_mutex_lock(&st->lock);
+            st->stop = 1;
+            rtpi_mutex_unlock(&st->lock);
+        }
+    }
+    rtpi_mutex_lock(&st->lock);
+    stop = st->stop;
+    rtpi_mutex_unlock(&st->lock);
+    return stop;
+}

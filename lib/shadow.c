@@ -82,11 +82,18 @@ static int sh_thin_near(const rtpi_shadow *sh, rtpi_v3 o)
 
 /* The item buffer over the wide primitives and its companions (see
    above). */
-static rtp_status sh_itembuf(rtpi_shadow *sh, int res, int threads, const rtp_allocator *a,
-                             rtp_error *err)
+static rtp_status sh_itembuf(rtpi_shadow *sh, int res, int threads, const rtpi_poll *poll,
+                             const rtp_allocator *a, rtp_error *err)
 {
+    /* (the companions' builds asked the caller's cancel too; the item
+       buffer's own reports the progress) */
+    rtpi_poll cpoll = {NULL, NULL, NULL};
     size_t n = rtpi_scene_nprims(sh->s);
     rtp_status st;
+    if (poll) {
+        cpoll.cancel = poll->cancel;
+        cpoll.user = poll->user;
+    }
     sh->thin = (unsigned char *)rtpi_malloc_array(a, n ? n : 1, 1);
     if (!sh->thin)
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
@@ -94,18 +101,18 @@ static rtp_status sh_itembuf(rtpi_shadow *sh, int res, int threads, const rtp_al
              ? rtpi_itembuf_build_osmesa_wide(sh->s, sh->light, res, SH_THIN_CELLS, sh->thin, a,
                                               &sh->ib, err)
              : rtpi_itembuf_build_wide_mt(sh->s, sh->light, res, SH_THIN_CELLS, sh->thin, threads,
-                                          a, &sh->ib, err);
+                                          poll, a, &sh->ib, err);
     if (st == RTP_OK)
         st = rtpi_lightbuf_build_some(sh->s, sh->light,
                                       sh->ib.res >= SH_THIN_DIV * SH_WIDE_RES
                                           ? (sh->ib.res + 1) / SH_THIN_DIV
                                           : SH_WIDE_RES,
-                                      sh->thin, 1, threads, sh->limit, a, &sh->lb, err);
+                                      sh->thin, 1, threads, sh->limit, &cpoll, a, &sh->lb, err);
     if (st == RTP_OK && sh->lb.ncand)
         st = sh_thin_cells(sh, a, err);
     if (st == RTP_OK)
         st = rtpi_lightbuf_build_some(sh->s, sh->light, SH_WIDE_RES, sh->thin, 0, threads,
-                                      sh->limit, a, &sh->wide, err);
+                                      sh->limit, &cpoll, a, &sh->wide, err);
     return st;
 }
 
@@ -114,12 +121,13 @@ rtp_status rtpi_shadow_create(const rtp_scene *s, const rtpi_kdtree *kd,
                               const rtp_allocator *a, rtpi_shadow **out,
                               rtp_error *err)
 {
-    return rtpi_shadow_create_mt(s, kd, light, mode, res, 1, HUGE_VAL, a, out, err);
+    return rtpi_shadow_create_mt(s, kd, light, mode, res, 1, HUGE_VAL, NULL, a, out, err);
 }
 
 rtp_status rtpi_shadow_create_mt(const rtp_scene *s, const rtpi_kdtree *kd, rtpi_v3 light,
                                  rtpi_shadow_mode mode, int res, int threads, double limit,
-                                 const rtp_allocator *a, rtpi_shadow **out, rtp_error *err)
+                                 const rtpi_poll *poll, const rtp_allocator *a,
+                                 rtpi_shadow **out, rtp_error *err)
 {
     rtpi_shadow *sh;
     rtp_status st = RTP_OK;
@@ -142,7 +150,8 @@ rtp_status rtpi_shadow_create_mt(const rtp_scene *s, const rtpi_kdtree *kd, rtpi
     sh->limit = limit;
     switch (mode) {
     case RTPI_SHADOW_LIGHTBUF:
-        st = rtpi_lightbuf_build_some(s, light, res, NULL, 0, threads, limit, a, &sh->lb, err);
+        st = rtpi_lightbuf_build_some(s, light, res, NULL, 0, threads, limit, poll, a, &sh->lb,
+                                      err);
         break;
     case RTPI_SHADOW_ITEMBUF:
     case RTPI_SHADOW_OSMESA:
@@ -155,11 +164,11 @@ rtp_status rtpi_shadow_create_mt(const rtp_scene *s, const rtpi_kdtree *kd, rtpi
         if (rtpi_lightbuf_res(s, light, res) < (res <= 0 ? RTPI_DC_DEFAULT_RES : res) / 4) {
             sh->mode = kd ? RTPI_SHADOW_EXACT : RTPI_SHADOW_LIGHTBUF;
             if (!kd)
-                st = rtpi_lightbuf_build_some(s, light, res, NULL, 0, threads, limit, a,
+                st = rtpi_lightbuf_build_some(s, light, res, NULL, 0, threads, limit, poll, a,
                                               &sh->lb, err);
             break;
         }
-        st = sh_itembuf(sh, res, threads, a, err);
+        st = sh_itembuf(sh, res, threads, poll, a, err);
         break;
     case RTPI_SHADOW_EXACT:
         break;

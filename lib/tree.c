@@ -776,7 +776,8 @@ static rtp_status update_visibility_body(rtp_tree *t, int mode, int res, int thr
     for (i = 0; i < nl; i++) {
         const double *lp = s->lights[i].pos;
         int moved = light_moved(t, i);
-        progress_part part;
+        progress_part part, bpart;
+        rtpi_poll poll;
         if (vis_up_to_date(t, i, kmode, kres))
             continue;
         if (!moved) {
@@ -807,12 +808,27 @@ static rtp_status update_visibility_body(rtp_tree *t, int mode, int res, int thr
             t->cube_alloc.realloc_fn = blk_realloc;
             t->cube_alloc.free_fn = blk_free;
             t->cube_alloc.user = t;
+            /* this light's share of the step's progress: a direction
+               cube's build the first half of it (a fine cube takes
+               seconds: the bunny's light buffer at 8192 cells 3 s), the
+               decisions' rows the rest */
+            part = *prog;
+            part.lo = prog->lo + prog->span * (double)done / (double)todo;
+            part.span = prog->span / (double)todo;
+            done++;
+            bpart = part;
+            bpart.span = mode != RTP_SHADOWS_EXACT ? 0.5 * part.span : 0.0;
+            poll.progress = part.fn ? progress_part_cb : NULL;
+            poll.cancel = part.cancel ? progress_part_cancel : NULL;
+            poll.user = &bpart;
+            part.lo += bpart.span;
+            part.span -= bpart.span;
             rs = rtpi_shadow_create_mt(s, t->kd, v3(lp[0], lp[1], lp[2]),
                                        (rtpi_shadow_mode)mode, res, threads,
                                        fallback && mode == RTP_SHADOWS_LIGHTBUF
                                            ? fmin(limit, auto_lb_bytes(t, res))
                                            : limit,
-                                       &t->cube_alloc, &sh, err);
+                                       &poll, &t->cube_alloc, &sh, err);
             if (rs == RTP_ERR_LIMIT && fallback && mode != RTP_SHADOWS_EXACT) {
                 /* AUTO: shadow rays where the lists would not fit (a mesh
                    seen edge on lists every triangle in a row of cells) */
@@ -821,7 +837,7 @@ static rtp_status update_visibility_body(rtp_tree *t, int mode, int res, int thr
                 if (!t->kd && (rs = rtpi_kd_build_mt(s, &t->alloc, threads, &t->kd, err)) != RTP_OK)
                     return rs;
                 rs = rtpi_shadow_create_mt(s, t->kd, v3(lp[0], lp[1], lp[2]),
-                                           RTPI_SHADOW_EXACT, res, threads, limit,
+                                           RTPI_SHADOW_EXACT, res, threads, limit, &poll,
                                            &t->cube_alloc, &sh, err);
             }
             if (rs != RTP_OK)
@@ -857,10 +873,6 @@ static rtp_status update_visibility_body(rtp_tree *t, int mode, int res, int thr
                 vc[k].keep_balls = mode == RTP_SHADOWS_EXACT;
                 ctx[k] = &vc[k];
             }
-            part = *prog;
-            part.lo = prog->lo + prog->span * (double)done / (double)todo;
-            part.span = prog->span / (double)todo;
-            done++;
             rows = rtpi_parallel_rows_cancel(t->ny, threads, ctx, vis_row,
                                              part.fn ? progress_part_cb : NULL,
                                              part.cancel ? progress_part_cancel : NULL, &part,

@@ -887,6 +887,116 @@ static void test_cancel_move(void)
     CHECK(f.live == 0 && f.bad_frees == 0);
 }
 
+/* A direction cube's build asks the caller's cancel inside it (a fine
+   cube takes seconds: the bunny's light buffer at 8192 cells 3 s, 10,000
+   stacked quads' item buffer at 2048 300 s): 3,200 small triangles over
+   a floor, a light buffer of 1024 cells a face and an item buffer at
+   256, 1 and 2 threads.  On one thread a move asks more often than an
+   exact one, which builds no cube (asked before the build, after it and
+   after rows only, a cube's move asked as often); a yes at the second
+   question, the
+   first inside the build, stops it, nothing leaked, and the next
+   evaluation equals a full trace. */
+static void test_cancel_cube_build(void)
+{
+    static const struct {
+        rtp_shadow_mode mode;
+        int res;
+    } cases[] = {{RTP_SHADOWS_LIGHTBUF, 1024}, {RTP_SHADOWS_ITEMBUF, 256}};
+    failing f;
+    rtp_allocator a;
+    rtp_scene *s = NULL;
+    rtp_error err;
+    rtp_trace_options o = small_opt();
+    char *text = (char *)malloc(300000);
+    size_t len = 0, c;
+    int i, j, threads;
+    failing_init(&f, &a);
+    if (!text) {
+        CHECK(text != NULL);
+        return;
+    }
+    len += (size_t)sprintf(text + len, "v\nfrom 0 -6 5\nat 0 0 0\nup 0 0 1\nangle 45\n"
+                                       "hither 0.01\nresolution 32 24\nb 0.1 0.1 0.1\n"
+                                       "l 0.5 0.3 4\nf 0.8 0.6 0.3 0.7 0.3 20 0 1\n"
+                                       "p 4\n-4 -4 0\n4 -4 0\n4 4 0\n-4 4 0\n");
+    for (i = 0; i < 40; i++)
+        for (j = 0; j < 40; j++) {
+            double x = -2.0 + 0.1 * i, y = -2.0 + 0.1 * j, z = 1.0 + 0.01 * ((i * 7 + j) % 5);
+            len += (size_t)sprintf(text + len, "p 4\n%g %g %g\n%g %g %g\n%g %g %g\n%g %g %g\n", x,
+                                   y, z, x + 0.05, y, z, x + 0.05, y + 0.05, z, x, y + 0.05, z);
+        }
+    o.width = 32;
+    o.height = 24;
+    if (rtp_scene_load_memory(text, len, "grid.nff", NULL, &a, &s, &err) != RTP_OK) {
+        CHECK_MSG(0, "fixture: %s", err.message);
+        free(text);
+        return;
+    }
+    free(text);
+    for (threads = 1; threads <= 2; threads++)
+        for (c = 0; c < sizeof cases / sizeof *cases; c++) {
+            rtp_tree *t = NULL;
+            rtp_image *img = NULL, *ref = NULL;
+            rtp_eval_options eo;
+            asker k;
+            long coarse, fine, live;
+            o.threads = threads;
+            if (rtp_record(s, &o, &t, NULL, NULL, &err) != RTP_OK) {
+                CHECK_MSG(0, "record: %s", err.message);
+                break;
+            }
+            memset(&eo, 0, sizeof eo);
+            eo.threads = threads;
+            eo.shadows = cases[c].mode;
+            eo.cancel = ask_cancel;
+            eo.progress = ask_progress;
+            /* the questions of an exact move, then of the case's */
+            memset(&k, 0, sizeof k);
+            eo.progress_user = &k;
+            eo.shadows = RTP_SHADOWS_EXACT;
+            CHECK(rtp_tree_set(t, "light.0.pos", "0.4,0.2,4", &err) == RTP_OK);
+            CHECK_MSG(rtp_tree_eval(t, &eo, &img, NULL, &err) == RTP_OK, "%s", err.message);
+            coarse = k.asked;
+            rtp_image_destroy(img);
+            img = NULL;
+            memset(&k, 0, sizeof k);
+            eo.shadows = cases[c].mode;
+            eo.shadow_res = cases[c].res;
+            CHECK(rtp_tree_set(t, "light.0.pos", "0.3,0.2,4", &err) == RTP_OK);
+            CHECK_MSG(rtp_tree_eval(t, &eo, &img, NULL, &err) == RTP_OK, "%s", err.message);
+            fine = k.asked;
+            rtp_image_destroy(img);
+            img = NULL;
+            /* (with two threads the calling thread's rows, and so the
+               questions after them, vary from run to run) */
+            CHECK_MSG(threads > 1 || fine > coarse,
+                      "mode %d: asked %ld times, %ld for an exact move", (int)cases[c].mode, fine,
+                      coarse);
+            /* cancelled inside the build */
+            memset(&k, 0, sizeof k);
+            k.at = 2;
+            live = f.live;
+            CHECK(rtp_tree_set(t, "light.0.pos", "0.2,0.2,4", &err) == RTP_OK);
+            memset(&err, 0, sizeof err);
+            CHECK_MSG(rtp_tree_eval(t, &eo, &img, NULL, &err) == RTP_ERR_CANCELLED && !img,
+                      "threads %d mode %d: %s", threads, (int)cases[c].mode, err.message);
+            CHECK_MSG(k.asked == 2, "threads %d mode %d: asked %ld times", threads,
+                      (int)cases[c].mode, k.asked);
+            CHECK_MSG(f.live == live, "threads %d mode %d: %ld block(s) leaked", threads,
+                      (int)cases[c].mode, f.live - live);
+            eo.cancel = NULL;
+            CHECK_MSG(rtp_tree_eval(t, &eo, &img, NULL, &err) == RTP_OK, "%s", err.message);
+            CHECK(rtp_tree_trace(t, threads, &ref, NULL, &err) == RTP_OK);
+            same_image(img, ref, 1e-6, "after a cancelled build");
+            rtp_image_destroy(img);
+            rtp_image_destroy(ref);
+            rtp_tree_destroy(t);
+        }
+    rtp_scene_destroy(s);
+    CHECK(f.live == 0 && f.bad_frees == 0);
+}
+
 /* The test scene recorded at w x h on one thread (the library's own
    allocator): 0, or -1 with a failed check and nothing left. */
 static int recorded(int w, int h, rtp_scene **s, rtp_tree **t)
@@ -1309,6 +1419,7 @@ int main(void)
     RUN(test_cancel_eval);
     RUN(test_cancel_move);
     RUN(test_cancel_move_mode);
+    RUN(test_cancel_cube_build);
     RUN(test_callback_reentry);
     RUN(test_progress_calls_bounded);
     cleanup();

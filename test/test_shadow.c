@@ -352,13 +352,13 @@ static void lb_same(const rtp_scene *s, rtpi_v3 lp, int res, const char *what)
     size_t k;
     int threads;
     rtpi_allocator_init(&al, NULL);
-    if (rtpi_lightbuf_build_some(s, lp, res, NULL, 0, 1, HUGE_VAL, &al, &a, NULL) != RTP_OK) {
+    if (rtpi_lightbuf_build_some(s, lp, res, NULL, 0, 1, HUGE_VAL, NULL, &al, &a, NULL) != RTP_OK) {
         CHECK_MSG(0, "%s: build failed", what);
         return;
     }
     for (threads = 2; threads <= 5; threads += 3) {
         int same;
-        if (rtpi_lightbuf_build_some(s, lp, res, NULL, 0, threads, HUGE_VAL, &al, &b,
+        if (rtpi_lightbuf_build_some(s, lp, res, NULL, 0, threads, HUGE_VAL, NULL, &al, &b,
                                      NULL) != RTP_OK) {
             CHECK_MSG(0, "%s: build on %d threads failed", what, threads);
             continue;
@@ -386,7 +386,7 @@ static void ib_same(const rtp_scene *s, rtpi_v3 lp, int res, const char *what)
     int threads;
     rtpi_allocator_init(&al, NULL);
     if (!ta || !tb ||
-        rtpi_itembuf_build_wide_mt(s, lp, res, 2.0, ta, 1, &al, &a, NULL) != RTP_OK) {
+        rtpi_itembuf_build_wide_mt(s, lp, res, 2.0, ta, 1, NULL, &al, &a, NULL) != RTP_OK) {
         CHECK_MSG(0, "%s: item buffer build failed", what);
         free(ta);
         free(tb);
@@ -394,7 +394,7 @@ static void ib_same(const rtp_scene *s, rtpi_v3 lp, int res, const char *what)
     }
     for (threads = 2; threads <= 5; threads += 3) {
         int same;
-        if (rtpi_itembuf_build_wide_mt(s, lp, res, 2.0, tb, threads, &al, &b, NULL) != RTP_OK) {
+        if (rtpi_itembuf_build_wide_mt(s, lp, res, 2.0, tb, threads, NULL, &al, &b, NULL) != RTP_OK) {
             CHECK_MSG(0, "%s: item buffer on %d threads failed", what, threads);
             continue;
         }
@@ -652,7 +652,7 @@ static int fail_each(const rtp_scene *s, const rtpi_kdtree *kd, rtpi_v3 lp, rtpi
         c.calls = 0;
         c.live = 0;
         c.fail_at = fail;
-        st = rtpi_shadow_create_mt(s, kd, lp, mode, res, threads, HUGE_VAL, &a, &sh, NULL);
+        st = rtpi_shadow_create_mt(s, kd, lp, mode, res, threads, HUGE_VAL, NULL, &a, &sh, NULL);
         if (c.calls <= fail) {
             bad += st != RTP_OK;
             rtpi_shadow_destroy(sh);
@@ -776,7 +776,7 @@ static void test_lightbuf_limit_threads(void)
             rtp_error err;
             int k = thr == 1 ? 0 : thr == 2 ? 1 : 2;
             rtpi_allocator_init(&a, NULL);
-            ok[k] = rtpi_lightbuf_build_some(s, v3(0, 0, 10), 256, NULL, 0, thr, lim, &a, &lb,
+            ok[k] = rtpi_lightbuf_build_some(s, v3(0, 0, 10), 256, NULL, 0, thr, lim, NULL, &a, &lb,
                                              &err) == RTP_OK;
             if (ok[k])
                 rtpi_lightbuf_free(&lb, &a);
