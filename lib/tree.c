@@ -958,6 +958,8 @@ typedef struct eval_ctx {
     int redo_terms;           /* recompute terms too, not only coeffs */
     int cached;               /* ev_terms / ev_coeffs in use */
     /* per thread scratch (uncached path and coefficient sums) */
+    const rtp_allocator *wa;  /* what rows grow terms with: t->alloc, behind
+                                 a lock when threads share a caller's */
     float *terms;
     size_t terms_cap;
     float *coeffs;
@@ -990,7 +992,7 @@ static int sample_coeffs(eval_ctx *e, size_t k, int redo_terms, float **coeffs_o
         terms = t->ev_terms + a * RTPI_TERMS(nl);
         coeffs = t->ev_coeffs + k * RTPI_COEFFS(nl);
     } else {
-        if (rtpi_grow(&t->alloc, (void **)&e->terms, &e->terms_cap, n * RTPI_TERMS(nl) + 1,
+        if (rtpi_grow(e->wa, (void **)&e->terms, &e->terms_cap, n * RTPI_TERMS(nl) + 1,
                       sizeof *e->terms)) {
             e->nomem = 1;
             return -1;
@@ -3322,6 +3324,8 @@ static rtp_status eval_body(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
     /* the materials whose samples alone step 3 set (RESOLVE_MAX at most;
        more: -1), so an incremental evaluation averages only their pixels */
     int nset = 0, partial = 0, by_mark = 0;
+    rtpi_locked_alloc la;
+    int la_made = 0;
     /* a moved light's rest holds only through moves of that light alone:
        every other evaluation ends it */
     size_t mv_light = t ? t->mv_light : 0; /* (a NULL t is refused below) */
@@ -3547,9 +3551,19 @@ static rtp_status eval_body(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
     if ((t->spd || cached) && !t->ev_samples)
         t->ev_samples = (float *)rtpi_malloc_array(&t->alloc, ns, 3 * sizeof(float));
     samples = t->spd || cached ? t->ev_samples : img->pixels;
+    /* (rows of the uncached path grow their scratch on the workers: a
+       caller's allocator need not be thread-safe, so they take a lock,
+       as the trace's workers do) */
+    if (nthreads > 1 && !rtpi_allocator_is_default(&t->alloc)) {
+        if (rtpi_locked_alloc_init(&la, &t->alloc) == 0)
+            la_made = 1;
+        else
+            nthreads = 1; /* (no lock: one thread needs none) */
+    }
     memset(e, 0, sizeof e[0] * (size_t)nthreads);
     for (i = 0; i < nthreads; i++) {
         e[i].t = t;
+        e[i].wa = la_made ? &la.a : &t->alloc;
         e[i].shade = &shade;
         e[i].vis = vis;
         e[i].eye = v3(s->camera.from[0], s->camera.from[1], s->camera.from[2]);
@@ -3886,6 +3900,8 @@ done:
     rtpi_free(&t->alloc, e);
     rtpi_free(&t->alloc, ctx);
     rtpi_free(&t->alloc, cv);
+    if (la_made)
+        rtpi_locked_alloc_destroy(&la);
     if (rs != RTP_OK) {
         /* a half-made cache must not be trusted next time */
         t->ev_valid = 0;

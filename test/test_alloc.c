@@ -13,6 +13,7 @@
 #include "internal.h"
 #include "rtp.h"
 
+#include <sched.h>
 #include <stdint.h>
 #include <string.h>
 #include <sys/stat.h>
@@ -1175,6 +1176,117 @@ static void test_progress_calls_bounded(void)
     rtp_scene_destroy(s);
 }
 
+/* ------------------------------------------------------ shared allocator */
+
+/* rtp.h: "A caller's allocator need not be thread-safe: calls with
+   options.threads > 1 take a lock around it".  This one is not, and says
+   when two calls overlapped: a call made while armed waits (a bounded
+   number of yields, no clock) for another to come in, so that an unlocked
+   call from a second thread is caught whatever the scheduling; where the
+   library locks, the bound only makes the run slower.  The uncached
+   evaluation's rows grew their scratch through the caller's allocator
+   from every thread without the lock (TSan saw it; an arena allocator
+   would have been corrupted). */
+typedef struct serial {
+    rtpi_mutex m; /* guards the counts, never held across a call */
+    int armed, inside;
+    long calls, overlaps;
+} serial;
+
+static void serial_enter(serial *z)
+{
+    long k, seen;
+    int wait;
+    rtpi_mutex_lock(&z->m);
+    if (++z->inside > 1)
+        z->overlaps++;
+    z->calls++;
+    wait = z->armed && z->inside == 1;
+    seen = z->overlaps;
+    rtpi_mutex_unlock(&z->m);
+    for (k = 0; wait && k < 20000; k++) {
+        long now;
+        rtpi_mutex_lock(&z->m);
+        now = z->overlaps;
+        rtpi_mutex_unlock(&z->m);
+        if (now != seen)
+            break;
+        sched_yield();
+    }
+}
+
+static void serial_leave(serial *z)
+{
+    rtpi_mutex_lock(&z->m);
+    z->inside--;
+    rtpi_mutex_unlock(&z->m);
+}
+
+static void *se_malloc(void *user, size_t size)
+{
+    void *p;
+    serial_enter((serial *)user);
+    p = malloc(size);
+    serial_leave((serial *)user);
+    return p;
+}
+
+static void *se_realloc(void *user, void *ptr, size_t size)
+{
+    void *p;
+    serial_enter((serial *)user);
+    p = realloc(ptr, size);
+    serial_leave((serial *)user);
+    return p;
+}
+
+static void se_free(void *user, void *ptr)
+{
+    serial_enter((serial *)user);
+    free(ptr);
+    serial_leave((serial *)user);
+}
+
+static void test_threads_share_allocator(void)
+{
+    serial z;
+    rtp_allocator a;
+    rtp_scene *s = NULL;
+    rtp_tree *t = NULL;
+    rtp_image *img = NULL;
+    rtp_trace_options o = small_opt();
+    rtp_eval_options eo;
+    rtp_error err;
+    if (!(rtp_features() & RTP_FEATURE_THREADS))
+        SKIP("a build without threads");
+    memset(&z, 0, sizeof z);
+    CHECK(rtpi_mutex_init(&z.m) == 0);
+    a.malloc_fn = se_malloc;
+    a.realloc_fn = se_realloc;
+    a.free_fn = se_free;
+    a.user = &z;
+    CHECK(rtp_scene_load(tmp_path("scene.nff"), &a, &s, &err) == RTP_OK);
+    o.width = 16;
+    o.height = 12;
+    CHECK(s && rtp_record(s, &o, &t, NULL, NULL, &err) == RTP_OK);
+    if (t) {
+        /* one evaluation without caches on two threads: each row's
+           samples grow the thread's scratch */
+        memset(&eo, 0, sizeof eo);
+        eo.threads = 2;
+        eo.no_cache = 1;
+        z.armed = 1;
+        CHECK(rtp_tree_eval(t, &eo, &img, NULL, &err) == RTP_OK);
+        z.armed = 0;
+        CHECK_MSG(z.overlaps == 0, "%ld of %ld allocator calls overlapped", z.overlaps,
+                  z.calls);
+    }
+    rtp_image_destroy(img);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+    rtpi_mutex_destroy(&z.m);
+}
+
 /* -------------------------------------------------------------- driver */
 
 /* Runs op with the 1st, 2nd, ... allocation failing until a run meets no
@@ -1422,6 +1534,7 @@ int main(void)
     RUN(test_cancel_cube_build);
     RUN(test_callback_reentry);
     RUN(test_progress_calls_bounded);
+    RUN(test_threads_share_allocator);
     cleanup();
     return check_report();
 }
