@@ -600,7 +600,12 @@ int rtp_builder_hit(rtp_builder *b, int x, int y, int parent, rtp_ray_kind kind,
 rtp_status rtp_builder_miss(rtp_builder *b, int x, int y, int parent,
                             rtp_ray_kind kind, rtp_error *err);
 /** Validates every sample's tree and makes the rtp_tree; the builder is
- *  consumed (destroyed) either way. */
+ *  consumed (destroyed) either way.  A hit above the tree's depth whose
+ *  material reflects (ks > 0) or transmits (kt > 0) but that was given no
+ *  such ray (hit or miss; a total internal reflection's is the reflected
+ *  one) is the renderer's own cut-off: the tree keeps one
+ *  (rtp_tree_info.min_weight > 0), so any ks or kt edit traces the
+ *  material's samples again, as for rtp_trace_options.min_weight. */
 rtp_status rtp_builder_finish(rtp_builder *b, rtp_tree **out, rtp_error *err);
 void rtp_builder_destroy(rtp_builder *b);
 

@@ -428,6 +428,73 @@ out:
     rtp_scene_destroy(s);
 }
 
+/* A renderer with a weight cut-off of its own leaves out rays a full
+   trace casts: here the mirror's (ks 0.5) reflected ray, with depth 5
+   set.  Taken as complete, a ks edit was evaluated from the trees alone
+   and was silently not the full trace (0.93 against 1.11); the tree
+   keeps a cut-off (min_weight > 0), so the edit traces the sample
+   again.  A ray left out at the depth set is no cut-off. */
+static void test_builder_cut_off(void)
+{
+    rtp_scene *s = NULL;
+    rtp_builder *b = NULL;
+    rtp_tree *t = NULL, *back = NULL;
+    rtp_image *a = NULL, *ref = NULL;
+    rtp_hit_record rec;
+    rtp_tree_info ti;
+    rtp_eval_stats st;
+    rtp_error err;
+    unsigned char lit = 1;
+    int depth;
+    CHECK(rtp_scene_load_memory(mirror_text, strlen(mirror_text), "m.nff", "nff", NULL, &s,
+                                NULL) == RTP_OK);
+    if (!s)
+        return;
+    memset(&rec, 0, sizeof rec);
+    rec.lights = &lit;
+    for (depth = 1; depth <= 5; depth += 4) {
+        t = NULL;
+        CHECK(rtp_builder_create(s, 1, 1, 0, &b, &err) == RTP_OK);
+        if (!b)
+            break;
+        CHECK(rtp_builder_set_depth(b, depth, &err) == RTP_OK);
+        CHECK(rtp_builder_hit(b, 0, 0, RTP_NO_PARENT, RTP_RAY_EYE, &rec, &err) == 0);
+        CHECK(rtp_builder_finish(b, &t, &err) == RTP_OK);
+        if (!t)
+            break;
+        rtp_tree_get_info(t, &ti);
+        CHECK_MSG(depth == 1 ? ti.min_weight == 0.0 : ti.min_weight > 0.0,
+                  "depth %d: min_weight %g", depth, ti.min_weight);
+        if (depth == 5) {
+            /* (the file keeps it) */
+            char path[600];
+            const char *tmp = getenv("TMPDIR");
+            snprintf(path, sizeof path, "%s/rtp-builder-cut.rtp", tmp && *tmp ? tmp : "/tmp");
+            CHECK(rtp_tree_write(t, path, NULL, &err) == RTP_OK);
+            CHECK(rtp_tree_read(path, NULL, &back, &err) == RTP_OK);
+            remove(path);
+            if (back) {
+                rtp_tree_get_info(back, &ti);
+                CHECK(ti.min_weight > 0.0);
+            }
+            rtp_tree_destroy(back);
+            CHECK(rtp_tree_set(t, "mat.0.ks", "0.9", &err) == RTP_OK);
+            memset(&st, 0, sizeof st);
+            CHECK(rtp_tree_eval(t, NULL, &a, &st, &err) == RTP_OK);
+            CHECK(rtp_tree_trace(t, 1, &ref, NULL, &err) == RTP_OK);
+            CHECK(st.retraced_samples == 1);
+            /* (one pixel traced both ways by one tracer: 1e-6 covers
+               float rounding of its sums) */
+            pixel_near(a, ref, 1e-6);
+            rtp_image_destroy(a);
+            rtp_image_destroy(ref);
+            a = ref = NULL;
+        }
+        rtp_tree_destroy(t);
+    }
+    rtp_scene_destroy(s);
+}
+
 /* A scene without a view: refused as rtp_trace refuses it (a tree of it
    was written and then refused by rtp_tree_read); a ray kind that is
    none named as such; an eye ray given both as a miss and as a hit. */
@@ -481,5 +548,6 @@ int main(void)
     RUN(test_builder_rejects);
     RUN(test_builder_depth);
     RUN(test_builder_misuse);
+    RUN(test_builder_cut_off);
     return check_report();
 }
