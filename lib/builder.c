@@ -65,17 +65,17 @@ rtp_status rtp_builder_create(const rtp_scene *scene, int width, int height, int
     if (!scene || !out)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_builder_create: NULL argument");
     if (width <= 0 || height <= 0)
-        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "image size %dx%d: not positive",
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_builder_create: image size %dx%d: not positive",
                           width, height);
     /* (the samples' grid, as rtp_trace counts it) */
     if (!rtpi_image_size_ok(width, height) ||
         !rtpi_image_size_ok(width + (spd != 0), height + (spd != 0)))
-        return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0, "image size %dx%d not allowed", width,
+        return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0, "rtp_builder_create: image size %dx%d not allowed", width,
                           height);
     /* (a tree keeps its camera: one with no view could be written but
        not read back, nor traced again) */
     if (rtpi_camera_problem(scene))
-        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "%s: no view to build trees for",
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_builder_create: %s: no view to build trees for",
                           rtpi_camera_problem(scene));
     b = (rtp_builder *)rtpi_calloc_array(&scene->alloc, 1, sizeof *b);
     if (!b)
@@ -104,30 +104,37 @@ rtp_status rtp_builder_set_depth(rtp_builder *b, int max_depth, rtp_error *err)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_builder_set_depth: NULL builder");
     if (max_depth < 1 || max_depth > RTP_MAX_DEPTH)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                          "ray-tree depth %d: not within 1..%d", max_depth, RTP_MAX_DEPTH);
+                          "rtp_builder_set_depth: ray-tree depth %d: not within 1..%d", max_depth, RTP_MAX_DEPTH);
     b->max_depth = max_depth;
     return RTP_OK;
 }
 
-static rtp_status check_link(rtp_builder *b, int x, int y, int parent, rtp_ray_kind kind,
-                             uint32_t *sample, rtp_error *err)
+/* (fn: the call, named in its messages; a renderer making many calls
+   cannot tell them apart otherwise) */
+static rtp_status check_link(const char *fn, rtp_builder *b, int x, int y, int parent,
+                             rtp_ray_kind kind, uint32_t *sample, rtp_error *err)
 {
     if (!b)
-        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "NULL builder");
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "%s: NULL builder", fn);
     if (x < 0 || y < 0 || x >= b->nx || y >= b->ny)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                          "sample (%d, %d) outside the %dx%d samples", x, y, b->nx, b->ny);
+                          "%s: sample (%d, %d) outside the %dx%d samples", fn, x, y, b->nx,
+                          b->ny);
     *sample = (uint32_t)((size_t)y * b->nx + x);
     if ((unsigned)kind > RTP_RAY_REFRACTED)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                          "ray kind %d: not RTP_RAY_EYE, RTP_RAY_REFLECTED or RTP_RAY_REFRACTED",
-                          (int)kind);
+                          "%s: ray kind %d: not RTP_RAY_EYE, RTP_RAY_REFLECTED or "
+                          "RTP_RAY_REFRACTED",
+                          fn, (int)kind);
     if ((kind == RTP_RAY_EYE) != (parent == RTP_NO_PARENT))
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                          "an eye ray has no parent; reflected and refracted rays have one");
+                          "%s: parent %d: an eye ray has no parent (RTP_NO_PARENT); reflected "
+                          "and refracted rays have one",
+                          fn, parent);
     if (parent != RTP_NO_PARENT && (parent < 0 || (uint32_t)parent >= b->count[*sample]))
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                          "sample (%d, %d): parent %d is not a node of this sample", x, y, parent);
+                          "%s: sample (%d, %d): parent %d is not a node of this sample", fn, x,
+                          y, parent);
     return RTP_OK;
 }
 
@@ -135,25 +142,29 @@ int rtp_builder_hit(rtp_builder *b, int x, int y, int parent, rtp_ray_kind kind,
                     const rtp_hit_record *hit, rtp_error *err)
 {
     uint32_t sample = 0; /* (set by check_link where it succeeds; -O3 cannot tell) */
-    rtp_status st = check_link(b, x, y, parent, kind, &sample, err);
+    rtp_status st = check_link("rtp_builder_hit", b, x, y, parent, kind, &sample, err);
     bhit *h;
     size_t i, nl;
     if (st != RTP_OK)
         return -(int)st;
     if (!hit)
-        return -(int)rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "NULL hit");
+        return -(int)rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_builder_hit: NULL hit");
     if (hit->prim >= rtpi_scene_nprims(b->scene))
         return -(int)rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                                "primitive %u: the scene has %zu", hit->prim,
-                                rtpi_scene_nprims(b->scene));
+                                "rtp_builder_hit: hit->prim %u: no such primitive (the scene "
+                                "has %zu)",
+                                hit->prim, rtpi_scene_nprims(b->scene));
     /* (kept as floats: a double past the float range would be infinite;
        false for NaN too) */
-    if (!(fabs(hit->pos[0]) <= FLT_MAX && fabs(hit->pos[1]) <= FLT_MAX &&
-          fabs(hit->pos[2]) <= FLT_MAX))
-        return -(int)rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                                "hit position not finite as a float");
+    for (i = 0; i < 3; i++)
+        if (!(fabs(hit->pos[i]) <= FLT_MAX))
+            return -(int)rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                                    "rtp_builder_hit: hit->pos[%zu] %g: not finite as a float",
+                                    i, hit->pos[i]);
     if (b->count[sample] >= RTPI_MAX_SUBTREE)
-        return -(int)rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0, "too many hits in one sample");
+        return -(int)rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
+                                "rtp_builder_hit: sample (%d, %d): more than %u hits", x, y,
+                                RTPI_MAX_SUBTREE);
     nl = b->scene->nlights;
     if (rtpi_grow(&b->alloc, (void **)&b->hits, &b->cap_hits, b->nhits + 1, sizeof *b->hits) ||
         (b->words && rtpi_grow(&b->alloc, (void **)&b->ext, &b->cap_ext, b->next + b->words,
@@ -189,7 +200,7 @@ rtp_status rtp_builder_miss(rtp_builder *b, int x, int y, int parent, rtp_ray_ki
                             rtp_error *err)
 {
     uint32_t sample = 0; /* (set by check_link where it succeeds; -O3 cannot tell) */
-    rtp_status st = check_link(b, x, y, parent, kind, &sample, err);
+    rtp_status st = check_link("rtp_builder_miss", b, x, y, parent, kind, &sample, err);
     bmiss *m;
     if (st != RTP_OK)
         return st;
@@ -376,7 +387,7 @@ rtp_status rtp_builder_finish(rtp_builder *b, rtp_tree **out, rtp_error *err)
                 slot = h->kind == RTP_RAY_REFLECTED ? &refl[h->parent] : &refr[h->parent];
                 if (*slot != -1)
                     st = rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                                    "sample (%d, %d): node %d has two %s rays",
+                                    "rtp_builder_finish: sample (%d, %d): node %d has two %s rays",
                                     sx, sy, (int)h->parent,
                                     h->kind == RTP_RAY_REFLECTED ? "reflected" : "refracted");
                 *slot = (int32_t)i;
@@ -386,7 +397,7 @@ rtp_status rtp_builder_finish(rtp_builder *b, rtp_tree **out, rtp_error *err)
                 int32_t *slot = ms->kind == RTP_RAY_REFLECTED ? &refl[ms->parent] : &refr[ms->parent];
                 if (*slot != -1)
                     st = rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                                    "sample (%d, %d): node %d has two %s rays",
+                                    "rtp_builder_finish: sample (%d, %d): node %d has two %s rays",
                                     sx, sy, (int)ms->parent,
                                     ms->kind == RTP_RAY_REFLECTED ? "reflected" : "refracted");
                 *slot = -2;
@@ -396,30 +407,30 @@ rtp_status rtp_builder_finish(rtp_builder *b, rtp_tree **out, rtp_error *err)
             for (i = 0; i < n && st == RTP_OK; i++)
                 if (e.h[i]->tir && refr[i] != -1)
                     st = rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                                    "sample (%d, %d): node %d reflects totally and has a "
+                                    "rtp_builder_finish: sample (%d, %d): node %d reflects totally and has a "
                                     "refracted ray",
                                     sx, sy, (int)i);
             if (st == RTP_OK && n && roots != 1)
                 st = rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                                "sample (%d, %d): %zu eye-ray hits (one expected)", sx, sy, roots);
+                                "rtp_builder_finish: sample (%d, %d): %zu eye-ray hits (one expected)", sx, sy, roots);
             if (st == RTP_OK && roots && b->eye_miss[k])
                 st = rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                                "sample (%d, %d): its eye ray given as a miss and as a hit", sx,
+                                "rtp_builder_finish: sample (%d, %d): its eye ray given as a miss and as a hit", sx,
                                 sy);
             if (st == RTP_OK && n && !depth_ok(&e, root, 1, MAX_BUILD_DEPTH))
                 st = rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
-                                "sample (%d, %d): tree deeper than %d (a miss counts as a ray "
+                                "rtp_builder_finish: sample (%d, %d): tree deeper than %d (a miss counts as a ray "
                                 "of the next level)",
                                 sx, sy, MAX_BUILD_DEPTH);
             if (st == RTP_OK && n && b->max_depth && !depth_ok(&e, root, 1, b->max_depth))
                 st = rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                                "sample (%d, %d): rays deeper than the depth %d set "
+                                "rtp_builder_finish: sample (%d, %d): rays deeper than the depth %d set "
                                 "(rtp_builder_set_depth)",
                                 sx, sy, b->max_depth);
             t->start[k] = first[k];
             if (st == RTP_OK && n && emit_node(&e, root, 1, (size_t)first[k]) != first[k] + n)
                 st = rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                                "sample (%d, %d): hits not connected to the eye ray", sx, sy);
+                                "rtp_builder_finish: sample (%d, %d): hits not connected to the eye ray", sx, sy);
         }
         t->start[ns] = first[ns];
         rtpi_free(a, mfirst);
