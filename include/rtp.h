@@ -575,7 +575,11 @@ typedef struct rtp_hit_record {
                             transmitted share follows the reflected ray
                             (no refracted ray: finish refuses one) */
     const unsigned char *lights; /* bit i (LSB first): light i seen from
-                            here; NULL: none */
+                            here, for every light of the scene, those
+                            switched off too (a light.N.on edit shows what
+                            these bits say; rtp's trace casts their shadow
+                            rays): (lights in the scene + 7) / 8
+                            bytes; NULL: none */
 } rtp_hit_record;
 
 /** Starts a tree of width x height samples (spd: corner samples of a
