@@ -703,7 +703,8 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
     if (tree_out)
         *tree_out = NULL;
     if (!s || (!out && !tree_out))
-        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_trace: NULL argument");
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "%s: NULL argument",
+                          tree_out ? "rtp_record" : "rtp_trace");
     memset(&opt, 0, sizeof opt);
     if (opt_in)
         opt = *opt_in;
@@ -729,7 +730,8 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
        holds no deeper tree: 10,000 overflowed a thread's stack) */
     if (opt.max_depth > RTP_MAX_DEPTH)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                          "rtp_trace: maximum depth %d over %d", opt.max_depth, RTP_MAX_DEPTH);
+                          "%s: option max_depth %d over %d (RTP_MAX_DEPTH)",
+                          tree_out ? "rtp_record" : "rtp_trace", opt.max_depth, RTP_MAX_DEPTH);
     if (rtpi_camera_problem(s))
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "%s: no view to trace",
                           rtpi_camera_problem(s));

@@ -854,6 +854,9 @@ static void test_max_depth(void)
     o.max_depth = RTP_MAX_DEPTH + 1;
     o.threads = 2;
     CHECK(rtp_record(s, &o, &t, &img, NULL, &err) == RTP_ERR_ARGUMENT && !t && !img);
+    /* (the message names the call made: it had said rtp_trace) */
+    CHECK_MSG(strstr(err.message, "rtp_record: option max_depth 1001") != NULL, "%s",
+              err.message);
     /* (NULL trees are argument errors, not a read through NULL) */
     {
         rtp_tree *none[1] = {NULL};
