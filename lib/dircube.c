@@ -1376,35 +1376,42 @@ static int lb_cells_fn(void *ctx, int part)
     }
     for (k = 0; k < lc->nparts; k++)
         all += lc->parts[k].nruns;
-    /* phase 0 marks the runs' ends, phase 2 lists the runs' ranks */
+    /* phase 0 marks the runs' ends, phase 2 lists the runs' ranks (asking
+       between blocks of runs: a test a run cost gears' moves 1%) */
     for (k = 0; k < lc->nparts; k++)
-        for (i = 0; i < lc->parts[k].nruns; i++) {
-            const lb_run *r = &lc->parts[k].runs[i];
-            size_t a, b;
-            if ((++done & (LB_POLL_CELLS / 16 - 1)) == 0 &&
+        for (i = 0; i < lc->parts[k].nruns;) {
+            const size_t i1 = lc->parts[k].nruns - i > LB_POLL_CELLS / 16
+                                  ? i + LB_POLL_CELLS / 16
+                                  : lc->parts[k].nruns;
+            if (done &&
                 rtpi_stopper_poll(th->stp, th->is_main,
                                   (lc->phase == 0 ? 0.5 : 0.0) +
                                       (lc->phase == 0 ? 0.5 : 1.0) * (double)done / (double)all))
                 return 1;
-            lb_clip(r, lo, hi, &a, &b);
-            if (a >= b)
-                continue;
-            if (lc->phase == 0) {
-                off[a + 2]++;
-                if (b < hi)
-                    off[b + 2]--;
-                sum += (uint32_t)(b - a);
-            } else {
-                /* (the rank in a local: ref's stores may alias it for
-                   all the compiler knows, which reloaded it an entry) */
-                uint32_t rank = r->rank, *o = off + 1;
-                /* (two cells a step: the floor's runs in every row) */
-                for (c = a; c + 2 <= b; c += 2) {
-                    ref[o[c]++] = rank;
-                    ref[o[c + 1]++] = rank;
+            done += i1 - i;
+            for (; i < i1; i++) {
+                const lb_run *r = &lc->parts[k].runs[i];
+                size_t a, b;
+                lb_clip(r, lo, hi, &a, &b);
+                if (a >= b)
+                    continue;
+                if (lc->phase == 0) {
+                    off[a + 2]++;
+                    if (b < hi)
+                        off[b + 2]--;
+                    sum += (uint32_t)(b - a);
+                } else {
+                    /* (the rank in a local: ref's stores may alias it for
+                       all the compiler knows, which reloaded it an entry) */
+                    uint32_t rank = r->rank, *o = off + 1;
+                    /* (two cells a step: the floor's runs in every row) */
+                    for (c = a; c + 2 <= b; c += 2) {
+                        ref[o[c]++] = rank;
+                        ref[o[c + 1]++] = rank;
+                    }
+                    if (c < b)
+                        ref[o[c]++] = rank;
                 }
-                if (c < b)
-                    ref[o[c]++] = rank;
             }
         }
     if (lc->phase == 0)
