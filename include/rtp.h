@@ -488,7 +488,8 @@ rtp_status rtp_tree_trace(const rtp_tree *tree, int threads, rtp_image **out,
  *  of the same scene with the same options into the whole frame's tree;
  *  the regions must cover the frame without overlapping.  Its evaluation
  *  equals a whole-frame trace bit for bit.  An error names a part by its
- *  index, "parts[K]".  @return RTP_ERR_ARGUMENT (no parts, a NULL one,
+ *  index, "parts[K]", and says what differs from parts[0] first (frame,
+ *  SPD, depth, min_weight, scene, camera, a material's or light's key).  @return RTP_ERR_ARGUMENT (no parts, a NULL one,
  *  parts of different scenes, frames, options or edits, overlaps or
  *  gaps), RTP_ERR_UNSUPPORTED (a part with an added light),
  *  RTP_ERR_NOMEM; *out is NULL on any failure.  The merged tree takes

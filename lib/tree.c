@@ -4033,60 +4033,145 @@ static rtp_tree *tree_shell(const rtp_tree *like, int w, int h, int rx, int ry, 
 
 /* Same scene and options?  The parts of one frame were traced from one
    scene file with one command line, so their scenes are equal value for
-   value (names and texture paths included). */
-static int same_setup(const rtp_tree *a, const rtp_tree *b)
+   value (names and texture paths included).  NULL when they are, else
+   what differs, for the message: in a farm of many jobs, which of them
+   ran with another option, --set or file is the thing to find (every
+   refusal said "another scene, frame or options, or edited otherwise"). */
+static const char *mat_field(const rtpi_material *m, const rtpi_material *n)
+{
+    if (memcmp(m->color, n->color, sizeof m->color) != 0)
+        return "color";
+    if (m->kd != n->kd)
+        return "kd";
+    if (m->ks != n->ks)
+        return "ks";
+    if (m->shine != n->shine)
+        return "shine";
+    if (m->kt != n->kt)
+        return "kt";
+    if (m->ior != n->ior)
+        return "ior";
+    if (m->tex != n->tex || m->tex_image != n->tex_image)
+        return "texture";
+    if (memcmp(m->color2, n->color2, sizeof m->color2) != 0)
+        return "color2";
+    if (m->tex_scale != n->tex_scale)
+        return "checker_scale";
+    if (m->bump != n->bump || m->bump_image != n->bump_image)
+        return "bump";
+    if (m->bump_strength != n->bump_strength)
+        return "bump_strength";
+    if (m->bump_scale != n->bump_scale)
+        return "bump_scale";
+    return "values"; /* (equal as numbers, not as bits: -0 and 0) */
+}
+
+static const char *setup_diff(const rtp_tree *a, const rtp_tree *b, char *buf, size_t size)
 {
     const rtp_scene *x = a->scene, *y = b->scene;
     size_t i;
-    if (a->full_w != b->full_w || a->full_h != b->full_h || a->spd != b->spd ||
-        a->max_depth != b->max_depth || a->min_weight != b->min_weight ||
-        a->vis_words != b->vis_words || a->nlights0 != b->nlights0 ||
+    if (a->full_w != b->full_w || a->full_h != b->full_h) {
+        snprintf(buf, size, "a region of a %dx%d frame, parts[0] of a %dx%d one", b->full_w,
+                 b->full_h, a->full_w, a->full_h);
+        return buf;
+    }
+    if (a->spd != b->spd)
+        return b->spd ? "traced with SPD corner samples, parts[0] without"
+                      : "traced without SPD corner samples, parts[0] with them";
+    if (a->max_depth != b->max_depth) {
+        snprintf(buf, size, "traced to depth %d, parts[0] to depth %d", b->max_depth,
+                 a->max_depth);
+        return buf;
+    }
+    if (a->min_weight != b->min_weight) {
+        snprintf(buf, size, "traced with min_weight %.17g, parts[0] with %.17g", b->min_weight,
+                 a->min_weight);
+        return buf;
+    }
+    if (a->vis_words != b->vis_words || a->nlights0 != b->nlights0 ||
         x->nlights != y->nlights || x->nmats != y->nmats || x->ntris != y->ntris ||
         x->nspheres != y->nspheres || x->ncones != y->ncones || x->npos != y->npos ||
-        x->nnrm != y->nnrm || x->nuv != y->nuv || x->ntexs != y->ntexs ||
-        memcmp(&x->camera, &y->camera, sizeof x->camera) != 0 ||
-        memcmp(&a->cam0, &b->cam0, sizeof a->cam0) != 0 ||
-        memcmp(x->background, y->background, sizeof x->background) != 0 ||
-        memcmp(x->ambient, y->ambient, sizeof x->ambient) != 0 ||
-        x->light_scale != y->light_scale)
-        return 0;
+        x->nnrm != y->nnrm || x->nuv != y->nuv || x->ntexs != y->ntexs) {
+        snprintf(buf, size,
+                 "traced from another scene: %zu lights, %zu materials, %zu triangles, %zu "
+                 "spheres, %zu cones; parts[0] %zu, %zu, %zu, %zu, %zu",
+                 y->nlights, y->nmats, y->ntris, y->nspheres, y->ncones, x->nlights, x->nmats,
+                 x->ntris, x->nspheres, x->ncones);
+        return buf;
+    }
     if ((x->npos && memcmp(x->pos, y->pos, x->npos * 3 * sizeof *x->pos)) ||
         (x->nnrm && memcmp(x->nrm, y->nrm, x->nnrm * 3 * sizeof *x->nrm)) ||
         (x->nuv && memcmp(x->uv, y->uv, x->nuv * 2 * sizeof *x->uv)) ||
         (x->ntris && memcmp(x->tris, y->tris, x->ntris * sizeof *x->tris)) ||
         (x->nspheres && memcmp(x->spheres, y->spheres, x->nspheres * sizeof *x->spheres)) ||
         (x->ncones && memcmp(x->cones, y->cones, x->ncones * sizeof *x->cones)))
-        return 0;
+        return "traced from another scene: other geometry than parts[0]'s";
+    if (memcmp(&a->cam0, &b->cam0, sizeof a->cam0) != 0)
+        return "traced from another camera than parts[0] (camera.* keys)";
+    if (memcmp(&x->camera, &y->camera, sizeof x->camera) != 0)
+        return "edited to another camera than parts[0] (camera.* keys)";
+    if (memcmp(x->background, y->background, sizeof x->background) != 0)
+        return "given another background than parts[0]";
+    if (memcmp(x->ambient, y->ambient, sizeof x->ambient) != 0)
+        return "given another ambient than parts[0]";
+    if (x->light_scale != y->light_scale)
+        return "traced from another scene: its lights are scaled for another light count "
+               "than parts[0]'s";
     /* (the images themselves: parts may have loaded different files into
        the same slot by a texture or bump edit) */
     for (i = 0; i < x->ntexs; i++) {
         const rtp_image *u = x->texs[i].image, *v = y->texs[i].image;
-        if ((u == NULL) != (v == NULL))
-            return 0;
-        if (u && (u->width != v->width || u->height != v->height ||
-                  memcmp(u->pixels, v->pixels,
-                         (size_t)u->width * (size_t)u->height * 3 * sizeof *u->pixels) != 0))
-            return 0;
+        if ((u == NULL) != (v == NULL) ||
+            (u && (u->width != v->width || u->height != v->height ||
+                   memcmp(u->pixels, v->pixels,
+                          (size_t)u->width * (size_t)u->height * 3 * sizeof *u->pixels) !=
+                       0))) {
+            snprintf(buf, size,
+                     "given other pixels for image %zu (%s) than parts[0] (a file changed "
+                     "between the jobs, or an edit)",
+                     i, y->texs[i].path ? y->texs[i].path : "?");
+            return buf;
+        }
     }
     for (i = 0; i < x->nmats; i++) {
         rtpi_material m = x->mats[i], n = y->mats[i];
+        const char *nm = y->mats[i].name;
         m.name = n.name = NULL;
-        if (memcmp(&m, &n, sizeof m) != 0 || memcmp(&a->mats0[i], &b->mats0[i], sizeof m) != 0)
-            return 0;
+        if (memcmp(&m, &n, sizeof m) != 0) {
+            snprintf(buf, size, "given another mat.%zu.%s%s%s%s than parts[0]", i,
+                     mat_field(&n, &m), nm ? " (" : "", nm ? nm : "", nm ? ")" : "");
+            return buf;
+        }
+        if (memcmp(&a->mats0[i], &b->mats0[i], sizeof m) != 0) {
+            snprintf(buf, size,
+                     "traced with another mat.%zu.%s%s%s%s than parts[0] (one was evaluated "
+                     "after an edit that traces again)",
+                     i, mat_field(&b->mats0[i], &a->mats0[i]), nm ? " (" : "", nm ? nm : "",
+                     nm ? ")" : "");
+            return buf;
+        }
     }
     for (i = 0; i < x->nlights; i++) {
         rtpi_light l = x->lights[i], k = y->lights[i];
         l.name = k.name = NULL;
-        if (memcmp(&l, &k, sizeof l) != 0)
-            return 0;
+        if (memcmp(&l, &k, sizeof l) != 0) {
+            snprintf(buf, size, "given another light.%zu.%s than parts[0]", i,
+                     memcmp(l.pos, k.pos, sizeof l.pos) != 0       ? "pos"
+                     : memcmp(l.color, k.color, sizeof l.color) != 0 ? "color"
+                                                                    : "on");
+            return buf;
+        }
     }
     /* the lights as traced: each part's visibility bits were decided
        there (a part written after a move holds its bits for the traced
        place, and its lights now where they were moved) */
     for (i = 0; i < a->nlights0; i++)
-        if (memcmp(a->lights0[i].pos, b->lights0[i].pos, sizeof a->lights0[i].pos) != 0)
-            return 0; /* (positions alone: a file keeps no more of them) */
-    return 1;
+        if (memcmp(a->lights0[i].pos, b->lights0[i].pos, sizeof a->lights0[i].pos) != 0) {
+            /* (positions alone: a file keeps no more of them) */
+            snprintf(buf, size, "traced with light %zu at another place than parts[0]", i);
+            return buf;
+        }
+    return NULL;
 }
 
 rtp_status rtp_tree_merge(rtp_tree *const *parts, size_t n, rtp_tree **out, rtp_error *err)
@@ -4116,11 +4201,11 @@ rtp_status rtp_tree_merge(rtp_tree *const *parts, size_t n, rtp_tree **out, rtp_
     gy = fh + spd;
     words = p0->vis_words;
     for (i = 0; i < n; i++) {
-        if (i && !same_setup(p0, parts[i]))
+        char why[192];
+        const char *d = i ? setup_diff(p0, parts[i], why, sizeof why) : NULL;
+        if (d)
             return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                              "parts[%zu] was traced from another scene, frame or options "
-                              "than parts[0], or edited otherwise",
-                              i);
+                              "parts[%zu] cannot join parts[0]: it was %s", i, d);
         if (parts[i]->scene->nlights != parts[i]->nlights0)
             return rtpi_error(err, RTP_ERR_UNSUPPORTED, NULL, 0, 0,
                               "parts[%zu] has added lights", i);

@@ -80,6 +80,26 @@ $RTP merge -o "$T/x.rtp" "$T/p1.rtp" "$T/p2.rtp" 2>"$T/err"
 [ $? -eq 1 ] && grep -q overlap "$T/err" && ok || bad "overlap not refused"
 $RTP merge -o "$T/x.rtp" "$T/p1.rtp" 2>"$T/err"
 [ $? -eq 1 ] && grep -q uncovered "$T/err" && ok || bad "gap not refused"
+# parts of another setup are refused with what differs (a farm of many
+# jobs: which one ran with another option or --set is the thing to find;
+# every such refusal said "another scene, frame or options, or edited
+# otherwise")
+$RTP trace $S --size 32x32 --region 0,20,32,32 --depth 4 -o "$T/pd.rtp" -q
+$RTP merge -o "$T/x.rtp" "$T/p1.rtp" "$T/pd.rtp" 2>"$T/err"
+[ $? -eq 1 ] && grep -q "pd.rtp cannot join .*p1.rtp: it was traced to depth 4, .*p1.rtp to depth 5" "$T/err" &&
+    ok || bad "merge of another depth: $(cat "$T/err")"
+$RTP trace $S --size 32x32 --region 0,20,32,32 --set mat.red.kd=0.5 -o "$T/pk.rtp" -q
+$RTP merge -o "$T/x.rtp" "$T/p1.rtp" "$T/pk.rtp" 2>"$T/err"
+[ $? -eq 1 ] && grep -q "given another mat.1.kd (red) than" "$T/err" &&
+    ok || bad "merge of another --set: $(cat "$T/err")"
+$RTP trace $S --size 32x32 --region 0,20,32,32 --set light.1.pos=0,0,9 -o "$T/pl.rtp" -q
+$RTP merge -o "$T/x.rtp" "$T/pl.rtp" "$T/p1.rtp" 2>"$T/err"
+[ $? -eq 1 ] && grep -q "p1.rtp cannot join .*pl.rtp: it was given another light.1.pos than" "$T/err" &&
+    ok || bad "merge of another light: $(cat "$T/err")"
+$RTP trace scenes/prims.nff --size 32x32 --region 0,20,32,32 -o "$T/ps.rtp" -q
+$RTP merge -o "$T/x.rtp" "$T/p1.rtp" "$T/ps.rtp" 2>"$T/err"
+[ $? -eq 1 ] && grep -q "it was traced from another scene" "$T/err" &&
+    ok || bad "merge of another scene: $(cat "$T/err")"
 # image regions holding NaN (a region's pixels may be anything) merge as
 # they are, and an overlap on a NaN pixel is still found (NaN once marked
 # "not covered yet")
