@@ -258,21 +258,25 @@ static int parse_size(const char *v, int *w, int *h)
     return 0;
 }
 
-/* "x0,y0,x1,y1" into r; returns 0 or -1. */
+/* "x0,y0,x1,y1" into r: four fields, none empty (strtok had taken
+   "1,1,2,2," and "1,,1,2,2"); returns 0 or -1. */
 static int parse_region(const char *v, int *r)
 {
-    char buf[128], *p, *save = NULL;
+    char buf[128];
+    const char *p = v;
     int k;
-    if (strlen(v) >= sizeof buf)
-        return -1;
-    strcpy(buf, v);
-    p = buf;
     for (k = 0; k < 4; k++) {
-        char *tok = k ? strtok_r(NULL, ",", &save) : strtok_r(p, ",", &save);
-        if (!tok || parse_int(tok, 0, 1 << 20, &r[k]))
+        const char *e = strchr(p, ',');
+        size_t n = e ? (size_t)(e - p) : strlen(p);
+        if ((k < 3) != (e != NULL) || n == 0 || n >= sizeof buf)
             return -1;
+        memcpy(buf, p, n);
+        buf[n] = '\0';
+        if (parse_int(buf, 0, 1 << 20, &r[k]))
+            return -1;
+        p = e ? e + 1 : p + n;
     }
-    if (strtok_r(NULL, ",", &save) || r[0] >= r[2] || r[1] >= r[3])
+    if (r[0] >= r[2] || r[1] >= r[3])
         return -1;
     return 0;
 }

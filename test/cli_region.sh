@@ -119,6 +119,11 @@ printf '\000\000\200\076\000\000\000\077\000\000\100\077\315\314\314\075\315\314
 $RTP diff "$T/crlf.pfm" - --fail-above max_abs=0 -q <"$T/crlf.pfm" && ok || bad "CRLF PFM from stdin differs"
 $RTP trace $S --size 32x32 --region 0,0,99,9 -i "$T/p3.pfm" -q 2>/dev/null
 [ $? -eq 1 ] && ok || bad "region outside the frame accepted"
+# a region of four fields, none empty: a usage error (strtok took these)
+for r in 0,0,8,8, 0,,0,8,8 ,0,0,8,8; do
+    $RTP trace $S --size 32x32 --region $r -i "$T/p4.pfm" -q 2>/dev/null
+    [ $? -eq 2 ] && [ ! -e "$T/p4.pfm" ] && ok || bad "--region $r accepted"
+done
 # parts whose texture files differ (the file changed between two farm
 # jobs) are another scene: refused, in either order (they merged, the
 # image depending on the order)
