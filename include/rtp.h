@@ -598,7 +598,9 @@ rtp_status rtp_builder_create(const rtp_scene *scene, int width, int height,
 rtp_status rtp_builder_set_depth(rtp_builder *b, int max_depth, rtp_error *err);
 /** Adds a hit to sample (x, y) as the given child of node `parent` (an
  *  index returned earlier for the same sample).  @return the new node's
- *  index (>= 0) or a negative rtp_status (see err). */
+ *  index (>= 0) or a negative rtp_status (see err): test it before
+ *  passing it on as a parent (-RTP_ERR_NOMEM is -1, RTP_NO_PARENT's
+ *  value). */
 int rtp_builder_hit(rtp_builder *b, int x, int y, int parent, rtp_ray_kind kind,
                     const rtp_hit_record *hit, rtp_error *err);
 /** Records that the given child ray of `parent` left the scene. */
