@@ -813,7 +813,7 @@ static int is_stdout(const char *path)
 
 /* Whether two outputs are one file (-o x -i x, --stats x): the last
    written would replace the other silently.  1 after a message. */
-static int same_output(const char *cmd, const char *a, const char *b)
+static int one_output(const char *a, const char *b)
 {
     char ta[4096], tb[4096];
     struct stat sa, sb;
@@ -821,25 +821,34 @@ static int same_output(const char *cmd, const char *a, const char *b)
         return 0;
     if (link_target(a, ta, sizeof ta) != 0 || link_target(b, tb, sizeof tb) != 0)
         return 0;
-    if (strcmp(ta, tb) == 0 || (stat(ta, &sa) == 0 && stat(tb, &sb) == 0 &&
-                                S_ISREG(sa.st_mode) && sa.st_dev == sb.st_dev &&
-                                sa.st_ino == sb.st_ino)) {
-        msg("%s: %s and %s are one file: give each output its own", cmd, a, b);
-        return 1;
-    }
-    return 0;
+    return strcmp(ta, tb) == 0 || (stat(ta, &sa) == 0 && stat(tb, &sb) == 0 &&
+                                   S_ISREG(sa.st_mode) && sa.st_dev == sb.st_dev &&
+                                   sa.st_ino == sb.st_ino);
+}
+
+static int same_output(const char *cmd, const char *a, const char *b)
+{
+    if (!one_output(a, b))
+        return 0;
+    msg("%s: %s and %s are one file: give each output its own", cmd, a, b);
+    return 1;
 }
 
 /* An output that is the input file itself (a tree named t.png, whose
    default image is t.png; -i naming the scene): written, it replaced the
    input, which cannot be had back.  1 after a message. */
-static int overwrites_input(const char *cmd, const char *in, const char *out, int dflt)
+static int is_input(const char *in, const char *out)
 {
     struct stat si, so;
     if (!in || !out || strcmp(in, "-") == 0 || strcmp(out, "-") == 0)
         return 0;
-    if (stat(in, &si) != 0 || stat(out, &so) != 0 || !S_ISREG(si.st_mode) ||
-        si.st_dev != so.st_dev || si.st_ino != so.st_ino)
+    return stat(in, &si) == 0 && stat(out, &so) == 0 && S_ISREG(si.st_mode) &&
+           si.st_dev == so.st_dev && si.st_ino == so.st_ino;
+}
+
+static int overwrites_input(const char *cmd, const char *in, const char *out, int dflt)
+{
+    if (!is_input(in, out))
         return 0;
     if (dflt)
         msg("%s: the default image %s is the input itself: name the image with -i", cmd, out);
@@ -2140,6 +2149,23 @@ static int cmd_reeval(int argc, char **argv)
                 snprintf(path, sizeof path, "-");
             } else if (expand_pattern(image_path, n - 1, path, sizeof path) != 0) {
                 msg("--stream: image name too long");
+                rc = 1;
+                break;
+            }
+            /* (a single reeval refuses these before it begins; a stream's
+               names come a line at a time: frame 3 of t%d.png is a tree
+               t3.png, read once at the start, which the image replaced) */
+            if (is_input(tree_path, path)) {
+                msg("stdin:%d: --stream: the image %s is the tree %s: writing it would "
+                    "replace it; name the frames another way",
+                    n, path, tree_path);
+                rc = 1;
+                break;
+            }
+            if (one_output(path, stats_path)) {
+                msg("stdin:%d: --stream: the image %s is the --stats file %s: give each "
+                    "output its own",
+                    n, path, stats_path);
                 rc = 1;
                 break;
             }

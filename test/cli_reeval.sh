@@ -493,6 +493,19 @@ expect_rc 0 $RTP diff "$T/pp3.pfm" "$T/pp2.pfm" --fail-above max_abs=1e-6
 printf 'ambient=0.1\nambient=0.2\nbogus=1\nambient=0.3\n' >"$T/bad.txt"
 expect_rc 1 sh -c "$RTP reeval '$T/t.rtp' --stream -i '$T/sx/g%d.pfm' --stats '$T/gs.json' <'$T/bad.txt'"
 [ "$(grep -c '"command": "reeval"' "$T/gs.json" 2>/dev/null)" = 2 ] && [ -f "$T/sx/g1.pfm" ] && [ ! -f "$T/sx/g2.pfm" ] && ok || bad "stream stopped at a bad line: stats $(cat "$T/gs.json" 2>&1)"
+# a stream's frame named as its tree or its --stats file stops the stream at
+# that line, the file kept (frame 1 of t%d.png had replaced a tree t1.png:
+# a single reeval refuses it, the stream wrote over it; helper 73)
+mkdir -p "$T/sy"
+cp "$T/t.rtp" "$T/sy/t1.png"
+expect_rc 1 sh -c "printf 'ambient=0.1\nambient=0.2\nambient=0.3\n' | $RTP reeval '$T/sy/t1.png' --stream -i '$T/sy/t%d.png'"
+cmp -s "$T/sy/t1.png" "$T/t.rtp" && [ -f "$T/sy/t0.png" ] && [ ! -f "$T/sy/t2.png" ] &&
+    grep -q "stdin:2: --stream: the image .*t1.png is the tree" "$T/err" && ok ||
+    bad "a stream's frame replaced its tree: $(cat "$T/err")"
+expect_rc 1 sh -c "printf 'ambient=0.1\nambient=0.2\nambient=0.3\n' | $RTP reeval '$T/t.rtp' --stream -i '$T/sy/f%d.pfm' --stats '$T/sy/f1.pfm'"
+grep -q '"command": "reeval"' "$T/sy/f1.pfm" && [ ! -f "$T/sy/f2.pfm" ] &&
+    grep -q "stdin:2: --stream: the image .*f1.pfm is the --stats file" "$T/err" && ok ||
+    bad "a stream's frame on its --stats file: $(cat "$T/err")"
 # an empty output name, before the work (it failed at the rename, naming nothing)
 expect_rc 1 $RTP trace $S --size 8x8 -o ''
 grep -q "file name is empty" "$T/err" && ok || bad "empty -o: $(cat "$T/err")"
