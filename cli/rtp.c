@@ -1824,7 +1824,8 @@ static long long file_size(const char *path)
 
 static int reeval_one(rtp_tree *tree, const rtp_eval_options *eo, rtp_image **keep,
                       const char *image_path, int reference, int threads,
-                      FILE *stats, const char *tree_path, double load_seconds, int line)
+                      FILE *stats, const char *stats_path, const char *tree_path,
+                      double load_seconds, int line)
 {
     rtp_image *img = *keep, *ref = NULL;
     rtp_eval_stats es;
@@ -1927,7 +1928,20 @@ static int reeval_one(rtp_tree *tree, const rtp_eval_options *eo, rtp_image **ke
         fprintf(stats, ", \"peak_rss_kb\": %ld}\n", peak_rss_kb());
         /* (each frame's line as its image goes out: a UI reading --stats
            from a pipe or FIFO got them ten at a time, 4 KiB of buffer) */
-        fflush(stats);
+        errno = 0;
+        if (fflush(stats) != 0 || ferror(stats)) {
+            /* a line that fails: a stream whose stats could not be
+               written ran on to its last line and failed only then,
+               every frame's stats lost, the reason too */
+            int e = errno;
+            char where[32] = "";
+            if (line > 0)
+                snprintf(where, sizeof where, "stdin:%d: ", line);
+            msg("%s%s: error writing stats: %s", where,
+                stats == stdout ? "stdout" : stats == stderr ? "stderr" : stats_path,
+                e ? strerror(e) : "write failed");
+            goto out;
+        }
     }
     rc = 0;
 out:
@@ -2128,7 +2142,7 @@ static int cmd_reeval(int argc, char **argv)
     if (stats_path && !(stats = stats_open(stats_path)))
         goto out;
     if (!stream) {
-        rc = reeval_one(tree, &eo, &img, image_path, reference, threads, stats,
+        rc = reeval_one(tree, &eo, &img, image_path, reference, threads, stats, stats_path,
                         tree_path, t_load, 0);
         progress_end(&prog);
     } else {
@@ -2169,7 +2183,8 @@ static int cmd_reeval(int argc, char **argv)
                 rc = 1;
                 break;
             }
-            if (reeval_one(tree, &eo, &img, path, reference, threads, stats, tree_path,
+            if (reeval_one(tree, &eo, &img, path, reference, threads, stats, stats_path,
+                           tree_path,
                            t_load, n)) {
                 rc = 1;
                 break;
@@ -2181,7 +2196,8 @@ static int cmd_reeval(int argc, char **argv)
     }
     /* A stream stopped by a bad line keeps the images written before it,
        and so the statistics of those images: a line each */
-    if (stats && (rc != 0 && !frames ? (stats_discard(stats), 0) : stats_close(stats, stats_path)))
+    if (stats && (rc != 0 && (!frames || ferror(stats)) ? (stats_discard(stats), 0)
+                                                        : stats_close(stats, stats_path)))
         rc = 1;
     stats = NULL;
 out:

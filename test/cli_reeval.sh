@@ -422,6 +422,13 @@ grep -q '\.\.\.c*\.pfm: ' "$T/err" && ok || { bad "a long name not shown by its 
 if [ -w /dev/full ]; then
     expect_rc 1 sh -c "$RTP version >/dev/full"
     expect_rc 1 sh -c "$RTP --help >/dev/full"
+    # a stream whose --stats cannot be written stops at that line, naming
+    # it and why (it ran to its last line, then said "write failed")
+    mkdir -p "$T/sf"
+    expect_rc 1 sh -c "printf 'ambient=0.1\nambient=0.2\nambient=0.3\n' | $RTP reeval '$T/t.rtp' --stream -i '$T/sf/f%d.pfm' --stats /dev/full"
+    [ -f "$T/sf/f0.pfm" ] && [ ! -f "$T/sf/f1.pfm" ] &&
+        grep -q "stdin:1: /dev/full: error writing stats: No space left" "$T/err" &&
+        [ "$(wc -l <"$T/err")" -eq 1 ] && ok || bad "a stream's stats to /dev/full: $(ls "$T/sf") $(cat "$T/err")"
 fi
 
 # stdin serves one input (session 21; each of these read stdin twice)
