@@ -3421,8 +3421,15 @@ static rtp_status eval_body(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
         double cells = 6.0 * (double)res * (double)res;
         double need = cells * (mode == RTP_SHADOWS_LIGHTBUF ? 4.0 : 8.0) +
                       (mode == RTP_SHADOWS_OSMESA ? cells / 6.0 * 8.0 : 0.0);
-        for (l = 0; !cam_pending && l < s->nlights; l++)
-            if (light_moved(t, l) && !(need <= lim)) {
+        for (l = 0; mode != RTP_SHADOWS_EXACT && !cam_pending && l < s->nlights; l++)
+            if (light_moved(t, l) && !(need <= lim) && asked_auto) {
+                /* AUTO chose between two exact ways: shadow rays need no
+                   cube, as where a light buffer's lists pass the limit
+                   (update_visibility's fallback); a stream under
+                   --memory-limit 1 stopped at its first move, the error
+                   telling to lower a resolution nobody had asked */
+                mode = RTP_SHADOWS_EXACT;
+            } else if (light_moved(t, l) && !(need <= lim)) {
                 char g[2][32]; /* '.' whatever the locale */
                 rtpi_fmt_g(g[0], sizeof g[0], 6, ceil(need / 1048576.0));
                 rtpi_fmt_g(g[1], sizeof g[1], 6, lim / 1048576.0);

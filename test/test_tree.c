@@ -1916,6 +1916,60 @@ out:
     free(text);
 }
 
+/* RTP_SHADOWS_AUTO under a memory limit its light buffer's cells do not
+   fit in takes shadow rays, as it does where the buffer's lists do not
+   fit: both ways are exact and shadow rays need no cube.  (It failed with
+   RTP_ERR_LIMIT, "lower its resolution", a resolution it had chosen
+   itself: a --stream under --memory-limit stopped at its first move.)
+   LIGHTBUF asked for is refused as before.  The tree (prims at 56x44)
+   holds over 4 hits a primitive, so AUTO's choice is the light buffer, of
+   at least 64 cells a face edge: 6 x 64^2 x 4 bytes = 96 KiB over the
+   64 KiB limit here. */
+static void test_shadows_auto_cube_limit(void)
+{
+    rtp_scene *s = load("scenes/prims.nff");
+    rtp_tree *t = NULL;
+    rtp_image *img = NULL, *full = NULL;
+    rtp_trace_options o;
+    rtp_eval_options eo;
+    rtp_eval_stats st;
+    rtp_diff_stats d;
+    rtp_error err;
+    rtp_status rs;
+    if (!s) {
+        CHECK(s != NULL);
+        return;
+    }
+    memset(&o, 0, sizeof o);
+    o.width = 56;
+    o.height = 44;
+    memset(&eo, 0, sizeof eo);
+    eo.memory_limit = 65536.0;
+    eo.shadows = RTP_SHADOWS_LIGHTBUF;
+    CHECK(rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK &&
+          rtp_tree_eval(t, &eo, &img, NULL, NULL) == RTP_OK);
+    CHECK(t && rtp_tree_set(t, "light.0.pos", "-2,-4,6", NULL) == RTP_OK);
+    rs = t ? rtp_tree_eval_into(t, &eo, img, &st, &err) : RTP_ERR_ARGUMENT;
+    CHECK_MSG(rs == RTP_ERR_LIMIT && strstr(err.message, "direction cube"),
+              "lightbuf over the limit: status %d", (int)rs);
+    eo.shadows = RTP_SHADOWS_AUTO;
+    memset(&st, 0, sizeof st);
+    rs = t ? rtp_tree_eval_into(t, &eo, img, &st, &err) : RTP_ERR_ARGUMENT;
+    CHECK_MSG(rs == RTP_OK, "auto over the limit: %s", rs == RTP_OK ? "" : err.message);
+    CHECK_MSG(rs != RTP_OK || (st.moved_lights == 1 && st.shadows == RTP_SHADOWS_EXACT),
+              "auto over the limit: %d moved, mode %d", st.moved_lights, (int)st.shadows);
+    if (rtp_scene_set(s, "light.0.pos", "-2,-4,6", NULL) != RTP_OK ||
+        rtp_trace(s, &o, &full, NULL, NULL) != RTP_OK || rs != RTP_OK ||
+        rtp_image_diff(img, full, 1e-6, &d, NULL) != RTP_OK)
+        CHECK_MSG(0, "no image to compare");
+    else
+        CHECK_MSG(d.max_abs <= 1e-6, "%g from a full trace", d.max_abs);
+    rtp_image_destroy(img);
+    rtp_image_destroy(full);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+}
+
 /* RTP_SHADOWS_AUTO is exact, and takes the light buffer where the tree
    holds 4 or more recorded hits a primitive, else (few hits: a small
    image of many primitives) the light buffer for a first move of a
@@ -4745,6 +4799,7 @@ int main(void)
     RUN(test_moved_light_lightbuf);
     RUN(test_shadows_auto);
     RUN(test_shadows_auto_overlap);
+    RUN(test_shadows_auto_cube_limit);
     RUN(test_moved_light_small_spd);
     RUN(test_edit_sequence);
     RUN(test_random_chains);
