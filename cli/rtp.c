@@ -960,7 +960,11 @@ static int apply_kv(set_fn set, void *obj, const char *kv, const char *where, in
     if (set(obj, key, eq + 1, &err) != RTP_OK) {
         char buf[600];
         rtp_error_format(&err, buf, sizeof buf);
-        if (line)
+        /* (an empty value in a line: "light.0.color= 1" is two words) */
+        if (line && !eq[1])
+            fprintf(stderr, "rtp: %s:%d: %s (blanks separate a line's edits: no blank after '=')\n",
+                    where, line, buf);
+        else if (line)
             fprintf(stderr, "rtp: %s:%d: %s\n", where, line, buf);
         else
             fprintf(stderr, "rtp: %s\n", buf);

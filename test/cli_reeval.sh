@@ -459,6 +459,10 @@ printf 'mat.Floor Mat.kd=0.3\n' > "$T/blank.txt"
 expect_rc 1 $RTP reeval "$T/hash.rtp" --params "$T/blank.txt" -i "$T/hash3.pfm"
 grep -q "blank.txt:1: expected KEY=VALUE, got 'mat.Floor' (blanks separate .*mat.N" "$T/err" && ok ||
     bad "params: a name with a blank: $(cat "$T/err")"
+printf 'mat.0.kd= 0.3\n' > "$T/blank2.txt"
+expect_rc 1 $RTP reeval "$T/hash.rtp" --params "$T/blank2.txt" -i "$T/hash3.pfm"
+grep -q "blank2.txt:1: mat.0.kd: .*got '' (blanks separate a line's edits: no blank after '=')" \
+    "$T/err" && ok || bad "params: a blank after '=': $(cat "$T/err")"
 
 # a light buffer's lists count against --memory-limit (a flat mesh seen
 # edge on lists every triangle along a row of cells: 3.6 GB under a limit
