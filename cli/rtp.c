@@ -2022,6 +2022,13 @@ static int cmd_reeval(int argc, char **argv)
                 goto usage;
             }
             eo.shadows = (rtp_shadow_mode)m;
+            if (eo.shadows == RTP_SHADOWS_OSMESA && !(rtp_features() & RTP_FEATURE_OSMESA)) {
+                /* (here, before a stream waits on its first line: the
+                   evaluation would refuse it there) */
+                msg("--shadows osmesa: this build has no OSMesa (rebuild with make OSMESA=1 "
+                    "and libosmesa6-dev); use itembuf for the same item buffer in software");
+                goto out; /* (rc is 1 until the end) */
+            }
         } else if (is_opt(a, "--region")) {
             if (!(v = opt_value(argc, argv, &i, "--region")))
                 goto usage;

@@ -402,7 +402,8 @@ typedef struct rtp_eval_options {
        while samples are traced again (class-D edits, RTP_STALE_RETRACE, a
        moved camera) and while moved lights' shadows are decided (on
        either side of a shadow structure's build, inside a light or item
-       buffer's build but OSMesa's, and after rows): the long evaluations; nonzero stops it as soon as the rows being traced
+       buffer's build but OSMesa's, and after rows): the long
+       evaluations; nonzero stops it as soon as the rows being traced
        or decided end: RTP_ERR_CANCELLED, the tree as it was (the edits
        stay set: the next evaluation traces or decides them).  NULL:
        never. */
@@ -489,10 +490,11 @@ rtp_status rtp_tree_trace(const rtp_tree *tree, int threads, rtp_image **out,
  *  the regions must cover the frame without overlapping.  Its evaluation
  *  equals a whole-frame trace bit for bit.  An error names a part by its
  *  index, "parts[K]", and says what differs from parts[0] first (frame,
- *  SPD, depth, min_weight, scene, camera, a material's or light's key).  @return RTP_ERR_ARGUMENT (no parts, a NULL one,
- *  parts of different scenes, frames, options or edits, overlaps or
- *  gaps), RTP_ERR_UNSUPPORTED (a part with an added light),
- *  RTP_ERR_NOMEM; *out is NULL on any failure.  The merged tree takes
+ *  SPD, depth, min_weight, scene, camera, a material's or light's key).
+ *  @return RTP_ERR_ARGUMENT (no parts, a NULL one, parts of different
+ *  scenes, frames, options or edits, overlaps or gaps),
+ *  RTP_ERR_UNSUPPORTED (a part with an added light), RTP_ERR_NOMEM;
+ *  *out is NULL on any failure.  The merged tree takes
  *  parts[0]'s allocator. */
 rtp_status rtp_tree_merge(rtp_tree *const *parts, size_t n, rtp_tree **out,
                           rtp_error *err);

@@ -65,17 +65,18 @@ rtp_status rtp_builder_create(const rtp_scene *scene, int width, int height, int
     if (!scene || !out)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_builder_create: NULL argument");
     if (width <= 0 || height <= 0)
-        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_builder_create: image size %dx%d: not positive",
-                          width, height);
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                          "rtp_builder_create: image size %dx%d: not positive", width, height);
     /* (the samples' grid, as rtp_trace counts it) */
     if (!rtpi_image_size_ok(width, height) ||
         !rtpi_image_size_ok(width + (spd != 0), height + (spd != 0)))
-        return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0, "rtp_builder_create: image size %dx%d not allowed", width,
-                          height);
+        return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
+                          "rtp_builder_create: image size %dx%d not allowed", width, height);
     /* (a tree keeps its camera: one with no view could be written but
        not read back, nor traced again) */
     if (rtpi_camera_problem(scene))
-        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_builder_create: %s: no view to build trees for",
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                          "rtp_builder_create: %s: no view to build trees for",
                           rtpi_camera_problem(scene));
     b = (rtp_builder *)rtpi_calloc_array(&scene->alloc, 1, sizeof *b);
     if (!b)
@@ -104,7 +105,8 @@ rtp_status rtp_builder_set_depth(rtp_builder *b, int max_depth, rtp_error *err)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_builder_set_depth: NULL builder");
     if (max_depth < 1 || max_depth > RTP_MAX_DEPTH)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                          "rtp_builder_set_depth: ray-tree depth %d: not within 1..%d", max_depth, RTP_MAX_DEPTH);
+                          "rtp_builder_set_depth: ray-tree depth %d: not within 1..%d", max_depth,
+                          RTP_MAX_DEPTH);
     b->max_depth = max_depth;
     return RTP_OK;
 }
@@ -394,7 +396,8 @@ rtp_status rtp_builder_finish(rtp_builder *b, rtp_tree **out, rtp_error *err)
             }
             for (m = mfirst[k]; m < mfirst[k + 1] && st == RTP_OK; m++) {
                 const bmiss *ms = morder[m];
-                int32_t *slot = ms->kind == RTP_RAY_REFLECTED ? &refl[ms->parent] : &refr[ms->parent];
+                int32_t *slot =
+                    ms->kind == RTP_RAY_REFLECTED ? &refl[ms->parent] : &refr[ms->parent];
                 if (*slot != -1)
                     st = rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
                                     "rtp_builder_finish: sample (%d, %d): node %d has two %s rays",
@@ -406,31 +409,39 @@ rtp_status rtp_builder_finish(rtp_builder *b, rtp_tree **out, rtp_error *err)
                transmitted share follows the reflected ray) */
             for (i = 0; i < n && st == RTP_OK; i++)
                 if (e.h[i]->tir && refr[i] != -1)
-                    st = rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                                    "rtp_builder_finish: sample (%d, %d): node %d reflects totally and has a "
-                                    "refracted ray",
-                                    sx, sy, (int)i);
+                    st = rtpi_error(
+                        err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                        "rtp_builder_finish: sample (%d, %d): node %d reflects totally and has a "
+                        "refracted ray",
+                        sx, sy, (int)i);
             if (st == RTP_OK && n && roots != 1)
-                st = rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                                "rtp_builder_finish: sample (%d, %d): %zu eye-ray hits (one expected)", sx, sy, roots);
+                st = rtpi_error(
+                    err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                    "rtp_builder_finish: sample (%d, %d): %zu eye-ray hits (one expected)", sx, sy,
+                    roots);
             if (st == RTP_OK && roots && b->eye_miss[k])
-                st = rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                                "rtp_builder_finish: sample (%d, %d): its eye ray given as a miss and as a hit", sx,
-                                sy);
+                st = rtpi_error(
+                    err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                    "rtp_builder_finish: sample (%d, %d): its eye ray given as a miss and as a hit",
+                    sx, sy);
             if (st == RTP_OK && n && !depth_ok(&e, root, 1, MAX_BUILD_DEPTH))
                 st = rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
-                                "rtp_builder_finish: sample (%d, %d): tree deeper than %d (a miss counts as a ray "
+                                "rtp_builder_finish: sample (%d, %d): tree deeper than %d (a miss "
+                                "counts as a ray "
                                 "of the next level)",
                                 sx, sy, MAX_BUILD_DEPTH);
             if (st == RTP_OK && n && b->max_depth && !depth_ok(&e, root, 1, b->max_depth))
-                st = rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                                "rtp_builder_finish: sample (%d, %d): rays deeper than the depth %d set "
-                                "(rtp_builder_set_depth)",
-                                sx, sy, b->max_depth);
+                st = rtpi_error(
+                    err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                    "rtp_builder_finish: sample (%d, %d): rays deeper than the depth %d set "
+                    "(rtp_builder_set_depth)",
+                    sx, sy, b->max_depth);
             t->start[k] = first[k];
             if (st == RTP_OK && n && emit_node(&e, root, 1, (size_t)first[k]) != first[k] + n)
-                st = rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                                "rtp_builder_finish: sample (%d, %d): hits not connected to the eye ray", sx, sy);
+                st = rtpi_error(
+                    err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                    "rtp_builder_finish: sample (%d, %d): hits not connected to the eye ray", sx,
+                    sy);
         }
         t->start[ns] = first[ns];
         rtpi_free(a, mfirst);

@@ -621,7 +621,8 @@ static int auto_shadows(const rtp_tree *t, int one_off, size_t moving)
 static double auto_lb_bytes(const rtp_tree *t, int res)
 {
     double np = (double)rtpi_scene_nprims(t->scene);
-    double entries = AUTO_LB_ENTRIES * ((double)t->nnodes + np) + (t->kd ? 0.0 : AUTO_LB_BUILD * np);
+    double entries =
+        AUTO_LB_ENTRIES * ((double)t->nnodes + np) + (t->kd ? 0.0 : AUTO_LB_BUILD * np);
     return 4.0 * (6.0 * (double)res * (double)res + 2.0) + 80.0 * np +
            4.0 * (entries > 262144.0 ? entries : 262144.0);
 }

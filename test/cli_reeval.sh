@@ -146,6 +146,9 @@ if $RTP version | grep -q "no osmesa"; then
     grep -q "no OSMesa" "$T/err" && [ ! -e "$T/osm.pfm" ] && ok || bad "osmesa without OSMesa: $(cat "$T/err")"
     expect_rc 1 $RTP reeval "$T/t.rtp" --shadows osmesa --set light.key.pos=4e12,3e12,2e12 -i "$T/osm.pfm"
     [ ! -e "$T/osm.pfm" ] && ok || bad "osmesa without OSMesa, a far light: an image written"
+    # (a stream is refused before it waits on its first line)
+    expect_rc 1 $RTP reeval "$T/t.rtp" --stream --shadows osmesa -i "$T/osm%d.pfm" </dev/null
+    grep -q "no OSMesa" "$T/err" && ok || bad "a stream with osmesa without OSMesa: $(cat "$T/err")"
 fi
 
 # A stream of PFM frames saved to a file and given on stdin: its first
