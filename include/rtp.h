@@ -348,9 +348,10 @@ typedef enum rtp_shadow_mode {
                                  at least 4 recorded hits a primitive (or no
                                  kd-tree yet and no move before: a first
                                  move) unless its lists would be long
-                                 (overlapping primitives: past about 16
-                                 entries a hit), else shadow rays through
-                                 the kd-tree (the CLI's default); shadow_res 0:
+                                 (overlapping primitives: past 16 entries
+                                 a hit and a primitive, README), else
+                                 shadow rays through the kd-tree (the
+                                 CLI's default); shadow_res 0:
                                  the light buffer's from the tree's hits,
                                  256 sqrt(hits / 250,000) as a power of two,
                                  64 to 1024 */

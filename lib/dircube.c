@@ -1258,7 +1258,8 @@ rtp_status rtpi_lightbuf_build(const rtp_scene *s, rtpi_v3 light, int res,
                                const rtp_allocator *a, rtpi_lightbuf *lb,
                                rtp_error *err)
 {
-    return rtpi_lightbuf_build_some(s, light, res, NULL, 0, 1, HUGE_VAL, NULL, a, lb, err);
+    return rtpi_lightbuf_build_some(s, light, res, NULL, 0, 1, HUGE_VAL, HUGE_VAL, NULL, a, lb,
+                                    err);
 }
 
 /* A thread of the counting pass: its projection scratch, and the parts
@@ -1315,8 +1316,9 @@ static inline void lb_clip(const lb_run *r, size_t lo, size_t hi, size_t *a, siz
 
 /* A thread of lb_cells_fn: the ranges, and the caller's progress and
    cancel, which the calling thread (is_main) asks every LB_POLL_CELLS
-   cells or runs of its range: at 8192 cells a face the bunny's cube
-   passes over 400 M cells, 3 s. */
+   cells or LB_POLL_CELLS / 16 runs of its range (rtpi_stopper_poll calls
+   them at most STOPPER_REPORTS times a build): at 8192 cells a face the
+   bunny's cube passes over 400 M cells, 3 s. */
 typedef struct lb_cells_thr {
     lb_cells *lc;
     rtpi_stopper *stp;
@@ -1468,7 +1470,8 @@ int rtpi_lightbuf_res(const rtp_scene *s, rtpi_v3 light, int res)
 
 rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
                                     const unsigned char *sel, unsigned char want, int threads,
-                                    double limit, const rtpi_poll *poll, const rtp_allocator *a,
+                                    double limit, double max_entries, const rtpi_poll *poll,
+                                    const rtp_allocator *a,
                                     rtpi_lightbuf *lb, rtp_error *err)
 {
     size_t n = rtpi_scene_nprims(s), ncells, i, nc = 0;
@@ -1480,7 +1483,7 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
     uint64_t total = 0;
     size_t runs = 0;
     lb_budget bud;
-    int np, nt, k, nw = 0, failed = 0, over = 0, rows;
+    int np, nt, k, nw = 0, failed = 0, over = 0, rows, by_entries;
     unsigned used = 0; /* faces whose cells the runs reach (dc_ctx.faces) */
     double S;
     const unsigned char *hit = dc_kept(s) ? s->phit : NULL; /* (dc_hittable's) */
@@ -1582,9 +1585,13 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
         parts[k].a = ta;
         parts[k].bud = &bud;
     }
-    /* the runs within the limit too, less what is made already */
+    /* the runs within the limit too, less what is made already; and no
+       more runs than entries may be (a run lists a cell at least) */
     bud.room = limit - 4.0 * ((double)ncells + 2.0) -
                (double)nc * (sizeof *lb->cand + (lb->plane ? 40.0 : 0.0) + (lb->cone ? 32.0 : 0.0));
+    by_entries = bud.room > max_entries * sizeof(lb_run);
+    if (by_entries)
+        bud.room = max_entries * sizeof(lb_run);
     bud.stored = 0.0;
     if (rtpi_mutex_init(&bud.lock) != 0) {
         if (ta != a)
@@ -1629,12 +1636,28 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
         for (k = 0; k < np; k++)
             rtpi_free(a, parts[k].runs);
         rtpi_lightbuf_free(lb, a);
+        if (by_entries) {
+            /* (more runs than entries allowed: more entries too) */
+            rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
+                       "a light buffer of %d cells a face would list over %.0f entries", res,
+                       max_entries);
+            return RTPI_OVER_ENTRIES;
+        }
         rtpi_fmt_g(g, sizeof g, 6, limit / 1048576.0);
         return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
                           "a light buffer of %d cells a face: counting its lists passed the "
                           "memory limit of %s MiB (lower its resolution, take --shadows exact, or "
                           "raise memory_limit: rtp's --memory-limit)",
                           res, g);
+    }
+    if (!failed && (double)total > max_entries) { /* (the caller falls back: no message) */
+        for (k = 0; k < np; k++)
+            rtpi_free(a, parts[k].runs);
+        rtpi_lightbuf_free(lb, a);
+        rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
+                   "a light buffer of %d cells a face would list %.0f entries, over %.0f", res,
+                   (double)total, max_entries);
+        return RTPI_OVER_ENTRIES;
     }
     if (!failed && total > 0xffffffffu) {
         for (k = 0; k < np; k++)
@@ -1713,8 +1736,7 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
             for (q = 0; q < nr; q++)
                 lc[q].phase = k;
             stp.lo = plo[k];
-            stp.span = pspan[k];
-            stp.last = -1.0;
+            stp.span = pspan[k]; /* (rising: stp.last carries over) */
             rtpi_parallel_rows(nr, nr, ctx, lb_cells_fn, NULL, NULL);
             if (k == 0)
                 for (q = 0; q < nr; q++) { /* each range's first start */

@@ -195,11 +195,14 @@ int rtpi_lightbuf_res(const rtp_scene *s, rtpi_v3 light, int res);
    the primitives on up to `threads` threads (the same buffer for any
    number; a's calls are then serialised by a lock).  limit: bytes the
    buffer may take, its lists counted before they are made (HUGE_VAL:
-   none): past it RTP_ERR_LIMIT.  poll (NULL: none): the build's progress,
+   none): past it RTP_ERR_LIMIT, as past max_entries list entries
+   (HUGE_VAL: none; RTP_SHADOWS_AUTO's bound, tree.c auto_lb_entries).
+   poll (NULL: none): the build's progress,
    and its cancel asked between parts of it (RTP_ERR_CANCELLED). */
 rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
                                     const unsigned char *sel, unsigned char want, int threads,
-                                    double limit, const rtpi_poll *poll, const rtp_allocator *a,
+                                    double limit, double max_entries, const rtpi_poll *poll,
+                                    const rtp_allocator *a,
                                     rtpi_lightbuf *lb, rtp_error *err);
 /* 1 when no candidate of ray's cell hits ray in [tmin, tmax]; ray must run
    towards the light (rtpi_shadow_ray). */

@@ -979,8 +979,10 @@ struct rtp_tree {
     } blocks[16];
     rtp_allocator cube_alloc; /* the tree's allocator through blocks[] */
     int auto_long;            /* RTP_SHADOWS_AUTO found a light buffer's
-                                 lists too long (tree.c auto_lb_bytes): its
-                                 later moves take shadow rays at once */
+                                 lists too long at this many cells a face
+                                 (tree.c auto_lb_entries; 0: never): its
+                                 later moves at as many or more take
+                                 shadow rays at once */
 };
 
 /* The memory limit of a trace or re-evaluation given none: 16 GiB. */
@@ -1078,6 +1080,12 @@ int rtpi_parallel_rows_stack(int nrows, int nthreads, void *const *ctx, rtpi_row
 int rtpi_parallel_rows_cancel(int nrows, int nthreads, void *const *ctx, rtpi_row_fn fn,
                               void (*progress)(void *, double), int (*cancel)(void *),
                               void *user, size_t stack);
+/* A light buffer's lists past the entries its caller allowed
+   (rtpi_lightbuf_build_some's max_entries: RTP_SHADOWS_AUTO's bound, which
+   then takes shadow rays): never returned from the public calls; err
+   holds RTP_ERR_LIMIT. */
+#define RTPI_OVER_ENTRIES ((rtp_status)100)
+
 /* The caller's progress and cancel for a long step inside a call (a
    direction cube's build): progress of the step in [0,1], asked from the
    calling thread only (as rtpi_parallel_rows_cancel's); NULL members:
@@ -1100,7 +1108,7 @@ int rtpi_poll_cancelled(const rtpi_poll *poll);
    whether to stop. */
 typedef struct rtpi_stopper {
     const rtpi_poll *poll; /* NULL: never stops, nothing reported */
-    double lo, span, last; /* the rows' share of the step; last reported */
+    double lo, span, last; /* the rows' share of the build; last report */
     int stop;              /* cancel said yes (under lock) */
     rtpi_mutex lock;
 } rtpi_stopper;

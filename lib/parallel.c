@@ -284,7 +284,7 @@ int rtpi_stopper_init(rtpi_stopper *st, const rtpi_poll *poll, double lo, double
     st->poll = poll && (poll->progress || poll->cancel) ? poll : NULL;
     st->lo = lo;
     st->span = span;
-    st->last = -1.0;
+    st->last = -1.0; /* (the last report's step, STOPPER_REPORTS a build) */
     st->stop = 0;
     if (!st->poll)
         return 0;
@@ -297,22 +297,32 @@ void rtpi_stopper_destroy(rtpi_stopper *st)
         rtpi_mutex_destroy(&st->lock);
 }
 
+/* A build's progress and cancel are called at most this many times (a
+   step's rows another REPORTS): an item buffer asked every 256 of a
+   million triangles called them 4,000 times. */
+#define STOPPER_REPORTS 250
+
 int rtpi_stopper_poll(rtpi_stopper *st, int is_main, double done)
 {
     int stop;
     if (!st->poll)
         return 0;
     if (is_main) {
-        if (st->poll->progress && done > st->last) {
-            st->poll->progress(st->poll->user, st->lo + st->span * (done < 1.0 ? done : 1.0));
-            st->last = done;
-        }
+        /* (the build's share, [lo, lo + span] of it, in STOPPER_REPORTS
+           steps: only at a new one, forward) */
+        double at = st->lo + st->span * (done < 1.0 ? done : 1.0);
+        if (!(at * STOPPER_REPORTS >= st->last + 1.0))
+            goto read;
+        st->last = floor(at * STOPPER_REPORTS);
+        if (st->poll->progress)
+            st->poll->progress(st->poll->user, at);
         if (rtpi_poll_cancelled(st->poll)) {
             rtpi_mutex_lock(&st->lock);
             st->stop = 1;
             rtpi_mutex_unlock(&st->lock);
         }
     }
+read:
     rtpi_mutex_lock(&st->lock);
     stop = st->stop;
     rtpi_mutex_unlock(&st->lock);

@@ -107,12 +107,13 @@ static rtp_status sh_itembuf(rtpi_shadow *sh, int res, int threads, const rtpi_p
                                       sh->ib.res >= SH_THIN_DIV * SH_WIDE_RES
                                           ? (sh->ib.res + 1) / SH_THIN_DIV
                                           : SH_WIDE_RES,
-                                      sh->thin, 1, threads, sh->limit, &cpoll, a, &sh->lb, err);
+                                      sh->thin, 1, threads, sh->limit, HUGE_VAL, &cpoll, a,
+                                      &sh->lb, err);
     if (st == RTP_OK && sh->lb.ncand)
         st = sh_thin_cells(sh, a, err);
     if (st == RTP_OK)
         st = rtpi_lightbuf_build_some(sh->s, sh->light, SH_WIDE_RES, sh->thin, 0, threads,
-                                      sh->limit, &cpoll, a, &sh->wide, err);
+                                      sh->limit, HUGE_VAL, &cpoll, a, &sh->wide, err);
     return st;
 }
 
@@ -121,13 +122,14 @@ rtp_status rtpi_shadow_create(const rtp_scene *s, const rtpi_kdtree *kd,
                               const rtp_allocator *a, rtpi_shadow **out,
                               rtp_error *err)
 {
-    return rtpi_shadow_create_mt(s, kd, light, mode, res, 1, HUGE_VAL, NULL, a, out, err);
+    return rtpi_shadow_create_mt(s, kd, light, mode, res, 1, HUGE_VAL, HUGE_VAL, NULL, a, out,
+                                 err);
 }
 
 rtp_status rtpi_shadow_create_mt(const rtp_scene *s, const rtpi_kdtree *kd, rtpi_v3 light,
                                  rtpi_shadow_mode mode, int res, int threads, double limit,
-                                 const rtpi_poll *poll, const rtp_allocator *a,
-                                 rtpi_shadow **out, rtp_error *err)
+                                 double max_entries, const rtpi_poll *poll,
+                                 const rtp_allocator *a, rtpi_shadow **out, rtp_error *err)
 {
     rtpi_shadow *sh;
     rtp_status st = RTP_OK;
@@ -150,8 +152,8 @@ rtp_status rtpi_shadow_create_mt(const rtp_scene *s, const rtpi_kdtree *kd, rtpi
     sh->limit = limit;
     switch (mode) {
     case RTPI_SHADOW_LIGHTBUF:
-        st = rtpi_lightbuf_build_some(s, light, res, NULL, 0, threads, limit, poll, a, &sh->lb,
-                                      err);
+        st = rtpi_lightbuf_build_some(s, light, res, NULL, 0, threads, limit, max_entries, poll,
+                                      a, &sh->lb, err);
         break;
     case RTPI_SHADOW_ITEMBUF:
     case RTPI_SHADOW_OSMESA:
@@ -164,8 +166,8 @@ rtp_status rtpi_shadow_create_mt(const rtp_scene *s, const rtpi_kdtree *kd, rtpi
         if (rtpi_lightbuf_res(s, light, res) < (res <= 0 ? RTPI_DC_DEFAULT_RES : res) / 4) {
             sh->mode = kd ? RTPI_SHADOW_EXACT : RTPI_SHADOW_LIGHTBUF;
             if (!kd)
-                st = rtpi_lightbuf_build_some(s, light, res, NULL, 0, threads, limit, poll, a,
-                                              &sh->lb, err);
+                st = rtpi_lightbuf_build_some(s, light, res, NULL, 0, threads, limit,
+                                              max_entries, poll, a, &sh->lb, err);
             break;
         }
         st = sh_itembuf(sh, res, threads, poll, a, err);

@@ -55,14 +55,15 @@ rtp_status rtpi_shadow_create(const rtp_scene *s, const rtpi_kdtree *kd,
                               rtp_error *err);
 /* The same, building the direction cube's light buffers on up to
    `threads` threads (the same buffers for any number), their lists within
-   `limit` bytes (HUGE_VAL: no bound; past it RTP_ERR_LIMIT).  poll (NULL:
+   `limit` bytes and a light buffer's within max_entries entries
+   (HUGE_VAL: no bound; past either RTP_ERR_LIMIT).  poll (NULL:
    none): the build's progress, and its cancel asked inside the cubes'
    builds (RTP_ERR_CANCELLED; the item buffer drawn by OSMesa is not
    stopped inside). */
 rtp_status rtpi_shadow_create_mt(const rtp_scene *s, const rtpi_kdtree *kd, rtpi_v3 light,
                                  rtpi_shadow_mode mode, int res, int threads, double limit,
-                                 const rtpi_poll *poll, const rtp_allocator *a,
-                                 rtpi_shadow **out, rtp_error *err);
+                                 double max_entries, const rtpi_poll *poll,
+                                 const rtp_allocator *a, rtpi_shadow **out, rtp_error *err);
 
 /* Does the recorded hit at p (a float position, as the tree keeps it) on
    primitive prim, whose shadow ray trace would start at o (p moved off the

@@ -588,8 +588,6 @@ static void vis_key(int mode, int res, int *kmode, int *kres)
 
 static int auto_shadows(const rtp_tree *t, int one_off, size_t moving)
 {
-    if (t->auto_long)
-        return RTP_SHADOWS_EXACT; /* (the scene's overlap: auto_lb_bytes) */
     if (t->nnodes >= AUTO_HITS_PER_PRIM * rtpi_scene_nprims(t->scene))
         return RTP_SHADOWS_LIGHTBUF;
     if (t->kd || t->cur_vis || !one_off || moving > 2)
@@ -597,34 +595,33 @@ static int auto_shadows(const rtp_tree *t, int one_off, size_t moving)
     return RTP_SHADOWS_LIGHTBUF;
 }
 
-/* The bytes RTP_SHADOWS_AUTO lets a light buffer of `res` cells a face
-   take before it takes shadow rays instead: its cells, its candidates'
-   records (80 bytes a primitive at most) and list entries (4 bytes
-   each).  Primitives that overlap as seen from the light list each other
-   in every cell they share: 10,000 stacked quads at 128 cells listed
-   61.8 M entries for 119 k recorded hits, 0.89 s against shadow rays'
-   0.22 s, of which 0.20 s was the kd-tree's build.  An entry costs about
-   15 ns to fill (that stack, one thread); a shadow ray's query a sixteenth
-   of a microsecond and up (stacks of 30 to 10,000 quads at 256x256 with
-   the kd-tree's build: even at about 16 entries a hit, shadow rays 2x as
-   fast at 51), and the kd-tree's build, where there is none yet, 2-10 us
-   a primitive (mount_s6 2, the stack 10): AUTO_LB_ENTRIES a hit and a
-   primitive, AUTO_LB_BUILD more a primitive without a kd-tree, and never
-   fewer than 2^18 (a few milliseconds: below that either is quick, and a
-   small image of a large scene, few hits, lists more than its hits).  The
-   seven SPD scenes list 0.4-1.9 entries a hit (tree_s11 the most), far
-   below.  The limit bounds the runs the counting pass makes too
-   (lb_budget), so it stops early where the lists would be long. */
+/* The list entries RTP_SHADOWS_AUTO lets a light buffer hold before it
+   takes shadow rays instead.  Primitives that overlap as seen from the
+   light list each other in every cell they share: 10,000 stacked quads
+   at 128 cells listed 61.8 M entries for 119 k recorded hits, 0.89 s
+   against shadow rays' 0.22 s, of which 0.20 s was the kd-tree's build.
+   An entry costs about 15 ns to fill (that stack, one thread); a shadow
+   ray's query a sixteenth of a microsecond and up (stacks of 30 to
+   10,000 quads at 256x256 with the kd-tree's build: even at about 16
+   entries a hit, shadow rays 2x as fast at 51), and the kd-tree's build,
+   where there is none yet, 2-10 us a primitive (mount_s6 2, the stack
+   10): AUTO_LB_ENTRIES a hit and a primitive, AUTO_LB_BUILD more a
+   primitive without a kd-tree, and never fewer than 2^18 (a few
+   milliseconds: below that either is quick, and a small image of a large
+   scene, few hits, lists more than its hits).  The seven SPD scenes list
+   0.4-1.9 entries a hit (tree_s11 the most), far below.  The runs the
+   counting pass makes are bounded by it too (lb_budget: a run lists a
+   cell at least), so the pass stops early where the lists would be
+   long. */
 #define AUTO_LB_ENTRIES 16.0
 #define AUTO_LB_BUILD 150.0
 
-static double auto_lb_bytes(const rtp_tree *t, int res)
+static double auto_lb_entries(const rtp_tree *t)
 {
     double np = (double)rtpi_scene_nprims(t->scene);
     double entries =
         AUTO_LB_ENTRIES * ((double)t->nnodes + np) + (t->kd ? 0.0 : AUTO_LB_BUILD * np);
-    return 4.0 * (6.0 * (double)res * (double)res + 2.0) + 80.0 * np +
-           4.0 * (entries > 262144.0 ? entries : 262144.0);
+    return entries > 262144.0 ? entries : 262144.0;
 }
 
 /* The light buffer's cells a face edge for RTP_SHADOWS_AUTO without a
@@ -779,6 +776,7 @@ static rtp_status update_visibility_body(rtp_tree *t, int mode, int res, int thr
         int moved = light_moved(t, i);
         progress_part part, bpart;
         rtpi_poll poll;
+        double lb_cap;
         if (vis_up_to_date(t, i, kmode, kres))
             continue;
         if (!moved) {
@@ -824,22 +822,26 @@ static rtp_status update_visibility_body(rtp_tree *t, int mode, int res, int thr
             poll.user = &bpart;
             part.lo += bpart.span;
             part.span -= bpart.span;
+            lb_cap = fallback && mode == RTP_SHADOWS_LIGHTBUF ? auto_lb_entries(t) : HUGE_VAL;
             rs = rtpi_shadow_create_mt(s, t->kd, v3(lp[0], lp[1], lp[2]),
-                                       (rtpi_shadow_mode)mode, res, threads,
-                                       fallback && mode == RTP_SHADOWS_LIGHTBUF
-                                           ? fmin(limit, auto_lb_bytes(t, res))
-                                           : limit,
-                                       &poll, &t->cube_alloc, &sh, err);
-            if (rs == RTP_ERR_LIMIT && fallback && mode != RTP_SHADOWS_EXACT) {
+                                       (rtpi_shadow_mode)mode, res, threads, limit, lb_cap, &poll,
+                                       &t->cube_alloc, &sh, err);
+            if ((rs == RTP_ERR_LIMIT || rs == RTPI_OVER_ENTRIES) && fallback &&
+                mode != RTP_SHADOWS_EXACT) {
                 /* AUTO: shadow rays where the lists would not fit (a mesh
                    seen edge on lists every triangle in a row of cells) */
+                /* (the lists too long for AUTO, not for the memory limit:
+                   the next move at this resolution or finer need not
+                   count them again; a limit may be raised, a coarser
+                   buffer list less) */
+                if (rs == RTPI_OVER_ENTRIES && (!t->auto_long || res < t->auto_long))
+                    t->auto_long = res;
                 mode = RTP_SHADOWS_EXACT;
-                t->auto_long = 1; /* (the next move need not count again) */
                 if (!t->kd && (rs = rtpi_kd_build_mt(s, &t->alloc, threads, &t->kd, err)) != RTP_OK)
                     return rs;
                 rs = rtpi_shadow_create_mt(s, t->kd, v3(lp[0], lp[1], lp[2]),
-                                           RTPI_SHADOW_EXACT, res, threads, limit, &poll,
-                                           &t->cube_alloc, &sh, err);
+                                           RTPI_SHADOW_EXACT, res, threads, limit, HUGE_VAL,
+                                           &poll, &t->cube_alloc, &sh, err);
             }
             if (rs != RTP_OK)
                 return rs;
@@ -3392,6 +3394,10 @@ static rtp_status eval_body(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
         mode = auto_shadows(t, opt && opt->no_cache, moving);
         if (mode == RTP_SHADOWS_LIGHTBUF && !(opt && opt->shadow_res > 0))
             res = auto_res(t);
+        /* (lists found too long at this resolution or a coarser one:
+           update_visibility's fallback) */
+        if (mode == RTP_SHADOWS_LIGHTBUF && t->auto_long && res >= t->auto_long)
+            mode = RTP_SHADOWS_EXACT;
     }
     /* A light so far that its buffer would list most primitives in every
        cell (a sun at 1e11 over a terrain of size 2: 14 times the shadow

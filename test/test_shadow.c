@@ -352,13 +352,13 @@ static void lb_same(const rtp_scene *s, rtpi_v3 lp, int res, const char *what)
     size_t k;
     int threads;
     rtpi_allocator_init(&al, NULL);
-    if (rtpi_lightbuf_build_some(s, lp, res, NULL, 0, 1, HUGE_VAL, NULL, &al, &a, NULL) != RTP_OK) {
+    if (rtpi_lightbuf_build_some(s, lp, res, NULL, 0, 1, HUGE_VAL, HUGE_VAL, NULL, &al, &a, NULL) != RTP_OK) {
         CHECK_MSG(0, "%s: build failed", what);
         return;
     }
     for (threads = 2; threads <= 5; threads += 3) {
         int same;
-        if (rtpi_lightbuf_build_some(s, lp, res, NULL, 0, threads, HUGE_VAL, NULL, &al, &b,
+        if (rtpi_lightbuf_build_some(s, lp, res, NULL, 0, threads, HUGE_VAL, HUGE_VAL, NULL, &al, &b,
                                      NULL) != RTP_OK) {
             CHECK_MSG(0, "%s: build on %d threads failed", what, threads);
             continue;
@@ -652,7 +652,8 @@ static int fail_each(const rtp_scene *s, const rtpi_kdtree *kd, rtpi_v3 lp, rtpi
         c.calls = 0;
         c.live = 0;
         c.fail_at = fail;
-        st = rtpi_shadow_create_mt(s, kd, lp, mode, res, threads, HUGE_VAL, NULL, &a, &sh, NULL);
+        st = rtpi_shadow_create_mt(s, kd, lp, mode, res, threads, HUGE_VAL, HUGE_VAL, NULL, &a, &sh,
+                                   NULL);
         if (c.calls <= fail) {
             bad += st != RTP_OK;
             rtpi_shadow_destroy(sh);
@@ -776,7 +777,7 @@ static void test_lightbuf_limit_threads(void)
             rtp_error err;
             int k = thr == 1 ? 0 : thr == 2 ? 1 : 2;
             rtpi_allocator_init(&a, NULL);
-            ok[k] = rtpi_lightbuf_build_some(s, v3(0, 0, 10), 256, NULL, 0, thr, lim, NULL, &a, &lb,
+            ok[k] = rtpi_lightbuf_build_some(s, v3(0, 0, 10), 256, NULL, 0, thr, lim, HUGE_VAL, NULL, &a, &lb,
                                              &err) == RTP_OK;
             if (ok[k])
                 rtpi_lightbuf_free(&lb, &a);
@@ -1041,6 +1042,63 @@ static void test_osmesa_curved(void)
     rtp_scene_destroy(s);
 }
 
+/* rtpi_stopper: the calling thread's polls call progress and cancel at
+   most STOPPER_REPORTS (250) times a build however often it is asked (an
+   item buffer asked every 256 of a million triangles had called them
+   4,000 times, against a step's "about a thousand"), its progress only
+   forward and within [lo, lo + span]; a yes stops every thread's rows. */
+typedef struct stop_count {
+    long progress, cancel, at;
+    double last, lo, hi;
+    int back;
+} stop_count;
+
+static void sc_progress(void *user, double done)
+{
+    stop_count *c = (stop_count *)user;
+    c->back |= done < c->last || done < c->lo || done > c->hi;
+    c->last = done;
+    c->progress++;
+}
+
+static int sc_cancel(void *user)
+{
+    stop_count *c = (stop_count *)user;
+    return ++c->cancel == c->at;
+}
+
+static void test_stopper_reports(void)
+{
+    stop_count c;
+    rtpi_poll p;
+    rtpi_stopper st;
+    long i, n = 1000000;
+    memset(&c, 0, sizeof c);
+    c.lo = 0.2;
+    c.hi = 0.7;
+    p.progress = sc_progress;
+    p.cancel = sc_cancel;
+    p.user = &c;
+    CHECK(rtpi_stopper_init(&st, &p, 0.2, 0.5) == 0);
+    for (i = 0; i <= n; i++)
+        CHECK(rtpi_stopper_poll(&st, 1, (double)i / (double)n) == 0);
+    /* (another thread's polls call nothing) */
+    CHECK(rtpi_stopper_poll(&st, 0, 0.5) == 0);
+    CHECK_MSG(c.progress >= 100 && c.progress <= 126 && c.cancel == c.progress && !c.back,
+              "%ld progress and %ld cancel calls for a million polls over half a build",
+              c.progress, c.cancel);
+    rtpi_stopper_destroy(&st);
+    /* a yes at the fifth question: every later poll, any thread's, stops */
+    memset(&c, 0, sizeof c);
+    c.at = 5;
+    c.hi = 1.0;
+    CHECK(rtpi_stopper_init(&st, &p, 0.0, 1.0) == 0);
+    for (i = 0; i < 10000 && !rtpi_stopper_poll(&st, 1, (double)i / 10000.0); i++)
+        ;
+    CHECK(c.cancel == 5 && rtpi_stopper_poll(&st, 0, 0.9) == 1);
+    rtpi_stopper_destroy(&st);
+}
+
 int main(void)
 {
     const char *env = getenv("RTP_TEST_SEED");
@@ -1060,6 +1118,7 @@ int main(void)
     RUN(test_spd_scene);
     RUN(test_light_at_cone_tip);
     RUN(test_lightbuf_limit_threads);
+    RUN(test_stopper_reports);
     RUN(test_osmesa);
     RUN(test_osmesa_curved);
     return check_report();

@@ -1907,6 +1907,41 @@ static void test_shadows_auto_overlap(void)
     CHECK(eval_with(t, RTP_SHADOWS_LIGHTBUF, "light.0.pos", "0.4,0.1,3", &img, &st, 0) == 0);
     CHECK_MSG(st.moved_lights == 1 && st.shadows == RTP_SHADOWS_LIGHTBUF,
               "stacked quads, lightbuf asked: mode %d", (int)st.shadows);
+    {
+        /* the lists found too long at 64 cells a face: at 16 they are
+           short enough (under 2^18 entries), and AUTO asks the light
+           buffer again; on a tree whose light buffer a memory limit
+           refused once, AUTO's next move without it takes the light
+           buffer (both had stuck to shadow rays for good) */
+        rtp_eval_options eo;
+        rtp_tree *t2 = NULL;
+        memset(&eo, 0, sizeof eo);
+        eo.shadows = RTP_SHADOWS_AUTO;
+        eo.shadow_res = 16;
+        rtp_image_destroy(img);
+        img = NULL;
+        CHECK(rtp_tree_set(t, "light.0.pos", "0.3,0.1,3", NULL) == RTP_OK &&
+              rtp_tree_eval(t, &eo, &img, &st, NULL) == RTP_OK);
+        CHECK_MSG(st.shadows == RTP_SHADOWS_LIGHTBUF, "stacked quads at 16 cells: mode %d",
+                  (int)st.shadows);
+        rtp_image_destroy(img);
+        img = NULL;
+        /* (16 cells a face: 6 KB of cells fit in 50 KB, the lists, about
+           60k entries, do not) */
+        eo.memory_limit = 50000.0;
+        CHECK(rtp_record(s, &o, &t2, NULL, NULL, NULL) == RTP_OK &&
+              rtp_tree_set(t2, "light.0.pos", "0.5,0.1,3", NULL) == RTP_OK &&
+              rtp_tree_eval(t2, &eo, &img, &st, NULL) == RTP_OK);
+        CHECK_MSG(st.shadows == RTP_SHADOWS_EXACT, "under 50 KB: mode %d", (int)st.shadows);
+        rtp_image_destroy(img);
+        img = NULL;
+        eo.memory_limit = 0.0;
+        CHECK(rtp_tree_set(t2, "light.0.pos", "0.4,0.1,3", NULL) == RTP_OK &&
+              rtp_tree_eval(t2, &eo, &img, &st, NULL) == RTP_OK);
+        CHECK_MSG(st.shadows == RTP_SHADOWS_LIGHTBUF, "after the limit: mode %d",
+                  (int)st.shadows);
+        rtp_tree_destroy(t2);
+    }
 out:
     rtp_image_destroy(img);
     rtp_image_destroy(full);
