@@ -642,6 +642,21 @@ static void same_image(const rtp_image *a, const rtp_image *b, double tol, const
               "%s: not the same image", what);
 }
 
+/* An evaluation of t (eo, stats into es) equals its full trace on
+   `threads` threads, within 1e-6: what a cancelled call must leave. */
+static void eval_is_trace(rtp_tree *t, const rtp_eval_options *eo, rtp_eval_stats *es,
+                          int threads, const char *what)
+{
+    rtp_image *img = NULL, *ref = NULL;
+    rtp_error err;
+    memset(&err, 0, sizeof err);
+    CHECK_MSG(rtp_tree_eval(t, eo, &img, es, &err) == RTP_OK, "%s", err.message);
+    CHECK(rtp_tree_trace(t, threads, &ref, NULL, &err) == RTP_OK);
+    same_image(img, ref, 1e-6, what);
+    rtp_image_destroy(img);
+    rtp_image_destroy(ref);
+}
+
 /* rtp_trace and rtp_record with options.cancel: a yes at any point (before
    or after the kd-tree's build, after some rows, on one thread or two,
    with the caller relaying a deep tree's workers) stops the trace with
@@ -755,7 +770,7 @@ static void test_cancel_eval(void)
     for (threads = 1; threads <= 2; threads++)
         for (i = 0; i < sizeof keys / sizeof *keys; i++) {
             rtp_tree *t = NULL;
-            rtp_image *img = NULL, *ref = NULL;
+            rtp_image *img = NULL;
             rtp_eval_options eo;
             rtp_eval_stats es;
             asker k;
@@ -788,12 +803,8 @@ static void test_cancel_eval(void)
             /* the tree as it was: traced again now, as a full trace */
             memset(&k, 0, sizeof k);
             memset(&es, 0, sizeof es);
-            CHECK_MSG(rtp_tree_eval(t, &eo, &img, &es, &err) == RTP_OK, "%s", err.message);
+            eval_is_trace(t, &eo, &es, threads, keys[i][0]);
             CHECK(es.retraced_samples > 0 && k.asked >= 1 && !k.said);
-            CHECK(rtp_tree_trace(t, threads, &ref, NULL, &err) == RTP_OK);
-            same_image(img, ref, 1e-6, keys[i][0]);
-            rtp_image_destroy(img);
-            rtp_image_destroy(ref);
             rtp_tree_destroy(t);
         }
     rtp_scene_destroy(s);
@@ -829,7 +840,7 @@ static void test_cancel_move(void)
         for (m = 0; m < sizeof modes / sizeof *modes; m++)
             for (i = 0; i < sizeof ats / sizeof *ats; i++) {
                 rtp_tree *t = NULL;
-                rtp_image *img = NULL, *ref = NULL;
+                rtp_image *img = NULL;
                 rtp_eval_options eo;
                 rtp_eval_stats es;
                 asker k;
@@ -874,14 +885,10 @@ static void test_cancel_move(void)
                 CHECK(rtp_tree_set(t, "light.lamp.pos", "-1,-5,4", &err) == RTP_OK);
                 memset(&k, 0, sizeof k);
                 memset(&es, 0, sizeof es);
-                CHECK_MSG(rtp_tree_eval(t, &eo, &img, &es, &err) == RTP_OK, "%s", err.message);
+                eval_is_trace(t, &eo, &es, threads, "moved back after a cancelled move");
                 /* (a yes before the rows left the last decisions whole) */
                 CHECK_MSG(ats[i] <= 2 || (es.moved_lights == 1 && es.shadow_queries > 0),
                           "at %ld: the light not decided anew", ats[i]);
-                CHECK(rtp_tree_trace(t, threads, &ref, NULL, &err) == RTP_OK);
-                same_image(img, ref, 1e-6, "moved back after a cancelled move");
-                rtp_image_destroy(img);
-                rtp_image_destroy(ref);
                 rtp_tree_destroy(t);
             }
     rtp_scene_destroy(s);
@@ -938,7 +945,7 @@ static void test_cancel_cube_build(void)
     for (threads = 1; threads <= 2; threads++)
         for (c = 0; c < sizeof cases / sizeof *cases; c++) {
             rtp_tree *t = NULL;
-            rtp_image *img = NULL, *ref = NULL;
+            rtp_image *img = NULL;
             rtp_eval_options eo;
             asker k;
             long coarse, fine, live;
@@ -987,11 +994,7 @@ static void test_cancel_cube_build(void)
             CHECK_MSG(f.live == live, "threads %d mode %d: %ld block(s) leaked", threads,
                       (int)cases[c].mode, f.live - live);
             eo.cancel = NULL;
-            CHECK_MSG(rtp_tree_eval(t, &eo, &img, NULL, &err) == RTP_OK, "%s", err.message);
-            CHECK(rtp_tree_trace(t, threads, &ref, NULL, &err) == RTP_OK);
-            same_image(img, ref, 1e-6, "after a cancelled build");
-            rtp_image_destroy(img);
-            rtp_image_destroy(ref);
+            eval_is_trace(t, &eo, NULL, threads, "after a cancelled build");
             rtp_tree_destroy(t);
         }
     rtp_scene_destroy(s);
