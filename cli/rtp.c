@@ -1826,33 +1826,23 @@ static long long file_size(const char *path)
     return (long long)sb.st_size;
 }
 
-static int reeval_one(rtp_tree *tree, const rtp_eval_options *eo, rtp_image **keep,
-                      const char *image_path, int reference, int threads,
-                      FILE *stats, const char *stats_path, const char *tree_path,
-                      double load_seconds, int line)
+/* What follows an evaluation: its image written, the full trace of
+   --reference (tree: the tree evaluated), the messages, its --stats
+   line.  0, or 1 after a message. */
+static int reeval_report(const rtp_tree *tree, const rtp_image *img, const rtp_eval_stats *es_in,
+                         const rtp_tree_info *ti_in, const char *image_path, int reference,
+                         int threads, FILE *stats, const char *stats_path,
+                         const char *tree_path, double load_seconds, int line)
 {
-    rtp_image *img = *keep, *ref = NULL;
-    rtp_eval_stats es;
+    rtp_image *ref = NULL;
+    rtp_eval_stats es = *es_in;
+    rtp_tree_info ti = *ti_in;
     rtp_trace_stats ts;
     rtp_diff_stats d;
-    rtp_tree_info ti;
     rtp_error err;
     double t_ref = 0.0;
     int rc = 1;
-    rtp_status st;
     memset(&err, 0, sizeof err);
-    if (eo->progress == progress_cb)
-        progress_start((progress *)eo->progress_user, 1);
-    /* a stream of edits reuses one image */
-    st = img ? rtp_tree_eval_into(tree, eo, img, &es, &err)
-             : rtp_tree_eval(tree, eo, &img, &es, &err);
-    if (eo->progress == progress_cb) /* (its line ended before any other) */
-        progress_end((progress *)eo->progress_user);
-    if (st != RTP_OK) {
-        fail_line(&err, line);
-        goto out;
-    }
-    *keep = img;
     if (image_path && write_image(img, image_path, &err) != RTP_OK) {
         fail_line(&err, line);
         goto out;
@@ -1899,7 +1889,6 @@ static int reeval_one(rtp_tree *tree, const rtp_eval_options *eo, rtp_image **ke
     }
     if (stats) {
         long long fb = file_size(tree_path);
-        rtp_tree_get_info(tree, &ti);
         fprintf(stats,
                 "{\"command\": \"reeval\", \"seconds\": %.6f, \"load_seconds\": %.6f, "
                 "\"shadow_seconds\": %.6f, \"moved_lights\": %d, \"shadow_queries\": %llu, "
@@ -1951,6 +1940,69 @@ static int reeval_one(rtp_tree *tree, const rtp_eval_options *eo, rtp_image **ke
 out:
     rtp_image_destroy(ref);
     return rc;
+}
+
+static int reeval_one(rtp_tree *tree, const rtp_eval_options *eo, rtp_image **keep,
+                      const char *image_path, int reference, int threads,
+                      FILE *stats, const char *stats_path, const char *tree_path,
+                      double load_seconds, int line)
+{
+    rtp_image *img = *keep;
+    rtp_eval_stats es;
+    rtp_tree_info ti;
+    rtp_error err;
+    rtp_status st;
+    memset(&err, 0, sizeof err);
+    if (eo->progress == progress_cb)
+        progress_start((progress *)eo->progress_user, 1);
+    /* a stream of edits reuses one image */
+    st = img ? rtp_tree_eval_into(tree, eo, img, &es, &err)
+             : rtp_tree_eval(tree, eo, &img, &es, &err);
+    if (eo->progress == progress_cb) /* (its line ended before any other) */
+        progress_end((progress *)eo->progress_user);
+    if (st != RTP_OK) {
+        fail_line(&err, line);
+        return 1;
+    }
+    *keep = img;
+    rtp_tree_get_info(tree, &ti);
+    return reeval_report(tree, img, &es, &ti, image_path, reference, threads, stats, stats_path,
+                         tree_path, load_seconds, line);
+}
+
+/* A one-off reeval's edits, made by rtp_tree_eval_file's callback once
+   the tree file's scene is read: the added lights, the --params files in
+   turn, then the --set edits (a later edit of a key wins). */
+typedef struct cli_edits {
+    const char **add_lights, **params, **sets;
+    int nadd, nparams, nsets;
+    int reported; /* a message was printed (apply_kv's, with its place) */
+    double t_edits; /* when the callback was called */
+} cli_edits;
+
+static rtp_status make_edits(void *user, rtp_tree *tree, rtp_error *err)
+{
+    cli_edits *c = (cli_edits *)user;
+    int i;
+    rtp_status st;
+    c->t_edits = now_seconds();
+    for (i = 0; i < c->nadd; i++) {
+        double pos[3];
+        parse_xyz(c->add_lights[i], pos); /* (checked with the options) */
+        if ((st = rtp_tree_add_light(tree, pos, err)) != RTP_OK)
+            return st;
+    }
+    for (i = 0; i < c->nparams; i++)
+        if (apply_params_file(set_tree, tree, c->params[i])) {
+            c->reported = 1;
+            return RTP_ERR_ARGUMENT;
+        }
+    for (i = 0; i < c->nsets; i++)
+        if (apply_kv(set_tree, tree, c->sets[i], "--set", 0)) {
+            c->reported = 1;
+            return RTP_ERR_ARGUMENT;
+        }
+    return RTP_OK;
 }
 
 static int cmd_reeval(int argc, char **argv)
@@ -2118,6 +2170,42 @@ static int cmd_reeval(int argc, char **argv)
     }
 
     t0 = now_seconds();
+    if (!stream && !reference && region[2] == 0) {
+        /* One image: the tree's samples evaluated as they are read, none
+           kept where the edits allow it (rtp_tree_eval_file; README:
+           "One-off evaluation") */
+        cli_edits ce;
+        rtp_eval_stats es;
+        rtp_tree_info ti;
+        rtp_status st;
+        memset(&ce, 0, sizeof ce);
+        ce.add_lights = add_lights;
+        ce.nadd = nadd;
+        ce.params = params;
+        ce.nparams = nparams;
+        ce.sets = sets;
+        ce.nsets = nsets;
+        ce.t_edits = -1.0;
+        if (eo.progress == progress_cb)
+            progress_start(&prog, 1);
+        st = rtp_tree_eval_file(tree_path, NULL, make_edits, &ce, &eo, &img, &ti, &es, &err);
+        progress_end(&prog);
+        if (st != RTP_OK) {
+            if (!ce.reported)
+                fail_err(&err);
+            goto out;
+        }
+        /* (the scene's reading: the trees' is in es.seconds) */
+        t_load = ce.t_edits - t0;
+        if (stats_path && !(stats = stats_open(stats_path)))
+            goto out;
+        rc = reeval_report(NULL, img, &es, &ti, image_path, 0, threads, stats, stats_path,
+                           tree_path, t_load, 0);
+        if (stats && (rc != 0 ? (stats_discard(stats), 0) : stats_close(stats, stats_path)))
+            rc = 1;
+        stats = NULL;
+        goto out;
+    }
     if (rtp_tree_read(tree_path, NULL, &tree, &err) != RTP_OK) {
         fail_err(&err);
         goto out;

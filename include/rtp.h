@@ -529,6 +529,35 @@ typedef struct rtp_tree_info {
 
 void rtp_tree_get_info(const rtp_tree *tree, rtp_tree_info *info);
 
+/* The edits of a one-off evaluation of a tree file (rtp_tree_eval_file):
+ * called once the file's scene is read, before its trees, with the tree
+ * then, which only rtp_tree_set, rtp_tree_add_light, rtp_tree_scene and
+ * rtp_tree_get_info may be given (its trees are not there yet: other
+ * calls return RTP_ERR_ARGUMENT), and only during the call.  A status but
+ * RTP_OK stops the evaluation with it (and err as the function set it). */
+typedef rtp_status (*rtp_tree_edit_fn)(void *user, rtp_tree *tree, rtp_error *err);
+
+/** A one-off evaluation of a tree file ("-": stdin): reads it, calls
+ *  edit (NULL: none), evaluates, frees the tree.  The image and stats are
+ *  those of rtp_tree_read, the same edits and rtp_tree_eval with
+ *  opt->no_cache set, bit for bit, and a file those refuse is refused with
+ *  the same error.  Where the edits leave every light where it was traced
+ *  and nothing to trace again (no moved or added light, no class-D edit,
+ *  no camera edit, no bump edit with RTP_STALE_RETRACE) and the file holds
+ *  at most 32 lights (format 2), each sample's tree is evaluated as it is
+ *  read and none is kept: the memory of the image and a band of trees,
+ *  not of every tree (README: "One-off evaluation").  Otherwise the trees
+ *  are read whole first.  info (may be NULL) receives rtp_tree_get_info
+ *  of the tree read; stats->seconds is the evaluation's time with the
+ *  reading of the trees it was made with (not of the scene before them).
+ *  Progress and cancel (opt) are called between bands too.
+ *  @return as rtp_tree_read and rtp_tree_eval, or edit's status. */
+rtp_status rtp_tree_eval_file(const char *path, const rtp_allocator *alloc,
+                              rtp_tree_edit_fn edit, void *user,
+                              const rtp_eval_options *opt, rtp_image **out,
+                              rtp_tree_info *info, rtp_eval_stats *stats,
+                              rtp_error *err);
+
 /** Writes the tree file (format 2.0, nodes and meshes packed:
  *  lib/tree-format.md); "-" is stdout.  Files are written to a temporary
  *  name and renamed: nothing half written is left.  bytes (may be NULL)

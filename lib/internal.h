@@ -816,8 +816,10 @@ void rtpi_texture_factor(const rtp_scene *s, const rtpi_material *m,
    (rtp_tree in rtp.h).  Sample k's nodes are nodes[start[k] .. start[k+1]). */
 struct rtp_tree {
     rtp_allocator alloc;
-    int busy; /* an evaluation is under way: its progress or cancel
-                 callback must not use the tree (rtpi_tree_busy) */
+    int busy; /* 1: an evaluation is under way: its progress or cancel
+                 callback must not use the tree (rtpi_tree_busy); 2: the
+                 tree of rtp_tree_eval_file's edit callback, without its
+                 ray trees: edits only */
     rtp_scene *scene;      /* owned copy: parameters are edited here */
     rtpi_material *mats0;  /* materials as traced (names not kept) */
     rtpi_light *lights0;   /* lights as traced (names not kept) */
@@ -1136,5 +1138,22 @@ rtp_status rtpi_cancelled(rtp_error *err);
    a write there would be lost or see the tree half changed); else
    RTP_OK. */
 rtp_status rtpi_tree_busy(const rtp_tree *t, const char *fn, rtp_error *err);
+
+/* A one-off evaluation fed the trees as they are read (rtp_tree_eval_file;
+   treefile.c's reader).  begin: once the file's scene and TREE's sample
+   counts are read (t->start set, t->nodes not), can_stream 1 where the
+   trees can be handed a band at a time (packed, light bits in the
+   nodes); *stream set to 1 takes them so, else they are read whole into
+   the tree.  band: sample rows y0 .. y1 - 1, sample y0 nx + i's nodes at
+   nodes + start[i] .. nodes + start[i + 1] - 1, each checked as a whole
+   read checks it.  An error of either stops the read with it at once. */
+typedef struct rtpi_tree_sink {
+    rtp_status (*begin)(void *user, rtp_tree *t, int can_stream, int *stream, rtp_error *err);
+    rtp_status (*band)(void *user, rtp_tree *t, int y0, int y1, const rtpi_cnode *nodes,
+                       const uint64_t *start, rtp_error *err);
+    void *user;
+} rtpi_tree_sink;
+rtp_status rtpi_tree_read_sink(const char *path, const rtp_allocator *alloc,
+                               const rtpi_tree_sink *ts, rtp_tree **out, rtp_error *err);
 
 #endif /* RTP_INTERNAL_H */

@@ -177,6 +177,31 @@ static int needs_retrace(rtp_tree *t, size_t m, int stale_retrace)
            (t->min_weight > 0.0 && (a->ks != a0->ks || a->kt != a0->kt));
 }
 
+/* Does a sample (its n nodes) hold a reflected or refracted ray below a
+   material whose bump is stale (count_stale)? */
+static int sample_stale(rtp_tree *t, const rtpi_cnode *nd, size_t n)
+{
+    size_t i;
+    for (i = 0; i < n; i++, nd++) {
+        /* (a ray that left the scene is as stale: bent, it may hit) */
+        if ((nd->link & (RTPI_L_REFL | RTPI_L_REFL_MISS | RTPI_L_REFR | RTPI_L_REFR_MISS |
+                         RTPI_L_TIR)) &&
+            bump_stale(t, rtpi_prim_material(t->scene, nd->prim)))
+            return 1;
+    }
+    return 0;
+}
+
+/* Any material whose bump is stale below rays the samples may hold? */
+static int any_stale(rtp_tree *t)
+{
+    size_t m;
+    int any = 0;
+    for (m = 0; m < t->scene->nmats; m++)
+        any |= (t->mats0[m].ks > 0.0f || t->mats0[m].kt > 0.0f) && bump_stale(t, m);
+    return any;
+}
+
 /* Samples holding a reflected or refracted ray (a subtree, or a ray that
    left the scene) below a material whose bump map changed since its
    samples were traced, kept there (--stale keep: the paper's way,
@@ -184,32 +209,14 @@ static int needs_retrace(rtp_tree *t, size_t m, int stale_retrace)
    silent.  Counted once after a bump key or a re-trace (t->stale_ok). */
 static unsigned long long count_stale(rtp_tree *t)
 {
-    const rtp_scene *s = t->scene;
-    size_t m, k, ns = (size_t)t->nx * t->ny;
+    size_t k, ns = (size_t)t->nx * t->ny;
     unsigned long long n = 0;
-    int any = 0;
-    for (m = 0; m < s->nmats; m++)
-        any |= (t->mats0[m].ks > 0.0f || t->mats0[m].kt > 0.0f) && bump_stale(t, m);
-    if (!any)
+    if (!any_stale(t))
         return 0;
     if (t->stale_ok)
         return t->stale_n;
-    for (k = 0; k < ns; k++) {
-        size_t i;
-        for (i = (size_t)t->start[k]; i < (size_t)t->start[k + 1]; i++) {
-            const rtpi_cnode *nd = &t->nodes[i];
-            uint32_t mat;
-            /* (a ray that left the scene is as stale: bent, it may hit) */
-            if (!(nd->link & (RTPI_L_REFL | RTPI_L_REFL_MISS | RTPI_L_REFR | RTPI_L_REFR_MISS |
-                              RTPI_L_TIR)))
-                continue;
-            mat = rtpi_prim_material(s, nd->prim);
-            if (bump_stale(t, mat)) {
-                n++;
-                break;
-            }
-        }
-    }
+    for (k = 0; k < ns; k++)
+        n += sample_stale(t, t->nodes + t->start[k], (size_t)(t->start[k + 1] - t->start[k]));
     t->stale_n = n;
     t->stale_ok = 1;
     return n;
@@ -224,6 +231,11 @@ rtp_status rtpi_tree_busy(const rtp_tree *t, const char *fn, rtp_error *err)
 {
     if (!t->busy)
         return RTP_OK;
+    if (t->busy == 2)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                          "%s: the tree rtp_tree_eval_file's edit callback is given has "
+                          "no ray trees yet: only rtp_tree_set and rtp_tree_add_light may "
+                          "be called on it there", fn);
     return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
                       "%s: the tree is being evaluated (called from the evaluation's "
                       "progress or cancel callback): call it after rtp_tree_eval returns",
@@ -240,7 +252,8 @@ rtp_status rtp_tree_set(rtp_tree *t, const char *key, const char *value,
     rtp_status st;
     if (!t || !key || !value)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_set: NULL argument");
-    if ((st = rtpi_tree_busy(t, "rtp_tree_set", err)) != RTP_OK)
+    /* (an edit callback's tree, busy 2, takes edits: rtp_tree_eval_file) */
+    if (t->busy == 1 && (st = rtpi_tree_busy(t, "rtp_tree_set", err)) != RTP_OK)
         return st;
     s = t->scene;
     /* Keep the parameters so a refused edit leaves the tree unchanged. */
@@ -379,7 +392,7 @@ rtp_status rtp_tree_add_light(rtp_tree *t, const double pos[3], rtp_error *err)
     size_t cap0;
     if (!t || !pos)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_add_light: NULL argument");
-    if (t->busy)
+    if (t->busy == 1)
         return rtpi_tree_busy(t, "rtp_tree_add_light", err);
     /* the range a key's value has (rtp_scene_set), so that the position
        rtp_scene_get gives back can be set again */
@@ -2103,25 +2116,30 @@ static int mark_row(void *ctx, int y)
 
 /* Every pixel row from e->samples into e->pixels (rtpi_resolve_samples,
    by rows on the threads). */
+/* A pixel row of w pixels from SPD's corner samples: sample rows s0 and
+   the one after it (w + 1 samples each). */
+static void spd_row(const float *s0, float *out, size_t w)
+{
+    const float *s1 = s0 + 3 * (w + 1);
+    size_t x;
+    for (x = 0; x < w; x++, s0 += 3, s1 += 3, out += 3) {
+        out[0] = 0.25f * (s0[0] + s0[3] + s1[0] + s1[3]);
+        out[1] = 0.25f * (s0[1] + s0[4] + s1[1] + s1[4]);
+        out[2] = 0.25f * (s0[2] + s0[5] + s1[2] + s1[5]);
+    }
+}
+
 static int resolve_row(void *ctx, int y)
 {
     eval_ctx *e = (eval_ctx *)ctx;
     const rtp_tree *t = e->t;
-    size_t w = (size_t)t->width, x;
+    size_t w = (size_t)t->width;
     if (!t->spd) {
         memcpy(e->pixels + 3 * (size_t)y * w, e->samples + 3 * (size_t)y * w,
                3 * w * sizeof *e->pixels);
         return 0;
     }
-    {
-        const float *s0 = e->samples + 3 * (size_t)y * (w + 1), *s1 = s0 + 3 * (w + 1);
-        float *out = e->pixels + 3 * (size_t)y * w;
-        for (x = 0; x < w; x++, s0 += 3, s1 += 3, out += 3) {
-            out[0] = 0.25f * (s0[0] + s0[3] + s1[0] + s1[3]);
-            out[1] = 0.25f * (s0[1] + s0[4] + s1[1] + s1[4]);
-            out[2] = 0.25f * (s0[2] + s0[5] + s1[2] + s1[5]);
-        }
-    }
+    spd_row(e->samples + 3 * (size_t)y * (w + 1), e->pixels + 3 * (size_t)y * w, w);
     return 0;
 }
 
@@ -3287,6 +3305,37 @@ static int cp_eval(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, con
     return 1;
 }
 
+/* The options' checks, before anything is done. */
+static rtp_status opts_check(const rtp_eval_options *opt, rtp_error *err)
+{
+    if (opt && ((unsigned)opt->shadows > RTP_SHADOWS_AUTO || opt->shadow_res < 0 ||
+                opt->shadow_res > RTP_MAX_SHADOW_RES))
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                          "invalid shadow mode or resolution (1..%d)", RTP_MAX_SHADOW_RES);
+#ifndef RTP_HAVE_OSMESA
+    /* (refused whether or not a light moves: the stub that said so was
+       reached only by a moved light decided by the item buffer, and a
+       far light or none went on in another mode, exit 0) */
+    if (opt && opt->shadows == RTP_SHADOWS_OSMESA)
+        return rtpi_error(err, RTP_ERR_UNSUPPORTED, NULL, 0, 0,
+                          "osmesa shadows: this build has no OSMesa (rebuild with make "
+                          "OSMESA=1 and libosmesa6-dev); use itembuf for the same item "
+                          "buffer in software");
+#endif
+    /* (each had been taken for the default: a stale mode of 7 for keep,
+       the approximate one) */
+    if (opt && (unsigned)opt->stale > RTP_STALE_RETRACE)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "stale: unknown mode %d",
+                          (int)opt->stale);
+    if (opt && opt->threads < 0)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                          "threads: %d is negative (0 or 1: the calling thread)", opt->threads);
+    if (opt && !(opt->memory_limit >= 0.0))
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                          "memory_limit: negative or not a number (0: the default)");
+    return RTP_OK;
+}
+
 static rtp_status eval_body(rtp_tree *t, const rtp_eval_options *opt, rtp_image *into,
                             rtp_image **out, rtp_eval_stats *stats, rtp_error *err);
 
@@ -3359,31 +3408,8 @@ static rtp_status eval_body(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
     ns = (size_t)t->nx * t->ny;
     if (nthreads > RTPI_MAX_THREADS)
         nthreads = RTPI_MAX_THREADS;
-    if (opt && ((unsigned)opt->shadows > RTP_SHADOWS_AUTO || opt->shadow_res < 0 ||
-                opt->shadow_res > RTP_MAX_SHADOW_RES))
-        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                          "invalid shadow mode or resolution (1..%d)", RTP_MAX_SHADOW_RES);
-#ifndef RTP_HAVE_OSMESA
-    /* (refused whether or not a light moves: the stub that said so was
-       reached only by a moved light decided by the item buffer, and a
-       far light or none went on in another mode, exit 0) */
-    if (opt && opt->shadows == RTP_SHADOWS_OSMESA)
-        return rtpi_error(err, RTP_ERR_UNSUPPORTED, NULL, 0, 0,
-                          "osmesa shadows: this build has no OSMesa (rebuild with make "
-                          "OSMESA=1 and libosmesa6-dev); use itembuf for the same item "
-                          "buffer in software");
-#endif
-    /* (each had been taken for the default: a stale mode of 7 for keep,
-       the approximate one) */
-    if (opt && (unsigned)opt->stale > RTP_STALE_RETRACE)
-        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "stale: unknown mode %d",
-                          (int)opt->stale);
-    if (opt && opt->threads < 0)
-        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                          "threads: %d is negative (0 or 1: the calling thread)", opt->threads);
-    if (opt && !(opt->memory_limit >= 0.0))
-        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                          "memory_limit: negative or not a number (0: the default)");
+    if ((rs = opts_check(opt, err)) != RTP_OK)
+        return rs;
     mode = opt ? (int)opt->shadows : 0;
     res = opt && opt->shadow_res > 0 ? opt->shadow_res : RTPI_DC_DEFAULT_RES;
     asked_auto = mode == RTP_SHADOWS_AUTO;
@@ -3958,6 +3984,253 @@ rtp_status rtp_tree_eval_into(rtp_tree *t, const rtp_eval_options *opt, rtp_imag
     if (!image)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_eval_into: NULL image");
     return eval_impl(t, opt, image, NULL, stats, err);
+}
+
+/* ------------------------------------------- one-off from a tree file */
+
+/* rtp_tree_eval_file's state: the evaluation eval_body's full uncached
+   path makes (eval_row for every sample, then SPD's corner samples
+   averaged), done a band of sample rows at a time as the reader hands
+   them over. */
+typedef struct file_eval {
+    rtp_tree_edit_fn edit;
+    void *user;
+    rtp_eval_options opt; /* the caller's, no_cache set */
+    int nthreads;
+    int streamed;         /* the bands came: no tree kept */
+    double t0;            /* when the edits were made */
+    rtpi_shade_ctx shade;
+    eval_ctx *e;
+    void **ctx;
+    double *cv;
+    rtpi_locked_alloc la;
+    int la_made;
+    rtp_image *img;
+    float *rows;          /* SPD: the band's sample rows after the row
+                             before it */
+    size_t rows_cap;      /* (floats) */
+    int stale_any;        /* any_stale: count stale samples */
+    unsigned long long stale;
+} file_eval;
+
+/* Can the trees be evaluated as they come?  Every light where it was
+   traced (an added one is not: it has no recorded visibility), the camera
+   too, no material to trace again (needs_retrace, with --stale retrace a
+   changed bump's). */
+static int file_streamable(rtp_tree *t, const rtp_eval_options *opt)
+{
+    const rtp_scene *s = t->scene;
+    size_t i;
+    if (memcmp(&s->camera, &t->cam0, sizeof t->cam0) != 0)
+        return 0;
+    for (i = 0; i < s->nlights; i++)
+        if (light_moved(t, i))
+            return 0;
+    for (i = 0; i < s->nmats; i++)
+        if (needs_retrace(t, i, opt->stale == RTP_STALE_RETRACE))
+            return 0;
+    return 1;
+}
+
+static rtp_status file_begin(void *user, rtp_tree *t, int can_stream, int *stream,
+                             rtp_error *err)
+{
+    file_eval *f = (file_eval *)user;
+    const rtp_scene *s = t->scene;
+    size_t nl = s->nlights;
+    int i;
+    if (f->edit) {
+        rtp_status st;
+        if (err)
+            memset(err, 0, sizeof *err);
+        /* (the tree's trees are not read: only edits may be made) */
+        t->busy = 2;
+        st = f->edit(f->user, t, err);
+        t->busy = 0;
+        if (st != RTP_OK) {
+            if (err && !err->message[0])
+                rtpi_error(err, st, NULL, 0, 0, "rtp_tree_eval_file: the edit callback "
+                                                 "returned status %d", (int)st);
+            return st;
+        }
+    }
+    f->t0 = seconds_now();
+    if (!can_stream || !file_streamable(t, &f->opt))
+        return RTP_OK; /* (read whole, then rtp_tree_eval) */
+    f->shade.s = s;
+    f->shade.one_sided = t->spd;
+    f->shade.vis_words = 0; /* (light bits in the nodes: can_stream) */
+    f->stale_any = f->opt.stale != RTP_STALE_RETRACE && any_stale(t);
+    f->cv = (double *)rtpi_malloc_array(&t->alloc, RTPI_COEFFS(nl), sizeof *f->cv);
+    f->e = (eval_ctx *)rtpi_calloc_array(&t->alloc, (size_t)f->nthreads, sizeof *f->e);
+    f->ctx = (void **)rtpi_malloc_array(&t->alloc, (size_t)f->nthreads, sizeof *f->ctx);
+    if (!f->cv || !f->e || !f->ctx)
+        return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+    for (i = 0; i < 3; i++) {
+        f->cv[i] = s->background[i];
+        f->cv[3 + i] = s->ambient[i];
+    }
+    rtpi_light_colors(s, f->cv + 6);
+    if (f->nthreads > 1 && !rtpi_allocator_is_default(&t->alloc)) {
+        if (rtpi_locked_alloc_init(&f->la, &t->alloc) == 0)
+            f->la_made = 1;
+        else
+            f->nthreads = 1;
+    }
+    for (i = 0; i < f->nthreads; i++) {
+        eval_ctx *e = &f->e[i];
+        e->wa = f->la_made ? &f->la.a : &t->alloc;
+        e->shade = &f->shade;
+        e->vis = NULL;
+        e->eye = v3(s->camera.from[0], s->camera.from[1], s->camera.from[2]);
+        e->cl = f->cv + 6;
+        e->coeffs = (float *)rtpi_malloc_array(&t->alloc, RTPI_COEFFS(nl) + 16, sizeof(float));
+        e->acc = (double *)rtpi_malloc_array(&t->alloc, RTPI_COEFFS(nl) + 16, sizeof(double));
+        f->ctx[i] = e;
+        if (!e->coeffs || !e->acc)
+            return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+    }
+    if (rtp_image_create(t->width, t->height, &t->alloc, &f->img, err) != RTP_OK)
+        return err ? err->status : RTP_ERR_NOMEM;
+    f->streamed = 1;
+    *stream = 1;
+    return RTP_OK;
+}
+
+/* Sample rows y0 .. y1 - 1: eval_row's for each, into the image (a pixel
+   a sample) or the band's rows, whose pixel rows are then averaged. */
+static rtp_status file_band(void *user, rtp_tree *t, int y0, int y1, const rtpi_cnode *nodes,
+                            const uint64_t *start, rtp_error *err)
+{
+    file_eval *f = (file_eval *)user;
+    size_t nx = (size_t)t->nx, w = (size_t)t->width, k, n = (size_t)(y1 - y0) * nx;
+    /* The band as a tree of its own rows, for eval_row (which reads the
+       tree's scene, sample starts and nodes): a shallow copy, read only,
+       freed with nothing. */
+    rtp_tree b = *t;
+    float *samples;
+    int i, y;
+    b.nodes = (rtpi_cnode *)(uintptr_t)nodes;
+    b.start = (uint64_t *)(uintptr_t)start;
+    b.ny = y1 - y0;
+    if (t->spd) {
+        /* the row before the band (its last, kept from the band before)
+           and the band's */
+        if (rtpi_grow(&t->alloc, (void **)&f->rows, &f->rows_cap, 3 * (n + nx), sizeof(float)))
+            return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+        samples = f->rows + 3 * nx;
+    } else {
+        samples = f->img->pixels + 3 * (size_t)y0 * nx;
+    }
+    for (i = 0; i < f->nthreads; i++) {
+        f->e[i].t = &b;
+        f->e[i].samples = samples;
+    }
+    tree_rows(&b, y1 - y0, f->nthreads, f->ctx, eval_row, NULL, NULL);
+    for (i = 0; i < f->nthreads; i++) {
+        f->e[i].t = t;
+        if (f->e[i].nomem)
+            return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+    }
+    for (k = 0; f->stale_any && k < n; k++)
+        f->stale += (unsigned long long)sample_stale(t, nodes + start[k],
+                                                     (size_t)(start[k + 1] - start[k]));
+    if (t->spd) {
+        /* pixel row y from sample rows y and y + 1: those whose second
+           row is in the band */
+        for (y = y0 > 0 ? y0 - 1 : 0; y + 1 < y1 && y < t->height; y++)
+            spd_row(f->rows + 3 * (size_t)(y - y0 + 1) * nx, f->img->pixels + 3 * (size_t)y * w,
+                    w);
+        memcpy(f->rows, f->rows + 3 * n, 3 * nx * sizeof(float));
+    }
+    if (f->opt.progress)
+        f->opt.progress(f->opt.progress_user, (double)y1 / t->ny);
+    if (y1 < t->ny && f->opt.cancel && f->opt.cancel(f->opt.progress_user))
+        return rtpi_cancelled(err);
+    return RTP_OK;
+}
+
+static void file_free(file_eval *f, const rtp_allocator *a)
+{
+    int i;
+    for (i = 0; f->e && i < f->nthreads; i++) {
+        rtpi_free(a, f->e[i].terms);
+        rtpi_free(a, f->e[i].coeffs);
+        rtpi_free(a, f->e[i].acc);
+    }
+    rtpi_free(a, f->e);
+    rtpi_free(a, f->ctx);
+    rtpi_free(a, f->cv);
+    rtpi_free(a, f->rows);
+    if (f->la_made)
+        rtpi_locked_alloc_destroy(&f->la);
+    f->e = NULL;
+    f->ctx = NULL;
+    f->cv = NULL;
+    f->rows = NULL;
+    f->la_made = 0;
+}
+
+rtp_status rtp_tree_eval_file(const char *path, const rtp_allocator *alloc,
+                              rtp_tree_edit_fn edit, void *user,
+                              const rtp_eval_options *opt, rtp_image **out,
+                              rtp_tree_info *info, rtp_eval_stats *stats, rtp_error *err)
+{
+    file_eval f;
+    rtp_allocator a;
+    rtpi_tree_sink sink;
+    rtp_tree *t = NULL;
+    rtp_status st;
+    if (out)
+        *out = NULL;
+    if (info)
+        memset(info, 0, sizeof *info);
+    if (!path || !out)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_eval_file: NULL argument");
+    if ((st = opts_check(opt, err)) != RTP_OK)
+        return st;
+    if (rtpi_allocator_partial(alloc))
+        return rtpi_allocator_refused(err, "rtp_tree_eval_file");
+    rtpi_allocator_init(&a, alloc);
+    memset(&f, 0, sizeof f);
+    f.edit = edit;
+    f.user = user;
+    if (opt)
+        f.opt = *opt;
+    f.opt.no_cache = 1;
+    f.opt.incremental = 0;
+    f.nthreads = f.opt.threads > 1 ? f.opt.threads : 1;
+    if (f.nthreads > RTPI_MAX_THREADS)
+        f.nthreads = RTPI_MAX_THREADS;
+    sink.begin = file_begin;
+    sink.band = file_band;
+    sink.user = &f;
+    st = rtpi_tree_read_sink(path, alloc, &sink, &t, err);
+    if (st == RTP_OK && f.streamed) {
+        size_t ns = (size_t)t->nx * t->ny;
+        if (stats) {
+            memset(stats, 0, sizeof *stats);
+            stats->samples = stats->combined_samples = ns;
+            stats->written_pixels = (unsigned long long)t->width * t->height;
+            stats->stale_samples = f.stale;
+            stats->nodes = t->nnodes;
+            stats->seconds = seconds_now() - f.t0;
+        }
+        *out = f.img;
+        f.img = NULL;
+    } else if (st == RTP_OK) {
+        st = eval_impl(t, &f.opt, NULL, out, stats, err);
+        if (st == RTP_OK && stats)
+            stats->seconds = seconds_now() - f.t0;
+    }
+    if (st == RTP_OK && info)
+        rtp_tree_get_info(t, info);
+    /* (a failed read has freed its tree: the state's blocks came from
+       the allocator it was given, which a holds too) */
+    file_free(&f, &a);
+    rtp_image_destroy(f.img);
+    rtp_tree_destroy(t);
+    return st;
 }
 
 rtp_status rtp_tree_trace(const rtp_tree *t, int threads, rtp_image **out,

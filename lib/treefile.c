@@ -339,17 +339,23 @@ static size_t varint_len(uint64_t v)
    node at that place in the sample before (the position is predicted as
    2A - B on the coordinates' bit patterns, linear along a surface).
    NULL: none. */
+static RTPI_FORCE_INLINE void refs_in(const rtpi_cnode *nodes, const uint64_t *start, size_t k,
+                                      size_t j, const rtpi_cnode **a, const rtpi_cnode **b)
+{
+    *a = *b = NULL;
+    if (k >= 1 && start[k] - start[k - 1] > j) {
+        *a = &nodes[start[k - 1] + j];
+        if (k >= 2 && start[k - 1] - start[k - 2] > j)
+            *b = &nodes[start[k - 2] + j];
+    } else if (j > 0) {
+        *a = &nodes[start[k] + j - 1];
+    }
+}
+
 static RTPI_FORCE_INLINE void node_refs(const rtp_tree *t, size_t k, size_t j,
                                         const rtpi_cnode **a, const rtpi_cnode **b)
 {
-    *a = *b = NULL;
-    if (k >= 1 && t->start[k] - t->start[k - 1] > j) {
-        *a = &t->nodes[t->start[k - 1] + j];
-        if (k >= 2 && t->start[k - 1] - t->start[k - 2] > j)
-            *b = &t->nodes[t->start[k - 2] + j];
-    } else if (j > 0) {
-        *a = &t->nodes[t->start[k] + j - 1];
-    }
+    refs_in(t->nodes, t->start, k, j, a, b);
 }
 
 /* The most bytes a packed node takes: six 32-bit varints. */
@@ -1072,6 +1078,8 @@ typedef struct loader {
     const rtp_allocator *a;
     const char *section;
     unsigned major; /* the file's format version (HEAD) */
+    const rtpi_tree_sink *sink; /* a one-off evaluation's (NULL: none) */
+    int sink_stop; /* the sink refused: its error, not the file's */
 } loader;
 
 /* what: the message; detail (may be NULL) follows it. */
@@ -1546,6 +1554,116 @@ static size_t check_subtree(const rtpi_cnode *nodes, size_t idx, size_t n, int d
     return end;
 }
 
+/* Every texture a material names is in the file (TEXR or TEXB come
+   before GEOM and TREE). */
+static rtp_status textures_held(loader *L)
+{
+    const rtp_scene *s = L->t->scene;
+    size_t i;
+    for (i = 0; i < s->nmats; i++) {
+        const rtpi_material *m = &s->mats[i];
+        if ((m->tex == RTPI_TEX_IMAGE && m->tex_image >= s->ntexs) ||
+            (m->bump == RTPI_BUMP_IMAGE && m->bump_image >= s->ntexs)) {
+            char what[64];
+            snprintf(what, sizeof what, "%zu", i);
+            L->section = "MATL";
+            return bad(L, "a texture the file does not hold named by material ", what);
+        }
+    }
+    return RTP_OK;
+}
+
+/* A band of a one-off evaluation: whole sample rows up to this many
+   nodes (or one row of more), at most BAND_ROWS rows.  2^16 nodes are
+   1.5 MB, in cache when the band is evaluated right after it is
+   decoded; a band a call of the sink, whose threads start anew each
+   band (SPD's 513 rows at 512x512: 10 to 33 bands on the seven scenes). */
+#define BAND_NODES ((uint64_t)1 << 16)
+#define BAND_ROWS 64
+
+/* The trees of a one-off evaluation (L->sink): decoded band by band into
+   a buffer that holds the band's nodes after the last two samples before
+   it (each packed node's references: node_refs), each sample checked as
+   read_tree checks it, and handed to the sink; none kept. */
+static rtp_status read_bands(loader *L, rd *r, unsigned layout, uint32_t vis_mask)
+{
+    rtp_tree *t = L->t;
+    const uint64_t *start = t->start;
+    size_t nx = (size_t)t->nx, ny = (size_t)t->ny, nprims = rtpi_scene_nprims(L->s);
+    size_t y0, y1, c = 0, cap = 0, i;
+    rtpi_cnode *band = NULL;
+    /* bs: band's sample starts, the c carried samples' then the band's */
+    uint64_t *bs = (uint64_t *)rtpi_malloc_array(L->a, BAND_ROWS * nx + 3, sizeof *bs);
+    rtp_status st = RTP_OK;
+    if (!bs)
+        return nomem(L);
+    bs[0] = 0;
+    for (y0 = 0; y0 < ny && st == RTP_OK; y0 = y1) {
+        size_t k0 = y0 * nx, k, kn;
+        uint64_t need;
+        y1 = y0 + 1;
+        while (y1 < ny && y1 - y0 < BAND_ROWS && start[(y1 + 1) * nx] - start[k0] <= BAND_NODES)
+            y1++;
+        kn = y1 * nx;
+        need = bs[c] + (start[kn] - start[k0]);
+        if (need > cap) {
+            /* (at least one more than asked: rtpi_grow's own rule) */
+            size_t want = (size_t)need;
+            if (rtpi_grow(L->a, (void **)&band, &cap, want + 1, sizeof *band)) {
+                st = nomem(L);
+                break;
+            }
+        }
+        for (k = k0; k < kn; k++) {
+            size_t li = c + (k - k0), j, n = (size_t)(start[k + 1] - start[k]);
+            bs[li + 1] = bs[li] + n;
+            for (j = 0; j < n; j++) {
+                rtpi_cnode *nd = &band[bs[li] + j];
+                const rtpi_cnode *ra, *rb;
+                size_t used;
+                if (r->src && r->n - r->at < PACKED_MAX)
+                    (void)refill(r, PACKED_MAX); /* (fewer where the section ends) */
+                /* (li >= 1 exactly where k >= 1, li >= 2 where k >= 2:
+                   the samples before k0 that k's references may need are
+                   the carried ones) */
+                refs_in(band, bs, li, j, &ra, &rb);
+                used = unpack_node(r->p + r->at, r->n - r->at, ra, rb, layout, nd);
+                if (used == 0)
+                    st = bad(L, "section too short", NULL);
+                else if (used == (size_t)-1 || !finite3(nd->p) || nd->prim >= nprims ||
+                         (nd->vis & ~vis_mask))
+                    st = bad(L, "invalid node", NULL);
+                if (st != RTP_OK)
+                    goto out;
+                r->at += used;
+            }
+            if (n && check_subtree(band + bs[li], 0, n, 1, t->max_depth) != n) {
+                st = bad(L, "malformed ray tree", NULL);
+                goto out;
+            }
+        }
+        st = L->sink->band(L->sink->user, t, (int)y0, (int)y1, band, bs + c, L->err);
+        if (st != RTP_OK) {
+            L->sink_stop = 1;
+            break;
+        }
+        /* the band's last two samples (of those there are) to the front */
+        {
+            size_t keep = kn < 2 ? kn : 2, li0 = c + (kn - k0) - keep;
+            uint64_t from = bs[li0], nn = bs[c + (kn - k0)] - from;
+            if (nn)
+                memmove(band, band + from, (size_t)nn * sizeof *band);
+            for (i = 0; i <= keep; i++)
+                bs[i] = bs[li0 + i] - from;
+            c = keep;
+        }
+    }
+out:
+    rtpi_free(L->a, band);
+    rtpi_free(L->a, bs);
+    return st;
+}
+
 static rtp_status read_tree(loader *L, rd *r)
 {
     rtp_tree *t = L->t;
@@ -1575,8 +1693,7 @@ static rtp_status read_tree(loader *L, rd *r)
     t->nnodes = (size_t)nnodes;
     t->vis_words = words;
     t->start = (uint64_t *)rtpi_malloc_array(L->a, (size_t)nsamples + 1, sizeof *t->start);
-    t->nodes = (rtpi_cnode *)rtpi_malloc_array(L->a, t->nnodes ? t->nnodes : 1, sizeof *t->nodes);
-    if (!t->start || !t->nodes)
+    if (!t->start)
         return nomem(L);
     for (k = 0; k < nsamples; k++) {
         uint64_t c = get_varint(r);
@@ -1589,6 +1706,25 @@ static rtp_status read_tree(loader *L, rd *r)
     if (at != nnodes)
         return bad(L, "sample node counts do not add up", NULL);
     vis_mask = s->nlights >= 32 ? 0xffffffffu : ((1u << s->nlights) - 1u);
+    if (L->sink) {
+        /* a one-off evaluation: its edits now, then the trees a band at a
+           time (packed, their light bits in their nodes) or whole */
+        rtp_status st;
+        int stream = 0;
+        if ((st = textures_held(L)) != RTP_OK)
+            return st;
+        t->nlights0 = s->nlights;
+        st = L->sink->begin(L->sink->user, t, L->major > 1 && words == 0, &stream, L->err);
+        if (st != RTP_OK) {
+            L->sink_stop = 1;
+            return st;
+        }
+        if (stream)
+            return read_bands(L, r, layout, vis_mask);
+    }
+    t->nodes = (rtpi_cnode *)rtpi_malloc_array(L->a, t->nnodes ? t->nnodes : 1, sizeof *t->nodes);
+    if (!t->nodes)
+        return nomem(L);
     /* packed: each node's length is known once it is read, so the window
        is kept PACKED_MAX bytes ahead */
     for (k = 0; L->major > 1 && k < nsamples; k++) {
@@ -1788,19 +1924,8 @@ static rtp_status tree_end(loader *L, unsigned seen, rtp_status st, rtp_tree **o
             ;
         st = bad(L, "a required section is missing: ", required_sections[i]);
     }
-    if (st == RTP_OK) {
-        for (i = 0; i < t->scene->nmats; i++) {
-            const rtpi_material *m = &t->scene->mats[i];
-            if ((m->tex == RTPI_TEX_IMAGE && m->tex_image >= t->scene->ntexs) ||
-                (m->bump == RTPI_BUMP_IMAGE && m->bump_image >= t->scene->ntexs)) {
-                char what[64];
-                snprintf(what, sizeof what, "%zu", i);
-                L->section = "MATL";
-                st = bad(L, "a texture the file does not hold named by material ", what);
-                break;
-            }
-        }
-    }
+    if (st == RTP_OK)
+        st = textures_held(L);
     if (st != RTP_OK) {
         rtp_tree_destroy(t);
         return st;
@@ -1941,7 +2066,8 @@ static int section_bytes(FILE *f, uint64_t len, int known, const rtp_allocator *
 }
 
 static rtp_status tree_read_stream(FILE *f, uint64_t size, int known, const char *name,
-                                   const rtp_allocator *alloc, rtp_tree **out, rtp_error *err)
+                                   const rtp_allocator *alloc, const rtpi_tree_sink *ts,
+                                   rtp_tree **out, rtp_error *err)
 {
     rtp_allocator a;
     loader L;
@@ -1956,6 +2082,7 @@ static rtp_status tree_read_stream(FILE *f, uint64_t size, int known, const char
     memset(&L, 0, sizeof L);
     L.name = name;
     L.err = err;
+    L.sink = ts;
     {
         /* (a stream's size: what it holds, once it holds fewer than 8) */
         size_t n = known && size < 8 ? (size_t)size : 8, got = fread(head, 1, n, f);
@@ -2029,6 +2156,14 @@ static rtp_status tree_read_stream(FILE *f, uint64_t size, int known, const char
             if (ost == RTP_OK && idx >= 0)
                 pst = parse_section(&L, idx, &body);
             L.err = err;
+            if (L.sink_stop) {
+                /* the sink's own error (an edit refused, no memory, a
+                   cancel): now, not after the rest of the file */
+                if (err)
+                    *err = perr;
+                st = pst;
+                break;
+            }
             /* the rest of the section's bytes, for their CRC */
             while (src->left && !src->short_read) {
                 body.at = body.n;
@@ -2101,8 +2236,8 @@ static rtp_status tree_read_stream(FILE *f, uint64_t size, int known, const char
     return tree_end(&L, seen, st, out);
 }
 
-rtp_status rtp_tree_read(const char *path, const rtp_allocator *alloc, rtp_tree **out,
-                         rtp_error *err)
+static rtp_status read_path(const char *path, const rtp_allocator *alloc,
+                            const rtpi_tree_sink *ts, rtp_tree **out, rtp_error *err)
 {
     rtp_allocator a;
     rtp_status st;
@@ -2134,8 +2269,20 @@ rtp_status rtp_tree_read(const char *path, const rtp_allocator *alloc, rtp_tree 
             size = (uint64_t)sb.st_size;
         }
     }
-    st = tree_read_stream(f, size, known, path, &a, out, err);
+    st = tree_read_stream(f, size, known, path, &a, ts, out, err);
     if (!is_stdin)
         fclose(f);
     return st;
+}
+
+rtp_status rtp_tree_read(const char *path, const rtp_allocator *alloc, rtp_tree **out,
+                         rtp_error *err)
+{
+    return read_path(path, alloc, NULL, out, err);
+}
+
+rtp_status rtpi_tree_read_sink(const char *path, const rtp_allocator *alloc,
+                               const rtpi_tree_sink *ts, rtp_tree **out, rtp_error *err)
+{
+    return read_path(path, alloc, ts, out, err);
 }

@@ -419,6 +419,57 @@ static rtp_status op_tree_eval(ctx *c)
     return st;
 }
 
+/* rtp_tree_eval_file's edits: the first `n` of `kv` (pairs). */
+typedef struct file_edits {
+    const char *const (*kv)[2];
+    size_t n;
+} file_edits;
+
+static rtp_status file_edit(void *user, rtp_tree *t, rtp_error *err)
+{
+    file_edits *f = (file_edits *)user;
+    size_t i;
+    rtp_status st;
+    for (i = 0; i < f->n; i++)
+        if ((st = rtp_tree_set(t, f->kv[i][0], f->kv[i][1], err)) != RTP_OK)
+            return st;
+    return RTP_OK;
+}
+
+/* Optical edits and a bump kept: the trees evaluated as they are read. */
+static const char *const file_a_edits[][2] = {
+    {"mat.floor.color", "0.2,0.4,0.6"}, {"light.lamp.color", "1,0.5,0"},
+    {"light.spare.on", "1"},            {"mat.floor.bump_strength", "0.9"}};
+
+static rtp_status eval_file_with(ctx *c, const char *const (*kv)[2], size_t n, int threads)
+{
+    rtp_image *img = NULL;
+    rtp_eval_options eo;
+    file_edits fe;
+    rtp_status st;
+    fe.kv = kv;
+    fe.n = n;
+    memset(&eo, 0, sizeof eo);
+    eo.threads = threads;
+    ARM(c);
+    st = rtp_tree_eval_file(tmp_path("r.rtp"), c->a, file_edit, &fe, &eo, &img, NULL, NULL,
+                            &c->err);
+    DISARM(c);
+    CHECK(st == RTP_OK || !img);
+    rtp_image_destroy(img);
+    return st;
+}
+
+static rtp_status op_tree_eval_file(ctx *c)
+{
+    return eval_file_with(c, file_a_edits, sizeof file_a_edits / sizeof *file_a_edits, 1);
+}
+
+static rtp_status op_tree_eval_file_threads(ctx *c)
+{
+    return eval_file_with(c, file_a_edits, sizeof file_a_edits / sizeof *file_a_edits, 3);
+}
+
 /* Edits of every class the tree takes: optical (A), a moved light (B,
    shadows decided anew at evaluation), a raised ks (D, re-traced). */
 static const char *const tree_edits[][2] = {
@@ -463,6 +514,12 @@ static rtp_status op_tree_eval_edited(ctx *c)
     rtp_image_destroy(img);
     rtp_tree_destroy(t);
     return st;
+}
+
+/* The same from the file: its trees read whole, then evaluated. */
+static rtp_status op_tree_eval_file_whole(ctx *c)
+{
+    return eval_file_with(c, tree_edits, sizeof tree_edits / sizeof *tree_edits, 1);
 }
 
 /* A stream of edits on warm caches, into one kept image: what allocates
@@ -1331,6 +1388,9 @@ static long sweep(const char *name, rtp_status (*op)(ctx *))
 }
 
 #define SWEEP(fn) static void test_##fn(void) { CHECK(sweep(#fn, op_##fn) >= 0); }
+SWEEP(tree_eval_file)
+SWEEP(tree_eval_file_threads)
+SWEEP(tree_eval_file_whole)
 SWEEP(load_nff)
 SWEEP(load_obj)
 SWEEP(trace)
@@ -1523,6 +1583,9 @@ int main(void)
     RUN(test_tree_eval);
     RUN(test_tree_set);
     RUN(test_tree_eval_edited);
+    RUN(test_tree_eval_file);
+    RUN(test_tree_eval_file_threads);
+    RUN(test_tree_eval_file_whole);
     RUN(test_tree_eval_warm);
     RUN(test_tree_eval_warm_spd);
     RUN(test_image_io);

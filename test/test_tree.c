@@ -4797,6 +4797,274 @@ static void test_texture_bytes(void)
     }
 }
 
+/* ------------------------------------------------ rtp_tree_eval_file */
+
+typedef struct file_edits {
+    const char *const *kv; /* key, value, ... */
+    int n;                 /* pairs */
+    int calls;
+    int has_trees;         /* rtp_tree_eval on the tree was refused */
+    const double *add;     /* a light to add, or NULL */
+} file_edits;
+
+static rtp_status file_edit(void *user, rtp_tree *t, rtp_error *err)
+{
+    file_edits *f = (file_edits *)user;
+    rtp_image *img = NULL;
+    rtp_error e2;
+    int i;
+    rtp_status st;
+    f->calls++;
+    /* (its trees are not there yet: anything but edits is refused) */
+    f->has_trees = rtp_tree_eval(t, NULL, &img, NULL, &e2) != RTP_ERR_ARGUMENT ||
+                   rtp_tree_write(t, "/dev/null", NULL, &e2) != RTP_ERR_ARGUMENT;
+    rtp_image_destroy(img);
+    if (f->add && (st = rtp_tree_add_light(t, f->add, err)) != RTP_OK)
+        return st;
+    for (i = 0; i < f->n; i++)
+        if ((st = rtp_tree_set(t, f->kv[2 * i], f->kv[2 * i + 1], err)) != RTP_OK)
+            return st;
+    return RTP_OK;
+}
+
+/* rtp_tree_eval_file of `file` with the edits equals rtp_tree_read, the
+   edits and rtp_tree_eval (no_cache) bit for bit, stats and info too.
+   streamed 2: the trees must have been evaluated as they came, its
+   allocations peaking a quarter of the nodes' bytes below the whole
+   read's at least (a tree of several bands: read_bands); 0: they must
+   have been read whole (its peak as high as the whole read's less that);
+   1: either. */
+static void eval_file_case(const char *file, int threads, const char *const *kv, int n,
+                           const double *add, int streamed)
+{
+    counted ca, cb;
+    rtp_allocator a = counted_allocator(&ca), b = counted_allocator(&cb);
+    rtp_eval_options eo;
+    rtp_tree *t = NULL;
+    rtp_image *ref = NULL, *img = NULL;
+    rtp_eval_stats es_ref, es;
+    rtp_tree_info ti_ref, ti;
+    rtp_error err;
+    file_edits fe;
+    int i, ok;
+    memset(&eo, 0, sizeof eo);
+    eo.threads = threads;
+    eo.no_cache = 1;
+    memset(&fe, 0, sizeof fe);
+    fe.kv = kv;
+    fe.n = n;
+    fe.add = add;
+    ok = rtp_tree_read(file, &a, &t, &err) == RTP_OK;
+    if (ok && add)
+        ok = rtp_tree_add_light(t, add, &err) == RTP_OK;
+    for (i = 0; ok && i < n; i++)
+        ok = rtp_tree_set(t, kv[2 * i], kv[2 * i + 1], &err) == RTP_OK;
+    ok = ok && rtp_tree_eval(t, &eo, &ref, &es_ref, &err) == RTP_OK;
+    CHECK_MSG(ok, "%s: reference: %s", file, err.message);
+    if (!ok) {
+        rtp_tree_destroy(t);
+        return;
+    }
+    rtp_tree_get_info(t, &ti_ref);
+    rtp_tree_destroy(t);
+    eo.no_cache = 0; /* (eval_file sets it) */
+    memset(&es, 0xff, sizeof es);
+    CHECK_MSG(rtp_tree_eval_file(file, &b, file_edit, &fe, &eo, &img, &ti, &es, &err) ==
+                  RTP_OK,
+              "%s: %s", file, err.message);
+    CHECK(fe.calls == 1 && !fe.has_trees);
+    CHECK_MSG(same_image(img, ref), "%s, %d thread(s), %d edits: images differ", file, threads,
+              n);
+    CHECK(memcmp(&ti, &ti_ref, sizeof ti) == 0);
+    CHECK(es.samples == es_ref.samples && es.nodes == es_ref.nodes &&
+          es.combined_samples == es_ref.combined_samples &&
+          es.written_pixels == es_ref.written_pixels &&
+          es.stale_samples == es_ref.stale_samples && es.moved_lights == es_ref.moved_lights &&
+          es.retraced_samples == es_ref.retraced_samples);
+    if (streamed == 2)
+        CHECK_MSG(cb.peak + ti.nodes * sizeof(rtpi_cnode) / 4 < ca.peak,
+                  "%s: streamed, yet its peak %zu bytes against the whole read's %zu (%llu "
+                  "nodes)",
+                  file, cb.peak, ca.peak, ti.nodes);
+    else if (streamed == 0)
+        CHECK_MSG(cb.peak + ti.nodes * sizeof(rtpi_cnode) / 4 >= ca.peak,
+                  "%s: read whole, yet its peak %zu bytes against %zu", file, cb.peak, ca.peak);
+    rtp_image_destroy(img);
+    rtp_image_destroy(ref);
+    CHECK(ca.live == 0 && cb.live == 0);
+}
+
+typedef struct file_progress {
+    int calls, backwards, asked, stop;
+    double last;
+} file_progress;
+
+static void file_progress_cb(void *user, double done)
+{
+    file_progress *p = (file_progress *)user;
+    p->backwards |= done < p->last;
+    p->last = done;
+    p->calls++;
+}
+
+static int file_cancel_cb(void *user)
+{
+    file_progress *p = (file_progress *)user;
+    p->asked++;
+    return p->stop;
+}
+
+/* A tree of the scene at w x h (SPD corner samples or not) in file. */
+static int file_of(const char *scene, int w, int h, int spd, int depth, const char *file)
+{
+    rtp_scene *s = load(scene);
+    rtp_tree *t = NULL;
+    rtp_trace_options o;
+    int ok;
+    if (!s)
+        return 0;
+    memset(&o, 0, sizeof o);
+    o.width = w;
+    o.height = h;
+    o.spd = spd;
+    o.max_depth = depth;
+    o.threads = 2;
+    ok = rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK &&
+         rtp_tree_write(t, file, NULL, NULL) == RTP_OK;
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+    return ok;
+}
+
+static void test_eval_file(void)
+{
+    /* class A edits of every kind the scenes hold: streamed */
+    static const char *const spheres_a[] = {"light.0.color", "1,0.5,0.2", "mat.0.kd", "0.3",
+                                            "mat.1.shine", "7", "ambient", "0.2",
+                                            "background", "0.3,0.1,0", "mat.1.ks", "0.2"};
+    static const char *const textured_a[] = {"mat.floor.bump_strength", "0.9",
+                                             "mat.ball.color", "0.1,0.9,0.3",
+                                             "light.0.on", "0"};
+    static const char *const prims_a[] = {"light.1.color", "0,1,0", "mat.1.kt", "0.2"};
+    /* what is read whole: a moved light, an ior, the camera, a retraced bump */
+    static const char *const moved[] = {"light.0.pos", "1,-3,6"};
+    static const char *const cam[] = {"camera.angle", "30"};
+    static const char *const spheres_d[] = {"mat.1.ior", "1.3"};
+    static const double add[3] = {0.5, -2, 4};
+    static const char *const trap_a[] = {"light.0.color", "1,0.5,0.2", "mat.1.kd", "0.3",
+                                         "mat.0.shine", "7", "ambient", "0.2"};
+    char f[7][512], trap[512];
+    /* (the last, trap_nff: ~15 nodes a sample, three bands) */
+    static const struct {
+        const char *scene;
+        int w, h, spd;
+    } trees[7] = {{"scenes/spheres.nff", 200, 150, 0}, {"scenes/spheres.nff", 64, 48, 1},
+                  {"scenes/textured.nff", 90, 70, 0},  {"scenes/prims.nff", 1, 300, 0},
+                  {"scenes/prims.nff", 1, 120, 1},     {"scenes/teapot.nff", 160, 120, 1},
+                  {NULL, 120, 90, 0}};
+    int i, th;
+    snprintf(trap, sizeof trap, "%s/rtp-evalfile-%d-trap.nff", tmpdir(), (int)getpid());
+    {
+        FILE *tf = fopen(trap, "w");
+        CHECK(tf && fputs(trap_nff, tf) >= 0 && fclose(tf) == 0);
+    }
+    for (i = 0; i < 7; i++) {
+        snprintf(f[i], sizeof f[i], "%s/rtp-evalfile-%d-%d.rtp", tmpdir(), (int)getpid(), i);
+        if (!file_of(trees[i].scene ? trees[i].scene : trap, trees[i].w, trees[i].h,
+                     trees[i].spd, 0, f[i])) {
+            CHECK_MSG(0, "%s: no tree", trees[i].scene ? trees[i].scene : trap);
+            return;
+        }
+    }
+    for (th = 1; th <= 3; th += 2) {
+        eval_file_case(f[0], th, NULL, 0, NULL, 1);
+        eval_file_case(f[0], th, spheres_a, 6, NULL, 1);
+        eval_file_case(f[6], th, trap_a, 4, NULL, 2);
+        eval_file_case(f[1], th, spheres_a, 6, NULL, 1);
+        eval_file_case(f[2], th, textured_a, 3, NULL, 1);
+        eval_file_case(f[3], th, prims_a, 2, NULL, 1); /* (a sample a row) */
+        eval_file_case(f[4], th, prims_a, 2, NULL, 1);
+        eval_file_case(f[5], th, spheres_a, 2, NULL, 1);
+    }
+    eval_file_case(f[0], 2, moved, 1, NULL, 0);
+    eval_file_case(f[0], 2, NULL, 0, add, 0);
+    eval_file_case(f[1], 2, cam, 1, NULL, 0);
+    eval_file_case(f[0], 2, spheres_d, 1, NULL, 0);
+    {
+        /* --stale retrace with a changed bump: read whole; kept: streamed,
+           its stale samples counted */
+        counted c;
+        rtp_allocator a = counted_allocator(&c);
+        rtp_eval_options eo;
+        rtp_image *img = NULL;
+        file_edits fe;
+        rtp_error err;
+        memset(&fe, 0, sizeof fe);
+        fe.kv = textured_a;
+        fe.n = 1;
+        memset(&eo, 0, sizeof eo);
+        eo.stale = RTP_STALE_RETRACE;
+        CHECK(rtp_tree_eval_file(f[2], &a, file_edit, &fe, &eo, &img, NULL, NULL, &err) ==
+              RTP_OK);
+        rtp_image_destroy(img);
+        CHECK(c.live == 0);
+    }
+    {
+        /* the edit callback's errors, the file's, the options', a cancel */
+        file_edits fe;
+        rtp_error err;
+        rtp_image *img = NULL;
+        rtp_eval_options eo;
+        static const char *const bad[] = {"mat.99.kd", "1"};
+        memset(&fe, 0, sizeof fe);
+        fe.kv = bad;
+        fe.n = 1;
+        CHECK(rtp_tree_eval_file(f[0], NULL, file_edit, &fe, NULL, &img, NULL, NULL, &err) ==
+                  RTP_ERR_KEY &&
+              !img && strstr(err.message, "mat.99"));
+        CHECK(rtp_tree_eval_file("/nonexistent/x.rtp", NULL, NULL, NULL, NULL, &img, NULL,
+                                 NULL, &err) == RTP_ERR_IO &&
+              !img);
+        memset(&eo, 0, sizeof eo);
+        eo.threads = -1;
+        CHECK(rtp_tree_eval_file(f[0], NULL, NULL, NULL, &eo, &img, NULL, NULL, &err) ==
+                  RTP_ERR_ARGUMENT &&
+              !img);
+        CHECK(rtp_tree_eval_file(f[0], NULL, NULL, NULL, NULL, NULL, NULL, NULL, &err) ==
+              RTP_ERR_ARGUMENT);
+    }
+    {
+        /* progress between bands, to 1; a cancel there stops the read */
+        counted c;
+        rtp_allocator a = counted_allocator(&c);
+        file_progress fp;
+        rtp_eval_options eo;
+        rtp_image *img = NULL;
+        rtp_error err;
+        memset(&fp, 0, sizeof fp);
+        memset(&eo, 0, sizeof eo);
+        eo.progress = file_progress_cb;
+        eo.cancel = file_cancel_cb;
+        eo.progress_user = &fp;
+        CHECK(rtp_tree_eval_file(f[6], &a, NULL, NULL, &eo, &img, NULL, NULL, &err) == RTP_OK &&
+              img);
+        CHECK_MSG(fp.calls >= 2 && fp.last == 1.0 && !fp.backwards && fp.asked >= 1,
+                  "progress %d calls, last %g, backwards %d; cancel asked %d", fp.calls, fp.last,
+                  fp.backwards, fp.asked);
+        rtp_image_destroy(img);
+        img = NULL;
+        memset(&fp, 0, sizeof fp);
+        fp.stop = 1;
+        CHECK(rtp_tree_eval_file(f[6], &a, NULL, NULL, &eo, &img, NULL, NULL, &err) ==
+                  RTP_ERR_CANCELLED &&
+              !img && fp.asked == 1);
+        CHECK(c.live == 0);
+    }
+    for (i = 0; i < 7; i++)
+        remove(f[i]);
+    remove(trap);
+}
+
 int main(void)
 {
     RUN(test_identical_project_scenes);
@@ -4865,5 +5133,6 @@ int main(void)
     RUN(test_format1_file);
     RUN(test_malformed_packed_node);
     RUN(test_reader_refuses_what_no_scene_holds);
+    RUN(test_eval_file);
     return check_report();
 }
