@@ -691,6 +691,127 @@ static int vis_up_to_date(const rtp_tree *t, size_t i, int kmode, int kres)
            (!light_moved(t, i) || (t->cur_mode == kmode && t->cur_res == kres));
 }
 
+/* A moved light's shadow queries (light_vis_make) and what its rows of
+   decisions need (light_vis_rows). */
+typedef struct light_vis {
+    size_t light;
+    int mode;                /* the mode that decides it (AUTO's fallback
+                                to shadow rays made) */
+    int threads;
+    rtpi_shadow *sh;
+    unsigned char *balls;    /* rtpi_balls_around (NULL: no spheres) */
+} light_vis;
+
+static void light_vis_free(rtp_tree *t, light_vis *lv)
+{
+    rtpi_shadow_destroy(lv->sh);
+    rtpi_free(&t->alloc, lv->balls);
+    lv->sh = NULL;
+    lv->balls = NULL;
+}
+
+/* Light i's shadow queries by `mode` (not AUTO) at `res` cells: its
+   direction cube's build (its progress and cancel through poll), or the
+   kd-tree's where shadow rays decide.  `fallback` (AUTO asked): shadow
+   rays where the light buffer's lists pass `limit` bytes or AUTO's bound
+   on entries. */
+static rtp_status light_vis_make(rtp_tree *t, size_t i, int mode, int res, int threads,
+                                 double limit, int fallback, rtpi_poll *poll, light_vis *lv,
+                                 rtp_error *err)
+{
+    rtp_scene *s = t->scene;
+    const double *lp = s->lights[i].pos;
+    double lb_cap;
+    rtp_status rs;
+    memset(lv, 0, sizeof *lv);
+    lv->light = i;
+    lv->threads = threads;
+    if (mode != RTP_SHADOWS_EXACT && rtpi_scene_bounds(s) != 0)
+        return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+    /* only shadow rays need the kd-tree; the cubes draw the scene */
+    if (mode == RTP_SHADOWS_EXACT && !t->kd &&
+        (rs = rtpi_kd_build_mt(s, &t->alloc, threads, &t->kd, err)) != RTP_OK)
+        return rs;
+    t->cube_alloc.malloc_fn = blk_malloc;
+    t->cube_alloc.realloc_fn = blk_realloc;
+    t->cube_alloc.free_fn = blk_free;
+    t->cube_alloc.user = t;
+    lb_cap = fallback && mode == RTP_SHADOWS_LIGHTBUF ? auto_lb_entries(t) : HUGE_VAL;
+    rs = rtpi_shadow_create_mt(s, t->kd, v3(lp[0], lp[1], lp[2]), (rtpi_shadow_mode)mode, res,
+                               threads, limit, lb_cap, poll, &t->cube_alloc, &lv->sh, err);
+    if ((rs == RTP_ERR_LIMIT || rs == RTPI_OVER_ENTRIES) && fallback &&
+        mode != RTP_SHADOWS_EXACT) {
+        /* AUTO: shadow rays where the lists would not fit (a mesh
+           seen edge on lists every triangle in a row of cells) */
+        /* (the lists too long for AUTO, not for the memory limit:
+           the next move at this resolution or finer need not
+           count them again; a limit may be raised, a coarser
+           buffer list less) */
+        if (rs == RTPI_OVER_ENTRIES && (!t->auto_long || res < t->auto_long))
+            t->auto_long = res;
+        mode = RTP_SHADOWS_EXACT;
+        if (!t->kd && (rs = rtpi_kd_build_mt(s, &t->alloc, threads, &t->kd, err)) != RTP_OK)
+            return rs;
+        rs = rtpi_shadow_create_mt(s, t->kd, v3(lp[0], lp[1], lp[2]), RTPI_SHADOW_EXACT, res,
+                                   threads, limit, HUGE_VAL, poll, &t->cube_alloc, &lv->sh, err);
+    }
+    if (rs != RTP_OK)
+        return rs;
+    lv->mode = mode;
+    if (s->nspheres) {
+        lv->balls = (unsigned char *)rtpi_malloc_array(&t->alloc, s->nspheres, 1);
+        if (!lv->balls) {
+            light_vis_free(t, lv);
+            return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+        }
+        rtpi_balls_around(s, v3(lp[0], lp[1], lp[2]), lv->balls);
+    }
+    return RTP_OK;
+}
+
+/* Decides lv's light for every node of t's sample rows into t->cur_vis
+   (vis_row); st (may be NULL) counts the queries and the light.  0, 1
+   out of memory, 2 cancelled (some rows decided, the rest not). */
+static int light_vis_rows(rtp_tree *t, const light_vis *lv, double off_floor, int prim_floor,
+                          void (*progress)(void *, double), int (*cancel)(void *), void *user,
+                          rtp_eval_stats *st)
+{
+    const double *lp = t->scene->lights[lv->light].pos;
+    int k, rows, threads = lv->threads;
+    /* (on the heap: 256 on the stack were a 37 KB frame) */
+    vis_ctx *vc = (vis_ctx *)rtpi_malloc_array(&t->alloc, (size_t)threads, sizeof *vc);
+    void **ctx = (void **)rtpi_malloc_array(&t->alloc, (size_t)threads, sizeof *ctx);
+    if (!vc || !ctx) {
+        rtpi_free(&t->alloc, vc);
+        rtpi_free(&t->alloc, ctx);
+        return 1;
+    }
+    for (k = 0; k < threads; k++) {
+        vc[k].t = t;
+        vc[k].sh = lv->sh;
+        vc[k].lp = v3(lp[0], lp[1], lp[2]);
+        vc[k].off_floor = off_floor;
+        vc[k].prim_floor = prim_floor;
+        vc[k].light = lv->light;
+        vc[k].queries = 0;
+        vc[k].balls = lv->balls;
+        memset(&vc[k].cache, 0, sizeof vc[k].cache);
+        vc[k].keep_balls = lv->mode == RTP_SHADOWS_EXACT;
+        ctx[k] = &vc[k];
+    }
+    rows = rtpi_parallel_rows_cancel(t->ny, threads, ctx, vis_row, progress, cancel, user,
+                                     rtpi_trace_stack(t->max_depth));
+    if (rows != 2 && st) {
+        st->moved_lights++;
+        st->shadows = (rtp_shadow_mode)lv->mode;
+        for (k = 0; k < threads; k++)
+            st->shadow_queries += vc[k].queries;
+    }
+    rtpi_free(&t->alloc, vc);
+    rtpi_free(&t->alloc, ctx);
+    return rows == 2 ? 2 : 0;
+}
+
 /* Brings cur_vis up to date for every light: recorded bits where a light
    is where it was traced, new decisions where it moved, by shadow mode
    `mode` (not AUTO) at `res` cells.  Only lights whose position (or the
@@ -735,7 +856,7 @@ static rtp_status update_visibility_body(rtp_tree *t, int mode, int res, int thr
     size_t nl = s->nlights, words = (nl + 31) / 32, i, n, todo = 0, done = 0;
     double off_floor;
     int prim_floor;
-    int k, kmode, kres;
+    int kmode, kres;
     vis_key(mode, res, &kmode, &kres);
     if (threads < 1)
         threads = 1;
@@ -789,7 +910,6 @@ static rtp_status update_visibility_body(rtp_tree *t, int mode, int res, int thr
         int moved = light_moved(t, i);
         progress_part part, bpart;
         rtpi_poll poll;
-        double lb_cap;
         if (vis_up_to_date(t, i, kmode, kres))
             continue;
         if (!moved) {
@@ -798,28 +918,14 @@ static rtp_status update_visibility_body(rtp_tree *t, int mode, int res, int thr
                 *w = (*w & ~(1u << (i & 31))) | recorded_bit(t, n, i) << (i & 31);
             }
         } else {
-            rtpi_shadow *sh = NULL;
+            light_vis lv;
             rtp_status rs;
-            vis_ctx *vc;
-            void **ctx;
-            unsigned char *balls = NULL;
             int rows;
-            mode = mode_asked;
             /* (the caller's cancel on either side of the kd-tree's or the
                buffer's build and after each row: a moved light of a
                large mesh takes seconds) */
             if (part_cancelled(prog))
                 return rtpi_cancelled(err);
-            if (mode != RTP_SHADOWS_EXACT && rtpi_scene_bounds(s) != 0)
-                return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
-            /* only shadow rays need the kd-tree; the cubes draw the scene */
-            if (mode == RTP_SHADOWS_EXACT && !t->kd &&
-                (rs = rtpi_kd_build_mt(s, &t->alloc, threads, &t->kd, err)) != RTP_OK)
-                return rs;
-            t->cube_alloc.malloc_fn = blk_malloc;
-            t->cube_alloc.realloc_fn = blk_realloc;
-            t->cube_alloc.free_fn = blk_free;
-            t->cube_alloc.user = t;
             /* this light's share of the step's progress: a direction
                cube's build the first half of it (a fine cube takes
                seconds: the bunny's light buffer at 8192 cells 3 s), the
@@ -829,90 +935,31 @@ static rtp_status update_visibility_body(rtp_tree *t, int mode, int res, int thr
             part.span = prog->span / (double)todo;
             done++;
             bpart = part;
-            bpart.span = mode != RTP_SHADOWS_EXACT ? 0.5 * part.span : 0.0;
+            bpart.span = mode_asked != RTP_SHADOWS_EXACT ? 0.5 * part.span : 0.0;
             poll.progress = part.fn ? progress_part_cb : NULL;
             poll.cancel = part.cancel ? progress_part_cancel : NULL;
             poll.user = &bpart;
             part.lo += bpart.span;
             part.span -= bpart.span;
-            lb_cap = fallback && mode == RTP_SHADOWS_LIGHTBUF ? auto_lb_entries(t) : HUGE_VAL;
-            rs = rtpi_shadow_create_mt(s, t->kd, v3(lp[0], lp[1], lp[2]),
-                                       (rtpi_shadow_mode)mode, res, threads, limit, lb_cap, &poll,
-                                       &t->cube_alloc, &sh, err);
-            if ((rs == RTP_ERR_LIMIT || rs == RTPI_OVER_ENTRIES) && fallback &&
-                mode != RTP_SHADOWS_EXACT) {
-                /* AUTO: shadow rays where the lists would not fit (a mesh
-                   seen edge on lists every triangle in a row of cells) */
-                /* (the lists too long for AUTO, not for the memory limit:
-                   the next move at this resolution or finer need not
-                   count them again; a limit may be raised, a coarser
-                   buffer list less) */
-                if (rs == RTPI_OVER_ENTRIES && (!t->auto_long || res < t->auto_long))
-                    t->auto_long = res;
-                mode = RTP_SHADOWS_EXACT;
-                if (!t->kd && (rs = rtpi_kd_build_mt(s, &t->alloc, threads, &t->kd, err)) != RTP_OK)
-                    return rs;
-                rs = rtpi_shadow_create_mt(s, t->kd, v3(lp[0], lp[1], lp[2]),
-                                           RTPI_SHADOW_EXACT, res, threads, limit, HUGE_VAL,
-                                           &poll, &t->cube_alloc, &sh, err);
-            }
-            if (rs != RTP_OK)
+            if ((rs = light_vis_make(t, i, mode_asked, res, threads, limit, fallback, &poll, &lv,
+                                     err)) != RTP_OK)
                 return rs;
             if (part_cancelled(prog)) {
-                rtpi_shadow_destroy(sh);
+                light_vis_free(t, &lv);
                 return rtpi_cancelled(err);
             }
-            /* (on the heap: 256 on the stack were a 37 KB frame) */
-            vc = (vis_ctx *)rtpi_malloc_array(&t->alloc, (size_t)threads, sizeof *vc);
-            ctx = (void **)rtpi_malloc_array(&t->alloc, (size_t)threads, sizeof *ctx);
-            if (s->nspheres)
-                balls = (unsigned char *)rtpi_malloc_array(&t->alloc, s->nspheres, 1);
-            if (!vc || !ctx || (s->nspheres && !balls)) {
-                rtpi_free(&t->alloc, vc);
-                rtpi_free(&t->alloc, ctx);
-                rtpi_free(&t->alloc, balls);
-                rtpi_shadow_destroy(sh);
-                return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
-            }
-            if (balls)
-                rtpi_balls_around(s, v3(lp[0], lp[1], lp[2]), balls);
-            for (k = 0; k < threads; k++) {
-                vc[k].t = t;
-                vc[k].sh = sh;
-                vc[k].lp = v3(lp[0], lp[1], lp[2]);
-                vc[k].off_floor = off_floor;
-                vc[k].prim_floor = prim_floor;
-                vc[k].light = i;
-                vc[k].queries = 0;
-                vc[k].balls = balls;
-                memset(&vc[k].cache, 0, sizeof vc[k].cache);
-                vc[k].keep_balls = mode == RTP_SHADOWS_EXACT;
-                ctx[k] = &vc[k];
-            }
-            rows = rtpi_parallel_rows_cancel(t->ny, threads, ctx, vis_row,
-                                             part.fn ? progress_part_cb : NULL,
-                                             part.cancel ? progress_part_cancel : NULL, &part,
-                                             rtpi_trace_stack(t->max_depth));
-            rtpi_shadow_destroy(sh);
+            rows = light_vis_rows(t, &lv, off_floor, prim_floor, part.fn ? progress_part_cb : NULL,
+                                  part.cancel ? progress_part_cancel : NULL, &part, st);
+            light_vis_free(t, &lv);
             if (rows == 2) {
                 /* some rows hold the new decisions, the rest the old: the
                    light is decided anew at the next evaluation, wherever
                    it then is (its place as nothing decided) */
                 t->cur_pos[3 * i] = NAN;
-                rtpi_free(&t->alloc, vc);
-                rtpi_free(&t->alloc, ctx);
-                rtpi_free(&t->alloc, balls);
                 return rtpi_cancelled(err);
             }
-            if (st) {
-                st->moved_lights++;
-                st->shadows = (rtp_shadow_mode)mode;
-                for (k = 0; k < threads; k++)
-                    st->shadow_queries += vc[k].queries;
-            }
-            rtpi_free(&t->alloc, vc);
-            rtpi_free(&t->alloc, ctx);
-            rtpi_free(&t->alloc, balls);
+            if (rows != 0)
+                return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
         }
         t->cur_pos[3 * i] = lp[0];
         t->cur_pos[3 * i + 1] = lp[1];
@@ -3305,6 +3352,84 @@ static int cp_eval(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, con
     return 1;
 }
 
+/* The shadow mode and resolution moved lights are decided by: AUTO
+   resolved, shadow rays for a light too far for a cube, the cube's cells
+   against the memory limit.  *asked_auto: the mode asked was AUTO. */
+static rtp_status shadow_mode_for(rtp_tree *t, const rtp_eval_options *opt, int *mode_out,
+                                  int *res_out, int *asked_auto_out, rtp_error *err)
+{
+    const rtp_scene *s = t->scene;
+    size_t l;
+    int mode, res, asked_auto, cam_pending;
+    mode = opt ? (int)opt->shadows : 0;
+    res = opt && opt->shadow_res > 0 ? opt->shadow_res : RTPI_DC_DEFAULT_RES;
+    asked_auto = mode == RTP_SHADOWS_AUTO;
+    if (mode == RTP_SHADOWS_AUTO) {
+        size_t moving = 0;
+        for (l = 0; l < s->nlights; l++)
+            moving += light_moved(t, l) && s->lights[l].on;
+        mode = auto_shadows(t, opt && opt->no_cache, moving);
+        if (mode == RTP_SHADOWS_LIGHTBUF && !(opt && opt->shadow_res > 0))
+            res = auto_res(t);
+        /* (lists found too long at this resolution or a coarser one:
+           update_visibility's fallback) */
+        if (mode == RTP_SHADOWS_LIGHTBUF && t->auto_long && res >= t->auto_long)
+            mode = RTP_SHADOWS_EXACT;
+    }
+    /* A light so far that its buffer would list most primitives in every
+       cell (a sun at 1e11 over a terrain of size 2: 14 times the shadow
+       rays' time; 524k triangles at 1e11 took 49 s and 5.4 GB before
+       lb_res): shadow rays, as exact, which --stats names.  The item
+       buffer does the same in rtpi_shadow_create. */
+    /* (a moved camera's re-trace below traces every light where it is:
+       none is decided by a cube then, whatever its distance or cells) */
+    cam_pending = memcmp(&s->camera, &t->cam0, sizeof t->cam0) != 0;
+    for (l = 0; mode != RTP_SHADOWS_EXACT && !cam_pending && l < s->nlights; l++) {
+        const double *lp = s->lights[l].pos;
+        /* (the item buffers too, as rtpi_shadow_create decides them: here
+           so that --stats says so and no cube is charged to the memory
+           limit; itembuf:8192 from 1e13 was refused under 100 MiB while
+           it took 3 MB) */
+        if (light_moved(t, l) && s->lights[l].on &&
+            rtpi_lightbuf_res(s, v3(lp[0], lp[1], lp[2]), res) < res / 4)
+            mode = RTP_SHADOWS_EXACT;
+    }
+    /* A direction cube's cells against the memory limit, before it is
+       made: 8 bytes a cell for an item buffer (id and depth; OSMesa's
+       colour and depth buffers for a face on top), 4 for a light buffer's
+       cell starts (its lists come on top), six whole faces (a far light's
+       window has fewer: an upper bound).  itembuf:8192 took 2.9 GB of a
+       64x64 tree's move under --memory-limit 100. */
+    if (mode != RTP_SHADOWS_EXACT) {
+        double lim = opt && opt->memory_limit > 0.0 ? opt->memory_limit : RTPI_MEMORY_LIMIT;
+        double cells = 6.0 * (double)res * (double)res;
+        double need = cells * (mode == RTP_SHADOWS_LIGHTBUF ? 4.0 : 8.0) +
+                      (mode == RTP_SHADOWS_OSMESA ? cells / 6.0 * 8.0 : 0.0);
+        for (l = 0; mode != RTP_SHADOWS_EXACT && !cam_pending && l < s->nlights; l++)
+            if (light_moved(t, l) && !(need <= lim) && asked_auto) {
+                /* AUTO chose between two exact ways: shadow rays need no
+                   cube, as where a light buffer's lists pass the limit
+                   (update_visibility's fallback); a stream under
+                   --memory-limit 1 stopped at its first move, the error
+                   telling to lower a resolution nobody had asked */
+                mode = RTP_SHADOWS_EXACT;
+            } else if (light_moved(t, l) && !(need <= lim)) {
+                char g[2][32]; /* '.' whatever the locale */
+                rtpi_fmt_g(g[0], sizeof g[0], 6, ceil(need / 1048576.0));
+                rtpi_fmt_g(g[1], sizeof g[1], 6, lim / 1048576.0);
+                return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
+                                  "a direction cube of %d cells a face takes up to %s MiB, "
+                                  "over the memory limit of %s MiB (lower its resolution or "
+                                  "raise memory_limit: rtp's --memory-limit)",
+                                  res, g[0], g[1]);
+            }
+    }
+    *mode_out = mode;
+    *res_out = res;
+    *asked_auto_out = asked_auto;
+    return RTP_OK;
+}
+
 /* The options' checks, before anything is done. */
 static rtp_status opts_check(const rtp_eval_options *opt, rtp_error *err)
 {
@@ -3370,9 +3495,9 @@ static rtp_status eval_body(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
     progress_part prog;
     rtp_scene *s;
     int i, nthreads = opt && opt->threads > 1 ? opt->threads : 1, any_moved = 0, full;
-    int asked_auto;
-    int cached, mode, res, kmode, kres, one = 0, matpath = 0, sparse, list_combine = 0, hl_used = 0;
-    int hl_apply = 0, hl_after = 0, restored = -1, cam_pending;
+    int asked_auto = 0;
+    int cached, mode = 0, res = 0, kmode, kres, one = 0, matpath = 0, sparse, list_combine = 0, hl_used = 0;
+    int hl_apply = 0, hl_after = 0, restored = -1;
     /* the materials whose samples alone step 3 set (RESOLVE_MAX at most;
        more: -1), so an incremental evaluation averages only their pixels */
     int nset = 0, partial = 0, by_mark = 0;
@@ -3410,69 +3535,8 @@ static rtp_status eval_body(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
         nthreads = RTPI_MAX_THREADS;
     if ((rs = opts_check(opt, err)) != RTP_OK)
         return rs;
-    mode = opt ? (int)opt->shadows : 0;
-    res = opt && opt->shadow_res > 0 ? opt->shadow_res : RTPI_DC_DEFAULT_RES;
-    asked_auto = mode == RTP_SHADOWS_AUTO;
-    if (mode == RTP_SHADOWS_AUTO) {
-        size_t moving = 0;
-        for (l = 0; l < s->nlights; l++)
-            moving += light_moved(t, l) && s->lights[l].on;
-        mode = auto_shadows(t, opt && opt->no_cache, moving);
-        if (mode == RTP_SHADOWS_LIGHTBUF && !(opt && opt->shadow_res > 0))
-            res = auto_res(t);
-        /* (lists found too long at this resolution or a coarser one:
-           update_visibility's fallback) */
-        if (mode == RTP_SHADOWS_LIGHTBUF && t->auto_long && res >= t->auto_long)
-            mode = RTP_SHADOWS_EXACT;
-    }
-    /* A light so far that its buffer would list most primitives in every
-       cell (a sun at 1e11 over a terrain of size 2: 14 times the shadow
-       rays' time; 524k triangles at 1e11 took 49 s and 5.4 GB before
-       lb_res): shadow rays, as exact, which --stats names.  The item
-       buffer does the same in rtpi_shadow_create. */
-    /* (a moved camera's re-trace below traces every light where it is:
-       none is decided by a cube then, whatever its distance or cells) */
-    cam_pending = memcmp(&s->camera, &t->cam0, sizeof t->cam0) != 0;
-    for (l = 0; mode != RTP_SHADOWS_EXACT && !cam_pending && l < s->nlights; l++) {
-        const double *lp = s->lights[l].pos;
-        /* (the item buffers too, as rtpi_shadow_create decides them: here
-           so that --stats says so and no cube is charged to the memory
-           limit; itembuf:8192 from 1e13 was refused under 100 MiB while
-           it took 3 MB) */
-        if (light_moved(t, l) && s->lights[l].on &&
-            rtpi_lightbuf_res(s, v3(lp[0], lp[1], lp[2]), res) < res / 4)
-            mode = RTP_SHADOWS_EXACT;
-    }
-    /* A direction cube's cells against the memory limit, before it is
-       made: 8 bytes a cell for an item buffer (id and depth; OSMesa's
-       colour and depth buffers for a face on top), 4 for a light buffer's
-       cell starts (its lists come on top), six whole faces (a far light's
-       window has fewer: an upper bound).  itembuf:8192 took 2.9 GB of a
-       64x64 tree's move under --memory-limit 100. */
-    if (mode != RTP_SHADOWS_EXACT) {
-        double lim = opt && opt->memory_limit > 0.0 ? opt->memory_limit : RTPI_MEMORY_LIMIT;
-        double cells = 6.0 * (double)res * (double)res;
-        double need = cells * (mode == RTP_SHADOWS_LIGHTBUF ? 4.0 : 8.0) +
-                      (mode == RTP_SHADOWS_OSMESA ? cells / 6.0 * 8.0 : 0.0);
-        for (l = 0; mode != RTP_SHADOWS_EXACT && !cam_pending && l < s->nlights; l++)
-            if (light_moved(t, l) && !(need <= lim) && asked_auto) {
-                /* AUTO chose between two exact ways: shadow rays need no
-                   cube, as where a light buffer's lists pass the limit
-                   (update_visibility's fallback); a stream under
-                   --memory-limit 1 stopped at its first move, the error
-                   telling to lower a resolution nobody had asked */
-                mode = RTP_SHADOWS_EXACT;
-            } else if (light_moved(t, l) && !(need <= lim)) {
-                char g[2][32]; /* '.' whatever the locale */
-                rtpi_fmt_g(g[0], sizeof g[0], 6, ceil(need / 1048576.0));
-                rtpi_fmt_g(g[1], sizeof g[1], 6, lim / 1048576.0);
-                return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
-                                  "a direction cube of %d cells a face takes up to %s MiB, "
-                                  "over the memory limit of %s MiB (lower its resolution or "
-                                  "raise memory_limit: rtp's --memory-limit)",
-                                  res, g[0], g[1]);
-            }
-    }
+    if ((rs = shadow_mode_for(t, opt, &mode, &res, &asked_auto, err)) != RTP_OK)
+        return rs;
     vis_key(mode, res, &kmode, &kres);
     memset(&shade, 0, sizeof shade);
     shade.s = s;
