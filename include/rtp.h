@@ -541,13 +541,14 @@ typedef rtp_status (*rtp_tree_edit_fn)(void *user, rtp_tree *tree, rtp_error *er
  *  edit (NULL: none), evaluates, frees the tree.  The image and stats are
  *  those of rtp_tree_read, the same edits and rtp_tree_eval with
  *  opt->no_cache set, bit for bit, and a file those refuse is refused with
- *  the same error.  Where the edits leave every light where it was traced
- *  and nothing to trace again (no moved or added light, no class-D edit,
- *  no camera edit, no bump edit with RTP_STALE_RETRACE) and the file holds
- *  at most 32 lights (format 2), each sample's tree is evaluated as it is
- *  read and none is kept: the memory of the image and a band of trees,
- *  not of every tree (README: "One-off evaluation").  Otherwise the trees
- *  are read whole first.  info (may be NULL) receives rtp_tree_get_info
+ *  the same error.  Where the edits trace nothing again (no class-D edit,
+ *  no camera edit, no bump edit with RTP_STALE_RETRACE) and move or add
+ *  one light at most, and the file holds at most 32 lights (format 2),
+ *  each sample's tree is evaluated as it is read and none is kept: the
+ *  memory of the image, a band of trees and the moved light's direction
+ *  cube, not of every tree (README: "One-off evaluation"; the moved
+ *  light's shadow queries are made first, its cube's build asking
+ *  opt->cancel).  Otherwise the trees are read whole first.  info (may be NULL) receives rtp_tree_get_info
  *  of the tree read; stats->seconds is the evaluation's time with the
  *  reading of the trees it was made with (not of the scene before them).
  *  Progress and cancel (opt) are called between bands too.

@@ -1146,11 +1146,14 @@ rtp_status rtpi_tree_busy(const rtp_tree *t, const char *fn, rtp_error *err);
    nodes); *stream set to 1 takes them so, else they are read whole into
    the tree.  band: sample rows y0 .. y1 - 1, sample y0 nx + i's nodes at
    nodes + start[i] .. nodes + start[i + 1] - 1, each checked as a whole
-   read checks it.  An error of either stops the read with it at once. */
+   read checks it.  An error of either stops the read with it at once.
+   end: once begin was called, before the reader returns or frees the
+   tree (whether the read failed or not). */
 typedef struct rtpi_tree_sink {
     rtp_status (*begin)(void *user, rtp_tree *t, int can_stream, int *stream, rtp_error *err);
     rtp_status (*band)(void *user, rtp_tree *t, int y0, int y1, const rtpi_cnode *nodes,
                        const uint64_t *start, rtp_error *err);
+    void (*end)(void *user, rtp_tree *t);
     void *user;
 } rtpi_tree_sink;
 rtp_status rtpi_tree_read_sink(const char *path, const rtp_allocator *alloc,

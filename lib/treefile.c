@@ -1080,6 +1080,7 @@ typedef struct loader {
     unsigned major; /* the file's format version (HEAD) */
     const rtpi_tree_sink *sink; /* a one-off evaluation's (NULL: none) */
     int sink_stop; /* the sink refused: its error, not the file's */
+    int sink_begun; /* its begin was called: its end is due */
 } loader;
 
 /* what: the message; detail (may be NULL) follows it. */
@@ -1714,6 +1715,7 @@ static rtp_status read_tree(loader *L, rd *r)
         if ((st = textures_held(L)) != RTP_OK)
             return st;
         t->nlights0 = s->nlights;
+        L->sink_begun = 1;
         st = L->sink->begin(L->sink->user, t, L->major > 1 && words == 0, &stream, L->err);
         if (st != RTP_OK) {
             L->sink_stop = 1;
@@ -1918,7 +1920,13 @@ static rtp_status tree_end(loader *L, unsigned seen, rtp_status st, rtp_tree **o
     rtp_tree *t = L->t;
     size_t i;
     L->section = NULL;
-    t->nlights0 = t->scene->nlights;
+    if (L->sink_begun) {
+        L->sink_begun = 0;
+        L->sink->end(L->sink->user, t);
+    }
+    /* (a sink's tree had them counted before its edits: read_tree) */
+    if (!L->sink)
+        t->nlights0 = t->scene->nlights;
     if (st == RTP_OK && (seen & 0x3fu) != 0x3fu) {
         for (i = 0; (seen >> i) & 1u; i++)
             ;

@@ -465,6 +465,15 @@ static rtp_status op_tree_eval_file(ctx *c)
     return eval_file_with(c, file_a_edits, sizeof file_a_edits / sizeof *file_a_edits, 1);
 }
 
+/* A moved light with them: its shadows decided a band at a time. */
+static const char *const file_b_edits[][2] = {
+    {"light.lamp.color", "1,0.5,0"}, {"light.0.pos", "2,-3,5"}, {"ambient", "0.2"}};
+
+static rtp_status op_tree_eval_file_moved(ctx *c)
+{
+    return eval_file_with(c, file_b_edits, sizeof file_b_edits / sizeof *file_b_edits, 2);
+}
+
 static rtp_status op_tree_eval_file_threads(ctx *c)
 {
     return eval_file_with(c, file_a_edits, sizeof file_a_edits / sizeof *file_a_edits, 3);
@@ -1390,6 +1399,7 @@ static long sweep(const char *name, rtp_status (*op)(ctx *))
 #define SWEEP(fn) static void test_##fn(void) { CHECK(sweep(#fn, op_##fn) >= 0); }
 SWEEP(tree_eval_file)
 SWEEP(tree_eval_file_threads)
+SWEEP(tree_eval_file_moved)
 SWEEP(tree_eval_file_whole)
 SWEEP(load_nff)
 SWEEP(load_obj)
@@ -1585,6 +1595,7 @@ int main(void)
     RUN(test_tree_eval_edited);
     RUN(test_tree_eval_file);
     RUN(test_tree_eval_file_threads);
+    RUN(test_tree_eval_file_moved);
     RUN(test_tree_eval_file_whole);
     RUN(test_tree_eval_warm);
     RUN(test_tree_eval_warm_spd);

@@ -4834,6 +4834,9 @@ static rtp_status file_edit(void *user, rtp_tree *t, rtp_error *err)
    read's at least (a tree of several bands: read_bands); 0: they must
    have been read whole (its peak as high as the whole read's less that);
    1: either. */
+static rtp_shadow_mode file_mode; /* eval_file_case's --shadows */
+static int file_res;
+
 static void eval_file_case(const char *file, int threads, const char *const *kv, int n,
                            const double *add, int streamed)
 {
@@ -4850,6 +4853,8 @@ static void eval_file_case(const char *file, int threads, const char *const *kv,
     memset(&eo, 0, sizeof eo);
     eo.threads = threads;
     eo.no_cache = 1;
+    eo.shadows = file_mode;
+    eo.shadow_res = file_res;
     memset(&fe, 0, sizeof fe);
     fe.kv = kv;
     fe.n = n;
@@ -4880,7 +4885,9 @@ static void eval_file_case(const char *file, int threads, const char *const *kv,
           es.combined_samples == es_ref.combined_samples &&
           es.written_pixels == es_ref.written_pixels &&
           es.stale_samples == es_ref.stale_samples && es.moved_lights == es_ref.moved_lights &&
-          es.retraced_samples == es_ref.retraced_samples);
+          es.retraced_samples == es_ref.retraced_samples &&
+          es.shadow_queries == es_ref.shadow_queries &&
+          (!es.moved_lights || es.shadows == es_ref.shadows));
     if (streamed == 2)
         CHECK_MSG(cb.peak + ti.nodes * sizeof(rtpi_cnode) / 4 < ca.peak,
                   "%s: streamed, yet its peak %zu bytes against the whole read's %zu (%llu "
@@ -4951,6 +4958,7 @@ static void test_eval_file(void)
     static const char *const cam[] = {"camera.angle", "30"};
     static const char *const spheres_d[] = {"mat.1.ior", "1.3"};
     static const double add[3] = {0.5, -2, 4};
+    static const char *const trap_move[] = {"light.0.pos", "0.3,-0.4,0.2"};
     static const char *const trap_a[] = {"light.0.color", "1,0.5,0.2", "mat.1.kd", "0.3",
                                          "mat.0.shine", "7", "ambient", "0.2"};
     char f[7][512], trap[512];
@@ -4986,8 +4994,24 @@ static void test_eval_file(void)
         eval_file_case(f[4], th, prims_a, 2, NULL, 1);
         eval_file_case(f[5], th, spheres_a, 2, NULL, 1);
     }
-    eval_file_case(f[0], 2, moved, 1, NULL, 0);
-    eval_file_case(f[0], 2, NULL, 0, add, 0);
+    /* moved and added lights: decided a band at a time, by every mode */
+    for (th = 0; th < 5; th++) {
+        static const rtp_shadow_mode modes[5] = {RTP_SHADOWS_AUTO, RTP_SHADOWS_EXACT,
+                                                 RTP_SHADOWS_LIGHTBUF, RTP_SHADOWS_ITEMBUF,
+                                                 RTP_SHADOWS_AUTO};
+        file_mode = modes[th];
+        file_res = th == 4 ? 64 : 0;
+        eval_file_case(f[0], 2, moved, 1, NULL, 1);
+        eval_file_case(f[0], 1, NULL, 0, add, 1);
+        eval_file_case(f[5], 3, moved, 1, NULL, 1);
+        eval_file_case(f[6], 2, trap_move, 1, NULL, 2);
+        eval_file_case(f[2], 2, moved, 1, NULL, 1);
+        /* two: read whole (each cube made and freed in turn) */
+        eval_file_case(f[1], 2, moved, 1, add, 1);
+        eval_file_case(f[6], 2, trap_move, 1, add, 0);
+    }
+    file_mode = RTP_SHADOWS_AUTO;
+    file_res = 0;
     eval_file_case(f[1], 2, cam, 1, NULL, 0);
     eval_file_case(f[0], 2, spheres_d, 1, NULL, 0);
     {
