@@ -858,6 +858,21 @@ static int overwrites_input(const char *cmd, const char *in, const char *out, in
     return 1;
 }
 
+/* Any of the outputs out[0..nout) that is one of the inputs in[0..nin)
+   (--stats or --heatmap naming the scene, the tree, an image diff reads
+   or a params file): refused as -i naming the input is, before anything
+   is read.  1 after a message. */
+static int outputs_over_inputs(const char *cmd, const char *const *in, int nin,
+                               const char *const *out, int nout)
+{
+    int i, o;
+    for (o = 0; o < nout; o++)
+        for (i = 0; i < nin; i++)
+            if (overwrites_input(cmd, in[i], out[o], 0))
+                return 1;
+    return 0;
+}
+
 /* --stats - with an image or tree to stdout: the JSON would land inside
    the binary stream (between a stream's images); an image or tree '-'
    where stdout is a terminal: its bytes would go to the screen (as gzip
@@ -1390,8 +1405,17 @@ static int cmd_trace(int argc, char **argv)
         image_path = default_image;
     }
     if (overwrites_input("trace", scene_path, image_path, image_path == default_image) ||
-        overwrites_input("trace", scene_path, tree_path, 0))
+        overwrites_input("trace", scene_path, tree_path, 0) ||
+        overwrites_input("trace", scene_path, stats_path, 0))
         goto usage;
+    {
+        const char *outs[3];
+        outs[0] = tree_path;
+        outs[1] = image_path;
+        outs[2] = stats_path;
+        if (outputs_over_inputs("trace", (const char *const *)params, nparams, outs, 3))
+            goto usage;
+    }
 
     t0 = now_seconds();
     if (rtp_scene_load(scene_path, NULL, &scene, &err) != RTP_OK) {
@@ -1661,6 +1685,15 @@ static int cmd_diff(int argc, char **argv)
     }
     if (stdout_taken("diff", stats_path, heat, NULL))
         goto usage;
+    {
+        const char *ins[2], *outs[2];
+        ins[0] = pa;
+        ins[1] = pb;
+        outs[0] = heat;
+        outs[1] = stats_path;
+        if (outputs_over_inputs("diff", ins, 2, outs, 2))
+            goto usage;
+    }
     /* outputs checked before the inputs are read, as trace's are */
     if (!output_ok(heat) || !output_ok(stats_path) || same_output("diff", heat, stats_path))
         goto out;
@@ -2142,6 +2175,15 @@ static int cmd_reeval(int argc, char **argv)
     }
     if (!stream && overwrites_input("reeval", tree_path, image_path, image_path == default_image))
         goto usage;
+    if (overwrites_input("reeval", tree_path, stats_path, 0))
+        goto usage;
+    {
+        const char *outs[2];
+        outs[0] = stats_path;
+        outs[1] = stream ? NULL : image_path;
+        if (outputs_over_inputs("reeval", (const char *const *)params, nparams, outs, 2))
+            goto usage;
+    }
     if (stdout_taken("reeval", stats_path, image_path, NULL))
         goto usage;
     if (stream && strcmp(image_path, "-") != 0) {
@@ -2425,6 +2467,10 @@ static int cmd_info(int argc, char **argv)
     }
     if (!tree_path) {
         msg("info: no tree file given");
+        usage_hint(info_help);
+        return EXIT_USAGE;
+    }
+    if (overwrites_input("info", tree_path, stats_path, 0)) {
         usage_hint(info_help);
         return EXIT_USAGE;
     }

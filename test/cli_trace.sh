@@ -106,6 +106,25 @@ cp "$T/cwd/t.rtp" "$T/cwd/t.$b8"
     bad "reeval's default image over its tree: exit $rc, $(cat "$T/err")"
 expect_rc 2 $RTP reeval "$T/cwd/t.rtp" -i "$T/cwd/t.rtp"
 cmp -s "$T/cwd/t.rtp" "$T/cwd/t.$b8" && ok || bad "reeval -i over its tree wrote it"
+# --stats and --heatmap naming an input are refused alike (they replaced
+# the scene, the tree, the params file or diff's image with JSON or a heat
+# map, exit 0)
+cp scenes/spheres.nff "$T/cwd/s.nff"
+cp "$T/cwd/t.rtp" "$T/cwd/t2.rtp"
+printf 'light.0.on=1\n' > "$T/cwd/p.txt"
+expect_rc 2 $RTP trace "$T/cwd/s.nff" --size 8x6 -i "$T/cwd/s.pfm" --stats "$T/cwd/s.nff"
+expect_rc 2 $RTP trace scenes/spheres.nff --size 8x6 -i "$T/cwd/s.pfm" --params "$T/cwd/p.txt" --stats "$T/cwd/p.txt"
+expect_rc 2 $RTP reeval "$T/cwd/t2.rtp" -i "$T/cwd/s.pfm" --stats "$T/cwd/t2.rtp"
+expect_rc 2 $RTP reeval "$T/cwd/t2.rtp" -i "$T/cwd/s.pfm" --params "$T/cwd/p.txt" --stats "$T/cwd/p.txt"
+echo | $RTP reeval "$T/cwd/t2.rtp" --stream -i "$T/cwd/f%d.pfm" --stats "$T/cwd/t2.rtp" 2>"$T/err"
+[ $? -eq 2 ] && ok || bad "reeval --stream --stats over its tree: $(cat "$T/err")"
+expect_rc 2 $RTP info "$T/cwd/t2.rtp" --stats "$T/cwd/t2.rtp"
+cp "$T/a.pfm" "$T/cwd/a.pfm"
+expect_rc 2 $RTP diff "$T/cwd/a.pfm" "$T/a.pfm" --heatmap "$T/cwd/a.pfm"
+expect_rc 2 $RTP diff "$T/a.pfm" "$T/cwd/a.pfm" --stats "$T/cwd/a.pfm"
+cmp -s scenes/spheres.nff "$T/cwd/s.nff" && cmp -s "$T/cwd/t.rtp" "$T/cwd/t2.rtp" &&
+    cmp -s "$T/a.pfm" "$T/cwd/a.pfm" && grep -q '^light.0.on=1$' "$T/cwd/p.txt" && ok ||
+    bad "an output over an input replaced it"
 expect_rc 3 $RTP diff "$T/a.pfm" "$T/$b8" --fail-above rmse=0.001
 expect_rc 0 $RTP diff "$T/a.pfm" "$T/$b8" --fail-above rmse=100
 expect_rc 1 $RTP diff "$T/a.pfm" scenes/spheres.nff
