@@ -396,8 +396,9 @@ typedef struct rtp_eval_options {
     double memory_limit;    /* bytes the trees may take while samples are
                                traced again (class D), old and new, and a
                                moved light's direction cube's cells (6
-                               shadow_res^2, 8 bytes each for an item
-                               buffer, 4 for a light buffer); 0: 16 GiB.
+                               shadow_res^2, 9 bytes each for an item
+                               buffer, OSMesa's 12 more a face cell, 4
+                               for a light buffer); 0: 16 GiB.
                                Past it: RTP_ERR_LIMIT, the tree as it was */
     /* Asked now and then from the calling thread (with progress_user)
        while samples are traced again (class-D edits, RTP_STALE_RETRACE, a

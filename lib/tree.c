@@ -3395,16 +3395,20 @@ static rtp_status shadow_mode_for(rtp_tree *t, const rtp_eval_options *opt, int 
             mode = RTP_SHADOWS_EXACT;
     }
     /* A direction cube's cells against the memory limit, before it is
-       made: 8 bytes a cell for an item buffer (id and depth; OSMesa's
-       colour and depth buffers for a face on top), 4 for a light buffer's
-       cell starts (its lists come on top), six whole faces (a far light's
-       window has fewer: an upper bound).  itembuf:8192 took 2.9 GB of a
-       64x64 tree's move under --memory-limit 100. */
+       made: 9 bytes a cell for an item buffer (id and depth, and the
+       cell starts of the thin light buffer beside it, a quarter as many
+       cells: SH_THIN_DIV), and for OSMesa 12 bytes a face cell on top
+       (its colour and depth buffers and the ids read back); 4 for a light
+       buffer's cell starts (its lists come on top); six whole faces (a
+       far light's window has fewer: an upper bound).  itembuf:8192 took
+       2.9 GB of a 64x64 tree's move under --memory-limit 100; charged 8
+       bytes a cell, itembuf:8192 peaked at 3.52 GB under a limit of 3072
+       MiB and osmesa:8192 at 4.28 GB under 3584 (helper 78). */
     if (mode != RTP_SHADOWS_EXACT) {
         double lim = opt && opt->memory_limit > 0.0 ? opt->memory_limit : RTPI_MEMORY_LIMIT;
         double cells = 6.0 * (double)res * (double)res;
-        double need = cells * (mode == RTP_SHADOWS_LIGHTBUF ? 4.0 : 8.0) +
-                      (mode == RTP_SHADOWS_OSMESA ? cells / 6.0 * 8.0 : 0.0);
+        double need = cells * (mode == RTP_SHADOWS_LIGHTBUF ? 4.0 : 9.0) +
+                      (mode == RTP_SHADOWS_OSMESA ? cells / 6.0 * 12.0 : 0.0);
         for (l = 0; mode != RTP_SHADOWS_EXACT && !cam_pending && l < s->nlights; l++)
             if (light_moved(t, l) && !(need <= lim) && asked_auto) {
                 /* AUTO chose between two exact ways: shadow rays need no

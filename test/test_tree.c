@@ -1164,7 +1164,7 @@ static void test_camera_after_light_edits(void)
         /* lights added past 32 (the trees' light bits then take words of
            their own): a camera edit traces them all too; and the moved
            lights' direction cubes, which that re-trace makes needless, are
-           not charged to the memory limit (itembuf:8192 is 3 GiB) */
+           not charged to the memory limit (itembuf:8192 is 3.4 GiB) */
         rtp_eval_options e2 = eo;
         int j;
         for (j = 0; j < 31; j++) {
