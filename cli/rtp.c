@@ -6,6 +6,7 @@
 #define _POSIX_C_SOURCE 200809L
 #include "rtp.h"
 
+#include <ctype.h>
 #include <errno.h>
 #include <fcntl.h>
 #include <math.h>
@@ -178,6 +179,9 @@ static int parse_int(const char *s, int lo, int hi, int *out)
     char *end;
     long v;
     errno = 0;
+    /* (strtol skips leading blanks: "osmesa: 5" was taken) */
+    if (isspace((unsigned char)*s))
+        return -1;
     v = strtol(s, &end, 10);
     if (end == s || *end || errno || v < lo || v > hi)
         return -1;

@@ -449,9 +449,12 @@ rtp_status rtpi_itembuf_build_osmesa_wide(const rtp_scene *s, rtpi_v3 light, int
     double dmin = HUGE_VAL;
     rtp_status st = RTP_OK;
     int f;
-    if (n >= 0xffffffu)
+    /* (ids prim + 1, 1 to 2^24 - 1: 16,777,215 primitives fit; the test
+       said >= and refused that many) */
+    if (n > 0xffffffu)
         return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
-                          "osmesa shadows: %lu primitives do not fit 24-bit colour ids",
+                          "osmesa shadows: %lu primitives do not fit 24-bit colour ids (at "
+                          "most 16777215): use itembuf, the same item buffer in software",
                           (unsigned long)n);
     st = rtpi_itembuf_alloc(ib, s, light, res, a, err);
     if (st != RTP_OK)
