@@ -129,10 +129,10 @@ grep -q "signature" "$T/err" && ok || bad "foreign file"
 # (RES past the library's 8192 a usage error, not a failure after the work)
 expect_rc 2 $RTP reeval "$T/t.rtp" --set light.0.pos=1,2,5 --shadows itembuf:8193
 expect_rc 2 $RTP reeval "$T/t.rtp" --shadows bogus
+grep -q "auto\[:RES\]" "$T/err" && ok || bad "--shadows bogus: the modes not named"
 # numbers with a blank before them are not numbers (strtol skipped it)
 expect_rc 2 $RTP reeval "$T/t.rtp" --shadows "itembuf: 5"
 expect_rc 2 $RTP reeval "$T/t.rtp" -j " 2"
-grep -q "auto\[:RES\]" "$T/err" && ok || bad "--shadows bogus: the modes not named"
 expect_rc 2 $RTP reeval
 # a usage error: the message, the usage line and where the options are,
 # not the whole help burying the message
