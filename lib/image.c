@@ -1362,6 +1362,11 @@ static rtp_status read_from(FILE *f, const char *name, long long size,
         return rtpi_error(err, RTP_ERR_FORMAT, name, 0, 0,
                           "netpbm type P%c is not supported: only P6 and "
                           "P3 colour images", sig[1]);
+    /* (an rtp tree file's signature begins 0x89 'R': rtp diff handed a
+       tree for an image said only the bytes) */
+    if (sig[0] == 0x89 && sig[1] == 'R')
+        return rtpi_error(err, RTP_ERR_FORMAT, name, 0, 0,
+                          "not an image: an rtp tree file (rtp reeval makes its image)");
     return rtpi_error(err, RTP_ERR_FORMAT, name, 0, 0,
                       "not a PNG, PPM or PFM image (starts with bytes "
                       "0x%02x 0x%02x)", sig[0], sig[1]);

@@ -1821,6 +1821,25 @@ static rtp_status check_signature(loader *L, const unsigned char *data, size_t s
             return bad(L, "empty: not an rtp tree file", NULL);
         if (memcmp(data, signature, size < 8 ? size : 8) == 0)
             return bad(L, "truncated: the file ends inside its signature", NULL);
+        /* (what else a tree's place is often given: an image rtp wrote,
+           or the scene itself) */
+        if (size >= 3 && data[0] == 'P' && (data[1] == 'F' || data[1] == 'f') &&
+            (data[2] == '\n' || data[2] == '\r' || data[2] == ' '))
+            return bad(L, "not an rtp tree file (it is a PFM image)", NULL);
+        if (size >= 3 && data[0] == 'P' && (data[1] == '3' || data[1] == '6') &&
+            (data[2] == '\n' || data[2] == '\r' || data[2] == ' ' || data[2] == '\t'))
+            return bad(L, "not an rtp tree file (it is a PPM image)", NULL);
+        {
+            size_t i, n = size < 8 ? size : 8;
+            int text = 1;
+            for (i = 0; i < n; i++)
+                text &= (data[i] >= 0x20 && data[i] < 0x7f) || data[i] == '\n' ||
+                        data[i] == '\r' || data[i] == '\t';
+            if (text)
+                return bad(L, "not an rtp tree file (it is text: a scene? rtp trace SCENE -o "
+                              "TREE makes a tree)",
+                           NULL);
+        }
         return bad(L, "not an rtp tree file (wrong signature)", NULL);
     }
     return RTP_OK;

@@ -4290,6 +4290,30 @@ static void test_newer_version_and_foreign(void)
     CHECK(rtp_tree_read_memory(png, sizeof png, "img.png", NULL, &t, &err) == RTP_ERR_FORMAT);
     CHECK(strstr(err.message, "PNG") != NULL);
     CHECK(rtp_tree_read_memory(text, sizeof text - 1, "scene.nff", NULL, &t, &err) == RTP_ERR_FORMAT);
+    CHECK_MSG(strstr(err.message, "it is text") != NULL, "%s", err.message);
+    CHECK(rtp_tree_read_memory("PF\n2 1\n-1\n", 11, "img.pfm", NULL, &t, &err) ==
+              RTP_ERR_FORMAT &&
+          strstr(err.message, "PFM image") != NULL);
+    CHECK(rtp_tree_read_memory("P6\n2 1\n255\n", 11, "img.ppm", NULL, &t, &err) ==
+              RTP_ERR_FORMAT &&
+          strstr(err.message, "PPM image") != NULL);
+    {
+        /* and an image reader handed a tree says so */
+        rtp_image *im = NULL;
+        size_t tn;
+        unsigned char *tree_bytes = small_tree_file(&tn);
+        char file[512];
+        FILE *f;
+        snprintf(file, sizeof file, "%s/rtp-notimage-%d.rtp", tmpdir(), (int)getpid());
+        f = fopen(file, "wb");
+        CHECK(tree_bytes && f && fwrite(tree_bytes, 1, tn, f) == tn);
+        if (f)
+            fclose(f);
+        CHECK(rtp_image_read(file, NULL, &im, &err) == RTP_ERR_FORMAT &&
+              strstr(err.message, "rtp tree file") != NULL && !im);
+        remove(file);
+        free(tree_bytes);
+    }
     CHECK(rtp_tree_read_memory("", 0, "empty", NULL, &t, &err) == RTP_ERR_FORMAT);
     CHECK(rtp_tree_read("/nonexistent/x.rtp", NULL, &t, &err) == RTP_ERR_IO);
     CHECK(t == NULL);
