@@ -1080,7 +1080,9 @@ typedef struct loader {
     unsigned major; /* the file's format version (HEAD) */
     const rtpi_tree_sink *sink; /* a one-off evaluation's (NULL: none) */
     int sink_stop; /* the sink refused: its error, not the file's */
-    int sink_begun; /* its begin was called: its end is due */
+    int sink_begun; /* the sink's begin was called: its edits are made,
+                       the lights as traced are set (nlights0), its end
+                       is due */
 } loader;
 
 /* what: the message; detail (may be NULL) follows it. */
@@ -1557,19 +1559,26 @@ static size_t check_subtree(const rtpi_cnode *nodes, size_t idx, size_t n, int d
 
 /* Every texture a material names is in the file (TEXR or TEXB come
    before GEOM and TREE). */
-static rtp_status textures_held(loader *L)
+static size_t texture_missing(const rtp_scene *s)
 {
-    const rtp_scene *s = L->t->scene;
     size_t i;
     for (i = 0; i < s->nmats; i++) {
         const rtpi_material *m = &s->mats[i];
         if ((m->tex == RTPI_TEX_IMAGE && m->tex_image >= s->ntexs) ||
-            (m->bump == RTPI_BUMP_IMAGE && m->bump_image >= s->ntexs)) {
-            char what[64];
-            snprintf(what, sizeof what, "%zu", i);
-            L->section = "MATL";
-            return bad(L, "a texture the file does not hold named by material ", what);
-        }
+            (m->bump == RTPI_BUMP_IMAGE && m->bump_image >= s->ntexs))
+            return i;
+    }
+    return (size_t)-1;
+}
+
+static rtp_status textures_held(loader *L)
+{
+    size_t i = texture_missing(L->t->scene);
+    if (i != (size_t)-1) {
+        char what[64];
+        snprintf(what, sizeof what, "%zu", i);
+        L->section = "MATL";
+        return bad(L, "a texture the file does not hold named by material ", what);
     }
     return RTP_OK;
 }
@@ -1592,6 +1601,7 @@ static rtp_status read_bands(loader *L, rd *r, unsigned layout, uint32_t vis_mas
     const uint64_t *start = t->start;
     size_t nx = (size_t)t->nx, ny = (size_t)t->ny, nprims = rtpi_scene_nprims(L->s);
     size_t y0, y1, c = 0, cap = 0, i;
+    int malformed = 0;
     rtpi_cnode *band = NULL;
     /* bs: band's sample starts, the c carried samples' then the band's */
     uint64_t *bs = (uint64_t *)rtpi_malloc_array(L->a, BAND_ROWS * nx + 3, sizeof *bs);
@@ -1607,8 +1617,11 @@ static rtp_status read_bands(loader *L, rd *r, unsigned layout, uint32_t vis_mas
             y1++;
         kn = y1 * nx;
         need = bs[c] + (start[kn] - start[k0]);
-        if (need > cap) {
-            /* (at least one more than asked: rtpi_grow's own rule) */
+        if (need >= cap) {
+            /* (at least one more than asked: rtpi_grow's own rule; and
+               a buffer even for bands of no node, whose nodes pointer
+               the evaluation offsets by 0: not NULL, as a whole read's
+               t->nodes is not) */
             size_t want = (size_t)need;
             if (rtpi_grow(L->a, (void **)&band, &cap, want + 1, sizeof *band)) {
                 st = nomem(L);
@@ -1638,16 +1651,21 @@ static rtp_status read_bands(loader *L, rd *r, unsigned layout, uint32_t vis_mas
                     goto out;
                 r->at += used;
             }
-            if (n && check_subtree(band + bs[li], 0, n, 1, t->max_depth) != n) {
-                st = bad(L, "malformed ray tree", NULL);
-                goto out;
-            }
+            /* (a malformed tree is reported once every node is read, as
+               read_tree does: an invalid node or a short section after it
+               is the error then; nothing more is evaluated) */
+            if (!malformed && n &&
+                check_subtree(band + bs[li], 0, n, 1, t->max_depth) != n)
+                malformed = 1;
         }
+        if (malformed)
+            goto carry;
         st = L->sink->band(L->sink->user, t, (int)y0, (int)y1, band, bs + c, L->err);
         if (st != RTP_OK) {
             L->sink_stop = 1;
             break;
         }
+    carry:
         /* the band's last two samples (of those there are) to the front */
         {
             size_t keep = kn < 2 ? kn : 2, li0 = c + (kn - k0) - keep;
@@ -1659,6 +1677,8 @@ static rtp_status read_bands(loader *L, rd *r, unsigned layout, uint32_t vis_mas
             c = keep;
         }
     }
+    if (st == RTP_OK && malformed)
+        st = bad(L, "malformed ray tree", NULL);
 out:
     rtpi_free(L->a, band);
     rtpi_free(L->a, bs);
@@ -1670,6 +1690,9 @@ static rtp_status read_tree(loader *L, rd *r)
     rtp_tree *t = L->t;
     rtp_scene *s = L->s;
     uint64_t nsamples = get_u64(r), nnodes = get_u64(r), k, at = 0;
+    /* (the lights the file's trees were traced with: a one-off
+       evaluation's edits, made before the trees are read, may add some) */
+    size_t nl = s->nlights;
     uint32_t words = get_u32(r);
     unsigned layout = get_u8(r);
     size_t i, nprims = rtpi_scene_nprims(s), node_bytes, chunk;
@@ -1712,8 +1735,14 @@ static rtp_status read_tree(loader *L, rd *r)
            time (packed, their light bits in their nodes) or whole */
         rtp_status st;
         int stream = 0;
-        if ((st = textures_held(L)) != RTP_OK)
-            return st;
+        if (texture_missing(s) != (size_t)-1) {
+            /* (no edits, no evaluation: the file read on as rtp_tree_read
+               reads it, and refused as that refuses it, a fault of the
+               trees or of what follows them first, tree_end's check of
+               the textures last) */
+            L->sink = NULL;
+            goto whole;
+        }
         t->nlights0 = s->nlights;
         L->sink_begun = 1;
         st = L->sink->begin(L->sink->user, t, L->major > 1 && words == 0, &stream, L->err);
@@ -1724,6 +1753,7 @@ static rtp_status read_tree(loader *L, rd *r)
         if (stream)
             return read_bands(L, r, layout, vis_mask);
     }
+whole:
     t->nodes = (rtpi_cnode *)rtpi_malloc_array(L->a, t->nnodes ? t->nnodes : 1, sizeof *t->nodes);
     if (!t->nodes)
         return nomem(L);
@@ -1796,9 +1826,9 @@ static rtp_status read_tree(loader *L, rd *r)
             return nomem(L);
         for (i = 0; i < t->nnodes * words; i++)
             t->vis_ext[i] = get_u32(r);
-        if (s->nlights % 32)
+        if (nl % 32)
             for (i = 0; i < t->nnodes; i++)
-                if (t->vis_ext[i * words + words - 1] >> (s->nlights % 32))
+                if (t->vis_ext[i * words + words - 1] >> (nl % 32))
                     return bad(L, "invalid light bits", NULL);
     }
     /* Each sample's nodes must form exactly one preorder tree within the
@@ -1940,12 +1970,13 @@ static rtp_status tree_end(loader *L, unsigned seen, rtp_status st, rtp_tree **o
     size_t i;
     L->section = NULL;
     if (L->sink_begun) {
+        /* (its nlights0 set before its edits, which may add lights:
+           those were not traced) */
         L->sink_begun = 0;
         L->sink->end(L->sink->user, t);
-    }
-    /* (a sink's tree had them counted before its edits: read_tree) */
-    if (!L->sink)
+    } else {
         t->nlights0 = t->scene->nlights;
+    }
     if (st == RTP_OK && (seen & 0x3fu) != 0x3fu) {
         for (i = 0; (seen >> i) & 1u; i++)
             ;

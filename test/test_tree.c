@@ -4910,7 +4910,8 @@ static void eval_file_case(const char *file, int threads, const char *const *kv,
           es.written_pixels == es_ref.written_pixels &&
           es.stale_samples == es_ref.stale_samples && es.moved_lights == es_ref.moved_lights &&
           es.retraced_samples == es_ref.retraced_samples &&
-          es.shadow_queries == es_ref.shadow_queries &&
+          es.retraced_rays == es_ref.retraced_rays && es.capped_rays == es_ref.capped_rays &&
+          es.shadow_queries == es_ref.shadow_queries && es.camera_moved == es_ref.camera_moved &&
           (!es.moved_lights || es.shadows == es_ref.shadows));
     if (streamed == 2)
         CHECK_MSG(cb.peak + ti.nodes * sizeof(rtpi_cnode) / 4 < ca.peak,
@@ -4981,26 +4982,33 @@ static void test_eval_file(void)
     static const char *const moved[] = {"light.0.pos", "1,-3,6"};
     static const char *const cam[] = {"camera.angle", "30"};
     static const char *const spheres_d[] = {"mat.1.ior", "1.3"};
+    /* (the floor's ks from 0 with a light added: its samples traced
+       again with the lights as traced, which the added one is not; the
+       reader set nlights0 after the edits, so they were traced with the
+       added light too, at NaN: more rays than rtp_tree_read's) */
+    static const char *const floor_ks[] = {"mat.0.ks", "0.5"};
     static const double add[3] = {0.5, -2, 4};
     static const char *const trap_move[] = {"light.0.pos", "0.3,-0.4,0.2"};
     static const char *const trap_a[] = {"light.0.color", "1,0.5,0.2", "mat.1.kd", "0.3",
                                          "mat.0.shine", "7", "ambient", "0.2"};
-    char f[7][512], trap[512];
-    /* (the last, trap_nff: ~15 nodes a sample, three bands) */
+    char f[8][512], trap[512];
+    /* (the seventh, trap_nff: ~15 nodes a sample, three bands; the last
+       no node at all: its bands' nodes were NULL, offset by 0 in the
+       evaluation, undefined (clang's UBSan)) */
     static const struct {
         const char *scene;
         int w, h, spd;
-    } trees[7] = {{"scenes/spheres.nff", 200, 150, 0}, {"scenes/spheres.nff", 64, 48, 1},
+    } trees[8] = {{"scenes/spheres.nff", 200, 150, 0}, {"scenes/spheres.nff", 64, 48, 1},
                   {"scenes/textured.nff", 90, 70, 0},  {"scenes/prims.nff", 1, 300, 0},
                   {"scenes/prims.nff", 1, 120, 1},     {"scenes/teapot.nff", 160, 120, 1},
-                  {NULL, 120, 90, 0}};
+                  {NULL, 120, 90, 0},                  {"scenes/stiff/empty.nff", 30, 20, 1}};
     int i, th;
     snprintf(trap, sizeof trap, "%s/rtp-evalfile-%d-trap.nff", tmpdir(), (int)getpid());
     {
         FILE *tf = fopen(trap, "w");
         CHECK(tf && fputs(trap_nff, tf) >= 0 && fclose(tf) == 0);
     }
-    for (i = 0; i < 7; i++) {
+    for (i = 0; i < 8; i++) {
         snprintf(f[i], sizeof f[i], "%s/rtp-evalfile-%d-%d.rtp", tmpdir(), (int)getpid(), i);
         if (!file_of(trees[i].scene ? trees[i].scene : trap, trees[i].w, trees[i].h,
                      trees[i].spd, 0, f[i])) {
@@ -5017,6 +5025,8 @@ static void test_eval_file(void)
         eval_file_case(f[3], th, prims_a, 2, NULL, 1); /* (a sample a row) */
         eval_file_case(f[4], th, prims_a, 2, NULL, 1);
         eval_file_case(f[5], th, spheres_a, 2, NULL, 1);
+        eval_file_case(f[7], th, NULL, 0, NULL, 1);
+        eval_file_case(f[7], th, spheres_a + 6, 2, NULL, 1);
     }
     /* moved and added lights: decided a band at a time, by every mode */
     for (th = 0; th < 5; th++) {
@@ -5038,6 +5048,7 @@ static void test_eval_file(void)
     file_res = 0;
     eval_file_case(f[1], 2, cam, 1, NULL, 0);
     eval_file_case(f[0], 2, spheres_d, 1, NULL, 0);
+    eval_file_case(f[0], 2, floor_ks, 1, add, 0);
     {
         /* --stale retrace with a changed bump: read whole; kept: streamed,
            its stale samples counted */
@@ -5108,9 +5119,138 @@ static void test_eval_file(void)
               !img && fp.asked == 1);
         CHECK(c.live == 0);
     }
-    for (i = 0; i < 7; i++)
+    {
+        /* 64 lights, two whole words of light bits a node, and one more
+           added by the edits: read whole, as rtp_tree_read reads it (the
+           light bits were checked against the lights after the edits,
+           65: "invalid light bits") */
+        char nff[512], file[512];
+        FILE *lf;
+        snprintf(nff, sizeof nff, "%s/rtp-evalfile-%d-64.nff", tmpdir(), (int)getpid());
+        snprintf(file, sizeof file, "%s/rtp-evalfile-%d-64.rtp", tmpdir(), (int)getpid());
+        lf = fopen(nff, "w");
+        CHECK(lf != NULL);
+        if (lf) {
+            fprintf(lf, "v from 0 -8 3 at 0 0 0 up 0 0 1 angle 40 hither 0.01 "
+                        "resolution 24 18\nb 0.1 0.1 0.2\n");
+            for (i = 0; i < 64; i++)
+                fprintf(lf, "l %g %g %g 0.03 0.02 0.02\n", 6.0 * cos(i * 0.1),
+                        6.0 * sin(i * 0.1) - 2.0, 4.0 + 0.05 * i);
+            fprintf(lf, "f 0.8 0.3 0.2 0.6 0.3 20 0 1\ns -1.2 0 0 1\n"
+                        "f 0.4 0.7 0.4 0.8 0.2 10 0 1\np 4\n-9 -9 -1\n9 -9 -1\n9 9 -1\n"
+                        "-9 9 -1\n");
+            CHECK(fclose(lf) == 0);
+            CHECK(file_of(nff, 24, 18, 0, 0, file));
+            eval_file_case(file, 2, NULL, 0, add, 0);
+            eval_file_case(file, 2, spheres_a, 2, NULL, 0);
+        }
+        remove(file);
+        remove(nff);
+    }
+    for (i = 0; i < 8; i++)
         remove(f[i]);
     remove(trap);
+}
+
+/* rtp_tree_eval_file of the n bytes at data (written to file) against
+   rtp_tree_read, with each bit of `limit` bytes of the TREE section's
+   body (from its middle on where there are more) flipped in turn, the CRC made right: the same status
+   and message, or both read it.  The flips tried are added to *tried;
+   the disagreements returned (the first few told). */
+static size_t eval_file_flips(const unsigned char *data, size_t n, const char *file,
+                              size_t limit, size_t *tried)
+{
+    size_t at = section_at(data, n, "TREE"), len, p, p0, m, failures = 0;
+    unsigned char *copy, byte;
+    int b;
+    CHECK(at < n);
+    if (at >= n)
+        return 1;
+    len = (size_t)data[at + 4] | (size_t)data[at + 5] << 8 | (size_t)data[at + 6] << 16;
+    p0 = at + 12 + (len > limit ? len / 2 : 0);
+    if (len > limit)
+        len = limit;
+    for (p = p0; p < p0 + len; p++) {
+        for (b = 0; b < 8; b++) {
+            rtp_tree *t = NULL;
+            rtp_image *img = NULL;
+            rtp_error e1, e2;
+            rtp_status s1, s2;
+            FILE *fp;
+            m = n;
+            byte = (unsigned char)(data[p] ^ (1u << b));
+            copy = splice_section(data, &m, at, p, 1, &byte, 1);
+            if (!copy || !(fp = fopen(file, "wb"))) {
+                free(copy);
+                return failures + 1;
+            }
+            CHECK(fwrite(copy, 1, m, fp) == m && fclose(fp) == 0);
+            free(copy);
+            memset(&e1, 0, sizeof e1);
+            memset(&e2, 0, sizeof e2);
+            s1 = rtp_tree_read(file, NULL, &t, &e1);
+            rtp_tree_destroy(t);
+            s2 = rtp_tree_eval_file(file, NULL, NULL, NULL, NULL, &img, NULL, NULL, &e2);
+            rtp_image_destroy(img);
+            ++*tried;
+            if (s1 != s2 || (s1 != RTP_OK && strcmp(e1.message, e2.message) != 0)) {
+                if (failures++ < 3)
+                    fprintf(stderr, "  byte %zu bit %d: read %d \"%s\", eval_file %d \"%s\"\n",
+                            p - at - 12, b, (int)s1, e1.message, (int)s2, e2.message);
+            }
+        }
+    }
+    return failures;
+}
+
+/* A file whose trees are wrong where its checksums are right:
+   rtp_tree_eval_file refuses it with rtp_tree_read's status and message,
+   or reads it as that does (eval_file_flips).  A malformed tree before
+   an invalid node was "malformed ray tree" (read_bands checked each
+   sample once read, where read_tree reads every node first: "invalid
+   node"); and a file that names a texture it does not hold and whose
+   trees are wrong too was refused for the texture (checked before the
+   edits), where rtp_tree_read names the trees' fault (tree_end checks
+   the textures last). */
+static void test_eval_file_same_errors(void)
+{
+    size_t n, m, at, failures = 0, tried = 0;
+    unsigned char *data = small_tree_file(&n), *notex = NULL;
+    char file[512];
+    if (!data) {
+        CHECK(data != NULL);
+        return;
+    }
+    snprintf(file, sizeof file, "%s/rtp-evalfile-flip-%d.rtp", tmpdir(), (int)getpid());
+    failures += eval_file_flips(data, n, file, (size_t)-1, &tried);
+    free(data);
+    /* textured.nff's tree without its textures' section */
+    if (file_of("scenes/textured.nff", 20, 16, 0, 0, file)) {
+        FILE *fp = fopen(file, "rb");
+        data = (unsigned char *)malloc(1 << 20);
+        n = fp && data ? fread(data, 1, 1 << 20, fp) : 0;
+        if (fp)
+            fclose(fp);
+        at = section_at(data, n, "TEXB");
+        if (at >= n)
+            at = section_at(data, n, "TEXR");
+        CHECK(n > 0 && at < n);
+        if (n > 0 && at < n && (notex = (unsigned char *)malloc(n)) != NULL) {
+            size_t len = (size_t)data[at + 4] | (size_t)data[at + 5] << 8 |
+                         (size_t)data[at + 6] << 16;
+            memcpy(notex, data, at);
+            memcpy(notex + at, data + at + 16 + len, n - at - 16 - len);
+            m = n - 16 - len;
+            failures += eval_file_flips(notex, m, file, 64, &tried);
+        }
+        free(notex);
+        free(data);
+    } else {
+        CHECK_MSG(0, "scenes/textured.nff: no tree");
+    }
+    CHECK_MSG(failures == 0, "%zu of %zu flipped bits refused otherwise than rtp_tree_read",
+              failures, tried);
+    remove(file);
 }
 
 int main(void)
@@ -5182,5 +5322,6 @@ int main(void)
     RUN(test_malformed_packed_node);
     RUN(test_reader_refuses_what_no_scene_holds);
     RUN(test_eval_file);
+    RUN(test_eval_file_same_errors);
     return check_report();
 }
