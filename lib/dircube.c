@@ -1514,6 +1514,30 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
        bounds delta + lambda with room to spare. */
     lb->slack = 1e-12 * S;
     lb->scale = S;
+    /* The candidates' arrays against the limit before they are made (the
+       runs' budget below counts them only once made): a candidate, then
+       its sort's scratch or its plane and cone.  An 8M-triangle mesh's
+       took 600 MB before a limit of 50 MiB refused the lists. */
+    for (i = 0; i < n; i++)
+        nc += (hit ? hit[i] : rtpi_prim_hittable(s, (uint32_t)i)) && !(sel && sel[i] != want);
+    {
+        int cones = nc && (s->nspheres + s->ncones) * 16 >= rtpi_scene_nprims(s);
+        double per = (double)sizeof *lb->cand +
+                     fmax((double)sizeof *lb->cand,
+                          (s->ntris ? 40.0 : 0.0) + (cones ? 32.0 : 0.0));
+        double need = 4.0 * ((double)ncells + 2.0) + (double)nc * per;
+        if (!(need <= limit)) {
+            char g[2][32]; /* '.' whatever the locale */
+            rtpi_fmt_g(g[0], sizeof g[0], 6, ceil(need / 1048576.0));
+            rtpi_fmt_g(g[1], sizeof g[1], 6, limit / 1048576.0);
+            return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
+                              "a light buffer of %d cells a face: its %zu primitives take %s MiB "
+                              "before its lists, over the memory limit of %s MiB (take --shadows "
+                              "exact, or raise memory_limit: rtp's --memory-limit)",
+                              res, nc, g[0], g[1]);
+        }
+    }
+    nc = 0;
     lb->cand = (rtpi_lb_cand *)rtpi_malloc_array(a, n ? n : 1, sizeof *lb->cand);
     /* (ncells + 2: lb_cells' cursors; zeroed there, by parts) */
     lb->off = (uint32_t *)rtpi_malloc_array(a, ncells + 2, sizeof *lb->off);

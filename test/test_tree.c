@@ -2005,6 +2005,92 @@ static void test_shadows_auto_cube_limit(void)
     rtp_scene_destroy(s);
 }
 
+/* A light buffer's per-primitive arrays (a candidate, its sort's scratch,
+   a triangle's plane: 56 bytes a triangle) are checked against the memory
+   limit before they are made, as its cells and lists are: an 8M-triangle
+   grid's light buffer took 600 MB before a limit of 50 MiB refused its
+   lists.  Here 45,000 triangles (2.5 MB of arrays) under 1 MiB: LIGHTBUF
+   is refused with the named error within the limit, AUTO takes shadow
+   rays and is exact. */
+static void test_lightbuf_prims_limit(void)
+{
+    counted c;
+    rtp_allocator a;
+    rtp_scene *s = NULL;
+    rtp_tree *t = NULL;
+    rtp_image *img = NULL, *full = NULL;
+    rtp_trace_options o;
+    rtp_eval_options eo;
+    rtp_eval_stats st;
+    rtp_diff_stats d;
+    rtp_error err;
+    rtp_status rs;
+    const int n = 150;
+    size_t cap = (size_t)n * n * 120 + 512, len, base;
+    char *text = (char *)malloc(cap);
+    int i, j;
+    if (!text) {
+        CHECK(0);
+        return;
+    }
+    len = (size_t)snprintf(text, cap,
+                           "v\nfrom 0.5 -0.5 1.5 at 0.5 0.5 0 up 0 0 1 angle 50 hither 0.01\n"
+                           "resolution 24 24\nl 0.3 0.4 2\nf 0.8 0.8 0.8 1 0 0 0 0\n");
+    for (i = 0; i < n; i++)
+        for (j = 0; j < n; j++) {
+            double x = (double)i / n, y = (double)j / n, e = 1.0 / n;
+            len += (size_t)snprintf(text + len, cap - len, "pp 4\n%g %g 0 0 0 1\n%g %g 0 0 0 1\n"
+                                    "%g %g 0 0 0 1\n%g %g 0 0 0 1\n", x, y, x + e, y, x + e,
+                                    y + e, x, y + e);
+        }
+    a = counted_allocator(&c);
+    memset(&o, 0, sizeof o);
+    memset(&eo, 0, sizeof eo);
+    CHECK(rtp_scene_load_memory(text, len, "grid.nff", "nff", &a, &s, &err) == RTP_OK);
+    free(text);
+    CHECK(s && rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
+    if (!t) {
+        rtp_scene_destroy(s);
+        return;
+    }
+    /* a first move by shadow rays makes what every move keeps (the
+       triangles' normals, the visibility bits); the primitives' bounds
+       the cubes need are the scene's: neither is the light buffer's */
+    eo.shadows = RTP_SHADOWS_EXACT;
+    CHECK(rtp_tree_set(t, "light.0.pos", "0.6,0.4,2", NULL) == RTP_OK &&
+          rtp_tree_eval(t, &eo, &img, NULL, NULL) == RTP_OK);
+    CHECK(rtpi_scene_bounds(t->scene) == 0);
+    eo.shadows = RTP_SHADOWS_LIGHTBUF;
+    eo.shadow_res = 16; /* (6 KB of cells) */
+    eo.memory_limit = 1048576.0;
+    CHECK(rtp_tree_set(t, "light.0.pos", "0.5,0.6,1", NULL) == RTP_OK);
+    base = c.live;
+    c.peak = c.live;
+    rs = img ? rtp_tree_eval_into(t, &eo, img, NULL, &err) : RTP_ERR_ARGUMENT;
+    CHECK_MSG(rs == RTP_ERR_LIMIT && strstr(err.message, "primitives take"),
+              "lightbuf: %s", rs == RTP_OK ? "ok" : err.message);
+    CHECK_MSG((double)(c.peak - base) <= eo.memory_limit + 65536.0,
+              "lightbuf under 1 MiB: peak %.0f bytes", (double)(c.peak - base));
+    eo.shadows = RTP_SHADOWS_AUTO;
+    memset(&st, 0, sizeof st);
+    rs = img ? rtp_tree_eval_into(t, &eo, img, &st, &err) : RTP_ERR_ARGUMENT;
+    CHECK_MSG(rs == RTP_OK && st.shadows == RTP_SHADOWS_EXACT, "auto: %s, mode %d",
+              rs == RTP_OK ? "ok" : err.message, (int)st.shadows);
+    if (rs == RTP_OK && rtp_tree_trace(t, 1, &full, NULL, NULL) == RTP_OK &&
+        rtp_image_diff(img, full, 1e-6, &d, NULL) == RTP_OK)
+        CHECK_MSG(d.max_abs <= 1e-6, "auto: %g from a full trace", d.max_abs);
+    else
+        CHECK(0);
+    rtp_image_destroy(img);
+    rtp_image_destroy(full);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+    CHECK(c.live == 0);
+#ifdef RTP_HAVE_THREADS
+    pthread_mutex_destroy(&c.lock);
+#endif
+}
+
 /* RTP_SHADOWS_AUTO is exact, and takes the light buffer where the tree
    holds 4 or more recorded hits a primitive, else (few hits: a small
    image of many primitives) the light buffer for a first move of a
@@ -5282,6 +5368,7 @@ int main(void)
     RUN(test_min_weight_edits);
     RUN(test_trees_outgrow_limit);
     RUN(test_memory_limit_holds);
+    RUN(test_lightbuf_prims_limit);
     RUN(test_many_lights_cached);
 #ifdef RTP_HAVE_THREADS
     RUN(test_allocator_one_thread_at_a_time);
