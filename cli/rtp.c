@@ -1224,7 +1224,9 @@ static char *default_image_name(const char *scene)
     return out;
 }
 
-/* "X,Y,Z" (--add-light) into pos; 0, or -1. */
+/* "X,Y,Z" (--add-light) into pos, each |x| <= 3.4e38 as a key's value
+   (rtp_tree_add_light refuses more, a message that named no option); 0,
+   or -1. */
 static int parse_xyz(const char *p, double pos[3])
 {
     char *end;
@@ -1233,7 +1235,7 @@ static int parse_xyz(const char *p, double pos[3])
         if (!decimal_start(p))
             return -1;
         pos[k] = strtod(p, &end);
-        if (end == p || !isfinite(pos[k]) || (k < 2 && *end != ',') ||
+        if (end == p || !(fabs(pos[k]) <= 3.4e38) || (k < 2 && *end != ',') ||
             (k == 2 && *end != '\0'))
             return -1;
         p = end + 1;
@@ -2144,7 +2146,8 @@ static int cmd_reeval(int argc, char **argv)
             if (!(v = opt_value(argc, argv, &i, "--add-light")))
                 goto usage;
             if (parse_xyz(v, pos)) {
-                msg("--add-light %s: expected X,Y,Z", v);
+                msg("--add-light %s: expected X,Y,Z: 3 comma-separated numbers (|x| <= 3.4e38)",
+                    v);
                 goto usage;
             }
             add_lights[nadd++] = v;

@@ -230,6 +230,12 @@ expect_rc 2 $RTP reeval "$T/t.rtp" --add-light a,b,c
 # decimal numbers only, as scene files have them (strtod took hex and nan)
 expect_rc 2 $RTP reeval "$T/t.rtp" --add-light 0x10,0,0
 expect_rc 2 $RTP reeval "$T/t.rtp" --add-light 1,nan,0
+# past a key's range, as NaN, a usage error naming the option (it was exit
+# 1, "light position must be finite", naming neither option nor value)
+expect_rc 2 $RTP reeval "$T/t.rtp" --add-light 1e39,0,0
+grep -q -- "--add-light 1e39,0,0: expected X,Y,Z: 3 comma-separated numbers (|x| <= 3.4e38)" \
+    "$T/err" && ok || bad "--add-light 1e39: $(cat "$T/err")"
+expect_rc 0 $RTP reeval "$T/t.rtp" --add-light -3.4e38,0,3.4e38 -i "$T/al.pfm"
 expect_rc 0 $RTP reeval "$T/t.rtp" --add-light " 1, 2, 3" --memory-limit " 100" -i "$T/al.pfm"
 expect_rc 2 $RTP diff "$T/t.pfm" "$T/t.pfm" --fail-above max_abs=0x1
 expect_rc 2 $RTP version extra
