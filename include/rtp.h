@@ -546,8 +546,8 @@ typedef rtp_status (*rtp_tree_edit_fn)(void *user, rtp_tree *tree, rtp_error *er
  *  no camera edit, no bump edit with RTP_STALE_RETRACE) and move or add
  *  one light at most, and the file holds at most 32 lights (format 2),
  *  each sample's tree is evaluated as it is read and none is kept: the
- *  memory of the image, a band of trees and the moved light's direction
- *  cube, not of every tree (README: "One-off evaluation"; the moved
+ *  memory of the image, the samples' index (8 bytes each), a band of
+ *  trees and the moved light's direction cube, not of every tree (README: "One-off evaluation"; the moved
  *  light's shadow queries are made first, its cube's build asking
  *  opt->cancel).  Otherwise the trees are read whole first.  info (may be NULL) receives rtp_tree_get_info
  *  of the tree read; stats->seconds is the evaluation's time with the

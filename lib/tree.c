@@ -4217,6 +4217,10 @@ static rtp_status file_begin(void *user, rtp_tree *t, int can_stream, int *strea
     }
     f->streamed = 1;
     *stream = 1;
+    /* (a tree pointer kept from the edit callback and used from progress
+       or cancel meets a busy tree, as during rtp_tree_eval: file_end
+       clears it) */
+    t->busy = 1;
     return RTP_OK;
 }
 
@@ -4315,6 +4319,7 @@ static void file_end(void *user, rtp_tree *t)
 {
     file_eval *f = (file_eval *)user;
     size_t i;
+    t->busy = 0;
     for (i = 0; f->lv && i < f->nl; i++)
         light_vis_free(t, &f->lv[i]);
     rtpi_free(&t->alloc, f->lv);
