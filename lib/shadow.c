@@ -80,6 +80,20 @@ static int sh_thin_near(const rtpi_shadow *sh, rtpi_v3 o)
     return c != RTPI_DC_ABSENT && ((sh->thin_cells[c >> 6] >> (c & 63)) & 1u);
 }
 
+/* A companion light buffer's error said as the item buffer's (it named
+   "a light buffer of 256 cells" where an item buffer was asked; helper
+   79). */
+static rtp_status companion_error(rtp_status st, int res, int osmesa, rtp_error *err)
+{
+    if (st != RTP_OK && st != RTP_ERR_CANCELLED && err && err->message[0]) {
+        char m[sizeof err->message];
+        memcpy(m, err->message, sizeof m);
+        snprintf(err->message, sizeof err->message, "%s at %d cells a face needs beside it %.180s",
+                 osmesa ? "osmesa's item buffer" : "the item buffer", res, m);
+    }
+    return st;
+}
+
 /* The item buffer over the wide primitives and its companions (see
    above). */
 static rtp_status sh_itembuf(rtpi_shadow *sh, int res, int threads, const rtpi_poll *poll,
@@ -102,19 +116,20 @@ static rtp_status sh_itembuf(rtpi_shadow *sh, int res, int threads, const rtpi_p
                                               &sh->ib, err)
              : rtpi_itembuf_build_wide_mt(sh->s, sh->light, res, SH_THIN_CELLS, sh->thin, threads,
                                           poll, a, &sh->ib, err);
-    if (st == RTP_OK)
-        st = rtpi_lightbuf_build_some(sh->s, sh->light,
-                                      sh->ib.res >= SH_THIN_DIV * SH_WIDE_RES
-                                          ? (sh->ib.res + 1) / SH_THIN_DIV
-                                          : SH_WIDE_RES,
-                                      sh->thin, 1, threads, sh->limit, HUGE_VAL, &cpoll, a,
-                                      &sh->lb, err);
+    if (st != RTP_OK)
+        return st;
+    st = rtpi_lightbuf_build_some(sh->s, sh->light,
+                                  sh->ib.res >= SH_THIN_DIV * SH_WIDE_RES
+                                      ? (sh->ib.res + 1) / SH_THIN_DIV
+                                      : SH_WIDE_RES,
+                                  sh->thin, 1, threads, sh->limit, HUGE_VAL, &cpoll, a, &sh->lb,
+                                  err);
     if (st == RTP_OK && sh->lb.ncand)
         st = sh_thin_cells(sh, a, err);
     if (st == RTP_OK)
         st = rtpi_lightbuf_build_some(sh->s, sh->light, SH_WIDE_RES, sh->thin, 0, threads,
                                       sh->limit, HUGE_VAL, &cpoll, a, &sh->wide, err);
-    return st;
+    return companion_error(st, res, sh->mode == RTPI_SHADOW_OSMESA, err);
 }
 
 rtp_status rtpi_shadow_create(const rtp_scene *s, const rtpi_kdtree *kd,

@@ -2071,6 +2071,15 @@ static void test_lightbuf_prims_limit(void)
               "lightbuf: %s", rs == RTP_OK ? "ok" : err.message);
     CHECK_MSG((double)(c.peak - base) <= eo.memory_limit + 65536.0,
               "lightbuf under 1 MiB: peak %.0f bytes", (double)(c.peak - base));
+    /* the item buffer's companion light buffers, refused alike, say
+       they are the item buffer's (they named a light buffer of cells no
+       one had asked for) */
+    eo.shadows = RTP_SHADOWS_ITEMBUF;
+    rs = img ? rtp_tree_eval_into(t, &eo, img, NULL, &err) : RTP_ERR_ARGUMENT;
+    CHECK_MSG(rs == RTP_ERR_LIMIT &&
+                  strstr(err.message, "the item buffer at 16 cells a face needs beside it a "
+                                      "light buffer") == err.message,
+              "itembuf: %s", rs == RTP_OK ? "ok" : err.message);
     eo.shadows = RTP_SHADOWS_AUTO;
     memset(&st, 0, sizeof st);
     rs = img ? rtp_tree_eval_into(t, &eo, img, &st, &err) : RTP_ERR_ARGUMENT;
