@@ -3465,6 +3465,63 @@ static rtp_status opts_check(const rtp_eval_options *opt, rtp_error *err)
     return RTP_OK;
 }
 
+/* The colours of the image's linear terms in the coefficients' order:
+   the background's, the ambient's, then the lights' (cv + 6). */
+static void term_colours(const rtp_scene *s, double *cv)
+{
+    int i;
+    for (i = 0; i < 3; i++) {
+        cv[i] = s->background[i];
+        cv[3 + i] = s->ambient[i];
+    }
+    rtpi_light_colors(s, cv + 6);
+}
+
+/* What the workers' rows grow their scratch with: t->alloc, behind *la
+   (*la_made set) where threads share a caller's allocator, which need not
+   be thread-safe.  The thread count to use (1 where no lock could be
+   made: one thread needs none). */
+static int rows_allocator(rtp_tree *t, int nthreads, rtpi_locked_alloc *la, int *la_made)
+{
+    *la_made = 0;
+    if (nthreads > 1 && !rtpi_allocator_is_default(&t->alloc)) {
+        if (rtpi_locked_alloc_init(la, &t->alloc) != 0)
+            return 1;
+        *la_made = 1;
+    }
+    return nthreads;
+}
+
+/* eval_row's context for each of nthreads threads (e zeroed), ctx[i] =
+   &e[i]; 0, or -1 where a thread's scratch could not be had (its nomem
+   set; what was had is freed with the contexts). */
+static int eval_ctxs_init(rtp_tree *t, eval_ctx *e, void **ctx, int nthreads,
+                          const rtp_allocator *wa, const rtpi_shade_ctx *shade,
+                          const uint32_t *vis, const double *cl, float *samples, int cached)
+{
+    const rtp_scene *s = t->scene;
+    size_t nc = RTPI_COEFFS(s->nlights);
+    int i, bad = 0;
+    for (i = 0; i < nthreads; i++) {
+        e[i].t = t;
+        e[i].wa = wa;
+        e[i].shade = shade;
+        e[i].vis = vis;
+        e[i].eye = v3(s->camera.from[0], s->camera.from[1], s->camera.from[2]);
+        e[i].cl = cl;
+        e[i].samples = samples;
+        e[i].cached = cached;
+        /* (16 more each: the threads' scratch, written for every node,
+           must share no cache line with another thread's) */
+        e[i].coeffs = (float *)rtpi_malloc_array(&t->alloc, nc + 16, sizeof(float));
+        e[i].acc = (double *)rtpi_malloc_array(&t->alloc, nc + 16, sizeof(double));
+        if (!e[i].coeffs || !e[i].acc)
+            e[i].nomem = bad = 1;
+        ctx[i] = &e[i];
+    }
+    return bad ? -1 : 0;
+}
+
 static rtp_status eval_body(rtp_tree *t, const rtp_eval_options *opt, rtp_image *into,
                             rtp_image **out, rtp_eval_stats *stats, rtp_error *err);
 
@@ -3649,52 +3706,22 @@ static rtp_status eval_body(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
             rtp_image_destroy(img);
         return rs != RTP_OK ? rs : rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
     }
-    for (i = 0; i < 3; i++) {
-        cv[i] = s->background[i];
-        cv[3 + i] = s->ambient[i];
-    }
-    rtpi_light_colors(s, cl);
+    term_colours(s, cv);
     /* the samples' colours: kept across evaluations with the caches (and
        always with SPD, whose pixels average them) */
     if ((t->spd || cached) && !t->ev_samples)
         t->ev_samples = (float *)rtpi_malloc_array(&t->alloc, ns, 3 * sizeof(float));
     samples = t->spd || cached ? t->ev_samples : img->pixels;
-    /* (rows of the uncached path grow their scratch on the workers: a
-       caller's allocator need not be thread-safe, so they take a lock,
-       as the trace's workers do) */
-    if (nthreads > 1 && !rtpi_allocator_is_default(&t->alloc)) {
-        if (rtpi_locked_alloc_init(&la, &t->alloc) == 0)
-            la_made = 1;
-        else
-            nthreads = 1; /* (no lock: one thread needs none) */
-    }
+    /* (rows of the uncached path grow their scratch on the workers,
+       behind a lock as the trace's workers do) */
+    nthreads = rows_allocator(t, nthreads, &la, &la_made);
     memset(e, 0, sizeof e[0] * (size_t)nthreads);
-    for (i = 0; i < nthreads; i++) {
-        e[i].t = t;
-        e[i].wa = la_made ? &la.a : &t->alloc;
-        e[i].shade = &shade;
-        e[i].vis = vis;
-        e[i].eye = v3(s->camera.from[0], s->camera.from[1], s->camera.from[2]);
-        e[i].cl = cl;
-        e[i].samples = samples;
-        e[i].cached = cached;
-        /* (16 more each: the threads' scratch, written for every node,
-           must share no cache line with another thread's) */
-        e[i].coeffs = (float *)rtpi_malloc_array(&t->alloc, RTPI_COEFFS(nl) + 16, sizeof(float));
-        e[i].acc = (double *)rtpi_malloc_array(&t->alloc, RTPI_COEFFS(nl) + 16, sizeof(double));
-        if (!e[i].coeffs || !e[i].acc)
-            e[i].nomem = 1;
-        ctx[i] = &e[i];
-    }
-    if (!samples || e[0].nomem || (nthreads > 1 && e[nthreads - 1].nomem)) {
+    if (eval_ctxs_init(t, e, ctx, nthreads, la_made ? &la.a : &t->alloc, &shade, vis, cl,
+                       samples, cached) != 0 ||
+        !samples) {
         rs = rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
         goto done;
     }
-    for (i = 0; i < nthreads; i++)
-        if (e[i].nomem) {
-            rs = rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
-            goto done;
-        }
 
     if (full) {
         /* every step for every sample */
@@ -4151,30 +4178,12 @@ static rtp_status file_begin(void *user, rtp_tree *t, int can_stream, int *strea
     f->ctx = (void **)rtpi_malloc_array(&t->alloc, (size_t)f->nthreads, sizeof *f->ctx);
     if (!f->cv || !f->e || !f->ctx)
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
-    for (i = 0; i < 3; i++) {
-        f->cv[i] = s->background[i];
-        f->cv[3 + i] = s->ambient[i];
-    }
-    rtpi_light_colors(s, f->cv + 6);
-    if (f->nthreads > 1 && !rtpi_allocator_is_default(&t->alloc)) {
-        if (rtpi_locked_alloc_init(&f->la, &t->alloc) == 0)
-            f->la_made = 1;
-        else
-            f->nthreads = 1;
-    }
-    for (i = 0; i < f->nthreads; i++) {
-        eval_ctx *e = &f->e[i];
-        e->wa = f->la_made ? &f->la.a : &t->alloc;
-        e->shade = &f->shade;
-        e->vis = NULL;
-        e->eye = v3(s->camera.from[0], s->camera.from[1], s->camera.from[2]);
-        e->cl = f->cv + 6;
-        e->coeffs = (float *)rtpi_malloc_array(&t->alloc, RTPI_COEFFS(nl) + 16, sizeof(float));
-        e->acc = (double *)rtpi_malloc_array(&t->alloc, RTPI_COEFFS(nl) + 16, sizeof(double));
-        f->ctx[i] = e;
-        if (!e->coeffs || !e->acc)
-            return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
-    }
+    term_colours(s, f->cv);
+    f->nthreads = rows_allocator(t, f->nthreads, &f->la, &f->la_made);
+    /* (samples: each band's, set by file_band; the caches: none) */
+    if (eval_ctxs_init(t, f->e, f->ctx, f->nthreads, f->la_made ? &f->la.a : &t->alloc,
+                       &f->shade, NULL, f->cv + 6, NULL, 0) != 0)
+        return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
     if (rtp_image_create(t->width, t->height, &t->alloc, &f->img, err) != RTP_OK)
         return err ? err->status : RTP_ERR_NOMEM;
     f->nl = nl;
