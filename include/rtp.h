@@ -171,7 +171,9 @@ void rtp_scene_destroy(rtp_scene *scene);
  *  and bump keys the README lists), ambient, background,
  *  camera.from|at|up|angle|hither; N is a 0-based index in file order or
  *  a name the scene gives (a name may hold dots: the field follows the
- *  last).  An image key (mat.N.texture, mat.N.bump) reads its file each
+ *  last).  light.N.pos with N the count of lights (an index) adds light
+ *  N there, white and on (rtp_tree_add_light's light).  An image key
+ *  (mat.N.texture, mat.N.bump) reads its file each
  *  time, "-" the next image on stdin; an image no material uses any more
  *  is freed.  @return RTP_OK, RTP_ERR_KEY, RTP_ERR_PARSE, RTP_ERR_IO or
  *  RTP_ERR_FORMAT (an image key's file), or RTP_ERR_ARGUMENT (a value out

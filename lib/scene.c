@@ -540,7 +540,8 @@ static rtp_status item_key(const rtp_scene *s, const char *key, int *kind, long 
         *kind = ITEM_LIGHT;
         if ((*idx = find_index(dot1 + 1, len, s->nlights, light_name, s)) < 0)
             return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0,
-                              "%s: no such light (the scene has %zu)", key, s->nlights);
+                              "%s: no such light (the scene has %zu; light.%zu.pos adds one)",
+                              key, s->nlights, s->nlights);
         return RTP_OK;
     }
     if ((size_t)(dot1 - key) == 3 && memcmp(key, "mat", 3) == 0) {
@@ -645,6 +646,21 @@ static void set_rgb(float *dst, const double *v, int n)
         dst[i] = (float)v[n == 1 ? 0 : i];
 }
 
+/* Is key light.N.pos with N the scene's count of lights (an index, as
+   find_index reads one), which adds light N?  Only pos: a light's other
+   fields are set once it is there. */
+static int adds_light(const rtp_scene *s, const char *key)
+{
+    const char *d = key + 6, *e;
+    if (strncmp(key, "light.", 6) != 0)
+        return 0;
+    for (e = d; isdigit((unsigned char)*e); e++)
+        ;
+    if (e == d || e - d >= 10 || strcmp(e, ".pos") != 0)
+        return 0;
+    return (size_t)strtol(d, NULL, 10) == s->nlights;
+}
+
 rtp_status rtpi_scene_set(rtp_scene *s, const char *key, const char *value,
                           rtp_error *err)
 {
@@ -666,6 +682,22 @@ rtp_status rtpi_scene_set(rtp_scene *s, const char *key, const char *value,
     }
     if (strncmp(key, "camera.", 7) == 0)
         return set_camera(s, key, value, v, n, err);
+    if (adds_light(s, key)) {
+        /* a new light, white and on, as rtp_tree_add_light makes one (its
+           colour scaled as the loaded lights are: light_scale) */
+        rtpi_light l;
+        if ((st = want_n(err, key, value, n, 3, 0)) != RTP_OK)
+            return st;
+        memset(&l, 0, sizeof l);
+        l.pos[0] = v[0];
+        l.pos[1] = v[1];
+        l.pos[2] = v[2];
+        l.color[0] = l.color[1] = l.color[2] = 1.0f;
+        l.on = 1;
+        if (rtpi_scene_add_light(s, &l) < 0)
+            return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "%s: out of memory", key);
+        return RTP_OK;
+    }
     if ((st = item_key(s, key, &kind, &i, &field, err)) != RTP_OK)
         return st;
     if (kind == ITEM_LIGHT) {

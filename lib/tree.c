@@ -242,6 +242,20 @@ rtp_status rtpi_tree_busy(const rtp_tree *t, const char *fn, rtp_error *err)
                       fn);
 }
 
+/* The scene's last light was just added (rtp_tree_add_light, or a
+   light.N.pos key naming the next light): its lights0 entry, never traced
+   (pos NaN), so its visibility is always decided anew.  0, or -1 out of
+   memory (the caller takes the light away again). */
+static int added_light(rtp_tree *t)
+{
+    size_t n = t->scene->nlights, cap = n - 1;
+    if (rtpi_grow(&t->alloc, (void **)&t->lights0, &cap, n, sizeof *t->lights0))
+        return -1;
+    t->lights0[n - 1] = t->scene->lights[n - 1];
+    t->lights0[n - 1].pos[0] = NAN;
+    return 0;
+}
+
 rtp_status rtp_tree_set(rtp_tree *t, const char *key, const char *value,
                         rtp_error *err)
 {
@@ -249,6 +263,7 @@ rtp_status rtp_tree_set(rtp_tree *t, const char *key, const char *value,
     rtpi_material *mats = NULL;
     rtpi_light *lights = NULL;
     float amb[3], bg[3];
+    size_t nl;
     rtp_status st;
     if (!t || !key || !value)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_set: NULL argument");
@@ -271,14 +286,18 @@ rtp_status rtp_tree_set(rtp_tree *t, const char *key, const char *value,
         memcpy(lights, s->lights, s->nlights * sizeof *lights);
     memcpy(amb, s->ambient, sizeof amb);
     memcpy(bg, s->background, sizeof bg);
+    nl = s->nlights;
     st = rtpi_scene_set(s, key, value, err);
+    if (st == RTP_OK && s->nlights > nl && added_light(t) != 0)
+        st = rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "%s: out of memory", key);
     if (st == RTP_OK)
         st = check_exact(t, key, value, err);
     if (strstr(key, ".bump"))
         t->stale_ok = 0;
     if (st != RTP_OK) {
         /* names are untouched by rtp_scene_set: the copies' pointers are
-           the scene's own */
+           the scene's own; a light the key added goes */
+        s->nlights = nl;
         if (s->nmats)
             memcpy(s->mats, mats, s->nmats * sizeof *mats);
         if (s->nlights)
@@ -389,7 +408,6 @@ rtp_status rtp_tree_add_light(rtp_tree *t, const double pos[3], rtp_error *err)
 {
     rtp_scene *s;
     rtpi_light l;
-    size_t cap0;
     if (!t || !pos)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_add_light: NULL argument");
     if (t->busy == 1)
@@ -400,9 +418,6 @@ rtp_status rtp_tree_add_light(rtp_tree *t, const double pos[3], rtp_error *err)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
                           "light position must be finite, |x| <= 3.4e38");
     s = t->scene;
-    cap0 = s->nlights;
-    if (rtpi_grow(&t->alloc, (void **)&t->lights0, &cap0, s->nlights + 1, sizeof *t->lights0))
-        return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
     memset(&l, 0, sizeof l);
     l.pos[0] = pos[0];
     l.pos[1] = pos[1];
@@ -411,9 +426,10 @@ rtp_status rtp_tree_add_light(rtp_tree *t, const double pos[3], rtp_error *err)
     l.on = 1;
     if (rtpi_scene_add_light(s, &l) < 0)
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
-    /* never traced: its visibility is always decided anew */
-    t->lights0[s->nlights - 1] = l;
-    t->lights0[s->nlights - 1].pos[0] = NAN;
+    if (added_light(t) != 0) {
+        s->nlights--;
+        return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+    }
     return RTP_OK;
 }
 

@@ -237,6 +237,30 @@ grep -q -- "--add-light 1e39,0,0: expected X,Y,Z: 3 comma-separated numbers (|x|
     "$T/err" && ok || bad "--add-light 1e39: $(cat "$T/err")"
 expect_rc 0 $RTP reeval "$T/t.rtp" --add-light -3.4e38,0,3.4e38 -i "$T/al.pfm"
 expect_rc 0 $RTP reeval "$T/t.rtp" --add-light " 1, 2, 3" --memory-limit " 100" -i "$T/al.pfm"
+# light.N.pos with N the count of lights (spheres.nff: 2) adds light N,
+# on trace as on reeval, one-off and in a stream's lines: each image equals
+# the full trace of the scene edited alike
+A2="light.2.pos=3,-2,5"
+A2c="light.2.color=0.9,0.2,0.1"
+A3="light.3.pos=0,-5,4"
+$RTP trace $S --size 40x30 --set "$A2" -i "$T/add1.pfm" -q
+$RTP trace $S --size 40x30 --set "$A2" --set "$A2c" -i "$T/add2.pfm" -q
+$RTP trace $S --size 40x30 --set "$A2" --set "$A2c" --set "$A3" --set light.2.pos=-4,-3,6 \
+    -i "$T/add3.pfm" -q
+expect_rc 0 $RTP reeval "$T/t.rtp" --set "$A2" -i "$T/adda.pfm"
+$RTP diff "$T/adda.pfm" "$T/add1.pfm" --fail-above max_abs=1e-6 -q && ok ||
+    bad "reeval --set $A2 (a light added) differs from trace --set $A2"
+printf '%s\n%s\n%s light.2.pos=-4,-3,6\n' "$A2" "$A2c" "$A3" |
+    $RTP reeval "$T/t.rtp" --stream -i "$T/adds%d.pfm" -q
+for i in 1 2 3; do
+    $RTP diff "$T/adds$((i - 1)).pfm" "$T/add$i.pfm" --fail-above max_abs=1e-6 -q && ok ||
+        bad "stream line $i adding lights differs from a trace"
+done
+expect_rc 1 $RTP reeval "$T/t.rtp" --set light.3.pos=1,2,3 -i "$T/addx.pfm"
+grep -q "light.3.pos: no such light (the scene has 2; light.2.pos adds one)" "$T/err" && ok ||
+    bad "light.3.pos on two lights: $(cat "$T/err")"
+expect_rc 1 $RTP trace $S --size 8x6 --set light.2.pos=1,2 -i "$T/addx.pfm"
+[ ! -e "$T/addx.pfm" ] && ok || bad "a refused light.2.pos wrote an image"
 expect_rc 2 $RTP diff "$T/t.pfm" "$T/t.pfm" --fail-above max_abs=0x1
 expect_rc 2 $RTP version extra
 expect_rc 0 $RTP version --help

@@ -3006,6 +3006,65 @@ static void test_moves_rest(void)
 }
 
 
+/* light.N.pos with N the count of lights adds light N, white and on, on a
+   tree (rtp_tree_set) as on a scene (rtp_scene_set), so the same key
+   gives the full trace of a scene with a light added and a --stream line
+   can add one: its image equals rtp_tree_add_light's bit for bit, and
+   each image as the light is added, coloured, moved, switched off and a
+   second added equals a full trace of the scene edited alike.  A value
+   refused adds nothing; an index past the next is no light. */
+static void test_key_adds_light(void)
+{
+    rtp_scene *s;
+    rtp_tree *t, *t2 = NULL;
+    rtp_trace_options o;
+    rtp_eval_options eo;
+    rtp_image *re, *r2 = NULL;
+    size_t nl;
+    char k0[32], k1[32], k2[32], kc[32], ko[32];
+    const double at[3] = {3.0, -2.0, 5.0};
+    if (!edit_start(0, &s, &t, &o, &eo, &re))
+        return;
+    if (!t || !re)
+        goto done;
+    nl = rtp_tree_scene(t)->nlights;
+    snprintf(k0, sizeof k0, "light.%zu.pos", nl);
+    snprintf(kc, sizeof kc, "light.%zu.color", nl);
+    snprintf(ko, sizeof ko, "light.%zu.on", nl);
+    snprintf(k1, sizeof k1, "light.%zu.pos", nl + 1);
+    snprintf(k2, sizeof k2, "light.%zu.pos", nl + 2);
+    /* the same tree by rtp_tree_add_light, the same path of evaluations */
+    CHECK(rtp_record(s, &o, &t2, NULL, NULL, NULL) == RTP_OK);
+    CHECK(t2 && rtp_tree_eval(t2, &eo, &r2, NULL, NULL) == RTP_OK);
+    CHECK(t2 && rtp_tree_add_light(t2, at, NULL) == RTP_OK);
+    CHECK(t2 && r2 && rtp_tree_eval_into(t2, &eo, r2, NULL, NULL) == RTP_OK);
+    /* refused: nothing added, on the tree or the scene */
+    CHECK(rtp_tree_set(t, k0, "1,2", NULL) == RTP_ERR_PARSE);
+    CHECK(rtp_tree_set(t, k1, "1,2,3", NULL) == RTP_ERR_KEY);
+    CHECK(rtp_tree_set(t, kc, "1,0,0", NULL) == RTP_ERR_KEY);
+    CHECK(rtp_scene_set(s, k0, "nan,2,3", NULL) != RTP_OK);
+    CHECK(rtp_tree_scene(t)->nlights == nl);
+    CHECK(s->nlights == nl);
+    edit_equals_trace(t, s, &o, &eo, re, k0, "3,-2,5", NULL);
+    CHECK(rtp_tree_scene(t)->nlights == nl + 1);
+    if (r2)
+        CHECK(memcmp(re->pixels, r2->pixels, 3 * sizeof(float) * (size_t)re->width *
+                                                 (size_t)re->height) == 0);
+    edit_equals_trace(t, s, &o, &eo, re, kc, "0.9,0.2,0.1", NULL);
+    edit_equals_trace(t, s, &o, &eo, re, k0, "-4,-3,6", NULL);
+    edit_equals_trace(t, s, &o, &eo, re, k1, "0,-5,4", NULL);
+    edit_equals_trace(t, s, &o, &eo, re, ko, "0", NULL);
+    CHECK(rtp_tree_scene(t)->nlights == nl + 2);
+    CHECK(rtp_tree_set(t, k2, "1,2", NULL) == RTP_ERR_PARSE);
+    CHECK(rtp_tree_scene(t)->nlights == nl + 2);
+done:
+    rtp_image_destroy(re);
+    rtp_image_destroy(r2);
+    rtp_tree_destroy(t);
+    rtp_tree_destroy(t2);
+    rtp_scene_destroy(s);
+}
+
 /* Moves on smooth triangles (vertex normals) into a kept image, where the
    shadow queries take the shading normals the evaluation keeps: each
    image equals a full trace of the moved scene, with shadow rays and with
@@ -5394,6 +5453,7 @@ int main(void)
     RUN(test_material_planes);
     RUN(test_moves_kept_image);
     RUN(test_moves_rest);
+    RUN(test_key_adds_light);
     RUN(test_moves_smooth);
     RUN(test_material_q);
     RUN(test_warm_light_move_bitwise);
