@@ -1124,6 +1124,104 @@ static void pfm_decode(const unsigned char *bytes, float *dst, size_t count,
     }
 }
 
+/* How far PFM's header may run on after its scale: the blanks a writer
+   leaves before the line's end ("-1.0 \n", "-1.0\r\n", an empty line),
+   not padding of any length; past that the format's one whitespace
+   character ends the header. */
+#define RTPI_PFM_LINE_TAIL 64
+
+/* Bytes read past PFM's header while looking for its end that prove to
+   be pixels: they are the data's first. */
+typedef struct pfm_ahead {
+    unsigned char bytes[RTPI_PFM_LINE_TAIL];
+    size_t n, at;
+} pfm_ahead;
+
+/* Finds the end of PFM's header after its scale `scale` and the
+   whitespace character `c` that ended it.  The format asks for exactly
+   one whitespace character there, but writers put blanks before the
+   line's end, which read that way shift every pixel by a byte or two.
+   A file's size places the data: what lies between the scale and the
+   data is the header's when it is whitespace, and refused, naming it,
+   when it is other text ending a line ("-1.0 x", a fourth number).  A
+   stream has no size: blanks then a line end are taken as the header's
+   (a header ended by one blank whose first pixel byte is 0x0a cannot be
+   told from it, and is far rarer than the blank before the newline). */
+static rtp_status pfm_header_end(const reader *r, int c, const char *scale,
+                                 long long pixel_bytes, pfm_ahead *ah)
+{
+    size_t i, cap = RTPI_PFM_LINE_TAIL;
+    ah->n = ah->at = 0;
+    /* (bytes read ahead are never more than this image's pixels: they
+       are all taken by its data, never the next image's in a stream) */
+    if (pixel_bytes < (long long)cap)
+        cap = (size_t)pixel_bytes;
+    if (r->size >= 0) {
+        long pos = ftell(r->f);
+        long long gap = pos >= 0 ? r->size - pixel_bytes - pos : -1;
+        int blank = 1, text = 1;
+        if (gap <= 0 || gap > (long long)cap)
+            return RTP_OK;
+        ah->n = fread(ah->bytes, 1, (size_t)gap, r->f);
+        for (i = 0; i < ah->n; i++) {
+            unsigned char b = ah->bytes[i];
+            blank &= is_space(b);
+            text &= is_space(b) || (b >= 0x20 && b < 0x7f);
+        }
+        if (ah->n != (size_t)gap)
+            return RTP_OK; /* the pixel data's read reports it */
+        if (blank) {
+            ah->n = 0;
+            return RTP_OK;
+        }
+        /* (stdin redirected from a file may hold a stream of images:
+           the gap is then the next ones, read as data) */
+        if (text && ah->bytes[ah->n - 1] == '\n' && r->f != stdin) {
+            char extra[RTPI_PFM_LINE_TAIL + 1];
+            size_t a = 0, b = ah->n, len = 0;
+            while (a < b && is_space(ah->bytes[a]))
+                a++;
+            while (b > a && is_space(ah->bytes[b - 1]))
+                b--;
+            for (i = a; i < b; i++)
+                extra[len++] = is_space(ah->bytes[i]) ? ' ' : (char)ah->bytes[i];
+            extra[len] = '\0';
+            return BAD(r, "PFM: the header has \"%s\" after its scale \"%s\" "
+                          "(its lines: PF or Pf, the width and height, the "
+                          "scale)", extra, scale);
+        }
+        return RTP_OK;
+    }
+    if (c != ' ' && c != '\t' && c != '\r')
+        return RTP_OK;
+    while (ah->n < cap) {
+        int d = getc(r->f);
+        if (d == EOF)
+            break;
+        ah->bytes[ah->n++] = (unsigned char)d;
+        if (d == '\n') {
+            ah->n = 0;
+            break;
+        }
+        if (d != ' ' && d != '\t' && d != '\r')
+            break;
+    }
+    return RTP_OK;
+}
+
+/* Reads `rows` rows of `row_bytes` into dst, the bytes read ahead of
+   them first.  @return the rows read whole. */
+static size_t read_rows(FILE *f, pfm_ahead *ah, unsigned char *dst,
+                        size_t row_bytes, size_t rows)
+{
+    size_t want = row_bytes * rows, pre = ah->n - ah->at;
+    if (pre > want)
+        pre = want;
+    memcpy(dst, ah->bytes + ah->at, pre);
+    ah->at += pre;
+    return (pre + fread(dst + pre, 1, want - pre, f)) / row_bytes;
+}
+
 /* PFM after "PF" (colour) or "Pf" (grey, expanded to RGB). */
 static rtp_status read_pfm(const reader *r, int grey,
                            const rtp_allocator *alloc, rtp_image **out)
@@ -1133,6 +1231,7 @@ static rtp_status read_pfm(const reader *r, int grey,
     int w, h, y, c, little, cap = 0;
     size_t len = 0, n, nin, i, k, rows;
     rtp_status st;
+    pfm_ahead ahead;
 
     st = read_size(r, 0, "PFM", &w, &h);
     if (st != RTP_OK)
@@ -1150,19 +1249,9 @@ static rtp_status read_pfm(const reader *r, int grey,
     if (parse_scale(tok, &little) != 0)
         return BAD(r, "PFM: the scale \"%s\" is not a nonzero number", tok);
     nin = grey ? (size_t)w : 3 * (size_t)w;
-    if (c == '\r' && r->size >= 0) {
-        /* A header written with CRLF line ends (a text-mode writer on
-           Windows): the '\n' after the '\r' is the header's when the file
-           holds exactly one byte more than the header and pixels.  (A
-           stream cannot tell it from a first pixel byte 0x0a, and keeps
-           to the format's single whitespace character.) */
-        long pos = ftell(r->f);
-        int d = getc(r->f);
-        if (!(d == '\n' && pos >= 0 &&
-              r->size - pos == 1 + (long long)nin * 4 * (long long)h) &&
-            d != EOF)
-            ungetc(d, r->f);
-    }
+    st = pfm_header_end(r, c, tok, (long long)nin * 4 * (long long)h, &ahead);
+    if (st != RTP_OK)
+        return st;
     if (image_shell(w, h, alloc, &img) != RTP_OK)
         return out_of_memory(r);
     n = row_floats(img);
@@ -1182,7 +1271,7 @@ static rtp_status read_pfm(const reader *r, int grey,
         }
         dst = img->pixels + (size_t)y * n;
         bytes = (unsigned char *)dst;
-        got = fread(bytes, nin * 4, rows, r->f);
+        got = read_rows(r->f, &ahead, bytes, nin * 4, rows);
         if (got != rows) {
             snprintf(what, sizeof what,
                      "pixel data (row %d of %d from the bottom)",

@@ -522,6 +522,85 @@ static void test_pfm_file_length(void)
     }
 }
 
+/* Blanks before a PFM header's last line end ("-1.0 \n": some writers
+   emit it) are the header's, read from a file or a stream; other text
+   after the scale is refused naming it.  (The format asks for one
+   whitespace character after the scale: the blank was taken for it and
+   the '\n' for a pixel byte, "1 bytes after the pixel data".) */
+static void test_pfm_header_blanks(void)
+{
+    static const char *const ok_headers[] = {
+        "PF\n2 1\n-1.0 \n", "PF\n2 1\n-1.0\t\n", "PF\n2 1\n-1.0 \r\n",
+        "PF \n2 1 \n-1.0   \n", "PF\n2 1\n-1.0\n\n", "Pf\n2 1\n-1.0 \n"};
+    unsigned char file[256];
+    rtp_image *back = NULL;
+    rtp_error err;
+    size_t h, i, k;
+    FILE *f;
+
+    for (k = 0; k < sizeof ok_headers / sizeof *ok_headers; k++) {
+        int grey = ok_headers[k][1] == 'f';
+        size_t nf = grey ? 2 : 6;
+        h = (size_t)sprintf((char *)file, "%s", ok_headers[k]);
+        for (i = 0; i < nf; i++)
+            put_le(file + h + 4 * i, 0.125f * (float)(i + 1));
+        CHECK_MSG(read_mem(file, h + 4 * nf, &back, &err) == RTP_OK,
+                  "header %lu: %s", (unsigned long)k, err.message);
+        CHECK(back && back->pixels[0] == 0.125f &&
+              back->pixels[5] == (grey ? 0.25f : 0.75f));
+        rtp_image_destroy(back);
+        back = NULL;
+    }
+
+    /* A stream: blanks then a line end end the header; the next image
+       follows untouched.  A header ended by one blank keeps a first
+       pixel byte 0x20 (not followed by a line end) as the pixel's. */
+    h = (size_t)sprintf((char *)file, "PF\n2 1\n-1.0  \r\n");
+    for (i = 0; i < 6; i++)
+        put_le(file + h + 4 * i, 0.5f * (float)(i + 1));
+    h += 24;
+    h += (size_t)sprintf((char *)file + h, "PF 1 1 -1 ");
+    memcpy(file + h, " \0\0\x3f", 4); /* 0x3f000020 */
+    put_le(file + h + 4, 2.0f);
+    put_le(file + h + 8, 3.0f);
+    h += 12;
+    CHECK(write_bytes(tpath("stream.bin"), file, h) == 0);
+    f = fopen(tpath("stream.bin"), "rb");
+    CHECK(f != NULL);
+    if (f) {
+        CHECK(rtp_image_read_stream(f, "s", NULL, &back, &err) == RTP_OK);
+        CHECK(back && back->pixels[0] == 0.5f && back->pixels[5] == 3.0f);
+        rtp_image_destroy(back);
+        back = NULL;
+        CHECK(rtp_image_read_stream(f, "s", NULL, &back, &err) == RTP_OK);
+        CHECK(back && back->pixels[0] == bits_to_float(0x3f000020u) &&
+              back->pixels[2] == 3.0f);
+        CHECK(getc(f) == EOF);
+        rtp_image_destroy(back);
+        back = NULL;
+        fclose(f);
+    }
+
+    /* Text after the scale is not whitespace: refused, named. */
+    h = (size_t)sprintf((char *)file, "PF\n2 1\n-1.0 x\n");
+    for (i = 0; i < 6; i++)
+        put_le(file + h + 4 * i, 1.0f);
+    CHECK(read_mem(file, h + 24, &back, &err) == RTP_ERR_FORMAT);
+    CHECK(!back && strstr(err.message, "\"x\" after its scale \"-1.0\""));
+    h = (size_t)sprintf((char *)file, "PF\n2 1 3\n-1.0\n");
+    for (i = 0; i < 6; i++)
+        put_le(file + h + 4 * i, 1.0f);
+    CHECK(read_mem(file, h + 24, &back, &err) == RTP_ERR_FORMAT);
+    CHECK(!back && strstr(err.message, "\"-1.0\" after its scale \"3\""));
+    /* a blank, then data one byte short: the blank was the header's one
+       whitespace and the file is cut */
+    h = (size_t)sprintf((char *)file, "PF\n2 1\n-1.0 ");
+    for (i = 0; i < 6; i++)
+        put_le(file + h + 4 * i, 1.0f);
+    CHECK(read_mem(file, h + 23, &back, &err) == RTP_ERR_FORMAT);
+    CHECK(!back && strstr(err.message, "truncated"));
+}
+
 static void test_ppm(void)
 {
     rtp_image *img = make_test_image(9, 4), *back = NULL;
@@ -1420,6 +1499,7 @@ int main(void)
     RUN(test_pfm_exact);
     RUN(test_pfm_layout);
     RUN(test_pfm_file_length);
+    RUN(test_pfm_header_blanks);
     RUN(test_ppm);
     RUN(test_png);
 #ifdef TEST_PNG
