@@ -14,6 +14,16 @@
    stored as float, and squares of coordinates must stay finite too. */
 #define NUM_LIMIT 1e18
 
+/* A light's position takes the range its light.N.pos key and
+   --add-light take (rtp_scene_set, rtp_tree_add_light: float's, so a
+   position rtp_scene_get gives back can be set again).  NUM_LIMIT's
+   reason is geometry's: a light is kept in double and shading and shadow
+   rays work in double (light - p and its length squared stay finite to
+   ~1e154), so a far light is a direction.  At 1e18 a scene's light past
+   it was refused while the same light by key traced (and traces alike:
+   4e17 to 3.4e38 give the same image in one direction). */
+#define LIGHT_POS_LIMIT 3.4e38
+
 /* Image size limit per side for `resolution`. */
 #define RES_MAX 32768
 
@@ -55,8 +65,10 @@ static rtp_status need(nff *c, rtpi_tok *t, const char *what,
                           what, field);
 }
 
-static rtp_status num(nff *c, const char *what, const char *noun,
-                      const char *field, double *out, rtpi_tok *tok)
+/* A number up to `limit` in magnitude. */
+static rtp_status num_upto(nff *c, const char *what, const char *noun,
+                           const char *field, double limit, double *out,
+                           rtpi_tok *tok)
 {
     rtpi_tok t;
     char show[48];
@@ -68,9 +80,9 @@ static rtp_status num(nff *c, const char *what, const char *noun,
     if (r == -1)
         return rtpi_lex_error(&c->lx, &t, "expected number for %s %s, got '%s'",
                               noun, field, rtpi_tok_show(&t, show, sizeof show));
-    if (r != 0 || fabs(*out) > NUM_LIMIT) {
+    if (r != 0 || fabs(*out) > limit) {
         char lim[32];
-        rtpi_fmt_g(lim, sizeof lim, 6, NUM_LIMIT);
+        rtpi_fmt_g(lim, sizeof lim, 6, limit);
         return rtpi_lex_error(&c->lx, &t, "%s %s %s is out of range (|x| <= %s)",
                               noun, field, rtpi_tok_show(&t, show, sizeof show), lim);
     }
@@ -79,19 +91,34 @@ static rtp_status num(nff *c, const char *what, const char *noun,
     return RTP_OK;
 }
 
-/* n numbers with field names; tokens to toks (may be NULL). */
-static rtp_status nums(nff *c, const char *what, const char *noun,
-                       const char *const *fields, int n, double *out,
-                       rtpi_tok *toks)
+/* A number within NUM_LIMIT. */
+static rtp_status num(nff *c, const char *what, const char *noun,
+                      const char *field, double *out, rtpi_tok *tok)
+{
+    return num_upto(c, what, noun, field, NUM_LIMIT, out, tok);
+}
+
+/* n numbers with field names, each within `limit`; tokens to toks (may
+   be NULL). */
+static rtp_status nums_upto(nff *c, const char *what, const char *noun,
+                            const char *const *fields, int n, double limit,
+                            double *out, rtpi_tok *toks)
 {
     int i;
     for (i = 0; i < n; i++) {
-        rtp_status st = num(c, what, noun, fields[i], &out[i],
-                            toks ? &toks[i] : NULL);
+        rtp_status st = num_upto(c, what, noun, fields[i], limit, &out[i],
+                                 toks ? &toks[i] : NULL);
         if (st != RTP_OK)
             return st;
     }
     return RTP_OK;
+}
+
+static rtp_status nums(nff *c, const char *what, const char *noun,
+                       const char *const *fields, int n, double *out,
+                       rtpi_tok *toks)
+{
+    return nums_upto(c, what, noun, fields, n, NUM_LIMIT, out, toks);
 }
 
 /* A non-negative value, or an error at its token. */
@@ -242,7 +269,8 @@ static rtp_status read_light(nff *c)
     int i;
     long idx;
     memset(&l, 0, sizeof l);
-    st = nums(c, "l (light)", "light", xyz, 3, l.pos, NULL);
+    st = nums_upto(c, "l (light)", "light", xyz, 3, LIGHT_POS_LIMIT, l.pos,
+                   NULL);
     if (st != RTP_OK)
         return st;
     l.color[0] = l.color[1] = l.color[2] = 1.0f;

@@ -164,6 +164,22 @@ else
     skip=$((skip + 1))
 fi
 
+# An NFF light takes the range its light.N.pos key takes (|x| <= 3.4e38;
+# it was 1e18, geometry's bound): a light at 1e30 in the scene traces the
+# image the key gives, bit for bit; past the range both are refused.
+sed 's/^l -4 -5 8 /l -4e29 -5e29 8e29 /' scenes/spheres.nff >"$T/far.nff"
+expect_rc 0 $RTP trace "$T/far.nff" --size 40x30 -i "$T/far.pfm"
+expect_rc 0 $RTP trace scenes/spheres.nff --size 40x30 -i "$T/key.pfm" --set light.0.pos=-4e29,-5e29,8e29
+cmp -s "$T/far.pfm" "$T/key.pfm" && ok || bad "a far NFF light traces unlike its key"
+sed 's/^l -4 -5 8 /l -1.7e38 -2.125e38 3.4e38 /' scenes/spheres.nff >"$T/far.nff"
+expect_rc 0 $RTP trace "$T/far.nff" --size 40x30 -i "$T/far.pfm"
+cmp -s "$T/far.pfm" "$T/key.pfm" && ok || bad "a light at 3.4e38 traces unlike one at 1e30"
+sed 's/^l -4 -5 8 /l -4 -5 3.5e38 /' scenes/spheres.nff >"$T/far.nff"
+expect_rc 1 $RTP trace "$T/far.nff" --size 40x30 -i "$T/far.pfm"
+grep -q "far.nff:12:9: light z 3.5e38 is out of range (|x| <= 3.4e+38)" "$T/err" && ok ||
+    { bad "light past the range: message"; cat "$T/err" >&2; }
+expect_rc 1 $RTP trace scenes/spheres.nff --size 40x30 -i "$T/far.pfm" --set light.0.pos=-4,-5,3.5e38
+
 # The largest side --size takes traces (the limit once counted a sample
 # row and column more than the image has)
 expect_rc 0 $RTP trace scenes/spheres.nff --size 1048576x1 -i "$T/wide.pfm" -q

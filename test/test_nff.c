@@ -382,6 +382,28 @@ static void test_names_and_keys(void)
     rtp_scene_destroy(s);
 }
 
+/* A light's position takes its key's range (|x| <= 3.4e38, float's),
+   not geometry's 1e18: a scene's light at 1e30 was refused while
+   light.0.pos=1e30,... was taken.  What rtp_scene_get gives back sets
+   again. */
+static void test_far_light(void)
+{
+    rtp_scene *s = NULL;
+    rtp_error err;
+    char buf[128];
+    CHECK(load("l -4e29 -5e29 8e29\nl 3.4e38 -3.4e38 0 1 1 1\ns 0 0 0 1\n",
+               "far.nff", &s, &err) == RTP_OK);
+    if (!s)
+        return;
+    CHECK(s->nlights == 2 && s->lights[0].pos[0] == -4e29 &&
+          s->lights[0].pos[2] == 8e29);
+    CHECK(s->lights[1].pos[0] == 3.4e38 && s->lights[1].pos[1] == -3.4e38);
+    CHECK(rtp_scene_get(s, "light.1.pos", buf, sizeof buf, &err) == RTP_OK);
+    CHECK_MSG(rtp_scene_set(s, "light.1.pos", buf, &err) == RTP_OK, "%s: %s", buf,
+              err.message);
+    rtp_scene_destroy(s);
+}
+
 static void test_checker_bump(void)
 {
     rtp_scene *s = NULL;
@@ -543,6 +565,9 @@ static const bad_case bad_nff[] = {
     {"s 0 0 -1.#IND00 1\n", RTP_ERR_PARSE, 1, 7, "expected number for sphere z, got '-1.#IND00'"},
     {"s 0 0 0 0x10\n", RTP_ERR_PARSE, 1, 9, "expected number for sphere radius"},
     {"s 0 0 0 1e30\n", RTP_ERR_PARSE, 1, 9, "out of range"},
+    /* lights take their key's range, float's (not geometry's 1e18) */
+    {"l 0 0 3.5e38\n", RTP_ERR_PARSE, 1, 7, "light z 3.5e38 is out of range (|x| <= 3.4e+38)"},
+    {"l 1 -1e39 0\n", RTP_ERR_PARSE, 1, 5, "light y -1e39 is out of range"},
     {"v resolution 32768 32768\n", RTP_ERR_PARSE, 1, 20, "over the limit of 2^27 pixels"},
     {"p 999999999\n", RTP_ERR_PARSE, 1, 3, "exceeds the limit"},
     {"p 8193\n", RTP_ERR_PARSE, 1, 3, "vertex count 8193 exceeds the limit of 8192"},
@@ -955,6 +980,7 @@ int main(void)
     RUN(test_triangulate);
     RUN(test_concave_polygon);
     RUN(test_names_and_keys);
+    RUN(test_far_light);
     RUN(test_checker_bump);
     RUN(test_files);
     RUN(test_bad_inputs);
