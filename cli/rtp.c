@@ -2485,7 +2485,9 @@ static int cmd_info(int argc, char **argv)
     }
     if (!output_ok(stats_path))
         return 1;
-    if (rtp_tree_read(tree_path, NULL, &tree, &err) != RTP_OK)
+    /* (every check rtp_tree_read makes, in the memory of a band of trees:
+       a summary needs none of them kept) */
+    if (rtp_tree_read_summary(tree_path, NULL, &tree, &err) != RTP_OK)
         return fail_err(&err);
     rtp_tree_get_info(tree, &ti);
     fb = file_size(tree_path);

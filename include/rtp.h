@@ -578,6 +578,20 @@ rtp_status rtp_tree_read(const char *path, const rtp_allocator *alloc,
 rtp_status rtp_tree_read_memory(const void *data, size_t size,
                                 const char *name, const rtp_allocator *alloc,
                                 rtp_tree **out, rtp_error *err);
+/** Reads and validates a tree file ("-": stdin) as rtp_tree_read does,
+ *  every check made (checksums, lengths, every node and every sample's
+ *  tree) and the same error for the same file, but keeps none of its ray
+ *  trees: each band of sample rows is checked and dropped, in the memory
+ *  of the scene, the samples' index while it is read (8 bytes each) and
+ *  a band of trees, not of every tree (what `rtp info` does).  *out holds
+ *  the scene and the counts: rtp_tree_get_info gives what it gives of
+ *  rtp_tree_read's tree, rtp_tree_scene, rtp_tree_set and
+ *  rtp_tree_add_light work; rtp_tree_eval, rtp_tree_eval_into,
+ *  rtp_tree_trace, rtp_tree_write, rtp_tree_merge and rtp_tree_crop
+ *  return RTP_ERR_ARGUMENT (read it with rtp_tree_read for those).
+ *  @return as rtp_tree_read. */
+rtp_status rtp_tree_read_summary(const char *path, const rtp_allocator *alloc,
+                                 rtp_tree **out, rtp_error *err);
 
 /* --------------------------------------------------------------- builder */
 

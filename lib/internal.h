@@ -812,6 +812,10 @@ rtpi_v3 rtpi_bump_normal(const rtp_scene *s, const rtpi_material *m,
 void rtpi_texture_factor(const rtp_scene *s, const rtpi_material *m,
                          rtpi_v3 p, const double uv[2], double f[3]);
 
+/* rtp_tree.busy of a tree rtp_tree_read_summary read: no nodes, no
+   sample index (nodes NULL, start NULL), only its scene and counts. */
+#define RTPI_TREE_SUMMARY 3
+
 /* The ray trees of a whole image, with the scene they were traced in
    (rtp_tree in rtp.h).  Sample k's nodes are nodes[start[k] .. start[k+1]). */
 struct rtp_tree {
@@ -819,7 +823,9 @@ struct rtp_tree {
     int busy; /* 1: an evaluation is under way: its progress or cancel
                  callback must not use the tree (rtpi_tree_busy); 2: the
                  tree of rtp_tree_eval_file's edit callback, without its
-                 ray trees: edits only */
+                 ray trees: edits only; RTPI_TREE_SUMMARY: read by
+                 rtp_tree_read_summary, without ray trees for good:
+                 edits and its info only */
     rtp_scene *scene;      /* owned copy: parameters are edited here */
     rtpi_material *mats0;  /* materials as traced (names not kept) */
     rtpi_light *lights0;   /* lights as traced (names not kept) */

@@ -231,6 +231,11 @@ rtp_status rtpi_tree_busy(const rtp_tree *t, const char *fn, rtp_error *err)
 {
     if (!t->busy)
         return RTP_OK;
+    if (t->busy == RTPI_TREE_SUMMARY)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                          "%s: the tree was read by rtp_tree_read_summary, which keeps no "
+                          "ray trees: read the file with rtp_tree_read to evaluate, trace, "
+                          "write, merge or crop it", fn);
     if (t->busy == 2)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
                           "%s: the tree rtp_tree_eval_file's edit callback is given has "
@@ -267,7 +272,8 @@ rtp_status rtp_tree_set(rtp_tree *t, const char *key, const char *value,
     rtp_status st;
     if (!t || !key || !value)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_set: NULL argument");
-    /* (an edit callback's tree, busy 2, takes edits: rtp_tree_eval_file) */
+    /* (an edit callback's tree, busy 2, takes edits: rtp_tree_eval_file;
+       so does a summary's, which has no trees to make stale) */
     if (t->busy == 1 && (st = rtpi_tree_busy(t, "rtp_tree_set", err)) != RTP_OK)
         return st;
     s = t->scene;

@@ -1083,6 +1083,7 @@ typedef struct loader {
     int sink_begun; /* the sink's begin was called: its edits are made,
                        the lights as traced are set (nlights0), its end
                        is due */
+    int summary; /* rtp_tree_read_summary's: every node checked, none kept */
 } loader;
 
 /* what: the message; detail (may be NULL) follows it. */
@@ -1583,6 +1584,38 @@ static rtp_status textures_held(loader *L)
     return RTP_OK;
 }
 
+/* A format-1 node's fixed fields from c (the layout's node_bytes there):
+   the bytes are there (checked a chunk at a time), read directly. */
+static void unpack_node1(const unsigned char *c, unsigned layout, rtpi_cnode *nd)
+{
+    uint32_t u;
+    int j;
+    for (j = 0; j < 3; j++, c += 4) {
+        u = (uint32_t)c[0] | (uint32_t)c[1] << 8 | (uint32_t)c[2] << 16 | (uint32_t)c[3] << 24;
+        memcpy(&nd->p[j], &u, 4);
+    }
+    nd->prim = (uint32_t)c[0] | (uint32_t)c[1] << 8 | (uint32_t)c[2] << 16 | (uint32_t)c[3] << 24;
+    c += 4;
+    nd->vis = 0;
+    if (layout & NODE_VIS) {
+        nd->vis = (uint32_t)c[0] | (uint32_t)c[1] << 8 | (uint32_t)c[2] << 16 |
+                  (uint32_t)c[3] << 24;
+        c += 4;
+    }
+    if (layout & NODE_LINK32)
+        nd->link = (uint32_t)c[0] | (uint32_t)c[1] << 8 | (uint32_t)c[2] << 16 |
+                   (uint32_t)c[3] << 24;
+    else
+        nd->link = *c;
+}
+
+/* A format-1 node's bytes in layout: its fixed fields (16), light bits
+   where the nodes hold them, the full link word or its byte of flags. */
+static size_t node1_bytes(unsigned layout)
+{
+    return 16 + ((layout & NODE_VIS) ? 4 : 0) + ((layout & NODE_LINK32) ? 4 : 1);
+}
+
 /* A band of a one-off evaluation: whole sample rows up to this many
    nodes (or one row of more), at most BAND_ROWS rows.  2^16 nodes are
    1.5 MB, in cache when the band is evaluated right after it is
@@ -1591,16 +1624,51 @@ static rtp_status textures_held(loader *L)
 #define BAND_NODES ((uint64_t)1 << 16)
 #define BAND_ROWS 64
 
-/* The trees of a one-off evaluation (L->sink): decoded band by band into
-   a buffer that holds the band's nodes after the last two samples before
+/* The nodes of format 1 read_tree checks a chunk at a time, as many as
+   the window holds (all of them when the whole file is in memory): a
+   short section is found at a chunk's start, before its nodes. */
+static size_t node1_chunk(const rd *r, size_t node_bytes, size_t nnodes)
+{
+    return r->src ? r->src->cap / node_bytes : nnodes;
+}
+
+/* The light words of trees of more than 32 lights (after every node),
+   checked as read_tree checks them (nl: the lights they were traced
+   with), none kept. */
+static rtp_status skip_light_words(loader *L, rd *r, uint32_t words, size_t nl)
+{
+    size_t i, w, n = L->t->nnodes;
+    if (!count_ok(r, (uint64_t)n * words, 4))
+        return bad(L, "section too short", NULL);
+    for (i = 0; i < n; i++)
+        for (w = 0; w < words; w++) {
+            uint32_t v = get_u32(r);
+            if (w == words - 1 && nl % 32 && v >> (nl % 32))
+                return bad(L, "invalid light bits", NULL);
+        }
+    return RTP_OK;
+}
+
+/* The trees of a one-off evaluation (L->sink) or of a summary
+   (L->summary: rtp_tree_read_summary): decoded band by band into a
+   buffer that holds the band's nodes after the last two samples before
    it (each packed node's references: node_refs), each sample checked as
-   read_tree checks it, and handed to the sink; none kept. */
-static rtp_status read_bands(loader *L, rd *r, unsigned layout, uint32_t vis_mask)
+   read_tree checks it, and handed to the sink (if any); none kept.  Each
+   error is read_tree's for the same bytes: the nodes' in file order (a
+   format-1 chunk's shortness before its nodes), the light words' after
+   them (words: a summary's file of more than 32 lights, nl its lights),
+   a malformed tree's last. */
+static rtp_status read_bands(loader *L, rd *r, unsigned layout, uint32_t vis_mask,
+                             uint32_t words, size_t nl)
 {
     rtp_tree *t = L->t;
     const uint64_t *start = t->start;
     size_t nx = (size_t)t->nx, ny = (size_t)t->ny, nprims = rtpi_scene_nprims(L->s);
     size_t y0, y1, c = 0, cap = 0, i;
+    /* format 1: its node's bytes, the nodes read and where the chunk
+       whose bytes were asked for ends */
+    size_t node_bytes = node1_bytes(layout), chunk = node1_chunk(r, node_bytes, t->nnodes);
+    size_t done = 0, chunk_end = 0;
     int malformed = 0;
     rtpi_cnode *band = NULL;
     /* bs: band's sample starts, the c carried samples' then the band's */
@@ -1611,18 +1679,18 @@ static rtp_status read_bands(loader *L, rd *r, unsigned layout, uint32_t vis_mas
     bs[0] = 0;
     for (y0 = 0; y0 < ny && st == RTP_OK; y0 = y1) {
         size_t k0 = y0 * nx, k, kn;
-        uint64_t need;
+        uint64_t need_n;
         y1 = y0 + 1;
         while (y1 < ny && y1 - y0 < BAND_ROWS && start[(y1 + 1) * nx] - start[k0] <= BAND_NODES)
             y1++;
         kn = y1 * nx;
-        need = bs[c] + (start[kn] - start[k0]);
-        if (need >= cap) {
+        need_n = bs[c] + (start[kn] - start[k0]);
+        if (need_n >= cap) {
             /* (at least one more than asked: rtpi_grow's own rule; and
                a buffer even for bands of no node, whose nodes pointer
                the evaluation offsets by 0: not NULL, as a whole read's
                t->nodes is not) */
-            size_t want = (size_t)need;
+            size_t want = (size_t)need_n;
             if (rtpi_grow(L->a, (void **)&band, &cap, want + 1, sizeof *band)) {
                 st = nomem(L);
                 break;
@@ -1635,13 +1703,26 @@ static rtp_status read_bands(loader *L, rd *r, unsigned layout, uint32_t vis_mas
                 rtpi_cnode *nd = &band[bs[li] + j];
                 const rtpi_cnode *ra, *rb;
                 size_t used;
-                if (r->src && r->n - r->at < PACKED_MAX)
-                    (void)refill(r, PACKED_MAX); /* (fewer where the section ends) */
-                /* (li >= 1 exactly where k >= 1, li >= 2 where k >= 2:
-                   the samples before k0 that k's references may need are
-                   the carried ones) */
-                refs_in(band, bs, li, j, &ra, &rb);
-                used = unpack_node(r->p + r->at, r->n - r->at, ra, rb, layout, nd);
+                if (L->major == 1) {
+                    if (done == chunk_end) {
+                        chunk_end = t->nnodes - done < chunk ? t->nnodes : done + chunk;
+                        if (!need(r, (chunk_end - done) * node_bytes)) {
+                            st = bad(L, "section too short", NULL);
+                            goto out;
+                        }
+                    }
+                    unpack_node1(r->p + r->at, layout, nd);
+                    used = node_bytes;
+                    done++;
+                } else {
+                    if (r->src && r->n - r->at < PACKED_MAX)
+                        (void)refill(r, PACKED_MAX); /* (fewer where the section ends) */
+                    /* (li >= 1 exactly where k >= 1, li >= 2 where k >= 2:
+                       the samples before k0 that k's references may need
+                       are the carried ones) */
+                    refs_in(band, bs, li, j, &ra, &rb);
+                    used = unpack_node(r->p + r->at, r->n - r->at, ra, rb, layout, nd);
+                }
                 if (used == 0)
                     st = bad(L, "section too short", NULL);
                 else if (used == (size_t)-1 || !finite3(nd->p) || nd->prim >= nprims ||
@@ -1658,7 +1739,7 @@ static rtp_status read_bands(loader *L, rd *r, unsigned layout, uint32_t vis_mas
                 check_subtree(band + bs[li], 0, n, 1, t->max_depth) != n)
                 malformed = 1;
         }
-        if (malformed)
+        if (malformed || !L->sink)
             goto carry;
         st = L->sink->band(L->sink->user, t, (int)y0, (int)y1, band, bs + c, L->err);
         if (st != RTP_OK) {
@@ -1677,6 +1758,8 @@ static rtp_status read_bands(loader *L, rd *r, unsigned layout, uint32_t vis_mas
             c = keep;
         }
     }
+    if (st == RTP_OK && words)
+        st = skip_light_words(L, r, words, nl);
     if (st == RTP_OK && malformed)
         st = bad(L, "malformed ray tree", NULL);
 out:
@@ -1710,7 +1793,7 @@ static rtp_status read_tree(loader *L, rd *r)
         return bad(L, "node layout does not match the scene", NULL);
     /* (format 1's fixed fields; a packed node takes 5 bytes at least, 6
        with light bits) */
-    node_bytes = 16 + ((layout & NODE_VIS) ? 4 : 0) + ((layout & NODE_LINK32) ? 4 : 1);
+    node_bytes = node1_bytes(layout);
     if (!count_ok(r, nnodes, L->major == 1 ? node_bytes : 5u + ((layout & NODE_VIS) != 0)) ||
         nnodes > (uint64_t)((size_t)-1 / sizeof(rtpi_cnode)))
         return bad(L, "invalid node count", NULL);
@@ -1751,7 +1834,15 @@ static rtp_status read_tree(loader *L, rd *r)
             return st;
         }
         if (stream)
-            return read_bands(L, r, layout, vis_mask);
+            return read_bands(L, r, layout, vis_mask, 0, nl);
+    }
+    if (L->summary) {
+        /* every file, its light words too; the samples' index was needed
+           only to find each sample's nodes */
+        rtp_status st = read_bands(L, r, layout, vis_mask, words, nl);
+        rtpi_free(L->a, t->start);
+        t->start = NULL;
+        return st;
     }
 whole:
     t->nodes = (rtpi_cnode *)rtpi_malloc_array(L->a, t->nnodes ? t->nnodes : 1, sizeof *t->nodes);
@@ -1779,7 +1870,7 @@ whole:
     }
     /* format 1: the nodes as many at a time as the window holds (all of
        them when the whole file is in memory) */
-    chunk = r->src ? r->src->cap / node_bytes : t->nnodes;
+    chunk = node1_chunk(r, node_bytes, t->nnodes);
     for (i = 0; L->major == 1 && i < t->nnodes;) {
         /* the bytes are there (checked once a chunk): read the fields
            directly */
@@ -1789,31 +1880,9 @@ whole:
             return bad(L, "section too short", NULL);
         c = r->p + r->at;
         r->at += (end - i) * node_bytes;
-        for (; i < end; i++) {
+        for (; i < end; i++, c += node_bytes) {
             rtpi_cnode *nd = &t->nodes[i];
-            uint32_t u;
-            int j;
-            for (j = 0; j < 3; j++, c += 4) {
-                u = (uint32_t)c[0] | (uint32_t)c[1] << 8 | (uint32_t)c[2] << 16 |
-                    (uint32_t)c[3] << 24;
-                memcpy(&nd->p[j], &u, 4);
-            }
-            nd->prim = (uint32_t)c[0] | (uint32_t)c[1] << 8 | (uint32_t)c[2] << 16 |
-                       (uint32_t)c[3] << 24;
-            c += 4;
-            nd->vis = 0;
-            if (layout & NODE_VIS) {
-                nd->vis = (uint32_t)c[0] | (uint32_t)c[1] << 8 | (uint32_t)c[2] << 16 |
-                          (uint32_t)c[3] << 24;
-                c += 4;
-            }
-            if (layout & NODE_LINK32) {
-                nd->link = (uint32_t)c[0] | (uint32_t)c[1] << 8 | (uint32_t)c[2] << 16 |
-                           (uint32_t)c[3] << 24;
-                c += 4;
-            } else {
-                nd->link = *c++;
-            }
+            unpack_node1(c, layout, nd);
             if (!finite3(nd->p) || nd->prim >= nprims || (nd->vis & ~vis_mask))
                 return bad(L, "invalid node", NULL);
         }
@@ -2125,7 +2194,7 @@ static int section_bytes(FILE *f, uint64_t len, int known, const rtp_allocator *
 
 static rtp_status tree_read_stream(FILE *f, uint64_t size, int known, const char *name,
                                    const rtp_allocator *alloc, const rtpi_tree_sink *ts,
-                                   rtp_tree **out, rtp_error *err)
+                                   int summary, rtp_tree **out, rtp_error *err)
 {
     rtp_allocator a;
     loader L;
@@ -2141,6 +2210,7 @@ static rtp_status tree_read_stream(FILE *f, uint64_t size, int known, const char
     L.name = name;
     L.err = err;
     L.sink = ts;
+    L.summary = summary;
     {
         /* (a stream's size: what it holds, once it holds fewer than 8) */
         size_t n = known && size < 8 ? (size_t)size : 8, got = fread(head, 1, n, f);
@@ -2294,8 +2364,11 @@ static rtp_status tree_read_stream(FILE *f, uint64_t size, int known, const char
     return tree_end(&L, seen, st, out);
 }
 
-static rtp_status read_path(const char *path, const rtp_allocator *alloc,
-                            const rtpi_tree_sink *ts, rtp_tree **out, rtp_error *err)
+/* fn: the public function's name (for its argument errors); ts, summary:
+   tree_read_stream's. */
+static rtp_status read_path(const char *fn, const char *path, const rtp_allocator *alloc,
+                            const rtpi_tree_sink *ts, int summary, rtp_tree **out,
+                            rtp_error *err)
 {
     rtp_allocator a;
     rtp_status st;
@@ -2306,9 +2379,9 @@ static rtp_status read_path(const char *path, const rtp_allocator *alloc,
     if (out)
         *out = NULL;
     if (!path || !out)
-        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_read: NULL argument");
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "%s: NULL argument", fn);
     if (rtpi_allocator_partial(alloc))
-        return rtpi_allocator_refused(err, "rtp_tree_read");
+        return rtpi_allocator_refused(err, fn);
     rtpi_allocator_init(&a, alloc);
     is_stdin = strcmp(path, "-") == 0;
     f = is_stdin ? stdin : fopen(path, "rb");
@@ -2327,7 +2400,7 @@ static rtp_status read_path(const char *path, const rtp_allocator *alloc,
             size = (uint64_t)sb.st_size;
         }
     }
-    st = tree_read_stream(f, size, known, path, &a, ts, out, err);
+    st = tree_read_stream(f, size, known, path, &a, ts, summary, out, err);
     if (!is_stdin)
         fclose(f);
     return st;
@@ -2336,11 +2409,20 @@ static rtp_status read_path(const char *path, const rtp_allocator *alloc,
 rtp_status rtp_tree_read(const char *path, const rtp_allocator *alloc, rtp_tree **out,
                          rtp_error *err)
 {
-    return read_path(path, alloc, NULL, out, err);
+    return read_path("rtp_tree_read", path, alloc, NULL, 0, out, err);
+}
+
+rtp_status rtp_tree_read_summary(const char *path, const rtp_allocator *alloc, rtp_tree **out,
+                                 rtp_error *err)
+{
+    rtp_status st = read_path("rtp_tree_read_summary", path, alloc, NULL, 1, out, err);
+    if (st == RTP_OK)
+        (*out)->busy = RTPI_TREE_SUMMARY; /* (for good: it has no ray trees) */
+    return st;
 }
 
 rtp_status rtpi_tree_read_sink(const char *path, const rtp_allocator *alloc,
                                const rtpi_tree_sink *ts, rtp_tree **out, rtp_error *err)
 {
-    return read_path(path, alloc, ts, out, err);
+    return read_path("rtp_tree_read", path, alloc, ts, 0, out, err);
 }
