@@ -404,6 +404,23 @@ static rtp_status op_tree_read(ctx *c)
     return st;
 }
 
+/* The same file summarised: its trees checked a band at a time, none
+   kept (rtp info). */
+static rtp_status op_tree_read_summary(ctx *c)
+{
+    rtp_tree *t = NULL;
+    rtp_tree_info ti;
+    rtp_status st;
+    ARM(c);
+    st = rtp_tree_read_summary(tmp_path("r.rtp"), c->a, &t, &c->err);
+    DISARM(c);
+    CHECK(st == RTP_OK || !t);
+    rtp_tree_get_info(t, &ti);
+    CHECK(st != RTP_OK || ti.nodes > 0);
+    rtp_tree_destroy(t);
+    return st;
+}
+
 static rtp_status op_tree_eval(ctx *c)
 {
     rtp_tree *t = tree(c);
@@ -1408,6 +1425,7 @@ SWEEP(record)
 SWEEP(builder)
 SWEEP(tree_write)
 SWEEP(tree_read)
+SWEEP(tree_read_summary)
 SWEEP(tree_eval)
 SWEEP(tree_set)
 SWEEP(tree_eval_edited)
@@ -1590,6 +1608,7 @@ int main(void)
     RUN(test_builder);
     RUN(test_tree_write);
     RUN(test_tree_read);
+    RUN(test_tree_read_summary);
     RUN(test_tree_eval);
     RUN(test_tree_set);
     RUN(test_tree_eval_edited);

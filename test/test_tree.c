@@ -5306,13 +5306,14 @@ static void test_eval_file(void)
     remove(trap);
 }
 
-/* rtp_tree_eval_file of the n bytes at data (written to file) against
-   rtp_tree_read, with each bit of `limit` bytes of the TREE section's
-   body (from its middle on where there are more) flipped in turn, the CRC made right: the same status
-   and message, or both read it.  The flips tried are added to *tried;
-   the disagreements returned (the first few told). */
-static size_t eval_file_flips(const unsigned char *data, size_t n, const char *file,
-                              size_t limit, size_t *tried)
+/* rtp_tree_eval_file (summary: rtp_tree_read_summary) of the n bytes at
+   data (written to file) against rtp_tree_read, with each bit of `limit`
+   bytes of the TREE section's body (where there are more: from its
+   middle on, where 1: its last ones, 2: its first) flipped in turn, the CRC made right: the
+   same status and message, or both read it.  The flips tried are added
+   to *tried; the disagreements returned (the first few told). */
+static size_t flips_against_read(const unsigned char *data, size_t n, const char *file,
+                                 size_t limit, int where, int summary, size_t *tried)
 {
     size_t at = section_at(data, n, "TREE"), len, p, p0, m, failures = 0;
     unsigned char *copy, byte;
@@ -5321,7 +5322,7 @@ static size_t eval_file_flips(const unsigned char *data, size_t n, const char *f
     if (at >= n)
         return 1;
     len = (size_t)data[at + 4] | (size_t)data[at + 5] << 8 | (size_t)data[at + 6] << 16;
-    p0 = at + 12 + (len > limit ? len / 2 : 0);
+    p0 = at + 12 + (len > limit ? (where == 1 ? len - limit : where == 2 ? 0 : len / 2) : 0);
     if (len > limit)
         len = limit;
     for (p = p0; p < p0 + len; p++) {
@@ -5344,13 +5345,19 @@ static size_t eval_file_flips(const unsigned char *data, size_t n, const char *f
             memset(&e2, 0, sizeof e2);
             s1 = rtp_tree_read(file, NULL, &t, &e1);
             rtp_tree_destroy(t);
-            s2 = rtp_tree_eval_file(file, NULL, NULL, NULL, NULL, &img, NULL, NULL, &e2);
-            rtp_image_destroy(img);
+            if (summary) {
+                s2 = rtp_tree_read_summary(file, NULL, &t, &e2);
+                rtp_tree_destroy(t);
+            } else {
+                s2 = rtp_tree_eval_file(file, NULL, NULL, NULL, NULL, &img, NULL, NULL, &e2);
+                rtp_image_destroy(img);
+            }
             ++*tried;
             if (s1 != s2 || (s1 != RTP_OK && strcmp(e1.message, e2.message) != 0)) {
                 if (failures++ < 3)
-                    fprintf(stderr, "  byte %zu bit %d: read %d \"%s\", eval_file %d \"%s\"\n",
-                            p - at - 12, b, (int)s1, e1.message, (int)s2, e2.message);
+                    fprintf(stderr, "  byte %zu bit %d: read %d \"%s\", %s %d \"%s\"\n",
+                            p - at - 12, b, (int)s1, e1.message,
+                            summary ? "read_summary" : "eval_file", (int)s2, e2.message);
             }
         }
     }
@@ -5359,7 +5366,7 @@ static size_t eval_file_flips(const unsigned char *data, size_t n, const char *f
 
 /* A file whose trees are wrong where its checksums are right:
    rtp_tree_eval_file refuses it with rtp_tree_read's status and message,
-   or reads it as that does (eval_file_flips).  A malformed tree before
+   or reads it as that does (flips_against_read).  A malformed tree before
    an invalid node was "malformed ray tree" (read_bands checked each
    sample once read, where read_tree reads every node first: "invalid
    node"); and a file that names a texture it does not hold and whose
@@ -5376,7 +5383,7 @@ static void test_eval_file_same_errors(void)
         return;
     }
     snprintf(file, sizeof file, "%s/rtp-evalfile-flip-%d.rtp", tmpdir(), (int)getpid());
-    failures += eval_file_flips(data, n, file, (size_t)-1, &tried);
+    failures += flips_against_read(data, n, file, (size_t)-1, 0, 0, &tried);
     free(data);
     /* textured.nff's tree without its textures' section */
     if (file_of("scenes/textured.nff", 20, 16, 0, 0, file)) {
@@ -5395,7 +5402,7 @@ static void test_eval_file_same_errors(void)
             memcpy(notex, data, at);
             memcpy(notex + at, data + at + 16 + len, n - at - 16 - len);
             m = n - 16 - len;
-            failures += eval_file_flips(notex, m, file, 64, &tried);
+            failures += flips_against_read(notex, m, file, 64, 0, 0, &tried);
         }
         free(notex);
         free(data);
@@ -5405,6 +5412,217 @@ static void test_eval_file_same_errors(void)
     CHECK_MSG(failures == 0, "%zu of %zu flipped bits refused otherwise than rtp_tree_read",
               failures, tried);
     remove(file);
+}
+
+/* A file's bytes (malloc'd, *n of them), or NULL. */
+static unsigned char *file_bytes(const char *path, size_t *n)
+{
+    FILE *f = fopen(path, "rb");
+    unsigned char *d = NULL;
+    long size;
+    *n = 0;
+    if (!f)
+        return NULL;
+    if (fseek(f, 0, SEEK_END) == 0 && (size = ftell(f)) > 0 && fseek(f, 0, SEEK_SET) == 0 &&
+        (d = (unsigned char *)malloc((size_t)size)) != NULL) {
+        *n = fread(d, 1, (size_t)size, f);
+        if (*n != (size_t)size) {
+            free(d);
+            d = NULL;
+        }
+    }
+    fclose(f);
+    return d;
+}
+
+/* The files of the summary's tests, in files[0..4] (tmp: those to
+   remove, also set): the small scene's (format 2, two lights), format 1,
+   40 lights (two light words a node after the nodes), many sample rows
+   (big: SPD corner samples at the scene's 512x512, 513 rows, nine bands,
+   3 MB; else 140 rows of 4 samples, three bands), textures.  @return
+   whether they were made (a failure CHECKed). */
+static int summary_files(char files[5][512], char *nff, int big)
+{
+    size_t n;
+    unsigned char *data = small_tree_file(&n);
+    FILE *f;
+    int pid = (int)getpid(), ok = 1;
+    snprintf(files[0], 512, "%s/rtp-summary-%d-small.rtp", tmpdir(), pid);
+    snprintf(files[1], 512, "test/golden/format1.rtp");
+    snprintf(files[2], 512, "%s/rtp-summary-%d-lights.rtp", tmpdir(), pid);
+    snprintf(files[3], 512, "%s/rtp-summary-%d-spd.rtp", tmpdir(), pid);
+    snprintf(files[4], 512, "%s/rtp-summary-%d-tex.rtp", tmpdir(), pid);
+    snprintf(nff, 512, "%s/rtp-summary-%d.nff", tmpdir(), pid);
+    f = data ? fopen(files[0], "wb") : NULL;
+    ok &= f && fwrite(data, 1, n, f) == n;
+    if (f)
+        ok &= fclose(f) == 0;
+    free(data);
+    ok = ok && write_many_lights(nff) && file_of(nff, 24, 18, 0, 0, files[2]);
+    ok = ok && file_of("scenes/spheres.nff", 4, 140, big, 0, files[3]);
+    ok = ok && file_of("scenes/textured.nff", 20, 16, 0, 0, files[4]);
+    CHECK_MSG(ok, "the summary's test files were not made");
+    return ok;
+}
+
+static void summary_files_remove(char files[5][512], const char *nff)
+{
+    int i;
+    for (i = 0; i < 5; i++)
+        if (i != 1)
+            remove(files[i]);
+    remove(nff);
+}
+
+/* rtp_tree_read_summary: of every kind of file (each node layout, format
+   1, SPD, nine bands, textures) the info and scene rtp_tree_read
+   gives, no node kept (its peak is a band's, not the trees': a whole
+   read past it by more than half the nodes' bytes), every call that
+   needs the trees refused by name, edits taken, nothing leaked. */
+static void test_summary(void)
+{
+    static const char *const keys[] = {"camera.from", "camera.angle", "ambient", "background",
+                                       "light.0.pos", "light.0.color", "mat.0.color",
+                                       "mat.0.ks", "mat.1.kt", "mat.1.ior"};
+    char files[5][512], nff[512];
+    int i, ok = summary_files(files, nff, 1);
+    size_t k;
+    for (i = 0; ok && i < 5; i++) {
+        counted ca, cb;
+        rtp_allocator a = counted_allocator(&ca), b = counted_allocator(&cb);
+        rtp_tree *t = NULL, *u = NULL;
+        rtp_tree_info ti, ui;
+        rtp_error err;
+        CHECK_MSG(rtp_tree_read(files[i], &a, &t, &err) == RTP_OK, "%s: %s", files[i],
+                  err.message);
+        CHECK_MSG(rtp_tree_read_summary(files[i], &b, &u, &err) == RTP_OK, "%s: %s", files[i],
+                  err.message);
+        if (!t || !u) {
+            rtp_tree_destroy(t);
+            rtp_tree_destroy(u);
+            continue;
+        }
+        rtp_tree_get_info(t, &ti);
+        rtp_tree_get_info(u, &ui);
+        CHECK_MSG(memcmp(&ti, &ui, sizeof ti) == 0 && ui.nodes > 0, "%s: info differs",
+                  files[i]);
+        for (k = 0; k < sizeof keys / sizeof *keys; k++) {
+            char v1[256], v2[256];
+            rtp_status s1 = rtp_scene_get(rtp_tree_scene(t), keys[k], v1, sizeof v1, NULL),
+                       s2 = rtp_scene_get(rtp_tree_scene(u), keys[k], v2, sizeof v2, NULL);
+            CHECK_MSG(s1 == s2 && (s1 != RTP_OK || strcmp(v1, v2) == 0), "%s: %s: %s, %s",
+                      files[i], keys[k], s1 == RTP_OK ? v1 : "-", s2 == RTP_OK ? v2 : "-");
+        }
+        CHECK(u->nodes == NULL && u->start == NULL && u->vis_ext == NULL);
+        CHECK(i != 2 || t->vis_words == 2);
+        if (i == 3)
+            CHECK_MSG(cb.peak + ui.nodes * sizeof(rtpi_cnode) / 2 < ca.peak,
+                      "%s: summary's peak %zu bytes against the whole read's %zu (%llu nodes)",
+                      files[i], cb.peak, ca.peak, ui.nodes);
+        if (i == 0) {
+            /* what needs the trees: refused, naming the call and the reader */
+            rtp_image *img = NULL, *into = NULL;
+            rtp_tree *out = NULL;
+            rtp_status st[6];
+            int region[4] = {0, 0, 2, 2}, j;
+            const double pos[3] = {1, 2, 3};
+            memset(&err, 0, sizeof err);
+            st[0] = rtp_tree_eval(u, NULL, &img, NULL, &err);
+            CHECK_MSG(strstr(err.message, "rtp_tree_eval: ") == err.message &&
+                          strstr(err.message, "rtp_tree_read_summary"),
+                      "%s", err.message);
+            CHECK(rtp_image_create(ui.width, ui.height, NULL, &into, NULL) == RTP_OK);
+            st[1] = rtp_tree_eval_into(u, NULL, into, NULL, &err);
+            st[2] = rtp_tree_trace(u, 1, &img, NULL, &err);
+            st[3] = rtp_tree_write(u, files[0], NULL, &err);
+            st[4] = rtp_tree_crop(u, region, &out, &err);
+            CHECK_MSG(strstr(err.message, "rtp_tree_crop: ") == err.message &&
+                          strstr(err.message, "rtp_tree_read_summary"),
+                      "%s", err.message);
+            st[5] = rtp_tree_merge(&u, 1, &out, &err);
+            for (j = 0; j < 6; j++)
+                CHECK_MSG(st[j] == RTP_ERR_ARGUMENT, "call %d: %d", j, (int)st[j]);
+            CHECK(!img && !out);
+            rtp_image_destroy(into);
+            /* (the refused write left the file alone) */
+            CHECK(rtp_tree_read_summary(files[0], NULL, &out, NULL) == RTP_OK);
+            rtp_tree_destroy(out);
+            /* edits: taken, as rtp_tree_read's tree takes them */
+            CHECK(rtp_tree_set(u, "light.0.color", "1,0.5,0", &err) == RTP_OK);
+            CHECK(rtp_tree_add_light(u, pos, &err) == RTP_OK);
+            rtp_tree_get_info(u, &ui);
+            CHECK(ui.lights == ti.lights + 1);
+        }
+        rtp_tree_destroy(t);
+        rtp_tree_destroy(u);
+        CHECK_MSG(ca.live == 0 && cb.live == 0, "%s: %zu and %zu bytes left", files[i], ca.live,
+                  cb.live);
+    }
+    {
+        /* a missing file, a directory, a NULL: rtp_tree_read's errors */
+        rtp_tree *u = (rtp_tree *)&ok;
+        rtp_error e1, e2;
+        CHECK(rtp_tree_read_summary("/nonexistent/x.rtp", NULL, &u, &e2) == RTP_ERR_IO && !u);
+        CHECK(rtp_tree_read("/nonexistent/x.rtp", NULL, &u, &e1) == RTP_ERR_IO &&
+              strcmp(e1.message, e2.message) == 0);
+        CHECK(rtp_tree_read_summary(tmpdir(), NULL, &u, &e2) == RTP_ERR_IO && !u);
+        CHECK(rtp_tree_read_summary(NULL, NULL, &u, &e2) == RTP_ERR_ARGUMENT &&
+              strstr(e2.message, "rtp_tree_read_summary"));
+    }
+    summary_files_remove(files, nff);
+}
+
+/* rtp_tree_read_summary refuses a file whose trees are wrong where its
+   checksums are right with rtp_tree_read's status and message, or reads
+   it as that does: flipped bits of each kind of file, where its nodes
+   are (several bands in, format 1's fixed nodes), its sample counts, the
+   light words after the nodes (40 lights: "invalid light bits" after an
+   invalid node, before a malformed tree) and a file naming a texture it
+   does not hold (tree_end's check, last). */
+static void test_summary_same_errors(void)
+{
+    char files[5][512], nff[512], file[512];
+    size_t n, m, at, failures = 0, tried = 0;
+    unsigned char *data, *notex;
+    int i;
+    if (!summary_files(files, nff, 0)) {
+        summary_files_remove(files, nff);
+        return;
+    }
+    snprintf(file, sizeof file, "%s/rtp-summary-flip-%d.rtp", tmpdir(), (int)getpid());
+    for (i = 0; i < 5; i++) {
+        data = file_bytes(files[i], &n);
+        CHECK_MSG(data != NULL, "%s", files[i]);
+        if (!data)
+            continue;
+        if (i == 0) {
+            failures += flips_against_read(data, n, file, (size_t)-1, 0, 1, &tried);
+        } else if (i == 4) {
+            at = section_at(data, n, "TEXB");
+            if (at >= n)
+                at = section_at(data, n, "TEXR");
+            CHECK(at < n);
+            if (at < n && (notex = (unsigned char *)malloc(n)) != NULL) {
+                size_t len = (size_t)data[at + 4] | (size_t)data[at + 5] << 8 |
+                             (size_t)data[at + 6] << 16;
+                memcpy(notex, data, at);
+                memcpy(notex + at, data + at + 16 + len, n - at - 16 - len);
+                m = n - 16 - len;
+                failures += flips_against_read(notex, m, file, 64, 0, 1, &tried);
+                failures += flips_against_read(notex, m, file, 32, 2, 1, &tried);
+                free(notex);
+            }
+        } else {
+            failures += flips_against_read(data, n, file, 96, 0, 1, &tried);
+            failures += flips_against_read(data, n, file, i == 2 ? 96 : 32, 1, 1, &tried);
+            failures += flips_against_read(data, n, file, 48, 2, 1, &tried);
+        }
+        free(data);
+    }
+    CHECK_MSG(failures == 0, "%zu of %zu flipped bits refused otherwise than rtp_tree_read",
+              failures, tried);
+    remove(file);
+    summary_files_remove(files, nff);
 }
 
 int main(void)
@@ -5479,5 +5697,7 @@ int main(void)
     RUN(test_reader_refuses_what_no_scene_holds);
     RUN(test_eval_file);
     RUN(test_eval_file_same_errors);
+    RUN(test_summary);
+    RUN(test_summary_same_errors);
     return check_report();
 }
