@@ -672,6 +672,41 @@ for kv in light.0.color=1,0.5,0.2 light.0.pos=0.3,-0.4,0.2; do
     else ok; fi
 done
 
+# info keeps no tree either (rtp_tree_read_summary): its peak RSS over the
+# same build's info of the 8x8 tree (never a bare figure: see above) grows
+# by less than a quarter of the trees' bytes, where a stream, which holds
+# the tree, grows by more than them (else the check measures nothing);
+# the same summary as the stream's tree gives, a corrupt or truncated
+# file refused with the message reading it whole gives (exit 1).
+if [ -x /usr/bin/time ] && /usr/bin/time -f %M -o "$T/m" true 2>/dev/null; then
+    rss() { /usr/bin/time -f %M -o "$T/m" "$@" >/dev/null 2>&1; tail -n 1 "$T/m"; }
+    b=$(rss $RTP info "$T/trap8.rtp")
+    o=$(rss $RTP info "$T/trap.rtp" --stats "$T/info.json")
+    st=$(echo "ambient=0.1" | rss $RTP reeval "$T/trap.rtp" --stream -i "$T/ist%d.pfm" -q)
+    tb=$(sed -n 's/.*"tree_bytes": \([0-9]*\).*/\1/p' "$T/info.json")
+    if [ -z "$tb" ] || [ -z "$b" ] || [ -z "$o" ] || [ -z "$st" ]; then
+        bad "info: no tree_bytes or peak RSS"
+    elif [ $(((st - b) * 1024)) -lt "$tb" ]; then
+        bad "--stream: grew $((st - b)) KiB, below the tree's $tb bytes: the check measures nothing"
+    elif [ $(((o - b) * 1024 * 4)) -ge "$tb" ]; then
+        bad "info: grew $((o - b)) KiB over an 8x8 tree's, the trees are $tb bytes: they were kept"
+    else ok; fi
+else
+    echo "skip: no /usr/bin/time -f: info's memory not checked" >&2
+    skip=$((skip + 1))
+fi
+sz=$(wc -c <"$T/trap.rtp")
+cp "$T/trap.rtp" "$T/flip.rtp"
+printf 'ABCD' | dd of="$T/flip.rtp" bs=1 seek=$((sz / 2)) conv=notrunc 2>/dev/null
+head -c $((sz / 2)) "$T/trap.rtp" >"$T/short.rtp"
+for f in flip short; do
+    expect_rc 1 $RTP info "$T/$f.rtp" --stats "$T/bad.json"
+    mv "$T/err" "$T/info.err"
+    expect_rc 1 sh -c "echo ambient=0.1 | $RTP reeval '$T/$f.rtp' --stream -i '$T/x%d.pfm' -q"
+    if grep -q "$f.rtp: .* in section TREE" "$T/info.err" && cmp -s "$T/info.err" "$T/err"; then ok
+    else bad "info of $f.rtp: $(cat "$T/info.err"), reading it whole: $(cat "$T/err")"; fi
+done
+
 rm -rf "$T"
 echo "$pass passed, $fail failed, $skip skipped"
 [ "$fail" -eq 0 ]
