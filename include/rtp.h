@@ -11,7 +11,8 @@
  *   rtp_scene_set      edit a parameter by key ("light.0.pos", "mat.2.kd");
  *                      rtp_scene_get reads one back
  *   rtp_trace          the image;  rtp_record: the image and its ray trees
- *   rtp_tree_write/read   the self-contained tree file (.rtp)
+ *   rtp_tree_write/read   the self-contained tree file (.rtp);
+ *                      rtp_tree_read_summary checks one, keeping no trees
  *   rtp_tree_set       edit the tree's scene: materials, lights (moved ones
  *                      get new shadows), bumps, even ks/kt/ior (the samples
  *                      concerned are traced again, exactly) and the camera
