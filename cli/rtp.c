@@ -1176,10 +1176,11 @@ static void usage_hint(const char *help)
 
 static const char trace_help[] =
     "usage: rtp trace SCENE [options]\n"
-    "Traces SCENE (NFF, or .obj) with a Whitted ray tracer and writes the image\n"
-    "and, with -o, the ray trees that `rtp reeval` re-evaluates.\n"
+    "Traces SCENE (NFF, or .obj; '-' = NFF on stdin) with a Whitted ray tracer\n"
+    "and writes the image and, with -o, the ray trees that `rtp reeval`\n"
+    "re-evaluates.\n"
     "  -o, --output TREE    write the ray trees to TREE (.rtp; '-' = stdout)\n"
-    "  -i, --image FILE     image to write (.png, .ppm, .pfm; '-' = PFM on stdout);\n"
+    "  -i, --image FILE     image to write (.png .ppm .pfm; '-' = PFM on stdout);\n"
     "                       default: SCENE's name with .png ('-': trace.png;\n"
     "                       .ppm in a build without PNG), in the current folder\n"
     "                       (none with -o)\n"
@@ -1198,11 +1199,13 @@ static const char trace_help[] =
     "  --spd                SPD testing procedure: 512x512 from 513x513 corner\n"
     "                       rays, depth 5, no weight cut-off, one-sided opaque\n"
     "  --depth N            maximum ray-tree depth, eye ray = 1 (default 5)\n"
-    "  --memory-limit MIB   stop when the image and its trees need more (16384)\n"
+    "  --memory-limit MIB   stop when the image and its trees need more (default\n"
+    "                       16384)\n"
     "  --min-weight W       do not spawn rays weighing less than W (default 0)\n"
-    "  -j, --threads N      threads (default: the processors online)\n"
+    "  -j, --threads N      threads, 1 to 256 (default: the processors online)\n"
     "  --stats FILE         write statistics as one JSON object ('-' = stdout)\n"
-    "  -q, --quiet          no messages but errors;  -v, --verbose  more\n"
+    "  -q, --quiet          no messages but errors\n"
+    "  -v, --verbose        a line of times and ray counts on stderr\n"
     "  -h, --help           this help\n";
 
 /* The image written where none is named: the input's name without its
@@ -1799,7 +1802,8 @@ static const char reeval_help[] =
     "  --shadows MODE       shadows of moved or added lights: auto[:RES] (exact:\n"
     "                       the light buffer where the tree has 4 or more hits a\n"
     "                       primitive, else shadow rays, but the light buffer for\n"
-    "                       a first move, before a kd-tree is built; default),\n"
+    "                       one or two lights moved by a single reeval, which\n"
+    "                       builds no kd-tree; default),\n"
     "                       exact (shadow rays), lightbuf[:RES] (light buffer,\n"
     "                       exact), itembuf[:RES] (item buffer, approximate at\n"
     "                       shadow edges), osmesa[:RES] (item buffer by OSMesa);\n"
@@ -1817,18 +1821,20 @@ static const char reeval_help[] =
     "  --memory-limit MIB   stop when traced-again trees would take more, with\n"
     "                       the trees already held, or a moved light's direction\n"
     "                       cube or light buffer lists could (auto: shadow rays\n"
-    "                       then) (16384)\n"
+    "                       then) (default 16384)\n"
     "  --reference          also trace the edited scene in full and report both\n"
     "                       times and the error of the re-evaluation\n"
-    "  -j, --threads N      threads (default: the processors online)\n"
+    "  -j, --threads N      threads, 1 to 256 (default: the processors online)\n"
     "  --stats FILE         write statistics as one JSON object ('-' = stdout)\n"
-    "  -q, --quiet / -v, --verbose / -h, --help\n"
+    "  -q, --quiet          no messages but errors\n"
+    "  -v, --verbose        the evaluation's time and nodes on stderr\n"
+    "  -h, --help           this help\n"
     "Edits that change where rays go (a new ior, ks or kt raised from 0, any\n"
-    "ks or kt edit of a tree traced with --min-weight) trace again exactly\n"
-    "the samples that contain the material (--stats reports\n"
-    "retraced_samples and retraced_rays); the result equals a full trace.  A\n"
-    "camera key (camera.from|at|up|angle|hither) traces every sample again: a\n"
-    "full trace from the tree file, said so; later edits re-evaluate.\n";
+    "ks or kt edit of a tree traced with --min-weight) trace again exactly the\n"
+    "samples that contain the material (--stats reports retraced_samples and\n"
+    "retraced_rays); the result equals a full trace.  A camera key\n"
+    "(camera.from|at|up|angle|hither) traces every sample again: a full trace\n"
+    "from the tree file, said so; later edits re-evaluate.\n";
 
 /* Expands a pattern with one %d or %0Nd; returns 0 or -1. */
 static int expand_pattern(const char *pat, int n, char *out, size_t size)
@@ -2439,11 +2445,15 @@ static void print_keys(const rtp_scene *s, const rtp_tree_info *ti)
 }
 
 static const char info_help[] =
-    "usage: rtp info TREE [--stats FILE] [-q] [-v] [-h]\n"
-    "Prints what a tree file holds: image and sample sizes, nodes, bytes per\n"
-    "node, file size, and the keys --set takes with their values now: the\n"
-    "camera, ambient and background, each light and material by index and\n"
-    "name (texture and bump fields where a material has them).\n";
+    "usage: rtp info TREE [options]\n"
+    "Prints what a tree file ('-' = stdin) holds: image and sample sizes,\n"
+    "nodes, bytes per node, file size, and the keys --set takes with their\n"
+    "values now: the camera, ambient and background, each light and material\n"
+    "by index and name (texture and bump fields where a material has them).\n"
+    "  --stats FILE         write the sizes as one JSON object ('-' = stdout)\n"
+    "  -q, --quiet          print nothing (--stats still writes)\n"
+    "  -v, --verbose        accepted (info has nothing more to say)\n"
+    "  -h, --help           this help\n";
 
 static int cmd_info(int argc, char **argv)
 {
@@ -2545,7 +2555,7 @@ static int cmd_info(int argc, char **argv)
 /* ---------------------------------------------------------------- merge */
 
 static const char merge_help[] =
-    "usage: rtp merge -o TREE [-i IMAGE] REGION.rtp...\n"
+    "usage: rtp merge -o TREE [-i IMAGE] [-j N] REGION.rtp...\n"
     "       rtp merge -i IMAGE --size WxH REGION-IMAGE@X,Y...\n"
     "Joins what `rtp trace --region` made on several machines into the whole\n"
     "frame: region trees into the frame's tree (and, with -i, its image,\n"
@@ -2553,9 +2563,11 @@ static const char merge_help[] =
     "  -o, --output TREE    the joined tree file ('-' = stdout)\n"
     "  -i, --image FILE     the joined image (.png .ppm .pfm; '-' = PFM on stdout)\n"
     "  --size WxH           the frame's size (image mode)\n"
-    "  -j, --threads N      threads for evaluating the joined tree (default: the\n"
-    "                       processors online)\n"
-    "  -q, --quiet / -v, --verbose / -h, --help\n"
+    "  -j, --threads N      threads for evaluating the joined tree, 1 to 256\n"
+    "                       (default: the processors online)\n"
+    "  -q, --quiet          no messages but errors\n"
+    "  -v, --verbose        accepted (merge has nothing more to say)\n"
+    "  -h, --help           this help\n"
     "Regions must cover the frame without overlapping.\n";
 
 /* The library names a part by its index, "parts[K]": here it is the
@@ -2821,21 +2833,24 @@ int main(int argc, char **argv)
     }
     if (strcmp(argv[1], "version") == 0 || strcmp(argv[1], "--version") == 0) {
         unsigned f = rtp_features();
-        if (argc > 2 && (strcmp(argv[2], "-h") == 0 || strcmp(argv[2], "--help") == 0)) {
-            fputs("usage: rtp version\nPrints the versions of rtp and of its library, and what "
-                  "this build has\n(png, threads, osmesa).\n",
-                  stdout);
-            return stdout_done(0);
-        }
+        int k;
+        /* --help anywhere, as every command takes it ('rtp version -v
+           --help' was a usage error) */
+        for (k = 2; k < argc; k++)
+            if (strcmp(argv[k], "-h") == 0 || strcmp(argv[k], "--help") == 0) {
+                fputs("usage: rtp version [-q] [-v]\nPrints the versions of rtp and of its "
+                      "library, and what this build has\n(png, threads, osmesa).\n",
+                      stdout);
+                return stdout_done(0);
+            }
         {
             /* -q and -v as every command takes them (it prints what it
                always prints) */
-            int k;
             for (k = 2; k < argc; k++)
                 if (strcmp(argv[k], "-q") && strcmp(argv[k], "--quiet") &&
                     strcmp(argv[k], "-v") && strcmp(argv[k], "--verbose")) {
                     msg("version: unexpected argument '%s'", argv[k]);
-                    fputs("usage: rtp version\n", stderr);
+                    fputs("usage: rtp version [-q] [-v]\n", stderr);
                     return EXIT_USAGE;
                 }
         }

@@ -21,6 +21,20 @@ expect_rc 0 $RTP --help
 expect_rc 2 $RTP
 expect_rc 2 $RTP frobnicate
 expect_rc 0 $RTP trace --help
+# Every --help fits 80 columns, and each command's lists -q, -v and -h
+# alike; --help is taken anywhere among the arguments (version took it
+# only first: 'rtp version -v --help' was a usage error)
+for c in "" trace reeval diff info merge version; do
+    $RTP $c --help >"$T/help" 2>&1 && ok || bad "rtp $c --help failed"
+    awk 'length > 80 { w = 1 } END { exit w }' "$T/help" && ok ||
+        bad "rtp $c --help is wider than 80 columns"
+    case $c in trace|reeval|diff|info|merge)
+        grep -q '^  -q, --quiet ' "$T/help" && grep -q '^  -v, --verbose ' "$T/help" &&
+            grep -q '^  -h, --help ' "$T/help" && ok || bad "rtp $c --help: -q, -v, -h";;
+    esac
+done
+expect_rc 0 $RTP version -v --help
+grep -q "usage: rtp version" "$T/out" && ok || bad "version -v --help: $(cat "$T/err")"
 expect_rc 2 $RTP trace
 expect_rc 2 $RTP trace scenes/spheres.nff --depth zero
 expect_rc 1 $RTP trace "$T/does-not-exist.nff" -i "$T/x.pfm"
