@@ -73,7 +73,8 @@ extern "C" {
 /* Before 1.0 a minor version may add fields at the end of the public
    structs (0.2: rtp_trace_stats.capped_rays, rtp_eval_options.memory_limit,
    rtp_eval_stats.capped_rays and camera_moved; 0.3:
-   rtp_eval_stats.stale_samples): a program compares rtp_version_number()
+   rtp_eval_stats.stale_samples; 0.4: rtp_trace_options.cancel and
+   rtp_eval_options.cancel): a program compares rtp_version_number()
    with the RTP_VERSION_NUMBER it was built with. */
 #define RTP_VERSION_MAJOR 0
 #define RTP_VERSION_MINOR 4
@@ -348,9 +349,10 @@ typedef enum rtp_shadow_mode {
                                  with OSMESA=1), from a thread of its own:
                                  the caller's OpenGL binding is untouched */
     RTP_SHADOWS_AUTO = 4      /* exact: the light buffer where the tree has
-                                 at least 4 recorded hits a primitive (or no
-                                 kd-tree yet and no move before: a first
-                                 move) unless its lists would be long
+                                 at least 4 recorded hits a primitive (or,
+                                 with no_cache, one or two lights moved
+                                 while the tree has no kd-tree and no move
+                                 before) unless its lists would be long
                                  (overlapping primitives: past 16 entries
                                  a hit and a primitive, README), else
                                  shadow rays through the kd-tree (the
@@ -373,8 +375,9 @@ typedef struct rtp_eval_options {
     int threads;            /* 0 or 1: one thread, the calling one (a
                                deep tree's re-trace aside: Stack above) */
     rtp_shadow_mode shadows;
-    int shadow_res;         /* direction-cube cells per face edge; 0: 512;
-                               at most RTP_MAX_SHADOW_RES */
+    int shadow_res;         /* direction-cube cells per face edge; 0: 512
+                               (RTP_SHADOWS_AUTO's light buffer: from the
+                               tree's hits); at most RTP_MAX_SHADOW_RES */
     rtp_stale_mode stale;
     int no_cache;           /* 1: a one-off evaluation: keep no caches for
                                later edits (faster once, slower after) */
@@ -401,8 +404,12 @@ typedef struct rtp_eval_options {
                                moved light's direction cube's cells (6
                                shadow_res^2, 9 bytes each for an item
                                buffer, OSMesa's 12 more a face cell, 4
-                               for a light buffer); 0: 16 GiB.
-                               Past it: RTP_ERR_LIMIT, the tree as it was */
+                               for a light buffer, whose per-primitive
+                               arrays and lists are counted too before
+                               they are made); 0: 16 GiB.
+                               Past it: RTP_ERR_LIMIT, the tree as it was
+                               (RTP_SHADOWS_AUTO takes shadow rays
+                               instead of a cube over it) */
     /* Asked now and then from the calling thread (with progress_user)
        while samples are traced again (class-D edits, RTP_STALE_RETRACE, a
        moved camera) and while moved lights' shadows are decided (on
