@@ -74,10 +74,12 @@ extern "C" {
    structs (0.2: rtp_trace_stats.capped_rays, rtp_eval_options.memory_limit,
    rtp_eval_stats.capped_rays and camera_moved; 0.3:
    rtp_eval_stats.stale_samples; 0.4: rtp_trace_options.cancel and
-   rtp_eval_options.cancel): a program compares rtp_version_number()
-   with the RTP_VERSION_NUMBER it was built with. */
+   rtp_eval_options.cancel; 0.5: rtp_tree_info.min_weight, and the calls
+   rtp_tree_eval_file and rtp_tree_read_summary; light.N.pos of the next
+   N adds a light): a program compares rtp_version_number() with the
+   RTP_VERSION_NUMBER it was built with. */
 #define RTP_VERSION_MAJOR 0
-#define RTP_VERSION_MINOR 4
+#define RTP_VERSION_MINOR 5
 #define RTP_VERSION_PATCH 0
 #define RTP_VERSION_NUMBER \
     (RTP_VERSION_MAJOR * 10000 + RTP_VERSION_MINOR * 100 + RTP_VERSION_PATCH)
