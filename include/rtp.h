@@ -558,7 +558,7 @@ typedef rtp_status (*rtp_tree_edit_fn)(void *user, rtp_tree *tree, rtp_error *er
  *  no camera edit, no bump edit with RTP_STALE_RETRACE) and move or add
  *  one light at most, and the file holds at most 32 lights (format 2),
  *  each sample's tree is evaluated as it is read and none is kept: the
- *  memory of the image, the samples' index (8 bytes each), a band of
+ *  memory of the image, the samples' node counts (a byte each for most), a band of
  *  trees and the moved light's direction cube, not of every tree (README: "One-off evaluation"; the moved
  *  light's shadow queries are made first, its cube's build asking
  *  opt->cancel).  Otherwise the trees are read whole first.  info (may be NULL) receives rtp_tree_get_info
@@ -592,7 +592,7 @@ rtp_status rtp_tree_read_memory(const void *data, size_t size,
  *  every check made (checksums, lengths, every node and every sample's
  *  tree) and the same error for the same file, but keeps none of its ray
  *  trees: each band of sample rows is checked and dropped, in the memory
- *  of the scene, the samples' index while it is read (8 bytes each) and
+ *  of the scene, the samples' node counts (a byte each for most) and
  *  a band of trees, not of every tree (what `rtp info` does).  *out holds
  *  the scene and the counts: rtp_tree_get_info gives what it gives of
  *  rtp_tree_read's tree, rtp_tree_scene, rtp_tree_set and

@@ -1649,6 +1649,42 @@ static rtp_status skip_light_words(loader *L, rd *r, uint32_t words, size_t nl)
     return RTP_OK;
 }
 
+/* The samples' node counts where the trees may be read in bands (a
+   one-off evaluation's, a summary's): LEB128, a byte a sample for most,
+   an eighth of the index of 64-bit starts a whole read makes (mount_s6
+   at 2048x2048: 34 MB), which only that read needs; read in order. */
+typedef struct counts {
+    unsigned char *b;
+    size_t n, cap, at;
+} counts;
+
+/* Appends count v (0, or -1 out of memory). */
+static int counts_put(const rtp_allocator *a, counts *cn, uint64_t v)
+{
+    if (cn->cap - cn->n < 10 && rtpi_grow(a, (void **)&cn->b, &cn->cap, cn->n + 10, 1))
+        return -1;
+    while (v >= 0x80u) {
+        cn->b[cn->n++] = (unsigned char)((v & 0x7fu) | 0x80u);
+        v >>= 7;
+    }
+    cn->b[cn->n++] = (unsigned char)v;
+    return 0;
+}
+
+/* The next count (counts_put's, so never past the end). */
+static uint64_t counts_next(counts *cn)
+{
+    uint64_t v = 0;
+    int shift = 0;
+    unsigned char x;
+    do {
+        x = cn->b[cn->at++];
+        v |= (uint64_t)(x & 0x7fu) << shift;
+        shift += 7;
+    } while (x & 0x80u);
+    return v;
+}
+
 /* The trees of a one-off evaluation (L->sink) or of a summary
    (L->summary: rtp_tree_read_summary): decoded band by band into a
    buffer that holds the band's nodes after the last two samples before
@@ -1659,12 +1695,15 @@ static rtp_status skip_light_words(loader *L, rd *r, uint32_t words, size_t nl)
    them (words: a summary's file of more than 32 lights, nl its lights),
    a malformed tree's last. */
 static rtp_status read_bands(loader *L, rd *r, unsigned layout, uint32_t vis_mask,
-                             uint32_t words, size_t nl)
+                             uint32_t words, size_t nl, counts *cn)
 {
     rtp_tree *t = L->t;
-    const uint64_t *start = t->start;
     size_t nx = (size_t)t->nx, ny = (size_t)t->ny, nprims = rtpi_scene_nprims(L->s);
-    size_t y0, y1, c = 0, cap = 0, i;
+    size_t y0, y1, c = 0, cap = 0, i, x;
+    /* the next row's counts, decoded to see whether the band takes it
+       (next_n: their sum; have_next: decoded, not yet in a band) */
+    uint64_t *rowc = NULL, next_n = 0;
+    int have_next = 0;
     /* format 1: its node's bytes, the nodes read and where the chunk
        whose bytes were asked for ends */
     size_t node_bytes = node1_bytes(layout), chunk = node1_chunk(r, node_bytes, t->nnodes);
@@ -1674,17 +1713,35 @@ static rtp_status read_bands(loader *L, rd *r, unsigned layout, uint32_t vis_mas
     /* bs: band's sample starts, the c carried samples' then the band's */
     uint64_t *bs = (uint64_t *)rtpi_malloc_array(L->a, BAND_ROWS * nx + 3, sizeof *bs);
     rtp_status st = RTP_OK;
-    if (!bs)
+    rowc = (uint64_t *)rtpi_malloc_array(L->a, nx, sizeof *rowc);
+    if (!bs || !rowc) {
+        rtpi_free(L->a, bs);
+        rtpi_free(L->a, rowc);
         return nomem(L);
+    }
     bs[0] = 0;
     for (y0 = 0; y0 < ny && st == RTP_OK; y0 = y1) {
         size_t k0 = y0 * nx, k, kn;
-        uint64_t need_n;
-        y1 = y0 + 1;
-        while (y1 < ny && y1 - y0 < BAND_ROWS && start[(y1 + 1) * nx] - start[k0] <= BAND_NODES)
-            y1++;
+        uint64_t need_n, band_n = 0;
+        /* rows while the band holds at most BAND_NODES nodes (its first
+           row whatever it holds) and BAND_ROWS rows, their counts after
+           the carried samples' */
+        for (y1 = y0; y1 < ny; y1++) {
+            size_t li = c + (y1 - y0) * nx;
+            if (!have_next) {
+                for (next_n = 0, x = 0; x < nx; x++)
+                    next_n += rowc[x] = counts_next(cn);
+                have_next = 1;
+            }
+            if (y1 > y0 && (y1 - y0 >= BAND_ROWS || band_n + next_n > BAND_NODES))
+                break;
+            for (x = 0; x < nx; x++)
+                bs[li + x + 1] = bs[li + x] + rowc[x];
+            band_n += next_n;
+            have_next = 0;
+        }
         kn = y1 * nx;
-        need_n = bs[c] + (start[kn] - start[k0]);
+        need_n = bs[c + (kn - k0)];
         if (need_n >= cap) {
             /* (at least one more than asked: rtpi_grow's own rule; and
                a buffer even for bands of no node, whose nodes pointer
@@ -1697,8 +1754,7 @@ static rtp_status read_bands(loader *L, rd *r, unsigned layout, uint32_t vis_mas
             }
         }
         for (k = k0; k < kn; k++) {
-            size_t li = c + (k - k0), j, n = (size_t)(start[k + 1] - start[k]);
-            bs[li + 1] = bs[li] + n;
+            size_t li = c + (k - k0), j, n = (size_t)(bs[li + 1] - bs[li]);
             for (j = 0; j < n; j++) {
                 rtpi_cnode *nd = &band[bs[li] + j];
                 const rtpi_cnode *ra, *rb;
@@ -1765,10 +1821,25 @@ static rtp_status read_bands(loader *L, rd *r, unsigned layout, uint32_t vis_mas
 out:
     rtpi_free(L->a, band);
     rtpi_free(L->a, bs);
+    rtpi_free(L->a, rowc);
     return st;
 }
 
+static rtp_status read_tree_counts(loader *L, rd *r, counts *cn);
+
+/* The TREE section (read_tree_counts), the counts a banded read keeps
+   freed after it. */
 static rtp_status read_tree(loader *L, rd *r)
+{
+    counts cn;
+    rtp_status st;
+    memset(&cn, 0, sizeof cn);
+    st = read_tree_counts(L, r, &cn);
+    rtpi_free(L->a, cn.b);
+    return st;
+}
+
+static rtp_status read_tree_counts(loader *L, rd *r, counts *cn)
 {
     rtp_tree *t = L->t;
     rtp_scene *s = L->s;
@@ -1799,17 +1870,29 @@ static rtp_status read_tree(loader *L, rd *r)
         return bad(L, "invalid node count", NULL);
     t->nnodes = (size_t)nnodes;
     t->vis_words = words;
-    t->start = (uint64_t *)rtpi_malloc_array(L->a, (size_t)nsamples + 1, sizeof *t->start);
-    if (!t->start)
-        return nomem(L);
+    if (L->sink || L->summary) {
+        /* (a byte a sample for most, then counts_put grows it) */
+        cn->cap = (size_t)nsamples + 10;
+        cn->b = (unsigned char *)rtpi_malloc(L->a, cn->cap);
+        if (!cn->b)
+            return nomem(L);
+    } else {
+        t->start = (uint64_t *)rtpi_malloc_array(L->a, (size_t)nsamples + 1, sizeof *t->start);
+        if (!t->start)
+            return nomem(L);
+    }
     for (k = 0; k < nsamples; k++) {
         uint64_t c = get_varint(r);
         if (r->bad || c > nnodes - at)
             return bad(L, "sample node counts do not add up", NULL);
-        t->start[k] = at;
+        if (t->start)
+            t->start[k] = at;
+        else if (counts_put(L->a, cn, c) != 0)
+            return nomem(L);
         at += c;
     }
-    t->start[nsamples] = at;
+    if (t->start)
+        t->start[nsamples] = at;
     if (at != nnodes)
         return bad(L, "sample node counts do not add up", NULL);
     vis_mask = s->nlights >= 32 ? 0xffffffffu : ((1u << s->nlights) - 1u);
@@ -1834,17 +1917,22 @@ static rtp_status read_tree(loader *L, rd *r)
             return st;
         }
         if (stream)
-            return read_bands(L, r, layout, vis_mask, 0, nl);
+            return read_bands(L, r, layout, vis_mask, 0, nl, cn);
     }
-    if (L->summary) {
-        /* every file, its light words too; the samples' index was needed
-           only to find each sample's nodes */
-        rtp_status st = read_bands(L, r, layout, vis_mask, words, nl);
-        rtpi_free(L->a, t->start);
-        t->start = NULL;
-        return st;
-    }
+    if (L->summary) /* (every file, its light words too) */
+        return read_bands(L, r, layout, vis_mask, words, nl, cn);
 whole:
+    if (!t->start) {
+        /* read whole after all: the samples' index from their counts */
+        t->start = (uint64_t *)rtpi_malloc_array(L->a, (size_t)nsamples + 1, sizeof *t->start);
+        if (!t->start)
+            return nomem(L);
+        for (k = 0, at = 0; k < nsamples; k++) {
+            t->start[k] = at;
+            at += counts_next(cn);
+        }
+        t->start[nsamples] = at;
+    }
     t->nodes = (rtpi_cnode *)rtpi_malloc_array(L->a, t->nnodes ? t->nnodes : 1, sizeof *t->nodes);
     if (!t->nodes)
         return nomem(L);

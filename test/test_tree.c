@@ -5474,6 +5474,47 @@ static void summary_files_remove(char files[5][512], const char *nff)
     remove(nff);
 }
 
+/* The bands' readers keep the samples' node counts as the file has them
+   (a byte each where a sample has fewer than 128 nodes), not the index of
+   8 bytes a sample a whole read makes: on a 1024x1024 frame of an empty
+   scene (no node: the index is all there is), rtp_tree_read_summary's
+   peak stays under 4 bytes a sample (the counts, a band's starts and
+   the reader's window: 3.4 at 512x512) and rtp_tree_eval_file's under
+   its image's bytes and 4 a sample (each was over 8), where the whole
+   read holds the 8. */
+static void test_bands_counts_memory(void)
+{
+    char file[512];
+    counted ca, cb, cc;
+    rtp_allocator a = counted_allocator(&ca), b = counted_allocator(&cb),
+                  c = counted_allocator(&cc);
+    rtp_tree *t = NULL, *u = NULL;
+    rtp_image *img = NULL;
+    rtp_eval_options eo;
+    rtp_error err;
+    size_t ns = 1024 * 1024, img_bytes = ns * 3 * sizeof(float);
+    snprintf(file, sizeof file, "%s/rtp-counts-%d.rtp", tmpdir(), (int)getpid());
+    if (!file_of("scenes/stiff/empty.nff", 1024, 1024, 0, 0, file)) {
+        CHECK_MSG(0, "the empty scene's tree was not made");
+        return;
+    }
+    memset(&eo, 0, sizeof eo);
+    eo.threads = 1;
+    CHECK(rtp_tree_read(file, &a, &t, NULL) == RTP_OK);
+    CHECK_MSG(rtp_tree_read_summary(file, &b, &u, &err) == RTP_OK, "%s", err.message);
+    CHECK_MSG(rtp_tree_eval_file(file, &c, NULL, NULL, &eo, &img, NULL, NULL, &err) == RTP_OK,
+              "%s", err.message);
+    CHECK_MSG(ca.peak >= 8 * ns, "the whole read's peak %zu bytes", ca.peak);
+    CHECK_MSG(cb.peak < 4 * ns, "the summary's peak %zu bytes for %zu samples", cb.peak, ns);
+    CHECK_MSG(cc.peak < img_bytes + 4 * ns, "the one-off's peak %zu bytes for %zu samples",
+              cc.peak, ns);
+    rtp_image_destroy(img);
+    rtp_tree_destroy(t);
+    rtp_tree_destroy(u);
+    CHECK(ca.live == 0 && cb.live == 0 && cc.live == 0);
+    remove(file);
+}
+
 /* rtp_tree_read_summary: of every kind of file (each node layout, format
    1, SPD, nine bands, textures) the info and scene rtp_tree_read
    gives, no node kept (its peak is a band's, not the trees': a whole
@@ -5698,6 +5739,7 @@ int main(void)
     RUN(test_eval_file);
     RUN(test_eval_file_same_errors);
     RUN(test_summary);
+    RUN(test_bands_counts_memory);
     RUN(test_summary_same_errors);
     return check_report();
 }
