@@ -961,7 +961,13 @@ static int apply_kv(set_fn set, void *obj, const char *kv, const char *where, in
     }
     kn = (size_t)(eq - kv);
     if (kn >= sizeof key) {
-        msg("%s: key too long", where);
+        /* (a params file's or a stream's line named, as every other
+           error of a line names it) */
+        if (line)
+            msg("%s:%d: key too long (%zu characters; at most %zu)", where, line, kn,
+                sizeof key - 1);
+        else
+            msg("%s: key too long (%zu characters; at most %zu)", where, kn, sizeof key - 1);
         return 1;
     }
     memcpy(key, kv, kn);

@@ -500,6 +500,18 @@ expect_rc 1 $RTP reeval "$T/hash.rtp" --params "$T/blank2.txt" -i "$T/hash3.pfm"
 grep -q "blank2.txt:1: mat.0.kd: .*got '' (blanks separate a line's edits: no blank after '=')" \
     "$T/err" && ok || bad "params: a blank after '=': $(cat "$T/err")"
 
+# a key too long for the key buffer names its line, as every other error
+# of a params file's or a stream's line does (it said "blank2.txt: key
+# too long", no line, the length nor the limit)
+long=$(awk 'BEGIN { s = "mat."; for (i = 0; i < 600; i++) s = s "a"; print s ".kd=1" }')
+printf 'mat.0.kd=0.3\n%s\n' "$long" > "$T/longkey.txt"
+expect_rc 1 $RTP reeval "$T/hash.rtp" --params "$T/longkey.txt" -i "$T/hash3.pfm"
+grep -q "longkey.txt:2: key too long (607 characters; at most 511)" "$T/err" && ok ||
+    bad "params: a key too long: $(cat "$T/err")"
+expect_rc 1 sh -c "printf 'mat.0.kd=0.3\n%s\n' '$long' | $RTP reeval '$T/hash.rtp' --stream -i '$T/lk%d.pfm'"
+grep -q "stdin:2: key too long" "$T/err" && [ -e "$T/lk0.pfm" ] && [ ! -e "$T/lk1.pfm" ] && ok ||
+    bad "stream: a key too long: $(cat "$T/err")"
+
 # a light buffer's lists count against --memory-limit (a flat mesh seen
 # edge on lists every triangle along a row of cells: 3.6 GB under a limit
 # of 500 MiB): lightbuf is refused, auto takes shadow rays and is exact
