@@ -1112,6 +1112,19 @@ static int apply_params_file(set_fn set, void *obj, const char *path)
    scene read whole, then "--params -" read nothing and the trace went on
    unedited).  Sets stdin_user for the edits read later; 1 after a
    message. */
+/* Whether path reads what stdin holds: '-', or another name of the pipe
+   or socket stdin is (/dev/stdin, /dev/fd/0, /proc/self/fd/0, a FIFO's
+   own name), which shares its bytes (a regular file's other name is read
+   from its own start, and reads nothing of stdin's). */
+static int reads_stdin(const char *path)
+{
+    struct stat sp, s0;
+    if (strcmp(path, "-") == 0)
+        return 1;
+    return !std_closed[0] && fstat(0, &s0) == 0 && (S_ISFIFO(s0.st_mode) || S_ISSOCK(s0.st_mode)) &&
+           stat(path, &sp) == 0 && sp.st_dev == s0.st_dev && sp.st_ino == s0.st_ino;
+}
+
 static int stdin_inputs(const char *cmd, const char *file, const char *file_what,
                         const char *const *params, int nparams, const char *const *sets,
                         int nsets, const char *stream)
@@ -1134,16 +1147,19 @@ static int stdin_inputs(const char *cmd, const char *file, const char *file_what
             return 1;
         }
     }
-    if (strcmp(file, "-") == 0)
+    /* (another name of a piped stdin reads it too: "--params /dev/stdin
+       --stream" read every line as the params file's, then the stream
+       found none and exited 0 with no image) */
+    if (reads_stdin(file))
         users[n++] = file_what;
     for (i = 0; i < nparams; i++)
-        np += strcmp(params[i], "-") == 0;
+        np += reads_stdin(params[i]);
     if (np)
         users[n++] = "--params";
     if (stream)
         users[n++] = stream;
     if (np > 1) {
-        msg("%s: --params - given twice: stdin can serve only one", cmd);
+        msg("%s: --params - (or another name of stdin) given twice: stdin can serve only one", cmd);
         return 1;
     }
     if (n > 1) {

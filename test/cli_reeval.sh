@@ -512,6 +512,24 @@ expect_rc 1 sh -c "printf 'mat.0.kd=0.3\n%s\n' '$long' | $RTP reeval '$T/hash.rt
 grep -q "stdin:2: key too long" "$T/err" && [ -e "$T/lk0.pfm" ] && [ ! -e "$T/lk1.pfm" ] && ok ||
     bad "stream: a key too long: $(cat "$T/err")"
 
+# stdin's other names (/dev/stdin, /dev/fd/0) serve one input as '-'
+# does: "--params /dev/stdin --stream" read the lines as the params file,
+# then the stream found none: exit 0, no image, no word
+if [ -e /dev/stdin ]; then
+    expect_rc 2 sh -c "printf 'mat.0.kd=0.3\n' | $RTP reeval '$T/hash.rtp' --params /dev/stdin --stream -i '$T/ds%d.pfm'"
+    grep -q "stdin can serve only one of --params and --stream's edits" "$T/err" && ok ||
+        bad "--params /dev/stdin --stream: $(cat "$T/err")"
+    expect_rc 2 sh -c "printf 'mat.0.kd=0.3\n' | cat '$T/hash.rtp' - | $RTP reeval /dev/stdin --stream -i '$T/ds%d.pfm'"
+    grep -q "stdin can serve only one of the tree and --stream's edits" "$T/err" && ok ||
+        bad "reeval /dev/stdin --stream: $(cat "$T/err")"
+    # (alone, or with stdin a file, which /dev/stdin opens anew, it serves)
+    expect_rc 0 sh -c "printf 'mat.0.kd=0.5\n' | $RTP reeval '$T/hash.rtp' --params /dev/stdin -i '$T/ds.pfm'"
+    cmp -s "$T/ds.pfm" "$T/hash2.pfm" && ok || bad "--params /dev/stdin alone"
+    printf 'mat.0.kd=0.5\n' > "$T/ds.txt"
+    expect_rc 0 sh -c "$RTP reeval '$T/hash.rtp' --params /dev/stdin --stream -i '$T/ds%d.pfm' < '$T/ds.txt'"
+    cmp -s "$T/ds0.pfm" "$T/hash2.pfm" && ok || bad "--params /dev/stdin --stream from a file"
+fi
+
 # a light buffer's lists count against --memory-limit (a flat mesh seen
 # edge on lists every triangle along a row of cells: 3.6 GB under a limit
 # of 500 MiB): lightbuf is refused, auto takes shadow rays and is exact
