@@ -2354,6 +2354,21 @@ static int cmd_reeval(int argc, char **argv)
                 rc = 1;
                 break;
             }
+            {
+                /* (a --params file, read before the first line, is an
+                   input as the tree is: a frame of its name replaced it) */
+                int k, hit = -1;
+                for (k = 0; k < nparams && hit < 0; k++)
+                    if (is_input(params[k], path))
+                        hit = k;
+                if (hit >= 0) {
+                    msg("stdin:%d: --stream: the image %s is the --params file %s: writing it "
+                        "would replace it; name the frames another way",
+                        n, path, params[hit]);
+                    rc = 1;
+                    break;
+                }
+            }
             if (one_output(path, stats_path)) {
                 msg("stdin:%d: --stream: the image %s is the --stats file %s: give each "
                     "output its own",

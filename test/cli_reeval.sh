@@ -530,6 +530,15 @@ if [ -e /dev/stdin ]; then
     cmp -s "$T/ds0.pfm" "$T/hash2.pfm" && ok || bad "--params /dev/stdin --stream from a file"
 fi
 
+# a stream's frame named as a --params file (read before the first line)
+# is refused as one named as the tree is: frame 1 of pe%d.pfm replaced the
+# params file pe1.pfm, which a single reeval -i refuses
+printf 'mat.0.kd=0.3\n' > "$T/pe1.pfm"
+expect_rc 1 sh -c "printf '\n\n\n' | $RTP reeval '$T/hash.rtp' --params '$T/pe1.pfm' --stream -i '$T/pe%d.pfm'"
+grep -q "stdin:2: --stream: the image .*pe1.pfm is the --params file" "$T/err" && [ -e "$T/pe0.pfm" ] &&
+    [ ! -e "$T/pe2.pfm" ] && [ "$(cat "$T/pe1.pfm")" = "mat.0.kd=0.3" ] && ok ||
+    bad "stream: a frame named as the params file: $(cat "$T/err")"
+
 # a light buffer's lists count against --memory-limit (a flat mesh seen
 # edge on lists every triangle along a row of cells: 3.6 GB under a limit
 # of 500 MiB): lightbuf is refused, auto takes shadow rays and is exact
