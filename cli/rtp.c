@@ -1105,13 +1105,6 @@ static int apply_params_file(set_fn set, void *obj, const char *path)
     return rc;
 }
 
-/* stdin serves one input: the command's file (the scene or tree, when
-   it is '-'), one --params file, --stream's edits (stream: its name, or
-   NULL), or an image a --set value '-' names.  Two of them read it in
-   turn, the second finding it empty or in the middle of the first (a
-   scene read whole, then "--params -" read nothing and the trace went on
-   unedited).  Sets stdin_user for the edits read later; 1 after a
-   message. */
 /* Whether path reads what stdin holds: '-', or another name of the pipe
    or socket stdin is (/dev/stdin, /dev/fd/0, /proc/self/fd/0, a FIFO's
    own name), which shares its bytes (a regular file's other name is read
@@ -1121,10 +1114,18 @@ static int reads_stdin(const char *path)
     struct stat sp, s0;
     if (strcmp(path, "-") == 0)
         return 1;
-    return !std_closed[0] && fstat(0, &s0) == 0 && (S_ISFIFO(s0.st_mode) || S_ISSOCK(s0.st_mode)) &&
-           stat(path, &sp) == 0 && sp.st_dev == s0.st_dev && sp.st_ino == s0.st_ino;
+    return !std_closed[0] && fstat(0, &s0) == 0 &&
+           (S_ISFIFO(s0.st_mode) || S_ISSOCK(s0.st_mode)) && stat(path, &sp) == 0 &&
+           sp.st_dev == s0.st_dev && sp.st_ino == s0.st_ino;
 }
 
+/* stdin serves one input: the command's file (the scene or tree, when
+   it is '-'), one --params file, --stream's edits (stream: its name, or
+   NULL), or an image a --set value '-' names.  Two of them read it in
+   turn, the second finding it empty or in the middle of the first (a
+   scene read whole, then "--params -" read nothing and the trace went on
+   unedited).  Sets stdin_user for the edits read later; 1 after a
+   message. */
 static int stdin_inputs(const char *cmd, const char *file, const char *file_what,
                         const char *const *params, int nparams, const char *const *sets,
                         int nsets, const char *stream)
