@@ -877,6 +877,45 @@ static int outputs_over_inputs(const char *cmd, const char *const *in, int nin,
     return 0;
 }
 
+/* Any of the outputs out[0..nout) that is an image the scene reads, a
+   material's texture or bump map (the scene's own, or one a key named):
+   written, it replaced the user's image ("trace textured.nff -i tex.ppm"
+   wrote over the scene's texture).  Known once the scene is read (and
+   for a stream's frames, after each line's edits).  line: the --stream
+   line (0: none).  1 after a message. */
+static int overwrites_scene_image(const char *cmd, const rtp_scene *s, const char *const *out,
+                                  int nout, int line)
+{
+    static const char *const fields[] = {"texture", "bump"};
+    rtp_scene_info si;
+    size_t m;
+    int k, o;
+    rtp_scene_get_info(s, &si);
+    for (m = 0; m < si.materials; m++)
+        for (k = 0; k < 2; k++) {
+            char key[64], path[4096];
+            snprintf(key, sizeof key, "mat.%zu.%s", m, fields[k]);
+            /* (none, waves and noise name no file) */
+            if (rtp_scene_get(s, key, path, sizeof path, NULL) != RTP_OK ||
+                strcmp(path, "none") == 0 || strcmp(path, "waves") == 0 ||
+                strcmp(path, "noise") == 0)
+                continue;
+            for (o = 0; o < nout; o++)
+                if (is_input(path, out[o])) {
+                    if (line)
+                        msg("stdin:%d: %s: %s is the image %s that %s reads: writing it "
+                            "would replace it; name another file",
+                            line, cmd, out[o], path, key);
+                    else
+                        msg("%s: %s is the image %s that %s reads: writing it would replace "
+                            "it; name another file",
+                            cmd, out[o], path, key);
+                    return 1;
+                }
+        }
+    return 0;
+}
+
 /* --stats - with an image or tree to stdout: the JSON would land inside
    the binary stream (between a stream's images); an image or tree '-'
    where stdout is a terminal: its bytes would go to the screen (as gzip
@@ -1463,6 +1502,16 @@ static int cmd_trace(int argc, char **argv)
     for (i = 0; i < nsets; i++)
         if (apply_kv(set_scene, scene, sets[i], "--set", 0))
             goto out;
+    {
+        const char *outs[3];
+        outs[0] = tree_path;
+        outs[1] = image_path;
+        outs[2] = stats_path;
+        if (overwrites_scene_image("trace", scene, outs, 3, 0)) {
+            rc = EXIT_USAGE; /* (as an output naming the scene is) */
+            goto out;
+        }
+    }
     t_load = now_seconds() - t0;
     if (verbosity > 0) {
         /* (a valid scene, but from a generator whose output went missing
@@ -2047,6 +2096,8 @@ typedef struct cli_edits {
     const char **add_lights, **params, **sets;
     int nadd, nparams, nsets;
     int reported; /* a message was printed (apply_kv's, with its place) */
+    int usage;    /* ...and it was a usage error's (an output over an input) */
+    const char *outs[2]; /* the image and --stats files */
     double t_edits; /* when the callback was called */
 } cli_edits;
 
@@ -2072,6 +2123,10 @@ static rtp_status make_edits(void *user, rtp_tree *tree, rtp_error *err)
             c->reported = 1;
             return RTP_ERR_ARGUMENT;
         }
+    if (overwrites_scene_image("reeval", rtp_tree_scene(tree), c->outs, 2, 0)) {
+        c->reported = c->usage = 1;
+        return RTP_ERR_ARGUMENT;
+    }
     return RTP_OK;
 }
 
@@ -2265,6 +2320,8 @@ static int cmd_reeval(int argc, char **argv)
         ce.nparams = nparams;
         ce.sets = sets;
         ce.nsets = nsets;
+        ce.outs[0] = image_path;
+        ce.outs[1] = stats_path;
         ce.t_edits = -1.0;
         if (eo.progress == progress_cb)
             progress_start(&prog, 1);
@@ -2273,6 +2330,8 @@ static int cmd_reeval(int argc, char **argv)
         if (st != RTP_OK) {
             if (!ce.reported)
                 fail_err(&err);
+            if (ce.usage)
+                rc = EXIT_USAGE;
             goto out;
         }
         /* (the scene's reading: the trees' is in es.seconds) */
@@ -2318,6 +2377,15 @@ static int cmd_reeval(int argc, char **argv)
     for (i = 0; i < nsets; i++)
         if (apply_kv(set_tree, tree, sets[i], "--set", 0))
             goto out;
+    {
+        const char *outs[2];
+        outs[0] = stream ? NULL : image_path; /* (a stream's frames: at each line) */
+        outs[1] = stats_path;
+        if (overwrites_scene_image("reeval", rtp_tree_scene(tree), outs, 2, 0)) {
+            rc = EXIT_USAGE;
+            goto out;
+        }
+    }
     if (stats_path && !(stats = stats_open(stats_path)))
         goto out;
     if (!stream) {
@@ -2376,6 +2444,14 @@ static int cmd_reeval(int argc, char **argv)
                     n, path, stats_path);
                 rc = 1;
                 break;
+            }
+            {
+                /* (a texture or bump image a line named, or the scene's) */
+                const char *fr = path;
+                if (overwrites_scene_image("--stream", rtp_tree_scene(tree), &fr, 1, n)) {
+                    rc = 1;
+                    break;
+                }
             }
             if (reeval_one(tree, &eo, &img, path, reference, threads, stats, stats_path,
                            tree_path,

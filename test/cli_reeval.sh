@@ -746,6 +746,32 @@ for f in flip short; do
     else bad "info of $f.rtp: $(cat "$T/info.err"), reading it whole: $(cat "$T/err")"; fi
 done
 
+# An output that is an image the scene reads (its texture, or a texture or
+# bump map a key named) is refused before anything is written: trace
+# wrote over the scene's texture, reeval over the image its own --set
+# named, exit 0
+mkdir -p "$T/tx"
+cp scenes/textured.nff scenes/tex4.ppm scenes/quad.obj "$T/tx/"
+cp scenes/tex4b.ppm "$T/tx/mine.ppm"
+cp "$T/tx/mine.ppm" "$T/tx/mine.orig"
+cp "$T/tx/tex4.ppm" "$T/tx/tex4.orig"
+expect_rc 2 $RTP trace "$T/tx/textured.nff" --size 20x15 -i "$T/tx/tex4.ppm"
+grep -q "tex4.ppm that mat.0.texture reads" "$T/err" && ok || bad "trace -i the texture: $(cat "$T/err")"
+expect_rc 2 $RTP trace "$T/tx/textured.nff" --size 20x15 -o "$T/tx/t.rtp" -i "$T/tx/t.ppm" \
+    --set mat.1.bump="$T/tx/mine.ppm" --stats "$T/tx/mine.ppm"
+[ ! -e "$T/tx/t.rtp" ] && [ ! -e "$T/tx/t.ppm" ] && ok || bad "a refused trace wrote its tree or image"
+expect_rc 0 $RTP trace "$T/tx/textured.nff" --size 20x15 -o "$T/tx/t.rtp" -q
+expect_rc 2 $RTP reeval "$T/tx/t.rtp" --set mat.1.texture="$T/tx/mine.ppm" -i "$T/tx/mine.ppm"
+grep -q "mine.ppm that mat.1.texture reads" "$T/err" && ok || bad "reeval -i its texture: $(cat "$T/err")"
+expect_rc 2 $RTP reeval "$T/tx/t.rtp" --region 0,0,4,4 -i "$T/tx/tex4.ppm"
+cp "$T/tx/mine.ppm" "$T/tx/mine1.ppm"
+expect_rc 1 sh -c "printf 'ambient=0.1\nmat.2.bump=$T/tx/mine1.ppm\n' |
+    $RTP reeval '$T/tx/t.rtp' --stream -i '$T/tx/mine%d.ppm' -q"
+[ -e "$T/tx/mine0.ppm" ] && grep -q "stdin:2: --stream: .*mine1.ppm .* mat.2.bump reads" "$T/err" &&
+    ok || bad "a stream's frame over a bump map a line named: $(cat "$T/err")"
+cmp -s "$T/tx/mine.ppm" "$T/tx/mine.orig" && cmp -s "$T/tx/mine1.ppm" "$T/tx/mine.orig" &&
+    cmp -s "$T/tx/tex4.ppm" "$T/tx/tex4.orig" && ok || bad "an image the scene reads was written over"
+
 rm -rf "$T"
 echo "$pass passed, $fail failed, $skip skipped"
 [ "$fail" -eq 0 ]
