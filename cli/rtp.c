@@ -2778,6 +2778,19 @@ static int cmd_merge(int argc, char **argv)
             goto usage;
         }
     }
+    for (i = 0; i < n; i++) {
+        /* a part named as an output: written, the merge replaced it */
+        char path[4096];
+        const char *at = images ? strrchr(in[i], '@') : NULL;
+        size_t pl = at ? (size_t)(at - in[i]) : strlen(in[i]);
+        if (pl >= sizeof path)
+            continue; /* (no such file: its read fails) */
+        memcpy(path, in[i], pl);
+        path[pl] = '\0';
+        if (overwrites_input("merge", path, out_tree, 0) ||
+            overwrites_input("merge", path, out_image, 0))
+            goto usage;
+    }
     if ((out_image && !image_name_ok(out_image)) || !output_ok(out_image) ||
         !output_ok(out_tree) || same_output("merge", out_tree, out_image))
         goto out;

@@ -161,6 +161,18 @@ else
     skip=$((skip + 1))
 fi
 
+# A part named as merge's output is refused, the part kept (a tree merged
+# over its first part, an image over its second: exit 0, the part gone)
+$RTP trace scenes/spheres.nff --size 40x30 --region 0,0,40,15 -o "$T/q0.rtp" -i "$T/q0.pfm" -q
+$RTP trace scenes/spheres.nff --size 40x30 --region 0,15,40,30 -o "$T/q1.rtp" -i "$T/q1.pfm" -q
+cp "$T/q0.rtp" "$T/q0.orig"
+cp "$T/q1.pfm" "$T/q1.orig"
+$RTP merge -o "$T/q0.rtp" "$T/q0.rtp" "$T/q1.rtp" 2>"$T/err"
+[ $? -eq 2 ] && cmp -s "$T/q0.rtp" "$T/q0.orig" && grep -q "is the input" "$T/err" && ok ||
+    bad "merge -o over a part: $(cat "$T/err")"
+$RTP merge -i "$T/q1.pfm" --size 40x30 "$T/q0.pfm@0,0" "$T/q1.pfm@0,15" 2>"$T/err"
+[ $? -eq 2 ] && cmp -s "$T/q1.pfm" "$T/q1.orig" && ok || bad "merge -i over a part image: $(cat "$T/err")"
+
 rm -rf "$T"
 echo "$pass passed, $fail failed, $skip skipped"
 [ "$fail" -eq 0 ]
