@@ -1672,11 +1672,14 @@ static int counts_put(const rtp_allocator *a, counts *cn, uint64_t v)
 }
 
 /* The next count (counts_put's, so never past the end). */
-static uint64_t counts_next(counts *cn)
+static RTPI_FORCE_INLINE uint64_t counts_next(counts *cn)
 {
-    uint64_t v = 0;
-    int shift = 0;
+    uint64_t v = cn->b[cn->at++];
+    int shift = 7;
     unsigned char x;
+    if (v < 0x80u) /* (most) */
+        return v;
+    v &= 0x7fu;
     do {
         x = cn->b[cn->at++];
         v |= (uint64_t)(x & 0x7fu) << shift;
@@ -1887,6 +1890,8 @@ static rtp_status read_tree_counts(loader *L, rd *r, counts *cn)
             return bad(L, "sample node counts do not add up", NULL);
         if (t->start)
             t->start[k] = at;
+        else if (c < 0x80u && cn->n < cn->cap) /* (most: a byte) */
+            cn->b[cn->n++] = (unsigned char)c;
         else if (counts_put(L->a, cn, c) != 0)
             return nomem(L);
         at += c;
