@@ -4140,6 +4140,9 @@ typedef struct file_eval {
     unsigned long long queries;
     int shadows;          /* the mode that decided them */
     double shadow_s;      /* deciding them, cubes' builds included */
+    rtp_status deferred;  /* the evaluation's setup failed (file_begin):
+                             its error, given once the file is read */
+    rtp_error deferred_err;
 } file_eval;
 
 /* Can the trees be evaluated as they come?  The camera where it was
@@ -4165,15 +4168,22 @@ static int file_streamable(rtp_tree *t, const rtp_eval_options *opt)
     return 1;
 }
 
+static rtp_status file_setup(file_eval *f, rtp_tree *t, int can_stream, int *stream,
+                             rtp_error *err);
+
+/* The edits, then the evaluation's setup (file_setup).  A setup that fails
+   (a moved light's cube over the memory limit, no memory) is made before
+   the trees are read, and rtp_tree_read + the edits + rtp_tree_eval would
+   refuse a corrupt file for its trees before that evaluation failed: its
+   error waits until the file has been read and checked (the bands are
+   read, checked and dropped), and a corrupt file gets rtp_tree_read's.
+   An edit's error and a cancel stop the read at once. */
 static rtp_status file_begin(void *user, rtp_tree *t, int can_stream, int *stream,
                              rtp_error *err)
 {
     file_eval *f = (file_eval *)user;
-    const rtp_scene *s = t->scene;
-    size_t nl;
-    int i;
+    rtp_status st;
     if (f->edit) {
-        rtp_status st;
         if (err)
             memset(err, 0, sizeof *err);
         /* (the tree's trees are not read: only edits may be made) */
@@ -4188,6 +4198,30 @@ static rtp_status file_begin(void *user, rtp_tree *t, int can_stream, int *strea
         }
     }
     f->t0 = seconds_now();
+    st = file_setup(f, t, can_stream, stream, err);
+    if (st != RTP_OK && st != RTP_ERR_CANCELLED) {
+        f->deferred = st;
+        if (err)
+            f->deferred_err = *err;
+        else
+            rtpi_error(&f->deferred_err, st, NULL, 0, 0, "rtp_tree_eval_file: status %d",
+                       (int)st);
+        f->streamed = 1; /* (nothing to evaluate: the trees only checked) */
+        *stream = 1;
+        t->busy = 0;
+        return RTP_OK;
+    }
+    return st;
+}
+
+/* Decides whether the trees are evaluated as they come (*stream) and, if
+   so, makes what their evaluation needs. */
+static rtp_status file_setup(file_eval *f, rtp_tree *t, int can_stream, int *stream,
+                             rtp_error *err)
+{
+    const rtp_scene *s = t->scene;
+    size_t nl;
+    int i;
     nl = s->nlights; /* (lights added by the edits included) */
     if (!can_stream || !file_streamable(t, &f->opt))
         return RTP_OK; /* (read whole, then rtp_tree_eval) */
@@ -4298,6 +4332,13 @@ static rtp_status file_band(void *user, rtp_tree *t, int y0, int y1, const rtpi_
     rtp_tree b = *t;
     float *samples;
     int i, y;
+    if (f->deferred) {
+        /* (the setup failed: the file is only checked, which a cancel
+           may stop) */
+        if (y1 < t->ny && f->opt.cancel && f->opt.cancel(f->opt.progress_user))
+            return rtpi_cancelled(err);
+        return RTP_OK;
+    }
     b.nodes = (rtpi_cnode *)(uintptr_t)nodes;
     b.start = (uint64_t *)(uintptr_t)start;
     b.ny = y1 - y0;
@@ -4416,7 +4457,12 @@ rtp_status rtp_tree_eval_file(const char *path, const rtp_allocator *alloc,
     sink.end = file_end;
     sink.user = &f;
     st = rtpi_tree_read_sink(path, alloc, &sink, &t, err);
-    if (st == RTP_OK && f.streamed) {
+    if (st == RTP_OK && f.deferred) {
+        /* (the file is sound: the setup's error) */
+        st = f.deferred;
+        if (err)
+            *err = f.deferred_err;
+    } else if (st == RTP_OK && f.streamed) {
         size_t ns = (size_t)t->nx * t->ny;
         if (stats) {
             memset(stats, 0, sizeof *stats);

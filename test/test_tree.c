@@ -5414,6 +5414,86 @@ static void test_eval_file_same_errors(void)
     remove(file);
 }
 
+/* A moved light's shadow queries are set up before the trees are read
+   (rtp_tree_eval_file's streamed path); a setup that fails there (its
+   cube over the memory limit) was reported before a corrupt file's error,
+   where rtp_tree_read + the edits + rtp_tree_eval refuse the file for
+   its trees first (found by test/fuzz/fuzz_treefile.c: "a light buffer
+   of 512 cells a face lists 281 MiB, over the memory limit" for a file
+   whose nodes were invalid).  Now the file's error, and the setup's once
+   the file is sound: what rtp_tree_eval gives. */
+static void test_eval_file_setup_error_after_file(void)
+{
+    static const char *const moved[] = {"light.0.pos", "1,-3,6"};
+    static const unsigned char zero = 0;
+    size_t n, m, at, len;
+    unsigned char *data = small_tree_file(&n), *bad = NULL;
+    char good_f[512], bad_f[512];
+    rtp_eval_options eo;
+    rtp_error e1, e2;
+    rtp_tree *t = NULL;
+    rtp_image *img = NULL;
+    file_edits fe;
+    FILE *f;
+    int k;
+    if (!data) {
+        CHECK(data != NULL);
+        return;
+    }
+    /* a byte more at the end of the trees' section, its CRC right:
+       "unexpected bytes at the end", once every band is read */
+    at = section_at(data, n, "TREE");
+    CHECK(at < n);
+    len = (size_t)data[at + 4] | (size_t)data[at + 5] << 8 | (size_t)data[at + 6] << 16;
+    m = n;
+    if (at < n)
+        bad = splice_section(data, &m, at, at + 12 + len, 0, &zero, 1);
+    snprintf(good_f, sizeof good_f, "%s/rtp-setup-%d-good.rtp", tmpdir(), (int)getpid());
+    snprintf(bad_f, sizeof bad_f, "%s/rtp-setup-%d-bad.rtp", tmpdir(), (int)getpid());
+    for (k = 0; bad && k < 2; k++) {
+        f = fopen(k ? bad_f : good_f, "wb");
+        CHECK(f && fwrite(k ? bad : data, 1, k ? m : n, f) == (k ? m : n));
+        if (f)
+            CHECK(fclose(f) == 0);
+    }
+    memset(&eo, 0, sizeof eo);
+    eo.shadows = RTP_SHADOWS_LIGHTBUF; /* (its cube: 6 MiB at 512 cells) */
+    eo.memory_limit = 1048576.0;
+    memset(&fe, 0, sizeof fe);
+    fe.kv = moved;
+    fe.n = 1;
+    for (k = 0; bad && k < 2; k++) {
+        const char *file = k ? bad_f : good_f;
+        rtp_status s1, s2;
+        /* the reference: the whole read, the edit, the evaluation */
+        memset(&e1, 0, sizeof e1);
+        s1 = rtp_tree_read(file, NULL, &t, &e1);
+        if (s1 == RTP_OK && (s1 = rtp_tree_set(t, moved[0], moved[1], &e1)) == RTP_OK) {
+            eo.no_cache = 1;
+            s1 = rtp_tree_eval(t, &eo, &img, NULL, &e1);
+            eo.no_cache = 0;
+            rtp_image_destroy(img);
+            img = NULL;
+        }
+        rtp_tree_destroy(t);
+        t = NULL;
+        CHECK_MSG(s1 == (k ? RTP_ERR_FORMAT : RTP_ERR_LIMIT), "%s: %d %s", file, (int)s1,
+                  e1.message);
+        fe.calls = 0;
+        memset(&e2, 0, sizeof e2);
+        s2 = rtp_tree_eval_file(file, NULL, file_edit, &fe, &eo, &img, NULL, NULL, &e2);
+        CHECK_MSG(s2 == s1 && strcmp(e1.message, e2.message) == 0 && !img && fe.calls == 1,
+                  "%s: rtp_tree_eval_file %d \"%s\", rtp_tree_read and rtp_tree_eval %d \"%s\"",
+                  k ? "corrupt" : "sound", (int)s2, e2.message, (int)s1, e1.message);
+        rtp_image_destroy(img);
+        img = NULL;
+    }
+    remove(good_f);
+    remove(bad_f);
+    free(bad);
+    free(data);
+}
+
 /* A file's bytes (malloc'd, *n of them), or NULL. */
 static unsigned char *file_bytes(const char *path, size_t *n)
 {
@@ -5738,6 +5818,7 @@ int main(void)
     RUN(test_reader_refuses_what_no_scene_holds);
     RUN(test_eval_file);
     RUN(test_eval_file_same_errors);
+    RUN(test_eval_file_setup_error_after_file);
     RUN(test_summary);
     RUN(test_bands_counts_memory);
     RUN(test_summary_same_errors);
