@@ -594,7 +594,7 @@ rtp_status rtp_tree_read_memory(const void *data, size_t size,
  *  trees: each band of sample rows is checked and dropped, in the memory
  *  of the scene, the samples' node counts (a byte each for most) and
  *  a band of trees, not of every tree (what `rtp info` does).  *out holds
- *  the scene and the counts: rtp_tree_get_info gives what it gives of
+ *  the scene and the totals (samples, nodes): rtp_tree_get_info gives what it gives of
  *  rtp_tree_read's tree, rtp_tree_scene, rtp_tree_set and
  *  rtp_tree_add_light work; rtp_tree_eval, rtp_tree_eval_into,
  *  rtp_tree_trace, rtp_tree_write, rtp_tree_merge and rtp_tree_crop

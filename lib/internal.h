@@ -245,6 +245,9 @@ int rtpi_scene_cone_frames(rtp_scene *s);
 /* Adds a material with NFF defaults; returns its index or -1. */
 long rtpi_scene_add_material(rtp_scene *s, const rtpi_material *m);
 long rtpi_scene_add_light(rtp_scene *s, const rtpi_light *l);
+/* A white light, on, at pos (rtp_tree_add_light's, a light.N.pos key's
+   naming the next light): its index, or -1 out of memory. */
+long rtpi_scene_add_white_light(rtp_scene *s, const double pos[3]);
 /* Loads (once per path, or with fresh each time: a key's image, kept
    apart unless the scene holds the same pixels under that name) a PNG,
    PPM or PFM texture; returns its index via *index. */

@@ -176,6 +176,18 @@ long rtpi_scene_add_light(rtp_scene *s, const rtpi_light *l)
     return (long)s->nlights++;
 }
 
+long rtpi_scene_add_white_light(rtp_scene *s, const double pos[3])
+{
+    rtpi_light l;
+    memset(&l, 0, sizeof l);
+    l.pos[0] = pos[0];
+    l.pos[1] = pos[1];
+    l.pos[2] = pos[2];
+    l.color[0] = l.color[1] = l.color[2] = 1.0f;
+    l.on = 1;
+    return rtpi_scene_add_light(s, &l);
+}
+
 rtp_status rtpi_scene_add_texture(rtp_scene *s, const char *path, int fresh,
                                   uint32_t *index, rtp_error *err)
 {
@@ -683,18 +695,11 @@ rtp_status rtpi_scene_set(rtp_scene *s, const char *key, const char *value,
     if (strncmp(key, "camera.", 7) == 0)
         return set_camera(s, key, value, v, n, err);
     if (adds_light(s, key)) {
-        /* a new light, white and on, as rtp_tree_add_light makes one (its
-           colour scaled as the loaded lights are: light_scale) */
-        rtpi_light l;
+        /* a new light, as rtp_tree_add_light makes one (its colour scaled
+           as the loaded lights are: light_scale) */
         if ((st = want_n(err, key, value, n, 3, 0)) != RTP_OK)
             return st;
-        memset(&l, 0, sizeof l);
-        l.pos[0] = v[0];
-        l.pos[1] = v[1];
-        l.pos[2] = v[2];
-        l.color[0] = l.color[1] = l.color[2] = 1.0f;
-        l.on = 1;
-        if (rtpi_scene_add_light(s, &l) < 0)
+        if (rtpi_scene_add_white_light(s, v) < 0)
             return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "%s: out of memory", key);
         return RTP_OK;
     }

@@ -413,7 +413,6 @@ static void *blk_realloc(void *user, void *p, size_t size)
 rtp_status rtp_tree_add_light(rtp_tree *t, const double pos[3], rtp_error *err)
 {
     rtp_scene *s;
-    rtpi_light l;
     if (!t || !pos)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_add_light: NULL argument");
     if (t->busy == 1)
@@ -424,13 +423,7 @@ rtp_status rtp_tree_add_light(rtp_tree *t, const double pos[3], rtp_error *err)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
                           "light position must be finite, |x| <= 3.4e38");
     s = t->scene;
-    memset(&l, 0, sizeof l);
-    l.pos[0] = pos[0];
-    l.pos[1] = pos[1];
-    l.pos[2] = pos[2];
-    l.color[0] = l.color[1] = l.color[2] = 1.0f;
-    l.on = 1;
-    if (rtpi_scene_add_light(s, &l) < 0)
+    if (rtpi_scene_add_white_light(s, pos) < 0)
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
     if (added_light(t) != 0) {
         s->nlights--;
