@@ -193,12 +193,12 @@ FUZZ_FLAGS = -g -O1 -fno-omit-frame-pointer \
 .PHONY: fuzz
 fuzz: $(FUZZ_BIN)
 
-$(BUILD)/fuzz/%: test/fuzz/%.c test/fuzz/fuzz_common.h test/fuzz/replay.h $(BUILD)/librtp.a
+$(BUILD)/fuzz/%: test/fuzz/%.c test/fuzz/fuzz_common.h test/fuzz/fuzz_crc.h test/fuzz/replay.h $(BUILD)/librtp.a
 	@mkdir -p $(dir $@)
 	@$(if $(Q),echo "  CCLD    $@")
 	$(Q)$(CC) $(ALL_CFLAGS) -Ilib $(LDFLAGS) $< $(BUILD)/librtp.a -o $@ $(LIBS)
 
-build-fuzz/%: test/fuzz/%.c test/fuzz/fuzz_common.h test/fuzz/replay.h $(LIB_SRC) include/rtp.h $(wildcard lib/*.h)
+build-fuzz/%: test/fuzz/%.c test/fuzz/fuzz_common.h test/fuzz/fuzz_crc.h test/fuzz/replay.h $(LIB_SRC) include/rtp.h $(wildcard lib/*.h)
 	@mkdir -p $(dir $@)
 	@$(if $(Q),echo "  FUZZ    $@")
 	$(Q)$(FUZZ_CC) $(WARN) $(FUZZ_FLAGS) -D_POSIX_C_SOURCE=200809L $(DEFS) \
