@@ -289,9 +289,21 @@ static void terms_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t 
     double tex[3];
 
     m = &s->mats[rtpi_prim_material(s, nd->prim)];
-    rtpi_surface_from_point(s, nd->prim, nd->p,
-                            m->tex == RTPI_TEX_IMAGE || m->bump == RTPI_BUMP_IMAGE, &sf);
-    n = rtpi_bump_normal(s, m, nd->prim, p, sf.uv, sf.ns);
+    if (m->tex == RTPI_TEX_IMAGE || m->bump == RTPI_BUMP_IMAGE) {
+        rtpi_surface_from_point(s, nd->prim, nd->p, 1, &sf);
+    } else {
+        /* no uv wanted: the normals by rtpi_surface_normals' own
+           arithmetic for spheres, flat triangles and cones (the same
+           expressions), not through a ray and rtpi_surface_at_ex (mount,
+           whose glass balls hold most nodes: 4% of a first evaluation) */
+        rtpi_v3 ng;
+        (void)rtpi_surface_normals(s, nd->prim, p, &ng, &sf.ns);
+        sf.uv[0] = sf.uv[1] = 0.0;
+    }
+    /* (the calls only where the material has a bump or texture: each
+       was a call and a test a node, 9% of mount's first evaluation,
+       whose materials have neither) */
+    n = m->bump == RTPI_BUMP_NONE ? sf.ns : rtpi_bump_normal(s, m, nd->prim, p, sf.uv, sf.ns);
     if ((nd->link & RTPI_L_BACK) && rtpi_two_sided(s, c->one_sided, nd->prim, m))
         n = v3_mul(n, -1.0);
     v = v3_norm(v3_sub(from, p));
@@ -301,7 +313,10 @@ static void terms_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t 
     nv[3] = (float)v.x;
     nv[4] = (float)v.y;
     nv[5] = (float)v.z;
-    rtpi_texture_factor(s, m, p, sf.uv, tex);
+    if (m->tex == RTPI_TEX_NONE)
+        tex[0] = tex[1] = tex[2] = 1.0; /* (rtpi_texture_factor's) */
+    else
+        rtpi_texture_factor(s, m, p, sf.uv, tex);
     t[0] = (float)tex[0];
     t[1] = (float)tex[1];
     t[2] = (float)tex[2];
