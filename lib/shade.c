@@ -295,9 +295,13 @@ static void terms_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t 
         /* no uv wanted: the normals by rtpi_surface_normals' own
            arithmetic for spheres, flat triangles and cones (the same
            expressions), not through a ray and rtpi_surface_at_ex (mount,
-           whose glass balls hold most nodes: 4% of a first evaluation) */
+           whose glass balls hold most nodes: 4% of a first evaluation).
+           At p + 0, the point rtpi_surface_at_ex takes (o + 0 d: a -0
+           coordinate becomes +0), so that the normals are its own to the
+           sign of a zero. */
         rtpi_v3 ng;
-        (void)rtpi_surface_normals(s, nd->prim, p, &ng, &sf.ns);
+        (void)rtpi_surface_normals(s, nd->prim, v3(p.x + 0.0, p.y + 0.0, p.z + 0.0), &ng,
+                                   &sf.ns);
         sf.uv[0] = sf.uv[1] = 0.0;
     }
     /* (the calls only where the material has a bump or texture: each

@@ -279,7 +279,7 @@ static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
     /* Bumps bend the reflected and refracted rays; shadow rays follow the
        unbumped surface, so the recorded visibility holds for any bump a
        re-evaluation may set. */
-    nb = rtpi_bump_normal(s, m, hit.prim, sf.p, sf.uv, ns);
+    nb = m->bump == RTPI_BUMP_NONE ? ns : rtpi_bump_normal(s, m, hit.prim, sf.p, sf.uv, ns);
     /* (bent: the bump changed the normal here.  A bump that bends nothing
        — strength 0, an image on a primitive without uvs — leaves it as
        it was, bit for bit, and the rays as without a bump, which is what
