@@ -1171,7 +1171,7 @@ int rtpi_kd_intersect(const rtpi_kdtree *kd, const rtpi_ray *ray,
     double t0, t1, best = ray->tmax, tmin = ray->tmin;
     double bt = 0.0, bu = 0.0, bv = 0.0;
     const double dd = v3_dot(ray->d, ray->d); /* (spheres' a) */
-    rtpi_ray rb = *ray; /* the ray up to the best hit (spheres, cones) */
+    rtpi_ray rb = *ray; /* the ray up to the best hit (spheres and cones) */
     uint32_t node = 0, bprim = 0;
     int sp = 0, found = 0;
 
@@ -1213,13 +1213,17 @@ int rtpi_kd_intersect(const rtpi_kdtree *kd, const rtpi_ray *ray,
                         bprim = prim;
                         found = 1;
                     }
-                } else {
-                    rtpi_hit h;
+                } else if (prim - ntris - nspheres < s->ncones) {
+                    /* a cone the same way (hit_cone's two steps; most
+                       end at the first) */
+                    const rtpi_cone_frame *cf = &s->cframes[prim - ntris - nspheres];
+                    rtpi_v3 o2;
+                    double tc, t;
                     rb.tmax = best;
-                    if (rtpi_intersect_prim(s, prim, &rb, &h)) {
-                        best = bt = h.t;
-                        bu = h.u;
-                        bv = h.v;
+                    if (rtpi_cone_near(cf, &rb, dd, &tc, &o2) &&
+                        rtpi_cone_t(cf, &rb, dd, tc, o2, &t)) {
+                        best = bt = t;
+                        bu = bv = 0.0;
                         bprim = prim;
                         found = 1;
                     }
