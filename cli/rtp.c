@@ -9,6 +9,7 @@
 #include <ctype.h>
 #include <errno.h>
 #include <fcntl.h>
+#include <limits.h>
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -2706,6 +2707,24 @@ static void name_parts(rtp_error *err, const char *const *in, int n)
     memcpy(err->message, out, o + 1);
 }
 
+/* A part's "X,Y" (after its '@') into *x, *y; returns 0 or -1.  sscanf's
+   %d overflowed past INT_MAX, undefined behaviour: glibc took
+   "4294967326,20" as 30,20 and placed the part there.  Negative offsets
+   parse, so that merge says the part does not fit the frame. */
+static int parse_offset(const char *s, int *x, int *y)
+{
+    char buf[32];
+    const char *comma = strchr(s, ',');
+    size_t n = comma ? (size_t)(comma - s) : 0;
+    if (!comma || n == 0 || n >= sizeof buf)
+        return -1;
+    memcpy(buf, s, n);
+    buf[n] = '\0';
+    if (parse_int(buf, INT_MIN, INT_MAX, x) || parse_int(comma + 1, INT_MIN, INT_MAX, y))
+        return -1;
+    return 0;
+}
+
 static int cmd_merge(int argc, char **argv)
 {
     const char *out_tree = NULL, *out_image = NULL;
@@ -2772,8 +2791,7 @@ static int cmd_merge(int argc, char **argv)
     for (i = 0; images && i < n; i++) {
         const char *at = strrchr(in[i], '@');
         int x0, y0;
-        char end;
-        if (!at || at == in[i] || sscanf(at + 1, "%d,%d%c", &x0, &y0, &end) != 2) {
+        if (!at || at == in[i] || parse_offset(at + 1, &x0, &y0)) {
             msg("merge: %s: expected IMAGE@X,Y", in[i]);
             goto usage;
         }
@@ -2813,7 +2831,7 @@ static int cmd_merge(int argc, char **argv)
             rtp_image *part = NULL;
             size_t pl;
             if (!at || (pl = (size_t)(at - in[i])) >= sizeof path ||
-                sscanf(at + 1, "%d,%d", &x0, &y0) != 2) {
+                parse_offset(at + 1, &x0, &y0)) {
                 msg("merge: %s: expected IMAGE@X,Y", in[i]);
                 goto out;
             }

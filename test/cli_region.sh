@@ -173,6 +173,12 @@ $RTP merge -o "$T/q0.rtp" "$T/q0.rtp" "$T/q1.rtp" 2>"$T/err"
 $RTP merge -i "$T/q1.pfm" --size 40x30 "$T/q0.pfm@0,0" "$T/q1.pfm@0,15" 2>"$T/err"
 [ $? -eq 2 ] && cmp -s "$T/q1.pfm" "$T/q1.orig" && ok || bad "merge -i over a part image: $(cat "$T/err")"
 
+# a part's offset past INT_MAX is refused (sscanf's %d wrapped
+# 4294967311,0 to 15,0 and merged the part there, exit 0)
+$RTP merge -i "$T/qw.pfm" --size 40x30 "$T/q0.pfm@0,0" "$T/q1.pfm@0,4294967311" 2>"$T/err"
+[ $? -eq 2 ] && [ ! -e "$T/qw.pfm" ] && grep -q "expected IMAGE@X,Y" "$T/err" && ok ||
+    bad "merge of a part at 0,4294967311: $(cat "$T/err")"
+
 rm -rf "$T"
 echo "$pass passed, $fail failed, $skip skipped"
 [ "$fail" -eq 0 ]
