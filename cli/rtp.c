@@ -2757,7 +2757,8 @@ static int cmd_merge(int argc, char **argv)
         } else if (is_opt(a, "--size")) {
             if (parse_size(opt_value(argc, argv, &i, "--size"), &fw, &fh))
                 goto usage;
-        } else if (a[0] == '-' && a[1] != '\0') {
+        } else if (a[0] == '-' && a[1] != '\0' && a[1] != '@') {
+            /* ("-@X,Y" is an image part on stdin) */
             msg("merge: unknown option '%s'", a);
             goto usage;
         } else {

@@ -178,6 +178,10 @@ $RTP merge -i "$T/q1.pfm" --size 40x30 "$T/q0.pfm@0,0" "$T/q1.pfm@0,15" 2>"$T/er
 $RTP merge -i "$T/qw.pfm" --size 40x30 "$T/q0.pfm@0,0" "$T/q1.pfm@0,4294967311" 2>"$T/err"
 [ $? -eq 2 ] && [ ! -e "$T/qw.pfm" ] && grep -q "expected IMAGE@X,Y" "$T/err" && ok ||
     bad "merge of a part at 0,4294967311: $(cat "$T/err")"
+# an image part on stdin, -@X,Y (refused as an unknown option)
+$RTP merge -i "$T/qs.pfm" --size 40x30 "$T/q0.pfm@0,0" -@0,15 <"$T/q1.pfm" 2>"$T/err" &&
+    $RTP merge -i "$T/qf.pfm" --size 40x30 "$T/q0.pfm@0,0" "$T/q1.pfm@0,15" &&
+    cmp -s "$T/qs.pfm" "$T/qf.pfm" && ok || bad "merge of an image part on stdin: $(cat "$T/err")"
 
 rm -rf "$T"
 echo "$pass passed, $fail failed, $skip skipped"
