@@ -514,6 +514,50 @@ static void keep_drop(keep_old *k)
     k->state = 0;
 }
 
+/* Writes tree to tree_path and then img to image_path (either pair may be
+   NULL) as one: when the image fails, the tree is put back as it was.
+   trace -o -i and merge -o -i both write such a pair (merge had left a
+   new tree, or replaced an old one, under a failed image: exit 1).
+   @return 0, or -1 with the error said. */
+static int write_pair(const rtp_tree *tree, const char *tree_path, unsigned long long *bytes,
+                      const rtp_image *img, const char *image_path)
+{
+    keep_old keep;
+    rtp_error err;
+    int pair = tree_path && image_path && output_is_file(tree_path), held = 0;
+    memset(&err, 0, sizeof err);
+    keep.state = 0;
+    if (pair) {
+        /* (signals held over both writes: Ctrl-C between them would
+           leave the new tree with the old image; not over an image to a
+           pipe, device or stdout, whose write may block as long as its
+           reader: Ctrl-C then puts the tree back, on_term) */
+        held = output_is_file(image_path) ? hold_signals(tree_path) : 0;
+        keep_take(&keep, tree_path);
+    }
+    if (tree_path && write_tree(tree, tree_path, bytes, &err) != RTP_OK) {
+        fail_err(&err);
+        keep_drop(&keep);
+        release_signals(held);
+        return -1;
+    }
+    if (pair && !held) {
+        pair_keep = &keep;
+        pair_live = 1;
+    }
+    if (image_path && write_image(img, image_path, &err) != RTP_OK) {
+        pair_live = 0;
+        fail_err(&err);
+        keep_undo(&keep, tree_path);
+        release_signals(held);
+        return -1;
+    }
+    pair_live = 0;
+    keep_drop(&keep);
+    release_signals(held);
+    return 0;
+}
+
 /* ---------------------------------------------------------------- stats */
 
 static mode_t stats_umask(void)
@@ -1352,15 +1396,13 @@ static int cmd_trace(int argc, char **argv)
     rtp_image *img = NULL;
     rtp_error err;
     progress prog;
-    int i, rc = 1, nsets = 0, nparams = 0, c, pair = 0, pair_held = 0;
+    int i, rc = 1, nsets = 0, nparams = 0, c;
     const char **sets, **params;
     double t0, t_load, t_trace, t_write;
-    keep_old keep;
 
     memset(&opt, 0, sizeof opt);
     opt.threads = default_threads();
     memset(&err, 0, sizeof err);
-    keep.state = 0;
     sets = (const char **)calloc(2 * ((size_t)argc + 1), sizeof *sets);
     if (!sets) {
         msg("out of memory");
@@ -1540,35 +1582,8 @@ static int cmd_trace(int argc, char **argv)
     /* (the image of any kind: one written to a full device or a pipe
        whose reader left fails as a file's does, and the tree is put
        back then too) */
-    pair = tree_path && image_path && output_is_file(tree_path);
-    if (pair) {
-        /* (signals held over both writes: Ctrl-C between them would
-           leave the new tree with the old image; not over an image to a
-           pipe, device or stdout, whose write may block as long as its
-           reader: Ctrl-C then puts the tree back, on_term) */
-        pair_held = output_is_file(image_path) ? hold_signals(tree_path) : 0;
-        keep_take(&keep, tree_path);
-    }
-    if (tree_path && write_tree(tree, tree_path, &file_bytes, &err) != RTP_OK) {
-        fail_err(&err);
-        keep_drop(&keep);
-        release_signals(pair_held);
+    if (write_pair(tree, tree_path, &file_bytes, img, image_path))
         goto out;
-    }
-    if (pair && !pair_held) {
-        pair_keep = &keep;
-        pair_live = 1;
-    }
-    if (image_path && write_image(img, image_path, &err) != RTP_OK) {
-        pair_live = 0;
-        fail_err(&err);
-        keep_undo(&keep, tree_path);
-        release_signals(pair_held);
-        goto out;
-    }
-    pair_live = 0;
-    keep_drop(&keep);
-    release_signals(pair_held);
     rtp_tree_get_info(tree, &ti);
     t_write = now_seconds() - t0;
     if (verbosity > 0 && st.capped_rays)
@@ -2887,22 +2902,18 @@ static int cmd_merge(int argc, char **argv)
             fail_err(&err);
             goto out;
         }
-        if (out_tree && write_tree(joined, out_tree, NULL, &err) != RTP_OK) {
-            fail_err(&err);
-            goto out;
-        }
         memset(&eo, 0, sizeof eo);
         eo.threads = threads;
         eo.no_cache = 1;
+        /* (the image made before either is written: the pair is written
+           as one) */
         if (out_image && rtp_tree_eval(joined, &eo, &img, NULL, &err) != RTP_OK) {
             fail_err(&err);
             goto out;
         }
     }
-    if (out_image && write_image(img, out_image, &err) != RTP_OK) {
-        fail_err(&err);
+    if (write_pair(joined, out_tree, NULL, img, out_image))
         goto out;
-    }
     rc = 0;
 out:
     if (parts)

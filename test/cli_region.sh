@@ -182,6 +182,21 @@ $RTP merge -i "$T/qw.pfm" --size 40x30 "$T/q0.pfm@0,0" "$T/q1.pfm@0,4294967311" 
 $RTP merge -i "$T/qs.pfm" --size 40x30 "$T/q0.pfm@0,0" -@0,15 <"$T/q1.pfm" 2>"$T/err" &&
     $RTP merge -i "$T/qf.pfm" --size 40x30 "$T/q0.pfm@0,0" "$T/q1.pfm@0,15" &&
     cmp -s "$T/qs.pfm" "$T/qf.pfm" && ok || bad "merge of an image part on stdin: $(cat "$T/err")"
+# merge -o TREE -i IMAGE is one pair, as trace's is: an image that fails
+# (a full disk) puts an old tree back and removes a new one (both were
+# left, exit 1)
+if [ -w /dev/full ]; then
+    ln -sf /dev/full "$T/full.pfm"
+    cp "$T/q0.rtp" "$T/qm.rtp"
+    $RTP merge -o "$T/qm.rtp" -i "$T/full.pfm" "$T/q0.rtp" "$T/q1.rtp" 2>"$T/err"
+    [ $? -eq 1 ] && cmp -s "$T/qm.rtp" "$T/q0.rtp" && ok ||
+        bad "merge -o old -i full: the tree replaced: $(cat "$T/err")"
+    $RTP merge -o "$T/qn.rtp" -i "$T/full.pfm" "$T/q0.rtp" "$T/q1.rtp" 2>"$T/err"
+    [ $? -eq 1 ] && [ ! -e "$T/qn.rtp" ] && ok ||
+        bad "merge -o new -i full: the tree left: $(cat "$T/err")"
+else
+    skip=$((skip + 1)); echo "skip: /dev/full not writable: merge's pair not checked" >&2
+fi
 
 rm -rf "$T"
 echo "$pass passed, $fail failed, $skip skipped"
