@@ -1167,7 +1167,9 @@ static int apply_params_file(set_fn set, void *obj, const char *path)
     char *line = (char *)malloc(MAX_LINE + 1);
     int n = 0, rc = 0, got;
     if (!f || !line) {
-        if (!f)
+        if (!*path)
+            msg("no params file name");
+        else if (!f)
             msg("%s: cannot open: %s", path, strerror(errno));
         else
             msg("%s: out of memory", path);

@@ -382,6 +382,8 @@ rtp_status rtp_scene_load(const char *path, const rtp_allocator *alloc,
                           "rtp_scene_load: NULL argument");
     if (rtpi_allocator_partial(alloc))
         return rtpi_allocator_refused(err, "rtp_scene_load");
+    if (!*path) /* (fopen's error would name no file, as rtp_image_read says) */
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "no scene file name");
     rtpi_allocator_init(&a, alloc);
     st = rtpi_read_file(&a, path, &text, &size, err);
     if (st != RTP_OK)

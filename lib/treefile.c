@@ -2476,6 +2476,10 @@ static rtp_status read_path(const char *fn, const char *path, const rtp_allocato
     if (rtpi_allocator_partial(alloc))
         return rtpi_allocator_refused(err, fn);
     rtpi_allocator_init(&a, alloc);
+    /* ("" is no file: fopen's error then named none, "cannot open: No
+       such file or directory", as rtp_image_read says it) */
+    if (!*path)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "no tree file name");
     is_stdin = strcmp(path, "-") == 0;
     f = is_stdin ? stdin : fopen(path, "rb");
     if (!f)

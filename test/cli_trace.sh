@@ -199,6 +199,17 @@ expect_rc 1 $RTP trace scenes/spheres.nff --size 40x30 -i "$T/far.pfm" --set lig
 expect_rc 0 $RTP trace scenes/spheres.nff --size 1048576x1 -i "$T/wide.pfm" -q
 rm -f "$T/wide.pfm"
 
+# an empty file name is said as one (a scene, tree or params file named
+# "" said "rtp: cannot open: No such file or directory", naming no file:
+# which of merge's parts was it?)
+$RTP trace scenes/spheres.nff --size 8x8 --region 0,0,8,4 -o "$T/e0.rtp" -q
+for c in "trace ''" "reeval '' -i $T/e.pfm" "info ''" "merge -o $T/e.rtp $T/e0.rtp ''" \
+         "reeval $T/e0.rtp --params '' -i $T/e.pfm"; do
+    eval "$RTP $c" 2>"$T/err"
+    [ $? -eq 1 ] && grep -q "no [a-z]* *file name" "$T/err" && ok ||
+        bad "rtp $c: $(cat "$T/err")"
+done
+
 rm -rf "$T"
 echo "$pass passed, $fail failed, $skip skipped"
 [ "$fail" -eq 0 ]
