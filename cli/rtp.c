@@ -1779,7 +1779,9 @@ static int cmd_diff(int argc, char **argv)
         msg("diff: two images needed");
         goto usage;
     }
-    if (strcmp(pa, "-") == 0 && strcmp(pb, "-") == 0) {
+    if (reads_stdin(pa) && reads_stdin(pb)) {
+        /* (- and /dev/stdin, a pipe's two names: the second read it
+           empty, "the file is empty") */
         msg("diff: only one image can come from stdin");
         goto usage;
     }
@@ -2795,17 +2797,6 @@ static int cmd_merge(int argc, char **argv)
     }
     if (stdout_taken("merge", NULL, out_tree, out_image))
         goto usage;
-    {
-        /* stdin holds one input: a second '-' read it empty ("-: empty:
-           not an rtp tree file") */
-        int nstdin = 0;
-        for (i = 0; i < n; i++)
-            nstdin += strcmp(in[i], "-") == 0 || strncmp(in[i], "-@", 2) == 0;
-        if (nstdin > 1) {
-            msg("merge: only one part can come from stdin");
-            goto usage;
-        }
-    }
     for (i = 0; images && i < n; i++) {
         const char *at = strrchr(in[i], '@');
         int x0, y0;
@@ -2814,7 +2805,7 @@ static int cmd_merge(int argc, char **argv)
             goto usage;
         }
     }
-    for (i = 0; i < n; i++) {
+    for (i = 0, c = 0; i < n; i++) {
         /* a part named as an output: written, the merge replaced it */
         char path[4096];
         const char *at = images ? strrchr(in[i], '@') : NULL;
@@ -2826,6 +2817,14 @@ static int cmd_merge(int argc, char **argv)
         if (overwrites_input("merge", path, out_tree, 0) ||
             overwrites_input("merge", path, out_image, 0))
             goto usage;
+        /* stdin holds one input: a second '-' (or /dev/stdin, another
+           name of the pipe) read it empty ("-: empty: not an rtp tree
+           file") */
+        c += reads_stdin(path);
+    }
+    if (c > 1) {
+        msg("merge: only one part can come from stdin (-, or another name of it)");
+        goto usage;
     }
     if ((out_image && !image_name_ok(out_image)) || !output_ok(out_image) ||
         !output_ok(out_tree) || same_output("merge", out_tree, out_image))

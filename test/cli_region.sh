@@ -197,6 +197,19 @@ if [ -w /dev/full ]; then
 else
     skip=$((skip + 1)); echo "skip: /dev/full not writable: merge's pair not checked" >&2
 fi
+# '-' and /dev/stdin, two names of one pipe, are two parts from stdin: a
+# usage error (the second read it empty: "empty: not an rtp tree file",
+# exit 1)
+if [ -e /dev/stdin ]; then
+    cat "$T/q0.rtp" | $RTP merge -o "$T/qd.rtp" - /dev/stdin "$T/q1.rtp" 2>"$T/err"
+    [ $? -eq 2 ] && grep -q "only one part can come from stdin" "$T/err" && ok ||
+        bad "merge - /dev/stdin: $(cat "$T/err")"
+    cat "$T/q0.pfm" | $RTP diff - /dev/stdin 2>"$T/err" >/dev/null
+    [ $? -eq 2 ] && grep -q "only one image can come from stdin" "$T/err" && ok ||
+        bad "diff - /dev/stdin: $(cat "$T/err")"
+else
+    skip=$((skip + 1)); echo "skip: no /dev/stdin: stdin's other name not checked" >&2
+fi
 
 rm -rf "$T"
 echo "$pass passed, $fail failed, $skip skipped"
