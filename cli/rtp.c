@@ -1205,6 +1205,17 @@ static int reads_stdin(const char *path)
            sp.st_dev == s0.st_dev && sp.st_ino == s0.st_ino;
 }
 
+/* Whether path is '-' while stdin is closed: said as trace and reeval
+   say it (1 after a message: a usage error); info, diff and merge read
+   the directory that holds fd 0 and said "-: is a directory". */
+static int stdin_closed_for(const char *cmd, const char *path, const char *what)
+{
+    if (!std_closed[0] || strcmp(path, "-") != 0)
+        return 0;
+    msg("%s: stdin is closed: nothing there for %s", cmd, what);
+    return 1;
+}
+
 /* stdin serves one input: the command's file (the scene or tree, when
    it is '-'), one --params file, --stream's edits (stream: its name, or
    NULL), or an image a --set value '-' names.  Two of them read it in
@@ -1785,6 +1796,8 @@ static int cmd_diff(int argc, char **argv)
         msg("diff: only one image can come from stdin");
         goto usage;
     }
+    if (stdin_closed_for("diff", pa, "an image") || stdin_closed_for("diff", pb, "an image"))
+        goto usage;
     if (stdout_taken("diff", stats_path, heat, NULL))
         goto usage;
     {
@@ -2623,7 +2636,8 @@ static int cmd_info(int argc, char **argv)
         usage_hint(info_help);
         return EXIT_USAGE;
     }
-    if (overwrites_input("info", tree_path, stats_path, 0)) {
+    if (overwrites_input("info", tree_path, stats_path, 0) ||
+        stdin_closed_for("info", tree_path, "the tree")) {
         usage_hint(info_help);
         return EXIT_USAGE;
     }
@@ -2821,6 +2835,8 @@ static int cmd_merge(int argc, char **argv)
            name of the pipe) read it empty ("-: empty: not an rtp tree
            file") */
         c += reads_stdin(path);
+        if (stdin_closed_for("merge", path, "a part"))
+            goto usage;
     }
     if (c > 1) {
         msg("merge: only one part can come from stdin (-, or another name of it)");

@@ -642,6 +642,11 @@ grep -q "stdin is closed: nothing there for the tree" "$T/err" && ok || bad "std
 expect_rc 2 sh -c "$RTP reeval '$T/t.rtp' --set mat.red.texture=- -i '$T/sc.pfm' <&-"
 grep -q "stdin is closed" "$T/err" && ok || bad "stdin closed, texture: $(cat "$T/err")"
 expect_rc 0 sh -c "$RTP reeval '$T/t.rtp' -i '$T/sc.pfm' <&-"
+# ... for info, diff and merge too (they said "-: is a directory", exit 1)
+for c in "info -" "diff - '$T/sc.pfm'" "merge -o '$T/sc.rtp' -" "merge -i '$T/sm.pfm' --size 1x1 -@0,0"; do
+    expect_rc 2 sh -c "$RTP $c <&-"
+    grep -q "stdin is closed: nothing there for" "$T/err" && ok || bad "stdin closed, $c: $(cat "$T/err")"
+done
 # far lights are decided by shadow rays in the item buffer modes too: no
 # cube charged to the limit, and --stats says exact (reviewer: refused)
 expect_rc 0 $RTP reeval "$T/t.rtp" --set light.key.pos=3e13,-5e13,8e13 --shadows itembuf:8192 --memory-limit 100 -i "$T/far.pfm" --stats "$T/far.json"
