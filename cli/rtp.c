@@ -2805,6 +2805,12 @@ static int cmd_merge(int argc, char **argv)
             "--size and -i");
         goto usage;
     }
+    if (!images && fw) {
+        /* (it was taken and ignored: the frame is the one the trees were
+           traced in, whatever --size said) */
+        msg("merge: --size is for region images (IMAGE@X,Y): region trees know their frame");
+        goto usage;
+    }
     if (out_tree && out_image && is_stdout(out_tree) && is_stdout(out_image)) {
         msg("merge: the tree and the image cannot both go to stdout");
         goto usage;

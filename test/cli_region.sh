@@ -210,6 +210,11 @@ if [ -e /dev/stdin ]; then
 else
     skip=$((skip + 1)); echo "skip: no /dev/stdin: stdin's other name not checked" >&2
 fi
+# --size with region trees is a usage error (it was ignored: the merged
+# frame is the trees', whatever --size said)
+$RTP merge -o "$T/qz.rtp" --size 80x60 "$T/q0.rtp" "$T/q1.rtp" 2>"$T/err"
+[ $? -eq 2 ] && [ ! -e "$T/qz.rtp" ] && grep -q "size is for region images" "$T/err" && ok ||
+    bad "merge of trees with --size: $(cat "$T/err")"
 
 rm -rf "$T"
 echo "$pass passed, $fail failed, $skip skipped"
