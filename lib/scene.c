@@ -660,6 +660,18 @@ static void set_rgb(float *dst, const double *v, int n)
         dst[i] = (float)v[n == 1 ? 0 : i];
 }
 
+/* A field rtp_scene_set does not take.  name is one rtp_scene_get reads:
+   "unknown key" for it sent a caller who had just read it looking for a
+   typo. */
+static rtp_status field_refused(rtp_error *err, const char *key, const char *field,
+                                const char *fields)
+{
+    if (strcmp(field, "name") == 0)
+        return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0,
+                          "%s is read only (%s)", key, fields);
+    return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0, "unknown key '%s' (%s)", key, fields);
+}
+
 /* Is key light.N.pos with N the scene's count of lights (an index, as
    find_index reads one), which adds light N?  Only pos: a light's other
    fields are set once it is there. */
@@ -727,8 +739,7 @@ rtp_status rtpi_scene_set(rtp_scene *s, const char *key, const char *value,
                 return st;
             l->on = v[0] != 0.0;
         } else {
-            return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0,
-                              "unknown key '%s' (light fields: pos, color, on)", key);
+            return field_refused(err, key, field, "light fields: pos, color, on");
         }
         return RTP_OK;
     }
@@ -820,11 +831,10 @@ rtp_status rtpi_scene_set(rtp_scene *s, const char *key, const char *value,
                 dst = (float *)(void *)((char *)m + off);
         }
         if (!dst)
-            return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0,
-                              "unknown key '%s' (material fields: color, kd, ks, kt, shine, ior, "
-                              "checker, color2, checker_scale, texture, bump, "
-                              "bump_strength, bump_scale)",
-                              key);
+            return field_refused(err, key, field,
+                                 "material fields: color, kd, ks, kt, shine, ior, checker, "
+                                 "color2, checker_scale, texture, bump, bump_strength, "
+                                 "bump_scale");
         if ((st = want(err, key, value, n, 1)) != RTP_OK)
             return st;
         /* (an ior is kept as a float: one that rounds to 0 is 0) */

@@ -1271,6 +1271,13 @@ static void test_scene_get(void)
         CHECK(rtp_scene_get(s, "mat.0.fov", val, sizeof val, NULL) == RTP_ERR_KEY);
         CHECK(rtp_scene_get(s, "camera.fov", val, sizeof val, NULL) == RTP_ERR_KEY);
         CHECK(rtp_scene_get(s, "camera.from", val, 4, NULL) == RTP_ERR_ARGUMENT && !val[0]);
+        /* a name is read only, and said to be so, not an unknown key */
+        CHECK(rtp_scene_set(s, "mat.1.name", "x", &err) == RTP_ERR_KEY &&
+              strstr(err.message, "mat.1.name is read only") != NULL);
+        CHECK(rtp_scene_set(s, "light.0.name", "x", &err) == RTP_ERR_KEY &&
+              strstr(err.message, "light.0.name is read only") != NULL);
+        CHECK(rtp_scene_set(s, "light.0.nam", "x", &err) == RTP_ERR_KEY &&
+              strstr(err.message, "unknown key 'light.0.nam'") != NULL);
         rtp_image_destroy(a);
         rtp_image_destroy(b);
         rtp_scene_destroy(s);
