@@ -138,6 +138,12 @@ char *rtp_error_format(const rtp_error *err, char *buf, size_t size);
 
 /* ------------------------------------------------------------ allocation */
 
+/* The three behave as malloc, realloc and free (user passed first): a
+   block is aligned for any type, as malloc's (rtp keeps doubles and
+   pointers in them); realloc_fn is given NULL for a new block, as realloc
+   is; rtp never asks for 0 bytes and never frees NULL.  NULL from
+   malloc_fn or realloc_fn is an allocation failure (RTP_ERR_NOMEM, or a
+   slower path where one exists). */
 typedef struct rtp_allocator {
     void *(*malloc_fn)(void *user, size_t size);
     void *(*realloc_fn)(void *user, void *ptr, size_t size);
@@ -398,9 +404,13 @@ typedef struct rtp_eval_options {
                                there (the caller's promise): pixels an edit
                                cannot change are not written again.  Ignored
                                when that image (known by its pixels' address)
-                               was not the last one written; an image made
-                               anew may get the same address, so set this
-                               only for the image last written. */
+                               is not the one this tree wrote last; nothing
+                               else is checked: an image made anew at the
+                               same address, or one another tree's
+                               evaluation (a crop's too) wrote since, gets
+                               wrong pixels, so set this only for the image
+                               this tree wrote last and nothing wrote
+                               since. */
     double memory_limit;    /* bytes the trees may take while samples are
                                traced again (class D), old and new, and a
                                moved light's direction cube's cells (6

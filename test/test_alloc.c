@@ -31,6 +31,7 @@ typedef struct failing {
     int failed;      /* a failure was injected */
     long live;       /* blocks allocated and not freed (armed or not) */
     long bad_frees;  /* frees of pointers this allocator never gave */
+    long odd_calls;  /* a size of 0 or a free of NULL (rtp.h: rtp makes none) */
 } failing;
 
 /* Each block carries a header with a magic word, so a free of a foreign
@@ -56,6 +57,7 @@ static void *fa_malloc(void *user, size_t size)
     failing *f = (failing *)user;
     unsigned char *p;
     uint32_t m = MAGIC;
+    f->odd_calls += size == 0;
     if (inject(f) || size > (size_t)-1 - HDR)
         return NULL;
     p = (unsigned char *)malloc(size + HDR);
@@ -81,6 +83,7 @@ static void fa_free(void *user, void *ptr)
 {
     failing *f = (failing *)user;
     uint32_t d = DEAD;
+    f->odd_calls += ptr == NULL;
     if (!ptr || !fa_check(f, ptr))
         return;
     memcpy((unsigned char *)ptr - HDR, &d, sizeof d);
@@ -94,6 +97,7 @@ static void *fa_realloc(void *user, void *ptr, size_t size)
     unsigned char *p;
     if (!ptr)
         return fa_malloc(user, size);
+    f->odd_calls += size == 0;
     if (!fa_check(f, ptr))
         return NULL;
     if (inject(f) || size > (size_t)-1 - HDR)
@@ -1394,6 +1398,8 @@ static long sweep(const char *name, rtp_status (*op)(ctx *))
         CHECK_MSG(f.live == 0, "%s: fail at %ld: %ld block(s) leaked", name, n, f.live);
         CHECK_MSG(f.bad_frees == 0, "%s: fail at %ld: %ld bad free(s)", name, n,
                   f.bad_frees);
+        CHECK_MSG(f.odd_calls == 0, "%s: fail at %ld: %ld call(s) for 0 bytes or freeing NULL",
+                  name, n, f.odd_calls);
         if (!f.failed) {
             CHECK_MSG(st == RTP_OK, "%s: no failure injected, yet status %d (%s)", name,
                       (int)st, c.err.message);
