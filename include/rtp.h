@@ -43,16 +43,19 @@
  *    and not others is RTP_ERR_ARGUMENT; all NULL, the library's own).  A
  *    caller's allocator need not be thread-safe: calls with
  *    options.threads > 1 take a lock around it (two calls of the library
- *    on different threads with one allocator still need it to be).
+ *    on different threads with one allocator still need it to be, and so
+ *    does a call with it from a progress or cancel callback: the workers
+ *    of the call reporting, threads > 1 or a deep tree's below, may be
+ *    allocating meanwhile, outside that call's lock).
  *  - Stack: any call fits in a thread of 128 KiB (musl's default).
  *    Tracing and evaluating recurse up to 1 KiB a ray-tree level, so the
  *    rays and trees of a max_depth above 32 (up to RTP_MAX_DEPTH) are
  *    traced and evaluated on threads the library starts with the stack
  *    they need, even with threads 0 or 1 (the allocator is then called
- *    from that thread, never from two at once); the calling thread waits,
- *    and still makes every progress call.  A build without threads works
- *    on the calling thread: give it 1 KiB (more under sanitizers) a
- *    level.
+ *    from that thread, never from two at once but for a callback's calls:
+ *    above); the calling thread waits, and still makes every progress
+ *    call.  A build without threads works on the calling thread: give it
+ *    1 KiB (more under sanitizers) a level.
  *  - Images are linear RGB floats, row-major, top row first.
  */
 #ifndef RTP_RAYTRACE_RTP_H
