@@ -308,7 +308,8 @@ typedef struct rtp_trace_stats {
 } rtp_trace_stats;
 
 /** Traces the scene into a new image.  stats may be NULL.
- *  @return RTP_OK, RTP_ERR_ARGUMENT, RTP_ERR_LIMIT or RTP_ERR_NOMEM. */
+ *  @return RTP_OK, RTP_ERR_ARGUMENT, RTP_ERR_LIMIT, RTP_ERR_NOMEM or
+ *  RTP_ERR_CANCELLED (opt->cancel). */
 rtp_status rtp_trace(const rtp_scene *scene, const rtp_trace_options *opt,
                      rtp_image **out, rtp_trace_stats *stats, rtp_error *err);
 
