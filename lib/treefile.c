@@ -2167,7 +2167,8 @@ rtp_status rtp_tree_read_memory(const void *data, size_t size, const char *name,
     if (out)
         *out = NULL;
     if (!out || (!data && size))
-        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_read: NULL argument");
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                          "rtp_tree_read_memory: NULL argument");
     if (rtpi_allocator_partial(alloc))
         return rtpi_allocator_refused(err, "rtp_tree_read_memory");
     if (!name)

@@ -575,6 +575,8 @@ static void test_partial_allocator(void) /* (and out-parameters) */
     CHECK(rtp_tree_read(NULL, NULL, &t, &err) == RTP_ERR_ARGUMENT && !t);
     t = (rtp_tree *)&part;
     CHECK(rtp_tree_read_memory(NULL, 5, "x", NULL, &t, &err) == RTP_ERR_ARGUMENT && !t);
+    /* (the error names the function called, not the one beside it) */
+    CHECK_MSG(strncmp(err.message, "rtp_tree_read_memory:", 21) == 0, "%s", err.message);
     {
         rtp_builder *b = (rtp_builder *)&part;
         CHECK(rtp_builder_create(NULL, 2, 2, 0, &b, &err) == RTP_ERR_ARGUMENT && !b);
