@@ -31,19 +31,21 @@ static double pixel_error(const float *a, const float *b)
     return e > e2 ? e : e2;
 }
 
-static rtp_status check_pair(const rtp_image *a, const rtp_image *b,
+/* what: the caller's call ("image diff", "heat map"), which its errors
+   name */
+static rtp_status check_pair(const rtp_image *a, const rtp_image *b, const char *what,
                              rtp_error *err)
 {
     if (!a || !b || !a->pixels || !b->pixels)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                          "image diff: missing image");
+                          "%s: missing image", what);
     if (a->width != b->width || a->height != b->height)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
                           "image sizes differ: %dx%d and %dx%d", a->width,
                           a->height, b->width, b->height);
     if (!rtpi_image_size_ok(a->width, a->height))
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                          "image diff: invalid image size %dx%d", a->width,
+                          "%s: invalid image size %dx%d", what, a->width,
                           a->height);
     return RTP_OK;
 }
@@ -59,7 +61,7 @@ rtp_status rtp_image_diff(const rtp_image *a, const rtp_image *b,
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
                           "image diff: stats is NULL");
     memset(stats, 0, sizeof *stats);
-    st = check_pair(a, b, err);
+    st = check_pair(a, b, "image diff", err);
     if (st != RTP_OK)
         return st;
     if (isnan(threshold))
@@ -221,7 +223,7 @@ rtp_status rtp_diff_heatmap(const rtp_image *a, const rtp_image *b,
     int w, h, ow, oh, fs, x, y, bar0, bar1, need;
     double max = 0.0;
 
-    st = check_pair(a, b, err);
+    st = check_pair(a, b, "heat map", err);
     if (st != RTP_OK)
         return st;
     if (!png_path || !*png_path)

@@ -197,6 +197,9 @@ static void test_arguments(void)
     CHECK(rtp_diff_heatmap(a, a, (double)NAN, tpath("h.ppm"), &err) ==
           RTP_ERR_ARGUMENT);
     CHECK(rtp_diff_heatmap(a, a, 0.0, NULL, &err) == RTP_ERR_ARGUMENT);
+    /* (the heat map's errors name it, not rtp_image_diff) */
+    CHECK(rtp_diff_heatmap(a, NULL, 0.0, tpath("h.ppm"), &err) == RTP_ERR_ARGUMENT &&
+          strncmp(err.message, "heat map:", 9) == 0);
     rtp_image_destroy(a);
     rtp_image_destroy(b);
 }
