@@ -210,6 +210,7 @@ typedef struct rtp_scene_info {
     int width, height;   /* resolution the scene asks for */
 } rtp_scene_info;
 
+/* All 0 for a NULL scene; nothing written for a NULL info. */
 void rtp_scene_get_info(const rtp_scene *scene, rtp_scene_info *info);
 
 /* ----------------------------------------------------------------- image */
@@ -554,6 +555,7 @@ typedef struct rtp_tree_info {
                                  edit of such trees traces again */
 } rtp_tree_info;
 
+/* All 0 for a NULL tree; nothing written for a NULL info. */
 void rtp_tree_get_info(const rtp_tree *tree, rtp_tree_info *info);
 
 /* The edits of a one-off evaluation of a tree file (rtp_tree_eval_file):

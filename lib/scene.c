@@ -398,6 +398,8 @@ rtp_status rtp_scene_load(const char *path, const rtp_allocator *alloc,
 void rtp_scene_get_info(const rtp_scene *s, rtp_scene_info *info)
 {
     size_t i;
+    if (!info)
+        return; /* (a NULL scene gives zeros; a NULL info, nothing) */
     memset(info, 0, sizeof *info);
     if (!s)
         return;

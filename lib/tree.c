@@ -61,6 +61,8 @@ void rtp_tree_destroy(rtp_tree *t)
 
 void rtp_tree_get_info(const rtp_tree *t, rtp_tree_info *info)
 {
+    if (!info)
+        return; /* (as rtp_scene_get_info) */
     memset(info, 0, sizeof *info);
     if (!t)
         return;

@@ -573,6 +573,20 @@ static void test_partial_allocator(void) /* (and out-parameters) */
     CHECK(rtp_scene_load_memory(NULL, 5, "x", "nff", NULL, &s, &err) == RTP_ERR_ARGUMENT && !s);
     t = (rtp_tree *)&part;
     CHECK(rtp_tree_read(NULL, NULL, &t, &err) == RTP_ERR_ARGUMENT && !t);
+    {
+        /* the info calls: zeros for a NULL scene or tree, and a NULL info
+           is no crash (it was memset) */
+        rtp_scene_info si;
+        rtp_tree_info ti;
+        memset(&si, 0xff, sizeof si);
+        memset(&ti, 0xff, sizeof ti);
+        rtp_scene_get_info(NULL, &si);
+        rtp_tree_get_info(NULL, &ti);
+        CHECK(si.triangles == 0 && si.lights == 0 && si.width == 0);
+        CHECK(ti.nodes == 0 && ti.width == 0 && ti.lights == 0);
+        rtp_scene_get_info(NULL, NULL);
+        rtp_tree_get_info(NULL, NULL);
+    }
     t = (rtp_tree *)&part;
     CHECK(rtp_tree_read_memory(NULL, 5, "x", NULL, &t, &err) == RTP_ERR_ARGUMENT && !t);
     /* (the error names the function called, not the one beside it) */
