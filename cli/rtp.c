@@ -547,12 +547,15 @@ static int write_pair(const rtp_tree *tree, const char *tree_path, unsigned long
     }
     if (image_path && write_image(img, image_path, &err) != RTP_OK) {
         pair_live = 0;
+        pair_keep = NULL; /* (keep ends with this call: gcc -O3's
+                             -Wdangling-pointer saw it kept) */
         fail_err(&err);
         keep_undo(&keep, tree_path);
         release_signals(held);
         return -1;
     }
     pair_live = 0;
+    pair_keep = NULL;
     keep_drop(&keep);
     release_signals(held);
     return 0;
