@@ -940,6 +940,9 @@ struct rtp_tree {
     /* colour planes (tree.c: cp_*): an image for other colours of the
        terms (background, ambient, lights) is S + sum K_d (c_d - cS_d) */
     float *cp_s;           /* pixels * 3: S, the full path's image for... */
+    float *cp_sown;        /* S's own block, where the first evaluation
+                              made the planes (cp_ready); otherwise S
+                              lies in ev_samples' */
     double *cp_cl;         /* ...the colours cS (3 per term) */
     int cp_s_ok;           /* S holds for the coefficients now */
     size_t cp_nt;          /* terms: 2 + lights */

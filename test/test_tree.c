@@ -2800,6 +2800,109 @@ static void test_one_term_edits(void)
     one_term_run(1);
 }
 
+/* An evaluation into an image kept for further edits (incremental)
+   makes S and, with one or two lights, their colour planes on the way, so
+   that each light's first colour edit sums no sample and equals a full
+   trace (with more lights, none: each is made at its first edit);
+   S lies in a block of its own, so the samples stay and a shine edit
+   right after recombines only its material's; a one-off evaluation
+   makes none of it. */
+static void ready_planes_run(int spd)
+{
+    char path[512];
+    rtp_scene *s = NULL;
+    rtp_tree *t = NULL;
+    rtp_trace_options o;
+    rtp_eval_options eo;
+    rtp_image *re = NULL;
+    rtp_eval_stats es;
+    size_t j;
+    char key[32];
+    /* one-off: nothing made */
+    if (!edit_start(spd, &s, &t, &o, &eo, &re))
+        return;
+    rtp_image_destroy(re);
+    re = NULL;
+    rtp_tree_destroy(t);
+    t = NULL;
+    eo.incremental = 0;
+    CHECK(rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
+    CHECK(t && rtp_tree_eval(t, &eo, &re, NULL, NULL) == RTP_OK);
+    if (t)
+        CHECK_MSG(!t->cp_ok && !t->cp_sown, "spd %d: one-off made planes", spd);
+    rtp_image_destroy(re);
+    re = NULL;
+    rtp_tree_destroy(t);
+    t = NULL;
+    /* kept: both lights' planes and S, the samples kept */
+    eo.incremental = 1;
+    CHECK(rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
+    CHECK(t && rtp_tree_eval(t, &eo, &re, NULL, NULL) == RTP_OK);
+    if (t && re) {
+        CHECK_MSG(t->cp_ok && t->cp_ok[2] && t->cp_ok[3] && !t->cp_ok[0] && !t->cp_ok[1] &&
+                      t->cp_s_ok && t->cp_sown && t->cp_s == t->cp_sown && t->ev_samples_ok,
+                  "spd %d: the lights' planes and S not made", spd);
+        if (edit_equals_trace(t, s, &o, &eo, re, "mat.red.shine", "12", &es))
+            CHECK_MSG(es.combined_samples > 0 &&
+                          es.combined_samples < (unsigned long long)re->width * re->height,
+                      "spd %d: shine summed %llu samples", spd, es.combined_samples);
+    }
+    rtp_image_destroy(re);
+    re = NULL;
+    rtp_tree_destroy(t);
+    t = NULL;
+    CHECK(rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
+    CHECK(t && rtp_tree_eval(t, &eo, &re, NULL, NULL) == RTP_OK);
+    if (t && re) {
+        if (edit_equals_trace(t, s, &o, &eo, re, "light.1.color", "0.9,0.2,0.1", &es))
+            CHECK_MSG(es.combined_samples == 0, "spd %d: summed %llu samples", spd,
+                      es.combined_samples);
+        if (edit_equals_trace(t, s, &o, &eo, re, "light.0.color", "0.1,0.8,0.3", &es))
+            CHECK_MSG(es.combined_samples == 0, "spd %d: summed %llu samples", spd,
+                      es.combined_samples);
+        (void)edit_equals_trace(t, s, &o, &eo, re, "mat.red.kd", "0.2", &es);
+        /* the coefficients changed: the plane is made at the edit */
+        if (edit_equals_trace(t, s, &o, &eo, re, "light.0.color", "1,1,0.5", &es))
+            CHECK_MSG(t->cp_sown == NULL, "spd %d: S kept a block of its own", spd);
+    }
+    rtp_image_destroy(re);
+    re = NULL;
+    rtp_tree_destroy(t);
+    t = NULL;
+    rtp_scene_destroy(s);
+    s = NULL;
+    /* 40 lights: none made */
+    snprintf(path, sizeof path, "%s/rtp-ready-%d.nff", tmpdir(), (int)getpid());
+    if (!write_many_lights(path))
+        return;
+    s = load(path);
+    edit_options(spd, &o, &eo);
+    o.width = 48;
+    o.height = 36;
+    memset(o.region, 0, sizeof o.region);
+    if (s && rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK &&
+        rtp_tree_eval(t, &eo, &re, NULL, NULL) == RTP_OK) {
+        CHECK_MSG(!t->cp_ok && !t->cp_sown, "spd %d: planes of 40 lights made", spd);
+        for (j = 0; j < 40; j += 13) {
+            snprintf(key, sizeof key, "light.%d.color", (int)j);
+            if (edit_equals_trace(t, s, &o, &eo, re, key, "0.3,0.2,0.1", &es))
+                CHECK(es.combined_samples == 0);
+        }
+    } else {
+        CHECK(0);
+    }
+    rtp_image_destroy(re);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+    remove(path);
+}
+
+static void test_ready_planes(void)
+{
+    ready_planes_run(0);
+    ready_planes_run(1);
+}
+
 /* The two ways a material's first edit makes its planes, each equal to
    a full trace: from the kept image where it is the coefficients' image
    (no sample summed, only the material's pixels written), and from
@@ -5813,6 +5916,7 @@ int main(void)
     RUN(test_edit_sequence);
     RUN(test_random_chains);
     RUN(test_one_term_edits);
+    RUN(test_ready_planes);
     RUN(test_material_planes);
     RUN(test_moves_kept_image);
     RUN(test_moves_rest);
