@@ -415,7 +415,11 @@ typedef struct rtp_eval_options {
                                evaluation (a crop's too) wrote since, gets
                                wrong pixels, so set this only for the image
                                this tree wrote last and nothing wrote
-                               since. */
+                               since.  An evaluation of every sample (the
+                               first) with it set also readies the first
+                               colour edit of each light in a scene of
+                               one or two lights: 12 bytes a pixel, and
+                               12 a pixel each light reaches, kept. */
     double memory_limit;    /* bytes the trees may take while samples are
                                traced again (class D), old and new, and a
                                moved light's direction cube's cells (6
