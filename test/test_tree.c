@@ -2807,6 +2807,20 @@ static void test_one_term_edits(void)
    S lies in a block of its own, so the samples stay and a shine edit
    right after recombines only its material's; a one-off evaluation
    makes none of it. */
+/* A new tree of s recorded and evaluated once with eo into *re (the
+   tree and image before destroyed); 0 where a step failed. */
+static int ready_fresh(rtp_scene *s, const rtp_trace_options *o, const rtp_eval_options *eo,
+                       rtp_tree **t, rtp_image **re)
+{
+    rtp_image_destroy(*re);
+    *re = NULL;
+    rtp_tree_destroy(*t);
+    *t = NULL;
+    CHECK(rtp_record(s, o, t, NULL, NULL, NULL) == RTP_OK);
+    CHECK(*t && rtp_tree_eval(*t, eo, re, NULL, NULL) == RTP_OK);
+    return *t && *re;
+}
+
 static void ready_planes_run(int spd)
 {
     char path[512];
@@ -2821,24 +2835,12 @@ static void ready_planes_run(int spd)
     /* one-off: nothing made */
     if (!edit_start(spd, &s, &t, &o, &eo, &re))
         return;
-    rtp_image_destroy(re);
-    re = NULL;
-    rtp_tree_destroy(t);
-    t = NULL;
     eo.incremental = 0;
-    CHECK(rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
-    CHECK(t && rtp_tree_eval(t, &eo, &re, NULL, NULL) == RTP_OK);
-    if (t)
+    if (ready_fresh(s, &o, &eo, &t, &re))
         CHECK_MSG(!t->cp_ok && !t->cp_sown, "spd %d: one-off made planes", spd);
-    rtp_image_destroy(re);
-    re = NULL;
-    rtp_tree_destroy(t);
-    t = NULL;
     /* kept: both lights' planes and S, the samples kept */
     eo.incremental = 1;
-    CHECK(rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
-    CHECK(t && rtp_tree_eval(t, &eo, &re, NULL, NULL) == RTP_OK);
-    if (t && re) {
+    if (ready_fresh(s, &o, &eo, &t, &re)) {
         CHECK_MSG(t->cp_ok && t->cp_ok[2] && t->cp_ok[3] && !t->cp_ok[0] && !t->cp_ok[1] &&
                       t->cp_s_ok && t->cp_sown && t->cp_s == t->cp_sown && t->ev_samples_ok,
                   "spd %d: the lights' planes and S not made", spd);
@@ -2847,13 +2849,7 @@ static void ready_planes_run(int spd)
                           es.combined_samples < (unsigned long long)re->width * re->height,
                       "spd %d: shine summed %llu samples", spd, es.combined_samples);
     }
-    rtp_image_destroy(re);
-    re = NULL;
-    rtp_tree_destroy(t);
-    t = NULL;
-    CHECK(rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
-    CHECK(t && rtp_tree_eval(t, &eo, &re, NULL, NULL) == RTP_OK);
-    if (t && re) {
+    if (ready_fresh(s, &o, &eo, &t, &re)) {
         if (edit_equals_trace(t, s, &o, &eo, re, "light.1.color", "0.9,0.2,0.1", &es))
             CHECK_MSG(es.combined_samples == 0, "spd %d: summed %llu samples", spd,
                       es.combined_samples);
