@@ -33,7 +33,7 @@ labels="full_trace first_eval light_colour_1st light_colour ambient material_kd_
 {
     echo "## Instructions per evaluation (callgrind, 1 thread; millions)"
     echo
-    echo "The edits of bench_reeval, in its order, on one kept image: 1st is the first edit of a term (it makes the planes), the others the third; the material is the second (the first where the scene has one); moves are light 0's, the third of three (a drag going on; before session 11 the second of two). With RTP_INSTR_TRACE=1: a full trace of the scene (kd-tree build included), and each edit's count as a fraction of it."
+    echo "The edits of bench_reeval, in its order, on one kept image: 1st is the first edit of a term (it makes the planes, but a one- or two-light scene's first evaluation made its lights'), the others the third; the material is the second (the first where the scene has one); moves are light 0's, the third of three (a drag going on; before session 11 the second of two). With RTP_INSTR_TRACE=1: a full trace of the scene (kd-tree build included), and each edit's count as a fraction of it."
     echo
     echo "| scene | size | full trace | first eval | light colour 1st | light colour | ambient | material kd 1st | material kd | move exact | lightbuf:256 | itembuf:256 | auto (default) |"
     echo "|---|---|---|---|---|---|---|---|---|---|---|---|---|"
