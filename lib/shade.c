@@ -554,9 +554,16 @@ int rtpi_sample_coeffs(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t 
         acc[0] = acc[1] = acc[2] = 1.0; /* the eye ray saw the background */
     else
         coeffs_node(c, nodes, 0, terms, 1.0, acc, w);
-    for (i = 0; i < m; i++) {
+    /* (three at a time, m being 6 + 3 nlights, the sum in the same
+       order: the loop's own steps were a third of its 27 instructions
+       a light; mount_s6's first evaluation 367.6 -> 365.0 M) */
+    for (i = 0; i < m; i += 3) {
         coeffs[i] = (float)acc[i];
+        coeffs[i + 1] = (float)acc[i + 1];
+        coeffs[i + 2] = (float)acc[i + 2];
         sum += fabsf(coeffs[i]);
+        sum += fabsf(coeffs[i + 1]);
+        sum += fabsf(coeffs[i + 2]);
     }
     /* (a coefficient not finite makes the sum so) */
     return sum <= RTPI_COEFF_MAX;
