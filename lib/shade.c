@@ -502,19 +502,29 @@ static void coeffs_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t
     size_t nl = s->nlights, i;
     const float *t = terms + idx * RTPI_TERMS(nl);
     const rtpi_material *m = &s->mats[rtpi_prim_material(s, nd->prim)];
-    double wr, wt, kd = w * m->kd, ks = w * m->ks, cobj[3];
+    double wr, wt, kd = w * m->kd, ks = w * m->ks, cobj[3], kc0, kc1, kc2;
     int k;
     if (wout)
         wout[idx] = w;
     obj_colour(m, t, cobj);
-    for (k = 0; k < 3; k++)
-        acc[3 + k] += kd * cobj[k]; /* ambient: kd c_obj */
+    /* kd c_obj once, the ambient's and each light's product (kd * cobj[k]
+       * d is (kd * cobj[k]) * d: the same operations), the three
+       channels side by side: gears_s4's first evaluation 444.8 -> 423.8 M,
+       mount_s6's 364.0 -> 355.1) */
+    kc0 = kd * cobj[0];
+    kc1 = kd * cobj[1];
+    kc2 = kd * cobj[2];
+    acc[3] += kc0; /* ambient: kd c_obj */
+    acc[4] += kc1;
+    acc[5] += kc2;
     for (i = 0; i < nl; i++) {
-        double d = t[3 + 2 * i], sp = t[4 + 2 * i];
+        double d = t[3 + 2 * i], hs, *a = acc + 6 + 3 * i;
         if (d == 0.0)
             continue;
-        for (k = 0; k < 3; k++)
-            acc[6 + 3 * i + k] += kd * cobj[k] * d + ks * sp;
+        hs = ks * t[4 + 2 * i];
+        a[0] += kc0 * d + hs;
+        a[1] += kc1 * d + hs;
+        a[2] += kc2 * d + hs;
     }
     /* Global terms: ks I_r + kt I_t; on total internal reflection the
        transmitted share rides on the reflected subtree. */
