@@ -550,28 +550,23 @@ typedef struct rtpi_shade_ctx {
 /* The one shading routine, in three steps that trace and reeval share so
    that re-evaluation reproduces trace bit for bit:
 
-   1. rtpi_sample_terms: for each node of a sample, the object colour c_obj
+   1. the terms: for each node of a sample, the object colour c_obj
       and, per light, d = n.l and s = (r.v)^shine where the node sees the
       light and faces it (0 elsewhere) — everything geometric, as floats;
-   2. rtpi_sample_coeffs: the sample's colour is linear in the light
+   2. the coefficients: the sample's colour is linear in the light
       colours, the ambient light and the background:
          I = G (.) background + A (.) ambient + sum_i K_i (.) c_li
       with G, A, K_i (RGB) gathered over the tree with the materials' kd,
       ks, kt and the path weights;
    3. rtpi_combine: I from G, A, K_i and the current light colours.
+   rtpi_sample_eval makes steps 1 and 2 in one descent of a sample's tree;
+   rtpi_sample_coeffs step 2 again from kept terms.
 
    An edit of light colours, ambient or background redoes only step 3; a
    material edit redoes step 2 for the samples that contain it. */
 #define RTPI_TERMS(nl) (3 + 2 * (size_t)(nl))
 #define RTPI_COEFFS(nl) (6 + 3 * (size_t)(nl))
 
-/* terms: n * RTPI_TERMS(nlights) floats.  vis_ext: the nodes' visibility
-   words (c->vis_words per node) or NULL for the nodes' own bits.  nv (may
-   be NULL): receives each node's shading normal and view vector (6 floats),
-   from which rtpi_light_redo recomputes one light's terms exactly. */
-void rtpi_sample_terms(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
-                       size_t n, const uint32_t *vis_ext, rtpi_v3 eye,
-                       float *terms, float *nv);
 /* The largest sum of a sample's |coefficients| with which re-evaluation
    makes images from planes (tree.c): with the colours' magnitudes summing
    to no more than it too, and an edited material's new part within it,
@@ -592,11 +587,22 @@ void rtpi_sample_terms(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
 int rtpi_sample_coeffs(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
                        size_t n, const float *terms, double *acc,
                        float *coeffs, double *w);
+/* Steps 1 and 2 for a sample of n nodes seen from eye: its terms, then
+   from them its coefficients as rtpi_sample_coeffs makes them (the same
+   bits), in one descent of the tree.  terms: n * RTPI_TERMS(nlights)
+   floats.  vis_ext: the nodes' visibility words (c->vis_words per node)
+   or NULL for the nodes' own bits.  nv (may be NULL): receives each
+   node's shading normal and view vector (6 floats), from which
+   rtpi_light_redo recomputes one light's terms exactly.  acc, coeffs, w
+   and the result as for rtpi_sample_coeffs. */
+int rtpi_sample_eval(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t n,
+                     const uint32_t *vis_ext, rtpi_v3 eye, float *terms, float *nv,
+                     double *acc, float *coeffs, double *w);
 /* A moved light's terms and coefficients (coeffs[6 + 3 light ..]) for
    samples k0 .. k1 - 1 (sample k's nodes from start[k] to start[k + 1];
    nodes, vis_ext, nv, w and terms indexed by node, coeffs and samples by
    sample), with the nodes' path weights w (rtpi_sample_coeffs'): bit for
-   bit what rtpi_sample_terms and rtpi_sample_coeffs make for that light.
+   bit what rtpi_sample_eval and rtpi_sample_coeffs make for that light.
    Where samples is not NULL each sample's colour is combined there too
    with the colours cl (rtpi_combine; the other coefficients must be those
    the colours are to be combined with).  *bad |= 1 where a coefficient
@@ -613,7 +619,7 @@ unsigned long long rtpi_light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *no
                                    double *rest, unsigned char *rest_ok);
 /* The light terms (n.l, highlight) of every node of material mat among a
    sample's n nodes, from the cached normals and view vectors nv, exactly
-   as rtpi_sample_terms computes them: what an edit of mat's shine or ks
+   as rtpi_sample_eval computes them: what an edit of mat's shine or ks
    changes. */
 void rtpi_material_light_terms(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
                                size_t n, const uint32_t *vis_ext, const float *nv,

@@ -1,7 +1,7 @@
 /* trace.c — the Whitted ray tracer.  For each pixel sample it records the
  * ray tree (hits, light visibility, reflected and refracted subtrees) and
- * then evaluates that tree by the shading steps (rtpi_sample_terms,
- * rtpi_sample_coeffs, rtpi_combine): the image trace produces
+ * then evaluates that tree by the shading steps (rtpi_sample_eval,
+ * rtpi_combine): the image trace produces
  * is the evaluation of the trees it recorded. */
 #include "internal.h"
 #include "dircube.h"
@@ -444,10 +444,9 @@ static void trace_sample(worker *w, int x, int y, float *rgb)
         }
         /* (no NULL + 0 when nothing was hit yet) */
         const rtpi_cnode *nodes = n ? w->nodes + w->sample_base : NULL;
-        rtpi_sample_terms(&w->sh->shade, nodes, n,
-                          words && n ? w->vis + w->sample_base * words : NULL, c->from,
-                          w->terms, NULL);
-        rtpi_sample_coeffs(&w->sh->shade, nodes, n, w->terms, w->acc, w->coeffs, NULL);
+        rtpi_sample_eval(&w->sh->shade, nodes, n,
+                         words && n ? w->vis + w->sample_base * words : NULL, c->from, w->terms,
+                         NULL, w->acc, w->coeffs, NULL);
         rtpi_combine(s, w->sh->cl, w->coeffs, rgb);
     }
     if (!w->sh->rows)

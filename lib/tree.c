@@ -453,7 +453,7 @@ static int light_moved(const rtp_tree *t, size_t i)
 }
 
 /* rtpi_parallel_rows for the tree's work: evaluating a sample recurses
-   a level a ray of its tree (rtpi_sample_terms and the others: up to
+   a level a ray of its tree (rtpi_sample_eval and the others: up to
    ~0.6 KiB a level), so the rows of a tree deeper than a host's thread
    can be counted on to hold run on threads of rtp's own
    (rtpi_trace_stack; a 1000-level tree's evaluation overflowed a
@@ -1096,13 +1096,16 @@ static int sample_coeffs(eval_ctx *e, size_t k, int redo_terms, float **coeffs_o
         coeffs = e->coeffs;
         redo_terms = 1;
     }
-    if (redo_terms)
-        rtpi_sample_terms(e->shade, t->nodes + a, n, e->vis ? e->vis + a * words : NULL, e->eye,
-                          terms, e->cached ? t->ev_nv + 6 * a : NULL);
     /* (coefficients near the float range count as not finite too: the
        planes then give way needlessly, which is safe) */
-    e->coef_bad |= !rtpi_sample_coeffs(e->shade, t->nodes + a, n, terms, e->acc, coeffs,
-                                       e->cached ? t->ev_w + a : NULL);
+    if (redo_terms)
+        e->coef_bad |= !rtpi_sample_eval(e->shade, t->nodes + a, n,
+                                         e->vis ? e->vis + a * words : NULL, e->eye, terms,
+                                         e->cached ? t->ev_nv + 6 * a : NULL, e->acc, coeffs,
+                                         e->cached ? t->ev_w + a : NULL);
+    else
+        e->coef_bad |= !rtpi_sample_coeffs(e->shade, t->nodes + a, n, terms, e->acc, coeffs,
+                                           e->cached ? t->ev_w + a : NULL);
     *coeffs_out = coeffs;
     return 0;
 }
@@ -1145,10 +1148,9 @@ static int eval_row(void *ctx, int y)
         }
         if (e->cached) {
             /* sample_coeffs' steps 1 and 2 into the caches */
-            float *terms = t->ev_terms + a * nt;
-            rtpi_sample_terms(sh, t->nodes + a, n, e->vis ? e->vis + a * words : NULL, e->eye,
-                              terms, t->ev_nv + 6 * a);
-            bad |= !rtpi_sample_coeffs(sh, t->nodes + a, n, terms, e->acc, coeffs, t->ev_w + a);
+            bad |= !rtpi_sample_eval(sh, t->nodes + a, n, e->vis ? e->vis + a * words : NULL,
+                                     e->eye, t->ev_terms + a * nt, t->ev_nv + 6 * a, e->acc,
+                                     coeffs, t->ev_w + a);
         } else if (sample_coeffs(e, k, 1, &coeffs)) {
             return 1;
         }
