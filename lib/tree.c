@@ -2181,8 +2181,10 @@ static void free_material_lists(rtp_tree *t)
 }
 
 /* For each material, the samples whose trees contain it and its nodes
-   (built once). */
-static rtp_status build_material_lists(rtp_tree *t)
+   (built once).  mk (may be NULL): room for a uint16_t a node, where the
+   first pass keeps each node's material for the second (up to 65536
+   materials). */
+static rtp_status build_material_lists(rtp_tree *t, uint16_t *mk)
 {
     const rtp_scene *s = t->scene;
     const uint64_t *start = t->start;
@@ -2191,11 +2193,7 @@ static rtp_status build_material_lists(rtp_tree *t)
     uint32_t *last = NULL, *fill = NULL, *nfill = NULL, *ms, *mn, *samples, *mnodes;
     /* (the lists and arrays in locals: each store to the lists read the
        tree's fields again, 1.1 M instructions of mount_s6's first
-       evaluation.  Each node's material kept from the first pass for
-       the second, two bytes a node, saved 3.2 M more, but freeing that
-       block raised glibc's mmap threshold, and a light buffer's lists
-       grown by realloc later were copied, not remapped: a move of
-       rings_s7's light 0.5 M more, every move) */
+       evaluation; the second lookup, where mk spares it, 3.2 M) */
     last = (uint32_t *)rtpi_malloc_array(&t->alloc, nm ? nm : 1, sizeof *last);
     fill = (uint32_t *)rtpi_malloc_array(&t->alloc, nm ? nm : 1, sizeof *fill);
     nfill = (uint32_t *)rtpi_malloc_array(&t->alloc, nm ? nm : 1, sizeof *nfill);
@@ -2205,6 +2203,8 @@ static rtp_status build_material_lists(rtp_tree *t)
                                                  sizeof *t->mat_nodes);
     if (!last || !fill || !nfill || !t->mat_start || !t->mat_nstart || !t->mat_nodes)
         goto nomem;
+    if (nm > 65536)
+        mk = NULL;
     ms = t->mat_start;
     mn = t->mat_nstart;
     mnodes = t->mat_nodes;
@@ -2213,6 +2213,8 @@ static rtp_status build_material_lists(rtp_tree *t)
     for (k = 0, n = (size_t)start[0]; k < ns; k++)
         for (; n < (size_t)start[k + 1]; n++) {
             uint32_t m = rtpi_prim_material(s, nodes[n].prim);
+            if (mk)
+                mk[n] = (uint16_t)m;
             mn[m + 1]++;
             if (last[m] != (uint32_t)k) {
                 last[m] = (uint32_t)k;
@@ -2235,7 +2237,7 @@ static rtp_status build_material_lists(rtp_tree *t)
     }
     for (k = 0, n = (size_t)start[0]; k < ns; k++)
         for (; n < (size_t)start[k + 1]; n++) {
-            uint32_t m = rtpi_prim_material(s, nodes[n].prim);
+            uint32_t m = mk ? mk[n] : rtpi_prim_material(s, nodes[n].prim);
             mnodes[nfill[m]++] = (uint32_t)n;
             if (last[m] != (uint32_t)k) {
                 last[m] = (uint32_t)k;
@@ -2539,7 +2541,7 @@ static rtp_status retrace_edited(rtp_tree *t, int threads, int stale, double lim
         any |= needs_retrace(t, m, stale);
     if (!any && !camera)
         return RTP_OK;
-    if (!camera && !t->mat_start && build_material_lists(t) != RTP_OK)
+    if (!camera && !t->mat_start && build_material_lists(t, NULL) != RTP_OK)
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
     mark = (unsigned char *)rtpi_calloc_array(&t->alloc, ns + 1, 1);
     list = (uint32_t *)rtpi_malloc_array(&t->alloc, ns + 1, sizeof *list);
@@ -4076,7 +4078,14 @@ static rtp_status eval_body(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
             drop_caches(t), cached = 0; /* evaluate without caches */
         t->ev_valid = 0;
     }
-    if (cached && !t->mat_start && build_material_lists(t) != RTP_OK)
+    /* (the path weights' cache lends the lists its room where the full
+       path is to write every node's weight anew: ev_valid is 0.  A block
+       of their own, made and freed, raised glibc's mmap threshold, and
+       a light buffer's lists grown by realloc later were copied, not
+       remapped: rings_s7's move_lightbuf256 391.54 -> 392.06 M, every
+       move) */
+    if (cached && !t->mat_start &&
+        build_material_lists(t, t->ev_valid ? NULL : (uint16_t *)(void *)t->ev_w) != RTP_OK)
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
     full = !cached || !t->ev_valid;
     if (t->hl_mat && !full && !hl_continues(t, kmode, kres))
