@@ -908,7 +908,8 @@ struct rtp_tree {
     int ev_inf;            /* some coefficient passed RTPI_COEFF_MAX (a kt
                               of 1e19) since the last full evaluation: no
                               planes (tree.c planes_in_range) */
-    size_t ev_nlights;
+    size_t ev_nlights;     /* the lights ev_terms and the other caches
+                              are made for (set as they are made) */
     double *ev_pos;        /* 3 per light: positions the terms are for */
     int ev_vis_mode, ev_vis_res;
     rtpi_material *ev_mats; /* materials the caches were made with */

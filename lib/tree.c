@@ -4060,9 +4060,15 @@ static rtp_status eval_body(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                   fmin(EV_CACHE_BYTES, opt && opt->memory_limit > 0.0 ? opt->memory_limit
                                                                       : RTPI_MEMORY_LIMIT)) &&
              !(opt && opt->no_cache);
-    if (t->ev_valid && t->ev_nlights != nl)
+    /* (caches made for another count of lights go, whether or not they
+       hold: an evaluation that failed after making them, out of memory,
+       left ev_valid 0 and them sized for its lights, and a light added
+       then overran ev_coeffs and ev_terms; ev_nlights is set where they
+       are made) */
+    if (t->ev_terms && t->ev_nlights != nl)
         drop_caches(t);
     if (cached && !t->ev_terms) {
+        t->ev_nlights = nl;
         t->ev_terms = (float *)rtpi_malloc_array(&t->alloc, t->nnodes * RTPI_TERMS(nl) + 1,
                                                  sizeof *t->ev_terms);
         t->ev_coeffs = (float *)rtpi_malloc_array(&t->alloc, ns * RTPI_COEFFS(nl),

@@ -2899,6 +2899,138 @@ static void test_ready_planes(void)
     ready_planes_run(1);
 }
 
+/* An allocator that fails its fail_at-th allocation while armed and
+   follows each block with as many bytes again of a pattern, checked as
+   the block is freed: a write past a block's end (by less than its size)
+   shows as `overrun`, not as a corrupt heap. */
+typedef struct slack {
+    int armed;
+    long count, fail_at, live, overrun;
+} slack;
+
+#define SLACK_HDR 16
+#define SLACK_BYTE 0xa5
+
+static void *slack_malloc(void *user, size_t n)
+{
+    slack *k = (slack *)user;
+    unsigned char *p;
+    if (k->armed && ++k->count == k->fail_at)
+        return NULL;
+    if (n > ((size_t)-1 - SLACK_HDR) / 2 || !(p = (unsigned char *)malloc(SLACK_HDR + 2 * n)))
+        return NULL;
+    memcpy(p, &n, sizeof n);
+    memset(p + SLACK_HDR + n, SLACK_BYTE, n);
+    k->live++;
+    return p + SLACK_HDR;
+}
+
+static void slack_free(void *user, void *q)
+{
+    slack *k = (slack *)user;
+    unsigned char *p = (unsigned char *)q - SLACK_HDR;
+    size_t n, i;
+    memcpy(&n, p, sizeof n);
+    for (i = 0; i < n; i++)
+        if (p[SLACK_HDR + n + i] != SLACK_BYTE) {
+            k->overrun++;
+            break;
+        }
+    k->live--;
+    free(p);
+}
+
+static void *slack_realloc(void *user, void *q, size_t n)
+{
+    void *r;
+    size_t old;
+    if (!q)
+        return slack_malloc(user, n);
+    memcpy(&old, (unsigned char *)q - SLACK_HDR, sizeof old);
+    if (!(r = slack_malloc(user, n)))
+        return NULL;
+    memcpy(r, q, old < n ? old : n);
+    slack_free(user, q);
+    return r;
+}
+
+/* An evaluation that fails for memory after it made the caches (here the
+   first, incremental one of a one-light scene, failing at each of its
+   allocations in turn), then a light added: the next evaluation equals a
+   full trace and writes inside its blocks.  The caches stayed, sized for
+   one light, with ev_valid 0, and were dropped for another count of
+   lights only where ev_valid was set: the coefficients of two lights went
+   past the end of ev_coeffs and ev_terms (a double free or a corrupt heap
+   in helper 91's sweep, a heap overflow under valgrind). */
+static void test_failed_eval_then_light_added(void)
+{
+    int spd, tested = 0;
+    for (spd = 0; spd < 2; spd++) {
+        long n;
+        for (n = 1; n < 400; n++) {
+            slack k;
+            rtp_allocator a;
+            rtp_scene *s = NULL;
+            rtp_tree *t = NULL;
+            rtp_image *img = NULL, *full = NULL;
+            rtp_trace_options o;
+            rtp_eval_options eo;
+            rtp_diff_stats d;
+            rtp_status st;
+            memset(&k, 0, sizeof k);
+            k.fail_at = n;
+            a.malloc_fn = slack_malloc;
+            a.realloc_fn = slack_realloc;
+            a.free_fn = slack_free;
+            a.user = &k;
+            memset(&o, 0, sizeof o);
+            o.width = 12;
+            o.height = 10;
+            if (spd) { /* (SPD's frame is 512x512: a region of it) */
+                o.spd = 1;
+                o.region[0] = 250;
+                o.region[1] = 250;
+                o.region[2] = 262;
+                o.region[3] = 260;
+            }
+            memset(&eo, 0, sizeof eo);
+            eo.incremental = 1;
+            if (rtp_scene_load("scenes/checker.nff", &a, &s, NULL) != RTP_OK ||
+                rtp_record(s, &o, &t, NULL, NULL, NULL) != RTP_OK) {
+                CHECK(0);
+                rtp_scene_destroy(s);
+                break;
+            }
+            k.armed = 1;
+            st = rtp_tree_eval(t, &eo, &img, NULL, NULL);
+            k.armed = 0;
+            CHECK(st == RTP_OK || st == RTP_ERR_NOMEM);
+            if (st == RTP_ERR_NOMEM && t->ev_terms) {
+                tested++;
+                CHECK(rtp_tree_set(t, "light.1.pos", "-2,-3,5", NULL) == RTP_OK);
+                CHECK(rtp_scene_set(s, "light.1.pos", "-2,-3,5", NULL) == RTP_OK);
+                if (rtp_tree_eval(t, &eo, &img, NULL, NULL) == RTP_OK &&
+                    rtp_trace(s, &o, &full, NULL, NULL) == RTP_OK &&
+                    rtp_image_diff(img, full, 1e-6, &d, NULL) == RTP_OK)
+                    CHECK_MSG(d.max_abs <= 1e-6, "spd %d, allocation %ld failed: %g", spd, n,
+                              d.max_abs);
+                else
+                    CHECK_MSG(0, "spd %d, allocation %ld failed: a step failed", spd, n);
+            }
+            rtp_image_destroy(full);
+            rtp_image_destroy(img);
+            rtp_tree_destroy(t);
+            rtp_scene_destroy(s);
+            CHECK_MSG(k.overrun == 0 && k.live == 0,
+                      "spd %d, allocation %ld failed: %ld blocks overrun, %ld left", spd, n,
+                      k.overrun, k.live);
+            if (k.count < n) /* (no allocation failed: each was tried) */
+                break;
+        }
+    }
+    CHECK_MSG(tested > 0, "no evaluation failed after making the caches");
+}
+
 /* The two ways a material's first edit makes its planes, each equal to
    a full trace: from the kept image where it is the coefficients' image
    (no sample summed, only the material's pixels written), and from
@@ -5913,6 +6045,7 @@ int main(void)
     RUN(test_random_chains);
     RUN(test_one_term_edits);
     RUN(test_ready_planes);
+    RUN(test_failed_eval_then_light_added);
     RUN(test_material_planes);
     RUN(test_moves_kept_image);
     RUN(test_moves_rest);
