@@ -183,6 +183,19 @@ static const char mtl_text[] =
     "newmtl clear\nKd 0.2 0.2 0.2\nKs 0.5\nNi 1.5\nd 0.3\n"
     "newmtl pic\nKd 1 1 1\nmap_Kd tex.ppm\nbump -bm 0.5 tex.ppm\n";
 
+/* Two lights: a first evaluation into a kept image makes their colour
+   planes and S (tree.c cp_ready) */
+static const char ready_text[] =
+    "b 0.1 0.1 0.2\n"
+    "v from 0 -6 2 at 0 0 0.5 up 0 0 1 angle 40 hither 0.01 resolution 6 5\n"
+    "ambient 0.05 0.05 0.05\n"
+    "l 3 -4 6 0.8 0.7 0.6\nname lamp\n"
+    "l -3 -4 5\n"
+    "f 0.9 0.9 0.9 0.8 0.2 20 0 0\nname floor\n"
+    "p 4 -4 -4 0 4 -4 0 4 4 0 -4 4 0\n"
+    "f 0.8 0.3 0.3 0.5 0.4 40 0.4 1.5\nname glass\n"
+    "s 0 0 1 0.8\n";
+
 static const char ppm_text[] = "P3\n2 2\n255\n255 0 0  0 255 0\n0 0 255  255 255 255\n";
 
 static int write_patch(void)
@@ -206,7 +219,8 @@ static int setup(void)
         return -1;
     return write_text("scene.nff", nff_text) || write_text("sub.nff", sub_text) ||
            write_text("mesh.obj", obj_text) || write_text("mesh.mtl", mtl_text) ||
-           write_text("tex.ppm", ppm_text) || write_patch();
+           write_text("tex.ppm", ppm_text) || write_text("ready.nff", ready_text) ||
+           write_patch();
 }
 
 /* ----------------------------------------------------------- operations */
@@ -266,11 +280,13 @@ static rtp_status op_load_obj(ctx *c)
     return st;
 }
 
-/* Loads the NFF scene unarmed. */
+static const char *scene_name = "scene.nff"; /* scene()'s */
+
+/* Loads the NFF scene (scene_name) unarmed. */
 static rtp_scene *scene(ctx *c)
 {
     rtp_scene *s = NULL;
-    if (rtp_scene_load(tmp_path("scene.nff"), c->a, &s, &c->err) != RTP_OK) {
+    if (rtp_scene_load(tmp_path(scene_name), c->a, &s, &c->err) != RTP_OK) {
         fprintf(stderr, "setup: %s\n", c->err.message);
         return NULL;
     }
@@ -565,7 +581,7 @@ static const char *const warm_edits[][2] = {
     {"light.lamp.color", "0.2,0.2,0.2"}, {"mat.glass.shine", "7"},
     {"mat.glass.shine", "9"},        {"mat.green.ks", "0.2"}};
 
-static rtp_status op_tree_eval_warm(ctx *c)
+static rtp_status warm_run(ctx *c, const char *const (*edits)[2], size_t n, int arm_first)
 {
     rtp_tree *t = tree(c), *twin = tree(c);
     rtp_image *img = NULL;
@@ -581,34 +597,65 @@ static rtp_status op_tree_eval_warm(ctx *c)
     eo.incremental = 1;
     memset(&fo, 0, sizeof fo);
     fo.no_cache = 1; /* the twin: every image from scratch */
-    if (rtp_tree_eval(t, &eo, &img, NULL, &c->err) != RTP_OK) {
+    if (arm_first)
+        ARM(c);
+    st = rtp_tree_eval(t, &eo, &img, NULL, &c->err);
+    DISARM(c);
+    if (st != RTP_OK && !arm_first)
         fprintf(stderr, "setup: %s\n", c->err.message);
+    if (st != RTP_OK) {
         rtp_tree_destroy(t);
         rtp_tree_destroy(twin);
-        return RTP_ERR_IO;
+        return arm_first ? st : RTP_ERR_IO;
     }
-    st = RTP_OK;
-    for (i = 0; i < sizeof warm_edits / sizeof *warm_edits && st == RTP_OK; i++) {
+    for (i = 0; i < n && st == RTP_OK; i++) {
         rtp_image *ref = NULL;
         rtp_diff_stats d;
         ARM(c);
-        st = rtp_tree_set(t, warm_edits[i][0], warm_edits[i][1], &c->err);
+        st = rtp_tree_set(t, edits[i][0], edits[i][1], &c->err);
         if (st == RTP_OK)
             st = rtp_tree_eval_into(t, &eo, img, NULL, &c->err);
         DISARM(c);
         if (st != RTP_OK)
             break;
         /* each image, also where a failure was tolerated, the twin's */
-        CHECK(rtp_tree_set(twin, warm_edits[i][0], warm_edits[i][1], NULL) == RTP_OK &&
+        CHECK(rtp_tree_set(twin, edits[i][0], edits[i][1], NULL) == RTP_OK &&
               rtp_tree_eval(twin, &fo, &ref, NULL, NULL) == RTP_OK);
         CHECK_MSG(ref && rtp_image_diff(img, ref, 0.0, &d, NULL) == RTP_OK && d.max_abs <= 1e-5,
-                  "%s=%s: %g off the uncached twin", warm_edits[i][0], warm_edits[i][1],
+                  "%s=%s: %g off the uncached twin", edits[i][0], edits[i][1],
                   ref ? d.max_abs : -1.0);
         rtp_image_destroy(ref);
     }
     rtp_image_destroy(img);
     rtp_tree_destroy(t);
     rtp_tree_destroy(twin);
+    return st;
+}
+
+static rtp_status op_tree_eval_warm(ctx *c)
+{
+    return warm_run(c, warm_edits, sizeof warm_edits / sizeof *warm_edits, 0);
+}
+
+/* A scene of two lights, its first evaluation armed too: the colour
+   planes and S it makes for the edits (cp_ready), each left out where
+   there is no memory for it, then edits that use them, each image the
+   uncached twin's. */
+static const char *const ready_edits[][2] = {
+    {"light.lamp.color", "1,0.5,0"}, {"light.1.color", "0.2,0.3,0.9"},
+    {"mat.glass.shine", "10"},       {"light.lamp.color", "0.5,1,0"},
+    {"ambient", "0.2"},              {"light.1.color", "1,1,1"}};
+
+static rtp_status op_tree_eval_ready(ctx *c)
+{
+    rtp_status st;
+    scene_name = "ready.nff";
+    st = warm_run(c, ready_edits, sizeof ready_edits / sizeof *ready_edits, 1);
+    tree_spd = 1;
+    if (st == RTP_OK)
+        st = warm_run(c, ready_edits, sizeof ready_edits / sizeof *ready_edits, 1);
+    tree_spd = 0;
+    scene_name = "scene.nff";
     return st;
 }
 
@@ -1437,6 +1484,7 @@ SWEEP(tree_set)
 SWEEP(tree_eval_edited)
 SWEEP(tree_eval_warm)
 SWEEP(tree_eval_warm_spd)
+SWEEP(tree_eval_ready)
 SWEEP(image_diff)
 SWEEP(heatmap)
 
@@ -1624,6 +1672,7 @@ int main(void)
     RUN(test_tree_eval_file_whole);
     RUN(test_tree_eval_warm);
     RUN(test_tree_eval_warm_spd);
+    RUN(test_tree_eval_ready);
     RUN(test_image_io);
     RUN(test_image_diff);
     RUN(test_heatmap);
