@@ -3031,6 +3031,138 @@ static void test_failed_eval_then_light_added(void)
     CHECK_MSG(tested > 0, "no evaluation failed after making the caches");
 }
 
+/* A chain of shine edits (the listed highlights: the samples and terms
+   at the chain's shine, the coefficients and ev_mats at the shine
+   before) ended by an evaluation that fails for memory, the shine back
+   at the caches' and another material edited: the next evaluation
+   equals a full trace.  The failed one had put the highlights' terms
+   back (hl_restore) and dropped the list before an allocation it could
+   still return from keeping ev_valid, so the next saw the material as
+   the caches have it and nothing pending: it kept the chain's
+   highlights in the material's samples (0.012 off on checker.nff). */
+static void test_failed_eval_after_shine_chain(void)
+{
+    static const char *const shines[] = {"25", "7", "90"};
+    int tested = 0;
+    long n;
+    for (n = 1; n < 400; n++) {
+        slack k;
+        rtp_allocator a;
+        rtp_scene *s = NULL;
+        rtp_tree *t = NULL;
+        rtp_image *re = NULL, *full = NULL;
+        rtp_trace_options o;
+        rtp_eval_options eo;
+        rtp_diff_stats d;
+        rtp_status st;
+        size_t i;
+        int ok = 1;
+        memset(&k, 0, sizeof k);
+        k.fail_at = n;
+        a.malloc_fn = slack_malloc;
+        a.realloc_fn = slack_realloc;
+        a.free_fn = slack_free;
+        a.user = &k;
+        memset(&o, 0, sizeof o);
+        o.width = 20;
+        o.height = 16;
+        memset(&eo, 0, sizeof eo);
+        eo.incremental = 1;
+        if (rtp_scene_load("scenes/checker.nff", &a, &s, NULL) != RTP_OK ||
+            rtp_record(s, &o, &t, NULL, NULL, NULL) != RTP_OK ||
+            rtp_image_create(20, 16, &a, &re, NULL) != RTP_OK ||
+            rtp_tree_eval_into(t, &eo, re, NULL, NULL) != RTP_OK) {
+            CHECK(0);
+            rtp_image_destroy(re);
+            rtp_tree_destroy(t);
+            rtp_scene_destroy(s);
+            break;
+        }
+        for (i = 0; i < sizeof shines / sizeof *shines; i++)
+            ok &= rtp_tree_set(t, "mat.ball.shine", shines[i], NULL) == RTP_OK &&
+                  rtp_tree_eval_into(t, &eo, re, NULL, NULL) == RTP_OK;
+        /* (40: the ball's shine in the file, the caches' still) */
+        ok &= rtp_tree_set(t, "mat.ball.shine", "40", NULL) == RTP_OK &&
+              rtp_tree_set(t, "mat.board.kd", "0.33", NULL) == RTP_OK &&
+              rtp_scene_set(s, "mat.board.kd", "0.33", NULL) == RTP_OK;
+        CHECK(ok);
+        k.armed = 1;
+        st = rtp_tree_eval_into(t, &eo, re, NULL, NULL);
+        k.armed = 0;
+        CHECK(st == RTP_OK || st == RTP_ERR_NOMEM);
+        if (st == RTP_ERR_NOMEM) {
+            tested++;
+            if (rtp_tree_eval_into(t, &eo, re, NULL, NULL) == RTP_OK &&
+                rtp_trace(s, &o, &full, NULL, NULL) == RTP_OK &&
+                rtp_image_diff(re, full, 1e-6, &d, NULL) == RTP_OK)
+                CHECK_MSG(d.max_abs <= 1e-6, "allocation %ld failed: %g", n, d.max_abs);
+            else
+                CHECK_MSG(0, "allocation %ld failed: a step failed", n);
+        }
+        rtp_image_destroy(full);
+        rtp_image_destroy(re);
+        rtp_tree_destroy(t);
+        rtp_scene_destroy(s);
+        CHECK_MSG(k.overrun == 0 && k.live == 0,
+                  "allocation %ld failed: %ld blocks overrun, %ld left", n, k.overrun, k.live);
+        if (k.count < n) /* (no allocation failed: each was tried) */
+            break;
+    }
+    CHECK_MSG(tested > 0, "no evaluation failed");
+}
+
+/* A chain of shine edits ended by a one-off evaluation (no_cache) with
+   the shine back at the caches', then edits of the material's kd and
+   colour, a light's colour and its ks, each equal to a full trace, plain
+   and SPD.  The one-off evaluation dropped the list of highlights but
+   left their terms at the chain's shine in the caches it kept: the
+   material then equal to the caches' had nothing to redo, and the next
+   kd edit summed those terms (0.097 off on checker.nff). */
+static void test_nocache_ends_shine_chain(void)
+{
+    static const char *const edits[][2] = {{"mat.ball.kd", "0.3"},
+                                           {"mat.ball.color", "0.3,0.8,0.2"},
+                                           {"light.0.color", "0.5,0.8,0.2"},
+                                           {"mat.ball.ks", "0.6"}};
+    int spd;
+    for (spd = 0; spd < 2; spd++) {
+        rtp_scene *s = NULL;
+        rtp_tree *t = NULL;
+        rtp_image *re = NULL, *one = NULL;
+        rtp_trace_options o;
+        rtp_eval_options eo, once;
+        rtp_diff_stats d;
+        size_t i;
+        if (!edit_start_on("scenes/checker.nff", spd, &s, &t, &o, &eo, &re) || !t || !re) {
+            rtp_image_destroy(re);
+            rtp_tree_destroy(t);
+            rtp_scene_destroy(s);
+            continue;
+        }
+        once = eo;
+        once.no_cache = 1;
+        once.incremental = 0;
+        CHECK(edit_equals_trace(t, s, &o, &eo, re, "mat.ball.shine", "5", NULL));
+        /* (40: the ball's shine in the file, the caches' still) */
+        CHECK(rtp_tree_set(t, "mat.ball.shine", "40", NULL) == RTP_OK &&
+              rtp_scene_set(s, "mat.ball.shine", "40", NULL) == RTP_OK);
+        CHECK(rtp_tree_eval(t, &once, &one, NULL, NULL) == RTP_OK);
+        if (one) {
+            rtp_image *full = NULL;
+            CHECK(rtp_trace(s, &o, &full, NULL, NULL) == RTP_OK &&
+                  rtp_image_diff(one, full, 1e-6, &d, NULL) == RTP_OK && d.max_abs <= 1e-6);
+            rtp_image_destroy(full);
+        }
+        for (i = 0; i < sizeof edits / sizeof *edits; i++)
+            CHECK_MSG(edit_equals_trace(t, s, &o, &eo, re, edits[i][0], edits[i][1], NULL),
+                      "spd %d, %s=%s", spd, edits[i][0], edits[i][1]);
+        rtp_image_destroy(one);
+        rtp_image_destroy(re);
+        rtp_tree_destroy(t);
+        rtp_scene_destroy(s);
+    }
+}
+
 /* The two ways a material's first edit makes its planes, each equal to
    a full trace: from the kept image where it is the coefficients' image
    (no sample summed, only the material's pixels written), and from
@@ -6046,6 +6178,8 @@ int main(void)
     RUN(test_one_term_edits);
     RUN(test_ready_planes);
     RUN(test_failed_eval_then_light_added);
+    RUN(test_failed_eval_after_shine_chain);
+    RUN(test_nocache_ends_shine_chain);
     RUN(test_material_planes);
     RUN(test_moves_kept_image);
     RUN(test_moves_rest);
