@@ -4478,7 +4478,13 @@ done:
         stats->shadow_seconds = st.moved_lights ? t1 - t0s : 0.0;
         stats->nodes = t->nnodes;
     }
-    t->last_pixels = img->pixels;
+    /* (an evaluation without the caches, no_cache or over the memory
+       limit, leaves them and ev_valid as the one before made them: its
+       image is not theirs, and an incremental evaluation after it, which
+       writes only what changed since the caches and takes a material's
+       P from the image, left a kd edit's pixels 0.108 off a full trace
+       on spheres.nff; the next evaluation writes every pixel) */
+    t->last_pixels = cached ? img->pixels : NULL;
     /* a material's planes and listed highlights make images the
        coefficients (held at the material before) do not */
     t->last_exact = !matpath && !hl_apply;
