@@ -2954,6 +2954,18 @@ static void *slack_realloc(void *user, void *q, size_t n)
     return r;
 }
 
+/* A slack allocator into *a, failing its fail_at-th allocation once
+   armed (k->armed). */
+static void slack_init(slack *k, rtp_allocator *a, long fail_at)
+{
+    memset(k, 0, sizeof *k);
+    k->fail_at = fail_at;
+    a->malloc_fn = slack_malloc;
+    a->realloc_fn = slack_realloc;
+    a->free_fn = slack_free;
+    a->user = k;
+}
+
 /* An evaluation that fails for memory after it made the caches (here the
    first, incremental one of a one-light scene, failing at each of its
    allocations in turn), then a light added: the next evaluation equals a
@@ -2977,12 +2989,7 @@ static void test_failed_eval_then_light_added(void)
             rtp_eval_options eo;
             rtp_diff_stats d;
             rtp_status st;
-            memset(&k, 0, sizeof k);
-            k.fail_at = n;
-            a.malloc_fn = slack_malloc;
-            a.realloc_fn = slack_realloc;
-            a.free_fn = slack_free;
-            a.user = &k;
+            slack_init(&k, &a, n);
             memset(&o, 0, sizeof o);
             o.width = 12;
             o.height = 10;
@@ -3057,12 +3064,7 @@ static void test_failed_eval_after_shine_chain(void)
         rtp_status st;
         size_t i;
         int ok = 1;
-        memset(&k, 0, sizeof k);
-        k.fail_at = n;
-        a.malloc_fn = slack_malloc;
-        a.realloc_fn = slack_realloc;
-        a.free_fn = slack_free;
-        a.user = &k;
+        slack_init(&k, &a, n);
         memset(&o, 0, sizeof o);
         o.width = 20;
         o.height = 16;
