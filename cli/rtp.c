@@ -112,6 +112,13 @@ static int fail_line(const rtp_error *err, int line)
     return 1;
 }
 
+/* A count's noun: one for 1, else many ("1 materials", "traced all 1
+   samples" had been said). */
+static const char *noun(unsigned long long n, const char *one, const char *many)
+{
+    return n == 1 ? one : many;
+}
+
 static double now_seconds(void)
 {
     struct timespec ts;
@@ -1393,9 +1400,10 @@ static int stale_warned; /* the stale-subtree warning said (once a run) */
 static void capped_warning(unsigned long long n)
 {
     fprintf(stderr,
-            "rtp: warning: %llu rays were not followed: their samples' ray trees reached "
-            "2^20 nodes (lower --depth or set --min-weight)\n",
-            n);
+            "rtp: warning: %llu %s not followed: %s reached 2^20 nodes (lower --depth or set "
+            "--min-weight)\n",
+            n, noun(n, "ray was", "rays were"),
+            noun(n, "its sample's ray tree", "their samples' ray trees"));
 }
 
 static int cmd_trace(int argc, char **argv)
@@ -1607,10 +1615,11 @@ static int cmd_trace(int argc, char **argv)
     if (verbosity > 1)
         fprintf(stderr,
                 "rtp: %dx%d in %.3f s (load %.3f, build %.3f, trace %.3f, write %.3f); "
-                "%llu eye rays, %llu hits, %llu shadow, %llu reflected, %llu refracted\n",
+                "%llu eye %s, %llu %s, %llu shadow, %llu reflected, %llu refracted\n",
                 st.width, st.height, t_load + t_trace + t_write, t_load,
                 st.build_seconds, st.trace_seconds, t_write, st.eye_rays,
-                st.eye_hits, st.shadow_rays, st.reflected_rays, st.refracted_rays);
+                noun(st.eye_rays, "ray", "rays"), st.eye_hits, noun(st.eye_hits, "hit", "hits"),
+                st.shadow_rays, st.reflected_rays, st.refracted_rays);
     if (stats_path) {
         FILE *f = stats_open(stats_path);
         if (!f)
@@ -2022,24 +2031,28 @@ static int reeval_report(const rtp_tree *tree, const rtp_image *img, const rtp_e
                     es.seconds, t_ref, es.seconds > 0 ? t_ref / es.seconds : 0.0, d.rmse,
                     d.psnr, d.max_abs);
     } else if (verbosity > 1) {
-        fprintf(stderr, "rtp: reeval %.4f s, %llu nodes\n", es.seconds, es.nodes);
+        fprintf(stderr, "rtp: reeval %.4f s, %llu %s\n", es.seconds, es.nodes,
+                noun(es.nodes, "node", "nodes"));
     }
     if (verbosity > 0 && es.camera_moved)
-        fprintf(stderr, "rtp: traced all %llu samples again (%llu rays): the camera moved, a "
-                        "full trace\n",
-                es.retraced_samples, es.retraced_rays);
+        fprintf(stderr, "rtp: traced %s %llu %s again (%llu %s): the camera moved, a full "
+                        "trace\n",
+                noun(es.retraced_samples, "the", "all"), es.retraced_samples,
+                noun(es.retraced_samples, "sample", "samples"), es.retraced_rays,
+                noun(es.retraced_rays, "ray", "rays"));
     else if (verbosity > 0 && es.retraced_samples)
-        fprintf(stderr, "rtp: traced %llu of %llu samples again (%llu rays) for edits that move rays\n",
-                es.retraced_samples, es.samples ? es.samples : 0ULL, es.retraced_rays);
+        fprintf(stderr, "rtp: traced %llu of %llu %s again (%llu %s) for edits that move rays\n",
+                es.retraced_samples, es.samples, noun(es.samples, "sample", "samples"),
+                es.retraced_rays, noun(es.retraced_rays, "ray", "rays"));
     if (verbosity > 0 && es.capped_rays)
         capped_warning(es.capped_rays);
     /* (once a run: a stream of bump edits would say it every frame) */
     if (verbosity > 0 && es.stale_samples && !stale_warned) {
         fprintf(stderr,
-                "rtp: warning: %llu samples keep reflected or refracted rays traced before "
+                "rtp: warning: %llu %s reflected or refracted rays traced before "
                 "the bump edit (--stale keep, the default: approximate there; --stale retrace "
                 "is exact, --reference measures the error)\n",
-                es.stale_samples);
+                es.stale_samples, noun(es.stale_samples, "sample keeps", "samples keep"));
         stale_warned = 1;
     }
     if (stats) {
@@ -2654,8 +2667,9 @@ static int cmd_info(int argc, char **argv)
     fb = file_size(tree_path);
     if ((!stats_path || strcmp(stats_path, "-") != 0) && verbosity > 0) {
         unsigned long long px = (unsigned long long)ti.width * ti.height;
-        printf("%s: %dx%d image%s, %llu samples, depth %d", tree_path, ti.width, ti.height,
-               ti.spd ? " (SPD: corner samples)" : "", ti.samples, ti.max_depth);
+        printf("%s: %dx%d image%s, %llu %s, depth %d", tree_path, ti.width, ti.height,
+               ti.spd ? " (SPD: corner samples)" : "", ti.samples,
+               noun(ti.samples, "sample", "samples"), ti.max_depth);
         if (ti.min_weight > 0.0)
             printf(", min weight %.9g", ti.min_weight);
         printf("\n");
@@ -2665,8 +2679,11 @@ static int cmd_info(int argc, char **argv)
         if (fb >= 0)
             printf("file %lld bytes = %.2f x the raw 8-bit RGB image (%llu bytes)\n", fb,
                    px ? (double)fb / (3.0 * (double)px) : 0.0, 3 * px);
-        printf("scene: %zu triangles, %zu spheres, %zu cones; %zu materials, %zu lights\n",
-               ti.triangles, ti.spheres, ti.cones, ti.materials, ti.lights);
+        printf("scene: %zu %s, %zu %s, %zu %s; %zu %s, %zu %s\n", ti.triangles,
+               noun(ti.triangles, "triangle", "triangles"), ti.spheres,
+               noun(ti.spheres, "sphere", "spheres"), ti.cones, noun(ti.cones, "cone", "cones"),
+               ti.materials, noun(ti.materials, "material", "materials"), ti.lights,
+               noun(ti.lights, "light", "lights"));
         if (ti.width != ti.full_width || ti.height != ti.full_height)
             printf("region: pixels %d,%d to %d,%d of a %dx%d frame\n", ti.region_x,
                    ti.region_y, ti.region_x + ti.width, ti.region_y + ti.height,

@@ -94,6 +94,19 @@ grep -q '^light.1 (fill): pos=1.5,-2,3.25 color=0.4,0.4,0.5 on=1$' "$T/out" && o
 grep -q '^camera: from=0,-8,3 at=0,0,0.8 up=0,0,1 angle=40 hither=0.1$' "$T/out" && ok ||
     { bad "info: camera keys"; cat "$T/out" >&2; }
 
+# a count of one is said in the singular ("1 materials, 1 lights",
+# "traced all 1 samples again", "1 eye rays"): a 1x1 scene of one sphere
+printf 'v\nfrom 0 -5 2\nat 0 0 0\nup 0 0 1\nangle 40\nhither 0.1\nresolution 1 1\nl 2 -3 4\nf 0.9 0.4 0.3 0.7 0.2 30 0 1\ns 0 0 0 1\n' >"$T/one.nff"
+expect_rc 0 $RTP trace "$T/one.nff" -o "$T/one.rtp" -i "$T/one.pfm" -v
+grep -q '; 1 eye ray, 1 hit, 1 shadow, ' "$T/err" && ok || bad "trace -v of one sample: $(cat "$T/err")"
+expect_rc 0 $RTP info "$T/one.rtp"
+grep -q ': 1x1 image, 1 sample, depth 5$' "$T/out" &&
+    grep -q '^scene: 0 triangles, 1 sphere, 0 cones; 1 material, 1 light$' "$T/out" && ok ||
+    bad "info of one sample: $(cat "$T/out")"
+expect_rc 0 $RTP reeval "$T/one.rtp" --set camera.from=0,-6,2 -i "$T/one2.pfm" -v
+grep -q 'rtp: reeval .* s, 1 node$' "$T/err" && grep -q 'traced the 1 sample again (' "$T/err" &&
+    ok || bad "reeval -v of one sample: $(cat "$T/err")"
+
 # The tree file is streamed out in 64 KiB pieces (treefile.c: sink): one
 # of several pieces written to a file and through a pipe is the same, its
 # size is the file_bytes trace reports, and it reads back to the same image;
