@@ -1086,11 +1086,17 @@ typedef struct loader {
     int summary; /* rtp_tree_read_summary's: every node checked, none kept */
 } loader;
 
-/* what: the message; detail (may be NULL) follows it. */
+/* what: the message; detail (may be NULL) follows it, then the section
+   by its tag without the blanks that pad it to 4 bytes ("in section
+   END " had ended the message in a blank). */
 static rtp_status bad(loader *L, const char *what, const char *detail)
 {
-    return rtpi_error(L->err, RTP_ERR_FORMAT, L->name, 0, 0, "%s%s%s%s", what,
-                      detail ? detail : "", L->section ? " in section " : "",
+    int n = 0;
+    if (L->section)
+        for (n = 4; n > 0 && L->section[n - 1] == ' '; n--)
+            ;
+    return rtpi_error(L->err, RTP_ERR_FORMAT, L->name, 0, 0, "%s%s%s%.*s", what,
+                      detail ? detail : "", n ? " in section " : "", n,
                       L->section ? L->section : "");
 }
 
@@ -2224,7 +2230,9 @@ rtp_status rtp_tree_read_memory(const void *data, size_t size, const char *name,
             break;
         }
         if (strcmp(tag, "END ") == 0) {
-            /* empty and last */
+            /* empty and last (the messages name END: "in section END"
+               after them said it twice) */
+            L.section = NULL;
             if (len != 0)
                 st = bad(&L, "END is not empty", NULL);
             else if (r.at != r.n)
@@ -2439,7 +2447,8 @@ static rtp_status tree_read_stream(FILE *f, uint64_t size, int known, const char
         if (strcmp(tag, "END ") == 0) {
             /* empty and last (past it only where the size is known: a
                pipe's writer may keep it open, and waiting for its end
-               would hang) */
+               would hang; the messages name END, as above) */
+            L.section = NULL;
             if (len != 0)
                 st = bad(&L, "END is not empty", NULL);
             else if (known && pos != size)

@@ -4669,6 +4669,49 @@ static void test_reader_refuses_what_no_scene_holds(void)
     free(data);
 }
 
+/* The errors of the END section end with the tag's name, not the blank
+   that pads it ("checksum mismatch: the file is corrupt in section END "),
+   and those about END name it once ("bytes after END in section END "),
+   in memory and from a file alike. */
+static void test_end_section_messages(void)
+{
+    size_t n;
+    unsigned char *data = small_tree_file(&n), *copy;
+    rtp_tree *t = NULL;
+    rtp_error err;
+    char file[512];
+    size_t m;
+    snprintf(file, sizeof file, "%s/rtp-end-%d.rtp", tmpdir(), (int)getpid());
+    copy = data ? (unsigned char *)malloc(n + 1) : NULL;
+    CHECK(data && copy && n > 16);
+    if (!data || !copy || n <= 16) {
+        free(data);
+        free(copy);
+        return;
+    }
+    memcpy(copy, data, n);
+    copy[n - 1] ^= 0xff; /* END's checksum */
+    memset(&err, 0, sizeof err);
+    CHECK(rtp_tree_read_memory(copy, n, "end.rtp", NULL, &t, &err) == RTP_ERR_FORMAT && !t);
+    m = strlen(err.message);
+    CHECK_MSG(m > 0 && err.message[m - 1] != ' ' && strstr(err.message, "checksum") &&
+                  strcmp(err.message + m - strlen(" in section END"), " in section END") == 0,
+              "'%s'", err.message);
+    CHECK(!file_disagrees(copy, n, file));
+    memcpy(copy, data, n);
+    copy[n] = 0; /* a byte after END */
+    memset(&err, 0, sizeof err);
+    CHECK(rtp_tree_read_memory(copy, n + 1, "end.rtp", NULL, &t, &err) == RTP_ERR_FORMAT && !t);
+    m = strlen(err.message);
+    CHECK_MSG(m > 0 && err.message[m - 1] != ' ' && strstr(err.message, "after END") &&
+                  !strstr(strstr(err.message, "END") + 3, "END"),
+              "'%s'", err.message);
+    CHECK(!file_disagrees(copy, n + 1, file));
+    remove(file);
+    free(copy);
+    free(data);
+}
+
 /* A packed node whose number runs past 5 bytes, or past 32 bits (the
    first node's first number written again in 5 bytes with a bit above
    them: read as 32 bits, the file would be whole), is an invalid node; a
@@ -6248,6 +6291,7 @@ int main(void)
     RUN(test_format1_file);
     RUN(test_malformed_packed_node);
     RUN(test_reader_refuses_what_no_scene_holds);
+    RUN(test_end_section_messages);
     RUN(test_eval_file);
     RUN(test_eval_file_same_errors);
     RUN(test_eval_file_setup_error_after_file);
