@@ -1508,12 +1508,27 @@ static int cmd_trace(int argc, char **argv)
     }
     if (stdout_taken("trace", stats_path, tree_path, image_path))
         goto usage;
-    if (image_path && !image_name_ok(image_path))
-        goto out;
-    if (!output_ok(tree_path) || !output_ok(image_path) || !output_ok(stats_path) ||
-        same_output("trace", tree_path, image_path) ||
+    if (!image_path && !tree_path) {
+        /* (named before the outputs are checked: --stats s.png wrote over
+           the default image s.png, exit 0) */
+        default_image = default_image_name(strcmp(scene_path, "-") ? scene_path : "trace");
+        if (!default_image) {
+            msg("out of memory");
+            goto out;
+        }
+        image_path = default_image;
+    }
+    /* two outputs on one file: a usage error, as two on stdout are (it
+       was exit 1) */
+    if (same_output("trace", tree_path, image_path) ||
         same_output("trace", tree_path, stats_path) ||
         same_output("trace", image_path, stats_path))
+        goto usage;
+    /* (the default's format is known: a scene named '' made it ".png",
+       said instead of "no scene file name") */
+    if (image_path && image_path != default_image && !image_name_ok(image_path))
+        goto out;
+    if (!output_ok(tree_path) || !output_ok(image_path) || !output_ok(stats_path))
         goto out;
     if (opt.spd && verbosity > 0) {
         const char *ign[3];
@@ -1534,14 +1549,6 @@ static int cmd_trace(int argc, char **argv)
            tree of corner samples) */
         opt.width = opt.height = 0;
         opt.max_depth = 5;
-    }
-    if (!image_path && !tree_path) {
-        default_image = default_image_name(strcmp(scene_path, "-") ? scene_path : "trace");
-        if (!default_image) {
-            msg("out of memory");
-            goto out;
-        }
-        image_path = default_image;
     }
     if (overwrites_input("trace", scene_path, image_path, image_path == default_image) ||
         overwrites_input("trace", scene_path, tree_path, 0) ||
@@ -1821,8 +1828,10 @@ static int cmd_diff(int argc, char **argv)
         if (outputs_over_inputs("diff", ins, 2, outs, 2))
             goto usage;
     }
+    if (same_output("diff", heat, stats_path))
+        goto usage;
     /* outputs checked before the inputs are read, as trace's are */
-    if (!output_ok(heat) || !output_ok(stats_path) || same_output("diff", heat, stats_path))
+    if (!output_ok(heat) || !output_ok(stats_path))
         goto out;
     if (rtp_image_read(pa, NULL, &a, &err) != RTP_OK ||
         rtp_image_read(pb, NULL, &b, &err) != RTP_OK) {
@@ -2326,7 +2335,8 @@ static int cmd_reeval(int argc, char **argv)
         if (outputs_over_inputs("reeval", (const char *const *)params, nparams, outs, 2))
             goto usage;
     }
-    if (stdout_taken("reeval", stats_path, image_path, NULL))
+    if (stdout_taken("reeval", stats_path, image_path, NULL) ||
+        (!stream && same_output("reeval", image_path, stats_path)))
         goto usage;
     if (stream && strcmp(image_path, "-") != 0) {
         char probe[4096];
@@ -2339,7 +2349,7 @@ static int cmd_reeval(int argc, char **argv)
     } else if (!image_name_ok(image_path) || !output_ok(image_path)) {
         goto out;
     }
-    if (!output_ok(stats_path) || (!stream && same_output("reeval", image_path, stats_path)))
+    if (!output_ok(stats_path))
         goto out;
     eo.threads = threads;
     /* one image: caches for later edits would only cost time */
@@ -2868,8 +2878,10 @@ static int cmd_merge(int argc, char **argv)
         msg("merge: only one part can come from stdin (-, or another name of it)");
         goto usage;
     }
+    if (same_output("merge", out_tree, out_image))
+        goto usage;
     if ((out_image && !image_name_ok(out_image)) || !output_ok(out_image) ||
-        !output_ok(out_tree) || same_output("merge", out_tree, out_image))
+        !output_ok(out_tree))
         goto out;
     if (images) {
         int x0, y0, x, y;

@@ -370,8 +370,25 @@ ln -s /proc/self/fd/2 "$T/err2.pfm"
 expect_rc 0 sh -c "$RTP trace $S --size 4x4 -q -i '$T/err2.pfm' 2>>'$T/e.log'"
 [ "$(head -n 1 "$T/e.log")" = OLDLOG ] && [ "$(wc -c <"$T/e.log")" -gt 7 ] && ok ||
     bad "an image to a /proc/self/fd link replaced the file instead of appending"
-expect_rc 1 $RTP trace $S --size 4x4 -i "$T/one.pfm" --stats "$T/one.pfm"
-grep -q "one file" "$T/err" && ok || bad "two outputs on one file not refused"
+# (a usage error on every command, as two outputs on stdout are: it was
+# exit 1; trace's default image too, which --stats had replaced, exit 0)
+for c in "trace $S --size 4x4 -i $T/one.pfm --stats $T/one.pfm" \
+         "trace $S --size 4x4 -o $T/one.pfm -i $T/one.pfm" \
+         "reeval $T/t.rtp -i $T/one.pfm --stats $T/one.pfm" \
+         "diff $T/t.pfm $T/r.pfm --heatmap $T/one.pfm --stats $T/one.pfm" \
+         "merge -o $T/one.pfm -i $T/one.pfm $T/t.rtp"; do
+    rm -f "$T/one.pfm"
+    expect_rc 2 $RTP $c
+    grep -q "one file" "$T/err" && [ ! -e "$T/one.pfm" ] && ok ||
+        bad "two outputs on one file, $c: $(cat "$T/err")"
+done
+mkdir -p "$T/dflt"
+cp $S "$T/dflt/sc.nff"
+abs=$(cd "$(dirname "$RTP")" && pwd)/$(basename "$RTP")
+expect_rc 2 sh -c "cd '$T/dflt' && '$abs' trace sc.nff --size 4x4 --stats sc.$(
+    $RTP version | grep -q 'with: png' && echo png || echo ppm)"
+grep -q "one file" "$T/err" && [ ! -e "$T/dflt/sc.png" ] && [ ! -e "$T/dflt/sc.ppm" ] && ok ||
+    bad "trace's default image as its --stats file: $(cat "$T/err")"
 mkdir -p "$T/pp"
 (echo light.0.pos=1,1,1; sleep 1; echo light.0.pos=1,2,1) |
     $RTP reeval "$T/t.rtp" --stream -i - --stats "$T/pp/s.json" 2>/dev/null | head -c 10 >/dev/null
