@@ -1704,6 +1704,7 @@ static void json_number(FILE *f, const char *key, double v)
 typedef struct fail_limit {
     char metric[32];
     double value;
+    int percent; /* given as a percent: said as one */
 } fail_limit;
 
 static int cmd_diff(int argc, char **argv)
@@ -1784,6 +1785,7 @@ static int cmd_diff(int argc, char **argv)
             /* above: the share of pixels over --threshold, which the
                line of metrics prints as a percent and JSON as a share;
                a limit over 1 without '%' was one that never failed */
+            fl->percent = percent;
             if (percent)
                 fl->value /= 100.0;
             if (strcmp(fl->metric, "above") == 0 && !(fl->value >= 0.0 && fl->value <= 1.0)) {
@@ -1889,9 +1891,13 @@ static int cmd_diff(int argc, char **argv)
                                                  : d.psnr;
         int psnr = strcmp(m, "psnr") == 0;
         if (psnr ? got < fails[k].value : got > fails[k].value) {
-            /* said under -q too: quiet is for success */
-            msg("diff: %s = %.6g is %s the limit %.6g", m, got, psnr ? "below" : "above",
-                fails[k].value);
+            /* said under -q too: quiet is for success; a percent limit
+               as a percent, as the line of metrics says above (5% was
+               said as "the limit 0.05") */
+            double f = fails[k].percent ? 100.0 : 1.0;
+            const char *pc = fails[k].percent ? "%" : "";
+            msg("diff: %s = %.6g%s is %s the limit %.6g%s", m, f * got, pc,
+                psnr ? "below" : "above", f * fails[k].value, pc);
             over = 1;
         }
     }

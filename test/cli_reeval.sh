@@ -634,6 +634,11 @@ expect_rc 3 $RTP diff "$T/t.pfm" "$T/amb.pfm" -q --fail-above max_abs=0.001 --fa
 grep -q "max_abs = .* is above the limit" "$T/err" && ok || bad "diff -q over a limit said nothing"
 expect_rc 2 $RTP diff "$T/t.pfm" "$T/amb.pfm" --fail-above above=50
 expect_rc 3 $RTP diff "$T/t.pfm" "$T/amb.pfm" -q --fail-above above=1%
+# (a percent limit said as a percent, as the line of metrics says above:
+# "the limit 0.01" had answered above=1%)
+grep -q "above = [0-9.]*% is above the limit 1%$" "$T/err" && ok || bad "above=1%: $(cat "$T/err")"
+expect_rc 3 $RTP diff "$T/t.pfm" "$T/amb.pfm" -q --fail-above above=0.01
+grep -q "above = 0\.[0-9]* is above the limit 0.01$" "$T/err" && ok || bad "above=0.01: $(cat "$T/err")"
 expect_rc 0 $RTP diff "$T/t.pfm" "$T/amb.pfm" -q --fail-above above=100%
 expect_rc 2 $RTP diff "$T/t.pfm" "$T/amb.pfm" --fail-above mae=5%
 expect_rc 2 $RTP diff "$T/t.pfm" "$T/amb.pfm" --fail-above above=150%
