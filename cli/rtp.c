@@ -1794,6 +1794,12 @@ static int cmd_diff(int argc, char **argv)
                     v);
                 goto usage;
             }
+            /* (an error is never below 0: mae=-1 failed every pair of
+               images, identical ones too; psnr may be, past a peak of 1) */
+            if (strcmp(fl->metric, "psnr") != 0 && fl->value < 0.0) {
+                msg("--fail-above %s: %s is 0 or more: expected a limit >= 0", v, fl->metric);
+                goto usage;
+            }
             nfail++;
         } else if (arg[0] == '-' && arg[1] != '\0') {
             msg("diff: unknown option '%s'", arg);

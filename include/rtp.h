@@ -705,8 +705,12 @@ typedef struct rtp_diff_stats {
     size_t pixels;
 } rtp_diff_stats;
 
-/** Compares two images of equal size channel by channel (peak 1.0).
- *  @return RTP_OK or RTP_ERR_ARGUMENT on a size mismatch. */
+/** Compares two images of equal size channel by channel (peak 1.0); a
+ *  pixel whose largest channel error exceeds threshold counts in
+ *  share_above (a negative threshold counts every pixel, as 0 counts
+ *  every pixel that differs).
+ *  @return RTP_OK, or RTP_ERR_ARGUMENT on a size mismatch, a missing
+ *  image or stats, or a NaN threshold. */
 rtp_status rtp_image_diff(const rtp_image *a, const rtp_image *b,
                           double threshold, rtp_diff_stats *stats,
                           rtp_error *err);

@@ -639,6 +639,12 @@ expect_rc 3 $RTP diff "$T/t.pfm" "$T/amb.pfm" -q --fail-above above=1%
 grep -q "above = [0-9.]*% is above the limit 1%$" "$T/err" && ok || bad "above=1%: $(cat "$T/err")"
 expect_rc 3 $RTP diff "$T/t.pfm" "$T/amb.pfm" -q --fail-above above=0.01
 grep -q "above = 0\.[0-9]* is above the limit 0.01$" "$T/err" && ok || bad "above=0.01: $(cat "$T/err")"
+# an error is never below 0: a negative limit failed identical images
+# (exit 3); a usage error now.  psnr may be below 0 (a peak past 1)
+for l in mae=-1 rmse=-0.5 max_abs=-1e-9; do
+    expect_rc 2 $RTP diff "$T/t.pfm" "$T/t.pfm" -q --fail-above $l
+done
+expect_rc 0 $RTP diff "$T/t.pfm" "$T/t.pfm" -q --fail-above psnr=-5
 expect_rc 0 $RTP diff "$T/t.pfm" "$T/amb.pfm" -q --fail-above above=100%
 expect_rc 2 $RTP diff "$T/t.pfm" "$T/amb.pfm" --fail-above mae=5%
 expect_rc 2 $RTP diff "$T/t.pfm" "$T/amb.pfm" --fail-above above=150%
