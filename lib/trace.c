@@ -675,7 +675,9 @@ static rtp_status gather_tree(shared *sh, int w, int h, rtp_tree **out,
 }
 
 /* The error a worker's status stands for: over the memory limit (the
-   remedy given), or out of memory, while doing what. */
+   remedy given, said in parentheses: none of its own, "(raise
+   memory_limit (rtp's --memory-limit))" had nested them), or out of
+   memory, while doing what. */
 static rtp_status worker_error(rtp_status st, double limit, const char *what,
                                const char *remedy, rtp_error *err)
 {
@@ -939,8 +941,8 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
     for (i = 0; i < nthreads; i++)
         if (ws[i].status != RTP_OK) {
             st = worker_error(ws[i].status, limit, "tracing",
-                              "raise memory_limit (rtp's --memory-limit), or trace with a lower "
-                              "max_depth (--depth) or a min_weight (--min-weight)",
+                              "raise memory_limit, or trace with a lower max_depth or a "
+                              "min_weight: rtp's --memory-limit, --depth, --min-weight",
                               err);
             goto done;
         }
@@ -1183,7 +1185,7 @@ rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int thre
     for (i = 0; i < (size_t)nthreads; i++)
         if (jobs[i].w.status != RTP_OK) {
             st = worker_error(jobs[i].w.status, limit, "re-tracing",
-                              "raise memory_limit (rtp's --memory-limit)", err);
+                              "raise memory_limit: rtp's --memory-limit", err);
             goto done;
         }
     for (i = 0; i < (size_t)nthreads; i++) {
@@ -1204,7 +1206,7 @@ rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int thre
        splice: the spliced copy is the peak) */
     if ((double)total * nb + (double)(ns + 1) * 8.0 > sh.room) {
         st = worker_error(RTP_ERR_LIMIT, limit, "re-tracing",
-                          "raise memory_limit (rtp's --memory-limit)", err);
+                          "raise memory_limit: rtp's --memory-limit", err);
         goto done;
     }
     nodes = (rtpi_cnode *)rtpi_malloc_array(a, total + 1, sizeof *nodes);

@@ -303,6 +303,16 @@ fi
 printf 'mat.0.kd=0.5\nmat.1.kt=0.9\n' > "$T/lines"
 expect_rc 1 sh -c "$RTP reeval '$T/t.rtp' --stream --memory-limit 0.01 -i '$T/ln_%d.pfm' < '$T/lines'"
 grep -q "stdin:2: the ray trees" "$T/err" && ok || { bad "stream failure without its line"; cat "$T/err" >&2; }
+# the memory limit's messages name the remedy without parentheses in
+# parentheses ("(raise memory_limit (rtp's --memory-limit))"): re-tracing,
+# its splice, and tracing
+for c in "reeval $T/t.rtp --memory-limit 0.01 --set mat.1.kt=0.9 -i $T/ln.pfm" \
+         "reeval $T/t.rtp --memory-limit 0.05 --set mat.1.kt=0.9 -i $T/ln.pfm" \
+         "trace $S --size 40x30 --memory-limit 0.068 -o $T/ln.rtp"; do
+    expect_rc 1 $RTP $c
+    grep -q "memory limit.*--memory-limit" "$T/err" && ! grep -q '([^)]*(' "$T/err" && ok ||
+        bad "$c: $(cat "$T/err")"
+done
 printf '\357\273\277# edits\nmat.0.kd=0.3\n' > "$T/bom.txt"
 expect_rc 0 $RTP reeval "$T/t.rtp" --params "$T/bom.txt" -i "$T/bom.pfm"
 printf 'mat.0.kd=0.3\000x\n' > "$T/nul.txt"
