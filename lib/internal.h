@@ -74,6 +74,11 @@ rtp_status rtpi_error(rtp_error *err, rtp_status status, const char *file,
     __attribute__((format(printf, 6, 7)))
 #endif
     ;
+/* text into dst (size bytes, NUL-terminated): whole where it fits, else
+   its start and its end with "..." between (whole 0: text is only the
+   start of a longer one, said as its start and "..."), each cut at a
+   UTF-8 character's first byte.  For rtp_error's message. */
+void rtpi_fit_text(char *dst, size_t size, const char *text, int whole);
 
 /* ---------------------------------------------------------------- vectors */
 

@@ -512,11 +512,12 @@ static rtp_status image_key_error(rtp_error *err, rtp_status st, const char *key
                                   const char *others)
 {
     if (err) {
-        /* (made whole, then cut to the message's size) */
+        /* (made whole, then fitted to the message: cut at its size, it
+           could end inside a character) */
         char msg[2 * sizeof err->message + 128];
-        snprintf(msg, sizeof msg, "%s: %s (values: %s)", key, err->message, others);
-        msg[sizeof err->message - 1] = '\0';
-        memcpy(err->message, msg, sizeof err->message);
+        int n = snprintf(msg, sizeof msg, "%s: %s (values: %s)", key, err->message, others);
+        rtpi_fit_text(err->message, sizeof err->message, msg,
+                      n >= 0 && (size_t)n < sizeof msg);
     }
     return st;
 }

@@ -86,10 +86,11 @@ static int sh_thin_near(const rtpi_shadow *sh, rtpi_v3 o)
 static rtp_status companion_error(rtp_status st, int res, int osmesa, rtp_error *err)
 {
     if (st != RTP_OK && st != RTP_ERR_CANCELLED && err && err->message[0]) {
-        char m[sizeof err->message];
-        memcpy(m, err->message, sizeof m);
-        snprintf(err->message, sizeof err->message, "%s at %d cells a face needs beside it %.180s",
-                 osmesa ? "osmesa's item buffer" : "the item buffer", res, m);
+        /* (fitted whole: "%.180s" could end inside a character) */
+        char m[sizeof err->message + 64];
+        int n = snprintf(m, sizeof m, "%s at %d cells a face needs beside it %s",
+                         osmesa ? "osmesa's item buffer" : "the item buffer", res, err->message);
+        rtpi_fit_text(err->message, sizeof err->message, m, n >= 0 && (size_t)n < sizeof m);
     }
     return st;
 }

@@ -380,10 +380,52 @@ char *rtpi_strdup(const rtp_allocator *a, const char *s)
     return d;
 }
 
+/* Whether byte c continues a UTF-8 sequence (is not a character's first). */
+static int utf8_cont(char c)
+{
+    return ((unsigned char)c & 0xc0u) == 0x80u;
+}
+
+void rtpi_fit_text(char *dst, size_t size, const char *text, int whole)
+{
+    size_t n = strlen(text), head, tail = 0, dots = size >= 8 ? 3 : 0;
+    const char *t = text + n;
+    if (!size)
+        return;
+    if (whole && n < size) {
+        memcpy(dst, text, n + 1);
+        return;
+    }
+    head = size - 1 - dots;
+    /* a message cut at its end lost what went wrong: a key or a path of
+       hundreds of bytes comes first ("mat.NAME.kd: no such material"),
+       the reason after it; a third of the room keeps the end */
+    if (whole && dots) {
+        tail = head / 3;
+        head -= tail;
+        t = text + n - tail;
+        while (utf8_cont(*t))
+            t++;
+    }
+    if (head > n)
+        head = n;
+    while (head > 0 && utf8_cont(text[head]))
+        head--;
+    memcpy(dst, text, head);
+    memcpy(dst + head, "...", dots);
+    memcpy(dst + head + dots, t, (size_t)(text + n - t));
+    dst[head + dots + (size_t)(text + n - t)] = '\0';
+}
+
 rtp_status rtpi_error(rtp_error *err, rtp_status status, const char *file,
                       int line, int col, const char *fmt, ...)
 {
     va_list ap;
+    /* the message whole, then fitted to err->message (a key or a value
+       of hundreds of bytes had pushed out the reason after it, and the
+       cut could split a character in two); past this, its start */
+    char whole[768];
+    int got;
     if (!err)
         return status;
     err->status = status;
@@ -406,26 +448,33 @@ rtp_status rtpi_error(rtp_error *err, rtp_status status, const char *file,
     err->line = line;
     err->column = col;
     va_start(ap, fmt);
-    vsnprintf(err->message, sizeof err->message, fmt, ap);
+    got = vsnprintf(whole, sizeof whole, fmt, ap);
     va_end(ap);
+    if (got < 0)
+        whole[0] = '\0';
+    rtpi_fit_text(err->message, sizeof err->message, whole,
+                  got >= 0 && (size_t)got < sizeof whole);
     return status;
 }
 
 char *rtp_error_format(const rtp_error *err, char *buf, size_t size)
 {
+    /* (no byte read past a field: one a caller filled itself need not
+       end in a NUL) */
+    const int fw = (int)sizeof err->file, mw = (int)sizeof err->message;
     if (!buf || !size)
         return buf;
     if (!err) {
         snprintf(buf, size, "unknown error");
     } else if (err->file[0] && err->line > 0 && err->column > 0) {
-        snprintf(buf, size, "%s:%d:%d: %s", err->file, err->line, err->column,
+        snprintf(buf, size, "%.*s:%d:%d: %.*s", fw, err->file, err->line, err->column, mw,
                  err->message);
     } else if (err->file[0] && err->line > 0) {
-        snprintf(buf, size, "%s:%d: %s", err->file, err->line, err->message);
+        snprintf(buf, size, "%.*s:%d: %.*s", fw, err->file, err->line, mw, err->message);
     } else if (err->file[0]) {
-        snprintf(buf, size, "%s: %s", err->file, err->message);
+        snprintf(buf, size, "%.*s: %.*s", fw, err->file, mw, err->message);
     } else if (err->message[0]) {
-        snprintf(buf, size, "%s", err->message);
+        snprintf(buf, size, "%.*s", mw, err->message);
     } else {
         snprintf(buf, size, "%s", rtp_status_string(err->status));
     }

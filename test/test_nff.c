@@ -382,6 +382,73 @@ static void test_names_and_keys(void)
     rtp_scene_destroy(s);
 }
 
+/* Whether s is well-formed UTF-8 (lead bytes and their continuations;
+   enough to see a sequence cut in two). */
+static int utf8_whole(const char *s)
+{
+    const unsigned char *p = (const unsigned char *)s;
+    while (*p) {
+        int k, n = *p < 0x80 ? 1 : *p >= 0xc2 && *p <= 0xdf ? 2 : *p >= 0xe0 && *p <= 0xef ? 3
+                   : *p >= 0xf0 && *p <= 0xf4 ? 4 : 0;
+        if (!n)
+            return 0;
+        for (k = 1; k < n; k++)
+            if ((p[k] & 0xc0) != 0x80)
+                return 0;
+        p += n;
+    }
+    return 1;
+}
+
+/* An error message longer than rtp_error's keeps its start and its end,
+   each cut at a character's first byte ("mat.<130 x e-acute>.kd=1" gave
+   the key's first 255 bytes alone: no reason, and its end inside a
+   character), or where it is longer still its start and "..."; and
+   rtp_error_format reads no byte past a field that a caller filled
+   without a NUL. */
+static void test_long_messages(void)
+{
+    rtp_scene *s = NULL;
+    rtp_error err;
+    char key[400], val[3000], buf[1200];
+    size_t k;
+    struct {
+        rtp_error e;
+        char after[64];
+    } w;
+    CHECK(load("l 1 2 3\nf 1 0 0 1 0 100 0 0\ns 0 0 0 1\n", "m.nff", &s, &err) == RTP_OK);
+    if (!s)
+        return;
+    strcpy(key, "mat.");
+    for (k = 0; k < 130; k++)
+        strcat(key, "\xc3\xa9");
+    strcat(key, ".kd");
+    memset(&err, 0, sizeof err);
+    CHECK(rtp_scene_set(s, key, "1", &err) == RTP_ERR_KEY);
+    CHECK_MSG(strlen(err.message) < sizeof err.message && utf8_whole(err.message) &&
+                  strncmp(err.message, "mat.\xc3\xa9", 6) == 0 && strstr(err.message, "...") &&
+                  strstr(err.message, "\xc3\xa9.kd: no such material"),
+              "'%s'", err.message);
+    /* a value of thousands of bytes (past what the message is made in):
+       its start, said as cut */
+    memset(val, '1', sizeof val - 1);
+    val[sizeof val - 1] = '\0';
+    memset(&err, 0, sizeof err);
+    CHECK(rtp_scene_set(s, "mat.0.kd", val, &err) == RTP_ERR_PARSE);
+    k = strlen(err.message);
+    CHECK_MSG(k + 1 == sizeof err.message && strncmp(err.message, "mat.0.kd: expected", 18) == 0 &&
+                  strcmp(err.message + k - 4, "1...") == 0,
+              "'%s'", err.message);
+    rtp_scene_destroy(s);
+    /* every field full, none ending in a NUL: each read to its size (the
+       message ran on into the bytes after the struct) */
+    memset(&w, 'x', sizeof w);
+    w.e.line = w.e.column = 0;
+    w.after[sizeof w.after - 1] = '\0';
+    rtp_error_format(&w.e, buf, sizeof buf);
+    CHECK_MSG(strlen(buf) == sizeof w.e.file + 2 + sizeof w.e.message, "%zu bytes", strlen(buf));
+}
+
 /* A light's position takes its key's range (|x| <= 3.4e38, float's),
    not geometry's 1e18: a scene's light at 1e30 was refused while
    light.0.pos=1e30,... was taken.  What rtp_scene_get gives back sets
@@ -980,6 +1047,7 @@ int main(void)
     RUN(test_triangulate);
     RUN(test_concave_polygon);
     RUN(test_names_and_keys);
+    RUN(test_long_messages);
     RUN(test_far_light);
     RUN(test_checker_bump);
     RUN(test_files);
