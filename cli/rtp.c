@@ -1959,7 +1959,8 @@ static const char reeval_help[] =
     "  --memory-limit MIB   stop when traced-again trees would take more, with\n"
     "                       the trees already held, or a moved light's direction\n"
     "                       cube or light buffer lists could (auto: shadow rays\n"
-    "                       then) (default 16384)\n"
+    "                       then); --reference's full trace as trace's (default\n"
+    "                       16384)\n"
     "  --reference          also trace the edited scene in full and report both\n"
     "                       times and the error of the re-evaluation\n"
     "  -j, --threads N      threads, 1 to 256 (default: the processors online)\n"
@@ -2012,11 +2013,11 @@ static long long file_size(const char *path)
 }
 
 /* What follows an evaluation: its image written, the full trace of
-   --reference (tree: the tree evaluated), the messages, its --stats
-   line.  0, or 1 after a message. */
+   --reference (tree: the tree evaluated; under --memory-limit, as trace
+   is), the messages, its --stats line.  0, or 1 after a message. */
 static int reeval_report(const rtp_tree *tree, const rtp_image *img, const rtp_eval_stats *es_in,
                          const rtp_tree_info *ti_in, const char *image_path, int reference,
-                         int threads, FILE *stats, const char *stats_path,
+                         int threads, double memory_limit, FILE *stats, const char *stats_path,
                          const char *tree_path, double load_seconds, int line)
 {
     rtp_image *ref = NULL;
@@ -2036,8 +2037,18 @@ static int reeval_report(const rtp_tree *tree, const rtp_image *img, const rtp_e
         /* the full trace alone, as `seconds` is the evaluation alone
            (the comparison after it was timed with it) */
         double t0 = now_seconds();
-        if (rtp_tree_trace(tree, threads, &ref, &ts, &err) != RTP_OK) {
-            fail_line(&err, line);
+        rtp_trace_options to;
+        memset(&to, 0, sizeof to);
+        to.threads = threads;
+        to.memory_limit = memory_limit;
+        if (rtp_tree_trace_opt(tree, &to, &ref, &ts, &err) != RTP_OK) {
+            /* (said as the reference's: "a 40x30 traced image needs"
+               answered a reeval) */
+            char buf[600], where[32] = "";
+            if (line > 0)
+                snprintf(where, sizeof where, "stdin:%d: ", line);
+            fprintf(stderr, "rtp: %s--reference: %s\n", where,
+                    rtp_error_format(&err, buf, sizeof buf));
             goto out;
         }
         t_ref = now_seconds() - t0;
@@ -2155,7 +2166,8 @@ static int reeval_one(rtp_tree *tree, const rtp_eval_options *eo, rtp_image **ke
     }
     *keep = img;
     rtp_tree_get_info(tree, &ti);
-    return reeval_report(tree, img, &es, &ti, image_path, reference, threads, stats, stats_path,
+    return reeval_report(tree, img, &es, &ti, image_path, reference, threads, eo->memory_limit,
+                         stats, stats_path,
                          tree_path, load_seconds, line);
 }
 
@@ -2409,7 +2421,8 @@ static int cmd_reeval(int argc, char **argv)
         t_load = ce.t_edits - t0;
         if (stats_path && !(stats = stats_open(stats_path)))
             goto out;
-        rc = reeval_report(NULL, img, &es, &ti, image_path, 0, threads, stats, stats_path,
+        rc = reeval_report(NULL, img, &es, &ti, image_path, 0, threads, eo.memory_limit, stats,
+                           stats_path,
                            tree_path, t_load, 0);
         if (stats && (rc != 0 ? (stats_discard(stats), 0) : stats_close(stats, stats_path)))
             rc = 1;

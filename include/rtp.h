@@ -79,8 +79,9 @@ extern "C" {
    rtp_eval_stats.stale_samples; 0.4: rtp_trace_options.cancel and
    rtp_eval_options.cancel; 0.5: rtp_tree_info.min_weight, and the calls
    rtp_tree_eval_file and rtp_tree_read_summary; light.N.pos of the next
-   N adds a light): a program compares rtp_version_number() with the
-   RTP_VERSION_NUMBER it was built with. */
+   N adds a light; after 0.5.0, the call rtp_tree_trace_opt): a program
+   compares rtp_version_number() with the RTP_VERSION_NUMBER it was built
+   with. */
 #define RTP_VERSION_MAJOR 0
 #define RTP_VERSION_MINOR 5
 #define RTP_VERSION_PATCH 0
@@ -517,6 +518,12 @@ rtp_status rtp_tree_add_light(rtp_tree *tree, const double pos[3],
  *  is compared against.  threads as in rtp_trace_options. */
 rtp_status rtp_tree_trace(const rtp_tree *tree, int threads, rtp_image **out,
                           rtp_trace_stats *stats, rtp_error *err);
+/** rtp_tree_trace with opt's threads, memory_limit, progress,
+ *  progress_user and cancel, as rtp_trace takes them (opt NULL: the
+ *  defaults); the size, region, spd, max_depth and min_weight are the
+ *  tree's, whatever opt says. */
+rtp_status rtp_tree_trace_opt(const rtp_tree *tree, const rtp_trace_options *opt,
+                              rtp_image **out, rtp_trace_stats *stats, rtp_error *err);
 
 /** Joins trees traced from regions of one frame (rtp_trace_options.region)
  *  of the same scene with the same options into the whole frame's tree;

@@ -4977,15 +4977,30 @@ rtp_status rtp_tree_trace(const rtp_tree *t, int threads, rtp_image **out,
     rtp_trace_options o;
     if (out)
         *out = NULL;
-    if (!t)
-        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_trace: NULL tree");
-    if (t->busy)
-        return rtpi_tree_busy(t, "rtp_tree_trace", err);
     if (threads < 0)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
                           "rtp_tree_trace: threads %d is negative (0 or 1: the calling thread)",
                           threads);
     memset(&o, 0, sizeof o);
+    o.threads = threads;
+    return rtp_tree_trace_opt(t, &o, out, stats, err);
+}
+
+rtp_status rtp_tree_trace_opt(const rtp_tree *t, const rtp_trace_options *opt, rtp_image **out,
+                              rtp_trace_stats *stats, rtp_error *err)
+{
+    rtp_trace_options o;
+    if (out)
+        *out = NULL;
+    if (!t)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_trace: NULL tree");
+    if (t->busy)
+        return rtpi_tree_busy(t, "rtp_tree_trace", err);
+    /* (the caller's limit, threads and callbacks: reeval --reference's
+       trace had taken none of its --memory-limit) */
+    memset(&o, 0, sizeof o);
+    if (opt)
+        o = *opt;
     /* a region's tree: the frame its camera spans, traced over the region */
     o.width = t->full_w;
     o.height = t->full_h;
@@ -4996,7 +5011,6 @@ rtp_status rtp_tree_trace(const rtp_tree *t, int threads, rtp_image **out,
     o.spd = t->spd;
     o.max_depth = t->max_depth;
     o.min_weight = t->min_weight;
-    o.threads = threads;
     /* (the tree's frame: a builder's corner samples need not be SPD's
        512x512) */
     return rtpi_trace_sized(t->scene, &o, out, stats, err);

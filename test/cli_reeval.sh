@@ -40,6 +40,12 @@ for kv in "mat.red.color=0.1,0.9,0.2" "light.fill.on=0" "ambient=0.3" \
 done
 expect_rc 0 $RTP reeval "$T/t.rtp" --set light.key.pos=-3,-4,7 --shadows exact --reference -i "$T/x.pfm" --stats "$T/ref.json"
 grep -q '"max_abs": 0' "$T/ref.json" && ok || { bad "--reference error"; cat "$T/ref.json" >&2; }
+# --reference's full trace is under --memory-limit, as trace is (a 40x30
+# image with its samples takes 0.028 MiB; it ran past 0.01, exit 0)
+expect_rc 1 $RTP reeval "$T/t.rtp" --set ambient=0.2 --reference --memory-limit 0.01 -i "$T/rl.pfm"
+grep -q "^rtp: --reference: .*over the memory limit of 0.01 MiB" "$T/err" && ok ||
+    bad "--reference past --memory-limit: $(cat "$T/err")"
+expect_rc 0 $RTP reeval "$T/t.rtp" --set ambient=0.2 --reference --memory-limit 1 -i "$T/rl.pfm"
 
 # A camera edit is a full trace from the tree file, said so; it equals
 # trace of the edited scene bit for bit, and a stream's later edits

@@ -349,6 +349,47 @@ static void test_tree_trace_region(void)
     }
 }
 
+/* rtp_tree_trace_opt traces under the caller's memory limit, as rtp_trace
+   does (rtp_tree_trace took none: reeval --reference's full trace ran past
+   --memory-limit), and is rtp_tree_trace's image otherwise, a region's
+   tree too. */
+static void test_tree_trace_opt(void)
+{
+    rtp_scene *s = load("scenes/spheres.nff");
+    rtp_tree *t = NULL;
+    rtp_image *a = NULL, *b = NULL, *c = NULL;
+    rtp_trace_options o;
+    rtp_error err;
+    if (!s)
+        return;
+    memset(&o, 0, sizeof o);
+    o.width = 40;
+    o.height = 30;
+    o.region[0] = 4;
+    o.region[1] = 2;
+    o.region[2] = 36;
+    o.region[3] = 26;
+    CHECK(rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
+    CHECK(t && rtp_tree_trace(t, 1, &a, NULL, NULL) == RTP_OK);
+    CHECK(t && rtp_tree_trace_opt(t, NULL, &b, NULL, NULL) == RTP_OK);
+    CHECK(same_image(a, b));
+    memset(&o, 0, sizeof o);
+    o.threads = 2;
+    o.memory_limit = 0.01 * 1048576.0; /* the 32x24 image and its samples: 0.018 MiB */
+    memset(&err, 0, sizeof err);
+    c = a; /* (set to NULL on failure) */
+    CHECK_MSG(t && rtp_tree_trace_opt(t, &o, &c, NULL, &err) == RTP_ERR_LIMIT && !c &&
+                  strstr(err.message, "memory limit of 0.01 MiB"),
+              "%s", err.message);
+    o.memory_limit = 1048576.0;
+    CHECK(t && rtp_tree_trace_opt(t, &o, &c, NULL, NULL) == RTP_OK && same_image(a, c));
+    rtp_image_destroy(a);
+    rtp_image_destroy(b);
+    rtp_image_destroy(c);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+}
+
 /* rtp_tree_crop: a region of a frame's tree is the tree that tracing
    the region makes (the same samples, nodes and image, SPD's corners
    too), a region of a region too; after edits (a moved light, an added
@@ -6234,6 +6275,7 @@ int main(void)
     RUN(test_scene_get);
     RUN(test_class_d_retrace);
     RUN(test_tree_trace_region);
+    RUN(test_tree_trace_opt);
     RUN(test_tree_crop);
     RUN(test_max_depth);
     RUN(test_merge_other_setups);
