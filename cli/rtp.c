@@ -219,7 +219,10 @@ static int parse_double(const char *s, double *out)
         return -1;
     errno = 0;
     v = strtod(s, &end);
-    if (end == s || *end || errno || !isfinite(v))
+    /* (ERANGE on an underflow is no error: 1e-320 is a number >= 0, a
+       subnormal or 0, as --set and --add-light take it; an overflow is
+       infinite, refused by isfinite) */
+    if (end == s || *end || (errno && errno != ERANGE) || !isfinite(v))
         return -1;
     *out = v;
     return 0;

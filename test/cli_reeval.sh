@@ -664,6 +664,11 @@ expect_rc 0 $RTP diff "$T/t.pfm" "$T/t.pfm" -q --fail-above psnr=-5
 expect_rc 0 $RTP diff "$T/t.pfm" "$T/amb.pfm" -q --fail-above above=100%
 expect_rc 2 $RTP diff "$T/t.pfm" "$T/amb.pfm" --fail-above mae=5%
 expect_rc 2 $RTP diff "$T/t.pfm" "$T/amb.pfm" --fail-above above=150%
+# a subnormal is a number, as --set takes it (strtod's ERANGE on underflow
+# made these "expected a number >= 0", a usage error)
+expect_rc 0 $RTP diff "$T/t.pfm" "$T/t.pfm" -q --threshold 1e-320 --fail-above max_abs=1e-320
+expect_rc 0 $RTP trace $S --size 8x8 --min-weight 1e-320 -i "$T/mw.pfm" -q
+expect_rc 2 $RTP diff "$T/t.pfm" "$T/t.pfm" --threshold 1e400
 # a number key's '-' is a bad number, not "stdin taken" (reviewer)
 expect_rc 1 sh -c "$RTP reeval - -i '$T/s1.pfm' --set light.0.on=- <'$T/t.rtp'"
 grep -q "expected 1 comma-separated number" "$T/err" && ok || bad "light.0.on=-: $(cat "$T/err")"
