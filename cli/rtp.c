@@ -2015,9 +2015,9 @@ static long long file_size(const char *path)
     return (long long)sb.st_size;
 }
 
-/* What follows an evaluation: its image written, the full trace of
-   --reference (tree: the tree evaluated; under --memory-limit, as trace
-   is), the messages, its --stats line.  0, or 1 after a message. */
+/* What follows an evaluation: the full trace of --reference (tree: the
+   tree evaluated; under --memory-limit, as trace is), its image written,
+   the messages, its --stats line.  0, or 1 after a message. */
 static int reeval_report(const rtp_tree *tree, const rtp_image *img, const rtp_eval_stats *es_in,
                          const rtp_tree_info *ti_in, const char *image_path, int reference,
                          int threads, double memory_limit, FILE *stats, const char *stats_path,
@@ -2032,13 +2032,11 @@ static int reeval_report(const rtp_tree *tree, const rtp_image *img, const rtp_e
     double t_ref = 0.0;
     int rc = 1;
     memset(&err, 0, sizeof err);
-    if (image_path && write_image(img, image_path, &err) != RTP_OK) {
-        fail_line(&err, line);
-        goto out;
-    }
     if (reference) {
         /* the full trace alone, as `seconds` is the evaluation alone
-           (the comparison after it was timed with it) */
+           (the comparison after it was timed with it); before the image
+           is written, so that a reference that fails leaves no image
+           (exit 1 had left it written) */
         double t0 = now_seconds();
         rtp_trace_options to;
         memset(&to, 0, sizeof to);
@@ -2059,6 +2057,12 @@ static int reeval_report(const rtp_tree *tree, const rtp_image *img, const rtp_e
             fail_line(&err, line);
             goto out;
         }
+    }
+    if (image_path && write_image(img, image_path, &err) != RTP_OK) {
+        fail_line(&err, line);
+        goto out;
+    }
+    if (reference) {
         if (verbosity > 0)
             fprintf(stderr,
                     "rtp: reeval %.4f s, full trace %.4f s (%.1fx); error: rmse %.3g, "

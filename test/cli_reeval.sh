@@ -46,6 +46,17 @@ expect_rc 1 $RTP reeval "$T/t.rtp" --set ambient=0.2 --reference --memory-limit 
 grep -q "^rtp: --reference: .*over the memory limit of 0.01 MiB" "$T/err" && ok ||
     bad "--reference past --memory-limit: $(cat "$T/err")"
 expect_rc 0 $RTP reeval "$T/t.rtp" --set ambient=0.2 --reference --memory-limit 1 -i "$T/rl.pfm"
+# ... and a reference that fails leaves no image, one-off or a stream's
+# frame (exit 1 had left it written), and an old one as it was
+rm -f "$T/rl.pfm"
+expect_rc 1 $RTP reeval "$T/t.rtp" --set ambient=0.2 --reference --memory-limit 0.01 -i "$T/rl.pfm"
+[ ! -e "$T/rl.pfm" ] && ok || bad "a failed --reference wrote the image"
+echo OLD >"$T/rl.pfm"
+expect_rc 1 $RTP reeval "$T/t.rtp" --set ambient=0.2 --reference --memory-limit 0.01 -i "$T/rl.pfm"
+[ "$(cat "$T/rl.pfm")" = OLD ] && ok || bad "a failed --reference replaced the old image"
+expect_rc 1 sh -c "echo ambient=0.2 | $RTP reeval '$T/t.rtp' --stream --reference --memory-limit 0.01 -i '$T/rl%d.pfm' -q"
+[ ! -e "$T/rl0.pfm" ] && grep -q "^rtp: stdin:1: --reference: " "$T/err" && ok ||
+    bad "a stream's failed --reference: $(ls "$T"/rl*) $(cat "$T/err")"
 
 # A camera edit is a full trace from the tree file, said so; it equals
 # trace of the edited scene bit for bit, and a stream's later edits
