@@ -79,12 +79,12 @@ extern "C" {
    rtp_eval_stats.stale_samples; 0.4: rtp_trace_options.cancel and
    rtp_eval_options.cancel; 0.5: rtp_tree_info.min_weight, and the calls
    rtp_tree_eval_file and rtp_tree_read_summary; light.N.pos of the next
-   N adds a light; after 0.5.0, the call rtp_tree_trace_opt): a program
-   compares rtp_version_number() with the RTP_VERSION_NUMBER it was built
-   with. */
+   N adds a light; 0.5.1: the call rtp_tree_trace_opt, a call added, no
+   struct changed): a program compares rtp_version_number() with the
+   RTP_VERSION_NUMBER it was built with. */
 #define RTP_VERSION_MAJOR 0
 #define RTP_VERSION_MINOR 5
-#define RTP_VERSION_PATCH 0
+#define RTP_VERSION_PATCH 1
 #define RTP_VERSION_NUMBER \
     (RTP_VERSION_MAJOR * 10000 + RTP_VERSION_MINOR * 100 + RTP_VERSION_PATCH)
 
