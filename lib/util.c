@@ -439,7 +439,7 @@ rtp_status rtpi_error(rtp_error *err, rtp_status status, const char *file,
                from a character's first byte on (a cut ".pn" named
                another file) */
             const char *tail = file + n - (sizeof err->file - 4);
-            while ((unsigned char)*tail >= 0x80 && (unsigned char)*tail < 0xc0)
+            while (utf8_cont(*tail))
                 tail++;
             memcpy(err->file, "...", 3);
             memcpy(err->file + 3, tail, strlen(tail) + 1);
