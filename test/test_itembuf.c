@@ -360,6 +360,33 @@ static void test_light_on_a_sphere(void)
     run_text("light on a sphere", text, sizeof text - 1, lights, sizeof lights / sizeof *lights);
 }
 
+/* The hit of a ray straight down from (x, y, z) and its shadow query
+   towards lp decided by ex (exact) and sh: 0 where nothing is hit or the
+   hit faces away from the light, else 1, counting the hit into *n, a
+   shadow into *shadowed and a disagreement into *wrong. */
+static int down_decision(const rtp_scene *s, const rtpi_kdtree *kd, const rtpi_shadow *ex,
+                         const rtpi_shadow *sh, rtpi_v3 lp, double x, double y, double z,
+                         int *n, int *shadowed, int *wrong)
+{
+    rtpi_ray ray;
+    rtpi_hit h;
+    rtpi_v3 p, o;
+    int e;
+    ray.o = v3(x, y, z);
+    ray.d = v3(0, 0, -1);
+    ray.tmin = 0.0;
+    ray.tmax = HUGE_VAL;
+    if (!rtpi_kd_intersect(kd, &ray, &h) ||
+        !rtpi_shadow_query_at(s, 0, h.prim, v3_madd(ray.o, ray.d, h.t), ray.d, lp,
+                              rtpi_offset_floor(s, NULL), &p, &o))
+        return 0;
+    (*n)++;
+    e = rtpi_shadow_visible(ex, p, o, h.prim);
+    *shadowed += !e;
+    *wrong += e != rtpi_shadow_visible(sh, p, o, h.prim);
+    return 1;
+}
+
 /* A needle 3 long and 2e-7 wide passing 0.3 under the light: points on
    the wall below, on the line under it, are in its shadow (exactly: their
    shadow rays run along its middle).  Its corners lie more than 75
@@ -398,25 +425,9 @@ static void test_needle_near_light(void)
             rtpi_shadow_destroy(ex);
             continue;
         }
-        for (k = 0; k < 200; k++) {
-            /* down onto the wall between the needle and it */
-            rtpi_ray ray;
-            rtpi_hit h;
-            rtpi_v3 p, o;
-            int e;
-            ray.o = v3(-2.9 + 5.8 * k / 199.0, 0, -0.5);
-            ray.d = v3(0, 0, -1);
-            ray.tmin = 0.0;
-            ray.tmax = HUGE_VAL;
-            if (!rtpi_kd_intersect(kd, &ray, &h) ||
-                !rtpi_shadow_query_at(s, 0, h.prim, v3_madd(ray.o, ray.d, h.t), ray.d, lp,
-                                      rtpi_offset_floor(s, NULL), &p, &o))
-                continue;
-            n++;
-            e = rtpi_shadow_visible(ex, p, o, h.prim);
-            shadowed += !e;
-            wrong += e != rtpi_shadow_visible(sh, p, o, h.prim);
-        }
+        for (k = 0; k < 200; k++) /* down onto the wall between the needle and it */
+            (void)down_decision(s, kd, ex, sh, lp, -2.9 + 5.8 * k / 199.0, 0, -0.5, &n,
+                                &shadowed, &wrong);
         printf("  needle near the light, %s %4d: %d points, %d in shadow, %d wrong\n",
                mode == RTPI_SHADOW_OSMESA ? "osmesa" : "itembuf", res[r % 3], n, shadowed, wrong);
         CHECK_MSG(n == 200 && shadowed > 150, "needle: %d points, %d in shadow", n, shadowed);
@@ -477,22 +488,8 @@ static void test_light_on_a_far_ball(void)
                    every shadow ray enters the ball below the light */
                 double ang = 6.283185307179586 * k / 2000.0;
                 double rad = r * (0.3 + 5.0 * ((k * 7919) % 1000) / 1000.0);
-                rtpi_ray ray;
-                rtpi_hit h;
-                rtpi_v3 p, o;
-                int e;
-                ray.o = v3(cx + rad * cos(ang), cy + rad * sin(ang), -1.2 * r);
-                ray.d = v3(0, 0, -1);
-                ray.tmin = 0.0;
-                ray.tmax = HUGE_VAL;
-                if (!rtpi_kd_intersect(kd, &ray, &h) ||
-                    !rtpi_shadow_query_at(s, 0, h.prim, v3_madd(ray.o, ray.d, h.t), ray.d, lp,
-                                          rtpi_offset_floor(s, NULL), &p, &o))
-                    continue;
-                n++;
-                e = rtpi_shadow_visible(ex, p, o, h.prim);
-                shadowed += !e;
-                wrong += e != rtpi_shadow_visible(sh, p, o, h.prim);
+                (void)down_decision(s, kd, ex, sh, lp, cx + rad * cos(ang),
+                                    cy + rad * sin(ang), -1.2 * r, &n, &shadowed, &wrong);
             }
             printf("  light on a far ball (%g, %g, r %g) %4d: %d points, %d in shadow, %d wrong\n",
                    cx, cy, r, (int)cfg[c][3], n, shadowed, wrong);
