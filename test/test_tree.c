@@ -2516,25 +2516,34 @@ static int edit_start(int spd, rtp_scene **s, rtp_tree **t, rtp_trace_options *o
     return edit_start_on("scenes/spheres.nff", spd, s, t, o, eo, re);
 }
 
-/* Sets key=value on the tree and the scene, evaluates into re and checks
-   it against a full trace of the scene (1e-6); 0 when a step failed. */
+/* Evaluates into re and checks it against a full trace of the scene
+   (1e-6), `what` naming the case in messages; 0 when a step failed. */
+static int eval_equals_trace(rtp_tree *t, const rtp_scene *s, const rtp_trace_options *o,
+                             const rtp_eval_options *eo, rtp_image *re, rtp_eval_stats *es,
+                             const char *what)
+{
+    rtp_image *full = NULL;
+    rtp_diff_stats d;
+    int ok = rtp_tree_eval_into(t, eo, re, es, NULL) == RTP_OK &&
+             rtp_trace(s, o, &full, NULL, NULL) == RTP_OK &&
+             rtp_image_diff(re, full, 1e-6, &d, NULL) == RTP_OK;
+    CHECK_MSG(ok, "%s: a step failed", what);
+    if (ok)
+        CHECK_MSG(d.max_abs <= 1e-6, "%s: %g", what, d.max_abs);
+    rtp_image_destroy(full);
+    return ok;
+}
+
+/* Sets key=value on the tree and the scene, then eval_equals_trace. */
 static int edit_equals_trace(rtp_tree *t, rtp_scene *s, const rtp_trace_options *o,
                              const rtp_eval_options *eo, rtp_image *re, const char *key,
                              const char *value, rtp_eval_stats *es)
 {
-    rtp_image *full = NULL;
-    rtp_diff_stats d;
-    int ok;
+    char what[160];
     CHECK(rtp_tree_set(t, key, value, NULL) == RTP_OK);
     CHECK(rtp_scene_set(s, key, value, NULL) == RTP_OK);
-    ok = rtp_tree_eval_into(t, eo, re, es, NULL) == RTP_OK &&
-         rtp_trace(s, o, &full, NULL, NULL) == RTP_OK &&
-         rtp_image_diff(re, full, 1e-6, &d, NULL) == RTP_OK;
-    CHECK_MSG(ok, "after %s=%s: a step failed", key, value);
-    if (ok)
-        CHECK_MSG(d.max_abs <= 1e-6, "after %s=%s: %g", key, value, d.max_abs);
-    rtp_image_destroy(full);
-    return ok;
+    snprintf(what, sizeof what, "after %s=%s", key, value);
+    return eval_equals_trace(t, s, o, eo, re, es, what);
 }
 
 /* Values near the float range, from the planes (a material's P + K x, the
@@ -3098,10 +3107,9 @@ static void test_failed_eval_after_shine_chain(void)
         rtp_allocator a;
         rtp_scene *s = NULL;
         rtp_tree *t = NULL;
-        rtp_image *re = NULL, *full = NULL;
+        rtp_image *re = NULL;
         rtp_trace_options o;
         rtp_eval_options eo;
-        rtp_diff_stats d;
         rtp_status st;
         size_t i;
         int ok = 1;
@@ -3134,15 +3142,11 @@ static void test_failed_eval_after_shine_chain(void)
         k.armed = 0;
         CHECK(st == RTP_OK || st == RTP_ERR_NOMEM);
         if (st == RTP_ERR_NOMEM) {
+            char what[64];
             tested++;
-            if (rtp_tree_eval_into(t, &eo, re, NULL, NULL) == RTP_OK &&
-                rtp_trace(s, &o, &full, NULL, NULL) == RTP_OK &&
-                rtp_image_diff(re, full, 1e-6, &d, NULL) == RTP_OK)
-                CHECK_MSG(d.max_abs <= 1e-6, "allocation %ld failed: %g", n, d.max_abs);
-            else
-                CHECK_MSG(0, "allocation %ld failed: a step failed", n);
+            snprintf(what, sizeof what, "allocation %ld failed", n);
+            (void)eval_equals_trace(t, s, &o, &eo, re, NULL, what);
         }
-        rtp_image_destroy(full);
         rtp_image_destroy(re);
         rtp_tree_destroy(t);
         rtp_scene_destroy(s);
