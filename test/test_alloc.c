@@ -1624,7 +1624,7 @@ static void test_image_io(void)
 static void cleanup(void)
 {
     static const char *const names[] = {"scene.nff", "sub.nff", "mesh.obj", "mesh.mtl",
-                                        "tex.ppm", "patch.bpt", "w.rtp", "r.rtp",
+                                        "tex.ppm", "ready.nff", "patch.bpt", "w.rtp", "r.rtp",
                                         "i.png", "i.ppm", "i.pfm", "heat.png", "heat.ppm"};
     size_t i;
     for (i = 0; i < sizeof names / sizeof *names; i++)
