@@ -301,14 +301,30 @@ void rtpi_surface_at_ex(const rtp_scene *s, const rtpi_ray *ray,
         out->ns = out->ng;
         if (tr->n[0] != RTPI_NONE && tr->n[1] != RTPI_NONE &&
             tr->n[2] != RTPI_NONE) {
-            rtpi_v3 n = v3_mul(v3_from_f(s->nrm + 3 * (size_t)tr->n[0]), b0);
+            rtpi_v3 n0 = v3_from_f(s->nrm + 3 * (size_t)tr->n[0]);
+            rtpi_v3 n1 = v3_from_f(s->nrm + 3 * (size_t)tr->n[1]);
+            rtpi_v3 n2 = v3_from_f(s->nrm + 3 * (size_t)tr->n[2]);
+            rtpi_v3 n = v3_mul(n0, b0);
             double dn;
-            n = v3_madd(n, v3_from_f(s->nrm + 3 * (size_t)tr->n[1]), hit->u);
-            n = v3_madd(n, v3_from_f(s->nrm + 3 * (size_t)tr->n[2]), hit->v);
+            n = v3_madd(n, n1, hit->u);
+            n = v3_madd(n, n2, hit->v);
             dn = v3_dot(n, out->ng);
-            /* Vertex normals pointing away from their triangle (a few in
-               SPD's teapot) are mirrored at the triangle's plane: that
-               keeps their tangential lean and puts them on ng's side. */
+            /* A triangle whose three vertex normals all point away from
+               it is wound the other way round from its normals (a mesh
+               written clockwise, as some exporters write them): its
+               normal is turned over, which puts it on ng's side with its
+               lean kept.  Mirrored, as below, the lean was reversed and a
+               smooth clockwise sphere shaded faceted (0.07 off its
+               counter-clockwise twin).  A triangle with only some vertex
+               normals pointing away from it (a few in SPD's teapot) has
+               them wrong, not its winding: those are mirrored at the
+               triangle's plane, which keeps their tangential lean and
+               puts them on ng's side. */
+            if (dn < 0.0 && v3_dot(n0, out->ng) < 0.0 && v3_dot(n1, out->ng) < 0.0 &&
+                v3_dot(n2, out->ng) < 0.0) {
+                n = v3_mul(n, -1.0);
+                dn = -dn;
+            }
             if (dn < 0.0)
                 n = v3_madd(n, out->ng, -2.0 * dn);
             if (v3_dot(n, n) > 0.0)

@@ -875,10 +875,15 @@ static void test_shading_normal(void)
     add_v(s, 0, 0, 0);
     add_v(s, 1, 0, 0);
     add_v(s, 0, 1, 0);
-    rtpi_scene_add_nrm(s, 0.3, 0, -1); /* faces away from the triangle */
+    /* two of the three normals face away from the triangle, and at the
+       hit their mix does (a triangle whose normals all face away is
+       wound the other way round and turned over instead:
+       test_nff's test_clockwise_patch) */
+    rtpi_scene_add_nrm(s, 0.3, 0, -1);
+    rtpi_scene_add_nrm(s, 0.3, 0, 0.2);
     for (k = 0; k < 3; k++) {
         t.v[k] = (uint32_t)k;
-        t.n[k] = 0;
+        t.n[k] = k < 2 ? 0 : 1;
         t.t[k] = RTPI_NONE;
     }
     t.mat = 0;

@@ -351,6 +351,34 @@ static void test_concave_polygon(void)
     rtp_scene_destroy(s);
 }
 
+/* A pp triangle written clockwise with the normals of its counter-
+   clockwise twin (a mesh wound the other way, with outward normals) shades
+   as its twin: its normal turned over, with its lean.  Mirrored at the
+   plane (the rule for a triangle with only a few normals pointing away),
+   the lean was reversed and a smooth clockwise sphere shaded faceted. */
+static void test_clockwise_patch(void)
+{
+    rtp_scene *s = NULL;
+    rtp_error err;
+    const float p[3] = {0.25f, 0.25f, 0.0f};
+    rtpi_surface a, b;
+    const char *text = "pp 3\n0 0 0 -0.3 -0.3 1\n1 0 0 0.4 -0.2 1\n0 1 0 -0.1 0.5 1\n"
+                       "pp 3\n0 0 0 -0.3 -0.3 1\n0 1 0 -0.1 0.5 1\n1 0 0 0.4 -0.2 1\n";
+    CHECK(load(text, "cw.nff", &s, &err) == RTP_OK);
+    if (!s)
+        return;
+    CHECK(s->ntris == 2);
+    rtpi_surface_from_point(s, 0, p, 0, &a);
+    rtpi_surface_from_point(s, 1, p, 0, &b);
+    CHECK(a.ng.z > 0.0 && b.ng.z < 0.0);
+    /* on the side of its own ng, the normal the file gives turned over */
+    CHECK_MSG(near(b.ns.x, -a.ns.x, 1e-6) && near(b.ns.y, -a.ns.y, 1e-6) &&
+                  near(b.ns.z, -a.ns.z, 1e-6),
+              "ccw %g %g %g, cw %g %g %g", a.ns.x, a.ns.y, a.ns.z, b.ns.x, b.ns.y, b.ns.z);
+    CHECK(a.ns.x < 0.0 && a.ns.y < 0.0); /* the lean the vertices give there */
+    rtp_scene_destroy(s);
+}
+
 /* ---------------------------------------------------------- additions */
 
 static void test_names_and_keys(void)
@@ -1046,6 +1074,7 @@ int main(void)
     RUN(test_token_based);
     RUN(test_triangulate);
     RUN(test_concave_polygon);
+    RUN(test_clockwise_patch);
     RUN(test_names_and_keys);
     RUN(test_long_messages);
     RUN(test_far_light);
