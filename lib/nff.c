@@ -467,7 +467,7 @@ static rtp_status read_polygon(nff *c, const rtpi_tok *kw, int smooth)
             return nomem(c, kw);
         if (smooth) {
             const double *q = c->pts + 3 * (n + i);
-            rtpi_v3 nv = v3_norm(v3(q[0], q[1], q[2]));
+            rtpi_v3 nv = rtpi_unit_normal(q[0], q[1], q[2]);
             if (rtpi_scene_add_nrm(c->s, nv.x, nv.y, nv.z))
                 return nomem(c, kw);
         }

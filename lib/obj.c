@@ -820,7 +820,7 @@ static rtp_status read_vertex(obj *o, int kind)
             memcpy(q, p, sizeof q);
         }
         {
-            rtpi_v3 n = v3_norm(v3(q[0], q[1], q[2]));
+            rtpi_v3 n = rtpi_unit_normal(q[0], q[1], q[2]);
             if (rtpi_scene_add_nrm(o->s, n.x, n.y, n.z))
                 return nomem(&o->lx, &here);
         }

@@ -9,6 +9,8 @@
 
 #include "internal.h"
 
+#include <float.h>
+
 /* Material index used by the NFF reader for primitives that come before
    any `f` line.  It is replaced by a default material appended after the
    whole file is read, so that material N stays the N-th `f` line. */
@@ -26,6 +28,22 @@
    quadratic: a concave 8192-gon takes about 0.25 s, and no real scene
    comes close (SPD's gears have 144). */
 #define RTPI_POLY_MAX 8192
+
+/* A vertex normal (x, y, z) as a unit vector, whatever its length: one
+   whose length squared would be no normal double (below 2^-1022, a
+   normal under ~1e-154 per component, which v3_norm's square took to 0
+   or to a subnormal of few digits) is scaled by its largest component
+   first.  A file's 1e-200 0 0 is the direction +x; it had become 0 0 0
+   as a float, a zero normal (OBJ: a flat face) or a mix towards none
+   (NFF pp).  Normals of a usual length take v3_norm itself, bit for bit
+   as before.  Zero stays zero. */
+static inline rtpi_v3 rtpi_unit_normal(double x, double y, double z)
+{
+    double m = fmax(fabs(x), fmax(fabs(y), fabs(z)));
+    if (x * x + y * y + z * z >= DBL_MIN || !(m > 0.0))
+        return v3_norm(v3(x, y, z));
+    return v3_norm(v3(x / m, y / m, z / m));
+}
 
 /* A token: bytes [s, s+n) starting at 1-based line and column. */
 typedef struct rtpi_tok {

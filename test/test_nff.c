@@ -379,6 +379,28 @@ static void test_clockwise_patch(void)
     rtp_scene_destroy(s);
 }
 
+/* A vertex normal is a direction whatever its length: 1e-200 times one
+   (whose square underflows) is that normal, not zero. */
+static void test_tiny_normal(void)
+{
+    rtp_scene *s = NULL;
+    rtp_error err;
+    const char *text = "pp 3\n0 0 0 -1e-200 -2e-200 2e-200\n1 0 0 0 0 1\n0 1 0 0 0 1\n"
+                       "pp 3\n0 0 0 -1e-310 -2e-310 2e-310\n1 0 0 0 0 1\n0 1 0 0 0 1\n";
+    int k;
+    CHECK(load(text, "tiny.nff", &s, &err) == RTP_OK);
+    if (!s)
+        return;
+    CHECK(s->nnrm == 6);
+    for (k = 0; k < 2 && s->nnrm == 6; k++) {
+        const float *n = s->nrm + 9 * k;
+        CHECK_MSG(near(n[0], -1.0 / 3, 1e-7) && near(n[1], -2.0 / 3, 1e-7) &&
+                      near(n[2], 2.0 / 3, 1e-7),
+                  "patch %d: %g %g %g", k, n[0], n[1], n[2]);
+    }
+    rtp_scene_destroy(s);
+}
+
 /* ---------------------------------------------------------- additions */
 
 static void test_names_and_keys(void)
@@ -1075,6 +1097,7 @@ int main(void)
     RUN(test_triangulate);
     RUN(test_concave_polygon);
     RUN(test_clockwise_patch);
+    RUN(test_tiny_normal);
     RUN(test_names_and_keys);
     RUN(test_long_messages);
     RUN(test_far_light);

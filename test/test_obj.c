@@ -106,6 +106,28 @@ static void test_faces(void)
 
 /* A concave n-gon and a face whose indices are relative to a vertex list
    that keeps growing. */
+/* A vn 1e-200 times a direction (its square underflows) is that
+   direction: the face stays smooth, not flat for a zero normal. */
+static void test_tiny_normal(void)
+{
+    rtp_scene *s = NULL;
+    rtp_error err;
+    const char *text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn -1e-200 -2e-200 2e-200\nvn 0 0 1\n"
+                       "f 1//1 2//2 3//2\n";
+    CHECK(load(text, "tiny.obj", &s, &err) == RTP_OK);
+    if (!s)
+        return;
+    CHECK(s->ntris == 1 && s->nnrm == 2);
+    if (s->ntris == 1 && s->nnrm == 2) {
+        const float *n = s->nrm;
+        CHECK(s->tris[0].n[0] != RTPI_NONE);
+        CHECK_MSG(near(n[0], -1.0 / 3, 1e-7) && near(n[1], -2.0 / 3, 1e-7) &&
+                      near(n[2], 2.0 / 3, 1e-7),
+                  "%g %g %g", n[0], n[1], n[2]);
+    }
+    rtp_scene_destroy(s);
+}
+
 static void test_ngon(void)
 {
     rtp_scene *s = NULL;
@@ -747,6 +769,7 @@ int main(void)
 {
     RUN(test_faces);
     RUN(test_ngon);
+    RUN(test_tiny_normal);
     RUN(test_xform);
     RUN(test_mtl);
     RUN(test_mtl_exports);
