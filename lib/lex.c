@@ -28,6 +28,16 @@ static int is_space(char c)
     return c == ' ' || c == '\t' || c == '\r' || c == '\f' || c == '\v';
 }
 
+/* Whether p ends a line: '\n', or a '\r' not followed by one (classic Mac
+   OS text files end lines with '\r' alone).  A '\r' before '\n' is white
+   space, the '\n' the line's end.  Without this a CR-only file was one
+   line: its first comment ran to the end of the file, and an NFF scene
+   with a comment at the top read as no objects at all. */
+static int is_eol(const rtpi_lex *lx, const char *p)
+{
+    return *p == '\n' || (*p == '\r' && (p + 1 >= lx->end || p[1] != '\n'));
+}
+
 /* '#' starts a comment only where a word could start: inside one it is
    part of it (a material "Material#25", as 3ds Max names them), so a
    value such as MSVC's "-1.#IND00" is one word, not a number, and not -1
@@ -43,7 +53,7 @@ static int continues(const rtpi_lex *lx, const char *p, size_t *len)
 {
     if (!lx->continuation || *p != '\\')
         return 0;
-    if (p + 1 < lx->end && p[1] == '\n') {
+    if (p + 1 < lx->end && is_eol(lx, p + 1)) {
         *len = 1;
         return 1;
     }
@@ -72,7 +82,11 @@ void rtpi_lex_here(const rtpi_lex *lx, rtpi_tok *t)
 static void skip_comment(rtpi_lex *lx)
 {
     const char *nl = (const char *)memchr(lx->p, '\n', (size_t)(lx->end - lx->p));
-    lx->p = nl ? nl : lx->end;
+    const char *cr = (const char *)memchr(lx->p, '\r', (size_t)((nl ? nl : lx->end) - lx->p));
+    /* (to the '\n', or to a lone '\r' before it) */
+    while (cr && !is_eol(lx, cr))
+        cr = (const char *)memchr(cr + 1, '\r', (size_t)((nl ? nl : lx->end) - (cr + 1)));
+    lx->p = cr ? cr : nl ? nl : lx->end;
 }
 
 static void take(rtpi_lex *lx, rtpi_tok *t)
@@ -89,7 +103,7 @@ int rtpi_lex_next(rtpi_lex *lx, rtpi_tok *t)
     while (lx->p < lx->end) {
         char c = *lx->p;
         size_t len;
-        if (c == '\n')
+        if (is_eol(lx, lx->p))
             newline(lx);
         else if (continues(lx, lx->p, &len)) {
             lx->p += len; /* (a lone continuation: white space) */
@@ -112,7 +126,7 @@ int rtpi_lex_next_inline(rtpi_lex *lx, rtpi_tok *t)
     size_t len;
     while (lx->p < lx->end) {
         char c = *lx->p;
-        if (c == '\n')
+        if (is_eol(lx, lx->p))
             break;
         if (continues(lx, lx->p, &len)) {
             lx->p += len; /* at the newline: the statement goes on */
@@ -138,7 +152,7 @@ void rtpi_lex_skip_line(rtpi_lex *lx)
            last backslash continues nothing (as on a line read) */
         const char *q = lx->p;
         int comment = 0;
-        for (; q < lx->end && *q != '\n'; q++)
+        for (; q < lx->end && !is_eol(lx, q); q++)
             if (*q == '#' && (q == lx->line_start || is_space(q[-1]))) {
                 comment = 1;
                 break;

@@ -157,6 +157,29 @@ static void test_token_based(void)
     rtp_scene_destroy(s);
 }
 
+/* Line ends of classic Mac OS files, '\r' alone: a comment ends there
+   (it ran to the end of the file, and the scene below a heading comment
+   read as no objects), and messages count their lines. */
+static void test_cr_line_ends(void)
+{
+    rtp_scene *s = NULL;
+    rtp_error err;
+    const char *text = "# a heading\rl 0 0 9 # a light\rs 0 0 0 1\r# more\r"
+                       "p 3\r0 0 0\r1 0 0\r0 1 0\r";
+    CHECK(load(text, "cr.nff", &s, &err) == RTP_OK);
+    if (s) {
+        CHECK(s->nlights == 1 && s->nspheres == 1 && s->ntris == 1);
+        rtp_scene_destroy(s);
+        s = NULL;
+    }
+    /* '\r\n' is one line end still, and '\r' alone beside it another */
+    CHECK(load("# x\r\n# y\rs 0 0 0 1\r\n\rp 3 0 0 0 1 0 0 0 x\r", "crlf.nff", &s, &err) ==
+          RTP_ERR_PARSE);
+    CHECK_MSG(err.line == 5 && err.column == 19, "%d:%d %s", err.line, err.column,
+              err.message);
+    rtp_scene_destroy(s);
+}
+
 /* --------------------------------------------------------- polygons */
 
 static double poly_area(const double *p, size_t n, double nrm[3])
@@ -1094,6 +1117,7 @@ int main(void)
 {
     RUN(test_every_keyword);
     RUN(test_token_based);
+    RUN(test_cr_line_ends);
     RUN(test_triangulate);
     RUN(test_concave_polygon);
     RUN(test_clockwise_patch);

@@ -128,6 +128,21 @@ static void test_tiny_normal(void)
     rtp_scene_destroy(s);
 }
 
+/* An OBJ and its MTL with classic Mac OS line ends ('\r' alone) read as
+   with '\n': they were one line, refused at its second statement. */
+static void test_cr_line_ends(void)
+{
+    rtp_scene *s = NULL;
+    rtp_error err;
+    const char *text = "# cr\rv 0 0 0\rv 1 0 0\rv 0 1 0\rvn 0 0 1\rf 1//1 2//1 3//1\r"
+                       "f 1 2 \\\r3\r";
+    CHECK(load(text, "cr.obj", &s, &err) == RTP_OK);
+    if (s) {
+        CHECK(s->npos == 3 && s->ntris == 2 && s->tris[0].n[0] != RTPI_NONE);
+        rtp_scene_destroy(s);
+    }
+}
+
 static void test_ngon(void)
 {
     rtp_scene *s = NULL;
@@ -769,6 +784,7 @@ int main(void)
 {
     RUN(test_faces);
     RUN(test_ngon);
+    RUN(test_cr_line_ends);
     RUN(test_tiny_normal);
     RUN(test_xform);
     RUN(test_mtl);
