@@ -2080,20 +2080,6 @@ int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
         return 1;
     i = x < 0.0 ? 0 : x >= res ? res - 1 : (int)x;
     j = y < 0.0 ? 0 : y >= res ? res - 1 : (int)y;
-    if (self == 0 && i > 0 && j > 0 && i < res - 1 && j < res - 1) {
-        /* The common case first: all 9 samples empty, prim's own or
-           thin. */
-        const uint32_t *row =
-            ib->id + ib->w.fbase[f] + (size_t)(j - 1) * (size_t)res + (size_t)(i - 1);
-        int other = 0;
-        for (dj = 0; dj < 3 && !other; dj++, row += res)
-            for (di = 0; di < 3; di++) {
-                uint32_t id = row[di];
-                other |= id != prim && id != RTPI_NONE && !(thin && thin[id]);
-            }
-        if (!other)
-            return 1;
-    }
     zp = rtpi_dc_depth(f, v3_sub(p, ib->light));
     /* nothing at or beyond zlim is in front: float depths are kept to
        ~1e-7 of z - zbase, so the bias is IB_BIAS of that, not of the
@@ -2107,32 +2093,66 @@ int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
        cannot tell what lies in front of p, so every sample is tested
        and, none hitting, an exact query decides */
     coarse = ib->zq[f] > 100.0 * bias;
-    for (dj = -1; dj <= 1; dj++) {
-        for (di = -1; di <= 1; di++) {
-            int g;
-            size_t c = ib_sample(ib, f, i + di, j + dj, &g);
-            uint32_t id;
-            double zc = 0.0, ex, ey;
-            if (c == RTPI_DC_ABSENT || (id = ib->id[c]) == RTPI_NONE ||
-                (id == prim && self == 0) || (thin && thin[id]))
-                continue;
-            if (g == f && !((zc = ib->z[c] + ib->w.zbase[g]) < zlim) && !coarse)
-                continue;
-            for (k = 0; k < n && cand[k] != id; k++)
-                ;
-            if (k == n)
-                cand[n++] = id;
-            if (m)
-                continue;
-            if (g != f) {
-                m = 1; /* a sample on another face: depths not comparable */
-                continue;
+    if (!coarse && i > 0 && j > 0 && i < res - 1 && j < res - 1) {
+        /* The common case: the 9 samples inside the window, on face f,
+           read straight from its rows, the depth test with the others
+           (the loop below's, in its order).  Most queries on a mesh meet
+           only its own triangles around p, at p's depth: no candidate,
+           lit, in one pass (a first pass for empty samples alone, then
+           this loop's with ib_sample's bounds again for the rest, had
+           cost mount 11% of an item-buffer move). */
+        size_t c0 = ib->w.fbase[f] + (size_t)(j - 1) * (size_t)res + (size_t)(i - 1);
+        const uint32_t *row = ib->id + c0;
+        const float *zr = ib->z + c0;
+        const double zb = ib->w.zbase[f];
+        for (dj = -1; dj <= 1; dj++, row += res, zr += res) {
+            for (di = -1; di <= 1; di++) {
+                uint32_t id = row[di + 1];
+                double zc, ex, ey;
+                if (id == RTPI_NONE || (id == prim && self == 0) || (thin && thin[id]) ||
+                    !((zc = zr[di + 1] + zb) < zlim))
+                    continue;
+                for (k = 0; k < n && cand[k] != id; k++)
+                    ;
+                if (k == n)
+                    cand[n++] = id;
+                if (m)
+                    continue;
+                if (tn < 0.0)
+                    tn = ib_tan(p, o, ib->light);
+                ex = (i + di + 0.5 - x) * ib->w.du[f];
+                ey = (j + dj + 0.5 - y) * ib->w.dv[f];
+                m = zc < zlim - zp * sqrt(ex * ex + ey * ey) * tn;
             }
-            if (tn < 0.0)
-                tn = ib_tan(p, o, ib->light);
-            ex = (i + di + 0.5 - x) * ib->w.du[f];
-            ey = (j + dj + 0.5 - y) * ib->w.dv[f];
-            m = zc < zlim - zp * sqrt(ex * ex + ey * ey) * tn;
+        }
+    } else {
+        for (dj = -1; dj <= 1; dj++) {
+            for (di = -1; di <= 1; di++) {
+                int g;
+                size_t c = ib_sample(ib, f, i + di, j + dj, &g);
+                uint32_t id;
+                double zc = 0.0, ex, ey;
+                if (c == RTPI_DC_ABSENT || (id = ib->id[c]) == RTPI_NONE ||
+                    (id == prim && self == 0) || (thin && thin[id]))
+                    continue;
+                if (g == f && !((zc = ib->z[c] + ib->w.zbase[g]) < zlim) && !coarse)
+                    continue;
+                for (k = 0; k < n && cand[k] != id; k++)
+                    ;
+                if (k == n)
+                    cand[n++] = id;
+                if (m)
+                    continue;
+                if (g != f) {
+                    m = 1; /* a sample on another face: depths not comparable */
+                    continue;
+                }
+                if (tn < 0.0)
+                    tn = ib_tan(p, o, ib->light);
+                ex = (i + di + 0.5 - x) * ib->w.du[f];
+                ey = (j + dj + 0.5 - y) * ib->w.dv[f];
+                m = zc < zlim - zp * sqrt(ex * ex + ey * ey) * tn;
+            }
         }
     }
     if (!n)
