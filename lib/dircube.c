@@ -2052,8 +2052,11 @@ static size_t ib_sample(const rtpi_itembuf *ib, int f, int i, int j, int *g)
 static double ib_tan(rtpi_v3 p, rtpi_v3 o, rtpi_v3 L)
 {
     rtpi_v3 nv = v3_sub(o, p), l = v3_sub(L, p);
-    double nl = v3_len(nv) * v3_len(l), cs = nl > 0.0 ? v3_dot(nv, l) / nl : 0.0, tn;
-    tn = cs * IB_TAN_MAX > 1.0 ? sqrt(fmax(0.0, 1.0 - cs * cs)) / cs : IB_TAN_MAX;
+    double nl = v3_len(nv) * v3_len(l), cs = nl > 0.0 ? v3_dot(nv, l) / nl : 0.0, tn, s2;
+    /* (fmax's by a comparison, not a libm call: s2 is never -0 nor,
+       where taken, NaN) */
+    s2 = 1.0 - cs * cs;
+    tn = cs * IB_TAN_MAX > 1.0 ? sqrt(s2 > 0.0 ? s2 : 0.0) / cs : IB_TAN_MAX;
     return tn < IB_TAN_MAX ? tn : IB_TAN_MAX;
 }
 
@@ -2087,7 +2090,9 @@ int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
        the scene: every real occluder behind the bias, 37% of the pixels
        lit in shadow); OSMesa's depths carry their own quantum (zq) */
     bias = IB_BIAS * fabs(zp - ib->w.zbase[f]);
-    zlim = zp - fmax(ib->zq[f], bias);
+    /* (fmax(zq, bias) by a comparison, not a libm call a query: bias is
+       not negative, a NaN one gives zq as fmax does) */
+    zlim = zp - (bias > ib->zq[f] ? bias : ib->zq[f]);
     /* OSMesa's quantum far coarser than p's own bias (a face whose depth
        extent dwarfs p's depth in it: one speck far away): its depths
        cannot tell what lies in front of p, so every sample is tested
