@@ -886,6 +886,11 @@ struct rtp_tree {
     double *tri_nrm;       /* 3 per triangle: its rtpi_tri_normal, made at
                               the first move (vis_row asks it of every
                               hit), NULL in a scene without triangles */
+    unsigned char *ball_in; /* nnodes, with cur_vis where the scene has
+                              spheres: per node 0 not yet known, 1 a back
+                              hit on a sphere whose shadow ray origin, the
+                              normal turned inwards, lies in the ball
+                              (rtpi_ball_holds), 2 anything else (vis_row) */
     size_t nlights0;       /* lights traced; later ones were added */
 
     /* Evaluation caches (tree.c): the shading steps' results, kept so an
