@@ -2060,13 +2060,30 @@ static double ib_tan(rtpi_v3 p, rtpi_v3 o, rtpi_v3 L)
     return tn < IB_TAN_MAX ? tn : IB_TAN_MAX;
 }
 
+/* p's depth zp on face f and the depth zlim nothing at or beyond which is
+   in front of p; @return the bias.  Float depths are kept to ~1e-7 of
+   z - zbase, so the bias is IB_BIAS of that, not of the face's whole
+   depth extent (one speck 1e5 away made it 10, more than the scene:
+   every real occluder behind the bias, 37% of the pixels lit in shadow);
+   OSMesa's depths carry their own quantum (zq). */
+static double ib_zlim(const rtpi_itembuf *ib, int f, rtpi_v3 p, double *zp, double *zlim)
+{
+    double bias;
+    *zp = rtpi_dc_depth(f, v3_sub(p, ib->light));
+    bias = IB_BIAS * fabs(*zp - ib->w.zbase[f]);
+    /* (fmax(zq, bias) by a comparison, not a libm call a query: bias is
+       not negative, a NaN one gives zq as fmax does) */
+    *zlim = *zp - (bias > ib->zq[f] ? bias : ib->zq[f]);
+    return bias;
+}
+
 int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
                          rtpi_v3 p, rtpi_v3 o, uint32_t prim, int self,
-                         const rtpi_ray *r, const unsigned char *thin, uint32_t *occ)
+                         const rtpi_ray *r, uint32_t *occ)
 {
-    int f, res = ib->res, i, j, di, dj, k, n = 0, m = 0, coarse;
+    int f, res = ib->res, i, j, di, dj, k, n = 0, m = 0, coarse = 0;
     uint32_t cand[9];
-    double u, v, x, y, zp, zlim, bias, tn = -1.0;
+    double u, v, x, y, zp = 0.0, zlim = 0.0, tn = -1.0;
     rtpi_ray rr;
     rtpi_hit h;
     lb_tri_ray w;
@@ -2083,39 +2100,33 @@ int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
         return 1;
     i = x < 0.0 ? 0 : x >= res ? res - 1 : (int)x;
     j = y < 0.0 ? 0 : y >= res ? res - 1 : (int)y;
-    zp = rtpi_dc_depth(f, v3_sub(p, ib->light));
-    /* nothing at or beyond zlim is in front: float depths are kept to
-       ~1e-7 of z - zbase, so the bias is IB_BIAS of that, not of the
-       face's whole depth extent (one speck 1e5 away made it 10, more than
-       the scene: every real occluder behind the bias, 37% of the pixels
-       lit in shadow); OSMesa's depths carry their own quantum (zq) */
-    bias = IB_BIAS * fabs(zp - ib->w.zbase[f]);
-    /* (fmax(zq, bias) by a comparison, not a libm call a query: bias is
-       not negative, a NaN one gives zq as fmax does) */
-    zlim = zp - (bias > ib->zq[f] ? bias : ib->zq[f]);
-    /* OSMesa's quantum far coarser than p's own bias (a face whose depth
-       extent dwarfs p's depth in it: one speck far away): its depths
-       cannot tell what lies in front of p, so every sample is tested
-       and, none hitting, an exact query decides */
-    coarse = ib->zq[f] > 100.0 * bias;
-    if (!coarse && i > 0 && j > 0 && i < res - 1 && j < res - 1) {
-        /* The common case: the 9 samples inside the window, on face f,
-           read straight from its rows, the depth test with the others
-           (the loop below's, in its order).  Most queries on a mesh meet
-           only its own triangles around p, at p's depth: no candidate,
-           lit, in one pass (a first pass for empty samples alone, then
-           this loop's with ib_sample's bounds again for the rest, had
-           cost mount 11% of an item-buffer move). */
+    /* (thin primitives are not drawn: no sample holds one) */
+    if (ib->zq[f] == 0.0 && i > 0 && j > 0 && i < res - 1 && j < res - 1) {
+        /* The common case: float depths (never coarse) and the 9
+           samples inside the window, on face f, read straight from its
+           rows in the loop below's order, with its tests; zlim made at
+           the first sample that needs it.  Most queries meet only
+           nothing or prim around p, answered lit by this one pass; on a
+           mesh they meet its own triangles, at p's depth (a first pass
+           for empty samples alone, then the loop below's with
+           ib_sample's bounds again had cost mount 11% of an item-buffer
+           move). */
         size_t c0 = ib->w.fbase[f] + (size_t)(j - 1) * (size_t)res + (size_t)(i - 1);
-        const uint32_t *row = ib->id + c0;
+        const uint32_t *row = ib->id + c0, own = self == 0 ? prim : RTPI_NONE;
         const float *zr = ib->z + c0;
         const double zb = ib->w.zbase[f];
+        int zmade = 0;
         for (dj = -1; dj <= 1; dj++, row += res, zr += res) {
             for (di = -1; di <= 1; di++) {
                 uint32_t id = row[di + 1];
                 double zc, ex, ey;
-                if (id == RTPI_NONE || (id == prim && self == 0) || (thin && thin[id]) ||
-                    !((zc = zr[di + 1] + zb) < zlim))
+                if (id == RTPI_NONE || id == own)
+                    continue;
+                if (!zmade) {
+                    (void)ib_zlim(ib, f, p, &zp, &zlim);
+                    zmade = 1;
+                }
+                if (!((zc = zr[di + 1] + zb) < zlim))
                     continue;
                 for (k = 0; k < n && cand[k] != id; k++)
                     ;
@@ -2131,6 +2142,11 @@ int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
             }
         }
     } else {
+        /* OSMesa's quantum far coarser than p's own bias (a face whose
+           depth extent dwarfs p's depth in it: one speck far away): its
+           depths cannot tell what lies in front of p, so every sample is
+           tested and, none hitting, an exact query decides */
+        coarse = ib->zq[f] > 100.0 * ib_zlim(ib, f, p, &zp, &zlim);
         for (dj = -1; dj <= 1; dj++) {
             for (di = -1; di <= 1; di++) {
                 int g;
@@ -2138,7 +2154,7 @@ int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
                 uint32_t id;
                 double zc = 0.0, ex, ey;
                 if (c == RTPI_DC_ABSENT || (id = ib->id[c]) == RTPI_NONE ||
-                    (id == prim && self == 0) || (thin && thin[id]))
+                    (id == prim && self == 0))
                     continue;
                 if (g == f && !((zc = ib->z[c] + ib->w.zbase[g]) < zlim) && !coarse)
                     continue;

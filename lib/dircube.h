@@ -325,14 +325,13 @@ rtp_status rtpi_itembuf_alloc(rtpi_itembuf *ib, const rtp_scene *s,
 /* The item-buffer decision for the hit at p on prim with shadow-ray
    origin o (see dircube.c for the rule): 1 lit, 0 in shadow (then
    certain), -1 open (something lies in front near the ray: ask an exact
-   query).  thin (NULL: none): per primitive, 1 for those the caller
-   decides itself (rtpi_itembuf_thin); they are never intersected here.
-   self: rtpi_prim_shadows_own(s, prim, o, light), which the caller needs
+   query).  The thin primitives of rtpi_itembuf_build_wide (the caller
+   decides those itself) are not drawn, so never intersected here.  self: rtpi_prim_shadows_own(s, prim, o, light), which the caller needs
    too.  r (NULL: made here when needed): rtpi_shadow_ray(o, light).  On
    0, *occ is the primitive found in the way. */
 int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
                          rtpi_v3 p, rtpi_v3 o, uint32_t prim, int self,
-                         const rtpi_ray *r, const unsigned char *thin, uint32_t *occ);
+                         const rtpi_ray *r, uint32_t *occ);
 /* Sets thin[i] (one per primitive) to 1 where primitive i is drawn and
    its projection may be narrower than `cells` cells of ib somewhere, else
    0. */

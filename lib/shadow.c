@@ -239,7 +239,7 @@ static RTPI_FORCE_INLINE int sh_visible(const rtpi_shadow *sh, rtpi_v3 p, rtpi_v
         break;
     case RTPI_SHADOW_ITEMBUF:
     case RTPI_SHADOW_OSMESA:
-        v = rtpi_itembuf_visible(&sh->ib, sh->s, p, o, prim, own, r, sh->thin, occ);
+        v = rtpi_itembuf_visible(&sh->ib, sh->s, p, o, prim, own, r, occ);
         if (v == 0)
             return 0;
         if (v > 0 && (!sh->lb.ncand || !sh_thin_near(sh, o)))
