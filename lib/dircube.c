@@ -2079,7 +2079,7 @@ static double ib_zlim(const rtpi_itembuf *ib, int f, rtpi_v3 p, double *zp, doub
 
 int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
                          rtpi_v3 p, rtpi_v3 o, uint32_t prim, int self,
-                         const rtpi_ray *r, uint32_t *occ)
+                         const rtpi_ray *r, uint32_t *occ, rtpi_dc_at *at)
 {
     int f, res = ib->res, i, j, di, dj, k, n = 0, m = 0, coarse = 0;
     uint32_t cand[9];
@@ -2092,6 +2092,9 @@ int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
         return 0;
     }
     f = rtpi_dc_face(v3_sub(o, ib->light), &u, &v);
+    at->f = f;
+    at->u = u;
+    at->v = v;
     if (ib->w.fbase[f] == RTPI_DC_ABSENT)
         return 1;
     x = (u - ib->w.u0[f]) / ib->w.du[f];

@@ -106,17 +106,32 @@ static inline int rtpi_dc_wcoord(double x, double x0, double dx, int res)
     return (int)t;
 }
 
+/* A direction's face and coordinates on it (rtpi_dc_face): made once,
+   they serve every cube of the same light (rtpi_dc_wcell_at). */
+typedef struct rtpi_dc_at {
+    int f;
+    double u, v;
+} rtpi_dc_at;
+
+/* The cell at a in windows w, or RTPI_DC_ABSENT on a face without
+   cells. */
+static inline size_t rtpi_dc_wcell_at(const rtpi_dc_window *w, int res, const rtpi_dc_at *a)
+{
+    int f = a->f, i, j;
+    if (w->fbase[f] == RTPI_DC_ABSENT)
+        return RTPI_DC_ABSENT;
+    i = rtpi_dc_wcoord(a->u, w->u0[f], w->du[f], res);
+    j = rtpi_dc_wcoord(a->v, w->v0[f], w->dv[f], res);
+    return w->fbase[f] + (size_t)j * (size_t)res + (size_t)i;
+}
+
 /* The cell of direction d (from the light; any length) in windows w, or
    RTPI_DC_ABSENT on a face without cells. */
 static inline size_t rtpi_dc_wcell(const rtpi_dc_window *w, int res, rtpi_v3 d)
 {
-    double u, v;
-    int f = rtpi_dc_face(d, &u, &v), i, j;
-    if (w->fbase[f] == RTPI_DC_ABSENT)
-        return RTPI_DC_ABSENT;
-    i = rtpi_dc_wcoord(u, w->u0[f], w->du[f], res);
-    j = rtpi_dc_wcoord(v, w->v0[f], w->dv[f], res);
-    return w->fbase[f] + (size_t)j * (size_t)res + (size_t)i;
+    rtpi_dc_at a;
+    a.f = rtpi_dc_face(d, &a.u, &a.v);
+    return rtpi_dc_wcell_at(w, res, &a);
 }
 
 /* The cell of direction d (from the light; any length) on a cube of full
@@ -328,10 +343,11 @@ rtp_status rtpi_itembuf_alloc(rtpi_itembuf *ib, const rtp_scene *s,
    query).  The thin primitives of rtpi_itembuf_build_wide (the caller
    decides those itself) are not drawn, so never intersected here.  self: rtpi_prim_shadows_own(s, prim, o, light), which the caller needs
    too.  r (NULL: made here when needed): rtpi_shadow_ray(o, light).  On
-   0, *occ is the primitive found in the way. */
+   0, *occ is the primitive found in the way; otherwise *at is the face
+   and coordinates of o - light, for other cubes of the light. */
 int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
                          rtpi_v3 p, rtpi_v3 o, uint32_t prim, int self,
-                         const rtpi_ray *r, uint32_t *occ);
+                         const rtpi_ray *r, uint32_t *occ, rtpi_dc_at *at);
 /* Sets thin[i] (one per primitive) to 1 where primitive i is drawn and
    its projection may be narrower than `cells` cells of ib somewhere, else
    0. */
