@@ -516,13 +516,28 @@ static int vis_row(void *ctx, int y)
     const float *nv = t->ev_valid ? t->ev_nv : NULL;
     /* (NULL also where the light buffer has no balls: no sphere) */
     unsigned char *ball_in = v->balls ? t->ball_in : NULL;
-    for (n = (size_t)t->start[k0]; n < (size_t)t->start[k1]; n++) {
-        const rtpi_cnode *nd = &t->nodes[n];
+    /* (the tree's and scene's arrays in locals: the query's call may
+       write anything for all the compiler knows, and they were loaded
+       again a node, with the row's end) */
+    const rtpi_cnode *const nodes = t->nodes;
+    uint32_t *const cur_vis = t->cur_vis;
+    const double *const tri_nrm = t->tri_nrm;
+    const rtpi_tri *const tris = s->tris;
+    const size_t ntris = s->ntris, nspheres = s->nspheres, n1 = (size_t)t->start[k1];
+    const rtpi_shadow *const sh = v->sh;
+    const unsigned char *const balls = v->balls;
+    const rtpi_v3 lp = v->lp;
+    const double off_floor = v->off_floor;
+    const int prim_floor = v->prim_floor, keep_balls = v->keep_balls, spd = t->spd;
+    const rtpi_sphere *const spheres = s->spheres;
+    const rtpi_material *const mats = s->mats, *const ev_mats = t->ev_mats;
+    for (n = (size_t)t->start[k0]; n < n1; n++) {
+        const rtpi_cnode *nd = &nodes[n];
         rtpi_v3 p = v3(nd->p[0], nd->p[1], nd->p[2]), ng, ns, o;
-        uint32_t *w = &t->cur_vis[n * words + wi], mat;
-        const rtpi_tri *tr = t->tri_nrm && nd->prim < s->ntris ? &s->tris[nd->prim] : NULL;
+        uint32_t *w = &cur_vis[n * words + wi], mat;
+        const rtpi_tri *tr = tri_nrm && nd->prim < ntris ? &tris[nd->prim] : NULL;
         int flip = 1; /* ng and ns still to be turned over for a back face */
-        if (ball_in && (nd->link & RTPI_L_BACK) && nd->prim - s->ntris < s->nspheres) {
+        if (ball_in && (nd->link & RTPI_L_BACK) && nd->prim - ntris < nspheres) {
             /* A back hit on a sphere (a glass ball's inside: three
                quarters of mount's nodes): its shadow ray's origin does
                not depend on the light (the normals are one), nor then
@@ -532,23 +547,23 @@ static int vis_row(void *ctx, int y)
                normal only for the query count (the same decisions and
                count as below, without the offset or the ball's test:
                mount 16% of a moved light's time). */
-            size_t si = nd->prim - s->ntris;
-            const rtpi_sphere *sp = &s->spheres[si];
+            size_t si = nd->prim - ntris;
+            const rtpi_sphere *sp = &spheres[si];
             unsigned char *bi = &ball_in[n];
             if (!*bi)
                 *bi = ball_holds_back(v, sp, nd->prim, p) ? 1 : 2;
-            if (*bi == 1 && v->balls[si] &&
-                rtpi_two_sided(s, t->spd, nd->prim, &s->mats[sp->mat])) {
+            if (*bi == 1 && balls[si] &&
+                rtpi_two_sided(s, spd, nd->prim, &mats[sp->mat])) {
                 rtpi_v3 nn = rtpi_sphere_normal(sp, p);
                 double d;
                 if (sp->r < 0.0f)
                     nn = v3_mul(nn, -1.0);
                 nn = v3_mul(nn, -1.0);
-                d = v3_dot(nn, v3_sub(v->lp, p)); /* (rtpi_shadow_setup's) */
+                d = v3_dot(nn, v3_sub(lp, p)); /* (rtpi_shadow_setup's) */
                 if (d > 0.0) {
                     *w &= ~bit;
                     queries++;
-                    if (v->keep_balls)
+                    if (keep_balls)
                         cache.last = nd->prim + 1u;
                     continue;
                 }
@@ -561,11 +576,11 @@ static int vis_row(void *ctx, int y)
         }
         if (tr && (tr->n[0] == RTPI_NONE || tr->n[1] == RTPI_NONE || tr->n[2] == RTPI_NONE)) {
             /* flat: ng as rtpi_surface_normals makes it */
-            const double *tn = t->tri_nrm + 3 * (size_t)nd->prim;
+            const double *tn = tri_nrm + 3 * (size_t)nd->prim;
             ng = ns = v3(tn[0], tn[1], tn[2]);
             mat = tr->mat;
-        } else if (tr && nv && s->mats[tr->mat].bump == RTPI_BUMP_NONE &&
-                   t->ev_mats[tr->mat].bump == RTPI_BUMP_NONE) {
+        } else if (tr && nv && mats[tr->mat].bump == RTPI_BUMP_NONE &&
+                   ev_mats[tr->mat].bump == RTPI_BUMP_NONE) {
             /* Smooth, not bumped: the shading normal the evaluation kept,
                turned over already (a triangle with vertex normals is
                two-sided), instead of interpolating it again (teapot: 12%
@@ -573,7 +588,7 @@ static int vis_row(void *ctx, int y)
                in its sign towards the light only where n.l is within
                ~1e-7 |l| of 0, where the light's term is as small. */
             const float *q = nv + 6 * n;
-            const double *tn = t->tri_nrm + 3 * (size_t)nd->prim;
+            const double *tn = tri_nrm + 3 * (size_t)nd->prim;
             double sg = nd->link & RTPI_L_BACK ? -1.0 : 1.0;
             ng = v3(sg * tn[0], sg * tn[1], sg * tn[2]);
             ns = v3(q[0], q[1], q[2]);
@@ -583,20 +598,19 @@ static int vis_row(void *ctx, int y)
             mat = rtpi_surface_normals(s, nd->prim, p, &ng, &ns);
         }
         if (flip && (nd->link & RTPI_L_BACK) &&
-            rtpi_two_sided(s, t->spd, nd->prim, &s->mats[mat])) {
+            rtpi_two_sided(s, spd, nd->prim, &mats[mat])) {
             ng = v3_mul(ng, -1.0);
             ns = v3_mul(ns, -1.0);
         }
         *w &= ~bit;
-        if (!rtpi_shadow_setup(p, ng, ns, v->lp,
-                               v->prim_floor ? rtpi_prim_offset_floor(s, nd->prim, v->off_floor)
-                                             : v->off_floor,
+        if (!rtpi_shadow_setup(p, ng, ns, lp,
+                               prim_floor ? rtpi_prim_offset_floor(s, nd->prim, off_floor)
+                                             : off_floor,
                                &o))
             continue;
         queries++;
-        if ((nd->link & RTPI_L_BACK) && v->balls && nd->prim - s->ntris < s->nspheres &&
-            v->balls[nd->prim - s->ntris] &&
-            rtpi_ball_holds(&s->spheres[nd->prim - s->ntris], o)) {
+        if ((nd->link & RTPI_L_BACK) && balls && nd->prim - ntris < nspheres &&
+            balls[nd->prim - ntris] && rtpi_ball_holds(&spheres[nd->prim - ntris], o)) {
             /* inside a ball the light is outside of: the ball is in the
                way (rtpi_prim_shadows_own_solid 1), which every mode
                answers without a test (sh_visible).  Here before the
@@ -607,11 +621,11 @@ static int vis_row(void *ctx, int y)
                leaves it for shadow rays, whose next query the ball saves
                a walk of the kd-tree; a light buffer's is cheaper than the
                ball's test (mount: 1.9% of a move) */
-            if (v->keep_balls)
+            if (keep_balls)
                 cache.last = nd->prim + 1u;
             continue;
         }
-        if (rtpi_shadow_visible_cached(v->sh, &cache, &p, &o, nd->prim))
+        if (rtpi_shadow_visible_cached(sh, &cache, &p, &o, nd->prim))
             *w |= bit;
     }
     v->queries += queries;
