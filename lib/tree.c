@@ -537,43 +537,6 @@ static int vis_row(void *ctx, int y)
         uint32_t *w = &cur_vis[n * words + wi], mat;
         const rtpi_tri *tr = tri_nrm && nd->prim < ntris ? &tris[nd->prim] : NULL;
         int flip = 1; /* ng and ns still to be turned over for a back face */
-        if (ball_in && (nd->link & RTPI_L_BACK) && nd->prim - ntris < nspheres) {
-            /* A back hit on a sphere (a glass ball's inside: three
-               quarters of mount's nodes): its shadow ray's origin does
-               not depend on the light (the normals are one), nor then
-               whether it lies in the ball, found once a tree (ball_in).
-               Where it does and the light is outside (balls), the ball
-               is in the way, whether or not the hit faces the light: the
-               normal only for the query count (the same decisions and
-               count as below, without the offset or the ball's test:
-               mount 16% of a moved light's time). */
-            size_t si = nd->prim - ntris;
-            const rtpi_sphere *sp = &spheres[si];
-            unsigned char *bi = &ball_in[n];
-            if (!*bi)
-                *bi = ball_holds_back(v, sp, nd->prim, p) ? 1 : 2;
-            if (*bi == 1 && balls[si] &&
-                rtpi_two_sided(s, spd, nd->prim, &mats[sp->mat])) {
-                rtpi_v3 nn = rtpi_sphere_normal(sp, p);
-                double d;
-                if (sp->r < 0.0f)
-                    nn = v3_mul(nn, -1.0);
-                nn = v3_mul(nn, -1.0);
-                d = v3_dot(nn, v3_sub(lp, p)); /* (rtpi_shadow_setup's) */
-                if (d > 0.0) {
-                    *w &= ~bit;
-                    queries++;
-                    if (keep_balls)
-                        cache.last = nd->prim + 1u;
-                    continue;
-                }
-                if (d <= 0.0) {
-                    *w &= ~bit;
-                    continue;
-                }
-                /* (NaN: as below) */
-            }
-        }
         if (tr && (tr->n[0] == RTPI_NONE || tr->n[1] == RTPI_NONE || tr->n[2] == RTPI_NONE)) {
             /* flat: ng as rtpi_surface_normals makes it */
             const double *tn = tri_nrm + 3 * (size_t)nd->prim;
@@ -595,6 +558,43 @@ static int vis_row(void *ctx, int y)
             mat = tr->mat;
             flip = 0;
         } else {
+            if (ball_in && (nd->link & RTPI_L_BACK) && nd->prim - ntris < nspheres) {
+                /* A back hit on a sphere (a glass ball's inside: three
+                   quarters of mount's nodes): its shadow ray's origin does
+                   not depend on the light (the normals are one), nor then
+                   whether it lies in the ball, found once a tree (ball_in).
+                   Where it does and the light is outside (balls), the ball
+                   is in the way, whether or not the hit faces the light: the
+                   normal only for the query count (the same decisions and
+                   count as below, without the offset or the ball's test:
+                   mount 16% of a moved light's time). */
+                size_t si = nd->prim - ntris;
+                const rtpi_sphere *sp = &spheres[si];
+                unsigned char *bi = &ball_in[n];
+                if (!*bi)
+                    *bi = ball_holds_back(v, sp, nd->prim, p) ? 1 : 2;
+                if (*bi == 1 && balls[si] &&
+                    rtpi_two_sided(s, spd, nd->prim, &mats[sp->mat])) {
+                    rtpi_v3 nn = rtpi_sphere_normal(sp, p);
+                    double d;
+                    if (sp->r < 0.0f)
+                        nn = v3_mul(nn, -1.0);
+                    nn = v3_mul(nn, -1.0);
+                    d = v3_dot(nn, v3_sub(lp, p)); /* (rtpi_shadow_setup's) */
+                    if (d > 0.0) {
+                        *w &= ~bit;
+                        queries++;
+                        if (keep_balls)
+                            cache.last = nd->prim + 1u;
+                        continue;
+                    }
+                    if (d <= 0.0) {
+                        *w &= ~bit;
+                        continue;
+                    }
+                    /* (NaN: as below) */
+                }
+            }
             mat = rtpi_surface_normals(s, nd->prim, p, &ng, &ns);
         }
         if (flip && (nd->link & RTPI_L_BACK) &&
