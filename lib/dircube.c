@@ -2081,8 +2081,10 @@ int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
                          rtpi_v3 p, rtpi_v3 o, uint32_t prim, int self,
                          const rtpi_ray *r, uint32_t *occ, rtpi_dc_at *at)
 {
-    int f, res = ib->res, i, j, di, dj, k, n = 0, m = 0, coarse = 0;
+    int f, res = ib->res, i, j, di, dj, k, n = 0, m = 0, coarse = 0, nf = 0;
     uint32_t cand[9];
+    double fz[9];          /* the direct pass's samples in front: depth */
+    unsigned char fq[9];   /* and place, 3 (dj + 1) + di + 1 */
     double u, v, x, y, zp = 0.0, zlim = 0.0, tn = -1.0;
     rtpi_ray rr;
     rtpi_hit h;
@@ -2122,7 +2124,7 @@ int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
         for (dj = -1; dj <= 1; dj++, row += res, zr += res) {
             for (di = -1; di <= 1; di++) {
                 uint32_t id = row[di + 1];
-                double zc, ex, ey;
+                double zc;
                 if (id == RTPI_NONE || id == own)
                     continue;
                 if (!zmade) {
@@ -2135,13 +2137,10 @@ int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
                     ;
                 if (k == n)
                     cand[n++] = id;
-                if (m)
-                    continue;
-                if (tn < 0.0)
-                    tn = ib_tan(p, o, ib->light);
-                ex = (i + di + 0.5 - x) * ib->w.du[f];
-                ey = (j + dj + 0.5 - y) * ib->w.dv[f];
-                m = zc < zlim - zp * sqrt(ex * ex + ey * ey) * tn;
+                /* (whether it lies clearly in front: after the
+                   candidates' tests, which a hit ends) */
+                fz[nf] = zc;
+                fq[nf++] = (unsigned char)(3 * (dj + 1) + di + 1);
             }
         }
     } else {
@@ -2193,6 +2192,27 @@ int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
             *occ = cand[k];
             return 0;
         }
+    /* The samples the direct pass found in front, in its order: is one
+       clearly in front (the rule above)?  tn is at most IB_TAN_MAX and not
+       negative, so where zp e >= 0 and the bound with IB_TAN_MAX holds
+       it holds with tn (the roundings are monotonic), and tn need not be
+       made (two roots and a division: a fifth of mount's item-buffer
+       queries). */
+    for (k = 0; k < nf && !m; k++) {
+        double ex, ey, ze;
+        di = fq[k] % 3 - 1;
+        dj = fq[k] / 3 - 1;
+        ex = (i + di + 0.5 - x) * ib->w.du[f];
+        ey = (j + dj + 0.5 - y) * ib->w.dv[f];
+        ze = zp * sqrt(ex * ex + ey * ey);
+        if (ze >= 0.0 && fz[k] < zlim - ze * IB_TAN_MAX) {
+            m = 1;
+            break;
+        }
+        if (tn < 0.0)
+            tn = ib_tan(p, o, ib->light);
+        m = fz[k] < zlim - ze * tn;
+    }
     return m || coarse ? -1 : 1;
 }
 
