@@ -2195,9 +2195,8 @@ int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
     /* The samples the direct pass found in front, in its order: is one
        clearly in front (the rule above)?  tn is at most IB_TAN_MAX and not
        negative, so where zp e >= 0 and the bound with IB_TAN_MAX holds
-       it holds with tn (the roundings are monotonic), and tn need not be
-       made (two roots and a division: a fifth of mount's item-buffer
-       queries). */
+       it holds with tn (the roundings are monotonic), and tn (three roots
+       and two divisions) need not be made. */
     for (k = 0; k < nf && !m; k++) {
         double ex, ey, ze;
         di = fq[k] % 3 - 1;
