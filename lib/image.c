@@ -1321,15 +1321,17 @@ typedef struct png_rctx {
     const rtp_allocator *alloc;
     rtp_image *img;
     int cap_rows;
-    unsigned char *bytes;  /* one row, or the whole image if interlaced */
+    unsigned char *row;    /* one row as libpng gives it */
+    unsigned char *bytes;  /* an interlaced image's pass rows, packed */
+    size_t used, cap;      /* bytes' bytes filled and allocated */
     int too_big;           /* the header asks for more than the limit */
     png_uint_32 w, h;
 } png_rctx;
 
-static void png_convert_row(const png_rctx *c, const unsigned char *src,
-                            int wide, float *dst)
+/* n samples (8- or 16-bit, big-endian) to floats in [0, 1]. */
+static void png_convert(const unsigned char *src, int wide, float *dst, size_t n)
 {
-    size_t n = row_floats(c->img), i;
+    size_t i;
     if (wide)
         for (i = 0; i < n; i++)
             dst[i] = (float)((unsigned)src[2 * i] << 8 | src[2 * i + 1]) /
@@ -1342,7 +1344,7 @@ static void png_convert_row(const png_rctx *c, const unsigned char *src,
 /* The only function that calls setjmp for reading; see png_io. */
 static int png_read_body(png_rctx *c)
 {
-    int bit_depth, color_type, interlace, passes, wide;
+    int bit_depth, color_type, interlace, wide;
     size_t rowbytes, y;
     if (setjmp(png_jmpbuf(c->png)))
         return -1;
@@ -1357,11 +1359,11 @@ static int png_read_body(png_rctx *c)
     }
     /* To RGB, 8 or 16 bits: palette and low-bit grey expanded, tRNS and
        alpha dropped (images are opaque RGB), grey copied to RGB.  No
-       gamma handling: values are stored as written, as rtp writes them. */
+       gamma handling: values are stored as written, as rtp writes them.
+       (No png_set_interlace_handling: Adam7 is undone below.) */
     png_set_expand(c->png);
     png_set_strip_alpha(c->png);
     png_set_gray_to_rgb(c->png);
-    passes = png_set_interlace_handling(c->png);
     png_read_update_info(c->png, c->info);
     wide = png_get_bit_depth(c->png, c->info) == 16;
     rowbytes = png_get_rowbytes(c->png, c->info);
@@ -1372,53 +1374,74 @@ static int png_read_body(png_rctx *c)
         c->io.nomem = 1;
         return -1;
     }
-    if (passes == 1) {
-        c->bytes = (unsigned char *)rtpi_malloc(&c->io.alloc, rowbytes);
-        if (!c->bytes) {
-            c->io.nomem = 1;
-            return -1;
-        }
+    /* (libpng copies a whole row's bytes into the row it is given, an
+       interlaced pass's row too: its pixels first) */
+    c->row = (unsigned char *)rtpi_malloc(&c->io.alloc, rowbytes);
+    if (!c->row) {
+        c->io.nomem = 1;
+        return -1;
+    }
+    if (interlace == PNG_INTERLACE_NONE) {
         for (y = 0; y < c->h; y++) {
             if (reserve_rows(c->img, &c->cap_rows, (int)y + 1) != 0) {
                 c->io.nomem = 1;
                 return -1;
             }
-            png_read_row(c->png, c->bytes, NULL);
-            png_convert_row(c, c->bytes, wide,
-                            c->img->pixels + y * row_floats(c->img));
+            png_read_row(c->png, c->row, NULL);
+            png_convert(c->row, wide, c->img->pixels + y * row_floats(c->img),
+                        row_floats(c->img));
         }
     } else {
-        /* Every pass spans the whole image, so all of it stays in memory
-           as bytes until the last pass.  The first pass grows that buffer
-           row by row: a file that claims a huge image but ends early
-           costs at most about 64 times its own size. */
+        /* Adam7 undone here rather than by libpng, whose de-interlacing
+           needs every row of the image from the first pass on: a file of
+           16 KB that claimed 11585x11585 16-bit pixels and ended in that
+           pass (1/64 of them) took 790 MB before it failed.  Each pass's
+           rows come packed (its pixels only) and are appended to c->bytes
+           as they come, so memory follows the data the file holds, as a
+           plain PNG's rows do; the pixels are placed once every pass has
+           been read.  (libpng skips a pass with no rows or no columns, as
+           the loop does.) */
+        size_t px = wide ? 6 : 3, total = (size_t)c->w * c->h * px, r, x;
+        float *dst;
         int pass;
-        size_t cap = 0;
-        for (pass = 0; pass < passes; pass++) {
-            for (y = 0; y < c->h; y++) {
-                if (y >= cap) {
+        const unsigned char *src;
+        for (pass = 0; pass < 7; pass++) {
+            size_t cols = PNG_PASS_COLS(c->w, pass), n = cols * px;
+            for (r = 0; cols && r < PNG_PASS_ROWS(c->h, pass); r++) {
+                png_read_row(c->png, c->row, NULL);
+                if (c->used + n > c->cap) {
                     unsigned char *nb;
-                    cap = cap ? 2 * cap : 64;
-                    if (cap > c->h)
-                        cap = c->h;
-                    nb = (unsigned char *)rtpi_realloc(&c->io.alloc, c->bytes,
-                                                       cap * rowbytes);
+                    size_t ncap = c->cap ? 2 * c->cap : (size_t)1 << 16;
+                    if (ncap < c->used + n)
+                        ncap = c->used + n;
+                    if (ncap > total)
+                        ncap = total;
+                    nb = (unsigned char *)rtpi_realloc(&c->io.alloc, c->bytes, ncap);
                     if (!nb) {
                         c->io.nomem = 1;
                         return -1;
                     }
                     c->bytes = nb;
+                    c->cap = ncap;
                 }
-                png_read_row(c->png, c->bytes + y * rowbytes, NULL);
+                memcpy(c->bytes + c->used, c->row, n);
+                c->used += n;
             }
         }
-        for (y = 0; y < c->h; y++) {
-            if (reserve_rows(c->img, &c->cap_rows, (int)y + 1) != 0) {
-                c->io.nomem = 1;
-                return -1;
+        if (reserve_rows(c->img, &c->cap_rows, (int)c->h) != 0) {
+            c->io.nomem = 1;
+            return -1;
+        }
+        src = c->bytes;
+        for (pass = 0; pass < 7; pass++) {
+            size_t cols = PNG_PASS_COLS(c->w, pass);
+            for (r = 0; cols && r < PNG_PASS_ROWS(c->h, pass); r++) {
+                y = PNG_ROW_FROM_PASS_ROW(r, pass);
+                for (x = 0; x < cols; x++, src += px) {
+                    dst = c->img->pixels + 3 * (y * c->w + PNG_COL_FROM_PASS_COL(x, pass));
+                    png_convert(src, wide, dst, 3);
+                }
             }
-            png_convert_row(c, c->bytes + y * rowbytes, wide,
-                            c->img->pixels + y * row_floats(c->img));
         }
     }
     /* Up to IEND, so a file cut in its last chunk is caught too. */
@@ -1472,6 +1495,7 @@ static rtp_status read_png(const reader *r, const rtp_allocator *alloc,
     }
     if (c.png)
         png_destroy_read_struct(&c.png, c.info ? &c.info : NULL, NULL);
+    rtpi_free(&a, c.row);
     rtpi_free(&a, c.bytes);
     if (st != RTP_OK) {
         rtp_image_destroy(c.img);

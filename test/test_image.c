@@ -1094,6 +1094,146 @@ static void test_corrupt_png(void)
     rtp_image_destroy(img);
 }
 
+/* An allocator that keeps the most bytes it ever had out at once. */
+typedef struct peak_bytes {
+    size_t now, peak;
+} peak_bytes;
+
+static void *pk_malloc(void *u, size_t n)
+{
+    peak_bytes *c = (peak_bytes *)u;
+    size_t *p = (size_t *)malloc(n + sizeof(size_t) * 2);
+    if (!p)
+        return NULL;
+    p[0] = n;
+    c->now += n;
+    if (c->now > c->peak)
+        c->peak = c->now;
+    return p + 2; /* (two words: malloc's alignment kept) */
+}
+
+static void pk_free(void *u, void *q)
+{
+    peak_bytes *c = (peak_bytes *)u;
+    size_t *p = (size_t *)q;
+    if (!p)
+        return;
+    c->now -= p[-2];
+    free(p - 2);
+}
+
+static void *pk_realloc(void *u, void *q, size_t n)
+{
+    size_t *p = (size_t *)q, old = p ? p[-2] : 0;
+    void *r = pk_malloc(u, n);
+    if (r && p)
+        memcpy(r, p, old < n ? old : n);
+    if (r)
+        pk_free(u, p);
+    return r;
+}
+
+/* An interlaced PNG that claims 1024x1024 16-bit RGB (6 MiB of rows) and
+   ends within its first pass, which holds 1/64 of the pixels: libpng's
+   own de-interlacing had rtp take the whole image's rows as that pass
+   came in (6 MiB from a 96 KB file; 790 MB from 16 KB of zeros claiming
+   11585x11585), where memory should follow the data read.  The zlib
+   stream is stored blocks, so the file is as big as its pixel data. */
+static void test_png_interlaced_truncated(void)
+{
+    enum { W = 1024, ROW = W / 8 * 6 + 1, ROWS = 120 };
+    size_t raw = (size_t)ROW * ROWS, blocks = (raw + 65534) / 65535, n, i, at;
+    unsigned char *d;
+    peak_bytes pk = {0, 0};
+    rtp_allocator a;
+    rtp_image *img = NULL;
+    rtp_error err;
+    FILE *f;
+    static const unsigned char sig[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+    if (!rtp_png_supported())
+        SKIP("built without libpng");
+    n = 8 + 25 + 12 + 2 + raw + 5 * blocks;
+    d = (unsigned char *)calloc(n, 1);
+    CHECK(d != NULL);
+    if (!d)
+        return;
+    memcpy(d, sig, 8);
+    put_u32be(d + 8, 13);
+    memcpy(d + 12, "IHDR", 4);
+    put_u32be(d + 16, W);
+    put_u32be(d + 20, W);
+    d[24] = 16; /* depth */
+    d[25] = 2;  /* RGB */
+    d[28] = 1;  /* Adam7 */
+    put_u32be(d + 29, crc32_png(d + 12, 17));
+    put_u32be(d + 33, (uint32_t)(n - 45)); /* IDAT: the file ends inside it */
+    memcpy(d + 37, "IDAT", 4);
+    d[41] = 0x78;
+    d[42] = 0x01;
+    for (i = 0, at = 43; i < blocks; i++) {
+        size_t len = raw - i * 65535 < 65535 ? raw - i * 65535 : 65535;
+        d[at] = 0; /* stored, not final */
+        d[at + 1] = (unsigned char)len;
+        d[at + 2] = (unsigned char)(len >> 8);
+        d[at + 3] = (unsigned char)~len;
+        d[at + 4] = (unsigned char)(~len >> 8);
+        at += 5 + len; /* (zero bytes: filter 0, black pixels) */
+    }
+    CHECK(write_bytes(tpath("ilace.png"), d, at) == 0);
+    free(d);
+    a.malloc_fn = pk_malloc;
+    a.realloc_fn = pk_realloc;
+    a.free_fn = pk_free;
+    a.user = &pk;
+    f = fopen(tpath("ilace.png"), "rb");
+    CHECK(f != NULL);
+    if (!f)
+        return;
+    CHECK(rtp_image_read_stream(f, "ilace.png", &a, &img, &err) == RTP_ERR_FORMAT);
+    fclose(f);
+    CHECK(img == NULL);
+    CHECK(pk.now == 0);
+    /* the pass's data (92 KB), a row and libpng's own buffers: far
+       below the 6 MiB of the image's rows */
+    CHECK(pk.peak < (size_t)1 << 20);
+    if (pk.peak >= (size_t)1 << 20)
+        fprintf(stderr, "  peak %lu bytes\n", (unsigned long)pk.peak);
+}
+
+#ifdef TEST_PNG
+/* Every small size and the kinds Adam7 treats apart (sub-byte grey,
+   8- and 16-bit RGB): interlaced images read as their plain twins. */
+static void test_png_interlaced_sizes(void)
+{
+    unsigned char data[12 * 12 * 6];
+    const char *pp = tpath("plain.png"), *pi = tpath("ilace2.png");
+    int w, h, k, ok = 1;
+    static const int ct[3] = {PNG_COLOR_TYPE_GRAY, PNG_COLOR_TYPE_RGB, PNG_COLOR_TYPE_RGB};
+    static const int depth[3] = {4, 8, 16}, bytes_x2[3] = {1, 6, 12};
+    for (k = 0; k < 3; k++)
+        for (h = 1; h <= 12; h++)
+            for (w = 1; w <= 12; w++) {
+                rtp_image *a = NULL, *b = NULL;
+                size_t rb = ((size_t)w * bytes_x2[k] + 1) / 2, i;
+                for (i = 0; i < sizeof data; i++)
+                    data[i] = (unsigned char)(rng() >> 7);
+                if (write_png_raw(pp, w, h, ct[k], depth[k], 0, data, rb, NULL, 0, NULL,
+                                  0) != 0 ||
+                    write_png_raw(pi, w, h, ct[k], depth[k], PNG_INTERLACE_ADAM7, data, rb,
+                                  NULL, 0, NULL, 0) != 0 ||
+                    rtp_image_read(pp, NULL, &a, NULL) != RTP_OK ||
+                    rtp_image_read(pi, NULL, &b, NULL) != RTP_OK || !same_bits(a, b)) {
+                    if (ok)
+                        fprintf(stderr, "  %dx%d kind %d differs\n", w, h, k);
+                    ok = 0;
+                }
+                rtp_image_destroy(a);
+                rtp_image_destroy(b);
+            }
+    CHECK(ok);
+}
+#endif
+
 /* Random byte changes: any outcome but a crash, a leak or a bad image. */
 static void test_fuzz(void)
 {
@@ -1505,7 +1645,9 @@ int main(void)
 #ifdef TEST_PNG
     RUN(test_png_kinds);
     RUN(test_png_wide);
+    RUN(test_png_interlaced_sizes);
 #endif
+    RUN(test_png_interlaced_truncated);
     RUN(test_sniff);
     RUN(test_truncated);
     RUN(test_corrupt_headers);
