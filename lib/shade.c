@@ -179,19 +179,33 @@ rtpi_v3 rtpi_bump_normal(const rtp_scene *s, const rtpi_material *m, uint32_t pr
            uvs, spheres, cones) and the height differences one texel
            apart. */
         const rtp_image *img;
-        rtpi_v3 pu, pv, d;
+        rtpi_v3 pu, pv, c, d;
         double hu, hv, a, eu, ev;
         if (m->bump_image >= s->ntexs || !s->texs[m->bump_image].image ||
             !rtpi_uv_tangents(s, prim, p, &pu, &pv))
             return n;
         img = s->texs[m->bump_image].image;
-        a = v3_len(v3_cross(pu, pv));
+        c = v3_cross(pu, pv);
+        a = v3_len(c);
         if (!(a > 0.0))
             return n;
         eu = 1.0 / img->width;
         ev = 1.0 / img->height;
         hu = (height_at(img, uv[0] + eu, uv[1]) - height_at(img, uv[0] - eu, uv[1])) / (2.0 * eu);
         hv = (height_at(img, uv[0], uv[1] + ev) - height_at(img, uv[0], uv[1] - ev)) / (2.0 * ev);
+        /* Blinn's d raises the surface along P_u x P_v.  Heights rise
+           along a triangle's front (its winding's normal, which its
+           shading normal shares a side with) whichever way its uvs run:
+           where they are mirrored (P_u x P_v against the front, as on
+           half of a mesh with mirrored uvs) the heights' gradient is
+           taken the other way round, or that half showed every bump as
+           a dent (a ramp on two mirror-image quads lit from between them
+           gave 0.6 on one and 0.8 on the other).  A sphere's and a cone's
+           P_u x P_v point out, the front. */
+        if (prim < s->ntris && v3_dot(c, rtpi_tri_normal(s, &s->tris[prim])) < 0.0) {
+            hu = -hu;
+            hv = -hv;
+        }
         d = v3_sub(v3_mul(v3_cross(n, pv), hu), v3_mul(v3_cross(n, pu), hv));
         {
             /* strength x scale as a float product (what every image was
