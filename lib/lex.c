@@ -292,6 +292,14 @@ char *rtpi_path_join(const rtp_allocator *a, const char *base,
             if (base[i] == '/')
                 dir = i + 1;
     }
+    /* A file named "-" beside a scene in the current folder is "./-":
+       "-" alone is stdin to the image and file readers, and a scene's
+       `texture -` read stdin (the bytes of a --params - or of an image
+       a key's "-" names) where the file beside it was meant. */
+    if (!dir && rel_len == 1 && rel[0] == '-') {
+        base = "./";
+        dir = 2;
+    }
     n = dir + rel_len;
     if (n < rel_len)
         return NULL;

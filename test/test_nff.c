@@ -567,6 +567,40 @@ static const char quad_obj[] =
     "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
     "vn 0 0 1\nf 1/1/1 2/2/1 3/3/1 4/4/1\n";
 
+/* A scene in the current folder naming a file "-" (texture, bump) means
+   that file, as "sub/-" would: "-" alone is stdin to the readers, and
+   `texture -` read stdin instead (here /dev/null: "the file is empty";
+   from a shell, the bytes of --params - or of an image a key's "-"
+   names). */
+static void test_file_named_dash(void)
+{
+    const char *dir = tmp_folder();
+    char old[1024];
+    rtp_scene *s = NULL;
+    rtp_error err;
+    FILE *in;
+    if (!dir[0])
+        SKIP("cannot make a temporary folder");
+    if (!getcwd(old, sizeof old))
+        SKIP("cannot tell the current folder");
+    CHECK(write_file(dir, "-", "P3\n2 1\n255\n255 0 0 0 0 255\n") == 0);
+    in = freopen("/dev/null", "rb", stdin);
+    CHECK(in != NULL);
+    CHECK(chdir(dir) == 0);
+    CHECK(load("f 1 1 1 1 0 100 0 0\ntexture -\nbump - 0.5\ns 0 0 0 1\n", "main.nff", &s,
+               &err) == RTP_OK);
+    if (!s) {
+        char buf[600];
+        fprintf(stderr, "%s\n", rtp_error_format(&err, buf, sizeof buf));
+    }
+    CHECK(s && s->ntexs == 1 && strcmp(s->texs[0].path, "./-") == 0 &&
+          s->texs[0].image->width == 2 && s->texs[0].image->pixels[0] == 1.0f &&
+          s->mats[0].bump_image == 0);
+    rtp_scene_destroy(s);
+    CHECK(chdir(old) == 0);
+    remove_file(dir, "-");
+}
+
 static void test_files(void)
 {
     const char *dir = tmp_folder();
@@ -1127,6 +1161,7 @@ int main(void)
     RUN(test_far_light);
     RUN(test_checker_bump);
     RUN(test_files);
+    RUN(test_file_named_dash);
     RUN(test_bad_inputs);
     RUN(test_truncation);
     RUN(test_mutations);
