@@ -400,8 +400,9 @@ static char *find_file(const rtp_allocator *a, const char *base, const char *nam
 /* Where the file name begins on a map line of n words (at least 1): past
    MTL's options and their arguments (-o, -s and -t take one to three
    numbers; -mm two; the others one).  An unknown option is taken to have
-   none, and *unknown set.  The name is at least the last word. */
-static int map_name_start(const rtpi_tok *tk, int n, int *unknown)
+   none, and *unknown set.  The name is at least the last word; *spent
+   says that word is an option's argument (no name follows the options). */
+static int map_name_start(const rtpi_tok *tk, int n, int *unknown, int *spent)
 {
     static const char *const one[] = {"-blendu", "-blendv", "-bm", "-boost", "-cc",
                                       "-clamp", "-imfchan", "-texres", "-type"};
@@ -426,6 +427,7 @@ static int map_name_start(const rtpi_tok *tk, int n, int *unknown)
                 *unknown = 1;
         }
     }
+    *spent = i >= n;
     return i < n ? i : n - 1;
 }
 
@@ -441,7 +443,7 @@ static rtp_status mtl_map(rtpi_lex *lx, rtp_scene *s, const char *what,
     char *path = NULL;
     rtp_error inner;
     rtp_status st;
-    int n = 0, i, from, start, unknown, oom;
+    int n = 0, i, from, start, unknown, spent, oom;
     while (rtpi_lex_next_inline(lx, &t)) {
         if (n == MAP_TOKENS)
             return rtpi_lex_error(lx, &t, "%s: more than %d words on the line", what,
@@ -455,7 +457,7 @@ static rtp_status mtl_map(rtpi_lex *lx, rtp_scene *s, const char *what,
        "map_Kd my tex.png" is never "tex.png"); after an option this
        reader does not know, whose arguments it cannot count, the longest
        run of the last words that names a file. */
-    start = map_name_start(tk, n, &unknown);
+    start = map_name_start(tk, n, &unknown, &spent);
     for (from = start; from <= (unknown ? n - 1 : start); from++) {
         char *cand;
         file = tk[from]; /* (its line and column for a message) */
@@ -474,6 +476,12 @@ static rtp_status mtl_map(rtpi_lex *lx, rtp_scene *s, const char *what,
         from = start;
         file = tk[from];
         file.n = (size_t)(tk[n - 1].s + tk[n - 1].n - tk[from].s);
+        /* the last word an option's argument, and no such file ("bump -bm
+           2", "map_Kd -clamp on"): no name (the -bm check below said
+           "expected a number after -bm" of a line that has one) */
+        if (spent && !unknown)
+            return rtpi_lex_error(lx, &tk[n - 1], "%s: expected a file name after the options",
+                                  what);
         /* an option where the name should be: "bump -bm" lacks its
            number and its file, and "-bm" is no image to look for */
         if (file.s[0] == '-')

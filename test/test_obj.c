@@ -324,6 +324,24 @@ static void test_mtl(void)
     CHECK(write_file(dir, "b.mtl", "newmtl x\nmap_Kd -clamp\n") == 0);
     CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_PARSE);
     CHECK(err.line == 2 && strstr(err.message, "expected a file name after the options"));
+    /* an option's argument where the file name should be: "bump -bm 2"
+       said "expected a number after -bm", "map_Kd -clamp on" looked for
+       an image named "on"; with the file there, "-mm 0 t.ppm" (one
+       argument short) still finds it */
+    CHECK(write_file(dir, "b.mtl", "newmtl x\nbump -bm 2\n") == 0);
+    CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_PARSE);
+    CHECK_MSG(err.line == 2 && err.column == 10 &&
+                  strstr(err.message, "bump: expected a file name after the options"),
+              "%d:%d %s", err.line, err.column, err.message);
+    CHECK(write_file(dir, "b.mtl", "newmtl x\nmap_Kd -clamp on\n") == 0);
+    CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_PARSE);
+    CHECK_MSG(err.line == 2 && err.column == 15 &&
+                  strstr(err.message, "map_Kd: expected a file name after the options"),
+              "%d:%d %s", err.line, err.column, err.message);
+    CHECK(write_file(dir, "b.mtl", "newmtl x\nmap_Kd -mm 0 t.ppm\n") == 0);
+    CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_OK);
+    rtp_scene_destroy(s);
+    s = NULL;
     /* a missing mtllib is named */
     CHECK(write_file(dir, "b.obj", "v 0 0 0\nmtllib nothere.mtl\n") == 0);
     CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_IO);
