@@ -1329,6 +1329,35 @@ static void test_alloc_failures(void)
         bad += fail == 1000;
         free(data);
     }
+#ifdef TEST_PNG
+    {
+        /* an interlaced 16-bit PNG: the passes' packed rows and the row
+           libpng fills are allocations of their own */
+        unsigned char rows[11 * 13 * 6];
+        long fail;
+        size_t i;
+        for (i = 0; i < sizeof rows; i++)
+            rows[i] = (unsigned char)(i * 37u);
+        CHECK(write_png_raw(tpath("af.bin"), 13, 11, PNG_COLOR_TYPE_RGB, 16,
+                            PNG_INTERLACE_ADAM7, rows, 13 * 6, NULL, 0, NULL, 0) == 0);
+        for (fail = 0; fail < 1000; fail++) {
+            rtp_image *back = NULL;
+            rtp_status st;
+            c.calls = 0;
+            c.fail_at = fail;
+            st = rtp_image_read(tpath("af.bin"), &a, &back, NULL);
+            if (c.calls <= fail) {
+                bad += st != RTP_OK || !back || back->width != 13;
+                rtp_image_destroy(back);
+                bad += c.live != 0;
+                break;
+            }
+            bad += st != RTP_ERR_NOMEM || back != NULL || c.live != 0;
+            rtp_image_destroy(back);
+        }
+        bad += fail == 1000;
+    }
+#endif
     CHECK_MSG(bad == 0, "%d bad outcomes", bad);
     rtp_image_destroy(img);
 }
