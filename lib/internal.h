@@ -832,9 +832,10 @@ rtpi_v3 rtpi_bump_normal(const rtp_scene *s, const rtpi_material *m,
                          rtpi_v3 n);
 
 /* The texture's part of c_obj at p/uv: for an image texture the image's
-   colour (c_obj = colour * it), for a checker 1 in colour cells and 0 in
+   colour (c_obj = colour * it; v wrapped, but on a sphere or cone held
+   to the image's edge rows), for a checker 1 in colour cells and 0 in
    color2 cells, else 1 (shade.c). */
-void rtpi_texture_factor(const rtp_scene *s, const rtpi_material *m,
+void rtpi_texture_factor(const rtp_scene *s, const rtpi_material *m, uint32_t prim,
                          rtpi_v3 p, const double uv[2], double f[3]);
 
 /* rtp_tree.busy of a tree rtp_tree_read_summary read: no nodes, no

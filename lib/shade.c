@@ -12,22 +12,34 @@
 
 static double fract_floor(double x) { return x - floor(x); }
 
-static void image_lookup(const rtp_image *img, double u, double v,
+static void image_lookup(const rtp_image *img, double u, double v, int clamp_v,
                          double rgb[3])
 {
     /* Bilinear, wrapping: uv (0,0) is the image's bottom-left corner as
-       OBJ's vt convention has it. */
+       OBJ's vt convention has it.  With clamp_v, v is not wrapped but
+       held to the image's edge rows: a sphere's latitude and a cone's
+       height run from one edge to the other, and wrapped, the half
+       texel next to a pole or rim blended the top row with the bottom
+       (a sphere's north pole, v = 1, took the bottom row's colour half
+       and half with its own). */
     double x = fract_floor(u) * img->width - 0.5;
-    double y = (1.0 - fract_floor(v)) * img->height - 0.5;
-    int x0 = (int)floor(x), y0 = (int)floor(y);
-    double fx = x - x0, fy = y - y0;
+    double y = (1.0 - (clamp_v ? v : fract_floor(v))) * img->height - 0.5;
+    int x0, y0;
+    double fx, fy;
     int c, dx, dy;
+    if (clamp_v) /* (within two texels of the rows: floor stays in int) */
+        y = y < -2.0 ? -2.0 : y > img->height + 1.0 ? img->height + 1.0 : y;
+    x0 = (int)floor(x);
+    y0 = (int)floor(y);
+    fx = x - x0;
+    fy = y - y0;
     for (c = 0; c < 3; c++)
         rgb[c] = 0.0;
     for (dy = 0; dy < 2; dy++) {
         for (dx = 0; dx < 2; dx++) {
             int xi = ((x0 + dx) % img->width + img->width) % img->width;
-            int yi = ((y0 + dy) % img->height + img->height) % img->height;
+            int yi = clamp_v ? (y0 + dy < 0 ? 0 : y0 + dy >= img->height ? img->height - 1 : y0 + dy)
+                             : ((y0 + dy) % img->height + img->height) % img->height;
             double w = (dx ? fx : 1.0 - fx) * (dy ? fy : 1.0 - fy);
             const float *px = img->pixels + 3 * ((size_t)yi * img->width + xi);
             for (c = 0; c < 3; c++)
@@ -36,8 +48,15 @@ static void image_lookup(const rtp_image *img, double u, double v,
     }
 }
 
-void rtpi_texture_factor(const rtp_scene *s, const rtpi_material *m, rtpi_v3 p,
-                         const double uv[2], double f[3])
+/* Whether prim's v is clamped, not wrapped (image_lookup): a sphere's
+   and a cone's, whose v spans the image once from edge to edge. */
+static int v_clamped(const rtp_scene *s, uint32_t prim)
+{
+    return (size_t)prim >= s->ntris;
+}
+
+void rtpi_texture_factor(const rtp_scene *s, const rtpi_material *m, uint32_t prim,
+                         rtpi_v3 p, const double uv[2], double f[3])
 {
     int c;
     if (m->tex == RTPI_TEX_CHECKER && m->tex_scale > 0.0f) {
@@ -55,7 +74,7 @@ void rtpi_texture_factor(const rtp_scene *s, const rtpi_material *m, rtpi_v3 p,
         return;
     }
     if (m->tex == RTPI_TEX_IMAGE && m->tex_image < s->ntexs && s->texs[m->tex_image].image) {
-        image_lookup(s->texs[m->tex_image].image, uv[0], uv[1], f);
+        image_lookup(s->texs[m->tex_image].image, uv[0], uv[1], v_clamped(s, prim), f);
         return;
     }
     for (c = 0; c < 3; c++)
@@ -161,10 +180,10 @@ static rtpi_v3 solid_gradient(const rtpi_material *m, rtpi_v3 p)
     }
 }
 
-static double height_at(const rtp_image *img, double u, double v)
+static double height_at(const rtp_image *img, double u, double v, int clamp_v)
 {
     double rgb[3];
-    image_lookup(img, u, v, rgb);
+    image_lookup(img, u, v, clamp_v, rgb);
     return (rgb[0] + rgb[1] + rgb[2]) / 3.0;
 }
 
@@ -181,6 +200,7 @@ rtpi_v3 rtpi_bump_normal(const rtp_scene *s, const rtpi_material *m, uint32_t pr
         const rtp_image *img;
         rtpi_v3 pu, pv, c, d;
         double hu, hv, a, eu, ev;
+        int cv;
         if (m->bump_image >= s->ntexs || !s->texs[m->bump_image].image ||
             !rtpi_uv_tangents(s, prim, p, &pu, &pv))
             return n;
@@ -191,8 +211,11 @@ rtpi_v3 rtpi_bump_normal(const rtp_scene *s, const rtpi_material *m, uint32_t pr
             return n;
         eu = 1.0 / img->width;
         ev = 1.0 / img->height;
-        hu = (height_at(img, uv[0] + eu, uv[1]) - height_at(img, uv[0] - eu, uv[1])) / (2.0 * eu);
-        hv = (height_at(img, uv[0], uv[1] + ev) - height_at(img, uv[0], uv[1] - ev)) / (2.0 * ev);
+        cv = v_clamped(s, prim);
+        hu = (height_at(img, uv[0] + eu, uv[1], cv) - height_at(img, uv[0] - eu, uv[1], cv)) /
+             (2.0 * eu);
+        hv = (height_at(img, uv[0], uv[1] + ev, cv) - height_at(img, uv[0], uv[1] - ev, cv)) /
+             (2.0 * ev);
         /* Blinn's d raises the surface along P_u x P_v.  Heights rise
            along a triangle's front (its winding's normal, which its
            shading normal shares a side with) whichever way its uvs run:
@@ -335,7 +358,7 @@ static inline const rtpi_material *node_terms(const rtpi_shade_ctx *c, const rtp
     if (m->tex == RTPI_TEX_NONE)
         tex[0] = tex[1] = tex[2] = 1.0; /* (rtpi_texture_factor's) */
     else
-        rtpi_texture_factor(s, m, p, sf.uv, tex);
+        rtpi_texture_factor(s, m, nd->prim, p, sf.uv, tex);
     t[0] = (float)tex[0];
     t[1] = (float)tex[1];
     t[2] = (float)tex[2];

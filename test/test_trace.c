@@ -382,6 +382,59 @@ static void test_bump_mirrored_uvs(void)
     remove(dir);
 }
 
+/* A sphere's latitude runs from the image's bottom row (south pole) to
+   its top row (north pole): v is held there, not wrapped, so each pole
+   shows its own row (wrapped, the half texel next to a pole blended the
+   top row with the bottom: the north pole 0.41 green and blue on a red
+   top row over a white bottom one). */
+static void test_texture_poles(void)
+{
+    char dir[64], path[128], scene[512];
+    int k;
+    strcpy(dir, "/tmp/rtp-test-trace-XXXXXX");
+    if (!mkdtemp(dir)) {
+        CHECK(!"a temporary folder");
+        return;
+    }
+    snprintf(path, sizeof path, "%s/rows.ppm", dir);
+    {
+        FILE *f = fopen(path, "wb");
+        CHECK(f != NULL);
+        if (f) {
+            fputs("P3\n2 4\n255\n255 0 0 255 0 0\n0 255 0 0 255 0\n"
+                  "0 0 255 0 0 255\n255 255 255 255 255 255\n", f);
+            fclose(f);
+        }
+    }
+    for (k = 0; k < 2; k++) { /* from above the north pole, below the south */
+        rtp_scene *s;
+        rtp_image *img;
+        const float *c;
+        snprintf(scene, sizeof scene,
+                 "v from 0 0 %d at 0 0 0 up 0 1 0 angle 2 hither 0.1 resolution 5 5\n"
+                 "b 0 0 0\nl 0 0 %d\nf 1 1 1 1 0 1 0 0\ntexture %s\ns 0 0 0 1\n",
+                 k ? -5 : 5, k ? -10 : 10, path);
+        s = load_text(scene);
+        img = s ? trace(s, 5, 5, 1, 0, NULL) : NULL;
+        CHECK(img != NULL);
+        if (img) {
+            c = px(img, 2, 2);
+            if (k == 0)
+                CHECK_MSG(c[0] > 0.5f && c[1] < 1e-3f * c[0] && c[2] < 1e-3f * c[0],
+                          "the north pole %g %g %g, not the top row's red", c[0], c[1], c[2]);
+            else
+                CHECK_MSG(c[0] > 0.5f && fabsf(c[1] - c[0]) < 1e-3f * c[0] &&
+                              fabsf(c[2] - c[0]) < 1e-3f * c[0],
+                          "the south pole %g %g %g, not the bottom row's white", c[0], c[1],
+                          c[2]);
+        }
+        rtp_image_destroy(img);
+        rtp_scene_destroy(s);
+    }
+    remove(path);
+    remove(dir);
+}
+
 /* SPD casts a reflection ray off every transmitting surface, ks 0 or
    not (its statistics count them).  With ks 0 that subtree weighs 0 in
    every evaluation (a ks edit from 0 traces again), so it is not kept,
@@ -665,6 +718,7 @@ int main(void)
     RUN(test_total_internal_reflection);
     RUN(test_bump_reflection_stays_above);
     RUN(test_bump_mirrored_uvs);
+    RUN(test_texture_poles);
     RUN(test_spd_zero_ks_subtrees);
     RUN(test_tiny_scale);
     RUN(test_huge_ground);
