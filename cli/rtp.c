@@ -1133,22 +1133,27 @@ static int apply_line(set_fn set, void *obj, char *text, const char *where, int 
    line's end, so what followed was dropped).  A UTF-8 byte-order mark before the first line
    is skipped, as the scene readers skip it.  (A mebibyte: one line may set
    every light of a scene of thousands; 8190 stopped a stream setting 300
-   lights' colours in one line.) */
+   lights' colours in one line.)  Lines end with '\n', "\r\n" or a lone
+   '\r' (classic Mac OS files), as the scene readers' do: read as blanks,
+   a file of '\r' ends was one line, whose first comment hid every edit
+   after it and whose frames a stream made one.  *cr (0 before the first
+   line) says the last line ended with '\r', so a '\n' starting this one
+   is that line's end: known without reading past the '\r', which would
+   wait on a stream's writer for its next line before the frame. */
 #define MAX_LINE 1048575
-static int next_line(FILE *f, const char *name, char *line, int *lineno)
+static int next_line(FILE *f, const char *name, char *line, int *lineno, int *cr)
 {
     size_t n = 0;
     int c, nul = 0;
+    if (*cr) {
+        *cr = 0;
+        if ((c = getc(f)) != '\n' && c != EOF)
+            ungetc(c, f);
+    }
     while ((c = getc(f)) != EOF && c != '\n') {
-        if (n == MAX_LINE && c == '\r') {
-            /* a CRLF line of MAX_LINE characters: its CR is no character
-               of the line (apply_line drops it) */
-            int d = getc(f);
-            if (d == '\n' || d == EOF) {
-                c = d;
-                break;
-            }
-            ungetc(d, f);
+        if (c == '\r') {
+            *cr = 1;
+            break;
         }
         if (n == MAX_LINE) {
             msg("%s:%d: line too long (at most %d characters)", name, *lineno + 1, MAX_LINE);
@@ -1178,7 +1183,7 @@ static int apply_params_file(set_fn set, void *obj, const char *path)
 {
     FILE *f = strcmp(path, "-") == 0 ? stdin : fopen(path, "r");
     char *line = (char *)malloc(MAX_LINE + 1);
-    int n = 0, rc = 0, got;
+    int n = 0, rc = 0, got, cr = 0;
     if (!f || !line) {
         if (!*path)
             msg("no params file name");
@@ -1191,7 +1196,7 @@ static int apply_params_file(set_fn set, void *obj, const char *path)
         free(line);
         return 1;
     }
-    while ((got = next_line(f, path, line, &n)) > 0)
+    while ((got = next_line(f, path, line, &n, &cr)) > 0)
         if (apply_line(set, obj, line, path, n)) {
             rc = 1;
             break;
@@ -2485,14 +2490,14 @@ static int cmd_reeval(int argc, char **argv)
         progress_end(&prog);
     } else {
         char *line = (char *)malloc(MAX_LINE + 1), path[4096];
-        int n = 0, got;
+        int n = 0, got, cr = 0;
         rc = 0;
         frames = 0;
         if (!line) {
             msg("--stream: out of memory");
             rc = 1;
         }
-        while (line && (got = next_line(stdin, "stdin", line, &n)) != 0) {
+        while (line && (got = next_line(stdin, "stdin", line, &n, &cr)) != 0) {
             if (got < 0 || apply_line(set_tree, tree, line, "stdin", n)) {
                 rc = 1;
                 break;

@@ -338,6 +338,22 @@ grep -q "nul.txt:1: a NUL byte" "$T/err" && ok || bad "NUL byte in --params not 
 printf 'light.0.on=0\000light.1.on=0' > "$T/nul2.txt"
 expect_rc 1 $RTP reeval "$T/t.rtp" --params "$T/nul2.txt" -i "$T/nul2.pfm"
 grep -q "a NUL byte" "$T/err" && ok || bad "NUL byte in a last line without newline not named"
+# a lone '\r' ends a line (classic Mac OS), as in the scene readers: read as
+# a blank, the file was one line whose leading comment hid both edits
+# (exit 0, an unedited image), errors said line 1, and a stream of such
+# lines made one frame
+$RTP trace $S --size 40x30 --set mat.red.kd=0.2 --set light.key.color=1,0.5,0.5 -i "$T/cr0.pfm" -q
+printf '# edits\rmat.red.kd=0.2\rlight.key.color=1,0.5,0.5\r' > "$T/cr.txt"
+expect_rc 0 $RTP reeval "$T/t.rtp" --params "$T/cr.txt" -i "$T/cr.pfm"
+$RTP diff "$T/cr.pfm" "$T/cr0.pfm" --fail-above max_abs=1e-6 -q && ok || bad "params: lone CR line ends"
+printf 'mat.red.kd=0.2\r\rfoo=1\r' > "$T/cr2.txt"
+expect_rc 1 $RTP reeval "$T/t.rtp" --params "$T/cr2.txt" -i "$T/cr2.pfm"
+grep -q "cr2.txt:3: unknown key 'foo'" "$T/err" && ok || bad "params: lone CR line number: $(cat "$T/err")"
+expect_rc 0 sh -c "printf 'mat.red.kd=0.2\r\r\nlight.key.color=1,0.5,0.5\r\n\n' |
+    $RTP reeval '$T/t.rtp' --stream -i '$T/crs%d.pfm' -q"
+[ -e "$T/crs3.pfm" ] && [ ! -e "$T/crs4.pfm" ] &&
+    $RTP diff "$T/crs2.pfm" "$T/cr0.pfm" --fail-above max_abs=1e-6 -q && ok ||
+    bad "stream: lone CR and CRLF line ends: $(ls "$T"/crs*.pfm)"
 # a line of /dev/zero is refused at its 1048576th byte, not read whole
 if [ -r /dev/zero ]; then
     expect_rc 1 timeout 20 $RTP reeval "$T/t.rtp" --params /dev/zero -i "$T/z.pfm"
