@@ -1041,6 +1041,7 @@ static int apply_kv(set_fn set, void *obj, const char *kv, const char *where, in
     const char *eq = strchr(kv, '=');
     size_t kn;
     rtp_error err;
+    rtp_status st;
     memset(&err, 0, sizeof err);
     if (!eq || eq == kv) {
         /* (a line's pairs are separated by blanks: "mat.Floor Mat.kd=0.3"
@@ -1079,7 +1080,36 @@ static int apply_kv(set_fn set, void *obj, const char *kv, const char *where, in
             msg("%s %s=-: stdin already serves %s; name the file", where, key, stdin_user);
         return 1;
     }
-    if (set(obj, key, eq + 1, &err) != RTP_OK) {
+    st = set(obj, key, eq + 1, &err);
+    if (st == RTP_OK)
+        return 0;
+    if (st == RTP_ERR_KEY) {
+        /* A name may hold '=' (an MTL "newmtl a=b"): a key that names
+           nothing is tried longer, up to each later '=' in turn, so that
+           mat.a=b.kd=0.5 reaches it ("unknown key 'mat.a'" said it did not
+           exist).  Only after a key error, which changes nothing: a value
+           holding '=' (a texture "x=1.png") is still a value.  The first
+           longer key that names something gives the outcome; none does,
+           the first key's error stands. */
+        const char *e2 = eq;
+        while ((e2 = strchr(e2 + 1, '=')) != NULL && (size_t)(e2 - kv) < sizeof key) {
+            rtp_error err2;
+            rtp_status st2;
+            memset(&err2, 0, sizeof err2);
+            memcpy(key, kv, (size_t)(e2 - kv));
+            key[e2 - kv] = '\0';
+            if (stdin_user && strcmp(e2 + 1, "-") == 0 && image_key(key))
+                break; /* (the first key's error: stdin is not read) */
+            if ((st2 = set(obj, key, e2 + 1, &err2)) == RTP_OK)
+                return 0;
+            if (st2 != RTP_ERR_KEY) {
+                err = err2;
+                eq = e2;
+                break;
+            }
+        }
+    }
+    {
         char buf[600];
         rtp_error_format(&err, buf, sizeof buf);
         /* (an empty value in a line: "light.0.color= 1" is two words) */
@@ -1092,7 +1122,6 @@ static int apply_kv(set_fn set, void *obj, const char *kv, const char *where, in
             fprintf(stderr, "rtp: %s\n", buf);
         return 1;
     }
-    return 0;
 }
 
 /* Applies every KEY=VALUE of a line (separated by blanks); a '#' where a

@@ -572,6 +572,27 @@ printf 'mat.0.kd= 0.3\n' > "$T/blank2.txt"
 expect_rc 1 $RTP reeval "$T/hash.rtp" --params "$T/blank2.txt" -i "$T/hash3.pfm"
 grep -q "blank2.txt:1: mat.0.kd: .*got '' (blanks separate a line's edits: no blank after '=')" \
     "$T/err" && ok || bad "params: a blank after '=': $(cat "$T/err")"
+# a name holding '=' (an MTL "newmtl a=b") is reached by name, on trace and
+# reeval, in --set and a line ("unknown key 'mat.a'": the key was cut at its
+# first '='); a value holding '=' stays a value, a bad one is the longer
+# key's error
+printf 'newmtl a=b\nKd 1 0 0\nnewmtl c\nKd 0 1 0\n' > "$T/eq.mtl"
+printf 'mtllib eq.mtl\nv -1 -1 0\nv 1 -1 0\nv 0 1 0\nv 1 1 0\nusemtl a=b\nf 1 2 3\nusemtl c\nf 2 4 3\n' > "$T/eq.obj"
+$RTP trace "$T/eq.obj" --size 16x16 -o "$T/eq.rtp" -q
+$RTP trace "$T/eq.obj" --size 16x16 --set mat.0.kd=0.5 -i "$T/eq0.pfm" -q
+expect_rc 0 $RTP trace "$T/eq.obj" --size 16x16 --set mat.a=b.kd=0.5 -i "$T/eq1.pfm"
+cmp -s "$T/eq0.pfm" "$T/eq1.pfm" && ok || bad "trace --set mat.a=b.kd: $(cat "$T/err")"
+expect_rc 0 $RTP reeval "$T/eq.rtp" --set mat.a=b.kd=0.5 -i "$T/eq2.pfm"
+$RTP diff "$T/eq2.pfm" "$T/eq0.pfm" --fail-above max_abs=1e-6 -q && ok || bad "reeval --set mat.a=b.kd"
+expect_rc 0 sh -c "echo 'mat.a=b.kd=0.5' | $RTP reeval '$T/eq.rtp' --stream -i '$T/eqs%d.pfm'"
+$RTP diff "$T/eqs0.pfm" "$T/eq0.pfm" --fail-above max_abs=1e-6 -q && ok || bad "stream mat.a=b.kd"
+expect_rc 1 $RTP reeval "$T/eq.rtp" --set mat.a=b.kd=-1 -i "$T/eq3.pfm"
+grep -q "mat.a=b.kd: -1: must be 0 or more" "$T/err" && ok || bad "mat.a=b.kd=-1: $(cat "$T/err")"
+expect_rc 1 $RTP reeval "$T/eq.rtp" --set mat.c.kd=0.5=1 -i "$T/eq3.pfm"
+grep -q "mat.c.kd: expected 1 comma-separated number.*got '0.5=1'" "$T/err" && ok ||
+    bad "mat.c.kd=0.5=1: $(cat "$T/err")"
+expect_rc 1 $RTP reeval "$T/eq.rtp" --set foo=bar=1 -i "$T/eq3.pfm"
+grep -q "unknown key 'foo'" "$T/err" && ok || bad "foo=bar=1: $(cat "$T/err")"
 
 # a key too long for the key buffer names its line, as every other error
 # of a params file's or a stream's line does (it said "blank2.txt: key
