@@ -551,7 +551,12 @@ static rtp_status read_mtl(obj *o, const char *text, size_t size, const char *na
             if ((st = line_string(&lx, "newmtl", &nt)) != RTP_OK)
                 break;
             if (nt.n > 255) {
-                st = rtpi_lex_error(&lx, &nt, "material name longer than 255 characters");
+                /* (bytes, as a tree file holds it: a name of 128
+                   two-byte characters was said to be over 255 characters) */
+                st = rtpi_lex_error(&lx, &nt,
+                                    "material name of %zu bytes: at most 255 (a tree file "
+                                    "cannot hold more)",
+                                    nt.n);
                 break;
             }
             /* A name this OBJ's mtllibs gave already (the first wins), an

@@ -298,6 +298,26 @@ static void test_mtl(void)
     CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_PARSE);
     CHECK(strstr(err.file, "b.mtl") && err.line == 2 && err.column == 7 &&
           strstr(err.message, "blue"));
+    {
+        /* a name's limit is 255 bytes (a tree file's), said as bytes: 127
+           two-byte characters load, 128 are refused without "255
+           characters" (they are 128) */
+        char mtl[400];
+        int i, n = sprintf(mtl, "newmtl ");
+        for (i = 0; i < 127; i++)
+            n += sprintf(mtl + n, "\xc3\xa9");
+        sprintf(mtl + n, "\nKd 1 0 0\n");
+        CHECK(write_file(dir, "b.mtl", mtl) == 0);
+        CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_OK);
+        rtp_scene_destroy(s);
+        s = NULL;
+        sprintf(mtl + n, "\xc3\xa9\nKd 1 0 0\n");
+        CHECK(write_file(dir, "b.mtl", mtl) == 0);
+        CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_PARSE);
+        CHECK_MSG(err.line == 1 && strstr(err.message, "256 bytes: at most 255") &&
+                      !strstr(err.message, "characters"),
+                  "%s", err.message);
+    }
     CHECK(write_file(dir, "b.mtl", "Kd 1 1 1\n") == 0);
     CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_PARSE);
     CHECK(err.line == 1 && err.column == 1 && strstr(err.message, "before any newmtl"));
