@@ -456,20 +456,41 @@ static int parse_numbers(const char *v, double *out, int max)
     }
 }
 
-/* Resolves "N" or a name among n items; returns index or -1. */
+/* Whether tok[0..len) is digits alone, an index: its value in *idx, or
+   (size_t)-1 past nine significant digits (more items than any scene
+   holds).  Leading zeros count for nothing: mat.0000000001 is mat.1, as
+   mat.01 is (it was read as a name, "no such material", from ten
+   characters on). */
+static int digits_index(const char *tok, size_t len, size_t *idx)
+{
+    size_t i, v = 0;
+    if (len == 0)
+        return 0;
+    for (i = 0; i < len; i++)
+        if (!isdigit((unsigned char)tok[i]))
+            return 0;
+    for (i = 0; i < len && tok[i] == '0'; i++)
+        ;
+    if (len - i > 9) {
+        *idx = (size_t)-1;
+        return 1;
+    }
+    for (; i < len; i++)
+        v = v * 10 + (size_t)(tok[i] - '0');
+    *idx = v;
+    return 1;
+}
+
+/* Resolves "N" or a name among n items; returns index or -1.  Digits
+   alone are always an index (README): a name of digits is reached by its
+   index. */
 static long find_index(const char *tok, size_t toklen, size_t n,
                        const char *(*name_of)(const rtp_scene *, size_t),
                        const rtp_scene *s)
 {
-    size_t i;
-    int digits = toklen > 0;
-    for (i = 0; i < toklen; i++)
-        if (!isdigit((unsigned char)tok[i]))
-            digits = 0;
-    if (digits && toklen < 10) {
-        long idx = strtol(tok, NULL, 10);
-        return (size_t)idx < n ? idx : -1;
-    }
+    size_t i, idx;
+    if (digits_index(tok, toklen, &idx))
+        return idx < n ? (long)idx : -1;
     for (i = 0; i < n; i++) {
         const char *nm = name_of(s, i);
         if (nm && strlen(nm) == toklen && memcmp(nm, tok, toklen) == 0)
@@ -681,13 +702,14 @@ static rtp_status field_refused(rtp_error *err, const char *key, const char *fie
 static int adds_light(const rtp_scene *s, const char *key)
 {
     const char *d = key + 6, *e;
+    size_t idx;
     if (strncmp(key, "light.", 6) != 0)
         return 0;
     for (e = d; isdigit((unsigned char)*e); e++)
         ;
-    if (e == d || e - d >= 10 || strcmp(e, ".pos") != 0)
+    if (strcmp(e, ".pos") != 0 || !digits_index(d, (size_t)(e - d), &idx))
         return 0;
-    return (size_t)strtol(d, NULL, 10) == s->nlights;
+    return idx == s->nlights;
 }
 
 rtp_status rtpi_scene_set(rtp_scene *s, const char *key, const char *value,

@@ -1147,9 +1147,43 @@ static void test_numbers_whatever_the_locale(void)
     setlocale(LC_NUMERIC, saved);
 }
 
+/* Digits alone are an index, leading zeros or not: mat.0000000001 was
+   read as a name from ten characters on ("no such material") where
+   mat.01 was material 1; likewise light.000000000N.pos adding light N. */
+static void test_key_digits(void)
+{
+    static const char text[] = "l 0 0 5\nf 1 0 0 1 0 1 0 0\nf 0 1 0 1 0 1 0 0\n";
+    rtp_scene *sc = NULL;
+    rtp_error err;
+    rtp_scene_info info;
+    char buf[64];
+    CHECK(rtp_scene_load_memory(text, sizeof text - 1, "d.nff", "nff", NULL, &sc, &err) ==
+          RTP_OK);
+    if (!sc)
+        return;
+    CHECK(rtp_scene_set(sc, "mat.01.kd", "0.25", &err) == RTP_OK);
+    CHECK(rtp_scene_get(sc, "mat.1.kd", buf, sizeof buf, &err) == RTP_OK &&
+          strcmp(buf, "0.25") == 0);
+    CHECK_MSG(rtp_scene_set(sc, "mat.0000000001.kd", "0.5", &err) == RTP_OK, "%s", err.message);
+    CHECK(rtp_scene_get(sc, "mat.1.kd", buf, sizeof buf, &err) == RTP_OK &&
+          strcmp(buf, "0.5") == 0);
+    CHECK(rtp_scene_get(sc, "mat.00000000000000000000000.kd", buf, sizeof buf, &err) ==
+              RTP_OK && strcmp(buf, "1") == 0);
+    CHECK(rtp_scene_set(sc, "mat.1000000000.kd", "0.5", &err) == RTP_ERR_KEY &&
+          strstr(err.message, "no such material"));
+    CHECK(rtp_scene_set(sc, "mat.18446744073709551617.kd", "0.5", &err) == RTP_ERR_KEY);
+    CHECK(rtp_scene_set(sc, "light.0000000001.pos", "1,2,3", &err) == RTP_OK);
+    rtp_scene_get_info(sc, &info);
+    CHECK(info.lights == 2);
+    CHECK(rtp_scene_get(sc, "light.1.pos", buf, sizeof buf, &err) == RTP_OK &&
+          strcmp(buf, "1,2,3") == 0);
+    rtp_scene_destroy(sc);
+}
+
 int main(void)
 {
     RUN(test_every_keyword);
+    RUN(test_key_digits);
     RUN(test_token_based);
     RUN(test_cr_line_ends);
     RUN(test_triangulate);
