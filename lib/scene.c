@@ -583,11 +583,22 @@ static rtp_status item_key(const rtp_scene *s, const char *key, int *kind, long 
         return RTP_OK;
     }
     if ((size_t)(dot1 - key) == 3 && memcmp(key, "mat", 3) == 0) {
+        size_t j, d;
         *kind = ITEM_MAT;
-        if ((*idx = find_index(dot1 + 1, len, s->nmats, mat_name, s)) < 0)
-            return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0,
-                              "%s: no such material (the scene has %zu)", key, s->nmats);
-        return RTP_OK;
+        if ((*idx = find_index(dot1 + 1, len, s->nmats, mat_name, s)) >= 0)
+            return RTP_OK;
+        /* digits are an index, never a name: an MTL material named "12"
+           is reached by its own index, which the message gives (it said
+           only that there was no such material) */
+        for (j = 0; j < s->nmats && digits_index(dot1 + 1, len, &d); j++)
+            if (s->mats[j].name && strlen(s->mats[j].name) == len &&
+                memcmp(s->mats[j].name, dot1 + 1, len) == 0)
+                return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0,
+                                  "%s: no such material (the scene has %zu; digits are an "
+                                  "index: the material named '%.*s' is mat.%zu)",
+                                  key, s->nmats, (int)len, dot1 + 1, j);
+        return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0,
+                          "%s: no such material (the scene has %zu)", key, s->nmats);
     }
     return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0, "unknown key '%s'", key);
 }

@@ -593,6 +593,14 @@ grep -q "mat.c.kd: expected 1 comma-separated number.*got '0.5=1'" "$T/err" && o
     bad "mat.c.kd=0.5=1: $(cat "$T/err")"
 expect_rc 1 $RTP reeval "$T/eq.rtp" --set foo=bar=1 -i "$T/eq3.pfm"
 grep -q "unknown key 'foo'" "$T/err" && ok || bad "foo=bar=1: $(cat "$T/err")"
+# digits are an index, never a name: a material named "12" past the last
+# index is said to be reached by its own (the message said only "no such
+# material")
+printf 'newmtl 12\nKd 1 0 0\nnewmtl b\nKd 0 1 0\n' > "$T/dg.mtl"
+printf 'mtllib dg.mtl\nv -1 -1 0\nv 1 -1 0\nv 0 1 0\nusemtl 12\nf 1 2 3\n' > "$T/dg.obj"
+expect_rc 1 $RTP trace "$T/dg.obj" --size 8x8 --set mat.12.kd=0.5 -i "$T/dg.pfm"
+grep -q "mat.12.kd: no such material (the scene has 2; digits are an index: the material named '12' is mat.0)" \
+    "$T/err" && ok || bad "mat.12 of a material named 12: $(cat "$T/err")"
 
 # a key too long for the key buffer names its line, as every other error
 # of a params file's or a stream's line does (it said "blank2.txt: key
