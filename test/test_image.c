@@ -1281,6 +1281,31 @@ static void test_fuzz(void)
     rtp_image_destroy(img);
 }
 
+/* af.bin read with every allocation failing in turn (c's, through a):
+   NOMEM and nothing left live each time, until a read that needs no more
+   succeeds (width w, or any where w < 0); the bad outcomes. */
+static int read_failing(counting *c, const rtp_allocator *a, int w)
+{
+    long fail;
+    int bad = 0;
+    for (fail = 0; fail < 1000; fail++) {
+        rtp_image *back = NULL;
+        rtp_status st;
+        c->calls = 0;
+        c->fail_at = fail;
+        st = rtp_image_read(tpath("af.bin"), a, &back, NULL);
+        if (c->calls <= fail) { /* nothing failed: done */
+            bad += st != RTP_OK || !back || (w >= 0 && back->width != w);
+            rtp_image_destroy(back);
+            bad += c->live != 0;
+            break;
+        }
+        bad += st != RTP_ERR_NOMEM || back != NULL || c->live != 0;
+        rtp_image_destroy(back);
+    }
+    return bad + (fail == 1000);
+}
+
 /* Every allocation failing in turn: NOMEM, nothing leaked. */
 static void test_alloc_failures(void)
 {
@@ -1297,7 +1322,6 @@ static void test_alloc_failures(void)
     for (k = 0; k < kinds; k++) {
         size_t n;
         unsigned char *data;
-        long fail;
         if (fmts[k] == RTP_IMAGE_AUTO) {
             n = sizeof p3 - 1;
             data = (unsigned char *)malloc(n);
@@ -1311,22 +1335,7 @@ static void test_alloc_failures(void)
             free(data);
             continue;
         }
-        for (fail = 0; fail < 1000; fail++) {
-            rtp_image *back = NULL;
-            rtp_status st;
-            c.calls = 0;
-            c.fail_at = fail;
-            st = rtp_image_read(tpath("af.bin"), &a, &back, NULL);
-            if (c.calls <= fail) { /* nothing failed: done */
-                bad += st != RTP_OK || !back;
-                rtp_image_destroy(back);
-                bad += c.live != 0;
-                break;
-            }
-            bad += st != RTP_ERR_NOMEM || back != NULL || c.live != 0;
-            rtp_image_destroy(back);
-        }
-        bad += fail == 1000;
+        bad += read_failing(&c, &a, -1);
         free(data);
     }
 #ifdef TEST_PNG
@@ -1334,28 +1343,12 @@ static void test_alloc_failures(void)
         /* an interlaced 16-bit PNG: the passes' packed rows and the row
            libpng fills are allocations of their own */
         unsigned char rows[11 * 13 * 6];
-        long fail;
         size_t i;
         for (i = 0; i < sizeof rows; i++)
             rows[i] = (unsigned char)(i * 37u);
         CHECK(write_png_raw(tpath("af.bin"), 13, 11, PNG_COLOR_TYPE_RGB, 16,
                             PNG_INTERLACE_ADAM7, rows, 13 * 6, NULL, 0, NULL, 0) == 0);
-        for (fail = 0; fail < 1000; fail++) {
-            rtp_image *back = NULL;
-            rtp_status st;
-            c.calls = 0;
-            c.fail_at = fail;
-            st = rtp_image_read(tpath("af.bin"), &a, &back, NULL);
-            if (c.calls <= fail) {
-                bad += st != RTP_OK || !back || back->width != 13;
-                rtp_image_destroy(back);
-                bad += c.live != 0;
-                break;
-            }
-            bad += st != RTP_ERR_NOMEM || back != NULL || c.live != 0;
-            rtp_image_destroy(back);
-        }
-        bad += fail == 1000;
+        bad += read_failing(&c, &a, 13);
     }
 #endif
     CHECK_MSG(bad == 0, "%d bad outcomes", bad);
