@@ -195,6 +195,17 @@ int rtpi_intersect_prim(const rtp_scene *s, uint32_t prim, const rtpi_ray *ray,
     return r;
 }
 
+/* Whether all three vertex normals of tr point away from ng (the side
+   its winding makes its front). */
+static int all_away(const rtp_scene *s, const rtpi_tri *tr, rtpi_v3 ng)
+{
+    int k;
+    for (k = 0; k < 3; k++)
+        if (!(v3_dot(v3_from_f(s->nrm + 3 * (size_t)tr->n[k]), ng) < 0.0))
+            return 0;
+    return 1;
+}
+
 /* Whether prim shadows a point of its own whose shadow ray starts at o:
    0 no, 1 yes, -1 cannot tell.  A triangle never does.  A sphere does
    exactly when the segment from o to the light crosses it where it
@@ -301,13 +312,10 @@ void rtpi_surface_at_ex(const rtp_scene *s, const rtpi_ray *ray,
         out->ns = out->ng;
         if (tr->n[0] != RTPI_NONE && tr->n[1] != RTPI_NONE &&
             tr->n[2] != RTPI_NONE) {
-            rtpi_v3 n0 = v3_from_f(s->nrm + 3 * (size_t)tr->n[0]);
-            rtpi_v3 n1 = v3_from_f(s->nrm + 3 * (size_t)tr->n[1]);
-            rtpi_v3 n2 = v3_from_f(s->nrm + 3 * (size_t)tr->n[2]);
-            rtpi_v3 n = v3_mul(n0, b0);
+            rtpi_v3 n = v3_mul(v3_from_f(s->nrm + 3 * (size_t)tr->n[0]), b0);
             double dn;
-            n = v3_madd(n, n1, hit->u);
-            n = v3_madd(n, n2, hit->v);
+            n = v3_madd(n, v3_from_f(s->nrm + 3 * (size_t)tr->n[1]), hit->u);
+            n = v3_madd(n, v3_from_f(s->nrm + 3 * (size_t)tr->n[2]), hit->v);
             dn = v3_dot(n, out->ng);
             /* A triangle whose three vertex normals all point away from
                it is wound the other way round from its normals (a mesh
@@ -320,13 +328,8 @@ void rtpi_surface_at_ex(const rtp_scene *s, const rtpi_ray *ray,
                them wrong, not its winding: those are mirrored at the
                triangle's plane, which keeps their tangential lean and
                puts them on ng's side. */
-            if (dn < 0.0 && v3_dot(n0, out->ng) < 0.0 && v3_dot(n1, out->ng) < 0.0 &&
-                v3_dot(n2, out->ng) < 0.0) {
-                n = v3_mul(n, -1.0);
-                dn = -dn;
-            }
             if (dn < 0.0)
-                n = v3_madd(n, out->ng, -2.0 * dn);
+                n = all_away(s, tr, out->ng) ? v3_mul(n, -1.0) : v3_madd(n, out->ng, -2.0 * dn);
             if (v3_dot(n, n) > 0.0)
                 out->ns = v3_norm(n);
         }
