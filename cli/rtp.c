@@ -1972,8 +1972,8 @@ static const char reeval_help[] =
     "  --stream             read edit sets from stdin, one line each (KEY=VALUE\n"
     "                       pairs; edits persist; light.N.pos with N the count\n"
     "                       of lights adds one), and write one image per line:\n"
-    "                       -i takes a pattern with %d (or %04d), or '-' for a\n"
-    "                       stream of PFM images on stdout\n"
+    "                       -i takes a pattern with %d (or %04d; %% for a '%'),\n"
+    "                       or '-' for a stream of PFM images on stdout\n"
     "  --shadows MODE       shadows of moved or added lights: auto[:RES] (exact:\n"
     "                       the light buffer where the tree has 4 or more hits a\n"
     "                       primitive, else shadow rays, but the light buffer for\n"
@@ -2012,26 +2012,42 @@ static const char reeval_help[] =
     "(camera.from|at|up|angle|hither) traces every sample again: a full trace\n"
     "from the tree file, said so; later edits re-evaluate.\n";
 
-/* Expands a pattern with one %d or %0Nd; returns 0 or -1. */
+/* Expands a --stream pattern: its one %d or %0Nd (N up to 12) to n, each
+   %% to a '%' (a literal '%' in a folder's or frame's name); returns 0,
+   or -1 where it has no %d, two, another conversion, or out of room. */
 static int expand_pattern(const char *pat, int n, char *out, size_t size)
 {
-    const char *pc = strchr(pat, '%');
-    int width = 0;
-    const char *after;
-    if (!pc)
-        return snprintf(out, size, "%s", pat) < (int)size ? 0 : -1;
-    after = pc + 1;
-    if (*after == '0') {
-        after++;
-        while (*after >= '0' && *after <= '9')
-            width = width * 10 + (*after++ - '0');
+    size_t o = 0;
+    int seen = 0;
+    for (; *pat; pat++) {
+        char num[32];
+        const char *piece = pat;
+        size_t len = 1;
+        if (*pat == '%' && pat[1] == '%') {
+            pat++;
+        } else if (*pat == '%') {
+            int width = 0;
+            const char *q = pat + 1;
+            if (*q == '0')
+                for (q++; *q >= '0' && *q <= '9'; q++)
+                    if ((width = width * 10 + (*q - '0')) > 12)
+                        return -1;
+            if (*q != 'd' || seen++)
+                return -1;
+            snprintf(num, sizeof num, "%0*d", width, n);
+            piece = num;
+            len = strlen(num);
+            pat = q;
+        }
+        if (o + len >= size)
+            return -1;
+        memcpy(out + o, piece, len);
+        o += len;
     }
-    if (*after != 'd' || strchr(after, '%') || width > 12)
+    if (!seen)
         return -1;
-    return snprintf(out, size, "%.*s%0*d%s", (int)(pc - pat), pat, width, n, after + 1) <
-                   (int)size
-               ? 0
-               : -1;
+    out[o] = '\0';
+    return 0;
 }
 
 /* --shadows' modes, indexed by rtp_shadow_mode (--stats' "shadows" names
@@ -2405,8 +2421,9 @@ static int cmd_reeval(int argc, char **argv)
         goto usage;
     if (stream && strcmp(image_path, "-") != 0) {
         char probe[4096];
-        if (expand_pattern(image_path, 0, probe, sizeof probe) != 0 || !strchr(image_path, '%')) {
-            msg("--stream: -i needs a pattern with one %%d (e.g. frame%%04d.png) or '-'");
+        if (expand_pattern(image_path, 0, probe, sizeof probe) != 0) {
+            msg("--stream: -i needs a pattern with one %%d (e.g. frame%%04d.png; %%%% for a "
+                "'%%') or '-'");
             goto usage;
         }
         if (!image_name_ok(probe) || !output_ok(probe))

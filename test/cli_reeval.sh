@@ -208,6 +208,14 @@ awk 'BEGIN { s = ""; while (length(s) < 1100000) s = s "mat.red.kd=0.5 "; print 
     $RTP reeval "$T/t.rtp" --stream -i "$T/long%d.pfm" 2>"$T/err"
 [ $? -eq 1 ] && grep -q "stdin:1: line too long" "$T/err" && [ ! -e "$T/long0.pfm" ] && ok ||
     { bad "--stream: a line past the buffer"; cat "$T/err" >&2; }
+# a '%' in a frame's name is written %% (refused before: a folder named
+# "100%" could not hold frames); %% alone, no %d, is still no pattern
+printf 'ambient=0.1\nambient=0.2\n' |
+    $RTP reeval "$T/t.rtp" --stream -i "$T/pc%%_%d.pfm" -q 2>"$T/err"
+[ $? -eq 0 ] && [ -e "$T/pc%_0.pfm" ] && [ -e "$T/pc%_1.pfm" ] && ok ||
+    { bad "--stream: %% in a pattern"; cat "$T/err" >&2; }
+echo ambient=0.1 | expect_rc 2 $RTP reeval "$T/t.rtp" --stream -i "$T/pcd%%d.pfm"
+[ ! -e "$T/pcd%d.pfm" ] && ok || bad "--stream: %%d taken for a pattern"
 mkdir -p "$T/folder"
 expect_rc 1 $RTP reeval "$T/t.rtp" --params "$T/folder" -i "$T/f.pfm"
 grep -q "cannot read" "$T/err" && [ ! -e "$T/f.pfm" ] && ok || bad "--params FOLDER"
