@@ -320,6 +320,103 @@ static void test_bump_reflection_stays_above(void)
     rtp_scene_destroy(s);
 }
 
+/* Refraction under strong bumps: rtp keeps no "inside" state along a ray
+   (each hit takes its side from the geometric normal, and a ray starts
+   on the side it leaves by), so a bumped normal that sends a refracted
+   ray back the way it came cannot leave the tracer wrong about the
+   medium.  Pinned on a lone glass ball by the trees' own flags: a ray
+   entering always crosses (ior 1.5 bends it towards the bumped normal,
+   whose geometric part is positive on a ball) and next hits the ball's
+   inside; a leaving ray that a bump turns back (103 of 2024 over the
+   strengths below) next hits the inside too, and one that crosses never does; a total
+   internal reflection stays inside (reflect_dir's rule).  Strength 100
+   lays the normal almost flat; trace and re-evaluation agree bit for
+   bit, and nothing is NaN. */
+static void test_bump_refraction_sides(void)
+{
+    static const char scene[] =
+        "v from 0 -6 0.3 at 0 0 0 up 0 0 1 angle 30 hither 0.01 resolution 48 48\n"
+        "b 0.1 0.2 0.3\nl 3 -4 6\n"
+        "f 0.9 0.8 0.3 0.8 0.2 20 0 0\np 4\n-8 4 -4\n8 4 -4\n8 4 6\n-8 4 6\n"
+        "f 0.9 0.9 0.9 0.05 0 100000 0.9 1.5\nname glass\nbump waves 0.3 0.1\ns 0 0 0 1\n";
+    static const char *const strengths[] = {"0.1", "0.3", "1", "100"};
+    static const char *const kinds[] = {"waves", "noise"};
+    unsigned long long turned = 0, leaving = 0;
+    size_t a, b;
+    for (a = 0; a < 2; a++)
+        for (b = 0; b < sizeof strengths / sizeof *strengths; b++) {
+            rtp_scene *s = load_text(scene);
+            rtp_trace_options o;
+            rtp_eval_options eo;
+            rtp_tree *t = NULL;
+            rtp_image *full = NULL, *re = NULL;
+            size_t j, bad = 0, entering = 0;
+            if (!s) {
+                CHECK(s != NULL);
+                return;
+            }
+            memset(&o, 0, sizeof o);
+            memset(&eo, 0, sizeof eo);
+            o.threads = 1;
+            eo.stale = RTP_STALE_RETRACE;
+            CHECK(rtp_scene_set(s, "mat.glass.bump", kinds[a], NULL) == RTP_OK);
+            CHECK(rtp_scene_set(s, "mat.glass.bump_strength", strengths[b], NULL) == RTP_OK);
+            CHECK(rtp_record(s, &o, &t, &full, NULL, NULL) == RTP_OK);
+            for (j = 0; t && j < t->nnodes; j++) {
+                const rtpi_cnode *nd = &t->nodes[j], *ch;
+                int back = (nd->link & RTPI_L_BACK) != 0, inside;
+                double side;
+                if (rtpi_prim_material(t->scene, nd->prim) != 1)
+                    continue;
+                if (nd->link & RTPI_L_REFR)
+                    ch = nd + (nd->link >> RTPI_L_SHIFT);
+                else if ((nd->link & RTPI_L_TIR) && (nd->link & RTPI_L_REFL))
+                    ch = nd + 1;
+                else
+                    continue;
+                /* the child's side of the surface: its direction along
+                   the ball's outward normal at the parent (the ball's
+                   centre is the origin), leaving is positive */
+                side = (double)nd->p[0] * (ch->p[0] - nd->p[0]) +
+                       (double)nd->p[1] * (ch->p[1] - nd->p[1]) +
+                       (double)nd->p[2] * (ch->p[2] - nd->p[2]);
+                inside = rtpi_prim_material(t->scene, ch->prim) == 1 &&
+                         (ch->link & RTPI_L_BACK) != 0;
+                if (nd->link & RTPI_L_TIR) {
+                    bad += !back || !inside || side >= 0.0;
+                } else if (!back) {
+                    entering++;
+                    bad += !inside || side >= 0.0;
+                } else {
+                    leaving++;
+                    turned += side < 0.0;
+                    bad += inside != (side < 0.0);
+                }
+            }
+            CHECK_MSG(bad == 0 && entering > 0, "bump %s %s: %zu of the ball's children on the "
+                      "wrong side (%zu entering)", kinds[a], strengths[b], bad, entering);
+            CHECK(full && all_finite(full));
+            /* re-traced from a tree of another strength: the same rays */
+            rtp_tree_destroy(t);
+            t = NULL;
+            CHECK(rtp_scene_set(s, "mat.glass.bump_strength", "0.05", NULL) == RTP_OK);
+            CHECK(rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
+            CHECK(t && rtp_tree_set(t, "mat.glass.bump_strength", strengths[b], NULL) == RTP_OK);
+            CHECK(t && rtp_tree_eval(t, &eo, &re, NULL, NULL) == RTP_OK);
+            CHECK_MSG(full && re && memcmp(full->pixels, re->pixels,
+                                           sizeof(float) * 3 * 48 * 48) == 0,
+                      "bump %s %s: re-traced image off the trace", kinds[a], strengths[b]);
+            rtp_image_destroy(full);
+            rtp_image_destroy(re);
+            rtp_tree_destroy(t);
+            rtp_scene_destroy(s);
+        }
+    /* (the case exists: leaving rays a bump turns back into the ball) */
+    CHECK_MSG(turned > 0, "%llu of %llu leaving rays turned back", turned, leaving);
+    fprintf(stderr, "  bumped glass: %llu of %llu leaving refracted rays turned back inside\n",
+            turned, leaving);
+}
+
 /* A height map by uv rises along a triangle's front however its uvs run.
    Two quads, the mirror images of each other across x = 0, the right
    one's uvs mirrored too (so a ramp in u rises towards the middle on
@@ -717,6 +814,7 @@ int main(void)
     RUN(test_spd_counts);
     RUN(test_total_internal_reflection);
     RUN(test_bump_reflection_stays_above);
+    RUN(test_bump_refraction_sides);
     RUN(test_bump_mirrored_uvs);
     RUN(test_texture_poles);
     RUN(test_spd_zero_ks_subtrees);
