@@ -996,7 +996,7 @@ struct rtp_tree {
     unsigned cp_gen;       /* counts the snapshots and stale planes */
     unsigned *cp_used;     /* per term: cp_clock when its plane was last used */
     unsigned cp_clock;     /* counts the evaluations by colour planes */
-    float *cb_p;           /* a chain's P' (tree.c: cb_chunk), as cp_k's
+    double *cb_p;          /* a chain's P' (tree.c: cb_chunk), as cp_k's
                               entries of the term, cb_cap of them, for... */
     size_t cb_cap;
     size_t cb_term;        /* ...1 + term j (0: none), with... */

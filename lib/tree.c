@@ -1133,7 +1133,7 @@ typedef struct eval_ctx {
     int nonfinite;            /* pk_put met a plane value that is not finite */
     float *rest;              /* pk_build_chunk: two sample rows' rest */
     int coef_bad;             /* a coefficient made was not finite */
-    unsigned long long combined; /* light_row: samples it combined */
+    unsigned long long combined; /* light_row, cp_full_pixel: samples it combined */
     unsigned char *mark;      /* light_row (may be NULL): 1 for each
                                  sample it combined (t->ev_mark) */
     unsigned long long written; /* mark_row: pixels it wrote */
@@ -3573,46 +3573,86 @@ static void cp_curs(const rtp_tree *t, int chunk, cp_cur *cu)
         cp_cur_band(t, t->cp_d[i], chunk, &cu[i]);
 }
 
-/* S + sum K_d (c_d - cS_d) at pixel p over the differing terms but
-   `skip` ((size_t)-1: none), the sums in the order of the terms; K_d
-   from cursor cu[i] of each (k[i]: NULL where 0).  A term whose K is 0
-   adds nothing (adding its 0 x dc changed nothing but the sign of a zero
-   sum). */
-static void cp_sum(const rtp_tree *t, size_t p, size_t skip, cp_cur *cu, double v[3],
+/* S + sum K_d (c_d - cS_d) at pixel p over the differing terms, term j's
+   added last (with_j 0: left out), the others in the order of the terms;
+   K_d from cursor cu[i] of each (k[i]: NULL where 0).  A term whose K is
+   0 adds nothing (adding its 0 x dc changed nothing but the sign of a
+   zero sum).  j last: a chain's P' (cb_chunk, the sum without j) plus
+   K_j dc_j is then this sum to the bit, so a region whose pixels hold no
+   lost digits (cp_check 0: the chain) makes the pixels its frame makes
+   by cp_pixel (a frame's check is set by pixels elsewhere; the chain's P'
+   in floats put them a float step apart, 5.96e-8 at 1). */
+static void cp_sum(const rtp_tree *t, size_t p, size_t j, int with_j, cp_cur *cu, double v[3],
                    const float **k)
 {
     const float *sp = t->cp_s + 3 * p;
-    size_t i;
+    size_t i, last = t->cp_nd;
     int c;
     for (c = 0; c < 3; c++)
         v[c] = sp[c];
     for (i = 0; i < t->cp_nd; i++) {
         const double *dc = t->cp_dc + 3 * i;
-        k[i] = t->cp_d[i] == skip ? NULL : cp_at(&cu[i], p);
+        k[i] = cp_at(&cu[i], p);
+        if (t->cp_d[i] == j) {
+            last = i;
+            if (!with_j)
+                k[i] = NULL;
+            continue;
+        }
         if (k[i])
             for (c = 0; c < 3; c++)
                 v[c] += k[i][c] * dc[c];
     }
+    if (last < t->cp_nd && k[last])
+        for (c = 0; c < 3; c++)
+            v[c] += k[last][c] * t->cp_dc[3 * last + c];
 }
 
-/* One pixel: cp_sum over every differing term; 1 where checked and it
-   lost digits. */
-static int cp_pixel(const rtp_tree *t, size_t p, cp_cur *cu, float *out)
+/* The full path's pixel p (combine_row, then resolve_row's sums for
+   SPD's corners) from the coefficients, which hold, into out. */
+static void cp_full_pixel(eval_ctx *e, size_t p, float *out)
 {
+    const rtp_tree *t = e->t;
+    size_t nc = RTPI_COEFFS(t->scene->nlights), w = (size_t)t->width, k;
+    float a[3], b[3], d[3], f[3];
+    int c;
+    e->combined += t->spd ? 4 : 1;
+    if (!t->spd) {
+        rtpi_combine(t->scene, e->cl, t->ev_coeffs + p * nc, out);
+        return;
+    }
+    k = (p / w) * (w + 1) + p % w;
+    rtpi_combine(t->scene, e->cl, t->ev_coeffs + k * nc, a);
+    rtpi_combine(t->scene, e->cl, t->ev_coeffs + (k + 1) * nc, b);
+    rtpi_combine(t->scene, e->cl, t->ev_coeffs + (k + w + 1) * nc, d);
+    rtpi_combine(t->scene, e->cl, t->ev_coeffs + (k + w + 2) * nc, f);
+    for (c = 0; c < 3; c++)
+        out[c] = 0.25f * (a[c] + b[c] + d[c] + f[c]);
+}
+
+/* One pixel: cp_sum over every differing term, e->term last; where
+   checked and it lost digits, the full path's pixel instead.  That pixel
+   alone: the image's other pixels, and S, stay as the planes make them
+   (a lost pixel sent the whole image down the full path and made S anew
+   from it, so a region without one, traced or evaluated apart, kept
+   other bits than its frame: README "Splitting a frame"). */
+static void cp_pixel(eval_ctx *e, size_t p, cp_cur *cu, float *out)
+{
+    const rtp_tree *t = e->t;
     const float *sp = t->cp_s + 3 * p, *k[CP_MAX_PLANES];
     double v[3], kc[3] = {0.0, 0.0, 0.0};
     size_t i, nd = t->cp_nd;
     int c;
-    cp_sum(t, p, (size_t)-1, cu, v, k);
+    cp_sum(t, p, e->term, 1, cu, v, k);
     for (c = 0; c < 3; c++)
         out[c] = (float)v[c];
     if (!t->cp_check)
-        return 0;
+        return;
     for (i = 0; i < nd; i++)
         for (c = 0; k[i] && c < 3; c++)
             kc[c] += fabs(k[i][c]) * t->cp_ab[3 * i + c];
-    return cp_lost(sp[0], kc[0], v[0]) | cp_lost(sp[1], kc[1], v[1]) |
-           cp_lost(sp[2], kc[2], v[2]);
+    if (cp_lost(sp[0], kc[0], v[0]) | cp_lost(sp[1], kc[1], v[1]) | cp_lost(sp[2], kc[2], v[2]))
+        cp_full_pixel(e, p, out);
 }
 
 /* A band of every pixel. */
@@ -3626,12 +3666,11 @@ static int cp_apply_band(void *ctx, int chunk)
         end = (size_t)t->width * t->height;
     cp_curs(t, chunk, cu);
     for (; p < end; p++)
-        e->nonfinite |= cp_pixel(t, p, cu, e->pixels + 3 * p);
+        cp_pixel(e, p, cu, e->pixels + 3 * p);
     return 0;
 }
 
-/* S + K dc over len consecutive pixels (cp_apply_listed, one term; with
-   P' for S, cb_apply). */
+/* S + K dc over len consecutive pixels (cp_apply_listed, one term). */
 static void cp_run1(const float *restrict sp, const float *restrict k, const double *dc,
                     float *restrict out, size_t len)
 {
@@ -3691,7 +3730,7 @@ static int cp_apply_listed(void *ctx, int chunk)
         for (; run < rend; run += 2) {
             size_t p = run[0], end = p + run[1];
             for (; p < end; p++)
-                e->nonfinite |= cp_pixel(t, p, cu, out + 3 * p);
+                cp_pixel(e, p, cu, out + 3 * p);
         }
     }
     return 0;
@@ -3702,8 +3741,9 @@ static int cp_apply_listed(void *ctx, int chunk)
    sum over d other than j of K_d (c_d - cS_d), is made once at the
    pixels whose K_j is not 0 (cb_p, as the entries of plane j), and each
    edit of the chain reads it and K_j alone, as for one term.  P' is
-   rounded to float once more than cp_pixel rounds (about a float ulp);
-   it is made from S and the planes, never from an image. */
+   kept in doubles, cp_sum's own before it adds K_j: each edit gives the
+   bits cp_pixel gives (a float P' was rounded once more, a float step
+   off them); it is made from S and the planes, never from an image. */
 static int cb_chunk(void *ctx, int chunk)
 {
     eval_ctx *e = (eval_ctx *)ctx;
@@ -3711,19 +3751,14 @@ static int cb_chunk(void *ctx, int chunk)
     const uint32_t *bt = t->cp_seg[e->term] + 4 * (size_t)chunk;
     const uint32_t *run = t->cp_run[e->term] + 2 * (size_t)bt[CP_ROFF];
     const uint32_t *rend = run + 2 * (size_t)bt[CP_NR];
-    float *pb = t->cb_p + 3 * (size_t)bt[CP_KOFF];
+    double *pb = t->cb_p + 3 * (size_t)bt[CP_KOFF];
     cp_cur cu[CP_MAX_PLANES];
     const float *k[CP_MAX_PLANES];
     cp_curs(t, chunk, cu);
     for (; run < rend; run += 2) {
         size_t p = run[0], end = p + run[1];
-        for (; p < end; p++, pb += 3) {
-            double v[3];
-            cp_sum(t, p, e->term, cu, v, k);
-            pb[0] = (float)v[0];
-            pb[1] = (float)v[1];
-            pb[2] = (float)v[2];
-        }
+        for (; p < end; p++, pb += 3)
+            cp_sum(t, p, e->term, 0, cu, pb, k);
     }
     return 0;
 }
@@ -3736,13 +3771,17 @@ static int cb_apply(void *ctx, int chunk)
     const uint32_t *bt = t->cp_seg[e->term] + 4 * (size_t)chunk;
     const uint32_t *run = t->cp_run[e->term] + 2 * (size_t)bt[CP_ROFF];
     const uint32_t *rend = run + 2 * (size_t)bt[CP_NR];
-    const float *pb = t->cb_p + 3 * (size_t)bt[CP_KOFF];
+    const double *pb = t->cb_p + 3 * (size_t)bt[CP_KOFF];
     const float *k = t->cp_k[e->term] + 3 * (size_t)bt[CP_KOFF];
+    const double d0 = t->cb_dc[0], d1 = t->cb_dc[1], d2 = t->cb_dc[2];
     for (; run < rend; run += 2) {
-        size_t p0 = run[0], len = run[1];
-        cp_run1(pb, k, t->cb_dc, e->pixels + 3 * p0, len);
-        pb += 3 * len;
-        k += 3 * len;
+        size_t p0 = run[0], len = run[1], i;
+        float *o = e->pixels + 3 * p0;
+        for (i = 0; i < len; i++, pb += 3, k += 3, o += 3) {
+            o[0] = (float)(pb[0] + k[0] * d0);
+            o[1] = (float)(pb[1] + k[1] * d1);
+            o[2] = (float)(pb[2] + k[2] * d2);
+        }
     }
     return 0;
 }
@@ -3762,7 +3801,7 @@ static int cb_room(rtp_tree *t, size_t n)
         return 1;
     rtpi_free(&t->alloc, t->cb_p);
     t->cb_term = 0; /* (what it held is gone) */
-    t->cb_p = (float *)rtpi_malloc_array(&t->alloc, n ? n : 1, 3 * sizeof *t->cb_p);
+    t->cb_p = (double *)rtpi_malloc_array(&t->alloc, n ? n : 1, 3 * sizeof *t->cb_p);
     t->cb_cap = t->cb_p ? n : 0;
     return t->cb_p != NULL;
 }
@@ -3794,7 +3833,7 @@ static int cp_eval(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, con
 {
     size_t nt = 2 + t->scene->nlights, j, nd = 0, nc = 0, changed = 0;
     size_t np = (size_t)t->width * t->height;
-    int i, c, nb = (t->height + PK_ROWS - 1) / PK_ROWS, lost = 0;
+    int i, c, nb = (t->height + PK_ROWS - 1) / PK_ROWS;
     /* the kept image serves only where it is the coefficients' image */
     sparse = sparse && t->last_exact;
     if (!t->ev_valid || !t->ev_cl || !cp_alloc(t, nt) ||
@@ -3881,16 +3920,13 @@ static int cp_eval(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, con
                            cp_apply_band, NULL, NULL);
         st->written_pixels = np;
     }
+    /* (the pixels that lost digits: their samples summed) */
     for (i = 0; i < nthreads; i++) {
-        lost |= e[i].nonfinite;
-        e[i].nonfinite = 0;
+        st->combined_samples += e[i].combined;
+        e[i].combined = 0;
     }
-    if (lost) {
-        /* the full path writes every pixel and S is made anew from it */
-        cp_s_drop(t);
-        st->written_pixels = np;
-        return 0;
-    }
+    if (st->combined_samples > (unsigned long long)t->nx * (unsigned long long)t->ny)
+        st->combined_samples = (unsigned long long)t->nx * (unsigned long long)t->ny;
     return 1;
 }
 

@@ -57,6 +57,44 @@ for mode in "" "--spd"; do
         bad "reeval --region $mode did other work than the region's tree: $(diff "$T/e.work" "$T/f.work" | cut -c 1-400 | head -4)"
     rm -f "$T"/part-*
 done
+# a stream of colour edits re-evaluated region by region equals the
+# frame's stream bit for bit where pixels elsewhere in the frame are bright
+# (a red of 30: the frame checks its pixels for lost digits, a region
+# without such pixels need not).  The chain of one term's edits kept its
+# P' in floats, a rounding the frame's checked sums did not make, and a
+# pixel that lost digits sent the whole frame down the full path, S made
+# anew: frames 3 to 11 of this stream, and frame 3 of the second (a bump
+# re-traced elsewhere in the frame, then two ambient edits), a float step
+# (5.96e-8) apart at 561 of 561 pixels
+$RTP trace $S --size 33x17 --set mat.red.color=30 -o "$T/hdr.rtp" -q
+printf '%s\n' ambient=0.742,0.795,0.942 light.key.color=0.840,0.776,0.249 \
+    light.key.color=0.901,0.113,0.469 light.fill.color=0.381,0.102,0.249 \
+    light.fill.color=0.408,0.182,0.867 background=0.160,0.797,0.139 \
+    background=0.127,0.002,0.871 light.fill.color=0.774,0.960,0.166 \
+    light.fill.color=0.289,0.961,0.539 light.fill.color=0.182,0.969,0.197 \
+    background=0.299,0.361,0.166 light.fill.color=0.264,0.332,0.817 >"$T/cb"
+$RTP trace $S --size 33x17 -o "$T/lo.rtp" -q
+printf '%s\n' mat.glass.kd=0.816 mat.glass.bump=waves \
+    "mat.floor.color=0.749,1.2,0.511 ambient=0.712,0.752,1.14" ambient=0.693,0.156,0.683 >"$T/lo"
+for c in "hdr cb 12 0,0,25,8 25,0,33,8 0,8,33,17" "lo lo 4 0,0,33,3 0,3,10,4 10,3,33,4 0,4,33,17"; do
+    set -- $c
+    tr=$1 ed=$2 nf=$3
+    shift 3
+    $RTP reeval "$T/$tr.rtp" --stream --stale retrace -i "$T/w%d.pfm" -q <"$T/$ed"
+    for r in "$@"; do
+        $RTP reeval "$T/$tr.rtp" --stream --stale retrace --region $r -i "$T/r$r-%d.pfm" -q <"$T/$ed"
+    done
+    i=0
+    while [ $i -lt $nf ]; do
+        args=""
+        for r in "$@"; do args="$args $T/r$r-$i.pfm@${r%%,*},$(echo $r | cut -d, -f2)"; done
+        $RTP merge -i "$T/wm.pfm" --size 33x17 $args
+        cmp -s "$T/w$i.pfm" "$T/wm.pfm" && ok ||
+            bad "$tr stream by regions: frame $i differs: $($RTP diff "$T/w$i.pfm" "$T/wm.pfm")"
+        i=$((i + 1))
+    done
+    rm -f "$T"/r*.pfm "$T"/w*.pfm
+done
 # merging one whole-frame tree rewrites it in today's format: a format-1
 # file (test/golden, written before format 2) comes out as format 2,
 # smaller, and re-evaluates to the same image
