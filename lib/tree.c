@@ -3763,6 +3763,19 @@ static int cb_chunk(void *ctx, int chunk)
     return 0;
 }
 
+#ifdef PK_SSE2
+/* cb_apply's o = P' + K dc for four values (dlo, dhi: the colours of
+   values 0-1 and 2-3), the scalar code's operations. */
+static inline void cb_quad(const double *pb, const float *k, float *o, __m128d dlo, __m128d dhi)
+{
+    const __m128 kf = _mm_loadu_ps(k);
+    const __m128d lo = _mm_add_pd(_mm_loadu_pd(pb), _mm_mul_pd(_mm_cvtps_pd(kf), dlo)),
+                  hi = _mm_add_pd(_mm_loadu_pd(pb + 2),
+                                  _mm_mul_pd(_mm_cvtps_pd(_mm_movehl_ps(kf, kf)), dhi));
+    _mm_storeu_ps(o, _mm_movelh_ps(_mm_cvtpd_ps(lo), _mm_cvtpd_ps(hi)));
+}
+#endif
+
 /* An edit of the chain: P' + K_j (c_j - cS_j) at those pixels. */
 static int cb_apply(void *ctx, int chunk)
 {
@@ -3774,10 +3787,25 @@ static int cb_apply(void *ctx, int chunk)
     const double *pb = t->cb_p + 3 * (size_t)bt[CP_KOFF];
     const float *k = t->cp_k[e->term] + 3 * (size_t)bt[CP_KOFF];
     const double d0 = t->cb_dc[0], d1 = t->cb_dc[1], d2 = t->cb_dc[2];
+#ifdef PK_SSE2
+    const __m128d d01 = _mm_set_pd(d1, d0), d20 = _mm_set_pd(d0, d2), d12 = _mm_set_pd(d2, d1);
+#endif
     for (; run < rend; run += 2) {
         size_t p0 = run[0], len = run[1], i;
         float *o = e->pixels + 3 * p0;
-        for (i = 0; i < len; i++, pb += 3, k += 3, o += 3) {
+        i = 0;
+#ifdef PK_SSE2
+        /* four pixels a step on SSE2's vectors, the same operations
+           value by value (gcc -O2 made the loop below scalar: balls_s4's
+           third ambient edit, a chain's, 6.30 M instructions, 3.22 M
+           this way; with P' in floats and cp_run1's loop, 3.75 M) */
+        for (; i + 4 <= len; i += 4, pb += 12, k += 12, o += 12) {
+            cb_quad(pb, k, o, d01, d20);
+            cb_quad(pb + 4, k + 4, o + 4, d12, d01);
+            cb_quad(pb + 8, k + 8, o + 8, d20, d12);
+        }
+#endif
+        for (; i < len; i++, pb += 3, k += 3, o += 3) {
             o[0] = (float)(pb[0] + k[0] * d0);
             o[1] = (float)(pb[1] + k[1] * d1);
             o[2] = (float)(pb[2] + k[2] * d2);
