@@ -521,7 +521,9 @@ rtp_status rtp_tree_trace(const rtp_tree *tree, int threads, rtp_image **out,
 /** rtp_tree_trace with opt's threads, memory_limit, progress,
  *  progress_user and cancel, as rtp_trace takes them (opt NULL: the
  *  defaults); the size, region, spd, max_depth and min_weight are the
- *  tree's, whatever opt says. */
+ *  tree's, whatever opt says.  Progress and cancel may not use the tree
+ *  being traced, as an evaluation's (rtp_eval_options.progress): those
+ *  calls return RTP_ERR_ARGUMENT until the trace returns. */
 rtp_status rtp_tree_trace_opt(const rtp_tree *tree, const rtp_trace_options *opt,
                               rtp_image **out, rtp_trace_stats *stats, rtp_error *err);
 

@@ -841,6 +841,10 @@ void rtpi_texture_factor(const rtp_scene *s, const rtpi_material *m, uint32_t pr
 /* rtp_tree.busy of a tree rtp_tree_read_summary read: no nodes, no
    sample index (nodes NULL, start NULL), only its scene and counts. */
 #define RTPI_TREE_SUMMARY 3
+/* rtp_tree.busy while rtp_tree_trace traces the tree's scene: its
+   progress or cancel callback must not use the tree (an edit there
+   changed the scene under the rows being traced). */
+#define RTPI_TREE_TRACING 4
 
 /* The ray trees of a whole image, with the scene they were traced in
    (rtp_tree in rtp.h).  Sample k's nodes are nodes[start[k] .. start[k+1]). */
@@ -851,7 +855,8 @@ struct rtp_tree {
                  tree of rtp_tree_eval_file's edit callback, without its
                  ray trees: edits only; RTPI_TREE_SUMMARY: read by
                  rtp_tree_read_summary, without ray trees for good:
-                 edits and its info only */
+                 edits and its info only; RTPI_TREE_TRACING: as 1, for
+                 rtp_tree_trace's callbacks */
     rtp_scene *scene;      /* owned copy: parameters are edited here */
     rtpi_material *mats0;  /* materials as traced (names not kept) */
     rtpi_light *lights0;   /* lights as traced (names not kept) */

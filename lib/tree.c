@@ -250,6 +250,11 @@ rtp_status rtpi_tree_busy(const rtp_tree *t, const char *fn, rtp_error *err)
                           "%s: the tree rtp_tree_eval_file's edit callback is given has "
                           "no ray trees yet: only rtp_tree_set and rtp_tree_add_light may "
                           "be called on it there", fn);
+    if (t->busy == RTPI_TREE_TRACING)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                          "%s: the tree's scene is being traced (called from rtp_tree_trace's "
+                          "progress or cancel callback): call it after rtp_tree_trace returns",
+                          fn);
     return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
                       "%s: the tree is being evaluated (called from the evaluation's "
                       "progress or cancel callback): call it after rtp_tree_eval returns",
@@ -283,7 +288,8 @@ rtp_status rtp_tree_set(rtp_tree *t, const char *key, const char *value,
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_set: NULL argument");
     /* (an edit callback's tree, busy 2, takes edits: rtp_tree_eval_file;
        so does a summary's, which has no trees to make stale) */
-    if (t->busy == 1 && (st = rtpi_tree_busy(t, "rtp_tree_set", err)) != RTP_OK)
+    if ((t->busy == 1 || t->busy == RTPI_TREE_TRACING) &&
+        (st = rtpi_tree_busy(t, "rtp_tree_set", err)) != RTP_OK)
         return st;
     s = t->scene;
     /* Keep the parameters so a refused edit leaves the tree unchanged. */
@@ -424,7 +430,7 @@ rtp_status rtp_tree_add_light(rtp_tree *t, const double pos[3], rtp_error *err)
     rtp_scene *s;
     if (!t || !pos)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_add_light: NULL argument");
-    if (t->busy == 1)
+    if (t->busy == 1 || t->busy == RTPI_TREE_TRACING)
         return rtpi_tree_busy(t, "rtp_tree_add_light", err);
     /* the range a key's value has (rtp_scene_set), so that the position
        rtp_scene_get gives back can be set again */
@@ -5154,6 +5160,8 @@ rtp_status rtp_tree_trace_opt(const rtp_tree *t, const rtp_trace_options *opt, r
                               rtp_trace_stats *stats, rtp_error *err)
 {
     rtp_trace_options o;
+    rtp_tree *mark;
+    rtp_status st;
     if (out)
         *out = NULL;
     if (!t)
@@ -5176,8 +5184,15 @@ rtp_status rtp_tree_trace_opt(const rtp_tree *t, const rtp_trace_options *opt, r
     o.max_depth = t->max_depth;
     o.min_weight = t->min_weight;
     /* (the tree's frame: a builder's corner samples need not be SPD's
-       512x512) */
-    return rtpi_trace_sized(t->scene, &o, out, stats, err);
+       512x512)  The tree is marked busy while its callbacks run, as an
+       evaluation's: the flag is the one field a const tree's call
+       writes (a tree is one thread's at a time, rtp.h; the object is
+       never defined const, the library made it). */
+    mark = (rtp_tree *)(uintptr_t)t;
+    mark->busy = RTPI_TREE_TRACING;
+    st = rtpi_trace_sized(t->scene, &o, out, stats, err);
+    mark->busy = 0;
+    return st;
 }
 
 /* ------------------------------------------------ merge and crop */

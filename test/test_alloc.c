@@ -1274,6 +1274,31 @@ static void test_callback_reentry(void)
         rtp_image_destroy(ref);
         img = ref = NULL;
     }
+    /* The full trace of the tree's scene (rtp_tree_trace_opt, reeval
+       --reference's) takes the caller's callbacks too, and they met no
+       refusal: a light added there grew the scene's lights under the
+       rows being traced (ASan: heap-buffer-overflow in combine_sums),
+       an edit made the rows before and after it two scenes' */
+    for (cb = 0; cb < 2; cb++) {
+        rtp_trace_options to;
+        memset(&r, 0, sizeof r);
+        r.t = t;
+        memset(&to, 0, sizeof to);
+        to.threads = 1;
+        if (cb)
+            to.progress = reenter_progress;
+        else
+            to.cancel = reenter_cb;
+        to.progress_user = &r;
+        CHECK_MSG(rtp_tree_trace_opt(t, &to, &img, NULL, &err) == RTP_OK, "%s", err.message);
+        CHECK_MSG(r.calls > 0 && r.refused == 8 * r.calls, "trace's %s: %d of %d calls refused",
+                  cb ? "progress" : "cancel", r.refused, 8 * r.calls);
+        CHECK(rtp_tree_trace(t, 1, &ref, NULL, &err) == RTP_OK);
+        same_image(img, ref, 0, "traced with refused calls from its callback");
+        rtp_image_destroy(img);
+        rtp_image_destroy(ref);
+        img = ref = NULL;
+    }
     /* and after it, the same calls are taken */
     CHECK(rtp_tree_set(t, "camera.from", "0.5,-6,2.5", &err) == RTP_OK);
     rtp_tree_destroy(t);
