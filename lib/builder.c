@@ -159,10 +159,13 @@ int rtp_builder_hit(rtp_builder *b, int x, int y, int parent, rtp_ray_kind kind,
     /* (kept as floats: a double past the float range would be infinite;
        false for NaN too) */
     for (i = 0; i < 3; i++)
-        if (!(fabs(hit->pos[i]) <= FLT_MAX))
+        if (!(fabs(hit->pos[i]) <= FLT_MAX)) {
+            char g[32]; /* (with '.' whatever the locale) */
+            rtpi_fmt_g(g, sizeof g, 6, hit->pos[i]);
             return -(int)rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                                    "rtp_builder_hit: hit->pos[%zu] %g: not finite as a float",
-                                    i, hit->pos[i]);
+                                    "rtp_builder_hit: hit->pos[%zu] %s: not finite as a float",
+                                    i, g);
+        }
     if (b->count[sample] >= RTPI_MAX_SUBTREE)
         return -(int)rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
                                 "rtp_builder_hit: sample (%d, %d): more than %u hits", x, y,

@@ -5302,8 +5302,10 @@ static const char *setup_diff(const rtp_tree *a, const rtp_tree *b, char *buf, s
         return buf;
     }
     if (a->min_weight != b->min_weight) {
-        snprintf(buf, size, "traced with min_weight %.17g, parts[0] with %.17g", b->min_weight,
-                 a->min_weight);
+        char g[2][32]; /* (with '.' whatever the locale: rtpi_fmt_g) */
+        rtpi_fmt_g(g[0], sizeof g[0], 17, b->min_weight);
+        rtpi_fmt_g(g[1], sizeof g[1], 17, a->min_weight);
+        snprintf(buf, size, "traced with min_weight %s, parts[0] with %s", g[0], g[1]);
         return buf;
     }
     if (a->vis_words != b->vis_words || a->nlights0 != b->nlights0 ||

@@ -6,6 +6,7 @@
 #include "check.h"
 #include "internal.h"
 
+#include <locale.h>
 #include <math.h>
 #include <signal.h>
 #include <stdlib.h>
@@ -653,6 +654,59 @@ static rtp_trace_options half_frame(int bottom)
     o.region[2] = 24;
     o.region[3] = bottom ? 16 : 8;
     return o;
+}
+
+/* The numbers in messages are written with '.' whatever the host's
+   LC_NUMERIC (test_nff: "numbers in error messages too"); two were
+   still printf's: a merge of parts traced with other min_weights said
+   "min_weight 0,01" and a builder's hit past the float range
+   "hit->pos[1] 3,5e+39" under a decimal-comma locale. */
+static void test_message_numbers_whatever_the_locale(void)
+{
+    static const char *const names[] = {"de_DE.UTF-8", "de_DE.utf8", "fr_FR.UTF-8",
+                                        "fr_FR.utf8", "de_DE", "fr_FR"};
+    char saved[128], buf[32];
+    const char *old = setlocale(LC_NUMERIC, NULL);
+    rtp_scene *s;
+    rtp_tree *top = NULL, *bot = NULL, *m = NULL, *parts[2];
+    rtp_builder *b = NULL;
+    rtp_hit_record hit;
+    rtp_trace_options o;
+    rtp_error err;
+    size_t i;
+    snprintf(saved, sizeof saved, "%s", old ? old : "C");
+    for (i = 0; i < sizeof names / sizeof *names; i++)
+        if (setlocale(LC_NUMERIC, names[i]))
+            break;
+    if (i == sizeof names / sizeof *names)
+        SKIP("no locale with a decimal comma installed (de_DE.UTF-8: .ci/run makes one)");
+    snprintf(buf, sizeof buf, "%.2f", 0.01);
+    CHECK(strcmp(buf, "0,01") == 0); /* the locale does what the test needs */
+    s = load("scenes/spheres.nff");
+    if (s) {
+        o = half_frame(0);
+        o.min_weight = 0.01;
+        CHECK(rtp_record(s, &o, &top, NULL, NULL, NULL) == RTP_OK);
+        o = half_frame(1);
+        CHECK(rtp_record(s, &o, &bot, NULL, NULL, NULL) == RTP_OK);
+        parts[0] = bot;
+        parts[1] = top;
+        memset(&err, 0, sizeof err);
+        CHECK(top && bot && rtp_tree_merge(parts, 2, &m, &err) == RTP_ERR_ARGUMENT);
+        CHECK_MSG(strstr(err.message, "min_weight 0.01") != NULL, "%s", err.message);
+        CHECK(rtp_builder_create(s, 2, 2, 0, &b, NULL) == RTP_OK);
+        memset(&hit, 0, sizeof hit);
+        hit.pos[1] = 3.5e39;
+        memset(&err, 0, sizeof err);
+        CHECK(b && rtp_builder_hit(b, 0, 0, RTP_NO_PARENT, RTP_RAY_EYE, &hit, &err) < 0);
+        CHECK_MSG(strstr(err.message, "3.5e+39") != NULL, "%s", err.message);
+    }
+    rtp_builder_destroy(b);
+    rtp_tree_destroy(m);
+    rtp_tree_destroy(top);
+    rtp_tree_destroy(bot);
+    rtp_scene_destroy(s);
+    setlocale(LC_NUMERIC, saved);
 }
 
 static void test_merge_other_setups(void)
@@ -6265,6 +6319,7 @@ int main(void)
 {
     RUN(test_identical_project_scenes);
     RUN(test_file_windows);
+    RUN(test_message_numbers_whatever_the_locale);
     RUN(test_colour_edits);
     RUN(test_near_float_max);
     RUN(test_identical_many_lights);
