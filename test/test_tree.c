@@ -942,6 +942,118 @@ static void test_small_stack_host(void)
 }
 #endif
 
+#ifdef RTP_HAVE_THREADS
+/* rtp.h: "A scene that is not being modified may be used from several
+   threads at once"; each thread's own tree is its own.  Four host
+   threads trace and record one shared scene (an image texture, bumps),
+   read its keys (one in a decimal-comma locale of its own, uselocale),
+   and edit, evaluate (every shadow mode), write and read back their own
+   trees; every image equals the one the main thread made alone.  Under
+   make tsan a lazily filled cache or a static buffer in any of these
+   paths is a race report. */
+typedef struct share_run {
+    const rtp_scene *scene;
+    const rtp_image *ref_trace, *ref_eval;
+    int id, ok, same_trace, same_eval, same_read, keys_ok;
+} share_run;
+
+static rtp_status share_edit(rtp_tree *t, rtp_error *err)
+{
+    rtp_status st = rtp_tree_set(t, "light.0.pos", "1.5,-5,6", err);
+    if (st == RTP_OK)
+        st = rtp_tree_set(t, "mat.ball.ks", "0.5", err);
+    if (st == RTP_OK)
+        st = rtp_tree_set(t, "mat.floor.ior", "1.3", err);
+    return st;
+}
+
+static void *share_main(void *arg)
+{
+    share_run *r = (share_run *)arg;
+    rtp_trace_options o;
+    rtp_eval_options eo;
+    rtp_tree *t = NULL, *back = NULL;
+    rtp_image *img = NULL, *ev = NULL, *ev2 = NULL;
+    char buf[64], file[512];
+    locale_t loc = (locale_t)0;
+    if (r->id == 1 && (loc = newlocale(LC_NUMERIC_MASK, "de_DE.UTF-8", (locale_t)0)) != 0)
+        uselocale(loc);
+    memset(&o, 0, sizeof o);
+    o.width = 24;
+    o.height = 16;
+    o.threads = 1 + r->id % 2;
+    r->keys_ok = rtp_scene_get(r->scene, "light.0.pos", buf, sizeof buf, NULL) == RTP_OK &&
+                 strcmp(buf, "2,-6,5") == 0 &&
+                 rtp_scene_get(r->scene, "mat.floor.kd", buf, sizeof buf, NULL) == RTP_OK &&
+                 strcmp(buf, "0.8") == 0;
+    r->ok = rtp_trace(r->scene, &o, &img, NULL, NULL) == RTP_OK &&
+            rtp_record(r->scene, &o, &t, NULL, NULL, NULL) == RTP_OK &&
+            share_edit(t, NULL) == RTP_OK;
+    r->same_trace = same_image(img, r->ref_trace);
+    memset(&eo, 0, sizeof eo);
+    eo.threads = 1 + r->id % 2;
+    eo.shadows = (rtp_shadow_mode)(r->id == 3 ? RTP_SHADOWS_AUTO : r->id);
+    snprintf(file, sizeof file, "%s/rtp-share-%d-%d.rtp", tmpdir(), (int)getpid(), r->id);
+    r->ok = r->ok && rtp_tree_eval(t, &eo, &ev, NULL, NULL) == RTP_OK &&
+            rtp_tree_write(t, file, NULL, NULL) == RTP_OK &&
+            rtp_tree_read(file, NULL, &back, NULL) == RTP_OK &&
+            rtp_tree_eval(back, &eo, &ev2, NULL, NULL) == RTP_OK;
+    /* (the item buffer is approximate: its image is its own) */
+    r->same_eval = eo.shadows == RTP_SHADOWS_ITEMBUF || same_image(ev, r->ref_eval);
+    r->same_read = same_image(ev, ev2);
+    remove(file);
+    rtp_image_destroy(img);
+    rtp_image_destroy(ev);
+    rtp_image_destroy(ev2);
+    rtp_tree_destroy(t);
+    rtp_tree_destroy(back);
+    if (loc) {
+        uselocale(LC_GLOBAL_LOCALE);
+        freelocale(loc);
+    }
+    return NULL;
+}
+
+static void test_threads_share_scene(void)
+{
+    rtp_scene *s = load("scenes/textured.nff");
+    rtp_tree *t = NULL;
+    rtp_image *ref_trace = NULL, *ref_eval = NULL;
+    rtp_trace_options o;
+    share_run r[4];
+    pthread_t th[4];
+    int i, started[4];
+    if (!s)
+        return;
+    memset(&o, 0, sizeof o);
+    o.width = 24;
+    o.height = 16;
+    CHECK(rtp_trace(s, &o, &ref_trace, NULL, NULL) == RTP_OK);
+    CHECK(rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
+    CHECK(t && share_edit(t, NULL) == RTP_OK && rtp_tree_eval(t, NULL, &ref_eval, NULL, NULL) == RTP_OK);
+    for (i = 0; i < 4; i++) {
+        memset(&r[i], 0, sizeof r[i]);
+        r[i].scene = s;
+        r[i].ref_trace = ref_trace;
+        r[i].ref_eval = ref_eval;
+        r[i].id = i;
+        started[i] = pthread_create(&th[i], NULL, share_main, &r[i]) == 0;
+    }
+    for (i = 0; i < 4; i++) {
+        if (!started[i])
+            continue;
+        pthread_join(th[i], NULL);
+        CHECK_MSG(r[i].ok && r[i].keys_ok && r[i].same_trace && r[i].same_eval && r[i].same_read,
+                  "thread %d: calls %d, keys %d, trace %d, evaluation %d, read back %d", i,
+                  r[i].ok, r[i].keys_ok, r[i].same_trace, r[i].same_eval, r[i].same_read);
+    }
+    rtp_image_destroy(ref_trace);
+    rtp_image_destroy(ref_eval);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+}
+#endif
+
 static void test_max_depth(void)
 {
     static const char mirrors[] =
@@ -6320,6 +6432,9 @@ int main(void)
     RUN(test_identical_project_scenes);
     RUN(test_file_windows);
     RUN(test_message_numbers_whatever_the_locale);
+#ifdef RTP_HAVE_THREADS
+    RUN(test_threads_share_scene);
+#endif
     RUN(test_colour_edits);
     RUN(test_near_float_max);
     RUN(test_identical_many_lights);
