@@ -4072,10 +4072,17 @@ static rtp_status shadow_mode_for(rtp_tree *t, const rtp_eval_options *opt, int 
 /* The options' checks, before anything is done. */
 static rtp_status opts_check(const rtp_eval_options *opt, rtp_error *err)
 {
-    if (opt && ((unsigned)opt->shadows > RTP_SHADOWS_AUTO || opt->shadow_res < 0 ||
-                opt->shadow_res > RTP_MAX_SHADOW_RES))
+    /* (each names its field and value, as the others below) */
+    if (opt && (unsigned)opt->shadows > RTP_SHADOWS_AUTO)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "shadows: unknown mode %d",
+                          (int)opt->shadows);
+    if (opt && opt->shadow_res < 0)
         return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                          "invalid shadow mode or resolution (1..%d)", RTP_MAX_SHADOW_RES);
+                          "shadow_res: %d is negative (0: the default)", opt->shadow_res);
+    if (opt && opt->shadow_res > RTP_MAX_SHADOW_RES)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                          "shadow_res: %d is over %d (RTP_MAX_SHADOW_RES)", opt->shadow_res,
+                          RTP_MAX_SHADOW_RES);
 #ifndef RTP_HAVE_OSMESA
     /* (refused whether or not a light moves: the stub that said so was
        reached only by a moved light decided by the item buffer, and a

@@ -1110,6 +1110,21 @@ static void test_max_depth(void)
         eo.threads = 0;
         eo.memory_limit = -1.0;
         CHECK(rtp_tree_eval(t, &eo, &bad, NULL, &err) == RTP_ERR_ARGUMENT && !bad);
+        /* each names its field and value, as the others do (both had
+           said "invalid shadow mode or resolution (1..8192)", 0 being
+           the default resolution) */
+        eo.memory_limit = 0.0;
+        eo.shadows = (rtp_shadow_mode)9;
+        CHECK(rtp_tree_eval(t, &eo, &bad, NULL, &err) == RTP_ERR_ARGUMENT && !bad);
+        CHECK_MSG(strstr(err.message, "shadows: unknown mode 9") != NULL, "%s", err.message);
+        eo.shadows = RTP_SHADOWS_EXACT;
+        eo.shadow_res = RTP_MAX_SHADOW_RES + 1;
+        CHECK(rtp_tree_eval(t, &eo, &bad, NULL, &err) == RTP_ERR_ARGUMENT && !bad);
+        CHECK_MSG(strstr(err.message, "shadow_res: 8193 is over 8192") != NULL, "%s",
+                  err.message);
+        eo.shadow_res = -2;
+        CHECK(rtp_tree_eval(t, &eo, &bad, NULL, &err) == RTP_ERR_ARGUMENT && !bad);
+        CHECK_MSG(strstr(err.message, "shadow_res: -2 is negative") != NULL, "%s", err.message);
         rtp_tree_get_info(t, &ti);
         CHECK_MSG(ti.nodes >= RTP_MAX_DEPTH, "%llu nodes", ti.nodes);
         CHECK(rtp_tree_write(t, file, NULL, NULL) == RTP_OK);
