@@ -32,6 +32,20 @@
 #if defined(__SANITIZE_ADDRESS__)
 #define RTPI_ASAN 1
 #endif
+/* Built with ThreadSanitizer, the same: it sees mmap and munmap, not
+   mremap (gcc 12's libtsan, clang 14's), so a mapping moved off a range
+   or grown in place over it left the range's old accesses in its shadow,
+   and another thread's block made there later was a data race reported
+   where none is (make tsan: test_trees_outgrow_limit's two workers'
+   trees, every run). */
+#if defined(__has_feature)
+#if __has_feature(thread_sanitizer)
+#define RTPI_TSAN 1
+#endif
+#endif
+#if defined(__SANITIZE_THREAD__)
+#define RTPI_TSAN 1
+#endif
 
 /* ------------------------------------------------------------ allocation */
 

@@ -47,9 +47,10 @@
    words before it, so that free and realloc can tell the kinds apart and
    know the size: the mapping's length (0: malloc's) and the size asked.
    Not under AddressSanitizer, whose checks of the heap the mappings
-   would escape (RTPI_ASAN: internal.h). */
+   would escape (RTPI_ASAN: internal.h), nor under ThreadSanitizer,
+   which does not see mremap (RTPI_TSAN). */
 #if defined(__linux__) && defined(MADV_HUGEPAGE) && defined(MREMAP_MAYMOVE) && \
-    defined(MREMAP_FIXED) && !defined(RTPI_ASAN)
+    defined(MREMAP_FIXED) && !defined(RTPI_ASAN) && !defined(RTPI_TSAN)
 #define RTPI_HUGE_MIN ((size_t)1 << 20)
 #define RTPI_HUGE_PAGE ((size_t)2 << 20)
 /* where a block's data starts: 16 bytes in keep malloc's alignment for a

@@ -1596,12 +1596,12 @@ static void test_default_allocator(void)
    huge pages its whole first 2 MiB, was zeroed as the block was made:
    a material's first kd edit made blocks it never used.)  Where util.c
    makes its own large blocks: Linux (mincore too), not under
-   AddressSanitizer (plain malloc then). */
+   AddressSanitizer nor ThreadSanitizer (plain malloc then). */
 static void test_large_block_untouched(void)
 {
 /* (util.c's condition for its large blocks) */
 #if defined(__linux__) && defined(MADV_HUGEPAGE) && defined(MREMAP_MAYMOVE) && \
-    defined(MREMAP_FIXED) && !defined(RTPI_ASAN)
+    defined(MREMAP_FIXED) && !defined(RTPI_ASAN) && !defined(RTPI_TSAN)
     /* 64 MiB: above glibc's largest mmap threshold (32 MiB), so fresh
        memory whatever this process freed before */
     const size_t size = (size_t)64 << 20, span = (size_t)2 << 20;
