@@ -586,6 +586,36 @@ static int dc_faces_reached(const double (*pts)[3], int n, double lim)
            dc_face_live(hz, mx, my, lim) << 4 | dc_face_live(-lz, mx, my, lim) << 5;
 }
 
+/* dc_cover's way to face f where dc_cover_fast cannot take the bound
+   c->b (made): each polygon clipped to the face's frustum widened to
+   lim, projected and drawn grown by m, or the whole face. */
+static void dc_cover_face(dc_ctx *c, int f, double m, double lim, dc_emit_fn fn, void *user)
+{
+    double uv[DC_MAXV][2];
+    int whole = c->b.full, k;
+    dc_rows_reset(c);
+    if (!whole && c->b.sides)
+        dc_bound_sides(&c->b);
+    for (k = 0; k < c->b.npoly && !whole; k++) {
+        dc_poly loc, clipped;
+        int v, n;
+        loc.n = c->b.poly[k].n;
+        for (v = 0; v < loc.n; v++)
+            dc_local(f, c->b.poly[k].v[v], loc.v[v]);
+        n = dc_clip(&loc, &clipped, lim);
+        if (n < 0 || (n > 0 && !dc_project(&clipped, uv)))
+            whole = 1; /* not convex after rounding, or through the light */
+        else if (n > 0)
+            dc_spans_conservative(c, f, (const double(*)[2])uv, n, m);
+    }
+    if (whole)
+        dc_emit_face(c, f, fn, user);
+    else
+        dc_emit_rows(c, f, fn, user);
+    if (whole || c->jmin <= c->jmax)
+        c->faces |= 1u << f;
+}
+
 /* Emits every cell the primitive's projection widened by `ang` radians
    may touch.  Face coordinates change by at most ~3x an angle change on
    a face (du/dtheta <= 1 + u^2 + v^2), so the polygons are grown by 4 ang
@@ -595,7 +625,6 @@ static void dc_cover(dc_ctx *c, uint32_t prim, double ang, dc_emit_fn fn,
                      void *user)
 {
     double m = 4.0 * ang, lim = 1.0 + m;
-    double uv[DC_MAXV][2];
     int f, k;
     double pts[2 * DC_N][3];
     int npts = 0, live = 0x3f, r;
@@ -620,26 +649,126 @@ static void dc_cover(dc_ctx *c, uint32_t prim, double ang, dc_emit_fn fn,
                 c->faces |= 1u << f;
             continue;
         }
-        if (!whole && c->b.sides)
-            dc_bound_sides(&c->b);
-        for (k = 0; k < c->b.npoly && !whole; k++) {
-            dc_poly loc, clipped;
-            int v, n;
-            loc.n = c->b.poly[k].n;
-            for (v = 0; v < loc.n; v++)
-                dc_local(f, c->b.poly[k].v[v], loc.v[v]);
-            n = dc_clip(&loc, &clipped, lim);
-            if (n < 0 || (n > 0 && !dc_project(&clipped, uv)))
-                whole = 1; /* not convex after rounding, or through the light */
-            else if (n > 0)
-                dc_spans_conservative(c, f, (const double(*)[2])uv, n, m);
+        dc_cover_face(c, f, m, lim, fn, user);
+    }
+}
+
+/* ------------------------------------------------ a triangle's own way */
+
+/* dc_spans_conservative of a triangle drawn whole on face f (dc_cover_tri's
+   fast case), its runs handed to fn: the same rows, crossings and
+   extents, with each vertex's rows (wcoord of v - m and v + m) made once
+   rather than once an edge it ends and again for the triangle's span:
+   rtpi_dc_wcoord is monotone, so the triangle's first and last rows are
+   the least and greatest of its vertices', and an edge's rows those of
+   its lower and upper end, which lie within them (the clamping a no-op);
+   vmin and vmax not found again, there being none to find.  n is 3, the
+   edges' loop unrolled. */
+static RTPI_FORCE_INLINE void dc_spans_tri(dc_ctx *c, int f, const double uv[3][2], double m,
+                                           dc_emit_fn fn, void *user)
+{
+    int res = c->res, j, j0, j1, k, jl[3], jh[3];
+    double u0 = c->u0[f], v0 = c->v0[f], du = c->du[f], dv = c->dv[f];
+    double *ulo = c->ulo, *uhi = c->uhi;
+    const double *blo = c->blo + (size_t)f * (size_t)res, *bhi = c->bhi + (size_t)f * (size_t)res;
+    size_t base;
+    for (k = 0; k < 3; k++) {
+        jl[k] = rtpi_dc_wcoord(uv[k][1] - m, v0, dv, res);
+        jh[k] = rtpi_dc_wcoord(uv[k][1] + m, v0, dv, res);
+    }
+    j0 = jl[0] < jl[1] ? jl[0] : jl[1];
+    j0 = jl[2] < j0 ? jl[2] : j0;
+    j1 = jh[0] > jh[1] ? jh[0] : jh[1];
+    j1 = jh[2] > j1 ? jh[2] : j1;
+    for (j = j0; j <= j1; j++) {
+        ulo[j] = DBL_MAX;
+        uhi[j] = -DBL_MAX;
+    }
+    for (k = 0; k < 3; k++) {
+        const int k1 = k < 2 ? k + 1 : 0;
+        const double px = uv[k][0], py = uv[k][1], qy = uv[k1][1];
+        const double ex = uv[k1][0] - px, ey = qy - py;
+        const int low = py < qy;
+        const double emin = low ? py : qy, emax = low ? qy : py;
+        const int ja = low ? jl[k] : jl[k1], jb = low ? jh[k1] : jh[k];
+        for (j = ja; j <= jb; j++) {
+            double lo = blo[j] - m, hi = bhi[j] + m;
+            double mn = ulo[j], mx = uhi[j];
+            if (py >= lo && py <= hi) {
+                mn = px < mn ? px : mn;
+                mx = px > mx ? px : mx;
+            }
+            if (emin < lo && lo < emax) {
+                double u = px + ex * ((lo - py) / ey);
+                mn = u < mn ? u : mn;
+                mx = u > mx ? u : mx;
+            }
+            if (emin < hi && hi < emax) {
+                double u = px + ex * ((hi - py) / ey);
+                mn = u < mn ? u : mn;
+                mx = u > mx ? u : mx;
+            }
+            ulo[j] = mn;
+            uhi[j] = mx;
         }
-        if (whole)
-            dc_emit_face(c, f, fn, user);
-        else
-            dc_emit_rows(c, f, fn, user);
-        if (whole || c->jmin <= c->jmax)
-            c->faces |= 1u << f;
+    }
+    base = c->fbase[f];
+    for (j = j0; j <= j1; j++)
+        if (ulo[j] <= uhi[j]) {
+            int i0 = rtpi_dc_wcoord(ulo[j] - m, u0, du, res);
+            fn(user, base + (size_t)j * (size_t)res + (size_t)i0,
+               rtpi_dc_wcoord(uhi[j] + m, u0, du, res) - i0 + 1);
+        }
+}
+
+/* dc_cover of triangle prim (prim < ntris): the same cells in the same
+   order, its points taken straight from the scene rather than through
+   its bound's polygon and a copy of it, and the fast case (dc_cover_fast:
+   a triangle is one polygon) drawn by dc_spans_tri; a face the fast way
+   cannot take goes dc_cover's way (dc_cover_face). */
+static RTPI_FORCE_INLINE void dc_cover_tri(dc_ctx *c, uint32_t prim, double ang,
+                                           dc_emit_fn fn, void *user)
+{
+    const rtp_scene *s = c->s;
+    const rtpi_tri *t = &s->tris[prim];
+    double m = 4.0 * ang, lim = 1.0 + m;
+    double pts[3][3];
+    int f, k, live, bound = 0;
+    for (k = 0; k < 3; k++) {
+        rtpi_v3 q = v3_sub(v3_from_f(s->pos + 3 * (size_t)t->v[k]), c->L);
+        pts[k][0] = q.x;
+        pts[k][1] = q.y;
+        pts[k][2] = q.z;
+    }
+    live = dc_faces_reached((const double(*)[3])pts, 3, lim);
+    for (f = 0; f < 6; f++) {
+        double uv[3][2], umin = HUGE_VAL, umax = -HUGE_VAL, vmin = HUGE_VAL, vmax = -HUGE_VAL;
+        if (c->fbase[f] == RTPI_DC_ABSENT || !((live >> f) & 1))
+            continue;
+        for (k = 0; k < 3; k++) {
+            double q[3];
+            dc_local(f, pts[k], q);
+            if (!(q[2] > 0.0 && fabs(q[0]) <= DC_FAST_UV * q[2] && fabs(q[1]) <= DC_FAST_UV * q[2]))
+                break;
+            uv[k][0] = q[0] / q[2];
+            uv[k][1] = q[1] / q[2];
+            umin = uv[k][0] < umin ? uv[k][0] : umin;
+            umax = uv[k][0] > umax ? uv[k][0] : umax;
+            vmin = uv[k][1] < vmin ? uv[k][1] : vmin;
+            vmax = uv[k][1] > vmax ? uv[k][1] : vmax;
+        }
+        if (k < 3) { /* not the fast way: dc_cover's, with its bound */
+            if (!bound) {
+                dc_bound_prim(c, prim, ang);
+                bound = 1;
+            }
+            dc_cover_face(c, f, m, lim, fn, user);
+            continue;
+        }
+        if (umin > lim || umax < -lim || vmin > lim || vmax < -lim)
+            continue; /* wholly off this face */
+        dc_spans_tri(c, f, (const double(*)[2])uv, m, fn, user);
+        c->faces |= 1u << f;
     }
 }
 
@@ -1278,8 +1407,13 @@ static int lb_part(void *ctx, int part)
     lb_fill *lf = &w->parts[part];
     uint32_t i;
     for (i = lf->r0; i < lf->r1 && !lf->oom; i++) {
+        uint32_t prim = w->lb->cand[i].prim;
+        double ang = lb_ang(w->S, w->lb->cand[i].near);
         lf->rank = i;
-        dc_cover(&w->c, w->lb->cand[i].prim, lb_ang(w->S, w->lb->cand[i].near), lb_count, lf);
+        if (prim < w->c.s->ntris) /* (lb_count inlined into it) */
+            dc_cover_tri(&w->c, prim, ang, lb_count, lf);
+        else
+            dc_cover(&w->c, prim, ang, lb_count, lf);
     }
     return lf->oom;
 }
