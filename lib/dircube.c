@@ -556,7 +556,7 @@ static inline int dc_face_live(double zmax, double m1, double m2, double lim)
    the points onto all six faces.  (In scalars, each face's test written
    out: as loops over arrays indexed by dc_next it took 225 instructions
    a triangle, gears 2% of a move.) */
-static int dc_faces_reached(const double (*pts)[3], int n, double lim)
+static RTPI_FORCE_INLINE int dc_faces_reached(const double (*pts)[3], int n, double lim)
 {
     double lx, ly, lz, hx, hy, hz, mx, my, mz;
     int k;
