@@ -1183,20 +1183,26 @@ static inline uint64_t lb_key(double d)
 }
 
 /* The candidates in lb_cmp's order, given in ascending prim order: a
-   stable radix sort on near's 64 bits, 8 at a time, skipping the bytes
+   stable radix sort on near's 64 bits, 11 at a time, skipping the digits
    every key shares (the exponent's high bits mostly).  qsort's calls of
    lb_cmp had been 3-20% of a light buffer's build (gears' thin
-   primitives: 23 M instructions).  -1 when out of memory. */
+   primitives: 23 M instructions).  (Eleven bits rather than eight: six
+   digits, five passes of gears' 36k keys rather than seven of bytes,
+   7.5 -> 5.5 M instructions; the same stable order.)  -1 when out of
+   memory. */
+#define LB_DIGIT 11
+#define LB_DIGITS ((64 + LB_DIGIT - 1) / LB_DIGIT)
 static int lb_sort(rtpi_lb_cand *c, size_t n, const rtp_allocator *a)
 {
-    size_t (*cnt)[256], i;
+    const uint64_t mask = ((uint64_t)1 << LB_DIGIT) - 1;
+    size_t (*cnt)[(size_t)1 << LB_DIGIT], i;
     rtpi_lb_cand *tmp, *src = c, *dst;
     int b;
     if (n < 64) {
         qsort(c, n, sizeof *c, lb_cmp);
         return 0;
     }
-    cnt = (size_t(*)[256])rtpi_calloc_array(a, 8, sizeof *cnt);
+    cnt = (size_t(*)[(size_t)1 << LB_DIGIT])rtpi_calloc_array(a, LB_DIGITS, sizeof *cnt);
     tmp = (rtpi_lb_cand *)rtpi_malloc_array(a, n, sizeof *tmp);
     if (!cnt || !tmp) {
         rtpi_free(a, cnt);
@@ -1205,21 +1211,21 @@ static int lb_sort(rtpi_lb_cand *c, size_t n, const rtp_allocator *a)
     }
     for (i = 0; i < n; i++) {
         uint64_t k = lb_key(c[i].near);
-        for (b = 0; b < 8; b++)
-            cnt[b][(k >> (8 * b)) & 255]++;
+        for (b = 0; b < LB_DIGITS; b++)
+            cnt[b][(k >> (LB_DIGIT * b)) & mask]++;
     }
     dst = tmp;
-    for (b = 0; b < 8; b++) {
+    for (b = 0; b < LB_DIGITS; b++) {
         size_t sum = 0, j;
-        if (cnt[b][(lb_key(src[0].near) >> (8 * b)) & 255] == n)
-            continue; /* one value of this byte: the order holds */
-        for (j = 0; j < 256; j++) {
+        if (cnt[b][(lb_key(src[0].near) >> (LB_DIGIT * b)) & mask] == n)
+            continue; /* one value of this digit: the order holds */
+        for (j = 0; j <= mask; j++) {
             size_t x = cnt[b][j];
             cnt[b][j] = sum;
             sum += x;
         }
         for (i = 0; i < n; i++)
-            dst[cnt[b][(lb_key(src[i].near) >> (8 * b)) & 255]++] = src[i];
+            dst[cnt[b][(lb_key(src[i].near) >> (LB_DIGIT * b)) & mask]++] = src[i];
         dst = src;
         src = src == c ? tmp : c;
     }
