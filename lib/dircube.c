@@ -53,6 +53,7 @@ typedef struct dc_ctx {
     int jmin, jmax;
     double u0[6], v0[6], du[6], dv[6]; /* faces' windows (see dircube.h) */
     size_t fbase[6];
+    unsigned present; /* bit f: fbase[f] != RTPI_DC_ABSENT */
     dc_bounds b;
     double S; /* dc_scale, made when first needed (ib_draw); < 0 before */
     unsigned faces; /* bit f: dc_cover may have emitted cells of face f */
@@ -283,11 +284,15 @@ static void dc_ctx_borders(dc_ctx *c)
 
 static void dc_ctx_window(dc_ctx *c, const rtpi_dc_window *w)
 {
+    int f;
     memcpy(c->u0, w->u0, sizeof c->u0);
     memcpy(c->v0, w->v0, sizeof c->v0);
     memcpy(c->du, w->du, sizeof c->du);
     memcpy(c->dv, w->dv, sizeof c->dv);
     memcpy(c->fbase, w->fbase, sizeof c->fbase);
+    c->present = 0;
+    for (f = 0; f < 6; f++)
+        c->present |= (unsigned)(w->fbase[f] != RTPI_DC_ABSENT) << f;
     dc_ctx_borders(c);
 }
 
@@ -721,6 +726,13 @@ static RTPI_FORCE_INLINE void dc_spans_tri(dc_ctx *c, int f, const double uv[3][
         }
 }
 
+/* The lowest bit set of a face mask (0 for none). */
+static const unsigned char dc_lowest[64] = {
+    0, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0,
+    4, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0,
+    5, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0,
+    4, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0};
+
 /* dc_cover of triangle prim (prim < ntris): the same cells in the same
    order, its points taken straight from the scene rather than through
    its bound's polygon and a copy of it, and the fast case (dc_cover_fast:
@@ -733,18 +745,21 @@ static RTPI_FORCE_INLINE void dc_cover_tri(dc_ctx *c, uint32_t prim, double ang,
     const rtpi_tri *t = &s->tris[prim];
     double m = 4.0 * ang, lim = 1.0 + m;
     double pts[3][3];
-    int f, k, live, bound = 0;
+    int f, k, bound = 0;
+    unsigned todo;
     for (k = 0; k < 3; k++) {
         rtpi_v3 q = v3_sub(v3_from_f(s->pos + 3 * (size_t)t->v[k]), c->L);
         pts[k][0] = q.x;
         pts[k][1] = q.y;
         pts[k][2] = q.z;
     }
-    live = dc_faces_reached((const double(*)[3])pts, 3, lim);
-    for (f = 0; f < 6; f++) {
+    /* the faces present and reached, lowest first: a triangle's one or
+       two rather than a test of each of six (2 M of gears' move) */
+    todo = (unsigned)dc_faces_reached((const double(*)[3])pts, 3, lim) & c->present;
+    while (todo) {
         double uv[3][2], umin = HUGE_VAL, umax = -HUGE_VAL, vmin = HUGE_VAL, vmax = -HUGE_VAL;
-        if (c->fbase[f] == RTPI_DC_ABSENT || !((live >> f) & 1))
-            continue;
+        f = dc_lowest[todo];
+        todo &= todo - 1;
         for (k = 0; k < 3; k++) {
             double q[3];
             dc_local(f, pts[k], q);
@@ -843,6 +858,7 @@ static rtp_status dc_ctx_init(dc_ctx *c, const rtp_scene *s, rtpi_v3 L, int res,
         c->du[f] = c->dv[f] = 2.0 / (double)res;
         c->fbase[f] = (size_t)f * (size_t)res * (size_t)res;
     }
+    c->present = 0x3f;
     c->rlo = (int *)rtpi_malloc_array(a, (size_t)res, sizeof *c->rlo);
     c->rhi = (int *)rtpi_malloc_array(a, (size_t)res, sizeof *c->rhi);
     c->ulo = (double *)rtpi_malloc_array(a, (size_t)res, sizeof *c->ulo);
