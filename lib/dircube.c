@@ -738,17 +738,15 @@ static const unsigned char dc_lowest[64] = {
    its bound's polygon and a copy of it, and the fast case (dc_cover_fast:
    a triangle is one polygon) drawn by dc_spans_tri; a face the fast way
    cannot take goes dc_cover's way (dc_cover_face). */
-static RTPI_FORCE_INLINE void dc_cover_tri(dc_ctx *c, uint32_t prim, double ang,
-                                           dc_emit_fn fn, void *user)
+static RTPI_FORCE_INLINE void dc_cover_tri(dc_ctx *c, uint32_t prim, const rtpi_v3 p[3],
+                                           double ang, dc_emit_fn fn, void *user)
 {
-    const rtp_scene *s = c->s;
-    const rtpi_tri *t = &s->tris[prim];
     double m = 4.0 * ang, lim = 1.0 + m;
     double pts[3][3];
     int f, k, bound = 0;
     unsigned todo;
     for (k = 0; k < 3; k++) {
-        rtpi_v3 q = v3_sub(v3_from_f(s->pos + 3 * (size_t)t->v[k]), c->L);
+        rtpi_v3 q = v3_sub(p[k], c->L);
         pts[k][0] = q.x;
         pts[k][1] = q.y;
         pts[k][2] = q.z;
@@ -1269,6 +1267,33 @@ static int lb_sort(rtpi_lb_cand *c, size_t n, const rtp_allocator *a)
    on that segment to within ~1e-16 of its length, and the watertight
    test's rounding (~1e-15 S) is far below 1e-9 S, so it reports no hit
    either.  n.o - n.p0 is within ~1e-15 S |n| of n.(o - p0). */
+static RTPI_FORCE_INLINE void lb_plane_of(const rtpi_v3 p[3], rtpi_v3 L, double S, double *pl)
+{
+    rtpi_v3 p0 = p[0], n = v3_cross(v3_sub(p[1], p0), v3_sub(p[2], p0));
+    double d = v3_dot(n, p0), sl = v3_dot(n, L) - d, thr = 1e-9 * S * v3_len(n);
+    pl[0] = pl[1] = pl[2] = pl[3] = pl[4] = 0.0;
+    if (!(thr > 0.0 && fabs(sl) > thr && thr < HUGE_VAL))
+        return; /* degenerate, or the light (nearly) in the plane: no test */
+    pl[0] = n.x;
+    pl[1] = n.y;
+    pl[2] = n.z;
+    pl[3] = d;
+    pl[4] = sl > 0.0 ? thr : -thr;
+}
+
+/* A triangle's vertices, as lb_plane and dc_cover_tri take them. */
+static RTPI_FORCE_INLINE void lb_tri_points(const rtp_scene *s, uint32_t prim, rtpi_v3 p[3])
+{
+    const rtpi_tri *t = &s->tris[prim];
+    int k;
+    for (k = 0; k < 3; k++)
+        p[k] = v3_from_f(s->pos + 3 * (size_t)t->v[k]);
+}
+
+/* lb_plane_of of candidate prim; t 0 for other primitives.  (Loading the
+   vertices itself: through lb_tri_points and lb_plane_of, the exact
+   move's planes, rtpi_tri_planes, took 0.8 M more instructions on
+   gears.) */
 static void lb_plane(const rtp_scene *s, uint32_t prim, rtpi_v3 L, double S, double *pl)
 {
     const rtpi_tri *t;
@@ -1440,11 +1465,19 @@ static int lb_part(void *ctx, int part)
     for (i = lf->r0; i < lf->r1 && !lf->oom; i++) {
         uint32_t prim = w->lb->cand[i].prim;
         double ang = lb_ang(w->S, w->lb->cand[i].near);
+        double *pl = w->lb->plane ? w->lb->plane + 5 * (size_t)i : NULL;
         lf->rank = i;
-        if (prim < w->c.s->ntris) /* (lb_count inlined into it) */
-            dc_cover_tri(&w->c, prim, ang, lb_count, lf);
-        else
+        if (prim < w->c.s->ntris) { /* (lb_count inlined into it) */
+            rtpi_v3 p[3];
+            lb_tri_points(w->c.s, prim, p);
+            if (pl)
+                lb_plane_of(p, w->c.L, w->S, pl);
+            dc_cover_tri(&w->c, prim, p, ang, lb_count, lf);
+        } else {
+            if (pl)
+                lb_plane(w->c.s, prim, w->c.L, w->S, pl);
             dc_cover(&w->c, prim, ang, lb_count, lf);
+        }
     }
     return lf->oom;
 }
@@ -1731,8 +1764,8 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
             return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0,
                               "out of memory for the light buffer");
         }
-        for (i = 0; i < nc; i++)
-            lb_plane(s, lb->cand[i].prim, light, S, lb->plane + 5 * i);
+        /* (its entries made in the counting pass, lb_part: a triangle's
+           vertices loaded once for its plane and its cells) */
     }
     /* (only spheres and cones use it, and only where they are more than a
        sixteenth of the scene: a few round shapes among a mesh's
