@@ -660,6 +660,41 @@ static void dc_cover(dc_ctx *c, uint32_t prim, double ang, dc_emit_fn fn,
 
 /* ------------------------------------------------ a triangle's own way */
 
+/* dc_spans_tri's edge from P to Q (face coordinates; jlP, jhP and jlQ,
+   jhQ their rows' wcoord of v - m and v + m): dc_spans_conservative's
+   steps for one edge over its rows, into ulo, uhi. */
+static RTPI_FORCE_INLINE void dc_edge_rows(const double P[2], const double Q[2], int jlP, int jhP,
+                                           int jlQ, int jhQ, double m, const double *blo,
+                                           const double *bhi, double *ulo, double *uhi)
+{
+    const double px = P[0], py = P[1], qy = Q[1];
+    const double ex = Q[0] - px, ey = qy - py;
+    const int low = py < qy;
+    const double emin = low ? py : qy, emax = low ? qy : py;
+    const int ja = low ? jlP : jlQ, jb = low ? jhQ : jhP;
+    int j;
+    for (j = ja; j <= jb; j++) {
+        double lo = blo[j] - m, hi = bhi[j] + m;
+        double mn = ulo[j], mx = uhi[j];
+        if (py >= lo && py <= hi) {
+            mn = px < mn ? px : mn;
+            mx = px > mx ? px : mx;
+        }
+        if (emin < lo && lo < emax) {
+            double u = px + ex * ((lo - py) / ey);
+            mn = u < mn ? u : mn;
+            mx = u > mx ? u : mx;
+        }
+        if (emin < hi && hi < emax) {
+            double u = px + ex * ((hi - py) / ey);
+            mn = u < mn ? u : mn;
+            mx = u > mx ? u : mx;
+        }
+        ulo[j] = mn;
+        uhi[j] = mx;
+    }
+}
+
 /* dc_spans_conservative of a triangle drawn whole on face f (dc_cover_tri's
    fast case), its runs handed to fn: the same rows, crossings and
    extents, with each vertex's rows (wcoord of v - m and v + m) made once
@@ -689,34 +724,11 @@ static RTPI_FORCE_INLINE void dc_spans_tri(dc_ctx *c, int f, const double uv[3][
         ulo[j] = DBL_MAX;
         uhi[j] = -DBL_MAX;
     }
-    for (k = 0; k < 3; k++) {
-        const int k1 = k < 2 ? k + 1 : 0;
-        const double px = uv[k][0], py = uv[k][1], qy = uv[k1][1];
-        const double ex = uv[k1][0] - px, ey = qy - py;
-        const int low = py < qy;
-        const double emin = low ? py : qy, emax = low ? qy : py;
-        const int ja = low ? jl[k] : jl[k1], jb = low ? jh[k1] : jh[k];
-        for (j = ja; j <= jb; j++) {
-            double lo = blo[j] - m, hi = bhi[j] + m;
-            double mn = ulo[j], mx = uhi[j];
-            if (py >= lo && py <= hi) {
-                mn = px < mn ? px : mn;
-                mx = px > mx ? px : mx;
-            }
-            if (emin < lo && lo < emax) {
-                double u = px + ex * ((lo - py) / ey);
-                mn = u < mn ? u : mn;
-                mx = u > mx ? u : mx;
-            }
-            if (emin < hi && hi < emax) {
-                double u = px + ex * ((hi - py) / ey);
-                mn = u < mn ? u : mn;
-                mx = u > mx ? u : mx;
-            }
-            ulo[j] = mn;
-            uhi[j] = mx;
-        }
-    }
+    /* (the three edges written out: each its ends' places and rows
+       known, not looked up from k) */
+    dc_edge_rows(uv[0], uv[1], jl[0], jh[0], jl[1], jh[1], m, blo, bhi, ulo, uhi);
+    dc_edge_rows(uv[1], uv[2], jl[1], jh[1], jl[2], jh[2], m, blo, bhi, ulo, uhi);
+    dc_edge_rows(uv[2], uv[0], jl[2], jh[2], jl[0], jh[0], m, blo, bhi, ulo, uhi);
     base = c->fbase[f];
     for (j = j0; j <= j1; j++)
         if (ulo[j] <= uhi[j]) {
