@@ -707,15 +707,17 @@ static RTPI_FORCE_INLINE void dc_edge_rows(const double P[2], const double Q[2],
 static RTPI_FORCE_INLINE void dc_spans_tri(dc_ctx *c, int f, const double uv[3][2], double m,
                                            dc_emit_fn fn, void *user)
 {
-    int res = c->res, j, j0, j1, k, jl[3], jh[3];
+    int res = c->res, j, j0, j1, jl[3], jh[3];
     double u0 = c->u0[f], v0 = c->v0[f], du = c->du[f], dv = c->dv[f];
     double *ulo = c->ulo, *uhi = c->uhi;
     const double *blo = c->blo + (size_t)f * (size_t)res, *bhi = c->bhi + (size_t)f * (size_t)res;
     size_t base;
-    for (k = 0; k < 3; k++) {
-        jl[k] = rtpi_dc_wcoord(uv[k][1] - m, v0, dv, res);
-        jh[k] = rtpi_dc_wcoord(uv[k][1] + m, v0, dv, res);
-    }
+    jl[0] = rtpi_dc_wcoord(uv[0][1] - m, v0, dv, res);
+    jh[0] = rtpi_dc_wcoord(uv[0][1] + m, v0, dv, res);
+    jl[1] = rtpi_dc_wcoord(uv[1][1] - m, v0, dv, res);
+    jh[1] = rtpi_dc_wcoord(uv[1][1] + m, v0, dv, res);
+    jl[2] = rtpi_dc_wcoord(uv[2][1] - m, v0, dv, res);
+    jh[2] = rtpi_dc_wcoord(uv[2][1] + m, v0, dv, res);
     j0 = jl[0] < jl[1] ? jl[0] : jl[1];
     j0 = jl[2] < j0 ? jl[2] : j0;
     j1 = jh[0] > jh[1] ? jh[0] : jh[1];
@@ -736,6 +738,19 @@ static RTPI_FORCE_INLINE void dc_spans_tri(dc_ctx *c, int f, const double uv[3][
             fn(user, base + (size_t)j * (size_t)res + (size_t)i0,
                rtpi_dc_wcoord(uhi[j] + m, u0, du, res) - i0 + 1);
         }
+}
+
+/* dc_cover_fast's test and projection of one point p (light-relative)
+   on face f: 0 if it is not well in front of the face. */
+static RTPI_FORCE_INLINE int dc_fast_uv(int f, const double p[3], double out[2])
+{
+    double q[3];
+    dc_local(f, p, q);
+    if (!(q[2] > 0.0 && fabs(q[0]) <= DC_FAST_UV * q[2] && fabs(q[1]) <= DC_FAST_UV * q[2]))
+        return 0;
+    out[0] = q[0] / q[2];
+    out[1] = q[1] / q[2];
+    return 1;
 }
 
 /* The lowest bit set of a face mask (0 for none). */
@@ -770,25 +785,21 @@ static RTPI_FORCE_INLINE void dc_cover_tri(dc_ctx *c, uint32_t prim, const rtpi_
         double uv[3][2], umin = HUGE_VAL, umax = -HUGE_VAL, vmin = HUGE_VAL, vmax = -HUGE_VAL;
         f = dc_lowest[todo];
         todo &= todo - 1;
-        for (k = 0; k < 3; k++) {
-            double q[3];
-            dc_local(f, pts[k], q);
-            if (!(q[2] > 0.0 && fabs(q[0]) <= DC_FAST_UV * q[2] && fabs(q[1]) <= DC_FAST_UV * q[2]))
-                break;
-            uv[k][0] = q[0] / q[2];
-            uv[k][1] = q[1] / q[2];
-            umin = uv[k][0] < umin ? uv[k][0] : umin;
-            umax = uv[k][0] > umax ? uv[k][0] : umax;
-            vmin = uv[k][1] < vmin ? uv[k][1] : vmin;
-            vmax = uv[k][1] > vmax ? uv[k][1] : vmax;
-        }
-        if (k < 3) { /* not the fast way: dc_cover's, with its bound */
+        if (!(dc_fast_uv(f, pts[0], uv[0]) && dc_fast_uv(f, pts[1], uv[1]) &&
+              dc_fast_uv(f, pts[2], uv[2]))) { /* not the fast way: dc_cover's, with its bound */
             if (!bound) {
                 dc_bound_prim(c, prim, ang);
                 bound = 1;
             }
             dc_cover_face(c, f, m, lim, fn, user);
             continue;
+        }
+        /* (the points in turn, as dc_cover_fast takes them) */
+        for (k = 0; k < 3; k++) {
+            umin = uv[k][0] < umin ? uv[k][0] : umin;
+            umax = uv[k][0] > umax ? uv[k][0] : umax;
+            vmin = uv[k][1] < vmin ? uv[k][1] : vmin;
+            vmax = uv[k][1] > vmax ? uv[k][1] : vmax;
         }
         if (umin > lim || umax < -lim || vmin > lim || vmax < -lim)
             continue; /* wholly off this face */
