@@ -770,14 +770,11 @@ static RTPI_FORCE_INLINE void dc_cover_tri(dc_ctx *c, uint32_t prim, const rtpi_
 {
     double m = 4.0 * ang, lim = 1.0 + m;
     double pts[3][3];
-    int f, k, bound = 0;
+    int f, bound = 0;
     unsigned todo;
-    for (k = 0; k < 3; k++) {
-        rtpi_v3 q = v3_sub(p[k], c->L);
-        pts[k][0] = q.x;
-        pts[k][1] = q.y;
-        pts[k][2] = q.z;
-    }
+    dc_put(pts[0], v3_sub(p[0], c->L));
+    dc_put(pts[1], v3_sub(p[1], c->L));
+    dc_put(pts[2], v3_sub(p[2], c->L));
     /* the faces present and reached, lowest first: a triangle's one or
        two rather than a test of each of six (2 M of gears' move) */
     todo = (unsigned)dc_faces_reached((const double(*)[3])pts, 3, lim) & c->present;
@@ -795,12 +792,18 @@ static RTPI_FORCE_INLINE void dc_cover_tri(dc_ctx *c, uint32_t prim, const rtpi_
             continue;
         }
         /* (the points in turn, as dc_cover_fast takes them) */
-        for (k = 0; k < 3; k++) {
-            umin = uv[k][0] < umin ? uv[k][0] : umin;
-            umax = uv[k][0] > umax ? uv[k][0] : umax;
-            vmin = uv[k][1] < vmin ? uv[k][1] : vmin;
-            vmax = uv[k][1] > vmax ? uv[k][1] : vmax;
-        }
+        umin = uv[0][0] < umin ? uv[0][0] : umin;
+        umax = uv[0][0] > umax ? uv[0][0] : umax;
+        vmin = uv[0][1] < vmin ? uv[0][1] : vmin;
+        vmax = uv[0][1] > vmax ? uv[0][1] : vmax;
+        umin = uv[1][0] < umin ? uv[1][0] : umin;
+        umax = uv[1][0] > umax ? uv[1][0] : umax;
+        vmin = uv[1][1] < vmin ? uv[1][1] : vmin;
+        vmax = uv[1][1] > vmax ? uv[1][1] : vmax;
+        umin = uv[2][0] < umin ? uv[2][0] : umin;
+        umax = uv[2][0] > umax ? uv[2][0] : umax;
+        vmin = uv[2][1] < vmin ? uv[2][1] : vmin;
+        vmax = uv[2][1] > vmax ? uv[2][1] : vmax;
         if (umin > lim || umax < -lim || vmin > lim || vmax < -lim)
             continue; /* wholly off this face */
         dc_spans_tri(c, f, (const double(*)[2])uv, m, fn, user);
