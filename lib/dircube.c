@@ -160,6 +160,39 @@ static void dc_row_add(dc_ctx *c, int j, int i0, int i1)
         c->rhi[j] = i1;
 }
 
+/* An edge from (px, py), (ex, ey) to its other end, over rows ja..jb
+   (emin, emax: its v range): its extent within each row's slab widened
+   by m, from its start where the slab holds it and its crossings of the
+   slab's borders strictly inside its range, gathered into ulo, uhi (the
+   edge rows' slabs reach to infinity: dc_ctx_borders). */
+static RTPI_FORCE_INLINE void dc_edge_span(double px, double py, double ex, double ey,
+                                           double emin, double emax, int ja, int jb, double m,
+                                           const double *blo, const double *bhi, double *ulo,
+                                           double *uhi)
+{
+    int j;
+    for (j = ja; j <= jb; j++) {
+        double lo = blo[j] - m, hi = bhi[j] + m;
+        double mn = ulo[j], mx = uhi[j];
+        if (py >= lo && py <= hi) {
+            mn = px < mn ? px : mn;
+            mx = px > mx ? px : mx;
+        }
+        if (emin < lo && lo < emax) {
+            double u = px + ex * ((lo - py) / ey);
+            mn = u < mn ? u : mn;
+            mx = u > mx ? u : mx;
+        }
+        if (emin < hi && hi < emax) {
+            double u = px + ex * ((hi - py) / ey);
+            mn = u < mn ? u : mn;
+            mx = u > mx ? u : mx;
+        }
+        ulo[j] = mn;
+        uhi[j] = mx;
+    }
+}
+
 /* Adds the cells that the convex polygon uv[0..n) grown by m (in face
    coordinates, both axes) touches: per row, the polygon's extent within
    the row's slab widened by m, found from the vertices inside the slab
@@ -202,27 +235,7 @@ static void dc_spans_conservative(dc_ctx *c, int f, const double uv[][2], int n,
            row 0 as vmin's would) */
         ja = ja < j0 ? j0 : ja;
         jb = jb > j1 ? j1 : jb;
-        for (j = ja; j <= jb; j++) {
-            /* (the edge rows' slabs reach to infinity: dc_ctx_borders) */
-            double lo = blo[j] - m, hi = bhi[j] + m;
-            double mn = ulo[j], mx = uhi[j];
-            if (py >= lo && py <= hi) {
-                mn = px < mn ? px : mn;
-                mx = px > mx ? px : mx;
-            }
-            if (emin < lo && lo < emax) {
-                double u = px + ex * ((lo - py) / ey);
-                mn = u < mn ? u : mn;
-                mx = u > mx ? u : mx;
-            }
-            if (emin < hi && hi < emax) {
-                double u = px + ex * ((hi - py) / ey);
-                mn = u < mn ? u : mn;
-                mx = u > mx ? u : mx;
-            }
-            ulo[j] = mn;
-            uhi[j] = mx;
-        }
+        dc_edge_span(px, py, ex, ey, emin, emax, ja, jb, m, blo, bhi, ulo, uhi);
     }
     if (c->emit_fn) {
         /* One polygon: its rows are the runs, in the order dc_emit_rows
@@ -671,28 +684,8 @@ static RTPI_FORCE_INLINE void dc_edge_rows(const double P[2], const double Q[2],
     const double ex = Q[0] - px, ey = qy - py;
     const int low = py < qy;
     const double emin = low ? py : qy, emax = low ? qy : py;
-    const int ja = low ? jlP : jlQ, jb = low ? jhQ : jhP;
-    int j;
-    for (j = ja; j <= jb; j++) {
-        double lo = blo[j] - m, hi = bhi[j] + m;
-        double mn = ulo[j], mx = uhi[j];
-        if (py >= lo && py <= hi) {
-            mn = px < mn ? px : mn;
-            mx = px > mx ? px : mx;
-        }
-        if (emin < lo && lo < emax) {
-            double u = px + ex * ((lo - py) / ey);
-            mn = u < mn ? u : mn;
-            mx = u > mx ? u : mx;
-        }
-        if (emin < hi && hi < emax) {
-            double u = px + ex * ((hi - py) / ey);
-            mn = u < mn ? u : mn;
-            mx = u > mx ? u : mx;
-        }
-        ulo[j] = mn;
-        uhi[j] = mx;
-    }
+    dc_edge_span(px, py, ex, ey, emin, emax, low ? jlP : jlQ, low ? jhQ : jhP, m, blo, bhi, ulo,
+                 uhi);
 }
 
 /* dc_spans_conservative of a triangle drawn whole on face f (dc_cover_tri's
