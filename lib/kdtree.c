@@ -1275,6 +1275,7 @@ static RTPI_FORCE_INLINE uint32_t kd_occluder(const rtpi_kdtree *kd, const rtpi_
     double t0, t1, tmin = ray->tmin, tmax = ray->tmax;
     const double dd = v3_dot(ray->d, ray->d); /* (spheres' and cones' a) */
     const rtpi_v3 dn = v3_mul(ray->d, -1.0);   /* (the cones' test, as the light buffer's) */
+    const double ld = sqrt(dd), ts = fabs(tmin) + fabs(tmax); /* (rtpi_cylinder_far's) */
     /* The cones this ray has tested, by their number's last 3 bits (all
        missed: a hit ends the walk).  A long thin cone lies in many
        leaves along a ray, and 29% of rings' shadow rays' cone tests were
@@ -1349,6 +1350,7 @@ static RTPI_FORCE_INLINE uint32_t kd_occluder(const rtpi_kdtree *kd, const rtpi_
                         continue;
                     }
                     if (rtpi_cone_near(cf, ray, dd, &tc, &o2) &&
+                        !(cf->ra == cf->rb && rtpi_cylinder_far(cf, ray, tc, o2, ld, ts)) &&
                         rtpi_cone_t(cf, ray, dd, tc, o2, &t))
                         return prim;
                     seen[prim & 7u] = prim;
