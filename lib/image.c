@@ -47,7 +47,9 @@ int rtpi_image_size_ok(int width, int height)
     if (width <= 0 || height <= 0 || width > RTPI_IMAGE_MAX_DIM ||
         height > RTPI_IMAGE_MAX_DIM)
         return 0;
-    if ((unsigned long)width * (unsigned long)height > RTPI_IMAGE_MAX_PIXELS)
+    /* (in 64 bits: with a 32-bit unsigned long, ILP32 and Windows' LLP64,
+       2^20 x 2^12 wrapped to 0 and passed) */
+    if ((unsigned long long)width * (unsigned long long)height > RTPI_IMAGE_MAX_PIXELS)
         return 0;
     /* Holds by the limits above; kept for 16-bit size_t paranoia. */
     return (size_t)width * (size_t)height <= (size_t)-1 / (3 * sizeof(float));

@@ -313,6 +313,17 @@ static void test_create(void)
     CHECK(rtpi_image_size_ok(16384, 8192));
     CHECK(!rtpi_image_size_ok(16384, 8193));
     CHECK(!rtpi_image_size_ok(0, 1) && !rtpi_image_size_ok(1, -3));
+    /* The limits' edges, and products that pass 2^32 (which a 32-bit
+       unsigned long, ILP32 or LLP64, wrapped: 2^20 x 2^12 to 0, 2^20 x
+       (2^12 + 1) to 2^20, both then allowed) */
+    CHECK(rtpi_image_size_ok(1 << 20, 1) && rtpi_image_size_ok(1, 1 << 20));
+    CHECK(rtpi_image_size_ok(1 << 20, 1 << 7) && rtpi_image_size_ok(1 << 7, 1 << 20));
+    CHECK(!rtpi_image_size_ok(1 << 20, (1 << 7) + 1));
+    CHECK(rtpi_image_size_ok(11585, 11585) && !rtpi_image_size_ok(11586, 11586));
+    CHECK(!rtpi_image_size_ok(1 << 20, 1 << 12) && !rtpi_image_size_ok(1 << 12, 1 << 20));
+    CHECK(!rtpi_image_size_ok(1 << 20, (1 << 12) + 1));
+    CHECK(!rtpi_image_size_ok(1 << 20, 1 << 20) && !rtpi_image_size_ok(65536, 65536));
+    CHECK(rtp_image_create(1 << 20, 1 << 12, NULL, &img, NULL) == RTP_ERR_LIMIT && !img);
 
     CHECK(rtp_image_create(7, 3, &a, &img, NULL) == RTP_OK);
     CHECK(img && img->width == 7 && img->height == 3 && img->pixels);
