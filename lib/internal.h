@@ -1185,6 +1185,11 @@ int rtpi_stopper_poll(rtpi_stopper *st, int is_main, double done);
    more than a host's thread can be counted on to have (0 otherwise). */
 size_t rtpi_trace_stack(int max_depth);
 
+/* 1 when trees of nnodes nodes fit the material lists' 32-bit node
+   indices (tree.c; else evaluation takes the full path, without caches,
+   and edits that trace samples again are refused). */
+int rtpi_material_lists_fit(size_t nnodes);
+
 /* ----------------------------------------------------------------- images */
 
 /* Allocation-size check shared by everything that makes w*h*3 floats. */

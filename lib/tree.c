@@ -2260,6 +2260,16 @@ static void free_material_lists(rtp_tree *t)
     t->mat_start = t->mat_samples = t->mat_nstart = t->mat_nodes = NULL;
 }
 
+/* Do trees of nnodes nodes fit the material lists?  They hold node
+   indices and their per-material offsets in 32 bits (mat_nodes,
+   mat_nstart, mat_start): at 2^32 nodes (96 GiB of trees, which a trace
+   or a merge under a large enough memory limit makes; a tree file holds
+   at most 2^31 - 1) they wrapped, and the lists named other nodes. */
+int rtpi_material_lists_fit(size_t nnodes)
+{
+    return (uint64_t)nnodes <= 0xffffffffu;
+}
+
 /* For each material, the samples whose trees contain it and its nodes
    (built once).  mk (may be NULL): room for a uint16_t a node, where the
    first pass keeps each node's material for the second (up to 65536
@@ -2644,6 +2654,11 @@ static rtp_status retrace_edited(rtp_tree *t, int threads, int stale, double lim
         any |= needs_retrace(t, m, stale);
     if (!any && !camera)
         return RTP_OK;
+    if (!camera && !rtpi_material_lists_fit(t->nnodes))
+        return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
+                          "%zu nodes: samples to trace again are found by lists of at most "
+                          "2^32 - 1 nodes; trace the scene again instead",
+                          t->nnodes);
     if (!camera && !t->mat_start && build_material_lists(t, NULL) != RTP_OK)
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
     mark = (unsigned char *)rtpi_calloc_array(&t->alloc, ns + 1, 1);
@@ -4310,7 +4325,8 @@ static rtp_status eval_body(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
               ev_cache_bytes(t, nl, ns) <=
                   fmin(EV_CACHE_BYTES, opt && opt->memory_limit > 0.0 ? opt->memory_limit
                                                                       : RTPI_MEMORY_LIMIT)) &&
-             !(opt && opt->no_cache);
+             !(opt && opt->no_cache) &&
+             rtpi_material_lists_fit(t->nnodes); /* (else the full path, which needs none) */
     /* (caches made for another count of lights go, whether or not they
        hold: an evaluation that failed after making them, out of memory,
        left ev_valid 0 and them sized for its lights, and a light added

@@ -6442,8 +6442,23 @@ static void test_summary_same_errors(void)
     summary_files_remove(files, nff);
 }
 
+/* The material lists index nodes in 32 bits: trees of 2^32 nodes or more
+   (96 GiB: too big to make here) take the full path, not lists whose
+   indices wrapped. */
+static void test_material_lists_bound(void)
+{
+    CHECK(rtpi_material_lists_fit(0) && rtpi_material_lists_fit(1));
+    CHECK(rtpi_material_lists_fit((size_t)0x7fffffffu));
+    CHECK(rtpi_material_lists_fit((size_t)0xffffffffu));
+    if (sizeof(size_t) > 4) {
+        CHECK(!rtpi_material_lists_fit((size_t)((uint64_t)1 << 32)));
+        CHECK(!rtpi_material_lists_fit((size_t)-1));
+    }
+}
+
 int main(void)
 {
+    RUN(test_material_lists_bound);
     RUN(test_identical_project_scenes);
     RUN(test_file_windows);
     RUN(test_message_numbers_whatever_the_locale);
