@@ -1287,9 +1287,10 @@ static int lb_sort(rtpi_lb_cand **cp, size_t n, const rtp_allocator *a)
    on that segment to within ~1e-16 of its length, and the watertight
    test's rounding (~1e-15 S) is far below 1e-9 S, so it reports no hit
    either.  n.o - n.p0 is within ~1e-15 S |n| of n.(o - p0). */
-static RTPI_FORCE_INLINE void lb_plane_of(const rtpi_v3 p[3], rtpi_v3 L, double S, double *pl)
+static RTPI_FORCE_INLINE void lb_plane_at(rtpi_v3 p0, rtpi_v3 p1, rtpi_v3 p2, rtpi_v3 L, double S,
+                                          double *pl)
 {
-    rtpi_v3 p0 = p[0], n = v3_cross(v3_sub(p[1], p0), v3_sub(p[2], p0));
+    rtpi_v3 n = v3_cross(v3_sub(p1, p0), v3_sub(p2, p0));
     double d = v3_dot(n, p0), sl = v3_dot(n, L) - d, thr = 1e-9 * S * v3_len(n);
     pl[0] = pl[1] = pl[2] = pl[3] = pl[4] = 0.0;
     if (!(thr > 0.0 && fabs(sl) > thr && thr < HUGE_VAL))
@@ -1299,6 +1300,12 @@ static RTPI_FORCE_INLINE void lb_plane_of(const rtpi_v3 p[3], rtpi_v3 L, double 
     pl[2] = n.z;
     pl[3] = d;
     pl[4] = sl > 0.0 ? thr : -thr;
+}
+
+/* lb_plane_at of the triangle p[0..2]. */
+static RTPI_FORCE_INLINE void lb_plane_of(const rtpi_v3 p[3], rtpi_v3 L, double S, double *pl)
+{
+    lb_plane_at(p[0], p[1], p[2], L, S, pl);
 }
 
 /* A triangle's vertices, as lb_plane and dc_cover_tri take them. */
@@ -1317,25 +1324,13 @@ static RTPI_FORCE_INLINE void lb_tri_points(const rtp_scene *s, uint32_t prim, r
 static void lb_plane(const rtp_scene *s, uint32_t prim, rtpi_v3 L, double S, double *pl)
 {
     const rtpi_tri *t;
-    rtpi_v3 p0, n;
-    double d, sl, thr;
-    pl[0] = pl[1] = pl[2] = pl[3] = pl[4] = 0.0;
-    if (prim >= s->ntris)
+    if (prim >= s->ntris) {
+        pl[0] = pl[1] = pl[2] = pl[3] = pl[4] = 0.0;
         return;
+    }
     t = &s->tris[prim];
-    p0 = v3_from_f(s->pos + 3 * (size_t)t->v[0]);
-    n = v3_cross(v3_sub(v3_from_f(s->pos + 3 * (size_t)t->v[1]), p0),
-                 v3_sub(v3_from_f(s->pos + 3 * (size_t)t->v[2]), p0));
-    d = v3_dot(n, p0);
-    sl = v3_dot(n, L) - d;
-    thr = 1e-9 * S * v3_len(n);
-    if (!(thr > 0.0 && fabs(sl) > thr && thr < HUGE_VAL))
-        return; /* degenerate, or the light (nearly) in the plane: no test */
-    pl[0] = n.x;
-    pl[1] = n.y;
-    pl[2] = n.z;
-    pl[3] = d;
-    pl[4] = sl > 0.0 ? thr : -thr;
+    lb_plane_at(v3_from_f(s->pos + 3 * (size_t)t->v[0]), v3_from_f(s->pos + 3 * (size_t)t->v[1]),
+                v3_from_f(s->pos + 3 * (size_t)t->v[2]), L, S, pl);
 }
 
 static double lb_ang(double S, double near)
