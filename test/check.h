@@ -7,6 +7,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <locale.h>
 
 #if defined(__GNUC__)
 #define CHECK_UNUSED __attribute__((unused))
@@ -75,6 +76,24 @@ CHECK_UNUSED static int check_report(void)
 #define CHECK_SPD_SCENES 7
 CHECK_UNUSED static const char *const check_spd_scenes[CHECK_SPD_SCENES] = {
     "balls_s4", "gears_s4", "mount_s6", "rings_s7", "teapot_s12", "tetra_s6", "tree_s11"};
+
+/* Sets LC_NUMERIC to a locale whose decimal point is ',' (a host
+   program's, for the tests that numbers read and print with '.'
+   whatever it is), the one before into saved; 0 where none is
+   installed (.ci/run makes de_DE.UTF-8).  setlocale(LC_NUMERIC, saved)
+   puts it back. */
+CHECK_UNUSED static inline int check_comma_locale(char *saved, size_t n)
+{
+    static const char *const names[] = {"de_DE.UTF-8", "de_DE.utf8", "fr_FR.UTF-8",
+                                        "fr_FR.utf8", "de_DE", "fr_FR"};
+    const char *old = setlocale(LC_NUMERIC, NULL);
+    size_t i;
+    snprintf(saved, n, "%s", old ? old : "C");
+    for (i = 0; i < sizeof names / sizeof *names; i++)
+        if (setlocale(LC_NUMERIC, names[i]))
+            return 1;
+    return 0;
+}
 
 /* The folder ../shared/scenes when present, else NULL (tests skip). */
 CHECK_UNUSED static inline const char *check_shared_scenes(void)

@@ -1074,21 +1074,13 @@ static void test_spd_gears_triangulation(void)
    locale: "0.5" was a parse error and get wrote "1,0,5,0". */
 static void test_numbers_whatever_the_locale(void)
 {
-    static const char *const names[] = {"de_DE.UTF-8", "de_DE.utf8", "fr_FR.UTF-8",
-                                        "fr_FR.utf8", "de_DE", "fr_FR"};
     static const char text[] = "v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 40.5\n"
                                "hither 0.25\nresolution 8 8\nl 1.5 -2.25 3e1\n"
                                "f 1 0.5 0 0.75 0.125 20.5 0 1.5\ns 0 0 0 .5\n";
     rtp_scene *sc = NULL;
     rtp_error err;
     char buf[128], saved[128];
-    const char *old = setlocale(LC_NUMERIC, NULL);
-    size_t i;
-    snprintf(saved, sizeof saved, "%s", old ? old : "C");
-    for (i = 0; i < sizeof names / sizeof *names; i++)
-        if (setlocale(LC_NUMERIC, names[i]))
-            break;
-    if (i == sizeof names / sizeof *names)
+    if (!check_comma_locale(saved, sizeof saved))
         SKIP("no locale with a decimal comma installed (de_DE.UTF-8: .ci/run makes one)");
     snprintf(buf, sizeof buf, "%.1f", 1.5);
     CHECK(strcmp(buf, "1,5") == 0); /* the locale does what the test needs */

@@ -663,22 +663,14 @@ static rtp_trace_options half_frame(int bottom)
    "hit->pos[1] 3,5e+39" under a decimal-comma locale. */
 static void test_message_numbers_whatever_the_locale(void)
 {
-    static const char *const names[] = {"de_DE.UTF-8", "de_DE.utf8", "fr_FR.UTF-8",
-                                        "fr_FR.utf8", "de_DE", "fr_FR"};
     char saved[128], buf[32];
-    const char *old = setlocale(LC_NUMERIC, NULL);
     rtp_scene *s;
     rtp_tree *top = NULL, *bot = NULL, *m = NULL, *parts[2];
     rtp_builder *b = NULL;
     rtp_hit_record hit;
     rtp_trace_options o;
     rtp_error err;
-    size_t i;
-    snprintf(saved, sizeof saved, "%s", old ? old : "C");
-    for (i = 0; i < sizeof names / sizeof *names; i++)
-        if (setlocale(LC_NUMERIC, names[i]))
-            break;
-    if (i == sizeof names / sizeof *names)
+    if (!check_comma_locale(saved, sizeof saved))
         SKIP("no locale with a decimal comma installed (de_DE.UTF-8: .ci/run makes one)");
     snprintf(buf, sizeof buf, "%.2f", 0.01);
     CHECK(strcmp(buf, "0,01") == 0); /* the locale does what the test needs */
