@@ -243,6 +243,15 @@ static const char *opt_value(int argc, char **argv, int *i, const char *name)
     return argv[++*i];
 }
 
+/* An argument that is an option: '-' and more ('-' alone is stdin or
+   stdout).  After '--' nothing is (names_only in each command's loop), so
+   a file whose name begins with '-' is named as `-- -x.nff`, as POSIX
+   utilities take it. */
+static int is_option_like(const char *arg)
+{
+    return arg[0] == '-' && arg[1] != '\0';
+}
+
 static int is_opt(const char *arg, const char *name)
 {
     size_t n = strlen(name);
@@ -1457,7 +1466,7 @@ static int cmd_trace(int argc, char **argv)
     rtp_image *img = NULL;
     rtp_error err;
     progress prog;
-    int i, rc = 1, nsets = 0, nparams = 0, c;
+    int i, rc = 1, nsets = 0, nparams = 0, c, names_only = 0;
     const char **sets, **params;
     double t0, t_load, t_trace, t_write;
 
@@ -1472,7 +1481,17 @@ static int cmd_trace(int argc, char **argv)
     params = sets + argc + 1;
     for (i = 0; i < argc; i++) {
         const char *a = argv[i], *v;
-        if (strcmp(a, "-h") == 0 || strcmp(a, "--help") == 0) {
+        if (!names_only && strcmp(a, "--") == 0) {
+            names_only = 1;
+            continue;
+        }
+        if (names_only || !is_option_like(a)) {
+            if (scene_path) {
+                msg("trace: more than one scene ('%s' and '%s')", scene_path, a);
+                goto usage;
+            }
+            scene_path = a;
+        } else if (strcmp(a, "-h") == 0 || strcmp(a, "--help") == 0) {
             fputs(trace_help, stdout);
             free(sets);
             return 0;
@@ -1523,13 +1542,8 @@ static int cmd_trace(int argc, char **argv)
                 msg("--min-weight: expected a number >= 0");
                 goto usage;
             }
-        } else if (a[0] == '-' && a[1] != '\0') {
-            msg("trace: unknown option '%s'", a);
-            goto usage;
-        } else if (!scene_path) {
-            scene_path = a;
         } else {
-            msg("trace: more than one scene ('%s' and '%s')", scene_path, a);
+            msg("trace: unknown option '%s'", a);
             goto usage;
         }
     }
@@ -1751,7 +1765,7 @@ static int cmd_diff(int argc, char **argv)
     rtp_image *a = NULL, *b = NULL;
     rtp_diff_stats d;
     rtp_error err;
-    int i, rc = 1, over = 0, c, held, nfail = 0, k;
+    int i, rc = 1, over = 0, c, held, nfail = 0, k, names_only = 0;
     rtp_status hs;
     fail_limit *fails;
 
@@ -1763,7 +1777,17 @@ static int cmd_diff(int argc, char **argv)
     }
     for (i = 0; i < argc; i++) {
         const char *arg = argv[i], *v;
-        if (strcmp(arg, "-h") == 0 || strcmp(arg, "--help") == 0) {
+        if (!names_only && strcmp(arg, "--") == 0) {
+            names_only = 1;
+            continue;
+        }
+        if (names_only || !is_option_like(arg)) {
+            if (pa && pb) {
+                msg("diff: more than two images");
+                goto usage;
+            }
+            *(pa ? &pb : &pa) = arg;
+        } else if (strcmp(arg, "-h") == 0 || strcmp(arg, "--help") == 0) {
             fputs(diff_help, stdout);
             free(fails);
             return 0;
@@ -1838,15 +1862,8 @@ static int cmd_diff(int argc, char **argv)
                 goto usage;
             }
             nfail++;
-        } else if (arg[0] == '-' && arg[1] != '\0') {
-            msg("diff: unknown option '%s'", arg);
-            goto usage;
-        } else if (!pa) {
-            pa = arg;
-        } else if (!pb) {
-            pb = arg;
         } else {
-            msg("diff: more than two images");
+            msg("diff: unknown option '%s'", arg);
             goto usage;
         }
     }
@@ -2276,7 +2293,7 @@ static int cmd_reeval(int argc, char **argv)
     const char **sets, **add_lights, **params;
     rtp_image *img = NULL;
     int region[4] = {0, 0, 0, 0};
-    int i, nsets = 0, nadd = 0, nparams = 0, rc = 1, stream = 0, reference = 0,
+    int i, nsets = 0, nadd = 0, nparams = 0, rc = 1, stream = 0, reference = 0, names_only = 0,
         threads = default_threads(), c, frames = 0;
     rtp_tree *tree = NULL;
     rtp_error err;
@@ -2299,7 +2316,17 @@ static int cmd_reeval(int argc, char **argv)
     }
     for (i = 0; i < argc; i++) {
         const char *a = argv[i], *v;
-        if (strcmp(a, "-h") == 0 || strcmp(a, "--help") == 0) {
+        if (!names_only && strcmp(a, "--") == 0) {
+            names_only = 1;
+            continue;
+        }
+        if (names_only || !is_option_like(a)) {
+            if (tree_path) {
+                msg("reeval: more than one tree ('%s' and '%s')", tree_path, a);
+                goto usage;
+            }
+            tree_path = a;
+        } else if (strcmp(a, "-h") == 0 || strcmp(a, "--help") == 0) {
             fputs(reeval_help, stdout);
             free(sets);
             free(add_lights);
@@ -2376,13 +2403,8 @@ static int cmd_reeval(int argc, char **argv)
                 goto usage;
             }
             add_lights[nadd++] = v;
-        } else if (a[0] == '-' && a[1] != '\0') {
-            msg("reeval: unknown option '%s'", a);
-            goto usage;
-        } else if (!tree_path) {
-            tree_path = a;
         } else {
-            msg("reeval: more than one tree ('%s' and '%s')", tree_path, a);
+            msg("reeval: unknown option '%s'", a);
             goto usage;
         }
     }
@@ -2718,10 +2740,20 @@ static int cmd_info(int argc, char **argv)
     rtp_tree_info ti;
     rtp_error err;
     long long fb;
-    int i, c;
+    int i, c, names_only = 0;
     memset(&err, 0, sizeof err);
     for (i = 0; i < argc; i++) {
-        if (strcmp(argv[i], "-h") == 0 || strcmp(argv[i], "--help") == 0) {
+        if (!names_only && strcmp(argv[i], "--") == 0) {
+            names_only = 1;
+            continue;
+        }
+        if (names_only || !is_option_like(argv[i])) {
+            if (tree_path) {
+                msg("info: one tree file at a time");
+                return EXIT_USAGE;
+            }
+            tree_path = argv[i];
+        } else if (strcmp(argv[i], "-h") == 0 || strcmp(argv[i], "--help") == 0) {
             fputs(info_help, stdout);
             return 0;
         } else if ((c = common_option(argc, argv, &i, NULL, &stats_path)) != 0) {
@@ -2729,14 +2761,9 @@ static int cmd_info(int argc, char **argv)
                 usage_hint(info_help);
                 return EXIT_USAGE;
             }
-        } else if (argv[i][0] == '-' && argv[i][1] != '\0') {
+        } else {
             msg("info: unknown option '%s'", argv[i]);
             usage_hint(info_help);
-            return EXIT_USAGE;
-        } else if (!tree_path) {
-            tree_path = argv[i];
-        } else {
-            msg("info: one tree file at a time");
             return EXIT_USAGE;
         }
     }
@@ -2874,7 +2901,8 @@ static int parse_offset(const char *s, int *x, int *y)
 static int cmd_merge(int argc, char **argv)
 {
     const char *out_tree = NULL, *out_image = NULL;
-    int i, n = 0, rc = 1, fw = 0, fh = 0, threads = default_threads(), images = 0, c;
+    int i, n = 0, rc = 1, fw = 0, fh = 0, threads = default_threads(), images = 0, c,
+        names_only = 0;
     const char **in = (const char **)calloc((size_t)argc + 1, sizeof *in);
     rtp_tree **parts = NULL, *joined = NULL;
     rtp_image *img = NULL;
@@ -2887,7 +2915,16 @@ static int cmd_merge(int argc, char **argv)
     }
     for (i = 0; i < argc; i++) {
         const char *a = argv[i];
-        if (strcmp(a, "-h") == 0 || strcmp(a, "--help") == 0) {
+        if (!names_only && strcmp(a, "--") == 0) {
+            names_only = 1;
+            continue;
+        }
+        if (names_only || !is_option_like(a) || a[1] == '@') {
+            /* ("-@X,Y" is an image part on stdin) */
+            in[n++] = a;
+            if (strchr(a, '@'))
+                images = 1;
+        } else if (strcmp(a, "-h") == 0 || strcmp(a, "--help") == 0) {
             fputs(merge_help, stdout);
             free(in);
             return 0;
@@ -2903,14 +2940,9 @@ static int cmd_merge(int argc, char **argv)
         } else if (is_opt(a, "--size")) {
             if (parse_size(opt_value(argc, argv, &i, "--size"), &fw, &fh))
                 goto usage;
-        } else if (a[0] == '-' && a[1] != '\0' && a[1] != '@') {
-            /* ("-@X,Y" is an image part on stdin) */
+        } else {
             msg("merge: unknown option '%s'", a);
             goto usage;
-        } else {
-            in[n++] = a;
-            if (strchr(a, '@'))
-                images = 1;
         }
     }
     if (!n || (!out_tree && !out_image) || (images && (!out_image || !fw || out_tree))) {

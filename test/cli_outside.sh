@@ -1,0 +1,40 @@
+#!/bin/sh
+# CLI tests for the outside world: names that look like options, pipes
+# whose reader leaves, and the like.
+RTP=${RTP:-./rtp}
+T=${TMPDIR:-/tmp}/rtp-outside.$$
+mkdir -p "$T"
+trap 'rm -rf "$T"' EXIT
+trap 'exit 130' INT
+trap 'exit 143' TERM
+pass=0; fail=0; skip=0
+ok()   { pass=$((pass + 1)); }
+bad()  { fail=$((fail + 1)); echo "FAIL: $*" >&2; }
+
+# '--' ends the options, so a file whose name begins with '-' is named as
+# itself on every command (it was "unknown option '--'", exit 2, and the
+# name itself "unknown option '-s.nff'"); an option after '--' is a file.
+cp scenes/spheres.nff "$T/-s.nff"
+(
+    cd "$T" || exit 1
+    R=$RTP; case $R in /*) ;; *) R=$OLDPWD/$R;; esac
+    "$R" trace --size 8x6 -o t.rtp -i a.pfm -q -- -s.nff 2>err && [ -s t.rtp ] && [ -s a.pfm ] ||
+        { echo "trace -- -s.nff: $(cat err)"; exit 1; }
+    cp t.rtp ./-t.rtp && cp a.pfm ./-a.pfm || exit 1
+    "$R" reeval -i b.pfm -q -- -t.rtp 2>err && [ -s b.pfm ] ||
+        { echo "reeval -- -t.rtp: $(cat err)"; exit 1; }
+    "$R" info -- -t.rtp >out 2>err && grep -q '^-t.rtp: 8x6 image' out ||
+        { echo "info -- -t.rtp: $(cat out err)"; exit 1; }
+    "$R" diff -- -a.pfm b.pfm >out 2>err && grep -q '^pixels 48 ' out ||
+        { echo "diff -- -a.pfm b.pfm: $(cat out err)"; exit 1; }
+    "$R" merge -o m.rtp -q -- -t.rtp 2>err && cmp -s m.rtp t.rtp ||
+        { echo "merge -- -t.rtp: $(cat err)"; exit 1; }
+    # after '--' an option is a name: no file '-q' here
+    "$R" trace -- -s.nff -q -i c.pfm >/dev/null 2>err
+    [ $? -eq 2 ] && grep -q "more than one scene" err ||
+        { echo "trace -- -s.nff -q: $(cat err)"; exit 1; }
+) >"$T/msg" 2>&1 && ok || bad "'--': $(cat "$T/msg")"
+
+rm -rf "$T"
+echo "$pass passed, $fail failed, $skip skipped"
+[ "$fail" -eq 0 ]
