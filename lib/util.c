@@ -529,15 +529,17 @@ rtp_status rtpi_read_file(const rtp_allocator *a, const char *path,
     FILE *f;
     char *buf = NULL, *nb;
     size_t cap = 0, len = 0, n;
-    int is_stdin = strcmp(path, "-") == 0;
+    int is_stdin = strcmp(path, "-") == 0, read_errno = 0;
     f = is_stdin ? stdin : fopen(path, "rb");
     if (!f)
         return rtpi_error(err, RTP_ERR_IO, path, 0, 0, "cannot open: %s",
                           strerror(errno));
-    if (!is_stdin) {
+    {
+        /* (stdin too: `rtp trace - < folder` said only "read error") */
         struct stat sb;
-        if (fstat(fileno(f), &sb) != 0 || S_ISDIR(sb.st_mode)) {
-            fclose(f);
+        if (fstat(fileno(f), &sb) == 0 && S_ISDIR(sb.st_mode)) {
+            if (!is_stdin)
+                fclose(f);
             return rtpi_error(err, RTP_ERR_IO, path, 0, 0, "is a directory, not a file");
         }
     }
@@ -575,16 +577,20 @@ rtp_status rtpi_read_file(const rtp_allocator *a, const char *path,
             buf = nb;
             cap = ncap;
         }
+        errno = 0;
         n = fread(buf + len, 1, cap - len - 1, f);
         len += n;
-        if (n == 0)
+        if (n == 0) {
+            read_errno = errno; /* (before fclose or free can change it) */
             break;
+        }
     }
     if (ferror(f)) {
         rtpi_free(a, buf);
         if (!is_stdin)
             fclose(f);
-        return rtpi_error(err, RTP_ERR_IO, path, 0, 0, "read error");
+        return rtpi_error(err, RTP_ERR_IO, path, 0, 0, "read error: %s",
+                          read_errno ? strerror(read_errno) : "the stream failed");
     }
     if (!is_stdin)
         fclose(f);

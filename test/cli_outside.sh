@@ -35,6 +35,28 @@ cp scenes/spheres.nff "$T/-s.nff"
         { echo "trace -- -s.nff -q: $(cat err)"; exit 1; }
 ) >"$T/msg" 2>&1 && ok || bad "'--': $(cat "$T/msg")"
 
+# A scene that cannot be read says why, on stdin as by name: stdin a
+# folder was "-: read error" (the name said "is a directory, not a file"),
+# and a read error by name gave no reason either.
+$RTP trace - -i "$T/d.pfm" -q <"$T" >/dev/null 2>"$T/err"
+[ $? -eq 1 ] && grep -qi "^rtp: -: .*is a directory" "$T/err" && [ ! -e "$T/d.pfm" ] && ok ||
+    bad "trace - with stdin a folder: $(cat "$T/err")"
+if [ -r /proc/self/mem ]; then
+    # (rtp's own /proc/self/mem: open, but a read at 0 fails, EIO)
+    $RTP trace /proc/self/mem -i "$T/d.pfm" -q >/dev/null 2>"$T/err"
+    rc=$?
+    if grep -q "cannot open" "$T/err"; then
+        echo "skip: /proc/self/mem cannot be opened here: the read error's reason unchecked" >&2
+        skip=$((skip + 1))
+    else
+        [ $rc -eq 1 ] && grep -q "^rtp: /proc/self/mem: read error: ." "$T/err" && ok ||
+            bad "trace of an unreadable file: $(cat "$T/err")"
+    fi
+else
+    echo "skip: no /proc/self/mem: the read error's reason unchecked" >&2
+    skip=$((skip + 1))
+fi
+
 rm -rf "$T"
 echo "$pass passed, $fail failed, $skip skipped"
 [ "$fail" -eq 0 ]
