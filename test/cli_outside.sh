@@ -57,6 +57,31 @@ else
     skip=$((skip + 1))
 fi
 
+# A reader that leaves (| head): rtp ends at once by SIGPIPE, as other
+# tools do (a shell says 141), silently; with SIGPIPE ignored, the write's
+# EPIPE is a failure: exit 1 with a message.
+# (where who started the tests ignores SIGPIPE, no child can take it back)
+{ yes 2>/dev/null; echo $? >"$T/rc"; } | head -c 1 >/dev/null
+if [ "$(cat "$T/rc")" -eq 141 ]; then
+    { $RTP trace scenes/spheres.nff --size 400x300 -i - 2>"$T/err"; echo $? >"$T/rc"; } |
+        head -c 10 >/dev/null
+    [ "$(cat "$T/rc")" -eq 141 ] && [ ! -s "$T/err" ] && ok ||
+        bad "trace -i - | head: exit $(cat "$T/rc"): $(cat "$T/err")"
+    $RTP trace scenes/spheres.nff --size 200x150 -o "$T/big.rtp" -q
+    { printf 'light.0.pos=1,2,3\nlight.0.pos=2,2,3\n' |
+        $RTP reeval "$T/big.rtp" --stream -i - 2>"$T/err"; echo $? >"$T/rc"; } |
+        head -c 10 >/dev/null
+    [ "$(cat "$T/rc")" -eq 141 ] && [ ! -s "$T/err" ] && ok ||
+        bad "reeval --stream -i - | head: exit $(cat "$T/rc"): $(cat "$T/err")"
+else
+    echo "skip: SIGPIPE is ignored here: the exit by SIGPIPE unchecked" >&2
+    skip=$((skip + 2))
+fi
+{ trap '' PIPE; $RTP trace scenes/spheres.nff --size 400x300 -i - 2>"$T/err"; echo $? >"$T/rc"; } |
+    head -c 10 >/dev/null
+[ "$(cat "$T/rc")" -eq 1 ] && grep -q "write failed: Broken pipe" "$T/err" && ok ||
+    bad "trace -i - | head, SIGPIPE ignored: exit $(cat "$T/rc"): $(cat "$T/err")"
+
 rm -rf "$T"
 echo "$pass passed, $fail failed, $skip skipped"
 [ "$fail" -eq 0 ]
