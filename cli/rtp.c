@@ -3118,7 +3118,10 @@ static const char main_help[] =
    have arrived: a full disk or a closed stdout is a failure, said so. */
 static int stdout_done(int rc)
 {
-    if ((fflush(stdout) != 0 || ferror(stdout)) && rc == 0) {
+    /* (diff over its limit too: its line lost is a failure, as a lost
+       --stats or --heatmap is; `diff --fail-above ... >/dev/full` was
+       exit 3 with nothing said) */
+    if ((fflush(stdout) != 0 || ferror(stdout)) && (rc == 0 || rc == EXIT_OVER)) {
         msg("stdout: write failed: %s", strerror(errno));
         rc = 1;
     }

@@ -82,6 +82,22 @@ fi
 [ "$(cat "$T/rc")" -eq 1 ] && grep -q "write failed: Broken pipe" "$T/err" && ok ||
     bad "trace -i - | head, SIGPIPE ignored: exit $(cat "$T/rc"): $(cat "$T/err")"
 
+# diff over its --fail-above limit with its line to a full stdout: the
+# line is lost, so exit 1 with a message, as a lost --stats or --heatmap
+# gives (it was exit 3, the write's failure unsaid).
+if [ -w /dev/full ]; then
+    $RTP trace scenes/spheres.nff --size 8x6 -i "$T/d1.pfm" -q
+    $RTP trace scenes/spheres.nff --size 8x6 -i "$T/d2.pfm" -q --set ambient=0.5,0.5,0.5
+    $RTP diff "$T/d1.pfm" "$T/d2.pfm" --fail-above rmse=0 >/dev/full 2>"$T/err"
+    [ $? -eq 1 ] && grep -q "stdout: write failed: No space left" "$T/err" && ok ||
+        bad "diff over its limit, stdout full: $(cat "$T/err")"
+    $RTP diff "$T/d1.pfm" "$T/d2.pfm" --fail-above rmse=0 >/dev/null 2>"$T/err"
+    [ $? -eq 3 ] && ok || bad "diff over its limit: not exit 3: $(cat "$T/err")"
+else
+    echo "skip: no /dev/full: diff's lost line unchecked" >&2
+    skip=$((skip + 2))
+fi
+
 rm -rf "$T"
 echo "$pass passed, $fail failed, $skip skipped"
 [ "$fail" -eq 0 ]
