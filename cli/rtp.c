@@ -360,7 +360,10 @@ typedef struct keep_old {
 
 
 /* SIGINT, SIGTERM, SIGHUP, SIGQUIT and SIGPIPE end rtp as they would, without
-   leaving a temporary file behind: they wait while an image or tree file
+   leaving a temporary file behind (and so do the others whose default
+   ends a process and that reach a batch job: SIGXCPU from a CPU limit,
+   SIGALRM, SIGUSR1, SIGUSR2, SIGVTALRM, which had left a --stream's
+   stats temporary; not SIGPROF, a profiling build's own): they wait while an image or tree file
    is written (the library writes it beside the file and renames it into
    place), and a stats file's temporary name is removed before the signal
    takes its course.  SIGXFSZ (a file size limit) is ignored, so that the
@@ -394,7 +397,8 @@ static void on_term(int sig)
 
 static void install_signals(void)
 {
-    static const int sigs[] = {SIGINT, SIGTERM, SIGHUP, SIGQUIT, SIGPIPE};
+    static const int sigs[] = {SIGINT,  SIGTERM, SIGHUP,  SIGQUIT,  SIGPIPE,
+                               SIGXCPU, SIGALRM, SIGUSR1, SIGUSR2, SIGVTALRM};
     size_t k;
     sigemptyset(&term_signals);
     for (k = 0; k < sizeof sigs / sizeof *sigs; k++) {

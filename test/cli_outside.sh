@@ -98,6 +98,32 @@ else
     skip=$((skip + 2))
 fi
 
+# A signal that ends rtp by default, from a CPU limit (ulimit -t:
+# SIGXCPU), a timer (timeout -s ALRM) or a batch system (SIGUSR1), ends it
+# as SIGTERM does, leaving no temporary file: a --stream's --stats file
+# is one from the start (SIGXCPU, SIGALRM, SIGUSR1, SIGUSR2 and SIGVTALRM
+# had left .rtp-stats-XXXXXX).
+$RTP trace scenes/spheres.nff --size 8x6 -o "$T/sg.rtp" -q
+mkdir -p "$T/sig"
+for sig in TERM XCPU ALRM USR1 USR2 VTALRM; do
+    rm -f "$T/sig/fifo"; mkfifo "$T/sig/fifo" || { bad "mkfifo"; break; }
+    sleep 5 >"$T/sig/fifo" &
+    feeder=$!
+    $RTP reeval "$T/sg.rtp" --stream -i "$T/sig/f%d.pfm" --stats "$T/sig/s.json" \
+        <"$T/sig/fifo" 2>/dev/null &
+    pid=$!
+    sleep 0.3
+    kill -s $sig $pid
+    wait $pid
+    rc=$?
+    kill $feeder 2>/dev/null
+    wait $feeder 2>/dev/null
+    rm -f "$T/sig/fifo"
+    [ $rc -gt 128 ] && [ -z "$(ls -A "$T/sig")" ] && ok ||
+        bad "SIG$sig while --stream waits: exit $rc, left: $(ls -A "$T/sig")"
+    rm -rf "$T/sig"; mkdir -p "$T/sig"
+done
+
 rm -rf "$T"
 echo "$pass passed, $fail failed, $skip skipped"
 [ "$fail" -eq 0 ]
