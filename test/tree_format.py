@@ -351,6 +351,7 @@ def texb_value(k):
 
 
 TEXB = [texb_value(k) for k in range(256)]
+TEXB_SET = set(TEXB)
 
 
 def parse_tex(t, r, tag):
@@ -488,6 +489,7 @@ def parse_tree(t, r):
         start[k + 1] = start[k] + c
     has_vis = layout & 1
     wide = layout & 2
+    node_at = r.i
     P = [None] * nodes  # [bits p0, p1, p2, prim, vis, link]
     zero = [0, 0, 0, 0, 0, 0]
     if t["major"] >= 2:
@@ -522,6 +524,7 @@ def parse_tree(t, r):
             n.append(r.u32() if has_vis else 0)
             n.append(r.u32() if wide else r.u8())
             P[q] = n
+    t["node_bytes"] = r.i - node_at
     vis_ext = []
     if vis_words:
         r.need(nodes * vis_words * 4, "vis_ext")
@@ -768,9 +771,10 @@ def summary(name, t):
         "%s: format %d.%d, %dx%d image, %d samples, depth %d%s"
         % (name, t["major"], t["minor"], t["width"], t["height"],
            t["samples"], t["max_depth"], ", SPD" if t["spd"] else ""),
-        "nodes %d (%.3f per sample), layout %d, vis_words %d"
-        % (t["nodes"], t["nodes"] / t["samples"], t["layout"],
-           t["vis_words"]),
+        "nodes %d (%.3f per sample, %.2f bytes each in the file), layout %d,"
+        " vis_words %d" % (t["nodes"], t["nodes"] / t["samples"],
+                           t["node_bytes"] / max(t["nodes"], 1), t["layout"],
+                           t["vis_words"]),
         "file %d bytes = %.2f x the raw 8-bit RGB image (%d bytes)"
         % (t["file_bytes"], t["file_bytes"] / (3 * px), 3 * px),
         "scene: %d triangles, %d spheres, %d cones; %d materials, %d lights;"
@@ -890,6 +894,7 @@ def check_against_rtp(rtp, path, data, t):
                   if again[i] != data[i]), min(len(again), len(data)))
         errs.append("re-encoded from the spec differs from rtp's file at "
                     "byte %d (%d vs %d bytes)" % (k, len(again), len(data)))
+    errs += writer_rules(t)
     p = subprocess.run([rtp, "info", path, "--stats", "-", "-q"],
                        capture_output=True)
     if p.returncode != 0:
@@ -909,6 +914,28 @@ def check_against_rtp(rtp, path, data, t):
             errs.append("rtp info's text has no %s" % k)
         elif not same_value(got[k], v):
             errs.append("info %s: rtp %r, spec %r" % (k, got[k], v))
+    return errs
+
+
+def writer_rules(t):
+    """What the document says a writer does, beyond the bytes themselves."""
+    errs = []
+    nt = len(t["textures"])
+    used = set()
+    for i, m in enumerate(t["materials"]):
+        for kind, want, ix in (("tex", 2, "tex_image"), ("bump", 1, "bump_image"),
+                               ("bump0", 1, "bump0_image")):
+            if m[kind] == want:
+                used.add(m[ix])
+            elif m[ix] != NONE32:
+                errs.append("mat %d: %s not in use but not 0xffffffff" % (i, ix))
+    if used != set(range(nt)):
+        errs.append("textures written %d, used %s" % (nt, sorted(used)))
+    if t["tex_tag"] == "TEXR" and all(
+            f32_of(v) in TEXB_SET for x in t["textures"] for v in x["texels"]):
+        errs.append("TEXR though every texel is k/255 (TEXB)")
+    if t["layout"] & 2 == 0 and any(n[5] & 8 for n in t["node_list"]):
+        errs.append("a refracted subtree without full link words")
     return errs
 
 
