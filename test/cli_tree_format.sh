@@ -44,6 +44,16 @@ for f in "$T"/*.rtp; do
     out=$($PY --check "$RTP" "$f" 2>&1)
     if [ $? -eq 0 ]; then ok; else bad "$(basename "$f"): $(echo "$out" | grep -v '^[a-z]' | head -5)"; fi
 done
+# trace's and reeval's --stats sizes against the file's
+for n in refract lights42 spd; do
+    case $n in
+    refract) $RTP trace scenes/spheres.nff --size 24x18 -j 1 -q -o "$T/s.rtp" --stats "$T/t.json";;
+    lights42) $RTP trace scenes/prims.nff --size 16x12 $lights -j 1 -q -o "$T/s.rtp" --stats "$T/t.json";;
+    spd) $RTP trace scenes/spheres.nff --spd --region 100,200,124,216 -j 1 -q -o "$T/s.rtp" --stats "$T/t.json";;
+    esac
+    $RTP reeval "$T/s.rtp" -i "$T/s.ppm" -j 1 -q --stats "$T/r.json"
+    out=$($PY --stats "$T/s.rtp" "$T/t.json" "$T/r.json" 2>&1) && ok || bad "--stats of $n: $out"
+done
 # and the document's files rtp must accept or refuse
 out=$($PY --craft "$RTP" "$T/refract.rtp" "$T/texb.rtp" "$T/lights42.rtp" "$T/format1.rtp" 2>&1)
 n=$(echo "$out" | sed -n 's/^\([0-9]*\) passed, \([0-9]*\) failed$/\1 \2/p')

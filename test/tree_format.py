@@ -11,6 +11,9 @@ the code cannot drift apart unnoticed.  test/cli_tree_format.sh runs it.
                                   document and require the very bytes rtp
                                   wrote; compare `RTP info` (text and --stats)
                                   with what the file holds
+  tree_format.py --stats FILE JSON...
+                                  trace's or reeval's --stats of FILE: its
+                                  sizes against the file's
   tree_format.py --craft RTP FILE...
                                   write, from each file, files the document
                                   says rtp must accept or must refuse with a
@@ -1321,6 +1324,21 @@ def main(argv):
                 good += g
                 bad += b
         print("%d passed, %d failed" % (good, bad))
+        return 1 if bad else 0
+    if len(argv) > 2 and argv[0] == "--stats":
+        # --stats FILE JSON...: trace's or reeval's --stats of FILE
+        with open(argv[1], "rb") as fh:
+            want = info_keys(parse(fh.read()))
+        bad = 0
+        for js in argv[2:]:
+            with open(js) as fh:
+                got = json.load(fh)
+            for k in ("pixels", "samples", "nodes", "bytes_per_node",
+                      "tree_bytes", "file_bytes"):
+                if got.get(k) != want[k]:
+                    print("%s: %s %r, the file says %r" % (js, k, got.get(k),
+                                                           want[k]))
+                    bad += 1
         return 1 if bad else 0
     if len(argv) > 1 and argv[0] == "--check":
         rtp = argv[1]
