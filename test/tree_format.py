@@ -1207,6 +1207,52 @@ def more_cases(t, out):
     if ta and t["geom"]["uv"]:
         ref("uvs partly present", edited(
             t, lambda u: u["geom"]["tris"][ta[0]].__setitem__(6, 0)), "GEOM")
+    inf, nan = float("inf"), float("nan")
+    g = t["geom"]
+    if g["pos"]:
+        ref("an infinite vertex", edited(
+            t, lambda u: u["geom"]["pos"][0].__setitem__(1, inf)), "GEOM")
+    if g["nrm"]:
+        ref("a NaN normal", edited(
+            t, lambda u: u["geom"]["nrm"][0].__setitem__(2, nan)), "GEOM")
+    if g["uv"]:
+        ref("an infinite uv", edited(
+            t, lambda u: u["geom"]["uv"][0].__setitem__(0, -inf)), "GEOM")
+    if g["spheres"]:
+        ref("an infinite sphere centre", edited(
+            t, lambda u: u["geom"]["spheres"][0][0].__setitem__(0, inf)),
+            "GEOM")
+        acc("a negative sphere (inside visible only)", edited(
+            t, lambda u: u["geom"]["spheres"][0][0].__setitem__(
+                3, -abs(u["geom"]["spheres"][0][0][3]))))
+    if t["lights"]:
+        ref("a NaN traced light position", edited(
+            t, lambda u: u["lights"][0]["pos0"].__setitem__(0, nan)), "LITE")
+        ref("a NUL in a light's name", edited(
+            t, lambda u: u["lights"][0].update(name=b"\0")), "LITE")
+    if t["textures"]:
+        ref("a NUL in a texture's path", edited(
+            t, lambda u: u["textures"][0].update(path=b"a\0")), "TEX")
+    ref("a NaN min_weight", edited(t, lambda u: u.update(
+        min_weight=nan)), "HEAD")
+    ref("an infinite light scale", edited(t, lambda u: u["scene"].update(
+        light_scale=inf)), "SCEN")
+    ref("a NaN bump strength", m0(bump_strength=nan), "MATL")
+    acc("a negative bump strength", m0(bump_strength=-2.0))
+    ref("depth 1001", edited(t, lambda u: u.update(max_depth=1001)), "HEAD")
+    acc("a region at the frame's far corner", edited(t, lambda u: u.update(
+        full_width=u["full_width"] + 7, full_height=u["full_height"] + 3,
+        region_x=u["region_x"] + 7, region_y=u["region_y"] + 3)))
+    ref("a frame of 2^20 + 1 across", edited(t, lambda u: u.update(
+        full_width=(1 << 20) + 1)), "HEAD")
+    if t["geom"]["cones"]:
+        ref("a cone with its apex on its base", edited(
+            t, lambda u: [u["geom"]["cones"][0][0].__setitem__(
+                4 + k, u["geom"]["cones"][0][0][k]) for k in range(3)]),
+            "GEOM")
+        ref("a cone with a negative radius", edited(
+            t, lambda u: u["geom"]["cones"][0][0].__setitem__(3, -1.0)),
+            "GEOM")
     if t["geom"]["cones"]:
         ref("a cone with both radii 0", edited(
             t, lambda u: [u["geom"]["cones"][0][0].__setitem__(3, 0.0),
