@@ -1253,6 +1253,20 @@ def more_cases(t, out):
         ref("a cone with a negative radius", edited(
             t, lambda u: u["geom"]["cones"][0][0].__setitem__(3, -1.0)),
             "GEOM")
+    # counts far past the bytes: refused before anything is allocated
+    ref("2^31 - 1 materials in a short section", with_secs(t, patch_body(
+        b"MATL", lambda b: w_u32(0x7FFFFFFF) + b[4:])), "MATL")
+    ref("2^31 - 1 lights in a short section", with_secs(t, patch_body(
+        b"LITE", lambda b: w_u32(0x7FFFFFFF) + b[4:])), "LITE")
+    ref("2^31 - 1 vertices in a short section", with_secs(t, patch_body(
+        b"GEOM", lambda b: w_u32(0x7FFFFFFF) + b[4:])), "GEOM")
+    ref("2^40 nodes in a short section", with_secs(t, patch_body(
+        b"TREE", lambda b: b[:8] + struct.pack("<Q", 1 << 40) + b[16:])),
+        "TREE")
+    ref("a 2^20 x 2^7 texture in a short section", edited(
+        t, lambda u: [u.update(tex_tag="TEXB"), u["textures"].append(
+            {"path": b"x", "width": 1 << 20, "height": 1 << 7,
+             "texels": [0] * 3})]), "texture")
     if t["geom"]["cones"]:
         ref("a cone with both radii 0", edited(
             t, lambda u: [u["geom"]["cones"][0][0].__setitem__(3, 0.0),
