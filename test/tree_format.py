@@ -309,7 +309,8 @@ def parse_matl(t, r):
         m["bump_strength"] = r.f32("bump_strength")
         m["bump_scale"] = r.f32("bump_scale")
         m["name"] = r.s()
-        m["ks0"], m["kt0"], m["ior0"] = r.f32("ks0"), r.f32("kt0"), r.f32("ior0")
+        for k in ("ks0", "kt0", "ior0"):
+            m[k] = r.f32(k)
         m["bump0"] = r.u8()
         m["bump0_image"] = r.u32()
         m["bump0_strength"] = r.f32("bump0_strength")
@@ -899,7 +900,7 @@ def check_against_rtp(rtp, path, data, t):
                     "byte %d (%d vs %d bytes)" % (k, len(again), len(data)))
     errs += writer_rules(t)
     p = subprocess.run([rtp, "info", path, "--stats", "-", "-q"],
-                       capture_output=True)
+                       stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     if p.returncode != 0:
         errs.append("rtp info failed: %s" % p.stderr.decode().strip())
     else:
@@ -910,7 +911,8 @@ def check_against_rtp(rtp, path, data, t):
             elif got[k] != v and not (isinstance(v, float)
                                       and abs(got[k] - v) <= 1e-6 * abs(v)):
                 errs.append("info %s: rtp %r, spec %r" % (k, got[k], v))
-    p = subprocess.run([rtp, "info", path], capture_output=True)
+    p = subprocess.run([rtp, "info", path], stdout=subprocess.PIPE,
+                       stderr=subprocess.PIPE)
     got = info_text_keys(p.stdout.decode(errors="replace"))
     for k, v in expected_text_keys(t).items():
         if k not in got:
@@ -926,12 +928,14 @@ def writer_rules(t):
     nt = len(t["textures"])
     used = set()
     for i, m in enumerate(t["materials"]):
-        for kind, want, ix in (("tex", 2, "tex_image"), ("bump", 1, "bump_image"),
+        for kind, want, ix in (("tex", 2, "tex_image"),
+                               ("bump", 1, "bump_image"),
                                ("bump0", 1, "bump0_image")):
             if m[kind] == want:
                 used.add(m[ix])
             elif m[ix] != NONE32:
-                errs.append("mat %d: %s not in use but not 0xffffffff" % (i, ix))
+                errs.append("mat %d: %s not in use but not 0xffffffff"
+                            % (i, ix))
     if used != set(range(nt)):
         errs.append("textures written %d, used %s" % (nt, sorted(used)))
     if t["tex_tag"] == "TEXR" and all(
@@ -956,7 +960,7 @@ def enumerate_extensions(t):
 
 
 
-# ---------------------------------------------------------------- crafted files
+# ------------------------------------------------------------ crafted files
 
 
 def raw_file(secs, tail=b""):
@@ -1330,8 +1334,9 @@ def run_rtp(rtp, data, tmp):
     if os.path.exists(img):
         os.remove(img)
     p = subprocess.run([rtp, "reeval", f, "-i", img, "-q", "-j", "1"],
-                       capture_output=True)
-    q = subprocess.run([rtp, "info", f, "-q"], capture_output=True)
+                       stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    q = subprocess.run([rtp, "info", f, "-q"], stdout=subprocess.PIPE,
+                       stderr=subprocess.PIPE)
     return p.returncode, p.stderr.decode(errors="replace"), \
         os.path.exists(img), q.returncode
 
