@@ -152,7 +152,8 @@ def check_size(w, h, what):
 
 
 def split_sections(data, from_pipe=False):
-    """[(tag, body)] of every section, extensions included, CRCs checked."""
+    """[(tag, body)] of every section, extensions included, CRCs checked
+    (from_pipe: as a stream is read, stopping at END)."""
     if data[:8] != SIGNATURE:
         if data[:8] == b"\x89PNG\r\n\x1a\n":
             raise FormatError("a PNG image, not a tree file")
@@ -557,7 +558,6 @@ def parse_tree(t, r):
                 raise FormatError("TREE: node %d light bits" % q)
     # each sample exactly one preorder tree, no deeper than max_depth
     maxd = t["max_depth"]
-    depth_seen = 0
     for k in range(samples):
         a, b = start[k], start[k + 1]
         if a == b:
@@ -963,8 +963,8 @@ def enumerate_extensions(t):
 # ------------------------------------------------------------ crafted files
 
 
-def raw_file(secs, tail=b""):
-    return SIGNATURE + b"".join(section(t, b) for t, b in secs) + tail
+def raw_file(secs):
+    return SIGNATURE + b"".join(section(t, b) for t, b in secs)
 
 
 def with_secs(t, fn):
