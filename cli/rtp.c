@@ -2658,6 +2658,19 @@ usage:
 
 /* Prints "KEY=VALUE" for each of fields under prefix ("" or "light.0."),
    on one line after head. */
+/* s with each control byte (below 0x20, and DEL) as '?', for the
+   terminal: a tree file's names and texture paths may hold any byte but
+   NUL (an MTL's newmtl takes ESC), and `rtp info` of a file from anywhere
+   must not send escape sequences or forge lines of its own. */
+static char *printable(char *s)
+{
+    char *p;
+    for (p = s; *p; p++)
+        if ((unsigned char)*p < 0x20 || *p == 0x7f)
+            *p = '?';
+    return s;
+}
+
 static void print_fields(const rtp_scene *s, const char *head, const char *prefix,
                          const char *const *fields, size_t n)
 {
@@ -2667,7 +2680,7 @@ static void print_fields(const rtp_scene *s, const char *head, const char *prefi
     for (i = 0; i < n; i++) {
         snprintf(key, sizeof key, "%s%s", prefix, fields[i]);
         if (rtp_scene_get(s, key, val, sizeof val, NULL) == RTP_OK)
-            printf(" %s=%s", fields[i], val);
+            printf(" %s=%s", fields[i], printable(val));
     }
     putchar('\n');
 }
@@ -2681,7 +2694,7 @@ static void item_head(const rtp_scene *s, const char *kind, size_t i, char *pref
     snprintf(prefix, psize, "%s.%zu.", kind, i);
     snprintf(key, sizeof key, "%sname", prefix);
     if (rtp_scene_get(s, key, name, sizeof name, NULL) == RTP_OK && name[0])
-        snprintf(head, hsize, "%s.%zu (%.255s):", kind, i, name);
+        snprintf(head, hsize, "%s.%zu (%.255s):", kind, i, printable(name));
     else
         snprintf(head, hsize, "%s.%zu:", kind, i);
 }

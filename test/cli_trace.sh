@@ -210,6 +210,15 @@ for c in "trace ''" "reeval '' -i $T/e.pfm" "info ''" "merge -o $T/e.rtp $T/e0.r
         bad "rtp $c: $(cat "$T/err")"
 done
 
+# rtp info prints a name's control bytes as '?': an MTL's newmtl takes
+# ESC, and a tree file any byte but NUL (escape sequences to the terminal)
+printf 'newmtl red\033[31mX\nKd 1 0 0\n' >"$T/esc.mtl"
+printf 'mtllib esc.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl red\033[31mX\nf 1 2 3\n' >"$T/esc.obj"
+$RTP trace "$T/esc.obj" --size 8x8 -o "$T/esc.rtp" -q
+$RTP info "$T/esc.rtp" >"$T/out"
+[ $? -eq 0 ] && grep -q '^mat.0 (red?\[31mX):' "$T/out" && ! grep -q "$(printf '\033')" "$T/out" && ok ||
+    bad "rtp info printed a name's ESC: $(cat -v "$T/out" | grep mat)"
+
 rm -rf "$T"
 echo "$pass passed, $fail failed, $skip skipped"
 [ "$fail" -eq 0 ]
