@@ -474,6 +474,12 @@ char *rtp_error_format(const rtp_error *err, char *buf, size_t size)
         snprintf(buf, size, "%.*s:%d: %.*s", fw, err->file, err->line, mw, err->message);
     } else if (err->file[0]) {
         snprintf(buf, size, "%.*s: %.*s", fw, err->file, mw, err->message);
+    } else if (err->line > 0 && err->column > 0) {
+        /* (no file: a scene from rtp_scene_load_memory named "" still
+           says where, as rtp.h's "as much as is known" promises) */
+        snprintf(buf, size, "%d:%d: %.*s", err->line, err->column, mw, err->message);
+    } else if (err->line > 0) {
+        snprintf(buf, size, "%d: %.*s", err->line, mw, err->message);
     } else if (err->message[0]) {
         snprintf(buf, size, "%.*s", mw, err->message);
     } else {

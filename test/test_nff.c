@@ -522,6 +522,32 @@ static void test_long_messages(void)
     CHECK_MSG(strlen(buf) == sizeof w.e.file + 2 + sizeof w.e.message, "%zu bytes", strlen(buf));
 }
 
+/* rtp_error_format says as much as is known: a parse error of a scene
+   loaded from memory under the name "" has a line and column but no file,
+   and was formatted as its message alone, the position dropped. */
+static void test_error_format_without_file(void)
+{
+    rtp_scene *s = NULL;
+    rtp_error err;
+    char buf[600];
+    memset(&err, 0, sizeof err);
+    CHECK(load("s 0 0 0 x\n", "", &s, &err) == RTP_ERR_PARSE);
+    CHECK(s == NULL && err.file[0] == '\0' && err.line == 1 && err.column == 9);
+    rtp_error_format(&err, buf, sizeof buf);
+    CHECK_MSG(strncmp(buf, "1:9: expected number", 20) == 0, "'%s'", buf);
+    err.column = 0;
+    rtp_error_format(&err, buf, sizeof buf);
+    CHECK_MSG(strncmp(buf, "1: expected number", 18) == 0, "'%s'", buf);
+    /* with a file, as before */
+    CHECK(load("s 0 0 0 x\n", "m.nff", &s, &err) == RTP_ERR_PARSE);
+    rtp_error_format(&err, buf, sizeof buf);
+    CHECK_MSG(strncmp(buf, "m.nff:1:9: expected number", 26) == 0, "'%s'", buf);
+    /* nothing known but the status */
+    memset(&err, 0, sizeof err);
+    err.status = RTP_ERR_IO;
+    CHECK(strcmp(rtp_error_format(&err, buf, sizeof buf), "input/output error") == 0);
+}
+
 /* A light's position takes its key's range (|x| <= 3.4e38, float's),
    not geometry's 1e18: a scene's light at 1e30 was refused while
    light.0.pos=1e30,... was taken.  What rtp_scene_get gives back sets
@@ -1184,6 +1210,7 @@ int main(void)
     RUN(test_tiny_normal);
     RUN(test_names_and_keys);
     RUN(test_long_messages);
+    RUN(test_error_format_without_file);
     RUN(test_far_light);
     RUN(test_checker_bump);
     RUN(test_files);
