@@ -189,9 +189,11 @@ void rtp_scene_destroy(rtp_scene *scene);
  *  N there, white and on (rtp_tree_add_light's light).  An image key
  *  (mat.N.texture, mat.N.bump) reads its file each
  *  time, "-" the next image on stdin; an image no material uses any more
- *  is freed.  @return RTP_OK, RTP_ERR_KEY, RTP_ERR_PARSE, RTP_ERR_IO or
- *  RTP_ERR_FORMAT (an image key's file), or RTP_ERR_ARGUMENT (a value out
- *  of range). */
+ *  is freed.  @return RTP_OK, RTP_ERR_KEY, RTP_ERR_PARSE, RTP_ERR_IO,
+ *  RTP_ERR_FORMAT, RTP_ERR_LIMIT (an image key's file past the image size
+ *  limit) or RTP_ERR_UNSUPPORTED (a PNG without libpng), RTP_ERR_ARGUMENT
+ *  (a value out of range) or RTP_ERR_NOMEM; a refused edit leaves the
+ *  scene as it was. */
 rtp_status rtp_scene_set(rtp_scene *scene, const char *key,
                          const char *value, rtp_error *err);
 

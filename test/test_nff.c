@@ -548,6 +548,38 @@ static void test_error_format_without_file(void)
     CHECK(strcmp(rtp_error_format(&err, buf, sizeof buf), "input/output error") == 0);
 }
 
+/* An image key whose file is past the image size limit (2^20 a side) is
+   RTP_ERR_LIMIT from rtp_scene_set and rtp_tree_set, as from
+   rtp_scene_load; rtp.h's list for rtp_scene_set lacked it.  The scene
+   keeps its texture. */
+static void test_image_key_over_the_limit(void)
+{
+    const char *dir = tmp_folder();
+    char name[512], buf[600];
+    rtp_scene *s = NULL;
+    rtp_tree *t = NULL;
+    rtp_error err;
+    rtp_trace_options o;
+    if (!dir[0])
+        SKIP("cannot make a temporary folder");
+    CHECK(write_file(dir, "wide.ppm", "P6\n2000000 1\n255\n") == 0);
+    snprintf(name, sizeof name, "%s/wide.ppm", dir);
+    CHECK(load("l 1 2 3\nf 1 0 0 1 0 100 0 0\ns 0 0 0 1\n", "m.nff", &s, &err) == RTP_OK);
+    if (!s)
+        return;
+    CHECK(rtp_scene_set(s, "mat.0.texture", name, &err) == RTP_ERR_LIMIT);
+    CHECK(rtp_scene_set(s, "mat.0.bump", name, &err) == RTP_ERR_LIMIT);
+    CHECK(rtp_scene_get(s, "mat.0.texture", buf, sizeof buf, &err) == RTP_OK &&
+          strcmp(buf, "none") == 0);
+    memset(&o, 0, sizeof o);
+    o.width = o.height = 2;
+    CHECK(rtp_record(s, &o, &t, NULL, NULL, &err) == RTP_OK);
+    if (t)
+        CHECK(rtp_tree_set(t, "mat.0.texture", name, &err) == RTP_ERR_LIMIT);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+}
+
 /* A light's position takes its key's range (|x| <= 3.4e38, float's),
    not geometry's 1e18: a scene's light at 1e30 was refused while
    light.0.pos=1e30,... was taken.  What rtp_scene_get gives back sets
@@ -1214,6 +1246,7 @@ int main(void)
     RUN(test_far_light);
     RUN(test_checker_bump);
     RUN(test_files);
+    RUN(test_image_key_over_the_limit);
     RUN(test_file_named_dash);
     RUN(test_bad_inputs);
     RUN(test_truncation);
