@@ -726,10 +726,13 @@ int rtpi_write_kind(const char *path)
     struct stat sb, so;
     if (stat(path, &sb) != 0)
         return RTPI_WRITE_FILE;
-    if (!S_ISREG(sb.st_mode))
-        return RTPI_WRITE_IN_PLACE;
+    /* (stdout's own file whatever its kind: a pipe or terminal behind
+       /dev/stdout written in place came before what the caller had
+       printed to stdout and not yet flushed) */
     if (fstat(fileno(stdout), &so) == 0 && so.st_dev == sb.st_dev && so.st_ino == sb.st_ino)
         return RTPI_WRITE_STDOUT;
+    if (!S_ISREG(sb.st_mode))
+        return RTPI_WRITE_IN_PLACE;
     if (fd_link(path))
         return RTPI_WRITE_APPEND;
 #else

@@ -290,9 +290,10 @@ FILE *rtpi_open_temp(const char *path, char *tmp, size_t tmpsize);
 /* How a file at path is written: RTPI_WRITE_FILE beside it and renamed
    over it (a regular file or none yet), RTPI_WRITE_IN_PLACE (a FIFO, a
    device, a pipe behind /dev/fd/N: never replaced by a rename), or
-   RTPI_WRITE_STDOUT (the very file stdout is, as /dev/stdout names it
-   when stdout goes to a file: written through stdout, so that '>>' still
-   appends and no link in /dev is replaced), or RTPI_WRITE_APPEND (a
+   RTPI_WRITE_STDOUT (the very file stdout is, as /dev/stdout names it,
+   a file, pipe or terminal: written through stdout, so that '>>' still
+   appends, no link in /dev is replaced and the bytes follow what the
+   caller printed to stdout before), or RTPI_WRITE_APPEND (a
    regular file named through /proc/PID/fd or /dev/fd: another open
    file, as 2>>log makes stderr: appended to, never replaced). */
 enum { RTPI_WRITE_FILE, RTPI_WRITE_IN_PLACE, RTPI_WRITE_STDOUT, RTPI_WRITE_APPEND };

@@ -11,6 +11,7 @@
 #include <string.h>
 #include <time.h>
 #include <sys/stat.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #if defined(RTP_HAVE_PNG)
@@ -1513,6 +1514,57 @@ static void test_io_chunks(void)
     rtp_image_destroy(img);
 }
 
+/* A path naming stdout's own file (/dev/stdout, here a link of the
+   test's own to /proc/self/fd/1) is written through stdout whatever that
+   file is: behind a pipe it was opened and written in place, so the image
+   came out before what the program had printed to stdout and not yet
+   flushed ("HEAD" after the image).  A child process writes into a pipe;
+   the parent reads HEAD, the PFM, TAIL in that order. */
+static void test_write_to_stdout_pipe(void)
+{
+    rtp_image *img = NULL;
+    rtp_error err;
+    int fd[2], status = 0;
+    pid_t pid;
+    char link[600], got[256];
+    size_t n = 0;
+    ssize_t r;
+    snprintf(link, sizeof link, "%s", tpath("out1"));
+    remove(link);
+    if (symlink("/proc/self/fd/1", link) != 0)
+        SKIP("cannot make a link to /proc/self/fd/1");
+    CHECK(rtp_image_create(1, 1, NULL, &img, &err) == RTP_OK);
+    if (!img || pipe(fd) != 0)
+        SKIP("no image or no pipe");
+    fflush(stdout);
+    pid = fork();
+    if (pid == 0) {
+        close(fd[0]);
+        if (dup2(fd[1], 1) < 0)
+            _exit(2);
+        setvbuf(stdout, NULL, _IOFBF, 4096);
+        fputs("HEAD", stdout);
+        if (rtp_image_write(img, link, RTP_IMAGE_PFM, &err) != RTP_OK)
+            _exit(3);
+        fputs("TAIL", stdout);
+        fflush(stdout);
+        _exit(0);
+    }
+    close(fd[1]);
+    while (n < sizeof got && (r = read(fd[0], got + n, sizeof got - n)) > 0)
+        n += (size_t)r;
+    close(fd[0]);
+    if (pid > 0)
+        waitpid(pid, &status, 0);
+    CHECK(pid > 0 && WIFEXITED(status) && WEXITSTATUS(status) == 0);
+    /* "PF\n1 1\n-1.0\n" and 12 bytes of pixels between the two */
+    CHECK_MSG(n == 4 + 12 + 12 + 4 && memcmp(got, "HEAD", 4) == 0 &&
+                  memcmp(got + 4, "PF\n1 1\n", 7) == 0 && memcmp(got + n - 4, "TAIL", 4) == 0,
+              "%zu bytes, starting '%.4s'", n, got);
+    rtp_image_destroy(img);
+    remove(link);
+}
+
 static void test_write_errors(void)
 {
     rtp_image *img = make_test_image(8, 8), *back = NULL;
@@ -1689,6 +1741,7 @@ int main(void)
     RUN(test_alloc_failures);
     RUN(test_io_chunks);
     RUN(test_write_errors);
+    RUN(test_write_to_stdout_pipe);
     RUN(test_read_errors);
     remove_all(tmpdir);
     remove(tmpdir);
