@@ -276,7 +276,8 @@ typedef struct rtp_trace_options {
                            (re-evaluating a ks or kt edit of such trees
                            traces the material's samples again) */
     int threads;        /* 0 or 1: one thread, the calling one (deep
-                           trees aside: see Stack above) */
+                           trees aside: see Stack above); more than 256
+                           are taken as 256; negative: RTP_ERR_ARGUMENT */
     double memory_limit; /* bytes the image, samples and trees may take;
                             0: 16 GiB.  Past it: RTP_ERR_LIMIT, before any
                             tracing where the image and one node a sample
@@ -390,7 +391,9 @@ typedef enum rtp_stale_mode {
 
 typedef struct rtp_eval_options {
     int threads;            /* 0 or 1: one thread, the calling one (a
-                               deep tree's re-trace aside: Stack above) */
+                               deep tree's re-trace aside: Stack above);
+                               more than 256 are taken as 256; negative:
+                               RTP_ERR_ARGUMENT */
     rtp_shadow_mode shadows;
     int shadow_res;         /* direction-cube cells per face edge; 0: 512
                                (RTP_SHADOWS_AUTO's light buffer: from the

@@ -204,6 +204,10 @@ static void test_threads_identical(void)
     CHECK(a && b && c);
     if (a && b && c) {
         size_t n = sizeof(float) * 3 * 64 * 64;
+        /* (rtp.h: more than 256 threads are taken as 256) */
+        rtp_image *d = trace(s, 64, 64, 1000000, 0, NULL);
+        CHECK(d && memcmp(a->pixels, d->pixels, n) == 0);
+        rtp_image_destroy(d);
         CHECK(memcmp(a->pixels, b->pixels, n) == 0);
         CHECK(memcmp(a->pixels, c->pixels, n) == 0);
         CHECK(sa.shadow_rays == sb.shadow_rays && sa.reflected_rays == sb.reflected_rays &&
