@@ -4,6 +4,7 @@
 
 #include <ctype.h>
 #include <errno.h>
+#include <float.h>
 #include <stdio.h>
 #include <stdlib.h>
 
@@ -891,12 +892,18 @@ rtp_status rtpi_scene_set(rtp_scene *s, const char *key, const char *value,
 
 /* Appends v in the shortest form that reads back to the same value (as a
    float where is_float: the parameter's own precision), after a comma
-   unless first. */
+   unless first.  A normal value's 6 (float) or 15 (double) digits lose
+   their trailing zeros to its shortest form (and keep 30 from %.1g's
+   "3e+01"); a subnormal one's do not (1e-45 came back as 1.4013e-45,
+   5e-324 as 4.94065645841247e-324), so those start from one digit (in
+   exponent form whatever the digits). */
 static void put_num(char *out, size_t size, size_t *at, double v, int is_float, int first)
 {
     char tmp[40];
     int prec;
-    for (prec = is_float ? 6 : 15; prec <= 17; prec++) {
+    double a = v < 0 ? -v : v;
+    int subnormal = a > 0 && (is_float ? a < FLT_MIN : a < DBL_MIN);
+    for (prec = subnormal ? 1 : is_float ? 6 : 15; prec <= 17; prec++) {
         double back;
         rtpi_fmt_g(tmp, sizeof tmp, prec, v);
         back = rtpi_strtod(tmp, NULL);

@@ -580,6 +580,36 @@ static void test_image_key_over_the_limit(void)
     rtp_scene_destroy(s);
 }
 
+/* rtp_scene_get gives the shortest form that reads back to the same value,
+   subnormal values too (a float kd of 1e-45 came back as 1.4013e-45, a
+   light's double 5e-324 as 4.94065645841247e-324: both read back, neither
+   the shortest); normal values as before (30, not %.1g's 3e+01). */
+static void test_get_shortest_subnormal(void)
+{
+    rtp_scene *s = NULL;
+    rtp_error err;
+    char buf[128];
+    CHECK(load("l 1 2 3\nf 1 0 0 1 0 100 0 0\ns 0 0 0 1\n", "m.nff", &s, &err) == RTP_OK);
+    if (!s)
+        return;
+    CHECK(rtp_scene_set(s, "mat.0.kd", "1.4e-45", &err) == RTP_OK);
+    CHECK(rtp_scene_get(s, "mat.0.kd", buf, sizeof buf, &err) == RTP_OK);
+    CHECK_MSG(strcmp(buf, "1e-45") == 0, "'%s'", buf);
+    CHECK(rtp_scene_set(s, "light.0.pos", "5e-324,1e-320,0.1", &err) == RTP_OK);
+    CHECK(rtp_scene_get(s, "light.0.pos", buf, sizeof buf, &err) == RTP_OK);
+    CHECK_MSG(strcmp(buf, "5e-324,1e-320,0.1") == 0, "'%s'", buf);
+    CHECK(rtp_scene_set(s, "mat.0.color", "0.3,16777217,0.2999999", &err) == RTP_OK);
+    CHECK(rtp_scene_get(s, "mat.0.color", buf, sizeof buf, &err) == RTP_OK);
+    CHECK_MSG(strcmp(buf, "0.3,16777216,0.2999999") == 0, "'%s'", buf);
+    CHECK(rtp_scene_set(s, "mat.0.shine", "100000", &err) == RTP_OK);
+    CHECK(rtp_scene_get(s, "mat.0.shine", buf, sizeof buf, &err) == RTP_OK);
+    CHECK_MSG(strcmp(buf, "100000") == 0, "'%s'", buf);
+    CHECK(rtp_scene_set(s, "light.0.pos", "30,-1e-300,1e21", &err) == RTP_OK);
+    CHECK(rtp_scene_get(s, "light.0.pos", buf, sizeof buf, &err) == RTP_OK);
+    CHECK_MSG(strcmp(buf, "30,-1e-300,1e+21") == 0, "'%s'", buf);
+    rtp_scene_destroy(s);
+}
+
 /* A light's position takes its key's range (|x| <= 3.4e38, float's),
    not geometry's 1e18: a scene's light at 1e30 was refused while
    light.0.pos=1e30,... was taken.  What rtp_scene_get gives back sets
@@ -1244,6 +1274,7 @@ int main(void)
     RUN(test_long_messages);
     RUN(test_error_format_without_file);
     RUN(test_far_light);
+    RUN(test_get_shortest_subnormal);
     RUN(test_checker_bump);
     RUN(test_files);
     RUN(test_image_key_over_the_limit);
