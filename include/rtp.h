@@ -632,8 +632,9 @@ rtp_status rtp_tree_read_memory(const void *data, size_t size,
  *  the scene and the totals (samples, nodes): rtp_tree_get_info gives what it gives of
  *  rtp_tree_read's tree, rtp_tree_scene, rtp_tree_set and
  *  rtp_tree_add_light work; rtp_tree_eval, rtp_tree_eval_into,
- *  rtp_tree_trace, rtp_tree_write, rtp_tree_merge and rtp_tree_crop
- *  return RTP_ERR_ARGUMENT (read it with rtp_tree_read for those).
+ *  rtp_tree_trace, rtp_tree_trace_opt, rtp_tree_write, rtp_tree_merge and
+ *  rtp_tree_crop return RTP_ERR_ARGUMENT (read it with rtp_tree_read for
+ *  those).
  *  @return as rtp_tree_read. */
 rtp_status rtp_tree_read_summary(const char *path, const rtp_allocator *alloc,
                                  rtp_tree **out, rtp_error *err);

@@ -5173,6 +5173,9 @@ rtp_status rtp_tree_eval_file(const char *path, const rtp_allocator *alloc,
     return st;
 }
 
+static rtp_status tree_trace(const rtp_tree *t, const rtp_trace_options *opt, rtp_image **out,
+                             rtp_trace_stats *stats, rtp_error *err, const char *call);
+
 rtp_status rtp_tree_trace(const rtp_tree *t, int threads, rtp_image **out,
                           rtp_trace_stats *stats, rtp_error *err)
 {
@@ -5185,11 +5188,19 @@ rtp_status rtp_tree_trace(const rtp_tree *t, int threads, rtp_image **out,
                           threads);
     memset(&o, 0, sizeof o);
     o.threads = threads;
-    return rtp_tree_trace_opt(t, &o, out, stats, err);
+    return tree_trace(t, &o, out, stats, err, "rtp_tree_trace");
 }
 
 rtp_status rtp_tree_trace_opt(const rtp_tree *t, const rtp_trace_options *opt, rtp_image **out,
                               rtp_trace_stats *stats, rtp_error *err)
+{
+    return tree_trace(t, opt, out, stats, err, "rtp_tree_trace_opt");
+}
+
+/* Both: their refusals name the call made (rtp_tree_trace_opt's had named
+   rtp_tree_trace). */
+static rtp_status tree_trace(const rtp_tree *t, const rtp_trace_options *opt, rtp_image **out,
+                             rtp_trace_stats *stats, rtp_error *err, const char *call)
 {
     rtp_trace_options o;
     rtp_tree *mark;
@@ -5197,9 +5208,9 @@ rtp_status rtp_tree_trace_opt(const rtp_tree *t, const rtp_trace_options *opt, r
     if (out)
         *out = NULL;
     if (!t)
-        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "rtp_tree_trace: NULL tree");
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "%s: NULL tree", call);
     if (t->busy)
-        return rtpi_tree_busy(t, "rtp_tree_trace", err);
+        return rtpi_tree_busy(t, call, err);
     /* (the caller's limit, threads and callbacks: reeval --reference's
        trace had taken none of its --memory-limit) */
     memset(&o, 0, sizeof o);

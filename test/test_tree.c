@@ -6332,7 +6332,7 @@ static void test_summary(void)
             /* what needs the trees: refused, naming the call and the reader */
             rtp_image *img = NULL, *into = NULL;
             rtp_tree *out = NULL;
-            rtp_status st[6];
+            rtp_status st[7];
             int region[4] = {0, 0, 2, 2}, j;
             const double pos[3] = {1, 2, 3};
             memset(&err, 0, sizeof err);
@@ -6349,7 +6349,13 @@ static void test_summary(void)
                           strstr(err.message, "rtp_tree_read_summary"),
                       "%s", err.message);
             st[5] = rtp_tree_merge(&u, 1, &out, &err);
-            for (j = 0; j < 6; j++)
+            /* (rtp_tree_trace_opt, added after the summary, is refused
+               too and says so under its own name, not rtp_tree_trace's) */
+            st[6] = rtp_tree_trace_opt(u, NULL, &img, NULL, &err);
+            CHECK_MSG(strstr(err.message, "rtp_tree_trace_opt: ") == err.message &&
+                          strstr(err.message, "rtp_tree_read_summary"),
+                      "%s", err.message);
+            for (j = 0; j < 7; j++)
                 CHECK_MSG(st[j] == RTP_ERR_ARGUMENT, "call %d: %d", j, (int)st[j]);
             CHECK(!img && !out);
             rtp_image_destroy(into);
