@@ -303,6 +303,9 @@ expect_rc 2 $RTP diff "$T/t.pfm" "$T/t.pfm" --fail-above max_abs=0x1
 expect_rc 2 $RTP version extra
 expect_rc 0 $RTP version --help
 grep -q "usage: rtp version" "$T/out" && ok || bad "version --help"
+# README: rtp --version is rtp version, rtp help is rtp --help
+[ "$($RTP --version)" = "$($RTP version)" ] && ok || bad "rtp --version differs from rtp version"
+[ "$($RTP help)" = "$($RTP --help)" ] && ok || bad "rtp help differs from rtp --help"
 # an empty tree file says so; a pipe has no file_bytes
 : > "$T/empty.rtp"
 expect_rc 1 $RTP info "$T/empty.rtp"
