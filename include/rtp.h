@@ -244,9 +244,10 @@ rtp_image_format rtp_image_format_from_path(const char *path);
 
 /** Writes an image; path "-" is stdout.  Nothing is left behind on
  *  failure: files are written to a temporary name and renamed (a path
- *  that is not a regular file, as a pipe, a device or /dev/fd/N, is
- *  written in place, and a path naming the process's stdout is written
- *  through stdout). */
+ *  that is not a regular file, as a pipe or a device, is written in
+ *  place; a regular file named through /dev/fd/N or /proc/PID/fd/N,
+ *  another open file as a shell's 2>>log makes one, is appended to; and
+ *  a path naming the process's stdout is written through stdout). */
 rtp_status rtp_image_write(const rtp_image *image, const char *path,
                            rtp_image_format format, rtp_error *err);
 /** Writes to an open stream. */
@@ -609,8 +610,10 @@ rtp_status rtp_tree_eval_file(const char *path, const rtp_allocator *alloc,
 
 /** Writes the tree file (format 2.0, nodes and meshes packed:
  *  lib/tree-format.md); "-" is stdout.  Files are written to a temporary
- *  name and renamed: nothing half written is left.  bytes (may be NULL)
- *  receives the file size. */
+ *  name and renamed: nothing half written is left (pipes, devices, another
+ *  open file named through /dev/fd/N and stdout's own file are written as
+ *  rtp_image_write writes them).  bytes (may be NULL) receives the bytes
+ *  written: the file's size, but where appended to. */
 rtp_status rtp_tree_write(const rtp_tree *tree, const char *path,
                           unsigned long long *bytes, rtp_error *err);
 /** Reads and validates a tree file of format 1 or 2; "-" is stdin.  A

@@ -6,6 +6,7 @@
 
 #include <dirent.h>
 #include <errno.h>
+#include <fcntl.h>
 #include <limits.h>
 #include <stdint.h>
 #include <string.h>
@@ -1565,6 +1566,63 @@ static void test_write_to_stdout_pipe(void)
     remove(link);
 }
 
+/* A regular file named through /dev/fd/N or /proc/self/fd/N (another open
+   file, as a shell's 2>>log makes one) is appended to, by rtp_image_write
+   and rtp_tree_write alike, never replaced: rtp.h said /dev/fd/N was
+   "written in place" and rtp_tree_write named no exception to its rename,
+   where README and the code append. */
+static void test_write_through_fd_appends(void)
+{
+    static const char scene[] = "v from 0 0 5 at 0 0 0 up 0 1 0 angle 40 hither 1 resolution 4 4\n"
+                                "l 0 0 5\nf 1 0 0 1 0 1 0 1\ns 0 0 0 1\n";
+    rtp_image *img = NULL;
+    rtp_scene *s = NULL;
+    rtp_tree *t = NULL;
+    rtp_error err;
+    rtp_trace_options o;
+    char path[64], buf[16];
+    unsigned long long bytes = 0;
+    int k;
+    CHECK(rtp_image_create(1, 1, NULL, &img, &err) == RTP_OK);
+    CHECK(rtp_scene_load_memory(scene, sizeof scene - 1, "fd.nff", "nff", NULL, &s, &err) ==
+          RTP_OK);
+    memset(&o, 0, sizeof o);
+    if (s)
+        CHECK(rtp_record(s, &o, &t, NULL, NULL, &err) == RTP_OK);
+    if (!img || !t)
+        return;
+    for (k = 0; k < 2; k++) {
+        const char *name = tpath(k ? "fd-tree.bin" : "fd-image.bin");
+        FILE *f = fopen(name, "wb");
+        long size;
+        int fd;
+        CHECK(f && fputs("OLDCONTENT", f) >= 0 && fclose(f) == 0);
+        fd = open(name, O_WRONLY);
+        CHECK(fd >= 0);
+        if (fd < 0)
+            continue;
+        snprintf(path, sizeof path, k ? "/proc/self/fd/%d" : "/dev/fd/%d", fd);
+        if (k)
+            CHECK(rtp_tree_write(t, path, &bytes, &err) == RTP_OK);
+        else
+            CHECK(rtp_image_write(img, path, RTP_IMAGE_PFM, &err) == RTP_OK);
+        close(fd);
+        f = fopen(name, "rb");
+        CHECK(f != NULL);
+        if (!f)
+            continue;
+        CHECK(fread(buf, 1, 10, f) == 10 && memcmp(buf, "OLDCONTENT", 10) == 0);
+        CHECK(fseek(f, 0, SEEK_END) == 0);
+        size = ftell(f);
+        fclose(f);
+        CHECK_MSG(size == 10 + (k ? (long)bytes : 12 + 12), "%s: %ld bytes", path, size);
+        remove(name);
+    }
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+    rtp_image_destroy(img);
+}
+
 static void test_write_errors(void)
 {
     rtp_image *img = make_test_image(8, 8), *back = NULL;
@@ -1742,6 +1800,7 @@ int main(void)
     RUN(test_io_chunks);
     RUN(test_write_errors);
     RUN(test_write_to_stdout_pipe);
+    RUN(test_write_through_fd_appends);
     RUN(test_read_errors);
     remove_all(tmpdir);
     remove(tmpdir);
