@@ -2291,9 +2291,10 @@ static double ib_zlim(const rtpi_itembuf *ib, int f, rtpi_v3 p, double *zp, doub
 }
 
 int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
-                         rtpi_v3 p, rtpi_v3 o, uint32_t prim, int self,
+                         const rtpi_v3 *pp, const rtpi_v3 *op, uint32_t prim, int self,
                          const rtpi_ray *r, uint32_t *occ, rtpi_dc_at *at)
 {
+    const rtpi_v3 p = *pp, o = *op;
     int f, res = ib->res, i, j, di, dj, k, n = 0, m = 0, coarse = 0, nf = 0;
     uint32_t cand[9];
     double fz[9];          /* the direct pass's samples in front: depth */

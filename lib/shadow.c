@@ -61,8 +61,9 @@ struct rtpi_shadow {
 #if defined(__GNUC__)
 __attribute__((noinline))
 #endif
-static int sh_own_sphere(const rtpi_shadow *sh, size_t i, uint32_t prim, rtpi_v3 o)
+static int sh_own_sphere(const rtpi_shadow *sh, size_t i, uint32_t prim, const rtpi_v3 *op)
 {
+    const rtpi_v3 o = *op;
     const rtpi_sphere *sp = &sh->s->spheres[i];
     rtpi_v3 oc = v3_sub(o, v3_from_f(sp->c));
     double d2o = v3_dot(oc, oc), d2l = sh->ball[2 * i], r2 = sh->ball[2 * i + 1];
@@ -77,15 +78,15 @@ static int sh_own_sphere(const rtpi_shadow *sh, size_t i, uint32_t prim, rtpi_v3
    asks: the call, with the light's distance made again, was ~75
    instructions of balls' and mount's queries, 2% of a light-buffer
    move). */
-static RTPI_FORCE_INLINE int sh_own(const rtpi_shadow *sh, uint32_t prim, rtpi_v3 o)
+static RTPI_FORCE_INLINE int sh_own(const rtpi_shadow *sh, uint32_t prim, const rtpi_v3 *op)
 {
     const rtp_scene *s = sh->s;
     size_t i = (size_t)prim - s->ntris;
     if (prim < s->ntris)
         return 0;
     /* (sh->ball made: the scene has spheres) */
-    return i < s->nspheres ? sh_own_sphere(sh, i, prim, o)
-                           : rtpi_prim_shadows_own_solid(s, prim, o, sh->light);
+    return i < s->nspheres ? sh_own_sphere(sh, i, prim, op)
+                           : rtpi_prim_shadows_own_solid(s, prim, *op, sh->light);
 }
 
 /* sh->ball for the light; 0, or -1 out of memory. */
@@ -130,10 +131,13 @@ static rtp_status sh_thin_cells(rtpi_shadow *sh, const rtp_allocator *a, rtp_err
 /* May a thin primitive lie in the way from o to the light?  0 only where
    none can (its direction's cell lists none).  at: the face and
    coordinates of o - light, which the item buffer's query made (made
-   again here they had cost tree_s11 1% of an item-buffer move). */
-static int sh_thin_near(const rtpi_shadow *sh, rtpi_v3 o, const rtpi_dc_at *at)
+   again here they had cost tree_s11 1% of an item-buffer move).  Inline
+   (the compiler's heuristics kept it a call): balls_s4's item-buffer move
+   341.04 -> 339.46 M instructions. */
+static RTPI_FORCE_INLINE int sh_thin_near(const rtpi_shadow *sh, const rtpi_v3 *op,
+                                          const rtpi_dc_at *at)
 {
-    rtpi_v3 d = v3_sub(o, sh->light);
+    rtpi_v3 d = v3_sub(*op, sh->light);
     size_t c;
     if (d.x == 0.0 && d.y == 0.0 && d.z == 0.0)
         return 1; /* at the light: the light buffer asks every candidate */
@@ -281,12 +285,13 @@ rtp_status rtpi_shadow_create_mt(const rtp_scene *s, const rtpi_kdtree *kd, rtpi
 /* (inlined whatever the compiler's heuristics say: every query passes
    through it, and the calls with their copies of p and o cost a quarter
    of a light buffer's query on tree) */
-static RTPI_FORCE_INLINE int sh_visible(const rtpi_shadow *sh, rtpi_v3 p, rtpi_v3 o,
-                                        uint32_t prim, const rtpi_ray *r, uint32_t *occ)
+static RTPI_FORCE_INLINE int sh_visible(const rtpi_shadow *sh, const rtpi_v3 *pp,
+                                        const rtpi_v3 *op, uint32_t prim, const rtpi_ray *r,
+                                        uint32_t *occ)
 {
     rtpi_ray rr;
     rtpi_dc_at at;
-    int own = sh_own(sh, prim, o), v;
+    int own = sh_own(sh, prim, op), v;
     uint32_t skip = own == 0 ? prim : RTPI_NONE;
     *occ = RTPI_NONE;
     if (own == 1) {
@@ -306,13 +311,13 @@ static RTPI_FORCE_INLINE int sh_visible(const rtpi_shadow *sh, rtpi_v3 p, rtpi_v
         break;
     case RTPI_SHADOW_ITEMBUF:
     case RTPI_SHADOW_OSMESA:
-        v = rtpi_itembuf_visible(&sh->ib, sh->s, p, o, prim, own, r, occ, &at);
+        v = rtpi_itembuf_visible(&sh->ib, sh->s, pp, op, prim, own, r, occ, &at);
         if (v == 0)
             return 0;
-        if (v > 0 && (!sh->lb.ncand || !sh_thin_near(sh, o, &at)))
+        if (v > 0 && (!sh->lb.ncand || !sh_thin_near(sh, op, &at)))
             return 1; /* (no thin primitive to ask) */
         if (!r) {
-            rr = rtpi_shadow_ray(o, sh->light);
+            rr = rtpi_shadow_ray(*op, sh->light);
             r = &rr;
         }
         if (sh->lb.ncand &&
@@ -325,7 +330,7 @@ static RTPI_FORCE_INLINE int sh_visible(const rtpi_shadow *sh, rtpi_v3 p, rtpi_v
         break;
     }
     if (!r) {
-        rr = rtpi_shadow_ray(o, sh->light);
+        rr = rtpi_shadow_ray(*op, sh->light);
         r = &rr;
     }
     if (sh->mode == RTPI_SHADOW_LIGHTBUF)
@@ -337,13 +342,12 @@ static RTPI_FORCE_INLINE int sh_visible(const rtpi_shadow *sh, rtpi_v3 p, rtpi_v
 int rtpi_shadow_visible(const rtpi_shadow *sh, rtpi_v3 p, rtpi_v3 o, uint32_t prim)
 {
     uint32_t occ;
-    return sh_visible(sh, p, o, prim, NULL, &occ);
+    return sh_visible(sh, &p, &o, prim, NULL, &occ);
 }
 
 int rtpi_shadow_visible_cached(const rtpi_shadow *sh, rtpi_shadow_cache *c, const rtpi_v3 *pp,
                                const rtpi_v3 *op, uint32_t prim)
 {
-    const rtpi_v3 p = *pp, o = *op;
     uint32_t occ;
     int v;
     rtpi_ray r;
@@ -361,7 +365,7 @@ int rtpi_shadow_visible_cached(const rtpi_shadow *sh, rtpi_shadow_cache *c, cons
         const rtp_scene *s = sh->s;
         uint32_t q = c->last - 1u;
         int hit;
-        r = rtpi_shadow_ray(o, sh->light);
+        r = rtpi_shadow_ray(*op, sh->light);
         if (q - s->ntris < s->nspheres) {
             /* (a sphere inline, as the kd-tree's walk tests it) */
             double t;
@@ -372,7 +376,7 @@ int rtpi_shadow_visible_cached(const rtpi_shadow *sh, rtpi_shadow_cache *c, cons
         }
         if (hit)
             return 0;
-        v = sh_visible(sh, p, o, prim, &r, &occ);
+        v = sh_visible(sh, pp, op, prim, &r, &occ);
     } else if (c->last && c->last - 1u != prim && sh->mode == RTPI_SHADOW_LIGHTBUF) {
         /* A triangle: sh_visible's, with the last occluder asked by the
            light buffer first, whose test then shares the list walk's
@@ -381,17 +385,17 @@ int rtpi_shadow_visible_cached(const rtpi_shadow *sh, rtpi_shadow_cache *c, cons
            way, answers before it: the same answer, both being hits (for
            a sphere or cone first, as above: mount's glass balls, their
            own test a call, 0.8% more). */
-        int own = sh_own(sh, prim, o);
+        int own = sh_own(sh, prim, op);
         if (own == 1) {
             occ = prim;
         } else {
-            r = rtpi_shadow_ray(o, sh->light);
+            r = rtpi_shadow_ray(*op, sh->light);
             occ = rtpi_lightbuf_occluder_first(&sh->lb, sh->s, &r, own == 0 ? prim : RTPI_NONE,
                                                c->last - 1u);
         }
         v = occ == RTPI_NONE;
     } else {
-        v = sh_visible(sh, p, o, prim, NULL, &occ);
+        v = sh_visible(sh, pp, op, prim, NULL, &occ);
     }
     /* Remembered only while queries keep meeting occluders: after a lit
        answer the next is most likely lit too, and a test would be lost. */
