@@ -243,32 +243,8 @@ int rtpi_prim_shadows_own_solid(const rtp_scene *s, uint32_t prim, rtpi_v3 o, rt
         }
         return sp->r > 0.0f ? oin != lin : oin && !lin;
     }
-    if ((i -= s->nspheres) < s->ncones) {
-        const rtpi_cone *cn = &s->cones[i];
-        const cone_frame *cf = &s->cframes[i];
-        rtpi_v3 b, ax, q;
-        double H, h, hc, rb, ra;
-        if (cf->ok) { /* (the same axis, height and radii, derived once) */
-            b = cf->b;
-            ax = cf->w;
-            H = cf->h;
-            rb = cf->rb;
-            ra = cf->ra;
-        } else {
-            b = v3_from_f(cn->base);
-            ax = v3_sub(v3_from_f(cn->apex), b);
-            H = v3_len(ax);
-            rb = fabs((double)cn->rb);
-            ra = fabs((double)cn->ra);
-            if (!(H > 0.0))
-                return -1;
-            ax = v3_mul(ax, 1.0 / H);
-        }
-        q = v3_sub(o, b);
-        h = v3_dot(q, ax);
-        hc = h < 0.0 ? 0.0 : h > H ? H : h;
-        return v3_len(v3_madd(q, ax, -h)) > rb + (ra - rb) * (hc / H) ? 0 : -1;
-    }
+    if ((i -= s->nspheres) < s->ncones)
+        return rtpi_cone_shadows_own(s, i, &o);
     return -1;
 }
 

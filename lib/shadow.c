@@ -85,8 +85,10 @@ static RTPI_FORCE_INLINE int sh_own(const rtpi_shadow *sh, uint32_t prim, const 
     if (prim < s->ntris)
         return 0;
     /* (sh->ball made: the scene has spheres) */
-    return i < s->nspheres ? sh_own_sphere(sh, i, prim, op)
-                           : rtpi_prim_shadows_own_solid(s, prim, *op, sh->light);
+    if (i < s->nspheres)
+        return sh_own_sphere(sh, i, prim, op);
+    /* (rtpi_prim_shadows_own_solid's answers) */
+    return (i -= s->nspheres) < s->ncones ? rtpi_cone_shadows_own(s, i, op) : -1;
 }
 
 /* sh->ball for the light; 0, or -1 out of memory. */
