@@ -228,6 +228,20 @@ static int parse_double(const char *s, double *out)
     return 0;
 }
 
+/* v (finite) in the fewest significant digits that read back as v
+   (0.1, not %.17g's 0.10000000000000001): into buf, which it returns. */
+static const char *shortest(char *buf, size_t size, double v)
+{
+    int prec;
+    for (prec = 1; prec < 17; prec++) {
+        snprintf(buf, size, "%.*g", prec, v);
+        if (strtod(buf, NULL) == v)
+            return buf;
+    }
+    snprintf(buf, size, "%.17g", v);
+    return buf;
+}
+
 /* Returns the option's value: "--opt=value" or the next argument. */
 static const char *opt_value(int argc, char **argv, int *i, const char *name)
 {
@@ -1543,7 +1557,7 @@ static int cmd_trace(int argc, char **argv)
             if (!(v = opt_value(argc, argv, &i, "--min-weight")))
                 goto usage;
             if (parse_double(v, &opt.min_weight) || opt.min_weight < 0) {
-                msg("--min-weight: expected a number >= 0");
+                msg("--min-weight: expected a finite number >= 0");
                 goto usage;
             }
         } else {
@@ -1805,7 +1819,7 @@ static int cmd_diff(int argc, char **argv)
             if (!(v = opt_value(argc, argv, &i, "--threshold")))
                 goto usage;
             if (parse_double(v, &threshold) || threshold < 0) {
-                msg("--threshold: expected a number >= 0");
+                msg("--threshold: expected a finite number >= 0");
                 goto usage;
             }
         } else if (is_opt(arg, "--fail-above")) {
@@ -2829,6 +2843,7 @@ static int cmd_info(int argc, char **argv)
     }
     if (stats_path) {
         FILE *f = stats_open(stats_path);
+        char mw[32];
         if (!f) {
             rtp_tree_destroy(tree);
             return 1;
@@ -2838,11 +2853,12 @@ static int cmd_info(int argc, char **argv)
                 "\"pixels\": %llu, \"samples\": %llu, \"nodes\": %llu, \"bytes_per_node\": %u, "
                 "\"tree_bytes\": %llu, \"lights\": %zu, \"materials\": %zu, \"depth\": %d, "
                 "\"full_width\": %d, \"full_height\": %d, \"region_x\": %d, \"region_y\": %d, "
-                "\"min_weight\": %.17g",
+                "\"min_weight\": %s",
                 ti.width, ti.height, ti.spd ? "true" : "false",
                 (unsigned long long)ti.width * ti.height, ti.samples, ti.nodes,
                 ti.bytes_per_node, ti.tree_bytes, ti.lights, ti.materials, ti.max_depth,
-                ti.full_width, ti.full_height, ti.region_x, ti.region_y, ti.min_weight);
+                ti.full_width, ti.full_height, ti.region_x, ti.region_y,
+                shortest(mw, sizeof mw, ti.min_weight));
         /* (a pipe has no size: left out, as reeval leaves it out) */
         if (fb >= 0)
             fprintf(f, ", \"file_bytes\": %lld", fb);

@@ -100,6 +100,9 @@ grep -q '"min_weight": 0[,}]' "$T/info.json" && ok || bad "info min_weight 0"
 $RTP trace $S --size 40x30 --min-weight 0.01 -o "$T/mw.rtp" -q
 $RTP info "$T/mw.rtp" --stats - -q | grep -q '"min_weight": 0.01[,}]' && ok || bad "info --stats min_weight"
 $RTP info "$T/mw.rtp" | grep -q ', depth 5, min weight 0.01$' && ok || bad "info: min weight"
+# in its shortest form (%.17g printed 0.1 as 0.10000000000000001)
+$RTP trace $S --size 8x6 --min-weight 0.1 -o "$T/mw1.rtp" -q
+$RTP info "$T/mw1.rtp" --stats - -q | grep -q '"min_weight": 0.1[,}]' && ok || bad "info --stats min_weight 0.1"
 # info lists the keys --set takes with their values, as --set takes them:
 # a material by index and name, a value set on trace read back as given
 $RTP trace $S --size 40x30 --set mat.red.kd=0.35 --set light.fill.pos=1.5,-2,3.25 -o "$T/k.rtp" -q
@@ -736,6 +739,9 @@ expect_rc 2 $RTP diff "$T/t.pfm" "$T/amb.pfm" --fail-above above=150%
 expect_rc 0 $RTP diff "$T/t.pfm" "$T/t.pfm" -q --threshold 1e-320 --fail-above max_abs=1e-320
 expect_rc 0 $RTP trace $S --size 8x8 --min-weight 1e-320 -i "$T/mw.pfm" -q
 expect_rc 2 $RTP diff "$T/t.pfm" "$T/t.pfm" --threshold 1e400
+# ...a usage error that says the number must be finite (inf is >= 0)
+$RTP diff "$T/t.pfm" "$T/t.pfm" --threshold inf 2>&1 | grep -q 'expected a finite number >= 0' &&
+    ok || bad "diff --threshold inf: the message says finite"
 # a number key's '-' is a bad number, not "stdin taken" (reviewer)
 expect_rc 1 sh -c "$RTP reeval - -i '$T/s1.pfm' --set light.0.on=- <'$T/t.rtp'"
 grep -q "expected 1 comma-separated number" "$T/err" && ok || bad "light.0.on=-: $(cat "$T/err")"
