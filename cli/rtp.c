@@ -1673,7 +1673,16 @@ static int cmd_trace(int argc, char **argv)
     if ((tree_path ? rtp_record(scene, &opt, &tree, &img, &st, &err)
                    : rtp_trace(scene, &opt, &img, &st, &err)) != RTP_OK) {
         progress_end(&prog);
-        fail_err(&err);
+        /* an error of no file (out of memory in the kd-tree's build, a
+           limit) said with the scene it stopped */
+        if (!err.file[0] && err.line == 0) {
+            char buf[600];
+            fprintf(stderr, "rtp: %s: %s\n",
+                    strcmp(scene_path, "-") ? scene_path : "the scene on stdin",
+                    rtp_error_format(&err, buf, sizeof buf));
+        } else {
+            fail_err(&err);
+        }
         goto out;
     }
     progress_end(&prog);

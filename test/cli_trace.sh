@@ -153,6 +153,8 @@ grep -q "a.pfm is 40x30, .*tall.pfm 30x40: image sizes differ" "$T/err" && ok ||
 printf 'v\nfrom 0 0 0\nat 0 0 1\nup 0 1 0\nangle 60\nhither 0.01\nresolution 4 4\nb 0.1 0.1 0.1\nl 0.5 0.5 0.5\nf 0.9 0.9 0.9 0.1 0.9 10 0 1\ns 0 0 0 10\nf 0.9 0.9 0.9 0.1 0.5 10 0.5 1.5\ns 0 0 4 2\ns 0 4 3 2\ns 3 -3 3 2\ns -3 -3 -3 2\ns 4 0 -3 2\ns -4 3 -3 2\n' > "$T/trap.nff"
 expect_rc 1 $RTP trace "$T/trap.nff" --depth 40 --memory-limit 32 -o "$T/trap.rtp" -i "$T/trap.pfm"
 grep -q "memory limit of 32 MiB" "$T/err" && ok || { bad "memory limit not named"; cat "$T/err" >&2; }
+# ...and the scene it stopped (an error of no file of its own)
+grep -q "^rtp: $T/trap.nff: .*memory limit of 32 MiB" "$T/err" && ok || { bad "scene not named"; cat "$T/err" >&2; }
 [ ! -e "$T/trap.rtp" ] && [ ! -e "$T/trap.pfm" ] && ok || bad "files written past the memory limit"
 expect_rc 0 $RTP trace "$T/trap.nff" --size 1x1 --depth 40 -o "$T/trap.rtp" --stats "$T/trap.json"
 grep -q "warning: 16 rays were not followed" "$T/err" && ok || { bad "no warning of a full tree"; cat "$T/err" >&2; }
