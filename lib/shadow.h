@@ -80,6 +80,11 @@ int rtpi_shadow_visible(const rtpi_shadow *sh, rtpi_v3 p, rtpi_v3 o,
    across lights and modes of the same scene. */
 typedef struct rtpi_shadow_cache {
     uint32_t last; /* primitive + 1; 0: none */
+    /* EXACT: the last two distinct primitives its queries found in the
+       way (+ 1; 0: none), kept across lit answers: asked after `last`
+       missed */
+    uint32_t h1, h2;
+    int gain; /* whether asking h1 and h2 pays (sh_earlier) */
 } rtpi_shadow_cache;
 
 /* (p and o by address: a query's arguments copied by value cost a
