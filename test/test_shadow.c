@@ -1099,6 +1099,109 @@ static void test_stopper_reports(void)
     rtpi_stopper_destroy(&st);
 }
 
+/* EXACT's cache (rtpi_shadow_visible_cached): the occluders met before
+   the last one are asked too (sh_earlier), which changes no answer.  A
+   row crossing the shadows of two squares A and B by turns: after A then
+   B, a point in A's shadow is answered by A, the one before the last
+   (its score goes up: it was asked and hit); random points in random
+   order answer as uncached queries, and so do points where the earlier
+   occluders are the point's own primitive. */
+static void test_exact_cache_earlier(void)
+{
+    static const char text[] =
+        "v\nfrom 0 -9 4\nat 0 0 0.5\nup 0 0 1\nangle 50\nhither 0.01\nresolution 8 8\n"
+        "l 0 0 6\nf 0.8 0.8 0.8 1 0 0 0 1\n"
+        "p 4\n-5 -5 0\n5 -5 0\n5 5 0\n-5 5 0\n"
+        "p 4\n-2 -0.5 2\n-1 -0.5 2\n-1 0.5 2\n-2 0.5 2\n"
+        "p 4\n1 -0.5 2\n2 -0.5 2\n2 0.5 2\n1 0.5 2\n";
+    static const double row[] = {-2.2, 2.2, -2.3, 2.3, -2.4, 0.0, 2.4, -2.5};
+    rtp_scene *s = load(text, sizeof text - 1);
+    rtpi_kdtree *kd = NULL;
+    rtpi_shadow *sh = NULL;
+    rtp_allocator a;
+    rtpi_shadow_cache c = {0}, c2 = {0};
+    rtpi_v3 lp = v3(0, 0, 6);
+    sample *sm = (sample *)malloc(NSAMPLES * sizeof *sm);
+    size_t k, n, bad = 0;
+    rtpi_allocator_init(&a, NULL);
+    CHECK(s != NULL && sm != NULL);
+    if (!s || !sm || rtpi_kd_build(s, NULL, &kd, NULL) != RTP_OK ||
+        rtpi_shadow_create(s, kd, lp, RTPI_SHADOW_EXACT, 0, &a, &sh, NULL) != RTP_OK) {
+        CHECK(0);
+        rtpi_kd_destroy(kd);
+        rtp_scene_destroy(s);
+        free(sm);
+        return;
+    }
+    for (k = 0; k < sizeof row / sizeof *row; k++) {
+        /* the floor's point under (row[k], 0.1), as trace would ask it */
+        rtpi_ray r;
+        rtpi_hit h;
+        rtpi_v3 p, o;
+        int e, v;
+        r.o = v3(row[k], 0.1, -1.0);
+        r.d = v3(0, 0, 1);
+        r.tmin = 0.0;
+        r.tmax = HUGE_VAL;
+        CHECK(rtpi_kd_intersect(kd, &r, &h) && h.prim < 2);
+        CHECK(rtpi_shadow_query_at(s, 0, h.prim, v3_madd(r.o, r.d, h.t), v3(0, 0, -1), lp,
+                                   rtpi_offset_floor(s, NULL), &p, &o));
+        e = rtpi_shadow_visible(sh, p, o, h.prim);
+        v = rtpi_shadow_visible_cached(sh, &c, &p, &o, h.prim);
+        CHECK_MSG(e == (row[k] == 0.0), "point %lu (x %g): lit %d", (unsigned long)k, row[k], e);
+        CHECK_MSG(v == e, "point %lu (x %g): cached %d, uncached %d", (unsigned long)k, row[k],
+                  v, e);
+        if (k == 2) /* A, B, then A: asked as the one before the last, and hit */
+            CHECK_MSG(c.gain > 0 && c.last == c.h1 && c.h2 != 0 && c.h1 != c.h2,
+                      "after A, B, A: gain %d, last %u, h1 %u, h2 %u", c.gain,
+                      (unsigned)c.last, (unsigned)c.h1, (unsigned)c.h2);
+    }
+    /* random points in random order, and the first scene's */
+    n = make_samples(s, kd, lp, sm, NSAMPLES);
+    CHECK(n > NSAMPLES / 4);
+    for (k = 0; k < n; k++)
+        bad += rtpi_shadow_visible_cached(sh, &c, &sm[k].p, &sm[k].o, sm[k].prim) !=
+               rtpi_shadow_visible(sh, sm[k].p, sm[k].o, sm[k].prim);
+    CHECK_MSG(bad == 0, "%lu of %lu cached answers differ", (unsigned long)bad, (unsigned long)n);
+    rtpi_shadow_destroy(sh);
+    rtpi_kd_destroy(kd);
+    rtp_scene_destroy(s);
+    s = load(scene_text, sizeof scene_text - 1);
+    kd = NULL;
+    sh = NULL;
+    CHECK(s != NULL);
+    if (!s || rtpi_kd_build(s, NULL, &kd, NULL) != RTP_OK) {
+        CHECK(0);
+        rtp_scene_destroy(s);
+        free(sm);
+        return;
+    }
+    for (k = 0; k < NLIGHTS; k++) {
+        size_t j;
+        lp = v3(lights[k].pos[0], lights[k].pos[1], lights[k].pos[2]);
+        if (rtpi_shadow_create(s, kd, lp, RTPI_SHADOW_EXACT, 0, &a, &sh, NULL) != RTP_OK) {
+            CHECK(0);
+            break;
+        }
+        n = make_samples(s, kd, lp, sm, 4000);
+        bad = 0;
+        /* each point twice, the second time after the cache met its own
+           primitive in the way of another point */
+        for (j = 0; j < n; j++) {
+            int e = rtpi_shadow_visible(sh, sm[j].p, sm[j].o, sm[j].prim);
+            bad += rtpi_shadow_visible_cached(sh, &c2, &sm[j].p, &sm[j].o, sm[j].prim) != e;
+            bad += rtpi_shadow_visible_cached(sh, &c2, &sm[j].p, &sm[j].o, sm[j].prim) != e;
+        }
+        CHECK_MSG(bad == 0, "light %s: %lu cached answers differ", lights[k].name,
+                  (unsigned long)bad);
+        rtpi_shadow_destroy(sh);
+        sh = NULL;
+    }
+    rtpi_kd_destroy(kd);
+    rtp_scene_destroy(s);
+    free(sm);
+}
+
 int main(void)
 {
     const char *env = getenv("RTP_TEST_SEED");
@@ -1117,6 +1220,7 @@ int main(void)
     RUN(test_lightbuf_threads);
     RUN(test_spd_scene);
     RUN(test_light_at_cone_tip);
+    RUN(test_exact_cache_earlier);
     RUN(test_lightbuf_limit_threads);
     RUN(test_stopper_reports);
     RUN(test_osmesa);
