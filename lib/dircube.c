@@ -2167,12 +2167,35 @@ rtp_status rtpi_round_cones(const rtp_scene *s, rtpi_v3 light, double scale,
     *out = NULL;
     if (!n)
         return RTP_OK;
-    *out = (double *)rtpi_malloc_array(a, 4 * n, sizeof **out);
+    *out = (double *)rtpi_malloc_array(a, 4 * n + 6 * s->ncones, sizeof **out);
     if (!*out)
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
     for (i = 0; i < n; i++) {
         uint32_t prim = (uint32_t)(s->ntris + i);
         lb_cone(s, prim, light, scale, dc_near(s, prim, light), *out + 4 * i);
+    }
+    for (i = 0; i < s->ncones; i++) {
+        /* the cylinders' line test (rtpi_kd_occluder_planes), for rays
+           with ts |d| <= T = 4 scale (any origin within the scale: |L -
+           o| <= 2 sqrt(3) scale): m = w x (L - b); M = R + 1e-12 (S' +
+           S'^2 / R) + 1e-14 T with S' = 2 bound + 2 |mid - L| + 3.01 T;
+           E = 1e-14 (|L - b| + M); T */
+        const rtpi_cone_frame *cf = &s->cframes[i];
+        double *q = *out + 4 * n + 6 * i;
+        rtpi_v3 lb = v3_sub(light, cf->b), m = v3_cross(cf->w, lb);
+        double T = 4.0 * scale, R = cf->rb,
+               sp = 2.0 * cf->bound + 2.0 * v3_len(v3_sub(cf->mid, light)) + 3.01 * T;
+        double M = R + 1e-12 * (sp + sp * (sp / R)) + 1e-14 * T;
+        q[0] = q[1] = q[2] = q[3] = q[4] = q[5] = 0.0; /* (T 0: no test) */
+        if (cf->ok && cf->ra == cf->rb && R > 0.0 && M < HUGE_VAL && T < HUGE_VAL &&
+            m.x - m.x == 0.0 && m.y - m.y == 0.0 && m.z - m.z == 0.0) {
+            q[0] = m.x;
+            q[1] = m.y;
+            q[2] = m.z;
+            q[3] = M;
+            q[4] = 1e-14 * (v3_len(lb) + M);
+            q[5] = T;
+        }
     }
     return RTP_OK;
 }

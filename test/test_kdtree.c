@@ -4,6 +4,8 @@
  * Randomised: the seed is printed; RTP_SEED=N replays a run. */
 #include "internal.h"
 #include "check.h"
+#include "dircube.h"
+#include "shadow.h"
 
 #include <time.h>
 
@@ -1082,6 +1084,122 @@ static void test_stats(void)
     rtp_scene_destroy(s);
 }
 
+/* The cylinders' line test of shadow rays towards a light
+   (rtpi_round_cones' data, kd_cylinder_line_far in the walk) turns away
+   no ray rtpi_cone_t hits: rays from beyond points at R (1 + e) from an
+   axis, e from -1e-6 to 1e-6 (1e-9 the closest), near and far, rays along
+   an axis (d x w = 0), directions with zero components, lights on an
+   axis' extension, inside the scene and far away: the walk with the
+   light's tests answers as brute force over rtpi_intersect_prim. */
+static void test_cylinder_line(void)
+{
+    static const double es[] = {-1e-6, -1e-9, 0.0, 1e-9, 1e-6, 1e-3, -0.5};
+    rtpi_v3 lights[6];
+    rng g;
+    rtp_scene *s = new_scene();
+    rtpi_kdtree *kd = NULL;
+    rtp_allocator a;
+    int i, li, k, bad = 0, hits = 0, graze_hit = 0, graze_miss = 0, nc;
+    g.s = g_seed ^ 0x3131;
+    rtpi_allocator_init(&a, NULL);
+    for (i = 0; i < 60; i++) {
+        rtpi_v3 b = v3(rndr(&g, -2, 2), rndr(&g, -2, 2), rndr(&g, 0, 2));
+        rtpi_v3 d = v3_mul(rnd_dir(&g), rndr(&g, 0.3, 2));
+        double r = rndr(&g, 0.01, 0.06);
+        if (i % 4 == 0) /* along a coordinate axis */
+            d = i % 8 ? v3(0, 0, 1.5) : v3(1.2, 0, 0);
+        add_cone(s, b, r, v3_add(b, d), r);
+    }
+    add_sphere(s, 0.5, 0.5, 1, 0.3);
+    nc = (int)s->ncones;
+    if (rtpi_kd_build(s, NULL, &kd, NULL) != RTP_OK) {
+        CHECK(0);
+        rtp_scene_destroy(s);
+        return;
+    }
+    {
+        const rtpi_cone_frame *c0 = &s->cframes[0], *c1 = &s->cframes[1];
+        lights[0] = v3(2, 3, 9);
+        lights[1] = v3(0.1, -0.2, 1.0);                       /* among them */
+        lights[2] = v3_madd(c0->b, c0->w, -2.0);              /* on an axis */
+        lights[3] = v3_madd(c1->b, c1->w, c1->h + 0.7);       /* and another */
+        lights[4] = v3(3e5, -1e5, 8e5);
+        lights[5] = v3(-4, 0, 1); /* level with the x cylinders */
+    }
+    for (li = 0; li < 6; li++) {
+        rtpi_v3 L = lights[li];
+        double *planes = NULL, *cones = NULL, scale = 0.0;
+        if (rtpi_tri_planes(s, L, &a, &planes, &scale, NULL) != RTP_OK ||
+            rtpi_round_cones(s, L, scale, &a, &cones, NULL) != RTP_OK) {
+            CHECK(0);
+            break;
+        }
+        for (k = 0; k < 6000; k++) {
+            int c = (int)(rnd(&g) * nc) % nc, kind = k % 10, brute = 0, walk;
+            const rtpi_cone_frame *cf = &s->cframes[c];
+            double e = es[k % (sizeof es / sizeof *es)];
+            rtpi_v3 u = v3_cross(cf->w, rnd_dir(&g)), P, o;
+            rtpi_ray r;
+            rtpi_hit h;
+            uint32_t q;
+            u = v3_mul(u, 1.0 / v3_len(u));
+            P = v3_madd(v3_madd(cf->b, cf->w, rndr(&g, 0.02, 0.98) * cf->h), u, cf->rb * (1 + e));
+            o = v3_add(L, v3_mul(v3_sub(P, L), kind < 5 ? 1.0001 + kind : 1.0 + 1e-6 * kind));
+            if (kind < 5) {
+                /* a line through L in a plane parallel to the axis at R
+                   (1 + e) from it, which it touches at height hq */
+                rtpi_v3 Lp = v3_madd(cf->b, cf->w, v3_dot(v3_sub(L, cf->b), cf->w));
+                rtpi_v3 vv = v3_sub(L, Lp);
+                double dL = v3_len(vv), rho = cf->rb * (1 + e);
+                if (dL > 2 * rho) {
+                    double ct = rho / dL, st = sqrt(1 - ct * ct);
+                    double hq = rndr(&g, 0.02, 0.98) * cf->h, hL = v3_dot(v3_sub(L, cf->b), cf->w);
+                    rtpi_v3 v2, T, Q;
+                    vv = v3_mul(vv, 1.0 / dL);
+                    v2 = v3_cross(cf->w, vv);
+                    T = v3_add(Lp, v3_add(v3_mul(vv, rho * ct), v3_mul(v2, rho * st)));
+                    Q = v3_madd(T, cf->w, hq - hL);
+                    o = v3_add(L, v3_mul(v3_sub(Q, L), 1.0001 + kind));
+                }
+            }
+            if (kind == 7 && (li == 2 || li == 3)) {
+                /* from the axis of the cylinder whose axis holds the
+                   light: along it (d x w = 0), or off it by R (1 + e) */
+                const rtpi_cone_frame *ca = &s->cframes[li - 2];
+                o = v3_madd(ca->b, ca->w, li == 2 ? ca->h + 0.5 : -0.5);
+                if (k & 32)
+                    o = v3_madd(o, u, ca->rb * (1 + e));
+            }
+            if (kind == 8) /* zero components */
+                o = v3(L.x + 0.5, P.y, P.z);
+            if (kind == 9) /* random */
+                o = v3(rndr(&g, -3, 3), rndr(&g, -3, 3), rndr(&g, -0.5, 3));
+            r = rtpi_shadow_ray(o, L);
+            for (q = 0; q < (uint32_t)rtpi_scene_nprims(s) && !brute; q++)
+                brute = rtpi_intersect_prim(s, q, &r, &h);
+            walk = rtpi_kd_occluder_planes(kd, &r, RTPI_NONE, planes, cones, scale) !=
+                   RTPI_NONE;
+            bad += walk != brute;
+            hits += brute;
+            if (kind < 5 && e == -1e-9)
+                graze_hit += brute;
+            if (kind < 5 && e == 1e-3)
+                graze_miss += !brute;
+        }
+        rtpi_free(&a, planes);
+        rtpi_free(&a, cones);
+    }
+    CHECK_MSG(bad == 0, "%d walks with the cylinders' line test differ from brute force (seed "
+              "%llu)", bad, (unsigned long long)g_seed);
+    printf("cylinders line test: %d hits, grazing %d hit, %d missed\n", hits, graze_hit, graze_miss);
+    CHECK(hits > 5000);
+    /* the grazing rays are what they were made to be, mostly */
+    CHECK_MSG(graze_hit > 1000 && graze_miss > 1000, "grazing: %d hit, %d missed", graze_hit,
+              graze_miss);
+    rtpi_kd_destroy(kd);
+    rtp_scene_destroy(s);
+}
+
 int main(void)
 {
     const char *env = getenv("RTP_SEED");
@@ -1106,5 +1224,6 @@ int main(void)
     RUN(test_fan_budget);
     RUN(test_diagonal_pipe);
     RUN(test_stats);
+    RUN(test_cylinder_line);
     return check_report();
 }
