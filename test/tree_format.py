@@ -466,6 +466,22 @@ def parse_geom(t, r):
     t["geom"] = g
 
 
+ZERO_NODE = (0, 0, 0, 0, 0, 0)
+
+
+def predictors(P, start, counts, k, j):
+    """The nodes node j of sample k is predicted from (the reader's and the
+    writer's one rule): A, the same node of the sample before, or the node
+    before in this sample, or zeros; B (or None), the same node two samples
+    back where A is the sample before's."""
+    if k > 0 and counts[k - 1] > j:
+        B = P[start[k - 2] + j] if k > 1 and counts[k - 2] > j else None
+        return P[start[k - 1] + j], B
+    if j > 0:
+        return P[start[k] + j - 1], None
+    return ZERO_NODE, None
+
+
 def parse_tree(t, r):
     nl = len(t["lights"])
     samples = r.u64()
@@ -496,20 +512,11 @@ def parse_tree(t, r):
     wide = layout & 2
     node_at = r.i
     P = [None] * nodes  # [bits p0, p1, p2, prim, vis, link]
-    zero = [0, 0, 0, 0, 0, 0]
     if t["major"] >= 2:
         r.need(nodes * (5 + (1 if has_vis else 0)), "nodes")
         for k in range(samples):
             for j in range(counts[k]):
-                B = None
-                if k > 0 and counts[k - 1] > j:
-                    A = P[start[k - 1] + j]
-                    if k > 1 and counts[k - 2] > j:
-                        B = P[start[k - 2] + j]
-                elif j > 0:
-                    A = P[start[k] + j - 1]
-                else:
-                    A = zero
+                A, B = predictors(P, start, counts, k, j)
                 n = [0] * 6
                 for i in range(3):
                     pred = (2 * A[i] - B[i]) if B else A[i]
@@ -715,19 +722,10 @@ def encode_tree(t):
     start = [0]
     for c in counts:
         start.append(start[-1] + c)
-    zero = [0] * 6
     if t["major"] >= 2:
         for k in range(len(counts)):
             for j in range(counts[k]):
-                B = None
-                if k > 0 and counts[k - 1] > j:
-                    A = P[start[k - 1] + j]
-                    if k > 1 and counts[k - 2] > j:
-                        B = P[start[k - 2] + j]
-                elif j > 0:
-                    A = P[start[k] + j - 1]
-                else:
-                    A = zero
+                A, B = predictors(P, start, counts, k, j)
                 n = P[start[k] + j]
                 for i in range(3):
                     pred = (2 * A[i] - B[i]) if B else A[i]
