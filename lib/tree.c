@@ -5416,12 +5416,14 @@ static const char *setup_diff(const rtp_tree *a, const rtp_tree *b, char *buf, s
     }
     for (i = 0; i < x->nlights; i++) {
         rtpi_light l = x->lights[i], k = y->lights[i];
+        const char *nm = y->lights[i].name;
         l.name = k.name = NULL;
         if (memcmp(&l, &k, sizeof l) != 0) {
-            snprintf(buf, size, "given another light.%zu.%s than parts[0]", i,
+            snprintf(buf, size, "given another light.%zu.%s%s%s%s than parts[0]", i,
                      memcmp(l.pos, k.pos, sizeof l.pos) != 0       ? "pos"
                      : memcmp(l.color, k.color, sizeof l.color) != 0 ? "color"
-                                                                    : "on");
+                                                                    : "on",
+                     nm ? " (" : "", nm ? nm : "", nm ? ")" : "");
             return buf;
         }
     }

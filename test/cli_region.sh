@@ -132,7 +132,7 @@ $RTP merge -o "$T/x.rtp" "$T/p1.rtp" "$T/pk.rtp" 2>"$T/err"
     ok || bad "merge of another --set: $(cat "$T/err")"
 $RTP trace $S --size 32x32 --region 0,20,32,32 --set light.1.pos=0,0,9 -o "$T/pl.rtp" -q
 $RTP merge -o "$T/x.rtp" "$T/pl.rtp" "$T/p1.rtp" 2>"$T/err"
-[ $? -eq 1 ] && grep -q "p1.rtp cannot join .*pl.rtp: it was given another light.1.pos than" "$T/err" &&
+[ $? -eq 1 ] && grep -q "p1.rtp cannot join .*pl.rtp: it was given another light.1.pos (fill) than" "$T/err" &&
     ok || bad "merge of another light: $(cat "$T/err")"
 $RTP trace scenes/prims.nff --size 32x32 --region 0,20,32,32 -o "$T/ps.rtp" -q
 $RTP merge -o "$T/x.rtp" "$T/p1.rtp" "$T/ps.rtp" 2>"$T/err"
