@@ -176,6 +176,11 @@ static int bump_stale(rtp_tree *t, size_t m)
 static int needs_retrace(rtp_tree *t, size_t m, int stale_retrace)
 {
     const rtpi_material *a = &t->scene->mats[m], *a0 = &t->mats0[m];
+    /* Traced to depth 1 (eye rays alone), no reflected or refracted ray
+       is cast whatever ks, kt, ior or bump: nothing to trace (SPD's depth
+       is 5; its one-sidedness by kt is below) */
+    if (t->max_depth <= 1 && !t->spd)
+        return 0;
     /* a new bump bends the reflected and refracted rays below it: those
        subtrees are stale; kept (the paper's way) unless asked otherwise */
     if (stale_retrace && (a0->ks > 0.0f || a0->kt > 0.0f) && bump_stale(t, m))

@@ -74,6 +74,17 @@ printf 'camera.from=1,2,9\nmat.red.kd=0.2\n' |
 $RTP diff "$T/cams1.pfm" "$T/camkd.pfm" --fail-above max_abs=1e-6 -q && ok || bad "stream: kd after a camera move"
 [ "$(grep -c '"retraced_samples": 0' "$T/cams.json")" = 1 ] && ok || { bad "stream: the kd edit traced"; cat "$T/cams.json" >&2; }
 
+# Traced to depth 1 (eye rays alone) no reflected or refracted ray is
+# cast whatever ks, kt or ior: a class-D edit traces nothing and still
+# equals trace of the edited scene (every sample was traced again).
+$RTP trace scenes/prims.nff --size 40x30 --depth 1 -o "$T/d1.rtp" -q
+$RTP trace scenes/prims.nff --size 40x30 --depth 1 --set mat.0.ks=0.6 --set mat.1.kt=0.5 \
+    --set mat.1.ior=1.7 -i "$T/d1t.pfm" -q
+expect_rc 0 $RTP reeval "$T/d1.rtp" --set mat.0.ks=0.6 --set mat.1.kt=0.5 --set mat.1.ior=1.7 \
+    -i "$T/d1r.pfm" --stats "$T/d1.json" -q
+cmp -s "$T/d1t.pfm" "$T/d1r.pfm" && ok || bad "depth 1: ks/kt/ior from 0 differs from trace"
+grep -q '"retraced_samples": 0' "$T/d1.json" && ok || { bad "depth 1: traced again"; cat "$T/d1.json" >&2; }
+
 # The default shadows (auto) say what decided a moved light: here, 40x30
 # hits of spheres.nff's few primitives, the light buffer; auto:RES parses.
 expect_rc 0 $RTP reeval "$T/t.rtp" --set light.key.pos=-3,-4,7 -i "$T/a.pfm" --stats "$T/auto.json"
