@@ -3146,7 +3146,7 @@ usage:
 /* ----------------------------------------------------------------- main */
 
 static const char main_help[] =
-    "usage: rtp COMMAND [options]   (rtp COMMAND --help for each)\n"
+    "usage: rtp COMMAND [options]   (rtp help COMMAND for each)\n"
     "Parameterized ray tracing with geometric parameters.\n"
     "  trace SCENE   trace a scene (NFF or OBJ); write the image and ray trees\n"
     "  reeval TREE   re-evaluate ray trees with edited parameters, no tracing\n"
@@ -3197,6 +3197,19 @@ int main(int argc, char **argv)
     if (argc < 2) {
         fputs(main_help, stderr);
         return EXIT_USAGE;
+    }
+    if (strcmp(argv[1], "help") == 0 && argc > 2) {
+        /* rtp help COMMAND: that command's --help, as git and go say it
+           (it printed the list of commands) */
+        static char help_opt[] = "--help";
+        if (argc > 3) {
+            msg("help: unexpected argument '%s'", argv[3]);
+            fputs("usage: rtp help [COMMAND]\n", stderr);
+            return EXIT_USAGE;
+        }
+        argv[1] = argv[2];
+        argv[2] = help_opt;
+        argc = 3;
     }
     if (strcmp(argv[1], "-h") == 0 || strcmp(argv[1], "--help") == 0 ||
         strcmp(argv[1], "help") == 0) {

@@ -35,6 +35,13 @@ for c in "" trace reeval diff info merge version; do
 done
 expect_rc 0 $RTP version -v --help
 grep -q "usage: rtp version" "$T/out" && ok || bad "version -v --help: $(cat "$T/err")"
+# rtp help COMMAND is COMMAND's --help (it printed the command list)
+for c in trace reeval diff info merge version; do
+    $RTP $c --help >"$T/h1" 2>&1
+    $RTP help $c >"$T/h2" 2>&1 && cmp -s "$T/h1" "$T/h2" && ok || bad "rtp help $c is not rtp $c --help"
+done
+expect_rc 2 $RTP help frobnicate
+expect_rc 2 $RTP help trace reeval
 expect_rc 2 $RTP trace
 expect_rc 2 $RTP trace scenes/spheres.nff --depth zero
 expect_rc 1 $RTP trace "$T/does-not-exist.nff" -i "$T/x.pfm"
