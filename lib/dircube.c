@@ -2160,7 +2160,7 @@ rtp_status rtpi_tri_planes(const rtp_scene *s, rtpi_v3 light, const rtp_allocato
     return RTP_OK;
 }
 
-rtp_status rtpi_round_cones(const rtp_scene *s, rtpi_v3 light, double scale,
+rtp_status rtpi_round_cones(const rtp_scene *s, rtpi_v3 light, double scale, double far,
                             const rtp_allocator *a, double **out, rtp_error *err)
 {
     size_t i, n = s->nspheres + s->ncones;
@@ -2174,16 +2174,24 @@ rtp_status rtpi_round_cones(const rtp_scene *s, rtpi_v3 light, double scale,
         uint32_t prim = (uint32_t)(s->ntris + i);
         lb_cone(s, prim, light, scale, dc_near(s, prim, light), *out + 4 * i);
     }
+    /* The cylinders' line test (rtpi_kd_occluder_planes) holds for rays
+       with ts |d| <= T, T as the test's margins take it: T = 4 scale
+       took every ray (|L - o| <= 2 sqrt(3) scale), and made the margins
+       useless for a scene far from the origin (rings moved by 1e5: M
+       past 29 R, none of 239,770 cylinders asked turned away).  Shadow
+       rays leave hits, which lie in the kd-tree's box, moved off it by
+       the float rounding of the hit and the offset (under 1e-6 of the
+       scale, internal.h): T the light's greatest distance from the box
+       (far, rtpi_kd_far) plus 1e-5 of the scale holds them all; a ray
+       beyond T (none) would only not be asked. */
+    far += 1e-5 * scale;
     for (i = 0; i < s->ncones; i++) {
-        /* the cylinders' line test (rtpi_kd_occluder_planes), for rays
-           with ts |d| <= T = 4 scale (any origin within the scale: |L -
-           o| <= 2 sqrt(3) scale): m = w x (L - b); M = R + 1e-12 (S' +
-           S'^2 / R) + 1e-14 T with S' = 2 bound + 2 |mid - L| + 3.01 T;
-           E = 1e-14 (|L - b| + M); T */
+        /* m = w x (L - b); M = R + 1e-12 (S' + S'^2 / R) + 1e-14 T with
+           S' = 2 bound + 2 |mid - L| + 3.01 T; E = 1e-14 (|L - b| + M); T */
         const rtpi_cone_frame *cf = &s->cframes[i];
         double *q = *out + 4 * n + 6 * i;
         rtpi_v3 lb = v3_sub(light, cf->b), m = v3_cross(cf->w, lb);
-        double T = 4.0 * scale, R = cf->rb,
+        double T = far < 4.0 * scale ? far : 4.0 * scale, R = cf->rb,
                sp = 2.0 * cf->bound + 2.0 * v3_len(v3_sub(cf->mid, light)) + 3.01 * T;
         double M = R + 1e-12 * (sp + sp * (sp / R)) + 1e-14 * T;
         q[0] = q[1] = q[2] = q[3] = q[4] = q[5] = 0.0; /* (T 0: no test) */

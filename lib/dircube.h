@@ -255,9 +255,9 @@ rtp_status rtpi_tri_planes(const rtp_scene *s, rtpi_v3 light, const rtp_allocato
    The 4 (nspheres + ncones) doubles are followed by 6 for each cone i
    (cframes[i]): a cylinder's line test for shadow rays towards the light
    (rtpi_kd_occluder_planes: m = w x (light - b), its margins M and E,
-   and the longest ray T it holds for; T = 0 where there is no test).
-   *out NULL where s has none. */
-rtp_status rtpi_round_cones(const rtp_scene *s, rtpi_v3 light, double scale,
+   and the longest ray T it holds for, from `far`, rtpi_kd_far of the
+   light; T = 0 where there is no test).  *out NULL where s has none. */
+rtp_status rtpi_round_cones(const rtp_scene *s, rtpi_v3 light, double scale, double far,
                             const rtp_allocator *a, double **out, rtp_error *err);
 
 /* -------------------------------------------------------- item buffer */

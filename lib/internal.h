@@ -536,6 +536,9 @@ rtp_status rtpi_kd_build_mt(const rtp_scene *s, const rtp_allocator *a,
                             int nthreads, rtpi_kdtree **out, rtp_error *err);
 void rtpi_kd_destroy(rtpi_kdtree *kd);
 void rtpi_kd_get_stats(const rtpi_kdtree *kd, rtpi_kd_stats *st);
+/* The greatest distance from L to the tree's box, where every hit lies
+   (0 without a primitive). */
+double rtpi_kd_far(const rtpi_kdtree *kd, rtpi_v3 L);
 /* Closest hit with t in [ray->tmin, ray->tmax].  @return 1 on hit. */
 int rtpi_kd_intersect(const rtpi_kdtree *kd, const rtpi_ray *ray,
                       rtpi_hit *hit);

@@ -1014,6 +1014,22 @@ nomem:
                       "out of memory building the kd-tree");
 }
 
+double rtpi_kd_far(const rtpi_kdtree *kd, rtpi_v3 L)
+{
+    double l[3], d2 = 0.0;
+    int k;
+    if (!kd->has_box)
+        return 0.0;
+    l[0] = L.x;
+    l[1] = L.y;
+    l[2] = L.z;
+    for (k = 0; k < 3; k++) {
+        double a = fmax(fabs(l[k] - kd->lo[k]), fabs(l[k] - kd->hi[k]));
+        d2 += a * a;
+    }
+    return sqrt(d2);
+}
+
 void rtpi_kd_get_stats(const rtpi_kdtree *kd, rtpi_kd_stats *st)
 {
     *st = kd->stats;

@@ -726,7 +726,8 @@ static rtp_status trace_tests(shared *sh, const rtp_scene *s, double samples, rt
         rtpi_v3 lp = v3(pos[0], pos[1], pos[2]); /* (trace_ray's light) */
         rtp_status st = rtpi_tri_planes(s, lp, &s->alloc, &rt->planes, &rt->scale, err);
         if (st == RTP_OK)
-            st = rtpi_round_cones(s, lp, rt->scale, &s->alloc, &rt->cones, err);
+            st = rtpi_round_cones(s, lp, rt->scale, rtpi_kd_far(sh->kd, lp), &s->alloc,
+                                  &rt->cones, err);
         if (st != RTP_OK)
             return st;
     }

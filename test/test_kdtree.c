@@ -1090,8 +1090,12 @@ static void test_stats(void)
    axis, e from -1e-6 to 1e-6 (1e-9 the closest), near and far, rays along
    an axis (d x w = 0), directions with zero components, lights on an
    axis' extension, inside the scene and far away: the walk with the
-   light's tests answers as brute force over rtpi_intersect_prim. */
-static void test_cylinder_line(void)
+   light's tests answers as brute force over rtpi_intersect_prim.  The
+   scene at the origin and moved off it by `off` along x, where the test's
+   margins must still be of the cylinders' size (they were made for rays
+   as long as 4 times the largest coordinate: 1e5 from the origin, M was
+   29 R and nothing was turned away). */
+static void cylinder_line_case(double off)
 {
     static const double es[] = {-1e-6, -1e-9, 0.0, 1e-9, 1e-6, 1e-3, -0.5};
     rtpi_v3 lights[6];
@@ -1103,14 +1107,14 @@ static void test_cylinder_line(void)
     g.s = g_seed ^ 0x3131;
     rtpi_allocator_init(&a, NULL);
     for (i = 0; i < 60; i++) {
-        rtpi_v3 b = v3(rndr(&g, -2, 2), rndr(&g, -2, 2), rndr(&g, 0, 2));
+        rtpi_v3 b = v3(off + rndr(&g, -2, 2), rndr(&g, -2, 2), rndr(&g, 0, 2));
         rtpi_v3 d = v3_mul(rnd_dir(&g), rndr(&g, 0.3, 2));
         double r = rndr(&g, 0.01, 0.06);
         if (i % 4 == 0) /* along a coordinate axis */
             d = i % 8 ? v3(0, 0, 1.5) : v3(1.2, 0, 0);
         add_cone(s, b, r, v3_add(b, d), r);
     }
-    add_sphere(s, 0.5, 0.5, 1, 0.3);
+    add_sphere(s, off + 0.5, 0.5, 1, 0.3);
     nc = (int)s->ncones;
     if (rtpi_kd_build(s, NULL, &kd, NULL) != RTP_OK) {
         CHECK(0);
@@ -1119,20 +1123,30 @@ static void test_cylinder_line(void)
     }
     {
         const rtpi_cone_frame *c0 = &s->cframes[0], *c1 = &s->cframes[1];
-        lights[0] = v3(2, 3, 9);
-        lights[1] = v3(0.1, -0.2, 1.0);                       /* among them */
+        lights[0] = v3(off + 2, 3, 9);
+        lights[1] = v3(off + 0.1, -0.2, 1.0);                 /* among them */
         lights[2] = v3_madd(c0->b, c0->w, -2.0);              /* on an axis */
         lights[3] = v3_madd(c1->b, c1->w, c1->h + 0.7);       /* and another */
         lights[4] = v3(3e5, -1e5, 8e5);
-        lights[5] = v3(-4, 0, 1); /* level with the x cylinders */
+        lights[5] = v3(off - 4, 0, 1); /* level with the x cylinders */
     }
     for (li = 0; li < 6; li++) {
         rtpi_v3 L = lights[li];
         double *planes = NULL, *cones = NULL, scale = 0.0;
         if (rtpi_tri_planes(s, L, &a, &planes, &scale, NULL) != RTP_OK ||
-            rtpi_round_cones(s, L, scale, &a, &cones, NULL) != RTP_OK) {
+            rtpi_round_cones(s, L, scale, rtpi_kd_far(kd, L), &a, &cones, NULL) != RTP_OK) {
             CHECK(0);
             break;
+        }
+        if (li < 2) {
+            /* lights among the cylinders: a margin of their size */
+            int wide = 0;
+            for (k = 0; k < nc; k++) {
+                const double *q = cones + 4 * (s->nspheres + s->ncones) + 6 * (size_t)k;
+                wide += !(q[5] > 0.0 && q[3] < 1.001 * s->cframes[k].rb);
+            }
+            CHECK_MSG(wide == 0, "offset %g, light %d: %d cylinders' line tests with wide "
+                      "margins", off, li, wide);
         }
         for (k = 0; k < 6000; k++) {
             int c = (int)(rnd(&g) * nc) % nc, kind = k % 10, brute = 0, walk;
@@ -1173,7 +1187,7 @@ static void test_cylinder_line(void)
             if (kind == 8) /* zero components */
                 o = v3(L.x + 0.5, P.y, P.z);
             if (kind == 9) /* random */
-                o = v3(rndr(&g, -3, 3), rndr(&g, -3, 3), rndr(&g, -0.5, 3));
+                o = v3(off + rndr(&g, -3, 3), rndr(&g, -3, 3), rndr(&g, -0.5, 3));
             r = rtpi_shadow_ray(o, L);
             for (q = 0; q < (uint32_t)rtpi_scene_nprims(s) && !brute; q++)
                 brute = rtpi_intersect_prim(s, q, &r, &h);
@@ -1191,13 +1205,20 @@ static void test_cylinder_line(void)
     }
     CHECK_MSG(bad == 0, "%d walks with the cylinders' line test differ from brute force (seed "
               "%llu)", bad, (unsigned long long)g_seed);
-    printf("cylinders line test: %d hits, grazing %d hit, %d missed\n", hits, graze_hit, graze_miss);
+    printf("cylinders line test (offset %g): %d hits, grazing %d hit, %d missed\n", off, hits,
+           graze_hit, graze_miss);
     CHECK(hits > 5000);
     /* the grazing rays are what they were made to be, mostly */
     CHECK_MSG(graze_hit > 1000 && graze_miss > 1000, "grazing: %d hit, %d missed", graze_hit,
               graze_miss);
     rtpi_kd_destroy(kd);
     rtp_scene_destroy(s);
+}
+
+static void test_cylinder_line(void)
+{
+    cylinder_line_case(0.0);
+    cylinder_line_case(1e5);
 }
 
 int main(void)
