@@ -266,6 +266,22 @@ static int is_option_like(const char *arg)
     return arg[0] == '-' && arg[1] != '\0';
 }
 
+enum { ARG_END, ARG_OPERAND, ARG_OPTION };
+
+/* What a command's loop does with arg: ARG_END for the first '--' (taken:
+   every later argument is an ARG_OPERAND, *names_only set), ARG_OPERAND
+   for a file or a value, ARG_OPTION for an option to parse. */
+static int arg_kind(const char *arg, int *names_only)
+{
+    if (*names_only)
+        return ARG_OPERAND;
+    if (strcmp(arg, "--") == 0) {
+        *names_only = 1;
+        return ARG_END;
+    }
+    return is_option_like(arg) ? ARG_OPTION : ARG_OPERAND;
+}
+
 static int is_opt(const char *arg, const char *name)
 {
     size_t n = strlen(name);
@@ -1499,11 +1515,10 @@ static int cmd_trace(int argc, char **argv)
     params = sets + argc + 1;
     for (i = 0; i < argc; i++) {
         const char *a = argv[i], *v;
-        if (!names_only && strcmp(a, "--") == 0) {
-            names_only = 1;
+        int kind = arg_kind(a, &names_only);
+        if (kind == ARG_END)
             continue;
-        }
-        if (names_only || !is_option_like(a)) {
+        if (kind == ARG_OPERAND) {
             if (scene_path) {
                 msg("trace: more than one scene ('%s' and '%s')", scene_path, a);
                 goto usage;
@@ -1804,11 +1819,10 @@ static int cmd_diff(int argc, char **argv)
     }
     for (i = 0; i < argc; i++) {
         const char *arg = argv[i], *v;
-        if (!names_only && strcmp(arg, "--") == 0) {
-            names_only = 1;
+        int kind = arg_kind(arg, &names_only);
+        if (kind == ARG_END)
             continue;
-        }
-        if (names_only || !is_option_like(arg)) {
+        if (kind == ARG_OPERAND) {
             if (pa && pb) {
                 msg("diff: more than two images");
                 goto usage;
@@ -2343,11 +2357,10 @@ static int cmd_reeval(int argc, char **argv)
     }
     for (i = 0; i < argc; i++) {
         const char *a = argv[i], *v;
-        if (!names_only && strcmp(a, "--") == 0) {
-            names_only = 1;
+        int kind = arg_kind(a, &names_only);
+        if (kind == ARG_END)
             continue;
-        }
-        if (names_only || !is_option_like(a)) {
+        if (kind == ARG_OPERAND) {
             if (tree_path) {
                 msg("reeval: more than one tree ('%s' and '%s')", tree_path, a);
                 goto usage;
@@ -2783,11 +2796,10 @@ static int cmd_info(int argc, char **argv)
     int i, c, names_only = 0;
     memset(&err, 0, sizeof err);
     for (i = 0; i < argc; i++) {
-        if (!names_only && strcmp(argv[i], "--") == 0) {
-            names_only = 1;
+        int kind = arg_kind(argv[i], &names_only);
+        if (kind == ARG_END)
             continue;
-        }
-        if (names_only || !is_option_like(argv[i])) {
+        if (kind == ARG_OPERAND) {
             if (tree_path) {
                 msg("info: one tree file at a time");
                 return EXIT_USAGE;
@@ -2957,11 +2969,10 @@ static int cmd_merge(int argc, char **argv)
     }
     for (i = 0; i < argc; i++) {
         const char *a = argv[i];
-        if (!names_only && strcmp(a, "--") == 0) {
-            names_only = 1;
+        int kind = arg_kind(a, &names_only);
+        if (kind == ARG_END)
             continue;
-        }
-        if (names_only || !is_option_like(a) || a[1] == '@') {
+        if (kind == ARG_OPERAND || a[1] == '@') {
             /* ("-@X,Y" is an image part on stdin) */
             in[n++] = a;
             if (strchr(a, '@'))
