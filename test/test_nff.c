@@ -578,6 +578,7 @@ static void test_image_key_over_the_limit(void)
         CHECK(rtp_tree_set(t, "mat.0.texture", name, &err) == RTP_ERR_LIMIT);
     rtp_tree_destroy(t);
     rtp_scene_destroy(s);
+    remove_file(dir, "wide.ppm"); /* (main removes the folder, if empty) */
 }
 
 /* rtp_scene_get gives the shortest form that reads back to the same value,
