@@ -2,15 +2,8 @@
 # make install into a staging folder; build a program against the installed
 # copy through pkg-config; the header compiles as C99 and as C++; the
 # shared library exports only rtp_ symbols.
-T=${TMPDIR:-/tmp}/rtp-install.$$
-mkdir -p "$T"
-# (a run cut short by Ctrl-C or a CI timeout leaves nothing behind either)
-trap 'rm -rf "$T"' EXIT
-trap 'exit 130' INT
-trap 'exit 143' TERM
-pass=0; fail=0; skip=0
-ok()  { pass=$((pass + 1)); }
-bad() { fail=$((fail + 1)); echo "FAIL: $*" >&2; }
+TEST_NAME=install
+. "$(dirname "$0")/common.sh"
 CC=${CC:-cc}
 
 # the build being tested (sanitizer builds pass their flags down)

@@ -1,15 +1,8 @@
 #!/bin/sh
 # CLI tests for the outside world: names that look like options, pipes
 # whose reader leaves, and the like.
-RTP=${RTP:-./rtp}
-T=${TMPDIR:-/tmp}/rtp-outside.$$
-mkdir -p "$T"
-trap 'rm -rf "$T"' EXIT
-trap 'exit 130' INT
-trap 'exit 143' TERM
-pass=0; fail=0; skip=0
-ok()   { pass=$((pass + 1)); }
-bad()  { fail=$((fail + 1)); echo "FAIL: $*" >&2; }
+TEST_NAME=outside
+. "$(dirname "$0")/common.sh"
 
 # '--' ends the options, so a file whose name begins with '-' is named as
 # itself on every command (it was "unknown option '--'", exit 2, and the

@@ -2,21 +2,8 @@
 # CLI tests for rtp reeval and rtp info: the full pipe, bit-identical
 # re-evaluation, edits against full traces, stream mode, params files,
 # refused input, and tree-file errors.
-RTP=${RTP:-./rtp}
-T=${TMPDIR:-/tmp}/rtp-reeval.$$
-mkdir -p "$T"
-# (a run cut short by Ctrl-C or a CI timeout leaves nothing behind either)
-trap 'rm -rf "$T"' EXIT
-trap 'exit 130' INT
-trap 'exit 143' TERM
-pass=0; fail=0; skip=0
-ok()  { pass=$((pass + 1)); }
-bad() { fail=$((fail + 1)); echo "FAIL: $*" >&2; }
-expect_rc() {
-    want=$1; shift
-    "$@" >"$T/out" 2>"$T/err"; rc=$?
-    if [ "$rc" -eq "$want" ]; then ok; else bad "exit $rc (want $want): $*"; cat "$T/err" >&2; fi
-}
+TEST_NAME=reeval
+. "$(dirname "$0")/common.sh"
 S=scenes/spheres.nff
 
 # The whole pipeline through pipes: trace | reeval | diff against a full trace.

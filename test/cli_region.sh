@@ -2,16 +2,8 @@
 # Splitting a frame across machines: regions traced apart (here with
 # xargs -P, as a farm would), merged, must equal a whole-frame run bit for
 # bit — images, trees, and re-evaluations of the merged tree.
-RTP=${RTP:-./rtp}
-T=${TMPDIR:-/tmp}/rtp-region.$$
-mkdir -p "$T"
-# (a run cut short by Ctrl-C or a CI timeout leaves nothing behind either)
-trap 'rm -rf "$T"' EXIT
-trap 'exit 130' INT
-trap 'exit 143' TERM
-pass=0; fail=0; skip=0
-ok()  { pass=$((pass + 1)); }
-bad() { fail=$((fail + 1)); echo "FAIL: $*" >&2; }
+TEST_NAME=region
+. "$(dirname "$0")/common.sh"
 S=scenes/spheres.nff
 
 for mode in "" "--spd"; do

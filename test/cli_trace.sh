@@ -1,21 +1,8 @@
 #!/bin/sh
 # CLI tests for rtp trace and rtp diff: exit codes, messages, pipes, stats,
 # and (when ../shared is present) every SPD scene and mesh renders.
-RTP=${RTP:-./rtp}
-T=${TMPDIR:-/tmp}/rtp-cli.$$
-mkdir -p "$T"
-# (a run cut short by Ctrl-C or a CI timeout leaves nothing behind either)
-trap 'rm -rf "$T"' EXIT
-trap 'exit 130' INT
-trap 'exit 143' TERM
-pass=0; fail=0; skip=0
-ok()   { pass=$((pass + 1)); }
-bad()  { fail=$((fail + 1)); echo "FAIL: $*" >&2; }
-expect_rc() { # want cmd...
-    want=$1; shift
-    "$@" >"$T/out" 2>"$T/err"; rc=$?
-    if [ "$rc" -eq "$want" ]; then ok; else bad "exit $rc (want $want): $*"; cat "$T/err" >&2; fi
-}
+TEST_NAME=cli
+. "$(dirname "$0")/common.sh"
 
 expect_rc 0 $RTP --help
 expect_rc 2 $RTP

@@ -7,20 +7,13 @@
 # anywhere, longer varints, a newer minor, format 1 ...) or refuse by name
 # (an unknown required section, a newer major, lengths that disagree,
 # right CRCs over wrong data ...).  Skipped without python3.
-RTP=${RTP:-./rtp}
-T=${TMPDIR:-/tmp}/rtp-format.$$
-pass=0; fail=0; skip=0
 if ! python3 -c 'import sys; sys.exit(sys.version_info < (3, 6))' 2>/dev/null; then
     echo "skip: no python3 (3.6 or later): the tree format's independent reader not run" >&2
     echo "0 passed, 0 failed, 1 skipped"
     exit 0
 fi
-mkdir -p "$T"
-trap 'rm -rf "$T"' EXIT
-trap 'exit 130' INT
-trap 'exit 143' TERM
-ok()  { pass=$((pass + 1)); }
-bad() { fail=$((fail + 1)); echo "FAIL: $*" >&2; }
+TEST_NAME=format
+. "$(dirname "$0")/common.sh"
 PY="python3 test/tree_format.py"
 
 # files of every kind the format holds
