@@ -959,6 +959,33 @@ static rtp_status out_of_memory(const reader *r)
                       "out of memory reading the image");
 }
 
+/* What follows a PPM file's last sample: nothing for P6, blanks and
+   comments for P3.  More (samples, pixels, another image) means the
+   header does not describe the data -- a width or height too small read
+   every row shifted, silently -- and is refused as bytes after a PFM's
+   pixels are.  (A stream may carry the next image after it, as stdin
+   redirected from such a file does: not checked there.) */
+static rtp_status ppm_after(const reader *r, int ascii, int w, int h)
+{
+    long pos;
+    int c;
+    if (r->size < 0 || r->f == stdin)
+        return RTP_OK;
+    if (ascii) {
+        c = skip_space(r->f, 1);
+        if (c == EOF)
+            return ferror(r->f) ? ended(r, "pixel data") : RTP_OK;
+        return BAD(r, "PPM: more after the last of the %dx%d pixels' samples: the "
+                      "header (P3 %dx%d) does not describe the data", w, h, w, h);
+    }
+    pos = ftell(r->f);
+    if (pos >= 0 && r->size > pos)
+        return BAD(r, "PPM: %lld bytes after the pixel data: the header (P6 %dx%d) does "
+                      "not describe the data (rtp reads one image a file)",
+                   r->size - pos, w, h);
+    return RTP_OK;
+}
+
 /* Netpbm P6 (binary) or P3 (ASCII) after the two magic bytes. */
 static rtp_status read_ppm(const reader *r, int ascii,
                            const rtp_allocator *alloc, rtp_image **out)
@@ -1012,6 +1039,7 @@ static rtp_status read_ppm(const reader *r, int ascii,
                 row[i] = (float)v / scale;
             }
         }
+        st = ppm_after(r, 1, w, h);
         goto done;
     }
     /* P6: a chunk of rows a read, counted in floats (RTPI_IO_CHUNK) so
@@ -1059,6 +1087,7 @@ static rtp_status read_ppm(const reader *r, int ascii,
             }
         }
     }
+    st = ppm_after(r, 0, w, h);
 done:
     rtpi_free(&img->alloc, buf);
     if (st != RTP_OK) {

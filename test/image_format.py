@@ -1003,6 +1003,13 @@ def check_refusals(cx):
     cx.expect_read("PNG bytes after IEND", good + b"\0\0\0\0", "png", 2, 2,
                    [[tuple(value_bits(v, 255) for v in (1, 2, 3)),
                      tuple(value_bits(v, 255) for v in (4, 5, 6))]] * 2)
+    # PPM: bytes past the raster mean the header does not describe it
+    p6 = b"P6\n2 1\n255\n\1\2\3\4\5\6"
+    cx.expect_refused("P6 a pixel more than the header says", p6 + b"\7\10\11", "ppm", 2, 1)
+    cx.expect_refused("P6 a byte after the data", p6 + b"\n", "ppm", 2, 1)
+    cx.expect_refused("P6 a second image after the first", p6 + p6, "ppm", 2, 1)
+    cx.expect_refused("P3 a sample more than the header says",
+                      b"P3\n1 1\n255\n1 2 3 4\n", "ppm", 1, 1)
     cx.expect_read("P3 blanks and a comment after the last sample",
                    b"P3\n1 1\n255\n1 2 3 \n# end\n\n", "ppm", 1, 1,
                    [[tuple(value_bits(v, 255) for v in (1, 2, 3))]])
