@@ -1360,6 +1360,10 @@ typedef struct png_rctx {
     size_t used, cap;      /* bytes' bytes filled and allocated */
     int too_big;           /* the header asks for more than the limit */
     png_uint_32 w, h;
+    png_colorp plte;       /* a palette image's colours (else NULL) */
+    int nplte;
+    long bad_index;        /* an index past them (else -1), at bad_x, bad_y */
+    png_uint_32 bad_x, bad_y;
 } png_rctx;
 
 /* n samples (8- or 16-bit, big-endian) to floats in [0, 1]. */
@@ -1375,11 +1379,37 @@ static void png_convert(const unsigned char *src, int wide, float *dst, size_t n
             dst[i] = (float)src[i] / 255.0f;
 }
 
+/* n pixels of a row as libpng gives it (RGB samples, or a palette
+   image's indices a byte each) to RGB floats at dst.  An index past the
+   palette, which the PNG specification makes an error and libpng reads
+   as black, is kept in c->bad_index (x: its pixel's place in the row)
+   and @return -1. */
+static int png_pixels(png_rctx *c, const unsigned char *src, int wide, float *dst,
+                      size_t n, png_uint_32 *x)
+{
+    size_t i;
+    if (!c->plte) {
+        png_convert(src, wide, dst, 3 * n);
+        return 0;
+    }
+    for (i = 0; i < n; i++) {
+        if (src[i] >= c->nplte) {
+            c->bad_index = src[i];
+            *x = (png_uint_32)i;
+            return -1;
+        }
+        dst[3 * i] = (float)c->plte[src[i]].red / 255.0f;
+        dst[3 * i + 1] = (float)c->plte[src[i]].green / 255.0f;
+        dst[3 * i + 2] = (float)c->plte[src[i]].blue / 255.0f;
+    }
+    return 0;
+}
+
 /* The only function that calls setjmp for reading; see png_io. */
 static int png_read_body(png_rctx *c)
 {
     int bit_depth, color_type, interlace, wide;
-    size_t rowbytes, y;
+    size_t rowbytes, y, px;
     if (setjmp(png_jmpbuf(c->png)))
         return -1;
     png_set_read_fn(c->png, &c->io, png_read_fn);
@@ -1391,18 +1421,27 @@ static int png_read_body(png_rctx *c)
         c->too_big = 1;
         return -1;
     }
-    /* To RGB, 8 or 16 bits: palette and low-bit grey expanded, tRNS and
-       alpha dropped (images are opaque RGB), grey copied to RGB.  No
-       gamma handling: values are stored as written, as rtp writes them.
-       (No png_set_interlace_handling: Adam7 is undone below.) */
-    png_set_expand(c->png);
-    png_set_strip_alpha(c->png);
-    png_set_gray_to_rgb(c->png);
+    /* To RGB, 8 or 16 bits: low-bit grey expanded, tRNS and alpha
+       dropped (images are opaque RGB), grey copied to RGB.  No gamma
+       handling: values are stored as written, as rtp writes them.  A
+       palette image's indices come a byte each and are looked up here
+       (png_pixels), each checked against the palette: libpng's expansion
+       made one past it black, silently.  (No png_set_interlace_handling:
+       Adam7 is undone below.) */
+    if (color_type == PNG_COLOR_TYPE_PALETTE) {
+        if (!png_get_PLTE(c->png, c->info, &c->plte, &c->nplte) || c->nplte < 1)
+            png_error(c->png, "a palette image without a palette");
+        png_set_packing(c->png);
+    } else {
+        png_set_expand(c->png);
+        png_set_strip_alpha(c->png);
+        png_set_gray_to_rgb(c->png);
+    }
     png_read_update_info(c->png, c->info);
     wide = png_get_bit_depth(c->png, c->info) == 16;
     rowbytes = png_get_rowbytes(c->png, c->info);
-    if (png_get_channels(c->png, c->info) != 3 ||
-        rowbytes != (size_t)c->w * 3 * (wide ? 2 : 1))
+    px = c->plte ? 1 : wide ? 6 : 3;
+    if (png_get_channels(c->png, c->info) != (c->plte ? 1 : 3) || rowbytes != (size_t)c->w * px)
         png_error(c->png, "unexpected row layout after conversion to RGB");
     if (image_shell((int)c->w, (int)c->h, c->alloc, &c->img) != RTP_OK) {
         c->io.nomem = 1;
@@ -1422,8 +1461,11 @@ static int png_read_body(png_rctx *c)
                 return -1;
             }
             png_read_row(c->png, c->row, NULL);
-            png_convert(c->row, wide, c->img->pixels + y * row_floats(c->img),
-                        row_floats(c->img));
+            if (png_pixels(c, c->row, wide, c->img->pixels + y * row_floats(c->img), c->w,
+                           &c->bad_x) != 0) {
+                c->bad_y = (png_uint_32)y;
+                return -1;
+            }
         }
     } else {
         /* Adam7 undone here rather than by libpng, whose de-interlacing
@@ -1435,7 +1477,7 @@ static int png_read_body(png_rctx *c)
            plain PNG's rows do; the pixels are placed once every pass has
            been read.  (libpng skips a pass with no rows or no columns, as
            the loop does.) */
-        size_t px = wide ? 6 : 3, total = (size_t)c->w * c->h * px, r, x;
+        size_t total = (size_t)c->w * c->h * px, r, x;
         float *dst;
         int pass;
         const unsigned char *src;
@@ -1472,8 +1514,13 @@ static int png_read_body(png_rctx *c)
             for (r = 0; cols && r < PNG_PASS_ROWS(c->h, pass); r++) {
                 y = PNG_ROW_FROM_PASS_ROW(r, pass);
                 for (x = 0; x < cols; x++, src += px) {
-                    dst = c->img->pixels + 3 * (y * c->w + PNG_COL_FROM_PASS_COL(x, pass));
-                    png_convert(src, wide, dst, 3);
+                    png_uint_32 col = PNG_COL_FROM_PASS_COL(x, pass);
+                    dst = c->img->pixels + 3 * (y * c->w + col);
+                    if (png_pixels(c, src, wide, dst, 1, &c->bad_x) != 0) {
+                        c->bad_x = col;
+                        c->bad_y = (png_uint_32)y;
+                        return -1;
+                    }
                 }
             }
         }
@@ -1493,6 +1540,7 @@ static rtp_status read_png(const reader *r, const rtp_allocator *alloc,
     memset(&c, 0, sizeof c);
     png_io_init(&c.io, &a, r->f);
     c.alloc = &a;
+    c.bad_index = -1;
 #ifdef PNG_USER_MEM_SUPPORTED
     c.png = png_create_read_struct_2(PNG_LIBPNG_VER_STRING, &c.io, png_err_fn,
                                      png_warn_fn, &c.io, png_malloc_fn,
@@ -1513,6 +1561,11 @@ static rtp_status read_png(const reader *r, const rtp_allocator *alloc,
                             "PNG: image size %lux%lu exceeds the limit of "
                             "%lu pixels", (unsigned long)c.w,
                             (unsigned long)c.h, RTPI_IMAGE_MAX_PIXELS);
+        else if (c.bad_index >= 0)
+            st = rtpi_error(r->err, RTP_ERR_FORMAT, r->name, 0, 0,
+                            "corrupt PNG: pixel (%lu, %lu) is palette index %ld, past "
+                            "the palette's %d colours", (unsigned long)c.bad_x,
+                            (unsigned long)c.bad_y, c.bad_index, c.nplte);
         else if (c.io.nomem)
             st = out_of_memory(r);
         else if (c.io.io_errno)

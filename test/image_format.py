@@ -998,6 +998,20 @@ def check_refusals(cx):
     cx.expect_refused("PNG unknown critical chunk",
                       png_with(ihdr, [(b"CRIT", b"x"),
                                       (b"IDAT", zlib.compress(b"\0" * 14))]), "png")
+    cx.expect_refused("PNG palette index past the palette",
+                      write_png(2, 2, 3, 8, [[(0,), (1,)], [(2,), (5,)]],
+                                palette=[(1, 2, 3), (4, 5, 6), (7, 8, 9)]), "png")
+    cx.expect_refused("PNG 4-bit palette index past the palette",
+                      write_png(2, 1, 3, 4, [[(0,), (15,)]],
+                                palette=[(1, 2, 3), (4, 5, 6)]), "png", 2, 1)
+    cx.expect_refused("PNG palette index just past the palette",
+                      write_png(2, 2, 3, 8, [[(0,), (1,)], [(2,), (3,)]],
+                                palette=[(1, 2, 3), (4, 5, 6), (7, 8, 9)]), "png",
+                      needle="palette index 3")
+    cx.expect_refused("PNG Adam7 2-bit palette index past the palette",
+                      write_png(3, 3, 3, 2, [[(0,)] * 3, [(1,)] * 3, [(0,), (1,), (2,)]],
+                                palette=[(1, 2, 3), (4, 5, 6)], interlace=1), "png", 3, 3,
+                      needle="pixel (2, 2)")
     # bytes after IEND are not the image's (a stream may hold the next
     # image there): read past, the image read whole
     cx.expect_read("PNG bytes after IEND", good + b"\0\0\0\0", "png", 2, 2,
