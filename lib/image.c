@@ -1447,6 +1447,17 @@ static int png_read_body(png_rctx *c)
         c->io.nomem = 1;
         return -1;
     }
+    /* Image data left over once the last row is read (more rows than
+       IHDR's height: "Too much image data"; bytes after the zlib stream:
+       "Extra compressed data"), which libpng finds as it reads that row,
+       are errors while the rows are read, not libpng's warnings, as bytes
+       after a PFM's pixels are: a header that does not describe the data
+       was read as a crop of it, silently.  (Only while the rows are read:
+       the header's and the trailing ancillary chunks, which rtp does not
+       use, keep libpng's leniency.) */
+#ifdef PNG_BENIGN_ERRORS_SUPPORTED
+    png_set_benign_errors(c->png, 0);
+#endif
     /* (libpng copies a whole row's bytes into the row it is given, an
        interlaced pass's row too: its pixels first) */
     c->row = (unsigned char *)rtpi_malloc(&c->io.alloc, rowbytes);
@@ -1525,6 +1536,9 @@ static int png_read_body(png_rctx *c)
             }
         }
     }
+#ifdef PNG_BENIGN_ERRORS_SUPPORTED
+    png_set_benign_errors(c->png, 1);
+#endif
     /* Up to IEND, so a file cut in its last chunk is caught too. */
     png_read_end(c->png, NULL);
     return 0;

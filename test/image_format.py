@@ -1012,6 +1012,14 @@ def check_refusals(cx):
                       write_png(3, 3, 3, 2, [[(0,)] * 3, [(1,)] * 3, [(0,), (1,), (2,)]],
                                 palette=[(1, 2, 3), (4, 5, 6)], interlace=1), "png", 3, 3,
                       needle="pixel (2, 2)")
+    cx.expect_refused("PNG rows past IHDR's height",
+                      png_with(ihdr, [(b"IDAT", zlib.compress(b"\0\1\2\3\4\5\6" * 3))]),
+                      "png")
+    cx.expect_refused("PNG Adam7 rows past IHDR's height",
+                      png_with(struct.pack(">IIBBBBB", 2, 2, 8, 2, 0, 0, 1),
+                               [(b"IDAT", zlib.compress(b"\0" * 40))]), "png")
+    cx.expect_refused("PNG bytes after the zlib stream",
+                      png_with(ihdr, [(b"IDAT", zlib.compress(b"\0" * 14) + b"junk")]), "png")
     # bytes after IEND are not the image's (a stream may hold the next
     # image there): read past, the image read whole
     cx.expect_read("PNG bytes after IEND", good + b"\0\0\0\0", "png", 2, 2,
