@@ -941,9 +941,16 @@ def check_refusals(cx):
     p3 = write_pnm(b"3", w, h, 255, [[(1, 2, 3)] * w] * h)
     png = write_png(w, h, 2, 8, [[(1, 2, 3)] * w] * h)
     pngi = write_png(w, h, 0, 1, [[(1,)] * w] * h, interlace=1)
+    pfmg = write_pfm(w, h, rows, grey=True, little=False)
+    ppm16 = write_pnm(b"6", w, h, 1000, [[(1, 999, 1000)] * w] * h)
+    pngp = write_png(w, h, 3, 2, [[(0,), (2,)], [(1,), (0,)]], palette=[(9, 8, 7)] * 3,
+                     trns=b"\x00", interlace=1)
+    png16 = write_png(w, h, 6, 16, [[(1, 2, 3, 4), (65535, 0, 256, 9)]] * h)
     # every cut of a small file
-    for name, data, ext in (("PFM", pfm, "pfm"), ("P6", ppm, "ppm"), ("P3", p3, "ppm"),
-                            ("PNG", png, "png"), ("Adam7 PNG", pngi, "png")):
+    for name, data, ext in (("PFM", pfm, "pfm"), ("big-endian Pf", pfmg, "pfm"),
+                            ("P6", ppm, "ppm"), ("16-bit P6", ppm16, "ppm"), ("P3", p3, "ppm"),
+                            ("PNG", png, "png"), ("Adam7 PNG", pngi, "png"),
+                            ("Adam7 palette PNG", pngp, "png"), ("16-bit RGBA PNG", png16, "png")):
         if cx.skip_png(ext):
             continue
         cut_bad = []
