@@ -965,7 +965,7 @@ static rtp_status out_of_memory(const reader *r)
    every row shifted, silently -- and is refused as bytes after a PFM's
    pixels are.  (A stream may carry the next image after it, as stdin
    redirected from such a file does: not checked there.) */
-static rtp_status ppm_after(const reader *r, int ascii, int w, int h)
+static rtp_status ppm_after(const reader *r, int ascii, int w, int h, int first)
 {
     long pos;
     int c;
@@ -981,8 +981,14 @@ static rtp_status ppm_after(const reader *r, int ascii, int w, int h)
     pos = ftell(r->f);
     if (pos >= 0 && r->size > pos)
         return BAD(r, "PPM: %lld bytes after the pixel data: the header (P6 %dx%d) does "
-                      "not describe the data (rtp reads one image a file)",
-                   r->size - pos, w, h);
+                      "not describe the data (rtp reads one image a file)%s",
+                   r->size - pos, w, h,
+                   /* (the pixels read from the line feed of a CR LF: one
+                      byte over, the first a line feed) */
+                   r->size - pos == 1 && first == '\n'
+                       ? "; its maximum value's line ends in CR LF? Netpbm's header "
+                         "ends in one whitespace character"
+                       : "");
     return RTP_OK;
 }
 
@@ -993,7 +999,7 @@ static rtp_status read_ppm(const reader *r, int ascii,
     rtp_image *img = NULL;
     unsigned char *buf = NULL;
     long maxval;
-    int w, h, y, cap = 0;
+    int w, h, y, cap = 0, first = -1;
     size_t n, i, bps, k, rows;
     float scale, lut[256];
     rtp_status st;
@@ -1039,7 +1045,7 @@ static rtp_status read_ppm(const reader *r, int ascii,
                 row[i] = (float)v / scale;
             }
         }
-        st = ppm_after(r, 1, w, h);
+        st = ppm_after(r, 1, w, h, 0);
         goto done;
     }
     /* P6: a chunk of rows a read, counted in floats (RTPI_IO_CHUNK) so
@@ -1058,6 +1064,8 @@ static rtp_status read_ppm(const reader *r, int ascii,
             goto done;
         }
         got = fread(buf, n * bps, rows, r->f);
+        if (y == 0 && got > 0)
+            first = buf[0];
         if (got != rows) {
             snprintf(what, sizeof what, "pixel data (row %d of %d)",
                      y + (int)got + 1, h);
@@ -1087,7 +1095,7 @@ static rtp_status read_ppm(const reader *r, int ascii,
             }
         }
     }
-    st = ppm_after(r, 0, w, h);
+    st = ppm_after(r, 0, w, h, first);
 done:
     rtpi_free(&img->alloc, buf);
     if (st != RTP_OK) {

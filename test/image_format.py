@@ -1079,6 +1079,10 @@ def check_refusals(cx):
     cx.expect_refused("P6 a pixel more than the header says", p6 + b"\7\10\11", "ppm", 2, 1)
     cx.expect_refused("P6 a byte after the data", p6 + b"\n", "ppm", 2, 1)
     cx.expect_refused("P6 a second image after the first", p6 + p6, "ppm", 2, 1)
+    # netpbm's header ends in one whitespace character: after a CR LF the
+    # line feed would be the first sample, every byte one off
+    cx.expect_refused("P6 header lines ending in CR LF",
+                      b"P6\r\n2 1\r\n255\r\n\1\2\3\4\5\6", "ppm", 2, 1, needle="CR LF")
     cx.expect_refused("P3 a sample more than the header says",
                       b"P3\n1 1\n255\n1 2 3 4\n", "ppm", 1, 1)
     cx.expect_read("P3 blanks and a comment after the last sample",
