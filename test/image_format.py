@@ -918,6 +918,23 @@ def check_consumers(cx, scene_dir):
         else:
             ok("%s: every variant traces as its PFM" % key)
     del base
+    # a height map's height is the mean of R, G and B (README): red alone
+    # bends as a grey of a third of it does
+    hs = [0.0, 0.75, 0.375, 1.5, 3.0, 0.75, 0.0, 1.5, 0.375]
+    red = [[(fbits(hs[(x + 3 * y) % 9]), 0, 0) for x in range(3)] for y in range(3)]
+    grey = [[(fbits(hs[(x + 3 * y) % 9] / 3),) * 3 for x in range(3)] for y in range(3)]
+    outs = []
+    for name, rows in (("red", red), ("grey", grey)):
+        p = cx.put("h-%s.pfm" % name, write_pfm(3, 3, rows))
+        out = cx.path("h-%s-out.pfm" % name)
+        rc, _, err = run([rtp, "trace", os.path.join(scene_dir, "textured.nff"), "--size",
+                          "24x18", "-j", "1", "-q", "-i", out, "--set", "mat.1.bump=" + p,
+                          "--set", "mat.1.bump_strength=3"])
+        outs.append(cx.get("h-%s-out.pfm" % name) if rc == 0 else err)
+    if outs[0] != outs[1] or not isinstance(outs[0], bytes):
+        bad("a red height map does not bend as a grey of a third of it")
+    else:
+        ok("a height is the mean of R, G and B")
     # a texture's values must be finite (scenes/README): a PFM holding NaN
     # or an infinity is refused by name
     for name, u in (("nan", 0x7FC00000), ("inf", 0x7F800000)):
