@@ -898,6 +898,32 @@ def check_consumers(cx, scene_dir):
             bad("diff of %s against its values: exit %d %s %s" % (name, rc, out[:200], err))
         else:
             ok("diff reads %s to its values" % name)
+    # the same through a pipe (no file size to place the data by)
+    piped = dict(variants)
+    piped["crlf.pfm"] = write_pfm(w, h, want).replace(b"-1.0\n", b"-1.0\r\n", 1)
+    piped["blank.pfm"] = write_pfm(w, h, want).replace(b"-1.0\n", b"-1.0 \n", 1)
+    piped["grey.pfm"] = write_pfm(w, h, [[(p[0],) * 3 for p in r] for r in want], grey=True,
+                                  little=False)
+    for name, data in sorted(piped.items()):
+        ref_p = ref
+        if name == "grey.pfm":
+            ref_p = cx.put("ref-grey.pfm", write_pfm(w, h, [[(p[0],) * 3 for p in r]
+                                                            for r in want]))
+        rc, out, err = run([rtp, "diff", "-", ref_p, "--stats", "-", "-q"], stdin=data)
+        if rc != 0 or b'"max_abs": 0' not in out.replace(b'"max_abs":0', b'"max_abs": 0'):
+            bad("diff of %s on a pipe: exit %d %s %s" % (name, rc, out[:200], err))
+        else:
+            ok("diff reads %s on a pipe to its values" % name)
+    for name, data in sorted(piped.items()):
+        # (P3's last byte is a line feed, and a sample cut short may be
+        # another number: it is cut in the middle only)
+        for cut in (len(data) // 2,) + (() if data[:2] == b"P3" else (len(data) - 1,)):
+            rc, out, err = run([rtp, "diff", "-", ref, "-q"], stdin=data[:cut])
+            if rc != 1 or "<stdin>" not in err:
+                bad("%s cut to %d bytes on a pipe: exit %d %s" % (name, cut, rc, err.strip()))
+                break
+        else:
+            ok("%s cut on a pipe refused" % name)
     # a texture and a bump map: every variant the same image as the PFM
     base = open(os.path.join(scene_dir, "textured.nff")).read()
     for key in ("texture", "bump"):
