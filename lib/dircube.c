@@ -2255,7 +2255,7 @@ rtp_status rtpi_round_cones(const rtp_scene *s, rtpi_v3 light, double scale, dou
    blocks the ray just in front of p while sampled beside the ray at or
    behind p's depth (steep, touching p's surface: a contact shadow's edge,
    within a cell of the contact). */
-#define IB_BIAS 1e-4
+#define IB_BIAS RTPI_IB_BIAS
 #define IB_TAN_MAX 8.0
 
 int rtpi_itembuf_renders(const rtp_scene *s, uint32_t prim, rtpi_v3 L)
@@ -2312,50 +2312,34 @@ static double ib_tan(rtpi_v3 p, rtpi_v3 o, rtpi_v3 L)
    OSMesa's depths carry their own quantum (zq). */
 static double ib_zlim(const rtpi_itembuf *ib, int f, rtpi_v3 p, double *zp, double *zlim)
 {
-    double bias;
-    *zp = rtpi_dc_depth(f, v3_sub(p, ib->light));
-    bias = IB_BIAS * fabs(*zp - ib->w.zbase[f]);
-    /* (fmax(zq, bias) by a comparison, not a libm call a query: bias is
-       not negative, a NaN one gives zq as fmax does) */
-    *zlim = *zp - (bias > ib->zq[f] ? bias : ib->zq[f]);
-    return bias;
+    return rtpi_itembuf_zlim(ib, f, &p, zp, zlim);
 }
 
-int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
-                         const rtpi_v3 *pp, const rtpi_v3 *op, uint32_t prim, int self,
-                         const rtpi_ray *r, uint32_t *occ, rtpi_dc_at *at)
+/* The decision from its first steps (at, st; rtpi_itembuf_pre): zmade 1
+   where these made zlim (a direct query), 0 where it is to be made at
+   the first sample that needs it. */
+static RTPI_FORCE_INLINE int ib_rest(const rtpi_itembuf *ib, const rtp_scene *s,
+                                     const rtpi_v3 *pp, const rtpi_v3 *op, uint32_t prim,
+                                     int self, const rtpi_ray *r, uint32_t *occ,
+                                     const rtpi_dc_at *at, const rtpi_ib_query *st, int zmade)
 {
     const rtpi_v3 p = *pp, o = *op;
-    int f, res = ib->res, i, j, di, dj, k, n = 0, m = 0, coarse = 0, nf = 0;
+    int f = at->f, res = ib->res, i = st->i, j = st->j, di, dj, k, n = 0, m = 0, coarse = 0,
+        nf = 0;
     uint32_t cand[9];
     double fz[9];          /* the direct pass's samples in front: depth */
     unsigned char fq[9];   /* and place, 3 (dj + 1) + di + 1 */
-    double u, v, x, y, zp = 0.0, zlim = 0.0, tn = -1.0;
+    double x = st->x, y = st->y, zp = st->zp, zlim = st->zlim, tn = -1.0;
     rtpi_ray rr;
     rtpi_hit h;
     lb_tri_ray w;
-    if (self == 1) {
-        *occ = prim;
-        return 0;
-    }
-    f = rtpi_dc_face(v3_sub(o, ib->light), &u, &v);
-    at->f = f;
-    at->u = u;
-    at->v = v;
-    if (ib->w.fbase[f] == RTPI_DC_ABSENT)
-        return 1;
-    x = (u - ib->w.u0[f]) / ib->w.du[f];
-    y = (v - ib->w.v0[f]) / ib->w.dv[f];
-    if (!(x > -1.0 && x < res + 1.0 && y > -1.0 && y < res + 1.0))
-        return 1;
-    i = x < 0.0 ? 0 : x >= res ? res - 1 : (int)x;
-    j = y < 0.0 ? 0 : y >= res ? res - 1 : (int)y;
     /* (thin primitives are not drawn: no sample holds one) */
-    if (ib->zq[f] == 0.0 && i > 0 && j > 0 && i < res - 1 && j < res - 1) {
+    if (st->direct) {
         /* The common case: float depths (never coarse) and the 9
            samples inside the window, on face f, read straight from its
            rows in the loop below's order, with its tests; zlim made at
-           the first sample that needs it.  Most queries meet only
+           the first sample that needs it (or by rtpi_itembuf_pre, whose
+           least depth found one in front).  Most queries meet only
            nothing or prim around p, answered lit by this one pass; on a
            mesh they meet its own triangles, at p's depth (a first pass
            for empty samples alone, then the loop below's with
@@ -2365,7 +2349,6 @@ int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
         const uint32_t *row = ib->id + c0, own = self == 0 ? prim : RTPI_NONE;
         const float *zr = ib->z + c0;
         const double zb = ib->w.zbase[f];
-        int zmade = 0;
         /* Sample q (3 (dj + 1) + di + 1) of the rows from row and zr,
            written out for each of the 9 in the loop's order: as two
            loops, their counting and the sample's place were a tenth of
@@ -2474,6 +2457,27 @@ int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
         m = fz[k] < zlim - ze * tn;
     }
     return m || coarse ? -1 : 1;
+}
+
+int rtpi_itembuf_visible(const rtpi_itembuf *ib, const rtp_scene *s,
+                         const rtpi_v3 *pp, const rtpi_v3 *op, uint32_t prim, int self,
+                         const rtpi_ray *r, uint32_t *occ, rtpi_dc_at *at)
+{
+    rtpi_ib_query q;
+    if (self == 1) {
+        *occ = prim;
+        return 0;
+    }
+    if (rtpi_itembuf_pre(ib, pp, op, at, &q, 0) > 0)
+        return 1;
+    return ib_rest(ib, s, pp, op, prim, self, r, occ, at, &q, 0);
+}
+
+int rtpi_itembuf_visible_rest(const rtpi_itembuf *ib, const rtp_scene *s, const rtpi_v3 *pp,
+                              const rtpi_v3 *op, uint32_t prim, int self, const rtpi_ray *r,
+                              uint32_t *occ, const rtpi_dc_at *at, const rtpi_ib_query *q)
+{
+    return ib_rest(ib, s, pp, op, prim, self, r, occ, at, q, 1);
 }
 
 /* For triangle prim (q: its corners less L): every point of it lies
@@ -2593,8 +2597,11 @@ rtp_status rtpi_itembuf_alloc(rtpi_itembuf *ib, const rtp_scene *s,
         rtpi_itembuf_free(ib, a);
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory for the item buffer");
     }
-    /* RTPI_NONE is all ones; an empty cell's depth is never read. */
+    /* RTPI_NONE is all ones; an empty cell's depth is read only by
+       rtpi_itembuf_pre's least of 9, which a huge one (bytes 0x7f:
+       3.39e38) leaves to the drawn cells. */
     memset(ib->id, 0xff, ncells * sizeof *ib->id);
+    memset(ib->z, 0x7f, ncells * sizeof *ib->z);
     return RTP_OK;
 }
 

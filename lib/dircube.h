@@ -341,6 +341,94 @@ rtp_status rtpi_itembuf_draw(rtpi_itembuf *ib, const rtp_scene *s,
 rtp_status rtpi_itembuf_alloc(rtpi_itembuf *ib, const rtp_scene *s,
                               rtpi_v3 light, int res, const rtp_allocator *a,
                               rtp_error *err);
+/* The item buffer's depth bias (dircube.c's rule: IB_BIAS). */
+#define RTPI_IB_BIAS 1e-4
+
+/* p's depth zp on face f and the depth zlim nothing at or beyond which
+   is in front of p (see dircube.c, ib_zlim); @return the bias. */
+static inline double rtpi_itembuf_zlim(const rtpi_itembuf *ib, int f, const rtpi_v3 *pp,
+                                       double *zp, double *zlim)
+{
+    double bias;
+    *zp = rtpi_dc_depth(f, v3_sub(*pp, ib->light));
+    bias = RTPI_IB_BIAS * fabs(*zp - ib->w.zbase[f]);
+    /* (fmax(zq, bias) by a comparison, not a libm call a query: bias is
+       not negative, a NaN one gives zq as fmax does) */
+    *zlim = *zp - (bias > ib->zq[f] ? bias : ib->zq[f]);
+    return bias;
+}
+
+/* What a query's first steps found (rtpi_itembuf_pre): the cell (i, j)
+   of at's face holding the direction at window coordinates (x, y), and
+   where `direct` (float depths, the 9 samples inside the window) p's
+   depth and its zlim. */
+typedef struct rtpi_ib_query {
+    double x, y, zp, zlim;
+    int i, j, direct;
+} rtpi_ib_query;
+
+/* The item-buffer decision's first steps, inline in its caller: sets
+   *at as rtpi_itembuf_visible does and @return 1 where that would answer
+   1 for want of cells there, with `least` 2 where it would answer 1
+   because none of the 9 samples' depths lies in front of p's zlim (an
+   empty cell's depth is the huge one rtpi_itembuf_alloc gives it: it
+   only makes the least smaller, and a least in front leaves the answer
+   to the full pass), else -1 with *q for rtpi_itembuf_visible_rest. */
+static RTPI_FORCE_INLINE int rtpi_itembuf_pre(const rtpi_itembuf *ib, const rtpi_v3 *pp,
+                                              const rtpi_v3 *op, rtpi_dc_at *at,
+                                              rtpi_ib_query *q, int least)
+{
+    double u, v, x, y;
+    int f = rtpi_dc_face(v3_sub(*op, ib->light), &u, &v), res = ib->res, i, j;
+    at->f = f;
+    at->u = u;
+    at->v = v;
+    if (ib->w.fbase[f] == RTPI_DC_ABSENT)
+        return 1;
+    x = (u - ib->w.u0[f]) / ib->w.du[f];
+    y = (v - ib->w.v0[f]) / ib->w.dv[f];
+    if (!(x > -1.0 && x < res + 1.0 && y > -1.0 && y < res + 1.0))
+        return 1;
+    i = x < 0.0 ? 0 : x >= res ? res - 1 : (int)x;
+    j = y < 0.0 ? 0 : y >= res ? res - 1 : (int)y;
+    q->x = x;
+    q->y = y;
+    q->i = i;
+    q->j = j;
+    q->zp = q->zlim = 0.0;
+    q->direct = ib->zq[f] == 0.0 && i > 0 && j > 0 && i < res - 1 && j < res - 1;
+    if (q->direct && least) {
+        const float *z = ib->z + ib->w.fbase[f] + (size_t)(j - 1) * (size_t)res + (size_t)(i - 1);
+        float m = HUGE_VALF;
+        /* The least of the 9 depths, a NaN one (never in front) left out:
+           z + zbase rounds monotonically in z, so no sample's sum lies
+           below the least's. */
+#define IB_PRE_MIN(k) m = z[k] < m ? z[k] : m
+        IB_PRE_MIN(0);
+        IB_PRE_MIN(1);
+        IB_PRE_MIN(2);
+        z += res;
+        IB_PRE_MIN(0);
+        IB_PRE_MIN(1);
+        IB_PRE_MIN(2);
+        z += res;
+        IB_PRE_MIN(0);
+        IB_PRE_MIN(1);
+        IB_PRE_MIN(2);
+#undef IB_PRE_MIN
+        (void)rtpi_itembuf_zlim(ib, f, pp, &q->zp, &q->zlim);
+        if (!(m + ib->w.zbase[f] < q->zlim))
+            return 2;
+    }
+    return -1;
+}
+
+/* The rest of the decision after rtpi_itembuf_pre answered -1 (its *at
+   and *q): as rtpi_itembuf_visible. */
+int rtpi_itembuf_visible_rest(const rtpi_itembuf *ib, const rtp_scene *s, const rtpi_v3 *pp,
+                              const rtpi_v3 *op, uint32_t prim, int self, const rtpi_ray *r,
+                              uint32_t *occ, const rtpi_dc_at *at, const rtpi_ib_query *q);
+
 /* The item-buffer decision for the hit at p on prim with shadow-ray
    origin o (see dircube.c for the rule): 1 lit, 0 in shadow (then
    certain), -1 open (something lies in front near the ray: ask an exact

@@ -85,6 +85,7 @@ typedef struct rtpi_shadow_cache {
        missed */
     uint32_t h1, h2;
     int gain; /* whether asking h1 and h2 pays (sh_earlier) */
+    int least; /* item buffers: whether the least of 9 pays (sh_visible) */
 } rtpi_shadow_cache;
 
 /* (p and o by address: a query's arguments copied by value cost a

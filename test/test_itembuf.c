@@ -106,6 +106,45 @@ static void check_mode(const char *label, const rtp_scene *s, const rtpi_kdtree 
     rtpi_shadow_destroy(sh);
 }
 
+/* An item buffer's first steps with the least depth of the 9 samples
+   (rtpi_itembuf_pre, inline in shadow.c) and the rest answer as the
+   whole query without it, and the least answers some queries itself
+   (else its test would prove nothing). */
+static void check_itembuf_least(const char *label, const rtp_scene *s, rtpi_v3 lp, int res,
+                                const sample *sm, size_t n)
+{
+    rtpi_itembuf ib;
+    rtp_allocator a;
+    size_t k, bad = 0, least = 0;
+    rtpi_allocator_init(&a, NULL);
+    if (rtpi_itembuf_build(s, lp, res, &a, &ib, NULL) != RTP_OK) {
+        CHECK_MSG(0, "%s: cannot build the item buffer", label);
+        return;
+    }
+    for (k = 0; k < n; k++) {
+        int self = rtpi_prim_shadows_own(s, sm[k].prim, sm[k].o, lp), v, w;
+        uint32_t occ = RTPI_NONE, occ2 = RTPI_NONE;
+        rtpi_dc_at at, at2;
+        rtpi_ib_query q;
+        v = rtpi_itembuf_visible(&ib, s, &sm[k].p, &sm[k].o, sm[k].prim, self, NULL, &occ, &at);
+        if (self == 1) {
+            w = 0;
+            occ2 = sm[k].prim;
+        } else if ((w = rtpi_itembuf_pre(&ib, &sm[k].p, &sm[k].o, &at2, &q, 1)) < 0) {
+            w = rtpi_itembuf_visible_rest(&ib, s, &sm[k].p, &sm[k].o, sm[k].prim, self, NULL,
+                                          &occ2, &at2, &q);
+        }
+        least += w == 2;
+        bad += (w > 0) != (v > 0) || (w < 0) != (v < 0) || occ != occ2 ||
+               (v != 0 && (at.f != at2.f || at.u != at2.u || at.v != at2.v));
+    }
+    CHECK_MSG(bad == 0, "%s, res %d: %lu of %lu answers through the least of 9 differ", label,
+              res, (unsigned long)bad, (unsigned long)n);
+    CHECK_MSG(least > 0, "%s, res %d: the least of 9 answered none of %lu queries", label, res,
+              (unsigned long)n);
+    rtpi_itembuf_free(&ib, &a);
+}
+
 /* The light buffer through a thread's cache still answers as EXACT. */
 static void check_lightbuf_cached(const char *label, const rtp_scene *s, const rtpi_kdtree *kd,
                                   rtpi_v3 lp, const sample *sm, size_t n)
@@ -173,6 +212,7 @@ static void run(const char *label, const rtp_scene *s, const rtpi_v3 *lights, si
         check_lightbuf_cached(name, s, kd, lights[li], sm, n);
         for (r = 0; r < 3; r++) {
             check_mode(name, s, kd, lights[li], RTPI_SHADOW_ITEMBUF, res[r], sm, n);
+            check_itembuf_least(name, s, lights[li], res[r], sm, n);
             if (gl)
                 check_mode(name, s, kd, lights[li], RTPI_SHADOW_OSMESA, res[r], sm, n);
         }
