@@ -1060,6 +1060,48 @@ static void test_diagonal_pipe(void)
     rtp_scene_destroy(s);
 }
 
+/* A stack of parallel quads, as shelves or a pile of sheets are: each
+   half of the slab is nearly as large as the whole (0.94 of its surface
+   here), so the box SAH, which prices a ray through every quad of a
+   leaf, left the split short of KD_LEAF_MARGIN and the stack two leaves of
+   half its quads each (16,000 of them traced 256x256 in 25 s).  A ray stops at the
+   first quad it hits: splits that part the quads without cutting one
+   (split_clean) are taken, and a leaf holds a few triangles (8 a leaf
+   here; 500 before, in two leaves). */
+static void test_stacked_quads(void)
+{
+    rng g;
+    rtp_scene *s = new_scene();
+    rtpi_kdtree *kd = NULL;
+    rtpi_kd_stats st;
+    const int m = 500;
+    int i;
+    g.s = g_seed ^ 0x5151;
+    for (i = 0; i < m; i++) {
+        double z = (double)i / m;
+        uint32_t a = add_v(s, -2, -2, z), b = add_v(s, 2, -2, z), c = add_v(s, 2, 2, z),
+                 d = add_v(s, -2, 2, z);
+        add_t(s, a, b, c);
+        add_t(s, a, c, d);
+    }
+    CHECK(rtpi_kd_build(s, NULL, &kd, NULL) == RTP_OK);
+    if (kd) {
+        size_t full;
+        rtpi_kd_get_stats(kd, &st);
+        full = st.leaves - st.empty_leaves;
+        printf("stack of %d quads: %lu leaves (%lu empty), %lu references\n", m,
+               (unsigned long)st.leaves, (unsigned long)st.empty_leaves,
+               (unsigned long)st.prim_refs);
+        CHECK_MSG(full > 0 && st.prim_refs / full <= 16,
+                  "%lu leaves (%lu empty), %lu references for %d triangles",
+                  (unsigned long)st.leaves, (unsigned long)st.empty_leaves,
+                  (unsigned long)st.prim_refs, 2 * m);
+        rtpi_kd_destroy(kd);
+    }
+    check_scene_vs_brute(s, &g, 3000, 0);
+    rtp_scene_destroy(s);
+}
+
 static void test_stats(void)
 {
     rtp_scene *s = new_scene();
@@ -1244,6 +1286,7 @@ int main(void)
     RUN(test_nomem);
     RUN(test_fan_budget);
     RUN(test_diagonal_pipe);
+    RUN(test_stacked_quads);
     RUN(test_stats);
     RUN(test_cylinder_line);
     return check_report();
