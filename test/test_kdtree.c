@@ -1064,7 +1064,8 @@ static void test_diagonal_pipe(void)
    half of the slab is nearly as large as the whole (0.94 of its surface
    here), so the box SAH, which prices a ray through every quad of a
    leaf, left the split short of KD_LEAF_MARGIN and the stack two leaves of
-   half its quads each (16,000 of them traced 256x256 in 25 s).  A ray stops at the
+   half its quads each (16,000 of them traced 256x256 in 5.8 s, 0.04 s
+   split).  A ray stops at the
    first quad it hits: splits that part the quads without cutting one
    (split_clean) are taken, and a leaf holds a few triangles (8 a leaf
    here; 500 before, in two leaves). */
