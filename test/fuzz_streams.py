@@ -294,6 +294,7 @@ def main():
     ap.add_argument("--out", default="/tmp/fuzz_streams")
     ap.add_argument("--minutes", type=float, default=0)
     ap.add_argument("--scene", default=None)
+    ap.add_argument("--lines", default="3,12", help="MIN,MAX lines a stream")
     args = ap.parse_args()
     os.makedirs(args.out, exist_ok=True)
     sc = [args.scene] if args.scene else scenes()
@@ -329,7 +330,7 @@ def main():
         lights, mats, env = info(tree)
         minw = "--min-weight" in topt
         g = Gen(r, lights, mats, env, minw)
-        nlines = r.randint(3, 12)
+        nlines = r.randint(*map(int, args.lines.split(",")))
         pre, addl = [], []
         if r.random() < 0.12:
             xyz = g.pos()
@@ -427,6 +428,14 @@ def main():
                 w0, wh0 = compare(read_pfm(ref), read_pfm(os.path.join(d, "t.pfm")), 0, 0.0)
                 if wh0:
                     print("NOTE reset trace not the traced bits:", tag, wh0, d)
+            if "written_pixels" in s:
+                prev = read_pfm(os.path.join(d, "f%d.pfm" % (k - 1)) if k else os.path.join(d, "t.pfm"))
+                cur = read_pfm(fr)
+                if k or not region:
+                    nch = len(set(i // 3 for i, (x, y) in enumerate(zip(prev[2], cur[2]))
+                                  if struct.pack("<f", x) != struct.pack("<f", y)))
+                    if nch > s["written_pixels"]:
+                        bad.append("%d pixels changed, written_pixels %d" % (nch, s["written_pixels"]))
             if s.get("stale_samples") and not keep:
                 bad.append("stale_samples %d with retrace" % s["stale_samples"])
             if s.get("moved_lights", 0) and "shadows" not in s:
