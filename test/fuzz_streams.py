@@ -145,6 +145,12 @@ class Gen:
 
     def pos(self):
         r = self.r
+        w = r.random()
+        if w < 0.03:   # far away: every mode decides it by shadow rays
+            return ",".join(fmt(c + r.uniform(-1, 1) * self.rad * 10 ** r.choice([6, 11, 13])) for c in self.at)
+        if w < 0.35:   # round positions: edges through cell centres, lights in planes
+            q = r.choice([1, 0.5, 0.25])
+            return ",".join(fmt(round((c + r.uniform(-1, 1) * self.rad) / q) * q) for c in self.at)
         return ",".join(fmt(c + r.uniform(-1, 1) * self.rad) for c in self.at)
 
     def edit(self):
@@ -155,6 +161,11 @@ class Gen:
             f = [float(x) for x in self.env["cam.from"].split(",")]
             if r.random() < 0.3:
                 return ("K", "camera.from", self.env["cam.from"])
+            if r.random() < 0.3:
+                return ("K", "camera.angle", fmt(r.uniform(20, 70)))
+            if r.random() < 0.3:
+                a = [float(x) for x in self.env["cam.at"].split(",")]
+                return ("K", "camera.at", ",".join(fmt(x + r.uniform(-0.1, 0.1) * self.rad) for x in a))
             return ("K", "camera.from", ",".join(fmt(x + r.uniform(-0.1, 0.1) * self.rad) for x in f))
         nm = len(self.mats)
         if not nm:
@@ -226,7 +237,7 @@ class Gen:
         for i in range(len(self.lights), self.nl):
             es.append(("R", "light.%d.on" % i, "0"))
         es += [("R", k, self.env[k]) for k in ("ambient", "background")]
-        es.append(("K", "camera.from", self.env["cam.from"]))
+        es += [("K", "camera." + k, self.env["cam." + k]) for k in ("from", "at", "angle")]
         for i, m in enumerate(self.mats):
             es += [("R", "mat.%d.%s" % (i, k), m[k]) for k in ("color", "kd", "ks", "kt", "shine", "ior")]
             es.append(("R", "mat.%d.checker" % i, "1" if "checker" in m else "0"))
@@ -319,7 +330,7 @@ def main():
             topt = ["--spd", "--region", "%d,%d,%d,%d" % (x0, y0, x0 + r.randint(8, 32), y0 + r.randint(8, 32))]
         else:
             s = r.choice([16, 24, 32, 48])
-            topt = ["--size", "%dx%d" % (s, s), "--depth", str(r.randint(2, 8))]
+            topt = ["--size", "%dx%d" % (s, s), "--depth", str(r.randint(1, 8))]
             if r.random() < 0.3:
                 topt += ["--min-weight", r.choice(["0.01", "0.1", "0.3"])]
         tree = os.path.join(d, "t.rtp")
