@@ -477,6 +477,17 @@ def main():
                     if wh3 and not (keep and (os_stale(d, k) or s.get("stale_samples"))):
                         bad.append("one-off vs stream frame %d: %s" % (k, wh3))
                     os_ = json.loads(open(os.path.join(d, "o%d.json" % k)).read())
+                    # lights away from where the tree traced them (added ones too)
+                    cam = any(a.startswith("camera.") for a in cum[1::2])
+                    pos = {}
+                    for a in cum[1::2]:
+                        kk, v = a.split("=", 1)
+                        if kk.startswith("light.") and kk.endswith(".pos"):
+                            pos[int(kk.split(".")[1])] = tuple(map(float, v.split(",")))
+                    want = sum(1 for i, v in pos.items()
+                               if i >= len(lights) or v != tuple(map(float, lights[i]["pos"].split(","))))
+                    if not cam and os_.get("moved_lights", 0) != want:
+                        bad.append("one-off moved_lights %d, %d lights away from the traced" % (os_.get("moved_lights", 0), want))
                     if os_.get("stale_samples") and not keep:
                         bad.append("one-off stale %d" % os_["stale_samples"])
             if bad:
