@@ -142,6 +142,20 @@ class Gen:
         self.rad = max(1e-3, sum((p - q) ** 2 for p, q in zip(f, a)) ** 0.5)
         self.orig_pos = [l["pos"] for l in lights]
         self.cur = {}
+        # focus: edits on one or two materials and one light, so that they meet
+        self.focus = r.random() < 0.4
+        self.mf = r.sample(range(len(mats)), min(len(mats), r.randint(1, 2))) if mats else []
+        self.lf = r.randrange(len(lights)) if lights else 0
+
+    def mat(self):
+        if self.focus and self.mf:
+            return self.r.choice(self.mf)
+        return self.r.randrange(len(self.mats))
+
+    def light(self):
+        if self.focus and self.lf < self.nl and self.r.random() < 0.8:
+            return self.lf
+        return self.r.randrange(self.nl)
 
     def pos(self):
         r = self.r
@@ -178,23 +192,23 @@ class Gen:
             if r.random() < 0.2:
                 k = r.choice(["ambient", "background"])
                 return ("A", k, self.env[k])
-            m = r.randrange(nm)
+            m = self.mat()
             k = r.choice(["color", "kd", "ks", "kt", "shine", "ior"])
             cl = "D" if k in ("ks", "kt", "ior") else "A"
             return (cl, "mat.%d.%s" % (m, k), self.mats[m][k])
         if c == "A":
             w = r.random()
             if w < 0.2 and self.nl:
-                return ("A", "light.%d.color" % r.randrange(self.nl), col(r))
+                return ("A", "light.%d.color" % self.light(), col(r))
             if w < 0.3 and self.nl:
-                return ("A", "light.%d.on" % r.randrange(self.nl), r.choice("01"))
+                return ("A", "light.%d.on" % self.light(), r.choice("01"))
             if w < 0.37:
                 return ("A", "ambient", col(r))
             if w < 0.42:
                 return ("A", "background", col(r))
             if not nm:
                 return ("A", "ambient", col(r))
-            m = r.randrange(nm)
+            m = self.mat()
             k = r.choice(["color", "kd", "kd", "color", "shine", "ks", "kt",
                           "checker", "color2", "checker_scale", "texture"])
             if k in ("ks", "kt"):
@@ -215,15 +229,15 @@ class Gen:
             if not self.nl:
                 self.nl += 1
                 return ("B", "light.0.pos", self.pos())
-            return ("B", "light.%d.pos" % r.randrange(self.nl), self.pos())
+            return ("B", "light.%d.pos" % self.light(), self.pos())
         if c == "C":
-            m = r.randrange(nm)
+            m = self.mat()
             k = r.choice(["bump", "bump_strength", "bump_scale"])
             v = {"bump": lambda: r.choice(["waves", "noise", "none", TEX]),
                  "bump_strength": lambda: fmt(r.uniform(0, 1.5)),
                  "bump_scale": lambda: fmt(r.uniform(0.05, 2))}[k]()
             return ("C", "mat.%d.%s" % (m, k), v)
-        m = r.randrange(nm)
+        m = self.mat()
         k = r.choice(["ks", "kt", "ior", "ior"])
         if k == "ior":
             return ("D", "mat.%d.ior" % m, r.choice(["1", fmt(r.uniform(0.7, 2.4))]))
