@@ -121,6 +121,8 @@ def fmt(x):
 
 
 def col(r):
+    if r.random() < 0.03:   # past 2^50: the full path's bits, overflow included
+        return ",".join(r.choice(["1e10", "1e20", "3e30", "3.4e38", "0", "1e-30"]) for _ in range(3))
     if r.random() < 0.08:
         return ",".join(fmt(r.uniform(0, 40)) for _ in range(3))
     if r.random() < 0.3:
@@ -216,7 +218,8 @@ class Gen:
                 if float(self.mats[m][k]) == 0 or self.minw:
                     return ("D", "mat.%d.%s" % (m, k), fmt(r.uniform(0, 0.9)))
                 return ("A", "mat.%d.%s" % (m, k), fmt(r.uniform(0.01, 0.9)))
-            v = {"color": lambda: col(r), "kd": lambda: fmt(r.uniform(0, 1)),
+            v = {"color": lambda: col(r),
+                 "kd": lambda: fmt(r.uniform(0, 1)) if r.random() < 0.97 else r.choice(["1e15", "3e38", "0"]),
                  "shine": lambda: fmt(r.uniform(1, 300)),
                  "checker": lambda: r.choice("01"), "color2": lambda: col(r),
                  "checker_scale": lambda: fmt(r.uniform(0.2, 3)),
