@@ -327,7 +327,7 @@ def main():
     ap.add_argument("--lines", default="3,12", help="MIN,MAX lines a stream")
     args = ap.parse_args()
     os.makedirs(args.out, exist_ok=True)
-    sc = [args.scene] if args.scene else scenes()
+    sc = sorted(sum((glob.glob(g) for g in args.scene.split(",")), [])) if args.scene else scenes()
     t_end = time.time() + args.minutes * 60 if args.minutes else None
     counts = {}
     nfail = 0
