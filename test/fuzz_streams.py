@@ -469,9 +469,14 @@ def main():
             if refmode:
                 # --reference's max_abs is the frame's own error against the full trace
                 fa, fb = read_pfm(fr)[2], read_pfm(ref)[2]
-                m = max([abs(x - y) for x, y in zip(fa, fb) if x == x and y == y] + [0.0])
+                m = 0.0
+                for x, y in zip(fa, fb):
+                    if x == y or (x != x and y != y):
+                        continue
+                    e = abs(x - y)
+                    m = max(m, e if e == e else float("inf"))
                 rep = s.get("max_abs")
-                if rep is None or rep == "inf" or abs(float(rep) - m) > 1e-6 + 1e-6 * m:
+                if rep is None or (float(rep) != m and abs(float(rep) - m) > 1e-6 + 1e-6 * m):
                     bad.append("--reference max_abs %s, measured %g" % (rep, m))
             if where and sh.startswith("itembuf") and moved:
                 pass   # (approximate, error reported: checked above)
@@ -507,6 +512,8 @@ def main():
                 bad.append("moved_lights %d > moved so far %d" % (s["moved_lights"], len(moved)))
             if sh == "exact" and s.get("shadows", "exact") != "exact":
                 bad.append("shadows %s with exact" % s["shadows"])
+            if s.get("shadows", "exact") not in ("exact", "lightbuf", "itembuf"):
+                bad.append("shadows %s" % s["shadows"])
             if sh.startswith("lightbuf") and s.get("shadows", "lightbuf") not in ("lightbuf", "exact"):
                 bad.append("shadows %s with lightbuf" % s["shadows"])
             cls = set(c for c, _, _ in l)
