@@ -397,6 +397,11 @@ def main():
             x0, y0 = r.randrange(a, c), r.randrange(b, e)
             region = "%d,%d,%d,%d" % (x0, y0, r.randint(x0 + 1, c), r.randint(y0 + 1, e))
             ropt += ["--region", region]
+        if r.random() < 0.15 and len(lines) > 1 and lines[0]:
+            # the first line's edits as the stream's own --set: no frame of theirs
+            for _, kk, v in lines.pop(0):
+                ropt += ["--set", "%s=%s" % (kk, v)]
+                pre += ["--set", "%s=%s" % (kk, v)]
         for _ in range(r.choice([0, 0, 0, 1, 2])):   # blank and comment lines make frames too
             lines.insert(r.randrange(len(lines) + 1), [])
         nlines = len(lines)
@@ -428,7 +433,7 @@ def main():
             print("STATS LINES", len(st), nlines, tag)
             nfail += 1
         cum = list(pre)
-        moved = set(["add"] if pre else [])
+        moved = set(a.split("=")[0] for a in pre[1::2] if ".pos=" in a)
         if r.random() < 0.15:
             jo = ["-j", "2" if "1" in ropt[ropt.index("-j") + 1] else "1"]
             p2 = run([RTP, "reeval", tree, "--stream", "-q", "-i", os.path.join(d, "g%d.pfm")] + ropt + jo, input=text.encode())
