@@ -17,7 +17,7 @@ import argparse, glob, json, os, random, struct, subprocess, sys, time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
-RTP = os.path.join(ROOT, "rtp")
+RTP = os.path.abspath(os.environ.get("RTP", os.path.join(ROOT, "rtp")))
 SHARED = os.path.join(os.path.dirname(ROOT), "shared")
 TEX = os.path.join(ROOT, "scenes", "tex4.ppm")
 TEXB = os.path.join(ROOT, "scenes", "tex4b.ppm")
@@ -327,6 +327,7 @@ def main():
     ap.add_argument("--lines", default="3,12", help="MIN,MAX lines a stream")
     args = ap.parse_args()
     os.makedirs(args.out, exist_ok=True)
+    print("seed", args.seed, "rtp", RTP)
     sc = sorted(sum((glob.glob(g) for g in args.scene.split(",")), [])) if args.scene else scenes()
     t_end = time.time() + args.minutes * 60 if args.minutes else None
     counts = {}
@@ -569,7 +570,8 @@ def main():
     for k in sorted(counts):
         print("   ", "".join(k), counts[k])
     print("frames compared", nframes, "failures", nfail)
+    return 1 if nfail else 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())
