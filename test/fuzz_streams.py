@@ -13,7 +13,7 @@ A frame further than 1e-6 (or than a few float steps of the value, README
 "What re-evaluation can change") from its full trace is printed with the
 commands that reproduce it.  The stats lines are checked too.
 """
-import argparse, glob, json, os, random, struct, subprocess, sys, time
+import argparse, glob, json, os, random, shutil, struct, subprocess, sys, time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
@@ -324,6 +324,7 @@ def main():
     ap.add_argument("--scene", default=None)
     ap.add_argument("--memlimit", type=float, default=0.15, help="share of cases with a low --memory-limit")
     ap.add_argument("--spd", type=float, default=0.15, help="share of SPD scenes' cases traced --spd")
+    ap.add_argument("--keep", action="store_true", help="keep passing cases' files")
     ap.add_argument("--lines", default="3,12", help="MIN,MAX lines a stream")
     args = ap.parse_args()
     os.makedirs(args.out, exist_ok=True)
@@ -337,6 +338,7 @@ def main():
         if t_end and time.time() > t_end:
             break
         seed = args.seed * 100003 + case
+        nfail0 = nfail
         r = random.Random(seed)
         d = os.path.join(args.out, "c%d" % seed)
         os.makedirs(d, exist_ok=True)
@@ -565,6 +567,8 @@ def main():
                     print("   ", b)
                 print("    dir", d)
                 break
+        if nfail == nfail0 and not args.keep:
+            shutil.rmtree(d, ignore_errors=True)   # (a passing case's files go)
         sys.stdout.flush()
     print("cases by class set:")
     for k in sorted(counts):
