@@ -364,7 +364,7 @@ def main():
         minw = "--min-weight" in topt
         g = Gen(r, lights, mats, env, minw)
         nlines = r.randint(*map(int, args.lines.split(",")))
-        pre, addl = [], []
+        pre, addl, precls = [], [], set()
         if r.random() < 0.12:
             xyz = g.pos()
             addl = ["--add-light", xyz]
@@ -402,6 +402,7 @@ def main():
             ropt += ["--region", region]
         if r.random() < 0.15 and len(lines) > 1 and lines[0]:
             # the first line's edits as the stream's own --set: no frame of theirs
+            precls = set(c for c, _, _ in lines[0])
             for _, kk, v in lines.pop(0):
                 ropt += ["--set", "%s=%s" % (kk, v)]
                 pre += ["--set", "%s=%s" % (kk, v)]
@@ -524,7 +525,7 @@ def main():
                 bad.append("shadows %s" % s["shadows"])
             if sh.startswith("lightbuf") and s.get("shadows", "lightbuf") not in ("lightbuf", "exact"):
                 bad.append("shadows %s with lightbuf" % s["shadows"])
-            cls = set(c for c, _, _ in l)
+            cls = set(c for c, _, _ in l) | (precls if k == 0 else set())
             if s.get("retraced_samples", 0) and not (cls & set("CDRK")):
                 bad.append("retraced %d on class %s line" % (s["retraced_samples"], cls))
             # a one-off with the cumulative edits: sometimes
