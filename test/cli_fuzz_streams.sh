@@ -15,7 +15,7 @@ if ! python3 -c 'import sys; sys.exit(sys.version_info < (3, 6))' 2>/dev/null; t
     echo "0 passed, 0 failed, 1 skipped"
     exit 0
 fi
-trap 'rm -rf "$T"' EXIT
+trap 'rm -rf "$T" "$T.log"' EXIT
 trap 'exit 130' INT
 trap 'exit 143' TERM
 if python3 test/fuzz_streams.py --cases 16 --seed 1 --out "$T" >"$T.log" 2>&1; then
