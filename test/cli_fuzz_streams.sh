@@ -7,17 +7,11 @@
 # (stale_samples, moved_lights, shadows, written_pixels, --reference's
 # max_abs) against what happened.  Longer campaigns:
 # python3 test/fuzz_streams.py --minutes 20 --seed N.  Skipped without python3.
-RTP=${RTP:-./rtp}
+TEST_NAME=fzs
+. "$(dirname "$0")/common.sh"
 export RTP
-T=${TMPDIR:-/tmp}/rtp-fzs.$$
-if ! python3 -c 'import sys; sys.exit(sys.version_info < (3, 6))' 2>/dev/null; then
-    echo "skip: no python3 (3.6 or later): random edit streams not run" >&2
-    echo "0 passed, 0 failed, 1 skipped"
-    exit 0
-fi
 trap 'rm -rf "$T" "$T.log"' EXIT
-trap 'exit 130' INT
-trap 'exit 143' TERM
+need_python "random edit streams"
 if python3 test/fuzz_streams.py --cases 16 --seed 1 --out "$T" >"$T.log" 2>&1; then
     n=$(sed -n 's/^frames compared \([0-9]*\) .*/\1/p' "$T.log")
     echo "${n:-0} passed, 0 failed, 0 skipped"

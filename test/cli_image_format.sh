@@ -10,14 +10,7 @@
 # must refuse by name (cut at every length, headers that lie, bytes after the
 # data, palette indices past the palette, sizes past the limit).  Skipped
 # without python3.
-RTP=${RTP:-./rtp}
-T=${TMPDIR:-/tmp}/rtp-images.$$
-if ! python3 -c 'import sys; sys.exit(sys.version_info < (3, 6))' 2>/dev/null; then
-    echo "skip: no python3 (3.6 or later): the image formats' independent reader not run" >&2
-    echo "0 passed, 0 failed, 1 skipped"
-    exit 0
-fi
-trap 'rm -rf "$T"' EXIT
-trap 'exit 130' INT
-trap 'exit 143' TERM
+TEST_NAME=images
+. "$(dirname "$0")/common.sh"
+need_python "the image formats' independent reader"
 python3 test/image_format.py "$RTP" "$T"

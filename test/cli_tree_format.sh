@@ -7,13 +7,9 @@
 # anywhere, longer varints, a newer minor, format 1 ...) or refuse by name
 # (an unknown required section, a newer major, lengths that disagree,
 # right CRCs over wrong data ...).  Skipped without python3.
-if ! python3 -c 'import sys; sys.exit(sys.version_info < (3, 6))' 2>/dev/null; then
-    echo "skip: no python3 (3.6 or later): the tree format's independent reader not run" >&2
-    echo "0 passed, 0 failed, 1 skipped"
-    exit 0
-fi
 TEST_NAME=format
 . "$(dirname "$0")/common.sh"
+need_python "the tree format's independent reader"
 PY="python3 test/tree_format.py"
 
 # files of every kind the format holds

@@ -19,3 +19,12 @@ expect_rc() {
     "$@" >"$T/out" 2>"$T/err"; rc=$?
     if [ "$rc" -eq "$want" ]; then ok; else bad "exit $rc (want $want): $*"; cat "$T/err" >&2; fi
 }
+# need_python WHAT: without python3 (3.6 or later) the script is one skip,
+# saying WHAT was not run
+need_python() {
+    if ! python3 -c 'import sys; sys.exit(sys.version_info < (3, 6))' 2>/dev/null; then
+        echo "skip: no python3 (3.6 or later): $1 not run" >&2
+        echo "0 passed, 0 failed, 1 skipped"
+        exit 0
+    fi
+}
