@@ -106,10 +106,15 @@ static void check_mode(const char *label, const rtp_scene *s, const rtpi_kdtree 
     rtpi_shadow_destroy(sh);
 }
 
+/* The queries the least of 9 answered itself over every case, and all
+   of them (test_least_answers). */
+static unsigned long least_answered, least_asked;
+
 /* An item buffer's first steps with the least depth of the 9 samples
    (rtpi_itembuf_pre, inline in shadow.c) and the rest answer as the
-   whole query without it, and the least answers some queries itself
-   (else its test would prove nothing). */
+   whole query without it; the least's own answers are counted for
+   test_least_answers (one case may have none: a light among thin
+   branches, every sample's cells holding one in front). */
 static void check_itembuf_least(const char *label, const rtp_scene *s, rtpi_v3 lp, int res,
                                 const sample *sm, size_t n)
 {
@@ -140,9 +145,19 @@ static void check_itembuf_least(const char *label, const rtp_scene *s, rtpi_v3 l
     }
     CHECK_MSG(bad == 0, "%s, res %d: %lu of %lu answers through the least of 9 differ", label,
               res, (unsigned long)bad, (unsigned long)n);
-    CHECK_MSG(least > 0, "%s, res %d: the least of 9 answered none of %lu queries", label, res,
-              (unsigned long)n);
+    least_answered += (unsigned long)least;
+    least_asked += (unsigned long)n;
     rtpi_itembuf_free(&ib, &a);
+}
+
+/* The least of 9 answers queries itself (else the checks of its answers
+   above would prove nothing): over every scene, light and resolution
+   run before this. */
+static void test_least_answers(void)
+{
+    printf("  the least of 9 answered %lu of %lu queries\n", least_answered, least_asked);
+    CHECK_MSG(least_answered > least_asked / 10, "the least of 9 answered %lu of %lu queries",
+              least_answered, least_asked);
 }
 
 /* The light buffer through a thread's cache still answers as EXACT. */
@@ -647,6 +662,7 @@ int main(void)
     RUN(test_far_speck);
     RUN(test_needle_near_light);
     RUN(test_light_on_a_far_ball);
+    RUN(test_least_answers);
 #ifdef RTP_HAVE_OSMESA
     RUN(test_osmesa_leaves_the_callers_context);
 #endif
