@@ -1772,8 +1772,8 @@ static const char diff_help[] =
     "maximum absolute error and the share of pixels above the threshold.\n"
     "  --threshold T           per-pixel error counted in 'above' (default 1/255)\n"
     "  --heatmap IMAGE         write a heat map of the per-pixel error (PNG, or\n"
-    "                          .ppm/.pfm by name), full heat at the largest\n"
-    "                          finite error, with a legend below\n"
+    "                          .ppm/.pfm by name; PPM without libpng), full\n"
+    "                          heat at the largest finite error, legend below\n"
     "  --fail-above METRIC=V   exit 3 when METRIC (mae, rmse, max_abs, above,\n"
     "                          or psnr: below V) is worse than V; repeatable,\n"
     "                          every one checked; above is a share from 0 to 1\n"
@@ -1782,8 +1782,8 @@ static const char diff_help[] =
     "  -q, --quiet             print nothing on success\n"
     "  -v, --verbose           accepted (diff has nothing more to say)\n"
     "  -h, --help              this help\n"
-    "With --heatmap - the heat map is the PNG on stdout and the line of metrics\n"
-    "goes to stderr.\n";
+    "With --heatmap - the heat map is on stdout and the line of metrics goes to\n"
+    "stderr.\n";
 
 static void json_number(FILE *f, const char *key, double v)
 {

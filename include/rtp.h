@@ -736,7 +736,7 @@ rtp_status rtp_image_diff(const rtp_image *a, const rtp_image *b,
 
 /** Writes a heat map of the per-pixel error of a against b with a colour
  *  legend, in the format the path's extension names (.ppm, .pfm; any other
- *  name: PNG); `scale` is the error shown at full heat (0: the largest
+ *  name: PNG, or PPM where rtp_png_supported() is 0); `scale` is the error shown at full heat (0: the largest
  *  finite error, 1 where there is none; infinite errors show at full
  *  heat; a negative, infinite or NaN scale is RTP_ERR_ARGUMENT). */
 rtp_status rtp_diff_heatmap(const rtp_image *a, const rtp_image *b,

@@ -293,9 +293,13 @@ rtp_status rtp_diff_heatmap(const rtp_image *a, const rtp_image *b,
         draw_text(out, (bar0 + bar1 + 1 - text_width(lmid, fs)) / 2, y, lmid,
                   fs, white);
 
+    /* Any other name is the PNG, or the PPM where this build has no
+       libpng (as the CLI's default image names): a heat map is to be
+       looked at, so an 8-bit image either way. */
     fmt = rtp_image_format_from_path(png_path);
-    st = rtp_image_write(out, png_path,
-                         fmt == RTP_IMAGE_AUTO ? RTP_IMAGE_PNG : fmt, err);
+    if (fmt == RTP_IMAGE_AUTO)
+        fmt = rtp_png_supported() ? RTP_IMAGE_PNG : RTP_IMAGE_PPM;
+    st = rtp_image_write(out, png_path, fmt, err);
     rtp_image_destroy(out);
     return st;
 }

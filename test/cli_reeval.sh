@@ -261,6 +261,14 @@ if $RTP version | grep -q "with: png"; then
     expect_rc 0 sh -c "$RTP diff '$T/t.pfm' '$T/r.pfm' --heatmap - > '$T/hm.png'"
     head -c 8 "$T/hm.png" | od -c | grep -q "P   N   G" && ! grep -q "pixels" "$T/hm.png" && ok ||
         bad "diff --heatmap -: not a PNG alone on stdout"
+else
+    # without libpng, the 8-bit image a heat map is: PPM, as the default names
+    expect_rc 0 sh -c "$RTP diff '$T/t.pfm' '$T/r.pfm' --heatmap - > '$T/hm.ppm'"
+    head -c 3 "$T/hm.ppm" | grep -q "^P6" && ok ||
+        bad "diff --heatmap - without libpng: not a PPM on stdout"
+    expect_rc 0 $RTP diff "$T/t.pfm" "$T/r.pfm" --heatmap "$T/hm.map" -q
+    head -c 3 "$T/hm.map" | grep -q "^P6" && ok ||
+        bad "diff --heatmap NAME without libpng: not a PPM"
 fi
 expect_rc 1 $RTP merge -o "$T/j.rtp" -i "$T/j.xyz" "$T/w1.rtp"
 [ ! -e "$T/j.rtp" ] && ok || bad "merge wrote the tree before refusing the image name"
