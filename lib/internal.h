@@ -346,7 +346,8 @@ rtp_status rtpi_read_obj(rtp_scene *s, const char *text, size_t size,
 rtp_status rtpi_read_bpt(rtp_scene *s, const char *text, size_t size,
                          const char *name, int div, const double *xform,
                          uint32_t mat, rtp_error *err);
-/* Reads a whole file into memory (path "-" = stdin). */
+/* Reads a whole scene text file into memory (path "-" = stdin); a NUL
+   byte is refused (RTP_ERR_PARSE at its line and column), where read. */
 rtp_status rtpi_read_file(const rtp_allocator *a, const char *path,
                           char **text, size_t *size, rtp_error *err);
 

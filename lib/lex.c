@@ -276,6 +276,13 @@ rtp_status rtpi_lex_wrap(const rtpi_lex *lx, const rtpi_tok *t,
     if (st == RTP_ERR_NOMEM)
         return rtpi_error(lx->err, st, lx->name, t->line, t->col,
                           "out of memory");
+    /* A fault inside the file read (a NUL byte) is named where it lies,
+       as a parse error of the included file's own text is. */
+    if (st == RTP_ERR_PARSE && inner && inner->line > 0) {
+        if (lx->err)
+            *lx->err = *inner;
+        return st;
+    }
     return rtpi_error(lx->err, st, lx->name, t->line, t->col,
                       "%s '%s': %s", what, show,
                       inner && inner->message[0] ? inner->message

@@ -585,6 +585,25 @@ rtp_status rtpi_read_file(const rtp_allocator *a, const char *path,
         }
         errno = 0;
         n = fread(buf + len, 1, cap - len - 1, f);
+        if (n && memchr(buf + len, '\0', n)) {
+            /* Every file read here is a scene's text: a NUL byte means a
+               binary or UTF-16 file (or /dev/zero, which would be read
+               until memory ran out), refused where it is first seen. */
+            const char *z = (const char *)memchr(buf + len, '\0', n), *p;
+            int line = 1, col = 1;
+            for (p = buf; p < z; p++) {
+                if (*p == '\n')
+                    line++, col = 1;
+                else
+                    col++;
+            }
+            rtpi_free(a, buf);
+            if (!is_stdin)
+                fclose(f);
+            return rtpi_error(err, RTP_ERR_PARSE, path, line, col,
+                              "a NUL byte: not a text file (binary, or "
+                              "UTF-16?)");
+        }
         len += n;
         if (n == 0) {
             read_errno = errno; /* (before fclose or free can change it) */

@@ -215,6 +215,26 @@ $RTP info "$T/esc.rtp" >"$T/out"
 [ $? -eq 0 ] && grep -q '^mat.0 (red?\[31mX):' "$T/out" && ! grep -q "$(printf '\033')" "$T/out" && ok ||
     bad "rtp info printed a name's ESC: $(cat -v "$T/out" | grep mat)"
 
+# a scene is text: a NUL byte is refused where it is read, naming its line
+# and column (/dev/zero was read until memory ran out; UTF-16 gave a
+# keyword error), in a scene, an include and on stdin
+printf 'v\nfrom 0 0 5 # a comment\000\n' >"$T/nul.nff"
+$RTP trace "$T/nul.nff" --size 8x8 -i "$T/nul.pfm" 2>"$T/err"
+[ $? -eq 1 ] && grep -q "nul.nff:2:23: a NUL byte" "$T/err" && [ ! -e "$T/nul.pfm" ] && ok ||
+    bad "NUL in a comment: $(cat "$T/err")"
+printf 'include nul.nff\n' >"$T/inc.nff"
+$RTP trace "$T/inc.nff" --size 8x8 -i "$T/nul.pfm" 2>"$T/err"
+[ $? -eq 1 ] && grep -q "nul.nff:2:23: a NUL byte" "$T/err" && ok ||
+    bad "NUL in an include: $(cat "$T/err")"
+if [ -r /dev/zero ] && command -v timeout >/dev/null; then
+    timeout 60 $RTP trace /dev/zero --size 8x8 -i "$T/nul.pfm" 2>"$T/err"
+    [ $? -eq 1 ] && grep -q "/dev/zero:1:1: a NUL byte" "$T/err" && ok ||
+        bad "trace /dev/zero: $(cat "$T/err")"
+    head -c 100000 /dev/zero | timeout 60 $RTP trace - --size 8x8 -i "$T/nul.pfm" 2>"$T/err"
+    [ $? -eq 1 ] && grep -q "1:1: a NUL byte" "$T/err" && ok ||
+        bad "trace - of NULs: $(cat "$T/err")"
+fi
+
 rm -rf "$T"
 echo "$pass passed, $fail failed, $skip skipped"
 [ "$fail" -eq 0 ]
