@@ -265,7 +265,7 @@ rtp_status rtpi_shadow_create_mt(const rtp_scene *s, const rtpi_kdtree *kd, rtpi
         st = rtpi_tri_planes(s, light, a, &sh->planes, &sh->pscale, err);
     if (st == RTP_OK && sh->mode == RTPI_SHADOW_EXACT)
         st = rtpi_round_cones(s, light, sh->pscale, rtpi_kd_far(sh->kd, light), a,
-                                  &sh->cones, err);
+                              &sh->cones, err);
     if (st == RTP_OK && sh_balls(sh, a) != 0)
         st = rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
     if (st != RTP_OK) {
