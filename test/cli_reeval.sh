@@ -920,6 +920,27 @@ expect_rc 1 sh -c "printf 'ambient=0.1\nmat.2.bump=$T/tx/mine1.ppm\n' |
 cmp -s "$T/tx/mine.ppm" "$T/tx/mine.orig" && cmp -s "$T/tx/mine1.ppm" "$T/tx/mine.orig" &&
     cmp -s "$T/tx/tex4.ppm" "$T/tx/tex4.orig" && ok || bad "an image the scene reads was written over"
 
+# Lights added one by one in a stream grow the evaluation's caches in place
+# (tree.c grow_caches): a sample a new light does not reach keeps the colour
+# it was combined to without it, which is its colour with it (+ 0 x c) but
+# where a channel is -0: with colours of -0 the background's samples are -0,
+# and a white light added makes them +0 (before the samples were combined
+# again, frame 3 kept -0).  Every frame is a full trace's bits.
+expect_rc 0 $RTP trace $S --size 40x30 -o "$T/nzt.rtp" -q
+printf '%s\n' "light.0.color=-0,-0,-0 light.1.color=-0,-0,-0 ambient=-0,-0,-0 background=-0,-0,-0" \
+    "light.2.pos=0,0,9 light.2.color=-0,-0,-0" "light.3.pos=-20,0,1" "light.4.pos=3,3,3" \
+    "light.5.pos=3,-3,3" >"$T/negz.txt"
+expect_rc 0 sh -c "$RTP reeval '$T/nzt.rtp' --stream --shadows exact -j 1 -i '$T/nz%d.pfm' -q <'$T/negz.txt'"
+cum=""; i=0
+while read -r line; do
+    for kv in $line; do cum="$cum --set $kv"; done
+    # shellcheck disable=SC2086 # (the edits so far, one --set each)
+    $RTP trace $S --size 40x30 $cum -i "$T/nzr.pfm" -q
+    cmp -s "$T/nzr.pfm" "$T/nz$i.pfm" && ok ||
+        bad "a stream adding lights to colours of -0: frame $i is not the full trace's bits"
+    i=$((i + 1))
+done <"$T/negz.txt"
+
 rm -rf "$T"
 echo "$pass passed, $fail failed, $skip skipped"
 [ "$fail" -eq 0 ]
