@@ -131,8 +131,9 @@ def col(r):
 
 
 class Gen:
-    def __init__(self, r, lights, mats, env, minw):
+    def __init__(self, r, lights, mats, env, minw, adds=0.0):
         self.r = r
+        self.adds = adds                # share of lines that add a light first
         self.lights = lights
         self.nl = len(lights)           # count of lights so far (added ones too)
         self.mats = mats
@@ -289,7 +290,11 @@ class Gen:
     def line(self):
         r = self.r
         n = r.randint(1, 4)
-        es = [self.classify(self.edit()) for _ in range(n)]
+        es = []
+        if self.adds and r.random() < self.adds:  # (no draw by default: same streams)
+            self.nl += 1
+            es.append(("B", "light.%d.pos" % (self.nl - 1), self.pos()))
+        es += [self.classify(self.edit()) for _ in range(n)]
         if r.random() < 0.1:
             es.append(self.classify(es[r.randrange(len(es))]))      # same key twice
         if r.random() < 0.1 and es:
@@ -326,6 +331,9 @@ def main():
     ap.add_argument("--spd", type=float, default=0.15, help="share of SPD scenes' cases traced --spd")
     ap.add_argument("--keep", action="store_true", help="keep passing cases' files")
     ap.add_argument("--lines", default="3,12", help="MIN,MAX lines a stream")
+    ap.add_argument("--adds", type=float, default=0.0,
+                    help="share of lines that first add a light (lights one by one: "
+                         "with --lines 60,80 past 32 and 64)")
     args = ap.parse_args()
     os.makedirs(args.out, exist_ok=True)
     print("seed", args.seed, "rtp", RTP)
@@ -362,7 +370,7 @@ def main():
             continue
         lights, mats, env = info(tree)
         minw = "--min-weight" in topt
-        g = Gen(r, lights, mats, env, minw)
+        g = Gen(r, lights, mats, env, minw, args.adds)
         nlines = r.randint(*map(int, args.lines.split(",")))
         pre, addl, precls = [], [], set()
         if r.random() < 0.12:
