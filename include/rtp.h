@@ -510,8 +510,10 @@ rtp_status rtp_tree_eval_into(rtp_tree *tree, const rtp_eval_options *opt,
                               rtp_error *err);
 
 /** Adds a light (white, on) at the given position; it gets the next index.
- *  Its shadows are decided at evaluation like those of a moved light.  A
- *  tree with an added light cannot be written (rtp_tree_write:
+ *  Its shadows are decided at evaluation like those of a moved light, and
+ *  it costs about what a move does: the kept terms and coefficients grow
+ *  by the light's own (its visibility, terms and the samples it reaches),
+ *  not all made again over every light.  A tree with an added light cannot be written (rtp_tree_write:
  *  RTP_ERR_UNSUPPORTED; the file holds the lights the trees were traced
  *  with, their visibility recorded) nor merged, until a camera edit's
  *  evaluation traces every sample again: that trace casts the shadow rays
