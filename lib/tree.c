@@ -4411,13 +4411,13 @@ static rtp_status eval_body(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                                                                       : RTPI_MEMORY_LIMIT)) &&
              !(opt && opt->no_cache) &&
              rtpi_material_lists_fit(t->nnodes); /* (else the full path, which needs none) */
-    /* (caches made for another count of lights go, whether or not they
-       hold: an evaluation that failed after making them, out of memory,
-       left ev_valid 0 and them sized for its lights, and a light added
-       then overran ev_coeffs and ev_terms; ev_nlights is set where they
-       are made) */
+    /* (caches made for another count of lights grow where they hold and
+       lights were added (grow_caches, which sets ev_nlights), else go: an
+       evaluation that failed after making them, out of memory, left
+       ev_valid 0 and them sized for its lights, and a light added then
+       overran ev_coeffs and ev_terms; ev_nlights is set where they are
+       made) */
     if (t->ev_terms && t->ev_nlights != nl) {
-        /* (lights added: the caches grow; else, or out of memory, they go) */
         if (!(cached && t->ev_valid && nl > t->ev_nlights && grow_caches(t, nl, ns) == 0))
             drop_caches(t);
         mv_light = 0; /* (the rests lack the lights added) */
