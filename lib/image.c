@@ -959,13 +959,14 @@ static rtp_status out_of_memory(const reader *r)
                       "out of memory reading the image");
 }
 
-/* What follows a PPM file's last sample: nothing for P6, blanks and
-   comments for P3.  More (samples, pixels, another image) means the
+/* What follows a PPM file's last sample: nothing for P6 (or one line
+   feed; data is the pixel data's bytes), blanks and comments for P3.  More (samples, pixels, another image) means the
    header does not describe the data -- a width or height too small read
    every row shifted, silently -- and is refused as bytes after a PFM's
    pixels are.  (A stream may carry the next image after it, as stdin
    redirected from such a file does: not checked there.) */
-static rtp_status ppm_after(const reader *r, int ascii, int w, int h, int first)
+static rtp_status ppm_after(const reader *r, int ascii, int w, int h, int first,
+                           size_t data)
 {
     long pos;
     int c;
@@ -979,16 +980,27 @@ static rtp_status ppm_after(const reader *r, int ascii, int w, int h, int first)
                       "header (P3 %dx%d) does not describe the data", w, h, w, h);
     }
     pos = ftell(r->f);
+    if (pos >= 0 && r->size == pos + 1) {
+        /* One byte over: a line feed some writers end the file with (the
+           netpbm tools read past it), unless the header's last
+           whitespace was a CR -- a header of CR LF lines, whose line
+           feed was read as the first sample, every byte one off. */
+        int term = EOF, last = EOF;
+        if (pos >= (long)data + 1 && fseek(r->f, pos - (long)data - 1, SEEK_SET) == 0)
+            term = getc(r->f);
+        if (fseek(r->f, pos, SEEK_SET) == 0)
+            last = getc(r->f);
+        if (term == '\r' && first == '\n')
+            return BAD(r, "PPM: 1 bytes after the pixel data: its maximum value's "
+                          "line ends in CR LF? Netpbm's header ends in one "
+                          "whitespace character");
+        if (last == '\n' && term != EOF)
+            return RTP_OK;
+    }
     if (pos >= 0 && r->size > pos)
         return BAD(r, "PPM: %lld bytes after the pixel data: the header (P6 %dx%d) does "
-                      "not describe the data (rtp reads one image a file)%s",
-                   r->size - pos, w, h,
-                   /* (the pixels read from the line feed of a CR LF: one
-                      byte over, the first a line feed) */
-                   r->size - pos == 1 && first == '\n'
-                       ? "; its maximum value's line ends in CR LF? Netpbm's header "
-                         "ends in one whitespace character"
-                       : "");
+                      "not describe the data (rtp reads one image a file)",
+                   r->size - pos, w, h);
     return RTP_OK;
 }
 
@@ -1045,7 +1057,7 @@ static rtp_status read_ppm(const reader *r, int ascii,
                 row[i] = (float)v / scale;
             }
         }
-        st = ppm_after(r, 1, w, h, 0);
+        st = ppm_after(r, 1, w, h, 0, 0);
         goto done;
     }
     /* P6: a chunk of rows a read, counted in floats (RTPI_IO_CHUNK) so
@@ -1095,7 +1107,7 @@ static rtp_status read_ppm(const reader *r, int ascii,
             }
         }
     }
-    st = ppm_after(r, 0, w, h, first);
+    st = ppm_after(r, 0, w, h, first, (size_t)w * (size_t)h * 3 * bps);
 done:
     rtpi_free(&img->alloc, buf);
     if (st != RTP_OK) {
