@@ -173,13 +173,19 @@ static int bump_stale(rtp_tree *t, size_t m)
    With a weight cut-off any ks or kt edit: raised, rays below it may now
    be cast; lowered, rays the trees hold may now fall below it, and a full
    trace would not cast them (their subtrees were kept and counted). */
+/* Traced to depth 1 (eye rays alone), no reflected or refracted ray is
+   cast whatever ks, kt, ior or bump: the trees are what any of them
+   traces (SPD's depth is 5; its one-sidedness by kt is not so). */
+static int eye_rays_alone(const rtp_tree *t)
+{
+    return t->max_depth <= 1 && !t->spd;
+}
+
 static int needs_retrace(rtp_tree *t, size_t m, int stale_retrace)
 {
     const rtpi_material *a = &t->scene->mats[m], *a0 = &t->mats0[m];
-    /* Traced to depth 1 (eye rays alone), no reflected or refracted ray
-       is cast whatever ks, kt, ior or bump: nothing to trace (SPD's depth
-       is 5; its one-sidedness by kt is below) */
-    if (t->max_depth <= 1 && !t->spd)
+    /* (nothing to trace: eye_rays_alone) */
+    if (eye_rays_alone(t))
         return 0;
     /* a new bump bends the reflected and refracted rays below it: those
        subtrees are stale; kept (the paper's way) unless asked otherwise */
@@ -5415,6 +5421,34 @@ static const char *mat_field(const rtpi_material *m, const rtpi_material *n)
     return "values"; /* (equal as numbers, not as bits: -0 and 0) */
 }
 
+/* Which of the values material m0 was traced with (mats0) differs from
+   n0's, of those that decide which edits the trees can evaluate
+   (needs_retrace, bump_stale): what a tree file keeps of them, and none
+   where t traced eye rays alone (a ks or kt edit from 0 traced nothing
+   there and kept mats0's).  NULL where none.  (Comparing the whole
+   records refused parts alike: one given a colour, kd or ks edit after
+   its trace, the other traced with it -- in memory; read from its file,
+   a part's other fields are the material's own.) */
+static const char *traced_field(const rtp_tree *t, const rtpi_material *m0,
+                                const rtpi_material *n0)
+{
+    if (eye_rays_alone(t))
+        return NULL;
+    if (m0->ks != n0->ks)
+        return "ks";
+    if (m0->kt != n0->kt)
+        return "kt";
+    if (m0->ior != n0->ior)
+        return "ior";
+    if (m0->bump != n0->bump || m0->bump_image != n0->bump_image)
+        return "bump";
+    if (m0->bump_strength != n0->bump_strength)
+        return "bump_strength";
+    if (m0->bump_scale != n0->bump_scale)
+        return "bump_scale";
+    return NULL;
+}
+
 static const char *setup_diff(const rtp_tree *a, const rtp_tree *b, char *buf, size_t size)
 {
     const rtp_scene *x = a->scene, *y = b->scene;
@@ -5486,19 +5520,18 @@ static const char *setup_diff(const rtp_tree *a, const rtp_tree *b, char *buf, s
     }
     for (i = 0; i < x->nmats; i++) {
         rtpi_material m = x->mats[i], n = y->mats[i];
-        const char *nm = y->mats[i].name;
+        const char *nm = y->mats[i].name, *f;
         m.name = n.name = NULL;
         if (memcmp(&m, &n, sizeof m) != 0) {
             snprintf(buf, size, "given another mat.%zu.%s%s%s%s than parts[0]", i,
                      mat_field(&n, &m), nm ? " (" : "", nm ? nm : "", nm ? ")" : "");
             return buf;
         }
-        if (memcmp(&a->mats0[i], &b->mats0[i], sizeof m) != 0) {
+        if ((f = traced_field(a, &b->mats0[i], &a->mats0[i])) != NULL) {
             snprintf(buf, size,
                      "traced with another mat.%zu.%s%s%s%s than parts[0] (one was evaluated "
                      "after an edit that traces again)",
-                     i, mat_field(&b->mats0[i], &a->mats0[i]), nm ? " (" : "", nm ? nm : "",
-                     nm ? ")" : "");
+                     i, f, nm ? " (" : "", nm ? nm : "", nm ? ")" : "");
             return buf;
         }
     }

@@ -776,6 +776,105 @@ static void test_merge_other_setups(void)
     }
 }
 
+/* Parts merge whether an edit that traces nothing was made on one after
+   its trace or given to the other before it: in memory a part keeps the
+   whole materials it was traced with (mats0), and merge compared them
+   whole, so a colour or kd edit after the trace refused the pair
+   ("traced with another mat.0.color ... one was evaluated after an edit
+   that traces again"; read from its file a part kept only ks, kt, ior
+   and bump of them, and merged).  Traced to depth 1, a ks or kt edit
+   from 0 traces nothing either (needs_retrace) and kept mats0's ks 0:
+   refused too, where its re-trace had made the parts alike before.  The
+   merged tree is the trace of the edited scene. */
+static void merge_after_edit(int depth, const char *k1, const char *v1, const char *k2,
+                             const char *v2)
+{
+    rtp_scene *s = load("scenes/spheres.nff");
+    rtp_tree *top = NULL, *bot = NULL, *m = NULL, *parts[2];
+    rtp_image *mi = NULL, *full = NULL;
+    rtp_trace_options o;
+    rtp_eval_stats es;
+    rtp_error err;
+    int k;
+    if (!s)
+        return;
+    o = half_frame(0);
+    o.max_depth = depth;
+    CHECK(rtp_record(s, &o, &top, NULL, NULL, NULL) == RTP_OK);
+    CHECK(top && rtp_tree_set(top, k1, v1, NULL) == RTP_OK &&
+          rtp_tree_set(top, k2, v2, NULL) == RTP_OK);
+    memset(&es, 0, sizeof es);
+    CHECK_MSG(top && rtp_tree_eval(top, NULL, &mi, &es, NULL) == RTP_OK &&
+                  es.retraced_samples == 0,
+              "depth %d, %s: %llu samples traced again", depth, k1, es.retraced_samples);
+    rtp_image_destroy(mi);
+    mi = NULL;
+    CHECK(rtp_scene_set(s, k1, v1, NULL) == RTP_OK && rtp_scene_set(s, k2, v2, NULL) == RTP_OK);
+    o = half_frame(1);
+    o.max_depth = depth;
+    CHECK(rtp_record(s, &o, &bot, NULL, NULL, NULL) == RTP_OK);
+    o = half_frame(0);
+    o.max_depth = depth;
+    memset(o.region, 0, sizeof o.region);
+    CHECK(rtp_trace(s, &o, &full, NULL, NULL) == RTP_OK);
+    for (k = 0; k < 2 && top && bot; k++) {
+        parts[0] = k ? bot : top;
+        parts[1] = k ? top : bot;
+        m = NULL;
+        memset(&err, 0, sizeof err);
+        CHECK_MSG(rtp_tree_merge(parts, 2, &m, &err) == RTP_OK && m,
+                  "depth %d, %s, part order %d: %s", depth, k1, k, err.message);
+        CHECK_MSG(m && rtp_tree_eval(m, NULL, &mi, NULL, NULL) == RTP_OK && mi && full &&
+                      same_image(mi, full),
+                  "depth %d, %s, part order %d: the merged tree's image", depth, k1, k);
+        rtp_image_destroy(mi);
+        mi = NULL;
+        rtp_tree_destroy(m);
+    }
+    rtp_image_destroy(full);
+    rtp_tree_destroy(top);
+    rtp_tree_destroy(bot);
+    rtp_scene_destroy(s);
+}
+
+static void test_merge_after_edits_that_trace_nothing(void)
+{
+    rtp_scene *s;
+    rtp_tree *top = NULL, *bot = NULL, *m = NULL, *parts[2];
+    rtp_image *img = NULL;
+    rtp_trace_options o;
+    rtp_eval_stats es;
+    rtp_error err;
+    merge_after_edit(5, "mat.0.color", "0.1,0.2,0.3", "mat.1.kd", "0.2");
+    merge_after_edit(1, "mat.0.ks", "0.6", "mat.0.kt", "0.5");
+    merge_after_edit(1, "mat.3.ior", "1.2", "mat.1.kt", "0.4");
+    /* and where it traces: a part given ks from 0 but not evaluated since
+       (its trees hold no reflections below the floor) cannot join one
+       traced again for it */
+    s = load("scenes/spheres.nff");
+    if (!s)
+        return;
+    o = half_frame(0);
+    CHECK(rtp_record(s, &o, &top, NULL, NULL, NULL) == RTP_OK);
+    o = half_frame(1);
+    CHECK(rtp_record(s, &o, &bot, NULL, NULL, NULL) == RTP_OK);
+    memset(&es, 0, sizeof es);
+    CHECK(top && rtp_tree_set(top, "mat.0.ks", "0.6", NULL) == RTP_OK &&
+          rtp_tree_eval(top, NULL, &img, &es, NULL) == RTP_OK && es.retraced_samples > 0);
+    CHECK(bot && rtp_tree_set(bot, "mat.0.ks", "0.6", NULL) == RTP_OK);
+    parts[0] = top;
+    parts[1] = bot;
+    memset(&err, 0, sizeof err);
+    CHECK(top && bot && rtp_tree_merge(parts, 2, &m, &err) == RTP_ERR_ARGUMENT && !m);
+    CHECK_MSG(strstr(err.message, "traced with another mat.0.ks (floor)") != NULL, "%s",
+              err.message);
+    rtp_tree_destroy(m);
+    rtp_image_destroy(img);
+    rtp_tree_destroy(top);
+    rtp_tree_destroy(bot);
+    rtp_scene_destroy(s);
+}
+
 #ifdef RTP_HAVE_THREADS
 /* A host's thread with a small stack (musl's 128 KiB, macOS's 512 KiB)
    traces, re-traces and moves lights in trees RTP_MAX_DEPTH deep: the
@@ -6658,6 +6757,7 @@ int main(void)
     RUN(test_tree_crop);
     RUN(test_max_depth);
     RUN(test_merge_other_setups);
+    RUN(test_merge_after_edits_that_trace_nothing);
     RUN(test_partial_allocator);
     RUN(test_texture_edits_free_images);
 #ifdef RTP_HAVE_THREADS
