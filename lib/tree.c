@@ -5553,8 +5553,11 @@ static const char *setup_diff(const rtp_tree *a, const rtp_tree *b, char *buf, s
        place, and its lights now where they were moved) */
     for (i = 0; i < a->nlights0; i++)
         if (memcmp(a->lights0[i].pos, b->lights0[i].pos, sizeof a->lights0[i].pos) != 0) {
-            /* (positions alone: a file keeps no more of them) */
-            snprintf(buf, size, "traced with light %zu at another place than parts[0]", i);
+            /* (positions alone: a file keeps no more of them; the light
+               named as the edits' refusals name it) */
+            const char *nm = y->lights[i].name;
+            snprintf(buf, size, "traced with light.%zu%s%s%s at another place than parts[0]",
+                     i, nm ? " (" : "", nm ? nm : "", nm ? ")" : "");
             return buf;
         }
     return NULL;

@@ -739,6 +739,10 @@ static void test_merge_other_setups(void)
             m = NULL;
             CHECK_MSG(rtp_tree_merge(parts, 2, &m, &err) == RTP_ERR_ARGUMENT && !m,
                       "%s part order %d: merged", which ? "moved light" : "texture", k);
+            /* (the light named, as an edit's refusal names it) */
+            CHECK_MSG(!which || strstr(err.message, "traced with light.0 (key) at another "
+                                                    "place") != NULL,
+                      "%s", err.message);
             rtp_tree_destroy(m);
         }
         rtp_tree_destroy(top);
