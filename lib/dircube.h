@@ -424,7 +424,10 @@ static RTPI_FORCE_INLINE int rtpi_itembuf_pre(const rtpi_itembuf *ib, const rtpi
 }
 
 /* The rest of the decision after rtpi_itembuf_pre answered -1 (its *at
-   and *q): as rtpi_itembuf_visible. */
+   and *q): as rtpi_itembuf_visible.  Only after a call with `least` 1:
+   it takes q's zlim as made for a direct query, which with `least` 0 is
+   left 0 (depths are positive: no sample would lie in front, every
+   such query answered lit, occluders or not). */
 int rtpi_itembuf_visible_rest(const rtpi_itembuf *ib, const rtp_scene *s, const rtpi_v3 *pp,
                               const rtpi_v3 *op, uint32_t prim, int self, const rtpi_ray *r,
                               uint32_t *occ, const rtpi_dc_at *at, const rtpi_ib_query *q);
