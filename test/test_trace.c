@@ -810,6 +810,56 @@ static void test_set_values_as_nff(void)
     rtp_scene_destroy(s);
 }
 
+/* 20,000 copies of one triangle, one material, make the image the one
+   copy makes, bit for bit: every copy is hit at the same t (the very
+   floats in the very test), shading sees the same surface whichever
+   copy wins, and secondary rays leave from the same offset point, past
+   every copy.  (The kd-tree builds the copies as one triangle.) */
+static void test_copies_one_image(void)
+{
+    const char *head =
+        "v from 2 -5 3 at 0 0 0 up 0 0 1 angle 45 hither 0.1 resolution 32 32\n"
+        "b 0.1 0.1 0.2\n"
+        "l 3 -2 6\nl -4 -3 5 0.5 0.5 1\n"
+        "f 0.9 0.4 0.3 0.6 0.4 30 0 1\n"
+        "s 0.3 -0.2 1.2 0.5\n"
+        "f 0.7 0.8 0.9 0.6 0.4 40 0 1\n";
+    const char *tri = "p 3 -2 -2 -0.2 2.5 -1.5 0.3 -0.5 2.5 -0.1\n";
+    const int n = 20000;
+    size_t lh = strlen(head), lt = strlen(tri);
+    char *text = (char *)malloc(lh + (size_t)n * lt + 1);
+    rtp_scene *one, *many;
+    rtp_image *a = NULL, *b = NULL;
+    rtp_trace_stats sa, sb;
+    int i;
+    if (!text) {
+        CHECK(text != NULL);
+        return;
+    }
+    memcpy(text, head, lh);
+    memcpy(text + lh, tri, lt + 1);
+    one = load_text(text);
+    for (i = 0; i < n; i++)
+        memcpy(text + lh + (size_t)i * lt, tri, lt + 1);
+    many = load_text(text);
+    free(text);
+    CHECK(one && many);
+    if (one && many) {
+        a = trace(one, 32, 32, 1, 0, &sa);
+        b = trace(many, 32, 32, 1, 0, &sb);
+        CHECK(a && b);
+    }
+    if (a && b) {
+        CHECK(memcmp(a->pixels, b->pixels, sizeof(float) * 3 * 32 * 32) == 0);
+        CHECK(sa.shadow_rays == sb.shadow_rays && sa.reflected_rays == sb.reflected_rays);
+        CHECK(sa.reflected_rays > 0 && sa.shadow_rays > 0);
+    }
+    rtp_image_destroy(a);
+    rtp_image_destroy(b);
+    rtp_scene_destroy(one);
+    rtp_scene_destroy(many);
+}
+
 int main(void)
 {
     RUN(test_analytic_sphere);
@@ -828,5 +878,6 @@ int main(void)
     RUN(test_golden_prims);
     RUN(test_golden_checker);
     RUN(test_set_values_as_nff);
+    RUN(test_copies_one_image);
     return check_report();
 }
