@@ -325,7 +325,10 @@ rtp_status rtp_trace(const rtp_scene *scene, const rtp_trace_options *opt,
 /* The ray trees of a traced image together with a copy of the scene they
  * were traced in: enough to re-evaluate the image for new parameters
  * without tracing.  A tree keeps caches for the next evaluation: use one
- * tree from one thread at a time. */
+ * tree from one thread at a time.  The copy shares the scene's texture
+ * and bump images, which are read only once loaded: each is freed with
+ * the last scene or tree holding it, so the scene and its trees may be
+ * destroyed in any order, on any threads. */
 typedef struct rtp_tree rtp_tree;
 
 /** Traces like rtp_trace and also keeps every sample's ray tree.  The image

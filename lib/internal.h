@@ -203,9 +203,16 @@ typedef struct rtpi_camera {
     double hither;
 } rtpi_camera;
 
+/* A texture or bump map.  Its pixels are read only once made, and shared
+   by the scenes cloned from one (rtpi_scene_clone: a tree's, a
+   builder's) through share, which counts them: rtp trace -o had held a
+   4096x4096 bump map twice, the scene's and its tree's (200 MB).  The
+   last to let go frees them (rtpi_texture_release). */
+typedef struct rtpi_texshare rtpi_texshare;
 typedef struct rtpi_texture {
     char *path;
     rtp_image *image;
+    rtpi_texshare *share; /* NULL: image is this scene's alone */
     double max_abs; /* the largest |texel|: the plane paths' bound (tree.c mat_in_range) */
 } rtpi_texture;
 
@@ -282,6 +289,12 @@ rtp_status rtpi_scene_set(rtp_scene *s, const char *key, const char *value, rtp_
    edits kept every image it replaced.  The slot stays, its index never
    reused (caches compare materials by index), its image NULL. */
 void rtpi_scene_drop_textures(rtp_scene *s, const rtpi_material *mats0);
+/* Makes t's image shareable by clones (its count 1), allocating with a.
+   @return 0, or -1 when out of memory (t as it was). */
+int rtpi_texture_share(const rtp_allocator *a, rtpi_texture *t);
+/* Lets go of t's image (freed when no other scene holds it); t's image
+   and share become NULL. */
+void rtpi_texture_release(rtpi_texture *t);
 /* A new file beside path to write and then rename over it: a name of
    its own (tmp, tmpsize >= strlen(path) + 32 bytes) made with O_EXCL,
    so writers of one path at once never share it; the mode of a file
@@ -1142,6 +1155,15 @@ static inline void rtpi_mutex_lock(rtpi_mutex *m) { (void)m; }
 static inline void rtpi_mutex_unlock(rtpi_mutex *m) { (void)m; }
 static inline void rtpi_mutex_destroy(rtpi_mutex *m) { (void)m; }
 #endif
+
+/* The count of the scenes holding a texture's pixels (rtpi_texture):
+   under a lock, as a scene and its tree may be destroyed on two threads
+   at once.  alloc: this block's (the image remembers its own). */
+struct rtpi_texshare {
+    rtp_allocator alloc;
+    size_t refs;
+    rtpi_mutex m;
+};
 
 /* An allocator for threads over one that need not be thread-safe: every
    call through a (the one to hand out) takes one lock. */

@@ -55,7 +55,7 @@ void rtp_scene_destroy(rtp_scene *s)
         rtpi_free(&a, s->lights[i].name);
     for (i = 0; i < s->ntexs; i++) {
         rtpi_free(&a, s->texs[i].path);
-        rtp_image_destroy(s->texs[i].image);
+        rtpi_texture_release(&s->texs[i]);
     }
     rtpi_free(&a, s->pos);
     rtpi_free(&a, s->nrm);
@@ -189,6 +189,45 @@ long rtpi_scene_add_white_light(rtp_scene *s, const double pos[3])
     return rtpi_scene_add_light(s, &l);
 }
 
+int rtpi_texture_share(const rtp_allocator *a, rtpi_texture *t)
+{
+    rtpi_texshare *sh;
+    if (!t->image || t->share)
+        return 0;
+    sh = (rtpi_texshare *)rtpi_malloc(a, sizeof *sh);
+    if (!sh)
+        return -1;
+    if (rtpi_mutex_init(&sh->m)) {
+        rtpi_free(a, sh);
+        return -1;
+    }
+    sh->alloc = *a;
+    sh->refs = 1;
+    t->share = sh;
+    return 0;
+}
+
+void rtpi_texture_release(rtpi_texture *t)
+{
+    rtpi_texshare *sh = t->share;
+    if (sh) {
+        size_t left;
+        rtpi_mutex_lock(&sh->m);
+        left = --sh->refs;
+        rtpi_mutex_unlock(&sh->m);
+        if (left == 0) {
+            rtp_allocator a = sh->alloc;
+            rtp_image_destroy(t->image);
+            rtpi_mutex_destroy(&sh->m);
+            rtpi_free(&a, sh);
+        }
+    } else {
+        rtp_image_destroy(t->image);
+    }
+    t->image = NULL;
+    t->share = NULL;
+}
+
 rtp_status rtpi_scene_add_texture(rtp_scene *s, const char *path, int fresh,
                                   uint32_t *index, rtp_error *err)
 {
@@ -250,7 +289,13 @@ rtp_status rtpi_scene_add_texture(rtp_scene *s, const char *path, int fresh,
     }
     s->texs[s->ntexs].path = p;
     s->texs[s->ntexs].image = img;
+    s->texs[s->ntexs].share = NULL;
     s->texs[s->ntexs].max_abs = mx;
+    if (rtpi_texture_share(&s->alloc, &s->texs[s->ntexs])) {
+        rtpi_free(&s->alloc, p);
+        rtp_image_destroy(img);
+        return rtpi_error(err, RTP_ERR_NOMEM, path, 0, 0, "out of memory");
+    }
     *index = (uint32_t)s->ntexs++;
     return RTP_OK;
 }
@@ -957,10 +1002,8 @@ void rtpi_scene_drop_textures(rtp_scene *s, const rtpi_material *mats0)
                    (a->bump == RTPI_BUMP_IMAGE && a->bump_image == i) ||
                    (mats0 && mats0[m].bump == RTPI_BUMP_IMAGE && mats0[m].bump_image == i);
         }
-        if (!used) {
-            rtp_image_destroy(s->texs[i].image);
-            s->texs[i].image = NULL;
-        }
+        if (!used)
+            rtpi_texture_release(&s->texs[i]);
     }
 }
 
@@ -1160,6 +1203,15 @@ rtp_status rtpi_scene_clone(const rtp_scene *s, rtp_scene **out)
                 }
                 if (!src)
                     continue; /* (replaced by an edit: rtpi_scene_drop_textures) */
+                if (s->texs[i].share) { /* read only: held, not copied */
+                    rtpi_texshare *sh = s->texs[i].share;
+                    rtpi_mutex_lock(&sh->m);
+                    sh->refs++;
+                    rtpi_mutex_unlock(&sh->m);
+                    c->texs[i].image = s->texs[i].image;
+                    c->texs[i].share = sh;
+                    continue;
+                }
                 if (rtp_image_create(src->width, src->height, a, &c->texs[i].image, NULL) !=
                     RTP_OK) {
                     bad = 1;

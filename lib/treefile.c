@@ -1398,6 +1398,8 @@ static rtp_status read_texr(loader *L, rd *r)
         }
         if (r->bad)
             return bad(L, "section too short", NULL);
+        if (rtpi_texture_share(L->a, tx))
+            return nomem(L);
     }
     return RTP_OK;
 }

@@ -8,6 +8,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 /* Resident memory (KiB) from /proc/self/status, or -1. */
 static long rss_kib(void)
@@ -76,8 +77,140 @@ static void test_retrace_memory_bounded(void)
     rtp_scene_destroy(s);
 }
 
+/* An allocator that counts the bytes live and their peak. */
+typedef struct {
+    size_t live, peak;
+} counted;
+
+static void *cnt_malloc(void *user, size_t n)
+{
+    counted *c = (counted *)user;
+    size_t *p = (size_t *)malloc(n + 16);
+    if (!p)
+        return NULL;
+    *p = n;
+    c->live += n;
+    if (c->live > c->peak)
+        c->peak = c->live;
+    return (char *)p + 16;
+}
+
+static void cnt_free(void *user, void *q)
+{
+    size_t *p;
+    if (!q)
+        return;
+    p = (size_t *)(void *)((char *)q - 16);
+    ((counted *)user)->live -= *p;
+    free(p);
+}
+
+static void *cnt_realloc(void *user, void *q, size_t n)
+{
+    counted *c = (counted *)user;
+    size_t *p = q ? (size_t *)(void *)((char *)q - 16) : NULL, old = p ? *p : 0;
+    p = (size_t *)realloc(p, n + 16);
+    if (!p)
+        return NULL;
+    *p = n;
+    c->live = c->live - old + n;
+    if (c->live > c->peak)
+        c->peak = c->live;
+    return (char *)p + 16;
+}
+
+/* Writes a w x h binary PPM of a pattern; 0 or -1. */
+static int write_ppm(const char *path, int w, int h)
+{
+    FILE *f = fopen(path, "wb");
+    int x, y;
+    if (!f)
+        return -1;
+    fprintf(f, "P6\n%d %d\n255\n", w, h);
+    for (y = 0; y < h; y++)
+        for (x = 0; x < w; x++) {
+            fputc((x * 7 + y) & 255, f);
+            fputc((x ^ y) & 255, f);
+            fputc((x * y) & 255, f);
+        }
+    return fclose(f) ? -1 : 0;
+}
+
+/* A tree keeps the scene it was traced in, but not a second copy of its
+   texture and bump images: they are read only, and shared by the scene
+   and its trees (each freed with the last that holds it).  rtp trace -o
+   with a 4096x4096 bump map held it twice (the scene's and the tree's
+   copy: 200 MB more).  Here a 512x512 texture and a 256x256 bump map
+   (3.8 MB of floats) and an 8x8 trace: recording adds far less than
+   them, the tree evaluates the same once the scene is gone, and nothing
+   is left when both are. */
+static void test_tree_shares_textures(void)
+{
+    char dir[64], tex[128], bump[128], text[600];
+    counted c = {0, 0};
+    rtp_allocator a;
+    rtp_scene *s = NULL;
+    rtp_tree *t = NULL;
+    rtp_image *i1 = NULL, *i2 = NULL;
+    rtp_trace_options o;
+    rtp_error err;
+    size_t base, images = sizeof(float) * 3 * (512 * 512 + 256 * 256);
+    strcpy(dir, "/tmp/rtp-test-memory-XXXXXX");
+    if (!mkdtemp(dir)) {
+        CHECK(!"a temporary folder");
+        return;
+    }
+    snprintf(tex, sizeof tex, "%s/tex.ppm", dir);
+    snprintf(bump, sizeof bump, "%s/bump.ppm", dir);
+    CHECK(write_ppm(tex, 512, 512) == 0 && write_ppm(bump, 256, 256) == 0);
+    snprintf(text, sizeof text,
+             "v from 0 -5 0 at 0 0 0 up 0 0 1 angle 40 hither 0.1 resolution 8 8\n"
+             "b 0.1 0.1 0.1\nl 2 -6 5\n"
+             "f 1 1 1 0.9 0.1 30 0 0\ntexture %s\ns -0.6 0 0 0.5\n"
+             "f 0.8 0.6 0.4 0.8 0.2 40 0 0\nbump %s 1\ns 0.6 0 0 0.5\n",
+             tex, bump);
+    a.malloc_fn = cnt_malloc;
+    a.realloc_fn = cnt_realloc;
+    a.free_fn = cnt_free;
+    a.user = &c;
+    memset(&o, 0, sizeof o);
+    o.width = 8;
+    o.height = 8;
+    o.threads = 1;
+    if (rtp_scene_load_memory(text, strlen(text), "mem.nff", "nff", &a, &s, &err) != RTP_OK) {
+        CHECK_MSG(0, "load: %s", err.message);
+    } else {
+        CHECK(c.live >= images);
+        base = c.live;
+        c.peak = c.live;
+        CHECK(rtp_record(s, &o, &t, &i1, NULL, &err) == RTP_OK);
+        printf("  recording over %lu bytes of images: %ld bytes more at the peak, %ld kept\n",
+               (unsigned long)images, (long)(c.peak - base), (long)(c.live - base));
+        CHECK_MSG(c.peak - base < images / 4, "recording took %lu bytes more (images: %lu)",
+                  (unsigned long)(c.peak - base), (unsigned long)images);
+        rtp_scene_destroy(s);
+        s = NULL;
+        CHECK(c.live >= images); /* the tree's */
+        if (t && i1) {
+            rtp_eval_options eo;
+            memset(&eo, 0, sizeof eo);
+            eo.threads = 1;
+            CHECK(rtp_tree_eval(t, &eo, &i2, NULL, &err) == RTP_OK);
+            CHECK(i2 && memcmp(i1->pixels, i2->pixels, sizeof(float) * 3 * 8 * 8) == 0);
+        }
+        rtp_image_destroy(i1);
+        rtp_image_destroy(i2);
+        rtp_tree_destroy(t);
+        CHECK_MSG(c.live == 0, "%lu bytes left", (unsigned long)c.live);
+    }
+    remove(tex);
+    remove(bump);
+    rmdir(dir);
+}
+
 int main(void)
 {
     RUN(test_retrace_memory_bounded);
+    RUN(test_tree_shares_textures);
     return check_report();
 }
