@@ -130,6 +130,13 @@
 #ifndef KD_REF_FLOOR
 #define KD_REF_FLOOR 2097152.0
 #endif
+/* Look-ahead nodes of at least this many references are checked for
+   primitives alike (kd_group).  Fewer copies than that the depth limit
+   holds to a few thousand references (31 copies of a triangle: 2,294),
+   and the look-ahead nodes of meshes are mostly smaller (the bunny: 482
+   of 489 have 11-15 references, teapot_s12 173 of 181), so the check
+   rarely runs. */
+#define KD_ALIKE_MIN 32
 /* Hard cap on the depth; the traversal stack holds one entry per level. */
 #define KD_DEPTH_CAP 60
 /* The largest primitive count: counts share a word with the 2-bit node
@@ -193,8 +200,8 @@ typedef struct kd_build {
     uint32_t *refs;
     size_t nrefs, refs_cap;
     int max_depth, depth_seen;
-    const uint32_t *same;  /* the next primitive alike (kd_group), by id,
-                              RTPI_NONE at a group's end; NULL: none alike */
+    int check, saw;        /* check: a look-ahead node holding primitives
+                              alike stops the build, saw set (kd_group) */
     size_t task_max;       /* top build: nodes this small become tasks */
     kd_task *tasks;
     size_t ntasks, tasks_cap;
@@ -579,41 +586,10 @@ static int push_node(kd_build *b, uint32_t *idx)
     return 0;
 }
 
-/* A leaf of the n references r where primitives are alike (kd_group):
-   each followed by those alike, so that it lists every primitive its
-   cell meets. */
-static int make_leaf_alike(kd_build *b, const kd_ref *r, size_t n)
-{
-    uint32_t idx, p;
-    size_t i, m = 0;
-    for (i = 0; i < n; i++)
-        for (p = r[i].prim; p != RTPI_NONE; p = b->same[p])
-            m++;
-    if (push_node(b, &idx))
-        return -1;
-    b->nodes[idx].flags = 3u | (uint32_t)m << 2;
-    b->nodes[idx].a.off = 0;
-    if (m == 1) {
-        b->nodes[idx].a.one = r[0].prim;
-    } else if (m > 1) {
-        if (b->nrefs + m > 0xffffffffu ||
-            rtpi_grow(b->a, (void **)&b->refs, &b->refs_cap, b->nrefs + m,
-                      sizeof *b->refs))
-            return -1;
-        b->nodes[idx].a.off = (uint32_t)b->nrefs;
-        for (i = 0; i < n; i++)
-            for (p = r[i].prim; p != RTPI_NONE; p = b->same[p])
-                b->refs[b->nrefs++] = p;
-    }
-    return 0;
-}
-
 static int make_leaf(kd_build *b, const kd_ref *r, size_t n)
 {
     uint32_t idx;
     size_t i;
-    if (b->same)
-        return make_leaf_alike(b, r, n);
     if (push_node(b, &idx))
         return -1;
     b->nodes[idx].flags = 3u | (uint32_t)n << 2;
@@ -663,6 +639,164 @@ static int split_clean(const kd_ref *r, size_t n, const kd_split *sp)
     return nl > 0 && nl < n;
 }
 
+/* Whether references a and b are primitives that no split can part:
+   triangles with the same three vertices (in any order: the same point
+   set, so every cell meets both or neither), or other primitives with
+   the same box (their references are only ever their boxes cut at
+   planes).  In a node, a's and b's boxes are their clipped ones: alike
+   triangles in one order, or others, have the same there too. */
+static int kd_alike(const rtpi_kdtree *kd, const kd_ref *a, const kd_ref *b)
+{
+    int k, i, j;
+    /* (the boxes' floats are never NaN, and never -0: f_down, f_up) */
+    for (k = 0; k < 3; k++)
+        if (a->lo[k] != b->lo[k] || a->hi[k] != b->hi[k])
+            return 0;
+    if ((a->prim < kd->ntris) != (b->prim < kd->ntris))
+        return 0;
+    if (a->prim >= kd->ntris)
+        return 1;
+    /* Non-degenerate: three distinct vertices each, so a's being among
+       b's makes the sets equal. */
+    for (i = 0; i < 3; i++) {
+        const float *p = kd->tri + 9 * (size_t)a->prim + 3 * i;
+        for (j = 0; j < 3; j++) {
+            const float *q = kd->tri + 9 * (size_t)b->prim + 3 * j;
+            for (k = 0; k < 3 && p[k] == q[k]; k++)
+                ;
+            if (k == 3)
+                break;
+        }
+        if (j == 3)
+            return 0;
+    }
+    return 1;
+}
+
+/* A hash that alike references share (kd_alike): a triangle's of its
+   vertices, summed so that their order does not count (-0 as +0, as ==
+   has it); another primitive's of its box.  Not the triangles' boxes:
+   a fan of slivers over one box (all sharing its diagonal) put every
+   triangle in one chain. */
+static uint32_t kd_alike_hash(const rtpi_kdtree *kd, const kd_ref *r, size_t cap)
+{
+    uint64_t h = 0;
+    int i;
+    if (r->prim < kd->ntris) {
+        const float *v = kd->tri + 9 * (size_t)r->prim;
+        for (i = 0; i < 3; i++, v += 3) {
+            float f[4];
+            uint64_t w[2];
+            f[0] = v[0] + 0.0f;
+            f[1] = v[1] + 0.0f;
+            f[2] = v[2] + 0.0f;
+            f[3] = 0.0f;
+            memcpy(w, f, sizeof w);
+            h += (w[0] * 0x9e3779b97f4a7c15ull ^ w[1] * 0xc2b2ae3d27d4eb4full) >> 7;
+        }
+    } else {
+        uint64_t w[3];
+        memcpy(w, r, sizeof w); /* lo and hi, its first 24 bytes */
+        h = w[0] * 0x9e3779b97f4a7c15ull ^ w[1] * 0xc2b2ae3d27d4eb4full ^
+            w[2] * 0x165667b19e3779f9ull;
+    }
+    h ^= h >> 29;
+    h ^= h >> 17;
+    return (uint32_t)(h & (cap - 1));
+}
+
+/* Finds the references among r[0, n) alike to an earlier one (kd_alike)
+   by a hash (kd_alike_hash), chained in `room`, which holds at least 3 n
+   words.  With nx NULL: @return 1 at the first found, else 0.  Else each
+   found one is appended to its first's list (nx by id, the lists' tails
+   in nx + np), its prim set to RTPI_NONE, and @return the count found. */
+static size_t kd_find_alike(const rtpi_kdtree *kd, kd_ref *r, size_t n, uint32_t *room,
+                            uint32_t *nx, size_t np)
+{
+    uint32_t *head = room, *chain, x;
+    size_t cap = 1, i, found = 0;
+    while (cap < n)
+        cap *= 2;
+    chain = head + cap; /* (cap < 2 n) */
+    memset(head, 0xff, cap * sizeof *head); /* RTPI_NONE: an empty chain */
+    for (i = 0; i < n; i++) {
+        uint32_t hs = kd_alike_hash(kd, &r[i], cap), j;
+        for (x = head[hs]; x != RTPI_NONE; x = chain[x])
+            if (r[x].lo[0] == r[i].lo[0] && kd_alike(kd, &r[x], &r[i]))
+                break;
+        if (x == RTPI_NONE) {
+            chain[i] = head[hs];
+            head[hs] = (uint32_t)i;
+            continue;
+        }
+        if (!nx)
+            return 1;
+        j = r[x].prim; /* the group's first, whose reference stays */
+        nx[nx[np + j]] = r[i].prim;
+        nx[np + j] = r[i].prim;
+        r[i].prim = RTPI_NONE; /* (never chained: x is always a first) */
+        found++;
+    }
+    return found;
+}
+
+/* Whether the node b->ref[off, off + n) holds two references alike, asked
+   where its look-ahead splits it (the build's check).  @return 1 or 0, or -1 when
+   out of memory. */
+static int kd_node_alike(kd_build *b, size_t off, size_t n)
+{
+    if (rtpi_grow(b->a, (void **)&b->ref, &b->ref_cap, off + 2 * n, sizeof *b->ref))
+        return -1;
+    /* (3 n words fit in the n references above the list: 28 bytes each) */
+    return (int)kd_find_alike(b->kd, b->ref + off, n, (uint32_t *)(void *)(b->ref + off + n),
+                              NULL, 0);
+}
+
+/* Primitives alike (kd_alike) are built as one: N copies of a triangle
+   (an exporter's duplicated faces, a mesh included many times in one
+   place) can never be parted, yet the SAH, pricing each cell at N tests,
+   cut the empty space around them ever finer, each cell holding all N,
+   until KD_REF_BUDGET stopped it (8,000 copies: 2.0 M references and 2.6
+   s; 256 k: 9.3 s and 566 MB).  Past the few box splits that cut off
+   space or other primitives, only the look-ahead can split such a node
+   (every plane straddles them all), so the build checks there (check,
+   from KD_ALIKE_MIN references) and, where a node the look-ahead splits
+   holds two alike, starts again with this: the first of each group (by
+   id) stands for it in the build, and its leaves list the others after
+   it (kd_expand), in ascending id as the brute-force loop meets them (of
+   hits at one t the last tested wins in both).  A scene whose checks
+   find none keeps its tree, node for node (the SPD scenes, the bunny
+   and the meshes, scenes/).  The list r[0, *n) keeps its order with the
+   others taken out; the hash's chains live in the arena above it (2 np
+   references).
+   @return 0 (*same NULL when no two are alike), or -1 when out of
+   memory. */
+static int kd_group(const rtp_allocator *a, const rtpi_kdtree *kd, size_t np,
+                    kd_ref *r, size_t *n, uint32_t **same)
+{
+    uint32_t *nx;
+    size_t i, j;
+    *same = NULL;
+    if (*n < 2)
+        return 0;
+    nx = (uint32_t *)rtpi_malloc_array(a, 2 * np, sizeof *nx);
+    if (!nx)
+        return -1;
+    memset(nx, 0xff, np * sizeof *nx); /* RTPI_NONE */
+    for (j = 0; j < np; j++)
+        nx[np + j] = (uint32_t)j; /* a group's last member */
+    if (!kd_find_alike(kd, r, *n, (uint32_t *)(void *)(r + *n), nx, np)) {
+        rtpi_free(a, nx);
+        return 0;
+    }
+    for (i = 0, j = 0; i < *n; i++)
+        if (r[i].prim != RTPI_NONE)
+            r[j++] = r[i];
+    *n = j;
+    *same = nx; /* (its second half, the tails, is no longer read) */
+    return 0;
+}
+
 /* In the top build: the node becomes a task with a copy of its
    references (the arena above them is reused) and a placeholder node
    that names it. */
@@ -688,7 +822,7 @@ static int make_task(kd_build *b, const float *lo, const float *hi,
     t->b.a = b->a;
     t->b.kd = b->kd;
     t->b.max_depth = b->max_depth;
-    t->b.same = b->same;
+    t->b.check = b->check;
     t->b.ref_cap = 2 * n + KD_SMALL_MAX;
     t->b.ref = (kd_ref *)rtpi_malloc_array(b->a, t->b.ref_cap, sizeof(kd_ref));
     if (!t->b.ref)
@@ -739,6 +873,13 @@ static int build_node(kd_build *b, const float *lo, const float *hi,
         if (split_lookahead(b, off, n, lo, hi, area, &sp))
             return -1;
         take = sp.cost < KD_LEAF_MARGIN * KD_COST_ISECT * (double)n;
+        if (take && b->check && n >= KD_ALIKE_MIN) { /* (kd_group) */
+            int al = kd_node_alike(b, off, n);
+            if (al) {
+                b->saw = al > 0;
+                return -1;
+            }
+        }
     }
     if (!take) {
         if (b->task_max) /* the task decides the same again */
@@ -934,168 +1075,67 @@ static int run_tasks(kd_build *top, int nthreads)
     return ret ? -1 : 0;
 }
 
-/* Whether references a and b (of the initial list) are primitives that
-   no split can part: triangles with the same three vertices (in any
-   order: the same point set, so every cell meets both or neither), or
-   other primitives with the same box (their references are only ever
-   their boxes cut at planes). */
-static int kd_alike(const rtpi_kdtree *kd, const kd_ref *a, const kd_ref *b)
+/* Lists after each primitive of kd's leaves the others alike to it
+   (kd_group's lists, same).  @return 0, or -1 when out of memory. */
+static int kd_expand(rtpi_kdtree *kd, const uint32_t *same)
 {
-    int k, i, j;
-    /* (the boxes' floats are never NaN, and never -0: f_down, f_up) */
-    for (k = 0; k < 3; k++)
-        if (a->lo[k] != b->lo[k] || a->hi[k] != b->hi[k])
-            return 0;
-    if ((a->prim < kd->ntris) != (b->prim < kd->ntris))
-        return 0;
-    if (a->prim >= kd->ntris)
-        return 1;
-    /* Non-degenerate: three distinct vertices each, so a's being among
-       b's makes the sets equal. */
-    for (i = 0; i < 3; i++) {
-        const float *p = kd->tri + 9 * (size_t)a->prim + 3 * i;
-        for (j = 0; j < 3; j++) {
-            const float *q = kd->tri + 9 * (size_t)b->prim + 3 * j;
-            for (k = 0; k < 3 && p[k] == q[k]; k++)
-                ;
-            if (k == 3)
-                break;
-        }
-        if (j == 3)
-            return 0;
-    }
-    return 1;
-}
-
-/* Primitives alike (kd_alike) are built as one: N copies of a triangle
-   (an exporter's duplicated faces, a mesh included twice in one place)
-   can never be parted, yet the SAH, pricing each cell at N tests, cut
-   the empty space around them ever finer until KD_REF_BUDGET stopped it,
-   every leaf holding all N (8,000 copies: 2.0 M references and 2.6 s;
-   256 k: 9.3 s and 566 MB).  So the first of each group (by id) stands
-   for it in the build, and make_leaf lists the others after it, in
-   ascending id as the brute-force loop meets them (of hits at one t the
-   last tested wins in both).  A hash of the boxes finds the groups: its
-   heads and chains live in the arena above r[0, *n), which holds 2 np
-   references (28 bytes each, for 4 to 8 + 4 bytes a reference here), so
-   a scene without two primitives alike costs no allocation and ~35
-   instructions a primitive (the bunny's build 0.2% more), and builds
-   the very same tree: r keeps its order with the others taken out.
-   @return 0 (*same NULL when no two are alike), or -1 when out of
-   memory. */
-static int kd_group(const rtp_allocator *a, const rtpi_kdtree *kd, size_t np,
-                    kd_ref *r, size_t *n, uint32_t **same)
-{
-    uint32_t *head, *chain, *nx = NULL, *tail;
-    size_t cap = 1, i, j;
-    *same = NULL;
-    if (*n < 2)
-        return 0;
-    while (cap < *n)
-        cap *= 2;
-    /* (cap < 2 n, so its cap + n words, under 12 n bytes, fit in the
-       28 (2 np - n) >= 28 n above the list) */
-    head = (uint32_t *)(void *)(r + *n);
-    chain = head + cap;
-    memset(head, 0xff, cap * sizeof *head); /* RTPI_NONE: an empty chain */
-    for (i = 0; i < *n; i++) {
-        uint64_t w[3], h;
-        uint32_t x;
-        memcpy(w, &r[i], sizeof w); /* lo and hi, its first 24 bytes */
-        h = w[0] * 0x9e3779b97f4a7c15ull ^ w[1] * 0xc2b2ae3d27d4eb4full ^
-            w[2] * 0x165667b19e3779f9ull;
-        h ^= h >> 29;
-        h ^= h >> 17;
-        for (x = head[h & (cap - 1)]; x != RTPI_NONE; x = chain[x])
-            if (r[x].lo[0] == r[i].lo[0] && kd_alike(kd, &r[x], &r[i]))
-                break;
-        if (x == RTPI_NONE) {
-            chain[i] = head[h & (cap - 1)];
-            head[h & (cap - 1)] = (uint32_t)i;
+    size_t i, j, total = 0, at = 0;
+    uint32_t *refs, p;
+    for (i = 0; i < kd->nnodes; i++) {
+        const kd_node *nd = &kd->nodes[i];
+        uint32_t cnt = nd->flags >> 2;
+        const uint32_t *list = cnt == 1 ? &nd->a.one : kd->refs + nd->a.off;
+        if ((nd->flags & 3) != 3)
             continue;
-        }
-        if (!nx) { /* the first pair alike: the lists, as long as np */
-            nx = (uint32_t *)rtpi_malloc_array(a, 2 * np, sizeof *nx);
-            if (!nx)
-                return -1;
-            memset(nx, 0xff, np * sizeof *nx); /* RTPI_NONE */
-            for (j = 0; j < np; j++)
-                nx[np + j] = (uint32_t)j; /* a group's last member */
-        }
-        tail = nx + np;
-        j = r[x].prim; /* the group's first, whose reference stays */
-        nx[tail[j]] = r[i].prim;
-        tail[j] = r[i].prim;
-        r[i].prim = RTPI_NONE; /* taken out below (not in any chain) */
+        for (j = 0; j < cnt; j++)
+            for (p = list[j]; p != RTPI_NONE; p = same[p])
+                total++;
     }
-    if (!nx)
-        return 0;
-    for (i = 0, j = 0; i < *n; i++)
-        if (r[i].prim != RTPI_NONE)
-            r[j++] = r[i];
-    *n = j;
-    *same = nx; /* (its second half, the tails, is no longer read) */
+    if (total > 0xffffffffu)
+        return -1;
+    refs = (uint32_t *)rtpi_malloc_array(&kd->alloc, total ? total : 1, sizeof *refs);
+    if (!refs)
+        return -1;
+    for (i = 0; i < kd->nnodes; i++) {
+        kd_node *nd = &kd->nodes[i];
+        uint32_t cnt = nd->flags >> 2;
+        const uint32_t *list = cnt == 1 ? &nd->a.one : kd->refs + nd->a.off;
+        size_t from = at;
+        if ((nd->flags & 3) != 3)
+            continue;
+        for (j = 0; j < cnt; j++)
+            for (p = list[j]; p != RTPI_NONE; p = same[p])
+                refs[at++] = p;
+        /* (fewer than 2^30: they are primitives) */
+        nd->flags = 3u | (uint32_t)(at - from) << 2;
+        if (at - from <= 1) { /* (none: an empty leaf, off 0) */
+            nd->a.one = at > from ? refs[from] : 0;
+            at = from;
+        } else {
+            nd->a.off = (uint32_t)from;
+        }
+    }
+    rtpi_free(&kd->alloc, kd->refs);
+    kd->refs = refs;
+    kd->nrefs = at;
     return 0;
 }
 
-rtp_status rtpi_kd_build(const rtp_scene *s, const rtp_allocator *alloc,
-                         rtpi_kdtree **out, rtp_error *err)
+/* The references of every primitive into r, their bounds rounded
+   outward to floats, and the box of them all in lo, hi; degenerate or
+   non-finite primitives never hit and are left out.  @return how many. */
+static size_t kd_refs(const rtp_scene *s, const rtpi_kdtree *kd, kd_ref *ref, float *lo,
+                      float *hi)
 {
-    return rtpi_kd_build_mt(s, alloc, 1, out, err);
-}
-
-rtp_status rtpi_kd_build_mt(const rtp_scene *s, const rtp_allocator *alloc,
-                            int nthreads, rtpi_kdtree **out, rtp_error *err)
-{
-    rtp_allocator a;
-    rtpi_kdtree *kd;
-    kd_build top;
-    size_t np = rtpi_scene_nprims(s), i, nvalid = 0, nn, nr;
-    uint32_t *same = NULL;
-    float lo[3], hi[3];
+    size_t np = rtpi_scene_nprims(s), i, nvalid = 0;
     int k;
-    double lg;
-
-    *out = NULL;
-    rtpi_allocator_init(&a, alloc);
-    if (np >= KD_MAX_PRIMS)
-        return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
-                          "kd-tree: %lu primitives, at most %lu",
-                          (unsigned long)np, (unsigned long)KD_MAX_PRIMS - 1);
-    kd = (rtpi_kdtree *)rtpi_malloc(&a, sizeof *kd);
-    if (!kd)
-        return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
-    memset(kd, 0, sizeof *kd);
-    kd->alloc = a;
-    kd->scene = s;
-    kd->ntris = s->ntris;
-    memset(&top, 0, sizeof top);
-    top.a = &kd->alloc;
-    top.kd = kd;
-    if (np > 0) {
-        kd->tri = (float *)rtpi_malloc_array(&a, s->ntris ? s->ntris : 1,
-                                             9 * sizeof(float));
-        top.ref = (kd_ref *)rtpi_malloc_array(&a, np, 2 * sizeof(kd_ref));
-        if (!kd->tri || !top.ref)
-            goto nomem;
-        top.ref_cap = 2 * np;
-    }
-    for (i = 0; i < s->ntris; i++) {
-        const rtpi_tri *t = &s->tris[i];
-        for (k = 0; k < 3; k++)
-            memcpy(kd->tri + 9 * i + 3 * k, s->pos + 3 * (size_t)t->v[k],
-                   3 * sizeof(float));
-    }
-
-    /* Bounds of every primitive, rounded outward to floats; degenerate or
-       non-finite primitives never hit and are left out. */
     for (k = 0; k < 3; k++) {
         lo[k] = INFINITY;
         hi[k] = -INFINITY;
     }
     for (i = 0; i < np; i++) {
         double dlo[3], dhi[3];
-        kd_ref *r = top.ref + nvalid;
+        kd_ref *r = ref + nvalid;
         int ok = 1;
         if (i < s->ntris) {
             const float *v = kd->tri + 9 * i;
@@ -1118,40 +1158,110 @@ rtp_status rtpi_kd_build_mt(const rtp_scene *s, const rtp_allocator *alloc,
         }
         nvalid++;
     }
+    return nvalid;
+}
 
-    if (kd_group(&a, kd, np, top.ref, &nvalid, &same))
-        goto nomem;
-    top.same = same;
+rtp_status rtpi_kd_build(const rtp_scene *s, const rtp_allocator *alloc,
+                         rtpi_kdtree **out, rtp_error *err)
+{
+    return rtpi_kd_build_mt(s, alloc, 1, out, err);
+}
 
-    if (nvalid > 0) {
-        kd->has_box = 1;
-        for (k = 0; k < 3; k++) {
-            kd->lo[k] = lo[k];
-            kd->hi[k] = hi[k];
-            kd->maxabs[k] = fmax(fabs(kd->lo[k]), fabs(kd->hi[k]));
-        }
-    } else {
+rtp_status rtpi_kd_build_mt(const rtp_scene *s, const rtp_allocator *alloc,
+                            int nthreads, rtpi_kdtree **out, rtp_error *err)
+{
+    rtp_allocator a;
+    rtpi_kdtree *kd;
+    kd_build top;
+    size_t np = rtpi_scene_nprims(s), i, nvalid = 0, nn, nr;
+    uint32_t *same = NULL;
+    float lo[3], hi[3];
+    int k, pass;
+    double lg;
+
+    *out = NULL;
+    rtpi_allocator_init(&a, alloc);
+    if (np >= KD_MAX_PRIMS)
+        return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
+                          "kd-tree: %lu primitives, at most %lu",
+                          (unsigned long)np, (unsigned long)KD_MAX_PRIMS - 1);
+    kd = (rtpi_kdtree *)rtpi_malloc(&a, sizeof *kd);
+    if (!kd)
+        return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+    memset(kd, 0, sizeof *kd);
+    kd->alloc = a;
+    kd->scene = s;
+    kd->ntris = s->ntris;
+    memset(&top, 0, sizeof top);
+    if (np > 0) {
+        kd->tri = (float *)rtpi_malloc_array(&a, s->ntris ? s->ntris : 1,
+                                             9 * sizeof(float));
+        if (!kd->tri)
+            goto nomem;
+    }
+    for (i = 0; i < s->ntris; i++) {
+        const rtpi_tri *t = &s->tris[i];
         for (k = 0; k < 3; k++)
-            lo[k] = hi[k] = 0.0f;
+            memcpy(kd->tri + 9 * i + 3 * k, s->pos + 3 * (size_t)t->v[k],
+                   3 * sizeof(float));
     }
 
-    lg = nvalid > 1 ? log((double)nvalid) / log(2.0) : 0.0;
-    top.max_depth = (int)(KD_DEPTH_A + KD_DEPTH_B * lg);
-    if (top.max_depth > KD_DEPTH_CAP)
-        top.max_depth = KD_DEPTH_CAP;
-    /* Tasks of at most 1/KD_TASKS of the references (however many
-       threads: the tree must not depend on them), and none smaller than
-       KD_TASK_MIN, where a thread's start costs more than it saves. */
-    top.task_max = nvalid / KD_TASKS;
-    if (top.task_max < KD_TASK_MIN)
-        top.task_max = KD_TASK_MIN;
-    if (build_node(&top, lo, hi, 0, nvalid, 0,
-                   KD_REF_BUDGET * (double)nvalid + KD_REF_FLOOR))
-        goto nomem;
-    rtpi_free(top.a, top.ref); /* the tasks have their own copies */
-    top.ref = NULL;
-    if (run_tasks(&top, nthreads))
-        goto nomem;
+    /* Built once, or twice where the first build met primitives alike in
+       a node its look-ahead split (kd_group): the second builds them as
+       one. */
+    for (pass = 0;; pass++) {
+        memset(&top, 0, sizeof top);
+        top.a = &kd->alloc;
+        top.kd = kd;
+        top.check = pass == 0;
+        if (np > 0) {
+            top.ref = (kd_ref *)rtpi_malloc_array(&a, np, 2 * sizeof(kd_ref));
+            if (!top.ref)
+                goto nomem;
+            top.ref_cap = 2 * np;
+        }
+        nvalid = kd_refs(s, kd, top.ref, lo, hi);
+        if (pass && kd_group(&a, kd, np, top.ref, &nvalid, &same))
+            goto nomem;
+
+        if (nvalid > 0) {
+            kd->has_box = 1;
+            for (k = 0; k < 3; k++) {
+                kd->lo[k] = lo[k];
+                kd->hi[k] = hi[k];
+                kd->maxabs[k] = fmax(fabs(kd->lo[k]), fabs(kd->hi[k]));
+            }
+        } else {
+            for (k = 0; k < 3; k++)
+                lo[k] = hi[k] = 0.0f;
+        }
+
+        lg = nvalid > 1 ? log((double)nvalid) / log(2.0) : 0.0;
+        top.max_depth = (int)(KD_DEPTH_A + KD_DEPTH_B * lg);
+        if (top.max_depth > KD_DEPTH_CAP)
+            top.max_depth = KD_DEPTH_CAP;
+        /* Tasks of at most 1/KD_TASKS of the references (however many
+           threads: the tree must not depend on them), and none smaller
+           than KD_TASK_MIN, where a thread's start costs more than it
+           saves. */
+        top.task_max = nvalid / KD_TASKS;
+        if (top.task_max < KD_TASK_MIN)
+            top.task_max = KD_TASK_MIN;
+        if (build_node(&top, lo, hi, 0, nvalid, 0,
+                       KD_REF_BUDGET * (double)nvalid + KD_REF_FLOOR) == 0) {
+            rtpi_free(top.a, top.ref); /* the tasks have their own copies */
+            top.ref = NULL;
+            if (run_tasks(&top, nthreads) == 0)
+                break;
+        }
+        /* (whether a task saw them: the run stops at the first that
+           fails, but a tree saw them only if a task of it would) */
+        for (i = 0; i < top.ntasks; i++)
+            top.saw |= top.tasks[i].b.saw;
+        if (!top.saw)
+            goto nomem;
+        build_free(&top);
+    }
 
     /* Put the pieces together. */
     nn = top.nnodes - top.ntasks;
@@ -1170,6 +1280,8 @@ rtp_status rtpi_kd_build_mt(const rtp_scene *s, const rtp_allocator *alloc,
     if (!kd->nodes || !kd->refs)
         goto nomem;
     assemble(kd, &top, 0);
+    if (same && kd_expand(kd, same))
+        goto nomem;
 
     kd->stats.nodes = kd->nnodes;
     kd->stats.depth = top.depth_seen;

@@ -949,7 +949,8 @@ static void test_nomem(void)
               add_v(s, c.x, c.y + 0.05, c.z + 0.02));
     }
     add_sphere(s, 0.5, 0.5, 0.5, 0.1);
-    add_t(s, 0, 1, 2); /* a twin of the first: the build's groups fail too */
+    for (i = 0; i < 40; i++) /* copies of the first: the build starts again (kd_group) */
+        add_t(s, 0, 1, 2);
     for (n = 0; n < 100000 && !ok; n++) {
         fail_alloc f;
         rtp_allocator a;
