@@ -367,12 +367,82 @@ static inline const rtpi_material *node_terms(const rtpi_shade_ctx *c, const rtp
     return m;
 }
 
-unsigned long long rtpi_light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
-                                   const uint64_t *start, size_t k0, size_t k1,
-                                   const uint32_t *vis_ext, const float *nv, const double *w,
-                                   size_t light, float *terms, float *coeffs, const double *cl,
-                                   float *samples, int *bad, unsigned char *mark,
-                                   double *rest, unsigned char *rest_ok)
+/* rtpi_combine's sums where one came out NaN: a colour of 0 adds nothing
+   there (RTPI_TERM_SUM). */
+static void combine_zero(const rtp_scene *s, const double *cl, const float *coeffs, float rgb[3])
+{
+    size_t i, nl = s->nlights;
+    int k;
+    for (k = 0; k < 3; k++) {
+        double a = RTPI_TERM_SUM(RTPI_TERM_SUM(0.0, coeffs[k], (double)s->background[k]),
+                                 coeffs[3 + k], (double)s->ambient[k]);
+        for (i = 0; i < nl; i++)
+            a = RTPI_TERM_SUM(a, coeffs[6 + 3 * i + k], cl[3 * i + k]);
+        rgb[k] = (float)a;
+    }
+}
+
+/* The sums of rtpi_combine, each channel in the same order as ever
+   (background, ambient, the lights ascending), the three side by side;
+   light `skip` left out (none where it is nlights). */
+static inline void combine_sums(const rtp_scene *s, const double *cl, const float *coeffs,
+                                size_t skip, double v[3])
+{
+    size_t i, nl = s->nlights;
+    const float *c = coeffs + 6;
+    double v0 = coeffs[0] * (double)s->background[0] + coeffs[3] * (double)s->ambient[0];
+    double v1 = coeffs[1] * (double)s->background[1] + coeffs[4] * (double)s->ambient[1];
+    double v2 = coeffs[2] * (double)s->background[2] + coeffs[5] * (double)s->ambient[2];
+    for (i = 0; i < nl; i++, c += 3, cl += 3) {
+        if (i == skip)
+            continue;
+        v0 += c[0] * cl[0];
+        v1 += c[1] * cl[1];
+        v2 += c[2] * cl[2];
+    }
+    v[0] = v0;
+    v[1] = v1;
+    v[2] = v2;
+}
+
+/* (inline in rtpi_light_redo: its call, with the spills around it, was
+   a fifth of the combine's instructions: teapot's moves 151 k of them) */
+static RTPI_FORCE_INLINE void combine_into(const rtp_scene *s, const double *cl,
+                                           const float *coeffs, float rgb[3])
+{
+    double v[3];
+    combine_sums(s, cl, coeffs, s->nlights, v);
+    /* A colour of 0 adds nothing, whatever its coefficient: a light
+       turned off keeps its coefficients (for turning it on again), and
+       where a huge kt or ks took one beyond the float range, inf x 0 made
+       the pixel NaN.  Only a NaN sum can hold such a product (else the
+       rule gives the same sums, but for the sign of a zero), so only then
+       are the sums made again with it (tested as one: their sum is NaN
+       where one is, or where infinities of both signs meet, which the
+       rule leaves as they are). */
+    if (!(v[0] + v[1] + v[2] == v[0] + v[1] + v[2])) {
+        combine_zero(s, cl, coeffs, rgb); /* (a tail call: no frame here) */
+        return;
+    }
+    rgb[0] = (float)v[0];
+    rgb[1] = (float)v[1];
+    rgb[2] = (float)v[2];
+}
+
+void rtpi_combine(const rtp_scene *s, const double *cl, const float *coeffs, float rgb[3])
+{
+    combine_into(s, cl, coeffs, rgb);
+}
+
+/* rtpi_light_redo's body; with_rest: rest is not NULL (a constant at
+   each call: the loop compiled twice, the one without the kept rest
+   combining inline, which in the one with it had cost balls' and rings'
+   moves 0.1-0.2%) */
+static RTPI_FORCE_INLINE unsigned long long
+light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *start, size_t k0,
+           size_t k1, const uint32_t *vis_ext, const float *nv, const double *w, size_t light,
+           float *terms, float *coeffs, const double *cl, float *samples, int *bad,
+           unsigned char *mark, double *rest, unsigned char *rest_ok, int with_rest)
 {
     const rtp_scene *s = c->s;
     const rtpi_v3 lp = light_pos(&s->lights[light]);
@@ -435,7 +505,7 @@ unsigned long long rtpi_light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *no
             memcpy(cf, f, sizeof f);
         }
         if (samples) { /* the other samples' colours hold */
-            if (rest) {
+            if (with_rest) {
                 /* the rest of the sum, then this light's term: as
                    rtpi_combine where the light is the last, else about
                    a float ulp from it; it serves where the sum is finite */
@@ -458,7 +528,7 @@ unsigned long long rtpi_light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *no
                     rtpi_combine(s, cl, co, samples + 3 * k);
                 }
             } else {
-                rtpi_combine(s, cl, co, samples + 3 * k);
+                combine_into(s, cl, co, samples + 3 * k);
             }
             if (mark)
                 mark[k] = 1;
@@ -467,6 +537,19 @@ unsigned long long rtpi_light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *no
     }
     *bad |= nonfinite;
     return combined;
+}
+
+unsigned long long rtpi_light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
+                                   const uint64_t *start, size_t k0, size_t k1,
+                                   const uint32_t *vis_ext, const float *nv, const double *w,
+                                   size_t light, float *terms, float *coeffs, const double *cl,
+                                   float *samples, int *bad, unsigned char *mark,
+                                   double *rest, unsigned char *rest_ok)
+{
+    return rest ? light_redo(c, nodes, start, k0, k1, vis_ext, nv, w, light, terms, coeffs, cl,
+                             samples, bad, mark, rest, rest_ok, 1)
+                : light_redo(c, nodes, start, k0, k1, vis_ext, nv, w, light, terms, coeffs, cl,
+                             samples, bad, mark, NULL, rest_ok, 0);
 }
 
 void rtpi_material_light_terms(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t n,
@@ -690,65 +773,6 @@ void rtpi_light_colors(const rtp_scene *s, double *cl)
     for (i = 0; i < s->nlights; i++)
         for (k = 0; k < 3; k++)
             cl[3 * i + k] = s->lights[i].on ? s->lights[i].color[k] * s->light_scale : 0.0;
-}
-
-/* rtpi_combine's sums where one came out NaN: a colour of 0 adds nothing
-   there (RTPI_TERM_SUM). */
-static void combine_zero(const rtp_scene *s, const double *cl, const float *coeffs, float rgb[3])
-{
-    size_t i, nl = s->nlights;
-    int k;
-    for (k = 0; k < 3; k++) {
-        double a = RTPI_TERM_SUM(RTPI_TERM_SUM(0.0, coeffs[k], (double)s->background[k]),
-                                 coeffs[3 + k], (double)s->ambient[k]);
-        for (i = 0; i < nl; i++)
-            a = RTPI_TERM_SUM(a, coeffs[6 + 3 * i + k], cl[3 * i + k]);
-        rgb[k] = (float)a;
-    }
-}
-
-/* The sums of rtpi_combine, each channel in the same order as ever
-   (background, ambient, the lights ascending), the three side by side;
-   light `skip` left out (none where it is nlights). */
-static inline void combine_sums(const rtp_scene *s, const double *cl, const float *coeffs,
-                                size_t skip, double v[3])
-{
-    size_t i, nl = s->nlights;
-    const float *c = coeffs + 6;
-    double v0 = coeffs[0] * (double)s->background[0] + coeffs[3] * (double)s->ambient[0];
-    double v1 = coeffs[1] * (double)s->background[1] + coeffs[4] * (double)s->ambient[1];
-    double v2 = coeffs[2] * (double)s->background[2] + coeffs[5] * (double)s->ambient[2];
-    for (i = 0; i < nl; i++, c += 3, cl += 3) {
-        if (i == skip)
-            continue;
-        v0 += c[0] * cl[0];
-        v1 += c[1] * cl[1];
-        v2 += c[2] * cl[2];
-    }
-    v[0] = v0;
-    v[1] = v1;
-    v[2] = v2;
-}
-
-void rtpi_combine(const rtp_scene *s, const double *cl, const float *coeffs, float rgb[3])
-{
-    double v[3];
-    combine_sums(s, cl, coeffs, s->nlights, v);
-    /* A colour of 0 adds nothing, whatever its coefficient: a light
-       turned off keeps its coefficients (for turning it on again), and
-       where a huge kt or ks took one beyond the float range, inf x 0 made
-       the pixel NaN.  Only a NaN sum can hold such a product (else the
-       rule gives the same sums, but for the sign of a zero), so only then
-       are the sums made again with it (tested as one: their sum is NaN
-       where one is, or where infinities of both signs meet, which the
-       rule leaves as they are). */
-    if (!(v[0] + v[1] + v[2] == v[0] + v[1] + v[2])) {
-        combine_zero(s, cl, coeffs, rgb); /* (a tail call: no frame here) */
-        return;
-    }
-    rgb[0] = (float)v[0];
-    rgb[1] = (float)v[1];
-    rgb[2] = (float)v[2];
 }
 
 void rtpi_combine_rest(const rtp_scene *s, const double *cl, const float *coeffs, size_t light,
