@@ -1415,12 +1415,25 @@ static RTPI_FORCE_INLINE int kd_ray_setup(const rtpi_kdtree *kd, const rtpi_ray 
    child, else both are visited, the near one first; a ray parallel to
    the plane stays on its side, or runs in it and visits both.  par: 0
    where kr->par is 0 (the direction is 0 on no axis: nearly every ray),
-   which leaves its test out of each step.
-   @return the leaf's index. */
+   which leaves its test out of each step.  skip (shadow rays, whose
+   walk any hit ends: the order of the leaves is theirs to choose, yet
+   kept): 1, a far child that is an empty leaf is not pushed (an empty
+   leaf holds nothing to test); 2, also an empty leaf reached otherwise
+   pops the next pending node here, not in the caller.  teapot_s12's
+   shadow rays visited 820 k leaves, 494 k of them empty.  Measured
+   (callgrind, a moved light's third `exact` move, 512^2 SPD, M
+   instructions; 2 where kd_occluder is lazy, else 1): teapot 380.0 ->
+   374.3, mount 479.8 -> 471.8, rings 782.3 -> 771.6, tree 219.8 ->
+   218.2, balls 413.6 -> 411.3, tetra 48.61 -> 48.27, gears 331.3 ->
+   332.0.  Tried: the near child too, an empty one left for the far at
+   once (teapot 375.9, mount 478.4, gears 333.2); 2 for every scene
+   (teapot 374.6, gears 333.0); 1 for every scene (rings 777.4, tree
+   221.1).  rtpi_kd_intersect passes 0: not measured for nearest hits.
+   @return the leaf's index (empty only where nothing is pending). */
 static RTPI_FORCE_INLINE uint32_t kd_descend(const kd_node *nodes,
                                              const kd_ray *kr, uint32_t node,
                                              double *t0p, double *t1p,
-                                             kd_item *stack, int *spp, int par)
+                                             kd_item *stack, int *spp, int par, int skip)
 {
     double t0 = *t0p, t1 = *t1p;
     int sp = *spp;
@@ -1429,8 +1442,17 @@ static RTPI_FORCE_INLINE uint32_t kd_descend(const kd_node *nodes,
         uint32_t fl = nd->flags, ax = fl & 3, above = fl >> 2,
                  below = node + 1;
         double split = nd->a.split;
-        if (ax == 3)
+        if (ax == 3) {
+            if (skip > 1 && fl == 3u && sp > 0) {
+                /* an empty leaf: the next pending node at once */
+                sp--;
+                node = stack[sp].node;
+                t0 = stack[sp].t0;
+                t1 = stack[sp].t1;
+                continue;
+            }
             break;
+        }
         KD_CNT(0);
         if (par && (kr->par >> ax & 1)) {
             double dd = split - kr->o[ax];
@@ -1456,10 +1478,12 @@ static RTPI_FORCE_INLINE uint32_t kd_descend(const kd_node *nodes,
             } else if (lo > t1) {
                 node = nearc;
             } else {
-                stack[sp].node = farc;
-                stack[sp].t0 = lo > t0 ? lo : t0;
-                stack[sp].t1 = t1;
-                sp++;
+                if (!skip || nodes[farc].flags != 3u) {
+                    stack[sp].node = farc;
+                    stack[sp].t0 = lo > t0 ? lo : t0;
+                    stack[sp].t1 = t1;
+                    sp++;
+                }
                 if (hi < t1)
                     t1 = hi;
                 node = nearc;
@@ -1494,8 +1518,8 @@ int rtpi_kd_intersect(const rtpi_kdtree *kd, const rtpi_ray *ray,
     if (!kd_ray_setup(kd, ray, &kr, &t0, &t1) || !rtpi_wt_setup(&w, ray))
         return 0;
     for (;;) {
-        node = kr.par ? kd_descend(nodes, &kr, node, &t0, &t1, stack, &sp, 1)
-                      : kd_descend(nodes, &kr, node, &t0, &t1, stack, &sp, 0);
+        node = kr.par ? kd_descend(nodes, &kr, node, &t0, &t1, stack, &sp, 1, 0)
+                      : kd_descend(nodes, &kr, node, &t0, &t1, stack, &sp, 0, 0);
         KD_CNT(1);
         {
             const kd_node *nd = &nodes[node];
@@ -1651,8 +1675,8 @@ static RTPI_FORCE_INLINE uint32_t kd_occluder(const rtpi_kdtree *kd, const rtpi_
     if (!lazy)
         rtpi_wt_make(&w, ray);
     for (;;) {
-        node = kr.par ? kd_descend(nodes, &kr, node, &t0, &t1, stack, &sp, 1)
-                      : kd_descend(nodes, &kr, node, &t0, &t1, stack, &sp, 0);
+        node = kr.par ? kd_descend(nodes, &kr, node, &t0, &t1, stack, &sp, 1, lazy ? 2 : 1)
+                      : kd_descend(nodes, &kr, node, &t0, &t1, stack, &sp, 0, lazy ? 2 : 1);
         KD_CNT(1);
         {
             const kd_node *nd = &nodes[node];
