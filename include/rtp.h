@@ -328,7 +328,9 @@ rtp_status rtp_trace(const rtp_scene *scene, const rtp_trace_options *opt,
  * tree from one thread at a time.  The copy shares the scene's texture
  * and bump images, which are read only once loaded: each is freed with
  * the last scene or tree holding it, so the scene and its trees may be
- * destroyed in any order, on any threads. */
+ * destroyed in any order, on any threads.  (A build without threads has
+ * no lock to count the holders under: there the copy holds images of
+ * its own, as much memory again.) */
 typedef struct rtp_tree rtp_tree;
 
 /** Traces like rtp_trace and also keeps every sample's ray tree.  The image

@@ -289,8 +289,9 @@ rtp_status rtpi_scene_set(rtp_scene *s, const char *key, const char *value, rtp_
    edits kept every image it replaced.  The slot stays, its index never
    reused (caches compare materials by index), its image NULL. */
 void rtpi_scene_drop_textures(rtp_scene *s, const rtpi_material *mats0);
-/* Makes t's image shareable by clones (its count 1), allocating with a.
-   @return 0, or -1 when out of memory (t as it was). */
+/* Makes t's image shareable by clones (its count 1), allocating with a;
+   in a build without threads, nothing (no lock to count under: clones
+   copy the image).  @return 0, or -1 when out of memory (t as it was). */
 int rtpi_texture_share(const rtp_allocator *a, rtpi_texture *t);
 /* Lets go of t's image (freed when no other scene holds it); t's image
    and share become NULL. */

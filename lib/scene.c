@@ -191,6 +191,18 @@ long rtpi_scene_add_white_light(rtp_scene *s, const double pos[3])
 
 int rtpi_texture_share(const rtp_allocator *a, rtpi_texture *t)
 {
+#ifndef RTP_HAVE_THREADS
+    /* Not shared: a build without threads has no lock (rtpi_mutex is a
+       stub), yet a caller's own threads may record from one scene at once
+       (rtp.h: a scene not being modified may be used from several
+       threads) and destroy the scene and its trees on two threads; an
+       unlocked count lost increments (TSan: rtpi_scene_clone's refs++
+       raced in two rtp_record calls), freeing an image a tree still
+       read.  Clones copy the images, as before the sharing. */
+    (void)a;
+    (void)t;
+    return 0;
+#else
     rtpi_texshare *sh;
     if (!t->image || t->share)
         return 0;
@@ -205,6 +217,7 @@ int rtpi_texture_share(const rtp_allocator *a, rtpi_texture *t)
     sh->refs = 1;
     t->share = sh;
     return 0;
+#endif
 }
 
 void rtpi_texture_release(rtpi_texture *t)

@@ -186,8 +186,16 @@ static void test_tree_shares_textures(void)
         CHECK(rtp_record(s, &o, &t, &i1, NULL, &err) == RTP_OK);
         printf("  recording over %lu bytes of images: %ld bytes more at the peak, %ld kept\n",
                (unsigned long)images, (long)(c.peak - base), (long)(c.live - base));
+#ifdef RTP_HAVE_THREADS
         CHECK_MSG(c.peak - base < images / 4, "recording took %lu bytes more (images: %lu)",
                   (unsigned long)(c.peak - base), (unsigned long)images);
+#else
+        /* A build without threads has no lock to count the holders under
+           (rtpi_texture_share), and a caller's threads may each record
+           from one scene at once (rtp.h): the tree copies the images. */
+        CHECK_MSG(c.live - base >= images, "the tree kept %lu bytes (images: %lu)",
+                  (unsigned long)(c.live - base), (unsigned long)images);
+#endif
         rtp_scene_destroy(s);
         s = NULL;
         CHECK(c.live >= images); /* the tree's */
