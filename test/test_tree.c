@@ -3610,6 +3610,100 @@ static void test_failed_eval_after_shine_chain(void)
     CHECK_MSG(tested > 0, "no evaluation failed");
 }
 
+/* A light added to caches that hold (material planes after a kd edit,
+   colour planes, a shine chain's listed highlights, a moved light's
+   rests), the evaluation of the add failing for memory at each of its
+   allocations in turn: grow_caches' reallocs among them, where a failure
+   after some of them must leave the caches whole or dropped, never half
+   moved.  Then the added light's colour edited, and another light
+   added: each image is the full trace's, and no block overrun or left. */
+static void test_added_light_eval_fails(void)
+{
+    static const char *const pre[][5] = {
+        {"mat.1.kd", "0.3", NULL},
+        {"light.0.color", "0.3", "light.1.color", "0.2", NULL},
+        {"mat.1.shine", "7", "mat.1.shine", "90", NULL},
+        {"light.0.pos", "-3,-4,6", "light.0.pos", "-2,-4,6", NULL},
+    };
+    int p, spd, tested = 0;
+    for (spd = 0; spd < 2; spd++)
+        for (p = 0; p < 4; p++) {
+            long n;
+            for (n = 1; n < 400; n++) {
+                slack k;
+                rtp_allocator a;
+                rtp_scene *s = NULL;
+                rtp_tree *t = NULL;
+                rtp_image *img = NULL, *full = NULL;
+                rtp_trace_options o;
+                rtp_eval_options eo;
+                rtp_diff_stats d;
+                rtp_status st;
+                int i, step;
+                slack_init(&k, &a, n);
+                memset(&o, 0, sizeof o);
+                o.width = 12;
+                o.height = 10;
+                if (spd) { /* (SPD's frame is 512x512: a region of it) */
+                    o.spd = 1;
+                    o.region[0] = 250;
+                    o.region[1] = 250;
+                    o.region[2] = 262;
+                    o.region[3] = 260;
+                }
+                memset(&eo, 0, sizeof eo);
+                eo.incremental = 1;
+                eo.threads = 1;
+                if (rtp_scene_load("scenes/spheres.nff", &a, &s, NULL) != RTP_OK ||
+                    rtp_record(s, &o, &t, NULL, NULL, NULL) != RTP_OK ||
+                    rtp_tree_eval(t, &eo, &img, NULL, NULL) != RTP_OK) {
+                    CHECK(0);
+                    rtp_tree_destroy(t);
+                    rtp_scene_destroy(s);
+                    return;
+                }
+                for (i = 0; pre[p][i]; i += 2)
+                    CHECK(rtp_tree_set(t, pre[p][i], pre[p][i + 1], NULL) == RTP_OK &&
+                          rtp_scene_set(s, pre[p][i], pre[p][i + 1], NULL) == RTP_OK &&
+                          rtp_tree_eval_into(t, &eo, img, NULL, NULL) == RTP_OK);
+                CHECK(rtp_tree_set(t, "light.2.pos", "1,-3,5", NULL) == RTP_OK &&
+                      rtp_scene_set(s, "light.2.pos", "1,-3,5", NULL) == RTP_OK);
+                k.armed = 1;
+                st = rtp_tree_eval_into(t, &eo, img, NULL, NULL);
+                k.armed = 0;
+                CHECK(st == RTP_OK || st == RTP_ERR_NOMEM);
+                tested += st == RTP_ERR_NOMEM;
+                for (step = 0; step < 2; step++) {
+                    const char *key = step ? "light.3.pos" : "light.2.color";
+                    const char *val = step ? "2,-4,4" : "0.6,0.5,0.4";
+                    CHECK(rtp_tree_set(t, key, val, NULL) == RTP_OK &&
+                          rtp_scene_set(s, key, val, NULL) == RTP_OK);
+                    if (rtp_tree_eval_into(t, &eo, img, NULL, NULL) == RTP_OK &&
+                        rtp_trace(s, &o, &full, NULL, NULL) == RTP_OK &&
+                        rtp_image_diff(img, full, 1e-6, &d, NULL) == RTP_OK)
+                        CHECK_MSG(d.max_abs <= 1e-6,
+                                  "spd %d, before %s, allocation %ld failed, then %s: %g off",
+                                  spd, pre[p][0], n, key, d.max_abs);
+                    else
+                        CHECK_MSG(0, "spd %d, before %s, allocation %ld failed: a step failed",
+                                  spd, pre[p][0], n);
+                    rtp_image_destroy(full);
+                    full = NULL;
+                }
+                rtp_image_destroy(img);
+                rtp_tree_destroy(t);
+                rtp_scene_destroy(s);
+                CHECK_MSG(k.overrun == 0 && k.live == 0,
+                          "spd %d, before %s, allocation %ld failed: %ld blocks overrun, %ld "
+                          "left",
+                          spd, pre[p][0], n, k.overrun, k.live);
+                if (k.count < n) /* (no allocation failed: each was tried) */
+                    break;
+            }
+        }
+    CHECK_MSG(tested >= 8 * 10, "only %d evaluations of an added light failed", tested);
+}
+
 /* A chain of shine edits ended by a one-off evaluation (no_cache) with
    the shine back at the caches', then edits of the material's kd and
    colour, a light's colour and its ks, each equal to a full trace, plain
@@ -6787,6 +6881,7 @@ int main(void)
     RUN(test_ready_planes);
     RUN(test_failed_eval_then_light_added);
     RUN(test_failed_eval_after_shine_chain);
+    RUN(test_added_light_eval_fails);
     RUN(test_nocache_ends_shine_chain);
     RUN(test_nocache_into_kept_image);
     RUN(test_material_planes);
