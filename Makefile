@@ -50,6 +50,13 @@ TEST_BIN = $(TEST_SRC:%.c=$(BUILD)/%)
 BENCH_SRC = $(sort $(wildcard test/bench/*.c))
 BENCH_BIN = $(BENCH_SRC:test/bench/%.c=$(BUILD)/bench/%)
 
+# A plain `make` compiles on every processor: the library is compiled twice
+# (static, and PIC for librtp.so), ~50 s one file at a time on a 2-core VM.
+# A -j given on the command line (or by a parent make) is kept as it is.
+ifeq ($(filter -j%,$(MAKEFLAGS)),)
+MAKEFLAGS += -j$(shell getconf _NPROCESSORS_ONLN 2>/dev/null || echo 1)
+endif
+
 .PHONY: all test bench bench-build instr install uninstall clean asan ubsan tsan demo FORCE
 all: $(BUILD)/librtp.a $(BUILD)/librtp.so rtp
 
