@@ -202,6 +202,8 @@ typedef struct kd_build {
     int max_depth, depth_seen;
     int check, saw;        /* check: a look-ahead node holding primitives
                               alike stops the build, saw set (kd_group) */
+    const uint32_t *wt;    /* NULL, or by id the size of the group each
+                              reference stands for (kd_group, kd_weigh) */
     size_t task_max;       /* top build: nodes this small become tasks */
     kd_task *tasks;
     size_t ntasks, tasks_cap;
@@ -271,44 +273,70 @@ typedef struct kd_split {
     float pos;
 } kd_split;
 
-static void sort_f(float *a, size_t n)
+/* Sorts a[0, n), and w[0, n) along with it unless w is NULL. */
+static RTPI_FORCE_INLINE void sort_f(float *a, uint32_t *w, size_t n)
 {
     size_t i, j;
     for (i = 1; i < n; i++) {
         float x = a[i];
-        for (j = i; j > 0 && x < a[j - 1]; j--)
+        uint32_t y = w ? w[i] : 0;
+        for (j = i; j > 0 && x < a[j - 1]; j--) {
             a[j] = a[j - 1];
+            if (w)
+                w[j] = w[j - 1];
+        }
         a[j] = x;
+        if (w)
+            w[j] = y;
     }
+}
+
+/* The references r[0, n) weigh: each the size of the group it stands
+   for (kd_build.wt), or 1 each where wt is NULL. */
+static size_t kd_weigh(const uint32_t *wt, const kd_ref *r, size_t n)
+{
+    size_t i, w = 0;
+    if (!wt)
+        return n;
+    for (i = 0; i < n; i++)
+        w += wt[r[i].prim];
+    return w;
 }
 
 /* The same exact SAH for a few references (at most KD_SMALL_MAX): the
    starts, ends and planar positions of each axis sorted apart (insertion
-   sorts, cheap for short lists) and swept together. */
-static void split_small(const kd_ref *r, size_t n, const float *lo,
-                        const float *hi, const double *d, double area,
-                        kd_split *best)
+   sorts, cheap for short lists) and swept together.  Each reference
+   counts as the group it stands for (wt, w the node's total; NULL and n
+   where there are none): the inline body is compiled once for each. */
+static RTPI_FORCE_INLINE void split_small_w(const kd_ref *r, size_t n, const float *lo,
+                                            const float *hi, const double *d, double area,
+                                            kd_split *best, const uint32_t *wt, size_t w)
 {
     float st[KD_SMALL_MAX + 1], en[KD_SMALL_MAX + 1], pl[KD_SMALL_MAX + 1];
+    uint32_t ws[KD_SMALL_MAX + 1], we[KD_SMALL_MAX + 1], wp[KD_SMALL_MAX + 1];
     int k;
     size_t i;
     for (k = 0; k < 3; k++) {
         double o1 = d[(k + 1) % 3], o2 = d[(k + 2) % 3];
         double inv = 1.0 / area, cap = o1 * o2 * inv, perim = (o1 + o2) * inv;
-        size_t ns = 0, np = 0, is = 0, ie = 0, ip = 0, nl = 0, nr = n;
+        size_t ns = 0, np = 0, is = 0, ie = 0, ip = 0, nl = 0, nr = w;
         if (!(d[k] > 0.0))
             continue;
         for (i = 0; i < n; i++) {
             if (r[i].lo[k] == r[i].hi[k]) {
+                if (wt)
+                    wp[np] = wt[r[i].prim];
                 pl[np++] = r[i].lo[k];
             } else {
+                if (wt)
+                    ws[ns] = we[ns] = wt[r[i].prim];
                 st[ns] = r[i].lo[k];
                 en[ns++] = r[i].hi[k];
             }
         }
-        sort_f(st, ns);
-        sort_f(en, ns);
-        sort_f(pl, np);
+        sort_f(st, wt ? ws : NULL, ns);
+        sort_f(en, wt ? we : NULL, ns);
+        sort_f(pl, wt ? wp : NULL, np);
         /* Sentinels: every position is finite. */
         st[ns] = en[ns] = pl[np] = INFINITY;
         while (ie < ns || ip < np) {
@@ -316,11 +344,11 @@ static void split_small(const kd_ref *r, size_t n, const float *lo,
             size_t pe = 0, pp = 0, ps = 0;
             p = pl[ip] < p ? pl[ip] : p;
             while (en[ie] == p)
-                pe++, ie++;
+                pe += wt ? we[ie] : 1, ie++;
             while (pl[ip] == p)
-                pp++, ip++;
+                pp += wt ? wp[ip] : 1, ip++;
             while (st[is] == p)
-                ps++, is++;
+                ps += wt ? ws[is] : 1, is++;
             nr -= pp + pe;
             if (p > lo[k] && p < hi[k]) {
                 double x = (double)p - lo[k];
@@ -347,12 +375,22 @@ static void split_small(const kd_ref *r, size_t n, const float *lo,
     }
 }
 
+static void split_small(const kd_ref *r, size_t n, const float *lo, const float *hi,
+                        const double *d, double area, kd_split *best, const uint32_t *wt,
+                        size_t w)
+{
+    if (wt)
+        split_small_w(r, n, lo, hi, d, area, best, wt, w);
+    else
+        split_small_w(r, n, lo, hi, d, area, best, NULL, n);
+}
+
 /* Binned SAH (KD_BINS planes per axis, counting where boxes start and
    end): O(n) for the large nodes near the root, where the exact plane
-   matters least. */
-static void split_binned(const kd_ref *r, size_t n, const float *lo,
-                         const float *hi, const double *d, double area,
-                         kd_split *best)
+   matters least.  Weights as split_small_w's. */
+static RTPI_FORCE_INLINE void split_binned_w(const kd_ref *r, size_t n, const float *lo,
+                                             const float *hi, const double *d, double area,
+                                             kd_split *best, const uint32_t *wt, size_t w)
 {
     uint32_t cs[3][KD_BINS], ce[3][KD_BINS];
     float sc[3];
@@ -363,6 +401,7 @@ static void split_binned(const kd_ref *r, size_t n, const float *lo,
     for (k = 0; k < 3; k++)
         sc[k] = d[k] > 0.0 ? (float)(KD_BINS / d[k]) : 0.0f;
     for (i = 0; i < n; i++) {
+        const uint32_t wi = wt ? wt[r[i].prim] : 1;
         for (k = 0; k < 3; k++) {
             /* The boxes lie inside the node's, so the offsets are >= 0;
                rounding may give KD_BINS at the top, which the clamp
@@ -372,14 +411,14 @@ static void split_binned(const kd_ref *r, size_t n, const float *lo,
             unsigned s1 = (unsigned)((r[i].hi[k] - lo[k]) * sc[k]);
             s0 = s0 < KD_BINS - 1 ? s0 : KD_BINS - 1;
             s1 = s1 < KD_BINS - 1 ? s1 : KD_BINS - 1;
-            cs[k][s0]++;
-            ce[k][s1]++;
+            cs[k][s0] += wi;
+            ce[k][s1] += wi;
         }
     }
     for (k = 0; k < 3; k++) {
         double o1 = d[(k + 1) % 3], o2 = d[(k + 2) % 3];
         double inv = 1.0 / area, cap = o1 * o2 * inv, perim = (o1 + o2) * inv;
-        size_t nl = 0, nr = n;
+        size_t nl = 0, nr = w;
         if (!(d[k] > 0.0))
             continue;
         for (j = 1; j < KD_BINS; j++) {
@@ -400,6 +439,16 @@ static void split_binned(const kd_ref *r, size_t n, const float *lo,
             }
         }
     }
+}
+
+static void split_binned(const kd_ref *r, size_t n, const float *lo, const float *hi,
+                         const double *d, double area, kd_split *best, const uint32_t *wt,
+                         size_t w)
+{
+    if (wt)
+        split_binned_w(r, n, lo, hi, d, area, best, wt, w);
+    else
+        split_binned_w(r, n, lo, hi, d, area, best, NULL, n);
 }
 
 /* Splits the reference r of a straddling primitive at `pos` on `axis`:
@@ -486,11 +535,12 @@ static int split_ref(const kd_build *b, const kd_ref *r, int axis, float pos,
 /* The best cost of the node [lo,hi] holding the n references r: its
    leaf's, or its best split's if that is lower (by the same rules as
    build_node's choice, without the look-ahead). */
-static double node_cost(const kd_ref *r, size_t n, const float *lo,
+static double node_cost(const uint32_t *wt, const kd_ref *r, size_t n, const float *lo,
                         const float *hi)
 {
     kd_split sp;
-    double d[3], area, leaf = KD_COST_ISECT * (double)n;
+    size_t w = kd_weigh(wt, r, n);
+    double d[3], area, leaf = KD_COST_ISECT * (double)w;
     int k;
     for (k = 0; k < 3; k++)
         d[k] = (double)hi[k] - lo[k];
@@ -498,9 +548,9 @@ static double node_cost(const kd_ref *r, size_t n, const float *lo,
     sp.cost = HUGE_VAL;
     if (n >= KD_MIN_SPLIT && area > 0.0) {
         if (n <= KD_SMALL_MAX)
-            split_small(r, n, lo, hi, d, area, &sp);
+            split_small(r, n, lo, hi, d, area, &sp, wt, w);
         else
-            split_binned(r, n, lo, hi, d, area, &sp);
+            split_binned(r, n, lo, hi, d, area, &sp, wt, w);
     }
     return sp.cost < KD_LEAF_MARGIN * leaf ? sp.cost : leaf;
 }
@@ -562,10 +612,10 @@ static int split_lookahead(kd_build *b, size_t off, size_t n,
             chi[m] = hi[m];
         }
         chi[k] = p;
-        c = KD_COST_TRAV + (cap + x * perim) * node_cost(pl, nl, clo, chi);
+        c = KD_COST_TRAV + (cap + x * perim) * node_cost(b->wt, pl, nl, clo, chi);
         clo[k] = p;
         chi[k] = hi[k];
-        c += (cap + (d - x) * perim) * node_cost(pr, nr, clo, chi);
+        c += (cap + (d - x) * perim) * node_cost(b->wt, pr, nr, clo, chi);
         if (c < best->cost) {
             best->cost = c;
             best->axis = k;
@@ -768,7 +818,15 @@ static int kd_node_alike(kd_build *b, size_t off, size_t n)
    find none keeps its tree, node for node (the SPD scenes, the bunny
    and the meshes, scenes/).  The list r[0, *n) keeps its order with the
    others taken out; the hash's chains live in the arena above it (2 np
-   references).
+   references).  Each first weighs as its group in the build (kd_build.wt,
+   *same + np): in the SAH's counts, the leaf's cost, the look-ahead's and
+   the reference budget, so that N copies crossing other primitives are
+   cut as N would be (weighing one, 2 triangles of 3,000 copies through
+   20,000 small ones made 4.1 M references rather than 102 k); whether a
+   node is split at all (KD_MIN_SPLIT), sweeps its references exactly
+   (KD_SMALL_MAX) or looks ahead still counts references, not copies, so
+   that copies alone (or with fewer than KD_MIN_SPLIT others) stay one
+   leaf, as no cut can take them apart.
    @return 0 (*same NULL when no two are alike), or -1 when out of
    memory. */
 static int kd_group(const rtp_allocator *a, const rtpi_kdtree *kd, size_t np,
@@ -793,7 +851,15 @@ static int kd_group(const rtp_allocator *a, const rtpi_kdtree *kd, size_t np,
         if (r[i].prim != RTPI_NONE)
             r[j++] = r[i];
     *n = j;
-    *same = nx; /* (its second half, the tails, is no longer read) */
+    /* The tails are no longer read: the second half becomes the weights
+       (kd_build.wt), by the first's id the size of its group. */
+    for (i = 0; i < j; i++) {
+        uint32_t p, c = 0;
+        for (p = r[i].prim; p != RTPI_NONE; p = nx[p])
+            c++;
+        nx[np + r[i].prim] = c;
+    }
+    *same = nx;
     return 0;
 }
 
@@ -823,6 +889,7 @@ static int make_task(kd_build *b, const float *lo, const float *hi,
     t->b.kd = b->kd;
     t->b.max_depth = b->max_depth;
     t->b.check = b->check;
+    t->b.wt = b->wt;
     t->b.ref_cap = 2 * n + KD_SMALL_MAX;
     t->b.ref = (kd_ref *)rtpi_malloc_array(b->a, t->b.ref_cap, sizeof(kd_ref));
     if (!t->b.ref)
@@ -843,7 +910,7 @@ static int build_node(kd_build *b, const float *lo, const float *hi,
 {
     kd_split sp;
     double d[3], area;
-    size_t i, nl, nr;
+    size_t i, nl, nr, w, wl;
     kd_ref *r;
     float clo[3], chi[3];
     uint32_t idx;
@@ -853,6 +920,7 @@ static int build_node(kd_build *b, const float *lo, const float *hi,
         return make_task(b, lo, hi, off, n, depth, budget);
     if (depth > b->depth_seen)
         b->depth_seen = depth;
+    w = kd_weigh(b->wt, b->ref + off, n);
     sp.cost = HUGE_VAL;
     sp.axis = 0;
     sp.pos = 0.0f;
@@ -862,17 +930,17 @@ static int build_node(kd_build *b, const float *lo, const float *hi,
     area = d[0] * d[1] + d[1] * d[2] + d[2] * d[0];
     if (depth < b->max_depth && n >= KD_MIN_SPLIT && area > 0.0) {
         if (n <= KD_SMALL_MAX)
-            split_small(b->ref + off, n, lo, hi, d, area, &sp);
+            split_small(b->ref + off, n, lo, hi, d, area, &sp, b->wt, w);
         else
-            split_binned(b->ref + off, n, lo, hi, d, area, &sp);
+            split_binned(b->ref + off, n, lo, hi, d, area, &sp, b->wt, w);
     }
-    take = sp.cost < KD_LEAF_MARGIN * KD_COST_ISECT * (double)n;
-    if (!take && sp.cost < KD_COST_ISECT * (double)n)
+    take = sp.cost < KD_LEAF_MARGIN * KD_COST_ISECT * (double)w;
+    if (!take && sp.cost < KD_COST_ISECT * (double)w)
         take = split_clean(b->ref + off, n, &sp);
     if (!take && depth < b->max_depth && n > KD_SMALL_MAX && area > 0.0) {
         if (split_lookahead(b, off, n, lo, hi, area, &sp))
             return -1;
-        take = sp.cost < KD_LEAF_MARGIN * KD_COST_ISECT * (double)n;
+        take = sp.cost < KD_LEAF_MARGIN * KD_COST_ISECT * (double)w;
         if (take && b->check && n >= KD_ALIKE_MIN) { /* (kd_group) */
             int al = kd_node_alike(b, off, n);
             if (al) {
@@ -896,7 +964,7 @@ static int build_node(kd_build *b, const float *lo, const float *hi,
     {
         const int ax = sp.axis, pl = sp.planar_left;
         const float pos = sp.pos;
-        size_t j = 0, e = n, w, t;
+        size_t j = 0, e = n, q, t;
         kd_ref x;
         r = b->ref + off;
         i = 0;
@@ -917,9 +985,10 @@ static int build_node(kd_build *b, const float *lo, const float *hi,
                 j++;
             }
         }
-        /* the children hold at most n + (j - i): over the budget, the
-           node stays a leaf (its references only reordered) */
-        if ((double)(n + (j - i)) > budget) {
+        /* the children hold at most n + (j - i) references, weighing w
+           and the straddlers' again: over the budget, the node stays a
+           leaf (its references only reordered) */
+        if ((double)(w + kd_weigh(b->wt, r + i, j - i)) > budget) {
             if (b->task_max)
                 return make_task(b, lo, hi, off, n, depth, budget);
             return make_leaf(b, b->ref + off, n);
@@ -928,19 +997,21 @@ static int build_node(kd_build *b, const float *lo, const float *hi,
                       sizeof *b->ref))
             return -1;
         r = b->ref + off;
-        w = i;
+        q = i;
         t = n;
         for (; i < j; i++) {
             kd_ref lp, rp;
             int m = split_ref(b, &r[i], ax, pos, &lp, &rp);
             if (m & 2)
-                r[w++] = rp;
+                r[q++] = rp;
             if (m & 1)
                 r[t++] = lp;
         }
-        nr = w;
+        nr = q;
         nl = t - j;
-        memmove(r + w, r + j, nl * sizeof *r);
+        memmove(r + q, r + j, nl * sizeof *r);
+        wl = kd_weigh(b->wt, r + nr, nl);
+        w = kd_weigh(b->wt, r, nr) + wl; /* the children's, both sides */
     }
 
     if (push_node(b, &idx))
@@ -952,14 +1023,14 @@ static int build_node(kd_build *b, const float *lo, const float *hi,
         chi[k] = hi[k];
     }
     chi[sp.axis] = sp.pos;
-    if (build_node(b, clo, chi, off + nr, nl, depth + 1, budget * (double)nl / (double)(nl + nr)))
+    if (build_node(b, clo, chi, off + nr, nl, depth + 1, budget * (double)wl / (double)w))
         return -1;
     if (b->nnodes >= KD_MAX_PRIMS)
         return -1;
     b->nodes[idx].flags |= (uint32_t)b->nnodes << 2;
     clo[sp.axis] = sp.pos;
     chi[sp.axis] = hi[sp.axis];
-    return build_node(b, clo, chi, off, nr, depth + 1, budget * (double)nr / (double)(nl + nr));
+    return build_node(b, clo, chi, off, nr, depth + 1, budget * (double)(w - wl) / (double)w);
 }
 
 static void build_free(kd_build *b)
@@ -1173,7 +1244,7 @@ rtp_status rtpi_kd_build_mt(const rtp_scene *s, const rtp_allocator *alloc,
     rtp_allocator a;
     rtpi_kdtree *kd;
     kd_build top;
-    size_t np = rtpi_scene_nprims(s), i, nvalid = 0, nn, nr;
+    size_t np = rtpi_scene_nprims(s), i, nvalid = 0, nn, nr, nw;
     uint32_t *same = NULL;
     float lo[3], hi[3];
     int k, pass;
@@ -1221,8 +1292,10 @@ rtp_status rtpi_kd_build_mt(const rtp_scene *s, const rtp_allocator *alloc,
             top.ref_cap = 2 * np;
         }
         nvalid = kd_refs(s, kd, top.ref, lo, hi);
+        nw = nvalid; /* what the references weigh, copies and all */
         if (pass && kd_group(&a, kd, np, top.ref, &nvalid, &same))
             goto nomem;
+        top.wt = same ? same + np : NULL;
 
         if (nvalid > 0) {
             kd->has_box = 1;
@@ -1236,7 +1309,7 @@ rtp_status rtpi_kd_build_mt(const rtp_scene *s, const rtp_allocator *alloc,
                 lo[k] = hi[k] = 0.0f;
         }
 
-        lg = nvalid > 1 ? log((double)nvalid) / log(2.0) : 0.0;
+        lg = nw > 1 ? log((double)nw) / log(2.0) : 0.0;
         top.max_depth = (int)(KD_DEPTH_A + KD_DEPTH_B * lg);
         if (top.max_depth > KD_DEPTH_CAP)
             top.max_depth = KD_DEPTH_CAP;
@@ -1248,7 +1321,7 @@ rtp_status rtpi_kd_build_mt(const rtp_scene *s, const rtp_allocator *alloc,
         if (top.task_max < KD_TASK_MIN)
             top.task_max = KD_TASK_MIN;
         if (build_node(&top, lo, hi, 0, nvalid, 0,
-                       KD_REF_BUDGET * (double)nvalid + KD_REF_FLOOR) == 0) {
+                       KD_REF_BUDGET * (double)nw + KD_REF_FLOOR) == 0) {
             rtpi_free(top.a, top.ref); /* the tasks have their own copies */
             top.ref = NULL;
             if (run_tasks(&top, nthreads) == 0)

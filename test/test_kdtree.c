@@ -1196,6 +1196,65 @@ static void test_alike(void)
     rtp_scene_destroy(s);
 }
 
+/* Copies among other primitives weigh as what they are: 2 large
+   triangles of C copies each through 4,000 small ones.  Weighing one, a
+   group was cut wherever the small triangles asked for it, each cell
+   listing all C (C = 200: 15 times the references of the scene with one
+   copy each, 69 k; C = 3,000 with 20,000 small: 4.1 M); weighing C, the
+   copies stay in a few cells and the small triangles around them are
+   left in those leaves (2.1 times).  The bound: at most 3 times the
+   one-copy scene's references. */
+static void alike_among_scene(rtp_scene *s, uint64_t seed, int copies)
+{
+    static const double B[2][9] = {{0, 0, 0.1, 1, 0.1, 0.9, 0.4, 1, 0.5},
+                                   {1, 0, 0.2, 0.1, 0.9, 0.1, 0.6, 1, 0.95}};
+    rng g;
+    int i, t;
+    g.s = seed;
+    for (i = 0; i < 4000; i++) {
+        double x = rnd(&g), y = rnd(&g), z = rnd(&g);
+        add_t(s, add_v(s, x, y, z), add_v(s, x + 0.02 * rnd(&g), y + 0.02 * rnd(&g), z),
+              add_v(s, x, y + 0.02 * rnd(&g), z + 0.02 * rnd(&g)));
+    }
+    for (t = 0; t < 2; t++) {
+        const double *v = B[t];
+        uint32_t a = add_v(s, v[0], v[1], v[2]), b = add_v(s, v[3], v[4], v[5]),
+                 c = add_v(s, v[6], v[7], v[8]);
+        for (i = 0; i < copies; i++)
+            add_t(s, a, b, c);
+    }
+}
+
+static void test_alike_among(void)
+{
+    const int copies = 200;
+    size_t refs[2] = {0, 0};
+    rng g;
+    int pass;
+    g.s = g_seed ^ 0xa1a2;
+    for (pass = 0; pass < 2; pass++) {
+        rtp_scene *s = new_scene();
+        rtpi_kdtree *kd = NULL;
+        rtpi_kd_stats st;
+        alike_among_scene(s, g_seed ^ 0x5eed, pass ? copies : 1);
+        CHECK(rtpi_kd_build(s, NULL, &kd, NULL) == RTP_OK);
+        if (kd) {
+            rtpi_kd_get_stats(kd, &st);
+            refs[pass] = st.prim_refs;
+            rtpi_kd_destroy(kd);
+        }
+        if (pass)
+            check_scene_vs_brute(s, &g, 1000, 0);
+        rtp_scene_destroy(s);
+    }
+    printf("2 triangles of %d copies among 4,000: %lu references, %lu with one copy each\n",
+           copies, (unsigned long)refs[1], (unsigned long)refs[0]);
+    CHECK_MSG(refs[0] > 0 && refs[1] <= 3 * refs[0],
+              "%lu references with %d copies, %lu with one (seed %llu)",
+              (unsigned long)refs[1], copies, (unsigned long)refs[0],
+              (unsigned long long)g_seed);
+}
+
 static void test_stats(void)
 {
     rtp_scene *s = new_scene();
@@ -1388,6 +1447,7 @@ int main(void)
     RUN(test_diagonal_pipe);
     RUN(test_stacked_quads);
     RUN(test_alike);
+    RUN(test_alike_among);
     RUN(test_stats);
     RUN(test_cylinder_line);
     return check_report();
