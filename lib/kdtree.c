@@ -909,7 +909,7 @@ static int build_node(kd_build *b, const float *lo, const float *hi,
                       size_t off, size_t n, int depth, double budget)
 {
     kd_split sp;
-    double d[3], area;
+    double d[3], area, wd;
     size_t i, nl, nr, w, wl;
     kd_ref *r;
     float clo[3], chi[3];
@@ -934,13 +934,14 @@ static int build_node(kd_build *b, const float *lo, const float *hi,
         else
             split_binned(b->ref + off, n, lo, hi, d, area, &sp, b->wt, w);
     }
-    take = sp.cost < KD_LEAF_MARGIN * KD_COST_ISECT * (double)w;
-    if (!take && sp.cost < KD_COST_ISECT * (double)w)
+    wd = (double)(int64_t)w; /* (as sah's: signed converts faster) */
+    take = sp.cost < KD_LEAF_MARGIN * KD_COST_ISECT * wd;
+    if (!take && sp.cost < KD_COST_ISECT * wd)
         take = split_clean(b->ref + off, n, &sp);
     if (!take && depth < b->max_depth && n > KD_SMALL_MAX && area > 0.0) {
         if (split_lookahead(b, off, n, lo, hi, area, &sp))
             return -1;
-        take = sp.cost < KD_LEAF_MARGIN * KD_COST_ISECT * (double)w;
+        take = sp.cost < KD_LEAF_MARGIN * KD_COST_ISECT * wd;
         if (take && b->check && n >= KD_ALIKE_MIN) { /* (kd_group) */
             int al = kd_node_alike(b, off, n);
             if (al) {
@@ -988,7 +989,7 @@ static int build_node(kd_build *b, const float *lo, const float *hi,
         /* the children hold at most n + (j - i) references, weighing w
            and the straddlers' again: over the budget, the node stays a
            leaf (its references only reordered) */
-        if ((double)(w + kd_weigh(b->wt, r + i, j - i)) > budget) {
+        if ((double)(int64_t)(w + kd_weigh(b->wt, r + i, j - i)) > budget) {
             if (b->task_max)
                 return make_task(b, lo, hi, off, n, depth, budget);
             return make_leaf(b, b->ref + off, n);
@@ -1023,14 +1024,14 @@ static int build_node(kd_build *b, const float *lo, const float *hi,
         chi[k] = hi[k];
     }
     chi[sp.axis] = sp.pos;
-    if (build_node(b, clo, chi, off + nr, nl, depth + 1, budget * (double)wl / (double)w))
+    if (build_node(b, clo, chi, off + nr, nl, depth + 1, budget * (double)(int64_t)wl / (double)(int64_t)w))
         return -1;
     if (b->nnodes >= KD_MAX_PRIMS)
         return -1;
     b->nodes[idx].flags |= (uint32_t)b->nnodes << 2;
     clo[sp.axis] = sp.pos;
     chi[sp.axis] = hi[sp.axis];
-    return build_node(b, clo, chi, off, nr, depth + 1, budget * (double)(w - wl) / (double)w);
+    return build_node(b, clo, chi, off, nr, depth + 1, budget * (double)(int64_t)(w - wl) / (double)(int64_t)w);
 }
 
 static void build_free(kd_build *b)
