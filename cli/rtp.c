@@ -106,7 +106,7 @@ static int fail_line(const rtp_error *err, int line)
 {
     char buf[600];
     if (line > 0)
-        fprintf(stderr, "rtp: stdin:%d: %s\n", line, rtp_error_format(err, buf, sizeof buf));
+        fprintf(stderr, "rtp: <stdin>:%d: %s\n", line, rtp_error_format(err, buf, sizeof buf));
     else
         fail_err(err);
     return 1;
@@ -1004,7 +1004,7 @@ static int overwrites_scene_image(const char *cmd, const rtp_scene *s, const cha
             for (o = 0; o < nout; o++)
                 if (is_input(path, out[o])) {
                     if (line)
-                        msg("stdin:%d: %s: %s is the image %s that %s reads: writing it "
+                        msg("<stdin>:%d: %s: %s is the image %s that %s reads: writing it "
                             "would replace it; name another file",
                             line, cmd, out[o], path, key);
                     else
@@ -1268,6 +1268,8 @@ static int apply_params_file(set_fn set, void *obj, const char *path)
         free(line);
         return 1;
     }
+    if (f == stdin)
+        path = "<stdin>"; /* (stdin's one name in messages, as the library's) */
     while ((got = next_line(f, path, line, &n, &cr)) > 0)
         if (apply_line(set, obj, line, path, n)) {
             rc = 1;
@@ -2155,7 +2157,7 @@ static int reeval_report(const rtp_tree *tree, const rtp_image *img, const rtp_e
                answered a reeval) */
             char buf[600], where[32] = "";
             if (line > 0)
-                snprintf(where, sizeof where, "stdin:%d: ", line);
+                snprintf(where, sizeof where, "<stdin>:%d: ", line);
             fprintf(stderr, "rtp: %s--reference: %s\n", where,
                     rtp_error_format(&err, buf, sizeof buf));
             goto out;
@@ -2244,7 +2246,7 @@ static int reeval_report(const rtp_tree *tree, const rtp_image *img, const rtp_e
             int e = errno;
             char where[32] = "";
             if (line > 0)
-                snprintf(where, sizeof where, "stdin:%d: ", line);
+                snprintf(where, sizeof where, "<stdin>:%d: ", line);
             msg("%s%s: error writing stats: %s", where,
                 stats == stdout ? "stdout" : stats == stderr ? "stderr" : stats_path,
                 e ? strerror(e) : "write failed");
@@ -2605,8 +2607,8 @@ static int cmd_reeval(int argc, char **argv)
             msg("--stream: out of memory");
             rc = 1;
         }
-        while (line && (got = next_line(stdin, "stdin", line, &n, &cr)) != 0) {
-            if (got < 0 || apply_line(set_tree, tree, line, "stdin", n)) {
+        while (line && (got = next_line(stdin, "<stdin>", line, &n, &cr)) != 0) {
+            if (got < 0 || apply_line(set_tree, tree, line, "<stdin>", n)) {
                 rc = 1;
                 break;
             }
@@ -2621,7 +2623,7 @@ static int cmd_reeval(int argc, char **argv)
                names come a line at a time: frame 3 of t%d.png is a tree
                t3.png, read once at the start, which the image replaced) */
             if (is_input(tree_path, path)) {
-                msg("stdin:%d: --stream: the image %s is the tree %s: writing it would "
+                msg("<stdin>:%d: --stream: the image %s is the tree %s: writing it would "
                     "replace it; name the frames another way",
                     n, path, tree_path);
                 rc = 1;
@@ -2635,7 +2637,7 @@ static int cmd_reeval(int argc, char **argv)
                     if (is_input(params[k], path))
                         hit = k;
                 if (hit >= 0) {
-                    msg("stdin:%d: --stream: the image %s is the --params file %s: writing it "
+                    msg("<stdin>:%d: --stream: the image %s is the --params file %s: writing it "
                         "would replace it; name the frames another way",
                         n, path, params[hit]);
                     rc = 1;
@@ -2643,7 +2645,7 @@ static int cmd_reeval(int argc, char **argv)
                 }
             }
             if (one_output(path, stats_path)) {
-                msg("stdin:%d: --stream: the image %s is the --stats file %s: give each "
+                msg("<stdin>:%d: --stream: the image %s is the --stats file %s: give each "
                     "output its own",
                     n, path, stats_path);
                 rc = 1;

@@ -447,7 +447,9 @@ rtp_status rtp_scene_load(const char *path, const rtp_allocator *alloc,
     st = rtpi_read_file(&a, path, &text, &size, err);
     if (st != RTP_OK)
         return st;
-    st = rtp_scene_load_memory(text, size, path,
+    /* (stdin is "<stdin>" in errors, as every reader names it; its
+       relative paths resolve from the current folder either way) */
+    st = rtp_scene_load_memory(text, size, strcmp(path, "-") == 0 ? "<stdin>" : path,
                                ends_with(path, ".obj") ? "obj" : "nff", &a,
                                out, err);
     rtpi_free(&a, text);

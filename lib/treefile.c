@@ -2545,7 +2545,8 @@ static rtp_status read_path(const char *fn, const char *path, const rtp_allocato
         if (S_ISDIR(sb.st_mode)) {
             if (!is_stdin)
                 fclose(f);
-            return rtpi_error(err, RTP_ERR_IO, path, 0, 0, "is a directory, not a file");
+            return rtpi_error(err, RTP_ERR_IO, is_stdin ? "<stdin>" : path, 0, 0,
+                              "is a directory, not a file");
         }
         /* a regular file's size is known: each section is checked
            against it before it is read (else a pipe's bytes as they come) */
@@ -2554,7 +2555,9 @@ static rtp_status read_path(const char *fn, const char *path, const rtp_allocato
             size = (uint64_t)sb.st_size;
         }
     }
-    st = tree_read_stream(f, size, known, path, &a, ts, summary, out, err);
+    /* (stdin is "<stdin>" in errors, as the image and scene readers say) */
+    st = tree_read_stream(f, size, known, is_stdin ? "<stdin>" : path, &a, ts, summary, out,
+                          err);
     if (!is_stdin)
         fclose(f);
     return st;

@@ -537,6 +537,8 @@ rtp_status rtpi_read_file(const rtp_allocator *a, const char *path,
     size_t cap = 0, len = 0, n;
     int is_stdin = strcmp(path, "-") == 0, read_errno = 0;
     f = is_stdin ? stdin : fopen(path, "rb");
+    if (is_stdin)
+        path = "<stdin>"; /* (its name in errors, as every reader's) */
     if (!f)
         return rtpi_error(err, RTP_ERR_IO, path, 0, 0, "cannot open: %s",
                           strerror(errno));

@@ -32,7 +32,7 @@ cp scenes/spheres.nff "$T/-s.nff"
 # folder was "-: read error" (the name said "is a directory, not a file"),
 # and a read error by name gave no reason either.
 $RTP trace - -i "$T/d.pfm" -q <"$T" >/dev/null 2>"$T/err"
-[ $? -eq 1 ] && grep -qi "^rtp: -: .*is a directory" "$T/err" && [ ! -e "$T/d.pfm" ] && ok ||
+[ $? -eq 1 ] && grep -qi "^rtp: <stdin>: .*is a directory" "$T/err" && [ ! -e "$T/d.pfm" ] && ok ||
     bad "trace - with stdin a folder: $(cat "$T/err")"
 if [ -r /proc/self/mem ]; then
     # (rtp's own /proc/self/mem: open, but a read at 0 fails, EIO)

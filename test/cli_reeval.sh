@@ -42,7 +42,7 @@ echo OLD >"$T/rl.pfm"
 expect_rc 1 $RTP reeval "$T/t.rtp" --set ambient=0.2 --reference --memory-limit 0.01 -i "$T/rl.pfm"
 [ "$(cat "$T/rl.pfm")" = OLD ] && ok || bad "a failed --reference replaced the old image"
 expect_rc 1 sh -c "echo ambient=0.2 | $RTP reeval '$T/t.rtp' --stream --reference --memory-limit 0.01 -i '$T/rl%d.pfm' -q"
-[ ! -e "$T/rl0.pfm" ] && grep -q "^rtp: stdin:1: --reference: " "$T/err" && ok ||
+[ ! -e "$T/rl0.pfm" ] && grep -q "^rtp: <stdin>:1: --reference: " "$T/err" && ok ||
     bad "a stream's failed --reference: $(ls "$T"/rl*) $(cat "$T/err")"
 
 # A camera edit is a full trace from the tree file, said so; it equals
@@ -207,7 +207,7 @@ awk 'BEGIN { s = ""; for (i = 0; i < 20000; i++) s = s "mat.red.kd=0.5 "; print 
 [ $? -eq 0 ] && [ -e "$T/longok0.pfm" ] && ok || { bad "--stream: a 300k-character line"; cat "$T/err" >&2; }
 awk 'BEGIN { s = ""; while (length(s) < 1100000) s = s "mat.red.kd=0.5 "; print s }' |
     $RTP reeval "$T/t.rtp" --stream -i "$T/long%d.pfm" 2>"$T/err"
-[ $? -eq 1 ] && grep -q "stdin:1: line too long" "$T/err" && [ ! -e "$T/long0.pfm" ] && ok ||
+[ $? -eq 1 ] && grep -q "<stdin>:1: line too long" "$T/err" && [ ! -e "$T/long0.pfm" ] && ok ||
     { bad "--stream: a line past the buffer"; cat "$T/err" >&2; }
 # a '%' in a frame's name is written %% (refused before: a folder named
 # "100%" could not hold frames); %% alone, no %d, is still no pattern
@@ -339,7 +339,7 @@ fi
 # --stream take a byte-order mark and refuse a NUL byte, naming the line
 printf 'mat.0.kd=0.5\nmat.1.kt=0.9\n' > "$T/lines"
 expect_rc 1 sh -c "$RTP reeval '$T/t.rtp' --stream --memory-limit 0.01 -i '$T/ln_%d.pfm' < '$T/lines'"
-grep -q "stdin:2: the ray trees" "$T/err" && ok || { bad "stream failure without its line"; cat "$T/err" >&2; }
+grep -q "<stdin>:2: the ray trees" "$T/err" && ok || { bad "stream failure without its line"; cat "$T/err" >&2; }
 # the memory limit's messages name the remedy without parentheses in
 # parentheses ("(raise memory_limit (rtp's --memory-limit))"): re-tracing,
 # its splice, and tracing
@@ -556,7 +556,7 @@ if [ -w /dev/full ]; then
     mkdir -p "$T/sf"
     expect_rc 1 sh -c "printf 'ambient=0.1\nambient=0.2\nambient=0.3\n' | $RTP reeval '$T/t.rtp' --stream -i '$T/sf/f%d.pfm' --stats /dev/full"
     [ -f "$T/sf/f0.pfm" ] && [ ! -f "$T/sf/f1.pfm" ] &&
-        grep -q "stdin:1: /dev/full: error writing stats: No space left" "$T/err" &&
+        grep -q "<stdin>:1: /dev/full: error writing stats: No space left" "$T/err" &&
         [ "$(wc -l <"$T/err")" -eq 1 ] && ok || bad "a stream's stats to /dev/full: $(ls "$T/sf") $(cat "$T/err")"
 fi
 
@@ -570,7 +570,7 @@ expect_rc 2 sh -c "cat '$T/t.rtp' | $RTP reeval - --set mat.0.texture=- -i '$T/s
 grep -q "stdin already serves the tree" "$T/err" && ok || bad "texture=- with the tree on stdin: $(cat "$T/err")"
 mkdir -p "$T/sx"
 expect_rc 1 sh -c "printf 'mat.0.texture=-\nambient=0.2\n' | $RTP reeval '$T/t.rtp' --stream -i '$T/sx/f%d.pfm'"
-grep -q "stdin:1: mat.0.texture=-: stdin already serves" "$T/err" && ok || bad "texture=- in a stream: $(cat "$T/err")"
+grep -q "<stdin>:1: mat.0.texture=-: stdin already serves" "$T/err" && ok || bad "texture=- in a stream: $(cat "$T/err")"
 expect_rc 2 sh -c "$RTP merge -o '$T/m2.rtp' - - <'$T/t.rtp'"
 grep -q "only one part can come from stdin" "$T/err" && ok || bad "merge - -: $(cat "$T/err")"
 # a '#' inside a word is part of it, in a params line as in the scene
@@ -631,7 +631,7 @@ expect_rc 1 $RTP reeval "$T/hash.rtp" --params "$T/longkey.txt" -i "$T/hash3.pfm
 grep -q "longkey.txt:2: key too long (607 characters; at most 511)" "$T/err" && ok ||
     bad "params: a key too long: $(cat "$T/err")"
 expect_rc 1 sh -c "printf 'mat.0.kd=0.3\n%s\n' '$long' | $RTP reeval '$T/hash.rtp' --stream -i '$T/lk%d.pfm'"
-grep -q "stdin:2: key too long" "$T/err" && [ -e "$T/lk0.pfm" ] && [ ! -e "$T/lk1.pfm" ] && ok ||
+grep -q "<stdin>:2: key too long" "$T/err" && [ -e "$T/lk0.pfm" ] && [ ! -e "$T/lk1.pfm" ] && ok ||
     bad "stream: a key too long: $(cat "$T/err")"
 
 # stdin's other names (/dev/stdin, /dev/fd/0) serve one input as '-'
@@ -657,7 +657,7 @@ fi
 # params file pe1.pfm, which a single reeval -i refuses
 printf 'mat.0.kd=0.3\n' > "$T/pe1.pfm"
 expect_rc 1 sh -c "printf '\n\n\n' | $RTP reeval '$T/hash.rtp' --params '$T/pe1.pfm' --stream -i '$T/pe%d.pfm'"
-grep -q "stdin:2: --stream: the image .*pe1.pfm is the --params file" "$T/err" && [ -e "$T/pe0.pfm" ] &&
+grep -q "<stdin>:2: --stream: the image .*pe1.pfm is the --params file" "$T/err" && [ -e "$T/pe0.pfm" ] &&
     [ ! -e "$T/pe2.pfm" ] && [ "$(cat "$T/pe1.pfm")" = "mat.0.kd=0.3" ] && ok ||
     bad "stream: a frame named as the params file: $(cat "$T/err")"
 
@@ -709,11 +709,11 @@ mkdir -p "$T/sy"
 cp "$T/t.rtp" "$T/sy/t1.ppm"
 expect_rc 1 sh -c "printf 'ambient=0.1\nambient=0.2\nambient=0.3\n' | $RTP reeval '$T/sy/t1.ppm' --stream -i '$T/sy/t%d.ppm'"
 cmp -s "$T/sy/t1.ppm" "$T/t.rtp" && [ -f "$T/sy/t0.ppm" ] && [ ! -f "$T/sy/t2.ppm" ] &&
-    grep -q "stdin:2: --stream: the image .*t1.ppm is the tree" "$T/err" && ok ||
+    grep -q "<stdin>:2: --stream: the image .*t1.ppm is the tree" "$T/err" && ok ||
     bad "a stream's frame replaced its tree: $(cat "$T/err")"
 expect_rc 1 sh -c "printf 'ambient=0.1\nambient=0.2\nambient=0.3\n' | $RTP reeval '$T/t.rtp' --stream -i '$T/sy/f%d.pfm' --stats '$T/sy/f1.pfm'"
 grep -q '"command": "reeval"' "$T/sy/f1.pfm" && [ ! -f "$T/sy/f2.pfm" ] &&
-    grep -q "stdin:2: --stream: the image .*f1.pfm is the --stats file" "$T/err" && ok ||
+    grep -q "<stdin>:2: --stream: the image .*f1.pfm is the --stats file" "$T/err" && ok ||
     bad "a stream's frame on its --stats file: $(cat "$T/err")"
 # an empty output name, before the work (it failed at the rename, naming nothing)
 expect_rc 1 $RTP trace $S --size 8x8 -o ''
@@ -915,7 +915,7 @@ expect_rc 2 $RTP reeval "$T/tx/t.rtp" --region 0,0,4,4 -i "$T/tx/tex4.ppm"
 cp "$T/tx/mine.ppm" "$T/tx/mine1.ppm"
 expect_rc 1 sh -c "printf 'ambient=0.1\nmat.2.bump=$T/tx/mine1.ppm\n' |
     $RTP reeval '$T/tx/t.rtp' --stream -i '$T/tx/mine%d.ppm' -q"
-[ -e "$T/tx/mine0.ppm" ] && grep -q "stdin:2: --stream: .*mine1.ppm .* mat.2.bump reads" "$T/err" &&
+[ -e "$T/tx/mine0.ppm" ] && grep -q "<stdin>:2: --stream: .*mine1.ppm .* mat.2.bump reads" "$T/err" &&
     ok || bad "a stream's frame over a bump map a line named: $(cat "$T/err")"
 cmp -s "$T/tx/mine.ppm" "$T/tx/mine.orig" && cmp -s "$T/tx/mine1.ppm" "$T/tx/mine.orig" &&
     cmp -s "$T/tx/tex4.ppm" "$T/tx/tex4.orig" && ok || bad "an image the scene reads was written over"
@@ -940,6 +940,20 @@ while read -r line; do
         bad "a stream adding lights to colours of -0: frame $i is not the full trace's bits"
     i=$((i + 1))
 done <"$T/negz.txt"
+
+# stdin has one name in every message, <stdin> (the scene was "-:1:1",
+# a tree "-:", a --params - "-:1", an image "<stdin>", a --stream line
+# "stdin:1")
+echo x | $RTP trace - -i "$T/n.pfm" -q 2>"$T/err"
+grep -q "^rtp: <stdin>:1:1: unknown keyword" "$T/err" && ok || bad "scene on stdin's name: $(cat "$T/err")"
+echo x | $RTP info - 2>"$T/err" >/dev/null
+grep -q "^rtp: <stdin>: not an rtp tree" "$T/err" && ok || bad "tree on stdin's name: $(cat "$T/err")"
+echo x | $RTP reeval "$T/t.rtp" --params - -i "$T/n.pfm" -q 2>"$T/err"
+grep -q "^rtp: <stdin>:1: expected KEY=VALUE" "$T/err" && ok || bad "--params -'s name: $(cat "$T/err")"
+echo x | $RTP diff - "$T/t.pfm" 2>"$T/err" >/dev/null
+grep -q "^rtp: <stdin>: not a PNG" "$T/err" && ok || bad "image on stdin's name: $(cat "$T/err")"
+echo x | $RTP reeval "$T/t.rtp" --stream -i "$T/n%d.pfm" -q 2>"$T/err"
+grep -q "^rtp: <stdin>:1: expected KEY=VALUE" "$T/err" && ok || bad "--stream line's name: $(cat "$T/err")"
 
 rm -rf "$T"
 echo "$pass passed, $fail failed, $skip skipped"
