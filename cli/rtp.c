@@ -1251,6 +1251,12 @@ static int next_line(FILE *f, const char *name, char *line, int *lineno, int *cr
     return 1;
 }
 
+/* An input's name in messages: '-' is "<stdin>", as the library names it. */
+static const char *in_name(const char *path)
+{
+    return strcmp(path, "-") == 0 ? "<stdin>" : path;
+}
+
 static int apply_params_file(set_fn set, void *obj, const char *path)
 {
     FILE *f = strcmp(path, "-") == 0 ? stdin : fopen(path, "r");
@@ -1268,8 +1274,7 @@ static int apply_params_file(set_fn set, void *obj, const char *path)
         free(line);
         return 1;
     }
-    if (f == stdin)
-        path = "<stdin>"; /* (stdin's one name in messages, as the library's) */
+    path = in_name(path);
     while ((got = next_line(f, path, line, &n, &cr)) > 0)
         if (apply_line(set, obj, line, path, n)) {
             rc = 1;
@@ -1945,8 +1950,8 @@ static int cmd_diff(int argc, char **argv)
     }
     if (a->width != b->width || a->height != b->height) {
         /* (the library's message has the sizes; the names are here) */
-        msg("%s is %dx%d, %s %dx%d: image sizes differ", pa, a->width, a->height, pb, b->width,
-            b->height);
+        msg("%s is %dx%d, %s %dx%d: image sizes differ", in_name(pa), a->width, a->height,
+            in_name(pb), b->width, b->height);
         goto out;
     }
     if (rtp_image_diff(a, b, threshold, &d, &err) != RTP_OK) {
@@ -3083,7 +3088,7 @@ static int cmd_merge(int argc, char **argv)
                 goto out;
             }
             if (x0 < 0 || y0 < 0 || part->width > fw - x0 || part->height > fh - y0) {
-                msg("merge: %s (%dx%d at %d,%d) does not fit the %dx%d frame", path,
+                msg("merge: %s (%dx%d at %d,%d) does not fit the %dx%d frame", in_name(path),
                     part->width, part->height, x0, y0, fw, fh);
                 rtp_image_destroy(part);
                 goto out;
@@ -3094,7 +3099,8 @@ static int cmd_merge(int argc, char **argv)
                     float *d = img->pixels + 3 * k;
                     const float *sp = part->pixels + 3 * ((size_t)y * part->width + x);
                     if (covered[k]) {
-                        msg("merge: %s overlaps another region at %d,%d", path, x0 + x, y0 + y);
+                        msg("merge: %s overlaps another region at %d,%d", in_name(path), x0 + x,
+                            y0 + y);
                         rtp_image_destroy(part);
                         goto out;
                     }

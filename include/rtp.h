@@ -187,8 +187,8 @@ void rtp_scene_destroy(rtp_scene *scene);
  *  a name the scene gives (a name may hold dots: the field follows the
  *  last).  light.N.pos with N the count of lights (an index) adds light
  *  N there, white and on (rtp_tree_add_light's light).  An image key
- *  (mat.N.texture, mat.N.bump) reads its file each
- *  time, "-" the next image on stdin; an image no material uses any more
+ *  (mat.N.texture, mat.N.bump) reads its file each time, "-" stdin (all
+ *  of it, one image: rtp_image_read); an image no material uses any more
  *  is freed.  @return RTP_OK, RTP_ERR_KEY, RTP_ERR_PARSE, RTP_ERR_IO,
  *  RTP_ERR_FORMAT, RTP_ERR_LIMIT (an image key's file past the image size
  *  limit) or RTP_ERR_UNSUPPORTED (a PNG without libpng), RTP_ERR_ARGUMENT
@@ -201,7 +201,7 @@ rtp_status rtp_scene_set(rtp_scene *scene, const char *key,
  *  takes it: numbers comma-separated in the shortest form that reads back
  *  to the same value; checker and on 0 or 1; texture and bump none, waves,
  *  noise or the image's path ("-" for one read from stdin: setting that
- *  again reads stdin's next image).  Also light.N.name and mat.N.name (read
+ *  again reads stdin again, at its end by then).  Also light.N.name and mat.N.name (read
  *  only; "" when unnamed).  @return RTP_OK, RTP_ERR_KEY, or
  *  RTP_ERR_ARGUMENT when buf is too small (buf then ""). */
 rtp_status rtp_scene_get(const rtp_scene *scene, const char *key, char *buf, size_t size,
@@ -253,7 +253,11 @@ rtp_status rtp_image_write(const rtp_image *image, const char *path,
 /** Writes to an open stream. */
 rtp_status rtp_image_write_stream(const rtp_image *image, FILE *stream,
                                   rtp_image_format format, rtp_error *err);
-/** Reads a PNG, PPM (P3/P6) or PFM; path "-" is stdin (format sniffed). */
+/** Reads a PNG, PPM (P3/P6) or PFM; path "-" is stdin (format sniffed).
+ *  The image is all the file holds: bytes after a PPM's or PFM's pixels
+ *  are RTP_ERR_FORMAT, from stdin or a pipe too (read to its end; a P6
+ *  may end in one line feed).  rtp_image_read_stream reads one image and
+ *  leaves what follows it (the next image of a stream) unread. */
 rtp_status rtp_image_read(const char *path, const rtp_allocator *alloc,
                           rtp_image **out, rtp_error *err);
 rtp_status rtp_image_read_stream(FILE *stream, const char *name,

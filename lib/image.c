@@ -840,9 +840,15 @@ typedef struct reader {
     FILE *f;
     const char *name;
     rtp_error *err;
-    /* a regular file's size in bytes (rtp_image_read), or -1 (a stream,
-       which may hold more after the image) */
+    /* a regular file's size in bytes (rtp_image_read), or -1 (a pipe,
+       a device, or a stream rtp_image_read_stream reads) */
     long long size;
+    /* whether the image is all the file holds (rtp_image_read: a path,
+       '-' and pipes too, is one image, bytes after it refused as a file's
+       are), else a stream's, which may hold the next image after it
+       (rtp_image_read_stream) */
+    int whole;
+    int *term; /* the whitespace character that ended the last number */
 } reader;
 
 /* A format error in the file being read. */
@@ -925,6 +931,7 @@ static rtp_status read_number(const reader *r, int flags, const char *what,
         return ended(r, what);
     if (c != EOF && !is_space(c))
         return BAD(r, "unexpected character after the %s", what);
+    *r->term = c;
     *out = v;
     return RTP_OK;
 }
@@ -959,19 +966,58 @@ static rtp_status out_of_memory(const reader *r)
                       "out of memory reading the image");
 }
 
+/* Reads a stream to its end: @return the bytes read (ferror tells a
+   failed read). */
+static long long rest_bytes(FILE *f)
+{
+    unsigned char buf[4096];
+    long long n = 0;
+    size_t got;
+    while ((got = fread(buf, 1, sizeof buf, f)) > 0)
+        n += (long long)got;
+    return n;
+}
+
 /* What follows a PPM file's last sample: nothing for P6 (or one line
    feed; data is the pixel data's bytes), blanks and comments for P3.  More (samples, pixels, another image) means the
    header does not describe the data -- a width or height too small read
    every row shifted, silently -- and is refused as bytes after a PFM's
-   pixels are.  (A stream may carry the next image after it, as stdin
-   redirected from such a file does: not checked there.) */
+   pixels are, from a pipe too (read to its end).  (A stream read by
+   rtp_image_read_stream may carry the next image after it: not checked
+   there.) */
 static rtp_status ppm_after(const reader *r, int ascii, int w, int h, int first,
                            size_t data)
 {
     long pos;
     int c;
-    if (r->size < 0 || r->f == stdin)
+    if (!r->whole)
         return RTP_OK;
+    if (ascii || r->size < 0) {
+        long long more;
+        if (ascii) {
+            c = skip_space(r->f, 1);
+            if (c == EOF)
+                return ferror(r->f) ? ended(r, "pixel data") : RTP_OK;
+            return BAD(r, "PPM: more after the last of the %dx%d pixels' samples: the "
+                          "header (P3 %dx%d) does not describe the data", w, h, w, h);
+        }
+        /* a pipe: its size is known once it is read to the end */
+        c = getc(r->f);
+        if (c == EOF)
+            return ferror(r->f) ? ended(r, "pixel data") : RTP_OK;
+        more = 1 + rest_bytes(r->f);
+        if (ferror(r->f))
+            return ended(r, "bytes after the pixel data");
+        if (more == 1 && *r->term == '\r' && first == '\n')
+            return BAD(r, "PPM: 1 bytes after the pixel data: its maximum value's "
+                          "line ends in CR LF? Netpbm's header ends in one "
+                          "whitespace character");
+        if (more == 1 && c == '\n')
+            return RTP_OK;
+        return BAD(r, "PPM: %lld bytes after the pixel data: the header (P6 %dx%d) does "
+                      "not describe the data (rtp reads one image a file)",
+                   more, w, h);
+    }
     if (ascii) {
         c = skip_space(r->f, 1);
         if (c == EOF)
@@ -1228,9 +1274,7 @@ static rtp_status pfm_header_end(const reader *r, int c, const char *scale,
             ah->n = 0;
             return RTP_OK;
         }
-        /* (stdin redirected from a file may hold a stream of images:
-           the gap is then the next ones, read as data) */
-        if (text && ah->bytes[ah->n - 1] == '\n' && r->f != stdin) {
+        if (text && ah->bytes[ah->n - 1] == '\n' && r->whole) {
             char extra[RTPI_PFM_LINE_TAIL + 1];
             size_t a = 0, b = ah->n, len = 0;
             while (a < b && is_space(ah->bytes[a]))
@@ -1335,17 +1379,27 @@ static rtp_status read_pfm(const reader *r, int grey,
         }
         pfm_decode(bytes, dst, rows * nin, little, grey);
     }
-    if (r->size >= 0 && r->f != stdin) {
+    if (r->whole) {
         /* A file's header tells its length: bytes beyond it mean the
            header does not describe the data ("Pf" over colour pixels, a
-           wrong size), and the image read would be wrong silently.  (A
-           stream may carry the next image: --stream writes them so, and
-           stdin redirected from such a file is that stream.) */
-        long pos = ftell(r->f);
-        if (pos >= 0 && r->size > pos) {
+           wrong size), and the image read would be wrong silently.  A
+           pipe is read to its end for its length (--stream's frames
+           through one are refused as a file of them is).  (A stream read
+           by rtp_image_read_stream may carry the next image: not
+           checked.) */
+        long pos = r->size >= 0 ? ftell(r->f) : -1;
+        long long more = pos >= 0 ? r->size - pos : 0;
+        if (r->size < 0) {
+            more = rest_bytes(r->f);
+            if (ferror(r->f)) {
+                st = ended(r, "bytes after the pixel data");
+                goto done;
+            }
+        }
+        if (more > 0) {
             st = BAD(r, "PFM: %lld bytes after the pixel data: the header (%s %dx%d) "
                         "does not describe the data",
-                     r->size - pos, grey ? "Pf, grey" : "PF, colour", w, h);
+                     more, grey ? "Pf, grey" : "PF, colour", w, h);
             goto done;
         }
     }
@@ -1630,17 +1684,20 @@ static rtp_status read_png(const reader *r, const rtp_allocator *alloc,
 static const unsigned char png_signature[8] = {0x89, 'P',  'N',  'G',
                                                '\r', '\n', 0x1a, '\n'};
 
-static rtp_status read_from(FILE *f, const char *name, long long size,
+static rtp_status read_from(FILE *f, const char *name, long long size, int whole,
                             const rtp_allocator *alloc, rtp_image **out,
                             rtp_error *err)
 {
     reader r;
     unsigned char sig[8];
     size_t got;
+    int term = EOF;
     r.f = f;
     r.name = name;
     r.err = err;
     r.size = size;
+    r.whole = whole;
+    r.term = &term;
     errno = 0;
     got = fread(sig, 1, 2, f);
     if (got < 2) {
@@ -1694,7 +1751,7 @@ rtp_status rtp_image_read_stream(FILE *stream, const char *name,
     if (!stream)
         return rtpi_error(err, RTP_ERR_ARGUMENT, name, 0, 0,
                           "no stream to read from");
-    return read_from(stream, name ? name : "<stream>", -1, alloc, out, err);
+    return read_from(stream, name ? name : "<stream>", -1, 0, alloc, out, err);
 }
 
 rtp_status rtp_image_read(const char *path, const rtp_allocator *alloc,
@@ -1718,7 +1775,7 @@ rtp_status rtp_image_read(const char *path, const rtp_allocator *alloc,
         long long size = fstat(fileno(stdin), &sb) == 0 && S_ISREG(sb.st_mode)
                              ? (long long)sb.st_size
                              : -1;
-        return read_from(stdin, "<stdin>", size, alloc, out, err);
+        return read_from(stdin, "<stdin>", size, 1, alloc, out, err);
     }
     f = fopen(path, "rb");
     if (!f)
@@ -1730,7 +1787,7 @@ rtp_status rtp_image_read(const char *path, const rtp_allocator *alloc,
         long long size = fstat(fileno(f), &sb) == 0 && S_ISREG(sb.st_mode)
                              ? (long long)sb.st_size
                              : -1;
-        st = read_from(f, path, size, alloc, out, err);
+        st = read_from(f, path, size, 1, alloc, out, err);
     }
     fclose(f);
     return st;

@@ -279,7 +279,7 @@ rtp_status rtpi_scene_add_texture(rtp_scene *s, const char *path, int fresh,
         }
     }
     /* read afresh (a key's image: the file may have changed since, or be
-       another file from another folder, or stdin's next image): where it
+       another file from another folder, or stdin): where it
        is an image the scene holds under that name, pixel for pixel, that
        one (a stream setting the same image again adds nothing, and the
        edit changes nothing) */

@@ -185,12 +185,48 @@ if $RTP version | grep -q "no osmesa"; then
     grep -q "no OSMesa" "$T/err" && ok || bad "a stream with osmesa without OSMesa: $(cat "$T/err")"
 fi
 
-# A stream of PFM frames saved to a file and given on stdin: its first
-# frame is read, as through a pipe (it was refused as a file whose header
-# does not describe its data: helper 46)
+# An image read from stdin or a pipe is all it holds, as a file is: bytes
+# after its pixels are refused, counted (a stream of frames on stdin, from
+# a file or a pipe, was read for its first frame, the rest unseen, while
+# the same file by name was refused; a header that lied, "Pf" over colour
+# pixels, read wrong silently through a pipe).  A P6 may end in one line
+# feed, as netpbm's tools allow.
 printf 'mat.red.kd=0.3\nmat.red.kd=0.5\n' | $RTP reeval "$T/t.rtp" --stream -i - -q >"$T/frames.pfm"
 $RTP reeval "$T/t.rtp" --set mat.red.kd=0.3 -i "$T/f0.pfm" -q
-expect_rc 0 sh -c "$RTP diff - '$T/f0.pfm' --fail-above max_abs=0 < '$T/frames.pfm'"
+$RTP reeval "$T/t.rtp" --set mat.red.kd=0.3 -i "$T/f0.ppm" -q
+fsz=$(wc -c <"$T/f0.pfm" | tr -d ' ')
+expect_rc 1 sh -c "$RTP diff - '$T/f0.pfm' --fail-above max_abs=0 < '$T/frames.pfm'"
+grep -q "^rtp: <stdin>: PFM: $fsz bytes after the pixel data" "$T/err" && ok ||
+    bad "frames from a file on stdin: $(cat "$T/err")"
+expect_rc 1 sh -c "cat '$T/frames.pfm' | $RTP diff - '$T/f0.pfm'"
+grep -q "^rtp: <stdin>: PFM: $fsz bytes after the pixel data" "$T/err" && ok ||
+    bad "frames through a pipe: $(cat "$T/err")"
+expect_rc 0 sh -c "cat '$T/f0.pfm' | $RTP diff - '$T/f0.pfm' --fail-above max_abs=0"
+expect_rc 1 sh -c "{ cat '$T/f0.pfm'; echo; } | $RTP diff '$T/f0.pfm' /dev/stdin"
+grep -q "^rtp: /dev/stdin: PFM: 1 bytes after the pixel data" "$T/err" && ok ||
+    bad "a PFM and a line feed through a pipe: $(cat "$T/err")"
+{ printf 'Pf\n'; sed -n 2,3p "$T/f0.pfm"; tail -c +$(head -n 3 "$T/f0.pfm" | wc -c | tr -d ' ') "$T/f0.pfm" | tail -c +2; } >"$T/grey.pfm"
+expect_rc 1 sh -c "cat '$T/grey.pfm' | $RTP diff - '$T/f0.pfm'"
+grep -q "^rtp: <stdin>: PFM: .* bytes after the pixel data: the header (Pf, grey" "$T/err" && ok ||
+    bad "Pf over colour pixels through a pipe: $(cat "$T/err")"
+expect_rc 0 sh -c "{ cat '$T/f0.ppm'; echo; } | $RTP diff - '$T/f0.ppm' --fail-above max_abs=0"
+expect_rc 1 sh -c "{ cat '$T/f0.ppm'; echo; echo; } | $RTP diff - '$T/f0.ppm'"
+grep -q "^rtp: <stdin>: PPM: 2 bytes after the pixel data" "$T/err" && ok ||
+    bad "a P6 and two line feeds through a pipe: $(cat "$T/err")"
+# (a header of CR LF lines: its last LF was read as the first sample)
+expect_rc 1 sh -c "printf 'P6\r\n2 1\r\n255\r\nABCDEF' | $RTP diff - '$T/f0.ppm'"
+grep -q "^rtp: <stdin>: PPM: 1 bytes after the pixel data: its maximum value's line ends in CR LF" \
+    "$T/err" && ok || bad "a P6 of CR LF lines through a pipe: $(cat "$T/err")"
+expect_rc 1 sh -c "printf 'P3 1 1 255 1 2 3 4\n' | $RTP diff - '$T/f0.ppm'"
+grep -q "^rtp: <stdin>: PPM: more after the last of the 1x1 pixels' samples" "$T/err" && ok ||
+    bad "a P3 and a sample more through a pipe: $(cat "$T/err")"
+# ... where each image is read: a texture a key names, a part merge joins
+expect_rc 1 sh -c "cat '$T/frames.pfm' | $RTP reeval '$T/t.rtp' --set mat.red.texture=- -i '$T/tx.pfm'"
+grep -q "^rtp: .*<stdin>.*PFM: $fsz bytes after the pixel data" "$T/err" && [ ! -e "$T/tx.pfm" ] && ok ||
+    bad "a texture of frames through a pipe: $(cat "$T/err")"
+expect_rc 1 sh -c "cat '$T/frames.pfm' | $RTP merge -i '$T/mx.pfm' --size $(sed -n 2p "$T/f0.pfm" | tr ' ' x) -@0,0"
+grep -q "^rtp: .*<stdin>.*PFM: $fsz bytes after the pixel data" "$T/err" && [ ! -e "$T/mx.pfm" ] && ok ||
+    bad "a merge part of frames through a pipe: $(cat "$T/err")"
 
 # Input and output that once went wrong without a word: --stats - inside
 # an image stream on stdout (usage error); a --stream line past the
@@ -954,6 +990,8 @@ echo x | $RTP diff - "$T/t.pfm" 2>"$T/err" >/dev/null
 grep -q "^rtp: <stdin>: not a PNG" "$T/err" && ok || bad "image on stdin's name: $(cat "$T/err")"
 echo x | $RTP reeval "$T/t.rtp" --stream -i "$T/n%d.pfm" -q 2>"$T/err"
 grep -q "^rtp: <stdin>:1: expected KEY=VALUE" "$T/err" && ok || bad "--stream line's name: $(cat "$T/err")"
+printf 'P3 1 1 255 1 2 3\n' | $RTP diff - "$T/t.pfm" 2>"$T/err" >/dev/null
+grep -q "^rtp: <stdin> is 1x1, .* image sizes differ" "$T/err" && ok || bad "diff's sizes naming stdin: $(cat "$T/err")"
 
 rm -rf "$T"
 echo "$pass passed, $fail failed, $skip skipped"
