@@ -172,7 +172,9 @@ rtp_status rtp_scene_load(const char *path, const rtp_allocator *alloc,
                           rtp_scene **out, rtp_error *err);
 
 /** Like rtp_scene_load from text in memory.  `name` is used in error
- *  messages and to resolve relative paths; `format` is "nff" or "obj". */
+ *  messages and to resolve relative paths; `format` is "nff" or "obj".
+ *  The size bytes are text: a NUL among them is RTP_ERR_PARSE at its
+ *  line and column, as in a file. */
 rtp_status rtp_scene_load_memory(const char *text, size_t size,
                                  const char *name, const char *format,
                                  const rtp_allocator *alloc, rtp_scene **out,

@@ -364,6 +364,10 @@ rtp_status rtpi_read_bpt(rtp_scene *s, const char *text, size_t size,
    byte is refused (RTP_ERR_PARSE at its line and column), where read. */
 rtp_status rtpi_read_file(const rtp_allocator *a, const char *path,
                           char **text, size_t *size, rtp_error *err);
+/* The refusal of the first NUL byte in text[0..size) (RTP_ERR_PARSE at
+   its line and column, named `name`), as rtpi_read_file refuses a file's;
+   RTP_OK without one. */
+rtp_status rtpi_text_nul(const char *text, size_t size, const char *name, rtp_error *err);
 
 /* Triangulates a planar polygon (concave allowed, as NFF `p`), keeping its
    winding.  pts: n xyz doubles.  Writes up to n-2 index triples to tri.

@@ -396,6 +396,11 @@ rtp_status rtp_scene_load_memory(const char *text, size_t size,
         return rtpi_allocator_refused(err, "rtp_scene_load_memory");
     if (!name)
         name = "<memory>";
+    /* (a NUL in a comment was read past, as in no file: rtpi_read_file
+       refuses any, as a binary or UTF-16 file's; a scene's text is the
+       same text wherever it comes from) */
+    if ((st = rtpi_text_nul(text, size, name, err)) != RTP_OK)
+        return st;
     st = rtpi_scene_create(alloc, &s);
     if (st != RTP_OK)
         return rtpi_error(err, st, name, 0, 0, "out of memory");

@@ -529,6 +529,23 @@ const char *rtp_version_string(void)
     return RTPI_STR(RTP_VERSION_MAJOR) "." RTPI_STR(RTP_VERSION_MINOR) "." RTPI_STR(RTP_VERSION_PATCH);
 }
 
+rtp_status rtpi_text_nul(const char *text, size_t size, const char *name, rtp_error *err)
+{
+    const char *z = size ? (const char *)memchr(text, '\0', size) : NULL, *p;
+    int line = 1, col = 1;
+    if (!z)
+        return RTP_OK;
+    /* (lines end as the lexer ends them: '\n', or a '\r' alone) */
+    for (p = text; p < z; p++) {
+        if (*p == '\n' || (*p == '\r' && p[1] != '\n'))
+            line++, col = 1;
+        else
+            col++;
+    }
+    return rtpi_error(err, RTP_ERR_PARSE, name, line, col,
+                      "a NUL byte: not a text file (binary, or UTF-16?)");
+}
+
 rtp_status rtpi_read_file(const rtp_allocator *a, const char *path,
                           char **text, size_t *size, rtp_error *err)
 {
@@ -591,20 +608,11 @@ rtp_status rtpi_read_file(const rtp_allocator *a, const char *path,
             /* Every file read here is a scene's text: a NUL byte means a
                binary or UTF-16 file (or /dev/zero, which would be read
                until memory ran out), refused where it is first seen. */
-            const char *z = (const char *)memchr(buf + len, '\0', n), *p;
-            int line = 1, col = 1;
-            for (p = buf; p < z; p++) {
-                if (*p == '\n')
-                    line++, col = 1;
-                else
-                    col++;
-            }
+            rtp_status st = rtpi_text_nul(buf, len + n, path, err);
             rtpi_free(a, buf);
             if (!is_stdin)
                 fclose(f);
-            return rtpi_error(err, RTP_ERR_PARSE, path, line, col,
-                              "a NUL byte: not a text file (binary, or "
-                              "UTF-16?)");
+            return st;
         }
         len += n;
         if (n == 0) {

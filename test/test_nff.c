@@ -922,14 +922,29 @@ static void test_bad_inputs(void)
                   b->col, b->msg);
         rtp_scene_destroy(s);
     }
-    /* a NUL byte inside a number */
+    /* a NUL byte, in a number or a comment, is refused where it is, as a
+       file's is (rtpi_read_file): a comment's was read past, and one in a
+       number said "sphere y" */
     {
         static const char text[] = "s 1 2\0 3 4\n";
+        static const char comment[] = "# one\r# a\0b\ns 0 0 0 1\n";
+        static const char obj[] = "v 0 0 0\n# \0\n";
         rtp_scene *s = NULL;
         rtp_error err;
         CHECK(rtp_scene_load_memory(text, sizeof text - 1, "nul.nff", "nff", NULL, &s,
                                     &err) == RTP_ERR_PARSE);
-        CHECK(err.line == 1 && err.column == 5 && strstr(err.message, "sphere y"));
+        CHECK(err.line == 1 && err.column == 6 && strstr(err.message, "a NUL byte"));
+        CHECK(rtp_scene_load_memory(comment, sizeof comment - 1, "nul.nff", "nff", NULL, &s,
+                                    &err) == RTP_ERR_PARSE && s == NULL);
+        CHECK_MSG(err.line == 2 && err.column == 4 && strcmp(err.file, "nul.nff") == 0 &&
+                      strstr(err.message, "a NUL byte: not a text file"),
+                  "%s:%d:%d: %s", err.file, err.line, err.column, err.message);
+        CHECK(rtp_scene_load_memory(obj, sizeof obj - 1, "nul.obj", "obj", NULL, &s,
+                                    &err) == RTP_ERR_PARSE && s == NULL);
+        CHECK(err.line == 2 && err.column == 3 && strstr(err.message, "a NUL byte"));
+        /* (the size given is the text: a NUL past it is not read) */
+        CHECK(rtp_scene_load_memory(text, 5, "nul.nff", "nff", NULL, &s, &err) == RTP_ERR_PARSE &&
+              strstr(err.message, "NUL") == NULL);
     }
     /* the error formats as file:line:col: message */
     {
