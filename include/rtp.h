@@ -167,7 +167,10 @@ typedef struct rtp_scene rtp_scene;
  *  RTP_ERR_FORMAT (a texture or bump image that cannot be used),
  *  RTP_ERR_LIMIT (an image past the size limit), RTP_ERR_UNSUPPORTED (a PNG
  *  without libpng), RTP_ERR_ARGUMENT or RTP_ERR_NOMEM; *out is NULL on any
- *  failure. */
+ *  failure.  An NFF v block with no view (at equal to from, up along the
+ *  view) is read: rtp_trace, rtp_record and rtp_builder_create refuse it,
+ *  RTP_ERR_ARGUMENT at its line, unless camera keys (rtp_scene_set) have
+ *  repaired it. */
 rtp_status rtp_scene_load(const char *path, const rtp_allocator *alloc,
                           rtp_scene **out, rtp_error *err);
 

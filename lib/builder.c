@@ -75,9 +75,8 @@ rtp_status rtp_builder_create(const rtp_scene *scene, int width, int height, int
     /* (a tree keeps its camera: one with no view could be written but
        not read back, nor traced again) */
     if (rtpi_camera_problem(scene))
-        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
-                          "rtp_builder_create: %s: no view to build trees for",
-                          rtpi_camera_problem(scene));
+        return rtpi_camera_error(scene, "rtp_builder_create", "no view to build trees for",
+                                 err);
     b = (rtp_builder *)rtpi_calloc_array(&scene->alloc, 1, sizeof *b);
     if (!b)
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");

@@ -225,6 +225,14 @@ struct rtp_scene {
     double light_scale; /* every light's colour is multiplied by this:
                            sqrt(L)/(2L) for L lights, SPD's advice */
     int has_camera;     /* 0: frame the bounds (an OBJ on its own) */
+    /* An NFF v block's camera that makes no view (at equal to from: [0];
+       up zero or along the view: [1]), said as reading it would have,
+       at its token: the check waits until a frame is made, after the
+       keys (--set camera.at=... repairs such a file).  cam_bad[k] 0: no
+       such error, or a key set the camera since (camera.from and .at
+       clear both, .up [1]). */
+    rtp_error cam_err[2];
+    int cam_bad[2];
 
     float *pos;  size_t npos, cap_pos;   /* xyz per vertex */
     float *nrm;  size_t nnrm, cap_nrm;   /* xyz per normal */
@@ -325,6 +333,11 @@ rtp_status rtpi_write_target(const rtp_allocator *a, const char *path, char **ou
 /* What is wrong with s's camera for a frame to be made (at equal to
    from, up along the view), or NULL. */
 const char *rtpi_camera_problem(const rtp_scene *s);
+/* The error for s's camera problem, RTP_ERR_ARGUMENT: the v block's (its
+   file, line and column) while no key has set what it left wrong, else
+   "[fn: ]<problem>: <what>" ("no view to trace"). */
+rtp_status rtpi_camera_error(const rtp_scene *s, const char *fn, const char *what,
+                             rtp_error *err);
 /* A material with default values (white, kd 1). */
 void rtpi_material_default(rtpi_material *m);
 

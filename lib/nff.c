@@ -249,13 +249,20 @@ static rtp_status read_view(nff *c, const rtpi_tok *vtok)
             return st;
     }
     /* (the test rtp_scene_set's camera keys and the tree reader make,
-       named in NFF's words at the token) */
+       named in NFF's words at the token, and kept for when a frame is
+       made: keys set after the file is read may repair it, as
+       `rtp trace s.nff --set camera.at=...` does) */
     why = rtpi_camera_problem(c->s);
-    if (why && strstr(why, "camera.at"))
-        return rtpi_lex_error(&c->lx, &at_tok, "view at equals view from");
-    if (why)
-        return rtpi_lex_error(&c->lx, &up_tok,
-                              "view up is zero or parallel to the view direction");
+    c->s->cam_bad[0] = c->s->cam_bad[1] = 0;
+    if (why && strstr(why, "camera.at")) {
+        rtpi_error(&c->s->cam_err[0], RTP_ERR_ARGUMENT, c->lx.name, at_tok.line, at_tok.col,
+                   "view at equals view from");
+        c->s->cam_bad[0] = 1;
+    } else if (why) {
+        rtpi_error(&c->s->cam_err[1], RTP_ERR_ARGUMENT, c->lx.name, up_tok.line, up_tok.col,
+                   "view up is zero or parallel to the view direction");
+        c->s->cam_bad[1] = 1;
+    }
     return RTP_OK;
 }
 

@@ -686,6 +686,23 @@ const char *rtpi_camera_problem(const rtp_scene *s)
     return NULL;
 }
 
+rtp_status rtpi_camera_error(const rtp_scene *s, const char *fn, const char *what,
+                             rtp_error *err)
+{
+    const char *why = rtpi_camera_problem(s);
+    int k = why && strstr(why, "camera.at") ? 0 : 1;
+    if (why && s->cam_bad[k]) {
+        const rtp_error *e = &s->cam_err[k];
+        return rtpi_error(err, RTP_ERR_ARGUMENT, e->file, e->line, e->column, "%s: %s",
+                          e->message, what);
+    }
+    if (fn)
+        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "%s: %s: %s", fn,
+                          why ? why : "the camera", what);
+    return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "%s: %s", why ? why : "the camera",
+                      what);
+}
+
 /* camera.from, camera.at, camera.up (x,y,z), camera.angle (degrees, as
    NFF's: between 0 and 180), camera.hither (>= 0): what NFF's v block
    says.  The camera is then the scene's, not framed for an OBJ. */
@@ -704,6 +721,10 @@ static rtp_status set_camera(rtp_scene *s, const char *key, const char *value,
         dst[0] = v[0];
         dst[1] = v[1];
         dst[2] = v[2];
+        /* (a problem of the file's v block is now the keys', said so) */
+        s->cam_bad[1] = 0;
+        if (dst != s->camera.up)
+            s->cam_bad[0] = 0;
     } else if (strcmp(field, "angle") == 0 || strcmp(field, "hither") == 0) {
         int angle = field[0] == 'a';
         if ((st = want_n(err, key, value, n, 1, 0)) != RTP_OK)

@@ -797,8 +797,7 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
                           "%s: option max_depth %d over %d (RTP_MAX_DEPTH)",
                           tree_out ? "rtp_record" : "rtp_trace", opt.max_depth, RTP_MAX_DEPTH);
     if (rtpi_camera_problem(s))
-        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "%s: no view to trace",
-                          rtpi_camera_problem(s));
+        return rtpi_camera_error(s, NULL, "no view to trace", err);
     fw = opt.width > 0 ? opt.width : s->width;
     fh = opt.height > 0 ? opt.height : s->height;
     if (opt.spd && !sized)
@@ -1091,8 +1090,7 @@ rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int thre
     if (n == 0)
         return RTP_OK;
     if (rtpi_camera_problem(t->scene))
-        return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0, "%s: no view to trace",
-                          rtpi_camera_problem(t->scene));
+        return rtpi_camera_error(t->scene, NULL, "no view to trace", err);
     if (nthreads > RTPI_MAX_THREADS)
         nthreads = RTPI_MAX_THREADS;
     if (!t->kd && (st = rtpi_kd_build_mt(t->scene, a, nthreads, &t->kd, err)) != RTP_OK)

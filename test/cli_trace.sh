@@ -235,6 +235,23 @@ if [ -r /dev/zero ] && command -v timeout >/dev/null; then
         bad "trace - of NULs: $(cat "$T/err")"
 fi
 
+# A v block with no view (at equal to from) is refused where the frame is
+# made, at its line, after the --set keys, which may repair it (it was
+# refused as the file was read, which no key could repair)
+printf 'v\nfrom 0 0 5\nat 0 0 5\nup 0 1 0\nangle 40\nhither 1\nresolution 8 8\nl 1 1 1\nf 1 0 0 0.5 0.5 30 0 1\ns 0 0 0 1\n' >"$T/samept.nff"
+expect_rc 1 $RTP trace "$T/samept.nff" -i "$T/samept.pfm" -q
+grep -q "samept.nff:3:1: view at equals view from" "$T/err" && [ ! -e "$T/samept.pfm" ] && ok ||
+    bad "a v block's at equal to from: $(cat "$T/err")"
+expect_rc 1 $RTP trace "$T/samept.nff" -o "$T/samept.rtp" -q --set camera.up=0,0,1
+grep -q "samept.nff:3:1: view at equals view from" "$T/err" && ok ||
+    bad "a v block's at equal to from, another camera key set: $(cat "$T/err")"
+expect_rc 0 $RTP trace "$T/samept.nff" -i "$T/samept.pfm" -q --set camera.at=0,0,0
+printf 'v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 40\nhither 1\nresolution 8 8\nl 1 1 1\nf 1 0 0 0.5 0.5 30 0 1\ns 0 0 0 1\n' >"$T/fixed.nff"
+expect_rc 0 $RTP trace "$T/fixed.nff" -i "$T/fixed.pfm" -q
+cmp -s "$T/samept.pfm" "$T/fixed.pfm" && ok || bad "a v block repaired by --set camera.at: not the file's image"
+printf 'camera.at=0,0,0\n' >"$T/cam.params"
+expect_rc 0 $RTP trace "$T/samept.nff" -i "$T/samep2.pfm" -q --params "$T/cam.params"
+
 rm -rf "$T"
 echo "$pass passed, $fail failed, $skip skipped"
 [ "$fail" -eq 0 ]

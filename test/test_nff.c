@@ -847,9 +847,6 @@ static const bad_case bad_nff[] = {
     {"l 1 2 3 -1 1 1\n", RTP_ERR_PARSE, 1, 9, "light red must not be negative"},
     {"b 1 1\n", RTP_ERR_PARSE, 2, 1,
      "unexpected end of file in b (background) line, expected blue"},
-    {"v\nfrom 0 0 0\nat 0 0 0\n", RTP_ERR_PARSE, 3, 1, "view at equals view from"},
-    {"v\nup 0 0 0\n", RTP_ERR_PARSE, 2, 1, "view up is zero or parallel"},
-    {"v\nfrom 0 0 5\nup 0 0 1\n", RTP_ERR_PARSE, 3, 1, "parallel to the view direction"},
     {"v\nresolution 0 5\n", RTP_ERR_PARSE, 2, 12, "resolution width 0 must be"},
     {"v\nresolution 64 64.5\n", RTP_ERR_PARSE, 2, 15, "resolution height 64.5"},
     {"v\nangle 180\n", RTP_ERR_PARSE, 2, 7, "view angle 180"},
@@ -903,6 +900,71 @@ static const bad_case bad_nff[] = {
     {"bezier a.bpt\n", RTP_ERR_PARSE, 2, 1, "expected subdivisions"},
     {"bezier no-such-file.bpt 4\n", RTP_ERR_IO, 1, 8, "cannot read bezier file"},
 };
+
+/* A v block that makes no view (at equal to from, up zero or along the
+   view) is read, and refused where a frame is made, at its token, unless
+   keys set since repaired it: `rtp trace s.nff --set camera.at=...` could
+   not repair such a file, refused as it was read. */
+static void test_camera_after_keys(void)
+{
+    static const struct {
+        const char *text;
+        int line, col;
+        const char *msg, *fix;
+    } cases[] = {
+        {"v\nfrom 0 0 5\nat 0 0 5\n", 3, 1, "view at equals view from", "camera.at"},
+        {"v\nup 0 0 0\n", 2, 1, "view up is zero or parallel", "camera.up"},
+        {"v\nfrom 0 0 5\nup 0 0 1\n", 3, 1, "parallel to the view direction", "camera.from"},
+    };
+    static const char *const fixes[] = {"camera.at", "0,0,0", "camera.up", "0,1,0",
+                                        "camera.from", "1,2,3"};
+    size_t i, k;
+    for (i = 0; i < sizeof cases / sizeof *cases; i++) {
+        char text[256];
+        rtp_scene *s = NULL;
+        rtp_image *img = NULL;
+        rtp_tree *tree = NULL;
+        rtp_builder *b = NULL;
+        rtp_trace_options o;
+        rtp_error err;
+        snprintf(text, sizeof text, "%ss 0 0 0 1\n", cases[i].text);
+        memset(&err, 0, sizeof err);
+        CHECK_MSG(load(text, "cam.nff", &s, &err) == RTP_OK && s, "case %zu: %s", i,
+                  err.message);
+        if (!s)
+            continue;
+        memset(&o, 0, sizeof o);
+        o.width = o.height = 4;
+        CHECK(rtp_trace(s, &o, &img, NULL, &err) == RTP_ERR_ARGUMENT && !img);
+        CHECK_MSG(strcmp(err.file, "cam.nff") == 0 && err.line == cases[i].line &&
+                      err.column == cases[i].col && strstr(err.message, cases[i].msg),
+                  "case %zu: %s:%d:%d: %s", i, err.file, err.line, err.column, err.message);
+        CHECK(rtp_record(s, &o, &tree, NULL, NULL, &err) == RTP_ERR_ARGUMENT && !tree &&
+              err.line == cases[i].line && strstr(err.message, cases[i].msg));
+        CHECK(rtp_builder_create(s, 4, 4, 0, &b, &err) == RTP_ERR_ARGUMENT && !b &&
+              err.line == cases[i].line && strstr(err.message, cases[i].msg));
+        /* a key that leaves the fault keeps its place in the file; a key
+           that makes its own is said as the keys' */
+        if (i == 0) {
+            CHECK(rtp_scene_set(s, "camera.up", "0,0,1", NULL) == RTP_OK);
+            CHECK(rtp_trace(s, &o, &img, NULL, &err) == RTP_ERR_ARGUMENT && err.line == 3);
+            CHECK(rtp_scene_set(s, "camera.from", "0,0,4", NULL) == RTP_OK);
+            CHECK(rtp_trace(s, &o, &img, NULL, &err) == RTP_ERR_ARGUMENT && !img &&
+                  err.line == 0 && strstr(err.message, "camera.up is zero or parallel"));
+            CHECK(rtp_scene_set(s, "camera.up", "0,1,0", NULL) == RTP_OK);
+            CHECK(rtp_scene_set(s, "camera.at", "0,0,4", NULL) == RTP_OK);
+            CHECK(rtp_trace(s, &o, &img, NULL, &err) == RTP_ERR_ARGUMENT && !img &&
+                  err.line == 0 && strstr(err.message, "camera.at equals camera.from"));
+        }
+        for (k = 0; k < sizeof fixes / sizeof *fixes; k += 2)
+            if (strcmp(fixes[k], cases[i].fix) == 0)
+                CHECK(rtp_scene_set(s, fixes[k], fixes[k + 1], NULL) == RTP_OK);
+        CHECK_MSG(rtp_trace(s, &o, &img, NULL, &err) == RTP_OK && img, "case %zu: %s", i,
+                  err.message);
+        rtp_image_destroy(img);
+        rtp_scene_destroy(s);
+    }
+}
 
 static void test_bad_inputs(void)
 {
@@ -1296,6 +1358,7 @@ int main(void)
     RUN(test_image_key_over_the_limit);
     RUN(test_file_named_dash);
     RUN(test_bad_inputs);
+    RUN(test_camera_after_keys);
     RUN(test_truncation);
     RUN(test_mutations);
     RUN(test_numbers_whatever_the_locale);
