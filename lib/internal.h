@@ -309,6 +309,14 @@ void rtpi_texture_release(rtpi_texture *t);
    so writers of one path at once never share it; the mode of a file
    already at path.  NULL with errno on failure. */
 FILE *rtpi_open_temp(const char *path, char *tmp, size_t tmpsize);
+/* Durability, POSIX (nothing elsewhere): rtpi_sync_file flushes f and
+   fsyncs it, so that a rename after it cannot leave an empty file after a
+   crash; rtpi_sync_dir fsyncs the folder holding path, so that the
+   rename itself lasts.  A file system that refuses fsync (EINVAL: a pipe,
+   some network and special file systems) is skipped quietly, as is a
+   folder rtp may not open.  @return 0, else errno. */
+int rtpi_sync_file(FILE *f);
+int rtpi_sync_dir(const char *path);
 /* How a file at path is written: RTPI_WRITE_FILE beside it and renamed
    over it (a regular file or none yet), RTPI_WRITE_IN_PLACE (a FIFO, a
    device, a pipe behind /dev/fd/N: never replaced by a rename), or

@@ -942,11 +942,22 @@ rtp_status rtp_tree_write(const rtp_tree *t, const char *path,
         if (fclose(out.f) != 0 && st == RTP_OK)
             st = rtpi_error(err, RTP_ERR_IO, path, 0, 0, "write failed: %s", strerror(errno));
     } else if (!to_stdout) {
+        /* A tree is costly to make again: its bytes are on the disk
+           before the rename (else a crash soon after could leave the
+           name on an empty file, the old tree gone) and the rename
+           after it (the folder synced) */
+        int e = st == RTP_OK ? rtpi_sync_file(out.f) : 0;
+        if (e)
+            st = rtpi_error(err, RTP_ERR_IO, path, 0, 0, "write failed: cannot sync: %s",
+                            strerror(e));
         if (fclose(out.f) != 0 && st == RTP_OK)
             st = rtpi_error(err, RTP_ERR_IO, path, 0, 0, "write failed: %s", strerror(errno));
         if (st == RTP_OK && rename(tmp, target) != 0)
             st = rtpi_error(err, RTP_ERR_IO, path, 0, 0, "cannot rename into place: %s",
                             strerror(errno));
+        if (st == RTP_OK && (e = rtpi_sync_dir(target)) != 0)
+            st = rtpi_error(err, RTP_ERR_IO, path, 0, 0,
+                            "written, but its folder cannot be synced: %s", strerror(e));
         if (st != RTP_OK)
             remove(tmp);
         rtpi_free(&t->alloc, tmp);

@@ -252,6 +252,24 @@ cmp -s "$T/samept.pfm" "$T/fixed.pfm" && ok || bad "a v block repaired by --set 
 printf 'camera.at=0,0,0\n' >"$T/cam.params"
 expect_rc 0 $RTP trace "$T/samept.nff" -i "$T/samep2.pfm" -q --params "$T/cam.params"
 
+# A tree file is on the disk before its rename and the rename after it:
+# fsync of the temporary file, then the rename, then fsync of the folder
+# (without them a crash soon after could leave the name on an empty file).
+# Seen through strace, where it runs.
+if command -v strace >/dev/null 2>&1 &&
+    strace -f -o "$T/st" -e trace=openat,open,fsync,rename,renameat,renameat2 \
+        $RTP trace scenes/spheres.nff --size 16x12 -o "$T/sync.rtp" -q 2>/dev/null &&
+    grep -q "rename" "$T/st"; then
+    awk '/\.rtp-[0-9a-f]*\.tmp/ && /open/ && !tmpfd { n = split($0, w, "= "); tmpfd = w[n] + 0 }
+         /fsync\(/ { f = $0; sub(/.*fsync\(/, "", f); f += 0
+                     if (!renamed && f == tmpfd) filesync = 1; if (renamed) dirsync = 1 }
+         /rename/ && /sync\.rtp/ { renamed = 1 }
+         END { exit !(tmpfd && filesync && renamed && dirsync) }' "$T/st" && ok ||
+        { bad "trace -o: no fsync of the tree before its rename and of its folder after"; cat "$T/st" >&2; }
+else
+    skip=$((skip + 1)); echo "skip: no strace (or no ptrace): a tree file's fsync not checked" >&2
+fi
+
 rm -rf "$T"
 echo "$pass passed, $fail failed, $skip skipped"
 [ "$fail" -eq 0 ]
