@@ -1034,16 +1034,16 @@ static rtp_status ppm_after(const reader *r, int ascii, int w, int h, int first,
     int c;
     if (!r->whole)
         return RTP_OK;
-    if (ascii || r->size < 0) {
+    if (ascii) {
+        c = skip_space(r->f, 1);
+        if (c == EOF)
+            return ferror(r->f) ? ended(r, "pixel data") : RTP_OK;
+        return BAD(r, "PPM: more after the last of the %dx%d pixels' samples: the "
+                      "header (P3 %dx%d) does not describe the data", w, h, w, h);
+    }
+    if (r->size < 0) {
+        /* a pipe: its length is known once it is read to its end */
         long long more;
-        if (ascii) {
-            c = skip_space(r->f, 1);
-            if (c == EOF)
-                return ferror(r->f) ? ended(r, "pixel data") : RTP_OK;
-            return BAD(r, "PPM: more after the last of the %dx%d pixels' samples: the "
-                          "header (P3 %dx%d) does not describe the data", w, h, w, h);
-        }
-        /* a pipe: its size is known once it is read to the end */
         c = getc(r->f);
         if (c == EOF)
             return ferror(r->f) ? ended(r, "pixel data") : RTP_OK;
@@ -1059,13 +1059,6 @@ static rtp_status ppm_after(const reader *r, int ascii, int w, int h, int first,
         return BAD(r, "PPM: %lld bytes after the pixel data: the header (P6 %dx%d) does "
                       "not describe the data (rtp reads one image a file)",
                    more, w, h);
-    }
-    if (ascii) {
-        c = skip_space(r->f, 1);
-        if (c == EOF)
-            return ferror(r->f) ? ended(r, "pixel data") : RTP_OK;
-        return BAD(r, "PPM: more after the last of the %dx%d pixels' samples: the "
-                      "header (P3 %dx%d) does not describe the data", w, h, w, h);
     }
     pos = ftell(r->f);
     if (pos >= 0 && r->size == pos + 1) {
