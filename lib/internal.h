@@ -681,6 +681,10 @@ typedef struct rtpi_shade_ctx {
 int rtpi_sample_coeffs(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
                        size_t n, const float *terms, double *acc,
                        float *coeffs, double *w);
+/* (float)pow(x, y), the same bits, mostly without calling pow (shade.c's
+   light_term) */
+float rtpi_pow_float(double x, double y);
+
 /* Steps 1 and 2 for a sample of n nodes seen from eye: its terms, then
    from them its coefficients as rtpi_sample_coeffs makes them (the same
    bits), in one descent of the tree.  terms: n * RTPI_TERMS(nlights)

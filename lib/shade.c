@@ -254,6 +254,307 @@ rtpi_v3 rtpi_bump_normal(const rtp_scene *s, const rtpi_material *m, uint32_t pr
     }
 }
 
+/* (float)pow(x, y) for the highlight's term, to the bit, mostly without
+   calling pow (a fifth of a moved light's redo on teapot, whose
+   materials' shines, 3.0827 and 4.81884, are not integers).  v = 2^(y
+   log2 x) is made in double with a relative error below 2^-42 (see
+   below), pow's own is at most a few ulps of double (glibc's manual,
+   "Known Maximum Errors in Math Functions"; its pow is documented at
+   0.52 ulp): both then lie within 2^-41 v of x^y.  Where no float
+   rounding boundary (a midpoint between neighbouring floats) is that
+   close to v, (float)v and (float)pow(x, y) are the same float.  A
+   boundary of v's binade sits where v's 29 low mantissa bits (those a
+   float drops) are 2^28; 2^-41 v is below 2^12 ulps of v, and the test
+   asks for 2^16 (16x that, for any slip in the bound: pow is then called
+   for 1 v in 4096).  Elsewhere pow: x not a positive normal double, |y|
+   above 1024 (the bound grows with y), v outside the normal floats (a
+   float subnormal's boundaries do not sit at those bits), but where v <
+   2^-152 (x^y < 2^-150, half the least float: 0 either way).
+
+   The error: x = 2^k z, z in [0.7058, 1.4117), its 128th part i holds
+   1/c and log2 c rounded (pow_log2_tab, made with 200-bit mpmath:
+   c the middle of the part, log2 c = -log2 of the rounded 1/c); r =
+   z/c - 1 from one rounded product (the subtraction is exact: Sterbenz),
+   |r| < 2^-8.01, off by < 2^-52.99; log2(1 + r) by its series to r^6
+   (the rest below |r|^7 / (7 ln 2) < 2^-58); L = (k + log2 c) + p off by
+   < 2^-52.4 + 2^-51.9 |L|; t = y L off by < |y| 2^-52.3 + 2^-52 |t| (|t|
+   <= 160 here: < |y| 2^-52.3 + 2^-44.3).  2^t = 2^e 2^(j/128) 2^f, |f|
+   <= 1/256 exact (t - kd/128: two doubles within 1/256), 2^(j/128)
+   rounded (pow_exp2_tab), 2^f by its series to f^5 (rest < 2^-60), three
+   roundings of ~2^-53 each: relative < 2^-51.4 + ln 2 (error of t) <
+   2^-51.4 + |y| 2^-52.8 + 2^-44.8, below 2^-42.3 for |y| <= 1024.  In
+   double arithmetic only (FLT_EVAL_METHOD 0: SSE2, not x87). */
+#if defined(FLT_EVAL_METHOD) && FLT_EVAL_METHOD == 0
+static const double pow_log2_tab[128][2] = {
+    {0x1.69be8c81fb00cp+0, -0x1.fecc6670c0ed3p-2},
+    {0x1.67c22fe4dcddap+0, -0x1.f6aa97eb30d82p-2},
+    {0x1.65cb6049c63c4p+0, -0x1.ee942efb1584fp-2},
+    {0x1.63da068aeb033p+0, -0x1.e6890bdb248e2p-2},
+    {0x1.61ee0c0281abbp+0, -0x1.de890f4a34fd9p-2},
+    {0x1.60075a87531dbp+0, -0x1.d6941a88668e3p-2},
+    {0x1.5e25dc6966c26p+0, -0x1.ceaa0f545c71bp-2},
+    {0x1.5c497c6ec9c1ap+0, -0x1.c6cacfe88afdep-2},
+    {0x1.5a7225d070680p+0, -0x1.bef63ef897a3ep-2},
+    {0x1.589fc43730bf1p+0, -0x1.b72c3faeca9f4p-2},
+    {0x1.56d243b8d56c2p+0, -0x1.af6cb5a991cd9p-2},
+    {0x1.550990d547f30p+0, -0x1.a7b784f91426dp-2},
+    {0x1.53459873d182dp+0, -0x1.a00c921cd54c7p-2},
+    {0x1.518647e0717edp+0, -0x1.986bc20168b87p-2},
+    {0x1.4fcb8cc948f96p+0, -0x1.90d4f9fe34082p-2},
+    {0x1.4e15553c1a639p+0, -0x1.89481fd33ff1fp-2},
+    {0x1.4c638fa3dcb8ep+0, -0x1.81c519a71771ep-2},
+    {0x1.4ab62ac66176cp+0, -0x1.7a4bce04b4bc8p-2},
+    {0x1.490d15c20cb76p+0, -0x1.72dc23d97b912p-2},
+    {0x1.4768400b9ecd3p+0, -0x1.6b76027340830p-2},
+    {0x1.45c7996c0ec27p+0, -0x1.6419517e5cd35p-2},
+    {0x1.442b11fe75285p+0, -0x1.5cc5f903ce821p-2},
+    {0x1.42929a2e06a4dp+0, -0x1.557be16764342p-2},
+    {0x1.40fe22b41db5ep+0, -0x1.4e3af365f4994p-2},
+    {0x1.3f6d9c965323ep+0, -0x1.47031813a0f68p-2},
+    {0x1.3de0f924a4a53p+0, -0x1.3fd438da22884p-2},
+    {0x1.3c5829f7a9375p+0, -0x1.38ae3f7722678p-2},
+    {0x1.3ad320eed2b70p+0, -0x1.319115fa9ba26p-2},
+    {0x1.3951d02ebc479p+0, -0x1.2a7ca6c547447p-2},
+    {0x1.37d42a1f851a3p+0, -0x1.2370dc8711fcfp-2},
+    {0x1.365a216b372dap+0, -0x1.1c6da23d9b235p-2},
+    {0x1.34e3a8fc39a0ap+0, -0x1.1572e332bcd35p-2},
+    {0x1.3370b3fbce360p+0, -0x1.0e808afb1ce04p-2},
+    {0x1.320135d099ac2p+0, -0x1.07968574c65d4p-2},
+    {0x1.3095221d368ecp+0, -0x1.00b4bec5cb816p-2},
+    {0x1.2f2c6cbed22b0p+0, -0x1.f3b646b5df4edp-3},
+    {0x1.2dc709cbd3534p+0, -0x1.e6133fccb2692p-3},
+    {0x1.2c64ed928aa10p+0, -0x1.d88042bc96524p-3},
+    {0x1.2b060c97ebe82p+0, -0x1.cafd29f7cc541p-3},
+    {0x1.29aa5b9650907p+0, -0x1.bd89d073e19a4p-3},
+    {0x1.2851cf7c428cdp+0, -0x1.b02611a74de70p-3},
+    {0x1.26fc5d6b4fab4p+0, -0x1.a2d1c9872008dp-3},
+    {0x1.25a9fab6e4facp+0, -0x1.958cd484b7b2cp-3},
+    {0x1.245a9ce332056p+0, -0x1.88570f8b8c50dp-3},
+    {0x1.230e39a413a1bp+0, -0x1.7b3057ff008edp-3},
+    {0x1.21c4c6dc061e2p+0, -0x1.6e188bb8422e3p-3},
+    {0x1.207e3a9b1e8d3p+0, -0x1.610f890435e07p-3},
+    {0x1.1f3a8b1e0af9dp+0, -0x1.54152ea16ecdfp-3},
+    {0x1.1df9aecd194e9p+0, -0x1.47295bbe31820p-3},
+    {0x1.1cbb9c3b44badp+0, -0x1.3a4beff681e8bp-3},
+    {0x1.1b804a2549645p+0, -0x1.2d7ccb523c1bdp-3},
+    {0x1.1a47af70be33ap+0, -0x1.20bbce4337af0p-3},
+    {0x1.1911c32b348dcp+0, -0x1.1408d9a375417p-3},
+    {0x1.17de7c895dcc0p+0, -0x1.0763ceb356018p-3},
+    {0x1.16add2e63647fp+0, -0x1.f5991e2fb9e4cp-4},
+    {0x1.157fbdc235cffp+0, -0x1.dc85f9b1f34edp-4},
+    {0x1.145434c2855c5p+0, -0x1.c38df4bfb881dp-4},
+    {0x1.132b2fb039dc6p+0, -0x1.aab0d4eaa4c53p-4},
+    {0x1.1204a67793f6ap+0, -0x1.91ee608059f0fp-4},
+    {0x1.10e0912744966p+0, -0x1.79465e875d130p-4},
+    {0x1.0fbee7efb622ep+0, -0x1.60b896bc03bdcp-4},
+    {0x1.0e9fa3225a3e1p+0, -0x1.4844d18d71a2dp-4},
+    {0x1.0d82bb30fbe96p+0, -0x1.2fead81aa60ffp-4},
+    {0x1.0c6828ad15f01p+0, -0x1.17aa742f98e2ep-4},
+    {0x1.0b4fe4472d780p+0, -0x1.ff06e084cd30cp-5},
+    {0x1.0a39e6ce309acp+0, -0x1.ceeb2ee1162e5p-5},
+    {0x1.0926292ed8e9ep+0, -0x1.9f016af855c03p-5},
+    {0x1.0814a47311c1ap+0, -0x1.6f492d92d47b7p-5},
+    {0x1.070551c1624f2p+0, -0x1.3fc210b7a44eap-5},
+    {0x1.05f82a5c5b2f9p+0, -0x1.106bafa785084p-5},
+    {0x1.04ed27a2078e3p+0, -0x1.c28b4dafc5c25p-6},
+    {0x1.03e4430b61a92p+0, -0x1.649f27dbdd25ep-6},
+    {0x1.02dd762bcaa3fp+0, -0x1.07122b739c631p-6},
+    {0x1.01d8bab085916p+0, -0x1.53c730c7994f4p-7},
+    {0x1.00d60a60359dbp+0, -0x1.344ac371d7b43p-8},
+    {0x1.ff0087b8260bep-1, 0x1.70ecbb0f4e5b9p-9},
+    {0x1.fb602a2f91e1fp-1, 0x1.aceb0fc432f1dp-7},
+    {0x1.f77a4dd695191p-1, 0x1.8cc05eb20bbeap-6},
+    {0x1.f3a3a89273f9ep-1, 0x1.20d307d6489cap-5},
+    {0x1.efdbe1f975defp-1, 0x1.7a9603d2d7ca6p-5},
+    {0x1.ec22a449beb96p-1, 0x1.d3abca04b572fp-5},
+    {0x1.e8779c4ff8ee3p-1, 0x1.160b78f318196p-4},
+    {0x1.e4da794f1f1e5p-1, 0x1.41ed0214dc8c5p-4},
+    {0x1.e14aece9570c6p-1, 0x1.6d7bbd94ba4d1p-4},
+    {0x1.ddc8ab09cfb09p-1, 0x1.98b8e1a95b45ap-4},
+    {0x1.da5369cf9557bp-1, 0x1.c3a59dc6cb645p-4},
+    {0x1.d6eae1794f6f3p-1, 0x1.ee431ad064cf6p-4},
+    {0x1.d38ecc51dc50bp-1, 0x1.0c493da4794d4p-3},
+    {0x1.d03ee69dc00cap-1, 0x1.214a6dc08eb62p-3},
+    {0x1.ccfaee895bcefp-1, 0x1.3625a8e21a5abp-3},
+    {0x1.c9c2a417e40ffp-1, 0x1.4adb7741b306ap-3},
+    {0x1.c695c9130c4d5p-1, 0x1.5f6c5e3fb9c2bp-3},
+    {0x1.c37420fb5f8a6p-1, 0x1.73d8e0787c747p-3},
+    {0x1.c05d70f93d515p-1, 0x1.88217dd7a78ebp-3},
+    {0x1.bd517fce73629p-1, 0x1.9c46b3ab0e0d6p-3},
+    {0x1.ba5015c86caaap-1, 0x1.b048fcb4cea84p-3},
+    {0x1.b758fcb2ee7e3p-1, 0x1.c428d13cdcc4ap-3},
+    {0x1.b46bffcb5d798p-1, 0x1.d7e6a721f373fp-3},
+    {0x1.b188ebb483bc1p-1, 0x1.eb82f1e9f86ffp-3},
+    {0x1.aeaf8e6ad28c6p-1, 0x1.fefe22d1d4cd8p-3},
+    {0x1.abdfb73919c0fp-1, 0x1.092c546e6466ep-2},
+    {0x1.a91936adaf945p-1, 0x1.12c97871a003bp-2},
+    {0x1.a65bde9003d33p-1, 0x1.1c56b2d095692p-2},
+    {0x1.a3a781d69993ap-1, 0x1.25d437e1f0dc0p-2},
+    {0x1.a0fbf49d62e51p-1, 0x1.2f423afbcbb48p-2},
+    {0x1.9e590c1c7a228p-1, 0x1.38a0ee7a2ec5fp-2},
+    {0x1.9bbe9e9f34c91p-1, 0x1.41f083c56042ap-2},
+    {0x1.992c837b8be99p-1, 0x1.4b312b57ff145p-2},
+    {0x1.96a29309d67c9p-1, 0x1.546314c4ed8f0p-2},
+    {0x1.9420a69cd210dp-1, 0x1.5d866ebd0d49cp-2},
+    {0x1.91a69879f676ap-1, 0x1.669b6714cddadp-2},
+    {0x1.8f3443d211372p-1, 0x1.6fa22ac990198p-2},
+    {0x1.8cc984ba25cabp-1, 0x1.789ae606df817p-2},
+    {0x1.8a6638248faa5p-1, 0x1.8185c42b83374p-2},
+    {0x1.880a3bda6379bp-1, 0x1.8a62efce68240p-2},
+    {0x1.85b56e750ca95p-1, 0x1.933292c3658c3p-2},
+    {0x1.8367af582510cp-1, 0x1.9bf4d61fdd769p-2},
+    {0x1.8120deab841dcp-1, 0x1.a4a9e23f3a2cep-2},
+    {0x1.7ee0dd558352dp-1, 0x1.ad51dec74a0e8p-2},
+    {0x1.7ca78cf575ea8p-1, 0x1.b5ecf2ac7ae29p-2},
+    {0x1.7a74cfde518dap-1, 0x1.be7b4435f5cc2p-2},
+    {0x1.7848891186241p-1, 0x1.c6fcf9019cf3ap-2},
+    {0x1.76229c3a02dd9p-1, 0x1.cf723607ebf30p-2},
+    {0x1.7402eda766a7bp-1, 0x1.d7db1f9fbbffep-2},
+    {0x1.71e962495a585p-1, 0x1.e037d981ecce0p-2},
+    {0x1.6fd5dfab12e9ep-1, 0x1.e88886ccf3146p-2},
+    {0x1.6dc84beefa396p-1, 0x1.f0cd4a084d935p-2},
+    {0x1.6bc08dca7cc53p-1, 0x1.f9064527e17e8p-2},
+};
+static const double pow_exp2_tab[128] = {
+    0x1.0000000000000p+0, 0x1.0163da9fb3335p+0,
+    0x1.02c9a3e778061p+0, 0x1.04315e86e7f85p+0,
+    0x1.059b0d3158574p+0, 0x1.0706b29ddf6dep+0,
+    0x1.0874518759bc8p+0, 0x1.09e3ecac6f383p+0,
+    0x1.0b5586cf9890fp+0, 0x1.0cc922b7247f7p+0,
+    0x1.0e3ec32d3d1a2p+0, 0x1.0fb66affed31bp+0,
+    0x1.11301d0125b51p+0, 0x1.12abdc06c31ccp+0,
+    0x1.1429aaea92de0p+0, 0x1.15a98c8a58e51p+0,
+    0x1.172b83c7d517bp+0, 0x1.18af9388c8deap+0,
+    0x1.1a35beb6fcb75p+0, 0x1.1bbe084045cd4p+0,
+    0x1.1d4873168b9aap+0, 0x1.1ed5022fcd91dp+0,
+    0x1.2063b88628cd6p+0, 0x1.21f49917ddc96p+0,
+    0x1.2387a6e756238p+0, 0x1.251ce4fb2a63fp+0,
+    0x1.26b4565e27cddp+0, 0x1.284dfe1f56381p+0,
+    0x1.29e9df51fdee1p+0, 0x1.2b87fd0dad990p+0,
+    0x1.2d285a6e4030bp+0, 0x1.2ecafa93e2f56p+0,
+    0x1.306fe0a31b715p+0, 0x1.32170fc4cd831p+0,
+    0x1.33c08b26416ffp+0, 0x1.356c55f929ff1p+0,
+    0x1.371a7373aa9cbp+0, 0x1.38cae6d05d866p+0,
+    0x1.3a7db34e59ff7p+0, 0x1.3c32dc313a8e5p+0,
+    0x1.3dea64c123422p+0, 0x1.3fa4504ac801cp+0,
+    0x1.4160a21f72e2ap+0, 0x1.431f5d950a897p+0,
+    0x1.44e086061892dp+0, 0x1.46a41ed1d0057p+0,
+    0x1.486a2b5c13cd0p+0, 0x1.4a32af0d7d3dep+0,
+    0x1.4bfdad5362a27p+0, 0x1.4dcb299fddd0dp+0,
+    0x1.4f9b2769d2ca7p+0, 0x1.516daa2cf6642p+0,
+    0x1.5342b569d4f82p+0, 0x1.551a4ca5d920fp+0,
+    0x1.56f4736b527dap+0, 0x1.58d12d497c7fdp+0,
+    0x1.5ab07dd485429p+0, 0x1.5c9268a5946b7p+0,
+    0x1.5e76f15ad2148p+0, 0x1.605e1b976dc09p+0,
+    0x1.6247eb03a5585p+0, 0x1.6434634ccc320p+0,
+    0x1.6623882552225p+0, 0x1.68155d44ca973p+0,
+    0x1.6a09e667f3bcdp+0, 0x1.6c012750bdabfp+0,
+    0x1.6dfb23c651a2fp+0, 0x1.6ff7df9519484p+0,
+    0x1.71f75e8ec5f74p+0, 0x1.73f9a48a58174p+0,
+    0x1.75feb564267c9p+0, 0x1.780694fde5d3fp+0,
+    0x1.7a11473eb0187p+0, 0x1.7c1ed0130c132p+0,
+    0x1.7e2f336cf4e62p+0, 0x1.80427543e1a12p+0,
+    0x1.82589994cce13p+0, 0x1.8471a4623c7adp+0,
+    0x1.868d99b4492edp+0, 0x1.88ac7d98a6699p+0,
+    0x1.8ace5422aa0dbp+0, 0x1.8cf3216b5448cp+0,
+    0x1.8f1ae99157736p+0, 0x1.9145b0b91ffc6p+0,
+    0x1.93737b0cdc5e5p+0, 0x1.95a44cbc8520fp+0,
+    0x1.97d829fde4e50p+0, 0x1.9a0f170ca07bap+0,
+    0x1.9c49182a3f090p+0, 0x1.9e86319e32323p+0,
+    0x1.a0c667b5de565p+0, 0x1.a309bec4a2d33p+0,
+    0x1.a5503b23e255dp+0, 0x1.a799e1330b358p+0,
+    0x1.a9e6b5579fdbfp+0, 0x1.ac36bbfd3f37ap+0,
+    0x1.ae89f995ad3adp+0, 0x1.b0e07298db666p+0,
+    0x1.b33a2b84f15fbp+0, 0x1.b59728de5593ap+0,
+    0x1.b7f76f2fb5e47p+0, 0x1.ba5b030a1064ap+0,
+    0x1.bcc1e904bc1d2p+0, 0x1.bf2c25bd71e09p+0,
+    0x1.c199bdd85529cp+0, 0x1.c40ab5fffd07ap+0,
+    0x1.c67f12e57d14bp+0, 0x1.c8f6d9406e7b5p+0,
+    0x1.cb720dcef9069p+0, 0x1.cdf0b555dc3fap+0,
+    0x1.d072d4a07897cp+0, 0x1.d2f87080d89f2p+0,
+    0x1.d5818dcfba487p+0, 0x1.d80e316c98398p+0,
+    0x1.da9e603db3285p+0, 0x1.dd321f301b460p+0,
+    0x1.dfc97337b9b5fp+0, 0x1.e264614f5a129p+0,
+    0x1.e502ee78b3ff6p+0, 0x1.e7a51fbc74c83p+0,
+    0x1.ea4afa2a490dap+0, 0x1.ecf482d8e67f1p+0,
+    0x1.efa1bee615a27p+0, 0x1.f252b376bba97p+0,
+    0x1.f50765b6e4540p+0, 0x1.f7bfdad9cbe14p+0,
+    0x1.fa7c1819e90d8p+0, 0x1.fd3c22b8f71f1p+0,
+};
+/* (out of line: the loops calling pow_float keep their registers) */
+#if defined(__GNUC__)
+__attribute__((noinline))
+#endif
+static float pow_libm(double x, double y)
+{
+    return (float)pow(x, y);
+}
+
+static RTPI_FORCE_INLINE float pow_float(double x, double y)
+{
+    /* 0x3fe6955500000000: z's range starts near 1/sqrt 2, so that |log2
+       z| <= 0.5 */
+    const uint64_t off = 0x3fe6955500000000u;
+    const double shift = 0x1.8p52; /* adding it rounds to an integer */
+    uint64_t ix, tmp, iv;
+    double z, r, p, L, t, kd, f, q, s, v, sc;
+    const double *lt;
+    unsigned u, j, ev;
+    memcpy(&ix, &x, sizeof ix);
+    if (ix - 0x0010000000000000u >= 0x7fe0000000000000u || !(fabs(y) <= 1024.0))
+        return pow_libm(x, y);
+    tmp = ix - off;
+    lt = pow_log2_tab[(tmp >> 45) & 127];
+    ix -= tmp & 0xfff0000000000000u;
+    memcpy(&z, &ix, sizeof z);
+    r = z * lt[0] - 1.0;
+    p = r * (0x1.71547652b82fep+0 +
+             r * (-0x1.71547652b82fep-1 +
+                  r * (0x1.ec709dc3a03fdp-2 +
+                       r * (-0x1.71547652b82fep-2 +
+                            r * (0x1.2776c50ef9bfep-2 + r * -0x1.ec709dc3a03fdp-3)))));
+    /* k: tmp's exponent field as a signed 12-bit number */
+    L = ((double)((int)((tmp + 0x8000000000000000u) >> 52) - 2048) + lt[1]) + p;
+    t = y * L;
+    if (t < -160.0)
+        return 0.0f; /* x^y < 2^-159 */
+    if (!(t <= 160.0))
+        return pow_libm(x, y);
+    kd = t * 128.0 + shift;
+    kd -= shift;
+    f = t - kd * (1.0 / 128.0);
+    u = (unsigned)((int)kd + 128 * 1024); /* 128 e + j, e biased by 1024 */
+    j = u & 127u;
+    q = f * (0x1.62e42fefa39efp-1 +
+             f * (0x1.ebfbdff82c58fp-3 +
+                  f * (0x1.c6b08d704a0c0p-5 +
+                       f * (0x1.3b2ab6fba4e77p-7 + f * 0x1.5d87fe78a6731p-10))));
+    s = pow_exp2_tab[j] + pow_exp2_tab[j] * q;
+    iv = (uint64_t)((u >> 7) - 1024u + 1023u) << 52; /* 2^e, e in [-161, 160] */
+    memcpy(&sc, &iv, sizeof sc);
+    v = s * sc;
+    memcpy(&iv, &v, sizeof iv);
+    ev = (unsigned)(iv >> 52);
+    if (ev - 897u <= 253u) { /* v in [2^-126, 2^127) */
+        if (((uint32_t)iv & 0x1fffffffu) - (0x10000000u - 0x10000u) >= 0x20000u)
+            return (float)v;
+    } else if (ev < 1023u - 152u) {
+        return 0.0f;
+    }
+    return pow_libm(x, y);
+}
+#else
+static float pow_float(double x, double y)
+{
+    return (float)pow(x, y);
+}
+#endif
+
+float rtpi_pow_float(double x, double y)
+{
+    return pow_float(x, y);
+}
+
 static int seen(const rtpi_cnode *nd, const uint32_t *ext, size_t i)
 {
     if (!ext)
@@ -285,8 +586,8 @@ static inline int light_geometry(const float *nv, rtpi_v3 p, rtpi_v3 lp, double 
     return 1;
 }
 
-static inline void light_term(const float *nv, rtpi_v3 p, rtpi_v3 lp, int visible,
-                              const rtpi_material *m, float *out)
+static RTPI_FORCE_INLINE void light_term(const float *nv, rtpi_v3 p, rtpi_v3 lp, int visible,
+                                         const rtpi_material *m, float *out)
 {
     double ndl, rv;
     out[0] = out[1] = 0.0f;
@@ -295,7 +596,7 @@ static inline void light_term(const float *nv, rtpi_v3 p, rtpi_v3 lp, int visibl
     out[0] = (float)ndl;
     /* no highlight to weigh where ks is 0 (an edit making it non-zero
        recomputes these terms) */
-    out[1] = rv > 0.0 && m->ks > 0.0f ? (float)pow(rv, m->shine) : 0.0f;
+    out[1] = rv > 0.0 && m->ks > 0.0f ? pow_float(rv, m->shine) : 0.0f;
 }
 
 /* c_obj at a node: its texture factor t[0..2] and the material's
