@@ -257,33 +257,38 @@ rtpi_v3 rtpi_bump_normal(const rtp_scene *s, const rtpi_material *m, uint32_t pr
 /* (float)pow(x, y) for the highlight's term, to the bit, mostly without
    calling pow (a fifth of a moved light's redo on teapot, whose
    materials' shines, 3.0827 and 4.81884, are not integers).  v = 2^(y
-   log2 x) is made in double with a relative error below 2^-42 (see
-   below), pow's own is at most a few ulps of double (glibc's manual,
-   "Known Maximum Errors in Math Functions"; its pow is documented at
-   0.52 ulp): both then lie within 2^-41 v of x^y.  Where no float
-   rounding boundary (a midpoint between neighbouring floats) is that
-   close to v, (float)v and (float)pow(x, y) are the same float.  A
-   boundary of v's binade sits where v's 29 low mantissa bits (those a
-   float drops) are 2^28; 2^-41 v is below 2^12 ulps of v, and the test
-   asks for 2^16 (16x that, for any slip in the bound: pow is then called
-   for 1 v in 4096).  Elsewhere pow: x not a positive normal double, |y|
-   above 1024 (the bound grows with y), v outside the normal floats (a
-   float subnormal's boundaries do not sit at those bits), but where v <
-   2^-152 (x^y < 2^-150, half the least float: 0 either way).
+   log2 x) is made in double with a relative error below 2^-42.3 (see
+   below); glibc's pow (Arm's optimized routines, glibc 2.28 on) states a
+   worst case of 0.54 ulp of double, and 2^-44 is allowed for it here
+   (some 500 ulps): pow's and v lie within 2^-41 v of each other.  Where
+   no float rounding boundary (a midpoint between neighbouring floats)
+   lies that close to v, (float)v and (float)pow(x, y) are the same
+   float.  The boundaries of v's binade
+   sit where v's 29 low mantissa bits (those a float drops) are 2^28;
+   2^-41 v is below 2^12 ulps of v, and the test asks for 2^16 (16x that,
+   for any slip in the bound: pow is then called for 1 v in 4096; at a
+   binade's ends a float, not a boundary, lies within reach).  Elsewhere
+   pow: x not a positive normal double, |y| above 1024 (the bound grows
+   with y), v outside the normal floats (a float subnormal's boundaries
+   do not sit at those bits), but where v < 2^-152 (x^y < 2^-150, half
+   the least float: 0 either way).
 
-   The error: x = 2^k z, z in [0.7058, 1.4117), its 128th part i holds
-   1/c and log2 c rounded (pow_log2_tab, made with 200-bit mpmath:
-   c the middle of the part, log2 c = -log2 of the rounded 1/c); r =
-   z/c - 1 from one rounded product (the subtraction is exact: Sterbenz),
-   |r| < 2^-8.01, off by < 2^-52.99; log2(1 + r) by its series to r^6
-   (the rest below |r|^7 / (7 ln 2) < 2^-58); L = (k + log2 c) + p off by
-   < 2^-52.4 + 2^-51.9 |L|; t = y L off by < |y| 2^-52.3 + 2^-52 |t| (|t|
-   <= 160 here: < |y| 2^-52.3 + 2^-44.3).  2^t = 2^e 2^(j/128) 2^f, |f|
-   <= 1/256 exact (t - kd/128: two doubles within 1/256), 2^(j/128)
-   rounded (pow_exp2_tab), 2^f by its series to f^5 (rest < 2^-60), three
-   roundings of ~2^-53 each: relative < 2^-51.4 + ln 2 (error of t) <
-   2^-51.4 + |y| 2^-52.8 + 2^-44.8, below 2^-42.3 for |y| <= 1024.  In
-   double arithmetic only (FLT_EVAL_METHOD 0: SSE2, not x87). */
+   The error: x = 2^k z, z in [0.7058, 1.4117), its 128th part (by z's
+   bits, as in glibc's log2) holds 1/c and log2 c rounded (pow_log2_tab,
+   made with 200-bit mpmath: c the middle of the part, log2 c = -log2 of
+   the rounded 1/c); r = z/c - 1 from one rounded product (the
+   subtraction is exact: Sterbenz), |r| < 2^-8.01, off by <= 2^-53;
+   log2(1 + r) by its series to r^6 (the rest below |r|^7 / (7 ln 2) <
+   2^-58.3), off by < 2^-52.4 with r's error and the series' roundings;
+   L = (k + log2 c) + p off by < 2^-52.2 + 2^-52 |L|; t = y L off by <
+   |y| 2^-52.2 + 2^-51.4 |t| (|t| <= 160 here: < |y| 2^-52.2 + 2^-44.1).
+   2^t = 2^e 2^(j/128) 2^f, |f| <= 1/256 exact (t - kd/128: two doubles
+   within 1/256), 2^(j/128) rounded (pow_exp2_tab), 2^f by its series to
+   f^5 (rest < 2^-60.7), two roundings of 2^-53 besides: relative <
+   2^-51.9 + ln 2 (error of t) < 2^-51.9 + |y| 2^-52.7 + 2^-44.6, below
+   2^-42.3 for |y| <= 1024 (measured against powl: 2^-42.8 at |y| 1024,
+   2^-44.7 at the SPD shines).  In double arithmetic only
+   (FLT_EVAL_METHOD 0: SSE2, not x87). */
 #if defined(FLT_EVAL_METHOD) && FLT_EVAL_METHOD == 0
 static const double pow_log2_tab[128][2] = {
     {0x1.69be8c81fb00cp+0, -0x1.fecc6670c0ed3p-2},
@@ -538,6 +543,15 @@ static RTPI_FORCE_INLINE float pow_float(double x, double y)
     if (ev - 897u <= 253u) { /* v in [2^-126, 2^127) */
         if (((uint32_t)iv & 0x1fffffffu) - (0x10000000u - 0x10000u) >= 0x20000u)
             return (float)v;
+    } else if (ev - (1023u - 152u) < 26u) {
+        /* v in [2^-152, 2^-126): the float subnormals, whose boundaries
+           are (i + 1/2) 2^-149; w = v 2^149 (exact) below 2^23, so 2^-41
+           v is below 2^-18 of w's units: w's distance to i + 1/2 asked
+           above 2^-17 (w - its nearest integer exact: both below 2^23) */
+        double w = v * 0x1p149, wi = w + shift;
+        wi -= shift;
+        if (fabs(fabs(w - wi) - 0.5) > 0x1p-17)
+            return (float)v;
     } else if (ev < 1023u - 152u) {
         return 0.0f;
     }
@@ -550,6 +564,9 @@ static float pow_float(double x, double y)
 }
 #endif
 
+#if defined(__GNUC__)
+__attribute__((noinline))
+#endif
 float rtpi_pow_float(double x, double y)
 {
     return pow_float(x, y);
@@ -586,8 +603,9 @@ static inline int light_geometry(const float *nv, rtpi_v3 p, rtpi_v3 lp, double 
     return 1;
 }
 
-static RTPI_FORCE_INLINE void light_term(const float *nv, rtpi_v3 p, rtpi_v3 lp, int visible,
-                                         const rtpi_material *m, float *out)
+static RTPI_FORCE_INLINE void light_term_pow(const float *nv, rtpi_v3 p, rtpi_v3 lp,
+                                             int visible, const rtpi_material *m, float *out,
+                                             int pow_inline)
 {
     double ndl, rv;
     out[0] = out[1] = 0.0f;
@@ -596,7 +614,19 @@ static RTPI_FORCE_INLINE void light_term(const float *nv, rtpi_v3 p, rtpi_v3 lp,
     out[0] = (float)ndl;
     /* no highlight to weigh where ks is 0 (an edit making it non-zero
        recomputes these terms) */
-    out[1] = rv > 0.0 && m->ks > 0.0f ? pow_float(rv, m->shine) : 0.0f;
+    if (!(rv > 0.0 && m->ks > 0.0f))
+        out[1] = 0.0f;
+    else
+        out[1] = pow_inline ? pow_float(rv, m->shine) : rtpi_pow_float(rv, m->shine);
+}
+
+/* light_term's arithmetic with the power inline (rtpi_light_redo) or
+   called (the first evaluation's node_terms over every light, where
+   inline it cost mount's 2%: the spills around the loop's other work) */
+static RTPI_FORCE_INLINE void light_term(const float *nv, rtpi_v3 p, rtpi_v3 lp, int visible,
+                                         const rtpi_material *m, float *out)
+{
+    light_term_pow(nv, p, lp, visible, m, out, 0);
 }
 
 /* c_obj at a node: its texture factor t[0..2] and the material's
@@ -775,7 +805,7 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
             }
             m = &s->mats[rtpi_prim_material(s, nd->prim)];
             /* (the light's position taken once: light_term inline) */
-            light_term(nv + 6 * j, v3(nd->p[0], nd->p[1], nd->p[2]), lp, visible, m, tl);
+            light_term_pow(nv + 6 * j, v3(nd->p[0], nd->p[1], nd->p[2]), lp, visible, m, tl, 1);
             /* coeffs_node's sum for this light, node by node in its order
                (depth first, reflected subtree first: the order they are
                stored in), leaving out the nodes it does not reach */
