@@ -260,8 +260,9 @@ rtp_status rtp_image_write_stream(const rtp_image *image, FILE *stream,
                                   rtp_image_format format, rtp_error *err);
 /** Reads a PNG, PPM (P3/P6) or PFM; path "-" is stdin (format sniffed).
  *  The image is all the file holds: bytes after a PPM's or PFM's pixels
- *  are RTP_ERR_FORMAT, from stdin or a pipe too (read to its end; a P6
- *  may end in one line feed).  rtp_image_read_stream reads one image and
+ *  are RTP_ERR_FORMAT, from stdin or a pipe too (read to its end, or
+ *  16 MiB past the image: an endless source is refused; a P6 may end in
+ *  one line feed).  rtp_image_read_stream reads one image and
  *  leaves what follows it (the next image of a stream) unread. */
 rtp_status rtp_image_read(const char *path, const rtp_allocator *alloc,
                           rtp_image **out, rtp_error *err);

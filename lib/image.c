@@ -1008,14 +1008,21 @@ static rtp_status out_of_memory(const reader *r)
                       "out of memory reading the image");
 }
 
-/* Reads a stream to its end: @return the bytes read (ferror tells a
-   failed read). */
+/* A pipe's bytes after an image are counted up to this many: an endless
+   source behind a valid image (`cat a.pfm /dev/urandom`, `yes`) is then
+   refused at once instead of read for ever.  (16 MiB: a whole further
+   frame of a 2048x2048 RGB PFM is 48 MiB, so past it the count says
+   "over 16777216" rather than a length.) */
+#define REST_MAX ((long long)1 << 24)
+
+/* Reads a stream to its end, or REST_MAX + 1 bytes of it: @return the
+   bytes read (ferror tells a failed read). */
 static long long rest_bytes(FILE *f)
 {
     unsigned char buf[4096];
     long long n = 0;
     size_t got;
-    while ((got = fread(buf, 1, sizeof buf, f)) > 0)
+    while (n <= REST_MAX && (got = fread(buf, 1, sizeof buf, f)) > 0)
         n += (long long)got;
     return n;
 }
@@ -1056,9 +1063,9 @@ static rtp_status ppm_after(const reader *r, int ascii, int w, int h, int first,
                           "whitespace character");
         if (more == 1 && c == '\n')
             return RTP_OK;
-        return BAD(r, "PPM: %lld bytes after the pixel data: the header (P6 %dx%d) does "
+        return BAD(r, "PPM: %s%lld bytes after the pixel data: the header (P6 %dx%d) does "
                       "not describe the data (rtp reads one image a file)",
-                   more, w, h);
+                   more > REST_MAX ? "over " : "", more > REST_MAX ? REST_MAX : more, w, h);
     }
     pos = ftell(r->f);
     if (pos >= 0 && r->size == pos + 1) {
@@ -1432,9 +1439,10 @@ static rtp_status read_pfm(const reader *r, int grey,
             }
         }
         if (more > 0) {
-            st = BAD(r, "PFM: %lld bytes after the pixel data: the header (%s %dx%d) "
+            st = BAD(r, "PFM: %s%lld bytes after the pixel data: the header (%s %dx%d) "
                         "does not describe the data",
-                     more, grey ? "Pf, grey" : "PF, colour", w, h);
+                     more > REST_MAX ? "over " : "", more > REST_MAX ? REST_MAX : more,
+                     grey ? "Pf, grey" : "PF, colour", w, h);
             goto done;
         }
     }

@@ -202,6 +202,13 @@ expect_rc 1 sh -c "cat '$T/frames.pfm' | $RTP diff - '$T/f0.pfm'"
 grep -q "^rtp: <stdin>: PFM: $fsz bytes after the pixel data" "$T/err" && ok ||
     bad "frames through a pipe: $(cat "$T/err")"
 expect_rc 0 sh -c "cat '$T/f0.pfm' | $RTP diff - '$T/f0.pfm' --fail-above max_abs=0"
+# an endless source behind a valid image is refused, not read for ever
+expect_rc 1 sh -c "cat '$T/f0.pfm' /dev/zero | timeout 60 $RTP diff - '$T/f0.pfm'"
+grep -q "^rtp: <stdin>: PFM: over 16777216 bytes after the pixel data" "$T/err" && ok ||
+    bad "a PFM and /dev/zero through a pipe: $(cat "$T/err")"
+expect_rc 1 sh -c "cat '$T/f0.ppm' /dev/zero | timeout 60 $RTP diff - '$T/f0.ppm'"
+grep -q "^rtp: <stdin>: PPM: over 16777216 bytes after the pixel data" "$T/err" && ok ||
+    bad "a P6 and /dev/zero through a pipe: $(cat "$T/err")"
 expect_rc 1 sh -c "{ cat '$T/f0.pfm'; echo; } | $RTP diff '$T/f0.pfm' /dev/stdin"
 grep -q "^rtp: /dev/stdin: PFM: 1 bytes after the pixel data" "$T/err" && ok ||
     bad "a PFM and a line feed through a pipe: $(cat "$T/err")"
