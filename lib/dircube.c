@@ -2081,14 +2081,13 @@ static RTPI_FORCE_INLINE uint32_t lb_walk(const rtpi_lightbuf *lb, const rtp_sce
     return RTPI_NONE;
 }
 
-uint32_t rtpi_lightbuf_occluder(const rtpi_lightbuf *lb, const rtp_scene *s,
-                                const rtpi_ray *ray, uint32_t skip)
-{
-    return rtpi_lightbuf_occluder_first(lb, s, ray, skip, RTPI_NONE);
-}
-
-uint32_t rtpi_lightbuf_occluder_first(const rtpi_lightbuf *lb, const rtp_scene *s,
-                                      const rtpi_ray *ray, uint32_t skip, uint32_t first)
+/* rtpi_lightbuf_occluder_first's body, inline in both entries: a query
+   without a first candidate (most of them: teapot 133 k of 175 k) no
+   longer passes through the other as a second call (lightbuf:256, third
+   move, 512^2 SPD: teapot 189.93 -> 189.66 M, balls 259.38 -> 258.87). */
+static RTPI_FORCE_INLINE uint32_t lb_occluder(const rtpi_lightbuf *lb, const rtp_scene *s,
+                                              const rtpi_ray *ray, uint32_t skip,
+                                              uint32_t first)
 {
     size_t cell, k;
     rtpi_v3 dn;
@@ -2116,6 +2115,18 @@ uint32_t rtpi_lightbuf_occluder_first(const rtpi_lightbuf *lb, const rtp_scene *
         return RTPI_NONE; /* no primitive can be met in these directions */
     return lb->cone ? lb_walk(lb, s, ray, skip, lb->off[cell], lb->off[cell + 1], dn, 1, &w)
                     : lb_walk(lb, s, ray, skip, lb->off[cell], lb->off[cell + 1], dn, 0, &w);
+}
+
+uint32_t rtpi_lightbuf_occluder(const rtpi_lightbuf *lb, const rtp_scene *s,
+                                const rtpi_ray *ray, uint32_t skip)
+{
+    return lb_occluder(lb, s, ray, skip, RTPI_NONE);
+}
+
+uint32_t rtpi_lightbuf_occluder_first(const rtpi_lightbuf *lb, const rtp_scene *s,
+                                      const rtpi_ray *ray, uint32_t skip, uint32_t first)
+{
+    return lb_occluder(lb, s, ray, skip, first);
 }
 
 void rtpi_lightbuf_free(rtpi_lightbuf *lb, const rtp_allocator *a)
