@@ -2095,9 +2095,9 @@ static RTPI_FORCE_INLINE uint32_t lb_occluder(const rtpi_lightbuf *lb, const rtp
     lb_tri_ray w;
     w.made = -1;
     if (first != RTPI_NONE) {
-        /* (rtpi_intersect_prim's answer: a triangle that cannot be hit
-           is a degenerate one, which it reports missed) */
-        if (first < s->ntris ? dc_hittable(s, first) && lb_tri_hit(s, first, ray, &w)
+        /* (rtpi_intersect_prim's answer without its zero-area test, as
+           lb_walk's: a triangle `first` is hittable, dircube.h) */
+        if (first < s->ntris ? lb_tri_hit(s, first, ray, &w)
                              : rtpi_intersect_prim(s, first, ray, &h))
             return first;
     }

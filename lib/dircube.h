@@ -231,7 +231,13 @@ uint32_t rtpi_lightbuf_occluder(const rtpi_lightbuf *lb, const rtp_scene *s,
 /* The same, with primitive `first` (RTPI_NONE: none; not skip) asked
    before the cell's list: a hit of it is returned as rtpi_intersect_prim
    would find it, and a triangle's test shares the watertight set-up the
-   list's walk makes (a shadow query's last occluder, rtpi_shadow_cache). */
+   list's walk makes (a shadow query's last occluder, rtpi_shadow_cache).
+   A triangle `first` must be hittable (rtpi_prim_hittable: not of zero
+   area), as every occluder a light buffer answers is (its lists hold no
+   other): it is asked without that test, as the lists' triangles are.
+   (callgrind, lightbuf:256, third move, 512^2 SPD: gears 305.4 ->
+   304.2 M without it, 141 k queries asking a first; teapot 189.7 ->
+   189.3.) */
 uint32_t rtpi_lightbuf_occluder_first(const rtpi_lightbuf *lb, const rtp_scene *s,
                                       const rtpi_ray *ray, uint32_t skip, uint32_t first);
 

@@ -526,7 +526,9 @@ int rtpi_shadow_visible_cached(const rtpi_shadow *sh, rtpi_shadow_cache *c, cons
            9% of a move).  The point's own primitive, where it is in the
            way, answers before it: the same answer, both being hits (for
            a sphere or cone first, as above: mount's glass balls, their
-           own test a call, 0.8% more). */
+           own test a call, 0.8% more).  A triangle in c->last was
+           answered by this light buffer, whose lists hold hittable ones
+           only: occluder_first's condition on `first`. */
         int own = sh_own(sh, prim, op);
         if (own == 1) {
             occ = prim;
