@@ -1317,6 +1317,24 @@ static RTPI_FORCE_INLINE void lb_tri_points(const rtp_scene *s, uint32_t prim, r
         p[k] = v3_from_f(s->pos + 3 * (size_t)t->v[k]);
 }
 
+/* A plane entry as the light buffer keeps it (rtpi_lightbuf's plane):
+   turned to the light's side, so that the walk asks so > t alone, and t
+   HUGE_VAL where there is no test.  Negating n, n.p0 and t is exact, and
+   so the walk's n.o - n.p0 is exactly the negated one's: the same
+   candidates are turned away as by so < t on the other side.  (The
+   sign's choice and the zero test had been a third of the test:
+   lightbuf:256, third move, 512^2 SPD, gears 304.18 -> 299.51 M,
+   teapot 189.31 -> 186.91.) */
+static RTPI_FORCE_INLINE void lb_plane_side(double *pl)
+{
+    int k;
+    if (pl[4] == 0.0)
+        pl[4] = HUGE_VAL;
+    else if (pl[4] < 0.0)
+        for (k = 0; k < 5; k++)
+            pl[k] = -pl[k];
+}
+
 /* lb_plane_of of candidate prim; t 0 for other primitives.  (Loading the
    vertices itself: through lb_tri_points and lb_plane_of, the exact
    move's planes, rtpi_tri_planes, took 0.8 M more instructions on
@@ -1485,12 +1503,16 @@ static int lb_part(void *ctx, int part)
         if (prim < w->c.s->ntris) { /* (lb_count inlined into it) */
             rtpi_v3 p[3];
             lb_tri_points(w->c.s, prim, p);
-            if (pl)
+            if (pl) {
                 lb_plane_of(p, w->c.L, w->S, pl);
+                lb_plane_side(pl);
+            }
             dc_cover_tri(&w->c, prim, p, ang, lb_count, lf);
         } else {
-            if (pl)
+            if (pl) {
                 lb_plane(w->c.s, prim, w->c.L, w->S, pl);
+                lb_plane_side(pl);
+            }
             dc_cover(&w->c, prim, ang, lb_count, lf);
         }
     }
@@ -2057,13 +2079,12 @@ static RTPI_FORCE_INLINE uint32_t lb_walk(const rtpi_lightbuf *lb, const rtp_sce
         if (cd->prim == skip)
             continue;
         if (!round || cd->prim < ntris) {
-            if (pl && pl[5 * rank + 4] != 0.0) {
+            if (pl) {
                 /* a triangle with the light on one side of its plane: the
                    origin on that side too, the segment misses it (a floor
                    under the scene is in most cells' lists) */
                 const double *q = pl + 5 * (size_t)rank;
-                double so = q[0] * ray->o.x + q[1] * ray->o.y + q[2] * ray->o.z - q[3];
-                if (q[4] > 0.0 ? so > q[4] : so < q[4])
+                if (q[0] * ray->o.x + q[1] * ray->o.y + q[2] * ray->o.z - q[3] > q[4])
                     continue;
             }
         } else {

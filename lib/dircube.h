@@ -178,10 +178,11 @@ typedef struct rtpi_lightbuf {
     uint32_t *ref;       /* candidate ranks, ascending within a cell */
     rtpi_lb_cand *cand;  /* by rank: ascending near */
     /* by rank, 5 each, where the scene has triangles: a triangle's plane
-       n (unnormalised), n.p0, and t: 0, or where the light lies farther
-       than |t| from the plane on its side (the sign of t), |t| the
-       distance (times |n|) at which a shadow ray's origin on that side
-       too lets the segment miss it (see rtpi_lightbuf_occluder) */
+       n (unnormalised, turned to the light's side), n.p0, and t:
+       HUGE_VAL (no test), or the light lies farther than t from the
+       plane, t the distance (times |n|) at which a shadow ray's origin
+       on the light's side too (n.o - n.p0 > t) lets the segment miss it
+       (lb_plane_at, lb_plane_side) */
     double *plane;
     /* by rank, 4 each, where spheres and cones are at least a sixteenth
        of the scene's primitives (NULL elsewhere; set for those only):
