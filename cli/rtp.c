@@ -1696,11 +1696,11 @@ static int cmd_trace(int argc, char **argv)
                    : rtp_trace(scene, &opt, &img, &st, &err)) != RTP_OK) {
         progress_end(&prog);
         /* an error of no file (out of memory in the kd-tree's build, a
-           limit) said with the scene it stopped */
+           limit, keys that leave no view) said with the scene it stopped,
+           stdin's named <stdin> as every message names it */
         if (!err.file[0] && err.line == 0) {
             char buf[600];
-            fprintf(stderr, "rtp: %s: %s\n",
-                    strcmp(scene_path, "-") ? scene_path : "the scene on stdin",
+            fprintf(stderr, "rtp: %s: %s\n", in_name(scene_path),
                     rtp_error_format(&err, buf, sizeof buf));
         } else {
             fail_err(&err);

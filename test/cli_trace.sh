@@ -251,6 +251,11 @@ expect_rc 0 $RTP trace "$T/fixed.nff" -i "$T/fixed.pfm" -q
 cmp -s "$T/samept.pfm" "$T/fixed.pfm" && ok || bad "a v block repaired by --set camera.at: not the file's image"
 printf 'camera.at=0,0,0\n' >"$T/cam.params"
 expect_rc 0 $RTP trace "$T/samept.nff" -i "$T/samep2.pfm" -q --params "$T/cam.params"
+# keys that make at equal to from again are said as the keys' fault, with
+# the scene's name: stdin's is <stdin>, as every message names it (README)
+expect_rc 1 $RTP trace - -i "$T/samep3.pfm" -q --set camera.at=0,0,0 --set camera.from=0,0,0 <"$T/fixed.nff"
+grep -q "^rtp: <stdin>: camera.at equals camera.from: no view to trace" "$T/err" && [ ! -e "$T/samep3.pfm" ] && ok ||
+    bad "keys making at equal to from, scene on stdin: $(cat "$T/err")"
 
 # A tree file is on the disk before its rename and the rename after it:
 # fsync of the temporary file, then the rename, then fsync of the folder
