@@ -861,6 +861,98 @@ static void test_copies_one_image(void)
     rtp_scene_destroy(many);
 }
 
+/* Copies of cylinders, cones and spheres (each primitive given once, twice
+   and five times in place, one material a primitive) make the one copy's
+   image bit for bit, traced and with a light moved in every shadow mode:
+   a copy is hit at the same t as the primitive, the hit's shadow and
+   secondary rays leave from past every copy's surface (rtpi_offset_origin:
+   4e-7 |p| against the float position's 1e-7 |p|), and from outside a
+   cone's convex solid, where the primitive itself is left out of its
+   shadow ray, its copies miss it as it would.  The scene has open ends
+   (insides seen, the inside's own ray testing the cone itself), a glass
+   cylinder, a pointed cone and a light among the primitives.  (Session
+   40 saw rings and lattice differ when doubled: its doubling script took
+   SPD's one-line cone for NFF's three lines, and duplicated the lines
+   after it, materials among them; the library was right.) */
+static void test_copies_curved(void)
+{
+    static const char *const head =
+        "v from 0 -6 2.5 at 0 0 0.6 up 0 0 1 angle 40 hither 0.01 resolution 40 40\n"
+        "b 0.1 0.1 0.2\n"
+        "l 4 -3 6\nl -5 -4 3\nl 0.5 0.3 0.9\n"
+        "f 0.8 0.8 0.8 0.8 0 0 0 1\n"
+        "p 4 -5 -5 0 5 -5 0 5 5 0 -5 5 0\n";
+    /* material, primitive: cylinders, cones (one pointed), spheres */
+    static const char *const prims[][2] = {
+        {"f 1 0.3 0.2 0.6 0.4 20 0 1\n", "c -1.5 0 0.3 0.3 1.2 0.7 1.8 0.3\n"},
+        {"f 0.2 0.9 0.3 0.5 0.3 20 0.5 1.5\n", "c 0.8 0.5 0 0.25 0.8 0.5 2 0.25\n"},
+        {"f 0.3 0.4 1 0.7 0.3 30 0 1\n", "c 1.8 -0.5 0.4 0.35 1 -1.4 1.6 0.35\n"},
+        {"f 1 0.3 0.2 0.6 0.4 20 0 1\n", "c -0.3 -1.2 0 0.5 -0.3 -1.2 1.4 0\n"},
+        {"f 0.2 0.9 0.3 0.5 0.3 20 0.5 1.5\n", "c 2.2 1 0.2 0.1 1.6 0.2 1.5 0.45\n"},
+        {"f 0.2 0.9 0.3 0.5 0.3 20 0.5 1.5\n", "s 0.1 -0.3 0.6 0.45\n"},
+        {"f 0.3 0.4 1 0.7 0.3 30 0 1\n", "s -1 1 1.6 0.3\n"},
+    };
+    static const rtp_shadow_mode modes[] = {RTP_SHADOWS_EXACT, RTP_SHADOWS_LIGHTBUF,
+                                            RTP_SHADOWS_ITEMBUF, RTP_SHADOWS_AUTO};
+    static const int ks[] = {1, 2, 5};
+    const size_t npx = sizeof(float) * 3 * 40 * 40;
+    rtp_image *img[3][5];
+    rtp_trace_stats st[3];
+    int c, i, j, m;
+    memset(img, 0, sizeof img);
+    for (c = 0; c < 3; c++) {
+        char text[4096];
+        size_t n = strlen(head);
+        rtp_scene *s;
+        rtp_tree *t = NULL;
+        rtp_trace_options o;
+        memcpy(text, head, n + 1);
+        for (i = 0; i < (int)(sizeof prims / sizeof prims[0]); i++) {
+            strcat(text, prims[i][0]);
+            for (j = 0; j < ks[c]; j++)
+                strcat(text, prims[i][1]);
+        }
+        CHECK(strlen(text) < sizeof text);
+        s = load_text(text);
+        CHECK(s != NULL);
+        if (!s)
+            continue;
+        memset(&o, 0, sizeof o);
+        o.width = o.height = 40;
+        o.threads = 1;
+        CHECK(rtp_record(s, &o, &t, &img[c][0], &st[c], NULL) == RTP_OK);
+        for (m = 0; t && m < 4; m++) {
+            rtp_eval_options eo;
+            memset(&eo, 0, sizeof eo);
+            eo.shadows = modes[m];
+            eo.shadow_res = 64;
+            /* over the glass cylinder's top, then among the primitives */
+            CHECK(rtp_tree_set(t, "light.0.pos", m & 1 ? "0.9,0.4,2.6" : "1,-2,2.5", NULL) ==
+                  RTP_OK);
+            CHECK(rtp_tree_set(t, "light.2.pos", m & 1 ? "0.2,0.4,1" : "-0.6,-0.4,0.8", NULL) ==
+                  RTP_OK);
+            CHECK(rtp_tree_eval(t, &eo, &img[c][1 + m], NULL, NULL) == RTP_OK);
+        }
+        rtp_tree_destroy(t);
+        rtp_scene_destroy(s);
+    }
+    for (c = 1; c < 3; c++) {
+        for (m = 0; m < 5; m++) {
+            CHECK(img[0][m] && img[c][m]);
+            if (img[0][m] && img[c][m])
+                CHECK_MSG(memcmp(img[0][m]->pixels, img[c][m]->pixels, npx) == 0,
+                          "%d copies: image %d differs from one copy's", ks[c], m);
+        }
+        CHECK(st[c].shadow_rays == st[0].shadow_rays &&
+              st[c].reflected_rays == st[0].reflected_rays &&
+              st[c].refracted_rays == st[0].refracted_rays);
+    }
+    CHECK(st[0].shadow_rays > 0 && st[0].refracted_rays > 0);
+    for (c = 0; c < 3; c++)
+        for (m = 0; m < 5; m++)
+            rtp_image_destroy(img[c][m]);
+}
+
 /* The highlight's (float)pow(x, y) made mostly without pow
    (rtpi_pow_float): the same bits as (float)pow over a fixed sweep of
    bases in (0, 1] and a little above 1, near 0, 1 and the double
@@ -936,5 +1028,6 @@ int main(void)
     RUN(test_golden_checker);
     RUN(test_set_values_as_nff);
     RUN(test_copies_one_image);
+    RUN(test_copies_curved);
     return check_report();
 }
