@@ -1685,7 +1685,7 @@ static int cmd_trace(int argc, char **argv)
         rtp_scene_get_info(scene, &si);
         if (si.triangles + si.spheres + si.cones == 0)
             fprintf(stderr, "rtp: warning: %s has no objects: the image is the background\n",
-                    strcmp(scene_path, "-") ? scene_path : "the scene on stdin");
+                    in_name(scene_path)); /* (stdin's <stdin>, as every message names it) */
     }
     progress_start(&prog, verbosity > 0 && isatty(2));
     if (verbosity > 0 && isatty(2)) {
