@@ -931,11 +931,15 @@ static int one_output(const char *a, const char *b)
                                    sa.st_ino == sb.st_ino);
 }
 
-static int same_output(const char *cmd, const char *a, const char *b)
+/* ra, rb: what each output is ("the image", "the --stats file"): two
+   names alike said only "x and x are one file", not which options gave
+   them (the default image among them). */
+static int same_output(const char *cmd, const char *ra, const char *a, const char *rb,
+                       const char *b)
 {
     if (!one_output(a, b))
         return 0;
-    msg("%s: %s and %s are one file: give each output its own", cmd, a, b);
+    msg("%s: %s %s and %s %s are one file: give each output its own", cmd, ra, a, rb, b);
     return 1;
 }
 
@@ -1498,6 +1502,7 @@ static int cmd_trace(int argc, char **argv)
     const char *scene_path = NULL, *image_path = NULL, *stats_path = NULL;
     const char *tree_path = NULL;
     char *default_image = NULL;
+    const char *image_role; /* (the image, or the default image, in messages) */
     rtp_trace_options opt;
     rtp_trace_stats st;
     rtp_tree *tree = NULL;
@@ -1611,9 +1616,10 @@ static int cmd_trace(int argc, char **argv)
     }
     /* two outputs on one file: a usage error, as two on stdout are (it
        was exit 1) */
-    if (same_output("trace", tree_path, image_path) ||
-        same_output("trace", tree_path, stats_path) ||
-        same_output("trace", image_path, stats_path))
+    image_role = image_path == default_image ? "the default image" : "the image";
+    if (same_output("trace", "the tree", tree_path, image_role, image_path) ||
+        same_output("trace", "the tree", tree_path, "the --stats file", stats_path) ||
+        same_output("trace", image_role, image_path, "the --stats file", stats_path))
         goto usage;
     /* (the default's format is known: a scene named '' made it ".png",
        said instead of "no scene file name") */
@@ -1938,7 +1944,7 @@ static int cmd_diff(int argc, char **argv)
         if (outputs_over_inputs("diff", ins, 2, outs, 2))
             goto usage;
     }
-    if (same_output("diff", heat, stats_path))
+    if (same_output("diff", "the heat map", heat, "the --stats file", stats_path))
         goto usage;
     /* outputs checked before the inputs are read, as trace's are */
     if (!output_ok(heat) || !output_ok(stats_path))
@@ -2486,7 +2492,9 @@ static int cmd_reeval(int argc, char **argv)
             goto usage;
     }
     if (stdout_taken("reeval", stats_path, image_path, NULL) ||
-        (!stream && same_output("reeval", image_path, stats_path)))
+        (!stream && same_output("reeval",
+                                image_path == default_image ? "the default image" : "the image",
+                                image_path, "the --stats file", stats_path)))
         goto usage;
     if (stream && strcmp(image_path, "-") != 0) {
         char probe[4096];
@@ -3053,7 +3061,7 @@ static int cmd_merge(int argc, char **argv)
         msg("merge: only one part can come from stdin (-, or another name of it)");
         goto usage;
     }
-    if (same_output("merge", out_tree, out_image))
+    if (same_output("merge", "the tree", out_tree, "the image", out_image))
         goto usage;
     if ((out_image && !image_name_ok(out_image)) || !output_ok(out_image) ||
         !output_ok(out_tree))

@@ -477,23 +477,27 @@ expect_rc 0 sh -c "$RTP trace $S --size 4x4 -q -i '$T/err2.pfm' 2>>'$T/e.log'"
 [ "$(head -n 1 "$T/e.log")" = OLDLOG ] && [ "$(wc -c <"$T/e.log")" -gt 7 ] && ok ||
     bad "an image to a /proc/self/fd link replaced the file instead of appending"
 # (a usage error on every command, as two outputs on stdout are: it was
-# exit 1; trace's default image too, which --stats had replaced, exit 0)
-for c in "trace $S --size 4x4 -i $T/one.pfm --stats $T/one.pfm" \
-         "trace $S --size 4x4 -o $T/one.pfm -i $T/one.pfm" \
-         "reeval $T/t.rtp -i $T/one.pfm --stats $T/one.pfm" \
-         "diff $T/t.pfm $T/r.pfm --heatmap $T/one.pfm --stats $T/one.pfm" \
-         "merge -o $T/one.pfm -i $T/one.pfm $T/t.rtp"; do
+# exit 1; trace's default image too, which --stats had replaced, exit 0).
+# The message says which outputs they are: "x and x are one file" did not
+# (after '|': what it names, as "the image" and "the --stats file")
+for c in "trace $S --size 4x4 -i $T/one.pfm --stats $T/one.pfm|the image|the --stats file" \
+         "trace $S --size 4x4 -o $T/one.pfm -i $T/one.pfm|the tree|the image" \
+         "reeval $T/t.rtp -i $T/one.pfm --stats $T/one.pfm|the image|the --stats file" \
+         "diff $T/t.pfm $T/r.pfm --heatmap $T/one.pfm --stats $T/one.pfm|the heat map|the --stats file" \
+         "merge -o $T/one.pfm -i $T/one.pfm $T/t.rtp|the tree|the image"; do
     rm -f "$T/one.pfm"
-    expect_rc 2 $RTP $c
-    grep -q "one file" "$T/err" && [ ! -e "$T/one.pfm" ] && ok ||
-        bad "two outputs on one file, $c: $(cat "$T/err")"
+    r1=${c#*|}; r2=${r1#*|}; r1=${r1%%|*}
+    expect_rc 2 $RTP ${c%%|*}
+    grep -q ": $r1 $T/one.pfm and $r2 $T/one.pfm are one file" "$T/err" && [ ! -e "$T/one.pfm" ] && ok ||
+        bad "two outputs on one file, ${c%%|*}: $(cat "$T/err")"
 done
 mkdir -p "$T/dflt"
 cp $S "$T/dflt/sc.nff"
 abs=$(cd "$(dirname "$RTP")" && pwd)/$(basename "$RTP")
 expect_rc 2 sh -c "cd '$T/dflt' && '$abs' trace sc.nff --size 4x4 --stats sc.$(
     $RTP version | grep -q 'with: png' && echo png || echo ppm)"
-grep -q "one file" "$T/err" && [ ! -e "$T/dflt/sc.png" ] && [ ! -e "$T/dflt/sc.ppm" ] && ok ||
+grep -q "the default image sc\.p[np][gm] and the --stats file sc\.p[np][gm] are one file" "$T/err" &&
+    [ ! -e "$T/dflt/sc.png" ] && [ ! -e "$T/dflt/sc.ppm" ] && ok ||
     bad "trace's default image as its --stats file: $(cat "$T/err")"
 mkdir -p "$T/pp"
 (echo light.0.pos=1,1,1; sleep 1; echo light.0.pos=1,2,1) |
