@@ -1879,13 +1879,19 @@ static int cmd_diff(int argc, char **argv)
                 memcpy(num, eq + 1, vn);
                 num[vn] = '\0';
             }
-            if (!eq || n >= sizeof fl->metric || vn >= sizeof num ||
-                parse_double(num, &fl->value)) {
+            if (!eq || n >= sizeof fl->metric) {
                 msg("--fail-above %s: expected METRIC=VALUE", v);
                 goto usage;
             }
             memcpy(fl->metric, v, n);
             fl->metric[n] = '\0';
+            /* (psnr=inf, "identical or fail", had been told it was not
+               METRIC=VALUE) */
+            if (vn >= sizeof num || parse_double(num, &fl->value)) {
+                msg("--fail-above %s: expected a finite number after '='%s", v,
+                    strcmp(fl->metric, "psnr") == 0 ? " (identical images: max_abs=0)" : "");
+                goto usage;
+            }
             if (strcmp(fl->metric, "mae") && strcmp(fl->metric, "rmse") &&
                 strcmp(fl->metric, "max_abs") && strcmp(fl->metric, "psnr") &&
                 strcmp(fl->metric, "above")) {

@@ -352,6 +352,17 @@ grep -q "light.3.pos: no such light (the scene has 2; light.2.pos adds one)" "$T
 expect_rc 1 $RTP trace $S --size 8x6 --set light.2.pos=1,2 -i "$T/addx.pfm"
 [ ! -e "$T/addx.pfm" ] && ok || bad "a refused light.2.pos wrote an image"
 expect_rc 2 $RTP diff "$T/t.pfm" "$T/t.pfm" --fail-above max_abs=0x1
+# a limit that is not a finite number is said as such, not as a malformed
+# METRIC=VALUE (psnr=inf is how one asks for identical images)
+expect_rc 2 $RTP diff "$T/t.pfm" "$T/t.pfm" --fail-above psnr=inf
+grep -q "^rtp: --fail-above psnr=inf: expected a finite number after '=' (identical images: max_abs=0)" \
+    "$T/err" && ok || bad "--fail-above psnr=inf: $(cat "$T/err")"
+expect_rc 2 $RTP diff "$T/t.pfm" "$T/t.pfm" --fail-above mae=abc
+grep -q "^rtp: --fail-above mae=abc: expected a finite number after '='$" "$T/err" && ok ||
+    bad "--fail-above mae=abc: $(cat "$T/err")"
+expect_rc 2 $RTP diff "$T/t.pfm" "$T/t.pfm" --fail-above mae
+grep -q "^rtp: --fail-above mae: expected METRIC=VALUE" "$T/err" && ok ||
+    bad "--fail-above mae: $(cat "$T/err")"
 expect_rc 2 $RTP version extra
 expect_rc 0 $RTP version --help
 grep -q "usage: rtp version" "$T/out" && ok || bad "version --help"
