@@ -1058,14 +1058,15 @@ static rtp_status ppm_after(const reader *r, int ascii, int w, int h, int first,
         if (ferror(r->f))
             return ended(r, "bytes after the pixel data");
         if (more == 1 && *r->term == '\r' && first == '\n')
-            return BAD(r, "PPM: 1 bytes after the pixel data: its maximum value's "
+            return BAD(r, "PPM: 1 byte after the pixel data: its maximum value's "
                           "line ends in CR LF? Netpbm's header ends in one "
                           "whitespace character");
         if (more == 1 && c == '\n')
             return RTP_OK;
-        return BAD(r, "PPM: %s%lld bytes after the pixel data: the header (P6 %dx%d) does "
+        return BAD(r, "PPM: %s%lld byte%s after the pixel data: the header (P6 %dx%d) does "
                       "not describe the data (rtp reads one image a file)",
-                   more > REST_MAX ? "over " : "", more > REST_MAX ? REST_MAX : more, w, h);
+                   more > REST_MAX ? "over " : "", more > REST_MAX ? REST_MAX : more,
+                   more == 1 ? "" : "s", w, h);
     }
     pos = ftell(r->f);
     if (pos >= 0 && r->size == pos + 1) {
@@ -1079,16 +1080,16 @@ static rtp_status ppm_after(const reader *r, int ascii, int w, int h, int first,
         if (fseek(r->f, pos, SEEK_SET) == 0)
             last = getc(r->f);
         if (term == '\r' && first == '\n')
-            return BAD(r, "PPM: 1 bytes after the pixel data: its maximum value's "
+            return BAD(r, "PPM: 1 byte after the pixel data: its maximum value's "
                           "line ends in CR LF? Netpbm's header ends in one "
                           "whitespace character");
         if (last == '\n' && term != EOF)
             return RTP_OK;
     }
     if (pos >= 0 && r->size > pos)
-        return BAD(r, "PPM: %lld bytes after the pixel data: the header (P6 %dx%d) does "
+        return BAD(r, "PPM: %lld byte%s after the pixel data: the header (P6 %dx%d) does "
                       "not describe the data (rtp reads one image a file)",
-                   r->size - pos, w, h);
+                   r->size - pos, r->size - pos == 1 ? "" : "s", w, h);
     return RTP_OK;
 }
 
@@ -1439,10 +1440,10 @@ static rtp_status read_pfm(const reader *r, int grey,
             }
         }
         if (more > 0) {
-            st = BAD(r, "PFM: %s%lld bytes after the pixel data: the header (%s %dx%d) "
-                        "does not describe the data",
+            st = BAD(r, "PFM: %s%lld byte%s after the pixel data: the header (%s %dx%d) "
+                        "does not describe the data (rtp reads one image a file)",
                      more > REST_MAX ? "over " : "", more > REST_MAX ? REST_MAX : more,
-                     grey ? "Pf, grey" : "PF, colour", w, h);
+                     more == 1 ? "" : "s", grey ? "Pf, grey" : "PF, colour", w, h);
             goto done;
         }
     }

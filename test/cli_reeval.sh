@@ -210,8 +210,13 @@ expect_rc 1 sh -c "cat '$T/f0.ppm' /dev/zero | timeout 60 $RTP diff - '$T/f0.ppm
 grep -q "^rtp: <stdin>: PPM: over 16777216 bytes after the pixel data" "$T/err" && ok ||
     bad "a P6 and /dev/zero through a pipe: $(cat "$T/err")"
 expect_rc 1 sh -c "{ cat '$T/f0.pfm'; echo; } | $RTP diff '$T/f0.pfm' /dev/stdin"
-grep -q "^rtp: /dev/stdin: PFM: 1 bytes after the pixel data" "$T/err" && ok ||
+grep -q "^rtp: /dev/stdin: PFM: 1 byte after the pixel data" "$T/err" && ok ||
     bad "a PFM and a line feed through a pipe: $(cat "$T/err")"
+# one stray byte (not a line feed) after a P6 file's pixels: counted in the singular
+{ cat "$T/f0.ppm"; printf x; } >"$T/x1.ppm"
+expect_rc 1 $RTP diff "$T/x1.ppm" "$T/f0.ppm"
+grep -q "^rtp: $T/x1.ppm: PPM: 1 byte after the pixel data: the header (P6 " "$T/err" && ok ||
+    bad "a P6 file and one stray byte: $(cat "$T/err")"
 { printf 'Pf\n'; sed -n 2,3p "$T/f0.pfm"; tail -c +$(head -n 3 "$T/f0.pfm" | wc -c | tr -d ' ') "$T/f0.pfm" | tail -c +2; } >"$T/grey.pfm"
 expect_rc 1 sh -c "cat '$T/grey.pfm' | $RTP diff - '$T/f0.pfm'"
 grep -q "^rtp: <stdin>: PFM: .* bytes after the pixel data: the header (Pf, grey" "$T/err" && ok ||
@@ -222,7 +227,7 @@ grep -q "^rtp: <stdin>: PPM: 2 bytes after the pixel data" "$T/err" && ok ||
     bad "a P6 and two line feeds through a pipe: $(cat "$T/err")"
 # (a header of CR LF lines: its last LF was read as the first sample)
 expect_rc 1 sh -c "printf 'P6\r\n2 1\r\n255\r\nABCDEF' | $RTP diff - '$T/f0.ppm'"
-grep -q "^rtp: <stdin>: PPM: 1 bytes after the pixel data: its maximum value's line ends in CR LF" \
+grep -q "^rtp: <stdin>: PPM: 1 byte after the pixel data: its maximum value's line ends in CR LF" \
     "$T/err" && ok || bad "a P6 of CR LF lines through a pipe: $(cat "$T/err")"
 expect_rc 1 sh -c "printf 'P3 1 1 255 1 2 3 4\n' | $RTP diff - '$T/f0.ppm'"
 grep -q "^rtp: <stdin>: PPM: more after the last of the 1x1 pixels' samples" "$T/err" && ok ||

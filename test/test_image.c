@@ -539,7 +539,7 @@ static void test_pfm_file_length(void)
    emit it) are the header's, read from a file or a stream; other text
    after the scale is refused naming it.  (The format asks for one
    whitespace character after the scale: the blank was taken for it and
-   the '\n' for a pixel byte, "1 bytes after the pixel data".) */
+   the '\n' for a pixel byte, "1 byte after the pixel data".) */
 static void test_pfm_header_blanks(void)
 {
     static const char *const ok_headers[] = {
