@@ -444,7 +444,7 @@ double rtpi_offset_floor(const rtp_scene *s, int *per_prim);
    computed in double from the primitive's coordinates, so it may lie a
    few of their double ulps off the surface: beyond 4e-7 |p| where p is
    near the origin on a primitive far larger (a ground quad or sphere
-   1e10 across under a scene of size 1 reflected and shadowed itself in
+   1e12 across under a scene of size 1 reflected and shadowed itself in
    40% of its pixels). */
 double rtpi_prim_offset_floor(const rtp_scene *s, uint32_t prim, double floor);
 
