@@ -1385,7 +1385,7 @@ static RTPI_FORCE_INLINE void lb_plane_turned(const rtpi_v3 p[3], rtpi_v3 L, dou
     }
 }
 
-/* lb_plane_of of candidate prim; t 0 for other primitives.  (Loading the
+/* lb_plane_at of candidate prim; t 0 for other primitives.  (Loading the
    vertices itself: through lb_tri_points and lb_plane_at, the exact
    move's planes, rtpi_tri_planes, took 0.8 M more instructions on
    gears.) */
