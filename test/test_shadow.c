@@ -571,6 +571,109 @@ static void test_lightbuf_threads(void)
     }
 }
 
+/* lb_build_paths's buffer a against b: cells, entries, candidates and
+   planes bit for bit. */
+static int lb_equal(const rtpi_lightbuf *a, const rtpi_lightbuf *b)
+{
+    size_t k;
+    int same = a->res == b->res && a->w.ncells == b->w.ncells && a->nrefs == b->nrefs &&
+               a->ncand == b->ncand &&
+               memcmp(a->off, b->off, (a->w.ncells + 1) * sizeof *a->off) == 0 &&
+               memcmp(a->ref, b->ref, a->nrefs * sizeof *a->ref) == 0 &&
+               !a->plane == !b->plane &&
+               (!a->plane || memcmp(a->plane, b->plane, 5 * a->ncand * sizeof *a->plane) == 0);
+    for (k = 0; same && k < a->ncand; k++) /* (field by field: padding) */
+        same = a->cand[k].prim == b->cand[k].prim && a->cand[k].near == b->cand[k].near;
+    return same;
+}
+
+/* The light buffer's build reads the primitives' bounds from the scene's
+   kept ones where rtpi_scene_bounds made them (dc_near, dc_scale), else
+   makes them: the same lists either way; and each triangle's plane entry,
+   made turned to the light's side as it is stored (lb_plane_turned), is
+   the exact mode's plane (rtpi_tri_planes: n and n.p0 turned, t added to
+   n.p0) entry for entry.  Lights above, at the cube's corners, low inside
+   the scene's bounds and between its objects (faces reached near their
+   edges). */
+static void lb_build_paths(rtp_scene *s, const char *what)
+{
+    rtp_allocator al;
+    size_t i, r;
+    rtpi_allocator_init(&al, NULL);
+    for (i = 0; i < sizeof lights / sizeof *lights; i++) {
+        rtpi_v3 lp = v3(lights[i].pos[0], lights[i].pos[1], lights[i].pos[2]);
+        rtpi_lightbuf a, b;
+        double *tp = NULL, scale;
+        int res;
+        for (res = 16; res <= 256; res *= 4) {
+            /* without kept bounds first (the scene as loaded), then with */
+            rtpi_free(&s->alloc, s->pbounds);
+            rtpi_free(&s->alloc, s->phit);
+            s->pbounds = NULL;
+            s->phit = NULL;
+            s->npbounds = 0;
+            if (rtpi_lightbuf_build(s, lp, res, &al, &a, NULL) != RTP_OK) {
+                CHECK_MSG(0, "%s, %s: build failed", what, lights[i].name);
+                return;
+            }
+            CHECK(rtpi_scene_bounds(s) == 0);
+            if (rtpi_lightbuf_build(s, lp, res, &al, &b, NULL) != RTP_OK) {
+                CHECK_MSG(0, "%s, %s: build with kept bounds failed", what, lights[i].name);
+                rtpi_lightbuf_free(&a, &al);
+                return;
+            }
+            CHECK_MSG(lb_equal(&a, &b), "%s, %s, %d cells: the buffer with kept bounds differs",
+                      what, lights[i].name, res);
+            if (res == 16 && rtpi_tri_planes(s, lp, &al, &tp, &scale, NULL) == RTP_OK && tp) {
+                size_t bad = 0;
+                CHECK(b.scale == scale);
+                for (r = 0; r < b.ncand; r++) {
+                    uint32_t p = b.cand[r].prim;
+                    const double *q = b.plane + 5 * r, *o = tp + 4 * (size_t)p;
+                    if (p >= s->ntris)
+                        continue;
+                    if (q[4] == HUGE_VAL)
+                        bad += !(q[0] == 0.0 && q[1] == 0.0 && q[2] == 0.0 && q[3] == 0.0 &&
+                                 o[3] == HUGE_VAL);
+                    else
+                        bad += !(q[4] > 0.0 && q[0] == o[0] && q[1] == o[1] && q[2] == o[2] &&
+                                 q[3] + q[4] == o[3]);
+                }
+                CHECK_MSG(bad == 0, "%s, %s: %lu plane entries differ from the exact mode's", what,
+                          lights[i].name, (unsigned long)bad);
+            }
+            rtpi_free(&al, tp);
+            tp = NULL;
+            rtpi_lightbuf_free(&a, &al);
+            rtpi_lightbuf_free(&b, &al);
+        }
+    }
+}
+
+static void test_lightbuf_build_paths(void)
+{
+    const char *dir = check_shared_scenes();
+    rtp_scene *s = NULL;
+    char path[512];
+    if (rtp_scene_load_memory(scene_text, sizeof scene_text - 1, "t.nff", "nff", NULL, &s,
+                              NULL) == RTP_OK) {
+        lb_build_paths(s, "test scene");
+        rtp_scene_destroy(s);
+        s = NULL;
+    } else {
+        CHECK_MSG(0, "cannot load the test scene");
+    }
+    if (!dir)
+        SKIP("../shared/scenes absent (the test scene alone was built)");
+    snprintf(path, sizeof path, "%s/spd/gears_s2.nff", dir);
+    if (rtp_scene_load(path, NULL, &s, NULL) == RTP_OK) {
+        lb_build_paths(s, "gears_s2");
+        rtp_scene_destroy(s);
+    } else {
+        CHECK_MSG(0, "cannot load %s", path);
+    }
+}
+
 /* Edges, corners and zero components map to a cell on a face that
    touches the direction; the cell's face coordinates hold it. */
 static void test_cell_mapping(void)
@@ -1218,6 +1321,7 @@ int main(void)
     RUN(test_lightbuf_far_light_lists);
     RUN(test_lightbuf_edge_on);
     RUN(test_lightbuf_threads);
+    RUN(test_lightbuf_build_paths);
     RUN(test_spd_scene);
     RUN(test_light_at_cone_tip);
     RUN(test_exact_cache_earlier);
