@@ -9,6 +9,13 @@
 #include "internal.h"
 
 #include <float.h>
+/* (SSE2, which every x86-64 has: rtpi_light_redo's node arithmetic two
+   coordinates a vector; elsewhere, or with RTP_NO_SSE2, its plain C twin,
+   the same operations in the same order) */
+#if defined(__SSE2__) && !defined(RTP_NO_SSE2)
+#include <emmintrin.h>
+#define SHADE_SSE2 1
+#endif
 
 static double fract_floor(double x) { return x - floor(x); }
 
@@ -780,6 +787,14 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
     const size_t nt = RTPI_TERMS(s->nlights), nc = RTPI_COEFFS(s->nlights), wi = light >> 5;
     const size_t vw = c->vis_words;
     const uint32_t bit = 1u << (light & 31);
+    const rtpi_material *const mats = s->mats;
+    const rtpi_tri *const tris = s->tris;
+    const rtpi_sphere *const sph = s->spheres;
+    const rtpi_cone *const cones = s->cones;
+    const size_t ntris = s->ntris, nsph = s->nspheres;
+#ifdef SHADE_SSE2
+    const __m128d lpxy = _mm_set_pd(lp.y, lp.x), lpz = _mm_set_sd(lp.z);
+#endif
     unsigned long long combined = 0;
     int nonfinite = 0;
     size_t k, j;
@@ -787,15 +802,125 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
         size_t a = (size_t)start[k], b = (size_t)start[k + 1];
         float *co = coeffs + k * nc;
         double a0 = 0.0, a1 = 0.0, a2 = 0.0;
+#ifdef SHADE_SSE2
+        __m128d a01 = _mm_setzero_pd(), a2v = _mm_setzero_pd();
+#endif
         if (a == b)
             continue; /* the background: no light in it, nothing changes */
+#ifdef SHADE_SSE2
+        /* light_term_pow's and the sums' arithmetic below on (x, y) in a
+           vector and z alone: each lane's operations are the plain C's,
+           in its order (a dot product (x x' + y y') + z z'), so the bits
+           are its own; the floats are widened two at a time (cvtps2pd).
+           Instructions a lit node: teapot's moves 137 -> ~90 (gcc). */
         for (j = a; j < b; j++) {
             const rtpi_cnode *nd = &nodes[j];
             const rtpi_material *m;
             float *t = terms + j * nt, *tl = t + 3 + 2 * light;
             int visible = vis_ext ? (vis_ext[j * vw + wi] & bit) != 0
                                   : (int)((nd->vis >> light) & 1u);
-            double d, sp, kd, ks, cobj[3];
+            const float *q = nv + 6 * j;
+            const double *wj = w + j;
+            __m128 qa, pa;
+            __m128d nxy, nzvx, vyz, vxy, lxy, lz, sq, len, ndl, rv, two, txy, tz, kds, d;
+            double ndl_d, rv_d;
+            uint64_t wb;
+            uint32_t prim, db;
+            float df;
+            if (!visible) {
+                tl[0] = tl[1] = 0.0f;
+                continue;
+            }
+            /* p[0..2] and prim, n and v[0] (16 bytes each), v[1..2] */
+            pa = _mm_loadu_ps(nd->p);
+            qa = _mm_loadu_ps(q);
+            lxy = _mm_sub_pd(lpxy, _mm_cvtps_pd(pa));
+            lz = _mm_sub_sd(lpz, _mm_cvtps_pd(_mm_movehl_ps(pa, pa)));
+            /* v3_norm: |l| = sqrt((x x + y y) + z z), l / |l| as l (1 / |l|) */
+            sq = _mm_mul_pd(lxy, lxy);
+            sq = _mm_add_sd(_mm_add_sd(sq, _mm_unpackhi_pd(sq, sq)), _mm_mul_sd(lz, lz));
+            len = _mm_sqrt_sd(sq, sq);
+            if (_mm_comigt_sd(len, _mm_setzero_pd())) {
+                __m128d inv = _mm_div_sd(_mm_set_sd(1.0), len);
+                inv = _mm_unpacklo_pd(inv, inv);
+                lxy = _mm_mul_pd(lxy, inv);
+                lz = _mm_mul_sd(lz, inv);
+            }
+            nxy = _mm_cvtps_pd(qa);
+            nzvx = _mm_cvtps_pd(_mm_movehl_ps(qa, qa)); /* (n.z, v.x) */
+            ndl = _mm_mul_pd(nxy, lxy);
+            ndl = _mm_add_sd(_mm_add_sd(ndl, _mm_unpackhi_pd(ndl, ndl)), _mm_mul_sd(nzvx, lz));
+            ndl_d = _mm_cvtsd_f64(ndl);
+            if (ndl_d <= 0.0) {
+                tl[0] = tl[1] = 0.0f;
+                continue;
+            }
+            prim = nd->prim;
+            m = &mats[prim < ntris        ? tris[prim].mat
+                      : prim - ntris < nsph ? sph[prim - ntris].mat
+                                            : cones[prim - ntris - nsph].mat];
+            /* r.v with r = n (2 n.l) - l */
+            vyz = _mm_cvtps_pd(_mm_castsi128_ps(_mm_loadl_epi64((const __m128i *)(q + 4))));
+            vxy = _mm_shuffle_pd(nzvx, vyz, 1);
+            two = _mm_add_sd(ndl, ndl);
+            two = _mm_unpacklo_pd(two, two);
+            txy = _mm_sub_pd(_mm_mul_pd(nxy, two), lxy);
+            tz = _mm_sub_sd(_mm_mul_sd(nzvx, two), lz);
+            rv = _mm_mul_pd(txy, vxy);
+            rv = _mm_add_sd(_mm_add_sd(rv, _mm_unpackhi_pd(rv, rv)),
+                            _mm_mul_sd(tz, _mm_unpackhi_pd(vyz, vyz)));
+            rv_d = _mm_cvtsd_f64(rv);
+            df = (float)ndl_d;
+            tl[0] = df;
+            tl[1] = rv_d > 0.0 && m->ks > 0.0f ? pow_float(rv_d, m->shine) : 0.0f;
+            memcpy(&wb, wj, sizeof wb);
+            memcpy(&db, &df, sizeof db);
+            if (!(wb << 1) || !(db << 1))
+                continue;
+            /* (kd, ks) = w (m->kd, m->ks); c_obj = t colour (+ (1 - t)
+               colour2); a += kd c_obj d + ks s */
+            kds = _mm_mul_pd(_mm_load1_pd(wj),
+                             _mm_cvtps_pd(_mm_castsi128_ps(
+                                 _mm_loadl_epi64((const __m128i *)&m->kd))));
+            {
+                __m128d txy2 = _mm_cvtps_pd(_mm_castsi128_ps(_mm_loadl_epi64((const __m128i *)t)));
+                __m128d cxy = _mm_cvtps_pd(
+                    _mm_castsi128_ps(_mm_loadl_epi64((const __m128i *)m->color)));
+                __m128d tz2 = _mm_set_sd(t[2]), cz = _mm_set_sd(m->color[2]);
+                __m128d kd = _mm_unpacklo_pd(kds, kds), ks = _mm_unpackhi_pd(kds, kds), hs;
+                cxy = _mm_mul_pd(txy2, cxy);
+                cz = _mm_mul_sd(tz2, cz);
+                if (m->tex == RTPI_TEX_CHECKER) {
+                    __m128d one = _mm_set1_pd(1.0);
+                    __m128d c2xy = _mm_cvtps_pd(
+                        _mm_castsi128_ps(_mm_loadl_epi64((const __m128i *)m->color2)));
+                    cxy = _mm_add_pd(cxy, _mm_mul_pd(_mm_sub_pd(one, txy2), c2xy));
+                    cz = _mm_add_sd(cz, _mm_mul_sd(_mm_sub_sd(one, tz2),
+                                                   _mm_set_sd(m->color2[2])));
+                }
+                d = _mm_set1_pd((double)df);
+                hs = _mm_mul_pd(ks, _mm_set1_pd((double)tl[1]));
+                a01 = _mm_add_pd(a01, _mm_add_pd(_mm_mul_pd(_mm_mul_pd(kd, cxy), d), hs));
+                a2v = _mm_add_sd(a2v, _mm_add_sd(_mm_mul_sd(_mm_mul_sd(kd, cz), d), hs));
+            }
+        }
+        a0 = _mm_cvtsd_f64(a01);
+        a1 = _mm_cvtsd_f64(_mm_unpackhi_pd(a01, a01));
+        a2 = _mm_cvtsd_f64(a2v);
+#else
+        for (j = a; j < b; j++) {
+            const rtpi_cnode *nd = &nodes[j];
+            const rtpi_material *m;
+            float *t = terms + j * nt, *tl = t + 3 + 2 * light;
+            int visible = vis_ext ? (vis_ext[j * vw + wi] & bit) != 0
+                                  : (int)((nd->vis >> light) & 1u);
+            const float *q = nv + 6 * j;
+            const double *wj = w + j;
+            double ndl, rv, d, sp, kd, ks, c0, c1, c2;
+            uint64_t wb;
+            uint32_t prim, db;
+            float df;
+            rtpi_v3 n, l;
             if (!visible) {
                 /* light_term's terms where the light is not seen, and
                    nothing to sum (most nodes of a scene in shadow: no
@@ -803,23 +928,54 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
                 tl[0] = tl[1] = 0.0f;
                 continue;
             }
-            m = &s->mats[rtpi_prim_material(s, nd->prim)];
-            /* (the light's position taken once: light_term inline) */
-            light_term_pow(nv + 6 * j, v3(nd->p[0], nd->p[1], nd->p[2]), lp, visible, m, tl, 1);
+            /* light_term_pow's arithmetic inline (the light's position
+               taken once), a node turned away leaving at once */
+            n = v3(q[0], q[1], q[2]);
+            l = v3_norm(v3_sub(lp, v3(nd->p[0], nd->p[1], nd->p[2])));
+            ndl = v3_dot(n, l);
+            if (ndl <= 0.0) {
+                tl[0] = tl[1] = 0.0f;
+                continue;
+            }
+            prim = nd->prim;
+            /* (rtpi_prim_material with the scene's arrays in locals) */
+            m = &mats[prim < ntris        ? tris[prim].mat
+                      : prim - ntris < nsph ? sph[prim - ntris].mat
+                                            : cones[prim - ntris - nsph].mat];
+            rv = v3_dot(v3_sub(v3_mul(n, 2.0 * ndl), l), v3(q[3], q[4], q[5]));
+            df = (float)ndl;
+            tl[0] = df;
+            /* no highlight to weigh where ks is 0 (an edit making it
+               non-zero recomputes these terms) */
+            tl[1] = rv > 0.0 && m->ks > 0.0f ? pow_float(rv, m->shine) : 0.0f;
             /* coeffs_node's sum for this light, node by node in its order
                (depth first, reflected subtree first: the order they are
-               stored in), leaving out the nodes it does not reach */
-            d = tl[0];
-            if (w[j] == 0.0 || d == 0.0)
+               stored in), leaving out the nodes it does not reach: w or
+               d zero (+0 or -0) told by their bits, one test each (as
+               == 0.0, gcc made ~14 instructions of the pair) */
+            memcpy(&wb, wj, sizeof wb);
+            memcpy(&db, &df, sizeof db);
+            if (!(wb << 1) || !(db << 1))
                 continue;
+            d = df;
             sp = tl[1];
-            kd = w[j] * m->kd;
-            ks = w[j] * m->ks;
-            obj_colour(m, t, cobj);
-            a0 += kd * cobj[0] * d + ks * sp;
-            a1 += kd * cobj[1] * d + ks * sp;
-            a2 += kd * cobj[2] * d + ks * sp;
+            kd = *wj * m->kd;
+            ks = *wj * m->ks;
+            /* obj_colour's */
+            if (m->tex == RTPI_TEX_CHECKER) {
+                c0 = t[0] * (double)m->color[0] + (1.0 - t[0]) * (double)m->color2[0];
+                c1 = t[1] * (double)m->color[1] + (1.0 - t[1]) * (double)m->color2[1];
+                c2 = t[2] * (double)m->color[2] + (1.0 - t[2]) * (double)m->color2[2];
+            } else {
+                c0 = t[0] * (double)m->color[0];
+                c1 = t[1] * (double)m->color[1];
+                c2 = t[2] * (double)m->color[2];
+            }
+            a0 += kd * c0 * d + ks * sp;
+            a1 += kd * c1 * d + ks * sp;
+            a2 += kd * c2 * d + ks * sp;
         }
+#endif
         {
             /* a coefficient the same to the bit (a node in shadow before
                and after, or out of the light's reach) combines to the
