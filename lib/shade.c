@@ -801,9 +801,10 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
     for (k = k0; k < k1; k++) {
         size_t a = (size_t)start[k], b = (size_t)start[k + 1];
         float *co = coeffs + k * nc;
-        double a0 = 0.0, a1 = 0.0, a2 = 0.0;
 #ifdef SHADE_SSE2
         __m128d a01 = _mm_setzero_pd(), a2v = _mm_setzero_pd();
+#else
+        double a0 = 0.0, a1 = 0.0, a2 = 0.0;
 #endif
         if (a == b)
             continue; /* the background: no light in it, nothing changes */
@@ -840,7 +841,7 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
             sq = _mm_mul_pd(lxy, lxy);
             sq = _mm_add_sd(_mm_add_sd(sq, _mm_unpackhi_pd(sq, sq)), _mm_mul_sd(lz, lz));
             len = _mm_sqrt_sd(sq, sq);
-            if (_mm_comigt_sd(len, _mm_setzero_pd())) {
+            if (_mm_cvtsd_f64(len) > 0.0) {
                 __m128d inv = _mm_div_sd(_mm_set_sd(1.0), len);
                 inv = _mm_unpacklo_pd(inv, inv);
                 lxy = _mm_mul_pd(lxy, inv);
@@ -904,9 +905,26 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
                 a2v = _mm_add_sd(a2v, _mm_add_sd(_mm_mul_sd(_mm_mul_sd(kd, cz), d), hs));
             }
         }
-        a0 = _mm_cvtsd_f64(a01);
-        a1 = _mm_cvtsd_f64(_mm_unpackhi_pd(a01, a01));
-        a2 = _mm_cvtsd_f64(a2v);
+        {
+            /* the block below on the vectors: (float) a, |a0| + |a1| + |a2|
+               in its order, the comparison of the bits as two integers */
+            float *cf = co + 6 + 3 * light;
+            const __m128d absm = _mm_castsi128_pd(_mm_set1_epi64x(0x7fffffffffffffff));
+            __m128d ab = _mm_and_pd(a01, absm);
+            __m128 f01 = _mm_cvtpd_ps(a01), f2 = _mm_cvtsd_ss(_mm_setzero_ps(), a2v);
+            uint64_t lo, old_lo;
+            uint32_t hi, old_hi;
+            ab = _mm_add_sd(_mm_add_sd(ab, _mm_unpackhi_pd(ab, ab)), _mm_and_pd(a2v, absm));
+            nonfinite |= !(_mm_cvtsd_f64(ab) <= RTPI_COEFF_MAX);
+            lo = (uint64_t)_mm_cvtsi128_si64(_mm_castps_si128(f01));
+            hi = (uint32_t)_mm_cvtsi128_si32(_mm_castps_si128(f2));
+            memcpy(&old_lo, cf, sizeof old_lo);
+            memcpy(&old_hi, cf + 2, sizeof old_hi);
+            if (samples && lo == old_lo && hi == old_hi)
+                continue;
+            memcpy(cf, &lo, sizeof lo);
+            memcpy(cf + 2, &hi, sizeof hi);
+        }
 #else
         for (j = a; j < b; j++) {
             const rtpi_cnode *nd = &nodes[j];
@@ -975,7 +993,6 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
             a1 += kd * c1 * d + ks * sp;
             a2 += kd * c2 * d + ks * sp;
         }
-#endif
         {
             /* a coefficient the same to the bit (a node in shadow before
                and after, or out of the light's reach) combines to the
@@ -991,6 +1008,7 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
                 continue;
             memcpy(cf, f, sizeof f);
         }
+#endif
         if (samples) { /* the other samples' colours hold */
             if (with_rest) {
                 /* the rest of the sum, then this light's term: as
@@ -1033,6 +1051,14 @@ unsigned long long rtpi_light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *no
                                    float *samples, int *bad, unsigned char *mark,
                                    double *rest, unsigned char *rest_ok)
 {
+    /* (scenes of up to 32 lights keep their bits in the nodes: compiled
+       without the parallel words there, a test a node and a register
+       less) */
+    if (!vis_ext)
+        return rest ? light_redo(c, nodes, start, k0, k1, NULL, nv, w, light, terms, coeffs, cl,
+                                 samples, bad, mark, rest, rest_ok, 1)
+                    : light_redo(c, nodes, start, k0, k1, NULL, nv, w, light, terms, coeffs, cl,
+                                 samples, bad, mark, NULL, rest_ok, 0);
     return rest ? light_redo(c, nodes, start, k0, k1, vis_ext, nv, w, light, terms, coeffs, cl,
                              samples, bad, mark, rest, rest_ok, 1)
                 : light_redo(c, nodes, start, k0, k1, vis_ext, nv, w, light, terms, coeffs, cl,
