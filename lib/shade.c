@@ -772,6 +772,20 @@ void rtpi_combine(const rtp_scene *s, const double *cl, const float *coeffs, flo
     combine_into(s, cl, coeffs, rgb);
 }
 
+#ifdef SHADE_SSE2
+/* f[0] and f[1] widened (cvtps2pd), and (float) (v01, v2) stored to o */
+static RTPI_FORCE_INLINE __m128d load2f(const float *f)
+{
+    return _mm_cvtps_pd(_mm_castsi128_ps(_mm_loadl_epi64((const __m128i *)f)));
+}
+
+static RTPI_FORCE_INLINE void store3f(float *o, __m128d v01, __m128d v2)
+{
+    _mm_storel_epi64((__m128i *)o, _mm_castps_si128(_mm_cvtpd_ps(v01)));
+    o[2] = (float)_mm_cvtsd_f64(v2);
+}
+#endif
+
 /* rtpi_light_redo's body; with_rest: rest is not NULL (a constant at
    each call: the loop compiled twice, the one without the kept rest
    combining inline, which in the one with it had cost balls' and rings'
@@ -794,6 +808,12 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
     const size_t ntris = s->ntris, nsph = s->nspheres;
 #ifdef SHADE_SSE2
     const __m128d lpxy = _mm_set_pd(lp.y, lp.x), lpz = _mm_set_sd(lp.z);
+    const __m128d absm = _mm_castsi128_pd(_mm_set1_epi64x(0x7fffffffffffffff));
+    const __m128d bg01 = load2f(s->background), bg2 = _mm_set_sd(s->background[2]);
+    const __m128d am01 = load2f(s->ambient), am2 = _mm_set_sd(s->ambient[2]);
+    const __m128d lc01 = _mm_loadu_pd(cl + 3 * light), lc2 = _mm_load_sd(cl + 3 * light + 2);
+    const size_t nl = s->nlights;
+    size_t i;
 #endif
     unsigned long long combined = 0;
     int nonfinite = 0;
@@ -909,7 +929,6 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
             /* the block below on the vectors: (float) a, |a0| + |a1| + |a2|
                in its order, the comparison of the bits as two integers */
             float *cf = co + 6 + 3 * light;
-            const __m128d absm = _mm_castsi128_pd(_mm_set1_epi64x(0x7fffffffffffffff));
             __m128d ab = _mm_and_pd(a01, absm);
             __m128 f01 = _mm_cvtpd_ps(a01), f2 = _mm_cvtsd_ss(_mm_setzero_ps(), a2v);
             uint64_t lo, old_lo;
@@ -1009,6 +1028,51 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
             memcpy(cf, f, sizeof f);
         }
 #endif
+#ifdef SHADE_SSE2
+        if (samples) {
+            /* the block below on the vectors, each lane its operations
+               (the background, ambient and this light's colour widened
+               once a call) */
+            float *o = samples + 3 * k;
+            __m128d v01, v2;
+            if (with_rest) {
+                double *r = rest + 3 * k;
+                const float *f = co + 6 + 3 * light;
+                __m128d ab;
+                if (!rest_ok[k]) {
+                    rtpi_combine_rest(s, cl, co, light, r);
+                    rest_ok[k] = 1;
+                }
+                v01 = _mm_add_pd(_mm_loadu_pd(r), _mm_mul_pd(load2f(f), lc01));
+                v2 = _mm_add_sd(_mm_load_sd(r + 2), _mm_mul_sd(_mm_set_sd(f[2]), lc2));
+                ab = _mm_and_pd(v01, absm);
+                ab = _mm_add_sd(_mm_add_sd(ab, _mm_unpackhi_pd(ab, ab)), _mm_and_pd(v2, absm));
+                if (_mm_cvtsd_f64(ab) <= DBL_MAX)
+                    store3f(o, v01, v2);
+                else
+                    rtpi_combine(s, cl, co, o);
+            } else {
+                const float *cc = co + 6;
+                const double *cli = cl;
+                double sum;
+                v01 = _mm_add_pd(_mm_mul_pd(load2f(co), bg01), _mm_mul_pd(load2f(co + 3), am01));
+                v2 = _mm_add_sd(_mm_mul_sd(_mm_set_sd(co[2]), bg2),
+                                _mm_mul_sd(_mm_set_sd(co[5]), am2));
+                for (i = 0; i < nl; i++, cc += 3, cli += 3) {
+                    v01 = _mm_add_pd(v01, _mm_mul_pd(load2f(cc), _mm_loadu_pd(cli)));
+                    v2 = _mm_add_sd(v2, _mm_mul_sd(_mm_set_sd(cc[2]), _mm_load_sd(cli + 2)));
+                }
+                sum = _mm_cvtsd_f64(_mm_add_sd(_mm_add_sd(v01, _mm_unpackhi_pd(v01, v01)), v2));
+                if (!(sum == sum))
+                    combine_zero(s, cl, co, o); /* (combine_into's NaN rule) */
+                else
+                    store3f(o, v01, v2);
+            }
+            if (mark)
+                mark[k] = 1;
+            combined++;
+        }
+#else
         if (samples) { /* the other samples' colours hold */
             if (with_rest) {
                 /* the rest of the sum, then this light's term: as
@@ -1039,6 +1103,7 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
                 mark[k] = 1;
             combined++;
         }
+#endif
     }
     *bad |= nonfinite;
     return combined;
