@@ -773,10 +773,16 @@ void rtpi_combine(const rtp_scene *s, const double *cl, const float *coeffs, flo
 }
 
 #ifdef SHADE_SSE2
-/* f[0] and f[1] widened (cvtps2pd), and (float) (v01, v2) stored to o */
+/* f[0] and f[1] widened (cvtps2pd) */
 static RTPI_FORCE_INLINE __m128d load2f(const float *f)
 {
     return _mm_cvtps_pd(_mm_castsi128_ps(_mm_loadl_epi64((const __m128i *)f)));
+}
+
+/* f[0] widened (in the low lane, 0 in the other) */
+static RTPI_FORCE_INLINE __m128d load1f(const float *f)
+{
+    return _mm_cvtps_pd(_mm_load_ss(f));
 }
 
 static RTPI_FORCE_INLINE void store3f(float *o, __m128d v01, __m128d v2)
@@ -907,7 +913,7 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
                 __m128d txy2 = _mm_cvtps_pd(_mm_castsi128_ps(_mm_loadl_epi64((const __m128i *)t)));
                 __m128d cxy = _mm_cvtps_pd(
                     _mm_castsi128_ps(_mm_loadl_epi64((const __m128i *)m->color)));
-                __m128d tz2 = _mm_set_sd(t[2]), cz = _mm_set_sd(m->color[2]);
+                __m128d tz2 = load1f(&t[2]), cz = load1f(&m->color[2]);
                 __m128d kd = _mm_unpacklo_pd(kds, kds), ks = _mm_unpackhi_pd(kds, kds), hs;
                 cxy = _mm_mul_pd(txy2, cxy);
                 cz = _mm_mul_sd(tz2, cz);
@@ -917,7 +923,7 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
                         _mm_castsi128_ps(_mm_loadl_epi64((const __m128i *)m->color2)));
                     cxy = _mm_add_pd(cxy, _mm_mul_pd(_mm_sub_pd(one, txy2), c2xy));
                     cz = _mm_add_sd(cz, _mm_mul_sd(_mm_sub_sd(one, tz2),
-                                                   _mm_set_sd(m->color2[2])));
+                                                   load1f(&m->color2[2])));
                 }
                 d = _mm_set1_pd((double)df);
                 hs = _mm_mul_pd(ks, _mm_set1_pd((double)tl[1]));
@@ -1044,7 +1050,7 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
                     rest_ok[k] = 1;
                 }
                 v01 = _mm_add_pd(_mm_loadu_pd(r), _mm_mul_pd(load2f(f), lc01));
-                v2 = _mm_add_sd(_mm_load_sd(r + 2), _mm_mul_sd(_mm_set_sd(f[2]), lc2));
+                v2 = _mm_add_sd(_mm_load_sd(r + 2), _mm_mul_sd(load1f(&f[2]), lc2));
                 ab = _mm_and_pd(v01, absm);
                 ab = _mm_add_sd(_mm_add_sd(ab, _mm_unpackhi_pd(ab, ab)), _mm_and_pd(v2, absm));
                 if (_mm_cvtsd_f64(ab) <= DBL_MAX)
@@ -1056,11 +1062,11 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
                 const double *cli = cl;
                 double sum;
                 v01 = _mm_add_pd(_mm_mul_pd(load2f(co), bg01), _mm_mul_pd(load2f(co + 3), am01));
-                v2 = _mm_add_sd(_mm_mul_sd(_mm_set_sd(co[2]), bg2),
-                                _mm_mul_sd(_mm_set_sd(co[5]), am2));
+                v2 = _mm_add_sd(_mm_mul_sd(load1f(&co[2]), bg2),
+                                _mm_mul_sd(load1f(&co[5]), am2));
                 for (i = 0; i < nl; i++, cc += 3, cli += 3) {
                     v01 = _mm_add_pd(v01, _mm_mul_pd(load2f(cc), _mm_loadu_pd(cli)));
-                    v2 = _mm_add_sd(v2, _mm_mul_sd(_mm_set_sd(cc[2]), _mm_load_sd(cli + 2)));
+                    v2 = _mm_add_sd(v2, _mm_mul_sd(load1f(&cc[2]), _mm_load_sd(cli + 2)));
                 }
                 sum = _mm_cvtsd_f64(_mm_add_sd(_mm_add_sd(v01, _mm_unpackhi_pd(v01, v01)), v2));
                 if (!(sum == sum))
