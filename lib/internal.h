@@ -592,9 +592,26 @@ uint32_t rtpi_kd_occluder(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t s
    triangle whose plane has the light and the ray's origin on one side,
    by the light buffer's margin, or a sphere or cone outside the cone of
    directions it can be hit in, is not tested (the ray misses it: the
-   same answer). */
+   same answer).  rtpi_tri_edges' edges (NULL: none), made from these
+   planes, are asked with a triangle's plane. */
 uint32_t rtpi_kd_occluder_planes(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t skip,
-                                 const double *planes, const double *cones, double scale);
+                                 const double *planes, const double *edges,
+                                 const double *cones, double scale);
+/* rtpi_tri_edges' margin, times scale^3 (see there). */
+#define RTPI_EDGE_MARGIN 1e-9
+/* For each triangle of s (RTPI_EDGE_N doubles a triangle) and a light at
+   `light`, with rtpi_tri_planes' planes and scale for it: the plane's
+   entry and the planes through the light and each edge, as n and
+   n.light (rtpi_edges_miss' order).  A shadow ray towards the light
+   whose origin o (within the scale) has n.o - n.light below -m for one
+   edge and above m for another, m = RTPI_EDGE_MARGIN scale^3, misses the
+   triangle (rtpi_kd_occluder_planes asks them, with the plane's test).
+   *out NULL where s has no triangles or planes is NULL, more than
+   RTPI_EDGE_TRIS of them, or a scale outside [1e-90, 1e90]. */
+#define RTPI_EDGE_TRIS ((size_t)1 << 21)
+#define RTPI_EDGE_N 16
+rtp_status rtpi_tri_edges(const rtp_scene *s, rtpi_v3 light, double scale, const double *planes,
+                          const rtp_allocator *a, double **out, rtp_error *err);
 
 /* ------------------------------------------------------------- ray trees */
 

@@ -43,6 +43,7 @@ struct rtpi_shadow {
        the light's queries run: a lit shadow ray among a terrain's
        triangles tests most of them in vain otherwise) */
     double *planes;
+    double *edges; /* EXACT: rtpi_tri_edges for the light (128 bytes a triangle) */
     double *cones; /* EXACT: rtpi_round_cones for the light */
     double pscale;
     /* per sphere (NULL: none): |light - c|^2 and r^2, what
@@ -263,6 +264,8 @@ rtp_status rtpi_shadow_create_mt(const rtp_scene *s, const rtpi_kdtree *kd, rtpi
     }
     if (st == RTP_OK && sh->mode == RTPI_SHADOW_EXACT)
         st = rtpi_tri_planes(s, light, a, &sh->planes, &sh->pscale, err);
+    if (st == RTP_OK && sh->mode == RTPI_SHADOW_EXACT && sh->planes)
+        st = rtpi_tri_edges(s, light, sh->pscale, sh->planes, a, &sh->edges, err);
     if (st == RTP_OK && sh->mode == RTPI_SHADOW_EXACT)
         st = rtpi_round_cones(s, light, sh->pscale, rtpi_kd_far(sh->kd, light), a,
                               &sh->cones, err);
@@ -374,7 +377,7 @@ static RTPI_FORCE_INLINE int sh_visible(const rtpi_shadow *sh, const rtpi_v3 *pp
     }
     if (sh->mode == RTPI_SHADOW_LIGHTBUF)
         return (*occ = rtpi_lightbuf_occluder(&sh->lb, sh->s, r, skip)) == RTPI_NONE;
-    return (*occ = rtpi_kd_occluder_planes(sh->kd, r, skip, sh->planes, sh->cones,
+    return (*occ = rtpi_kd_occluder_planes(sh->kd, r, skip, sh->planes, sh->edges, sh->cones,
                                            sh->pscale)) == RTPI_NONE;
 }
 
@@ -569,6 +572,7 @@ void rtpi_shadow_destroy(rtpi_shadow *sh)
     rtpi_free(&a, sh->thin);
     rtpi_free(&a, sh->thin_cells);
     rtpi_free(&a, sh->planes);
+    rtpi_free(&a, sh->edges);
     rtpi_free(&a, sh->cones);
     rtpi_free(&a, sh->ball);
     rtpi_free(&a, sh);

@@ -321,8 +321,8 @@ static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
             uint32_t skip = rtpi_prim_shadows_own(s, hit.prim, o, lp) == 0 ? hit.prim : RTPI_NONE;
             const rtpi_ray_tests *rt = sh->tests ? &sh->tests[i] : NULL;
             if (rt && (rt->planes || rt->cones)
-                    ? rtpi_kd_occluder_planes(sh->kd, &sr, skip, rt->planes, rt->cones,
-                                              rt->scale) != RTPI_NONE
+                    ? rtpi_kd_occluder_planes(sh->kd, &sr, skip, rt->planes, NULL,
+                                              rt->cones, rt->scale) != RTPI_NONE
                     : rtpi_kd_occluded(sh->kd, &sr, skip))
                 continue;
         }

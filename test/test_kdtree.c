@@ -6,6 +6,7 @@
 #include "check.h"
 #include "dircube.h"
 #include "shadow.h"
+#include "kdtree.h"
 
 #include <time.h>
 
@@ -1435,7 +1436,7 @@ static void cylinder_line_case(double off)
             r = rtpi_shadow_ray(o, L);
             for (q = 0; q < (uint32_t)rtpi_scene_nprims(s) && !brute; q++)
                 brute = rtpi_intersect_prim(s, q, &r, &h);
-            walk = rtpi_kd_occluder_planes(kd, &r, RTPI_NONE, planes, cones, scale) !=
+            walk = rtpi_kd_occluder_planes(kd, &r, RTPI_NONE, planes, NULL, cones, scale) !=
                    RTPI_NONE;
             bad += walk != brute;
             hits += brute;
@@ -1463,6 +1464,129 @@ static void test_cylinder_line(void)
 {
     cylinder_line_case(0.0);
     cylinder_line_case(1e5);
+}
+
+/* rtpi_tri_edges' test turns away no shadow ray the watertight test
+   hits: each triangle asked directly (rtpi_edges_miss against
+   rtpi_intersect_prim) on rays towards the light through points beside
+   its edges and vertices, 1e-12 to 1e-3 of the edge's length inside or
+   outside, from origins just beyond the triangle and far beyond it;
+   and the walk with planes and edges answers as brute force.  A mesh of
+   shared edges, slivers and large triangles; lights inside the scene,
+   on a triangle's plane, on an edge's line and far away; the scene at
+   the origin and moved off it by `off` (the margin scale^3). */
+static void tri_edges_case(double off)
+{
+    static const double es[] = {-1e-3, -1e-7, -1e-12, 0.0, 1e-12, 1e-7, 1e-3};
+    rtpi_v3 lights[5];
+    rng g;
+    rtp_scene *s = new_scene();
+    rtpi_kdtree *kd = NULL;
+    rtp_allocator a;
+    int i, j, li, k, bad = 0, badwalk = 0, culled = 0, hits = 0, near_hit = 0, nt;
+    g.s = g_seed ^ 0x7131;
+    rtpi_allocator_init(&a, NULL);
+    for (i = 0; i < 6; i++) /* a mesh: shared edges */
+        for (j = 0; j < 6; j++) {
+            double z = 0.2 * sin(i + 2 * j);
+            uint32_t v0 = add_v(s, off + i * 0.3, j * 0.3, z), v1 = add_v(s, off + i * 0.3 + 0.3, j * 0.3, z),
+                     v2 = add_v(s, off + i * 0.3, j * 0.3 + 0.3, z + 0.05);
+            add_t(s, v0, v1, v2);
+            add_t(s, v1, add_v(s, off + i * 0.3 + 0.3, j * 0.3 + 0.3, z), v2);
+        }
+    for (i = 0; i < 80; i++) {
+        rtpi_v3 p = v3(off + rndr(&g, -1, 3), rndr(&g, -1, 3), rndr(&g, 0.3, 2.5));
+        double sz = i % 4 == 0 ? 1.5 : 0.05;
+        rtpi_v3 q = v3_add(p, v3_mul(rnd_dir(&g), sz)), r2 = v3_add(p, v3_mul(rnd_dir(&g), sz));
+        if (i % 8 == 1) /* a sliver */
+            r2 = v3_add(v3_mul(v3_add(p, q), 0.5), v3_mul(rnd_dir(&g), 1e-4 * sz));
+        add_t(s, add_v(s, p.x, p.y, p.z), add_v(s, q.x, q.y, q.z), add_v(s, r2.x, r2.y, r2.z));
+    }
+    nt = (int)s->ntris;
+    if (rtpi_kd_build(s, NULL, &kd, NULL) != RTP_OK) {
+        CHECK(0);
+        rtp_scene_destroy(s);
+        return;
+    }
+    {
+        const float *p0 = s->pos + 3 * (size_t)s->tris[nt - 1].v[0];
+        const float *p1 = s->pos + 3 * (size_t)s->tris[nt - 1].v[1];
+        lights[0] = v3(off + 2, 3, 9);
+        lights[1] = v3(off + 0.8, 0.7, 1.4); /* among them */
+        lights[2] = v3(3e5, -1e5, 8e5);
+        /* on an edge's line beyond its end */
+        lights[3] = v3(p1[0] + 2.0 * (p1[0] - p0[0]), p1[1] + 2.0 * (p1[1] - p0[1]),
+                       p1[2] + 2.0 * (p1[2] - p0[2]));
+        lights[4] = v3(off + 0.9, 0.9, 0.2 * sin(3.0 + 6.0) + 0.0); /* near the mesh's plane */
+    }
+    for (li = 0; li < 5; li++) {
+        rtpi_v3 L = lights[li];
+        double *planes = NULL, *edges = NULL, scale = 0.0, thr;
+        if (rtpi_tri_planes(s, L, &a, &planes, &scale, NULL) != RTP_OK ||
+            rtpi_tri_edges(s, L, scale, planes, &a, &edges, NULL) != RTP_OK || !edges) {
+            CHECK(0);
+            rtpi_free(&a, planes);
+            break;
+        }
+        thr = RTPI_EDGE_MARGIN * scale * scale * scale;
+        for (k = 0; k < 8000; k++) {
+            int t = (int)(rnd(&g) * nt) % nt, kind = k % 4, brute = 0, walk, hit, miss;
+            const rtpi_tri *tr = &s->tris[t];
+            rtpi_v3 v[3], P, o;
+            double e = es[k % (sizeof es / sizeof *es)], u = rnd(&g);
+            int ed = (int)(rnd(&g) * 3) % 3;
+            rtpi_edge_o eo;
+            rtpi_ray r;
+            rtpi_hit h;
+            uint32_t q;
+            for (i = 0; i < 3; i++)
+                v[i] = v3_from_f(s->pos + 3 * (size_t)tr->v[i]);
+            /* beside edge ed (u along it; a vertex where kind is 3),
+               moved by e of the way towards the opposite vertex (< 0:
+               away from it) */
+            if (kind == 3)
+                u = 0.0;
+            P = v3_add(v[ed], v3_mul(v3_sub(v[(ed + 1) % 3], v[ed]), u));
+            P = v3_add(P, v3_mul(v3_sub(v[(ed + 2) % 3], P), e));
+            o = v3_add(L, v3_mul(v3_sub(P, L), kind == 0 ? 1.0 + 1e-6 : kind == 1 ? 1.3 : 4.0));
+            r = rtpi_shadow_ray(o, L);
+            hit = rtpi_intersect_prim(s, (uint32_t)t, &r, &h);
+            rtpi_edge_o_make(&eo, &o);
+            miss = fabs(o.x) <= scale && fabs(o.y) <= scale && fabs(o.z) <= scale &&
+                   rtpi_edges_miss(edges + RTPI_EDGE_N * (size_t)t, &eo, thr);
+            bad += hit && miss;
+            culled += miss;
+            hits += hit;
+            near_hit += hit && e < 0.0 && e > -1e-6;
+            for (q = 0; q < (uint32_t)nt && !brute; q++)
+                brute = rtpi_intersect_prim(s, q, &r, &h);
+            walk = rtpi_kd_occluder_planes(kd, &r, RTPI_NONE, planes, edges, NULL, scale) !=
+                   RTPI_NONE;
+            badwalk += walk != brute;
+        }
+        rtpi_free(&a, planes);
+        rtpi_free(&a, edges);
+    }
+    CHECK_MSG(bad == 0, "offset %g: %d hits turned away by the edges' test (seed %llu)", off, bad,
+              (unsigned long long)g_seed);
+    CHECK_MSG(badwalk == 0, "offset %g: %d walks with the edges differ from brute force (seed "
+              "%llu)", off, badwalk, (unsigned long long)g_seed);
+    printf("triangles' edge test (offset %g): %d hits, %d beside an edge, %d turned away\n", off,
+           hits, near_hit, culled);
+    /* the test is asked and turns rays away (at the origin: off it the
+       margin, scale^3, is wider than any of these triangles' values);
+       grazing rays hit */
+    CHECK_MSG((off != 0.0 || culled > 1000) && hits > 4000 && near_hit > 500,
+              "offset %g: %d hits, %d beside an edge, %d turned away", off, hits, near_hit,
+              culled);
+    rtpi_kd_destroy(kd);
+    rtp_scene_destroy(s);
+}
+
+static void test_tri_edges(void)
+{
+    tri_edges_case(0.0);
+    tri_edges_case(1e5);
 }
 
 int main(void)
@@ -1500,5 +1624,6 @@ int main(void)
     RUN(test_copies_leaf_order);
     RUN(test_stats);
     RUN(test_cylinder_line);
+    RUN(test_tri_edges);
     return check_report();
 }
