@@ -1823,6 +1823,7 @@ static int cmd_diff(int argc, char **argv)
     int i, rc = 1, over = 0, c, held, nfail = 0, k, names_only = 0;
     rtp_status hs;
     fail_limit *fails;
+    double t0, seconds;
 
     memset(&err, 0, sizeof err);
     fails = (fail_limit *)calloc((size_t)argc + 1, sizeof *fails);
@@ -1955,6 +1956,7 @@ static int cmd_diff(int argc, char **argv)
     /* outputs checked before the inputs are read, as trace's are */
     if (!output_ok(heat) || !output_ok(stats_path))
         goto out;
+    t0 = now_seconds();
     if (rtp_image_read(pa, NULL, &a, &err) != RTP_OK ||
         rtp_image_read(pb, NULL, &b, &err) != RTP_OK) {
         fail_err(&err);
@@ -1977,6 +1979,9 @@ static int cmd_diff(int argc, char **argv)
         fail_err(&err);
         goto out;
     }
+    /* (the command's whole work, as trace's seconds: both reads, the
+       comparison and the heat map; BRIEF's --stats keys have seconds) */
+    seconds = now_seconds() - t0;
     if (verbosity > 0 && !(stats_path && strcmp(stats_path, "-") == 0)) {
         /* (to stderr when the heat map takes stdout) */
         fprintf(is_stdout(heat) ? stderr : stdout,
@@ -1988,7 +1993,8 @@ static int cmd_diff(int argc, char **argv)
         FILE *f = stats_open(stats_path);
         if (!f)
             goto out;
-        fprintf(f, "{\"command\": \"diff\", \"pixels\": %zu, ", d.pixels);
+        fprintf(f, "{\"command\": \"diff\", \"seconds\": %.6f, \"pixels\": %zu, ", seconds,
+                d.pixels);
         json_number(f, "mae", d.mae);
         fputs(", ", f);
         json_number(f, "rmse", d.rmse);

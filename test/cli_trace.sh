@@ -53,6 +53,9 @@ grep -q '"eye_rays": 1200' "$T/s.json" && ok || { bad "stats eye_rays"; cat "$T/
 $RTP trace scenes/spheres.nff --size 40x30 -i - 2>"$T/err" | $RTP diff - "$T/a.pfm" --stats "$T/d.json" >/dev/null 2>&1
 [ $? -eq 0 ] && ok || bad "pipe trace | diff"
 grep -q '"psnr": "inf"' "$T/d.json" && ok || { bad "identical images not inf psnr"; cat "$T/d.json" >&2; }
+# BRIEF's --stats keys include `seconds` where they apply: diff's is its
+# reading, comparing and heat map, a plain number as trace's and reeval's
+grep -Eq '"seconds": [0-9]+\.[0-9]{6}[,}]' "$T/d.json" && ok || { bad "diff stats: no seconds"; cat "$T/d.json" >&2; }
 # An infinite pixel against a finite one: every error metric "inf", psnr "-inf"
 # (JSON has no infinity), and the printed line says the same.
 printf 'PF\n1 1\n-1.0\n\000\000\200\077\000\000\200\077\000\000\200\077' > "$T/one.pfm"
