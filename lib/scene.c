@@ -629,6 +629,13 @@ static rtp_status want(rtp_error *err, const char *key, const char *value, int g
 /* light.N.FIELD or mat.N.FIELD (N an index or a name): which (ITEM_LIGHT,
    ITEM_MAT), N's index and FIELD; else RTP_ERR_KEY naming what is wrong. */
 enum { ITEM_LIGHT = 1, ITEM_MAT = 2 };
+/* What a key of no family is told: the families, and the remedy for an
+   edit no class has (an object moved, BRIEF's "later" class D; it said
+   only "unknown key"). */
+#define KEYS_THERE                                                                         \
+    "keys: light.N.FIELD, mat.N.FIELD, camera.FIELD, ambient, background; objects are "   \
+    "not parameters: to move one, edit the scene and trace it again"
+
 static rtp_status item_key(const rtp_scene *s, const char *key, int *kind, long *idx,
                            const char **field, rtp_error *err)
 {
@@ -637,7 +644,7 @@ static rtp_status item_key(const rtp_scene *s, const char *key, int *kind, long 
     const char *dot1 = strchr(key, '.'), *dot2 = strrchr(key, '.');
     size_t len;
     if (!dot1 || dot2 == dot1)
-        return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0, "unknown key '%s'", key);
+        return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0, "unknown key '%s' (%s)", key, KEYS_THERE);
     *field = dot2 + 1;
     len = (size_t)(dot2 - dot1 - 1);
     if ((size_t)(dot1 - key) == 5 && memcmp(key, "light", 5) == 0) {
@@ -666,7 +673,7 @@ static rtp_status item_key(const rtp_scene *s, const char *key, int *kind, long 
         return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0,
                           "%s: no such material (the scene has %zu)", key, s->nmats);
     }
-    return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0, "unknown key '%s'", key);
+    return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0, "unknown key '%s' (%s)", key, KEYS_THERE);
 }
 
 /* What is wrong with s's camera for a frame to be made, or NULL: at

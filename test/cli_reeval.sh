@@ -676,6 +676,15 @@ grep -q "mat.c.kd: expected 1 comma-separated number.*got '0.5=1'" "$T/err" && o
     bad "mat.c.kd=0.5=1: $(cat "$T/err")"
 expect_rc 1 $RTP reeval "$T/eq.rtp" --set foo=bar=1 -i "$T/eq3.pfm"
 grep -q "unknown key 'foo'" "$T/err" && ok || bad "foo=bar=1: $(cat "$T/err")"
+# a key no edit class has (an object moved: BRIEF's "later" class D) is
+# refused naming the key, the keys there are and the remedy, on reeval and
+# trace alike, and writes no image
+expect_rc 1 $RTP reeval "$T/eq.rtp" --set obj.0.pos=1,2,3 -i "$T/eq4.pfm"
+grep -q "unknown key 'obj.0.pos' (keys: light.N.FIELD, mat.N.FIELD, camera.FIELD, ambient, background; .*trace it again)" \
+    "$T/err" && ok || bad "obj.0.pos: $(cat "$T/err")"
+[ ! -e "$T/eq4.pfm" ] && ok || bad "obj.0.pos wrote an image"
+expect_rc 1 $RTP trace "$T/eq.obj" --size 16x16 --set sphere=1 -i "$T/eq4.pfm"
+grep -q "unknown key 'sphere' (keys: .*trace it again)" "$T/err" && ok || bad "sphere=1: $(cat "$T/err")"
 # digits are an index, never a name: a material named "12" past the last
 # index is said to be reached by its own (the message said only "no such
 # material")
