@@ -1630,7 +1630,7 @@ static int cmd_trace(int argc, char **argv)
     if (opt.spd && verbosity > 0) {
         const char *ign[3];
         int n = 0;
-        if (opt.width)
+        if (opt.width && (opt.width != 512 || opt.height != 512))
             ign[n++] = "--size";
         if (opt.max_depth && opt.max_depth != 5)
             ign[n++] = "--depth";

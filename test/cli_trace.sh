@@ -165,7 +165,15 @@ grep -q "memory limit of 1 MiB while re-tracing" "$T/err" && ok || { bad "re-tra
 expect_rc 0 $RTP reeval "$T/trap.rtp" --set mat.1.kt=0.5 -i "$T/trap.pfm" --stats "$T/trap.json"
 grep -q '"capped_rays": 0' "$T/trap.json" && ok || { bad "reeval capped_rays"; cat "$T/trap.json" >&2; }
 
-# Every SPD scene and every mesh in ../shared renders (small, fast).
+# --spd traces 512x512 to depth 5 with no cut-off: a --size, --depth or
+# --min-weight that differs is said to be ignored; the same values are no
+# warning (--size 512x512 was said to be ignored, --depth 5 was not)
+expect_rc 0 $RTP trace scenes/spheres.nff --spd --size 512x512 --depth 5 -i "$T/spd1.pfm"
+[ ! -s "$T/err" ] && ok || bad "--spd --size 512x512 --depth 5: $(cat "$T/err")"
+expect_rc 0 $RTP trace scenes/spheres.nff --spd --size 512x256 --depth 4 --min-weight 0.1 -i "$T/spd2.pfm"
+grep -q "warning: --spd traces 512x512 to depth 5 with no weight cut-off: --size, --depth, --min-weight ignored" \
+    "$T/err" && ok || bad "--spd with other values: $(cat "$T/err")"
+cmp -s "$T/spd1.pfm" "$T/spd2.pfm" && ok || bad "--spd with other values: another image"
 shared=""
 for d in ../shared/scenes ../../shared/scenes; do [ -d "$d/spd" ] && shared=$d && break; done
 if [ -n "$shared" ]; then
