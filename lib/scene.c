@@ -789,6 +789,33 @@ static void set_rgb(float *dst, const double *v, int n)
         dst[i] = (float)v[n == 1 ? 0 : i];
 }
 
+/* A light's intensity is its colour's largest component: setting it to v
+   scales the colour to that, its hue kept (that component v itself, the
+   others c v / max in double, rounded once); a black light, which has no
+   hue, turns white of v.  Nothing is kept beside the colour, so the tree
+   file holds it as it holds the colour, and setting v twice is setting it
+   once; trace --set and reeval --set make the same floats. */
+static int light_brightest(const float *c)
+{
+    int i, k = 0;
+    for (i = 1; i < 3; i++)
+        if (c[i] > c[k])
+            k = i;
+    return k;
+}
+
+static void light_intensity(float *c, double v)
+{
+    int i, k = light_brightest(c);
+    double m = c[k];
+    if (!(m > 0.0)) {
+        c[0] = c[1] = c[2] = (float)v;
+        return;
+    }
+    for (i = 0; i < 3; i++)
+        c[i] = i == k ? (float)v : (float)((double)c[i] * v / m);
+}
+
 /* A field rtp_scene_set does not take.  name is one rtp_scene_get reads:
    "unknown key" for it sent a caller who had just read it looking for a
    typo. */
@@ -863,13 +890,18 @@ rtp_status rtpi_scene_set(rtp_scene *s, const char *key, const char *value,
                 (st = want_rgb(err, key, v, n)) != RTP_OK)
                 return st;
             set_rgb(l->color, v, n);
+        } else if (strcmp(field, "intensity") == 0) {
+            if ((st = want(err, key, value, n, 1)) != RTP_OK ||
+                (st = want_rgb(err, key, v, n)) != RTP_OK)
+                return st;
+            light_intensity(l->color, v[0]);
         } else if (strcmp(field, "on") == 0) {
             if ((st = want(err, key, value, n, 1)) != RTP_OK ||
                 (st = want_01(err, key, v[0])) != RTP_OK)
                 return st;
             l->on = v[0] != 0.0;
         } else {
-            return field_refused(err, key, field, "light fields: pos, color, on");
+            return field_refused(err, key, field, "light fields: pos, color, intensity, on");
         }
         return RTP_OK;
     }
@@ -1099,13 +1131,15 @@ rtp_status rtp_scene_get(const rtp_scene *s, const char *key, char *buf, size_t 
                 put_nums(buf, size, &at, l->pos, 3, 0);
             else if (strcmp(field, "color") == 0)
                 put_floats(buf, size, &at, l->color, 3);
+            else if (strcmp(field, "intensity") == 0)
+                put_floats(buf, size, &at, l->color + light_brightest(l->color), 1);
             else if (strcmp(field, "on") == 0)
                 put_str(buf, size, &at, l->on ? "1" : "0");
             else if (strcmp(field, "name") == 0)
                 put_str(buf, size, &at, l->name ? l->name : "");
             else
                 return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0,
-                                  "unknown key '%s' (light fields: pos, color, on, name)", key);
+                                  "unknown key '%s' (light fields: pos, color, intensity, on, name)", key);
         } else {
             const rtpi_material *m = &s->mats[i];
             size_t off;

@@ -1029,6 +1029,31 @@ grep -q "^rtp: <stdin>:1: expected KEY=VALUE" "$T/err" && ok || bad "--stream li
 printf 'P3 1 1 255 1 2 3\n' | $RTP diff - "$T/t.pfm" 2>"$T/err" >/dev/null
 grep -q "^rtp: <stdin> is 1x1, .* image sizes differ" "$T/err" && ok || bad "diff's sizes naming stdin: $(cat "$T/err")"
 
+# light.N.intensity (the colour's largest component, scaled to): a
+# one-off reeval is the full trace's bits, a stream of intensity and
+# colour edits within 1e-6 of the full traces (the colour planes' path),
+# the keys of every frame applied in turn
+expect_rc 0 $RTP trace $S --size 48x36 -o "$T/li.rtp" -q
+expect_rc 0 $RTP reeval "$T/li.rtp" --set light.1.intensity=2.5 -i "$T/li_r.pfm" -q
+expect_rc 0 $RTP trace $S --size 48x36 --set light.1.intensity=2.5 -i "$T/li_t.pfm" -q
+cmp -s "$T/li_r.pfm" "$T/li_t.pfm" && ok || bad "reeval --set light.1.intensity=2.5 is not trace's bits"
+expect_rc 0 $RTP trace $S --size 48x36 -i "$T/li_0.pfm" -q
+$RTP diff "$T/li_0.pfm" "$T/li_t.pfm" --fail-above max_abs=0 >/dev/null 2>&1
+[ $? -eq 3 ] && ok || bad "light.1.intensity=2.5 changed nothing"
+printf 'light.1.intensity=2\nlight.1.intensity=0.5\nlight.1.color=0\nlight.1.intensity=1.5 light.0.intensity=0\n' |
+    $RTP reeval "$T/li.rtp" --stream -i "$T/li_s%d.pfm" -q
+keys=""
+lf=0
+for kv in light.1.intensity=2 light.1.intensity=0.5 light.1.color=0 "light.1.intensity=1.5 light.0.intensity=0"; do
+    for k in $kv; do keys="$keys --set $k"; done
+    expect_rc 0 $RTP trace $S --size 48x36 $keys -i "$T/li_f.pfm" -q
+    expect_rc 0 $RTP diff "$T/li_s$lf.pfm" "$T/li_f.pfm" --fail-above max_abs=1e-6 -q
+    lf=$((lf + 1))
+done
+expect_rc 1 $RTP reeval "$T/li.rtp" --set light.0.intensity=-1 -i "$T/li_x.pfm" -q
+grep -q "light.0.intensity: -1: a colour's components must be 0 or more" "$T/err" && [ ! -e "$T/li_x.pfm" ] &&
+    ok || bad "a negative intensity: $(cat "$T/err")"
+
 rm -rf "$T"
 echo "$pass passed, $fail failed, $skip skipped"
 [ "$fail" -eq 0 ]

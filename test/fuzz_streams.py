@@ -201,8 +201,10 @@ class Gen:
             return (cl, "mat.%d.%s" % (m, k), self.mats[m][k])
         if c == "A":
             w = r.random()
-            if w < 0.2 and self.nl:
+            if w < 0.16 and self.nl:
                 return ("A", "light.%d.color" % self.light(), col(r))
+            if w < 0.2 and self.nl:
+                return ("A", "light.%d.intensity" % self.light(), "%.3g" % r.uniform(0, 2))
             if w < 0.3 and self.nl:
                 return ("A", "light.%d.on" % self.light(), r.choice("01"))
             if w < 0.37:

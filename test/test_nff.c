@@ -611,6 +611,40 @@ static void test_get_shortest_subnormal(void)
     rtp_scene_destroy(s);
 }
 
+/* light.N.intensity: the colour's largest component, set by scaling the
+   colour (hue kept, that component exactly the value; a black light
+   turns white of it), read back as that component; refused below 0, as
+   more than one number or past a float. */
+static void test_light_intensity(void)
+{
+    rtp_scene *s = NULL;
+    rtp_error err;
+    char buf[128];
+    CHECK(load("l 1 2 3 0.2 0.8 0.4\nl 0 0 9 0 0 0\nf 1 0 0 1 0 100 0 0\ns 0 0 0 1\n",
+               "li.nff", &s, &err) == RTP_OK);
+    if (!s)
+        return;
+    CHECK(rtp_scene_get(s, "light.0.intensity", buf, sizeof buf, &err) == RTP_OK);
+    CHECK_MSG(strcmp(buf, "0.8") == 0, "'%s'", buf);
+    CHECK(rtp_scene_set(s, "light.0.intensity", "2", &err) == RTP_OK);
+    CHECK(rtp_scene_get(s, "light.0.color", buf, sizeof buf, &err) == RTP_OK);
+    CHECK_MSG(strcmp(buf, "0.5,2,1") == 0, "'%s'", buf);
+    CHECK(rtp_scene_set(s, "light.0.intensity", "2", &err) == RTP_OK);
+    CHECK(rtp_scene_get(s, "light.0.color", buf, sizeof buf, &err) == RTP_OK);
+    CHECK_MSG(strcmp(buf, "0.5,2,1") == 0, "twice: '%s'", buf);
+    CHECK(rtp_scene_get(s, "light.0.intensity", buf, sizeof buf, &err) == RTP_OK);
+    CHECK_MSG(strcmp(buf, "2") == 0, "'%s'", buf);
+    CHECK(rtp_scene_set(s, "light.1.intensity", "0.7", &err) == RTP_OK);
+    CHECK(rtp_scene_get(s, "light.1.color", buf, sizeof buf, &err) == RTP_OK);
+    CHECK_MSG(strcmp(buf, "0.7,0.7,0.7") == 0, "black light: '%s'", buf);
+    CHECK(rtp_scene_set(s, "light.0.intensity", "-1", &err) == RTP_ERR_ARGUMENT);
+    CHECK(rtp_scene_set(s, "light.0.intensity", "1,2", &err) == RTP_ERR_PARSE);
+    CHECK(rtp_scene_set(s, "light.0.intensity", "1e39", &err) == RTP_ERR_PARSE);
+    CHECK(rtp_scene_get(s, "light.0.color", buf, sizeof buf, &err) == RTP_OK);
+    CHECK_MSG(strcmp(buf, "0.5,2,1") == 0, "after refusals: '%s'", buf);
+    rtp_scene_destroy(s);
+}
+
 /* A light's position takes its key's range (|x| <= 3.4e38, float's),
    not geometry's 1e18: a scene's light at 1e30 was refused while
    light.0.pos=1e30,... was taken.  What rtp_scene_get gives back sets
@@ -1353,6 +1387,7 @@ int main(void)
     RUN(test_error_format_without_file);
     RUN(test_far_light);
     RUN(test_get_shortest_subnormal);
+    RUN(test_light_intensity);
     RUN(test_checker_bump);
     RUN(test_files);
     RUN(test_image_key_over_the_limit);
