@@ -1887,18 +1887,25 @@ static int cmd_diff(int argc, char **argv)
             }
             memcpy(fl->metric, v, n);
             fl->metric[n] = '\0';
-            /* (psnr=inf, "identical or fail", had been told it was not
-               METRIC=VALUE) */
-            if (vn >= sizeof num || parse_double(num, &fl->value)) {
-                msg("--fail-above %s: expected a finite number after '='%s", v,
-                    strcmp(fl->metric, "psnr") == 0 ? " (identical images: max_abs=0)" : "");
-                goto usage;
-            }
+            /* (the metric first: psrn=inf had been told of its number) */
             if (strcmp(fl->metric, "mae") && strcmp(fl->metric, "rmse") &&
                 strcmp(fl->metric, "max_abs") && strcmp(fl->metric, "psnr") &&
                 strcmp(fl->metric, "above")) {
                 msg("--fail-above: unknown metric '%s' (mae, rmse, psnr, max_abs, above)",
                     fl->metric);
+                goto usage;
+            }
+            /* (psnr=inf, "identical or fail", had been told it was not
+               METRIC=VALUE; a finite number too long for num, that it
+               was no finite number) */
+            if (vn >= sizeof num) {
+                msg("--fail-above %s: the number after '=' is over %d characters", v,
+                    (int)sizeof num - 1);
+                goto usage;
+            }
+            if (parse_double(num, &fl->value)) {
+                msg("--fail-above %s: expected a finite number after '='%s", v,
+                    strcmp(fl->metric, "psnr") == 0 ? " (identical images: max_abs=0)" : "");
                 goto usage;
             }
             if (percent && strcmp(fl->metric, "above") != 0) {

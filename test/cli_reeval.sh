@@ -368,6 +368,15 @@ grep -q "^rtp: --fail-above mae=abc: expected a finite number after '='$" "$T/er
 expect_rc 2 $RTP diff "$T/t.pfm" "$T/t.pfm" --fail-above mae
 grep -q "^rtp: --fail-above mae: expected METRIC=VALUE" "$T/err" && ok ||
     bad "--fail-above mae: $(cat "$T/err")"
+# a misspelt metric is told first, whatever its number; a finite number
+# too long for the buffer is not said to be no finite number
+expect_rc 2 $RTP diff "$T/t.pfm" "$T/t.pfm" --fail-above psrn=inf
+grep -q "^rtp: --fail-above: unknown metric 'psrn'" "$T/err" && ok ||
+    bad "--fail-above psrn=inf: $(cat "$T/err")"
+long=0.$(printf '%070d' 1)
+expect_rc 2 $RTP diff "$T/t.pfm" "$T/t.pfm" --fail-above max_abs=$long
+grep -q "^rtp: --fail-above max_abs=$long: the number after '=' is over 63 characters" "$T/err" &&
+    ok || bad "--fail-above with a 72-character number: $(cat "$T/err")"
 expect_rc 2 $RTP version extra
 expect_rc 0 $RTP version --help
 grep -q "usage: rtp version" "$T/out" && ok || bad "version --help"
