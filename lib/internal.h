@@ -607,15 +607,16 @@ uint32_t rtpi_kd_occluder_planes(const rtpi_kdtree *kd, const rtpi_ray *ray, uin
    edge and above m for another, m = RTPI_EDGE_MARGIN scale^3, misses the
    triangle (rtpi_kd_occluder_planes asks them, with the plane's test).
    *out NULL where s has no triangles or planes is NULL, more than
-   RTPI_EDGE_TRIS of them, or a scale outside [1e-90, 1e90].  (The
+   RTPI_EDGE_TRIS of them, a scale outside [1e-90, 1e90], or its memory
+   cannot be had (a speed-up only).  (The
    bound keeps a move's edges within 128 MB beside the planes' 32 MB a
    million triangles: they are written whole for every moved light, a
    speed-up only, and a scene of millions of triangles seen in a frame of
    a million samples asks few of them.) */
 #define RTPI_EDGE_TRIS ((size_t)1 << 20)
 #define RTPI_EDGE_N 16
-rtp_status rtpi_tri_edges(const rtp_scene *s, rtpi_v3 light, double scale, const double *planes,
-                          const rtp_allocator *a, double **out, rtp_error *err);
+void rtpi_tri_edges(const rtp_scene *s, rtpi_v3 light, double scale, const double *planes,
+                    const rtp_allocator *a, double **out);
 
 /* ------------------------------------------------------------- ray trees */
 

@@ -265,7 +265,7 @@ rtp_status rtpi_shadow_create_mt(const rtp_scene *s, const rtpi_kdtree *kd, rtpi
     if (st == RTP_OK && sh->mode == RTPI_SHADOW_EXACT)
         st = rtpi_tri_planes(s, light, a, &sh->planes, &sh->pscale, err);
     if (st == RTP_OK && sh->mode == RTPI_SHADOW_EXACT && sh->planes)
-        st = rtpi_tri_edges(s, light, sh->pscale, sh->planes, a, &sh->edges, err);
+        rtpi_tri_edges(s, light, sh->pscale, sh->planes, a, &sh->edges);
     if (st == RTP_OK && sh->mode == RTPI_SHADOW_EXACT)
         st = rtpi_round_cones(s, light, sh->pscale, rtpi_kd_far(sh->kd, light), a,
                               &sh->cones, err);

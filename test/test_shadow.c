@@ -744,7 +744,7 @@ static int fail_each(const rtp_scene *s, const rtpi_kdtree *kd, rtpi_v3 lp, rtpi
     counting c;
     rtp_allocator a;
     long fail;
-    int bad = 0;
+    int bad = 0, spared = 0;
     a.malloc_fn = c_malloc;
     a.realloc_fn = c_realloc;
     a.free_fn = c_free;
@@ -763,10 +763,19 @@ static int fail_each(const rtp_scene *s, const rtpi_kdtree *kd, rtpi_v3 lp, rtpi
             bad += c.live != 0;
             break;
         }
+        if (mode == RTPI_SHADOW_EXACT && st == RTP_OK && sh) {
+            /* the triangles' edges, a speed-up, are left out where their
+               memory cannot be had (rtpi_tri_edges): one site, the move
+               goes on */
+            spared++;
+            rtpi_shadow_destroy(sh);
+            bad += c.live != 0;
+            continue;
+        }
         bad += st != RTP_ERR_NOMEM || sh != NULL || c.live != 0;
     }
     *sites = fail;
-    return bad + (fail == max);
+    return bad + (fail == max) + (spared != (mode == RTPI_SHADOW_EXACT && s->ntris ? 1 : 0));
 }
 
 static void test_alloc_failures(void)
