@@ -1407,8 +1407,9 @@ static const char trace_help[] =
     "                       (none with -o)\n"
     "  --set KEY=VALUE      edit the scene first (repeatable): light.N.pos|color|\n"
     "                       intensity|on,\n"
-    "                       mat.N.color|kd|ks|kt|shine|ior|checker|color2|\n"
-    "                       checker_scale|texture|bump|bump_strength|bump_scale,\n"
+    "                       mat.N.color|kd|ks|kt|shine|ior|ambient|checker|\n"
+    "                       color2|checker_scale|texture|bump|bump_strength|\n"
+    "                       bump_scale,\n"
     "                       ambient, background, camera.from|at|up|angle|hither;\n"
     "                       N is a 0-based index or a name; light.N.pos with N\n"
     "                       the count of lights adds a light\n"
@@ -2779,6 +2780,7 @@ static void print_keys(const rtp_scene *s, const rtp_tree_info *ti)
     static const char *const env[] = {"ambient", "background"};
     static const char *const light[] = {"pos", "color", "on"};
     static const char *const mat[] = {"color", "kd", "ks", "kt", "shine", "ior"};
+    static const char *const ambient[] = {"ambient"};
     static const char *const checker[] = {"checker", "color2", "checker_scale"};
     static const char *const texture[] = {"texture"};
     static const char *const bump[] = {"bump", "bump_strength", "bump_scale"};
@@ -2794,6 +2796,20 @@ static void print_keys(const rtp_scene *s, const rtp_tree_info *ti)
         char line[96];
         item_head(s, "mat", i, prefix, sizeof prefix, head, sizeof head);
         print_fields(s, head, prefix, mat, 6);
+        /* (the ambient coefficient where it is not kd's: one set apart
+           from it, on the line after the material's own) */
+        {
+            char kd[64];
+            snprintf(line, sizeof line, "%skd", prefix);
+            if (rtp_scene_get(s, line, kd, sizeof kd, NULL) == RTP_OK) {
+                char kd3[200];
+                snprintf(kd3, sizeof kd3, "%s,%s,%s", kd, kd, kd);
+                snprintf(line, sizeof line, "%sambient", prefix);
+                if (rtp_scene_get(s, line, val, sizeof val, NULL) == RTP_OK &&
+                    strcmp(val, kd3) != 0)
+                    print_fields(s, "   ", prefix, ambient, 1);
+            }
+        }
         /* (texture and bump fields where the material uses them, on the
            lines after its own) */
         snprintf(line, sizeof line, "%schecker", prefix);
@@ -2815,7 +2831,8 @@ static const char info_help[] =
     "Prints what a tree file ('-' = stdin) holds: image and sample sizes,\n"
     "nodes, bytes per node, file size, and the keys --set takes with their\n"
     "values now: the camera, ambient and background, each light and material\n"
-    "by index and name (texture and bump fields where a material has them).\n"
+    "by index and name (texture and bump fields where a material has them, its\n"
+    "ambient coefficient where it is not kd's).\n"
     "  --stats FILE         write the sizes as one JSON object ('-' = stdout)\n"
     "  -q, --quiet          print nothing (--stats still writes)\n"
     "  -v, --verbose        accepted (info has nothing more to say)\n"

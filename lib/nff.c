@@ -1,7 +1,7 @@
 /* nff.c — the NFF reader: Eric Haines' Neutral File Format exactly as the
  * SPD generators write it, read token by token (not line by line), plus
  * rtp's additions (scenes/README.md): name, off, ambient, checker,
- * texture, bump, include and bezier.
+ * texture, bump, include and bezier; and ka (README.md).
  *
  * Every malformed input is a parse error at the offending token's line
  * and column; nothing is allocated from a count before the text has been
@@ -584,6 +584,33 @@ static rtp_status read_checker(nff *c, const rtpi_tok *kw)
     return RTP_OK;
 }
 
+/* ka V (grey) or ka R G B: the current material's ambient coefficient
+   (mat.N.ambient; unset, it follows kd).  NFF's own keywords hold no ka. */
+static rtp_status read_ka(nff *c, const rtpi_tok *kw)
+{
+    static const char *const field[] = {"value", "green", "blue"};
+    rtpi_material *m;
+    double v[3];
+    rtpi_tok tk[3];
+    int i, n = 1;
+    rtp_status st = current_material(c, kw, &m);
+    if (st != RTP_OK || (st = num(c, "ka", "ka", field[0], &v[0], &tk[0])) != RTP_OK)
+        return st;
+    if (peek_number(c)) {
+        for (n = 1; n < 3; n++)
+            if ((st = num(c, "ka", "ka", field[n], &v[n], &tk[n])) != RTP_OK)
+                return st;
+    }
+    for (i = 0; i < n; i++)
+        if ((st = nonneg(c, &tk[i], "ka", field[i], v[i])) != RTP_OK)
+            return st;
+    m = &c->s->mats[c->mat];
+    for (i = 0; i < 3; i++)
+        m->ka[i] = (float)v[n == 1 ? 0 : i];
+    m->ka_set = 1;
+    return RTP_OK;
+}
+
 /* A file name token resolved against the current file's folder. */
 static rtp_status read_path(nff *c, const char *what, rtpi_tok *t,
                             char **path)
@@ -924,6 +951,12 @@ static rtp_status parse(nff *c)
         case 't':
             if (rtpi_tok_is(&t, "texture")) {
                 st = read_texture(c, &t);
+                continue;
+            }
+            break;
+        case 'k':
+            if (rtpi_tok_is(&t, "ka")) {
+                st = read_ka(c, &t);
                 continue;
             }
             break;

@@ -915,6 +915,23 @@ rtp_status rtpi_scene_set(rtp_scene *s, const char *key, const char *value,
             set_rgb(field[5] == '2' ? m->color2 : m->color, v, n);
             return RTP_OK;
         }
+        if (strcmp(field, "ambient") == 0) {
+            /* the ambient coefficient ka, grey (one number) or r,g,b; 0
+               or more, as kd (its message): set, it no longer follows kd */
+            int c;
+            if ((st = want(err, key, value, n, 3)) != RTP_OK)
+                return st;
+            for (c = 0; c < n; c++)
+                if (v[c] < 0.0) {
+                    char g[32]; /* '.' whatever the locale */
+                    rtpi_fmt_g(g, sizeof g, 6, v[c]);
+                    return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                                      "%s: %s: must be 0 or more", key, g);
+                }
+            set_rgb(m->ka, v, n);
+            m->ka_set = 1;
+            return RTP_OK;
+        }
         if (strcmp(field, "checker_scale") == 0) {
             if ((st = want(err, key, value, n, 1)) != RTP_OK)
                 return st;
@@ -994,9 +1011,9 @@ rtp_status rtpi_scene_set(rtp_scene *s, const char *key, const char *value,
         }
         if (!dst)
             return field_refused(err, key, field,
-                                 "material fields: color, kd, ks, kt, shine, ior, checker, "
-                                 "color2, checker_scale, texture, bump, bump_strength, "
-                                 "bump_scale");
+                                 "material fields: color, kd, ks, kt, shine, ior, ambient, "
+                                 "checker, color2, checker_scale, texture, bump, "
+                                 "bump_strength, bump_scale");
         if ((st = want(err, key, value, n, 1)) != RTP_OK)
             return st;
         /* (an ior is kept as a float: one that rounds to 0 is 0) */
@@ -1148,7 +1165,11 @@ rtp_status rtp_scene_get(const rtp_scene *s, const char *key, char *buf, size_t 
             else if (mat_number(field, &off))
                 put_floats(buf, size, &at, (const float *)(const void *)((const char *)m + off),
                            1);
-            else if (strcmp(field, "checker") == 0)
+            else if (strcmp(field, "ambient") == 0) {
+                /* the effective ka: kd in each channel while unset */
+                const float kd3[3] = {m->kd, m->kd, m->kd};
+                put_floats(buf, size, &at, m->ka_set ? m->ka : kd3, 3);
+            } else if (strcmp(field, "checker") == 0)
                 put_str(buf, size, &at, m->tex == RTPI_TEX_CHECKER ? "1" : "0");
             else if (strcmp(field, "texture") == 0)
                 put_str(buf, size, &at,
@@ -1164,7 +1185,7 @@ rtp_status rtp_scene_get(const rtp_scene *s, const char *key, char *buf, size_t 
             else
                 return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0,
                                   "unknown key '%s' (material fields: color, kd, ks, kt, shine, "
-                                  "ior, checker, color2, checker_scale, texture, bump, "
+                                  "ior, ambient, checker, color2, checker_scale, texture, bump, "
                                   "bump_strength, bump_scale, name)",
                                   key);
         }

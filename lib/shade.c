@@ -5,7 +5,9 @@
  * tree holds where each ray hit and which lights each hit saw; normals,
  * texture coordinates and view vectors are derived from the hit positions
  * and the scene's geometry; the scene holds every optical parameter.  Conventions (README.md, "Shading"): c_li is the light colour
- * times the scene's light scale; I_a = ambient * kd * c_obj. */
+ * times the scene's light scale; I_a = ambient * ka * c_obj, per channel,
+ * with ka the material's ambient coefficient (mat.N.ambient), kd in each
+ * channel where it has none (the sums then exactly as before ka came). */
 #include "internal.h"
 
 #include <float.h>
@@ -1210,9 +1212,17 @@ static inline void node_coeffs(const rtpi_material *m, const float *t, size_t nl
     kc0 = kd * cobj[0];
     kc1 = kd * cobj[1];
     kc2 = kd * cobj[2];
-    acc[3] += kc0; /* ambient: kd c_obj */
-    acc[4] += kc1;
-    acc[5] += kc2;
+    if (!m->ka_set) {
+        acc[3] += kc0; /* ambient: kd c_obj (ka follows kd) */
+        acc[4] += kc1;
+        acc[5] += kc2;
+    } else {
+        /* ambient: ka c_obj, as (w ka) c_obj the way kd's is (w kd) c_obj
+           (a test a node, the sums of a material without ka unchanged) */
+        acc[3] += w * m->ka[0] * cobj[0];
+        acc[4] += w * m->ka[1] * cobj[1];
+        acc[5] += w * m->ka[2] * cobj[2];
+    }
     for (i = 0; i < nl; i++) {
         double d = t[3 + 2 * i], hs, *a = acc + 6 + 3 * i;
         if (d == 0.0)

@@ -2378,11 +2378,19 @@ static int light_terms_only(const rtpi_material *a, const rtpi_material *b)
     return !terms_changed(&x, b);
 }
 
+/* Do a's and b's ambient coefficients differ (set or not, or as set)?
+   Unset, ka is kd, which coeffs_changed compares anyway. */
+static int ka_changed(const rtpi_material *a, const rtpi_material *b)
+{
+    return a->ka_set != b->ka_set ||
+           (a->ka_set && memcmp(a->ka, b->ka, sizeof a->ka) != 0);
+}
+
 static int coeffs_changed(const rtpi_material *a, const rtpi_material *b)
 {
     return terms_changed(a, b) || a->kd != b->kd || a->ks != b->ks || a->kt != b->kt ||
            memcmp(a->color, b->color, sizeof a->color) != 0 ||
-           memcmp(a->color2, b->color2, sizeof a->color2) != 0;
+           memcmp(a->color2, b->color2, sizeof a->color2) != 0 || ka_changed(a, b);
 }
 
 /* Does a material edit change the shine alone? */
@@ -2895,7 +2903,14 @@ static int mat_term(rtp_tree *t, const double *cv, size_t nl, uint32_t *mat)
         x = *a;
         x.kd = b->kd;
         memcpy(x.color, b->color, sizeof x.color);
-        if (coeffs_changed(&x, b) || b->tex == RTPI_TEX_CHECKER)
+        /* (a material with its own ambient coefficient, before or after:
+           its ambient part is ka colour, not kd colour, so the image is
+           not affine in the one x = kd colour (a kd edit moves only the
+           diffuse part, a colour edit both with different weights); its
+           edits take the general path, which sums the samples as trace
+           does.  Splitting q into its ambient and diffuse parts would
+           keep the planes for it, at a second plane a pixel) */
+        if (coeffs_changed(&x, b) || b->tex == RTPI_TEX_CHECKER || a->ka_set || b->ka_set)
             return 0;
         *mat = (uint32_t)j;
     }
@@ -5418,6 +5433,8 @@ static const char *mat_field(const rtpi_material *m, const rtpi_material *n)
         return "bump_strength";
     if (m->bump_scale != n->bump_scale)
         return "bump_scale";
+    if (ka_changed(m, n))
+        return "ambient";
     return "values"; /* (equal as numbers, not as bits: -0 and 0) */
 }
 
