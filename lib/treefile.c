@@ -706,6 +706,26 @@ static rtp_status serialize(const rtp_tree *t, sink *out)
     }
     put_section(&head, "MATL", &b);
 
+    /* MAMB, the ambient coefficients of the materials that have their own
+       (mat.N.ambient, NFF's ka), only where one has: a scene without
+       them writes today's bytes, and a reader older than the section
+       refuses it by name (a required tag) rather than take ka for kd */
+    for (i = 0, k = 0; i < s->nmats; i++)
+        k += s->mats[i].ka_set != 0;
+    if (k) {
+        body_reset(&b);
+        put_u32(&b, (uint32_t)k);
+        for (i = 0; i < s->nmats; i++) {
+            const rtpi_material *m = &s->mats[i];
+            if (!m->ka_set)
+                continue;
+            put_u32(&b, (uint32_t)i);
+            for (k = 0; k < 3; k++)
+                put_f32(&b, m->ka[k]);
+        }
+        put_section(&head, "MAMB", &b);
+    }
+
     body_reset(&b);
     put_u32(&b, (uint32_t)s->nlights);
     for (i = 0; i < s->nlights; i++) {
@@ -1317,6 +1337,41 @@ static rtp_status read_matl(loader *L, rd *r)
         if ((unsigned)m->tex > RTPI_TEX_IMAGE || (unsigned)m->bump > RTPI_BUMP_NOISE ||
             (unsigned)t->mats0[i].bump > RTPI_BUMP_NOISE)
             return bad(L, "unknown texture or bump kind", NULL);
+    }
+    return RTP_OK;
+}
+
+/* MAMB: u32 count, then per material with its own ambient coefficient
+   its index (ascending, each once) and ka[3] (f32, finite, 0 or more). */
+static rtp_status read_mamb(loader *L, rd *r)
+{
+    rtp_scene *s = L->s;
+    uint32_t n = get_u32(r), i, idx;
+    long prev = -1;
+    int k;
+    if (r->bad || !count_ok(r, n, 16) || n == 0 || n > s->nmats)
+        return bad(L, "invalid count of ambient coefficients", NULL);
+    for (i = 0; i < n; i++) {
+        rtpi_material *m;
+        float ka[3];
+        idx = get_u32(r);
+        for (k = 0; k < 3; k++)
+            ka[k] = get_f32(r);
+        if (r->bad)
+            return bad(L, "section too short", NULL);
+        if (idx >= s->nmats || (long)idx <= prev)
+            return bad(L, "material index out of range or not ascending", NULL);
+        if (!finite3(ka))
+            return bad(L, "ambient coefficient is not finite", NULL);
+        if (ka[0] < 0.0f || ka[1] < 0.0f || ka[2] < 0.0f)
+            return bad(L, "negative ambient coefficient", NULL);
+        prev = (long)idx;
+        m = &s->mats[idx];
+        memcpy(m->ka, ka, sizeof ka);
+        m->ka_set = 1;
+        /* (as traced too: mats0 is compared whole where parts merge) */
+        memcpy(L->t->mats0[idx].ka, ka, sizeof ka);
+        L->t->mats0[idx].ka_set = 1;
     }
     return RTP_OK;
 }
@@ -2127,6 +2182,8 @@ static rtp_status section_index(loader *L, const char *tag, unsigned *seen, int 
             *idx = (int)i;
     if (*idx < 0 && (strcmp(tag, "TEXR") == 0 || strcmp(tag, "TEXB") == 0))
         *idx = 6; /* (one or the other: a second is a repeated section) */
+    if (*idx < 0 && strcmp(tag, "MAMB") == 0)
+        *idx = 7; /* (only where a material has its own ambient) */
     if (*idx < 0) {
         /* lower-case first letter: an extension a reader may skip */
         if (tag[0] >= 'a' && tag[0] <= 'z')
@@ -2136,15 +2193,15 @@ static rtp_status section_index(loader *L, const char *tag, unsigned *seen, int 
     if (*seen & (1u << *idx))
         return bad(L, "repeated section", NULL);
     {
-        /* The specification's order, HEAD SCEN MATL LITE [TEXR] GEOM TREE
-           (rank by *idx): nothing of a later rank seen yet, every
+        /* The specification's order, HEAD SCEN MATL [MAMB] LITE [TEXR]
+           GEOM TREE (rank by *idx): nothing of a later rank seen yet, every
            required section of an earlier rank seen.  (Until session 19
            only what each section needs of the earlier ones was checked,
            so files a reader following the specification refuses were
            taken.) */
-        static const int rank[7] = {0, 1, 2, 3, 5, 6, 4};
+        static const int rank[8] = {0, 1, 2, 4, 6, 7, 5, 3};
         int j;
-        for (j = 0; j < 7; j++) {
+        for (j = 0; j < 8; j++) {
             int had = (*seen >> j) & 1u;
             if ((had && rank[j] > rank[*idx]) || (!had && j < 6 && rank[j] < rank[*idx]))
                 return bad(L, "section out of order", NULL);
@@ -2164,6 +2221,7 @@ static rtp_status parse_section(loader *L, int idx, rd *body)
     case 3: st = read_lite(L, body); break;
     case 4: st = read_geom(L, body); break;
     case 5: st = read_tree(L, body); break;
+    case 7: st = read_mamb(L, body); break;
     default: st = read_texr(L, body); break;
     }
     if (st == RTP_OK && rd_left(body) != 0)

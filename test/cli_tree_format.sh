@@ -28,6 +28,9 @@ t region scenes/spheres.nff --size 40x30 --region 5,7,29,20
 t minweight scenes/spheres.nff --size 24x18 --min-weight 0.3 --depth 8
 t depth1 scenes/prims.nff --size 16x12 --depth 1
 t obj scenes/quad.obj --size 16x12
+# materials with their own ambient coefficient (MAMB), grey and RGB
+t ambient scenes/textured.nff --size 20x10 --set mat.2.checker=1 --set mat.0.ambient=0.25 \
+    --set mat.2.ambient=0.5,0.125,2 --set mat.ball.ambient=0
 cp test/golden/format1.rtp "$T/format1.rtp"
 for f in "$T"/*.rtp; do
     out=$($PY --check "$RTP" "$f" 2>&1)
@@ -44,7 +47,8 @@ for n in refract lights42 spd; do
     out=$($PY --stats "$T/s.rtp" "$T/t.json" "$T/r.json" 2>&1) && ok || bad "--stats of $n: $out"
 done
 # and the document's files rtp must accept or refuse
-out=$($PY --craft "$RTP" "$T/refract.rtp" "$T/texb.rtp" "$T/lights42.rtp" "$T/format1.rtp" 2>&1)
+out=$($PY --craft "$RTP" "$T/refract.rtp" "$T/texb.rtp" "$T/lights42.rtp" "$T/format1.rtp" \
+    "$T/ambient.rtp" 2>&1)
 n=$(echo "$out" | sed -n 's/^\([0-9]*\) passed, \([0-9]*\) failed$/\1 \2/p')
 [ -n "$n" ] && pass=$((pass + ${n% *})) && fail=$((fail + ${n#* }))
 [ -n "$n" ] && [ "${n#* }" -eq 0 ] || echo "$out" | grep -v passed | head -20 >&2

@@ -31,7 +31,7 @@ import sys
 import zlib
 
 SIGNATURE = b"\x89RTP\r\n\x1a\n"
-ORDER = ["HEAD", "SCEN", "MATL", "LITE", "TEX", "GEOM", "TREE", "END "]
+ORDER = ["HEAD", "SCEN", "MATL", "MAMB", "LITE", "TEX", "GEOM", "TREE", "END "]
 NONE32 = 0xFFFFFFFF
 MAX_SIDE = 1 << 20
 MAX_PIXELS = 1 << 27
@@ -213,6 +213,8 @@ def parse(data):
     parse_head(t, Reader(by["HEAD"][1], "HEAD"))
     parse_scen(t, Reader(by["SCEN"][1], "SCEN"))
     parse_matl(t, Reader(by["MATL"][1], "MATL"))
+    if "MAMB" in by:
+        parse_mamb(t, Reader(by["MAMB"][1], "MAMB"))
     parse_lite(t, Reader(by["LITE"][1], "LITE"))
     t["tex_tag"] = None
     t["textures"] = []
@@ -329,6 +331,25 @@ def parse_matl(t, r):
         mats.append(m)
     r.end()
     t["materials"] = mats
+
+
+def parse_mamb(t, r):
+    """The materials' own ambient coefficients: m["ka"] where given."""
+    n = r.u32("count")
+    mats = t["materials"]
+    if n == 0 or n > len(mats):
+        raise FormatError("MAMB: count")
+    prev = -1
+    for _ in range(n):
+        i = r.u32()
+        ka = vec(r, 3, r.f32, "ka")
+        if i >= len(mats) or i <= prev:
+            raise FormatError("MAMB: material index")
+        if min(ka) < 0:
+            raise FormatError("MAMB: negative ka")
+        mats[i]["ka"] = ka
+        prev = i
+    r.end()
 
 
 def parse_lite(t, r):
@@ -666,6 +687,12 @@ def encode_sections(t):
         b += w_u32(m["bump0_image"])
         b += w_f32(m["bump0_strength"], m["bump0_scale"])
     out.append((b"MATL", b))
+    own = [(i, m["ka"]) for i, m in enumerate(t["materials"]) if m.get("ka")]
+    if own:
+        b = w_u32(len(own))
+        for i, ka in own:
+            b += w_u32(i) + w_f32(*ka)
+        out.append((b"MAMB", b))
     b = w_u32(len(t["lights"]))
     for li in t["lights"]:
         b += w_f64(*li["pos"]) + w_f32(*li["color"]) + w_u8(li["on"])
@@ -854,6 +881,8 @@ def expected_text_keys(t):
         p = "mat.%d." % i
         for k in ("color", "kd", "ks", "kt", "shine", "ior"):
             e[p + k] = m[k]
+        if m.get("ka") and m["ka"] != [m["kd"]] * 3:
+            e[p + "ambient"] = m["ka"]
         if m["tex"] == 1:
             e[p + "checker"] = 1
             e[p + "color2"] = m["color2"]
@@ -1045,6 +1074,45 @@ def cases(t):
     # refused
     ref("an unknown required section", encode(t, [(3, b"ABCD", b"")]),
         "unknown required section")
+    if any(m.get("ka") for m in t["materials"]):
+        # an older reader's view of MAMB: a required tag it does not know
+        ref("MAMB under another upper-case tag",
+            with_secs(t, lambda secs: secs.__setitem__(
+                idx(secs, b"MAMB"), (b"MAMX", secs[idx(secs, b"MAMB")][1]))),
+            "unknown required section")
+        def after_lite(secs):
+            m = secs.pop(idx(secs, b"MAMB"))
+            secs.insert(idx(secs, b"LITE") + 1, m)
+        ref("MAMB after LITE", with_secs(t, after_lite), "out of order")
+        ref("MAMB twice", with_secs(t, lambda secs: secs.insert(
+            idx(secs, b"MAMB"), secs[idx(secs, b"MAMB")])), "repeated")
+        ref("MAMB a byte longer (CRC right)",
+            with_secs(t, patch_body(b"MAMB", lambda b: b + b"\0")),
+            "unexpected bytes")
+        ref("MAMB a byte shorter (CRC right)",
+            with_secs(t, patch_body(b"MAMB", lambda b: b[:-1])), "MAMB")
+        ref("MAMB with a count of 0",
+            with_secs(t, patch_body(b"MAMB", lambda b: w_u32(0))), "count")
+        first = next(i for i, m in enumerate(t["materials"]) if m.get("ka"))
+        ref("MAMB's ka negative", edited(t, lambda u: u["materials"][first]
+                                         .update(ka=[0.5, -0.25, 1.0])),
+            "negative ambient")
+        ref("MAMB's ka NaN", with_secs(t, patch_body(
+            b"MAMB", lambda b: b[:8] + struct.pack("<f", float("nan")) +
+            b[12:])), "not finite")
+        ref("MAMB's ka infinite", with_secs(t, patch_body(
+            b"MAMB", lambda b: b[:12] + struct.pack("<f", float("inf")) +
+            b[16:])), "not finite")
+        ref("MAMB's index past the materials", with_secs(t, patch_body(
+            b"MAMB", lambda b: b[:4] + w_u32(nt) + b[8:])), "out of range")
+        if sum(1 for m in t["materials"] if m.get("ka")) > 1:
+            ref("MAMB's indices not ascending", with_secs(t, patch_body(
+                b"MAMB", lambda b: b[:4] + b[20:36] + b[4:20] + b[36:])),
+                "ascending")
+    else:
+        ref("MAMB's index past the materials", with_secs(t, lambda secs:
+            secs.insert(idx(secs, b"MATL") + 1, (b"MAMB", w_u32(1) +
+                        w_u32(nt) + w_f32(1.0, 1.0, 1.0)))), "out of range")
     ref("major version 3", edited(t, lambda u: u.update(major=3)),
         "newer rtp")
     ref("HEAD 4 bytes longer (CRC right)",
@@ -1066,8 +1134,9 @@ def cases(t):
     ref("GEOM missing",
         with_secs(t, lambda s: s.pop(idx(s, b"GEOM"))), "order")
     ref("TEXR and TEXB both",
-        with_secs(t, lambda s: s.insert(4, (b"TEXR", b"\0\0\0\0")) or
-                  s.insert(5, (b"TEXB", b"\0\0\0\0"))), "repeated")
+        with_secs(t, lambda s: s.insert(idx(s, b"LITE") + 1, (b"TEXR", b"\0\0\0\0"))
+                  or s.insert(idx(s, b"LITE") + 2, (b"TEXB", b"\0\0\0\0"))),
+        "repeated")
     ref("bytes after END", encode(t) + b"\0", "END")
     ref("a tag with a control byte", encode(t, [(2, b"ab\x01d", b"")]),
         "tag")
