@@ -668,7 +668,13 @@ typedef struct rtpi_shade_ctx {
     const rtp_scene *s;
     int one_sided;           /* SPD: opaque surfaces keep their normal */
     size_t vis_words;        /* words per node in vis_ext (> 32 lights) */
+    int has_ka;              /* some material of s has its own ambient
+                                coefficient (rtpi_scene_has_ka, when the
+                                context is made for an evaluation): only
+                                then do the sums look at ka_set */
 } rtpi_shade_ctx;
+/* Whether some material of s has its own ambient coefficient (ka_set). */
+int rtpi_scene_has_ka(const rtp_scene *s);
 
 /* The one shading routine, in three steps that trace and reeval share so
    that re-evaluation reproduces trace bit for bit:

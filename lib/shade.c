@@ -1199,8 +1199,8 @@ void rtpi_material_highlights(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, 
 
 /* Step 2 for one node of material m reached with path weight w, the
    node alone: its terms t into acc's A and K_i (coeffs_node, eval_node). */
-static inline void node_coeffs(const rtpi_material *m, const float *t, size_t nl, double w,
-                               double *acc)
+static RTPI_FORCE_INLINE void node_coeffs(const rtpi_material *m, const float *t, size_t nl,
+                                          double w, double *acc, int ka)
 {
     double kd = w * m->kd, ks = w * m->ks, cobj[3], kc0, kc1, kc2;
     size_t i;
@@ -1212,13 +1212,16 @@ static inline void node_coeffs(const rtpi_material *m, const float *t, size_t nl
     kc0 = kd * cobj[0];
     kc1 = kd * cobj[1];
     kc2 = kd * cobj[2];
-    if (!m->ka_set) {
+    if (!(ka && m->ka_set)) {
         acc[3] += kc0; /* ambient: kd c_obj (ka follows kd) */
         acc[4] += kc1;
         acc[5] += kc2;
     } else {
-        /* ambient: ka c_obj, as (w ka) c_obj the way kd's is (w kd) c_obj
-           (a test a node, the sums of a material without ka unchanged) */
+        /* ambient: ka c_obj, as (w ka) c_obj the way kd's is (w kd) c_obj.
+           The test only in the descents of a scene where some material
+           has its own ka (ka: c->has_ka, a constant in each copy of
+           coeffs_node and eval_node): a node's test had cost balls_s4's
+           first evaluation 344.54 -> 346.49 M instructions */
         acc[3] += w * m->ka[0] * cobj[0];
         acc[4] += w * m->ka[1] * cobj[1];
         acc[5] += w * m->ka[2] * cobj[2];
@@ -1250,8 +1253,14 @@ static inline void node_split(const rtpi_material *m, uint32_t link, double *wr,
 /* Step 2 for node idx reached with path weight w (accumulated in double):
    every coefficient into acc (G, A, K_i); rtpi_light_redo makes one
    light's K_i by the very same operations. */
-static void coeffs_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t idx,
-                        const float *terms, double w, double *acc, double *wout)
+static void coeffs_node0(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t idx,
+                         const float *terms, double w, double *acc, double *wout);
+static void coeffs_node1(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t idx,
+                         const float *terms, double w, double *acc, double *wout);
+
+static RTPI_FORCE_INLINE void coeffs_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
+                                          size_t idx, const float *terms, double w,
+                                          double *acc, double *wout, int ka)
 {
     const rtp_scene *s = c->s;
     const rtpi_cnode *nd = &nodes[idx];
@@ -1261,18 +1270,19 @@ static void coeffs_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t
     int k;
     if (wout)
         wout[idx] = w;
-    node_coeffs(m, terms + idx * RTPI_TERMS(nl), nl, w, acc);
+    node_coeffs(m, terms + idx * RTPI_TERMS(nl), nl, w, acc, ka);
     node_split(m, nd->link, &wr, &wt);
     if (wr > 0.0) {
         if (nd->link & RTPI_L_REFL)
-            coeffs_node(c, nodes, idx + 1, terms, w * wr, acc, wout);
+            (ka ? coeffs_node1 : coeffs_node0)(c, nodes, idx + 1, terms, w * wr, acc, wout);
         else if (nd->link & RTPI_L_REFL_MISS)
             for (k = 0; k < 3; k++)
                 acc[k] += w * wr;
     }
     if (wt > 0.0) {
         if (nd->link & RTPI_L_REFR)
-            coeffs_node(c, nodes, idx + (nd->link >> RTPI_L_SHIFT), terms, w * wt, acc, wout);
+            (ka ? coeffs_node1 : coeffs_node0)(c, nodes, idx + (nd->link >> RTPI_L_SHIFT),
+                                               terms, w * wt, acc, wout);
         else if (nd->link & RTPI_L_REFR_MISS)
             for (k = 0; k < 3; k++)
                 acc[k] += w * wt;
@@ -1286,9 +1296,29 @@ static void coeffs_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t
    written (0 where step 2 does not reach it).  One descent, not two, a
    node's call, lookups and reloads once (mount_s6's first evaluation
    355.1 -> 350.3 M, tree_s11's 289.0 -> 283.9). */
-static void eval_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t idx,
-                      const uint32_t *vis_ext, rtpi_v3 from, float *terms, float *nv_out,
-                      double w, int reached, double *acc, double *wout)
+static void coeffs_node0(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t idx,
+                         const float *terms, double w, double *acc, double *wout)
+{
+    coeffs_node(c, nodes, idx, terms, w, acc, wout, 0);
+}
+
+static void coeffs_node1(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t idx,
+                         const float *terms, double w, double *acc, double *wout)
+{
+    coeffs_node(c, nodes, idx, terms, w, acc, wout, 1);
+}
+
+static void eval_node0(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t idx,
+                       const uint32_t *vis_ext, rtpi_v3 from, float *terms, float *nv_out,
+                       double w, int reached, double *acc, double *wout);
+static void eval_node1(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t idx,
+                       const uint32_t *vis_ext, rtpi_v3 from, float *terms, float *nv_out,
+                       double w, int reached, double *acc, double *wout);
+
+static RTPI_FORCE_INLINE void eval_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
+                                        size_t idx, const uint32_t *vis_ext, rtpi_v3 from,
+                                        float *terms, float *nv_out, double w, int reached,
+                                        double *acc, double *wout, int ka)
 {
     const rtpi_cnode *nd = &nodes[idx];
     const size_t nl = c->s->nlights;
@@ -1300,22 +1330,45 @@ static void eval_node(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t i
     if (wout)
         wout[idx] = reached ? w : 0.0;
     if (reached) {
-        node_coeffs(m, terms + idx * RTPI_TERMS(nl), nl, w, acc);
+        node_coeffs(m, terms + idx * RTPI_TERMS(nl), nl, w, acc, ka);
         node_split(m, link, &wr, &wt);
     }
     /* (!(wr > 0.0): also NaN, as coeffs_node tests it) */
     if (link & RTPI_L_REFL)
-        eval_node(c, nodes, idx + 1, vis_ext, p, terms, nv_out, w * wr, reached && wr > 0.0,
-                  acc, wout);
+        (ka ? eval_node1 : eval_node0)(c, nodes, idx + 1, vis_ext, p, terms, nv_out, w * wr,
+                                       reached && wr > 0.0, acc, wout);
     else if (reached && wr > 0.0 && (link & RTPI_L_REFL_MISS))
         for (k = 0; k < 3; k++)
             acc[k] += w * wr;
     if (link & RTPI_L_REFR)
-        eval_node(c, nodes, idx + (link >> RTPI_L_SHIFT), vis_ext, p, terms, nv_out, w * wt,
-                  reached && wt > 0.0, acc, wout);
+        (ka ? eval_node1 : eval_node0)(c, nodes, idx + (link >> RTPI_L_SHIFT), vis_ext, p,
+                                       terms, nv_out, w * wt, reached && wt > 0.0, acc, wout);
     else if (reached && wt > 0.0 && (link & RTPI_L_REFR_MISS))
         for (k = 0; k < 3; k++)
             acc[k] += w * wt;
+}
+
+static void eval_node0(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t idx,
+                       const uint32_t *vis_ext, rtpi_v3 from, float *terms, float *nv_out,
+                       double w, int reached, double *acc, double *wout)
+{
+    eval_node(c, nodes, idx, vis_ext, from, terms, nv_out, w, reached, acc, wout, 0);
+}
+
+static void eval_node1(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t idx,
+                       const uint32_t *vis_ext, rtpi_v3 from, float *terms, float *nv_out,
+                       double w, int reached, double *acc, double *wout)
+{
+    eval_node(c, nodes, idx, vis_ext, from, terms, nv_out, w, reached, acc, wout, 1);
+}
+
+int rtpi_scene_has_ka(const rtp_scene *s)
+{
+    size_t i;
+    for (i = 0; i < s->nmats; i++)
+        if (s->mats[i].ka_set)
+            return 1;
+    return 0;
 }
 
 /* acc rounded into coeffs (m of them); 0 where their magnitudes sum past
@@ -1351,7 +1404,7 @@ int rtpi_sample_coeffs(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t 
     if (n == 0)
         acc[0] = acc[1] = acc[2] = 1.0; /* the eye ray saw the background */
     else
-        coeffs_node(c, nodes, 0, terms, 1.0, acc, w);
+        (c->has_ka ? coeffs_node1 : coeffs_node0)(c, nodes, 0, terms, 1.0, acc, w);
     return round_coeffs(acc, m, coeffs);
 }
 
@@ -1365,7 +1418,8 @@ int rtpi_sample_eval(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t n,
     if (n == 0)
         acc[0] = acc[1] = acc[2] = 1.0; /* the eye ray saw the background */
     else
-        eval_node(c, nodes, 0, vis_ext, eye, terms, nv, 1.0, 1, acc, w);
+        (c->has_ka ? eval_node1 : eval_node0)(c, nodes, 0, vis_ext, eye, terms, nv, 1.0, 1, acc,
+                                              w);
     return round_coeffs(acc, m, coeffs);
 }
 

@@ -863,6 +863,7 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
     sh.min_weight = opt.spd ? 0.0 : opt.min_weight;
     sh.shade.s = s;
     sh.shade.one_sided = opt.spd;
+    sh.shade.has_ka = rtpi_scene_has_ka(s);
     sh.shade.vis_words = s->nlights > 32 ? (s->nlights + 31) / 32 : 0;
     /* SPD: rays through the (w+1)x(h+1) pixel corners, averaged.  The
        camera spans the whole frame; a region traces its part of it. */
@@ -1136,6 +1137,7 @@ rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int thre
     sh.min_weight = t->min_weight;
     sh.shade.s = &tmp;
     sh.shade.one_sided = t->spd;
+    sh.shade.has_ka = rtpi_scene_has_ka(&tmp);
     sh.shade.vis_words = words;
     camera_init(&sh.cam, &tmp, t->full_w + t->spd, t->full_h + t->spd);
     sh.gx = t->nx;

@@ -4373,6 +4373,7 @@ static rtp_status eval_body(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
     memset(&shade, 0, sizeof shade);
     shade.s = s;
     shade.one_sided = t->spd;
+    shade.has_ka = rtpi_scene_has_ka(s);
     /* (a re-trace, when there is one, is most of the time: the first 90%
        of what progress reports; the evaluation of every sample after it
        the rest) */
@@ -5015,6 +5016,7 @@ static rtp_status file_setup(file_eval *f, rtp_tree *t, int can_stream, int *str
         return RTP_OK; /* (read whole, then rtp_tree_eval) */
     f->shade.s = s;
     f->shade.one_sided = t->spd;
+    f->shade.has_ka = rtpi_scene_has_ka(s);
     f->shade.vis_words = 0; /* (light bits in the nodes: can_stream) */
     f->stale_any = f->opt.stale != RTP_STALE_RETRACE && any_stale(t);
     f->cv = (double *)rtpi_malloc_array(&t->alloc, RTPI_COEFFS(nl), sizeof *f->cv);
