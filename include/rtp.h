@@ -186,8 +186,10 @@ rtp_status rtp_scene_load_memory(const char *text, size_t size,
 void rtp_scene_destroy(rtp_scene *scene);
 
 /** Sets one parameter, e.g. key "light.0.pos" value "1,2,3".  Keys:
- *  light.N.pos|color|intensity|on, mat.N.color|kd|ks|kt|shine|ior|ambient (and the
- *  texture and bump keys the README lists), ambient, background,
+ *  light.N.pos|color|intensity|on, mat.N.color|kd|ks|kt|shine|ior|ambient (a
+ *  material's own ambient coefficient, one number or r,g,b: once set, kd no
+ *  longer moves it; and the texture and bump keys the README lists), ambient,
+ *  background,
  *  camera.from|at|up|angle|hither; N is a 0-based index in file order or
  *  a name the scene gives (a name may hold dots: the field follows the
  *  last).  light.N.pos with N the count of lights (an index) adds light
@@ -206,7 +208,9 @@ rtp_status rtp_scene_set(rtp_scene *scene, const char *key,
  *  takes it: numbers comma-separated in the shortest form that reads back
  *  to the same value; checker and on 0 or 1; texture and bump none, waves,
  *  noise or the image's path ("-" for one read from stdin: setting that
- *  again reads stdin again, at its end by then).  Also light.N.name and mat.N.name (read
+ *  again reads stdin again, at its end by then); mat.N.ambient the effective
+ *  coefficient (kd,kd,kd while the material has none of its own).  Also
+ *  light.N.name and mat.N.name (read
  *  only; "" when unnamed).  @return RTP_OK, RTP_ERR_KEY, or
  *  RTP_ERR_ARGUMENT when buf is too small (buf then ""). */
 rtp_status rtp_scene_get(const rtp_scene *scene, const char *key, char *buf, size_t size,

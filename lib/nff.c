@@ -1,7 +1,7 @@
 /* nff.c — the NFF reader: Eric Haines' Neutral File Format exactly as the
  * SPD generators write it, read token by token (not line by line), plus
- * rtp's additions (scenes/README.md): name, off, ambient, checker,
- * texture, bump, include and bezier; and ka (README.md).
+ * rtp's additions (scenes/README.md): name, off, ambient, ka, checker,
+ * texture, bump, include and bezier.
  *
  * Every malformed input is a parse error at the offending token's line
  * and column; nothing is allocated from a count before the text has been

@@ -1063,6 +1063,99 @@ expect_rc 1 $RTP reeval "$T/li.rtp" --set light.0.intensity=-1 -i "$T/li_x.pfm" 
 grep -q "light.0.intensity: -1: a colour's components must be 0 or more" "$T/err" && [ ! -e "$T/li_x.pfm" ] &&
     ok || bad "a negative intensity: $(cat "$T/err")"
 
+# mat.N.ambient, a material's own ambient coefficient ka (unset: kd): on
+# a scene of textures, checkers, a bump, reflections and two lights, a
+# one-off reeval is the full trace's bits (grey and RGB, by index and
+# name, on a tree without ka and on one with it: a kd edit then leaves
+# the ambient part where ka holds it); a stream mixing ka, kd, colour,
+# the global ambient, light colours and a move is within 1e-6 of the full
+# traces frame by frame (the keys of every frame applied in turn)
+A="scenes/textured.nff --size 40x30 --set mat.1.checker=1 --set mat.1.checker_scale=0.7 --set light.1.pos=-3,-4,4"
+expect_rc 0 $RTP trace $A -o "$T/ka.rtp" -i "$T/ka_0.pfm" -q
+grep -q MAMB "$T/ka.rtp" && bad "a tree without ka has a MAMB section" || ok
+expect_rc 0 $RTP trace $A --set mat.2.ambient=0.25 -o "$T/ka2.rtp" -q
+grep -q MAMB "$T/ka2.rtp" && ok || bad "a tree with ka has no MAMB section"
+for kv in mat.0.ambient=0.3 mat.floor.ambient=0.5,0.1,2 mat.ball.ambient=0 \
+    "mat.1.ambient=2 mat.1.kd=0.1" "mat.0.ambient=0.9 mat.0.color=0.2,0.5,1"; do
+    keys=""
+    for k in $kv; do keys="$keys --set $k"; done
+    expect_rc 0 $RTP reeval "$T/ka.rtp" $keys -i "$T/ka_r.pfm" -q
+    expect_rc 0 $RTP trace $A $keys -i "$T/ka_t.pfm" -q
+    cmp -s "$T/ka_r.pfm" "$T/ka_t.pfm" && ok || bad "reeval $keys is not trace's bits"
+    $RTP diff "$T/ka_0.pfm" "$T/ka_t.pfm" --fail-above max_abs=0 >/dev/null 2>&1
+    [ $? -eq 3 ] && ok || bad "$keys changed nothing"
+done
+for kv in mat.2.kd=0.3 mat.2.color=1,0.2,0.2 mat.2.ambient=0.5,1,0 mat.0.kd=0.5; do
+    expect_rc 0 $RTP reeval "$T/ka2.rtp" --set $kv -i "$T/ka_r.pfm" -q
+    expect_rc 0 $RTP trace $A --set mat.2.ambient=0.25 --set $kv -i "$T/ka_t.pfm" -q
+    cmp -s "$T/ka_r.pfm" "$T/ka_t.pfm" && ok || bad "reeval of a tree with ka, $kv, is not trace's bits"
+done
+# (kd with ka set moves only the diffuse part: the ambient alone shows the
+# difference; the same kd with ka following it, another image)
+expect_rc 0 $RTP trace $A --set mat.2.ambient=0.8 --set mat.2.kd=0.3 -i "$T/ka_a.pfm" -q
+expect_rc 0 $RTP trace $A --set mat.2.kd=0.3 -i "$T/ka_b.pfm" -q
+$RTP diff "$T/ka_a.pfm" "$T/ka_b.pfm" --fail-above max_abs=0 >/dev/null 2>&1
+[ $? -eq 3 ] && ok || bad "ka 0.8 after kd 0.3 is ka following kd"
+$RTP reeval "$T/ka.rtp" --stream -i "$T/ka_s%d.pfm" -q <<'EOF2'
+mat.0.ambient=0.4
+mat.0.kd=0.5
+mat.2.kd=0.6
+mat.2.ambient=1,0.5,0.25 mat.2.color=0.3,0.9,0.9
+mat.2.kd=0.2
+ambient=0.5,0.4,0.3
+light.0.color=1,0.5,0.5
+mat.1.ambient=0.7
+mat.1.color=0.2,0.2,0.9
+light.1.pos=2,-5,3
+mat.2.ambient=0
+light.1.color=0.3,1,0.3 mat.0.ambient=2,0,1
+mat.0.color=1,1,0
+EOF2
+[ $? -eq 0 ] && ok || bad "the ka stream failed"
+keys=""
+lf=0
+while read -r line; do
+    for k in $line; do keys="$keys --set $k"; done
+    expect_rc 0 $RTP trace $A $keys -i "$T/ka_f.pfm" -q
+    expect_rc 0 $RTP diff "$T/ka_s$lf.pfm" "$T/ka_f.pfm" --fail-above max_abs=1e-6 -q
+    lf=$((lf + 1))
+done <<'EOF2'
+mat.0.ambient=0.4
+mat.0.kd=0.5
+mat.2.kd=0.6
+mat.2.ambient=1,0.5,0.25 mat.2.color=0.3,0.9,0.9
+mat.2.kd=0.2
+ambient=0.5,0.4,0.3
+light.0.color=1,0.5,0.5
+mat.1.ambient=0.7
+mat.1.color=0.2,0.2,0.9
+light.1.pos=2,-5,3
+mat.2.ambient=0
+light.1.color=0.3,1,0.3 mat.0.ambient=2,0,1
+mat.0.color=1,1,0
+EOF2
+[ "$lf" -eq 13 ] && ok || bad "the ka stream's frames: $lf"
+# refused: a negative, NaN, infinite or past-float value, two numbers,
+# four, none; exit 1, no image, the message kd's
+for v in -1 0.5,-0.1,1 nan inf 1e39 1,2 1,2,3,4 ""; do
+    expect_rc 1 $RTP reeval "$T/ka.rtp" --set mat.0.ambient=$v -i "$T/ka_x.pfm" -q
+    [ ! -e "$T/ka_x.pfm" ] && ok || bad "mat.0.ambient=$v wrote an image"
+    expect_rc 1 $RTP trace $A --set mat.0.ambient=$v -i "$T/ka_x.pfm" -q
+    [ ! -e "$T/ka_x.pfm" ] && ok || bad "trace mat.0.ambient=$v wrote an image"
+done
+$RTP reeval "$T/ka.rtp" --set mat.0.ambient=-1 -i "$T/ka_x.pfm" -q 2>"$T/err"
+grep -q "^rtp: mat.0.ambient: -1: must be 0 or more" "$T/err" && ok || bad "ka -1: $(cat "$T/err")"
+$RTP reeval "$T/ka.rtp" --set mat.0.kd=-1 -i "$T/ka_x.pfm" -q 2>"$T/err"
+grep -q "^rtp: mat.0.kd: -1: must be 0 or more" "$T/err" && ok || bad "kd -1: $(cat "$T/err")"
+# --params files take it as --set does; info shows ka where it is not kd's
+printf 'mat.ball.ambient=0.5,0.25,1\n' >"$T/ka.par"
+expect_rc 0 $RTP reeval "$T/ka.rtp" --params "$T/ka.par" -i "$T/ka_r.pfm" -q
+expect_rc 0 $RTP trace $A --set mat.ball.ambient=0.5,0.25,1 -i "$T/ka_t.pfm" -q
+cmp -s "$T/ka_r.pfm" "$T/ka_t.pfm" && ok || bad "--params mat.ball.ambient is not trace's bits"
+$RTP info "$T/ka2.rtp" >"$T/out"
+grep -q "^    ambient=0.25,0.25,0.25$" "$T/out" && ok || bad "info shows no ka: $(cat "$T/out")"
+[ "$(grep -c "ambient=" "$T/out")" -eq 2 ] && ok || bad "info shows ka where none is set: $(cat "$T/out")"
+
 rm -rf "$T"
 echo "$pass passed, $fail failed, $skip skipped"
 [ "$fail" -eq 0 ]

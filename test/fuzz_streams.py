@@ -215,7 +215,7 @@ class Gen:
                 return ("A", "ambient", col(r))
             m = self.mat()
             k = r.choice(["color", "kd", "kd", "color", "shine", "ks", "kt",
-                          "checker", "color2", "checker_scale", "texture"])
+                          "checker", "color2", "checker_scale", "texture", "ambient"])
             if k in ("ks", "kt"):
                 # class A only where it stays nonzero and no cut-off
                 if float(self.mats[m][k]) == 0 or self.minw:
@@ -226,7 +226,9 @@ class Gen:
                  "shine": lambda: fmt(r.uniform(1, 300)),
                  "checker": lambda: r.choice("01"), "color2": lambda: col(r),
                  "checker_scale": lambda: fmt(r.uniform(0.2, 3)),
-                 "texture": lambda: r.choice([TEX, TEXB, "none"])}[k]()
+                 "texture": lambda: r.choice([TEX, TEXB, "none"]),
+                 # (grey or RGB; once set, kd edits no longer move it)
+                 "ambient": lambda: fmt(r.uniform(0, 1.5)) if r.random() < 0.4 else col(r)}[k]()
             return ("A", "mat.%d.%s" % (m, k), v)
         if c == "B":
             if r.random() < 0.25:

@@ -686,6 +686,78 @@ static void test_checker_bump(void)
     rtp_scene_destroy(s);
 }
 
+/* ka V / ka R G B after an f line: the material's own ambient
+   coefficient; mat.N.ambient reads kd,kd,kd while none is set (and
+   follows kd), the set value after, refuses what kd refuses; NFF's
+   errors at file:line:col. */
+static void test_material_ambient(void)
+{
+    static const struct {
+        const char *text;
+        int line, col;
+        const char *msg;
+    } bad[] = {
+        {"ka 0.5\nf 1 1 1 1 0 100 0 0\n", 1, 1, "ka needs a material"},
+        {"f 1 1 1 1 0 100 0 0\nka -0.5\n", 2, 4, "ka value must not be negative"},
+        {"f 1 1 1 1 0 100 0 0\nka 1 2 -3\n", 2, 8, "ka blue must not be negative"},
+        {"f 1 1 1 1 0 100 0 0\nka 1 2\ns 0 0 0 1\n", 3, 1, "expected number for ka blue"},
+        {"f 1 1 1 1 0 100 0 0\nka\ns 0 0 0 1\n", 3, 1, "expected number for ka value"},
+        {"f 1 1 1 1 0 100 0 0\nka nan\n", 2, 4, "expected number for ka value"},
+        {"f 1 1 1 1 0 100 0 0\nka 1e19\n", 2, 4, "out of range"},
+        {"f 1 1 1 1 0 100 0 0\nka", 2, 3, "unexpected end of file in ka line"},
+    };
+    rtp_scene *s = NULL;
+    rtp_error err;
+    char buf[128];
+    size_t i;
+    CHECK(load("f 1 0 0 0.5 0 100 0 0\nname a\nka 0.25\nf 0 1 0 0.75 0 100 0 0\n"
+               "ka 0.5 1 2\nf 0 0 1 0.125 0 100 0 0\ns 0 0 0 1\n",
+               "ka.nff", &s, &err) == RTP_OK);
+    if (!s)
+        return;
+    CHECK(s->mats[0].ka_set && s->mats[0].ka[0] == 0.25f && s->mats[0].ka[2] == 0.25f);
+    CHECK(s->mats[1].ka_set && s->mats[1].ka[0] == 0.5f && s->mats[1].ka[1] == 1.0f &&
+          s->mats[1].ka[2] == 2.0f);
+    CHECK(!s->mats[2].ka_set);
+    CHECK(rtp_scene_get(s, "mat.a.ambient", buf, sizeof buf, &err) == RTP_OK);
+    CHECK_MSG(strcmp(buf, "0.25,0.25,0.25") == 0, "'%s'", buf);
+    CHECK(rtp_scene_get(s, "mat.2.ambient", buf, sizeof buf, &err) == RTP_OK);
+    CHECK_MSG(strcmp(buf, "0.125,0.125,0.125") == 0, "unset: '%s'", buf);
+    CHECK(rtp_scene_set(s, "mat.2.kd", "0.375", &err) == RTP_OK);
+    CHECK(rtp_scene_get(s, "mat.2.ambient", buf, sizeof buf, &err) == RTP_OK);
+    CHECK_MSG(strcmp(buf, "0.375,0.375,0.375") == 0, "follows kd: '%s'", buf);
+    CHECK(rtp_scene_set(s, "mat.2.ambient", "0.5,0,3", &err) == RTP_OK);
+    CHECK(rtp_scene_set(s, "mat.2.kd", "0.25", &err) == RTP_OK);
+    CHECK(rtp_scene_get(s, "mat.2.ambient", buf, sizeof buf, &err) == RTP_OK);
+    CHECK_MSG(strcmp(buf, "0.5,0,3") == 0, "set, kd edited: '%s'", buf);
+    CHECK(rtp_scene_set(s, "mat.a.ambient", "2", &err) == RTP_OK);
+    CHECK(rtp_scene_get(s, "mat.0.ambient", buf, sizeof buf, &err) == RTP_OK);
+    CHECK_MSG(strcmp(buf, "2,2,2") == 0, "grey: '%s'", buf);
+    CHECK(rtp_scene_set(s, "mat.0.ambient", "-1", &err) == RTP_ERR_ARGUMENT &&
+          strstr(err.message, "mat.0.ambient: -1: must be 0 or more"));
+    CHECK(rtp_scene_set(s, "mat.0.ambient", "1,-1,1", &err) == RTP_ERR_ARGUMENT);
+    CHECK(rtp_scene_set(s, "mat.0.ambient", "1,2", &err) == RTP_ERR_PARSE);
+    CHECK(rtp_scene_set(s, "mat.0.ambient", "1,2,3,4", &err) == RTP_ERR_PARSE);
+    CHECK(rtp_scene_set(s, "mat.0.ambient", "nan", &err) == RTP_ERR_PARSE);
+    CHECK(rtp_scene_set(s, "mat.0.ambient", "1e39", &err) == RTP_ERR_PARSE);
+    CHECK(rtp_scene_get(s, "mat.0.ambient", buf, sizeof buf, &err) == RTP_OK);
+    CHECK_MSG(strcmp(buf, "2,2,2") == 0, "after refusals: '%s'", buf);
+    CHECK(rtp_scene_set(s, "mat.0.ambiant", "1", &err) == RTP_ERR_KEY &&
+          strstr(err.message, "ambient"));
+    CHECK(rtp_scene_get(s, "mat.0.ambiant", buf, sizeof buf, &err) == RTP_ERR_KEY &&
+          strstr(err.message, "ambient"));
+    rtp_scene_destroy(s);
+    for (i = 0; i < sizeof bad / sizeof *bad; i++) {
+        s = NULL;
+        memset(&err, 0, sizeof err);
+        CHECK_MSG(load(bad[i].text, "kb.nff", &s, &err) == RTP_ERR_PARSE && !s &&
+                      err.line == bad[i].line && err.column == bad[i].col &&
+                      strstr(err.message, bad[i].msg),
+                  "case %zu: %d:%d %s", i, err.line, err.column, err.message);
+        rtp_scene_destroy(s);
+    }
+}
+
 static const char quad_obj[] =
     "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
     "vn 0 0 1\nf 1/1/1 2/2/1 3/3/1 4/4/1\n";
@@ -1389,6 +1461,7 @@ int main(void)
     RUN(test_get_shortest_subnormal);
     RUN(test_light_intensity);
     RUN(test_checker_bump);
+    RUN(test_material_ambient);
     RUN(test_files);
     RUN(test_image_key_over_the_limit);
     RUN(test_file_named_dash);
