@@ -145,6 +145,7 @@ class Gen:
         self.rad = max(1e-3, sum((p - q) ** 2 for p, q in zip(f, a)) ** 0.5)
         self.orig_pos = [l["pos"] for l in lights]
         self.cur = {}
+        self.amb = set()  # materials given their own ambient coefficient
         # focus: edits on one or two materials and one light, so that they meet
         self.focus = r.random() < 0.4
         self.mf = r.sample(range(len(mats)), min(len(mats), r.randint(1, 2))) if mats else []
@@ -229,6 +230,8 @@ class Gen:
                  "texture": lambda: r.choice([TEX, TEXB, "none"]),
                  # (grey or RGB; once set, kd edits no longer move it)
                  "ambient": lambda: fmt(r.uniform(0, 1.5)) if r.random() < 0.4 else col(r)}[k]()
+            if k == "ambient":
+                self.amb.add(m)
             return ("A", "mat.%d.%s" % (m, k), v)
         if c == "B":
             if r.random() < 0.25:
@@ -262,6 +265,9 @@ class Gen:
         es += [("K", "camera." + k, self.env["cam." + k]) for k in ("from", "at", "angle")]
         for i, m in enumerate(self.mats):
             es += [("R", "mat.%d.%s" % (i, k), m[k]) for k in ("color", "kd", "ks", "kt", "shine", "ior")]
+            if i in self.amb:
+                # (no key unsets ka; ka = kd in each channel sums as unset, to the bit)
+                es.append(("R", "mat.%d.ambient" % i, m["kd"]))
             es.append(("R", "mat.%d.checker" % i, "1" if "checker" in m else "0"))
             for k in ("color2", "checker_scale"):
                 if k in m:
