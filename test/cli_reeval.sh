@@ -1090,6 +1090,11 @@ for kv in mat.2.kd=0.3 mat.2.color=1,0.2,0.2 mat.2.ambient=0.5,1,0 mat.0.kd=0.5;
     expect_rc 0 $RTP trace $A --set mat.2.ambient=0.25 --set $kv -i "$T/ka_t.pfm" -q
     cmp -s "$T/ka_r.pfm" "$T/ka_t.pfm" && ok || bad "reeval of a tree with ka, $kv, is not trace's bits"
 done
+# ka set to kd in each channel sums as ka unset, to the bit (floor's kd 0.8)
+expect_rc 0 $RTP trace $A --set mat.floor.ambient=0.8 -i "$T/ka_t.pfm" -q
+cmp -s "$T/ka_0.pfm" "$T/ka_t.pfm" && ok || bad "ka = kd is not the image without ka"
+expect_rc 0 $RTP reeval "$T/ka.rtp" --set mat.floor.ambient=0.8 -i "$T/ka_r.pfm" -q
+cmp -s "$T/ka_0.pfm" "$T/ka_r.pfm" && ok || bad "reeval ka = kd is not the image without ka"
 # (kd with ka set moves only the diffuse part: the ambient alone shows the
 # difference; the same kd with ka following it, another image)
 expect_rc 0 $RTP trace $A --set mat.2.ambient=0.8 --set mat.2.kd=0.3 -i "$T/ka_a.pfm" -q
