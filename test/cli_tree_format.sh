@@ -32,6 +32,9 @@ t obj scenes/quad.obj --size 16x12
 t ambient scenes/textured.nff --size 20x10 --set mat.2.checker=1 --set mat.0.ambient=0.25 \
     --set mat.2.ambient=0.5,0.125,2 --set mat.ball.ambient=0
 cp test/golden/format1.rtp "$T/format1.rtp"
+# MAMB read back and written again (merge of one file rewrites it): the same bytes
+$RTP merge -o "$T/ambient.again" "$T/ambient.rtp" -q && cmp -s "$T/ambient.rtp" "$T/ambient.again" &&
+    ok || bad "a tree with MAMB read and written again differs"
 for f in "$T"/*.rtp; do
     out=$($PY --check "$RTP" "$f" 2>&1)
     if [ $? -eq 0 ]; then ok; else bad "$(basename "$f"): $(echo "$out" | grep -v '^[a-z]' | head -5)"; fi
