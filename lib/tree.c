@@ -3124,6 +3124,181 @@ static RTPI_FORCE_INLINE void cp_put(cp_fill *f, float k0, float k1, float k2, s
     f->next = p + 1;
 }
 
+#ifdef PK_SSE2
+/* 1 where none of the n pixels from sa's column on has four corners
+   without nodes (cp_row_spd_v's test), sample rows sa and sa + so: two
+   pixels a step, the sums of the rows' node ranges compared as 64-bit
+   lanes (both halves equal). */
+static int cp_row_full(const uint64_t *sa, size_t so, size_t n)
+{
+    __m128i lo = _mm_add_epi64(_mm_loadu_si128((const __m128i *)(const void *)sa),
+                               _mm_loadu_si128((const __m128i *)(const void *)(sa + so)));
+    size_t i = 0;
+    for (; i + 2 <= n; i += 2) {
+        const __m128i hi =
+            _mm_add_epi64(_mm_loadu_si128((const __m128i *)(const void *)(sa + i + 2)),
+                          _mm_loadu_si128((const __m128i *)(const void *)(sa + so + i + 2)));
+        const int m = _mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(lo, hi)));
+        if (m & (m >> 1) & 5)
+            return 0;
+        lo = hi;
+    }
+    return i == n || sa[i + 2] + sa[so + i + 2] != sa[i] + sa[so + i];
+}
+
+/* cp_row_spd_v's state along a row. */
+typedef struct {
+    __m128 mx, bad;  /* largest |K| by lanes; lanes that saw a NaN */
+    float *kp;       /* the next entry */
+    uint32_t *run;
+    size_t nr, next; /* as in cp_fill */
+    int in;          /* the pixel before is an entry */
+} cp_vrow;
+
+/* Pixel p of cp_row_spd_v from the column sums of its corners (l: left,
+   r: right; channels 0 and 1 in one vector, 2 in the low lane of the
+   other): its K at the next entry, which advances where K is not 0, and
+   the runs opened or closed where that changes. */
+static RTPI_FORCE_INLINE void cp_vpx(cp_vrow *v, __m128d l01, __m128d l2, __m128d r01,
+                                     __m128d r2, size_t p)
+{
+    const __m128d q4 = _mm_set1_pd(0.25);
+    const __m128 k01 = _mm_cvtpd_ps(_mm_mul_pd(q4, _mm_add_pd(l01, r01)));
+    const __m128 k2 = _mm_cvtpd_ps(_mm_mul_pd(q4, _mm_add_pd(l2, r2)));
+    /* (lane 3 is 0: cvtpd_ps zeroes the upper half; -0 counts as 0) */
+    const __m128i ki = _mm_and_si128(_mm_castps_si128(_mm_movelh_ps(k01, k2)),
+                                     _mm_set1_epi32(0x7fffffff));
+    const __m128 ka = _mm_castsi128_ps(ki);
+    const int nz =
+        _mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(ki, _mm_setzero_si128()))) != 0xf;
+    v->mx = _mm_max_ps(v->mx, ka);
+    v->bad = _mm_or_ps(v->bad, _mm_cmpunord_ps(ka, ka));
+    _mm_storel_pi((__m64 *)(void *)v->kp, k01);
+    _mm_store_ss(v->kp + 2, k2);
+    v->kp += 3 * (size_t)nz;
+    if (nz != v->in) {
+        if (!nz) {
+            v->run[2 * v->nr - 1] = (uint32_t)(p - v->run[2 * v->nr - 2]);
+            v->next = p;
+        } else if (p != v->next) {
+            v->run[2 * v->nr] = (uint32_t)p;
+            v->nr++;
+        } /* (else the run before goes on: the row before ended in it) */
+        v->in = nz;
+    }
+}
+
+/* cp_row_spd's loop on SSE2's vectors: its n pixels from p on (sa: the
+   node ranges of sample row y, sa + sbo of row y + 1), skip a constant.
+   The same IEEE operations in the same order as the scalar code (the
+   same bits).  Each pixel's K is stored at the next entry whether or not
+   it is 0 and the entries advance by its being not 0 (a 0 is
+   overwritten by the next entry: the band's room has a slot for each
+   pixel of its spans, so no store passes it), and a run is opened or
+   closed only where that changes; the maxima of |K| by lanes are float
+   maxima, with the lanes that saw a NaN apart (a float maximum drops a
+   NaN), which are as the scalar code's integer maxima (at or above
+   0x7f800000 where a K is infinite or NaN).  A pixel whose four corners
+   have no nodes is told by the sums of its two sample rows' node ranges,
+   which rise with x (equal two columns apart exactly where both rows'
+   are); a row pair without such a pixel (cp_row_spd asks) is walked two
+   pixels a step without the test.  About 40 instructions a pixel where
+   the loop before, a pixel's entry and run kept up pixel by pixel, took
+   66 (balls_s4: 17.6 M for a light's plane at 512 SPD; the scalar code
+   80). */
+static RTPI_FORCE_INLINE void cp_row_spd_v(const float *ka, size_t ks, size_t kbo,
+                                           const uint64_t *sa, size_t sbo, size_t n, size_t p,
+                                           const int skip, cp_fill *fp)
+{
+    const __m128 zf = _mm_setzero_ps();
+    __m128d l01 = _mm_setzero_pd(), l2 = _mm_setzero_pd(), r01, r2;
+    const float *ra = ka + ks, *rb = ka + ks + kbo; /* the pixel's right corners */
+    cp_vrow v;
+    size_t i = 0;
+    uint64_t u0 = 0, u1 = 0;
+    int have = 0;
+    {
+        float m[4];
+        uint32_t u[4] = {fp->mx[0], fp->mx[1], fp->mx[2], 0};
+        memcpy(m, u, sizeof m);
+        v.mx = _mm_loadu_ps(m);
+        v.bad = _mm_cmpunord_ps(v.mx, v.mx);
+    }
+    v.kp = fp->kp + 3 * fp->n;
+    v.run = fp->run;
+    v.nr = fp->nr;
+    v.next = fp->next;
+    v.in = 0;
+#define CP_COL(a, b, c01, c2)                                                                   \
+    (c01 = _mm_add_pd(_mm_cvtps_pd(_mm_loadl_pi(zf, (const __m64 *)(const void *)(a))),        \
+                      _mm_cvtps_pd(_mm_loadl_pi(zf, (const __m64 *)(const void *)(b)))),        \
+     c2 = _mm_add_pd(_mm_cvtps_pd(_mm_load_ss((a) + 2)), _mm_cvtps_pd(_mm_load_ss((b) + 2))))
+    if (!skip) {
+        __m128d s01, s2;
+        if (n)
+            CP_COL(ka, ka + kbo, l01, l2);
+        for (; i + 2 <= n; i += 2, ra += 2 * ks, rb += 2 * ks) {
+            CP_COL(ra, rb, r01, r2);
+            CP_COL(ra + ks, rb + ks, s01, s2);
+            cp_vpx(&v, l01, l2, r01, r2, p + i);
+            cp_vpx(&v, r01, r2, s01, s2, p + i + 1);
+            l01 = s01;
+            l2 = s2;
+        }
+        if (i < n) {
+            CP_COL(ra, rb, r01, r2);
+            cp_vpx(&v, l01, l2, r01, r2, p + i);
+            i++;
+        }
+    } else {
+        u0 = sa[0] + sa[sbo];
+        u1 = sa[1] + sa[sbo + 1];
+        for (; i < n; i++, ra += ks, rb += ks) {
+            const uint64_t u2 = sa[i + 2] + sa[sbo + i + 2];
+            const int none = u2 == u0;
+            u0 = u1;
+            u1 = u2;
+            if (none) {
+                if (v.in) {
+                    v.run[2 * v.nr - 1] = (uint32_t)(p + i - v.run[2 * v.nr - 2]);
+                    v.next = p + i;
+                    v.in = 0;
+                }
+                have = 0;
+                continue;
+            }
+            if (!have)
+                CP_COL(ra - ks, rb - ks, l01, l2);
+            CP_COL(ra, rb, r01, r2);
+            cp_vpx(&v, l01, l2, r01, r2, p + i);
+            l01 = r01;
+            l2 = r2;
+            have = 1;
+        }
+    }
+#undef CP_COL
+    if (v.in) {
+        v.run[2 * v.nr - 1] = (uint32_t)(p + n - v.run[2 * v.nr - 2]);
+        v.next = p + n;
+    }
+    {
+        float m[4];
+        uint32_t u[4], b[4];
+        _mm_storeu_ps(m, v.mx);
+        memcpy(u, m, sizeof u);
+        _mm_storeu_ps(m, v.bad);
+        memcpy(b, m, sizeof b);
+        fp->mx[0] = b[0] ? 0x7fc00000u : u[0];
+        fp->mx[1] = b[1] ? 0x7fc00000u : u[1];
+        fp->mx[2] = b[2] ? 0x7fc00000u : u[2];
+    }
+    fp->n = (size_t)(v.kp - fp->kp) / 3;
+    fp->nr = v.nr;
+    fp->next = v.next;
+}
+#endif
+
+
 /* cp_plane_chunk's pixels x .. x1 - 1 of a pixel row with corner
    samples for one term (the first pixel p, its coefficients at ka, its
    samples' node ranges at sa and sb; skip: the term is not the
@@ -3140,68 +3315,15 @@ static void cp_row_spd(const float *ka, size_t ks, size_t kbo, const uint64_t *s
 {
     cp_fill f = *fp;
 #ifdef PK_SSE2
-    /* pk_img_row's vectors: channels 0 and 1 in one, channel 2 in the low
-       lane of another, the same IEEE operations in the same order as the
-       scalar code below (the same bits); the maxima of the abs_bits by
-       lanes with signed compares (abs_bits are below 2^31, so signed
-       order is theirs), which see an infinity or NaN as the scalar
-       integer maxima do.  The scalar code took about 80 instructions a
-       pixel (balls_s4: 20.9 M for a light's plane at 512 SPD), a third of
-       them moving channels between registers. */
-    const __m128d q4 = _mm_set1_pd(0.25);
-    const __m128 zf = _mm_setzero_ps();
-    const __m128i absm = _mm_set1_epi32(0x7fffffff), zi = _mm_setzero_si128();
-    __m128i mx = _mm_setr_epi32((int32_t)f.mx[0], (int32_t)f.mx[1], (int32_t)f.mx[2], 0);
-    __m128d l01 = _mm_setzero_pd(), l2 = _mm_setzero_pd();
-    int have = 0;
-    for (; x < x1; x++, p++, ka += ks, sa++, sb++) {
-        __m128d r01, r2;
-        __m128i ki, gt;
-        __m128 k01, k2;
-        float *kp;
-        if (skip && sa[2] == sa[0] && sb[2] == sb[0]) {
-            have = 0; /* (the scalar code's note) */
-            continue;
-        }
-        if (!have) {
-            l01 = _mm_add_pd(_mm_cvtps_pd(_mm_loadl_pi(zf, (const __m64 *)(const void *)ka)),
-                             _mm_cvtps_pd(_mm_loadl_pi(zf, (const __m64 *)(const void *)(ka + kbo))));
-            l2 = _mm_add_pd(_mm_cvtps_pd(_mm_load_ss(ka + 2)), _mm_cvtps_pd(_mm_load_ss(ka + kbo + 2)));
-        }
-        r01 = _mm_add_pd(_mm_cvtps_pd(_mm_loadl_pi(zf, (const __m64 *)(const void *)(ka + ks))),
-                         _mm_cvtps_pd(_mm_loadl_pi(zf, (const __m64 *)(const void *)(ka + kbo + ks))));
-        r2 = _mm_add_pd(_mm_cvtps_pd(_mm_load_ss(ka + ks + 2)),
-                        _mm_cvtps_pd(_mm_load_ss(ka + kbo + ks + 2)));
-        k01 = _mm_cvtpd_ps(_mm_mul_pd(q4, _mm_add_pd(l01, r01)));
-        k2 = _mm_cvtpd_ps(_mm_mul_pd(q4, _mm_add_pd(l2, r2)));
-        l01 = r01;
-        l2 = r2;
-        have = 1;
-        /* (lane 3 is 0: cvtpd_ps zeroes the upper half; -0 counts as 0) */
-        ki = _mm_and_si128(_mm_castps_si128(_mm_movelh_ps(k01, k2)), absm);
-        if (_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(ki, zi))) == 0xf)
-            continue;
-        gt = _mm_cmpgt_epi32(ki, mx);
-        mx = _mm_or_si128(_mm_and_si128(gt, ki), _mm_andnot_si128(gt, mx));
-        kp = f.kp + 3 * f.n;
-        _mm_storel_pi((__m64 *)(void *)kp, k01);
-        _mm_store_ss(kp + 2, k2);
-        f.n++;
-        if (p == f.next) {
-            f.run[2 * f.nr - 1]++;
-        } else {
-            f.run[2 * f.nr] = (uint32_t)p;
-            f.run[2 * f.nr + 1] = 1;
-            f.nr++;
-        }
-        f.next = p + 1;
-    }
     {
-        uint32_t m[4];
-        _mm_storeu_si128((__m128i *)(void *)m, mx);
-        f.mx[0] = m[0];
-        f.mx[1] = m[1];
-        f.mx[2] = m[2];
+        /* (a row pair where no pixel's corners are all without nodes,
+           balls_s4's every one, is walked without the test, two pixels a
+           step: cp_row_spd_v) */
+        const size_t n = x1 - x, so = (size_t)(sb - sa);
+        if (skip && !cp_row_full(sa, so, n))
+            cp_row_spd_v(ka, ks, kbo, sa, so, n, p, 1, &f);
+        else
+            cp_row_spd_v(ka, ks, kbo, sa, so, n, p, 0, &f);
     }
 #else
     double l0 = 0.0, l1 = 0.0, l2 = 0.0;

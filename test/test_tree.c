@@ -3401,6 +3401,237 @@ static void test_ready_planes(void)
     ready_planes_run(1);
 }
 
+/* A light's colour plane as its first colour edit makes it in a scene of
+   three or more lights (tree.c: cp_plane_chunk, on SSE2 cp_row_spd_v),
+   checked entry by entry against K summed here from the coefficients the
+   evaluation keeps (SPD: the four corners' sums in double, the left
+   column's then the right's, times 0.25, to float; a pixel whose corners
+   all lack nodes has none), its runs maximal in each band, its largest
+   |K|, and the edit's image bit for bit S + K (c - cS) where K is not 0
+   and S elsewhere.  A floor, spheres with sky between them (pixels with
+   no node inside a row's span, and rows without) and shadows (K 0 amid
+   a run); plain samples, SPD's corners over the frame and a region of
+   odd width, one and two threads, 3 and 7 lights. */
+#define LP_ROWS 16 /* tree.c's PK_ROWS: a plane's bands */
+
+static int write_lights_scene(const char *path, int nl)
+{
+    FILE *f = fopen(path, "w");
+    int i;
+    CHECK(f != NULL);
+    if (!f)
+        return 0;
+    fprintf(f, "v\nfrom 0 -8 1.5\nat 0 0 0.8\nup 0 0 1\nangle 40\nhither 0.01\n"
+               "resolution 61 45\nb 0.1 0.2 0.4\n");
+    for (i = 0; i < nl; i++)
+        fprintf(f, "l %g %g %g 0.%d 0.3 0.2\n", 5.0 * cos(i * 0.9), 5.0 * sin(i * 0.9) - 1.0,
+                3.0 + 0.3 * i, 2 + i);
+    fprintf(f, "f 0.8 0.3 0.2 0.6 0.3 20 0 1\ns -1.5 0 0.6 0.7\ns 0.2 1 1.4 0.5\n"
+               "f 0.9 0.9 0.9 0.1 0.5 60 0.6 1.5\ns 1.4 0 0.5 0.6\n"
+               "f 0.4 0.7 0.4 0.8 0.2 10 0 1\np 4\n-9 -9 -0.2\n9 -9 -0.2\n9 9 -0.2\n-9 9 -0.2\n");
+    fclose(f);
+    return 1;
+}
+
+/* K of term j at pixel p from the kept coefficients; 0 where its samples
+   have no nodes.  *none: its corners have none. */
+static void lp_k(const rtp_tree *t, size_t j, size_t p, float k[3], int *none)
+{
+    const size_t nc = 6 + 3 * t->scene->nlights, w = (size_t)t->width, nx = (size_t)t->nx;
+    const float *a, *b, *c, *d;
+    size_t q;
+    int i;
+    if (!t->spd) {
+        *none = t->start[p + 1] == t->start[p];
+        a = t->ev_coeffs + p * nc + 3 * j;
+        for (i = 0; i < 3; i++)
+            k[i] = *none ? 0.0f : a[i];
+        return;
+    }
+    q = (p / w) * nx + p % w;
+    *none = t->start[q + 2] == t->start[q] && t->start[q + nx + 2] == t->start[q + nx];
+    a = t->ev_coeffs + q * nc + 3 * j;
+    b = a + nx * nc;
+    c = a + nc;
+    d = b + nc;
+    for (i = 0; i < 3; i++) {
+        double l = (double)a[i] + b[i], r = (double)c[i] + d[i];
+        k[i] = *none ? 0.0f : (float)(0.25 * (l + r));
+    }
+}
+
+static int lp_zero(const float k[3])
+{
+    uint32_t u[3];
+    memcpy(u, k, sizeof u);
+    return ((u[0] | u[1] | u[2]) & 0x7fffffffu) == 0;
+}
+
+/* Term j's plane against lp_k, and the image out (an edit of term j
+   alone, from S) against S + K dc; the pixels with no node inside a
+   span and the rows without such pixels counted into holes[2]. */
+static void lp_check(const rtp_tree *t, size_t j, const float *out, const char *what,
+                     unsigned long holes[2])
+{
+    const size_t w = (size_t)t->width, np = w * (size_t)t->height;
+    const int nb = (t->height + LP_ROWS - 1) / LP_ROWS;
+    float *kd = (float *)calloc(3 * np, sizeof *kd);
+    unsigned char *in = (unsigned char *)calloc(np, 1);
+    size_t p, y, bad = 0, badimg = 0;
+    double mx[3] = {0.0, 0.0, 0.0};
+    int b, c;
+    CHECK(kd && in);
+    if (!kd || !in || !t->cp_ok || !t->cp_ok[j] || !t->cp_k[j]) {
+        CHECK_MSG(0, "%s: term %d has no plane", what, (int)j);
+        free(kd);
+        free(in);
+        return;
+    }
+    for (b = 0; b < nb; b++) {
+        const uint32_t *bt = t->cp_seg[j] + 4 * (size_t)b;
+        const float *e = t->cp_k[j] + 3 * (size_t)bt[0];
+        const uint32_t *r = t->cp_run[j] + 2 * (size_t)bt[2];
+        size_t lo = (size_t)b * LP_ROWS * w, hi = lo + LP_ROWS * w, end = 0, n = 0, i;
+        if (hi > np)
+            hi = np;
+        for (i = 0; i < bt[3]; i++, r += 2) {
+            /* within the band, in order, apart (maximal) */
+            if (r[1] == 0 || r[0] < lo || r[0] + (size_t)r[1] > hi || (i && r[0] <= end)) {
+                CHECK_MSG(0, "%s: term %d band %d run %d (%u, %u) after %d", what, (int)j, b,
+                          (int)i, r[0], r[1], (int)end);
+                break;
+            }
+            for (p = r[0]; p < r[0] + (size_t)r[1]; p++, e += 3, n++) {
+                memcpy(kd + 3 * p, e, 3 * sizeof *e);
+                in[p] = 1;
+            }
+            end = r[0] + (size_t)r[1];
+        }
+        CHECK_MSG(n == bt[1], "%s: term %d band %d: %d entries, %u listed", what, (int)j, b,
+                  (int)n, bt[1]);
+    }
+    for (p = 0; p < np; p++) {
+        float k[3];
+        int none;
+        lp_k(t, j, p, k, &none);
+        if (in[p] != !lp_zero(k) || (in[p] && memcmp(k, kd + 3 * p, sizeof k) != 0))
+            bad++;
+        for (c = 0; c < 3; c++)
+            mx[c] = fabs(k[c]) > mx[c] ? fabs(k[c]) : mx[c];
+        if (out) {
+            float v[3];
+            for (c = 0; c < 3; c++)
+                v[c] = in[p] ? (float)(t->cp_s[3 * p + c] + k[c] * t->cp_dc[c])
+                             : t->cp_s[3 * p + c];
+            badimg += memcmp(v, out + 3 * p, sizeof v) != 0;
+        }
+    }
+    CHECK_MSG(bad == 0, "%s: term %d: %d pixels' K differ", what, (int)j, (int)bad);
+    CHECK_MSG(badimg == 0, "%s: term %d: %d pixels of the edit differ", what, (int)j,
+              (int)badimg);
+    for (c = 0; c < 3; c++)
+        CHECK_MSG(t->cp_kmax[3 * j + c] == mx[c], "%s: term %d: largest |K| %g, not %g", what,
+                  (int)j, t->cp_kmax[3 * j + c], mx[c]);
+    /* the rows with a pixel of no node inside their span, and without */
+    for (y = 0; y < (size_t)t->height; y++) {
+        size_t x, first = w, last = 0, h = 0;
+        for (x = 0; x < w; x++) {
+            float k[3];
+            int none;
+            lp_k(t, j, y * w + x, k, &none);
+            if (!none) {
+                first = x < first ? x : first;
+                last = x;
+            }
+        }
+        for (x = first; x < last; x++) {
+            float k[3];
+            int none;
+            lp_k(t, j, y * w + x, k, &none);
+            h += (size_t)none;
+        }
+        holes[h ? 0 : 1] += h ? h : (first < w);
+    }
+    free(kd);
+    free(in);
+}
+
+static void light_planes_run(int nl, int spd, int region, int threads)
+{
+    char path[512], key[32], what[96], col[64];
+    rtp_scene *s;
+    rtp_tree *t = NULL;
+    rtp_trace_options o;
+    rtp_eval_options eo;
+    rtp_image *re = NULL;
+    rtp_eval_stats es;
+    unsigned long holes[2] = {0, 0};
+    int l;
+    snprintf(path, sizeof path, "%s/rtp-lplanes-%d.nff", tmpdir(), (int)getpid());
+    if (!write_lights_scene(path, nl))
+        return;
+    s = load(path);
+    remove(path);
+    CHECK(s != NULL);
+    if (!s)
+        return;
+    memset(&o, 0, sizeof o);
+    memset(&eo, 0, sizeof eo);
+    o.width = spd ? 61 : 60;
+    o.height = 45;
+    o.spd = spd;
+    if (region) {
+        /* (of SPD's 512 x 512 frame; an odd width) */
+        o.region[0] = 131;
+        o.region[1] = 190;
+        o.region[2] = 390;
+        o.region[3] = 420;
+    }
+    eo.threads = threads;
+    eo.incremental = 1;
+    snprintf(what, sizeof what, "%d lights, spd %d, region %d, -j%d", nl, spd, region, threads);
+    if (rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK &&
+        rtp_tree_eval(t, &eo, &re, NULL, NULL) == RTP_OK) {
+        CHECK_MSG(!t->cp_ok || !t->cp_ok[2], "%s: a plane made by the evaluation", what);
+        for (l = 0; l < nl; l++) {
+            snprintf(key, sizeof key, "light.%d.color", l);
+            CHECK(rtp_tree_set(t, key, "0.7,0.05,1.3", NULL) == RTP_OK);
+            if (rtp_tree_eval_into(t, &eo, re, &es, NULL) != RTP_OK) {
+                CHECK(0);
+                continue;
+            }
+            /* (the term alone differs from S: S + K dc) */
+            CHECK_MSG(es.combined_samples == 0 && t->cp_nd == 1 && t->cp_d[0] == 2 + (size_t)l &&
+                          !t->cp_check,
+                      "%s: light %d's edit not from its plane alone", what, l);
+            lp_check(t, 2 + (size_t)l, re->pixels, what, holes);
+            /* back to S's colour: the next light's edit differs alone */
+            snprintf(col, sizeof col, "0.%d,0.3,0.2", 2 + l);
+            CHECK(rtp_tree_set(t, key, col, NULL) == RTP_OK);
+            CHECK(rtp_tree_eval_into(t, &eo, re, &es, NULL) == RTP_OK);
+        }
+        CHECK_MSG(holes[0] > 0 && holes[1] > 0,
+                  "%s: %lu pixels without nodes inside spans, %lu rows with none", what,
+                  holes[0], holes[1]);
+    } else {
+        CHECK(0);
+    }
+    rtp_image_destroy(re);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+}
+
+static void test_light_planes(void)
+{
+    int nl, th;
+    for (nl = 3; nl <= 7; nl += 4)
+        for (th = 1; th <= 2; th++) {
+            light_planes_run(nl, 0, 0, th);
+            light_planes_run(nl, 1, 0, th);
+            light_planes_run(nl, 1, 1, th);
+        }
+}
+
 /* An allocator that fails its fail_at-th allocation while armed and
    follows each block with as many bytes again of a pattern, checked as
    the block is freed: a write past a block's end (by less than its size)
@@ -6891,6 +7122,7 @@ int main(void)
     RUN(test_random_chains);
     RUN(test_one_term_edits);
     RUN(test_ready_planes);
+    RUN(test_light_planes);
     RUN(test_failed_eval_then_light_added);
     RUN(test_failed_eval_after_shine_chain);
     RUN(test_added_light_eval_fails);
