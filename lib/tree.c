@@ -3856,23 +3856,6 @@ static int cp_apply_band(void *ctx, int chunk)
     return 0;
 }
 
-#ifdef PK_SSE2
-/* Two floats at p as two doubles. */
-static inline __m128d cp_ld2(const float *p)
-{
-    return _mm_cvtps_pd(_mm_castpd_ps(_mm_load_sd((const double *)(const void *)p)));
-}
-
-/* cp_run1's o = S + K dc for four values (dlo, dhi: dc of values 0-1 and
-   2-3), the scalar code's operations. */
-static inline void cp_quad(const float *a, const float *b, float *o, __m128d dlo, __m128d dhi)
-{
-    const __m128d lo = _mm_add_pd(cp_ld2(a), _mm_mul_pd(cp_ld2(b), dlo)),
-                  hi = _mm_add_pd(cp_ld2(a + 2), _mm_mul_pd(cp_ld2(b + 2), dhi));
-    _mm_storeu_ps(o, _mm_movelh_ps(_mm_cvtpd_ps(lo), _mm_cvtpd_ps(hi)));
-}
-#endif
-
 /* S + K dc over len consecutive pixels (cp_apply_listed, one term). */
 static void cp_run1(const float *restrict sp, const float *restrict k, const double *dc,
                     float *restrict out, size_t len)
@@ -3885,23 +3868,7 @@ static void cp_run1(const float *restrict sp, const float *restrict k, const dou
        colours' pattern: gcc 12 -O2 makes two-wide operations of all of
        them (two pixels a step paired four of six); the same arithmetic
        value by value */
-    i = 0;
-#ifdef PK_SSE2
-    {
-        /* the same on SSE2's vectors, two values a conversion straight
-           from memory: gcc -O2's two-wide code above took 14.3
-           instructions a pixel */
-        const __m128d d01 = _mm_set_pd(d1, d0), d20 = _mm_set_pd(d0, d2), d12 = _mm_set_pd(d2, d1);
-        for (; i + 4 <= len; i += 4) {
-            const float *a = sp + 3 * i, *b = k + 3 * i;
-            float *o = out + 3 * i;
-            cp_quad(a, b, o, d01, d20);
-            cp_quad(a + 4, b + 4, o + 4, d12, d01);
-            cp_quad(a + 8, b + 8, o + 8, d20, d12);
-        }
-    }
-#endif
-    for (; i + 4 <= len; i += 4) {
+    for (i = 0; i + 4 <= len; i += 4) {
         const float *a = sp + 3 * i, *b = k + 3 * i;
         float *o = out + 3 * i;
         for (c = 0; c < 12; c++)
