@@ -1786,9 +1786,9 @@ static const char diff_help[] =
     "Compares images A and B ('-' = stdin) and prints MAE, RMSE, PSNR, the\n"
     "maximum absolute error and the share of pixels above the threshold.\n"
     "  --threshold T           per-pixel error counted in 'above' (default 1/255)\n"
-    "  --heatmap IMAGE         write a heat map of the per-pixel error (PNG, or\n"
-    "                          .ppm/.pfm by name; PPM without libpng), full\n"
-    "                          heat at the largest finite error, legend below\n"
+    "  --heatmap IMAGE         write a heat map of the per-pixel error (.png .ppm\n"
+    "                          .pfm; '-' = PNG on stdout, PPM without libpng),\n"
+    "                          full heat at the largest finite error, legend below\n"
     "  --fail-above METRIC=V   exit 3 when METRIC (mae, rmse, max_abs, above,\n"
     "                          or psnr: below V) is worse than V; repeatable,\n"
     "                          every one checked; above is a share from 0 to 1\n"
@@ -1962,7 +1962,11 @@ static int cmd_diff(int argc, char **argv)
     }
     if (same_output("diff", "the heat map", heat, "the --stats file", stats_path))
         goto usage;
-    /* outputs checked before the inputs are read, as trace's are */
+    /* outputs checked before the inputs are read, as trace's are; the
+       heat map's format by its name, as -i's (x.jpg had been written a
+       PNG, exit 0) */
+    if (heat && !image_name_ok(heat))
+        goto out;
     if (!output_ok(heat) || !output_ok(stats_path))
         goto out;
     t0 = now_seconds();

@@ -314,10 +314,15 @@ else
     expect_rc 0 sh -c "$RTP diff '$T/t.pfm' '$T/r.pfm' --heatmap - > '$T/hm.ppm'"
     head -c 3 "$T/hm.ppm" | grep -q "^P6" && ok ||
         bad "diff --heatmap - without libpng: not a PPM on stdout"
-    expect_rc 0 $RTP diff "$T/t.pfm" "$T/r.pfm" --heatmap "$T/hm.map" -q
-    head -c 3 "$T/hm.map" | grep -q "^P6" && ok ||
-        bad "diff --heatmap NAME without libpng: not a PPM"
 fi
+# session 42: the heat map's format by its name, as -i's: x.jpg had been
+# written a PNG (exit 0); refused as trace's -i is, nothing written
+for hm in hm.jpg hm; do
+    expect_rc 1 $RTP diff "$T/t.pfm" "$T/r.pfm" --heatmap "$T/$hm" --stats "$T/hm.json"
+    grep -q "/$hm: cannot tell the image format from the name: use .png, .ppm or .pfm" \
+        "$T/err" && [ ! -e "$T/$hm" ] && [ ! -e "$T/hm.json" ] && ok ||
+        { bad "diff --heatmap $hm: not refused as -i is, or a file written"; cat "$T/err" >&2; }
+done
 expect_rc 1 $RTP merge -o "$T/j.rtp" -i "$T/j.xyz" "$T/w1.rtp"
 [ ! -e "$T/j.rtp" ] && ok || bad "merge wrote the tree before refusing the image name"
 expect_rc 2 $RTP merge -i "$T/j.pfm" --size 40x30 "$T/t.pfm@0,0" "$T/t.pfm"
