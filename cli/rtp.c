@@ -2782,7 +2782,9 @@ static void print_keys(const rtp_scene *s, const rtp_tree_info *ti)
 {
     static const char *const camera[] = {"from", "at", "up", "angle", "hither"};
     static const char *const env[] = {"ambient", "background"};
-    static const char *const light[] = {"pos", "color", "on"};
+    /* (intensity, a key of its own since session 41, is the colour's
+       largest component: shown beside the colour it is read from) */
+    static const char *const light[] = {"pos", "color", "intensity", "on"};
     static const char *const mat[] = {"color", "kd", "ks", "kt", "shine", "ior"};
     static const char *const ambient[] = {"ambient"};
     static const char *const checker[] = {"checker", "color2", "checker_scale"};
@@ -2794,7 +2796,7 @@ static void print_keys(const rtp_scene *s, const rtp_tree_info *ti)
     print_fields(s, "environment:", "", env, 2);
     for (i = 0; i < ti->lights; i++) {
         item_head(s, "light", i, prefix, sizeof prefix, head, sizeof head);
-        print_fields(s, head, prefix, light, 3);
+        print_fields(s, head, prefix, light, 4);
     }
     for (i = 0; i < ti->materials; i++) {
         char line[96];
