@@ -1665,6 +1665,7 @@ int main(void)
     rtp_error err;
     if (setup() != 0) {
         fprintf(stderr, "cannot write the fixtures in %s\n", dir);
+        cleanup(); /* (what setup wrote before failing: it was left) */
         return 1;
     }
     /* The file op_tree_read reads. */

@@ -18,13 +18,14 @@ static rtp_status load(const char *text, const char *name, rtp_scene **s,
     return rtp_scene_load_memory(text, strlen(text), name, "nff", NULL, s, err);
 }
 
-static char tmpdir[64];
+static char tmpdir[256];
 
 /* A fresh folder for files the tests write; "" if none could be made. */
 static const char *tmp_folder(void)
 {
     if (!tmpdir[0]) {
-        strcpy(tmpdir, "/tmp/rtp-test-nff-XXXXXX");
+        const char *t = getenv("TMPDIR"); /* (as the other tests: /tmp was fixed) */
+        snprintf(tmpdir, sizeof tmpdir, "%s/rtp-test-nff-XXXXXX", t && *t ? t : "/tmp");
         if (!mkdtemp(tmpdir))
             tmpdir[0] = '\0';
     }

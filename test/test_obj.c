@@ -18,12 +18,13 @@ static rtp_status load(const char *text, const char *name, rtp_scene **s,
 
 static int near(double a, double b, double tol) { return fabs(a - b) <= tol; }
 
-static char tmpdir[64];
+static char tmpdir[256];
 
 static const char *tmp_folder(void)
 {
     if (!tmpdir[0]) {
-        strcpy(tmpdir, "/tmp/rtp-test-obj-XXXXXX");
+        const char *t = getenv("TMPDIR"); /* (as the other tests: /tmp was fixed) */
+        snprintf(tmpdir, sizeof tmpdir, "%s/rtp-test-obj-XXXXXX", t && *t ? t : "/tmp");
         if (!mkdtemp(tmpdir))
             tmpdir[0] = '\0';
     }

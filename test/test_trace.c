@@ -12,6 +12,14 @@
 #include <unistd.h>
 #include <string.h>
 
+/* The pattern of a fresh folder under TMPDIR (or /tmp) for mkdtemp (/tmp
+   was fixed, where the other tests take TMPDIR). */
+static void tmp_dir(char *dir, size_t size)
+{
+    const char *t = getenv("TMPDIR");
+    snprintf(dir, size, "%s/rtp-test-trace-XXXXXX", t && *t ? t : "/tmp");
+}
+
 static rtp_scene *load_text(const char *text)
 {
     rtp_scene *s = NULL;
@@ -437,13 +445,13 @@ static void test_bump_mirrored_uvs(void)
         "v 0.1 -1 0\nv 2 -1 0\nv 2 1 0\nv 0.1 1 0\n"
         "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
         "f 1/1 2/2 3/3\nf 1/1 3/3 4/4\nf 5/2 6/1 7/4\nf 5/2 7/4 8/3\n";
-    char dir[64], path[128], scene[512];
+    char dir[256], path[300], scene[1024];
     rtp_scene *s;
     rtp_image *img;
     FILE *f;
     double worst = 0.0;
     int x, y, c;
-    strcpy(dir, "/tmp/rtp-test-trace-XXXXXX");
+    tmp_dir(dir, sizeof dir);
     if (!mkdtemp(dir)) {
         CHECK(!"a temporary folder");
         return;
@@ -491,9 +499,9 @@ static void test_bump_mirrored_uvs(void)
    top row over a white bottom one). */
 static void test_texture_poles(void)
 {
-    char dir[64], path[128], scene[512];
+    char dir[256], path[300], scene[1024];
     int k;
-    strcpy(dir, "/tmp/rtp-test-trace-XXXXXX");
+    tmp_dir(dir, sizeof dir);
     if (!mkdtemp(dir)) {
         CHECK(!"a temporary folder");
         return;

@@ -713,8 +713,10 @@ static void test_merge_other_setups(void)
         rtp_trace_options o;
         rtp_error err;
         int k;
-        if (!s)
+        if (!s) {
+            remove(tex); /* (the first pass wrote it) */
             return;
+        }
         o = half_frame(0);
         CHECK(rtp_record(s, &o, &top, NULL, NULL, NULL) == RTP_OK);
         if (which) {
@@ -6039,8 +6041,10 @@ static void test_texture_edits_free_images(void)
     a = counted_allocator(&c);
     CHECK(write_ppm_256(bump0, 99) == 0);
     CHECK(rtp_scene_load("scenes/textured.nff", &a, &s, NULL) == RTP_OK);
-    if (!s)
+    if (!s) {
+        remove(bump0);
         return;
+    }
     CHECK(rtp_scene_set(s, "mat.ball.bump", bump0, NULL) == RTP_OK);
     memset(&o, 0, sizeof o);
     o.width = 24;
@@ -6239,8 +6243,11 @@ static void test_texture_bytes(void)
         CHECK(rtp_image_write(tex, img, RTP_IMAGE_AUTO, NULL) == RTP_OK);
         rtp_image_destroy(tex);
         f = fopen(nff, "w");
-        if (!f)
+        CHECK(f != NULL); /* (returned unsaid, the test passed) */
+        if (!f) {
+            remove(img);
             return;
+        }
         fprintf(f, "v from 0 -4 0 at 0 0 0 up 0 0 1 angle 40 hither 0.1 resolution 24 24\n"
                    "l 1 -3 2\nf 1 1 1 1 0 0 0 1\ntexture %s\n"
                    "p 4 -1 0 -1 1 0 -1 1 0 1 -1 0 1\n",
@@ -6469,7 +6476,12 @@ static void test_eval_file(void)
                 sc = "scenes/spheres.nff";
             snprintf(f[i], sizeof f[i], "%s/rtp-evalfile-%d-%d.rtp", tmpdir(), (int)getpid(), i);
             if (!file_of(sc, trees[i].w, trees[i].h, trees[i].spd, 0, f[i])) {
+                /* (the trees made so far and the trap's scene removed
+                   here too: a failure had left them in TMPDIR) */
                 CHECK_MSG(0, "%s: no tree", sc);
+                while (i >= 0)
+                    remove(f[i--]);
+                remove(trap);
                 return;
             }
         }
