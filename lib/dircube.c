@@ -1310,65 +1310,34 @@ static int lb_sort(rtpi_lb_cand **cp, size_t n, const rtp_allocator *a)
     return 0;
 }
 
-/* The plane entry of candidate prim (see rtpi_lightbuf; t 0 for other
-   primitives).  Where the light and a shadow ray's origin o both lie
-   more than 1e-9 S from a triangle's plane on one side (S the scale:
-   every coordinate, the light's and o's, at most S), the segment between
-   them misses the plane by as much; the ray rtpi_shadow_ray makes runs
-   on that segment to within ~1e-16 of its length, and the watertight
-   test's rounding (~1e-15 S) is far below 1e-9 S, so it reports no hit
-   either.  n.o - n.p0 is within ~1e-15 S |n| of n.(o - p0). */
-static RTPI_FORCE_INLINE void lb_plane_at(rtpi_v3 p0, rtpi_v3 p1, rtpi_v3 p2, rtpi_v3 L, double S,
-                                          double *pl)
-{
-    rtpi_v3 n = v3_cross(v3_sub(p1, p0), v3_sub(p2, p0));
-    double d = v3_dot(n, p0), sl = v3_dot(n, L) - d, thr = 1e-9 * S * v3_len(n);
-    pl[0] = pl[1] = pl[2] = pl[3] = pl[4] = 0.0;
-    if (!(thr > 0.0 && fabs(sl) > thr && thr < HUGE_VAL))
-        return; /* degenerate, or the light (nearly) in the plane: no test */
-    pl[0] = n.x;
-    pl[1] = n.y;
-    pl[2] = n.z;
-    pl[3] = d;
-    pl[4] = sl > 0.0 ? thr : -thr;
-}
-
-/* A triangle's vertices, as lb_plane and dc_cover_tri take them. */
-static RTPI_FORCE_INLINE void lb_tri_points(const rtp_scene *s, uint32_t prim, rtpi_v3 p[3])
-{
-    const rtpi_tri *t = &s->tris[prim];
-    int k;
-    for (k = 0; k < 3; k++)
-        p[k] = v3_from_f(s->pos + 3 * (size_t)t->v[k]);
-}
-
-/* A plane entry as the light buffer keeps it (rtpi_lightbuf's plane):
-   turned to the light's side, so that the walk asks so > t alone, and t
-   HUGE_VAL where there is no test.  Negating n, n.p0 and t is exact, and
-   so the walk's n.o - n.p0 is exactly the negated one's: the same
+/* A triangle's plane entry (see rtpi_lightbuf), the light buffer's and,
+   with t added to n.p0, the exact moves' (rtpi_tri_planes): one
+   computation for both (each had its own copy of it).  Where the light
+   and a shadow ray's origin o both lie more than 1e-9 S from a
+   triangle's plane on one side (S the scale: every coordinate, the
+   light's and o's, at most S), the segment between them misses the plane
+   by as much; the ray rtpi_shadow_ray makes runs on that segment to
+   within ~1e-16 of its length, and the watertight test's rounding
+   (~1e-15 S) is far below 1e-9 S, so it reports no hit either.  n.o -
+   n.p0 is within ~1e-15 S |n| of n.(o - p0).
+   The entry is turned to the light's side, so that the walk asks so > t
+   alone, and t is HUGE_VAL where there is no test (degenerate, or the
+   light (nearly) in the plane: n 0).  Negating n, n.p0 and t is exact,
+   and so the walk's n.o - n.p0 is exactly the negated one's: the same
    candidates are turned away as by so < t on the other side.  (The
    sign's choice and the zero test had been a third of the test:
    lightbuf:256, third move, 512^2 SPD, gears 304.18 -> 299.51 M,
-   teapot 189.31 -> 186.91.) */
-static RTPI_FORCE_INLINE void lb_plane_side(double *pl)
+   teapot 189.31 -> 186.91; turned as they are made, not stored, read
+   back and negated: gears 0.7 M instructions a move.  The vertices by
+   value: rtpi_tri_planes loads them itself, through lb_tri_points 0.8 M
+   more instructions on gears.) */
+static RTPI_FORCE_INLINE void lb_plane_turned(rtpi_v3 p0, rtpi_v3 p1, rtpi_v3 p2, rtpi_v3 L,
+                                              double S, double *pl)
 {
-    int k;
-    if (pl[4] == 0.0)
-        pl[4] = HUGE_VAL;
-    else if (pl[4] < 0.0)
-        for (k = 0; k < 5; k++)
-            pl[k] = -pl[k];
-}
-
-/* lb_plane_at then lb_plane_side of triangle p, the same numbers stored
-   once, turned as they are made (not stored, read back and negated:
-   gears 0.7 M instructions a move). */
-static RTPI_FORCE_INLINE void lb_plane_turned(const rtpi_v3 p[3], rtpi_v3 L, double S, double *pl)
-{
-    rtpi_v3 n = v3_cross(v3_sub(p[1], p[0]), v3_sub(p[2], p[0]));
-    double d = v3_dot(n, p[0]), sl = v3_dot(n, L) - d, thr = 1e-9 * S * v3_len(n);
+    rtpi_v3 n = v3_cross(v3_sub(p1, p0), v3_sub(p2, p0));
+    double d = v3_dot(n, p0), sl = v3_dot(n, L) - d, thr = 1e-9 * S * v3_len(n);
     if (!(thr > 0.0 && fabs(sl) > thr && thr < HUGE_VAL)) {
-        pl[0] = pl[1] = pl[2] = pl[3] = 0.0; /* no test (lb_plane_at's 0 t) */
+        pl[0] = pl[1] = pl[2] = pl[3] = 0.0; /* no test */
         pl[4] = HUGE_VAL;
     } else if (sl > 0.0) {
         pl[0] = n.x;
@@ -1376,7 +1345,7 @@ static RTPI_FORCE_INLINE void lb_plane_turned(const rtpi_v3 p[3], rtpi_v3 L, dou
         pl[2] = n.z;
         pl[3] = d;
         pl[4] = thr;
-    } else { /* (t was -thr: every entry negated) */
+    } else { /* (the light on n's other side: every entry negated) */
         pl[0] = -n.x;
         pl[1] = -n.y;
         pl[2] = -n.z;
@@ -1385,20 +1354,13 @@ static RTPI_FORCE_INLINE void lb_plane_turned(const rtpi_v3 p[3], rtpi_v3 L, dou
     }
 }
 
-/* lb_plane_at of candidate prim; t 0 for other primitives.  (Loading the
-   vertices itself: through lb_tri_points and lb_plane_at, the exact
-   move's planes, rtpi_tri_planes, took 0.8 M more instructions on
-   gears.) */
-static void lb_plane(const rtp_scene *s, uint32_t prim, rtpi_v3 L, double S, double *pl)
+/* A triangle's vertices, as dc_cover_tri takes them. */
+static RTPI_FORCE_INLINE void lb_tri_points(const rtp_scene *s, uint32_t prim, rtpi_v3 p[3])
 {
-    const rtpi_tri *t;
-    if (prim >= s->ntris) {
-        pl[0] = pl[1] = pl[2] = pl[3] = pl[4] = 0.0;
-        return;
-    }
-    t = &s->tris[prim];
-    lb_plane_at(v3_from_f(s->pos + 3 * (size_t)t->v[0]), v3_from_f(s->pos + 3 * (size_t)t->v[1]),
-                v3_from_f(s->pos + 3 * (size_t)t->v[2]), L, S, pl);
+    const rtpi_tri *t = &s->tris[prim];
+    int k;
+    for (k = 0; k < 3; k++)
+        p[k] = v3_from_f(s->pos + 3 * (size_t)t->v[k]);
 }
 
 static double lb_ang(double S, double near)
@@ -1554,12 +1516,12 @@ static int lb_part(void *ctx, int part)
             rtpi_v3 p[3];
             lb_tri_points(w->c.s, prim, p);
             if (pl)
-                lb_plane_turned(p, w->c.L, w->S, pl);
+                lb_plane_turned(p[0], p[1], p[2], w->c.L, w->S, pl);
             dc_cover_tri(&w->c, prim, p, ang, lb_count, lf);
         } else {
-            if (pl) {
-                lb_plane(w->c.s, prim, w->c.L, w->S, pl);
-                lb_plane_side(pl);
+            if (pl) { /* no plane: no test */
+                pl[0] = pl[1] = pl[2] = pl[3] = 0.0;
+                pl[4] = HUGE_VAL;
             }
             dc_cover(&w->c, prim, ang, lb_count, lf);
         }
@@ -2130,7 +2092,7 @@ static RTPI_FORCE_INLINE uint32_t lb_walk(const rtpi_lightbuf *lb, const rtp_sce
 {
     /* tmax = dist (1 - 1e-9): the segment reaches no farther than dist. */
     double lim = ray->tmax * (1.0 + 2e-9) + lb->slack;
-    /* the planes' test holds for origins within the scale (lb_plane);
+    /* the planes' test holds for origins within the scale (lb_plane_turned);
        the largest |coordinate| by selects, not three branches (an origin
        with a NaN coordinate may keep the planes: its test's comparisons
        are then false, and it rejects nothing, as without them; teapot's
@@ -2246,22 +2208,19 @@ rtp_status rtpi_tri_planes(const rtp_scene *s, rtpi_v3 light, const rtp_allocato
     if (!*out)
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
     for (i = 0; i < s->ntris; i++) {
-        double q[5], *o = *out + 4 * i, sg;
-        lb_plane(s, (uint32_t)i, light, *scale, q);
-        if (q[4] == 0.0) { /* no test: n.o > inf never holds */
-            o[0] = o[1] = o[2] = 0.0;
-            o[3] = HUGE_VAL;
-            continue;
-        }
-        /* Turned to the light's side (negating n and n.p0 is exact), the
-           margin added to n.p0: n.o > n.p0 + t, the sum's rounding
+        const rtpi_tri *t = &s->tris[i];
+        double q[5], *o = *out + 4 * i;
+        lb_plane_turned(v3_from_f(s->pos + 3 * (size_t)t->v[0]),
+                        v3_from_f(s->pos + 3 * (size_t)t->v[1]),
+                        v3_from_f(s->pos + 3 * (size_t)t->v[2]), light, *scale, q);
+        /* The margin added to n.p0: n.o > n.p0 + t, the sum's rounding
            (~1e-16 of it) far below t (1e-9 S |n|, against n.p0's at most
-           ~1.7 S |n|), so lb_plane's argument holds unchanged. */
-        sg = q[4] > 0.0 ? 1.0 : -1.0;
-        o[0] = sg * q[0];
-        o[1] = sg * q[1];
-        o[2] = sg * q[2];
-        o[3] = sg * q[3] + fabs(q[4]);
+           ~1.7 S |n|), so lb_plane_turned's argument holds unchanged; no
+           test: 0 + inf, which n.o never exceeds. */
+        o[0] = q[0];
+        o[1] = q[1];
+        o[2] = q[2];
+        o[3] = q[3] + q[4];
     }
     return RTP_OK;
 }

@@ -182,7 +182,7 @@ typedef struct rtpi_lightbuf {
        HUGE_VAL (no test), or the light lies farther than t from the
        plane, t the distance (times |n|) at which a shadow ray's origin
        on the light's side too (n.o - n.p0 > t) lets the segment miss it
-       (lb_plane_at, lb_plane_side) */
+       (lb_plane_turned) */
     double *plane;
     /* by rank, 4 each, where spheres and cones are at least a sixteenth
        of the scene's primitives (NULL elsewhere; set for those only):

@@ -1979,7 +1979,7 @@ uint32_t rtpi_kd_occluder_planes(const rtpi_kdtree *kd, const rtpi_ray *ray, uin
                                  const double *cones, double scale)
 {
     const rtp_scene *s = kd->scene;
-    /* the planes' test holds for origins within the scale (lb_plane in
+    /* the planes' test holds for origins within the scale (lb_plane_turned in
        dircube.c), and so does the edges' */
     if (!(fabs(ray->o.x) <= scale && fabs(ray->o.y) <= scale && fabs(ray->o.z) <= scale))
         planes = NULL;
