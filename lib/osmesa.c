@@ -4,13 +4,6 @@
 
 #if !defined(RTP_HAVE_OSMESA)
 
-rtp_status rtpi_itembuf_build_osmesa(const rtp_scene *s, rtpi_v3 light,
-                                     int res, const rtp_allocator *a,
-                                     rtpi_itembuf *ib, rtp_error *err)
-{
-    return rtpi_itembuf_build_osmesa_wide(s, light, res, 0.0, NULL, a, ib, err);
-}
-
 rtp_status rtpi_itembuf_build_osmesa_wide(const rtp_scene *s, rtpi_v3 light, int res,
                                           double cells, unsigned char *thin,
                                           const rtp_allocator *a, rtpi_itembuf *ib,
@@ -429,13 +422,6 @@ static void *osm_render(void *arg)
     return NULL;
 }
 
-rtp_status rtpi_itembuf_build_osmesa(const rtp_scene *s, rtpi_v3 light,
-                                     int res, const rtp_allocator *a,
-                                     rtpi_itembuf *ib, rtp_error *err)
-{
-    return rtpi_itembuf_build_osmesa_wide(s, light, res, 0.0, NULL, a, ib, err);
-}
-
 rtp_status rtpi_itembuf_build_osmesa_wide(const rtp_scene *s, rtpi_v3 light, int res,
                                           double cells, unsigned char *thin,
                                           const rtp_allocator *a, rtpi_itembuf *ib,
@@ -615,3 +601,11 @@ rtp_status rtpi_itembuf_build_osmesa_wide(const rtp_scene *s, rtpi_v3 light, int
 }
 
 #endif
+
+/* (one for both builds: each branch had its own copy) */
+rtp_status rtpi_itembuf_build_osmesa(const rtp_scene *s, rtpi_v3 light,
+                                     int res, const rtp_allocator *a,
+                                     rtpi_itembuf *ib, rtp_error *err)
+{
+    return rtpi_itembuf_build_osmesa_wide(s, light, res, 0.0, NULL, a, ib, err);
+}

@@ -71,6 +71,43 @@ CHECK_UNUSED static int check_report(void)
     return check_failed ? 1 : 0;
 }
 
+/* A folder for the files a test program writes, made under TMPDIR (or
+   /tmp) at the first call ("" if none could be made); the program
+   removes its files and, at its end, the folder (rmdir check_tmpdir).
+   (test_nff and test_obj each had their own copy of these three.) */
+CHECK_UNUSED static char check_tmpdir[256];
+
+CHECK_UNUSED static const char *check_tmp_folder(void)
+{
+    if (!check_tmpdir[0]) {
+        const char *t = getenv("TMPDIR");
+        snprintf(check_tmpdir, sizeof check_tmpdir, "%s/rtp-test-XXXXXX", t && *t ? t : "/tmp");
+        if (!mkdtemp(check_tmpdir))
+            check_tmpdir[0] = '\0';
+    }
+    return check_tmpdir;
+}
+
+/* Writes text to dir/name: 0, or -1 where it could not. */
+CHECK_UNUSED static int check_write_file(const char *dir, const char *name, const char *text)
+{
+    char path[512];
+    FILE *f;
+    snprintf(path, sizeof path, "%s/%s", dir, name);
+    f = fopen(path, "wb");
+    if (!f)
+        return -1;
+    fputs(text, f);
+    return fclose(f);
+}
+
+CHECK_UNUSED static void check_remove_file(const char *dir, const char *name)
+{
+    char path[512];
+    snprintf(path, sizeof path, "%s/%s", dir, name);
+    remove(path);
+}
+
 /* The seven default SPD scenes (../shared/scenes/spd/NAME.nff) the
    benchmarks measure. */
 #define CHECK_SPD_SCENES 7

@@ -18,39 +18,6 @@ static rtp_status load(const char *text, const char *name, rtp_scene **s,
     return rtp_scene_load_memory(text, strlen(text), name, "nff", NULL, s, err);
 }
 
-static char tmpdir[256];
-
-/* A fresh folder for files the tests write; "" if none could be made. */
-static const char *tmp_folder(void)
-{
-    if (!tmpdir[0]) {
-        const char *t = getenv("TMPDIR"); /* (as the other tests: /tmp was fixed) */
-        snprintf(tmpdir, sizeof tmpdir, "%s/rtp-test-nff-XXXXXX", t && *t ? t : "/tmp");
-        if (!mkdtemp(tmpdir))
-            tmpdir[0] = '\0';
-    }
-    return tmpdir;
-}
-
-static int write_file(const char *dir, const char *name, const char *text)
-{
-    char path[512];
-    FILE *f;
-    snprintf(path, sizeof path, "%s/%s", dir, name);
-    f = fopen(path, "wb");
-    if (!f)
-        return -1;
-    fputs(text, f);
-    return fclose(f);
-}
-
-static void remove_file(const char *dir, const char *name)
-{
-    char path[512];
-    snprintf(path, sizeof path, "%s/%s", dir, name);
-    remove(path);
-}
-
 static int file_exists(const char *path)
 {
     FILE *f = fopen(path, "rb");
@@ -555,7 +522,7 @@ static void test_error_format_without_file(void)
    keeps its texture. */
 static void test_image_key_over_the_limit(void)
 {
-    const char *dir = tmp_folder();
+    const char *dir = check_tmp_folder();
     char name[512], buf[600];
     rtp_scene *s = NULL;
     rtp_tree *t = NULL;
@@ -563,7 +530,7 @@ static void test_image_key_over_the_limit(void)
     rtp_trace_options o;
     if (!dir[0])
         SKIP("cannot make a temporary folder");
-    CHECK(write_file(dir, "wide.ppm", "P6\n2000000 1\n255\n") == 0);
+    CHECK(check_write_file(dir, "wide.ppm", "P6\n2000000 1\n255\n") == 0);
     snprintf(name, sizeof name, "%s/wide.ppm", dir);
     CHECK(load("l 1 2 3\nf 1 0 0 1 0 100 0 0\ns 0 0 0 1\n", "m.nff", &s, &err) == RTP_OK);
     if (!s)
@@ -579,7 +546,7 @@ static void test_image_key_over_the_limit(void)
         CHECK(rtp_tree_set(t, "mat.0.texture", name, &err) == RTP_ERR_LIMIT);
     rtp_tree_destroy(t);
     rtp_scene_destroy(s);
-    remove_file(dir, "wide.ppm"); /* (main removes the folder, if empty) */
+    check_remove_file(dir, "wide.ppm"); /* (main removes the folder, if empty) */
 }
 
 /* rtp_scene_get gives the shortest form that reads back to the same value,
@@ -770,7 +737,7 @@ static const char quad_obj[] =
    names). */
 static void test_file_named_dash(void)
 {
-    const char *dir = tmp_folder();
+    const char *dir = check_tmp_folder();
     char old[1024];
     rtp_scene *s = NULL;
     rtp_error err;
@@ -779,7 +746,7 @@ static void test_file_named_dash(void)
         SKIP("cannot make a temporary folder");
     if (!getcwd(old, sizeof old))
         SKIP("cannot tell the current folder");
-    CHECK(write_file(dir, "-", "P3\n2 1\n255\n255 0 0 0 0 255\n") == 0);
+    CHECK(check_write_file(dir, "-", "P3\n2 1\n255\n255 0 0 0 0 255\n") == 0);
     in = freopen("/dev/null", "rb", stdin);
     CHECK(in != NULL);
     CHECK(chdir(dir) == 0);
@@ -794,12 +761,12 @@ static void test_file_named_dash(void)
           s->mats[0].bump_image == 0);
     rtp_scene_destroy(s);
     CHECK(chdir(old) == 0);
-    remove_file(dir, "-");
+    check_remove_file(dir, "-");
 }
 
 static void test_files(void)
 {
-    const char *dir = tmp_folder();
+    const char *dir = check_tmp_folder();
     char name[512];
     rtp_scene *s = NULL;
     rtp_error err;
@@ -821,9 +788,9 @@ static void test_files(void)
         if (system(cmd) != 0)
             SKIP("cannot make a folder");
     }
-    CHECK(write_file(dir, "sub/tex.ppm", "P3\n2 1\n255\n255 0 0 0 0 255\n") == 0);
-    CHECK(write_file(dir, "sub/quad.obj", quad_obj) == 0);
-    CHECK(write_file(dir, "sub/part.nff",
+    CHECK(check_write_file(dir, "sub/tex.ppm", "P3\n2 1\n255\n255 0 0 0 0 255\n") == 0);
+    CHECK(check_write_file(dir, "sub/quad.obj", quad_obj) == 0);
+    CHECK(check_write_file(dir, "sub/part.nff",
                      "s 1 1 1 1\nf 0 1 0 1 0 100 0 0\nname inner\ns 2 2 2 1\n") == 0);
     /* one flat patch: the unit square in z = 0, points on a 4x4 grid */
     {
@@ -837,7 +804,7 @@ static void test_files(void)
         for (k = 0; k < 16; k++)
             o += (size_t)snprintf(bpt + o, sizeof bpt - o, "%g,%g,0\n", (k / 4) / 3.0,
                                   (k % 4) / 3.0);
-        CHECK(write_file(dir, "sub/flat.bpt", bpt) == 0);
+        CHECK(check_write_file(dir, "sub/flat.bpt", bpt) == 0);
     }
     snprintf(name, sizeof name, "%s/main.nff", dir);
     CHECK(load(text, name, &s, &err) == RTP_OK);
@@ -880,8 +847,8 @@ static void test_files(void)
     /* name after an include names the last f (or l) read, the included
        file's (it named the parent's, from before the include); a UTF-8
        byte-order mark at the start is not text */
-    CHECK(write_file(dir, "sub/plain.nff", "f 0 1 0 1 0 100 0 0\ns 2 2 2 1\n") == 0);
-    CHECK(write_file(dir, "after.nff",
+    CHECK(check_write_file(dir, "sub/plain.nff", "f 0 1 0 1 0 100 0 0\ns 2 2 2 1\n") == 0);
+    CHECK(check_write_file(dir, "after.nff",
                      "\xef\xbb\xbf" "f 1 0 0 1 0 10 0 0\nname outer\ninclude sub/plain.nff\n"
                      "name later\ns 0 0 0 1\n") == 0);
     snprintf(name, sizeof name, "%s/after.nff", dir);
@@ -891,22 +858,22 @@ static void test_files(void)
               strcmp(s->mats[1].name, "later") == 0);
     rtp_scene_destroy(s);
     s = NULL;
-    remove_file(dir, "after.nff");
-    remove_file(dir, "sub/plain.nff");
+    check_remove_file(dir, "after.nff");
+    check_remove_file(dir, "sub/plain.nff");
 
     /* a file that includes itself stops at the nesting limit */
-    CHECK(write_file(dir, "self.nff", "s 0 0 0 1\ninclude self.nff\n") == 0);
+    CHECK(check_write_file(dir, "self.nff", "s 0 0 0 1\ninclude self.nff\n") == 0);
     snprintf(name, sizeof name, "%s/self.nff", dir);
     CHECK(rtp_scene_load(name, NULL, &s, &err) == RTP_ERR_PARSE);
     CHECK(strstr(err.message, "nested deeper") != NULL);
     CHECK(err.line == 2 && err.column == 1);
     rtp_scene_destroy(s);
 
-    remove_file(dir, "self.nff");
-    remove_file(dir, "sub/tex.ppm");
-    remove_file(dir, "sub/quad.obj");
-    remove_file(dir, "sub/part.nff");
-    remove_file(dir, "sub/flat.bpt");
+    check_remove_file(dir, "self.nff");
+    check_remove_file(dir, "sub/tex.ppm");
+    check_remove_file(dir, "sub/quad.obj");
+    check_remove_file(dir, "sub/part.nff");
+    check_remove_file(dir, "sub/flat.bpt");
     snprintf(name, sizeof name, "%s/sub", dir);
     rmdir(name);
 }
@@ -1475,7 +1442,7 @@ int main(void)
     RUN(test_teapot_scene);
     RUN(test_spd_scenes);
     RUN(test_spd_gears_triangulation);
-    if (tmpdir[0])
-        rmdir(tmpdir);
+    if (check_tmpdir[0])
+        rmdir(check_tmpdir);
     return check_report();
 }

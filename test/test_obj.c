@@ -18,38 +18,6 @@ static rtp_status load(const char *text, const char *name, rtp_scene **s,
 
 static int near(double a, double b, double tol) { return fabs(a - b) <= tol; }
 
-static char tmpdir[256];
-
-static const char *tmp_folder(void)
-{
-    if (!tmpdir[0]) {
-        const char *t = getenv("TMPDIR"); /* (as the other tests: /tmp was fixed) */
-        snprintf(tmpdir, sizeof tmpdir, "%s/rtp-test-obj-XXXXXX", t && *t ? t : "/tmp");
-        if (!mkdtemp(tmpdir))
-            tmpdir[0] = '\0';
-    }
-    return tmpdir;
-}
-
-static int write_file(const char *dir, const char *name, const char *text)
-{
-    char path[512];
-    FILE *f;
-    snprintf(path, sizeof path, "%s/%s", dir, name);
-    f = fopen(path, "wb");
-    if (!f)
-        return -1;
-    fputs(text, f);
-    return fclose(f);
-}
-
-static void remove_file(const char *dir, const char *name)
-{
-    char path[512];
-    snprintf(path, sizeof path, "%s/%s", dir, name);
-    remove(path);
-}
-
 static rtpi_v3 tri_normal(const rtp_scene *s, const rtpi_tri *t)
 {
     rtpi_v3 p0 = v3_from_f(s->pos + 3 * (size_t)t->v[0]);
@@ -226,21 +194,21 @@ static void test_xform(void)
 
 static void test_mtl(void)
 {
-    const char *dir = tmp_folder();
+    const char *dir = check_tmp_folder();
     char path[512];
     rtp_scene *s = NULL;
     rtp_error err;
     char buf[600];
     if (!dir[0])
         SKIP("cannot make a temporary folder");
-    CHECK(write_file(dir, "t.ppm", "P3\n1 1\n255\n10 20 30\n") == 0);
-    CHECK(write_file(dir, "a.mtl",
+    CHECK(check_write_file(dir, "t.ppm", "P3\n1 1\n255\n10 20 30\n") == 0);
+    CHECK(check_write_file(dir, "a.mtl",
                      "# materials\nnewmtl red\n  Ka 1 0 0\n  Kd 0.8 0.4 0.2\n  Ks 0.3 0.6 0.9\n"
                      "  Ns 50\n  Ni 1.4\n  d 0.25\n  illum 2\n  Ke 0 0 0\n"
                      "newmtl glass\nKd 0 0 0\nTr 0.9\nmap_Kd -s 1 1 1 t.ppm\n"
                      "bump -bm 0.3 t.ppm\nmap_Ks t.ppm\n"
                      "newmtl grey\nKd 0.5\n") == 0);
-    CHECK(write_file(dir, "a.obj",
+    CHECK(check_write_file(dir, "a.obj",
                      "mtllib a.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"
                      "f 1 2 3\nusemtl red\nf 1 2 3\nusemtl glass\nf 1 2 3\n"
                      "usemtl grey\nf 1 2 3\n") == 0);
@@ -270,11 +238,11 @@ static void test_mtl(void)
        names with spaces, unquoted as exporters write them: the longest
        run of the last words that names a file (with "my t.ppm" and
        "t.ppm" both there, the last word alone took the wrong one) */
-    CHECK(write_file(dir, "my t.ppm", "P3\n1 1\n255\n200 10 10\n") == 0);
-    CHECK(write_file(dir, "c.mtl",
+    CHECK(check_write_file(dir, "my t.ppm", "P3\n1 1\n255\n200 10 10\n") == 0);
+    CHECK(check_write_file(dir, "c.mtl",
                      "newmtl sp\nmap_kd my t.ppm\nmap_Bump -bm 2 my t.ppm\n"
                      "newmtl plain\nMAP_KD t.ppm\n") == 0);
-    CHECK(write_file(dir, "c.obj", "mtllib c.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"
+    CHECK(check_write_file(dir, "c.obj", "mtllib c.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"
                                    "usemtl sp\nf 1 2 3\nusemtl plain\nf 1 2 3\n") == 0);
     snprintf(path, sizeof path, "%s/c.obj", dir);
     CHECK_MSG(rtp_scene_load(path, NULL, &s, &err) == RTP_OK, "%s",
@@ -288,13 +256,13 @@ static void test_mtl(void)
     }
     rtp_scene_destroy(s);
     s = NULL;
-    remove_file(dir, "my t.ppm");
-    remove_file(dir, "c.mtl");
-    remove_file(dir, "c.obj");
+    check_remove_file(dir, "my t.ppm");
+    check_remove_file(dir, "c.mtl");
+    check_remove_file(dir, "c.obj");
 
     /* errors inside the MTL carry the MTL's name and position */
-    CHECK(write_file(dir, "b.mtl", "newmtl x\nKd 1 1\nnewmtl y\n") == 0);
-    CHECK(write_file(dir, "b.obj", "mtllib b.mtl\n") == 0);
+    CHECK(check_write_file(dir, "b.mtl", "newmtl x\nKd 1 1\nnewmtl y\n") == 0);
+    CHECK(check_write_file(dir, "b.obj", "mtllib b.mtl\n") == 0);
     snprintf(path, sizeof path, "%s/b.obj", dir);
     CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_PARSE);
     CHECK(strstr(err.file, "b.mtl") && err.line == 2 && err.column == 7 &&
@@ -308,72 +276,72 @@ static void test_mtl(void)
         for (i = 0; i < 127; i++)
             n += sprintf(mtl + n, "\xc3\xa9");
         sprintf(mtl + n, "\nKd 1 0 0\n");
-        CHECK(write_file(dir, "b.mtl", mtl) == 0);
+        CHECK(check_write_file(dir, "b.mtl", mtl) == 0);
         CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_OK);
         rtp_scene_destroy(s);
         s = NULL;
         sprintf(mtl + n, "\xc3\xa9\nKd 1 0 0\n");
-        CHECK(write_file(dir, "b.mtl", mtl) == 0);
+        CHECK(check_write_file(dir, "b.mtl", mtl) == 0);
         CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_PARSE);
         CHECK_MSG(err.line == 1 && strstr(err.message, "256 bytes: at most 255") &&
                       !strstr(err.message, "characters"),
                   "%s", err.message);
     }
-    CHECK(write_file(dir, "b.mtl", "Kd 1 1 1\n") == 0);
+    CHECK(check_write_file(dir, "b.mtl", "Kd 1 1 1\n") == 0);
     CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_PARSE);
     CHECK(err.line == 1 && err.column == 1 && strstr(err.message, "before any newmtl"));
-    CHECK(write_file(dir, "b.mtl", "newmtl x\nKd 1 1 1\nfoo 1\n") == 0);
+    CHECK(check_write_file(dir, "b.mtl", "newmtl x\nKd 1 1 1\nfoo 1\n") == 0);
     CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_PARSE);
     CHECK(err.line == 3 && strstr(err.message, "unknown MTL keyword 'foo'"));
-    CHECK(write_file(dir, "b.mtl", "newmtl x\nmap_Kd missing.png\n") == 0);
+    CHECK(check_write_file(dir, "b.mtl", "newmtl x\nmap_Kd missing.png\n") == 0);
     CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_IO);
     CHECK(err.line == 2 && err.column == 8 && strstr(err.message, "missing.png"));
     /* an image that is there but cannot be read: its line and column too
        (they were left unset: garbage) */
-    CHECK(write_file(dir, "short.ppm", "P6\n4 4\n255\nabc") == 0);
-    CHECK(write_file(dir, "b.mtl", "newmtl x\nmap_Kd -s 1 1 1 short.ppm\n") == 0);
+    CHECK(check_write_file(dir, "short.ppm", "P6\n4 4\n255\nabc") == 0);
+    CHECK(check_write_file(dir, "b.mtl", "newmtl x\nmap_Kd -s 1 1 1 short.ppm\n") == 0);
     memset(&err, 0x55, sizeof err);
     CHECK(rtp_scene_load(path, NULL, &s, &err) != RTP_OK);
     CHECK_MSG(err.line == 2 && err.column == 17 && strstr(err.message, "short.ppm"),
               "%d:%d %s", err.line, err.column, err.message);
-    remove_file(dir, "short.ppm");
+    check_remove_file(dir, "short.ppm");
     /* an option where the file name should be (it looked for an image
        named "-bm") */
-    CHECK(write_file(dir, "b.mtl", "newmtl x\nbump -bm\n") == 0);
+    CHECK(check_write_file(dir, "b.mtl", "newmtl x\nbump -bm\n") == 0);
     CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_PARSE);
     CHECK(err.line == 2 && strstr(err.message, "expected a number after -bm"));
-    CHECK(write_file(dir, "b.mtl", "newmtl x\nmap_Kd -clamp\n") == 0);
+    CHECK(check_write_file(dir, "b.mtl", "newmtl x\nmap_Kd -clamp\n") == 0);
     CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_PARSE);
     CHECK(err.line == 2 && strstr(err.message, "expected a file name after the options"));
     /* an option's argument where the file name should be: "bump -bm 2"
        said "expected a number after -bm", "map_Kd -clamp on" looked for
        an image named "on"; with the file there, "-mm 0 t.ppm" (one
        argument short) still finds it */
-    CHECK(write_file(dir, "b.mtl", "newmtl x\nbump -bm 2\n") == 0);
+    CHECK(check_write_file(dir, "b.mtl", "newmtl x\nbump -bm 2\n") == 0);
     CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_PARSE);
     CHECK_MSG(err.line == 2 && err.column == 10 &&
                   strstr(err.message, "bump: expected a file name after the options"),
               "%d:%d %s", err.line, err.column, err.message);
-    CHECK(write_file(dir, "b.mtl", "newmtl x\nmap_Kd -clamp on\n") == 0);
+    CHECK(check_write_file(dir, "b.mtl", "newmtl x\nmap_Kd -clamp on\n") == 0);
     CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_PARSE);
     CHECK_MSG(err.line == 2 && err.column == 15 &&
                   strstr(err.message, "map_Kd: expected a file name after the options"),
               "%d:%d %s", err.line, err.column, err.message);
-    CHECK(write_file(dir, "b.mtl", "newmtl x\nmap_Kd -mm 0 t.ppm\n") == 0);
+    CHECK(check_write_file(dir, "b.mtl", "newmtl x\nmap_Kd -mm 0 t.ppm\n") == 0);
     CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_OK);
     rtp_scene_destroy(s);
     s = NULL;
     /* a missing mtllib is named */
-    CHECK(write_file(dir, "b.obj", "v 0 0 0\nmtllib nothere.mtl\n") == 0);
+    CHECK(check_write_file(dir, "b.obj", "v 0 0 0\nmtllib nothere.mtl\n") == 0);
     CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_IO);
     CHECK(err.line == 2 && err.column == 8 && strstr(err.message, "nothere.mtl"));
     rtp_scene_destroy(s);
 
-    remove_file(dir, "t.ppm");
-    remove_file(dir, "a.mtl");
-    remove_file(dir, "a.obj");
-    remove_file(dir, "b.mtl");
-    remove_file(dir, "b.obj");
+    check_remove_file(dir, "t.ppm");
+    check_remove_file(dir, "a.mtl");
+    check_remove_file(dir, "a.obj");
+    check_remove_file(dir, "b.mtl");
+    check_remove_file(dir, "b.obj");
 }
 
 /* Real exports: two Blender files' MTLs both define "Material" (each
@@ -384,19 +352,19 @@ static void test_mtl(void)
    naming the whole name (it took tex.png silently). */
 static void test_mtl_exports(void)
 {
-    const char *dir = tmp_folder();
+    const char *dir = check_tmp_folder();
     char path[512], buf[600];
     rtp_scene *s = NULL;
     rtp_error err;
     if (!dir[0])
         SKIP("cannot make a temporary folder");
-    CHECK(write_file(dir, "ea.mtl", "newmtl Material\nKd 0.8 0 0\n") == 0);
-    CHECK(write_file(dir, "eb.mtl", "newmtl Material\nKd 0 0 0.8\n") == 0);
-    CHECK(write_file(dir, "ea.obj", "mtllib ea.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"
+    CHECK(check_write_file(dir, "ea.mtl", "newmtl Material\nKd 0.8 0 0\n") == 0);
+    CHECK(check_write_file(dir, "eb.mtl", "newmtl Material\nKd 0 0 0.8\n") == 0);
+    CHECK(check_write_file(dir, "ea.obj", "mtllib ea.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"
                                     "usemtl Material\nf 1 2 3\n") == 0);
-    CHECK(write_file(dir, "eb.obj", "mtllib eb.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"
+    CHECK(check_write_file(dir, "eb.obj", "mtllib eb.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"
                                     "usemtl Material\nf 1 2 3\n") == 0);
-    CHECK(write_file(dir, "two.nff", "include ea.obj\ninclude eb.obj\n"
+    CHECK(check_write_file(dir, "two.nff", "include ea.obj\ninclude eb.obj\n"
                                      "include ea.obj translate 0 0 1\n") == 0);
     snprintf(path, sizeof path, "%s/two.nff", dir);
     CHECK_MSG(rtp_scene_load(path, NULL, &s, &err) == RTP_OK, "%s",
@@ -410,19 +378,19 @@ static void test_mtl_exports(void)
     s = NULL;
     /* one MTL reached by two spellings of its path is one file (string
        comparison made a copy of its materials per spelling) */
-    CHECK(write_file(dir, "sp.nff", "include ea.obj\ninclude ./ea.obj\n") == 0);
+    CHECK(check_write_file(dir, "sp.nff", "include ea.obj\ninclude ./ea.obj\n") == 0);
     snprintf(path, sizeof path, "%s/sp.nff", dir);
     CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_OK);
     CHECK(s && s->nmats == 1 && s->tris[0].mat == 0 && s->tris[1].mat == 0);
     rtp_scene_destroy(s);
     s = NULL;
-    remove_file(dir, "sp.nff");
+    check_remove_file(dir, "sp.nff");
     /* names with dots, as exporters make them ("Material.001"): a key's
        field is after its last dot (mat.Material.001.kd said "no such
        material") */
-    CHECK(write_file(dir, "dot.mtl", "newmtl Material.001\nKd 0.8 0 0\n"
+    CHECK(check_write_file(dir, "dot.mtl", "newmtl Material.001\nKd 0.8 0 0\n"
                                      "newmtl glass.red.kd\nKd 0 1 0\n") == 0);
-    CHECK(write_file(dir, "dot.obj", "mtllib dot.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"
+    CHECK(check_write_file(dir, "dot.obj", "mtllib dot.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"
                                      "usemtl Material.001\nf 1 2 3\nusemtl glass.red.kd\n"
                                      "f 1 3 2\n") == 0);
     snprintf(path, sizeof path, "%s/dot.obj", dir);
@@ -440,9 +408,9 @@ static void test_mtl_exports(void)
     }
     rtp_scene_destroy(s);
     s = NULL;
-    remove_file(dir, "dot.obj");
-    remove_file(dir, "dot.mtl");
-    CHECK(write_file(dir, "ov.nff", "f 0 1 0 1 0 10 0 1\nname Material\ns 0 0 0 1\n"
+    check_remove_file(dir, "dot.obj");
+    check_remove_file(dir, "dot.mtl");
+    CHECK(check_write_file(dir, "ov.nff", "f 0 1 0 1 0 10 0 1\nname Material\ns 0 0 0 1\n"
                                     "include ea.obj\ninclude eb.obj\n") == 0);
     snprintf(path, sizeof path, "%s/ov.nff", dir);
     CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_OK);
@@ -450,8 +418,8 @@ static void test_mtl_exports(void)
     rtp_scene_destroy(s);
     s = NULL;
 
-    CHECK(write_file(dir, "my model.mtl", "newmtl X\nKd 0 1 0\n") == 0);
-    CHECK(write_file(dir, "my model.obj", "mtllib my model.mtl\nv 0 0 0\nv 1 0 0\n"
+    CHECK(check_write_file(dir, "my model.mtl", "newmtl X\nKd 0 1 0\n") == 0);
+    CHECK(check_write_file(dir, "my model.obj", "mtllib my model.mtl\nv 0 0 0\nv 1 0 0\n"
                                           "v 0 1 0\nusemtl X\nf 1 2 3\n") == 0);
     snprintf(path, sizeof path, "%s/my model.obj", dir);
     CHECK_MSG(rtp_scene_load(path, NULL, &s, &err) == RTP_OK, "%s",
@@ -460,14 +428,14 @@ static void test_mtl_exports(void)
     rtp_scene_destroy(s);
     s = NULL;
     /* several names still are several files */
-    CHECK(write_file(dir, "m2.obj", "mtllib ea.mtl my\nv 0 0 0\n") == 0);
+    CHECK(check_write_file(dir, "m2.obj", "mtllib ea.mtl my\nv 0 0 0\n") == 0);
     snprintf(path, sizeof path, "%s/m2.obj", dir);
     CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_IO);
     CHECK(err.line == 1 && err.column == 15 && strstr(err.message, "'my'"));
 
-    CHECK(write_file(dir, "tex.ppm", "P3\n1 1\n255\n10 20 30\n") == 0);
-    CHECK(write_file(dir, "mt.mtl", "newmtl a\nmap_Kd -s 1 1 -blendu on my missing tex.ppm\n") == 0);
-    CHECK(write_file(dir, "mt.obj", "mtllib mt.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"
+    CHECK(check_write_file(dir, "tex.ppm", "P3\n1 1\n255\n10 20 30\n") == 0);
+    CHECK(check_write_file(dir, "mt.mtl", "newmtl a\nmap_Kd -s 1 1 -blendu on my missing tex.ppm\n") == 0);
+    CHECK(check_write_file(dir, "mt.obj", "mtllib mt.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"
                                     "usemtl a\nf 1 2 3\n") == 0);
     snprintf(path, sizeof path, "%s/mt.obj", dir);
     CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_IO);
@@ -475,7 +443,7 @@ static void test_mtl_exports(void)
               "%s", rtp_error_format(&err, buf, sizeof buf));
     /* after an option this reader cannot count, the last words that name
        a file */
-    CHECK(write_file(dir, "mt.mtl", "newmtl a\nmap_Kd -zz 3 tex.ppm\n") == 0);
+    CHECK(check_write_file(dir, "mt.mtl", "newmtl a\nmap_Kd -zz 3 tex.ppm\n") == 0);
     CHECK_MSG(rtp_scene_load(path, NULL, &s, &err) == RTP_OK, "%s",
               rtp_error_format(&err, buf, sizeof buf));
     CHECK(s && s->mats[0].tex == RTPI_TEX_IMAGE);
@@ -489,12 +457,12 @@ static void test_mtl_exports(void)
     CHECK(mkdir(path, 0700) == 0);
     snprintf(path, sizeof path, "%s/mats", dir);
     CHECK(mkdir(path, 0700) == 0);
-    CHECK(write_file(dir, "maps/t2.ppm", "P3\n1 1\n255\n40 50 60\n") == 0);
-    CHECK(write_file(dir, "mats/w.mtl",
+    CHECK(check_write_file(dir, "maps/t2.ppm", "P3\n1 1\n255\n40 50 60\n") == 0);
+    CHECK(check_write_file(dir, "mats/w.mtl",
                      "newmtl a\nmap_Kd ..\\maps\\t2.ppm\nnewmtl b\n"
                      "map_Kd C:\\Users\\me\\Documents\\tex.ppm\n") == 0);
-    CHECK(write_file(dir, "mats/tex.ppm", "P3\n1 1\n255\n10 20 30\n") == 0);
-    CHECK(write_file(dir, "w.obj", "mtllib mats\\w.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"
+    CHECK(check_write_file(dir, "mats/tex.ppm", "P3\n1 1\n255\n10 20 30\n") == 0);
+    CHECK(check_write_file(dir, "w.obj", "mtllib mats\\w.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"
                                    "usemtl a\nf 1 2 3\nusemtl b\nf 1 3 2\n") == 0);
     snprintf(path, sizeof path, "%s/w.obj", dir);
     CHECK_MSG(rtp_scene_load(path, NULL, &s, &err) == RTP_OK, "%s",
@@ -507,61 +475,61 @@ static void test_mtl_exports(void)
     rtp_scene_destroy(s);
     s = NULL;
     /* a name that names nothing either way is still an error naming it */
-    CHECK(write_file(dir, "mats/w.mtl", "newmtl a\nmap_Kd maps\\none.ppm\n") == 0);
+    CHECK(check_write_file(dir, "mats/w.mtl", "newmtl a\nmap_Kd maps\\none.ppm\n") == 0);
     CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_IO && !s &&
           strstr(err.message, "'maps\\none.ppm'"));
-    remove_file(dir, "mats/w.mtl");
-    remove_file(dir, "mats/tex.ppm");
-    remove_file(dir, "maps/t2.ppm");
-    remove_file(dir, "w.obj");
-    remove_file(dir, "mats");
-    remove_file(dir, "maps");
+    check_remove_file(dir, "mats/w.mtl");
+    check_remove_file(dir, "mats/tex.ppm");
+    check_remove_file(dir, "maps/t2.ppm");
+    check_remove_file(dir, "w.obj");
+    check_remove_file(dir, "mats");
+    check_remove_file(dir, "maps");
 
     /* a missing "mtllib my model.mtl" is named whole (it was 'my') */
-    CHECK(write_file(dir, "m3.obj", "mtllib no model.mtl\nv 0 0 0\n") == 0);
+    CHECK(check_write_file(dir, "m3.obj", "mtllib no model.mtl\nv 0 0 0\n") == 0);
     snprintf(path, sizeof path, "%s/m3.obj", dir);
     CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_IO);
     CHECK_MSG(err.line == 1 && err.column == 8 && strstr(err.message, "'no model.mtl'"), "%s",
               rtp_error_format(&err, buf, sizeof buf));
-    remove_file(dir, "m3.obj");
+    check_remove_file(dir, "m3.obj");
 
     /* a bump strength past the float range (-bm 1e40: stored as inf, the
        tree file written from it unreadable) is refused as NFF's is */
-    CHECK(write_file(dir, "bm.mtl", "newmtl a\nbump -bm 1e40 tex.ppm\n") == 0);
-    CHECK(write_file(dir, "bm.obj", "mtllib bm.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"
+    CHECK(check_write_file(dir, "bm.mtl", "newmtl a\nbump -bm 1e40 tex.ppm\n") == 0);
+    CHECK(check_write_file(dir, "bm.obj", "mtllib bm.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"
                                     "usemtl a\nf 1 2 3\n") == 0);
     snprintf(path, sizeof path, "%s/bm.obj", dir);
     CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_PARSE && !s);
     CHECK_MSG(err.line == 2 && err.column == 10 && strstr(err.message, "out of range"), "%s",
               rtp_error_format(&err, buf, sizeof buf));
-    remove_file(dir, "bm.mtl");
-    remove_file(dir, "bm.obj");
+    check_remove_file(dir, "bm.mtl");
+    check_remove_file(dir, "bm.obj");
 
     /* "newmtl Material #25", "newmtl Material #26": the comment cut both
        to "Material", and the second was dropped without a word */
-    CHECK(write_file(dir, "hh.mtl", "newmtl Material #25\nKd 1 0 0\nnewmtl Material #26\n"
+    CHECK(check_write_file(dir, "hh.mtl", "newmtl Material #25\nKd 1 0 0\nnewmtl Material #26\n"
                                     "Kd 0 0 1\n") == 0);
-    CHECK(write_file(dir, "hh.obj", "mtllib hh.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"
+    CHECK(check_write_file(dir, "hh.obj", "mtllib hh.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"
                                     "usemtl Material #25\nf 1 2 3\n") == 0);
     snprintf(path, sizeof path, "%s/hh.obj", dir);
     CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_PARSE && !s);
     CHECK_MSG(err.line == 3 && strstr(err.message, "'#' after a blank"), "%s",
               rtp_error_format(&err, buf, sizeof buf));
-    remove_file(dir, "hh.mtl");
-    remove_file(dir, "hh.obj");
+    check_remove_file(dir, "hh.mtl");
+    check_remove_file(dir, "hh.obj");
 
-    remove_file(dir, "ea.mtl");
-    remove_file(dir, "eb.mtl");
-    remove_file(dir, "ea.obj");
-    remove_file(dir, "eb.obj");
-    remove_file(dir, "two.nff");
-    remove_file(dir, "ov.nff");
-    remove_file(dir, "my model.mtl");
-    remove_file(dir, "my model.obj");
-    remove_file(dir, "m2.obj");
-    remove_file(dir, "tex.ppm");
-    remove_file(dir, "mt.mtl");
-    remove_file(dir, "mt.obj");
+    check_remove_file(dir, "ea.mtl");
+    check_remove_file(dir, "eb.mtl");
+    check_remove_file(dir, "ea.obj");
+    check_remove_file(dir, "eb.obj");
+    check_remove_file(dir, "two.nff");
+    check_remove_file(dir, "ov.nff");
+    check_remove_file(dir, "my model.mtl");
+    check_remove_file(dir, "my model.obj");
+    check_remove_file(dir, "m2.obj");
+    check_remove_file(dir, "tex.ppm");
+    check_remove_file(dir, "mt.mtl");
+    check_remove_file(dir, "mt.obj");
 }
 
 /* Thousands of names (the index that replaced a scan of every material
@@ -576,7 +544,7 @@ static void test_mtl_exports(void)
    past too; a face's error on the continued line names that line. */
 static void test_hash_and_continuation(void)
 {
-    const char *dir = tmp_folder();
+    const char *dir = check_tmp_folder();
     char path[512], buf[600];
     rtp_scene *s = NULL;
     rtp_error err;
@@ -585,10 +553,10 @@ static void test_hash_and_continuation(void)
     /* (a comment's last backslash continues nothing, on a line read past
        too: "illum 2 # note\" ate the Kd after it; a lone backslash joins
        the next line) */
-    CHECK(write_file(dir, "h.mtl",
+    CHECK(check_write_file(dir, "h.mtl",
                      "newmtl Mat#1 # red\nillum 2 # note \\\nKd 1 0 0\nnewmtl Mat#2\nKd 0 1 0\n") ==
           0);
-    CHECK(write_file(dir, "h.obj",
+    CHECK(check_write_file(dir, "h.obj",
                      "mtllib h.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
                      "usemtl Mat#1\nf 1 2 3 #first\nusemtl Mat#2\nf 1 \\\n 3 \\\r\n 4\n"
                      "vp 0.5 \\\n 0.5\ng one # c \\\n\\\nf 2 3 4\n") == 0);
@@ -608,13 +576,13 @@ static void test_hash_and_continuation(void)
               s->pos[3 * s->tris[1].v[2] + 0] == 0.0);
     }
     rtp_scene_destroy(s);
-    remove_file(dir, "h.mtl");
-    remove_file(dir, "h.obj");
+    check_remove_file(dir, "h.mtl");
+    check_remove_file(dir, "h.obj");
 }
 
 static void test_many_names(void)
 {
-    const char *dir = tmp_folder();
+    const char *dir = check_tmp_folder();
     char path[512], line[128];
     size_t i, len = 0, cap = 1 << 20;
     char *mtl = (char *)malloc(cap), *objt = (char *)malloc(4 * cap);
@@ -629,12 +597,12 @@ static void test_many_names(void)
     for (i = 0; i < (size_t)n; i++)
         len += (size_t)snprintf(mtl + len, cap - len, "newmtl m%zu\nKd %g 0.5 0.5\n", i,
                                 (double)i / n);
-    CHECK(write_file(dir, "many.mtl", mtl) == 0);
+    CHECK(check_write_file(dir, "many.mtl", mtl) == 0);
     len = (size_t)snprintf(objt, 4 * cap, "mtllib many.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\n");
     for (i = 0; i < (size_t)n; i++) /* in another order: 7 is prime to 3000 */
         len += (size_t)snprintf(objt + len, 4 * cap - len, "usemtl m%zu\nf 1 2 3\n",
                                 (i * 7) % (size_t)n);
-    CHECK(write_file(dir, "many.obj", objt) == 0);
+    CHECK(check_write_file(dir, "many.obj", objt) == 0);
     snprintf(path, sizeof path, "%s/many.obj", dir);
     CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_OK);
     if (s) {
@@ -658,8 +626,8 @@ static void test_many_names(void)
     len += (size_t)snprintf(objt + len, 4 * cap - len, "f 1 1 1 1 0 1 0 1\nname n0\n");
     CHECK(rtp_scene_load_memory(objt, len, "names.nff", "nff", NULL, &s, &err) == RTP_ERR_PARSE);
     CHECK(strstr(err.message, "already used by material 0") != NULL);
-    remove_file(dir, "many.mtl");
-    remove_file(dir, "many.obj");
+    check_remove_file(dir, "many.mtl");
+    check_remove_file(dir, "many.obj");
     free(mtl);
     free(objt);
 }
@@ -833,8 +801,8 @@ int main(void)
     RUN(test_bad_inputs);
     RUN(test_truncation);
     RUN(test_shared_meshes);
-    if (tmpdir[0])
-        rmdir(tmpdir);
+    if (check_tmpdir[0])
+        rmdir(check_tmpdir);
     RUN(test_bezier_mirrored);
     return check_report();
 }
