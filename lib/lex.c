@@ -98,15 +98,22 @@ static void take(rtpi_lex *lx, rtpi_tok *t)
     t->n = (size_t)(lx->p - t->s);
 }
 
-int rtpi_lex_next(rtpi_lex *lx, rtpi_tok *t)
+/* The next token, past blanks, comments and continuations; at the end
+   of a line, past it too or (inline) stopping there.  (rtpi_lex_next and
+   rtpi_lex_next_inline had each their own copy of this loop.) */
+static int next_token(rtpi_lex *lx, rtpi_tok *t, int inline_only)
 {
+    size_t len;
     while (lx->p < lx->end) {
         char c = *lx->p;
-        size_t len;
-        if (is_eol(lx, lx->p))
+        if (is_eol(lx, lx->p)) {
+            if (inline_only)
+                break;
             newline(lx);
-        else if (continues(lx, lx->p, &len)) {
-            lx->p += len; /* (a lone continuation: white space) */
+        } else if (continues(lx, lx->p, &len)) {
+            /* (inline: at the newline, the statement goes on; else a
+               lone continuation, white space) */
+            lx->p += len;
             newline(lx);
         } else if (is_space(c) || (lx->commas && c == ','))
             lx->p++;
@@ -121,27 +128,14 @@ int rtpi_lex_next(rtpi_lex *lx, rtpi_tok *t)
     return 0;
 }
 
+int rtpi_lex_next(rtpi_lex *lx, rtpi_tok *t)
+{
+    return next_token(lx, t, 0);
+}
+
 int rtpi_lex_next_inline(rtpi_lex *lx, rtpi_tok *t)
 {
-    size_t len;
-    while (lx->p < lx->end) {
-        char c = *lx->p;
-        if (is_eol(lx, lx->p))
-            break;
-        if (continues(lx, lx->p, &len)) {
-            lx->p += len; /* at the newline: the statement goes on */
-            newline(lx);
-        } else if (is_space(c) || (lx->commas && c == ','))
-            lx->p++;
-        else if (c == '#')
-            skip_comment(lx);
-        else {
-            take(lx, t);
-            return 1;
-        }
-    }
-    rtpi_lex_here(lx, t);
-    return 0;
+    return next_token(lx, t, 1);
 }
 
 void rtpi_lex_skip_line(rtpi_lex *lx)
