@@ -577,7 +577,7 @@ static int write_pair(const rtp_tree *tree, const char *tree_path, unsigned long
 {
     keep_old keep;
     rtp_error err;
-    int pair = tree_path && image_path && output_is_file(tree_path), held = 0;
+    int pair = tree_path && image_path && output_is_file(tree_path), held = 0, tree_held = 0;
     memset(&err, 0, sizeof err);
     keep.state = 0;
     if (pair) {
@@ -587,10 +587,15 @@ static int write_pair(const rtp_tree *tree, const char *tree_path, unsigned long
            reader: Ctrl-C then puts the tree back, on_term) */
         held = output_is_file(image_path) ? hold_signals(tree_path) : 0;
         keep_take(&keep, tree_path);
+        /* (and from the tree's write until pair_live is set: a signal
+           between the two, once the new tree was in place, had left it
+           and the old one's .old link; one held till then puts it back) */
+        tree_held = held ? 0 : hold_signals(tree_path);
     }
     if (tree_path && write_tree(tree, tree_path, bytes, &err) != RTP_OK) {
         fail_err(&err);
         keep_drop(&keep);
+        release_signals(tree_held);
         release_signals(held);
         return -1;
     }
@@ -598,6 +603,7 @@ static int write_pair(const rtp_tree *tree, const char *tree_path, unsigned long
         pair_keep = &keep;
         pair_live = 1;
     }
+    release_signals(tree_held);
     if (image_path && write_image(img, image_path, &err) != RTP_OK) {
         pair_live = 0;
         pair_keep = NULL; /* (keep ends with this call: gcc -O3's
