@@ -1726,6 +1726,73 @@ static size_t lb_drop_faces(rtpi_lightbuf *lb, lb_fill *parts, int np, unsigned 
     return ncells;
 }
 
+/* The candidates' edge entries (rtpi_lightbuf.edge) once the lists are
+   made, where room (bytes the limit leaves) holds them: for a triangle
+   rtpi_tri_edges' entry, the same numbers by the same operations (its
+   plane from the turned entry: n, and n.p0 + t, as rtpi_tri_planes adds
+   them; test_shadow compares them), so that rtpi_edges_miss' proof (at
+   rtpi_tri_edges) holds for the walk's rays, shadow rays towards the
+   light from origins within the scale.  Gears' move: 81% of the
+   triangles the walk had tested lie beyond an edge. */
+static void lb_edges(rtpi_lightbuf *lb, const rtp_scene *s, rtpi_v3 light,
+                     const rtp_allocator *a, double room)
+{
+    size_t r, nc = lb->ncand;
+    double S = lb->scale;
+    lb->edge = NULL;
+    if (!lb->plane || lb->cone || !nc || nc > RTPI_EDGE_TRIS || !(S >= 1e-90 && S <= 1e90) ||
+        !((double)nc * RTPI_EDGE_N * sizeof(double) + (double)s->ntris * sizeof(uint32_t) <=
+          room))
+        return;
+    lb->edge = (double *)rtpi_malloc_array(a, RTPI_EDGE_N * nc, sizeof *lb->edge);
+    lb->rank_of = (uint32_t *)rtpi_malloc_array(a, s->ntris, sizeof *lb->rank_of);
+    if (!lb->edge || !lb->rank_of) { /* (a speed-up only: the walk asks the planes instead) */
+        rtpi_free(a, lb->edge);
+        rtpi_free(a, lb->rank_of);
+        lb->edge = NULL;
+        lb->rank_of = NULL;
+        return;
+    }
+    memset(lb->rank_of, 0xff, s->ntris * sizeof *lb->rank_of); /* (RTPI_NONE) */
+    lb->ethr = RTPI_EDGE_MARGIN * S * S * S;
+    for (r = 0; r < nc; r++) {
+        uint32_t prim = lb->cand[r].prim;
+        const double *q = lb->plane + 5 * r;
+        double *e = lb->edge + RTPI_EDGE_N * r;
+        const rtpi_tri *t;
+        rtpi_v3 A, B, C, n[3];
+        int k;
+        if (prim >= s->ntris) {
+            for (k = 0; k < RTPI_EDGE_N; k++)
+                e[k] = 0.0;
+            e[6] = HUGE_VAL;
+            continue;
+        }
+        lb->rank_of[prim] = (uint32_t)r;
+        t = &s->tris[prim];
+        A = v3_sub(v3_from_f(s->pos + 3 * (size_t)t->v[0]), light);
+        B = v3_sub(v3_from_f(s->pos + 3 * (size_t)t->v[1]), light);
+        C = v3_sub(v3_from_f(s->pos + 3 * (size_t)t->v[2]), light);
+        n[0] = v3_cross(C, B);
+        n[1] = v3_cross(A, C);
+        n[2] = v3_cross(B, A);
+        e[0] = q[0];
+        e[2] = q[1];
+        e[4] = q[2];
+        e[6] = q[3] + q[4]; /* (no test: 0 + HUGE_VAL) */
+        e[1] = n[2].x;
+        e[3] = n[2].y;
+        e[5] = n[2].z;
+        e[7] = v3_dot(n[2], light);
+        for (k = 0; k < 2; k++) {
+            e[8 + k] = n[k].x;
+            e[10 + k] = n[k].y;
+            e[12 + k] = n[k].z;
+            e[14 + k] = v3_dot(n[k], light);
+        }
+    }
+}
+
 int rtpi_lightbuf_res(const rtp_scene *s, rtpi_v3 light, int res)
 {
     rtpi_dc_window w;
@@ -1752,7 +1819,7 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
     lb_budget bud;
     int np, nt, k, nw = 0, failed = 0, over = 0, rows, by_entries;
     unsigned used = 0; /* faces whose cells the runs reach (dc_ctx.faces) */
-    double S;
+    double S, lists = HUGE_VAL; /* (the buffer's bytes, once its lists are counted) */
     const unsigned char *hit = dc_kept(s) ? s->phit : NULL; /* (dc_hittable's) */
     memset(lb, 0, sizeof *lb);
     if (res <= 0)
@@ -1965,6 +2032,7 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
         double need = 4.0 * ((double)total + (double)ncells) +
                       (double)nc * (sizeof *lb->cand + (lb->plane ? 40.0 : 0.0) +
                                     (lb->cone ? 32.0 : 0.0));
+        lists = need;
         if (!(need <= limit)) {
             char g[2][32]; /* '.' whatever the locale */
             for (k = 0; k < np; k++)
@@ -2047,6 +2115,7 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
     }
     for (k = 0; k < np; k++)
         rtpi_free(a, parts[k].runs);
+    lb_edges(lb, s, light, a, limit - lists);
     return RTP_OK;
 }
 
@@ -2080,6 +2149,83 @@ static int lb_tri_hit(const rtp_scene *s, uint32_t prim, const rtpi_ray *ray, lb
                                   ray->tmin, ray->tmax, &t, &u, &v);
 }
 
+/* rtpi_edges_miss' test of edge entry e, by the same operations, with a
+   third answer: 0 where it turns the ray away (the segment misses the
+   triangle), 1 where the line from the light through o passes inside all
+   three edges by more than thr (n.o - n.light all above thr, or all below
+   -thr), else 2.  For 1: the proof at rtpi_tri_edges bounds each of
+   rtpi_wt_tri's computed weights within k' m of its exact value -k'
+   n_i.(o - L), whose sizes then exceed k' m: the three computed weights
+   are of one sign and none 0, so the watertight test passes its sign test
+   and det != 0, and what it answers is its t's test alone (lb_t_sure). */
+static RTPI_FORCE_INLINE int lb_edges_sure(const double *e, const rtpi_edge_o *eo, double thr)
+{
+    double p, e0, e1, e2, lo, hi;
+#ifdef RTPI_EDGE_SSE2
+    __m128d v = _mm_add_pd(_mm_mul_pd(_mm_loadu_pd(e), eo->x),
+                           _mm_mul_pd(_mm_loadu_pd(e + 2), eo->y));
+    v = _mm_add_pd(v, _mm_mul_pd(_mm_loadu_pd(e + 4), eo->z));
+    p = _mm_cvtsd_f64(v);
+    if (p > e[6])
+        return 0;
+    e2 = _mm_cvtsd_f64(_mm_unpackhi_pd(v, v)) - e[7];
+    v = _mm_add_pd(_mm_mul_pd(_mm_loadu_pd(e + 8), eo->x),
+                   _mm_mul_pd(_mm_loadu_pd(e + 10), eo->y));
+    v = _mm_sub_pd(_mm_add_pd(v, _mm_mul_pd(_mm_loadu_pd(e + 12), eo->z)), _mm_loadu_pd(e + 14));
+    e0 = _mm_cvtsd_f64(v);
+    e1 = _mm_cvtsd_f64(_mm_unpackhi_pd(v, v));
+#else
+    p = e[0] * eo->ox + e[2] * eo->oy + e[4] * eo->oz;
+    if (p > e[6])
+        return 0;
+    e2 = e[1] * eo->ox + e[3] * eo->oy + e[5] * eo->oz - e[7];
+    e0 = e[8] * eo->ox + e[10] * eo->oy + e[12] * eo->oz - e[14];
+    e1 = e[9] * eo->ox + e[11] * eo->oy + e[13] * eo->oz - e[15];
+#endif
+    lo = e0 < e1 ? e0 : e1;
+    hi = e0 > e1 ? e0 : e1;
+    lo = lo < e2 ? lo : e2;
+    hi = hi > e2 ? hi : e2;
+    if ((lo < -thr) & (hi > thr))
+        return 0;
+    return ((lo > thr) | (hi < -thr)) ? 1 : 2;
+}
+
+/* Where lb_edges_sure answered 1 for triangle prim: 1 when rtpi_wt_tri's
+   t certainly lies in [tmin, tmax] (the test then reports the hit, which
+   lb_tri_hit would), else 0 (it must be asked).  Its t is (e0 z0 + e1 z1
+   + e2 z2) sz / det with the weights e_i of one sign, z_i = p_i[kz] - oz
+   as it makes them: the weighted mean of the z_i sz, weights in [0, 1]
+   summing to 1, to within 9 u Z |sz| (Z = max |z_i|, u = 2^-53: the sum's
+   rounding below 3 u Z |det| with the weights of one sign, then two
+   products and the division's); so within [min z_i sz, max z_i sz]
+   widened by 1e-13 max |z_i sz| (each product's own rounding included)
+   it is in range wherever that widened interval is.  A NaN fails. */
+static RTPI_FORCE_INLINE int lb_t_sure(const rtp_scene *s, uint32_t prim, const rtpi_ray *ray)
+{
+    const rtpi_tri *tr = &s->tris[prim];
+    double z0, z1, z2, lo, hi, m, oz, sz;
+    double ax = fabs(ray->d.x), ay = fabs(ray->d.y), az = fabs(ray->d.z);
+    int kz;
+    /* kz, oz and sz as rtpi_wt_make makes them (not its whole set-up:
+       gears' move 143 k of them, 45 instructions each), for a direction
+       it accepts (else lb_tri_hit reports no hit: asked there) */
+    if (!rtpi_wt_valid(ray))
+        return 0;
+    kz = ax > ay ? (ax > az ? 0 : 2) : (ay > az ? 1 : 2);
+    oz = kz == 0 ? ray->o.x : kz == 1 ? ray->o.y : ray->o.z;
+    sz = 1.0 / (kz == 0 ? ray->d.x : kz == 1 ? ray->d.y : ray->d.z);
+    z0 = ((double)s->pos[3 * (size_t)tr->v[0] + kz] - oz) * sz;
+    z1 = ((double)s->pos[3 * (size_t)tr->v[1] + kz] - oz) * sz;
+    z2 = ((double)s->pos[3 * (size_t)tr->v[2] + kz] - oz) * sz;
+    lo = z0 < z1 ? z0 : z1;
+    hi = z0 > z1 ? z0 : z1;
+    lo = lo < z2 ? lo : z2;
+    hi = hi > z2 ? hi : z2;
+    m = 1e-13 * (fabs(lo) > fabs(hi) ? fabs(lo) : fabs(hi));
+    return lo - m >= ray->tmin && hi + m <= ray->tmax;
+}
+
 /* The list from entry k to end (one cell's) for the ray with direction
    -dn; `round` 0 where the buffer has no cone entries (few or no spheres
    and cones: a constant at each call, so the compiler makes the loop
@@ -2088,7 +2234,8 @@ static int lb_tri_hit(const rtp_scene *s, uint32_t prim, const rtpi_ray *ray, lb
    more). */
 static RTPI_FORCE_INLINE uint32_t lb_walk(const rtpi_lightbuf *lb, const rtp_scene *s,
                                           const rtpi_ray *ray, uint32_t skip, size_t k,
-                                          size_t end, rtpi_v3 dn, int round, lb_tri_ray *wp)
+                                          size_t end, rtpi_v3 dn, int round, int edges,
+                                          lb_tri_ray *wp)
 {
     /* tmax = dist (1 - 1e-9): the segment reaches no farther than dist. */
     double lim = ray->tmax * (1.0 + 2e-9) + lb->slack;
@@ -2101,8 +2248,12 @@ static RTPI_FORCE_INLINE uint32_t lb_walk(const rtpi_lightbuf *lb, const rtp_sce
     double ax = fabs(ray->o.x), ay = fabs(ray->o.y), az = fabs(ray->o.z);
     double am = ax > ay ? ax : ay;
     const double *pl = (am > az ? am : az) <= lb->scale ? lb->plane : NULL;
+    const double *pe = edges && pl ? lb->edge : NULL;
     size_t ntris = s->ntris;
+    rtpi_edge_o eo;
     rtpi_hit h;
+    if (edges)
+        rtpi_edge_o_make(&eo, &ray->o);
     for (; k < end; k++) {
         uint32_t rank = lb->ref[k];
         const rtpi_lb_cand *cd = &lb->cand[rank];
@@ -2111,7 +2262,18 @@ static RTPI_FORCE_INLINE uint32_t lb_walk(const rtpi_lightbuf *lb, const rtp_sce
         if (cd->prim == skip)
             continue;
         if (!round || cd->prim < ntris) {
-            if (pl) {
+            if (pe) {
+                /* its plane's test as the exact mode's, then its edges'
+                   (lb_edges): the line from the light through the origin
+                   passes outside one of them; or inside all three, and
+                   the hit's t certainly in range: the watertight test's
+                   answer without it */
+                int e = lb_edges_sure(pe + RTPI_EDGE_N * (size_t)rank, &eo, lb->ethr);
+                if (e == 0)
+                    continue;
+                if (e == 1 && lb_t_sure(s, cd->prim, ray))
+                    return cd->prim;
+            } else if (pl) {
                 /* a triangle with the light on one side of its plane: the
                    origin on that side too, the segment misses it (a floor
                    under the scene is in most cells' lists) */
@@ -2138,9 +2300,10 @@ static RTPI_FORCE_INLINE uint32_t lb_walk(const rtpi_lightbuf *lb, const rtp_sce
    without a first candidate (most of them: teapot 133 k of 175 k) no
    longer passes through the other as a second call (lightbuf:256, third
    move, 512^2 SPD: teapot 189.93 -> 189.66 M, balls 259.38 -> 258.87). */
+enum { LB_PLAIN, LB_ROUND, LB_EDGES }; /* the walk lb_occluder takes (lb_walk's) */
 static RTPI_FORCE_INLINE uint32_t lb_occluder(const rtpi_lightbuf *lb, const rtp_scene *s,
                                               const rtpi_ray *ray, uint32_t skip,
-                                              uint32_t first)
+                                              uint32_t first, int kind)
 {
     size_t cell, k;
     rtpi_v3 dn;
@@ -2149,9 +2312,24 @@ static RTPI_FORCE_INLINE uint32_t lb_occluder(const rtpi_lightbuf *lb, const rtp
     w.made = -1;
     if (first != RTPI_NONE) {
         /* (rtpi_intersect_prim's answer without its zero-area test, as
-           lb_walk's: a triangle `first` is hittable, dircube.h) */
-        if (first < s->ntris ? lb_tri_hit(s, first, ray, &w)
-                             : rtpi_intersect_prim(s, first, ray, &h))
+           lb_walk's: a triangle `first` is hittable, dircube.h); with
+           edge entries, a triangle's answered by them where they can
+           (lb_edges_sure, lb_t_sure: the same answer) */
+        int e = 2;
+        if (kind == LB_EDGES && first < s->ntris && lb->rank_of[first] != RTPI_NONE) {
+            double ax = fabs(ray->o.x), ay = fabs(ray->o.y), az = fabs(ray->o.z);
+            double am = ax > ay ? ax : ay;
+            if ((am > az ? am : az) <= lb->scale) {
+                rtpi_edge_o eo;
+                rtpi_edge_o_make(&eo, &ray->o);
+                e = lb_edges_sure(lb->edge + RTPI_EDGE_N * (size_t)lb->rank_of[first], &eo,
+                                  lb->ethr);
+                if (e == 1 && lb_t_sure(s, first, ray))
+                    return first;
+            }
+        }
+        if (e != 0 && (first < s->ntris ? lb_tri_hit(s, first, ray, &w)
+                                        : rtpi_intersect_prim(s, first, ray, &h)))
             return first;
     }
     if (!(ray->tmax > 0.0)) {
@@ -2166,20 +2344,49 @@ static RTPI_FORCE_INLINE uint32_t lb_occluder(const rtpi_lightbuf *lb, const rtp
     cell = rtpi_dc_wcell(&lb->w, lb->res, dn);
     if (cell == RTPI_DC_ABSENT)
         return RTPI_NONE; /* no primitive can be met in these directions */
-    return lb->cone ? lb_walk(lb, s, ray, skip, lb->off[cell], lb->off[cell + 1], dn, 1, &w)
-                    : lb_walk(lb, s, ray, skip, lb->off[cell], lb->off[cell + 1], dn, 0, &w);
+    return lb_walk(lb, s, ray, skip, lb->off[cell], lb->off[cell + 1], dn, kind == LB_ROUND,
+                   kind == LB_EDGES, &w);
 }
+
+/* lb_occluder for each kind of buffer, out of line, the entries choosing
+   one: the walk with the edges' test (lb_edges) inline beside the other
+   two had changed their compiled loops (lightbuf:256, third move, 512^2
+   SPD: balls 248.20 -> 251.25 M, rings 368.25 -> 370.72, their walks
+   without it); alone, each compiles as the one it is. */
+#if defined(__GNUC__)
+#define LB_NOINLINE __attribute__((noinline))
+#else
+#define LB_NOINLINE
+#endif
+#define LB_OCCLUDERS(kind, name)                                                                   \
+    static LB_NOINLINE uint32_t name(const rtpi_lightbuf *lb, const rtp_scene *s,                  \
+                                     const rtpi_ray *ray, uint32_t skip)                           \
+    {                                                                                              \
+        return lb_occluder(lb, s, ray, skip, RTPI_NONE, kind);                                     \
+    }                                                                                              \
+    static LB_NOINLINE uint32_t name##_first(const rtpi_lightbuf *lb, const rtp_scene *s,          \
+                                             const rtpi_ray *ray, uint32_t skip, uint32_t first)   \
+    {                                                                                              \
+        return lb_occluder(lb, s, ray, skip, first, kind);                                         \
+    }
+LB_OCCLUDERS(LB_PLAIN, lb_occ_plain)
+LB_OCCLUDERS(LB_ROUND, lb_occ_round)
+LB_OCCLUDERS(LB_EDGES, lb_occ_edges)
 
 uint32_t rtpi_lightbuf_occluder(const rtpi_lightbuf *lb, const rtp_scene *s,
                                 const rtpi_ray *ray, uint32_t skip)
 {
-    return lb_occluder(lb, s, ray, skip, RTPI_NONE);
+    return lb->cone ? lb_occ_round(lb, s, ray, skip)
+           : lb->edge ? lb_occ_edges(lb, s, ray, skip)
+                      : lb_occ_plain(lb, s, ray, skip);
 }
 
 uint32_t rtpi_lightbuf_occluder_first(const rtpi_lightbuf *lb, const rtp_scene *s,
                                       const rtpi_ray *ray, uint32_t skip, uint32_t first)
 {
-    return lb_occluder(lb, s, ray, skip, first);
+    return lb->cone ? lb_occ_round_first(lb, s, ray, skip, first)
+           : lb->edge ? lb_occ_edges_first(lb, s, ray, skip, first)
+                      : lb_occ_plain_first(lb, s, ray, skip, first);
 }
 
 void rtpi_lightbuf_free(rtpi_lightbuf *lb, const rtp_allocator *a)
@@ -2191,9 +2398,11 @@ void rtpi_lightbuf_free(rtpi_lightbuf *lb, const rtp_allocator *a)
     rtpi_free(a, lb->cand);
     rtpi_free(a, lb->plane);
     rtpi_free(a, lb->cone);
-    lb->off = lb->ref = NULL;
+    rtpi_free(a, lb->edge);
+    rtpi_free(a, lb->rank_of);
+    lb->off = lb->ref = lb->rank_of = NULL;
     lb->cand = NULL;
-    lb->plane = lb->cone = NULL;
+    lb->plane = lb->cone = lb->edge = NULL;
 }
 
 rtp_status rtpi_tri_planes(const rtp_scene *s, rtpi_v3 light, const rtp_allocator *a,

@@ -192,6 +192,16 @@ typedef struct rtpi_lightbuf {
        no bound): a ray whose direction's cosine falls below misses it
        (see lb_cone) */
     double *cone;
+    /* by rank, RTPI_EDGE_N each, where made (NULL: none; a speed-up only,
+       made where its memory fits within the build's limit): a triangle's
+       rtpi_tri_edges entry (its plane as rtpi_tri_planes makes it, and
+       the planes through the light and each edge), which the walk asks
+       in place of its plane entry (rtpi_edges_miss, margin ethr =
+       RTPI_EDGE_MARGIN scale^3); other primitives' entries never turn a
+       ray away (0, and HUGE_VAL for the plane's bound) */
+    double *edge;
+    double ethr;
+    uint32_t *rank_of;   /* with edge: each triangle's rank (RTPI_NONE: none) */
     double scale;        /* the scene's and light's largest |coordinate| */
     size_t nrefs, ncand;
 } rtpi_lightbuf;

@@ -1314,6 +1314,183 @@ static void test_exact_cache_earlier(void)
     free(sm);
 }
 
+/* A mesh scene of random triangles: a fan sharing edges and vertices, a
+   ground of two triangles, slivers and small tilted ones; each coordinate
+   scaled by sc and moved by off (far from the origin). */
+static rtp_scene *edge_scene(double off, double sc)
+{
+    char *t = (char *)malloc(64 * 1024);
+    size_t n = 0;
+    int k;
+    rtp_scene *s;
+#define EP(x, y, z) n += (size_t)sprintf(t + n, "%.17g %.17g %.17g\n", off + sc * (x), off + sc * (y), \
+                                         off + sc * (z))
+    if (!t)
+        return NULL;
+    n += (size_t)sprintf(t + n, "v\nfrom 0 -9 4\nat 0 0 0.5\nup 0 0 1\nangle 50\nhither 0.01\n"
+                                "resolution 16 16\nl 0 0 9\nf 0.8 0.8 0.8 1 0 0 0 1\n");
+    n += (size_t)sprintf(t + n, "p 3\n");
+    EP(-5, -5, 0);
+    EP(5, -5, 0);
+    EP(5, 5, 0);
+    n += (size_t)sprintf(t + n, "p 3\n");
+    EP(-5, -5, 0);
+    EP(5, 5, 0);
+    EP(-5, 5, 0);
+    for (k = 0; k < 12; k++) { /* a fan around (0, 0, 2): shared edges */
+        double a0 = 6.283185307179586 * k / 12, a1 = 6.283185307179586 * (k + 1) / 12;
+        n += (size_t)sprintf(t + n, "p 3\n");
+        EP(0, 0, 2);
+        EP(1.5 * cos(a0), 1.5 * sin(a0), 2 + 0.3 * sin(3 * a0));
+        EP(1.5 * cos(a1), 1.5 * sin(a1), 2 + 0.3 * sin(3 * a1));
+    }
+    for (k = 0; k < 40; k++) { /* small, tilted, some slivers */
+        double x = 8 * (rnd() - 0.5), y = 8 * (rnd() - 0.5), z = 0.2 + 3 * rnd();
+        double w = k % 4 == 0 ? 1e-3 : 0.6;
+        n += (size_t)sprintf(t + n, "p 3\n");
+        EP(x, y, z);
+        EP(x + 0.8 * (rnd() - 0.5), y + 0.8 * (rnd() - 0.5), z + w * (rnd() - 0.5));
+        EP(x + 0.8 * (rnd() - 0.5), y + 0.8 * (rnd() - 0.5), z + w * (rnd() - 0.5));
+    }
+#undef EP
+    s = load(t, n);
+    free(t);
+    return s;
+}
+
+/* A point of triangle prim: barycentric (a, b), or on its edge e (b < 0). */
+static rtpi_v3 tri_point(const rtp_scene *s, uint32_t prim, double a, double b)
+{
+    const rtpi_tri *tr = &s->tris[prim];
+    rtpi_v3 p0 = v3_from_f(s->pos + 3 * (size_t)tr->v[0]);
+    rtpi_v3 p1 = v3_from_f(s->pos + 3 * (size_t)tr->v[1]);
+    rtpi_v3 p2 = v3_from_f(s->pos + 3 * (size_t)tr->v[2]);
+    return v3_add(p0, v3_add(v3_mul(v3_sub(p1, p0), a), v3_mul(v3_sub(p2, p0), b)));
+}
+
+/* The light buffer's edge entries (lb_edges: the walk's edges' test, and a
+   cached first triangle answered by its edges and its t's bounds where
+   they are sure) answer every query as the buffer without them does (the
+   planes' walk and the watertight test of the first), primitive for
+   primitive, also for origins on the lines from the light through the
+   triangles' edges and vertices (to 1e-16..1e-9 of the way), on their
+   planes, just before and beyond them, lights in a triangle's plane, at a
+   vertex, just above a triangle, far away; and the edge entries are
+   rtpi_tri_edges' (the exact mode's) number for number. */
+static void test_lightbuf_edges_same(void)
+{
+    static const double offs[][2] = {{0, 1}, {3000, 0.01}, {-2e5, 3}};
+    size_t oi;
+    for (oi = 0; oi < sizeof offs / sizeof *offs; oi++) {
+        double off = offs[oi][0], sc = offs[oi][1];
+        rtp_scene *s = edge_scene(off, sc);
+        rtp_allocator al;
+        int li;
+        rtpi_allocator_init(&al, NULL);
+        CHECK(s != NULL);
+        if (!s)
+            return;
+        for (li = 0; li < 7; li++) {
+            rtpi_v3 L;
+            rtpi_lightbuf lb, pl;
+            double *te = NULL, *tp = NULL, scale;
+            size_t q, bad = 0, badf = 0, badn = 0, nq = 0, r;
+            uint32_t last = RTPI_NONE;
+            switch (li) {
+            case 0: L = v3(0.3, -0.2, 9); break;
+            case 1: L = v3(2e4, -1e4, 3e4); break;
+            case 2: L = tri_point(s, 2, 0, 0); /* the fan's shared vertex */
+                L = v3((L.x - off) / sc, (L.y - off) / sc, (L.z - off) / sc); break;
+            case 3: L = v3(0.2, 0.1, 2.0 + 1e-9); break; /* just above the fan's centre */
+            case 4: L = v3(-3, 2, 0); break; /* in the ground's plane */
+            case 5: L = v3(1, 1, 2.05); break; /* among the fan's triangles */
+            default: L = v3(4 * (rnd() - 0.5), 4 * (rnd() - 0.5), 0.1 + 4 * rnd()); break;
+            }
+            L = v3(off + sc * L.x, off + sc * L.y, off + sc * L.z);
+            if (li == 2)
+                L = tri_point(s, 2, 0, 0);
+            if (rtpi_lightbuf_build(s, L, li & 1 ? 64 : 256, &al, &lb, NULL) != RTP_OK) {
+                CHECK_MSG(0, "edges: build failed, light %d", li);
+                continue;
+            }
+            CHECK_MSG(lb.edge != NULL && lb.rank_of != NULL, "edges: none made, light %d", li);
+            if (!lb.edge) {
+                rtpi_lightbuf_free(&lb, &al);
+                continue;
+            }
+            /* entries: rtpi_tri_edges' */
+            if (rtpi_tri_planes(s, L, &al, &tp, &scale, NULL) == RTP_OK && tp) {
+                rtpi_tri_edges(s, L, scale, tp, &al, &te);
+                CHECK(te != NULL && scale == lb.scale && lb.ethr == RTPI_EDGE_MARGIN * scale * scale * scale);
+                for (r = 0; te && r < lb.ncand; r++) {
+                    uint32_t p = lb.cand[r].prim;
+                    bad += memcmp(lb.edge + RTPI_EDGE_N * r, te + RTPI_EDGE_N * (size_t)p,
+                                  RTPI_EDGE_N * sizeof *te) != 0 || lb.rank_of[p] != r;
+                }
+                CHECK_MSG(bad == 0, "edges: %lu entries differ from rtpi_tri_edges', light %d",
+                          (unsigned long)bad, li);
+            }
+            rtpi_free(&al, te);
+            rtpi_free(&al, tp);
+            pl = lb; /* the same buffer without its edges: the planes' walk */
+            pl.edge = NULL;
+            pl.rank_of = NULL;
+            for (q = 0; q < 6000; q++) {
+                uint32_t prim = (uint32_t)(rnd() * (double)s->ntris), first, a1, a2, skip;
+                double f = rnd(), g = rnd(), tiny = pow(10.0, -16 + 7 * rnd()), m;
+                rtpi_v3 pt, o;
+                rtpi_ray ray;
+                int kind = (int)(rnd() * 6), side = (int)(rnd() * 3);
+                if (prim >= s->ntris || lb.rank_of[prim] == RTPI_NONE)
+                    continue;
+                if (f + g > 1) {
+                    f = 1 - f;
+                    g = 1 - g;
+                }
+                switch (kind) {
+                case 0: pt = tri_point(s, prim, f, g); break;           /* inside */
+                case 1: pt = tri_point(s, prim, f, 0); break;           /* an edge */
+                case 2: pt = tri_point(s, prim, 0, g); break;           /* an edge */
+                case 3: pt = tri_point(s, prim, f, 1 - f); break;       /* the third */
+                case 4: pt = tri_point(s, prim, (double)(side == 1), (double)(side == 2));
+                    break;                                              /* a vertex */
+                default: pt = tri_point(s, prim, f * (1 + tiny), g); break;
+                }
+                /* along the light's line through pt: beyond it, on it,
+                   or just before it (between it and the light) */
+                side = (int)(rnd() * 7);
+                m = side == 0 ? 1 + 2 * rnd() : side == 1 ? 1 - 0.5 * rnd() : side <= 3 ? 1 + tiny
+                    : side <= 5 ? 1 - tiny : 1;
+                o = v3_add(L, v3_mul(v3_sub(pt, L), m));
+                if (q % 5 == 0) /* a nudge off the line, by up to 1e-9 of the scale */
+                    o = v3_add(o, v3_mul(v3(rnd() - 0.5, rnd() - 0.5, rnd() - 0.5),
+                                         tiny * fabs(sc) * 10));
+                ray = rtpi_shadow_ray(o, L);
+                skip = q % 7 == 0 ? prim : RTPI_NONE;
+                first = q % 4 == 3 && last != RTPI_NONE ? last : prim;
+                if (first == skip)
+                    first = RTPI_NONE;
+                a1 = rtpi_lightbuf_occluder_first(&lb, s, &ray, skip, first);
+                a2 = rtpi_lightbuf_occluder_first(&pl, s, &ray, skip, first);
+                badf += a1 != a2;
+                nq++;
+                a1 = rtpi_lightbuf_occluder(&lb, s, &ray, skip);
+                a2 = rtpi_lightbuf_occluder(&pl, s, &ray, skip);
+                badn += a1 != a2;
+                if (a2 != RTPI_NONE && a2 < s->ntris)
+                    last = a2;
+            }
+            CHECK(nq > 1000);
+            CHECK_MSG(badf == 0 && badn == 0,
+                      "edges: offset %g, light %d: %lu of %lu answers with a first differ, "
+                      "%lu without", off, li, (unsigned long)badf, (unsigned long)nq,
+                      (unsigned long)badn);
+            rtpi_lightbuf_free(&lb, &al);
+        }
+        rtp_scene_destroy(s);
+    }
+}
+
 int main(void)
 {
     const char *env = getenv("RTP_TEST_SEED");
@@ -1334,6 +1511,7 @@ int main(void)
     RUN(test_spd_scene);
     RUN(test_light_at_cone_tip);
     RUN(test_exact_cache_earlier);
+    RUN(test_lightbuf_edges_same);
     RUN(test_lightbuf_limit_threads);
     RUN(test_stopper_reports);
     RUN(test_osmesa);
