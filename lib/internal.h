@@ -190,7 +190,8 @@ typedef struct rtpi_material {
     float bump_strength, bump_scale;
     /* The ambient coefficient ka per channel (mat.N.ambient, NFF's ka),
        where ka_set: I_a = ambient ka c_obj.  Unset (0, every material
-       until a key or file sets it), ka is kd, read at evaluation: a kd
+       until a key or file sets it, and after mat.N.ambient=kd, which
+       zeroes ka too), ka is kd, read at evaluation: a kd
        edit moves the ambient part too, and the sums are today's to the
        bit (shade.c node_coeffs). */
     float ka[3];

@@ -917,8 +917,16 @@ rtp_status rtpi_scene_set(rtp_scene *s, const char *key, const char *value,
         }
         if (strcmp(field, "ambient") == 0) {
             /* the ambient coefficient ka, grey (one number) or r,g,b; 0
-               or more, as kd (its message): set, it no longer follows kd */
+               or more, as kd (its message): set, it no longer follows kd.
+               "kd" unsets it: ka follows kd again, the material as if
+               never given one (ka zeroed too: merge compares materials
+               whole, and a tree file then has no MAMB entry for it) */
             int c;
+            if (strcmp(value, "kd") == 0) {
+                memset(m->ka, 0, sizeof m->ka);
+                m->ka_set = 0;
+                return RTP_OK;
+            }
             if ((st = want(err, key, value, n, 3)) != RTP_OK)
                 return st;
             for (c = 0; c < n; c++)

@@ -1151,6 +1151,28 @@ light.1.color=0.3,1,0.3 mat.0.ambient=2,0,1
 mat.0.color=1,1,0
 EOF2
 [ "$lf" -eq 13 ] && ok || bad "the ka stream's frames: $lf"
+# mat.N.ambient=kd unsets ka: the material follows kd again.  A scene
+# given ka and then kd traces the very tree of one never given ka (no
+# MAMB); a tree with ka unset and kd edited is the trace of kd edited
+# alone, to the bit; a stream setting, unsetting and editing kd around
+# it is within 1e-6 of the full traces
+expect_rc 0 $RTP trace $A --set mat.2.ambient=0.25 --set mat.2.ambient=kd -o "$T/ka3.rtp" -q
+cmp -s "$T/ka.rtp" "$T/ka3.rtp" && ok || bad "ka set then unset is not the tree without ka"
+expect_rc 0 $RTP reeval "$T/ka2.rtp" --set mat.2.ambient=kd --set mat.2.kd=0.3 -i "$T/ka_r.pfm" -q
+expect_rc 0 $RTP trace $A --set mat.2.kd=0.3 -i "$T/ka_t.pfm" -q
+cmp -s "$T/ka_r.pfm" "$T/ka_t.pfm" && ok || bad "reeval ka unset, kd 0.3, is not trace's bits"
+printf '%s\n' mat.2.kd=0.6 mat.2.ambient=kd mat.2.kd=0.2 "mat.2.color=0.3,0.9,0.9 mat.2.ambient=0.5" \
+    mat.2.kd=0.9 "mat.2.ambient=kd mat.0.ambient=2" mat.2.kd=0.4 >"$T/ka_u.txt"
+expect_rc 0 $RTP reeval "$T/ka2.rtp" --stream -i "$T/ka_u%d.pfm" -q <"$T/ka_u.txt"
+keys="--set mat.2.ambient=0.25"
+lf=0
+while read -r line; do
+    for k in $line; do keys="$keys --set $k"; done
+    expect_rc 0 $RTP trace $A $keys -i "$T/ka_f.pfm" -q
+    expect_rc 0 $RTP diff "$T/ka_u$lf.pfm" "$T/ka_f.pfm" --fail-above max_abs=1e-6 -q
+    lf=$((lf + 1))
+done <"$T/ka_u.txt"
+[ "$lf" -eq 7 ] && ok || bad "the ka unset stream's frames: $lf"
 # refused: a negative, NaN, infinite or past-float value, two numbers,
 # four, none; exit 1, no image, the message kd's
 for v in -1 0.5,-0.1,1 nan inf 1e39 1,2 1,2,3,4 ""; do

@@ -228,8 +228,10 @@ class Gen:
                  "checker": lambda: r.choice("01"), "color2": lambda: col(r),
                  "checker_scale": lambda: fmt(r.uniform(0.2, 3)),
                  "texture": lambda: r.choice([TEX, TEXB, "none"]),
-                 # (grey or RGB; once set, kd edits no longer move it)
-                 "ambient": lambda: fmt(r.uniform(0, 1.5)) if r.random() < 0.4 else col(r)}[k]()
+                 # (grey or RGB; once set, kd edits no longer move it;
+                 # "kd" unsets it, kd's edits moving it again)
+                 "ambient": lambda: "kd" if r.random() < 0.15 else
+                 fmt(r.uniform(0, 1.5)) if r.random() < 0.4 else col(r)}[k]()
             if k == "ambient":
                 self.amb.add(m)
             return ("A", "mat.%d.%s" % (m, k), v)
@@ -266,8 +268,9 @@ class Gen:
         for i, m in enumerate(self.mats):
             es += [("R", "mat.%d.%s" % (i, k), m[k]) for k in ("color", "kd", "ks", "kt", "shine", "ior")]
             if i in self.amb:
-                # (no key unsets ka; ka = kd in each channel sums as unset, to the bit)
-                es.append(("R", "mat.%d.ambient" % i, m["kd"]))
+                # (the traced ka where the scene gave one, info's line after
+                # the material's; else unset: "kd")
+                es.append(("R", "mat.%d.ambient" % i, m.get("ambient", "kd")))
             es.append(("R", "mat.%d.checker" % i, "1" if "checker" in m else "0"))
             for k in ("color2", "checker_scale"):
                 if k in m:

@@ -698,6 +698,18 @@ static void test_material_ambient(void)
     CHECK(rtp_scene_set(s, "mat.2.kd", "0.25", &err) == RTP_OK);
     CHECK(rtp_scene_get(s, "mat.2.ambient", buf, sizeof buf, &err) == RTP_OK);
     CHECK_MSG(strcmp(buf, "0.5,0,3") == 0, "set, kd edited: '%s'", buf);
+    /* "kd" unsets it: kd,kd,kd again, following kd's edits, and the
+       material as one never given ka (merge compares materials whole) */
+    CHECK(rtp_scene_set(s, "mat.2.ambient", "kd", &err) == RTP_OK);
+    CHECK(rtp_scene_get(s, "mat.2.ambient", buf, sizeof buf, &err) == RTP_OK);
+    CHECK_MSG(strcmp(buf, "0.25,0.25,0.25") == 0, "unset: '%s'", buf);
+    CHECK(rtp_scene_set(s, "mat.2.kd", "0.75", &err) == RTP_OK);
+    CHECK(rtp_scene_get(s, "mat.2.ambient", buf, sizeof buf, &err) == RTP_OK);
+    CHECK_MSG(strcmp(buf, "0.75,0.75,0.75") == 0, "unset, follows kd: '%s'", buf);
+    CHECK(!s->mats[2].ka_set && s->mats[2].ka[0] == 0.0f && s->mats[2].ka[1] == 0.0f &&
+          s->mats[2].ka[2] == 0.0f);
+    CHECK(rtp_scene_set(s, "mat.2.ambient", "KD", &err) == RTP_ERR_PARSE);
+    CHECK(rtp_scene_set(s, "mat.2.ambient", "0.5,0,3", &err) == RTP_OK);
     CHECK(rtp_scene_set(s, "mat.a.ambient", "2", &err) == RTP_OK);
     CHECK(rtp_scene_get(s, "mat.0.ambient", buf, sizeof buf, &err) == RTP_OK);
     CHECK_MSG(strcmp(buf, "2,2,2") == 0, "grey: '%s'", buf);
