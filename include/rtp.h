@@ -188,8 +188,8 @@ void rtp_scene_destroy(rtp_scene *scene);
 /** Sets one parameter, e.g. key "light.0.pos" value "1,2,3".  Keys:
  *  light.N.pos|color|intensity|on, mat.N.color|kd|ks|kt|shine|ior|ambient (a
  *  material's own ambient coefficient, one number or r,g,b: once set, kd no
- *  longer moves it, until "kd" unsets it; and the texture and bump keys the README lists), ambient,
- *  background,
+ *  longer moves it, until "kd" unsets it; and the texture and bump keys
+ *  the README lists), ambient, background,
  *  camera.from|at|up|angle|hither; N is a 0-based index in file order or
  *  a name the scene gives (a name may hold dots: the field follows the
  *  last).  light.N.pos with N the count of lights (an index) adds light
