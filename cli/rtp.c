@@ -2109,8 +2109,9 @@ static const char reeval_help[] =
     "  -h, --help           this help\n"
     "Edits that change where rays go (a new ior, ks or kt raised from 0, any\n"
     "ks or kt edit of a tree traced with --min-weight) trace again exactly the\n"
-    "samples that contain the material (--stats reports retraced_samples and\n"
-    "retraced_rays); the result equals a full trace.  A camera key\n"
+    "samples that contain the material, the rays below its hits (--stats\n"
+    "reports retraced_samples and retraced_rays); the result equals a full\n"
+    "trace.  A camera key\n"
     "(camera.from|at|up|angle|hither) traces every sample again: a full trace\n"
     "from the tree file, said so; later edits re-evaluate.\n";
 

@@ -479,7 +479,11 @@ typedef struct rtp_eval_stats {
     unsigned long long shadow_queries; /* node-light pairs decided anew */
     int moved_lights;        /* lights whose visibility was recomputed */
     unsigned long long retraced_samples; /* traced again for a class-D edit */
-    unsigned long long retraced_rays;    /* rays those cast (all kinds) */
+    unsigned long long retraced_rays;    /* rays those cast (all kinds):
+                                            below the edited materials'
+                                            hits, the rest kept as traced
+                                            (a builder's tree, or a camera
+                                            edit: the whole samples') */
     unsigned long long combined_samples; /* samples whose colour was summed
                                             from their coefficients; 0 when
                                             an edit of colours (lights,

@@ -460,6 +460,7 @@ rtp_status rtp_builder_finish(rtp_builder *b, rtp_tree **out, rtp_error *err)
     t->nx = b->nx;
     t->ny = b->ny;
     t->spd = b->spd;
+    t->foreign = 1; /* (the renderer's hits: re-traces trace whole samples) */
     /* the renderer's depth where it said, else the deepest ray handed in
        (misses too): re-traces and rtp_tree_trace go as deep */
     t->max_depth = b->max_depth ? b->max_depth : e.depth > 0 ? e.depth : 1;

@@ -1003,6 +1003,9 @@ struct rtp_tree {
     int rx, ry;            /* the region's first pixel in the frame */
     int spd, max_depth;
     double min_weight;
+    int foreign;           /* some nodes came from a renderer's own tracer
+                              (rtp_builder_*), not rtp's trace: class C/D
+                              re-traces trace their samples whole */
     rtpi_cnode *nodes;
     size_t nnodes;
     uint64_t *start;       /* nx*ny + 1 */
@@ -1175,13 +1178,19 @@ struct rtp_tree {
    trees may take limit bytes in all, the old and the new together while
    they are spliced (RTP_ERR_LIMIT past it, t unchanged); progress (may
    be NULL) as rtp_trace_options'.  The caller
-   drops whatever caches refer to the old nodes. */
+   drops whatever caches refer to the old nodes.  With redo (one byte a
+   material; not with nlights_now) a sample's old tree is kept but below
+   the hits of materials whose redo is 1: the rays to the nodes above are
+   those a trace casts (t's trees are rtp's own trace of the scene as it
+   is but for those materials, tree.c retrace_edited), so their hits and
+   light bits are taken from the old tree and only the rays below are
+   cast (and counted in *rays); the new trees are a full trace's. */
 /* rtp_trace, with opt's width and height the frame even with spd (a
    builder's tree of corner samples need not be 512x512). */
 rtp_status rtpi_trace_sized(const rtp_scene *s, const rtp_trace_options *opt,
                             rtp_image **out, rtp_trace_stats *stats, rtp_error *err);
 rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int threads,
-                        size_t nlights_now, double limit, unsigned long long *rays,
+                        size_t nlights_now, const unsigned char *redo, double limit, unsigned long long *rays,
                         unsigned long long *capped, void (*progress)(void *, double),
                         int (*cancel)(void *), void *progress_user, rtp_error *err);
 

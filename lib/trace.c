@@ -61,6 +61,11 @@ typedef struct worker {
     float *coeffs;     /* its linear coefficients */
     double *acc;
     counts n;
+    /* Re-tracing a sample whose old tree is kept above its edited
+       materials (rtpi_retrace's keep): the old sample's nodes and their
+       visibility words, NULL while tracing afresh */
+    const rtpi_cnode *old;
+    const uint32_t *old_vis;
     rtp_status status;
     char pad[64]; /* the workers lie side by side, each writing its counts
                      and nn for every ray: no cache line shared */
@@ -109,6 +114,13 @@ struct shared {
     rtpi_ray_tests *tests;
     int gx, gy;        /* samples traced: the region's grid */
     int ox, oy;        /* its first sample in the frame's grid */
+    /* Re-tracing (rtpi_retrace's keep): per material, 1 where the rays
+       below its hits are traced afresh; the old trees, their starts and
+       visibility words.  NULL: every sample traced whole. */
+    const unsigned char *redo;
+    const rtpi_cnode *old_nodes;
+    const uint64_t *old_start;
+    const uint32_t *old_vis;
 };
 
 static double now_seconds(void)
@@ -215,7 +227,7 @@ size_t rtpi_trace_stack(int max_depth)
 }
 
 static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
-                         double weight);
+                         double weight, int32_t old);
 
 /* d mirrored about the shading normal nb; where a bumped
    normal would send it through the surface (on the incoming ray's side
@@ -234,16 +246,33 @@ static rtpi_v3 reflect_dir(rtpi_v3 d, rtpi_v3 nb, rtpi_v3 ng, int bumped)
     return v3_norm(r);
 }
 
-/* Traces a secondary ray from p in unit direction dir. */
+/* Traces a secondary ray from p in unit direction dir (old: see
+   trace_ray; RTPI_CHILD_MISS: the old tree says it leaves the scene). */
 static int32_t spawn(worker *w, rtpi_v3 p, rtpi_v3 ng, rtpi_v3 dir, int depth,
-                     double weight, double floor)
+                     double weight, double floor, int32_t old)
 {
     rtpi_ray r;
+    if (old == RTPI_CHILD_MISS)
+        return RTPI_CHILD_MISS;
     r.o = rtpi_offset_origin(p, ng, v3_dot(ng, dir) >= 0.0 ? 1.0 : -1.0, floor);
     r.d = dir;
     r.tmin = 0.0;
     r.tmax = HUGE_VAL;
-    return trace_ray(w, &r, depth, weight);
+    return trace_ray(w, &r, depth, weight, old);
+}
+
+/* The old child a replayed node's child ray reaches: its index, a miss,
+   or -1 (trace it) where the old node has none (capped, or not cast) or
+   its material's subtrees are what is traced again. */
+static int32_t old_child(const worker *w, int32_t old, int redo, uint32_t node_flag,
+                         uint32_t miss_flag, uint32_t off)
+{
+    uint32_t link;
+    if (old < 0 || redo)
+        return -1;
+    link = w->old[old].link;
+    return (link & node_flag) ? old + (int32_t)off
+           : (link & miss_flag) ? RTPI_CHILD_MISS : -1;
 }
 
 /* Link flags for a child: traced subtree, miss, or nothing (capped). */
@@ -253,8 +282,13 @@ static uint32_t child_flags(int32_t child, uint32_t node_flag,
     return child >= 0 ? node_flag : child == RTPI_CHILD_MISS ? miss_flag : 0u;
 }
 
+/* old >= 0: the ray is the one that reached node `old` of the sample's
+   old tree (w->old), whose hit and light bits are taken as they are (the
+   same ray hits the same point and sees the same lights: rtpi_retrace's
+   keep); its children are decided as ever and replayed likewise where
+   the old tree holds them and its material is not traced again. */
 static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
-                         double weight)
+                         double weight, int32_t old)
 {
     const shared *sh = w->sh;
     const rtp_scene *s = sh->s;
@@ -266,11 +300,13 @@ static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
     double eta = 1.0, cosi = 0.0, k = 0.0;
     int refracts = 0;
     uint32_t link = 0, vis = 0;
-    int front, bent;
+    int front, bent, redo = 0;
     double pfloor;
     size_t i, nl = s->nlights, words = sh->shade.vis_words;
 
-    if (!rtpi_kd_intersect(sh->kd, ray, &hit))
+    if (old >= 0)
+        hit.prim = w->old[old].prim;
+    else if (!rtpi_kd_intersect(sh->kd, ray, &hit))
         return RTPI_CHILD_MISS;
     idx = push_node(w);
     if (idx < 0)
@@ -279,9 +315,16 @@ static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
         /* Everything below starts from the float position the tree keeps,
            with the surface derived from it exactly as shading derives it,
            so a re-evaluation that casts rays again casts these very rays. */
-        rtpi_v3 pe = v3_madd(ray->o, ray->d, hit.t);
         const rtpi_material *hm = &s->mats[rtpi_prim_material(s, hit.prim)];
-        const float pf[3] = {(float)pe.x, (float)pe.y, (float)pe.z};
+        float pf[3];
+        if (old >= 0) {
+            memcpy(pf, w->old[old].p, sizeof pf);
+        } else {
+            rtpi_v3 pe = v3_madd(ray->o, ray->d, hit.t);
+            pf[0] = (float)pe.x;
+            pf[1] = (float)pe.y;
+            pf[2] = (float)pe.z;
+        }
         rtpi_surface_from_point(s, hit.prim, pf, hm->bump == RTPI_BUMP_IMAGE, &sf);
     }
     m = &s->mats[sf.mat];
@@ -306,6 +349,14 @@ static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
         nb = v3_mul(nb, -1.0);
     }
 
+    if (old >= 0) {
+        redo = sh->redo[sf.mat];
+        vis = w->old[old].vis;
+        if (words)
+            memcpy(w->vis + (w->sample_base + (size_t)idx) * words, w->old_vis + (size_t)old * words,
+                   words * sizeof *w->vis);
+        nl = 0; /* (the old node's light bits) */
+    }
     /* Shadows: no ray where the surface faces away from the light. */
     for (i = 0; i < nl; i++) {
         const rtpi_light *L = &s->lights[i];
@@ -352,9 +403,18 @@ static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
          (sh->spd && m->kt > 0.0f))) {
         rtpi_v3 r = reflect_dir(d, nb, ng, bent);
         size_t nn = w->nn;
-        w->n.reflected_rays++;
-        refl = spawn(w, sf.p, ng, r, depth + 1, weight * m->ks, pfloor);
-        if (m->ks > 0.0f || (refracts && k < 0.0)) {
+        int32_t oc = old_child(w, old, redo, RTPI_L_REFL, RTPI_L_REFL_MISS, 1);
+        int keep = m->ks > 0.0f || (refracts && k < 0.0);
+        /* (replayed: a reflection not kept is not cast, nor one the old
+           tree says leaves the scene) */
+        if (oc == -1 && (old < 0 || keep)) {
+            w->n.reflected_rays++;
+            refl = spawn(w, sf.p, ng, r, depth + 1, weight * m->ks, pfloor, -1);
+        } else {
+            refl = keep ? spawn(w, sf.p, ng, r, depth + 1, weight * m->ks, pfloor, oc)
+                        : RTPI_CHILD_MISS;
+        }
+        if (keep) {
             link |= child_flags(refl, RTPI_L_REFL, RTPI_L_REFL_MISS);
         } else {
             /* (a subtree's nodes are the last pushed; push_node clears
@@ -369,17 +429,22 @@ static int32_t trace_ray(worker *w, const rtpi_ray *ray, int depth,
                the reflected ray; trace it if ks did not already. */
             if (refl == RTPI_CHILD_NONE) {
                 rtpi_v3 r = reflect_dir(d, nb, ng, bent);
-                w->n.reflected_rays++;
-                refl = spawn(w, sf.p, ng, r, depth + 1, weight * m->kt, pfloor);
+                int32_t oc = old_child(w, old, redo, RTPI_L_REFL, RTPI_L_REFL_MISS, 1);
+                if (oc == -1)
+                    w->n.reflected_rays++;
+                refl = spawn(w, sf.p, ng, r, depth + 1, weight * m->kt, pfloor, oc);
                 link |= child_flags(refl, RTPI_L_REFL, RTPI_L_REFL_MISS);
             }
             link |= RTPI_L_TIR;
         } else {
             rtpi_v3 t = v3_norm(v3_add(v3_mul(d, eta),
                                        v3_mul(nb, eta * cosi - sqrt(k))));
-            int32_t refr;
-            w->n.refracted_rays++;
-            refr = spawn(w, sf.p, ng, t, depth + 1, weight * m->kt, pfloor);
+            int32_t refr,
+                oc = old_child(w, old, redo, RTPI_L_REFR, RTPI_L_REFR_MISS,
+                               old >= 0 ? w->old[old].link >> RTPI_L_SHIFT : 0);
+            if (oc == -1)
+                w->n.refracted_rays++;
+            refr = spawn(w, sf.p, ng, t, depth + 1, weight * m->kt, pfloor, oc);
             link |= child_flags(refr, RTPI_L_REFR, RTPI_L_REFR_MISS);
             if (refr >= 0)
                 link |= (uint32_t)(refr - idx) << RTPI_L_SHIFT;
@@ -416,8 +481,9 @@ static size_t record_sample(worker *w, int x, int y)
     ray.tmin = c->hither * len;
     ray.tmax = HUGE_VAL;
     w->sample_base = w->nn;
-    w->n.eye_rays++;
-    if (trace_ray(w, &ray, 1, 1.0) >= 0)
+    if (!w->old)
+        w->n.eye_rays++;
+    if (trace_ray(w, &ray, 1, 1.0, w->old ? 0 : -1) >= 0)
         w->n.eye_hits++;
     return w->nn - w->sample_base;
 }
@@ -1058,6 +1124,10 @@ static int retrace_chunk(void *ctx, int ci)
     w->nn = 0;
     for (; i < end; i++, k++) {
         uint32_t smp = j->samples[i];
+        uint64_t o0 = sh->old_start ? sh->old_start[smp] : 0;
+        /* (a sample whose eye ray left the scene holds no material) */
+        w->old = sh->redo && sh->old_start[smp + 1] > o0 ? sh->old_nodes + o0 : NULL;
+        w->old_vis = w->old && sh->old_vis ? sh->old_vis + o0 * sh->shade.vis_words : NULL;
         w->counts[k] = (uint32_t)record_sample(w, sh->ox + (int)(smp % (uint32_t)sh->gx),
                                                sh->oy + (int)(smp / (uint32_t)sh->gx));
         if (w->status != RTP_OK)
@@ -1069,7 +1139,7 @@ static int retrace_chunk(void *ctx, int ci)
 }
 
 rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int threads,
-                        size_t nlights_now, double limit, unsigned long long *rays,
+                        size_t nlights_now, const unsigned char *redo, double limit, unsigned long long *rays,
                         unsigned long long *capped, void (*progress)(void *, double),
                         int (*cancel)(void *), void *progress_user, rtp_error *err)
 {
@@ -1144,6 +1214,12 @@ rtp_status rtpi_retrace(rtp_tree *t, const uint32_t *samples, size_t n, int thre
     sh.gy = t->ny;
     sh.ox = t->rx;
     sh.oy = t->ry;
+    if (redo && !nlights_now) {
+        sh.redo = redo;
+        sh.old_nodes = t->nodes;
+        sh.old_start = t->start;
+        sh.old_vis = words ? t->vis_ext : NULL;
+    }
     /* The trees now, with their starts, stay until the new ones are
        spliced in. */
     nb = node_bytes(&sh);

@@ -2665,7 +2665,7 @@ static rtp_status retrace_edited(rtp_tree *t, int threads, int stale, double lim
 {
     const rtp_scene *s = t->scene;
     size_t m, k, ns = (size_t)t->nx * t->ny, n = 0, nl_now = 0;
-    unsigned char *mark, *swapped = NULL;
+    unsigned char *mark, *swapped = NULL, *redo = NULL;
     uint32_t *list;
     int any = 0, camera = memcmp(&s->camera, &t->cam0, sizeof t->cam0) != 0;
     rtp_status rs;
@@ -2701,17 +2701,25 @@ static rtp_status retrace_edited(rtp_tree *t, int threads, int stale, double lim
        spawned with the new bump, the tree said exact when the bump went
        back, 0.17 off a full trace; shading uses the new bump either way). */
     if (!camera) {
-        swapped = (unsigned char *)rtpi_calloc_array(&t->alloc, s->nmats + 1, 1);
+        swapped = (unsigned char *)rtpi_calloc_array(&t->alloc, 2 * s->nmats + 1, 1);
         if (!swapped) {
             rtpi_free(&t->alloc, mark);
             rtpi_free(&t->alloc, list);
             return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
         }
-        for (m = 0; m < s->nmats; m++)
+        /* (redo: the materials below whose hits the re-trace casts
+           rays; above them, and beside, a sample's old nodes are what a
+           trace casts: rtpi_retrace's redo.  A renderer's own hits are
+           not: its samples are traced whole) */
+        redo = t->foreign ? NULL : swapped + s->nmats;
+        for (m = 0; m < s->nmats; m++) {
+            if (redo)
+                redo[m] = (unsigned char)needs_retrace(t, m, stale);
             if (!needs_retrace(t, m, stale) && bump_stale(t, m)) {
                 swap_bump(&t->scene->mats[m], &t->mats0[m]);
                 swapped[m] = 1;
             }
+        }
     }
     /* A moved camera traces every sample again: with every light where
        it is now, added ones too (the new trees' light words as many as
@@ -2722,7 +2730,7 @@ static rtp_status retrace_edited(rtp_tree *t, int threads, int stale, double lim
        query. */
     if (camera)
         nl_now = s->nlights;
-    rs = rtpi_retrace(t, list, n, threads, nl_now, limit, st ? &st->retraced_rays : NULL,
+    rs = rtpi_retrace(t, list, n, threads, nl_now, redo, limit, st ? &st->retraced_rays : NULL,
                       st ? &st->capped_rays : NULL, progress->fn ? progress_part_cb : NULL,
                       progress->cancel ? progress_part_cancel : NULL, progress, err);
     for (m = 0; swapped && m < s->nmats; m++)
@@ -5499,6 +5507,7 @@ static rtp_tree *tree_shell(const rtp_tree *like, int w, int h, int rx, int ry, 
     t->spd = like->spd;
     t->max_depth = like->max_depth;
     t->min_weight = like->min_weight;
+    t->foreign = like->foreign;
     t->vis_words = words;
     t->nnodes = nnodes;
     t->nlights0 = like->nlights0;
@@ -5791,6 +5800,8 @@ rtp_status rtp_tree_merge(rtp_tree *const *parts, size_t n, rtp_tree **out, rtp_
         goto fail;
     if (!(t = tree_shell(p0, fw, fh, 0, 0, total)))
         goto nomem;
+    for (i = 0; i < n; i++)
+        t->foreign |= parts[i]->foreign;
     for (y = 0; y < gy; y++)
         for (x = 0; x < gx; x++) {
             size_t f = (size_t)y * gx + x, ls, cnt;

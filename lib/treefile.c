@@ -827,6 +827,14 @@ static rtp_status serialize(const rtp_tree *t, sink *out)
     rtpi_free(&t->alloc, remap);
     sink_put(out, tail.p, tail.n);
     rtpi_free(tail.a, tail.p);
+    /* An empty extension: the trees hold a renderer's own hits
+       (rtp_builder_*), which class C/D re-traces replace whole, not
+       below the edited materials alone (tree.c retrace_edited); a reader
+       that does not know it skips it, and re-traces whole samples. */
+    if (t->foreign) {
+        sink_begin(out, "frgn", 0);
+        sink_end(out);
+    }
     /* TREE, streamed: its length first (the nodes packed once to count
        their bytes) */
     len = 8 + 8 + 4 + 1 + (uint64_t)t->nnodes * t->vis_words * 4;
@@ -2186,6 +2194,8 @@ static rtp_status section_index(loader *L, const char *tag, unsigned *seen, int 
         *idx = 7; /* (only where a material has its own ambient) */
     if (*idx < 0) {
         /* lower-case first letter: an extension a reader may skip */
+        if (strcmp(tag, "frgn") == 0 && L->t)
+            L->t->foreign = 1; /* (rtp_tree_write: its body is not read) */
         if (tag[0] >= 'a' && tag[0] <= 'z')
             return RTP_OK;
         return bad(L, "unknown required section (written by a newer rtp?)", NULL);

@@ -7082,8 +7082,141 @@ static void test_material_lists_bound(void)
     }
 }
 
+/* Class C/D re-traces keep a sample's old nodes above the edited
+   materials and trace only below their hits (trace.c rtpi_retrace's
+   redo): the trees must be the very ones a whole-sample re-trace makes.
+   A tree marked foreign (a builder's: its samples traced whole) is the
+   reference, recorded alike and given the same edits; its images, nodes,
+   starts and light words must equal, and its rays cast be more. */
+static int same_trees(const rtp_tree *a, const rtp_tree *b)
+{
+    size_t ns = (size_t)a->nx * a->ny;
+    return a->nnodes == b->nnodes && a->vis_words == b->vis_words && a->nx == b->nx &&
+           a->ny == b->ny && memcmp(a->start, b->start, (ns + 1) * sizeof *a->start) == 0 &&
+           memcmp(a->nodes, b->nodes, a->nnodes * sizeof *a->nodes) == 0 &&
+           (!a->vis_words ||
+            memcmp(a->vis_ext, b->vis_ext, a->nnodes * a->vis_words * sizeof *a->vis_ext) == 0);
+}
+
+/* edits: key, value pairs, "" ending a step (evaluated), NULL the list */
+static void subtree_case(const char *nff, const rtp_trace_options *o, const char *const *edits,
+                         rtp_stale_mode stale, int threads, const char *what)
+{
+    rtp_scene *s = NULL;
+    rtp_tree *a = NULL, *b = NULL, *c = NULL;
+    rtp_eval_options eo;
+    rtp_eval_stats ea, eb;
+    rtp_image *ia = NULL, *ib = NULL;
+    rtp_error err;
+    char path[512];
+    size_t i;
+    int step = 0, fewer = 0, same = 1;
+    CHECK(rtp_scene_load_memory(nff, strlen(nff), "s.nff", "nff", NULL, &s, &err) == RTP_OK);
+    if (!s)
+        return;
+    CHECK(rtp_record(s, o, &a, NULL, NULL, &err) == RTP_OK);
+    CHECK(rtp_record(s, o, &b, NULL, NULL, &err) == RTP_OK);
+    rtp_scene_destroy(s);
+    if (!a || !b) {
+        rtp_tree_destroy(a);
+        rtp_tree_destroy(b);
+        return;
+    }
+    b->foreign = 1;
+    memset(&eo, 0, sizeof eo);
+    eo.stale = stale;
+    eo.threads = threads;
+    for (i = 0; edits[i]; i += 2) {
+        if (*edits[i]) {
+            CHECK(rtp_tree_set(a, edits[i], edits[i + 1], &err) == RTP_OK);
+            CHECK(rtp_tree_set(b, edits[i], edits[i + 1], &err) == RTP_OK);
+            continue;
+        }
+        i--; /* ("" alone ends a step) */
+        memset(&ea, 0, sizeof ea);
+        memset(&eb, 0, sizeof eb);
+        CHECK(rtp_tree_eval(a, &eo, &ia, &ea, &err) == RTP_OK);
+        CHECK(rtp_tree_eval(b, &eo, &ib, &eb, &err) == RTP_OK);
+        same &= same_image(ia, ib) && same_trees(a, b) &&
+                ea.retraced_samples == eb.retraced_samples;
+        CHECK_MSG(same_image(ia, ib) && same_trees(a, b), "%s, step %d: differ", what, step);
+        if (eb.retraced_samples)
+            fewer += ea.retraced_rays < eb.retraced_rays;
+        printf("  %s, step %d: %llu samples, %llu of %llu rays\n", what, step,
+               eb.retraced_samples, ea.retraced_rays, eb.retraced_rays);
+        rtp_image_destroy(ia);
+        rtp_image_destroy(ib);
+        ia = ib = NULL;
+        step++;
+    }
+    CHECK_MSG(same && fewer > 0, "%s: %d steps re-traced fewer rays", what, fewer);
+    /* the mark lives in the file: read back, a builder's tree re-traces
+       whole samples still */
+    snprintf(path, sizeof path, "%s/rtp_subtree_%d.rtp", tmpdir(), (int)getpid());
+    CHECK(rtp_tree_write(b, path, NULL, &err) == RTP_OK);
+    CHECK(rtp_tree_read(path, NULL, &c, &err) == RTP_OK && c && c->foreign);
+    rtp_tree_destroy(c);
+    c = NULL;
+    CHECK(rtp_tree_write(a, path, NULL, &err) == RTP_OK);
+    CHECK(rtp_tree_read(path, NULL, &c, &err) == RTP_OK && c && !c->foreign);
+    remove(path);
+    rtp_tree_destroy(c);
+    rtp_tree_destroy(a);
+    rtp_tree_destroy(b);
+}
+
+static void test_retrace_subtrees(void)
+{
+    /* a mirror floor, a glass ball before a mirror ball, two lights */
+    static const char nff[] =
+        "v\nfrom 0 -6 2\nat 0 0 0.5\nup 0 0 1\nangle 40\nhither 0.01\nresolution 24 18\n"
+        "b 0.1 0.2 0.3\nl 3 -4 6\nl -4 -2 5\n"
+        "f 0.8 0.7 0.6 0.6 0.4 20 0 1\np 4\n-5 -5 0\n5 -5 0\n5 5 0\n-5 5 0\n"
+        "f 0.9 0.9 0.9 0.1 0.1 30 0.8 1.5\ns -0.6 -1 0.8 0.8\n"
+        "f 0.7 0.3 0.2 0.3 0.6 40 0 1\ns 0.9 1 1 1\n"
+        "f 0.2 0.6 0.3 0.9 0 1 0 1\ns 2.5 0 0.5 0.5\n";
+    static const char *const d1[] = {"mat.0.bump", "waves", "", "mat.1.ior", "1.2", "",
+                                     "mat.3.ks", "0.5", "", "mat.2.kt", "0.4", "mat.1.kt",
+                                     "0", "", "mat.1.kt", "0.6", "mat.0.bump", "noise", "",
+                                     NULL};
+    static const char *const d2[] = {"mat.0.ks", "0", "", "mat.3.ks", "0.3", "", "mat.0.ks",
+                                     "0.5", "mat.2.bump", "waves", "", NULL};
+    char big[4096];
+    size_t at;
+    int i;
+    rtp_trace_options o;
+    memset(&o, 0, sizeof o);
+    o.width = 48;
+    o.height = 36;
+    subtree_case(nff, &o, d1, RTP_STALE_RETRACE, 1, "retrace, -j1");
+    subtree_case(nff, &o, d1, RTP_STALE_KEEP, 2, "keep, -j2");
+    subtree_case(nff, &o, d2, RTP_STALE_RETRACE, 2, "ks to 0 and back");
+    o.max_depth = 2;
+    subtree_case(nff, &o, d1, RTP_STALE_RETRACE, 2, "depth 2");
+    o.max_depth = 0;
+    o.min_weight = 0.2;
+    subtree_case(nff, &o, d1, RTP_STALE_RETRACE, 1, "min_weight 0.2");
+    subtree_case(nff, &o, d2, RTP_STALE_RETRACE, 2, "min_weight 0.2, ks");
+    o.min_weight = 0.0;
+    o.region[0] = 10;
+    o.region[1] = 6;
+    o.region[2] = 40;
+    o.region[3] = 30;
+    subtree_case(nff, &o, d1, RTP_STALE_RETRACE, 2, "a region");
+    memset(&o, 0, sizeof o);
+    o.width = 40;
+    o.height = 30;
+    /* 40 lights: the light words of nodes kept */
+    at = (size_t)snprintf(big, sizeof big, "%s", nff);
+    for (i = 0; i < 38; i++)
+        at += (size_t)snprintf(big + at, sizeof big - at, "l %d %d %d\n", i % 7 - 3, i / 7 - 3,
+                               4 + i % 3);
+    subtree_case(big, &o, d1, RTP_STALE_RETRACE, 2, "40 lights");
+}
+
 int main(void)
 {
+    RUN(test_retrace_subtrees);
     RUN(test_material_lists_bound);
     RUN(test_added_lights_grow_caches);
     RUN(test_identical_project_scenes);
