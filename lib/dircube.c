@@ -2150,81 +2150,19 @@ static int lb_tri_hit(const rtp_scene *s, uint32_t prim, const rtpi_ray *ray, lb
                                   ray->tmin, ray->tmax, &t, &u, &v);
 }
 
-/* rtpi_edges_miss' test of edge entry e, by the same operations, with a
-   third answer: 0 where it turns the ray away (the segment misses the
-   triangle), 1 where the line from the light through o passes inside all
-   three edges by more than thr (n.o - n.light all above thr, or all below
-   -thr), else 2.  For 1: the proof at rtpi_tri_edges bounds each of
-   rtpi_wt_tri's computed weights within k' m of its exact value -k'
-   n_i.(o - L), whose sizes then exceed k' m: the three computed weights
-   are of one sign and none 0, so the watertight test passes its sign test
-   and det != 0, and what it answers is its t's test alone (lb_t_sure). */
-static RTPI_FORCE_INLINE int lb_edges_sure(const double *e, const rtpi_edge_o *eo, double thr)
-{
-    double p, e0, e1, e2, lo, hi;
-#ifdef RTPI_EDGE_SSE2
-    __m128d v = _mm_add_pd(_mm_mul_pd(_mm_loadu_pd(e), eo->x),
-                           _mm_mul_pd(_mm_loadu_pd(e + 2), eo->y));
-    v = _mm_add_pd(v, _mm_mul_pd(_mm_loadu_pd(e + 4), eo->z));
-    p = _mm_cvtsd_f64(v);
-    if (p > e[6])
-        return 0;
-    e2 = _mm_cvtsd_f64(_mm_unpackhi_pd(v, v)) - e[7];
-    v = _mm_add_pd(_mm_mul_pd(_mm_loadu_pd(e + 8), eo->x),
-                   _mm_mul_pd(_mm_loadu_pd(e + 10), eo->y));
-    v = _mm_sub_pd(_mm_add_pd(v, _mm_mul_pd(_mm_loadu_pd(e + 12), eo->z)), _mm_loadu_pd(e + 14));
-    e0 = _mm_cvtsd_f64(v);
-    e1 = _mm_cvtsd_f64(_mm_unpackhi_pd(v, v));
-#else
-    p = e[0] * eo->ox + e[2] * eo->oy + e[4] * eo->oz;
-    if (p > e[6])
-        return 0;
-    e2 = e[1] * eo->ox + e[3] * eo->oy + e[5] * eo->oz - e[7];
-    e0 = e[8] * eo->ox + e[10] * eo->oy + e[12] * eo->oz - e[14];
-    e1 = e[9] * eo->ox + e[11] * eo->oy + e[13] * eo->oz - e[15];
-#endif
-    lo = e0 < e1 ? e0 : e1;
-    hi = e0 > e1 ? e0 : e1;
-    lo = lo < e2 ? lo : e2;
-    hi = hi > e2 ? hi : e2;
-    if ((lo < -thr) & (hi > thr))
-        return 0;
-    return ((lo > thr) | (hi < -thr)) ? 1 : 2;
-}
-
-/* Where lb_edges_sure answered 1 for triangle prim: 1 when rtpi_wt_tri's
-   t certainly lies in [tmin, tmax] (the test then reports the hit, which
-   lb_tri_hit would), else 0 (it must be asked).  Its t is (e0 z0 + e1 z1
-   + e2 z2) sz / det with the weights e_i of one sign, z_i = p_i[kz] - oz
-   as it makes them: the weighted mean of the z_i sz, weights in [0, 1]
-   summing to 1, to within 9 u Z |sz| (Z = max |z_i|, u = 2^-53: the sum's
-   rounding below 3 u Z |det| with the weights of one sign, then two
-   products and the division's); so within [min z_i sz, max z_i sz]
-   widened by 1e-13 max |z_i sz| (each product's own rounding included)
-   it is in range wherever that widened interval is.  A NaN fails. */
+/* lb_tri_hit's answer where rtpi_edges_sure answered 1 for triangle
+   prim: rtpi_wt_t_sure's (kdtree.h) on the scene's vertices, which
+   lb_tri_hit tests. */
 static RTPI_FORCE_INLINE int lb_t_sure(const rtp_scene *s, uint32_t prim, const rtpi_ray *ray)
 {
-    const rtpi_tri *tr = &s->tris[prim];
-    double z0, z1, z2, lo, hi, m, oz, sz;
-    double ax = fabs(ray->d.x), ay = fabs(ray->d.y), az = fabs(ray->d.z);
+    const rtpi_tri *tr;
+    double oz, sz;
     int kz;
-    /* kz, oz and sz as rtpi_wt_make makes them (not its whole set-up:
-       gears' move 143 k of them, 45 instructions each), for a direction
-       it accepts (else lb_tri_hit reports no hit: asked there) */
-    if (!rtpi_wt_valid(ray))
+    if (!rtpi_wt_z(ray, &kz, &oz, &sz))
         return 0;
-    kz = ax > ay ? (ax > az ? 0 : 2) : (ay > az ? 1 : 2);
-    oz = kz == 0 ? ray->o.x : kz == 1 ? ray->o.y : ray->o.z;
-    sz = 1.0 / (kz == 0 ? ray->d.x : kz == 1 ? ray->d.y : ray->d.z);
-    z0 = ((double)s->pos[3 * (size_t)tr->v[0] + kz] - oz) * sz;
-    z1 = ((double)s->pos[3 * (size_t)tr->v[1] + kz] - oz) * sz;
-    z2 = ((double)s->pos[3 * (size_t)tr->v[2] + kz] - oz) * sz;
-    lo = z0 < z1 ? z0 : z1;
-    hi = z0 > z1 ? z0 : z1;
-    lo = lo < z2 ? lo : z2;
-    hi = hi > z2 ? hi : z2;
-    m = 1e-13 * (fabs(lo) > fabs(hi) ? fabs(lo) : fabs(hi));
-    return lo - m >= ray->tmin && hi + m <= ray->tmax;
+    tr = &s->tris[prim];
+    return rtpi_wt_t_sure(s->pos + 3 * (size_t)tr->v[0], s->pos + 3 * (size_t)tr->v[1],
+                          s->pos + 3 * (size_t)tr->v[2], kz, oz, sz, ray->tmin, ray->tmax);
 }
 
 /* The list from entry k to end (one cell's) for the ray with direction
@@ -2268,7 +2206,7 @@ static RTPI_FORCE_INLINE uint32_t lb_walk(const rtpi_lightbuf *lb, const rtp_sce
                    passes outside one of them; or inside all three, and
                    the hit's t certainly in range: the watertight test's
                    answer without it */
-                int e = lb_edges_sure(pe + RTPI_EDGE_N * (size_t)rank, eop, lb->ethr);
+                int e = rtpi_edges_sure(pe + RTPI_EDGE_N * (size_t)rank, eop, lb->ethr);
                 if (e == 0)
                     continue;
                 if (e == 1 && lb_t_sure(s, cd->prim, ray))
@@ -2322,11 +2260,11 @@ static RTPI_FORCE_INLINE uint32_t lb_occluder(const rtpi_lightbuf *lb, const rtp
         /* (rtpi_intersect_prim's answer without its zero-area test, as
            lb_walk's: a triangle `first` is hittable, dircube.h); with
            edge entries, a triangle's answered by them where they can
-           (lb_edges_sure, lb_t_sure: the same answer) */
+           (rtpi_edges_sure, lb_t_sure: the same answer) */
         int e = 2;
         if (kind == LB_EDGES && inscale && first < s->ntris &&
             lb->rank_of[first] != RTPI_NONE) {
-            e = lb_edges_sure(lb->edge + RTPI_EDGE_N * (size_t)lb->rank_of[first], &eo,
+            e = rtpi_edges_sure(lb->edge + RTPI_EDGE_N * (size_t)lb->rank_of[first], &eo,
                               lb->ethr);
             if (e == 1 && lb_t_sure(s, first, ray))
                 return first;

@@ -1890,8 +1890,16 @@ static RTPI_FORCE_INLINE uint32_t kd_occluder(const rtpi_kdtree *kd, const rtpi_
                            test's weights of two vertices then differ in
                            sign; teapot: 91% of the triangles past the
                            plane) */
-                        if (rtpi_edges_miss(pe + RTPI_EDGE_N * (size_t)prim, &eo, thr))
+                        int e = rtpi_edges_sure(pe + RTPI_EDGE_N * (size_t)prim, &eo, thr);
+                        if (e == 0)
                             continue;
+                        /* inside all three by the margin, t certainly in
+                           range: rtpi_wt_tri's answer a hit, without it
+                           (rtpi_edges_sure; w made: pe's walks are not
+                           lazy) */
+                        if (e == 1 &&
+                            rtpi_wt_t_sure(v, v + 3, v + 6, w.kz, w.oz, w.sz, tmin, tmax))
+                            return prim;
                     } else if (pl) {
                         /* the light on one side of its plane, the
                            origin too: missed (a terrain's shadow rays

@@ -160,6 +160,50 @@ static inline void rtpi_edge_o_make(rtpi_edge_o *eo, const rtpi_v3 *o)
     eo->oz = o->z;
 }
 
+/* Edge entry e's test (rtpi_edges_miss below), with a third
+   answer: 0 where it turns the ray away (the segment misses the
+   triangle), 1 where the line from the light through o passes inside all
+   three edges by more than thr (n.o - n.light all above thr, or all below
+   -thr), else 2.  For 1: the proof at rtpi_tri_edges bounds each of
+   rtpi_wt_tri's computed weights within k' m of its exact value -k'
+   n_i.(o - L), whose sizes then exceed k' m: the three computed weights
+   are of one sign and none 0, so the watertight test passes its sign test
+   and det != 0, and what it answers is its t's test alone
+   (rtpi_wt_t_sure).  (The light buffer's walk and first, the kd-tree's
+   exact walk and EXACT's cached triangles ask it.) */
+static RTPI_FORCE_INLINE int rtpi_edges_sure(const double *e, const rtpi_edge_o *eo, double thr)
+{
+    double p, e0, e1, e2, lo, hi;
+#ifdef RTPI_EDGE_SSE2
+    __m128d v = _mm_add_pd(_mm_mul_pd(_mm_loadu_pd(e), eo->x),
+                           _mm_mul_pd(_mm_loadu_pd(e + 2), eo->y));
+    v = _mm_add_pd(v, _mm_mul_pd(_mm_loadu_pd(e + 4), eo->z));
+    p = _mm_cvtsd_f64(v);
+    if (p > e[6])
+        return 0;
+    e2 = _mm_cvtsd_f64(_mm_unpackhi_pd(v, v)) - e[7];
+    v = _mm_add_pd(_mm_mul_pd(_mm_loadu_pd(e + 8), eo->x),
+                   _mm_mul_pd(_mm_loadu_pd(e + 10), eo->y));
+    v = _mm_sub_pd(_mm_add_pd(v, _mm_mul_pd(_mm_loadu_pd(e + 12), eo->z)), _mm_loadu_pd(e + 14));
+    e0 = _mm_cvtsd_f64(v);
+    e1 = _mm_cvtsd_f64(_mm_unpackhi_pd(v, v));
+#else
+    p = e[0] * eo->ox + e[2] * eo->oy + e[4] * eo->oz;
+    if (p > e[6])
+        return 0;
+    e2 = e[1] * eo->ox + e[3] * eo->oy + e[5] * eo->oz - e[7];
+    e0 = e[8] * eo->ox + e[10] * eo->oy + e[12] * eo->oz - e[14];
+    e1 = e[9] * eo->ox + e[11] * eo->oy + e[13] * eo->oz - e[15];
+#endif
+    lo = e0 < e1 ? e0 : e1;
+    hi = e0 > e1 ? e0 : e1;
+    lo = lo < e2 ? lo : e2;
+    hi = hi > e2 ? hi : e2;
+    if ((lo < -thr) & (hi > thr))
+        return 0;
+    return ((lo > thr) | (hi < -thr)) ? 1 : 2;
+}
+
 /* Whether a shadow ray from o (eo) towards the light of rtpi_tri_edges'
    entry e (a triangle's 16 doubles) misses the triangle: its light's
    plane test first (rtpi_tri_planes' n.o > n.p0 + t, the same sums in
@@ -171,33 +215,48 @@ static inline void rtpi_edge_o_make(rtpi_edge_o *eo, const rtpi_v3 *o)
    alone took 12 and the edges' scalar code 40.) */
 static RTPI_FORCE_INLINE int rtpi_edges_miss(const double *e, const rtpi_edge_o *eo, double thr)
 {
-    double p, e0, e1, e2, lo, hi;
-#ifdef RTPI_EDGE_SSE2
-    __m128d v = _mm_add_pd(_mm_mul_pd(_mm_loadu_pd(e), eo->x),
-                           _mm_mul_pd(_mm_loadu_pd(e + 2), eo->y));
-    v = _mm_add_pd(v, _mm_mul_pd(_mm_loadu_pd(e + 4), eo->z));
-    p = _mm_cvtsd_f64(v);
-    if (p > e[6])
-        return 1;
-    e2 = _mm_cvtsd_f64(_mm_unpackhi_pd(v, v)) - e[7];
-    v = _mm_add_pd(_mm_mul_pd(_mm_loadu_pd(e + 8), eo->x),
-                   _mm_mul_pd(_mm_loadu_pd(e + 10), eo->y));
-    v = _mm_sub_pd(_mm_add_pd(v, _mm_mul_pd(_mm_loadu_pd(e + 12), eo->z)), _mm_loadu_pd(e + 14));
-    e0 = _mm_cvtsd_f64(v);
-    e1 = _mm_cvtsd_f64(_mm_unpackhi_pd(v, v));
-#else
-    p = e[0] * eo->ox + e[2] * eo->oy + e[4] * eo->oz;
-    if (p > e[6])
-        return 1;
-    e2 = e[1] * eo->ox + e[3] * eo->oy + e[5] * eo->oz - e[7];
-    e0 = e[8] * eo->ox + e[10] * eo->oy + e[12] * eo->oz - e[14];
-    e1 = e[9] * eo->ox + e[11] * eo->oy + e[13] * eo->oz - e[15];
-#endif
-    lo = e0 < e1 ? e0 : e1;
-    hi = e0 > e1 ? e0 : e1;
-    lo = lo < e2 ? lo : e2;
-    hi = hi > e2 ? hi : e2;
-    return (lo < -thr) & (hi > thr);
+    return rtpi_edges_sure(e, eo, thr) == 0;
+}
+
+/* Where rtpi_edges_sure answered 1 for the triangle (p0, p1, p2): 1 when
+   rtpi_wt_tri's t certainly lies in [tmin, tmax] (the test then reports
+   the hit), else 0 (it must be asked).  kz, oz, sz: rtpi_wt_make's.  Its
+   t is (e0 z0 + e1 z1 + e2 z2) sz / det with the weights e_i of one sign,
+   z_i = p_i[kz] - oz as it makes them: the weighted mean of the z_i sz,
+   weights in [0, 1] summing to 1, to within 9 u Z |sz| (Z = max |z_i|,
+   u = 2^-53: the sum's rounding below 3 u Z |det| with the weights of one
+   sign, then two products and the division's); so within [min z_i sz,
+   max z_i sz] widened by 1e-13 max |z_i sz| (each product's own rounding
+   included) it is in range wherever that widened interval is.  A NaN
+   fails. */
+static RTPI_FORCE_INLINE int rtpi_wt_t_sure(const float *p0, const float *p1, const float *p2,
+                                              int kz, double oz, double sz, double tmin,
+                                              double tmax)
+{
+    double z0 = ((double)p0[kz] - oz) * sz, z1 = ((double)p1[kz] - oz) * sz,
+           z2 = ((double)p2[kz] - oz) * sz, lo, hi, m;
+    lo = z0 < z1 ? z0 : z1;
+    hi = z0 > z1 ? z0 : z1;
+    lo = lo < z2 ? lo : z2;
+    hi = hi > z2 ? hi : z2;
+    m = 1e-13 * (fabs(lo) > fabs(hi) ? fabs(lo) : fabs(hi));
+    return lo - m >= tmin && hi + m <= tmax;
+}
+
+/* rtpi_wt_make's kz, oz and sz for ray r (not its whole set-up: gears'
+   lightbuf move 143 k of them, 45 instructions each), for a direction
+   rtpi_wt_valid accepts: else 0 (the test reports no hit: asked there). */
+static RTPI_FORCE_INLINE int rtpi_wt_z(const rtpi_ray *r, int *kz, double *oz, double *sz)
+{
+    double ax = fabs(r->d.x), ay = fabs(r->d.y), az = fabs(r->d.z);
+    int k;
+    if (!rtpi_wt_valid(r))
+        return 0;
+    k = ax > ay ? (ax > az ? 0 : 2) : (ay > az ? 1 : 2);
+    *kz = k;
+    *oz = k == 0 ? r->o.x : k == 1 ? r->o.y : r->o.z;
+    *sz = 1.0 / (k == 0 ? r->d.x : k == 1 ? r->d.y : r->d.z);
+    return 1;
 }
 
 /* @return 1 when (p1-p0)x(p2-p0), in double from the float vertices, is

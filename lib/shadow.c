@@ -424,8 +424,24 @@ static int sh_exact_tri(const rtpi_shadow *sh, uint32_t q, const rtpi_ray *r)
     double t, u, v;
     if (sh->planes && fabs(r->o.x) <= S && fabs(r->o.y) <= S && fabs(r->o.z) <= S) {
         const double *pl = sh->planes + 4 * (size_t)q;
-        if (pl[0] * r->o.x + pl[1] * r->o.y + pl[2] * r->o.z > pl[3])
+        if (sh->edges) {
+            /* the walk's test (rtpi_edges_sure: its plane's, then the
+               edges'): a miss it proves, or a hit with t certainly in
+               range, is hit_tri's answer (the proof at rtpi_tri_edges) */
+            rtpi_edge_o eo;
+            double oz, sz;
+            int e, kz;
+            rtpi_edge_o_make(&eo, &r->o);
+            e = rtpi_edges_sure(sh->edges + RTPI_EDGE_N * (size_t)q, &eo,
+                                RTPI_EDGE_MARGIN * S * S * S);
+            if (e == 0)
+                return 0;
+            if (e == 1 && rtpi_wt_z(r, &kz, &oz, &sz) &&
+                rtpi_wt_t_sure(p0, p1, p2, kz, oz, sz, r->tmin, r->tmax))
+                return 1;
+        } else if (pl[0] * r->o.x + pl[1] * r->o.y + pl[2] * r->o.z > pl[3]) {
             return 0;
+        }
     }
     return rtpi_wt_setup(&w, r) &&
            rtpi_wt_tri(&w, p0, p1, p2, r->tmin, r->tmax, &t, &u, &v);

@@ -1466,6 +1466,74 @@ static void test_cylinder_line(void)
     cylinder_line_case(1e5);
 }
 
+/* The sure hit (rtpi_edges_sure 1, then rtpi_wt_t_sure: the exact
+   walk's, the light buffer's and EXACT's cache's) for triangle t and ray
+   r, r's range as it is and cut at the vertices' z bounds along the
+   test's axis (the bounds rtpi_wt_t_sure widens by 1e-13), at the hit's
+   t and a few ulps around each: wherever it answers a hit, the watertight
+   test on the same floats must too (out[0] counts those it misses), and
+   the kd walk with the edges must answer the primitive the walk without
+   them answers (out[1]).  out[2]: sure answers; out[3]: ranges cut at a
+   bound where the vertices' z bounds are one value (a level triangle
+   seen along z: without the widening, sure where the test's own t rounds
+   past the bound); out[4]: lines inside all three edges by less than the
+   margin, where the weights' signs are not sure. */
+static void sure_case(const rtp_scene *s, const rtpi_kdtree *kd, int t, const rtpi_ray *r,
+                      const double *planes, const double *edges, double scale,
+                      const rtpi_edge_o *eo, int *out)
+{
+    const rtpi_tri *tr = &s->tris[t];
+    const float *p0 = s->pos + 3 * (size_t)tr->v[0], *p1 = s->pos + 3 * (size_t)tr->v[1],
+                *p2 = s->pos + 3 * (size_t)tr->v[2];
+    const double *e = edges + RTPI_EDGE_N * (size_t)t;
+    double oz, sz, z[3], lo, hi, cut[12], tt, uu, vv;
+    int kz, c, n = 0, es;
+    rtpi_wt_ray w;
+    if (!(fabs(r->o.x) <= scale && fabs(r->o.y) <= scale && fabs(r->o.z) <= scale) ||
+        !rtpi_wt_z(r, &kz, &oz, &sz) || !rtpi_wt_setup(&w, r))
+        return;
+    es = rtpi_edges_sure(e, eo, RTPI_EDGE_MARGIN * scale * scale * scale);
+    if (es == 2 && rtpi_edges_sure(e, eo, 0.0) == 1)
+        out[4]++;
+    if (es != 1)
+        return;
+    z[0] = ((double)p0[kz] - oz) * sz;
+    z[1] = ((double)p1[kz] - oz) * sz;
+    z[2] = ((double)p2[kz] - oz) * sz;
+    lo = fmin(z[0], fmin(z[1], z[2]));
+    hi = fmax(z[0], fmax(z[1], z[2]));
+    cut[n++] = lo;
+    cut[n++] = hi;
+    cut[n++] = nextafter(lo, -HUGE_VAL);
+    cut[n++] = nextafter(hi, HUGE_VAL);
+    cut[n++] = lo * (1.0 - 1e-13);
+    cut[n++] = hi * (1.0 + 1e-13);
+    cut[n++] = hi * (1.0 + 2e-13);
+    cut[n++] = lo * (1.0 - 2e-13);
+    if (rtpi_wt_tri(&w, p0, p1, p2, -HUGE_VAL, HUGE_VAL, &tt, &uu, &vv)) {
+        cut[n++] = tt;
+        cut[n++] = nextafter(tt, HUGE_VAL);
+        cut[n++] = nextafter(tt, -HUGE_VAL);
+    }
+    for (c = -1; c < 2 * n; c++) {
+        rtpi_ray q = *r;
+        int sr, hit;
+        if (c >= 0 && c < n)
+            q.tmax = cut[c];
+        else if (c >= n)
+            q.tmin = cut[c - n];
+        if (!(q.tmin <= q.tmax))
+            continue;
+        sr = rtpi_wt_t_sure(p0, p1, p2, kz, oz, sz, q.tmin, q.tmax);
+        hit = rtpi_wt_tri(&w, p0, p1, p2, q.tmin, q.tmax, &tt, &uu, &vv);
+        out[0] += sr && !hit;
+        out[2] += sr;
+        out[3] += c >= 0 && lo == hi && (q.tmax == hi || q.tmin == lo);
+        out[1] += rtpi_kd_occluder_planes(kd, &q, RTPI_NONE, planes, edges, NULL, scale) !=
+                  rtpi_kd_occluder_planes(kd, &q, RTPI_NONE, planes, NULL, NULL, scale);
+    }
+}
+
 /* rtpi_tri_edges' test turns away no shadow ray the watertight test
    hits: each triangle asked directly (rtpi_edges_miss against
    rtpi_intersect_prim) on rays towards the light through points beside
@@ -1484,6 +1552,7 @@ static void tri_edges_case(double off)
     rtpi_kdtree *kd = NULL;
     rtp_allocator a;
     int i, j, li, k, bad = 0, badwalk = 0, culled = 0, hits = 0, near_hit = 0, nt;
+    int sure[5] = {0, 0, 0, 0, 0};
     g.s = g_seed ^ 0x7131;
     rtpi_allocator_init(&a, NULL);
     for (i = 0; i < 6; i++) /* a mesh: shared edges */
@@ -1500,6 +1569,8 @@ static void tri_edges_case(double off)
         rtpi_v3 q = v3_add(p, v3_mul(rnd_dir(&g), sz)), r2 = v3_add(p, v3_mul(rnd_dir(&g), sz));
         if (i % 8 == 1) /* a sliver */
             r2 = v3_add(v3_mul(v3_add(p, q), 0.5), v3_mul(rnd_dir(&g), 1e-4 * sz));
+        if (i % 8 == 3) /* level: its vertices' z alike (the sure hit's t bound, below) */
+            q.z = r2.z = p.z;
         add_t(s, add_v(s, p.x, p.y, p.z), add_v(s, q.x, q.y, q.z), add_v(s, r2.x, r2.y, r2.z));
     }
     nt = (int)s->ntris;
@@ -1564,10 +1635,25 @@ static void tri_edges_case(double off)
             walk = rtpi_kd_occluder_planes(kd, &r, RTPI_NONE, planes, edges, NULL, scale) !=
                    RTPI_NONE;
             badwalk += walk != brute;
+            sure_case(s, kd, t, &r, planes, edges, scale, &eo, sure);
         }
         rtpi_free(&a, planes);
         rtpi_free(&a, edges);
     }
+    CHECK_MSG(sure[0] == 0 && sure[1] == 0,
+              "offset %g: %d sure hits the watertight test misses, %d walks with the edges found "
+              "another primitive than without (seed %llu)",
+              off, sure[0], sure[1], (unsigned long long)g_seed);
+    printf("triangles' sure hits (offset %g): %d sure, %d of them with t at a range's end, %d "
+           "within the margin\n", off, sure[2], sure[3], sure[4]);
+    /* asked and met (at the origin: off it the margin, scale^3, is wider
+       than these triangles' values): sure hits, some with t's range cut
+       at the vertices' bounds (level triangles) and lines inside the
+       edges by less than the margin (the cases a dropped margin or bound
+       answers wrongly) */
+    CHECK_MSG(off != 0.0 || (sure[2] > 2000 && sure[3] > 100 && sure[4] > 1000),
+              "offset %g: %d sure, %d at a range's end, %d within the margin", off, sure[2],
+              sure[3], sure[4]);
     CHECK_MSG(bad == 0, "offset %g: %d hits turned away by the edges' test (seed %llu)", off, bad,
               (unsigned long long)g_seed);
     CHECK_MSG(badwalk == 0, "offset %g: %d walks with the edges differ from brute force (seed "
