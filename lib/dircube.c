@@ -1760,8 +1760,6 @@ static void lb_edges(rtpi_lightbuf *lb, const rtp_scene *s, rtpi_v3 light,
         uint32_t prim = lb->cand[r].prim;
         const double *q = lb->plane + 5 * r;
         double *e = lb->edge + RTPI_EDGE_N * r;
-        const rtpi_tri *t;
-        rtpi_v3 A, B, C, n[3];
         int k;
         if (prim >= s->ntris) {
             for (k = 0; k < RTPI_EDGE_N; k++)
@@ -1770,27 +1768,9 @@ static void lb_edges(rtpi_lightbuf *lb, const rtp_scene *s, rtpi_v3 light,
             continue;
         }
         lb->rank_of[prim] = (uint32_t)r;
-        t = &s->tris[prim];
-        A = v3_sub(v3_from_f(s->pos + 3 * (size_t)t->v[0]), light);
-        B = v3_sub(v3_from_f(s->pos + 3 * (size_t)t->v[1]), light);
-        C = v3_sub(v3_from_f(s->pos + 3 * (size_t)t->v[2]), light);
-        n[0] = v3_cross(C, B);
-        n[1] = v3_cross(A, C);
-        n[2] = v3_cross(B, A);
-        e[0] = q[0];
-        e[2] = q[1];
-        e[4] = q[2];
-        e[6] = q[3] + q[4]; /* (no test: 0 + HUGE_VAL) */
-        e[1] = n[2].x;
-        e[3] = n[2].y;
-        e[5] = n[2].z;
-        e[7] = v3_dot(n[2], light);
-        for (k = 0; k < 2; k++) {
-            e[8 + k] = n[k].x;
-            e[10 + k] = n[k].y;
-            e[12 + k] = n[k].z;
-            e[14 + k] = v3_dot(n[k], light);
-        }
+        /* (q[3] + q[4]: its plane turned, as the walk's; no test where
+           0 + HUGE_VAL) */
+        rtpi_tri_edge_entry(e, s, &s->tris[prim], light, q, q[3] + q[4]);
     }
 }
 

@@ -1752,33 +1752,8 @@ void rtpi_tri_edges(const rtp_scene *s, rtpi_v3 light, double scale, const doubl
     if (!*out)
         return;
     for (i = 0; i < s->ntris; i++) {
-        const rtpi_tri *t = &s->tris[i];
         const double *q = planes + 4 * i;
-        rtpi_v3 A = v3_sub(v3_from_f(s->pos + 3 * (size_t)t->v[0]), light);
-        rtpi_v3 B = v3_sub(v3_from_f(s->pos + 3 * (size_t)t->v[1]), light);
-        rtpi_v3 C = v3_sub(v3_from_f(s->pos + 3 * (size_t)t->v[2]), light);
-        rtpi_v3 n[3];
-        double *e = *out + RTPI_EDGE_N * i;
-        int k;
-        n[0] = v3_cross(C, B);
-        n[1] = v3_cross(A, C);
-        n[2] = v3_cross(B, A);
-        /* the plane and edge 2 interleaved, then edges 0 and 1
-           (rtpi_edges_miss' vectors) */
-        e[0] = q[0];
-        e[2] = q[1];
-        e[4] = q[2];
-        e[6] = q[3];
-        e[1] = n[2].x;
-        e[3] = n[2].y;
-        e[5] = n[2].z;
-        e[7] = v3_dot(n[2], light);
-        for (k = 0; k < 2; k++) {
-            e[8 + k] = n[k].x;
-            e[10 + k] = n[k].y;
-            e[12 + k] = n[k].z;
-            e[14 + k] = v3_dot(n[k], light);
-        }
+        rtpi_tri_edge_entry(*out + RTPI_EDGE_N * i, s, &s->tris[i], light, q, q[3]);
     }
 }
 

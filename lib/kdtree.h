@@ -133,6 +133,39 @@ static RTPI_FORCE_INLINE int rtpi_wt_tri(const rtpi_wt_ray *w, const float *p0,
     return 1;
 }
 
+/* One triangle's entry of rtpi_tri_edges (the exact moves') and of the
+   light buffer's edges (lb_edges), which must be the same numbers: its
+   plane's normal q[0..2] and constant d, and edge 2's, interleaved, then
+   edges 0 and 1 (rtpi_edges_sure's layout); each edge's plane through
+   the light, n_i and n_i.light. */
+static RTPI_FORCE_INLINE void rtpi_tri_edge_entry(double *e, const rtp_scene *s,
+                                                  const rtpi_tri *t, rtpi_v3 light,
+                                                  const double *q, double d)
+{
+    rtpi_v3 A = v3_sub(v3_from_f(s->pos + 3 * (size_t)t->v[0]), light);
+    rtpi_v3 B = v3_sub(v3_from_f(s->pos + 3 * (size_t)t->v[1]), light);
+    rtpi_v3 C = v3_sub(v3_from_f(s->pos + 3 * (size_t)t->v[2]), light);
+    rtpi_v3 n[3];
+    int k;
+    n[0] = v3_cross(C, B);
+    n[1] = v3_cross(A, C);
+    n[2] = v3_cross(B, A);
+    e[0] = q[0];
+    e[2] = q[1];
+    e[4] = q[2];
+    e[6] = d;
+    e[1] = n[2].x;
+    e[3] = n[2].y;
+    e[5] = n[2].z;
+    e[7] = v3_dot(n[2], light);
+    for (k = 0; k < 2; k++) {
+        e[8 + k] = n[k].x;
+        e[10 + k] = n[k].y;
+        e[12 + k] = n[k].z;
+        e[14 + k] = v3_dot(n[k], light);
+    }
+}
+
 /* rtpi_tri_edges' test, the ray's origin o set up once a walk (SSE2,
    which every x86-64 has: two of the three edges in one vector, whose
    lanes round each operation as the plain code does; RTP_NO_SSE2 makes
