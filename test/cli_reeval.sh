@@ -1112,7 +1112,7 @@ expect_rc 0 $RTP trace $A --set mat.2.ambient=0.8 --set mat.2.kd=0.3 -i "$T/ka_a
 expect_rc 0 $RTP trace $A --set mat.2.kd=0.3 -i "$T/ka_b.pfm" -q
 $RTP diff "$T/ka_a.pfm" "$T/ka_b.pfm" --fail-above max_abs=0 >/dev/null 2>&1
 [ $? -eq 3 ] && ok || bad "ka 0.8 after kd 0.3 is ka following kd"
-$RTP reeval "$T/ka.rtp" --stream -i "$T/ka_s%d.pfm" -q <<'EOF2'
+cat >"$T/ka_lines.txt" <<'EOF2'
 mat.0.ambient=0.4
 mat.0.kd=0.5
 mat.2.kd=0.6
@@ -1127,6 +1127,7 @@ mat.2.ambient=0
 light.1.color=0.3,1,0.3 mat.0.ambient=2,0,1
 mat.0.color=1,1,0
 EOF2
+$RTP reeval "$T/ka.rtp" --stream -i "$T/ka_s%d.pfm" -q <"$T/ka_lines.txt"
 [ $? -eq 0 ] && ok || bad "the ka stream failed"
 keys=""
 lf=0
@@ -1135,21 +1136,7 @@ while read -r line; do
     expect_rc 0 $RTP trace $A $keys -i "$T/ka_f.pfm" -q
     expect_rc 0 $RTP diff "$T/ka_s$lf.pfm" "$T/ka_f.pfm" --fail-above max_abs=1e-6 -q
     lf=$((lf + 1))
-done <<'EOF2'
-mat.0.ambient=0.4
-mat.0.kd=0.5
-mat.2.kd=0.6
-mat.2.ambient=1,0.5,0.25 mat.2.color=0.3,0.9,0.9
-mat.2.kd=0.2
-ambient=0.5,0.4,0.3
-light.0.color=1,0.5,0.5
-mat.1.ambient=0.7
-mat.1.color=0.2,0.2,0.9
-light.1.pos=2,-5,3
-mat.2.ambient=0
-light.1.color=0.3,1,0.3 mat.0.ambient=2,0,1
-mat.0.color=1,1,0
-EOF2
+done <"$T/ka_lines.txt"
 [ "$lf" -eq 13 ] && ok || bad "the ka stream's frames: $lf"
 # mat.N.ambient=kd unsets ka: the material follows kd again.  A scene
 # given ka and then kd traces the very tree of one never given ka (no
