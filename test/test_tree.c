@@ -7181,6 +7181,8 @@ static void test_retrace_subtrees(void)
                                      NULL};
     static const char *const d2[] = {"mat.0.ks", "0", "", "mat.3.ks", "0.3", "", "mat.0.ks",
                                      "0.5", "mat.2.bump", "waves", "", NULL};
+    static const char *const d3[] = {"mat.4.kt", "0.5", "mat.4.ior", "1.3", "", "mat.4.kt", "0",
+                                     "", "mat.1.kt", "0", "mat.4.kt", "0.2", "", NULL};
     char big[4096];
     size_t at;
     int i;
@@ -7212,6 +7214,17 @@ static void test_retrace_subtrees(void)
         at += (size_t)snprintf(big + at, sizeof big - at, "l %d %d %d\n", i % 7 - 3, i / 7 - 3,
                                4 + i % 3);
     subtree_case(big, &o, d1, RTP_STALE_RETRACE, 2, "40 lights");
+    /* SPD: opaque surfaces are one-sided, so kt from 0 (or to 0) turns a
+       surface seen from behind two-sided (one-sided): its own hit sees
+       the lights anew, though the ray to it is replayed.  A wall facing
+       away from the eye and the lights, seen directly and in the mirror
+       floor (replayed copies of its hits had kept it as traced, unlit) */
+    at = (size_t)snprintf(big, sizeof big, "%s", nff);
+    snprintf(big + at, sizeof big - at,
+             "f 0.3 0.5 0.9 0.8 0.2 10 0 1\np 4\n-4 3 3\n4 3 3\n4 3 0\n-4 3 0\n");
+    memset(&o, 0, sizeof o);
+    o.spd = 1;
+    subtree_case(big, &o, d3, RTP_STALE_RETRACE, 2, "SPD, a wall seen from behind");
 }
 
 int main(void)
