@@ -1184,7 +1184,10 @@ struct rtp_tree {
    those a trace casts (t's trees are rtp's own trace of the scene as it
    is but for those materials, tree.c retrace_edited), so their hits and
    light bits are taken from the old tree and only the rays below are
-   cast (and counted in *rays); the new trees are a full trace's. */
+   cast (and counted in *rays); the new trees are a full trace's.  A
+   redo of 3 (an SPD tree's material whose kt went from or to 0, so that
+   its surfaces turned two-sided or one-sided) casts the shadow rays of
+   its first hits too where they are seen from behind. */
 /* rtp_trace, with opt's width and height the frame even with spd (a
    builder's tree of corner samples need not be 512x512). */
 rtp_status rtpi_trace_sized(const rtp_scene *s, const rtp_trace_options *opt,

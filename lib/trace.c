@@ -356,7 +356,7 @@ static RTPI_FORCE_INLINE int32_t trace_ray(worker *w, const rtpi_ray *ray, int d
     }
 
     /* (SPD's opaque surfaces are one-sided, kt > 0 ones two-sided: a hit
-       from behind of a material traced again, its kt from or to 0, faces
+       from behind of a material whose kt went from or to 0 (redo 3) faces
        the lights otherwise than when it was traced, so it casts its
        shadow rays anew; a replayed hit had kept the old one's light
        bits: a one-sided square seen from behind, lit from the eye's side,
@@ -364,7 +364,7 @@ static RTPI_FORCE_INLINE int32_t trace_ray(worker *w, const rtpi_ray *ray, int d
        trace) */
     if (old >= 0)
         redo = sh->redo[sf.mat];
-    if (old >= 0 && !(sh->spd && !front && redo)) {
+    if (old >= 0 && !(redo == 3 && !front)) {
         vis = w->old[old].vis;
         if (words)
             memcpy(w->vis + (w->sample_base + (size_t)idx) * words, w->old_vis + (size_t)old * words,

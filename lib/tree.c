@@ -2713,8 +2713,15 @@ static rtp_status retrace_edited(rtp_tree *t, int threads, int stale, double lim
            not: its samples are traced whole) */
         redo = t->foreign ? NULL : swapped + s->nmats;
         for (m = 0; m < s->nmats; m++) {
+            /* (3: an SPD tree's surfaces of m face the lights otherwise
+               from behind now, two-sided or one-sided: rtpi_retrace) */
             if (redo)
-                redo[m] = (unsigned char)needs_retrace(t, m, stale);
+                redo[m] = (unsigned char)(needs_retrace(t, m, stale)
+                                              ? t->spd && (s->mats[m].kt > 0.0f) !=
+                                                              (t->mats0[m].kt > 0.0f)
+                                                    ? 3
+                                                    : 1
+                                              : 0);
             if (!needs_retrace(t, m, stale) && bump_stale(t, m)) {
                 swap_bump(&t->scene->mats[m], &t->mats0[m]);
                 swapped[m] = 1;
