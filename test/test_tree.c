@@ -7224,6 +7224,10 @@ static void test_retrace_subtrees(void)
              "f 0.3 0.5 0.9 0.8 0.2 10 0 1\np 4\n-4 3 3\n4 3 3\n4 3 0\n-4 3 0\n");
     memset(&o, 0, sizeof o);
     o.spd = 1;
+    o.region[0] = 96; /* (the wall, the floor before it, the balls) */
+    o.region[1] = 96;
+    o.region[2] = 416;
+    o.region[3] = 320;
     subtree_case(big, &o, d3, RTP_STALE_RETRACE, 2, "SPD, a wall seen from behind");
 }
 
