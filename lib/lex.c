@@ -208,6 +208,35 @@ int rtpi_tok_number(const rtpi_tok *t, double *out)
     return 0;
 }
 
+/* Case-insensitive: the n bytes at s equal the lower-case word. */
+static int ci_word(const char *s, size_t n, const char *word)
+{
+    size_t i;
+    if (n != strlen(word))
+        return 0;
+    for (i = 0; i < n; i++) {
+        char c = s[i];
+        if (c >= 'A' && c <= 'Z')
+            c = (char)(c - 'A' + 'a');
+        if (c != word[i])
+            return 0;
+    }
+    return 1;
+}
+
+int rtpi_tok_numlike(const rtpi_tok *t)
+{
+    const char *s = t->s;
+    size_t n = t->n;
+    if (n == 0)
+        return 0;
+    if (s[0] == '-' || s[0] == '+' || s[0] == '.' || (s[0] >= '0' && s[0] <= '9'))
+        return 1;
+    if (n > 4 && s[n - 1] == ')' && ci_word(s, 4, "nan("))
+        return 1;
+    return ci_word(s, n, "nan") || ci_word(s, n, "inf") || ci_word(s, n, "infinity");
+}
+
 int rtpi_tok_int(const rtpi_tok *t, long *out)
 {
     size_t i = 0;

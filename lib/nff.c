@@ -132,13 +132,15 @@ static rtp_status nonneg(nff *c, const rtpi_tok *t, const char *noun,
     return rtpi_lex_error(&c->lx, t, "%s %s must not be negative, got %s", noun, field, g);
 }
 
-/* Whether the next token is a number (without consuming it). */
+/* Whether the next token is meant as a number (without consuming it):
+   a bad one ("nan", "1e999", "0x10") too, which num then names by its
+   field, where taking it for the next keyword said "unknown keyword
+   'nan'" of `ka 0.1 nan 0.2`. */
 static int peek_number(const nff *c)
 {
     rtpi_lex save = c->lx;
     rtpi_tok t;
-    double d;
-    return rtpi_lex_next(&save, &t) && rtpi_tok_number(&t, &d) != -1; /* (-2: out of range, said by num) */
+    return rtpi_lex_next(&save, &t) && rtpi_tok_numlike(&t);
 }
 
 /* Consumes the next token if it is `word`. */

@@ -68,8 +68,9 @@ static rtp_status line_num(rtpi_lex *lx, const char *what, const char *field,
     return RTP_OK;
 }
 
-/* Up to `max` more optional numbers, then the end of the line. */
-static rtp_status line_rest(rtpi_lex *lx, const char *what, int max)
+/* Up to `max` more optional numbers, then the end of the line; `done`
+   numbers precede them on the line (for a message). */
+static rtp_status line_rest(rtpi_lex *lx, const char *what, int done, int max)
 {
     rtpi_tok t;
     char show[48];
@@ -80,6 +81,11 @@ static rtp_status line_rest(rtpi_lex *lx, const char *what, int max)
         if (r == -2 && n < max)
             return rtpi_lex_error(lx, &t, "%s value %s is out of range", what,
                                   rtpi_tok_show(&t, show, sizeof show));
+        /* (a bad number where one may be, `v 0 0 0 nan`: not "unexpected
+           'nan' at the end") */
+        if (r == -1 && n < max && rtpi_tok_numlike(&t))
+            return rtpi_lex_error(lx, &t, "expected number for %s value %d, got '%s'", what,
+                                  done + n + 1, rtpi_tok_show(&t, show, sizeof show));
         if (r != 0 || n++ >= max)
             return rtpi_lex_error(lx, &t, "unexpected '%s' at the end of %s",
                                   rtpi_tok_show(&t, show, sizeof show), what);
@@ -636,9 +642,7 @@ static rtp_status read_mtl(obj *o, const char *text, size_t size, const char *na
             {
                 rtpi_lex save = lx;
                 rtpi_tok peek;
-                double d;
-                if (rtpi_lex_next_inline(&save, &peek) &&
-                    rtpi_tok_number(&peek, &d) != -1) {
+                if (rtpi_lex_next_inline(&save, &peek) && rtpi_tok_numlike(&peek)) {
                     if ((st = line_num(&lx, what, "green", &v[1], &ct[1])) != RTP_OK ||
                         (st = line_num(&lx, what, "blue", &v[2], &ct[2])) != RTP_OK)
                         break;
@@ -648,7 +652,7 @@ static rtp_status read_mtl(obj *o, const char *text, size_t size, const char *na
                 if (v[i] < 0.0)
                     return rtpi_lex_error(&lx, &ct[i], "%s %s must not be negative, got %s",
                                           what, rgb[i], rtpi_tok_show(&ct[i], show, sizeof show));
-            if ((st = line_rest(&lx, what, 0)) != RTP_OK)
+            if ((st = line_rest(&lx, what, 1, 0)) != RTP_OK)
                 break;
             if (what[1] == 'd') {
                 /* kd carries the brightness, color the hue (max 1), so
@@ -666,7 +670,7 @@ static rtp_status read_mtl(obj *o, const char *text, size_t size, const char *na
             char what[8];
             rtpi_tok_show(&kw, what, sizeof what);
             if ((st = line_num(&lx, what, "value", &v[0], &tk)) != RTP_OK ||
-                (st = line_rest(&lx, what, 0)) != RTP_OK)
+                (st = line_rest(&lx, what, 1, 0)) != RTP_OK)
                 break;
             if (v[0] < 0.0)
                 return rtpi_lex_error(&lx, &tk, "%s must not be negative", what);
@@ -797,13 +801,13 @@ static rtp_status read_vertex(obj *o, int kind)
         /* vt u [v [w]] */
         rtpi_lex save = o->lx;
         rtpi_tok peek;
-        double d;
-        if (rtpi_lex_next_inline(&save, &peek) && rtpi_tok_number(&peek, &d) != -1 &&
+        if (rtpi_lex_next_inline(&save, &peek) && rtpi_tok_numlike(&peek) &&
             (st = line_num(&o->lx, what, "v", &p[1], NULL)) != RTP_OK)
             return st;
     }
     /* v: optional w or r g b (read past); vt: optional w. */
-    if ((st = line_rest(&o->lx, what, kind == 'v' ? 4 : kind == 't' ? 1 : 0)) != RTP_OK)
+    if ((st = line_rest(&o->lx, what, kind == 't' ? 2 : 3,
+                        kind == 'v' ? 4 : kind == 't' ? 1 : 0)) != RTP_OK)
         return st;
     rtpi_lex_here(&o->lx, &here);
     if (kind == 'v') {

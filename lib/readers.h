@@ -80,6 +80,14 @@ int rtpi_tok_is(const rtpi_tok *t, const char *word);
 /* A finite number; @return 0, -1 if the token is not one, -2 if it is a
    decimal number beyond a double's range. */
 int rtpi_tok_number(const rtpi_tok *t, double *out);
+/* Whether the token was meant as a number, scene number or not: one that
+   starts as a number does (a digit, a sign or '.': "1e999", "0x10",
+   "-") or strtod's words for what is none ("nan", "inf", "infinity",
+   signed or not, any case, "nan(...)").  Where a statement's numbers are
+   optional (ka's green, a light's colour, a vertex's w), such a token is
+   one of them, said as a bad number by its field, rather than the next
+   keyword. */
+int rtpi_tok_numlike(const rtpi_tok *t);
 /* A decimal integer with an optional sign, |v| <= 2^31-1; @return 0/-1. */
 int rtpi_tok_int(const rtpi_tok *t, long *out);
 /* Copies the token into buf (at most size-1 bytes, non-printable bytes

@@ -287,6 +287,24 @@ static void test_mtl(void)
                       !strstr(err.message, "characters"),
                   "%s", err.message);
     }
+    /* a bad number where an optional one may be is named by its field,
+       not "unexpected 'nan' at the end of Kd" */
+    {
+        static const char *const bad[][2] = {{"newmtl x\nKd 0.5 nan 0.5\n", "Kd green, got 'nan'"},
+                                             {"newmtl x\nKs 0.5 INF 0\n", "Ks green, got 'INF'"},
+                                             {"newmtl x\nKd 0.5 0x1 0\n", "Kd green, got '0x1'"},
+                                             {"newmtl x\nKd 0.5 1e999 0\n",
+                                              "Kd green 1e999 is out of range"},
+                                             {"newmtl x\nNs inf\n", "Ns value, got 'inf'"}};
+        size_t i;
+        for (i = 0; i < sizeof bad / sizeof *bad; i++) {
+            CHECK(check_write_file(dir, "b.mtl", bad[i][0]) == 0);
+            CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_PARSE && s == NULL);
+            CHECK_MSG(strstr(err.file, "b.mtl") && err.line == 2 &&
+                          err.column == (i == 4 ? 4 : 8) && strstr(err.message, bad[i][1]),
+                      "case %zu: %d:%d %s", i, err.line, err.column, err.message);
+        }
+    }
     CHECK(check_write_file(dir, "b.mtl", "Kd 1 1 1\n") == 0);
     CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_PARSE);
     CHECK(err.line == 1 && err.column == 1 && strstr(err.message, "before any newmtl"));
@@ -646,6 +664,12 @@ static const bad_case bad_obj[] = {
     {"v 1 2 nan\n", 1, 7, "got 'nan'"},
     {"v 1 2 3 4 5 6 7 8\n", 1, 17, "unexpected '8'"},
     {"v 1 2 3 w\n", 1, 9, "unexpected 'w'"},
+    /* a bad number where an optional one may be: named as one, not
+       "unexpected 'nan' at the end of v (vertex)" */
+    {"v 1 2 3 nan\n", 1, 9, "expected number for v (vertex) value 4, got 'nan'"},
+    {"v 1 2 3 1 -inf 1\n", 1, 11, "expected number for v (vertex) value 5, got '-inf'"},
+    {"vt 0.5 Infinity\n", 1, 8, "expected number for vt (texture vertex) v, got 'Infinity'"},
+    {"vt 0.5 0.5 nan(1)\n", 1, 12, "expected number for vt (texture vertex) value 3, got 'nan(1)'"},
     {"vn 1 2 3 4\n", 1, 10, "unexpected '4'"},
     {"vt\n", 1, 3, "expected u"},
     {"v 0 0 0\nf 1 2 3\n", 2, 5, "vertex index 2 out of range (1 vertex so far)"},
