@@ -186,6 +186,7 @@ rtp_status rtpi_read_bpt(rtp_scene *s, const char *text, size_t size,
     rtpi_v3 *grid = NULL;
     size_t i, k, left;
     rtp_status st;
+    int r;
     char show[48];
     const rtp_allocator *a = &s->alloc;
     rtpi_lex_init(&lx, text, size, name ? name : "<memory>", err);
@@ -245,8 +246,15 @@ rtp_status rtpi_read_bpt(rtp_scene *s, const char *text, size_t size,
                                     i + 1, (int)('x' + k));
                 goto done;
             }
-            if (rtpi_tok_number(&t, &p[k]) != 0 || fabs(p[k]) > 1e18) {
+            r = rtpi_tok_number(&t, &p[k]);
+            if (r == -1) {
                 st = rtpi_lex_error(&lx, &t, "expected number for point %zu %c, got '%s'",
+                                    i + 1, (int)('x' + k), rtpi_tok_show(&t, show, sizeof show));
+                goto done;
+            }
+            /* (as the NFF reader says it: 1e999 is a number, too large) */
+            if (r != 0 || fabs(p[k]) > 1e18) {
+                st = rtpi_lex_error(&lx, &t, "point %zu %c %s is out of range (|x| <= 1e+18)",
                                     i + 1, (int)('x' + k), rtpi_tok_show(&t, show, sizeof show));
                 goto done;
             }

@@ -811,6 +811,38 @@ static void test_bezier_mirrored(void)
     CHECK_MSG(z[0] * z[1] > 0.0, "mirrored patch faces z %g, plain %g", z[1], z[0]);
 }
 
+/* A patch file's point past the range is said to be out of range (it was
+   "expected number for point 1 x, got '1e999'"), a word as no number. */
+static void test_bezier_bad_number(void)
+{
+    static const char *const bad[][2] = {
+        {"1e999", "point 1 x 1e999 is out of range (|x| <= 1e+18)"},
+        {"1e19", "point 1 x 1e19 is out of range"},
+        {"nan", "expected number for point 1 x, got 'nan'"}};
+    size_t i;
+    for (i = 0; i < sizeof bad / sizeof *bad; i++) {
+        char bpt[1024];
+        size_t o = 0;
+        int k;
+        rtp_scene *s = NULL;
+        rtp_error err;
+        o += (size_t)snprintf(bpt + o, sizeof bpt - o, "1\n");
+        for (k = 1; k <= 16; k++)
+            o += (size_t)snprintf(bpt + o, sizeof bpt - o, "%d%s", k, k < 16 ? "," : "\n");
+        o += (size_t)snprintf(bpt + o, sizeof bpt - o, "16\n%s,0,0\n", bad[i][0]);
+        for (k = 1; k < 16; k++)
+            o += (size_t)snprintf(bpt + o, sizeof bpt - o, "%d,%d,0\n", k / 4, k % 4);
+        CHECK(rtpi_scene_create(NULL, &s) == RTP_OK);
+        if (!s)
+            return;
+        memset(&err, 0, sizeof err);
+        CHECK(rtpi_read_bpt(s, bpt, o, "p.bpt", 2, NULL, 0, &err) == RTP_ERR_PARSE);
+        CHECK_MSG(err.line == 4 && err.column == 1 && strstr(err.message, bad[i][1]),
+                  "%s: %d:%d %s", bad[i][0], err.line, err.column, err.message);
+        rtp_scene_destroy(s);
+    }
+}
+
 int main(void)
 {
     RUN(test_faces);
@@ -828,5 +860,6 @@ int main(void)
     if (check_tmpdir[0])
         rmdir(check_tmpdir);
     RUN(test_bezier_mirrored);
+    RUN(test_bezier_bad_number);
     return check_report();
 }
