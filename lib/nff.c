@@ -846,18 +846,23 @@ static rtp_status read_include(nff *c, const rtpi_tok *kw, int bezier)
         child.s = c->s;
         child.err = c->err;
         child.depth = c->depth + 1;
-        child.mat = c->mat;
         child.st = c->st;
         child.mtl = c->mtl;
+        /* An included NFF file reads as its text would in place of the
+           include line: it starts with the includer's current material
+           and last f or l, and leaves its own current after it.  (The
+           includer's current material was restored after it while name
+           and off named the child's last f or l, so that after an
+           include `name` named one material and `ka`, `texture` and the
+           objects went to another.) */
+        child.mat = c->mat;
+        child.named_kind = c->named_kind;
+        child.named_index = c->named_index;
         rtpi_lex_init(&child.lx, text, size, path, c->err);
         st = parse(&child);
-        /* name and off after the include apply to the last f or l read,
-           the child's where it has one (they named the parent's, from
-           before the include) */
-        if (child.named_kind) {
-            c->named_kind = child.named_kind;
-            c->named_index = child.named_index;
-        }
+        c->mat = child.mat;
+        c->named_kind = child.named_kind;
+        c->named_index = child.named_index;
         rtpi_free(a, child.pts);
         rtpi_free(a, child.tri);
     }

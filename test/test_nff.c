@@ -841,7 +841,10 @@ static void test_files(void)
     CHECK(s->nspheres == 3);
     CHECK(s->spheres[0].mat == 0 && s->spheres[1].mat == 1);
     CHECK(s->mats[1].name && strcmp(s->mats[1].name, "inner") == 0);
-    CHECK(s->spheres[2].mat == 0); /* back in main.nff: "pic" again */
+    /* back in main.nff the included file's f is still current, as it
+       would be were its text in place of the include line (it was
+       "pic" again, while `name` there named "inner") */
+    CHECK(s->spheres[2].mat == 1);
     /* the Bezier patch: 2x2 quads = 8 triangles at z = 3, facing -z or +z
        consistently with their vertex normals */
     CHECK(s->ntris == 2 + 8);
@@ -870,8 +873,36 @@ static void test_files(void)
               strcmp(s->mats[1].name, "later") == 0);
     rtp_scene_destroy(s);
     s = NULL;
+    /* one current material and one last f or l across an include, as
+       if its text stood in place: `name`, `ka`, `texture` and the objects
+       after the include all go to the included file's last f (name went
+       to it while ka and the sphere went to "outer"), and `name` and
+       `off` at the included file's start to the includer's last f or l */
+    CHECK(check_write_file(dir, "sub/plain.nff",
+                           "name outer\nka 0.25\ns 1 1 1 1\nl 1 2 3\n"
+                           "f 0 1 0 1 0 100 0 0\ns 2 2 2 1\n") == 0);
+    CHECK(check_write_file(dir, "after.nff",
+                           "f 1 0 0 1 0 10 0 0\ninclude sub/plain.nff\n"
+                           "name later\nka 0.5\ntexture sub/tex.ppm\ns 0 0 0 1\n"
+                           "l 0 0 9\ninclude sub/lamp.nff\n") == 0);
+    CHECK(check_write_file(dir, "sub/lamp.nff", "off\nname lamp\n") == 0);
+    CHECK(rtp_scene_load(name, NULL, &s, &err) == RTP_OK);
+    if (s) {
+        CHECK(s->nmats == 2 && strcmp(s->mats[0].name, "outer") == 0 &&
+              strcmp(s->mats[1].name, "later") == 0);
+        CHECK(s->mats[0].ka_set && s->mats[0].ka[1] == 0.25f);
+        CHECK(s->mats[1].ka_set && s->mats[1].ka[1] == 0.5f);
+        CHECK(s->mats[0].tex != RTPI_TEX_IMAGE && s->mats[1].tex == RTPI_TEX_IMAGE);
+        CHECK(s->nspheres == 3 && s->spheres[0].mat == 0 && s->spheres[1].mat == 1 &&
+              s->spheres[2].mat == 1);
+        CHECK(s->nlights == 2 && s->lights[0].on && !s->lights[1].on &&
+              s->lights[1].name && strcmp(s->lights[1].name, "lamp") == 0);
+    }
+    rtp_scene_destroy(s);
+    s = NULL;
     check_remove_file(dir, "after.nff");
     check_remove_file(dir, "sub/plain.nff");
+    check_remove_file(dir, "sub/lamp.nff");
 
     /* a file that includes itself stops at the nesting limit */
     CHECK(check_write_file(dir, "self.nff", "s 0 0 0 1\ninclude self.nff\n") == 0);
