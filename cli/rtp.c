@@ -2809,20 +2809,13 @@ static void print_keys(const rtp_scene *s, const rtp_tree_info *ti)
         char line[96];
         item_head(s, "mat", i, prefix, sizeof prefix, head, sizeof head);
         print_fields(s, head, prefix, mat, 6);
-        /* (the ambient coefficient where it is not kd's: one set apart
-           from it, on the line after the material's own) */
-        {
-            char kd[64];
-            snprintf(line, sizeof line, "%skd", prefix);
-            if (rtp_scene_get(s, line, kd, sizeof kd, NULL) == RTP_OK) {
-                char kd3[200];
-                snprintf(kd3, sizeof kd3, "%s,%s,%s", kd, kd, kd);
-                snprintf(line, sizeof line, "%sambient", prefix);
-                if (rtp_scene_get(s, line, val, sizeof val, NULL) == RTP_OK &&
-                    strcmp(val, kd3) != 0)
-                    print_fields(s, "   ", prefix, ambient, 1);
-            }
-        }
+        /* (the ambient coefficient where the material has one of its
+           own, on the line after the material's own: one set equal to
+           kd too, which kd's edits leave where one that follows kd moves
+           with them, so that the keys shown set the scene as it is) */
+        snprintf(line, sizeof line, "%sambient_own", prefix);
+        if (rtp_scene_get(s, line, val, sizeof val, NULL) == RTP_OK && strcmp(val, "1") == 0)
+            print_fields(s, "   ", prefix, ambient, 1);
         /* (texture and bump fields where the material uses them, on the
            lines after its own) */
         snprintf(line, sizeof line, "%schecker", prefix);
@@ -2845,7 +2838,7 @@ static const char info_help[] =
     "nodes, bytes per node, file size, and the keys --set takes with their\n"
     "values now: the camera, ambient and background, each light and material\n"
     "by index and name (texture and bump fields where a material has them, its\n"
-    "ambient coefficient where it is not kd's).\n"
+    "ambient coefficient where it has one of its own rather than follow kd).\n"
     "  --stats FILE         write the sizes as one JSON object ('-' = stdout)\n"
     "  -q, --quiet          print nothing (--stats still writes)\n"
     "  -v, --verbose        accepted (info has nothing more to say)\n"

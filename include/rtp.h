@@ -209,9 +209,12 @@ rtp_status rtp_scene_set(rtp_scene *scene, const char *key,
  *  to the same value; checker and on 0 or 1; texture and bump none, waves,
  *  noise or the image's path ("-" for one read from stdin: setting that
  *  again reads stdin again, at its end by then); mat.N.ambient the effective
- *  coefficient (kd,kd,kd while the material has none of its own).  Also
- *  light.N.name and mat.N.name (read
- *  only; "" when unnamed).  @return RTP_OK, RTP_ERR_KEY, or
+ *  coefficient (kd,kd,kd while the material has none of its own).  Also,
+ *  read only: light.N.name and mat.N.name ("" when unnamed), and
+ *  mat.N.ambient_own, "1" where the material has an ambient coefficient of
+ *  its own (set, kd's edits leave it), "0" where it follows kd (set
+ *  "kd"; what mat.N.ambient's numbers cannot tell of one set equal to
+ *  kd).  @return RTP_OK, RTP_ERR_KEY, or
  *  RTP_ERR_ARGUMENT when buf is too small (buf then ""). */
 rtp_status rtp_scene_get(const rtp_scene *scene, const char *key, char *buf, size_t size,
                          rtp_error *err);

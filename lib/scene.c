@@ -816,13 +816,13 @@ static void light_intensity(float *c, double v)
         c[i] = i == k ? (float)v : (float)((double)c[i] * v / m);
 }
 
-/* A field rtp_scene_set does not take.  name is one rtp_scene_get reads:
-   "unknown key" for it sent a caller who had just read it looking for a
-   typo. */
+/* A field rtp_scene_set does not take.  name and ambient_own are ones
+   rtp_scene_get reads: "unknown key" for them sent a caller who had just
+   read one looking for a typo. */
 static rtp_status field_refused(rtp_error *err, const char *key, const char *field,
                                 const char *fields)
 {
-    if (strcmp(field, "name") == 0)
+    if (strcmp(field, "name") == 0 || strcmp(field, "ambient_own") == 0)
         return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0,
                           "%s is read only (%s)", key, fields);
     return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0, "unknown key '%s' (%s)", key, fields);
@@ -1177,6 +1177,11 @@ rtp_status rtp_scene_get(const rtp_scene *s, const char *key, char *buf, size_t 
                 /* the effective ka: kd in each channel while unset */
                 const float kd3[3] = {m->kd, m->kd, m->kd};
                 put_floats(buf, size, &at, m->ka_set ? m->ka : kd3, 3);
+            } else if (strcmp(field, "ambient_own") == 0) {
+                /* (whether that ka is the material's own or kd's: one set
+                   equal to kd reads as kd,kd,kd too, and stays under kd's
+                   edits where kd's moves with them) */
+                put_str(buf, size, &at, m->ka_set ? "1" : "0");
             } else if (strcmp(field, "checker") == 0)
                 put_str(buf, size, &at, m->tex == RTPI_TEX_CHECKER ? "1" : "0");
             else if (strcmp(field, "texture") == 0)
@@ -1193,8 +1198,8 @@ rtp_status rtp_scene_get(const rtp_scene *s, const char *key, char *buf, size_t 
             else
                 return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0,
                                   "unknown key '%s' (material fields: color, kd, ks, kt, shine, "
-                                  "ior, ambient, checker, color2, checker_scale, texture, bump, "
-                                  "bump_strength, bump_scale, name)",
+                                  "ior, ambient, ambient_own, checker, color2, checker_scale, "
+                                  "texture, bump, bump_strength, bump_scale, name)",
                                   key);
         }
     }

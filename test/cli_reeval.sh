@@ -1180,6 +1180,23 @@ cmp -s "$T/ka_r.pfm" "$T/ka_t.pfm" && ok || bad "--params mat.ball.ambient is no
 $RTP info "$T/ka2.rtp" >"$T/out"
 grep -q "^    ambient=0.25,0.25,0.25$" "$T/out" && ok || bad "info shows no ka: $(cat "$T/out")"
 [ "$(grep -c "ambient=" "$T/out")" -eq 2 ] && ok || bad "info shows ka where none is set: $(cat "$T/out")"
+# a ka set equal to kd is the material's own all the same (a kd edit
+# leaves it): info shows it (it compared the numbers with kd's and hid
+# it), so the keys info shows set the scene as it is; one set back to
+# kd is not shown
+expect_rc 0 $RTP trace $A --set mat.ball.ambient=0.8 -o "$T/ka3.rtp" -q
+$RTP info "$T/ka3.rtp" >"$T/out"
+grep -A1 "^mat.2 (ball):" "$T/out" | grep -q "^    ambient=0.8,0.8,0.8$" && ok ||
+    bad "info hides a ka equal to kd: $(cat "$T/out")"
+[ "$(grep -c "ambient=" "$T/out")" -eq 2 ] && ok || bad "info: $(cat "$T/out")"
+expect_rc 0 $RTP reeval "$T/ka3.rtp" --set mat.ball.kd=0.3 -i "$T/ka_a.pfm" -q
+expect_rc 0 $RTP reeval "$T/ka.rtp" --set mat.ball.ambient=0.8 --set mat.ball.kd=0.3 -i "$T/ka_b.pfm" -q
+expect_rc 0 $RTP reeval "$T/ka.rtp" --set mat.ball.kd=0.3 -i "$T/ka_c.pfm" -q
+cmp -s "$T/ka_a.pfm" "$T/ka_b.pfm" && ok || bad "ka 0.8 then kd 0.3: not as info's keys say"
+cmp -s "$T/ka_a.pfm" "$T/ka_c.pfm" && bad "ka equal to kd follows kd's edit" || ok
+expect_rc 0 $RTP trace $A --set mat.ball.ambient=0.8 --set mat.ball.ambient=kd -o "$T/ka4.rtp" -q
+$RTP info "$T/ka4.rtp" >"$T/out"
+[ "$(grep -c "ambient=" "$T/out")" -eq 1 ] && ok || bad "info shows ka after kd: $(cat "$T/out")"
 
 rm -rf "$T"
 echo "$pass passed, $fail failed, $skip skipped"

@@ -708,6 +708,23 @@ static void test_material_ambient(void)
     CHECK_MSG(strcmp(buf, "0.75,0.75,0.75") == 0, "unset, follows kd: '%s'", buf);
     CHECK(!s->mats[2].ka_set && s->mats[2].ka[0] == 0.0f && s->mats[2].ka[1] == 0.0f &&
           s->mats[2].ka[2] == 0.0f);
+    /* ambient_own tells the two apart where the numbers do not: 1 once
+       set (equal to kd too), 0 while it follows kd; it is read only */
+    CHECK(rtp_scene_get(s, "mat.2.ambient_own", buf, sizeof buf, &err) == RTP_OK &&
+          strcmp(buf, "0") == 0);
+    CHECK(rtp_scene_set(s, "mat.2.ambient", "0.75", &err) == RTP_OK);
+    CHECK(rtp_scene_get(s, "mat.2.ambient", buf, sizeof buf, &err) == RTP_OK &&
+          strcmp(buf, "0.75,0.75,0.75") == 0);
+    CHECK(rtp_scene_get(s, "mat.2.ambient_own", buf, sizeof buf, &err) == RTP_OK &&
+          strcmp(buf, "1") == 0);
+    CHECK(rtp_scene_get(s, "mat.a.ambient_own", buf, sizeof buf, &err) == RTP_OK &&
+          strcmp(buf, "1") == 0);
+    CHECK(rtp_scene_set(s, "mat.2.ambient_own", "0", &err) == RTP_ERR_KEY &&
+          strstr(err.message, "mat.2.ambient_own is read only"));
+    CHECK(rtp_scene_set(s, "mat.2.ambient", "kd", &err) == RTP_OK);
+    CHECK(rtp_scene_get(s, "mat.2.ambient_own", buf, sizeof buf, &err) == RTP_OK &&
+          strcmp(buf, "0") == 0);
+    CHECK(rtp_scene_get(s, "mat.9.ambient_own", buf, sizeof buf, &err) == RTP_ERR_KEY);
     CHECK(rtp_scene_set(s, "mat.2.ambient", "KD", &err) == RTP_ERR_PARSE);
     CHECK(rtp_scene_set(s, "mat.2.ambient", "0.5,0,3", &err) == RTP_OK);
     CHECK(rtp_scene_set(s, "mat.a.ambient", "2", &err) == RTP_OK);
