@@ -224,17 +224,27 @@ static int ci_word(const char *s, size_t n, const char *word)
     return 1;
 }
 
-int rtpi_tok_numlike(const rtpi_tok *t)
+int rtpi_tok_nan_inf(const rtpi_tok *t)
 {
     const char *s = t->s;
     size_t n = t->n;
-    if (n == 0)
-        return 0;
-    if (s[0] == '-' || s[0] == '+' || s[0] == '.' || (s[0] >= '0' && s[0] <= '9'))
-        return 1;
+    if (n && (s[0] == '-' || s[0] == '+')) {
+        s++;
+        n--;
+    }
     if (n > 4 && s[n - 1] == ')' && ci_word(s, 4, "nan("))
         return 1;
     return ci_word(s, n, "nan") || ci_word(s, n, "inf") || ci_word(s, n, "infinity");
+}
+
+int rtpi_tok_numlike(const rtpi_tok *t)
+{
+    const char *s = t->s;
+    if (t->n == 0)
+        return 0;
+    if (s[0] == '-' || s[0] == '+' || s[0] == '.' || (s[0] >= '0' && s[0] <= '9'))
+        return 1;
+    return rtpi_tok_nan_inf(t);
 }
 
 int rtpi_tok_int(const rtpi_tok *t, long *out)

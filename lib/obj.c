@@ -407,13 +407,17 @@ static char *find_file(const rtp_allocator *a, const char *base, const char *nam
    MTL's options and their arguments (-o, -s and -t take one to three
    numbers; -mm two; the others one).  An unknown option is taken to have
    none, and *unknown set.  The name is at least the last word; *spent
-   says that word is an option's argument (no name follows the options). */
-static int map_name_start(const rtpi_tok *tk, int n, int *unknown, int *spent)
+   says that word is an option's argument (no name follows the options).
+   *bad is the index of a bad number where -o, -s or -t may take one
+   ("nan", "inf", "1e999": the name began there, "cannot load image 'nan 1
+   t.png'"), else -1. */
+static int map_name_start(const rtpi_tok *tk, int n, int *unknown, int *spent, int *bad)
 {
     static const char *const one[] = {"-blendu", "-blendv", "-bm", "-boost", "-cc",
                                       "-clamp", "-imfchan", "-texres", "-type"};
     int i = 0;
     *unknown = 0;
+    *bad = -1;
     while (i < n - 1 && tk[i].s[0] == '-') {
         const rtpi_tok *o = &tk[i++];
         size_t k;
@@ -421,6 +425,9 @@ static int map_name_start(const rtpi_tok *tk, int n, int *unknown, int *spent)
             double d;
             for (k = 0; k < 3 && i < n - 1 && rtpi_tok_number(&tk[i], &d) == 0; k++)
                 i++;
+            if (k < 3 && i < n - 1 && *bad < 0 &&
+                (rtpi_tok_nan_inf(&tk[i]) || rtpi_tok_number(&tk[i], &d) == -2))
+                *bad = i;
         } else if (rtpi_tok_is(o, "-mm")) {
             i += 2;
         } else {
@@ -449,7 +456,7 @@ static rtp_status mtl_map(rtpi_lex *lx, rtp_scene *s, const char *what,
     char *path = NULL;
     rtp_error inner;
     rtp_status st;
-    int n = 0, i, from, start, unknown, spent, oom;
+    int n = 0, i, from, start, unknown, spent, bad, oom;
     while (rtpi_lex_next_inline(lx, &t)) {
         if (n == MAP_TOKENS)
             return rtpi_lex_error(lx, &t, "%s: more than %d words on the line", what,
@@ -463,7 +470,17 @@ static rtp_status mtl_map(rtpi_lex *lx, rtp_scene *s, const char *what,
        "map_Kd my tex.png" is never "tex.png"); after an option this
        reader does not know, whose arguments it cannot count, the longest
        run of the last words that names a file. */
-    start = map_name_start(tk, n, &unknown, &spent);
+    start = map_name_start(tk, n, &unknown, &spent, &bad);
+    if (bad >= 0) {
+        char show[48], opt[8];
+        for (i = bad - 1; i > 0 && tk[i].s[0] != '-'; i--)
+            ;
+        return rtpi_lex_error(lx, &tk[bad],
+                              rtpi_tok_nan_inf(&tk[bad]) ? "%s: expected number for %s, got '%s'"
+                                                         : "%s: %s %s is out of range",
+                              what, rtpi_tok_show(&tk[i], opt, sizeof opt),
+                              rtpi_tok_show(&tk[bad], show, sizeof show));
+    }
     for (from = start; from <= (unknown ? n - 1 : start); from++) {
         char *cand;
         file = tk[from]; /* (its line and column for a message) */

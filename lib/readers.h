@@ -88,6 +88,9 @@ int rtpi_tok_number(const rtpi_tok *t, double *out);
    one of them, said as a bad number by its field, rather than the next
    keyword. */
 int rtpi_tok_numlike(const rtpi_tok *t);
+/* Whether the token is one of strtod's words for a non-finite value
+   ("nan", "-inf", "Infinity", "nan(1)"), which no scene number is. */
+int rtpi_tok_nan_inf(const rtpi_tok *t);
 /* A decimal integer with an optional sign, |v| <= 2^31-1; @return 0/-1. */
 int rtpi_tok_int(const rtpi_tok *t, long *out);
 /* Copies the token into buf (at most size-1 bytes, non-printable bytes

@@ -295,13 +295,20 @@ static void test_mtl(void)
                                              {"newmtl x\nKd 0.5 0x1 0\n", "Kd green, got '0x1'"},
                                              {"newmtl x\nKd 0.5 1e999 0\n",
                                               "Kd green 1e999 is out of range"},
-                                             {"newmtl x\nNs inf\n", "Ns value, got 'inf'"}};
+                                             {"newmtl x\nNs inf\n", "Ns value, got 'inf'"},
+                                             /* (the name began there: "cannot load
+                                                image 'nan 1 t.ppm'") */
+                                             {"newmtl x\nmap_Kd -s 1 nan 1 t.ppm\n",
+                                              "map_Kd: expected number for -s, got 'nan'"},
+                                             {"newmtl x\nbump -o 1e999 t.ppm\n",
+                                              "bump: -o 1e999 is out of range"}};
         size_t i;
         for (i = 0; i < sizeof bad / sizeof *bad; i++) {
             CHECK(check_write_file(dir, "b.mtl", bad[i][0]) == 0);
             CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_PARSE && s == NULL);
             CHECK_MSG(strstr(err.file, "b.mtl") && err.line == 2 &&
-                          err.column == (i == 4 ? 4 : 8) && strstr(err.message, bad[i][1]),
+                          err.column == (i == 4 ? 4 : i == 5 ? 13 : i == 6 ? 9 : 8) &&
+                          strstr(err.message, bad[i][1]),
                       "case %zu: %d:%d %s", i, err.line, err.column, err.message);
         }
     }
