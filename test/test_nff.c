@@ -951,6 +951,15 @@ static const bad_case bad_nff[] = {
     {"s 1 2 3 abc\n", RTP_ERR_PARSE, 1, 9, "expected number for sphere radius, got 'abc'"},
     {"p 2\n0 0 0\n1 1 1\n", RTP_ERR_PARSE, 1, 3, "polygon vertex count 2 < 3"},
     {"q 1 2\n", RTP_ERR_PARSE, 1, 1, "unknown keyword 'q'"},
+    /* a number where a statement begins: one too many for the one before
+       (it said "unknown keyword '2'") */
+    {"s 0 0 0 1 2\n", RTP_ERR_PARSE, 1, 11,
+     "expected a keyword, got '2' (more numbers than the 's' at line 1 takes)"},
+    {"l 1 2 3\nf 1 1 1 1 0 0 0 0\nka 0.5 0.5 0.5 0.5\n", RTP_ERR_PARSE, 3, 16,
+     "expected a keyword, got '0.5' (more numbers than the 'ka' at line 3 takes)"},
+    {"p 3\n0 0 0\n1 0 0\n0 1 0 nan\n", RTP_ERR_PARSE, 4, 7,
+     "expected a keyword, got 'nan' (more numbers than the 'p' at line 1 takes)"},
+    {"1 s 0 0 0 1\n", RTP_ERR_PARSE, 1, 1, "expected a keyword, got '1'"},
     {"f 1 1 1 0.5 0.5 3 0", RTP_ERR_PARSE, 1, 20,
      "unexpected end of file in f (material) line, expected ior"},
     {"s 0 0 0 nan\n", RTP_ERR_PARSE, 1, 9, "expected number for sphere radius, got 'nan'"},
