@@ -984,6 +984,11 @@ static const bad_case bad_nff[] = {
      "unexpected end of file in p (polygon) line, expected vertex 3 z"},
     {"pp 3\n0 0 0 0 0 1\n1 0 0 0 0 1\n0 1 0 0 0\n", RTP_ERR_PARSE, 5, 1,
      "expected vertex 3 normal z"},
+    /* (a polygon's field is named only for a message, not for each number) */
+    {"p 3\n0 0 0\n1 x 0\n0 1 0\n", RTP_ERR_PARSE, 3, 3,
+     "expected number for polygon vertex 2 y, got 'x'"},
+    {"pp 3\n0 0 0 0 0 1\n1 0 0 0 0 1\n0 1 0 0 1e19 1\n", RTP_ERR_PARSE, 4, 9,
+     "polygon patch vertex 3 normal y 1e19 is out of range (|x| <= 1e+18)"},
     {"pp 3\n0 0 0 0 0 0\n1 0 0 0 0 1\n0 1 0 0 0 1\n", RTP_ERR_PARSE, 2, 7,
      "polygon patch vertex 1 normal is zero"},
     {"l 1 2 3 0.5 x\n", RTP_ERR_PARSE, 1, 13, "expected number for light green, got 'x'"},
