@@ -192,6 +192,14 @@ typedef struct rtpi_lightbuf {
        no bound): a ray whose direction's cosine falls below misses it
        (see lb_cone) */
     double *cone;
+    /* by rank, 4 each, where made (NULL: none; a speed-up only, made
+       where the buffer has cone entries and cones, and its memory fits
+       within the build's limit): a cone's unit normal q of the plane
+       through the light and its axis, and a bound q[3] above |q.d| for
+       every direction d a ray that can hit it has (2, no bound, for
+       other candidates): a ray whose direction's |q.d| passes it misses
+       the cone (see lb_slabs) */
+    double *slab;
     /* by rank, RTPI_EDGE_N each, where made (NULL: none; a speed-up only,
        made where its memory fits within the build's limit): a triangle's
        rtpi_tri_edges entry (its plane as rtpi_tri_planes makes it, and

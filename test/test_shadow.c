@@ -763,10 +763,12 @@ static int fail_each(const rtp_scene *s, const rtpi_kdtree *kd, rtpi_v3 lp, rtpi
             bad += c.live != 0;
             break;
         }
-        if (mode == RTPI_SHADOW_EXACT && st == RTP_OK && sh) {
-            /* the triangles' edges, a speed-up, are left out where their
-               memory cannot be had (rtpi_tri_edges): one site, the move
-               goes on */
+        if (st == RTP_OK && sh) {
+            /* speed-ups are left out where their memory cannot be had,
+               the move going on: the triangles' edges (rtpi_tri_edges),
+               EXACT's one site, and a light buffer's cones' bands
+               (lb_slabs), one a light buffer with cone entries and cones
+               (the item buffer's thin and wide ones: two at most) */
             spared++;
             rtpi_shadow_destroy(sh);
             bad += c.live != 0;
@@ -775,7 +777,10 @@ static int fail_each(const rtp_scene *s, const rtpi_kdtree *kd, rtpi_v3 lp, rtpi
         bad += st != RTP_ERR_NOMEM || sh != NULL || c.live != 0;
     }
     *sites = fail;
-    return bad + (fail == max) + (spared != (mode == RTPI_SHADOW_EXACT && s->ntris ? 1 : 0));
+    return bad + (fail == max) +
+           (mode == RTPI_SHADOW_EXACT ? spared != (s->ntris ? 1 : 0)
+                                      : spared > (s->ncones ? (mode == RTPI_SHADOW_LIGHTBUF ? 1 : 2)
+                                                            : 0));
 }
 
 static void test_alloc_failures(void)
@@ -1491,6 +1496,118 @@ static void test_lightbuf_edges_same(void)
     }
 }
 
+/* The light buffer's band test for cones (lb_slabs): every shadow ray
+   that rtpi_intersect_prim finds hitting a cone passes its cone's band,
+   for rays grazing the cones' sides (points at their radius, 1e-7 of it
+   either way, behind them as the light sees them), over cylinders and
+   cones of random sizes and directions, lights near and far and one on
+   a cylinder's axis line, at the origin and moved far from it; and the
+   band turns some missing rays away (the test has teeth). */
+static void test_lightbuf_cone_slabs(void)
+{
+    static const double offs[][2] = {{0, 1}, {3000, 0.01}, {-2e5, 3}};
+    size_t oi;
+    for (oi = 0; oi < sizeof offs / sizeof *offs; oi++) {
+        double off = offs[oi][0], sc = offs[oi][1];
+        char *text = (char *)malloc(65536);
+        size_t len = 0, k;
+        rtp_scene *s;
+        rtp_allocator al;
+        int li;
+        rtpi_allocator_init(&al, NULL);
+        CHECK(text != NULL);
+        if (!text)
+            return;
+        len += (size_t)snprintf(text + len, 65536 - len,
+                                "v\nfrom 0 -9 4\nat 0 0 0.5\nup 0 0 1\nangle 50\nhither 0.01\n"
+                                "resolution 8 8\nl 0 0 9\nf 0.8 0.8 0.8 1 0 0 0 1\n");
+        for (k = 0; k < 40; k++) {
+            double ax = 6 * (rnd() - 0.5), ay = 6 * (rnd() - 0.5), az = 3 * rnd();
+            double ln = 0.2 + 2 * rnd(), z = 2 * rnd() - 1, ph = 6.283185307179586 * rnd();
+            double rr = sqrt(1 - z * z), r0 = 0.01 + 0.3 * rnd();
+            double r1 = k % 4 == 3 ? 0.01 + 0.3 * rnd() : r0; /* every fourth a cone */
+            len += (size_t)snprintf(text + len, 65536 - len, "c\n%.17g %.17g %.17g %.17g\n"
+                                    "%.17g %.17g %.17g %.17g\n",
+                                    off + sc * ax, off + sc * ay, off + sc * az, sc * r0,
+                                    off + sc * (ax + ln * rr * cos(ph)),
+                                    off + sc * (ay + ln * rr * sin(ph)), off + sc * (az + ln * z),
+                                    sc * r1);
+        }
+        len += (size_t)snprintf(text + len, 65536 - len, "s %.17g %.17g %.17g %.17g\n",
+                                off, off, off + sc * 5, sc * 0.3);
+        s = load(text, len);
+        free(text);
+        CHECK(s != NULL);
+        if (!s)
+            return;
+        for (li = 0; li < 6; li++) {
+            rtpi_v3 L;
+            rtpi_lightbuf lb;
+            size_t r, hits = 0, turned = 0, bad = 0, banded = 0;
+            switch (li) {
+            case 0: L = v3(0.3, -0.2, 9); break;
+            case 1: L = v3(2e4, -1e4, 3e4); break;
+            case 2: { /* on the first cylinder's axis line, beyond its end */
+                const rtpi_cone_frame *cf = &s->cframes[0];
+                L = v3_madd(cf->b, cf->w, -0.5 * sc);
+                L = v3((L.x - off) / sc, (L.y - off) / sc, (L.z - off) / sc);
+                break;
+            }
+            default: L = v3(8 * (rnd() - 0.5), 8 * (rnd() - 0.5), 0.1 + 4 * rnd()); break;
+            }
+            L = v3(off + sc * L.x, off + sc * L.y, off + sc * L.z);
+            if (rtpi_lightbuf_build(s, L, li & 1 ? 64 : 256, &al, &lb, NULL) != RTP_OK) {
+                CHECK_MSG(0, "cone bands: build failed, light %d", li);
+                continue;
+            }
+            CHECK_MSG(lb.slab != NULL && lb.cone != NULL, "cone bands: none made, light %d", li);
+            for (r = 0; lb.slab && r < lb.ncand; r++) {
+                uint32_t prim = lb.cand[r].prim;
+                const double *q = lb.slab + 4 * r;
+                const rtpi_cone_frame *cf;
+                rtpi_v3 e1, e2;
+                int t;
+                if (prim < s->ntris + s->nspheres || !(q[3] < 2.0))
+                    continue;
+                banded++;
+                cf = &s->cframes[prim - s->ntris - s->nspheres];
+                e1 = v3_norm(v3_cross(cf->w, fabs(cf->w.x) < 0.6 ? v3(1, 0, 0) : v3(0, 1, 0)));
+                e2 = v3_cross(cf->w, e1);
+                for (t = 0; t < 300; t++) {
+                    /* a point about the axis within 1.5 radii, or at the
+                       radius, 1e-7 of it either way; the ray from behind
+                       it through it */
+                    double h = cf->h * rnd(), ph = 6.283185307179586 * rnd();
+                    double rad = (cf->rb + cf->k * h) *
+                                 (t & 1 ? 1.5 * rnd() : 1.0 + 1e-7 * (double)(t % 3 - 1));
+                    rtpi_v3 X = v3_madd(v3_madd(v3_madd(cf->b, cf->w, h), e1, rad * cos(ph)), e2,
+                                        rad * sin(ph));
+                    rtpi_v3 o = v3_madd(X, v3_sub(X, L), 0.05 + rnd()), dn;
+                    rtpi_ray ray = rtpi_shadow_ray(o, L);
+                    rtpi_hit hh;
+                    int in;
+                    dn = v3_mul(ray.d, -1.0);
+                    in = !(fabs(dn.x * q[0] + dn.y * q[1] + dn.z * q[2]) > q[3]);
+                    if (rtpi_intersect_prim(s, prim, &ray, &hh)) {
+                        hits++;
+                        bad += !in;
+                    } else {
+                        turned += !in;
+                    }
+                }
+            }
+            CHECK_MSG(bad == 0, "cone bands, offset %g, light %d: %lu of %lu hits outside", off,
+                      li, (unsigned long)bad, (unsigned long)hits);
+            CHECK_MSG(banded >= 20 && hits > 1000 && turned > 50,
+                      "cone bands, offset %g, light %d: %lu banded, %lu hits, %lu turned away",
+                      off, li, (unsigned long)banded, (unsigned long)hits,
+                      (unsigned long)turned);
+            rtpi_lightbuf_free(&lb, &al);
+        }
+        rtp_scene_destroy(s);
+    }
+}
+
 int main(void)
 {
     const char *env = getenv("RTP_TEST_SEED");
@@ -1512,6 +1629,7 @@ int main(void)
     RUN(test_light_at_cone_tip);
     RUN(test_exact_cache_earlier);
     RUN(test_lightbuf_edges_same);
+    RUN(test_lightbuf_cone_slabs);
     RUN(test_lightbuf_limit_threads);
     RUN(test_stopper_reports);
     RUN(test_osmesa);
