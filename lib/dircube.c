@@ -1800,11 +1800,20 @@ static void lb_slabs(rtpi_lightbuf *lb, const rtp_scene *s, rtpi_v3 light,
     size_t r, nc = lb->ncand, c0 = s->ntris + s->nspheres;
     double S = lb->scale;
     lb->slab = NULL;
-    if (!lb->cone || !s->ncones || !nc || !((double)nc * 4.0 * sizeof(double) <= room))
+    lb->cone_rank = NULL;
+    if (!lb->cone || !s->ncones || !nc ||
+        !((double)nc * 4.0 * sizeof(double) + (double)s->ncones * sizeof(uint32_t) <= room))
         return;
     lb->slab = (double *)rtpi_malloc_array(a, 4 * nc, sizeof *lb->slab);
-    if (!lb->slab)
-        return; /* (a speed-up only) */
+    lb->cone_rank = (uint32_t *)rtpi_malloc_array(a, s->ncones, sizeof *lb->cone_rank);
+    if (!lb->slab || !lb->cone_rank) { /* (a speed-up only) */
+        rtpi_free(a, lb->slab);
+        rtpi_free(a, lb->cone_rank);
+        lb->slab = NULL;
+        lb->cone_rank = NULL;
+        return;
+    }
+    memset(lb->cone_rank, 0xff, s->ncones * sizeof *lb->cone_rank); /* (RTPI_NONE) */
     for (r = 0; r < nc; r++) {
         uint32_t prim = lb->cand[r].prim;
         double *q = lb->slab + 4 * r, near = lb->cand[r].near;
@@ -1813,6 +1822,7 @@ static void lb_slabs(rtpi_lightbuf *lb, const rtp_scene *s, rtpi_v3 light,
         if (prim >= c0 && prim - c0 < s->ncones) {
             const rtpi_cone_frame *cf = &s->cframes[prim - c0];
             rtpi_v3 bl = v3_sub(cf->b, light), m = v3_cross(cf->w, bl);
+            lb->cone_rank[prim - c0] = (uint32_t)r;
             double mm = v3_len(m), R, t, ang = lb_ang(S, near);
             if (!cf->ok || !(mm >= 1e-2 * v3_len(bl)) || !(mm < HUGE_VAL) || !(ang < 1e-3))
                 continue;
@@ -2397,11 +2407,13 @@ void rtpi_lightbuf_free(rtpi_lightbuf *lb, const rtp_allocator *a)
     rtpi_free(a, lb->plane);
     rtpi_free(a, lb->cone);
     rtpi_free(a, lb->slab);
+    rtpi_free(a, lb->cone_rank);
     rtpi_free(a, lb->edge);
     rtpi_free(a, lb->rank_of);
     lb->off = lb->ref = lb->rank_of = NULL;
     lb->cand = NULL;
     lb->plane = lb->cone = lb->edge = lb->slab = NULL;
+    lb->cone_rank = NULL;
 }
 
 rtp_status rtpi_tri_planes(const rtp_scene *s, rtpi_v3 light, const rtp_allocator *a,

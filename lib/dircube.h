@@ -200,6 +200,8 @@ typedef struct rtpi_lightbuf {
        other candidates): a ray whose direction's |q.d| passes it misses
        the cone (see lb_slabs) */
     double *slab;
+    uint32_t *cone_rank; /* with slab: cone i's rank (RTPI_NONE: not a
+                            candidate), for a query's cached cone */
     /* by rank, RTPI_EDGE_N each, where made (NULL: none; a speed-up only,
        made where its memory fits within the build's limit): a triangle's
        rtpi_tri_edges entry (its plane as rtpi_tri_planes makes it, and

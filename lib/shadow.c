@@ -531,8 +531,17 @@ static int sh_cached_lb(const rtpi_shadow *sh, rtpi_shadow_cache *c, const rtpi_
             double t;
             hit = rtpi_sphere_t(&s->spheres[q - s->ntris], &r, v3_dot(r.d, r.d), &t);
         } else {
+            /* a cone outside its band (lb_slabs) is missed; r.d is the
+               walk's -d, |q.d| the same */
             rtpi_hit h;
-            hit = rtpi_intersect_prim(s, q, &r, &h);
+            size_t i = q - s->ntris - s->nspheres;
+            uint32_t k = sh->lb.slab && i < s->ncones ? sh->lb.cone_rank[i] : RTPI_NONE;
+            hit = 1;
+            if (k != RTPI_NONE) {
+                const double *b = sh->lb.slab + 4 * (size_t)k;
+                hit = !(fabs(r.d.x * b[0] + r.d.y * b[1] + r.d.z * b[2]) > b[3]);
+            }
+            hit = hit && rtpi_intersect_prim(s, q, &r, &h);
         }
         if (hit)
             return 0;
