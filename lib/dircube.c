@@ -2233,7 +2233,8 @@ static RTPI_FORCE_INLINE int lb_in_scale(const rtpi_lightbuf *lb, const rtpi_v3 
    more). */
 static RTPI_FORCE_INLINE uint32_t lb_walk(const rtpi_lightbuf *lb, const rtp_scene *s,
                                           const rtpi_ray *ray, uint32_t skip, size_t k,
-                                          size_t end, rtpi_v3 dn, int round, int edges,
+                                          size_t end, rtpi_v3 dn, int round, int band,
+                                          int edges,
                                           const rtpi_edge_o *eop, int inscale, lb_tri_ray *wp)
 {
     /* tmax = dist (1 - 1e-9): the segment reaches no farther than dist. */
@@ -2247,7 +2248,7 @@ static RTPI_FORCE_INLINE uint32_t lb_walk(const rtpi_lightbuf *lb, const rtp_sce
     const double *pl = edges ? (inscale ? lb->plane : NULL)
                              : round ? NULL : lb_in_scale(lb, &ray->o) ? lb->plane : NULL;
     int plk = !round || edges;
-    const double *sb = round ? lb->slab : NULL;
+    const double *sb = band ? lb->slab : NULL;
     const double *pe = edges && pl ? lb->edge : NULL;
     size_t ntris = s->ntris;
     rtpi_hit h;
@@ -2288,7 +2289,7 @@ static RTPI_FORCE_INLINE uint32_t lb_walk(const rtpi_lightbuf *lb, const rtp_sce
                 continue;
             /* a cone: outside its band of directions about the plane
                through the light and its axis (lb_slabs) */
-            if (sb) {
+            if (band) {
                 const double *q = sb + 4 * (size_t)rank;
                 if (fabs(dn.x * q[0] + dn.y * q[1] + dn.z * q[2]) > q[3])
                     continue;
@@ -2305,7 +2306,8 @@ static RTPI_FORCE_INLINE uint32_t lb_walk(const rtpi_lightbuf *lb, const rtp_sce
    without a first candidate (most of them: teapot 133 k of 175 k) no
    longer passes through the other as a second call (lightbuf:256, third
    move, 512^2 SPD: teapot 189.93 -> 189.66 M, balls 259.38 -> 258.87). */
-enum { LB_PLAIN, LB_ROUND, LB_EDGES }; /* the walk lb_occluder takes (lb_walk's) */
+enum { LB_PLAIN, LB_ROUND, LB_EDGES, LB_BAND }; /* the walk lb_occluder takes (lb_walk's;
+                                                   LB_BAND: LB_ROUND's with the cones' bands) */
 static RTPI_FORCE_INLINE uint32_t lb_occluder(const rtpi_lightbuf *lb, const rtp_scene *s,
                                               const rtpi_ray *ray, uint32_t skip,
                                               uint32_t first, int kind)
@@ -2352,7 +2354,8 @@ static RTPI_FORCE_INLINE uint32_t lb_occluder(const rtpi_lightbuf *lb, const rtp
     cell = rtpi_dc_wcell(&lb->w, lb->res, dn);
     if (cell == RTPI_DC_ABSENT)
         return RTPI_NONE; /* no primitive can be met in these directions */
-    return lb_walk(lb, s, ray, skip, lb->off[cell], lb->off[cell + 1], dn, kind == LB_ROUND,
+    return lb_walk(lb, s, ray, skip, lb->off[cell], lb->off[cell + 1], dn,
+                   kind == LB_ROUND || kind == LB_BAND, kind == LB_BAND,
                    kind == LB_EDGES, &eo, inscale, &w);
 }
 
@@ -2380,11 +2383,12 @@ static RTPI_FORCE_INLINE uint32_t lb_occluder(const rtpi_lightbuf *lb, const rtp
 LB_OCCLUDERS(LB_PLAIN, lb_occ_plain)
 LB_OCCLUDERS(LB_ROUND, lb_occ_round)
 LB_OCCLUDERS(LB_EDGES, lb_occ_edges)
+LB_OCCLUDERS(LB_BAND, lb_occ_band)
 
 uint32_t rtpi_lightbuf_occluder(const rtpi_lightbuf *lb, const rtp_scene *s,
                                 const rtpi_ray *ray, uint32_t skip)
 {
-    return lb->cone ? lb_occ_round(lb, s, ray, skip)
+    return lb->cone ? (lb->slab ? lb_occ_band(lb, s, ray, skip) : lb_occ_round(lb, s, ray, skip))
            : lb->edge ? lb_occ_edges(lb, s, ray, skip)
                       : lb_occ_plain(lb, s, ray, skip);
 }
@@ -2392,7 +2396,8 @@ uint32_t rtpi_lightbuf_occluder(const rtpi_lightbuf *lb, const rtp_scene *s,
 uint32_t rtpi_lightbuf_occluder_first(const rtpi_lightbuf *lb, const rtp_scene *s,
                                       const rtpi_ray *ray, uint32_t skip, uint32_t first)
 {
-    return lb->cone ? lb_occ_round_first(lb, s, ray, skip, first)
+    return lb->cone ? (lb->slab ? lb_occ_band_first(lb, s, ray, skip, first)
+                                : lb_occ_round_first(lb, s, ray, skip, first))
            : lb->edge ? lb_occ_edges_first(lb, s, ray, skip, first)
                       : lb_occ_plain_first(lb, s, ray, skip, first);
 }
