@@ -1029,6 +1029,12 @@ struct rtp_tree {
                               hit on a sphere whose shadow ray origin, the
                               normal turned inwards, lies in the ball
                               (rtpi_ball_holds), 2 anything else (vis_row) */
+    double *prim_nrm;      /* 3 per node, with cur_vis where the scene has
+                              spheres or cones: the normal
+                              rtpi_surface_normals gives at a node on a
+                              sphere or cone (ng = ns, before any turn for
+                              a back face), 0 0 0 not yet known (vis_row);
+                              NULL without them or memory */
     size_t nlights0;       /* lights traced; later ones were added */
 
     /* Evaluation caches (tree.c): the shading steps' results, kept so an

@@ -35,6 +35,7 @@ void rtp_tree_destroy(rtp_tree *t)
     rtpi_free(&a, t->cur_vis);
     rtpi_free(&a, t->cur_pos);
     rtpi_free(&a, t->ball_in);
+    rtpi_free(&a, t->prim_nrm);
     rtpi_free(&a, t->tri_nrm);
     rtpi_free(&a, t->ev_terms);
     rtpi_free(&a, t->ev_coeffs);
@@ -513,6 +514,39 @@ static int ball_holds_back(const vis_ctx *v, const rtpi_sphere *sp, uint32_t pri
     return rtpi_ball_holds(sp, rtpi_offset_origin(p, n, 1.0, floor));
 }
 
+/* rtpi_surface_normals' normal (ng = ns) at p on sphere or cone prim (not
+   a triangle), by its own arithmetic, through the node's c[0..2]
+   (t->prim_nrm): derived and kept the first time, read from then on (the
+   node's p and the scene's geometry do not change while it is kept).  0
+   where rtpi_surface_normals takes another path (a cone's axis). */
+static RTPI_FORCE_INLINE int kept_normal(double *c, const rtp_scene *s, uint32_t prim, rtpi_v3 p,
+                                         rtpi_v3 *n)
+{
+    size_t i = prim - s->ntris;
+    if (c[0] != 0.0 || c[1] != 0.0 || c[2] != 0.0) {
+        *n = v3(c[0], c[1], c[2]);
+        return 1;
+    }
+    /* (0 0 0, which no sphere or cone off its axis gives but at a
+       sphere's centre, is derived again each time: the same numbers) */
+    if (i < s->nspheres) {
+        const rtpi_sphere *sp = &s->spheres[i];
+        *n = rtpi_sphere_normal(sp, p);
+        if (sp->r < 0.0f)
+            *n = v3_mul(*n, -1.0);
+    } else {
+        rtpi_v3 q;
+        double h;
+        i -= s->nspheres;
+        if (!(i < s->ncones && s->cframes[i].ok && rtpi_cone_normal(&s->cframes[i], p, n, &q, &h)))
+            return 0;
+    }
+    c[0] = n->x;
+    c[1] = n->y;
+    c[2] = n->z;
+    return 1;
+}
+
 /* Decides light `light` anew for every node of one row of samples, with
    trace's own rule (rtpi_shadow_setup) and the chosen shadow query. */
 static int vis_row(void *ctx, int y)
@@ -533,6 +567,7 @@ static int vis_row(void *ctx, int y)
     const float *nv = t->ev_valid ? t->ev_nv : NULL;
     /* (NULL also where the light buffer has no balls: no sphere) */
     unsigned char *ball_in = v->balls ? t->ball_in : NULL;
+    double *const prim_nrm = t->prim_nrm;
     /* (the tree's and scene's arrays in locals: the query's call may
        write anything for all the compiler knows, and they were loaded
        again a node, with the row's end) */
@@ -575,6 +610,7 @@ static int vis_row(void *ctx, int y)
             mat = tr->mat;
             flip = 0;
         } else {
+            double *pn = prim_nrm && nd->prim >= ntris ? prim_nrm + 3 * n : NULL;
             if (ball_in && (nd->link & RTPI_L_BACK) && nd->prim - ntris < nspheres) {
                 /* A back hit on a sphere (a glass ball's inside: three
                    quarters of mount's nodes): its shadow ray's origin does
@@ -592,10 +628,13 @@ static int vis_row(void *ctx, int y)
                     *bi = ball_holds_back(v, sp, nd->prim, p) ? 1 : 2;
                 if (*bi == 1 && balls[si] &&
                     rtpi_two_sided(s, spd, nd->prim, &mats[sp->mat])) {
-                    rtpi_v3 nn = rtpi_sphere_normal(sp, p);
+                    rtpi_v3 nn;
                     double d;
-                    if (sp->r < 0.0f)
-                        nn = v3_mul(nn, -1.0);
+                    if (!pn || !kept_normal(pn, s, nd->prim, p, &nn)) {
+                        nn = rtpi_sphere_normal(sp, p);
+                        if (sp->r < 0.0f)
+                            nn = v3_mul(nn, -1.0);
+                    }
                     nn = v3_mul(nn, -1.0);
                     d = v3_dot(nn, v3_sub(lp, p)); /* (rtpi_shadow_setup's) */
                     if (d > 0.0) {
@@ -612,7 +651,13 @@ static int vis_row(void *ctx, int y)
                     /* (NaN: as below) */
                 }
             }
-            mat = rtpi_surface_normals(s, nd->prim, p, &ng, &ns);
+            if (pn && kept_normal(pn, s, nd->prim, p, &ng)) {
+                size_t i = nd->prim - ntris;
+                ns = ng;
+                mat = i < nspheres ? spheres[i].mat : s->cones[i - nspheres].mat;
+            } else {
+                mat = rtpi_surface_normals(s, nd->prim, p, &ng, &ns);
+            }
         }
         if (flip && (nd->link & RTPI_L_BACK) &&
             rtpi_two_sided(s, spd, nd->prim, &mats[mat])) {
@@ -1001,6 +1046,13 @@ static rtp_status update_visibility_body(rtp_tree *t, int mode, int res, int thr
         if (s->nspheres && !t->ball_in &&
             !(t->ball_in = (unsigned char *)rtpi_calloc_array(&t->alloc, t->nnodes + 1, 1)))
             return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
+        /* (and for a scene with spheres or cones the nodes' normals on
+           them, kept as vis_row meets them: a cone's two square roots
+           and divisions were a third of rings_s7's vis_row; without the
+           memory each move derives them) */
+        if ((s->nspheres || s->ncones) && !t->prim_nrm)
+            t->prim_nrm = (double *)rtpi_calloc_array(&t->alloc, 3 * t->nnodes + 1,
+                                                      sizeof *t->prim_nrm);
     }
     if (nl > t->cur_nl) {
         /* lights added since (within the same visibility words): their
@@ -2788,10 +2840,12 @@ static rtp_status retrace_edited(rtp_tree *t, int threads, int stale, double lim
     rtpi_free(&t->alloc, t->cur_vis);
     rtpi_free(&t->alloc, t->cur_pos);
     rtpi_free(&t->alloc, t->ball_in); /* (nodes traced again) */
+    rtpi_free(&t->alloc, t->prim_nrm);
     free_material_lists(t);
     t->cur_vis = NULL;
     t->cur_pos = NULL;
     t->ball_in = NULL;
+    t->prim_nrm = NULL;
     return RTP_OK;
 }
 
@@ -5272,6 +5326,7 @@ static rtp_status file_band(void *user, rtp_tree *t, int y0, int y1, const rtpi_
     b.nodes = (rtpi_cnode *)(uintptr_t)nodes;
     b.start = (uint64_t *)(uintptr_t)start;
     b.ball_in = NULL; /* (t's nodes', not the band's) */
+    b.prim_nrm = NULL;
     b.ny = y1 - y0;
     if (t->spd) {
         /* the row before the band (its last, kept from the band before)
