@@ -585,10 +585,12 @@ static int vis_row(void *ctx, int y)
     const rtpi_material *const mats = s->mats, *const ev_mats = t->ev_mats;
     for (n = (size_t)t->start[k0]; n < n1; n++) {
         const rtpi_cnode *nd = &nodes[n];
-        rtpi_v3 p = v3(nd->p[0], nd->p[1], nd->p[2]), ng, ns, o;
+        rtpi_v3 p = v3(nd->p[0], nd->p[1], nd->p[2]), ng, ns, o, l;
         uint32_t *w = &cur_vis[n * words + wi], mat;
         const rtpi_tri *tr = tri_nrm && nd->prim < ntris ? &tris[nd->prim] : NULL;
         int flip = 1; /* ng and ns still to be turned over for a back face */
+        int same = 1; /* ng and ns one vector (but a smooth triangle's) */
+        double dn;
         if (tr && (tr->n[0] == RTPI_NONE || tr->n[1] == RTPI_NONE || tr->n[2] == RTPI_NONE)) {
             /* flat: ng as rtpi_surface_normals makes it */
             const double *tn = tri_nrm + 3 * (size_t)nd->prim;
@@ -609,6 +611,7 @@ static int vis_row(void *ctx, int y)
             ns = v3(q[0], q[1], q[2]);
             mat = tr->mat;
             flip = 0;
+            same = 0;
         } else {
             double *pn = prim_nrm && nd->prim >= ntris ? prim_nrm + 3 * n : NULL;
             if (ball_in && (nd->link & RTPI_L_BACK) && nd->prim - ntris < nspheres) {
@@ -657,6 +660,7 @@ static int vis_row(void *ctx, int y)
                 mat = i < nspheres ? spheres[i].mat : s->cones[i - nspheres].mat;
             } else {
                 mat = rtpi_surface_normals(s, nd->prim, p, &ng, &ns);
+                same = 0;
             }
         }
         if (flip && (nd->link & RTPI_L_BACK) &&
@@ -665,11 +669,16 @@ static int vis_row(void *ctx, int y)
             ns = v3_mul(ns, -1.0);
         }
         *w &= ~bit;
-        if (!rtpi_shadow_setup(p, ng, ns, lp,
-                               prim_floor ? rtpi_prim_offset_floor(s, nd->prim, off_floor)
-                                          : off_floor,
-                               &o))
+        /* rtpi_shadow_setup's arithmetic, whose second dot product, ng's,
+           is its first where ng and ns are one vector (the same bits:
+           then the side is the one the normal faces, NaN as ever) */
+        l = v3_sub(lp, p);
+        dn = v3_dot(ns, l);
+        if (dn <= 0.0)
             continue;
+        o = rtpi_offset_origin(p, ng, (same ? dn : v3_dot(ng, l)) >= 0.0 ? 1.0 : -1.0,
+                               prim_floor ? rtpi_prim_offset_floor(s, nd->prim, off_floor)
+                                          : off_floor);
         queries++;
         if ((nd->link & RTPI_L_BACK) && balls && nd->prim - ntris < nspheres &&
             balls[nd->prim - ntris] && rtpi_ball_holds(&spheres[nd->prim - ntris], o)) {
