@@ -1035,6 +1035,12 @@ struct rtp_tree {
                               sphere or cone (ng = ns, before any turn for
                               a back face), 0 0 0 not yet known (vis_row);
                               NULL without them or memory */
+    unsigned char *cone_own; /* nnodes, with prim_nrm where the scene has
+                              cones: per node on one, seen from the front
+                              (its shadow ray's origin the same for every
+                              light), 0 not yet known, else 1 + what
+                              rtpi_cone_shadows_own answers, negated
+                              (vis_row) */
     size_t nlights0;       /* lights traced; later ones were added */
 
     /* Evaluation caches (tree.c): the shading steps' results, kept so an

@@ -321,12 +321,12 @@ rtp_status rtpi_shadow_create_mt(const rtp_scene *s, const rtpi_kdtree *kd, rtpi
    the least asked always) */
 static RTPI_FORCE_INLINE int sh_visible(const rtpi_shadow *sh, const rtpi_v3 *pp,
                                         const rtpi_v3 *op, uint32_t prim, const rtpi_ray *r,
-                                        uint32_t *occ, int *least)
+                                        uint32_t *occ, int *least, int own_in)
 {
     rtpi_ray rr;
     rtpi_dc_at at;
     rtpi_ib_query q;
-    int own = sh_own(sh, prim, op), v;
+    int own = own_in != RTPI_OWN_ASK ? own_in : sh_own(sh, prim, op), v;
     uint32_t skip = own == 0 ? prim : RTPI_NONE;
     *occ = RTPI_NONE;
     if (own == 1) {
@@ -392,7 +392,7 @@ static RTPI_FORCE_INLINE int sh_visible(const rtpi_shadow *sh, const rtpi_v3 *pp
 int rtpi_shadow_visible(const rtpi_shadow *sh, rtpi_v3 p, rtpi_v3 o, uint32_t prim)
 {
     uint32_t occ;
-    return sh_visible(sh, &p, &o, prim, NULL, &occ, NULL);
+    return sh_visible(sh, &p, &o, prim, NULL, &occ, NULL, RTPI_OWN_ASK);
 }
 
 /* Whether triangle q is in the way of r, for EXACT's cache: the walk's
@@ -513,9 +513,11 @@ static int sh_earlier(const rtpi_shadow *sh, rtpi_shadow_cache *c, const rtpi_ra
    sh_cached's steps for that mode alone, in a
    function of their own, so a query pays no saving of the registers the
    other modes' paths take (24 instructions a query as one body: tree's
-   lightbuf:256 move 3.6 M of 129). */
-static int sh_cached_lb(const rtpi_shadow *sh, rtpi_shadow_cache *c, const rtpi_v3 *pp,
-                        const rtpi_v3 *op, uint32_t prim)
+   lightbuf:256 move 3.6 M of 129).  own_in: RTPI_OWN_ASK, or
+   rtpi_prim_shadows_own's answer the caller knows (rtpi_shadow_visible_own) */
+static RTPI_FORCE_INLINE int sh_cached_lb_body(const rtpi_shadow *sh, rtpi_shadow_cache *c,
+                                               const rtpi_v3 *pp, const rtpi_v3 *op,
+                                               uint32_t prim, int own_in)
 {
     const rtp_scene *s = sh->s;
     uint32_t occ, last = c->last;
@@ -545,14 +547,14 @@ static int sh_cached_lb(const rtpi_shadow *sh, rtpi_shadow_cache *c, const rtpi_
         }
         if (hit)
             return 0;
-        own = sh_own(sh, prim, op);
+        own = own_in != RTPI_OWN_ASK ? own_in : sh_own(sh, prim, op);
         if (own == 1) {
             c->last = prim + 1u;
             return 0;
         }
         occ = rtpi_lightbuf_occluder(&sh->lb, s, &r, own == 0 ? prim : RTPI_NONE);
     } else {
-        own = sh_own(sh, prim, op);
+        own = own_in != RTPI_OWN_ASK ? own_in : sh_own(sh, prim, op);
         if (own == 1) {
             occ = prim;
         } else {
@@ -567,8 +569,17 @@ static int sh_cached_lb(const rtpi_shadow *sh, rtpi_shadow_cache *c, const rtpi_
     return occ == RTPI_NONE;
 }
 
-static int sh_cached(const rtpi_shadow *sh, rtpi_shadow_cache *c, const rtpi_v3 *pp,
-                     const rtpi_v3 *op, uint32_t prim)
+static int sh_cached_lb(const rtpi_shadow *sh, rtpi_shadow_cache *c, const rtpi_v3 *pp,
+                        const rtpi_v3 *op, uint32_t prim)
+{
+    return sh_cached_lb_body(sh, c, pp, op, prim, RTPI_OWN_ASK);
+}
+
+/* The other modes' steps (sh_cached), own_in a constant in each copy (a
+   test of it in every query had cost tree_s11's moves 0.1%) */
+static RTPI_FORCE_INLINE int sh_cached_body(const rtpi_shadow *sh, rtpi_shadow_cache *c,
+                                            const rtpi_v3 *pp, const rtpi_v3 *op,
+                                            uint32_t prim, int own_in)
 {
     uint32_t occ;
     int v;
@@ -605,7 +616,7 @@ static int sh_cached(const rtpi_shadow *sh, rtpi_shadow_cache *c, const rtpi_v3 
             c->last = (uint32_t)hit;
             return 0;
         }
-        v = sh_visible(sh, pp, op, prim, &r, &occ, &c->least);
+        v = sh_visible(sh, pp, op, prim, &r, &occ, &c->least, own_in);
     } else if (c->last && c->last - 1u != prim && sh->mode == RTPI_SHADOW_LIGHTBUF) {
         /* A triangle: sh_visible's, with the last occluder asked by the
            light buffer first, whose test then shares the list walk's
@@ -616,7 +627,7 @@ static int sh_cached(const rtpi_shadow *sh, rtpi_shadow_cache *c, const rtpi_v3 
            own test a call, 0.8% more).  A triangle in c->last was
            answered by this light buffer, whose lists hold hittable ones
            only: occluder_first's condition on `first`. */
-        int own = sh_own(sh, prim, op);
+        int own = own_in != RTPI_OWN_ASK ? own_in : sh_own(sh, prim, op);
         if (own == 1) {
             occ = prim;
         } else {
@@ -626,7 +637,7 @@ static int sh_cached(const rtpi_shadow *sh, rtpi_shadow_cache *c, const rtpi_v3 
         }
         v = occ == RTPI_NONE;
     } else {
-        v = sh_visible(sh, pp, op, prim, NULL, &occ, &c->least);
+        v = sh_visible(sh, pp, op, prim, NULL, &occ, &c->least, own_in);
     }
     /* Remembered only while queries keep meeting occluders: after a lit
        answer the next is most likely lit too, and a test would be lost. */
@@ -642,6 +653,19 @@ static int sh_cached(const rtpi_shadow *sh, rtpi_shadow_cache *c, const rtpi_v3 
     }
     c->last = occ != RTPI_NONE ? occ + 1u : 0u;
     return v;
+}
+
+static int sh_cached(const rtpi_shadow *sh, rtpi_shadow_cache *c, const rtpi_v3 *pp,
+                     const rtpi_v3 *op, uint32_t prim)
+{
+    return sh_cached_body(sh, c, pp, op, prim, RTPI_OWN_ASK);
+}
+
+int rtpi_shadow_visible_own(const rtpi_shadow *sh, rtpi_shadow_cache *c, const rtpi_v3 *pp,
+                            const rtpi_v3 *op, uint32_t prim, int own)
+{
+    return sh->mode == RTPI_SHADOW_LIGHTBUF ? sh_cached_lb_body(sh, c, pp, op, prim, own)
+                                            : sh_cached_body(sh, c, pp, op, prim, own);
 }
 
 void rtpi_shadow_destroy(rtpi_shadow *sh)

@@ -102,6 +102,12 @@ static inline int rtpi_shadow_visible_cached(const rtpi_shadow *sh, rtpi_shadow_
 {
     return (*(const rtpi_shadow_cached_fn *)(const void *)sh)(sh, c, p, o, prim);
 }
+/* rtpi_shadow_visible_cached with rtpi_prim_shadows_own's answer for
+   prim and o (0, 1 or -1) known already to the caller (vis_row keeps a
+   cone's per node: its origin does not depend on the light) */
+#define RTPI_OWN_ASK 2 /* (not known: shadow.c's own copy asks) */
+int rtpi_shadow_visible_own(const rtpi_shadow *sh, rtpi_shadow_cache *c, const rtpi_v3 *p,
+                            const rtpi_v3 *o, uint32_t prim, int own);
 
 void rtpi_shadow_destroy(rtpi_shadow *sh);
 
