@@ -1035,6 +1035,9 @@ struct rtp_tree {
                               sphere or cone (ng = ns, before any turn for
                               a back face), 0 0 0 not yet known (vis_row);
                               NULL without them or memory */
+    double off_floor;      /* rtpi_offset_floor of the scene and its */
+    int prim_floor;        /* per_prim, found at the first move where */
+    int floor_ok;          /* floor_ok (the geometry does not change) */
     unsigned char *cone_own; /* nnodes, with prim_nrm where the scene has
                               cones: per node on one, seen from the front
                               (its shadow ray's origin the same for every

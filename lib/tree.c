@@ -1108,8 +1108,14 @@ static rtp_status update_visibility_body(rtp_tree *t, int mode, int res, int thr
     for (i = 0; i < nl; i++)
         todo += light_moved(t, i) && !vis_up_to_date(t, i, kmode, kres);
     /* (trace's floor for the shadow rays' origins: the same rays) */
-    prim_floor = 0;
-    off_floor = todo ? rtpi_offset_floor(s, &prim_floor) : 0.0;
+    /* (once a tree: a pass over the scene's every coordinate, rings_s7
+       0.15% of a move) */
+    if (todo && !t->floor_ok) {
+        t->off_floor = rtpi_offset_floor(s, &t->prim_floor);
+        t->floor_ok = 1;
+    }
+    prim_floor = todo ? t->prim_floor : 0;
+    off_floor = todo ? t->off_floor : 0.0;
     for (i = 0; i < nl; i++) {
         const double *lp = s->lights[i].pos;
         int moved = light_moved(t, i);
