@@ -658,14 +658,14 @@ static int vis_row(void *ctx, int y)
             }
             if (pn && kept_normal(pn, s, nd->prim, p, &ng)) {
                 size_t i = nd->prim - ntris;
-                if (i >= nspheres && cone_own && !(nd->link & RTPI_L_BACK)) {
-                    /* A cone seen from the front (no turn, no ball): the
-                       steps below, but that o is p moved along the kept
-                       normal (the side it faces) by the scene's offset,
-                       the same for every light, and so is whether o lies
-                       in the cone's solid, the query's own test (sh_own),
-                       kept too (rings_s7: 3% of a move) */
-                    unsigned char *co = &cone_own[n];
+                if (!(nd->link & RTPI_L_BACK)) {
+                    /* A sphere or cone seen from the front (no turn, no
+                       ball, no material to look up): the steps below.  On
+                       a cone, o is p moved along the kept normal (the
+                       side it faces) by the scene's offset, the same for
+                       every light, and so is whether o lies in the cone's
+                       solid, the query's own test (sh_own), kept too
+                       (rings_s7: 3% of a move) */
                     *w &= ~bit;
                     l = v3_sub(lp, p);
                     dn = v3_dot(ng, l);
@@ -676,10 +676,16 @@ static int vis_row(void *ctx, int y)
                                                ? rtpi_prim_offset_floor(s, nd->prim, off_floor)
                                                : off_floor);
                     queries++;
-                    if (!*co)
-                        *co = (unsigned char)(1 - rtpi_cone_shadows_own(s, i - nspheres, &o));
-                    if (rtpi_shadow_visible_own(sh, &cache, &p, &o, nd->prim, 1 - *co))
+                    if (i >= nspheres && cone_own) {
+                        unsigned char *co = &cone_own[n];
+                        if (!*co)
+                            *co = (unsigned char)(1 -
+                                                  rtpi_cone_shadows_own(s, i - nspheres, &o));
+                        if (rtpi_shadow_visible_own(sh, &cache, &p, &o, nd->prim, 1 - *co))
+                            *w |= bit;
+                    } else if (rtpi_shadow_visible_cached(sh, &cache, &p, &o, nd->prim)) {
                         *w |= bit;
+                    }
                     continue;
                 }
                 ns = ng;
