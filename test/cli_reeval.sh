@@ -1198,6 +1198,30 @@ expect_rc 0 $RTP trace $A --set mat.ball.ambient=0.8 --set mat.ball.ambient=kd -
 $RTP info "$T/ka4.rtp" >"$T/out"
 [ "$(grep -c "ambient=" "$T/out")" -eq 1 ] && ok || bad "info shows ka after kd: $(cat "$T/out")"
 
+# A moved light keeps what vis_row derives once per node (the normals on
+# spheres and cones, a cone's own test: light-independent) until the nodes
+# are traced again: a stream moving the light on both sides of a camera
+# move and of a kt edit (class D, turning the cone two-sided) makes each
+# frame a full trace makes, bit for bit, in both exact modes (kept normals
+# left over the camera's re-trace made frames 3-5 differ)
+P=scenes/prims.nff
+$RTP trace $P --size 48x48 -q -o "$T/pm.rtp"
+acc=""
+i=0
+for kv in light.0.pos=2,-6,9 camera.from=1,-11,7 light.0.pos=-3,-5,8 mat.4.kt=0.5 \
+          light.0.pos=1,-7,5; do
+    acc="$acc --set $kv"
+    $RTP trace $P --size 48x48 -q $acc -i "$T/pmf.$i.pfm"
+    i=$((i + 1))
+done
+for m in exact lightbuf; do
+    printf 'light.0.pos=2,-6,9\ncamera.from=1,-11,7\nlight.0.pos=-3,-5,8\nmat.4.kt=0.5\nlight.0.pos=1,-7,5\n' |
+        $RTP reeval "$T/pm.rtp" --stream --shadows $m -q -i "$T/pms.$m.%d.pfm"
+    n=0
+    for i in 0 1 2 3 4; do cmp -s "$T/pms.$m.$i.pfm" "$T/pmf.$i.pfm" || n=$((n + 1)); done
+    [ $n -eq 0 ] && ok || bad "prims.nff: $n of 5 $m stream frames (moves, camera, kt) differ from full traces"
+done
+
 rm -rf "$T"
 echo "$pass passed, $fail failed, $skip skipped"
 [ "$fail" -eq 0 ]
