@@ -605,6 +605,14 @@ uint32_t rtpi_kd_occluder(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t s
 uint32_t rtpi_kd_occluder_planes(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t skip,
                                  const double *planes, const double *edges,
                                  const double *cones, double scale);
+/* For each sphere of s and a light at `light`, with rtpi_tri_planes'
+   scale for it: rtpi_sphere_sure's entry (4 doubles: C - L, |C - L|^2 -
+   r^2; NaN where the sphere's radius is 0 or not finite).  *out NULL
+   where s has no spheres, more than RTPI_EDGE_TRIS of them, a scale
+   outside [1e-90, 1e90], or its memory cannot be had (a speed-up
+   only). */
+void rtpi_sphere_entries(const rtp_scene *s, rtpi_v3 light, double scale, const rtp_allocator *a,
+                         double **out);
 /* rtpi_tri_edges' margin, times scale^3 (see there). */
 #define RTPI_EDGE_MARGIN 1e-9
 /* For each triangle of s (RTPI_EDGE_N doubles a triangle) and a light at

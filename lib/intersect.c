@@ -248,6 +248,29 @@ int rtpi_prim_shadows_own_solid(const rtp_scene *s, uint32_t prim, rtpi_v3 o, rt
     return -1;
 }
 
+void rtpi_sphere_entries(const rtp_scene *s, rtpi_v3 light, double scale, const rtp_allocator *a,
+                         double **out)
+{
+    size_t i;
+    *out = NULL;
+    if (!s->nspheres || s->nspheres > RTPI_EDGE_TRIS || !(scale >= 1e-90 && scale <= 1e90))
+        return;
+    *out = (double *)rtpi_malloc_array(a, 4 * s->nspheres, sizeof **out);
+    if (!*out)
+        return;
+    for (i = 0; i < s->nspheres; i++) {
+        const rtpi_sphere *sp = &s->spheres[i];
+        rtpi_v3 g = v3_sub(v3_from_f(sp->c), light);
+        double r = fabs((double)sp->r), *e = *out + 4 * i;
+        e[0] = g.x;
+        e[1] = g.y;
+        e[2] = g.z;
+        e[3] = v3_dot(g, g) - r * r;
+        if (!(r > 0.0) || !(r < HUGE_VAL)) /* (rtpi_sphere_roots: no hit; NaN: -1) */
+            e[0] = e[1] = e[2] = e[3] = NAN;
+    }
+}
+
 void rtpi_balls_around(const rtp_scene *s, rtpi_v3 L, unsigned char *out)
 {
     size_t i;

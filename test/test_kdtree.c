@@ -1676,6 +1676,114 @@ static void test_tri_edges(void)
     tri_edges_case(1e5);
 }
 
+/* rtpi_sphere_sure against rtpi_sphere_t on the same floats: shadow
+   rays (rtpi_shadow_ray) towards a light far off, near, on and inside a
+   sphere, through points of the sphere's silhouette seen from the light
+   and of its surface, 0 and 1e-16 to 1e-3 of the radius outside or
+   inside, from origins in front of that point, just beside it (the
+   range's end) and beyond it; radii 1e-6 to 1e3 of the scene, inside-
+   only spheres; the scene at the origin and moved by `off`.  Every
+   answer it gives must be the full test's; it must give many (sure hits
+   and misses); with its margins dropped it must answer some wrongly
+   (the cases reach the margins). */
+static void sphere_sure_case(double off, int *out)
+{
+    static const double eps[] = {-1e-3, -1e-9, -1e-12, -1e-16, 0.0, 1e-16, 1e-12, 1e-9, 1e-3};
+    static const double lam[] = {0.3, 1.0 - 1e-12, 1.0, 1.0 + 1e-12, 1.0 + 1e-6, 2.0, 5.0};
+    static const double rad[] = {1e-6, 1e-3, 0.05, 0.7, 30.0};
+    rng g;
+    rtp_allocator a;
+    int c, k;
+    g.s = g_seed ^ 0x5f3e ^ (uint64_t)off;
+    rtpi_allocator_init(&a, NULL);
+    for (c = 0; c < 200; c++) {
+        rtp_scene *s = new_scene();
+        double r = rad[c % 5] * (0.5 + rnd(&g)), sr = c % 7 == 3 ? -r : r, *planes = NULL,
+               *e = NULL, scale = 0.0, D;
+        rtpi_v3 C = v3(off + rndr(&g, -1, 1), rndr(&g, -1, 1), rndr(&g, -1, 1)), L, gl;
+        rtpi_quad_k qk, q0;
+        int lk = c % 5;
+        add_sphere(s, C.x, C.y, C.z, sr);
+        add_sphere(s, off + 3, 3, 3, 0.5); /* (the scene's extent) */
+        C = v3_from_f(s->spheres[0].c);
+        r = fabs((double)s->spheres[0].r);
+        /* the light: far, near, on the surface, just inside, deep inside */
+        if (lk == 0)
+            L = v3_add(C, v3_mul(rnd_dir(&g), 50.0 * r + 10.0));
+        else if (lk == 1)
+            L = v3_add(C, v3_mul(rnd_dir(&g), 1.5 * r));
+        else if (lk == 2)
+            L = v3_add(C, v3_mul(rnd_dir(&g), r));
+        else if (lk == 3)
+            L = v3_add(C, v3_mul(rnd_dir(&g), r * (1.0 - 1e-12)));
+        else
+            L = v3_add(C, v3_mul(rnd_dir(&g), 0.3 * r));
+        if (rtpi_tri_planes(s, L, &a, &planes, &scale, NULL) != RTP_OK) {
+            CHECK(0);
+            rtp_scene_destroy(s);
+            return;
+        }
+        rtpi_sphere_entries(s, L, scale, &a, &e);
+        CHECK(e != NULL);
+        rtpi_quad_k_make(scale, &qk);
+        q0.mq = q0.m = q0.m3 = 0.0;
+        gl = v3_sub(L, C);
+        D = v3_len(gl);
+        for (k = 0; e && k < 120; k++) {
+            rtpi_v3 n = rnd_dir(&g), T, o;
+            double ep = eps[k % 9], lm = lam[(k / 9) % 7], t;
+            rtpi_ray ray;
+            int full, sure, zero;
+            if (k % 2 == 0 && D > r) {
+                /* a silhouette point: (T - C).(T - L) = 0 */
+                rtpi_v3 u = v3_mul(gl, 1.0 / D), p = v3_sub(n, v3_mul(u, v3_dot(n, u)));
+                double pl = v3_len(p), x = r / D;
+                if (!(pl > 1e-6))
+                    continue;
+                p = v3_mul(p, 1.0 / pl);
+                T = v3_add(C, v3_add(v3_mul(u, r * x), v3_mul(p, r * sqrt(1.0 - x * x))));
+                T = v3_add(C, v3_mul(v3_sub(T, C), 1.0 + ep));
+            } else {
+                T = v3_add(C, v3_mul(n, r * (1.0 + ep)));
+            }
+            o = v3_add(L, v3_mul(v3_sub(T, L), lm));
+            ray = rtpi_shadow_ray(o, L);
+            if (!(fabs(o.x) <= scale && fabs(o.y) <= scale && fabs(o.z) <= scale))
+                continue;
+            full = rtpi_sphere_t(&s->spheres[0], &ray, v3_dot(ray.d, ray.d), &t);
+            sure = rtpi_sphere_sure(e, !(s->spheres[0].r > 0.0f), &ray, &qk);
+            zero = rtpi_sphere_sure(e, !(s->spheres[0].r > 0.0f), &ray, &q0);
+            out[0] += sure >= 0 && sure != full;
+            out[1] += sure == 1;
+            out[2] += sure == 0;
+            out[3] += sure < 0;
+            out[4] += zero >= 0 && zero != full;
+            out[5] += full;
+        }
+        rtpi_free(&a, planes);
+        rtpi_free(&a, e);
+        rtp_scene_destroy(s);
+    }
+}
+
+static void test_sphere_sure(void)
+{
+    int out[6] = {0, 0, 0, 0, 0, 0}, o2[6] = {0, 0, 0, 0, 0, 0}, i;
+    sphere_sure_case(0.0, out);
+    sphere_sure_case(1e5, o2);
+    for (i = 0; i < 6; i++)
+        printf("%s%d", i ? " " : "spheres' sure test (wrong, hits, misses, open, wrong without "
+                                 "margins, full hits): offset 0: ", out[i]);
+    for (i = 0; i < 6; i++)
+        printf("%s%d", i ? " " : "; offset 1e5: ", o2[i]);
+    printf("\n");
+    CHECK_MSG(out[0] == 0 && o2[0] == 0, "%d, %d sure answers not rtpi_sphere_t's (seed %llu)",
+              out[0], o2[0], (unsigned long long)g_seed);
+    CHECK_MSG(out[1] > 3000 && out[2] > 3000 && out[3] > 500 && o2[1] > 1000 && o2[2] > 1000,
+              "too few decided: %d %d %d, %d %d", out[1], out[2], out[3], o2[1], o2[2]);
+    CHECK_MSG(out[4] + o2[4] > 0, "no answer wrong without the margins: the cases miss them");
+}
+
 int main(void)
 {
     /* RTP_TEST_SEED, as test_itembuf and test_shadow take it (this one
@@ -1712,5 +1820,6 @@ int main(void)
     RUN(test_stats);
     RUN(test_cylinder_line);
     RUN(test_tri_edges);
+    RUN(test_sphere_sure);
     return check_report();
 }
