@@ -613,6 +613,13 @@ uint32_t rtpi_kd_occluder_planes(const rtpi_kdtree *kd, const rtpi_ray *ray, uin
    only). */
 void rtpi_sphere_entries(const rtp_scene *s, rtpi_v3 light, double scale, const rtp_allocator *a,
                          double **out);
+/* For each cone of s and a light at `light`, with rtpi_tri_planes' scale
+   for it: rtpi_cyl_sure's entry (6 doubles: L - b across the axis, along
+   it, |across|^2 - R^2, h; NaN for cones that are not cylinders and
+   cylinders below 1e-7 of the scale).  *out NULL as for
+   rtpi_sphere_entries. */
+void rtpi_cyl_entries(const rtp_scene *s, rtpi_v3 light, double scale, const rtp_allocator *a,
+                      double **out);
 /* rtpi_tri_edges' margin, times scale^3 (see there). */
 #define RTPI_EDGE_MARGIN 1e-9
 /* For each triangle of s (RTPI_EDGE_N doubles a triangle) and a light at

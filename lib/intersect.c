@@ -271,6 +271,35 @@ void rtpi_sphere_entries(const rtp_scene *s, rtpi_v3 light, double scale, const 
     }
 }
 
+void rtpi_cyl_entries(const rtp_scene *s, rtpi_v3 light, double scale, const rtp_allocator *a,
+                      double **out)
+{
+    size_t i;
+    *out = NULL;
+    if (!s->ncones || s->ncones > RTPI_EDGE_TRIS || !(scale >= 1e-90 && scale <= 1e90))
+        return;
+    *out = (double *)rtpi_malloc_array(a, 6 * s->ncones, sizeof **out);
+    if (!*out)
+        return;
+    for (i = 0; i < s->ncones; i++) {
+        const rtpi_cone_frame *cf = &s->cframes[i];
+        double *e = *out + 6 * i;
+        rtpi_v3 g = v3_sub(light, cf->b), gp;
+        double gw = v3_dot(g, cf->w), R = cf->rb;
+        gp = v3_madd(g, cf->w, -gw);
+        e[0] = gp.x;
+        e[1] = gp.y;
+        e[2] = gp.z;
+        e[3] = gw;
+        e[4] = v3_dot(gp, gp) - R * R;
+        e[5] = cf->h;
+        /* (rtpi_cyl_sure: cylinders only, and none so small against the
+           scale that rtpi_cone_near's rounding could matter) */
+        if (!cf->ok || cf->ra != cf->rb || !(R > 0.0) || !(cf->bound >= 1e-7 * scale))
+            e[0] = e[1] = e[2] = e[3] = e[4] = e[5] = NAN;
+    }
+}
+
 void rtpi_balls_around(const rtp_scene *s, rtpi_v3 L, unsigned char *out)
 {
     size_t i;

@@ -470,7 +470,8 @@ static RTPI_FORCE_INLINE int rtpi_cylinder_far(const rtpi_cone_frame *cf, const 
    silhouettes, tangent, at the range's ends; it fails with the margins
    dropped.) */
 typedef struct rtpi_quad_k {
-    double mq, m, m3;
+    double mq, m, m3; /* spheres' (rtpi_sphere_sure) */
+    double cq, c1, c2; /* cylinders' (rtpi_cyl_sure) */
 } rtpi_quad_k;
 
 static inline void rtpi_quad_k_make(double S, rtpi_quad_k *k)
@@ -478,6 +479,9 @@ static inline void rtpi_quad_k_make(double S, rtpi_quad_k *k)
     k->mq = 1e-11 * S * S;
     k->m = 1e-7 * S;
     k->m3 = 5e-6 * S;
+    k->cq = 1e-10 * S * S;
+    k->c1 = 1e-6 * S;
+    k->c2 = 1e-8 * S;
 }
 
 static RTPI_FORCE_INLINE int rtpi_sphere_sure(const double *e, int io, const rtpi_ray *ray,
@@ -493,6 +497,66 @@ static RTPI_FORCE_INLINE int rtpi_sphere_sure(const double *e, int io, const rtp
     }
     if (Q < -k->mq || P < -k->m3 || P > top + k->m3)
         return 0;
+    return -1;
+}
+
+/* Cylinders (ra == rb) seen from one light L, as rtpi_sphere_sure:
+   rtpi_cone_near and rtpi_cone_t's answer (hit_cone's) for a shadow
+   ray towards L, from entry e (rtpi_cyl_entries: with g = L - b, gw =
+   g.w, gp = g - gw w: gp, gw, kc = |gp|^2 - R^2, h), where margins make
+   it certain; 1 hit, 0 miss, -1 ask the full test.  Same conditions on
+   the ray and S.  The line from the light, X(s) = L - s d (s = |L - o|
+   - t), meets the infinite cylinder where |gp - s dp|^2 = R^2, dp = d -
+   dw w, dw = d.w: A s^2 - 2 B s + kc = 0 with A = 1 - dw^2 (|d|^2 taken
+   as 1), B = d.gp, Q = B^2 - A kc, s = (B -+ sqrt Q) / A, at height H =
+   gw - s dw.  hit_cone's answer: some root with t in [tmin, tmax] and
+   its height in [0, h].
+
+   Why it is exact (u = 2^-53, lengths below 3.5 S as for spheres; the
+   cylinder is the frame's b, w, h, R as doubles, which both tests use).
+   rtpi_cone_t's coefficients (from o2, its f, h0, q0, qd) err by at most
+   15 u (qa), 150 u S (qb), 950 u S^2 (qc), so its disc by 2500 u S^2,
+   and with o2's own offset from the line (40 u S) by under 3000 u S^2
+   from the exact line's A (R^2 - D^2); Q here errs by under 1500 u S^2
+   (gp's and kc's rounding, B's 70 u S with the exact line's 18 u S
+   offset from L, A's 20 u): the two differ by under 5000 u S^2 < 6e-13
+   S^2, and cq = 1e-10 S^2 is 160 times that.  Q < -cq: its disc is
+   negative, a miss.  Q > cq and A >= 1e-3 (the line at least 1.8
+   degrees off the axis): both square roots exceed 1e-5 S and err by
+   under 1.6e-8 S, so each root, its (with tc's 25 u S) and these, lies
+   within 2e-8 S / A + 30 u S of the exact line's, |s| <= 10 S / A
+   adding under 2.2e-11 S / A through A's error; each height (h0's 60 u
+   S, the root's error times |dw| <= 1) as close.  The margin M = c1 / A
+   + c2 (1e-6 S / A + 1e-8 S) is over 40 times that and covers |L - o| -
+   tmax <= 3.6e-9 S: a root inside [M, top - M] with its height inside
+   [M, h - M] is a hit of rtpi_cone_t's at t within [tmin, tmax] (and
+   rtpi_cone_near passes it: the point lies within sqrt(h^2/4 + R^2) of
+   the middle, and rtpi_cyl_entries leaves out cylinders whose bound,
+   1e-6 larger, is below 1e-7 S, where the 60 u S of its own test could
+   matter); both roots outside [-M, top + M] or their heights outside
+   [-M, h + M]: a miss.  Else, and for |Q| <= cq or A < 1e-3, -1; NaN
+   anywhere (entries of cones that are not cylinders) fails every
+   comparison: -1.  (test_cyl_sure; it fails with the margins
+   dropped.) */
+static RTPI_FORCE_INLINE int rtpi_cyl_sure(const double *e, const rtpi_cone_frame *cf,
+                                           const rtpi_ray *ray, const rtpi_quad_k *k)
+{
+    double dw = ray->d.x * cf->w.x + ray->d.y * cf->w.y + ray->d.z * cf->w.z;
+    double A = 1.0 - dw * dw, B = ray->d.x * e[0] + ray->d.y * e[1] + ray->d.z * e[2];
+    double Q = B * B - A * e[4], top = ray->tmax - ray->tmin;
+    if (Q < -k->cq)
+        return 0;
+    if (Q > k->cq && A >= 1e-3) {
+        double ia = 1.0 / A, sq = sqrt(Q), M = k->c1 * ia + k->c2, h = e[5];
+        double s1 = (B - sq) * ia, s2 = (B + sq) * ia;
+        double h1 = e[3] - s1 * dw, h2 = e[3] - s2 * dw;
+        if ((s1 >= M && s1 <= top - M && h1 >= M && h1 <= h - M) ||
+            (s2 >= M && s2 <= top - M && h2 >= M && h2 <= h - M))
+            return 1;
+        if ((s1 < -M || s1 > top + M || h1 < -M || h1 > h + M) &&
+            (s2 < -M || s2 > top + M || h2 < -M || h2 > h + M))
+            return 0;
+    }
     return -1;
 }
 

@@ -1784,6 +1784,125 @@ static void test_sphere_sure(void)
     CHECK_MSG(out[4] + o2[4] > 0, "no answer wrong without the margins: the cases miss them");
 }
 
+/* rtpi_cyl_sure against hit_cone (rtpi_intersect_prim) on the same
+   floats, as sphere_sure_case: shadow rays towards a light far off,
+   near, beside the axis's line, close to the surface and inside,
+   through points of the side, its silhouette seen from the light and
+   its two rims (0 and 1e-16 to 1e-3 off, heights just outside and
+   inside the ends), from origins in front of the point, at it and
+   beyond; radii and heights 1e-6 to 30; cones that are not cylinders
+   (never decided); the scene at the origin and moved by `off`. */
+static void cyl_sure_case(double off, int *out)
+{
+    static const double eps[] = {-1e-3, -1e-9, -1e-12, -1e-16, 0.0, 1e-16, 1e-12, 1e-9, 1e-3};
+    static const double lam[] = {0.3, 1.0 - 1e-12, 1.0, 1.0 + 1e-12, 1.0 + 1e-6, 2.0, 5.0};
+    static const double hts[] = {-1e-3, -1e-12, 0.0, 1e-12, 0.3, 0.5, 1.0 - 1e-12, 1.0, 1.0 + 1e-9};
+    static const double rad[] = {1e-6, 1e-3, 0.05, 0.7, 30.0};
+    rng g;
+    rtp_allocator a;
+    int c, k;
+    g.s = g_seed ^ 0xc71d ^ (uint64_t)off;
+    rtpi_allocator_init(&a, NULL);
+    for (c = 0; c < 200; c++) {
+        rtp_scene *s = new_scene();
+        double R = rad[c % 5] * (0.5 + rnd(&g)), H = rad[(c / 5) % 5] * (0.5 + 2.0 * rnd(&g)),
+               *planes = NULL, *e = NULL, scale = 0.0, gpl;
+        rtpi_v3 B = v3(off + rndr(&g, -1, 1), rndr(&g, -1, 1), rndr(&g, -1, 1)), L, gl, gp, e1;
+        const rtpi_cone_frame *cf;
+        rtpi_quad_k qk, q0;
+        int lk = c % 6, cone = c % 11 == 4;
+        add_cone(s, B, R, v3_add(B, v3_mul(rnd_dir(&g), H)), cone ? 0.5 * R : R);
+        add_sphere(s, off + 3, 3, 3, 0.5); /* (the scene's extent) */
+        cf = &s->cframes[0];
+        if (!cf->ok) {
+            rtp_scene_destroy(s);
+            continue;
+        }
+        R = cf->rb;
+        /* the light: far, near, on the axis's line, on the surface, inside */
+        if (lk == 0)
+            L = v3_add(cf->mid, v3_mul(rnd_dir(&g), 50.0 * cf->bound + 10.0));
+        else if (lk == 1)
+            L = v3_add(cf->mid, v3_mul(rnd_dir(&g), 1.5 * cf->bound));
+        else if (lk == 2)
+            L = v3_madd(cf->b, cf->w, cf->h * rndr(&g, -2, 3));
+        else if (lk == 3)
+            L = v3_madd(cf->mid, v3_norm(v3_cross(cf->w, rnd_dir(&g))), R);
+        else if (lk == 4)
+            L = v3_madd(cf->mid, v3_norm(v3_cross(cf->w, rnd_dir(&g))), R * (1.0 + 1e-9));
+        else
+            L = v3_madd(cf->mid, v3_norm(v3_cross(cf->w, rnd_dir(&g))), 0.5 * R);
+        if (rtpi_tri_planes(s, L, &a, &planes, &scale, NULL) != RTP_OK) {
+            CHECK(0);
+            rtp_scene_destroy(s);
+            return;
+        }
+        rtpi_cyl_entries(s, L, scale, &a, &e);
+        CHECK(e != NULL);
+        rtpi_quad_k_make(scale, &qk);
+        q0 = qk;
+        q0.cq = q0.c1 = q0.c2 = 0.0;
+        gl = v3_sub(L, cf->b);
+        gp = v3_madd(gl, cf->w, -v3_dot(gl, cf->w));
+        gpl = v3_len(gp);
+        e1 = v3_norm(v3_cross(cf->w, rnd_dir(&g)));
+        for (k = 0; e && k < 150; k++) {
+            double ep = eps[k % 9], lm = lam[(k / 9) % 7], hv = hts[(k / 63 + k) % 9], phi;
+            rtpi_v3 n, T, o;
+            rtpi_ray ray;
+            rtpi_hit hh;
+            int full, sure, zero;
+            if (k % 3 == 0 && gpl > R) {
+                /* a silhouette line: n.gp = R */
+                rtpi_v3 u = v3_mul(gp, 1.0 / gpl), p = v3_cross(cf->w, u);
+                double x = R / gpl;
+                n = v3_add(v3_mul(u, x), v3_mul(p, (k & 4 ? 1.0 : -1.0) * sqrt(1.0 - x * x)));
+            } else {
+                phi = rndr(&g, 0, 6.283185307179586);
+                n = v3_add(v3_mul(e1, cos(phi)), v3_mul(v3_cross(cf->w, e1), sin(phi)));
+            }
+            if (k % 5 != 1)
+                hv = rnd(&g);
+            T = v3_add(v3_madd(cf->b, cf->w, cf->h * hv), v3_mul(n, R * (1.0 + ep)));
+            o = v3_add(L, v3_mul(v3_sub(T, L), lm));
+            ray = rtpi_shadow_ray(o, L);
+            if (!(fabs(o.x) <= scale && fabs(o.y) <= scale && fabs(o.z) <= scale))
+                continue;
+            full = rtpi_intersect_prim(s, (uint32_t)(s->ntris + s->nspheres), &ray, &hh);
+            sure = rtpi_cyl_sure(e, cf, &ray, &qk);
+            zero = rtpi_cyl_sure(e, cf, &ray, &q0);
+            out[0] += sure >= 0 && sure != full;
+            out[1] += sure == 1;
+            out[2] += sure == 0;
+            out[3] += sure < 0;
+            out[4] += zero >= 0 && zero != full;
+            out[5] += cone && sure >= 0;
+        }
+        rtpi_free(&a, planes);
+        rtpi_free(&a, e);
+        rtp_scene_destroy(s);
+    }
+}
+
+static void test_cyl_sure(void)
+{
+    int out[6] = {0, 0, 0, 0, 0, 0}, o2[6] = {0, 0, 0, 0, 0, 0}, i;
+    cyl_sure_case(0.0, out);
+    cyl_sure_case(1e5, o2);
+    for (i = 0; i < 6; i++)
+        printf("%s%d", i ? " " : "cylinders' sure test (wrong, hits, misses, open, wrong "
+                                 "without margins, cones decided): offset 0: ", out[i]);
+    for (i = 0; i < 6; i++)
+        printf("%s%d", i ? " " : "; offset 1e5: ", o2[i]);
+    printf("\n");
+    CHECK_MSG(out[0] == 0 && o2[0] == 0, "%d, %d sure answers not hit_cone's (seed %llu)",
+              out[0], o2[0], (unsigned long long)g_seed);
+    CHECK_MSG(out[5] == 0 && o2[5] == 0, "cones (not cylinders) decided: %d, %d", out[5], o2[5]);
+    CHECK_MSG(out[1] > 1500 && out[2] > 1500 && out[3] > 500 && o2[1] > 100 && o2[2] > 200,
+              "too few decided: %d %d %d, %d %d", out[1], out[2], out[3], o2[1], o2[2]);
+    CHECK_MSG(out[4] + o2[4] > 0, "no answer wrong without the margins: the cases miss them");
+}
+
 int main(void)
 {
     /* RTP_TEST_SEED, as test_itembuf and test_shadow take it (this one
@@ -1821,5 +1940,6 @@ int main(void)
     RUN(test_cylinder_line);
     RUN(test_tri_edges);
     RUN(test_sphere_sure);
+    RUN(test_cyl_sure);
     return check_report();
 }
