@@ -620,6 +620,13 @@ void rtpi_sphere_entries(const rtp_scene *s, rtpi_v3 light, double scale, const 
    rtpi_sphere_entries. */
 void rtpi_cyl_entries(const rtp_scene *s, rtpi_v3 light, double scale, const rtp_allocator *a,
                       double **out);
+/* rtpi_kd_occluder_planes (without edges) in scenes mostly of spheres
+   and cones, with rtpi_cyl_entries' cylinders (cyls) deciding
+   cylinder tests where their margins make it certain (rtpi_cyl_sure):
+   the same answer; the ray a shadow ray towards the entries' light. */
+uint32_t rtpi_kd_occluder_cyls(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t skip,
+                               const double *planes, const double *cones, const double *cyls,
+                               double scale);
 /* rtpi_tri_edges' margin, times scale^3 (see there). */
 #define RTPI_EDGE_MARGIN 1e-9
 /* For each triangle of s (RTPI_EDGE_N doubles a triangle) and a light at

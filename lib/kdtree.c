@@ -1803,7 +1803,7 @@ static RTPI_FORCE_INLINE int kd_cylinder_line_far(const double *q, const rtpi_co
 static RTPI_FORCE_INLINE uint32_t kd_occluder(const rtpi_kdtree *kd, const rtpi_ray *ray,
                                               uint32_t skip, int lazy, const double *pl,
                                               const double *pe, double thr, const double *pc,
-                                              int cn)
+                                              int cn, const double *py, const rtpi_quad_k *qk)
 {
     kd_item stack[KD_DEPTH_CAP + 4];
     kd_ray kr;
@@ -1923,6 +1923,20 @@ static RTPI_FORCE_INLINE uint32_t kd_occluder(const rtpi_kdtree *kd, const rtpi_
                     } else if (seen[prim & 7u] == prim) {
                         continue;
                     }
+                    if (py) {
+                        /* a cylinder decided from the light's numbers
+                           where they are certain (rtpi_cyl_sure; its
+                           miss by the line's distance, before the line
+                           test below) */
+                        int e = rtpi_cyl_sure(py + 6 * (size_t)(prim - ntris - nspheres), cf, ray,
+                                              qk);
+                        if (e > 0)
+                            return prim;
+                        if (e == 0) {
+                            seen[prim & 7u] = prim;
+                            continue;
+                        }
+                    }
                     if (cy && kd_cylinder_line_far(cy + 6 * (size_t)(prim - ntris - nspheres),
                                                    cf, ray, ld, tl)) {
                         seen[prim & 7u] = prim;
@@ -1946,8 +1960,8 @@ static RTPI_FORCE_INLINE uint32_t kd_occluder(const rtpi_kdtree *kd, const rtpi_
 }
 
 #define KD_OCC(lazy, pl, pe, thr, pc)                                                          \
-    (s->ncones ? kd_occluder(kd, ray, skip, lazy, pl, pe, thr, pc, 1)                          \
-               : kd_occluder(kd, ray, skip, lazy, pl, pe, thr, pc, 0))
+    (s->ncones ? kd_occluder(kd, ray, skip, lazy, pl, pe, thr, pc, 1, NULL, NULL)              \
+               : kd_occluder(kd, ray, skip, lazy, pl, pe, thr, pc, 0, NULL, NULL))
 
 uint32_t rtpi_kd_occluder(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t skip)
 {
@@ -1980,6 +1994,20 @@ uint32_t rtpi_kd_occluder_planes(const rtpi_kdtree *kd, const rtpi_ray *ray, uin
     if (planes)
         return cones ? KD_OCC(0, planes, NULL, 0.0, cones) : KD_OCC(0, planes, NULL, 0.0, NULL);
     return rtpi_kd_occluder(kd, ray, skip);
+}
+
+uint32_t rtpi_kd_occluder_cyls(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t skip,
+                               const double *planes, const double *cones, const double *cyls,
+                               double scale)
+{
+    const rtp_scene *s = kd->scene;
+    rtpi_quad_k qk;
+    if (cones && cyls && s->ntris < s->nspheres + s->ncones && fabs(ray->o.x) <= scale &&
+        fabs(ray->o.y) <= scale && fabs(ray->o.z) <= scale) {
+        rtpi_quad_k_make(scale, &qk);
+        return kd_occluder(kd, ray, skip, 1, planes, NULL, 0.0, cones, 1, cyls, &qk);
+    }
+    return rtpi_kd_occluder_planes(kd, ray, skip, planes, NULL, cones, scale);
 }
 
 int rtpi_kd_occluded(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t skip)

@@ -391,6 +391,9 @@ static RTPI_FORCE_INLINE int sh_visible(const rtpi_shadow *sh, const rtpi_v3 *pp
     }
     if (sh->mode == RTPI_SHADOW_LIGHTBUF)
         return (*occ = rtpi_lightbuf_occluder(&sh->lb, sh->s, r, skip)) == RTPI_NONE;
+    if (sh->cyls && sh->cones && sh->s->ntris < sh->s->nspheres + sh->s->ncones)
+        return (*occ = rtpi_kd_occluder_cyls(sh->kd, r, skip, sh->planes, sh->cones, sh->cyls,
+                                             sh->pscale)) == RTPI_NONE;
     return (*occ = rtpi_kd_occluder_planes(sh->kd, r, skip, sh->planes, sh->edges, sh->cones,
                                            sh->pscale)) == RTPI_NONE;
 }
