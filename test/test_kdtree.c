@@ -1884,9 +1884,72 @@ static void cyl_sure_case(double off, int *out)
     }
 }
 
+/* The walk with the cylinders' numbers (rtpi_kd_occluder_cyls) answers
+   the primitive the walk without them answers, on shadow rays from
+   points on and around thin cylinders (a ring of them, as SPD's rings)
+   and spheres; returns the walks that met one. */
+static int cyl_walk_case(double off, int *bad)
+{
+    rng g;
+    rtp_allocator a;
+    rtp_scene *s = new_scene();
+    rtpi_kdtree *kd = NULL;
+    int i, k, li, met = 0;
+    g.s = g_seed ^ 0x3a7 ^ (uint64_t)off;
+    rtpi_allocator_init(&a, NULL);
+    for (i = 0; i < 60; i++) {
+        double a0 = 0.1047 * i, a1 = a0 + 0.1047, z = 0.1 * (i / 20);
+        add_cone(s, v3(off + cos(a0), sin(a0), z), 0.03, v3(off + cos(a1), sin(a1), z), 0.03);
+    }
+    add_cone(s, v3(off, 0, 0), 0.2, v3(off, 0, 0.5), 0.1); /* (a cone: never decided) */
+    for (i = 0; i < 10; i++)
+        add_sphere(s, off + rndr(&g, -1, 1), rndr(&g, -1, 1), rndr(&g, 0, 0.5), 0.05);
+    if (rtpi_kd_build(s, NULL, &kd, NULL) != RTP_OK) {
+        CHECK(0);
+        rtp_scene_destroy(s);
+        return 0;
+    }
+    for (li = 0; li < 3; li++) {
+        rtpi_v3 L = li == 0 ? v3(off + 2, 3, 9) : li == 1 ? v3(off + 0.2, 0.1, 0.3)
+                                                 : v3(off + 1.0, 0.03, 0.0);
+        double *planes = NULL, *cones = NULL, *cyls = NULL, scale = 0.0;
+        if (rtpi_tri_planes(s, L, &a, &planes, &scale, NULL) != RTP_OK ||
+            rtpi_round_cones(s, L, scale, rtpi_kd_far(kd, L), &a, &cones, NULL) != RTP_OK) {
+            CHECK(0);
+            break;
+        }
+        rtpi_cyl_entries(s, L, scale, &a, &cyls);
+        CHECK(cyls != NULL);
+        for (k = 0; cyls && k < 4000; k++) {
+            const rtpi_cone_frame *cf = &s->cframes[(int)(rnd(&g) * 60) % 60];
+            rtpi_v3 n = v3_norm(v3_cross(cf->w, rnd_dir(&g))), p, o;
+            rtpi_ray r;
+            uint32_t q0, q1;
+            p = v3_add(v3_madd(cf->b, cf->w, cf->h * rnd(&g)),
+                       v3_mul(n, cf->rb * (1.0 + (k % 3 ? 1e-7 : 0.5))));
+            o = k % 2 ? p : v3_add(p, v3_mul(rnd_dir(&g), 0.3));
+            r = rtpi_shadow_ray(o, L);
+            q0 = rtpi_kd_occluder_planes(kd, &r, RTPI_NONE, planes, NULL, cones, scale);
+            q1 = rtpi_kd_occluder_cyls(kd, &r, RTPI_NONE, planes, cones, cyls, scale);
+            *bad += q0 != q1;
+            met += q0 != RTPI_NONE;
+        }
+        rtpi_free(&a, planes);
+        rtpi_free(&a, cones);
+        rtpi_free(&a, cyls);
+    }
+    rtpi_kd_destroy(kd);
+    rtp_scene_destroy(s);
+    return met;
+}
+
 static void test_cyl_sure(void)
 {
-    int out[6] = {0, 0, 0, 0, 0, 0}, o2[6] = {0, 0, 0, 0, 0, 0}, i;
+    int out[6] = {0, 0, 0, 0, 0, 0}, o2[6] = {0, 0, 0, 0, 0, 0}, i, bad = 0, met;
+    met = cyl_walk_case(0.0, &bad) + cyl_walk_case(1e5, &bad);
+    printf("cylinders' walk: %d of 24000 rays blocked\n", met);
+    CHECK_MSG(bad == 0 && met > 3000, "%d walks with the cylinders' numbers answered another "
+              "primitive (%d blocked; seed %llu)", bad, met, (unsigned long long)g_seed);
     cyl_sure_case(0.0, out);
     cyl_sure_case(1e5, o2);
     for (i = 0; i < 6; i++)
