@@ -765,10 +765,12 @@ static int fail_each(const rtp_scene *s, const rtpi_kdtree *kd, rtpi_v3 lp, rtpi
         }
         if (st == RTP_OK && sh) {
             /* speed-ups are left out where their memory cannot be had,
-               the move going on: the triangles' edges (rtpi_tri_edges),
-               EXACT's one site, and a light buffer's cones' bands
-               (lb_slabs), two a light buffer with cone entries and cones
-               (the item buffer's thin and wide ones: four at most) */
+               the move going on: EXACT's triangles' edges and spheres'
+               and cylinders' numbers (rtpi_tri_edges, rtpi_sphere_entries,
+               rtpi_cyl_entries), one site each, and a light buffer's
+               cones' bands (lb_slabs), two a light buffer with cone
+               entries and cones (the item buffer's thin and wide ones:
+               four at most) */
             spared++;
             rtpi_shadow_destroy(sh);
             bad += c.live != 0;
@@ -778,7 +780,8 @@ static int fail_each(const rtp_scene *s, const rtpi_kdtree *kd, rtpi_v3 lp, rtpi
     }
     *sites = fail;
     return bad + (fail == max) +
-           (mode == RTPI_SHADOW_EXACT      ? spared != (s->ntris ? 1 : 0)
+           (mode == RTPI_SHADOW_EXACT
+                ? spared != (s->ntris ? 1 : 0) + (s->nspheres ? 1 : 0) + (s->ncones ? 1 : 0)
             : mode == RTPI_SHADOW_LIGHTBUF ? spared != (s->ncones ? 2 : 0)
                                            : spared > (s->ncones ? 4 : 0));
 }
