@@ -617,7 +617,7 @@ void rtpi_sphere_entries(const rtp_scene *s, rtpi_v3 light, double scale, const 
    for it: rtpi_cyl_sure's entry (6 doubles: L - b across the axis, along
    it, |across|^2 - R^2, h; NaN for cones that are not cylinders and
    cylinders below 1e-7 of the scale).  *out NULL as for
-   rtpi_sphere_entries. */
+   rtpi_sphere_entries, and where no cone is such a cylinder. */
 void rtpi_cyl_entries(const rtp_scene *s, rtpi_v3 light, double scale, const rtp_allocator *a,
                       double **out);
 /* rtpi_kd_occluder_planes (without edges) in scenes mostly of spheres
