@@ -1838,7 +1838,9 @@ static void cyl_sure_case(double off, int *out)
             return;
         }
         rtpi_cyl_entries(s, L, scale, &a, &e);
-        CHECK(e != NULL);
+        /* (none where no cone is a cylinder; nor where the one is small
+           against the scale) */
+        CHECK(!cone || e == NULL);
         rtpi_quad_k_make(scale, &qk);
         q0 = qk;
         q0.cq = q0.c1 = q0.c2 = 0.0;
