@@ -100,6 +100,18 @@ static int sh_cached_lb(const rtpi_shadow *sh, rtpi_shadow_cache *c, const rtpi_
                         const rtpi_v3 *op, uint32_t prim);
 static int sh_cached(const rtpi_shadow *sh, rtpi_shadow_cache *c, const rtpi_v3 *pp,
                      const rtpi_v3 *op, uint32_t prim);
+static int sh_cached_cyl(const rtpi_shadow *sh, rtpi_shadow_cache *c, const rtpi_v3 *pp,
+                         const rtpi_v3 *op, uint32_t prim);
+
+/* Whether EXACT's kd walks ask the cylinders' numbers (rtpi_kd_occluder_cyls):
+   in scenes mostly of spheres and cones.  Chosen once, with the query's
+   function (sh->cached): a test in every query had cost the scenes of
+   triangles' moves 0.3-0.5% (gears_s4 exact). */
+static int sh_cyl_walk(const rtpi_shadow *sh)
+{
+    return sh->mode == RTPI_SHADOW_EXACT && sh->cyls && sh->cones &&
+           sh->s->ntris < sh->s->nspheres + sh->s->ncones;
+}
 
 /* sh->ball for the light; 0, or -1 out of memory. */
 static int sh_balls(rtpi_shadow *sh, const rtp_allocator *a)
@@ -282,7 +294,9 @@ rtp_status rtpi_shadow_create_mt(const rtp_scene *s, const rtpi_kdtree *kd, rtpi
     if (st == RTP_OK && sh->mode == RTPI_SHADOW_EXACT)
         st = rtpi_round_cones(s, light, sh->pscale, rtpi_kd_far(sh->kd, light), a,
                               &sh->cones, err);
-    sh->cached = sh->mode == RTPI_SHADOW_LIGHTBUF ? sh_cached_lb : sh_cached;
+    sh->cached = sh->mode == RTPI_SHADOW_LIGHTBUF ? sh_cached_lb
+                 : sh_cyl_walk(sh)                  ? sh_cached_cyl
+                                                    : sh_cached;
     if (st == RTP_OK && sh_balls(sh, a) != 0)
         st = rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
     if (st != RTP_OK) {
@@ -327,7 +341,7 @@ rtp_status rtpi_shadow_create_mt(const rtp_scene *s, const rtpi_kdtree *kd, rtpi
    the least asked always) */
 static RTPI_FORCE_INLINE int sh_visible(const rtpi_shadow *sh, const rtpi_v3 *pp,
                                         const rtpi_v3 *op, uint32_t prim, const rtpi_ray *r,
-                                        uint32_t *occ, int *least, int own_in)
+                                        uint32_t *occ, int *least, int own_in, int cyl)
 {
     rtpi_ray rr;
     rtpi_dc_at at;
@@ -391,7 +405,7 @@ static RTPI_FORCE_INLINE int sh_visible(const rtpi_shadow *sh, const rtpi_v3 *pp
     }
     if (sh->mode == RTPI_SHADOW_LIGHTBUF)
         return (*occ = rtpi_lightbuf_occluder(&sh->lb, sh->s, r, skip)) == RTPI_NONE;
-    if (sh->cyls && sh->cones && sh->s->ntris < sh->s->nspheres + sh->s->ncones)
+    if (cyl)
         return (*occ = rtpi_kd_occluder_cyls(sh->kd, r, skip, sh->planes, sh->cones, sh->cyls,
                                              sh->pscale)) == RTPI_NONE;
     return (*occ = rtpi_kd_occluder_planes(sh->kd, r, skip, sh->planes, sh->edges, sh->cones,
@@ -401,7 +415,7 @@ static RTPI_FORCE_INLINE int sh_visible(const rtpi_shadow *sh, const rtpi_v3 *pp
 int rtpi_shadow_visible(const rtpi_shadow *sh, rtpi_v3 p, rtpi_v3 o, uint32_t prim)
 {
     uint32_t occ;
-    return sh_visible(sh, &p, &o, prim, NULL, &occ, NULL, RTPI_OWN_ASK);
+    return sh_visible(sh, &p, &o, prim, NULL, &occ, NULL, RTPI_OWN_ASK, sh_cyl_walk(sh));
 }
 
 /* Whether triangle q is in the way of r, for EXACT's cache: the walk's
@@ -634,7 +648,7 @@ static int sh_cached_lb(const rtpi_shadow *sh, rtpi_shadow_cache *c, const rtpi_
    test of it in every query had cost tree_s11's moves 0.1%) */
 static RTPI_FORCE_INLINE int sh_cached_body(const rtpi_shadow *sh, rtpi_shadow_cache *c,
                                             const rtpi_v3 *pp, const rtpi_v3 *op,
-                                            uint32_t prim, int own_in)
+                                            uint32_t prim, int own_in, int cyl)
 {
     uint32_t occ;
     int v;
@@ -673,7 +687,7 @@ static RTPI_FORCE_INLINE int sh_cached_body(const rtpi_shadow *sh, rtpi_shadow_c
             c->last = (uint32_t)hit;
             return 0;
         }
-        v = sh_visible(sh, pp, op, prim, &r, &occ, &c->least, own_in);
+        v = sh_visible(sh, pp, op, prim, &r, &occ, &c->least, own_in, cyl);
     } else if (c->last && c->last - 1u != prim && sh->mode == RTPI_SHADOW_LIGHTBUF) {
         /* A triangle: sh_visible's, with the last occluder asked by the
            light buffer first, whose test then shares the list walk's
@@ -694,7 +708,7 @@ static RTPI_FORCE_INLINE int sh_cached_body(const rtpi_shadow *sh, rtpi_shadow_c
         }
         v = occ == RTPI_NONE;
     } else {
-        v = sh_visible(sh, pp, op, prim, NULL, &occ, &c->least, own_in);
+        v = sh_visible(sh, pp, op, prim, NULL, &occ, &c->least, own_in, cyl);
     }
     /* Remembered only while queries keep meeting occluders: after a lit
        answer the next is most likely lit too, and a test would be lost. */
@@ -715,14 +729,21 @@ static RTPI_FORCE_INLINE int sh_cached_body(const rtpi_shadow *sh, rtpi_shadow_c
 static int sh_cached(const rtpi_shadow *sh, rtpi_shadow_cache *c, const rtpi_v3 *pp,
                      const rtpi_v3 *op, uint32_t prim)
 {
-    return sh_cached_body(sh, c, pp, op, prim, RTPI_OWN_ASK);
+    return sh_cached_body(sh, c, pp, op, prim, RTPI_OWN_ASK, 0);
+}
+
+static int sh_cached_cyl(const rtpi_shadow *sh, rtpi_shadow_cache *c, const rtpi_v3 *pp,
+                         const rtpi_v3 *op, uint32_t prim)
+{
+    return sh_cached_body(sh, c, pp, op, prim, RTPI_OWN_ASK, 1);
 }
 
 int rtpi_shadow_visible_own(const rtpi_shadow *sh, rtpi_shadow_cache *c, const rtpi_v3 *pp,
                             const rtpi_v3 *op, uint32_t prim, int own)
 {
     return sh->mode == RTPI_SHADOW_LIGHTBUF ? sh_cached_lb_body(sh, c, pp, op, prim, own)
-                                            : sh_cached_body(sh, c, pp, op, prim, own);
+           : sh->cached == sh_cached_cyl ? sh_cached_body(sh, c, pp, op, prim, own, 1)
+                                         : sh_cached_body(sh, c, pp, op, prim, own, 0);
 }
 
 void rtpi_shadow_destroy(rtpi_shadow *sh)
