@@ -213,6 +213,10 @@ typedef struct rtpi_lightbuf {
     double ethr;
     uint32_t *rank_of;   /* with edge: each triangle's rank (RTPI_NONE: none) */
     double scale;        /* the scene's and light's largest |coordinate| */
+    /* bytes the build's limit leaves once the lists and the speed-ups
+       above are made (HUGE_VAL: no limit), for the light buffer's shadow
+       query's own numbers (shadow.c, sh_lb_quadrics) */
+    double room;
     size_t nrefs, ncand;
 } rtpi_lightbuf;
 

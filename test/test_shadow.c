@@ -733,6 +733,17 @@ static void c_free(void *u, void *p)
     free(p);
 }
 
+/* 1 where some cone of s is a cylinder (sh_lb_quadrics makes its
+   numbers) */
+static int has_cyl(const rtp_scene *s)
+{
+    size_t i;
+    for (i = 0; i < s->ncones; i++)
+        if (s->cframes[i].ok && s->cframes[i].ra == s->cframes[i].rb)
+            return 1;
+    return 0;
+}
+
 /* Every allocation failing in turn: NOMEM, nothing leaked. */
 /* Creates the shadow structures of mode with allocation k failed, for k
    = 0, 1, ... until one succeeds (at most max tries): each failure must
@@ -770,7 +781,10 @@ static int fail_each(const rtp_scene *s, const rtpi_kdtree *kd, rtpi_v3 lp, rtpi
                rtpi_cyl_entries), one site each, and a light buffer's
                cones' bands (lb_slabs), two a light buffer with cone
                entries and cones (the item buffer's thin and wide ones:
-               four at most) */
+               four at most); a light buffer's spheres' and
+               cylinders' numbers for its cached occluder
+               (sh_lb_quadrics: spheres where they outnumber the cones,
+               cylinders where a cone is one), one site each */
             spared++;
             rtpi_shadow_destroy(sh);
             bad += c.live != 0;
@@ -782,7 +796,8 @@ static int fail_each(const rtp_scene *s, const rtpi_kdtree *kd, rtpi_v3 lp, rtpi
     return bad + (fail == max) +
            (mode == RTPI_SHADOW_EXACT
                 ? spared != (s->ntris ? 1 : 0) + (s->nspheres ? 1 : 0) + (s->ncones ? 1 : 0)
-            : mode == RTPI_SHADOW_LIGHTBUF ? spared != (s->ncones ? 2 : 0)
+            : mode == RTPI_SHADOW_LIGHTBUF
+                ? spared != (s->ncones ? 2 : 0) + (s->nspheres > s->ncones ? 1 : 0) + has_cyl(s)
                                            : spared > (s->ncones ? 4 : 0));
 }
 
