@@ -2164,12 +2164,14 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
         rtpi_free(a, parts[k].runs);
     lb_edges(lb, s, light, a, limit - lists);
     lb_slabs(lb, s, light, a, limit - lists);
-    lb->room = limit - lists -
-               (lb->edge ? (double)lb->ncand * RTPI_EDGE_N * sizeof(double) +
-                               (double)s->ntris * sizeof(uint32_t)
-                         : 0.0) -
-               (lb->slab ? (double)lb->ncand * 4.0 * sizeof(double) + (double)s->ncones * sizeof(uint32_t)
-                         : 0.0);
+    /* (lb_edges' and lb_slabs' bytes, as they count them) */
+    lb->room = limit - lists;
+    if (lb->edge)
+        lb->room -= (double)lb->ncand * RTPI_EDGE_N * sizeof(double) +
+                    (double)s->ntris * sizeof(uint32_t);
+    if (lb->slab)
+        lb->room -= (double)lb->ncand * 4.0 * sizeof(double) +
+                    (double)s->ncones * sizeof(uint32_t);
     return RTP_OK;
 }
 
