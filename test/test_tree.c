@@ -3562,10 +3562,10 @@ static void light_planes_run(int nl, int spd, int region, int threads)
 {
     char path[512], key[32], what[96], col[64];
     rtp_scene *s;
-    rtp_tree *t = NULL;
+    rtp_tree *t = NULL, *lazy = NULL;
     rtp_trace_options o;
-    rtp_eval_options eo;
-    rtp_image *re = NULL;
+    rtp_eval_options eo, eo1;
+    rtp_image *re = NULL, *img = NULL;
     rtp_eval_stats es;
     unsigned long holes[2] = {0, 0};
     int l;
@@ -3591,26 +3591,69 @@ static void light_planes_run(int nl, int spd, int region, int threads)
     }
     eo.threads = threads;
     eo.incremental = 1;
+    eo1 = eo;
+    eo1.incremental = 0;
     snprintf(what, sizeof what, "%d lights, spd %d, region %d, -j%d", nl, spd, region, threads);
     if (rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK &&
         rtp_tree_eval(t, &eo, &re, NULL, NULL) == RTP_OK) {
-        CHECK_MSG(!t->cp_ok || !t->cp_ok[2], "%s: a plane made by the evaluation", what);
+        /* one or two lights: the first evaluation into a kept image made
+           S and every light's plane (cp_ready), which the first colour
+           edits use as they are; with more, none */
+        if (nl <= 2) {
+            CHECK_MSG(t->cp_s_ok && t->cp_ok, "%s: no S made by the evaluation", what);
+            for (l = 0; l < nl && t->cp_ok; l++) {
+                CHECK_MSG(t->cp_ok[2 + l], "%s: light %d's plane not made by the evaluation",
+                          what, l);
+                lp_check(t, 2 + (size_t)l, NULL, what, holes);
+            }
+            /* the same scene on the lazy path: its first evaluation not
+               kept (no planes), each plane made at its light's first edit */
+            if (rtp_record(s, &o, &lazy, NULL, NULL, NULL) == RTP_OK &&
+                rtp_tree_eval(lazy, &eo1, &img, NULL, NULL) == RTP_OK) {
+                CHECK_MSG(!lazy->cp_ok || !lazy->cp_ok[2], "%s: a plane made unkept", what);
+            } else {
+                CHECK(0);
+            }
+        } else {
+            CHECK_MSG(!t->cp_ok || !t->cp_ok[2], "%s: a plane made by the evaluation", what);
+        }
         for (l = 0; l < nl; l++) {
+            const size_t j = 2 + (size_t)l;
             snprintf(key, sizeof key, "light.%d.color", l);
             CHECK(rtp_tree_set(t, key, "0.7,0.05,1.3", NULL) == RTP_OK);
+            /* (set: the planes stay; cp_planes makes none that holds) */
+            if (nl <= 2)
+                CHECK_MSG(t->cp_ok && t->cp_ok[j] && t->cp_s_ok,
+                          "%s: light %d's plane gone before its first edit", what, l);
             if (rtp_tree_eval_into(t, &eo, re, &es, NULL) != RTP_OK) {
                 CHECK(0);
                 continue;
             }
             /* (the term alone differs from S: S + K dc) */
-            CHECK_MSG(es.combined_samples == 0 && t->cp_nd == 1 && t->cp_d[0] == 2 + (size_t)l &&
+            CHECK_MSG(es.combined_samples == 0 && t->cp_nd == 1 && t->cp_d[0] == j &&
                           !t->cp_check,
                       "%s: light %d's edit not from its plane alone", what, l);
-            lp_check(t, 2 + (size_t)l, re->pixels, what, holes);
+            lp_check(t, j, re->pixels, what, holes);
+            if (lazy && img) {
+                rtp_image *li = NULL;
+                CHECK(rtp_tree_set(lazy, key, "0.7,0.05,1.3", NULL) == RTP_OK);
+                if (rtp_tree_eval(lazy, &eo1, &li, NULL, NULL) == RTP_OK) {
+                    CHECK_MSG(lazy->cp_ok && lazy->cp_ok[j] &&
+                                  memcmp(li->pixels, re->pixels,
+                                         (size_t)3 * re->width * re->height * sizeof(float)) ==
+                                      0,
+                              "%s: light %d's first edit not the lazy path's image", what, l);
+                } else {
+                    CHECK(0);
+                }
+                rtp_image_destroy(li);
+            }
             /* back to S's colour: the next light's edit differs alone */
             snprintf(col, sizeof col, "0.%d,0.3,0.2", 2 + l);
             CHECK(rtp_tree_set(t, key, col, NULL) == RTP_OK);
             CHECK(rtp_tree_eval_into(t, &eo, re, &es, NULL) == RTP_OK);
+            if (lazy)
+                CHECK(rtp_tree_set(lazy, key, col, NULL) == RTP_OK);
         }
         CHECK_MSG(holes[0] > 0 && holes[1] > 0,
                   "%s: %lu pixels without nodes inside spans, %lu rows with none", what,
@@ -3619,14 +3662,16 @@ static void light_planes_run(int nl, int spd, int region, int threads)
         CHECK(0);
     }
     rtp_image_destroy(re);
+    rtp_image_destroy(img);
     rtp_tree_destroy(t);
+    rtp_tree_destroy(lazy);
     rtp_scene_destroy(s);
 }
 
 static void test_light_planes(void)
 {
     int nl, th;
-    for (nl = 3; nl <= 7; nl += 4)
+    for (nl = 1; nl <= 7; nl += nl < 3 ? 1 : 4)
         for (th = 1; th <= 2; th++) {
             light_planes_run(nl, 0, 0, th);
             light_planes_run(nl, 1, 0, th);
