@@ -446,10 +446,12 @@ typedef struct rtp_eval_options {
                                wrong pixels, so set this only for the image
                                this tree wrote last and nothing wrote
                                since.  An evaluation of every sample (the
-                               first) with it set also readies the first
-                               colour edit of each light in a scene of
-                               one or two lights: 12 bytes a pixel, and
-                               12 a pixel each light reaches, kept. */
+                               first) with it set also makes the
+                               snapshot colour edits start from (12
+                               bytes a pixel, kept) and, in a scene of
+                               one or two lights, readies the first
+                               colour edit of each light: 12 bytes more
+                               a pixel each light reaches, kept. */
     double memory_limit;    /* bytes the trees may take while samples are
                                traced again (class D), old and new, and a
                                moved light's direction cube's cells (6

@@ -3382,7 +3382,10 @@ static void ready_planes_run(int spd)
     memset(o.region, 0, sizeof o.region);
     if (s && rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK &&
         rtp_tree_eval(t, &eo, &re, NULL, NULL) == RTP_OK) {
-        CHECK_MSG(!t->cp_ok && !t->cp_sown, "spd %d: planes of 40 lights made", spd);
+        /* (S alone: every colour edit starts from it) */
+        CHECK_MSG(t->cp_ok && !t->cp_ok[2] && !t->cp_ok[41] && t->cp_s_ok && t->cp_sown &&
+                      t->cp_s == t->cp_sown && t->ev_samples_ok,
+                  "spd %d: 40 lights: a plane made, or S not", spd);
         for (j = 0; j < 40; j += 13) {
             snprintf(key, sizeof key, "light.%d.color", (int)j);
             if (edit_equals_trace(t, s, &o, &eo, re, key, "0.3,0.2,0.1", &es))
@@ -3598,7 +3601,7 @@ static void light_planes_run(int nl, int spd, int region, int threads)
         rtp_tree_eval(t, &eo, &re, NULL, NULL) == RTP_OK) {
         /* one or two lights: the first evaluation into a kept image made
            S and every light's plane (cp_ready), which the first colour
-           edits use as they are; with more, none */
+           edits use as they are; with more, S alone */
         if (nl <= 2) {
             CHECK_MSG(t->cp_s_ok && t->cp_ok, "%s: no S made by the evaluation", what);
             for (l = 0; l < nl && t->cp_ok; l++) {
@@ -3615,7 +3618,9 @@ static void light_planes_run(int nl, int spd, int region, int threads)
                 CHECK(0);
             }
         } else {
-            CHECK_MSG(!t->cp_ok || !t->cp_ok[2], "%s: a plane made by the evaluation", what);
+            /* (S alone, in a block of its own) */
+            CHECK_MSG(t->cp_ok && !t->cp_ok[2] && t->cp_s_ok && t->cp_sown,
+                      "%s: a plane made by the evaluation, or S not", what);
         }
         for (l = 0; l < nl; l++) {
             const size_t j = 2 + (size_t)l;
