@@ -1553,6 +1553,13 @@ static void test_lightbuf_cone_slabs(void)
         }
         len += (size_t)snprintf(text + len, 65536 - len, "s %.17g %.17g %.17g %.17g\n",
                                 off, off, off + sc * 5, sc * 0.3);
+        /* a floor far below: two triangles among the round candidates */
+        len += (size_t)snprintf(text + len, 65536 - len,
+                                "p 4\n%.17g %.17g %.17g\n%.17g %.17g %.17g\n"
+                                "%.17g %.17g %.17g\n%.17g %.17g %.17g\n",
+                                off - sc * 9, off - sc * 9, off - sc * 20, off + sc * 9,
+                                off - sc * 9, off - sc * 20, off + sc * 9, off + sc * 9,
+                                off - sc * 20, off - sc * 9, off + sc * 9, off - sc * 20);
         s = load(text, len);
         free(text);
         CHECK(s != NULL);
@@ -1579,6 +1586,13 @@ static void test_lightbuf_cone_slabs(void)
                 continue;
             }
             CHECK_MSG(lb.slab != NULL && lb.cone != NULL, "cone bands: none made, light %d", li);
+            /* a triangle's cone entry turns nothing away: the round
+               walk's scan stops at it by that test alone (lb_walk) */
+            CHECK(s->ntris == 2);
+            for (r = 0; lb.cone && r < lb.ncand; r++)
+                if (lb.cand[r].prim < s->ntris)
+                    CHECK(lb.cone[4 * r] == 0.0 && lb.cone[4 * r + 1] == 0.0 &&
+                          lb.cone[4 * r + 2] == 0.0 && lb.cone[4 * r + 3] == -2.0);
             for (r = 0; lb.slab && r < lb.ncand; r++) {
                 uint32_t prim = lb.cand[r].prim;
                 const double *q = lb.slab + 4 * r;
