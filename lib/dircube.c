@@ -2454,6 +2454,20 @@ uint32_t rtpi_lightbuf_occluder_first(const rtpi_lightbuf *lb, const rtp_scene *
                       : lb_occ_plain_first(lb, s, ray, skip, first);
 }
 
+rtpi_lb_occ_fn rtpi_lightbuf_occ_fn(const rtpi_lightbuf *lb)
+{
+    return lb->cone ? (lb->slab ? lb_occ_band : lb_occ_round)
+           : lb->edge ? lb_occ_edges
+                      : lb_occ_plain;
+}
+
+rtpi_lb_occ_first_fn rtpi_lightbuf_occ_first_fn(const rtpi_lightbuf *lb)
+{
+    return lb->cone ? (lb->slab ? lb_occ_band_first : lb_occ_round_first)
+           : lb->edge ? lb_occ_edges_first
+                      : lb_occ_plain_first;
+}
+
 void rtpi_lightbuf_free(rtpi_lightbuf *lb, const rtp_allocator *a)
 {
     if (!lb)

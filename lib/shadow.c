@@ -36,6 +36,8 @@ struct rtpi_shadow {
     const rtpi_kdtree *kd;
     rtpi_v3 light;
     rtpi_lightbuf lb;   /* LIGHTBUF; the thin primitives for the item buffer */
+    rtpi_lb_occ_fn lb_occ; /* LIGHTBUF: lb's query functions (rtpi_lightbuf_occ_fn) */
+    rtpi_lb_occ_first_fn lb_occ_first;
     rtpi_lightbuf wide; /* the other primitives, for the item buffer */
     rtpi_itembuf ib;
     unsigned char *thin; /* per primitive: 1 if in lb */
@@ -329,8 +331,11 @@ rtp_status rtpi_shadow_create_mt(const rtp_scene *s, const rtpi_kdtree *kd, rtpi
     if (st == RTP_OK && sh->mode == RTPI_SHADOW_EXACT)
         st = rtpi_round_cones(s, light, sh->pscale, rtpi_kd_far(sh->kd, light), a,
                               &sh->cones, err);
-    if (st == RTP_OK && sh->mode == RTPI_SHADOW_LIGHTBUF)
+    if (st == RTP_OK && sh->mode == RTPI_SHADOW_LIGHTBUF) {
         sh_lb_quadrics(sh, a);
+        sh->lb_occ = rtpi_lightbuf_occ_fn(&sh->lb);
+        sh->lb_occ_first = rtpi_lightbuf_occ_first_fn(&sh->lb);
+    }
     sh->cached = sh->mode == RTPI_SHADOW_LIGHTBUF ? sh_cached_lb
                  : sh_cyl_walk(sh)                  ? sh_cached_cyl
                                                     : sh_cached;
@@ -656,7 +661,7 @@ static RTPI_FORCE_INLINE int sh_cached_lb_body(const rtpi_shadow *sh, rtpi_shado
             c->last = prim + 1u;
             return 0;
         }
-        occ = rtpi_lightbuf_occluder(&sh->lb, s, &r, own == 0 ? prim : RTPI_NONE);
+        occ = sh->lb_occ(&sh->lb, s, &r, own == 0 ? prim : RTPI_NONE);
     } else {
         own = own_in != RTPI_OWN_ASK ? own_in : sh_own(sh, prim, op);
         if (own == 1) {
@@ -664,9 +669,9 @@ static RTPI_FORCE_INLINE int sh_cached_lb_body(const rtpi_shadow *sh, rtpi_shado
         } else {
             r = rtpi_shadow_ray(*op, sh->light);
             occ = last && last - 1u != prim
-                      ? rtpi_lightbuf_occluder_first(&sh->lb, s, &r,
-                                                     own == 0 ? prim : RTPI_NONE, last - 1u)
-                      : rtpi_lightbuf_occluder(&sh->lb, s, &r, own == 0 ? prim : RTPI_NONE);
+                      ? sh->lb_occ_first(&sh->lb, s, &r, own == 0 ? prim : RTPI_NONE,
+                                         last - 1u)
+                      : sh->lb_occ(&sh->lb, s, &r, own == 0 ? prim : RTPI_NONE);
         }
     }
     c->last = occ != RTPI_NONE ? occ + 1u : 0u;
