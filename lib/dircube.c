@@ -671,6 +671,76 @@ static void dc_cover(dc_ctx *c, uint32_t prim, double ang, dc_emit_fn fn,
     }
 }
 
+/* The light buffer's cells for sphere prim (of s->spheres) by the box of
+   its exact projection, where that is quick and sure: 1 when done, 0
+   for dc_cover to do it (the item buffer's cells keep dc_cover's).
+   dc_cover bounds the sphere's cone of directions (half-angle alpha =
+   asin(r / D) + ang about w, the unit direction to its centre, as
+   dc_bound_prim) by an octagon, projects its 8 points and lists the
+   cells of their box: 1,400 instructions a sphere (balls_s4: 10.6 M of
+   its lightbuf:256 move), and the box of the octagon's corners.  Here,
+   in face f's local frame (w = (wx, wy, wz), wz > 0) the cone's u range
+   on the plane z = 1 is bounded by the planes x = u z tangent to it:
+   (wx - u wz)^2 = sin^2(alpha) (1 + u^2), so with sn = sin alpha,
+   u = (wx wz -+ sn sqrt(wx^2 + wz^2 - sn^2)) / (wz^2 - sn^2), and v
+   alike with wy.  Taken only where wz^2 - sn^2 >= 1/4 (the cone well in
+   front of the face: no division by a small number), and where the box
+   widened by m lies within |u|, |v| < 0.9 of the face: every direction
+   of the cone then has its face's axis the largest by a tenth, so it is
+   face f's (rtpi_dc_face), and no other face lists it (a ray that can
+   hit the sphere runs within ang of a direction to it, the lists'
+   argument above, so inside the cone).  Rounding: sn is grown by 1e-9 of
+   itself for asin's and sin's; every input of the formula is at most 1,
+   the denominator at least 1/4, so u is off by a few 1e-15, w (cl / D)
+   by as little; the box is widened by 1e-10 besides m (= 4 ang, as
+   dc_cover widens).  Cells clamp to the window as in dc_cover_fast.
+   Where the box is not small (DC_BOX_EDGE, DC_BOX_CELLS), dc_cover's
+   spans are kept (fewer cells than a big box). */
+static int dc_cover_sphere(dc_ctx *c, uint32_t prim, double ang, dc_emit_fn fn, void *user)
+{
+    const rtpi_sphere *sp = &c->s->spheres[prim - c->s->ntris];
+    rtpi_v3 cl = v3_sub(v3_from_f(sp->c), c->L);
+    double D = v3_len(cl), r = fabs((double)sp->r), alpha, sn, den, wq[3], q[3], box[4];
+    double m = 4.0 * ang + 1e-10;
+    int f, a, k, i0, i1, j0, j1, j, res = c->res;
+    if (!(D > r) || !(D < HUGE_VAL))
+        return 0;
+    alpha = asin(r / D) + ang;
+    if (!(alpha < 0.5))
+        return 0;
+    sn = sin(alpha) * (1.0 + 1e-9);
+    wq[0] = cl.x / D;
+    wq[1] = cl.y / D;
+    wq[2] = cl.z / D;
+    a = fabs(wq[0]) >= fabs(wq[1]) ? (fabs(wq[0]) >= fabs(wq[2]) ? 0 : 2)
+                                   : (fabs(wq[1]) >= fabs(wq[2]) ? 1 : 2);
+    f = 2 * a + (wq[a] < 0.0);
+    dc_local(f, wq, q);
+    den = q[2] * q[2] - sn * sn;
+    if (!(den >= 0.25))
+        return 0;
+    for (k = 0; k < 2; k++) {
+        double root = sn * sqrt(q[k] * q[k] + den), mid = q[k] * q[2];
+        box[2 * k] = (mid - root) / den - m;
+        box[2 * k + 1] = (mid + root) / den + m;
+        if (!(box[2 * k] > -0.9 && box[2 * k + 1] < 0.9))
+            return 0;
+    }
+    if (c->fbase[f] == RTPI_DC_ABSENT)
+        return 1; /* no cell holds its directions */
+    i0 = rtpi_dc_wcoord(box[0], c->u0[f], c->du[f], res);
+    i1 = rtpi_dc_wcoord(box[1], c->u0[f], c->du[f], res);
+    j0 = rtpi_dc_wcoord(box[2], c->v0[f], c->dv[f], res);
+    j1 = rtpi_dc_wcoord(box[3], c->v0[f], c->dv[f], res);
+    if (!(i1 - i0 + 1 <= DC_BOX_EDGE || j1 - j0 + 1 <= DC_BOX_EDGE ||
+          (i1 - i0 + 1) * (j1 - j0 + 1) <= DC_BOX_CELLS))
+        return 0;
+    for (j = j0; j <= j1; j++)
+        fn(user, c->fbase[f] + (size_t)j * (size_t)res + (size_t)i0, i1 - i0 + 1);
+    c->faces |= 1u << f;
+    return 1;
+}
+
 /* ------------------------------------------------ a triangle's own way */
 
 /* dc_spans_tri's edge from P to Q (face coordinates; jlP, jhP and jlQ,
@@ -1531,7 +1601,9 @@ static int lb_part(void *ctx, int part)
                 pl[0] = pl[1] = pl[2] = pl[3] = 0.0;
                 pl[4] = HUGE_VAL;
             }
-            dc_cover(&w->c, prim, ang, lb_count, lf);
+            if (prim - w->c.s->ntris >= w->c.s->nspheres ||
+                !dc_cover_sphere(&w->c, prim, ang, lb_count, lf))
+                dc_cover(&w->c, prim, ang, lb_count, lf);
         }
     }
     return lf->oom;

@@ -1644,6 +1644,103 @@ static void test_lightbuf_cone_slabs(void)
     }
 }
 
+/* The light buffer lists a sphere by the box of its exact projection
+   (dircube.c, dc_cover_sphere): every shadow ray that rtpi_intersect_prim
+   finds hitting a sphere, grazing ones above all (through points at its
+   silhouette seen from the light, 1e-7 of its radius either way), finds
+   it in its cell's list; over spheres of random sizes from a tenth of a
+   cell to many cells, lights near and far, at the origin and moved far
+   from it (the offsets and scales of the cone bands' test), at 64 and
+   256 cells.  It fails with the box's sine 3% smaller. */
+static void test_lightbuf_sphere_box(void)
+{
+    static const double offs[][2] = {{0, 1}, {3000, 0.01}, {-2e5, 3}};
+    size_t oi;
+    for (oi = 0; oi < sizeof offs / sizeof *offs; oi++) {
+        double off = offs[oi][0], sc = offs[oi][1];
+        char *text = (char *)malloc(65536);
+        size_t len = 0, k;
+        rtp_scene *s;
+        rtp_allocator al;
+        int li;
+        rtpi_allocator_init(&al, NULL);
+        CHECK(text != NULL);
+        if (!text)
+            return;
+        len += (size_t)snprintf(text + len, 65536 - len,
+                                "v\nfrom 0 -9 4\nat 0 0 0.5\nup 0 0 1\nangle 50\nhither 0.01\n"
+                                "resolution 8 8\nl 0 0 9\nf 0.8 0.8 0.8 1 0 0 0 1\n");
+        for (k = 0; k < 200; k++) {
+            double r = k % 3 == 0 ? 0.003 + 0.01 * rnd() : k % 3 == 1 ? 0.03 * rnd() + 0.01
+                                                                     : 0.1 + 0.4 * rnd();
+            len += (size_t)snprintf(text + len, 65536 - len, "s %.17g %.17g %.17g %.17g\n",
+                                    off + sc * 6 * (rnd() - 0.5), off + sc * 6 * (rnd() - 0.5),
+                                    off + sc * 3 * rnd(), sc * r);
+        }
+        s = load(text, len);
+        free(text);
+        CHECK(s != NULL);
+        if (!s)
+            return;
+        for (li = 0; li < 6; li++) {
+            rtpi_v3 L;
+            rtpi_lightbuf lb;
+            size_t i, hits = 0, bad = 0;
+            switch (li) {
+            case 0: L = v3(0.3, -0.2, 9); break;
+            case 1: L = v3(2e2, -1e2, 3e2); break;
+            default: L = v3(8 * (rnd() - 0.5), 8 * (rnd() - 0.5), 4 + 4 * rnd()); break;
+            }
+            L = v3(off + sc * L.x, off + sc * L.y, off + sc * L.z);
+            if (rtpi_lightbuf_build(s, L, li & 1 ? 64 : 256, &al, &lb, NULL) != RTP_OK) {
+                CHECK_MSG(0, "sphere box: build failed, light %d", li);
+                continue;
+            }
+            for (i = 0; i < s->nspheres; i++) {
+                uint32_t prim = (uint32_t)(s->ntris + i);
+                rtpi_v3 C = v3_from_f(s->spheres[i].c), w = v3_sub(C, L), e1, e2;
+                double r = fabs((double)s->spheres[i].r), D = v3_len(w);
+                int t;
+                if (!(D > 1.01 * r))
+                    continue;
+                w = v3_mul(w, 1.0 / D);
+                e1 = v3_norm(v3_cross(w, fabs(w.x) < 0.6 ? v3(1, 0, 0) : v3(0, 1, 0)));
+                e2 = v3_cross(w, e1);
+                for (t = 0; t < 200; t++) {
+                    /* a point of the silhouette's circle (centre C - w
+                       r^2 / D, radius r sqrt(1 - r^2 / D^2)), its radius
+                       1e-7 of itself either way, or within it; the ray
+                       from behind it through it */
+                    double ph = 6.283185307179586 * rnd();
+                    double rad = r * sqrt(1.0 - r * r / (D * D)) *
+                                 (t & 1 ? rnd() : 1.0 + 1e-7 * (double)(t % 3 - 1));
+                    rtpi_v3 X = v3_madd(v3_madd(v3_madd(C, w, -r * r / D), e1, rad * cos(ph)),
+                                        e2, rad * sin(ph));
+                    rtpi_v3 o = v3_madd(X, v3_sub(X, L), 0.05 + rnd());
+                    rtpi_ray ray = rtpi_shadow_ray(o, L);
+                    rtpi_hit hh;
+                    size_t cell, e;
+                    int listed = 0;
+                    if (!rtpi_intersect_prim(s, prim, &ray, &hh))
+                        continue;
+                    hits++;
+                    cell = rtpi_dc_wcell(&lb.w, lb.res, v3_mul(ray.d, -1.0));
+                    for (e = cell == RTPI_DC_ABSENT ? 0 : lb.off[cell];
+                         cell != RTPI_DC_ABSENT && e < lb.off[cell + 1]; e++)
+                        listed |= lb.cand[lb.ref[e]].prim == prim;
+                    bad += !listed;
+                }
+            }
+            CHECK_MSG(bad == 0, "sphere box, offset %g, light %d: %lu of %lu hits not listed", off,
+                      li, (unsigned long)bad, (unsigned long)hits);
+            CHECK_MSG(hits > 10000, "sphere box, offset %g, light %d: %lu hits", off, li,
+                      (unsigned long)hits);
+            rtpi_lightbuf_free(&lb, &al);
+        }
+        rtp_scene_destroy(s);
+    }
+}
+
 int main(void)
 {
     const char *env = getenv("RTP_TEST_SEED");
@@ -1666,6 +1763,7 @@ int main(void)
     RUN(test_exact_cache_earlier);
     RUN(test_lightbuf_edges_same);
     RUN(test_lightbuf_cone_slabs);
+    RUN(test_lightbuf_sphere_box);
     RUN(test_lightbuf_limit_threads);
     RUN(test_stopper_reports);
     RUN(test_osmesa);
