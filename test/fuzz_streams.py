@@ -143,6 +143,15 @@ class Gen:
         a = [float(x) for x in env["cam.at"].split(",")]
         self.at = a
         self.rad = max(1e-3, sum((p - q) ** 2 for p, q in zip(f, a)) ** 0.5)
+        # a scene far from the origin against its size (fuzz_scenes/
+        # quadrics_far.nff): places written with the digits that size needs
+        # (%.4g had put its lights 10 units apart at 1e4 and made the camera's
+        # from its at); scenes within 100 sizes of the origin keep %.4g, and
+        # with it the streams of earlier seeds
+        import math
+        far = max(abs(x) for x in a) / self.rad
+        self.pfmt = fmt if far <= 100 else \
+            (lambda x, d=4 + int(math.ceil(math.log10(far))): "%.*g" % (d, x))
         self.orig_pos = [l["pos"] for l in lights]
         self.cur = {}
         self.amb = set()  # materials given their own ambient coefficient
@@ -165,11 +174,11 @@ class Gen:
         r = self.r
         w = r.random()
         if w < 0.03:   # far away: every mode decides it by shadow rays
-            return ",".join(fmt(c + r.uniform(-1, 1) * self.rad * 10 ** r.choice([6, 11, 13])) for c in self.at)
+            return ",".join(self.pfmt(c + r.uniform(-1, 1) * self.rad * 10 ** r.choice([6, 11, 13])) for c in self.at)
         if w < 0.35:   # round positions: edges through cell centres, lights in planes
             q = r.choice([1, 0.5, 0.25])
-            return ",".join(fmt(round((c + r.uniform(-1, 1) * self.rad) / q) * q) for c in self.at)
-        return ",".join(fmt(c + r.uniform(-1, 1) * self.rad) for c in self.at)
+            return ",".join(self.pfmt(round((c + r.uniform(-1, 1) * self.rad) / q) * q) for c in self.at)
+        return ",".join(self.pfmt(c + r.uniform(-1, 1) * self.rad) for c in self.at)
 
     def edit(self):
         """one random edit: (class, key, value)"""
@@ -183,8 +192,8 @@ class Gen:
                 return ("K", "camera.angle", fmt(r.uniform(20, 70)))
             if r.random() < 0.3:
                 a = [float(x) for x in self.env["cam.at"].split(",")]
-                return ("K", "camera.at", ",".join(fmt(x + r.uniform(-0.1, 0.1) * self.rad) for x in a))
-            return ("K", "camera.from", ",".join(fmt(x + r.uniform(-0.1, 0.1) * self.rad) for x in f))
+                return ("K", "camera.at", ",".join(self.pfmt(x + r.uniform(-0.1, 0.1) * self.rad) for x in a))
+            return ("K", "camera.from", ",".join(self.pfmt(x + r.uniform(-0.1, 0.1) * self.rad) for x in f))
         nm = len(self.mats)
         if not nm:
             c = r.choice("AB")
