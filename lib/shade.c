@@ -829,6 +829,9 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
     const size_t nl = s->nlights;
     size_t i;
 #endif
+    /* (a kept rest is made only where the samples are combined: the
+       copy with it tests nothing) */
+    const int comb = with_rest || samples != NULL;
     unsigned long long combined = 0;
     int nonfinite = 0;
     size_t k, j;
@@ -956,7 +959,7 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
             hi = (uint32_t)_mm_cvtsi128_si32(_mm_castps_si128(f2));
             memcpy(&old_lo, cf, sizeof old_lo);
             memcpy(&old_hi, cf + 2, sizeof old_hi);
-            if (samples && lo == old_lo && hi == old_hi)
+            if (comb && lo == old_lo && hi == old_hi)
                 continue;
             memcpy(cf, &lo, sizeof lo);
             memcpy(cf + 2, &hi, sizeof hi);
@@ -1040,13 +1043,13 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
                three classifications (a tenth of a move's sums on
                tetra) */
             nonfinite |= !(fabs(a0) + fabs(a1) + fabs(a2) <= RTPI_COEFF_MAX);
-            if (samples && memcmp(cf, f, sizeof f) == 0)
+            if (comb && memcmp(cf, f, sizeof f) == 0)
                 continue;
             memcpy(cf, f, sizeof f);
         }
 #endif
 #ifdef SHADE_SSE2
-        if (samples) {
+        if (comb) {
             /* the block below on the vectors, each lane its operations
                (the background, ambient and this light's colour widened
                once a call) */
@@ -1090,7 +1093,7 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
             combined++;
         }
 #else
-        if (samples) { /* the other samples' colours hold */
+        if (comb) { /* the other samples' colours hold */
             if (with_rest) {
                 /* the rest of the sum, then this light's term: as
                    rtpi_combine where the light is the last, else about
