@@ -840,6 +840,7 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
         float *co = coeffs + k * nc;
 #ifdef SHADE_SSE2
         __m128d a01 = _mm_setzero_pd(), a2v = _mm_setzero_pd();
+        __m128 f01, f2; /* the coefficient rounded, kept for its colour */
 #else
         double a0 = 0.0, a1 = 0.0, a2 = 0.0;
 #endif
@@ -950,9 +951,10 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
                in its order, the comparison of the bits as two integers */
             float *cf = co + 6 + 3 * light;
             __m128d ab = _mm_and_pd(a01, absm);
-            __m128 f01 = _mm_cvtpd_ps(a01), f2 = _mm_cvtsd_ss(_mm_setzero_ps(), a2v);
             uint64_t lo, old_lo;
             uint32_t hi, old_hi;
+            f01 = _mm_cvtpd_ps(a01);
+            f2 = _mm_cvtsd_ss(_mm_setzero_ps(), a2v);
             ab = _mm_add_sd(_mm_add_sd(ab, _mm_unpackhi_pd(ab, ab)), _mm_and_pd(a2v, absm));
             nonfinite |= !(_mm_cvtsd_f64(ab) <= RTPI_COEFF_MAX);
             _mm_storel_epi64((__m128i *)&lo, _mm_castps_si128(f01)); /* (also i386) */
@@ -1057,14 +1059,14 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
             __m128d v01, v2;
             if (with_rest) {
                 double *r = rest + 3 * k;
-                const float *f = co + 6 + 3 * light;
                 __m128d ab;
                 if (!rest_ok[k]) {
                     rtpi_combine_rest(s, cl, co, light, r);
                     rest_ok[k] = 1;
                 }
-                v01 = _mm_add_pd(_mm_loadu_pd(r), _mm_mul_pd(load2f(f), lc01));
-                v2 = _mm_add_sd(_mm_load_sd(r + 2), _mm_mul_sd(load1f(&f[2]), lc2));
+                /* (the coefficient as stored: f01, f2) */
+                v01 = _mm_add_pd(_mm_loadu_pd(r), _mm_mul_pd(_mm_cvtps_pd(f01), lc01));
+                v2 = _mm_add_sd(_mm_load_sd(r + 2), _mm_mul_sd(_mm_cvtps_pd(f2), lc2));
                 ab = _mm_and_pd(v01, absm);
                 ab = _mm_add_sd(_mm_add_sd(ab, _mm_unpackhi_pd(ab, ab)), _mm_and_pd(v2, absm));
                 if (_mm_cvtsd_f64(ab) <= DBL_MAX)
