@@ -826,6 +826,8 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
     const __m128d bg01 = load2f(s->background), bg2 = _mm_set_sd(s->background[2]);
     const __m128d am01 = load2f(s->ambient), am2 = _mm_set_sd(s->ambient[2]);
     const __m128d lc01 = _mm_loadu_pd(cl + 3 * light), lc2 = _mm_load_sd(cl + 3 * light + 2);
+    const __m128d cmax = _mm_set_sd(RTPI_COEFF_MAX);
+    __m128d badv = _mm_setzero_pd();
     const size_t nl = s->nlights;
     size_t i;
 #endif
@@ -956,7 +958,8 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
             f01 = _mm_cvtpd_ps(a01);
             f2 = _mm_cvtsd_ss(_mm_setzero_ps(), a2v);
             ab = _mm_add_sd(_mm_add_sd(ab, _mm_unpackhi_pd(ab, ab)), _mm_and_pd(a2v, absm));
-            nonfinite |= !(_mm_cvtsd_f64(ab) <= RTPI_COEFF_MAX);
+            /* !(ab <= RTPI_COEFF_MAX), a NaN's too, as a mask */
+            badv = _mm_or_pd(badv, _mm_cmpnle_sd(ab, cmax));
             _mm_storel_epi64((__m128i *)&lo, _mm_castps_si128(f01)); /* (also i386) */
             hi = (uint32_t)_mm_cvtsi128_si32(_mm_castps_si128(f2));
             memcpy(&old_lo, cf, sizeof old_lo);
@@ -1127,6 +1130,9 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
         }
 #endif
     }
+#ifdef SHADE_SSE2
+    nonfinite |= _mm_movemask_pd(badv) & 1;
+#endif
     *bad |= nonfinite;
     return combined;
 }
