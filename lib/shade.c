@@ -901,21 +901,29 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
             m = &mats[prim < ntris        ? tris[prim].mat
                       : prim - ntris < nsph ? sph[prim - ntris].mat
                                             : cones[prim - ntris - nsph].mat];
-            /* r.v with r = n (2 n.l) - l (2 n.l as n.l + n.l, the same
-               number) */
-            vyz = _mm_cvtps_pd(_mm_castsi128_ps(_mm_loadl_epi64((const __m128i *)(q + 4))));
-            vxy = _mm_shuffle_pd(nzvx, vyz, 1);
-            two = _mm_add_sd(ndl, ndl);
-            two = _mm_unpacklo_pd(two, two);
-            txy = _mm_sub_pd(_mm_mul_pd(nxy, two), lxy);
-            tz = _mm_sub_sd(_mm_mul_sd(nzvx, two), lz);
-            rv = _mm_mul_pd(txy, vxy);
-            rv = _mm_add_sd(_mm_add_sd(rv, _mm_unpackhi_pd(rv, rv)),
-                            _mm_mul_sd(tz, _mm_unpackhi_pd(vyz, vyz)));
-            rv_d = _mm_cvtsd_f64(rv);
             df = (float)ndl_d;
             tl[0] = df;
-            tl[1] = rv_d > 0.0 && m->ks > 0.0f ? pow_float(rv_d, m->shine) : 0.0f;
+            /* the highlight only where ks > 0: r.v is not made where it
+               weighs nothing (tree's materials, most of balls' lit
+               nodes) */
+            if (m->ks > 0.0f) {
+                /* r.v with r = n (2 n.l) - l (2 n.l as n.l + n.l, the
+                   same number) */
+                vyz = _mm_cvtps_pd(
+                    _mm_castsi128_ps(_mm_loadl_epi64((const __m128i *)(q + 4))));
+                vxy = _mm_shuffle_pd(nzvx, vyz, 1);
+                two = _mm_add_sd(ndl, ndl);
+                two = _mm_unpacklo_pd(two, two);
+                txy = _mm_sub_pd(_mm_mul_pd(nxy, two), lxy);
+                tz = _mm_sub_sd(_mm_mul_sd(nzvx, two), lz);
+                rv = _mm_mul_pd(txy, vxy);
+                rv = _mm_add_sd(_mm_add_sd(rv, _mm_unpackhi_pd(rv, rv)),
+                                _mm_mul_sd(tz, _mm_unpackhi_pd(vyz, vyz)));
+                rv_d = _mm_cvtsd_f64(rv);
+                tl[1] = rv_d > 0.0 ? pow_float(rv_d, m->shine) : 0.0f;
+            } else {
+                tl[1] = 0.0f;
+            }
             memcpy(&wb, wj, sizeof wb);
             memcpy(&db, &df, sizeof db);
             if (!(wb << 1) || !(db << 1))
@@ -1004,12 +1012,16 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
             m = &mats[prim < ntris        ? tris[prim].mat
                       : prim - ntris < nsph ? sph[prim - ntris].mat
                                             : cones[prim - ntris - nsph].mat];
-            rv = v3_dot(v3_sub(v3_mul(n, 2.0 * ndl), l), v3(q[3], q[4], q[5]));
             df = (float)ndl;
             tl[0] = df;
             /* no highlight to weigh where ks is 0 (an edit making it
-               non-zero recomputes these terms) */
-            tl[1] = rv > 0.0 && m->ks > 0.0f ? pow_float(rv, m->shine) : 0.0f;
+               non-zero recomputes these terms): r.v not made there */
+            if (m->ks > 0.0f) {
+                rv = v3_dot(v3_sub(v3_mul(n, 2.0 * ndl), l), v3(q[3], q[4], q[5]));
+                tl[1] = rv > 0.0 ? pow_float(rv, m->shine) : 0.0f;
+            } else {
+                tl[1] = 0.0f;
+            }
             /* coeffs_node's sum for this light, node by node in its order
                (depth first, reflected subtree first: the order they are
                stored in), leaving out the nodes it does not reach: w or
