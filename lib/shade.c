@@ -808,12 +808,15 @@ static RTPI_FORCE_INLINE unsigned long long
 light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *start, size_t k0,
            size_t k1, const uint32_t *vis_ext, const float *nv, const double *w, size_t light,
            float *terms, float *coeffs, const double *cl, float *samples, int *bad,
-           unsigned char *mark, double *rest, unsigned char *rest_ok, int with_rest)
+           unsigned char *mark, double *rest, unsigned char *rest_ok, int with_rest,
+           int one_word)
 {
     const rtp_scene *s = c->s;
     const rtpi_v3 lp = light_pos(&s->lights[light]);
-    const size_t nt = RTPI_TERMS(s->nlights), nc = RTPI_COEFFS(s->nlights), wi = light >> 5;
-    const size_t vw = c->vis_words;
+    /* (one_word: vis_ext holds a word a node, light's bit in it) */
+    const size_t nt = RTPI_TERMS(s->nlights), nc = RTPI_COEFFS(s->nlights),
+                 wi = one_word ? 0 : light >> 5;
+    const size_t vw = one_word ? 1 : c->vis_words;
     const uint32_t bit = 1u << (light & 31);
     const rtpi_material *const mats = s->mats;
     const rtpi_tri *const tris = s->tris;
@@ -1161,13 +1164,20 @@ unsigned long long rtpi_light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *no
        less) */
     if (!vis_ext)
         return rest ? light_redo(c, nodes, start, k0, k1, NULL, nv, w, light, terms, coeffs, cl,
-                                 samples, bad, mark, rest, rest_ok, 1)
+                                 samples, bad, mark, rest, rest_ok, 1, 0)
                     : light_redo(c, nodes, start, k0, k1, NULL, nv, w, light, terms, coeffs, cl,
-                                 samples, bad, mark, NULL, rest_ok, 0);
+                                 samples, bad, mark, NULL, rest_ok, 0, 0);
+    /* (a moved light's bits, up to 32 lights: a word a node, indexed
+       by the node without a product a sample) */
+    if (c->vis_words == 1)
+        return rest ? light_redo(c, nodes, start, k0, k1, vis_ext, nv, w, light, terms, coeffs,
+                                 cl, samples, bad, mark, rest, rest_ok, 1, 1)
+                    : light_redo(c, nodes, start, k0, k1, vis_ext, nv, w, light, terms, coeffs,
+                                 cl, samples, bad, mark, NULL, rest_ok, 0, 1);
     return rest ? light_redo(c, nodes, start, k0, k1, vis_ext, nv, w, light, terms, coeffs, cl,
-                             samples, bad, mark, rest, rest_ok, 1)
+                             samples, bad, mark, rest, rest_ok, 1, 0)
                 : light_redo(c, nodes, start, k0, k1, vis_ext, nv, w, light, terms, coeffs, cl,
-                             samples, bad, mark, NULL, rest_ok, 0);
+                             samples, bad, mark, NULL, rest_ok, 0, 0);
 }
 
 void rtpi_material_light_terms(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t n,
