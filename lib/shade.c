@@ -834,8 +834,8 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
     const size_t nl = s->nlights;
     size_t i;
 #endif
-    /* (a kept rest is made only where the samples are combined: the
-       copy with it tests nothing) */
+    /* (a kept rest only where the samples are combined (rtpi_light_redo):
+       the copy with it tests nothing) */
     const int comb = with_rest || samples != NULL;
     unsigned long long combined = 0;
     int nonfinite = 0;
@@ -1162,6 +1162,10 @@ unsigned long long rtpi_light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *no
     /* (scenes of up to 32 lights keep their bits in the nodes: compiled
        without the parallel words there, a test a node and a register
        less) */
+    /* (a rest serves only where samples are combined: the copy with it
+       takes samples for given) */
+    if (!samples)
+        rest = NULL;
     if (!vis_ext)
         return rest ? light_redo(c, nodes, start, k0, k1, NULL, nv, w, light, terms, coeffs, cl,
                                  samples, bad, mark, rest, rest_ok, 1, 0)
