@@ -2971,25 +2971,29 @@ static const char merge_help[] =
     "Regions must cover the frame without overlapping.\n";
 
 /* The library names a part by its index, "parts[K]": here it is the
-   K-th file given, named ("tree 1" had meant the second). */
-static void name_parts(rtp_error *err, const char *const *in, int n)
+   K-th file given, named ("tree 1" had meant the second), and the message
+   said here whole: written back into err->message (256 bytes), two long
+   paths cut it before its reason (a TMPDIR of 100 characters lost "p1.rtp
+   to depth 5"). */
+static int fail_parts(const rtp_error *err, const char *const *in, int n)
 {
-    char out[sizeof err->message], *p = err->message;
-    size_t o = 0;
-    while (*p && o + 1 < sizeof out) {
+    const char *p = err->message, *e = p + sizeof err->message;
+    if (err->file[0] || err->line > 0)
+        return fail_err(err); /* (no part named: merge's own are whole) */
+    fputs("rtp: ", stderr);
+    while (p < e && *p) {
         char *end;
         long k;
         if (strncmp(p, "parts[", 6) == 0 && (k = strtol(p + 6, &end, 10), *end == ']') &&
             end > p + 6 && k >= 0 && k < n) {
-            int w = snprintf(out + o, sizeof out - o, "%s", in[k]);
-            o = w < 0 ? o : o + (size_t)w < sizeof out ? o + (size_t)w : sizeof out - 1;
+            fputs(in[k], stderr);
             p = end + 1;
         } else {
-            out[o++] = *p++;
+            fputc(*p++, stderr);
         }
     }
-    out[o] = '\0';
-    memcpy(err->message, out, o + 1);
+    fputc('\n', stderr);
+    return 1;
 }
 
 /* A part's "X,Y" (after its '@') into *x, *y; returns 0 or -1.  sscanf's
@@ -3180,8 +3184,7 @@ static int cmd_merge(int argc, char **argv)
                 goto out;
             }
         if (rtp_tree_merge(parts, (size_t)n, &joined, &err) != RTP_OK) {
-            name_parts(&err, in, n);
-            fail_err(&err);
+            fail_parts(&err, in, n);
             goto out;
         }
         memset(&eo, 0, sizeof eo);

@@ -118,6 +118,15 @@ $RTP trace $S --size 32x32 --region 0,20,32,32 --depth 4 -o "$T/pd.rtp" -q
 $RTP merge -o "$T/x.rtp" "$T/p1.rtp" "$T/pd.rtp" 2>"$T/err"
 [ $? -eq 1 ] && grep -q "pd.rtp cannot join .*p1.rtp: it was traced to depth 4, .*p1.rtp to depth 5" "$T/err" &&
     ok || bad "merge of another depth: $(cat "$T/err")"
+# the same refusal under long paths says its reason whole (the CLI named
+# the parts inside the library's 256-byte message: under a TMPDIR of ~100
+# characters it ended at "to depth 4, ")
+L="$T/$(printf '%0100d' 0)"
+mkdir "$L" && cp "$T/p1.rtp" "$T/pd.rtp" "$L/"
+$RTP merge -o "$L/x.rtp" "$L/p1.rtp" "$L/pd.rtp" 2>"$T/err"
+[ $? -eq 1 ] && grep -q "pd.rtp cannot join $L/p1.rtp: it was traced to depth 4, $L/p1.rtp to depth 5\$" "$T/err" &&
+    [ ! -e "$L/x.rtp" ] && ok || bad "merge of another depth, long paths: $(cat "$T/err")"
+rm -rf "$L"
 $RTP trace $S --size 32x32 --region 0,20,32,32 --set mat.red.kd=0.5 -o "$T/pk.rtp" -q
 $RTP merge -o "$T/x.rtp" "$T/p1.rtp" "$T/pk.rtp" 2>"$T/err"
 [ $? -eq 1 ] && grep -q "given another mat.1.kd (red) than" "$T/err" &&
