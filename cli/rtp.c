@@ -819,9 +819,15 @@ static int stats_close(FILE *f, const char *path)
 static int image_name_ok(const char *path)
 {
     rtp_image_format f;
+    struct stat sb;
     if (strcmp(path, "-") == 0)
         return 1;
     f = rtp_image_format_from_path(path);
+    /* (a pipe or a device, /dev/null, named without an extension is
+       written PFM, as "-" is: rtp_image_write) */
+    if (f == RTP_IMAGE_AUTO && stat(path, &sb) == 0 && !S_ISREG(sb.st_mode) &&
+        !S_ISDIR(sb.st_mode))
+        return 1;
     if (f == RTP_IMAGE_AUTO) {
         msg("%s: cannot tell the image format from the name: use .png, .ppm or .pfm", path);
         return 0;
@@ -931,6 +937,10 @@ static int one_output(const char *a, const char *b)
     if (!a || !b || strcmp(a, "-") == 0 || strcmp(b, "-") == 0)
         return 0;
     if (link_target(a, ta, sizeof ta) != 0 || link_target(b, tb, sizeof tb) != 0)
+        return 0;
+    /* (a device takes both as it took one: -o /dev/null -i /dev/null,
+       a trace timed, was refused; a FIFO's reader would get them mixed) */
+    if (stat(ta, &sa) == 0 && S_ISCHR(sa.st_mode))
         return 0;
     return strcmp(ta, tb) == 0 || (stat(ta, &sa) == 0 && stat(tb, &sb) == 0 &&
                                    S_ISREG(sa.st_mode) && sa.st_dev == sb.st_dev &&

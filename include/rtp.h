@@ -243,8 +243,9 @@ rtp_status rtp_image_create(int width, int height, const rtp_allocator *alloc,
 void rtp_image_destroy(rtp_image *image);
 
 typedef enum rtp_image_format {
-    RTP_IMAGE_AUTO = 0, /* from the file extension; stdout "-" and
-                           rtp_image_write_stream's stream mean PFM */
+    RTP_IMAGE_AUTO = 0, /* from the file extension; stdout "-",
+                           rtp_image_write_stream's stream and a pipe or
+                           device named without one (/dev/null) mean PFM */
     RTP_IMAGE_PNG = 1,  /* 8-bit sRGB-free: values clamped to [0,1], *255;
                            NaN and +-infinity 0 (a bad pixel shows black) */
     RTP_IMAGE_PPM = 2,  /* binary P6, 8-bit, like PNG */

@@ -798,8 +798,13 @@ rtp_status rtp_image_write(const rtp_image *image, const char *path,
             format = RTP_IMAGE_PFM;
         return write_to(image, stdout, format, "<stdout>", err);
     }
+    kind = rtpi_write_kind(path);
     if (format == RTP_IMAGE_AUTO) {
         format = rtp_image_format_from_path(path);
+        /* a pipe or a device (/dev/null, a user timing a trace), no
+           extension in its name: PFM, as stdout's "-" has it */
+        if (format == RTP_IMAGE_AUTO && kind != RTPI_WRITE_FILE)
+            format = RTP_IMAGE_PFM;
         if (format == RTP_IMAGE_AUTO)
             return rtpi_error(err, RTP_ERR_ARGUMENT, path, 0, 0,
                               "cannot tell the image format from the "
@@ -814,7 +819,6 @@ rtp_status rtp_image_write(const rtp_image *image, const char *path,
         return no_png(err, path);
 #endif
     rtpi_allocator_init(&a, &image->alloc);
-    kind = rtpi_write_kind(path);
     if (kind == RTPI_WRITE_STDOUT) {
         st = write_to(image, stdout, format, path, err);
         if (fflush(stdout) != 0 && st == RTP_OK)

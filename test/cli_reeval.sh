@@ -278,6 +278,26 @@ expect_rc 1 $RTP trace $S --size 8x6 -o "$T/jpg.rtp" -i "$T/x.jpg"
 grep -q "x.jpg: cannot tell the image format" "$T/err" && [ ! -e "$T/jpg.rtp" ] && ok ||
     bad "trace -i x.jpg: not said before the trace, or the tree written"
 expect_rc 1 $RTP reeval "$T/t.rtp" -i "$T/x.jpg"
+# /dev/null takes any output (a trace timed): PFM for the image as "-"
+# has it, and the tree and the image both there are not "one file"
+# (refused as "cannot tell the image format", then as one file)
+if [ -c /dev/null ] && [ -w /dev/null ]; then
+    expect_rc 0 $RTP trace $S --size 8x6 -q -i /dev/null
+    expect_rc 0 $RTP trace $S --size 8x6 -q -o /dev/null -i /dev/null --stats /dev/null
+    expect_rc 0 $RTP reeval "$T/t.rtp" -q -i /dev/null --set ambient=0.2
+    expect_rc 0 $RTP merge -q -i /dev/null "$T/t.rtp"
+    # a FIFO without an extension gets the PFM "-" gives
+    if mkfifo "$T/fifo" 2>/dev/null; then
+        cat "$T/fifo" >"$T/fifo.out" &
+        $RTP reeval "$T/t.rtp" -q -i "$T/fifo" --set ambient=0.2 2>"$T/err"
+        rc=$?
+        [ $rc -ne 0 ] && : >"$T/fifo" # (refused unopened: cat is let go)
+        wait
+        $RTP reeval "$T/t.rtp" -q -i - --set ambient=0.2 | cmp -s - "$T/fifo.out" &&
+            [ $rc -eq 0 ] && ok || bad "reeval -i FIFO (no extension): $(cat "$T/err")"
+        rm -f "$T/fifo" "$T/fifo.out"
+    fi
+fi
 if [ -w /dev/full ]; then
     $RTP info "$T/t.rtp" >/dev/full 2>"$T/err"
     [ $? -eq 1 ] && grep -q "stdout: write failed" "$T/err" && ok || bad "info to a full disk"
