@@ -1098,7 +1098,11 @@ static int image_key(const char *key)
     return dot && (strcmp(dot, ".texture") == 0 || strcmp(dot, ".bump") == 0);
 }
 
-static int apply_kv(set_fn set, void *obj, const char *kv, const char *where, int line)
+/* line > 0: kv is the word at column col of that line of `where` (a
+   --params file or the stream), which every message names as
+   where:line:col, as the scene readers name a token; else a --set. */
+static int apply_kv(set_fn set, void *obj, const char *kv, const char *where, int line,
+                    int col)
 {
     char key[512]; /* (mat. + a name of up to 255 characters + a field) */
     const char *eq = strchr(kv, '=');
@@ -1110,12 +1114,12 @@ static int apply_kv(set_fn set, void *obj, const char *kv, const char *where, in
         /* (a line's pairs are separated by blanks: "mat.Floor Mat.kd=0.3"
            is two words, the first no pair) */
         if (line && (strncmp(kv, "mat.", 4) == 0 || strncmp(kv, "light.", 6) == 0))
-            msg("%s:%d: expected KEY=VALUE, got '%s' (blanks separate a line's edits: a name "
+            msg("%s:%d:%d: expected KEY=VALUE, got '%s' (blanks separate a line's edits: a name "
                 "holding a blank is reached by its index, mat.N or light.N, as 'rtp info "
                 "TREE' lists them)",
-                where, line, kv);
+                where, line, col, kv);
         else if (line)
-            msg("%s:%d: expected KEY=VALUE, got '%s'", where, line, kv);
+            msg("%s:%d:%d: expected KEY=VALUE, got '%s'", where, line, col, kv);
         else
             msg("%s %s: expected KEY=VALUE", where, kv);
         return 1;
@@ -1125,7 +1129,7 @@ static int apply_kv(set_fn set, void *obj, const char *kv, const char *where, in
         /* (a params file's or a stream's line named, as every other
            error of a line names it) */
         if (line)
-            msg("%s:%d: key too long (%zu characters; at most %zu)", where, line, kn,
+            msg("%s:%d:%d: key too long (%zu characters; at most %zu)", where, line, col, kn,
                 sizeof key - 1);
         else
             msg("%s: key too long (%zu characters; at most %zu)", where, kn, sizeof key - 1);
@@ -1137,7 +1141,7 @@ static int apply_kv(set_fn set, void *obj, const char *kv, const char *where, in
         /* an image (mat.N.texture=-) read from stdin would take the
            stream's next lines, or the rest of the tree, as its bytes */
         if (line)
-            msg("%s:%d: %s=-: stdin already serves %s; name the file", where, line, key,
+            msg("%s:%d:%d: %s=-: stdin already serves %s; name the file", where, line, col, key,
                 stdin_user);
         else
             msg("%s %s=-: stdin already serves %s; name the file", where, key, stdin_user);
@@ -1177,10 +1181,11 @@ static int apply_kv(set_fn set, void *obj, const char *kv, const char *where, in
         rtp_error_format(&err, buf, sizeof buf);
         /* (an empty value in a line: "light.0.color= 1" is two words) */
         if (line && !eq[1])
-            fprintf(stderr, "rtp: %s:%d: %s (blanks separate a line's edits: no blank after '=')\n",
-                    where, line, buf);
+            fprintf(stderr,
+                    "rtp: %s:%d:%d: %s (blanks separate a line's edits: no blank after '=')\n",
+                    where, line, col, buf);
         else if (line)
-            fprintf(stderr, "rtp: %s:%d: %s\n", where, line, buf);
+            fprintf(stderr, "rtp: %s:%d:%d: %s\n", where, line, col, buf);
         else
             fprintf(stderr, "rtp: %s\n", buf);
         return 1;
@@ -1211,7 +1216,7 @@ static int apply_line(set_fn set, void *obj, char *text, const char *where, int 
             p++;
         if (*p)
             *p++ = '\0';
-        if (apply_kv(set, obj, tok, where, line))
+        if (apply_kv(set, obj, tok, where, line, (int)(tok - text) + 1))
             return 1;
     }
 }
@@ -1236,7 +1241,7 @@ static int apply_line(set_fn set, void *obj, char *text, const char *where, int 
 static int next_line(FILE *f, const char *name, char *line, int *lineno, int *cr)
 {
     size_t n = 0;
-    int c, nul = 0;
+    int c, nul = 0; /* the first NUL's column, 0: none */
     if (*cr) {
         *cr = 0;
         if ((c = getc(f)) != '\n' && c != EOF)
@@ -1248,11 +1253,13 @@ static int next_line(FILE *f, const char *name, char *line, int *lineno, int *cr
             break;
         }
         if (n == MAX_LINE) {
-            msg("%s:%d: line too long (at most %d characters)", name, *lineno + 1, MAX_LINE);
+            msg("%s:%d:%d: line too long (at most %d characters)", name, *lineno + 1,
+                MAX_LINE + 1, MAX_LINE);
             return -1;
         }
-        nul |= c == '\0';
         line[n++] = (char)c;
+        if (c == '\0' && !nul)
+            nul = (int)n;
     }
     if (c == EOF && ferror(f)) {
         msg("%s: cannot read: %s", name, strerror(errno ? errno : EIO));
@@ -1263,7 +1270,10 @@ static int next_line(FILE *f, const char *name, char *line, int *lineno, int *cr
     line[n] = '\0';
     ++*lineno;
     if (nul) {
-        msg("%s:%d: a NUL byte in the line", name, *lineno);
+        /* (a BOM before it counts for nothing, as the scene readers have it) */
+        if (*lineno == 1 && n >= 3 && memcmp(line, "\xef\xbb\xbf", 3) == 0 && nul > 3)
+            nul -= 3;
+        msg("%s:%d:%d: a NUL byte in the line", name, *lineno, nul);
         return -1;
     }
     if (*lineno == 1 && n >= 3 && memcmp(line, "\xef\xbb\xbf", 3) == 0)
@@ -1689,7 +1699,7 @@ static int cmd_trace(int argc, char **argv)
         if (apply_params_file(set_scene, scene, params[i]))
             goto out;
     for (i = 0; i < nsets; i++)
-        if (apply_kv(set_scene, scene, sets[i], "--set", 0))
+        if (apply_kv(set_scene, scene, sets[i], "--set", 0, 0))
             goto out;
     {
         const char *outs[3];
@@ -2371,7 +2381,7 @@ static rtp_status make_edits(void *user, rtp_tree *tree, rtp_error *err)
             return RTP_ERR_ARGUMENT;
         }
     for (i = 0; i < c->nsets; i++)
-        if (apply_kv(set_tree, tree, c->sets[i], "--set", 0)) {
+        if (apply_kv(set_tree, tree, c->sets[i], "--set", 0, 0)) {
             c->reported = 1;
             return RTP_ERR_ARGUMENT;
         }
@@ -2636,7 +2646,7 @@ static int cmd_reeval(int argc, char **argv)
         if (apply_params_file(set_tree, tree, params[i]))
             goto out;
     for (i = 0; i < nsets; i++)
-        if (apply_kv(set_tree, tree, sets[i], "--set", 0))
+        if (apply_kv(set_tree, tree, sets[i], "--set", 0, 0))
             goto out;
     {
         const char *outs[2];

@@ -261,7 +261,7 @@ awk 'BEGIN { s = ""; for (i = 0; i < 20000; i++) s = s "mat.red.kd=0.5 "; print 
 [ $? -eq 0 ] && [ -e "$T/longok0.pfm" ] && ok || { bad "--stream: a 300k-character line"; cat "$T/err" >&2; }
 awk 'BEGIN { s = ""; while (length(s) < 1100000) s = s "mat.red.kd=0.5 "; print s }' |
     $RTP reeval "$T/t.rtp" --stream -i "$T/long%d.pfm" 2>"$T/err"
-[ $? -eq 1 ] && grep -q "<stdin>:1: line too long" "$T/err" && [ ! -e "$T/long0.pfm" ] && ok ||
+[ $? -eq 1 ] && grep -q "<stdin>:1:1048576: line too long" "$T/err" && [ ! -e "$T/long0.pfm" ] && ok ||
     { bad "--stream: a line past the buffer"; cat "$T/err" >&2; }
 # a '%' in a frame's name is written %% (refused before: a folder named
 # "100%" could not hold frames); %% alone, no %d, is still no pattern
@@ -453,7 +453,7 @@ printf '\357\273\277# edits\nmat.0.kd=0.3\n' > "$T/bom.txt"
 expect_rc 0 $RTP reeval "$T/t.rtp" --params "$T/bom.txt" -i "$T/bom.pfm"
 printf 'mat.0.kd=0.3\000x\n' > "$T/nul.txt"
 expect_rc 1 $RTP reeval "$T/t.rtp" --params "$T/nul.txt" -i "$T/nul.pfm"
-grep -q "nul.txt:1: a NUL byte" "$T/err" && ok || bad "NUL byte in --params not named"
+grep -q "nul.txt:1:13: a NUL byte" "$T/err" && ok || bad "NUL byte in --params not named"
 printf 'light.0.on=0\000light.1.on=0' > "$T/nul2.txt"
 expect_rc 1 $RTP reeval "$T/t.rtp" --params "$T/nul2.txt" -i "$T/nul2.pfm"
 grep -q "a NUL byte" "$T/err" && ok || bad "NUL byte in a last line without newline not named"
@@ -467,7 +467,7 @@ expect_rc 0 $RTP reeval "$T/t.rtp" --params "$T/cr.txt" -i "$T/cr.pfm"
 $RTP diff "$T/cr.pfm" "$T/cr0.pfm" --fail-above max_abs=1e-6 -q && ok || bad "params: lone CR line ends"
 printf 'mat.red.kd=0.2\r\rfoo=1\r' > "$T/cr2.txt"
 expect_rc 1 $RTP reeval "$T/t.rtp" --params "$T/cr2.txt" -i "$T/cr2.pfm"
-grep -q "cr2.txt:3: unknown key 'foo'" "$T/err" && ok || bad "params: lone CR line number: $(cat "$T/err")"
+grep -q "cr2.txt:3:1: unknown key 'foo'" "$T/err" && ok || bad "params: lone CR line number: $(cat "$T/err")"
 expect_rc 0 sh -c "printf 'mat.red.kd=0.2\r\r\nlight.key.color=1,0.5,0.5\r\n\n' |
     $RTP reeval '$T/t.rtp' --stream -i '$T/crs%d.pfm' -q"
 [ -e "$T/crs3.pfm" ] && [ ! -e "$T/crs4.pfm" ] &&
@@ -673,7 +673,7 @@ expect_rc 2 sh -c "cat '$T/t.rtp' | $RTP reeval - --set mat.0.texture=- -i '$T/s
 grep -q "stdin already serves the tree" "$T/err" && ok || bad "texture=- with the tree on stdin: $(cat "$T/err")"
 mkdir -p "$T/sx"
 expect_rc 1 sh -c "printf 'mat.0.texture=-\nambient=0.2\n' | $RTP reeval '$T/t.rtp' --stream -i '$T/sx/f%d.pfm'"
-grep -q "<stdin>:1: mat.0.texture=-: stdin already serves" "$T/err" && ok || bad "texture=- in a stream: $(cat "$T/err")"
+grep -q "<stdin>:1:1: mat.0.texture=-: stdin already serves" "$T/err" && ok || bad "texture=- in a stream: $(cat "$T/err")"
 expect_rc 2 sh -c "$RTP merge -o '$T/m2.rtp' - - <'$T/t.rtp'"
 grep -q "only one part can come from stdin" "$T/err" && ok || bad "merge - -: $(cat "$T/err")"
 # a '#' inside a word is part of it, in a params line as in the scene
@@ -689,11 +689,21 @@ $RTP trace "$T/hash.obj" --size 16x16 --set mat.0.kd=0.5 -i "$T/hash2.pfm" -q
 cmp -s "$T/hash1.pfm" "$T/hash2.pfm" && ok || bad "params: a name with '#'"
 printf 'mat.Floor Mat.kd=0.3\n' > "$T/blank.txt"
 expect_rc 1 $RTP reeval "$T/hash.rtp" --params "$T/blank.txt" -i "$T/hash3.pfm"
-grep -q "blank.txt:1: expected KEY=VALUE, got 'mat.Floor' (blanks separate .*mat.N" "$T/err" && ok ||
+grep -q "blank.txt:1:1: expected KEY=VALUE, got 'mat.Floor' (blanks separate .*mat.N" "$T/err" && ok ||
     bad "params: a name with a blank: $(cat "$T/err")"
+# a line's error names the word's column, as the scene readers name a
+# token's (FILE:LINE: alone had left a line of many edits to be searched;
+# after a BOM, columns count from the text, as in the scene readers)
+printf '\357\273\277mat.0.kd=0.3\tambient=0.1  light.0.pos=1,x,2\n' > "$T/col.txt"
+expect_rc 1 $RTP reeval "$T/hash.rtp" --params "$T/col.txt" -i "$T/hash3.pfm"
+grep -q "^rtp: $T/col.txt:1:27: light.0.pos: expected 3 comma-separated numbers" "$T/err" &&
+    ok || bad "params: the word's column: $(cat "$T/err")"
+expect_rc 1 sh -c "printf 'ambient=0.1\n  ambient=0.2 mat.0.kd=-1 \n' | $RTP reeval '$T/hash.rtp' --stream -i '$T/col%d.pfm'"
+grep -q "^rtp: <stdin>:2:15: mat.0.kd" "$T/err" && [ -e "$T/col0.pfm" ] && [ ! -e "$T/col1.pfm" ] &&
+    ok || bad "stream: the word's column: $(cat "$T/err")"
 printf 'mat.0.kd= 0.3\n' > "$T/blank2.txt"
 expect_rc 1 $RTP reeval "$T/hash.rtp" --params "$T/blank2.txt" -i "$T/hash3.pfm"
-grep -q "blank2.txt:1: mat.0.kd: .*got '' (blanks separate a line's edits: no blank after '=')" \
+grep -q "blank2.txt:1:1: mat.0.kd: .*got '' (blanks separate a line's edits: no blank after '=')" \
     "$T/err" && ok || bad "params: a blank after '=': $(cat "$T/err")"
 # a name holding '=' (an MTL "newmtl a=b") is reached by name, on trace and
 # reeval, in --set and a line ("unknown key 'mat.a'": the key was cut at its
@@ -740,10 +750,10 @@ grep -q "mat.12.kd: no such material (the scene has 2; digits are an index: the 
 long=$(awk 'BEGIN { s = "mat."; for (i = 0; i < 600; i++) s = s "a"; print s ".kd=1" }')
 printf 'mat.0.kd=0.3\n%s\n' "$long" > "$T/longkey.txt"
 expect_rc 1 $RTP reeval "$T/hash.rtp" --params "$T/longkey.txt" -i "$T/hash3.pfm"
-grep -q "longkey.txt:2: key too long (607 characters; at most 511)" "$T/err" && ok ||
+grep -q "longkey.txt:2:1: key too long (607 characters; at most 511)" "$T/err" && ok ||
     bad "params: a key too long: $(cat "$T/err")"
 expect_rc 1 sh -c "printf 'mat.0.kd=0.3\n%s\n' '$long' | $RTP reeval '$T/hash.rtp' --stream -i '$T/lk%d.pfm'"
-grep -q "<stdin>:2: key too long" "$T/err" && [ -e "$T/lk0.pfm" ] && [ ! -e "$T/lk1.pfm" ] && ok ||
+grep -q "<stdin>:2:1: key too long" "$T/err" && [ -e "$T/lk0.pfm" ] && [ ! -e "$T/lk1.pfm" ] && ok ||
     bad "stream: a key too long: $(cat "$T/err")"
 
 # stdin's other names (/dev/stdin, /dev/fd/0) serve one input as '-'
@@ -1061,11 +1071,11 @@ grep -q "^rtp: <stdin>:1:1: unknown keyword" "$T/err" && ok || bad "scene on std
 echo x | $RTP info - 2>"$T/err" >/dev/null
 grep -q "^rtp: <stdin>: not an rtp tree" "$T/err" && ok || bad "tree on stdin's name: $(cat "$T/err")"
 echo x | $RTP reeval "$T/t.rtp" --params - -i "$T/n.pfm" -q 2>"$T/err"
-grep -q "^rtp: <stdin>:1: expected KEY=VALUE" "$T/err" && ok || bad "--params -'s name: $(cat "$T/err")"
+grep -q "^rtp: <stdin>:1:1: expected KEY=VALUE" "$T/err" && ok || bad "--params -'s name: $(cat "$T/err")"
 echo x | $RTP diff - "$T/t.pfm" 2>"$T/err" >/dev/null
 grep -q "^rtp: <stdin>: not a PNG" "$T/err" && ok || bad "image on stdin's name: $(cat "$T/err")"
 echo x | $RTP reeval "$T/t.rtp" --stream -i "$T/n%d.pfm" -q 2>"$T/err"
-grep -q "^rtp: <stdin>:1: expected KEY=VALUE" "$T/err" && ok || bad "--stream line's name: $(cat "$T/err")"
+grep -q "^rtp: <stdin>:1:1: expected KEY=VALUE" "$T/err" && ok || bad "--stream line's name: $(cat "$T/err")"
 printf 'P3 1 1 255 1 2 3\n' | $RTP diff - "$T/t.pfm" 2>"$T/err" >/dev/null
 grep -q "^rtp: <stdin> is 1x1, .* image sizes differ" "$T/err" && ok || bad "diff's sizes naming stdin: $(cat "$T/err")"
 
