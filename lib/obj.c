@@ -3,9 +3,10 @@
  * OBJ: v, vn, vt, f (v, v/t, v//n, v/t/n; negative indices count back
  * from the last vertex read; polygons of any size, concave ones too, are
  * triangulated keeping their winding), usemtl, mtllib; o, g, s and the
- * free-form statements are read past.  MTL: newmtl, Kd, Ks, Ns, Ni, d,
- * Tr, map_Kd, bump/map_bump (-bm strength); Ka, Ke, illum and the other
- * maps are read past.  How MTL values become rtp materials is written in
+ * free-form statements are read past (vp's numbers checked).  MTL:
+ * newmtl, Kd, Ks, Ns, Ni, d, Tr, map_Kd, bump/map_bump (-bm strength);
+ * Ka, Ke, illum and the other values have their numbers checked and are
+ * not used; the other maps are read past.  How MTL values become rtp materials is written in
  * scenes/README.md.  Positions are transformed by the 4x3 `xform`,
  * normals by its inverse transpose. */
 #include "readers.h"
@@ -110,15 +111,29 @@ static rtp_status line_string(rtpi_lex *lx, const char *what, rtpi_tok *out)
     return RTP_OK;
 }
 
+/* OBJ statements rtp does not draw, read past: names (o, g, usemap,
+   maplib, ...), a smoothing group's word (s: normals come from vn or the
+   face), and elements and free-form geometry (l, p, curv, surf and their
+   blocks up to `end`), whose indices and parameters are a language rtp
+   does not read.  vp, the one of numbers alone, has them checked as v's
+   (ignored_numbers). */
 static const char *const ignored_obj[] = {
-    "o", "g", "s", "l", "p", "mg", "vp", "cstype", "deg", "bmat", "step",
+    "o", "g", "s", "l", "p", "mg", "cstype", "deg", "bmat", "step",
     "curv", "curv2", "surf", "parm", "trim", "hole", "scrv", "sp", "end",
     "con", "lod", "usemap", "maplib", "shadow_obj", "trace_obj", "ctech",
     "stech", "bevel", "c_interp", "d_interp", NULL};
 
-static const char *const ignored_mtl[] = {
-    "Ka", "Ke", "Tf", "illum", "sharpness", "disp", "decal", "refl", "Pr",
-    "Pm", "Ps", "Pc", "Pcr", "aniso", "anisor", "norm", NULL};
+/* MTL statements rtp does not use.  Those of numbers (a colour: Ka, Ke,
+   Tf; a value: illum, sharpness and the PBR extension's) have them
+   checked as Kd's are, 1 to 3 each (Ka's "xyz" and "spectral FILE" forms
+   too): "Ka nan 0 0" or "Ka x y z" loaded silently while "Kd nan" was
+   refused, and a file that holds them is malformed whatever rtp draws.
+   The maps (disp, decal, refl, norm) are read past: a file's name, whose
+   options are the image's reader's business, and no image is read. */
+static const char *const ignored_mtl_nums[] = {
+    "Ka", "Ke", "Tf", "illum", "sharpness", "Pr", "Pm", "Ps", "Pc", "Pcr", "aniso",
+    "anisor", NULL};
+static const char *const ignored_mtl[] = {"disp", "decal", "refl", "norm", NULL};
 
 static int in_list(const rtpi_tok *t, const char *const *list)
 {
@@ -126,6 +141,39 @@ static int in_list(const rtpi_tok *t, const char *const *list)
         if (rtpi_tok_is(t, *list))
             return 1;
     return 0;
+}
+
+/* The numbers of a statement rtp does not use (ignored_mtl_nums, vp): 1
+   to 3, each within NUM_LIMIT, checked as a used one's; "spectral FILE
+   [factor]" read past, "xyz" before the numbers taken. */
+static rtp_status ignored_numbers(rtpi_lex *lx, const rtpi_tok *kw)
+{
+    char what[16];
+    rtpi_lex save = *lx;
+    rtpi_tok peek;
+    double d;
+    int n;
+    rtp_status st;
+    rtpi_tok_show(kw, what, sizeof what);
+    if (rtpi_lex_next_inline(&save, &peek)) {
+        if (rtpi_tok_is(&peek, "spectral")) {
+            rtpi_lex_skip_line(lx);
+            return RTP_OK;
+        }
+        if (rtpi_tok_is(&peek, "xyz"))
+            *lx = save;
+    }
+    if ((st = line_num(lx, what, "value", &d, NULL)) != RTP_OK)
+        return st;
+    for (n = 1; n < 3; n++) {
+        static const char *const field[] = {"value", "value 2", "value 3"};
+        save = *lx;
+        if (!rtpi_lex_next_inline(&save, &peek) || !rtpi_tok_numlike(&peek))
+            break;
+        if ((st = line_num(lx, what, field[n], &d, NULL)) != RTP_OK)
+            return st;
+    }
+    return line_rest(lx, what, n, 0);
 }
 
 static const char *reg_name(const rtp_scene *s, int kind, uint32_t i)
@@ -625,6 +673,11 @@ static rtp_status read_mtl(obj *o, const char *text, size_t size, const char *na
                 return nomem(&lx, &nt);
             continue;
         }
+        if (in_list(&kw, ignored_mtl_nums)) {
+            if ((st = ignored_numbers(&lx, &kw)) != RTP_OK)
+                break;
+            continue;
+        }
         rtpi_tok head = kw; /* (its first 4 letters: map_ in any case) */
         head.n = 4;
         if (in_list(&kw, ignored_mtl) ||
@@ -1048,6 +1101,8 @@ rtp_status rtpi_read_obj_reg(rtp_scene *s, const char *text, size_t size,
             st = read_usemtl(&o);
         else if (rtpi_tok_is(&kw, "mtllib"))
             st = read_mtllib(&o);
+        else if (rtpi_tok_is(&kw, "vp"))
+            st = ignored_numbers(&o.lx, &kw);
         else if (in_list(&kw, ignored_obj))
             rtpi_lex_skip_line(&o.lx);
         else

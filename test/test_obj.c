@@ -318,6 +318,40 @@ static void test_mtl(void)
     CHECK(check_write_file(dir, "b.mtl", "newmtl x\nKd 1 1 1\nfoo 1\n") == 0);
     CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_PARSE);
     CHECK(err.line == 3 && strstr(err.message, "unknown MTL keyword 'foo'"));
+    /* the numbers of statements rtp does not use are checked as Kd's
+       ("Ka nan 0 0" loaded silently while "Kd nan" was refused), their
+       other forms still read */
+    {
+        static const struct {
+            const char *text;
+            int col;
+            const char *msg;
+        } ign[] = {{"newmtl x\nKa nan 0 0\n", 4, "expected number for Ka value, got 'nan'"},
+                   {"newmtl x\nKa x y z\n", 4, "expected number for Ka value, got 'x'"},
+                   {"newmtl x\nKe 0 0 1e19\n", 8, "Ke value 3 1e19 is out of range"},
+                   {"newmtl x\nTf 1 1 1 1\n", 10, "unexpected '1' at the end of Tf"},
+                   {"newmtl x\nillum\n", 6, "unexpected end of line in illum"},
+                   {"newmtl x\nPr inf\n", 4, "expected number for Pr value, got 'inf'"},
+                   {"Ka 1 0 nan\n", 8, "expected number for Ka value 3, got 'nan'"}};
+        size_t i;
+        for (i = 0; i < sizeof ign / sizeof *ign; i++) {
+            int line = strncmp(ign[i].text, "newmtl", 6) == 0 ? 2 : 1;
+            CHECK(check_write_file(dir, "b.mtl", ign[i].text) == 0);
+            CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_PARSE && s == NULL);
+            CHECK_MSG(strstr(err.file, "b.mtl") && err.line == line &&
+                          (ign[i].col == 1 || err.column == ign[i].col) &&
+                          strstr(err.message, ign[i].msg),
+                      "ignored case %zu: %d:%d %s", i, err.line, err.column, err.message);
+        }
+        CHECK(check_write_file(dir, "b.mtl",
+                               "newmtl x\nKa 0.2\nKa xyz 1 1 1\nKe spectral e.rfl 2\n"
+                               "Tf 1 1 1 # clear\nillum 2\nsharpness 60\nPr 0.5\nPs 1 1 1\n"
+                               "disp -mm 0 1 d.png\nKd 0.5\n") == 0);
+        CHECK_MSG(rtp_scene_load(path, NULL, &s, &err) == RTP_OK, "%s",
+                  rtp_error_format(&err, buf, sizeof buf));
+        rtp_scene_destroy(s);
+        s = NULL;
+    }
     CHECK(check_write_file(dir, "b.mtl", "newmtl x\nmap_Kd missing.png\n") == 0);
     CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_IO);
     CHECK(err.line == 2 && err.column == 8 && strstr(err.message, "missing.png"));
@@ -693,6 +727,9 @@ static const bad_case bad_obj[] = {
     {"usemtl foo\n", 1, 8, "unknown material 'foo'"},
     {"usemtl\n", 1, 7, "expected a name"},
     {"bogus 1\n", 1, 1, "unknown OBJ keyword 'bogus'"},
+    /* vp, not used, has its numbers checked as v's */
+    {"vp 0.5 nan\n", 1, 8, "expected number for vp value 2, got 'nan'"},
+    {"vp\n", 1, 3, "expected value"},
     {"v 0 0 0\r\nv 1 0 0\r\nv 0 1 0\r\nf 1 2 x\r\n", 4, 7, "got 'x'"},
     /* MSVC's NaN and infinity are words, not -1 and a comment (it read
        the vertex as z = -1, the normal as z = 1) */
