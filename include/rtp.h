@@ -199,7 +199,9 @@ void rtp_scene_destroy(rtp_scene *scene);
  *  is freed.  @return RTP_OK, RTP_ERR_KEY, RTP_ERR_PARSE, RTP_ERR_IO,
  *  RTP_ERR_FORMAT, RTP_ERR_LIMIT (an image key's file past the image size
  *  limit) or RTP_ERR_UNSUPPORTED (a PNG without libpng), RTP_ERR_ARGUMENT
- *  (a value out of range) or RTP_ERR_NOMEM; a refused edit leaves the
+ *  (a value out of range: numbers |x| <= 3.4e38, the camera's from, at,
+ *  up and hither |x| <= 1e18, as the scene files take them) or
+ *  RTP_ERR_NOMEM; a refused edit leaves the
  *  scene as it was. */
 rtp_status rtp_scene_set(rtp_scene *scene, const char *key,
                          const char *value, rtp_error *err);

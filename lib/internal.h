@@ -130,6 +130,20 @@ static inline rtpi_v3 v3_from_f(const float *f) { return v3(f[0], f[1], f[2]); }
 
 #define RTPI_NONE 0xffffffffu
 
+/* The magnitudes a scene's numbers may have, the same whether a scene
+   file or a key (rtp_scene_set, rtp_tree_set, --add-light) gives them.
+   RTPI_COORD_LIMIT: geometry and the camera (coordinates, radii, a
+   transform's numbers, from/at/up and hither): squares and products of
+   coordinates must stay finite.  RTPI_VALUE_LIMIT: what is kept as a
+   float and only scaled (colours, coefficients, the exponent, ior, the
+   checker's and a bump's numbers, a light's position, which shading
+   works in double, a far light being a direction): float's range.  (A
+   key took 3.4e38 for every one while a file stopped at 1e18: the same
+   material was given by a key and not in its file, and a camera at
+   1e30 by key only.) */
+#define RTPI_COORD_LIMIT 1e18
+#define RTPI_VALUE_LIMIT 3.4e38
+
 /* Triangle: indices into the scene's position/normal/uv arrays.  n[] and
    t[] are RTPI_NONE when the triangle has no vertex normals / uvs.  The
    geometric normal is (p1-p0)x(p2-p0), counter-clockwise = front. */

@@ -10,19 +10,10 @@
 
 #include <stdio.h>
 
-/* Largest magnitude accepted for any number: geometry and colours are
-   stored as float, and squares of coordinates must stay finite too. */
-#define NUM_LIMIT 1e18
-
-/* A light's position takes the range its light.N.pos key and
-   --add-light take (rtp_scene_set, rtp_tree_add_light: float's, so a
-   position rtp_scene_get gives back can be set again).  NUM_LIMIT's
-   reason is geometry's: a light is kept in double and shading and shadow
-   rays work in double (light - p and its length squared stay finite to
-   ~1e154), so a far light is a direction.  At 1e18 a scene's light past
-   it was refused while the same light by key traced (and traces alike:
-   4e17 to 3.4e38 give the same image in one direction). */
-#define LIGHT_POS_LIMIT 3.4e38
+/* Largest magnitude accepted for geometry and the camera (their squares
+   must stay finite), and for the values the keys set too: RTPI_*_LIMIT. */
+#define NUM_LIMIT RTPI_COORD_LIMIT
+#define VALUE_LIMIT RTPI_VALUE_LIMIT
 
 /* Image size limit per side for `resolution`. */
 #define RES_MAX 32768
@@ -140,6 +131,19 @@ static rtp_status nums(nff *c, const char *what, const char *noun,
                        rtpi_tok *toks)
 {
     return nums_upto(c, what, noun, fields, n, NUM_LIMIT, out, toks);
+}
+
+/* num and nums for a value a key sets too (VALUE_LIMIT). */
+static rtp_status val(nff *c, const char *what, const char *noun, const char *field,
+                      double *out, rtpi_tok *tok)
+{
+    return num_upto(c, what, noun, field, VALUE_LIMIT, out, tok);
+}
+
+static rtp_status vals(nff *c, const char *what, const char *noun,
+                       const char *const *fields, int n, double *out, rtpi_tok *toks)
+{
+    return nums_upto(c, what, noun, fields, n, VALUE_LIMIT, out, toks);
 }
 
 /* A non-negative value, or an error at its token. */
@@ -299,7 +303,7 @@ static rtp_status read_light(nff *c)
     int i;
     long idx;
     memset(&l, 0, sizeof l);
-    st = nums_upto(c, "l (light)", "light", xyz, 3, LIGHT_POS_LIMIT, l.pos,
+    st = nums_upto(c, "l (light)", "light", xyz, 3, VALUE_LIMIT, l.pos,
                    NULL);
     if (st != RTP_OK)
         return st;
@@ -307,7 +311,7 @@ static rtp_status read_light(nff *c)
     l.on = 1;
     if (peek_number(c)) {
         double col[3];
-        st = nums(c, "l (light)", "light", rgb, 3, col, tk);
+        st = vals(c, "l (light)", "light", rgb, 3, col, tk);
         for (i = 0; st == RTP_OK && i < 3; i++) {
             st = nonneg(c, &tk[i], "light", rgb[i], col[i]);
             l.color[i] = (float)col[i];
@@ -333,7 +337,7 @@ static rtp_status read_rgb(nff *c, const char *what, const char *noun,
     double v[3];
     rtpi_tok tk[3];
     int i;
-    rtp_status st = nums(c, what, noun, rgb, 3, v, tk);
+    rtp_status st = vals(c, what, noun, rgb, 3, v, tk);
     for (i = 0; st == RTP_OK && i < 3; i++) {
         st = nonneg(c, &tk[i], noun, rgb[i], v[i]);
         dst[i] = (float)v[i];
@@ -350,7 +354,7 @@ static rtp_status read_material(nff *c)
     rtpi_tok tk[8];
     int i;
     long idx;
-    rtp_status st = nums(c, "f (material)", "material", f, 8, v, tk);
+    rtp_status st = vals(c, "f (material)", "material", f, 8, v, tk);
     if (st != RTP_OK)
         return st;
     for (i = 0; i < 8; i++)
@@ -591,7 +595,7 @@ static rtp_status read_checker(nff *c, const rtpi_tok *kw)
     rtpi_tok tk;
     rtp_status st = current_material(c, kw, &m);
     if (st != RTP_OK || (st = read_rgb(c, "checker", "checker", col)) != RTP_OK ||
-        (st = num(c, "checker", "checker", "scale", &scale, &tk)) != RTP_OK)
+        (st = val(c, "checker", "checker", "scale", &scale, &tk)) != RTP_OK)
         return st;
     if (!((float)scale > 0.0f)) { /* (kept as a float: see rtpi_material) */
         char g[32];
@@ -615,11 +619,11 @@ static rtp_status read_ka(nff *c, const rtpi_tok *kw)
     rtpi_tok tk[3];
     int i, n = 1;
     rtp_status st = current_material(c, kw, &m);
-    if (st != RTP_OK || (st = num(c, "ka", "ka", field[0], &v[0], &tk[0])) != RTP_OK)
+    if (st != RTP_OK || (st = val(c, "ka", "ka", field[0], &v[0], &tk[0])) != RTP_OK)
         return st;
     if (peek_number(c)) {
         for (n = 1; n < 3; n++)
-            if ((st = num(c, "ka", "ka", field[n], &v[n], &tk[n])) != RTP_OK)
+            if ((st = val(c, "ka", "ka", field[n], &v[n], &tk[n])) != RTP_OK)
                 return st;
     }
     for (i = 0; i < n; i++)
@@ -687,7 +691,7 @@ static rtp_status read_bump(nff *c, const rtpi_tok *kw)
         return st;
     if (accept(c, "waves", &t) || accept(c, "noise", &t)) {
         kind = t.s[0] == 'w' ? RTPI_BUMP_WAVES : RTPI_BUMP_NOISE;
-        st = num(c, "bump", "bump", "scale", &scale, &t);
+        st = val(c, "bump", "bump", "scale", &scale, &t);
         if (st != RTP_OK)
             return st;
         if (!((float)scale > 0.0f)) {
@@ -700,7 +704,7 @@ static rtp_status read_bump(nff *c, const rtpi_tok *kw)
         if ((st = load_texture(c, "bump", &idx)) != RTP_OK)
             return st;
     }
-    if ((st = num(c, "bump", "bump", "strength", &strength, NULL)) != RTP_OK)
+    if ((st = val(c, "bump", "bump", "strength", &strength, NULL)) != RTP_OK)
         return st;
     m = &c->s->mats[c->mat];
     m->bump = kind;

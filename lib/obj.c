@@ -16,8 +16,10 @@
 #include <stdlib.h>
 #include <sys/stat.h>
 
-/* Largest magnitude accepted for a coordinate or MTL value. */
-#define NUM_LIMIT 1e18
+/* Largest magnitude accepted for a coordinate, and for an MTL value (a
+   mat.N key's too): RTPI_*_LIMIT. */
+#define NUM_LIMIT RTPI_COORD_LIMIT
+#define VALUE_LIMIT RTPI_VALUE_LIMIT
 
 typedef struct obj {
     rtp_scene *s;
@@ -47,9 +49,10 @@ static rtp_status nomem(const rtpi_lex *lx, const rtpi_tok *t)
                       "out of memory");
 }
 
-/* The next number on this line for `what` (e.g. "v (vertex)"), `field`. */
-static rtp_status line_num(rtpi_lex *lx, const char *what, const char *field,
-                           double *out, rtpi_tok *tok)
+/* The next number on this line for `what` (e.g. "v (vertex)"), `field`,
+   within limit. */
+static rtp_status line_num_upto(rtpi_lex *lx, const char *what, const char *field,
+                                double limit, double *out, rtpi_tok *tok)
 {
     rtpi_tok t;
     char show[48];
@@ -61,12 +64,25 @@ static rtp_status line_num(rtpi_lex *lx, const char *what, const char *field,
     if (r == -1)
         return rtpi_lex_error(lx, &t, "expected number for %s %s, got '%s'", what,
                               field, rtpi_tok_show(&t, show, sizeof show));
-    if (r != 0 || fabs(*out) > NUM_LIMIT)
+    if (r != 0 || fabs(*out) > limit)
         return rtpi_lex_error(lx, &t, "%s %s %s is out of range", what, field,
                               rtpi_tok_show(&t, show, sizeof show));
     if (tok)
         *tok = t;
     return RTP_OK;
+}
+
+/* A coordinate (NUM_LIMIT), and an MTL value (VALUE_LIMIT). */
+static rtp_status line_num(rtpi_lex *lx, const char *what, const char *field,
+                           double *out, rtpi_tok *tok)
+{
+    return line_num_upto(lx, what, field, NUM_LIMIT, out, tok);
+}
+
+static rtp_status line_val(rtpi_lex *lx, const char *what, const char *field,
+                           double *out, rtpi_tok *tok)
+{
+    return line_num_upto(lx, what, field, VALUE_LIMIT, out, tok);
 }
 
 /* Up to `max` more optional numbers, then the end of the line; `done`
@@ -144,7 +160,7 @@ static int in_list(const rtpi_tok *t, const char *const *list)
 }
 
 /* The numbers of a statement rtp does not use (ignored_mtl_nums, vp): 1
-   to 3, each within NUM_LIMIT, checked as a used one's; "spectral FILE
+   to 3, each within VALUE_LIMIT, checked as a used one's; "spectral FILE
    [factor]" read past, "xyz" before the numbers taken. */
 static rtp_status ignored_numbers(rtpi_lex *lx, const rtpi_tok *kw)
 {
@@ -163,14 +179,14 @@ static rtp_status ignored_numbers(rtpi_lex *lx, const rtpi_tok *kw)
         if (rtpi_tok_is(&peek, "xyz"))
             *lx = save;
     }
-    if ((st = line_num(lx, what, "value", &d, NULL)) != RTP_OK)
+    if ((st = line_val(lx, what, "value", &d, NULL)) != RTP_OK)
         return st;
     for (n = 1; n < 3; n++) {
         static const char *const field[] = {"value", "value 2", "value 3"};
         save = *lx;
         if (!rtpi_lex_next_inline(&save, &peek) || !rtpi_tok_numlike(&peek))
             break;
-        if ((st = line_num(lx, what, field[n], &d, NULL)) != RTP_OK)
+        if ((st = line_val(lx, what, field[n], &d, NULL)) != RTP_OK)
             return st;
     }
     return line_rest(lx, what, n, 0);
@@ -572,12 +588,12 @@ static rtp_status mtl_map(rtpi_lex *lx, rtp_scene *s, const char *what,
             /* (as every number these readers take: a strength past the
                float range was stored as inf, and the tree file written
                from it could not be read) */
-            if (fabs(*bm) > NUM_LIMIT) {
-                char show[48];
+            if (fabs(*bm) > VALUE_LIMIT) {
+                char show[48], lim[32]; /* ('.' whatever the locale) */
                 rtpi_free(&s->alloc, path);
-                return rtpi_lex_error(lx, &tk[i + 1], "%s: -bm %s is out of range (|x| <= %g)",
-                                      what, rtpi_tok_show(&tk[i + 1], show, sizeof show),
-                                      NUM_LIMIT);
+                rtpi_fmt_g(lim, sizeof lim, 6, VALUE_LIMIT);
+                return rtpi_lex_error(lx, &tk[i + 1], "%s: -bm %s is out of range (|x| <= %s)",
+                                      what, rtpi_tok_show(&tk[i + 1], show, sizeof show), lim);
             }
         }
     /* A NUL would silently cut the name (the folder itself was read). */
@@ -705,7 +721,7 @@ static rtp_status read_mtl(obj *o, const char *text, size_t size, const char *na
             int i;
             static const char *const rgb[3] = {"red", "green", "blue"};
             rtpi_tok ct[3];
-            if ((st = line_num(&lx, what, "red", &v[0], &ct[0])) != RTP_OK)
+            if ((st = line_val(&lx, what, "red", &v[0], &ct[0])) != RTP_OK)
                 break;
             v[1] = v[2] = v[0];
             ct[1] = ct[2] = ct[0];
@@ -713,8 +729,8 @@ static rtp_status read_mtl(obj *o, const char *text, size_t size, const char *na
                 rtpi_lex save = lx;
                 rtpi_tok peek;
                 if (rtpi_lex_next_inline(&save, &peek) && rtpi_tok_numlike(&peek)) {
-                    if ((st = line_num(&lx, what, "green", &v[1], &ct[1])) != RTP_OK ||
-                        (st = line_num(&lx, what, "blue", &v[2], &ct[2])) != RTP_OK)
+                    if ((st = line_val(&lx, what, "green", &v[1], &ct[1])) != RTP_OK ||
+                        (st = line_val(&lx, what, "blue", &v[2], &ct[2])) != RTP_OK)
                         break;
                 }
             }
@@ -739,7 +755,7 @@ static rtp_status read_mtl(obj *o, const char *text, size_t size, const char *na
                    rtpi_tok_is(&kw, "d") || rtpi_tok_is(&kw, "Tr")) {
             char what[8];
             rtpi_tok_show(&kw, what, sizeof what);
-            if ((st = line_num(&lx, what, "value", &v[0], &tk)) != RTP_OK ||
+            if ((st = line_val(&lx, what, "value", &v[0], &tk)) != RTP_OK ||
                 (st = line_rest(&lx, what, 1, 0)) != RTP_OK)
                 break;
             if (v[0] < 0.0)

@@ -506,7 +506,7 @@ static int parse_numbers(const char *v, double *out, int max)
         /* values are stored as floats (colours, coefficients): beyond
            float's range they would become infinite; below it (1e-400,
            strtod's ERANGE too) they are 0, as the readers have them */
-        if (end == v || !isfinite(d) || fabs(d) > 3.4e38)
+        if (end == v || !isfinite(d) || fabs(d) > RTPI_VALUE_LIMIT)
             return -1;
         if (n == max)
             return -1;
@@ -710,6 +710,23 @@ rtp_status rtpi_camera_error(const rtp_scene *s, const char *fn, const char *wha
                       what);
 }
 
+/* The camera's numbers are geometry: |x| <= RTPI_COORD_LIMIT, as NFF's v
+   block has them (a key took 1e30, the file refused 1e19). */
+static rtp_status want_coord(rtp_error *err, const char *key, const double *v, int n)
+{
+    int i;
+    char g[32], lim[32]; /* '.' whatever the locale */
+    for (i = 0; i < n; i++)
+        if (fabs(v[i]) > RTPI_COORD_LIMIT) {
+            rtpi_fmt_g(g, sizeof g, 6, v[i]);
+            rtpi_fmt_g(lim, sizeof lim, 6, RTPI_COORD_LIMIT);
+            return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
+                              "%s: %s is out of range (|x| <= %s, as a scene's view)", key, g,
+                              lim);
+        }
+    return RTP_OK;
+}
+
 /* camera.from, camera.at, camera.up (x,y,z), camera.angle (degrees, as
    NFF's: between 0 and 180), camera.hither (>= 0): what NFF's v block
    says.  The camera is then the scene's, not framed for an OBJ. */
@@ -725,6 +742,8 @@ static rtp_status set_camera(rtp_scene *s, const char *key, const char *value,
     if (dst) {
         if ((st = want_n(err, key, value, n, 3, 0)) != RTP_OK)
             return st;
+        if ((st = want_coord(err, key, v, 3)) != RTP_OK)
+            return st;
         dst[0] = v[0];
         dst[1] = v[1];
         dst[2] = v[2];
@@ -735,6 +754,8 @@ static rtp_status set_camera(rtp_scene *s, const char *key, const char *value,
     } else if (strcmp(field, "angle") == 0 || strcmp(field, "hither") == 0) {
         int angle = field[0] == 'a';
         if ((st = want_n(err, key, value, n, 1, 0)) != RTP_OK)
+            return st;
+        if (!angle && (st = want_coord(err, key, v, 1)) != RTP_OK)
             return st;
         if (angle ? !(v[0] > 0.0 && v[0] < 180.0) : !(v[0] >= 0.0)) {
             char g[32]; /* '.' whatever the locale */

@@ -202,6 +202,45 @@ grep -q "far.nff:12:9: light z 3.5e38 is out of range (|x| <= 3.4e+38)" "$T/err"
     { bad "light past the range: message"; cat "$T/err" >&2; }
 expect_rc 1 $RTP trace scenes/spheres.nff --size 40x30 -i "$T/far.pfm" --set light.0.pos=-4,-5,3.5e38
 
+# A material's numbers, a light's colour, ambient and background take the
+# range their keys take too (float's: the file stopped at 1e18, the key at
+# 3.4e38): at 3.4e38 the file traces the key's image, finite (here: a
+# kd of 3.4e38 times a colour's sum overflows, as by key); past it the
+# file names the field and the key refuses.  The camera is geometry, 1e18
+# in the file and now by key too (a key took 1e30).
+finite() { # PFM: every value finite (python3 where there is one)
+    command -v python3 >/dev/null || return 0
+    python3 -c 'import struct, sys, math
+d = open(sys.argv[1], "rb").read().split(b"\n", 3)[3]
+sys.exit(not all(math.isfinite(x) for x in struct.unpack("<%df" % (len(d) // 4), d)))' "$1"
+}
+for c in "s/^f 0.8 0.8 0.75 0.9 0 100000 0 0/f 0.8 0.8 0.75 0.9 0 3.4e38 0 0/|mat.floor.shine=3.4e38" \
+         "s/^f 0.9 0.2 0.15 0.8 0.2 30 0 0/f 0.9 0.2 0.15 0.8 0.2 30 0 3.4e38/|mat.red.ior=3.4e38" \
+         "s/^l 5 -2 4 0.4 0.4 0.5/l 5 -2 4 0.4 0.4 3.4e38/|light.fill.color=0.4,0.4,3.4e38" \
+         "s/^ambient 0.05 0.05 0.05/ambient 3.4e38 0.05 0.05/|ambient=3.4e38,0.05,0.05" \
+         "s/^b 0.1 0.15 0.3/b 0.1 3.4e38 0.3/|background=0.1,3.4e38,0.3"; do
+    sed "${c%%|*}" scenes/spheres.nff >"$T/big.nff"
+    $RTP trace "$T/big.nff" --size 40x30 -q -i "$T/big.pfm" 2>"$T/err" &&
+        $RTP trace scenes/spheres.nff --size 40x30 -q -i "$T/bigk.pfm" --set "${c#*|}" &&
+        cmp -s "$T/big.pfm" "$T/bigk.pfm" && finite "$T/big.pfm" && ok ||
+        bad "a value at 3.4e38 in the file unlike its key ${c#*|}: $(cat "$T/err")"
+done
+sed 's/^f 0.9 0.2 0.15 0.8 0.2 30 0 0/f 0.9 0.2 0.15 0.8 0.2 3.5e38 0 0/' scenes/spheres.nff >"$T/big.nff"
+expect_rc 1 $RTP trace "$T/big.nff" --size 40x30 -i "$T/big.pfm"
+grep -q "big.nff:25:24: material Shine 3.5e38 is out of range (|x| <= 3.4e+38)" "$T/err" && ok ||
+    { bad "a material's exponent past the range: message"; cat "$T/err" >&2; }
+expect_rc 1 $RTP trace scenes/spheres.nff --size 40x30 -i "$T/big.pfm" --set mat.red.shine=3.5e38
+sed 's/^from 0 -8 3/from 0 -1e18 3/' scenes/spheres.nff >"$T/big.nff"
+$RTP trace "$T/big.nff" --size 40x30 -q -i "$T/big.pfm" 2>"$T/err" &&
+    $RTP trace scenes/spheres.nff --size 40x30 -q -i "$T/bigk.pfm" --set camera.from=0,-1e18,3 &&
+    cmp -s "$T/big.pfm" "$T/bigk.pfm" && finite "$T/big.pfm" && ok ||
+    bad "a camera at 1e18 in the file unlike its key: $(cat "$T/err")"
+expect_rc 1 $RTP trace scenes/spheres.nff --size 40x30 -i "$T/big.pfm" --set camera.from=0,-1.1e18,3
+grep -q "camera.from: -1.1e+18 is out of range (|x| <= 1e+18" "$T/err" && ok ||
+    { bad "camera key past geometry's range: message"; cat "$T/err" >&2; }
+sed 's/^from 0 -8 3/from 0 -1.1e18 3/' scenes/spheres.nff >"$T/big.nff"
+expect_rc 1 $RTP trace "$T/big.nff" --size 40x30 -i "$T/big.pfm"
+
 # The largest side --size takes traces (the limit once counted a sample
 # row and column more than the image has)
 expect_rc 0 $RTP trace scenes/spheres.nff --size 1048576x1 -i "$T/wide.pfm" -q

@@ -671,7 +671,8 @@ static void test_material_ambient(void)
         {"f 1 1 1 1 0 100 0 0\nka 1 2\ns 0 0 0 1\n", 3, 1, "expected number for ka blue"},
         {"f 1 1 1 1 0 100 0 0\nka\ns 0 0 0 1\n", 3, 1, "expected number for ka value"},
         {"f 1 1 1 1 0 100 0 0\nka nan\n", 2, 4, "expected number for ka value"},
-        {"f 1 1 1 1 0 100 0 0\nka 1e19\n", 2, 4, "out of range"},
+        /* (mat.N.ambient's range, float's: 1e19 was refused here) */
+        {"f 1 1 1 1 0 100 0 0\nka 3.5e38\n", 2, 4, "ka value 3.5e38 is out of range (|x| <= 3.4e+38)"},
         {"f 1 1 1 1 0 100 0 0\nka", 2, 3, "unexpected end of file in ka line"},
     };
     rtp_scene *s = NULL;
@@ -974,6 +975,13 @@ static const bad_case bad_nff[] = {
     /* lights take their key's range, float's (not geometry's 1e18) */
     {"l 0 0 3.5e38\n", RTP_ERR_PARSE, 1, 7, "light z 3.5e38 is out of range (|x| <= 3.4e+38)"},
     {"l 1 -1e39 0\n", RTP_ERR_PARSE, 1, 5, "light y -1e39 is out of range"},
+    /* a material's, a light's colour, the background and ambient: their
+       keys' range too; the camera is geometry's */
+    {"f 1 1 1 1 0 3.5e38 0 0\n", RTP_ERR_PARSE, 1, 13,
+     "material Shine 3.5e38 is out of range (|x| <= 3.4e+38)"},
+    {"l 0 0 1 1 -4e38 1\n", RTP_ERR_PARSE, 1, 11, "light green -4e38 is out of range (|x| <= 3.4e+38)"},
+    {"b 0 0 1e39\n", RTP_ERR_PARSE, 1, 7, "background blue 1e39 is out of range"},
+    {"v\nfrom 0 0 1.1e18\n", RTP_ERR_PARSE, 2, 10, "view from z 1.1e18 is out of range (|x| <= 1e+18)"},
     {"v resolution 32768 32768\n", RTP_ERR_PARSE, 1, 20, "over the limit of 2^27 pixels"},
     {"p 999999999\n", RTP_ERR_PARSE, 1, 3, "exceeds the limit"},
     {"p 8193\n", RTP_ERR_PARSE, 1, 3, "vertex count 8193 exceeds the limit of 8192"},

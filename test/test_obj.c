@@ -328,7 +328,7 @@ static void test_mtl(void)
             const char *msg;
         } ign[] = {{"newmtl x\nKa nan 0 0\n", 4, "expected number for Ka value, got 'nan'"},
                    {"newmtl x\nKa x y z\n", 4, "expected number for Ka value, got 'x'"},
-                   {"newmtl x\nKe 0 0 1e19\n", 8, "Ke value 3 1e19 is out of range"},
+                   {"newmtl x\nKe 0 0 1e39\n", 8, "Ke value 3 1e39 is out of range"},
                    {"newmtl x\nTf 1 1 1 1\n", 10, "unexpected '1' at the end of Tf"},
                    {"newmtl x\nillum\n", 6, "unexpected end of line in illum"},
                    {"newmtl x\nPr inf\n", 4, "expected number for Pr value, got 'inf'"},
@@ -351,6 +351,19 @@ static void test_mtl(void)
                   rtp_error_format(&err, buf, sizeof buf));
         rtp_scene_destroy(s);
         s = NULL;
+        /* MTL values take their mat.N keys' range, float's (1e19 was
+           refused: the key's material could not be written in a file) */
+        CHECK(check_write_file(dir, "b.mtl", "newmtl x\nKd 3.4e38 0 0\nNs 3.4e38\nKa 3.4e38\n") ==
+              0);
+        CHECK_MSG(rtp_scene_load(path, NULL, &s, &err) == RTP_OK, "%s",
+                  rtp_error_format(&err, buf, sizeof buf));
+        CHECK(s && s->mats[0].kd == 3.4e38f && s->mats[0].shine == 3.4e38f);
+        rtp_scene_destroy(s);
+        s = NULL;
+        CHECK(check_write_file(dir, "b.mtl", "newmtl x\nNs 3.5e38\n") == 0);
+        CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_PARSE && s == NULL);
+        CHECK_MSG(err.line == 2 && err.column == 4 && strstr(err.message, "Ns value 3.5e38 is out of range"),
+                  "%d:%d %s", err.line, err.column, err.message);
     }
     CHECK(check_write_file(dir, "b.mtl", "newmtl x\nmap_Kd missing.png\n") == 0);
     CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_IO);
