@@ -2095,7 +2095,8 @@ static const char reeval_help[] =
     "                       pairs; edits persist; light.N.pos with N the count\n"
     "                       of lights adds one), and write one image per line:\n"
     "                       -i takes a pattern with %d (or %04d; %% for a '%'),\n"
-    "                       or '-' for a stream of PFM images on stdout\n"
+    "                       or '-' for a stream of PFM images on stdout (so\n"
+    "                       does a device: /dev/null)\n"
     "  --shadows MODE       shadows of moved or added lights: auto[:RES] (exact:\n"
     "                       the light buffer where the tree has 4 or more hits a\n"
     "                       primitive, else shadow rays, but the light buffer for\n"
@@ -2171,6 +2172,19 @@ static int expand_pattern(const char *pat, int n, char *out, size_t size)
         return -1;
     out[o] = '\0';
     return 0;
+}
+
+/* Whether a --stream's -i is a character device named without a %d
+   (/dev/null, a stream timed): every frame is written there, one after
+   another, as '-' writes them to stdout.  (Not a FIFO: each frame opens
+   its file, and its reader, at the end of a frame, could be gone before
+   the next frame's open, which then waited for ever.) */
+static int stream_device(const char *path)
+{
+    struct stat sb;
+    char probe[4096];
+    return stat(path, &sb) == 0 && S_ISCHR(sb.st_mode) &&
+           expand_pattern(path, 0, probe, sizeof probe) != 0;
 }
 
 /* --shadows' modes, indexed by rtp_shadow_mode (--stats' "shadows" names
@@ -2548,7 +2562,7 @@ static int cmd_reeval(int argc, char **argv)
                                 image_path == default_image ? "the default image" : "the image",
                                 image_path, "the --stats file", stats_path)))
         goto usage;
-    if (stream && strcmp(image_path, "-") != 0) {
+    if (stream && strcmp(image_path, "-") != 0 && !stream_device(image_path)) {
         char probe[4096];
         if (expand_pattern(image_path, 0, probe, sizeof probe) != 0) {
             msg("--stream: -i needs a pattern with one %%d (e.g. frame%%04d.png; %%%% for a "
@@ -2677,8 +2691,8 @@ static int cmd_reeval(int argc, char **argv)
                 rc = 1;
                 break;
             }
-            if (strcmp(image_path, "-") == 0) {
-                snprintf(path, sizeof path, "-");
+            if (strcmp(image_path, "-") == 0 || stream_device(image_path)) {
+                snprintf(path, sizeof path, "%s", image_path);
             } else if (expand_pattern(image_path, n - 1, path, sizeof path) != 0) {
                 msg("--stream: image name too long");
                 rc = 1;

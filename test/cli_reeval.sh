@@ -286,6 +286,8 @@ if [ -c /dev/null ] && [ -w /dev/null ]; then
     expect_rc 0 $RTP trace $S --size 8x6 -q -o /dev/null -i /dev/null --stats /dev/null
     expect_rc 0 $RTP reeval "$T/t.rtp" -q -i /dev/null --set ambient=0.2
     expect_rc 0 $RTP merge -q -i /dev/null "$T/t.rtp"
+    # a --stream too, every frame there ("-i needs a pattern with one %d")
+    expect_rc 0 sh -c "printf 'ambient=0.1\nambient=0.2\n' | $RTP reeval '$T/t.rtp' -q --stream -i /dev/null"
     # a FIFO without an extension gets the PFM "-" gives
     if mkfifo "$T/fifo" 2>/dev/null; then
         cat "$T/fifo" >"$T/fifo.out" &
