@@ -404,22 +404,29 @@ static char stats_tmp[4096];
 static volatile sig_atomic_t stats_tmp_live;
 /* trace -o TREE -i IMAGE with the image a pipe, device or stdout: its
    write may block as long as its reader, so signals stay live through it;
-   one arriving then puts the tree back as keep_undo would (pair_keep: the
-   keep_old of the tree, set while pair_live) */
-static const struct keep_old *pair_keep;
+   one arriving then puts the tree back as keep_undo would (pair_keep[0]:
+   the keep_old of the tree, set while pair_live).  So too while the
+   --stats file is written after them (it may be a FIFO): pair_keep[1]
+   is the image's then, and a signal puts both back. */
+static const struct keep_old *pair_keep[2];
 static volatile sig_atomic_t pair_live;
 
 static void on_term(int sig)
 {
     if (stats_tmp_live)
         unlink(stats_tmp); /* (async-signal-safe) */
-    if (pair_live && pair_keep) {
+    if (pair_live) {
         /* (rename and unlink are async-signal-safe; keep_old's fields
            were set before pair_live) */
-        if (pair_keep->state == 1)
-            rename(pair_keep->old, pair_keep->dest);
-        else if (pair_keep->state == 2)
-            unlink(pair_keep->dest);
+        int k;
+        for (k = 0; k < 2; k++) {
+            if (!pair_keep[k])
+                continue;
+            if (pair_keep[k]->state == 1)
+                rename(pair_keep[k]->old, pair_keep[k]->dest);
+            else if (pair_keep[k]->state == 2)
+                unlink(pair_keep[k]->dest);
+        }
     }
     signal(sig, SIG_DFL);
     raise(sig);
@@ -546,17 +553,19 @@ static void keep_take(keep_old *k, const char *path)
     k->state = 3;
 }
 
-static void keep_undo(keep_old *k, const char *path)
+/* what: the output put back ("tree", "image"); why: the file whose
+   write failed ("the image", "the --stats file") */
+static void keep_undo(keep_old *k, const char *path, const char *what, const char *why)
 {
     if (k->state == 1 && rename(k->old, k->dest) == 0)
-        msg("%s: put back as it was: the image could not be written", path);
+        msg("%s: put back as it was: %s could not be written", path, why);
     else if (k->state == 1)
         unlink(k->old);
     if (k->state == 2 && unlink(k->dest) == 0)
-        msg("%s: removed: the image could not be written", path);
+        msg("%s: removed: %s could not be written", path, why);
     if (k->state == 3)
-        msg("%s: the new tree stays: its old contents could not be kept beside it (%s)",
-            path, strerror(k->why));
+        msg("%s: the new %s stays: its old contents could not be kept beside it (%s)",
+            path, what, strerror(k->why));
     k->state = 0;
 }
 
@@ -571,22 +580,28 @@ static void keep_drop(keep_old *k)
    NULL) as one: when the image fails, the tree is put back as it was.
    trace -o -i and merge -o -i both write such a pair (merge had left a
    new tree, or replaced an old one, under a failed image: exit 1).
-   @return 0, or -1 with the error said. */
+   With keeps (two, the tree's and the image's), a --stats file follows:
+   the old contents of both stay kept there until pair_settle says
+   whether the stats were written (trace --stats /dev/full had exited 1
+   with the new image and tree in place).  @return 0, or -1 with the
+   error said (keeps then settled). */
 static int write_pair(const rtp_tree *tree, const char *tree_path, unsigned long long *bytes,
-                      const rtp_image *img, const char *image_path)
+                      const rtp_image *img, const char *image_path, keep_old *keeps)
 {
-    keep_old keep;
+    keep_old own[2];
+    keep_old *keep = keeps ? keeps : own;
     rtp_error err;
-    int pair = tree_path && image_path && output_is_file(tree_path), held = 0, tree_held = 0;
+    int pair = tree_path && (image_path || keeps) && output_is_file(tree_path), held = 0,
+        tree_held = 0, img_held = 0;
     memset(&err, 0, sizeof err);
-    keep.state = 0;
+    keep[0].state = keep[1].state = 0;
     if (pair) {
         /* (signals held over both writes: Ctrl-C between them would
            leave the new tree with the old image; not over an image to a
            pipe, device or stdout, whose write may block as long as its
            reader: Ctrl-C then puts the tree back, on_term) */
-        held = output_is_file(image_path) ? hold_signals(tree_path) : 0;
-        keep_take(&keep, tree_path);
+        held = !image_path || output_is_file(image_path) ? hold_signals(tree_path) : 0;
+        keep_take(&keep[0], tree_path);
         /* (and from the tree's write until pair_live is set: a signal
            between the two, once the new tree was in place, had left it
            and the old one's .old link; one held till then puts it back) */
@@ -594,30 +609,67 @@ static int write_pair(const rtp_tree *tree, const char *tree_path, unsigned long
     }
     if (tree_path && write_tree(tree, tree_path, bytes, &err) != RTP_OK) {
         fail_err(&err);
-        keep_drop(&keep);
+        keep_drop(&keep[0]);
         release_signals(tree_held);
         release_signals(held);
         return -1;
     }
     if (pair && !held) {
-        pair_keep = &keep;
+        pair_keep[0] = &keep[0];
         pair_live = 1;
     }
     release_signals(tree_held);
+    /* (the image's old contents kept only for a --stats to follow; a
+       pipe's or a device's cannot be) */
+    if (keeps && image_path && output_is_file(image_path)) {
+        /* (held until pair_live: a signal between had left the new
+           image and its old one's link) */
+        img_held = hold_signals(image_path);
+        keep_take(&keep[1], image_path);
+    }
     if (image_path && write_image(img, image_path, &err) != RTP_OK) {
+        release_signals(img_held);
         pair_live = 0;
-        pair_keep = NULL; /* (keep ends with this call: gcc -O3's
-                             -Wdangling-pointer saw it kept) */
+        pair_keep[0] = NULL; /* (keep ends with this call: gcc -O3's
+                                -Wdangling-pointer saw it kept) */
         fail_err(&err);
-        keep_undo(&keep, tree_path);
+        keep_undo(&keep[0], tree_path, "tree", "the image");
+        keep_drop(&keep[1]); /* (the failed write left the old image) */
         release_signals(held);
         return -1;
     }
+    if (keeps) {
+        /* (a signal held till now puts both back: the command did not
+           finish) */
+        pair_keep[0] = &keep[0];
+        pair_keep[1] = &keep[1];
+        pair_live = 1;
+        release_signals(img_held);
+        release_signals(held);
+        return 0;
+    }
     pair_live = 0;
-    pair_keep = NULL;
-    keep_drop(&keep);
+    pair_keep[0] = NULL;
+    keep_drop(&keep[0]);
     release_signals(held);
     return 0;
+}
+
+/* The outputs write_pair kept for a --stats file: failed (its write or
+   its rename), both put back as they were (a new one removed); else
+   their old contents dropped. */
+static void pair_settle(keep_old *keeps, const char *tree_path, const char *image_path,
+                        int failed)
+{
+    pair_live = 0;
+    pair_keep[0] = pair_keep[1] = NULL;
+    if (failed) {
+        keep_undo(&keeps[1], image_path, "image", "the --stats file");
+        keep_undo(&keeps[0], tree_path, "tree", "the --stats file");
+    } else {
+        keep_drop(&keeps[0]);
+        keep_drop(&keeps[1]);
+    }
 }
 
 /* ---------------------------------------------------------------- stats */
@@ -1533,6 +1585,8 @@ static int cmd_trace(int argc, char **argv)
     const char *image_role; /* (the image, or the default image, in messages) */
     rtp_trace_options opt;
     rtp_trace_stats st;
+    keep_old keeps[2]; /* the tree's and image's old contents while --stats is written */
+    int bad, held;
     rtp_tree *tree = NULL;
     rtp_tree_info ti;
     unsigned long long file_bytes = 0;
@@ -1747,7 +1801,7 @@ static int cmd_trace(int argc, char **argv)
     /* (the image of any kind: one written to a full device or a pipe
        whose reader left fails as a file's does, and the tree is put
        back then too) */
-    if (write_pair(tree, tree_path, &file_bytes, img, image_path))
+    if (write_pair(tree, tree_path, &file_bytes, img, image_path, stats_path ? keeps : NULL))
         goto out;
     rtp_tree_get_info(tree, &ti);
     t_write = now_seconds() - t0;
@@ -1763,8 +1817,10 @@ static int cmd_trace(int argc, char **argv)
                 st.shadow_rays, st.reflected_rays, st.refracted_rays);
     if (stats_path) {
         FILE *f = stats_open(stats_path);
-        if (!f)
+        if (!f) {
+            pair_settle(keeps, tree_path, image_path, 1);
             goto out;
+        }
         fputs("{\"command\": \"trace\", \"scene\": ", f);
         json_string(f, scene_path);
         fprintf(f,
@@ -1787,7 +1843,13 @@ static int cmd_trace(int argc, char **argv)
                        "\"bytes_per_node\": %u, \"tree_bytes\": %llu, \"file_bytes\": %llu",
                     ti.samples, ti.nodes, ti.bytes_per_node, ti.tree_bytes, file_bytes);
         fprintf(f, ", \"peak_rss_kb\": %ld}\n", peak_rss_kb());
-        if (stats_close(f, stats_path))
+        /* (held over the rename and the settling: a signal between had
+           put back the outputs of stats in place) */
+        held = hold_signals(stats_path);
+        bad = stats_close(f, stats_path);
+        pair_settle(keeps, tree_path, image_path, bad);
+        release_signals(held);
+        if (bad)
             goto out;
     }
     rc = 0;
@@ -1844,6 +1906,7 @@ typedef struct fail_limit {
 static int cmd_diff(int argc, char **argv)
 {
     const char *pa = NULL, *pb = NULL, *heat = NULL, *stats_path = NULL;
+    keep_old hkeep[2]; /* the heat map's old contents while --stats is written */
     double threshold = 1.0 / 255.0;
     rtp_image *a = NULL, *b = NULL;
     rtp_diff_stats d;
@@ -2011,13 +2074,24 @@ static int cmd_diff(int argc, char **argv)
         fail_err(&err);
         goto out;
     }
+    /* (the heat map's old contents kept while --stats is written: a
+       stats file that fails puts it back, as trace's image) */
+    hkeep[0].state = hkeep[1].state = 0;
+    if (heat && stats_path && output_is_file(heat))
+        keep_take(&hkeep[1], heat);
     held = heat ? hold_signals(heat) : 0;
     hs = heat ? rtp_diff_heatmap(a, b, 0.0, heat, &err) : RTP_OK;
-    release_signals(held);
     if (hs != RTP_OK) {
+        release_signals(held);
+        keep_drop(&hkeep[1]); /* (the failed write left the old file) */
         fail_err(&err);
         goto out;
     }
+    if (stats_path) {
+        pair_keep[1] = &hkeep[1];
+        pair_live = 1;
+    }
+    release_signals(held);
     /* (the command's whole work, as trace's seconds: both reads, the
        comparison and the heat map; BRIEF's --stats keys have seconds) */
     seconds = now_seconds() - t0;
@@ -2030,8 +2104,10 @@ static int cmd_diff(int argc, char **argv)
     }
     if (stats_path) {
         FILE *f = stats_open(stats_path);
-        if (!f)
+        if (!f) {
+            pair_settle(hkeep, NULL, heat, 1);
             goto out;
+        }
         fprintf(f, "{\"command\": \"diff\", \"seconds\": %.6f, \"pixels\": %zu, ", seconds,
                 d.pixels);
         json_number(f, "mae", d.mae);
@@ -2044,7 +2120,11 @@ static int cmd_diff(int argc, char **argv)
         fputs(", ", f);
         json_number(f, "above", d.share_above);
         fprintf(f, ", \"threshold\": %.9g}\n", threshold);
-        if (stats_close(f, stats_path))
+        held = hold_signals(stats_path); /* (as trace's) */
+        hs = stats_close(f, stats_path) ? RTP_ERR_IO : RTP_OK;
+        pair_settle(hkeep, NULL, heat, hs != RTP_OK);
+        release_signals(held);
+        if (hs != RTP_OK)
             goto out;
     }
     for (k = 0; k < nfail; k++) {
@@ -2204,12 +2284,20 @@ static long long file_size(const char *path)
 
 /* What follows an evaluation: the full trace of --reference (tree: the
    tree evaluated; under --memory-limit, as trace is), its image written,
-   the messages, its --stats line.  0, or 1 after a message. */
+   the messages, its --stats line.  0, or 1 after a message.  With
+   stats, the image's old contents are kept (keep: the image's and an
+   unused one, as write_pair's) until its line is written: a line that
+   fails puts the image back (a new one removed), so a frame fails whole;
+   with ikeep they stay kept for the caller's pair_settle after the stats
+   file's close (a one-off's), else settled here (a stream's frame). */
 static int reeval_report(const rtp_tree *tree, const rtp_image *img, const rtp_eval_stats *es_in,
                          const rtp_tree_info *ti_in, const char *image_path, int reference,
                          int threads, double memory_limit, FILE *stats, const char *stats_path,
-                         const char *tree_path, double load_seconds, int line)
+                         const char *tree_path, double load_seconds, int line, keep_old *ikeep)
 {
+    keep_old own[2];
+    keep_old *keep = ikeep ? ikeep : own;
+    keep[0].state = keep[1].state = 0;
     rtp_image *ref = NULL;
     rtp_eval_stats es = *es_in;
     rtp_tree_info ti = *ti_in;
@@ -2217,7 +2305,7 @@ static int reeval_report(const rtp_tree *tree, const rtp_image *img, const rtp_e
     rtp_diff_stats d;
     rtp_error err;
     double t_ref = 0.0;
-    int rc = 1;
+    int rc = 1, held = 0;
     memset(&err, 0, sizeof err);
     if (reference) {
         /* the full trace alone, as `seconds` is the evaluation alone
@@ -2245,10 +2333,21 @@ static int reeval_report(const rtp_tree *tree, const rtp_image *img, const rtp_e
             goto out;
         }
     }
+    if (stats && image_path && output_is_file(image_path)) {
+        held = hold_signals(image_path); /* (till pair_live, as write_pair's) */
+        keep_take(&keep[1], image_path);
+    }
     if (image_path && write_image(img, image_path, &err) != RTP_OK) {
+        release_signals(held);
         fail_line(&err, line);
+        keep_drop(&keep[1]); /* (the failed write left the old image) */
         goto out;
     }
+    if (stats) {
+        pair_keep[1] = &keep[1];
+        pair_live = 1;
+    }
+    release_signals(held);
     if (reference) {
         if (verbosity > 0)
             fprintf(stderr,
@@ -2327,8 +2426,11 @@ static int reeval_report(const rtp_tree *tree, const rtp_image *img, const rtp_e
             msg("%s%s: error writing stats: %s", where,
                 stats == stdout ? "stdout" : stats == stderr ? "stderr" : stats_path,
                 e ? strerror(e) : "write failed");
+            pair_settle(keep, NULL, image_path, 1);
             goto out;
         }
+        if (!ikeep)
+            pair_settle(keep, NULL, image_path, 0);
     }
     rc = 0;
 out:
@@ -2339,7 +2441,7 @@ out:
 static int reeval_one(rtp_tree *tree, const rtp_eval_options *eo, rtp_image **keep,
                       const char *image_path, int reference, int threads,
                       FILE *stats, const char *stats_path, const char *tree_path,
-                      double load_seconds, int line)
+                      double load_seconds, int line, keep_old *ikeep)
 {
     rtp_image *img = *keep;
     rtp_eval_stats es;
@@ -2362,7 +2464,7 @@ static int reeval_one(rtp_tree *tree, const rtp_eval_options *eo, rtp_image **ke
     rtp_tree_get_info(tree, &ti);
     return reeval_report(tree, img, &es, &ti, image_path, reference, threads, eo->memory_limit,
                          stats, stats_path,
-                         tree_path, load_seconds, line);
+                         tree_path, load_seconds, line, ikeep);
 }
 
 /* A one-off reeval's edits, made by rtp_tree_eval_file's callback once
@@ -2420,6 +2522,8 @@ static int cmd_reeval(int argc, char **argv)
     rtp_eval_options eo;
     progress prog;
     FILE *stats = NULL;
+    keep_old ikeep[2]; /* the image's old contents while --stats is written */
+    int held;
     double t0, t_load;
 
     memset(&err, 0, sizeof err);
@@ -2624,9 +2728,13 @@ static int cmd_reeval(int argc, char **argv)
             goto out;
         rc = reeval_report(NULL, img, &es, &ti, image_path, 0, threads, eo.memory_limit, stats,
                            stats_path,
-                           tree_path, t_load, 0);
+                           tree_path, t_load, 0, ikeep);
+        held = hold_signals(stats_path); /* (as trace's) */
         if (stats && (rc != 0 ? (stats_discard(stats), 0) : stats_close(stats, stats_path)))
             rc = 1;
+        if (stats)
+            pair_settle(ikeep, NULL, image_path, rc != 0);
+        release_signals(held);
         stats = NULL;
         goto out;
     }
@@ -2675,8 +2783,16 @@ static int cmd_reeval(int argc, char **argv)
         goto out;
     if (!stream) {
         rc = reeval_one(tree, &eo, &img, image_path, reference, threads, stats, stats_path,
-                        tree_path, t_load, 0);
+                        tree_path, t_load, 0, ikeep);
         progress_end(&prog);
+        held = hold_signals(stats_path); /* (as trace's) */
+        if (stats && (rc != 0 ? (stats_discard(stats), 0) : stats_close(stats, stats_path)))
+            rc = 1;
+        if (stats)
+            pair_settle(ikeep, NULL, image_path, rc != 0);
+        release_signals(held);
+        stats = NULL;
+        goto out;
     } else {
         char *line = (char *)malloc(MAX_LINE + 1), path[4096];
         int n = 0, got, cr = 0;
@@ -2740,7 +2856,7 @@ static int cmd_reeval(int argc, char **argv)
             }
             if (reeval_one(tree, &eo, &img, path, reference, threads, stats, stats_path,
                            tree_path,
-                           t_load, n)) {
+                           t_load, n, NULL)) {
                 rc = 1;
                 break;
             }
@@ -3231,7 +3347,7 @@ static int cmd_merge(int argc, char **argv)
             goto out;
         }
     }
-    if (write_pair(joined, out_tree, NULL, img, out_image))
+    if (write_pair(joined, out_tree, NULL, img, out_image, NULL))
         goto out;
     rc = 0;
 out:

@@ -657,12 +657,24 @@ if [ -w /dev/full ]; then
     expect_rc 1 sh -c "$RTP version >/dev/full"
     expect_rc 1 sh -c "$RTP --help >/dev/full"
     # a stream whose --stats cannot be written stops at that line, naming
-    # it and why (it ran to its last line, then said "write failed")
+    # it and why (it ran to its last line, then said "write failed"); the
+    # frame fails whole: its image removed (session 44: it stayed)
     mkdir -p "$T/sf"
     expect_rc 1 sh -c "printf 'ambient=0.1\nambient=0.2\nambient=0.3\n' | $RTP reeval '$T/t.rtp' --stream -i '$T/sf/f%d.pfm' --stats /dev/full"
-    [ -f "$T/sf/f0.pfm" ] && [ ! -f "$T/sf/f1.pfm" ] &&
+    [ ! -e "$T/sf/f0.pfm" ] && [ ! -f "$T/sf/f1.pfm" ] &&
         grep -q "<stdin>:1: /dev/full: error writing stats: No space left" "$T/err" &&
-        [ "$(wc -l <"$T/err")" -eq 1 ] && ok || bad "a stream's stats to /dev/full: $(ls "$T/sf") $(cat "$T/err")"
+        grep -q "f0.pfm: removed: the --stats file could not be written" "$T/err" &&
+        [ "$(wc -l <"$T/err")" -eq 2 ] && ok || bad "a stream's stats to /dev/full: $(ls "$T/sf") $(cat "$T/err")"
+    # a one-off's (both ways: the tree read as evaluated, and whole for
+    # --reference) and an old image put back as it was
+    expect_rc 1 $RTP reeval "$T/t.rtp" --set ambient=0.3 -i "$T/sf/one.pfm" --stats /dev/full
+    [ ! -e "$T/sf/one.pfm" ] && ok || bad "reeval --stats /dev/full left its image"
+    expect_rc 1 $RTP reeval "$T/t.rtp" --set ambient=0.3 --reference -q -i "$T/sf/ref.pfm" --stats /dev/full
+    [ ! -e "$T/sf/ref.pfm" ] && ok || bad "reeval --reference --stats /dev/full left its image"
+    $RTP reeval "$T/t.rtp" -i "$T/sf/old.pfm" && cp "$T/sf/old.pfm" "$T/sf/old0.pfm"
+    expect_rc 1 $RTP reeval "$T/t.rtp" --set ambient=0.3 -i "$T/sf/old.pfm" --stats /dev/full
+    cmp -s "$T/sf/old.pfm" "$T/sf/old0.pfm" && grep -q "old.pfm: put back as it was" "$T/err" &&
+        [ -z "$(ls -A "$T/sf" | grep '^\.rtp')" ] && ok || bad "reeval --stats /dev/full replaced its image: $(ls -A "$T/sf")"
 fi
 
 # stdin serves one input (session 21; each of these read stdin twice)

@@ -326,6 +326,35 @@ else
     skip=$((skip + 1)); echo "skip: no strace (or no ptrace): a tree file's fsync not checked" >&2
 fi
 
+# --stats joins the outputs' all-or-nothing rule (session 44): a stats file
+# that cannot be written (a full device, a file size limit) leaves the image,
+# the tree and the heat map as they were before the command, a new one
+# removed (trace --stats /dev/full had exited 1 with both written)
+mkdir -p "$T/so"
+if [ -w /dev/full ]; then
+    expect_rc 1 $RTP trace scenes/spheres.nff --size 8x8 -o "$T/so/n.rtp" -i "$T/so/n.pfm" --stats /dev/full
+    [ ! -e "$T/so/n.rtp" ] && [ ! -e "$T/so/n.pfm" ] && grep -q "n.pfm: removed: the --stats file could not be written" "$T/err" &&
+        ok || bad "trace --stats /dev/full left its outputs: $(ls "$T/so") $(cat "$T/err")"
+    $RTP trace scenes/spheres.nff --size 8x8 -q -o "$T/so/o.rtp" -i "$T/so/o.pfm"
+    cp "$T/so/o.rtp" "$T/so/o0.rtp"; cp "$T/so/o.pfm" "$T/so/o0.pfm"
+    expect_rc 1 $RTP trace scenes/spheres.nff --size 8x8 --set ambient=0.5 -o "$T/so/o.rtp" -i "$T/so/o.pfm" --stats /dev/full
+    cmp -s "$T/so/o.rtp" "$T/so/o0.rtp" && cmp -s "$T/so/o.pfm" "$T/so/o0.pfm" &&
+        [ -z "$(ls -A "$T/so" | grep -v '^[no]')" ] && ok || bad "trace --stats /dev/full kept new outputs: $(ls -A "$T/so")"
+    # --stats - to a full stdout likewise
+    expect_rc 1 sh -c "$RTP trace scenes/spheres.nff --size 8x8 -i '$T/so/s.pfm' --stats - >/dev/full"
+    [ ! -e "$T/so/s.pfm" ] && ok || bad "trace --stats - >/dev/full left its image"
+    # diff's heat map
+    expect_rc 1 $RTP diff "$T/so/o.pfm" "$T/so/o.pfm" -q --heatmap "$T/so/h.png" --stats /dev/full
+    [ ! -e "$T/so/h.png" ] && ok || bad "diff --stats /dev/full left its heat map"
+fi
+# a stats file that fails as a regular file (the file size limit: the long
+# scene path makes the JSON longer than 1 KiB, the 4x4 image shorter than
+# 512 bytes: dash counts ulimit -f in 512-byte blocks, bash in 1 KiB)
+P="$(i=0; while [ $i -lt 400 ]; do printf './'; i=$((i + 1)); done)scenes/spheres.nff"
+(ulimit -f 1 && exec $RTP trace "$P" --size 4x4 -i "$T/so/l.pfm" --stats "$T/so/l.json") 2>"$T/err"
+[ $? -eq 1 ] && [ ! -e "$T/so/l.pfm" ] && [ ! -e "$T/so/l.json" ] && grep -q "File too large" "$T/err" &&
+    [ -z "$(ls -A "$T/so" | grep '^\.rtp')" ] && ok || bad "trace --stats over a size limit: $(ls -A "$T/so") $(cat "$T/err")"
+
 rm -rf "$T"
 echo "$pass passed, $fail failed, $skip skipped"
 [ "$fail" -eq 0 ]
