@@ -355,6 +355,17 @@ P="$(i=0; while [ $i -lt 400 ]; do printf './'; i=$((i + 1)); done)scenes/sphere
 [ $? -eq 1 ] && [ ! -e "$T/so/l.pfm" ] && [ ! -e "$T/so/l.json" ] && grep -q "File too large" "$T/err" &&
     [ -z "$(ls -A "$T/so" | grep '^\.rtp')" ] && ok || bad "trace --stats over a size limit: $(ls -A "$T/so") $(cat "$T/err")"
 
+# a --stats FIFO that no one reads: SIGTERM while rtp waits on it puts the
+# image back (removed: it was new), as a failed stats file does
+if mkfifo "$T/so/f.json" 2>/dev/null; then
+    $RTP trace scenes/spheres.nff --size 8x8 -i "$T/so/f.pfm" --stats "$T/so/f.json" 2>/dev/null &
+    p=$!; n=0
+    while [ ! -e "$T/so/f.pfm" ] && [ $n -lt 200 ]; do sleep 0.05; n=$((n + 1)); done
+    sleep 0.2; kill -TERM $p; wait $p; r=$?
+    [ $n -lt 200 ] && [ $r -eq 143 ] && [ ! -e "$T/so/f.pfm" ] && [ -z "$(ls -A "$T/so" | grep '^\.rtp')" ] &&
+        ok || bad "SIGTERM on a --stats FIFO left its image: rc $r, $n, $(ls -A "$T/so")"
+fi
+
 rm -rf "$T"
 echo "$pass passed, $fail failed, $skip skipped"
 [ "$fail" -eq 0 ]
