@@ -600,16 +600,30 @@ static inline rtpi_v3 light_pos(const rtpi_light *L)
     return v3(L->pos[0], L->pos[1], L->pos[2]);
 }
 
+/* n.l and l (the unit vector to the light); 0 where n.l <= 0 (a NaN
+   n.l goes on, as the terms have always taken it) */
+static inline int light_ndl(const float *nv, rtpi_v3 p, rtpi_v3 lp, double *ndl, rtpi_v3 *l)
+{
+    rtpi_v3 n = v3(nv[0], nv[1], nv[2]);
+    *l = v3_norm(v3_sub(lp, p));
+    *ndl = v3_dot(n, *l);
+    return !(*ndl <= 0.0);
+}
+
+/* r_i.v, r_i being l mirrored about n; the highlight is (r_i.v)^shine. */
+static inline double light_rv(const float *nv, double ndl, rtpi_v3 l)
+{
+    rtpi_v3 n = v3(nv[0], nv[1], nv[2]), v = v3(nv[3], nv[4], nv[5]);
+    return v3_dot(v3_sub(v3_mul(n, 2.0 * ndl), l), v);
+}
+
 static inline int light_geometry(const float *nv, rtpi_v3 p, rtpi_v3 lp, double *ndl,
                                  double *rv)
 {
-    rtpi_v3 n = v3(nv[0], nv[1], nv[2]), v = v3(nv[3], nv[4], nv[5]), l;
-    l = v3_norm(v3_sub(lp, p));
-    *ndl = v3_dot(n, l);
-    if (*ndl <= 0.0)
+    rtpi_v3 l;
+    if (!light_ndl(nv, p, lp, ndl, &l))
         return 0;
-    /* r_i: l mirrored about n; the highlight is (r_i.v)^shine. */
-    *rv = v3_dot(v3_sub(v3_mul(n, 2.0 * *ndl), l), v);
+    *rv = light_rv(nv, *ndl, l);
     return 1;
 }
 
@@ -618,15 +632,18 @@ static RTPI_FORCE_INLINE void light_term_pow(const float *nv, rtpi_v3 p, rtpi_v3
                                              int pow_inline)
 {
     double ndl, rv;
+    rtpi_v3 l;
     out[0] = out[1] = 0.0f;
-    if (!visible || !light_geometry(nv, p, lp, &ndl, &rv))
+    if (!visible || !light_ndl(nv, p, lp, &ndl, &l))
         return;
     out[0] = (float)ndl;
     /* no highlight to weigh where ks is 0 (an edit making it non-zero
-       recomputes these terms) */
-    if (!(rv > 0.0 && m->ks > 0.0f))
-        out[1] = 0.0f;
-    else
+       recomputes these terms): r.v not made there (tree's materials,
+       most of balls' lit nodes), as in rtpi_light_redo */
+    if (!(m->ks > 0.0f))
+        return;
+    rv = light_rv(nv, ndl, l);
+    if (rv > 0.0)
         out[1] = pow_inline ? pow_float(rv, m->shine) : rtpi_pow_float(rv, m->shine);
 }
 
