@@ -589,12 +589,6 @@ static int seen(const rtpi_cnode *nd, const uint32_t *ext, size_t i)
     return (int)((ext[i >> 5] >> (i & 31)) & 1u);
 }
 
-/* The terms of one light at a hit: d = n.l and s = (r.v)^shine where the
-   hit sees the light and faces it.  n and v come rounded to float (as the
-   evaluation cache keeps them), so recomputing one light's terms from the
-   cache repeats this arithmetic exactly. */
-/* n.l and the highlight's base r.v at a hit facing the light; 0 where
-   the light is behind the surface. */
 static inline rtpi_v3 light_pos(const rtpi_light *L)
 {
     return v3(L->pos[0], L->pos[1], L->pos[2]);
@@ -617,6 +611,8 @@ static inline double light_rv(const float *nv, double ndl, rtpi_v3 l)
     return v3_dot(v3_sub(v3_mul(n, 2.0 * ndl), l), v);
 }
 
+/* n.l and the highlight's base r.v at a hit facing the light; 0 where
+   the light is behind the surface (rtpi_material_highlights). */
 static inline int light_geometry(const float *nv, rtpi_v3 p, rtpi_v3 lp, double *ndl,
                                  double *rv)
 {
@@ -627,6 +623,13 @@ static inline int light_geometry(const float *nv, rtpi_v3 p, rtpi_v3 lp, double 
     return 1;
 }
 
+/* The terms of one light at a hit: d = n.l and s = (r.v)^shine where the
+   hit sees the light and faces it.  n and v come rounded to float (as the
+   evaluation cache keeps them), so recomputing one light's terms from the
+   cache repeats this arithmetic exactly (rtpi_light_redo has its own
+   inline copy of it, with the power inline: pow_inline is 0 at every
+   call now, kept because folding it into light_term cost the first
+   evaluation 0.5-0.7%, session 44). */
 static RTPI_FORCE_INLINE void light_term_pow(const float *nv, rtpi_v3 p, rtpi_v3 lp,
                                              int visible, const rtpi_material *m, float *out,
                                              int pow_inline)
@@ -647,9 +650,9 @@ static RTPI_FORCE_INLINE void light_term_pow(const float *nv, rtpi_v3 p, rtpi_v3
         out[1] = pow_inline ? pow_float(rv, m->shine) : rtpi_pow_float(rv, m->shine);
 }
 
-/* light_term's arithmetic with the power inline (rtpi_light_redo) or
-   called (the first evaluation's node_terms over every light, where
-   inline it cost mount's 2%: the spills around the loop's other work) */
+/* light_term_pow with the power called (the first evaluation's
+   node_terms over every light, where inline it cost mount's 2%: the
+   spills around the loop's other work) */
 static RTPI_FORCE_INLINE void light_term(const float *nv, rtpi_v3 p, rtpi_v3 lp, int visible,
                                          const rtpi_material *m, float *out)
 {
