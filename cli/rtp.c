@@ -864,6 +864,29 @@ static int stats_close(FILE *f, const char *path)
     return 0;
 }
 
+/* The end of a command's --stats file f (NULL: none) and of the outputs
+   write_pair kept for it (keeps, the tree at tree_path and the image at
+   image_path): f closed into place, or given up where the command failed
+   already; the outputs put back if either failed, else their old contents
+   dropped; signals held over the rename and the settling (one between had
+   put back the outputs of stats in place).  1 where the stats file failed
+   or the command had. */
+static int stats_settle(FILE *f, const char *path, keep_old *keeps, const char *tree_path,
+                        const char *image_path, int failed)
+{
+    int held, bad = failed;
+    if (!f)
+        return failed;
+    held = hold_signals(path);
+    if (failed)
+        stats_discard(f);
+    else
+        bad = stats_close(f, path);
+    pair_settle(keeps, tree_path, image_path, bad);
+    release_signals(held);
+    return bad;
+}
+
 /* Whether an image can be written to path, said before the work that
    makes it (a trace of minutes, then "cannot tell the image format"):
    0 after a message.  (A name without a %d in a --stream pattern is
@@ -1586,7 +1609,6 @@ static int cmd_trace(int argc, char **argv)
     rtp_trace_options opt;
     rtp_trace_stats st;
     keep_old keeps[2]; /* the tree's and image's old contents while --stats is written */
-    int bad, held;
     rtp_tree *tree = NULL;
     rtp_tree_info ti;
     unsigned long long file_bytes = 0;
@@ -1843,13 +1865,7 @@ static int cmd_trace(int argc, char **argv)
                        "\"bytes_per_node\": %u, \"tree_bytes\": %llu, \"file_bytes\": %llu",
                     ti.samples, ti.nodes, ti.bytes_per_node, ti.tree_bytes, file_bytes);
         fprintf(f, ", \"peak_rss_kb\": %ld}\n", peak_rss_kb());
-        /* (held over the rename and the settling: a signal between had
-           put back the outputs of stats in place) */
-        held = hold_signals(stats_path);
-        bad = stats_close(f, stats_path);
-        pair_settle(keeps, tree_path, image_path, bad);
-        release_signals(held);
-        if (bad)
+        if (stats_settle(f, stats_path, keeps, tree_path, image_path, 0))
             goto out;
     }
     rc = 0;
@@ -2120,10 +2136,7 @@ static int cmd_diff(int argc, char **argv)
         fputs(", ", f);
         json_number(f, "above", d.share_above);
         fprintf(f, ", \"threshold\": %.9g}\n", threshold);
-        held = hold_signals(stats_path); /* (as trace's) */
-        hs = stats_close(f, stats_path) ? RTP_ERR_IO : RTP_OK;
-        pair_settle(hkeep, NULL, heat, hs != RTP_OK);
-        release_signals(held);
+        hs = stats_settle(f, stats_path, hkeep, NULL, heat, 0) ? RTP_ERR_IO : RTP_OK;
         if (hs != RTP_OK)
             goto out;
     }
@@ -2523,7 +2536,6 @@ static int cmd_reeval(int argc, char **argv)
     progress prog;
     FILE *stats = NULL;
     keep_old ikeep[2]; /* the image's old contents while --stats is written */
-    int held;
     double t0, t_load;
 
     memset(&err, 0, sizeof err);
@@ -2729,12 +2741,8 @@ static int cmd_reeval(int argc, char **argv)
         rc = reeval_report(NULL, img, &es, &ti, image_path, 0, threads, eo.memory_limit, stats,
                            stats_path,
                            tree_path, t_load, 0, ikeep);
-        held = hold_signals(stats_path); /* (as trace's) */
-        if (stats && (rc != 0 ? (stats_discard(stats), 0) : stats_close(stats, stats_path)))
+        if (stats_settle(stats, stats_path, ikeep, NULL, image_path, rc != 0) && rc == 0)
             rc = 1;
-        if (stats)
-            pair_settle(ikeep, NULL, image_path, rc != 0);
-        release_signals(held);
         stats = NULL;
         goto out;
     }
@@ -2785,12 +2793,8 @@ static int cmd_reeval(int argc, char **argv)
         rc = reeval_one(tree, &eo, &img, image_path, reference, threads, stats, stats_path,
                         tree_path, t_load, 0, ikeep);
         progress_end(&prog);
-        held = hold_signals(stats_path); /* (as trace's) */
-        if (stats && (rc != 0 ? (stats_discard(stats), 0) : stats_close(stats, stats_path)))
+        if (stats_settle(stats, stats_path, ikeep, NULL, image_path, rc != 0) && rc == 0)
             rc = 1;
-        if (stats)
-            pair_settle(ikeep, NULL, image_path, rc != 0);
-        release_signals(held);
         stats = NULL;
         goto out;
     } else {
