@@ -8,7 +8,10 @@
 # kd-tree it built).  Deterministic where
 # wall-clock time on a shared machine is not: compare a change's counts
 # with the counts before it.  Needs valgrind; prints a table and writes it
-# to build/instr/instr.md.
+# to build/instr/instr.md.  With RTP_INSTR_KEEP=1 the callgrind dumps
+# (BIN_DIR/cg.SCENE-SIZE.*, one a label) and the trees stay, for
+# callgrind_annotate's per-function counts.  Between two builds: run it in
+# each checkout, and test/bench/same_bits.sh for their outputs' bytes.
 #   run.sh BIN_DIR [SCENE...]
 dir=${1:-build/instr}
 shift
@@ -84,6 +87,7 @@ for size in $sizes; do
             fi
         done
         echo "$row" | tee -a "$out"
-        rm -f "$dir"/cg."$name"-"$size".* "$tree" "$dir/$name-$size.pfm"
+        [ -n "${RTP_INSTR_KEEP:-}" ] ||
+            rm -f "$dir"/cg."$name"-"$size".* "$tree" "$dir/$name-$size.pfm"
     done
 done
