@@ -11,6 +11,7 @@
 #include "rtp.h"
 
 #include <math.h>
+#include <float.h>
 #include <stdint.h>
 #include <string.h>
 
@@ -886,6 +887,16 @@ static RTPI_FORCE_INLINE void rtpi_nodes_diffuse(const rtpi_shade_ctx *c, const 
 {
     rtpi_nodes_diffuse_nl(c->s->nlights, idx, n, terms, w, cv, q);
 }
+/* The largest magnitude a sample's channel takes (rtpi_combine): where
+   its sum passes it (numbers near RTPI_VALUE_LIMIT: a kd of 3.4e38 under a
+   light of 3.4e38) the channel is this, with the sum's sign, and 0 where
+   the sum is NaN (infinities of both signs, from negative texels; an
+   infinite path weight times 0).  A quarter of float's range, not all of
+   it, so that SPD's four corner samples sum in float without overflow:
+   every image rtp makes (trace, reeval, each stream frame, --reference) is
+   finite, and the PNG's pixel white where it had been an infinity, shown
+   black.  (Without it PFMs held infinities and NaN.) */
+#define RTPI_SAMPLE_MAX (0.25f * FLT_MAX)
 /* acc + coefficient k x colour c, where a colour of 0 adds nothing (not
    even a NaN from an infinite k: rtpi_combine, which takes it where its
    plain sum came out NaN). */

@@ -728,8 +728,9 @@ static inline const rtpi_material *node_terms(const rtpi_shade_ctx *c, const rtp
     return m;
 }
 
-/* rtpi_combine's sums where one came out NaN: a colour of 0 adds nothing
-   there (RTPI_TERM_SUM). */
+/* rtpi_combine's sums where one came out NaN or past RTPI_SAMPLE_MAX: a
+   colour of 0 adds nothing there (RTPI_TERM_SUM), and each sum is held to
+   the sample's range, 0 where it is NaN still. */
 static void combine_zero(const rtp_scene *s, const double *cl, const float *coeffs, float rgb[3])
 {
     size_t i, nl = s->nlights;
@@ -739,7 +740,9 @@ static void combine_zero(const rtp_scene *s, const double *cl, const float *coef
                                  coeffs[3 + k], (double)s->ambient[k]);
         for (i = 0; i < nl; i++)
             a = RTPI_TERM_SUM(a, coeffs[6 + 3 * i + k], cl[3 * i + k]);
-        rgb[k] = (float)a;
+        rgb[k] = a > RTPI_SAMPLE_MAX ? RTPI_SAMPLE_MAX
+                 : a < -RTPI_SAMPLE_MAX ? -RTPI_SAMPLE_MAX
+                 : a == a ? (float)a : 0.0f;
     }
 }
 
@@ -780,8 +783,10 @@ static RTPI_FORCE_INLINE void combine_into(const rtp_scene *s, const double *cl,
        rule gives the same sums, but for the sign of a zero), so only then
        are the sums made again with it (tested as one: their sum is NaN
        where one is, or where infinities of both signs meet, which the
-       rule leaves as they are). */
-    if (!(v[0] + v[1] + v[2] == v[0] + v[1] + v[2])) {
+       rule leaves as they are).  The same test sends sums past
+       RTPI_SAMPLE_MAX there, to be held to it (their magnitudes summed: a
+       sum past it makes theirs so, NaN fails it). */
+    if (!(fabs(v[0]) + fabs(v[1]) + fabs(v[2]) <= RTPI_SAMPLE_MAX)) {
         combine_zero(s, cl, coeffs, rgb); /* (a tail call: no frame here) */
         return;
     }
@@ -1107,7 +1112,7 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
                 v2 = _mm_add_sd(_mm_load_sd(r + 2), _mm_mul_sd(_mm_cvtps_pd(f2), lc2));
                 ab = _mm_and_pd(v01, absm);
                 ab = _mm_add_sd(_mm_add_sd(ab, _mm_unpackhi_pd(ab, ab)), _mm_and_pd(v2, absm));
-                if (_mm_cvtsd_f64(ab) <= DBL_MAX)
+                if (_mm_cvtsd_f64(ab) <= RTPI_SAMPLE_MAX)
                     store3f(o, v01, v2);
                 else
                     rtpi_combine(s, cl, co, o);
@@ -1122,9 +1127,13 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
                     v01 = _mm_add_pd(v01, _mm_mul_pd(load2f(cc), _mm_loadu_pd(cli)));
                     v2 = _mm_add_sd(v2, _mm_mul_sd(load1f(&cc[2]), _mm_load_sd(cli + 2)));
                 }
-                sum = _mm_cvtsd_f64(_mm_add_sd(_mm_add_sd(v01, _mm_unpackhi_pd(v01, v01)), v2));
-                if (!(sum == sum))
-                    combine_zero(s, cl, co, o); /* (combine_into's NaN rule) */
+                {
+                    __m128d ab = _mm_and_pd(v01, absm);
+                    sum = _mm_cvtsd_f64(_mm_add_sd(_mm_add_sd(ab, _mm_unpackhi_pd(ab, ab)),
+                                                   _mm_and_pd(v2, absm)));
+                }
+                if (!(sum <= RTPI_SAMPLE_MAX))
+                    combine_zero(s, cl, co, o); /* (combine_into's rule) */
                 else
                     store3f(o, v01, v2);
             }
@@ -1137,7 +1146,8 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
             if (with_rest) {
                 /* the rest of the sum, then this light's term: as
                    rtpi_combine where the light is the last, else about
-                   a float ulp from it; it serves where the sum is finite */
+                   a float ulp from it; it serves where the sum is within
+                   RTPI_SAMPLE_MAX */
                 double *r = rest + 3 * k, v0, v1, v2;
                 const double *lc = cl + 3 * light;
                 const float *f = co + 6 + 3 * light;
@@ -1148,7 +1158,7 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
                 v0 = r[0] + f[0] * lc[0];
                 v1 = r[1] + f[1] * lc[1];
                 v2 = r[2] + f[2] * lc[2];
-                if (fabs(v0) + fabs(v1) + fabs(v2) <= DBL_MAX) {
+                if (fabs(v0) + fabs(v1) + fabs(v2) <= RTPI_SAMPLE_MAX) {
                     float *o = samples + 3 * k;
                     o[0] = (float)v0;
                     o[1] = (float)v1;

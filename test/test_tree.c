@@ -2972,6 +2972,18 @@ static int edit_start(int spd, rtp_scene **s, rtp_tree **t, rtp_trace_options *o
 
 /* Evaluates into re and checks it against a full trace of the scene
    (1e-6), `what` naming the case in messages; 0 when a step failed. */
+/* Every channel of img within RTPI_SAMPLE_MAX (NaN is not): the images
+   rtp makes are finite, whatever the scene's values (each sample held to
+   it where its sum passes it, an SPD pixel the average of four). */
+static int in_sample_range(const rtp_image *img)
+{
+    size_t i, n = (size_t)img->width * (size_t)img->height * 3;
+    for (i = 0; i < n; i++)
+        if (!(fabsf(img->pixels[i]) <= RTPI_SAMPLE_MAX))
+            return 0;
+    return 1;
+}
+
 static int eval_equals_trace(rtp_tree *t, const rtp_scene *s, const rtp_trace_options *o,
                              const rtp_eval_options *eo, rtp_image *re, rtp_eval_stats *es,
                              const char *what)
@@ -2982,8 +2994,11 @@ static int eval_equals_trace(rtp_tree *t, const rtp_scene *s, const rtp_trace_op
              rtp_trace(s, o, &full, NULL, NULL) == RTP_OK &&
              rtp_image_diff(re, full, 1e-6, &d, NULL) == RTP_OK;
     CHECK_MSG(ok, "%s: a step failed", what);
-    if (ok)
+    if (ok) {
         CHECK_MSG(d.max_abs <= 1e-6, "%s: %g", what, d.max_abs);
+        CHECK_MSG(in_sample_range(re) && in_sample_range(full),
+                  "%s: a channel past RTPI_SAMPLE_MAX or NaN", what);
+    }
     rtp_image_destroy(full);
     return ok;
 }
@@ -3030,6 +3045,7 @@ static void near_float_max_on(const char *path, int spd, int depth, const int *r
         CHECK(rtp_scene_set(s, pre[i], pre[i + 1], NULL) == RTP_OK);
     CHECK(rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
     CHECK(t && rtp_tree_eval(t, &eo, &re, NULL, NULL) == RTP_OK);
+    CHECK(!re || in_sample_range(re));
     /* (edit_equals_trace's 1e-6: an infinity against an equal one counts
        0, against a finite value infinite; a float step of 1e38 is 1e31) */
     for (i = 0; t && re && seq[i][0]; i++) {
@@ -3133,6 +3149,103 @@ static void test_near_float_max(void)
         near_float_max_on("scenes/textured.nff", 1, 0, column, negpre, neg_seq);
         remove(tex);
     }
+}
+
+/* The scene's values at RTPI_VALUE_LIMIT: a kd and colours of 3.4e38
+   under a light of 3.4e38 overflowed the float range, and a PFM held
+   infinities (a PNG showed them black); a floor of negative texels
+   (-inf coefficients) under a ceiling of +inf ones summed to NaN.  Each
+   sample is held to RTPI_SAMPLE_MAX (NaN: 0), by the trace and by every
+   evaluation alike (eval_equals_trace checks the range of both). */
+static void test_sample_range(void)
+{
+    static const char *const seq[][4] = {
+        {"light.1.color", "3.4e38,3.4e38,3.4e38"}, {"mat.2.ks", "3.4e38"},
+        {"light.0.pos", "-3,-5,8"}, {"mat.1.color", "0,3.4e38,0"}, {"mat.1.kd", "1"},
+        {"light.0.on", "0"}, {NULL},
+    };
+    static const char *const big[] = {"light.0.color", "3.4e38,3.4e38,3.4e38", "mat.0.kd",
+                                      "3.4e38", "mat.1.kd", "3.4e38", "mat.0.color",
+                                      "3.4e38,3.4e38,3.4e38", NULL};
+    static const char *const nan_seq[][4] = {
+        {"light.0.pos", "1,1,4"}, {"ambient", "0,0,0"}, {"mat.1.ks", "0"}, {NULL},
+    };
+    char tex[512], path[512];
+    FILE *f;
+    rtp_scene *s;
+    rtp_image *img = NULL;
+    rtp_trace_options o;
+    rtp_eval_options eo;
+    int spd, le = 1;
+    for (spd = 0; spd < 2; spd++) {
+        near_float_max_on("scenes/spheres.nff", spd, 0, NULL, big, seq);
+        near_float_max_on("scenes/spheres.nff", spd, 12, NULL, big, seq);
+    }
+    /* a white pixel where it was an infinity */
+    s = load("scenes/spheres.nff");
+    CHECK(s != NULL);
+    edit_options(0, &o, &eo);
+    if (s) {
+        size_t i, n, top = 0;
+        int k;
+        for (k = 0; big[k]; k += 2)
+            CHECK(rtp_scene_set(s, big[k], big[k + 1], NULL) == RTP_OK);
+        CHECK(rtp_trace(s, &o, &img, NULL, NULL) == RTP_OK);
+        n = img ? (size_t)img->width * img->height * 3 : 0;
+        for (i = 0; i < n; i++)
+            top += img->pixels[i] == RTPI_SAMPLE_MAX;
+        CHECK(img && in_sample_range(img) && top > 0);
+        rtp_image_destroy(img);
+        img = NULL;
+        rtp_scene_destroy(s);
+    }
+    /* -inf + inf: a floor of texels -1, colour and ka 3.4e38 (kd 0: its
+       ambient coefficient -inf), mirroring a ceiling of kd and colour
+       3.4e38 (ka 0: its light's coefficient +inf); NaN in the trace */
+    static const char *const floor_ka[] = {"mat.0.ambient", "3.4e38", "mat.1.ambient", "0",
+                                           NULL};
+    snprintf(tex, sizeof tex, "%s/rtp-range-%d.pfm", tmpdir(), (int)getpid());
+    snprintf(path, sizeof path, "%s/rtp-range-%d.nff", tmpdir(), (int)getpid());
+    f = fopen(tex, "wb");
+    CHECK(f != NULL);
+    if (f) {
+        static const float neg[12] = {-1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1};
+        CHECK(fputs(*(const char *)&le ? "PF\n2 2\n-1.0\n" : "PF\n2 2\n1.0\n", f) >= 0 &&
+              fwrite(neg, sizeof neg, 1, f) == 1);
+        CHECK(fclose(f) == 0);
+    }
+    f = fopen(path, "w");
+    CHECK(f != NULL);
+    if (f) {
+        fprintf(f, "b 0 0 0\nv\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 40\nhither 0.1\n"
+                   "resolution 8 8\nambient 1 1 1\nl 0 0 4\n"
+                   "f 3.4e38 3.4e38 3.4e38 0 1 1 0 1\ntexture %s\n"
+                   "p 4\n-20 -20 0\n20 -20 0\n20 20 0\n-20 20 0\n"
+                   "f 3.4e38 3.4e38 3.4e38 3.4e38 0 1 0 1\n"
+                   "p 4\n-50 -50 10\n50 -50 10\n50 50 10\n-50 50 10\n",
+                tex);
+        CHECK(fclose(f) == 0);
+        s = load(path);
+        CHECK(s != NULL);
+        if (s) {
+            const float *c;
+            int k;
+            for (k = 0; floor_ka[k]; k += 2)
+                CHECK(rtp_scene_set(s, floor_ka[k], floor_ka[k + 1], NULL) == RTP_OK);
+            CHECK(rtp_trace(s, &o, &img, NULL, NULL) == RTP_OK);
+            c = img ? img->pixels + 3 * ((size_t)(img->height / 2) * img->width +
+                                         img->width / 2)
+                    : NULL;
+            CHECK(img && in_sample_range(img));
+            CHECK(c && c[0] == 0.0f && c[1] == 0.0f && c[2] == 0.0f);
+            rtp_image_destroy(img);
+            rtp_scene_destroy(s);
+        }
+        near_float_max_on(path, 0, 0, NULL, floor_ka, nan_seq);
+        near_float_max_on(path, 1, 0, NULL, floor_ka, nan_seq);
+    }
+    remove(path);
+    remove(tex);
 }
 
 /* More than 64 lights where the caches are small: a stream's light edits
@@ -7294,6 +7407,7 @@ int main(void)
 #endif
     RUN(test_colour_edits);
     RUN(test_near_float_max);
+    RUN(test_sample_range);
     RUN(test_identical_many_lights);
     RUN(test_many_lights_retrace);
     RUN(test_identical_teapot);
