@@ -1514,6 +1514,164 @@ static void test_lightbuf_edges_same(void)
     }
 }
 
+/* The round primitives' tests (cone bands, sphere boxes), run by
+   round_run: scenes at the origin and moved far from it, small and large
+   (offset, scale), each a view, a light, a material and the test's
+   primitives (`add`: their text after `len` bytes of ROUND_TEXT; the new
+   length); for each of six lights (`light`: where in the unit scene),
+   placed as the scene is, the light buffer at 64 cells a face edge for
+   odd lights, 256 for even, which `check` examines. */
+#define ROUND_TEXT 65536
+
+typedef struct round_test {
+    const char *what;
+    size_t (*add)(char *text, size_t len, double off, double sc);
+    rtpi_v3 (*light)(const rtp_scene *s, int li, double off, double sc);
+    void (*check)(const rtp_scene *s, const rtpi_lightbuf *lb, rtpi_v3 L, double off, int li);
+} round_test;
+
+static void round_run(const round_test *t)
+{
+    static const double offs[][2] = {{0, 1}, {3000, 0.01}, {-2e5, 3}};
+    size_t oi;
+    for (oi = 0; oi < sizeof offs / sizeof *offs; oi++) {
+        double off = offs[oi][0], sc = offs[oi][1];
+        char *text = (char *)malloc(ROUND_TEXT);
+        size_t len;
+        rtp_scene *s;
+        rtp_allocator al;
+        int li;
+        rtpi_allocator_init(&al, NULL);
+        CHECK(text != NULL);
+        if (!text)
+            return;
+        len = (size_t)snprintf(text, ROUND_TEXT,
+                               "v\nfrom 0 -9 4\nat 0 0 0.5\nup 0 0 1\nangle 50\nhither 0.01\n"
+                               "resolution 8 8\nl 0 0 9\nf 0.8 0.8 0.8 1 0 0 0 1\n");
+        len = t->add(text, len, off, sc);
+        s = load(text, len);
+        free(text);
+        CHECK(s != NULL);
+        if (!s)
+            return;
+        for (li = 0; li < 6; li++) {
+            rtpi_v3 L = t->light(s, li, off, sc);
+            rtpi_lightbuf lb;
+            L = v3(off + sc * L.x, off + sc * L.y, off + sc * L.z);
+            if (rtpi_lightbuf_build(s, L, li & 1 ? 64 : 256, &al, &lb, NULL) != RTP_OK) {
+                CHECK_MSG(0, "%s: build failed, light %d", t->what, li);
+                continue;
+            }
+            t->check(s, &lb, L, off, li);
+            rtpi_lightbuf_free(&lb, &al);
+        }
+        rtp_scene_destroy(s);
+    }
+}
+
+/* 40 cylinders and cones (every fourth) of random sizes and directions, a
+   sphere, and a floor far below: two triangles among the round
+   candidates. */
+static size_t cone_slabs_add(char *text, size_t len, double off, double sc)
+{
+    size_t k;
+    for (k = 0; k < 40; k++) {
+        double ax = 6 * (rnd() - 0.5), ay = 6 * (rnd() - 0.5), az = 3 * rnd();
+        double ln = 0.2 + 2 * rnd(), z = 2 * rnd() - 1, ph = 6.283185307179586 * rnd();
+        double rr = sqrt(1 - z * z), r0 = 0.01 + 0.3 * rnd();
+        double r1 = k % 4 == 3 ? 0.01 + 0.3 * rnd() : r0; /* every fourth a cone */
+        len += (size_t)snprintf(text + len, ROUND_TEXT - len, "c\n%.17g %.17g %.17g %.17g\n"
+                                "%.17g %.17g %.17g %.17g\n",
+                                off + sc * ax, off + sc * ay, off + sc * az, sc * r0,
+                                off + sc * (ax + ln * rr * cos(ph)),
+                                off + sc * (ay + ln * rr * sin(ph)), off + sc * (az + ln * z),
+                                sc * r1);
+    }
+    len += (size_t)snprintf(text + len, ROUND_TEXT - len, "s %.17g %.17g %.17g %.17g\n", off,
+                            off, off + sc * 5, sc * 0.3);
+    len += (size_t)snprintf(text + len, ROUND_TEXT - len,
+                            "p 4\n%.17g %.17g %.17g\n%.17g %.17g %.17g\n"
+                            "%.17g %.17g %.17g\n%.17g %.17g %.17g\n",
+                            off - sc * 9, off - sc * 9, off - sc * 20, off + sc * 9,
+                            off - sc * 9, off - sc * 20, off + sc * 9, off + sc * 9,
+                            off - sc * 20, off - sc * 9, off + sc * 9, off - sc * 20);
+    return len;
+}
+
+/* near, far, on the first cylinder's axis line beyond its end, and at
+   random above the floor */
+static rtpi_v3 cone_slabs_light(const rtp_scene *s, int li, double off, double sc)
+{
+    rtpi_v3 L;
+    switch (li) {
+    case 0: return v3(0.3, -0.2, 9);
+    case 1: return v3(2e4, -1e4, 3e4);
+    case 2: {
+        const rtpi_cone_frame *cf = &s->cframes[0];
+        L = v3_madd(cf->b, cf->w, -0.5 * sc);
+        return v3((L.x - off) / sc, (L.y - off) / sc, (L.z - off) / sc);
+    }
+    default: return v3(8 * (rnd() - 0.5), 8 * (rnd() - 0.5), 0.1 + 4 * rnd());
+    }
+}
+
+static void cone_slabs_check(const rtp_scene *s, const rtpi_lightbuf *lb, rtpi_v3 L, double off,
+                             int li)
+{
+    size_t r, hits = 0, turned = 0, bad = 0, banded = 0;
+    CHECK_MSG(lb->slab != NULL && lb->cone != NULL, "cone bands: none made, light %d", li);
+    /* a triangle's cone entry turns nothing away: the round walk's scan
+       stops at it by that test alone (lb_walk) */
+    CHECK(s->ntris == 2);
+    for (r = 0; lb->cone && r < lb->ncand; r++)
+        if (lb->cand[r].prim < s->ntris)
+            CHECK(lb->cone[4 * r] == 0.0 && lb->cone[4 * r + 1] == 0.0 &&
+                  lb->cone[4 * r + 2] == 0.0 && lb->cone[4 * r + 3] == -2.0);
+    for (r = 0; lb->slab && r < lb->ncand; r++) {
+        uint32_t prim = lb->cand[r].prim;
+        const double *q = lb->slab + 4 * r;
+        const rtpi_cone_frame *cf;
+        rtpi_v3 e1, e2;
+        int t;
+        if (prim < s->ntris + s->nspheres)
+            continue;
+        /* (the cone's rank, for a query's cached cone) */
+        CHECK(lb->cone_rank[prim - s->ntris - s->nspheres] == r);
+        if (!(q[3] < 2.0))
+            continue;
+        banded++;
+        cf = &s->cframes[prim - s->ntris - s->nspheres];
+        e1 = v3_norm(v3_cross(cf->w, fabs(cf->w.x) < 0.6 ? v3(1, 0, 0) : v3(0, 1, 0)));
+        e2 = v3_cross(cf->w, e1);
+        for (t = 0; t < 300; t++) {
+            /* a point about the axis within 1.5 radii, or at the radius,
+               1e-7 of it either way; the ray from behind it through it */
+            double h = cf->h * rnd(), ph = 6.283185307179586 * rnd();
+            double rad = (cf->rb + cf->k * h) *
+                         (t & 1 ? 1.5 * rnd() : 1.0 + 1e-7 * (double)(t % 3 - 1));
+            rtpi_v3 X = v3_madd(v3_madd(v3_madd(cf->b, cf->w, h), e1, rad * cos(ph)), e2,
+                                rad * sin(ph));
+            rtpi_v3 o = v3_madd(X, v3_sub(X, L), 0.05 + rnd()), dn;
+            rtpi_ray ray = rtpi_shadow_ray(o, L);
+            rtpi_hit hh;
+            int in;
+            dn = v3_mul(ray.d, -1.0);
+            in = !(fabs(dn.x * q[0] + dn.y * q[1] + dn.z * q[2]) > q[3]);
+            if (rtpi_intersect_prim(s, prim, &ray, &hh)) {
+                hits++;
+                bad += !in;
+            } else {
+                turned += !in;
+            }
+        }
+    }
+    CHECK_MSG(bad == 0, "cone bands, offset %g, light %d: %lu of %lu hits outside", off, li,
+              (unsigned long)bad, (unsigned long)hits);
+    CHECK_MSG(banded >= 20 && hits > 1000 && turned > 50,
+              "cone bands, offset %g, light %d: %lu banded, %lu hits, %lu turned away", off, li,
+              (unsigned long)banded, (unsigned long)hits, (unsigned long)turned);
+}
+
 /* The light buffer's band test for cones (lb_slabs): every shadow ray
    that rtpi_intersect_prim finds hitting a cone passes its cone's band,
    for rays grazing the cones' sides (points at their radius, 1e-7 of it
@@ -1523,125 +1681,82 @@ static void test_lightbuf_edges_same(void)
    band turns some missing rays away (the test has teeth). */
 static void test_lightbuf_cone_slabs(void)
 {
-    static const double offs[][2] = {{0, 1}, {3000, 0.01}, {-2e5, 3}};
-    size_t oi;
-    for (oi = 0; oi < sizeof offs / sizeof *offs; oi++) {
-        double off = offs[oi][0], sc = offs[oi][1];
-        char *text = (char *)malloc(65536);
-        size_t len = 0, k;
-        rtp_scene *s;
-        rtp_allocator al;
-        int li;
-        rtpi_allocator_init(&al, NULL);
-        CHECK(text != NULL);
-        if (!text)
-            return;
-        len += (size_t)snprintf(text + len, 65536 - len,
-                                "v\nfrom 0 -9 4\nat 0 0 0.5\nup 0 0 1\nangle 50\nhither 0.01\n"
-                                "resolution 8 8\nl 0 0 9\nf 0.8 0.8 0.8 1 0 0 0 1\n");
-        for (k = 0; k < 40; k++) {
-            double ax = 6 * (rnd() - 0.5), ay = 6 * (rnd() - 0.5), az = 3 * rnd();
-            double ln = 0.2 + 2 * rnd(), z = 2 * rnd() - 1, ph = 6.283185307179586 * rnd();
-            double rr = sqrt(1 - z * z), r0 = 0.01 + 0.3 * rnd();
-            double r1 = k % 4 == 3 ? 0.01 + 0.3 * rnd() : r0; /* every fourth a cone */
-            len += (size_t)snprintf(text + len, 65536 - len, "c\n%.17g %.17g %.17g %.17g\n"
-                                    "%.17g %.17g %.17g %.17g\n",
-                                    off + sc * ax, off + sc * ay, off + sc * az, sc * r0,
-                                    off + sc * (ax + ln * rr * cos(ph)),
-                                    off + sc * (ay + ln * rr * sin(ph)), off + sc * (az + ln * z),
-                                    sc * r1);
-        }
-        len += (size_t)snprintf(text + len, 65536 - len, "s %.17g %.17g %.17g %.17g\n",
-                                off, off, off + sc * 5, sc * 0.3);
-        /* a floor far below: two triangles among the round candidates */
-        len += (size_t)snprintf(text + len, 65536 - len,
-                                "p 4\n%.17g %.17g %.17g\n%.17g %.17g %.17g\n"
-                                "%.17g %.17g %.17g\n%.17g %.17g %.17g\n",
-                                off - sc * 9, off - sc * 9, off - sc * 20, off + sc * 9,
-                                off - sc * 9, off - sc * 20, off + sc * 9, off + sc * 9,
-                                off - sc * 20, off - sc * 9, off + sc * 9, off - sc * 20);
-        s = load(text, len);
-        free(text);
-        CHECK(s != NULL);
-        if (!s)
-            return;
-        for (li = 0; li < 6; li++) {
-            rtpi_v3 L;
-            rtpi_lightbuf lb;
-            size_t r, hits = 0, turned = 0, bad = 0, banded = 0;
-            switch (li) {
-            case 0: L = v3(0.3, -0.2, 9); break;
-            case 1: L = v3(2e4, -1e4, 3e4); break;
-            case 2: { /* on the first cylinder's axis line, beyond its end */
-                const rtpi_cone_frame *cf = &s->cframes[0];
-                L = v3_madd(cf->b, cf->w, -0.5 * sc);
-                L = v3((L.x - off) / sc, (L.y - off) / sc, (L.z - off) / sc);
-                break;
-            }
-            default: L = v3(8 * (rnd() - 0.5), 8 * (rnd() - 0.5), 0.1 + 4 * rnd()); break;
-            }
-            L = v3(off + sc * L.x, off + sc * L.y, off + sc * L.z);
-            if (rtpi_lightbuf_build(s, L, li & 1 ? 64 : 256, &al, &lb, NULL) != RTP_OK) {
-                CHECK_MSG(0, "cone bands: build failed, light %d", li);
-                continue;
-            }
-            CHECK_MSG(lb.slab != NULL && lb.cone != NULL, "cone bands: none made, light %d", li);
-            /* a triangle's cone entry turns nothing away: the round
-               walk's scan stops at it by that test alone (lb_walk) */
-            CHECK(s->ntris == 2);
-            for (r = 0; lb.cone && r < lb.ncand; r++)
-                if (lb.cand[r].prim < s->ntris)
-                    CHECK(lb.cone[4 * r] == 0.0 && lb.cone[4 * r + 1] == 0.0 &&
-                          lb.cone[4 * r + 2] == 0.0 && lb.cone[4 * r + 3] == -2.0);
-            for (r = 0; lb.slab && r < lb.ncand; r++) {
-                uint32_t prim = lb.cand[r].prim;
-                const double *q = lb.slab + 4 * r;
-                const rtpi_cone_frame *cf;
-                rtpi_v3 e1, e2;
-                int t;
-                if (prim < s->ntris + s->nspheres)
-                    continue;
-                /* (the cone's rank, for a query's cached cone) */
-                CHECK(lb.cone_rank[prim - s->ntris - s->nspheres] == r);
-                if (!(q[3] < 2.0))
-                    continue;
-                banded++;
-                cf = &s->cframes[prim - s->ntris - s->nspheres];
-                e1 = v3_norm(v3_cross(cf->w, fabs(cf->w.x) < 0.6 ? v3(1, 0, 0) : v3(0, 1, 0)));
-                e2 = v3_cross(cf->w, e1);
-                for (t = 0; t < 300; t++) {
-                    /* a point about the axis within 1.5 radii, or at the
-                       radius, 1e-7 of it either way; the ray from behind
-                       it through it */
-                    double h = cf->h * rnd(), ph = 6.283185307179586 * rnd();
-                    double rad = (cf->rb + cf->k * h) *
-                                 (t & 1 ? 1.5 * rnd() : 1.0 + 1e-7 * (double)(t % 3 - 1));
-                    rtpi_v3 X = v3_madd(v3_madd(v3_madd(cf->b, cf->w, h), e1, rad * cos(ph)), e2,
-                                        rad * sin(ph));
-                    rtpi_v3 o = v3_madd(X, v3_sub(X, L), 0.05 + rnd()), dn;
-                    rtpi_ray ray = rtpi_shadow_ray(o, L);
-                    rtpi_hit hh;
-                    int in;
-                    dn = v3_mul(ray.d, -1.0);
-                    in = !(fabs(dn.x * q[0] + dn.y * q[1] + dn.z * q[2]) > q[3]);
-                    if (rtpi_intersect_prim(s, prim, &ray, &hh)) {
-                        hits++;
-                        bad += !in;
-                    } else {
-                        turned += !in;
-                    }
-                }
-            }
-            CHECK_MSG(bad == 0, "cone bands, offset %g, light %d: %lu of %lu hits outside", off,
-                      li, (unsigned long)bad, (unsigned long)hits);
-            CHECK_MSG(banded >= 20 && hits > 1000 && turned > 50,
-                      "cone bands, offset %g, light %d: %lu banded, %lu hits, %lu turned away",
-                      off, li, (unsigned long)banded, (unsigned long)hits,
-                      (unsigned long)turned);
-            rtpi_lightbuf_free(&lb, &al);
-        }
-        rtp_scene_destroy(s);
+    static const round_test t = {"cone bands", cone_slabs_add, cone_slabs_light,
+                                 cone_slabs_check};
+    round_run(&t);
+}
+
+/* 200 spheres: a third of radius a tenth of a cell at 256 cells, a third
+   about a cell, a third many cells */
+static size_t sphere_box_add(char *text, size_t len, double off, double sc)
+{
+    size_t k;
+    for (k = 0; k < 200; k++) {
+        double r = k % 3 == 0 ? 0.003 + 0.01 * rnd() : k % 3 == 1 ? 0.03 * rnd() + 0.01
+                                                                 : 0.1 + 0.4 * rnd();
+        len += (size_t)snprintf(text + len, ROUND_TEXT - len, "s %.17g %.17g %.17g %.17g\n",
+                                off + sc * 6 * (rnd() - 0.5), off + sc * 6 * (rnd() - 0.5),
+                                off + sc * 3 * rnd(), sc * r);
     }
+    return len;
+}
+
+/* near, far, and at random above the spheres */
+static rtpi_v3 sphere_box_light(const rtp_scene *s, int li, double off, double sc)
+{
+    (void)s;
+    (void)off;
+    (void)sc;
+    switch (li) {
+    case 0: return v3(0.3, -0.2, 9);
+    case 1: return v3(2e2, -1e2, 3e2);
+    default: return v3(8 * (rnd() - 0.5), 8 * (rnd() - 0.5), 4 + 4 * rnd());
+    }
+}
+
+static void sphere_box_check(const rtp_scene *s, const rtpi_lightbuf *lb, rtpi_v3 L, double off,
+                             int li)
+{
+    size_t i, hits = 0, bad = 0;
+    for (i = 0; i < s->nspheres; i++) {
+        uint32_t prim = (uint32_t)(s->ntris + i);
+        rtpi_v3 C = v3_from_f(s->spheres[i].c), w = v3_sub(C, L), e1, e2;
+        double r = fabs((double)s->spheres[i].r), D = v3_len(w);
+        int t;
+        if (!(D > 1.01 * r))
+            continue;
+        w = v3_mul(w, 1.0 / D);
+        e1 = v3_norm(v3_cross(w, fabs(w.x) < 0.6 ? v3(1, 0, 0) : v3(0, 1, 0)));
+        e2 = v3_cross(w, e1);
+        for (t = 0; t < 200; t++) {
+            /* a point of the silhouette's circle (centre C - w r^2 / D,
+               radius r sqrt(1 - r^2 / D^2)), its radius 1e-7 of itself
+               either way, or within it; the ray from behind it through
+               it */
+            double ph = 6.283185307179586 * rnd();
+            double rad = r * sqrt(1.0 - r * r / (D * D)) *
+                         (t & 1 ? rnd() : 1.0 + 1e-7 * (double)(t % 3 - 1));
+            rtpi_v3 X = v3_madd(v3_madd(v3_madd(C, w, -r * r / D), e1, rad * cos(ph)), e2,
+                                rad * sin(ph));
+            rtpi_v3 o = v3_madd(X, v3_sub(X, L), 0.05 + rnd());
+            rtpi_ray ray = rtpi_shadow_ray(o, L);
+            rtpi_hit hh;
+            size_t cell, e;
+            int listed = 0;
+            if (!rtpi_intersect_prim(s, prim, &ray, &hh))
+                continue;
+            hits++;
+            cell = rtpi_dc_wcell(&lb->w, lb->res, v3_mul(ray.d, -1.0));
+            for (e = cell == RTPI_DC_ABSENT ? 0 : lb->off[cell];
+                 cell != RTPI_DC_ABSENT && e < lb->off[cell + 1]; e++)
+                listed |= lb->cand[lb->ref[e]].prim == prim;
+            bad += !listed;
+        }
+    }
+    CHECK_MSG(bad == 0, "sphere box, offset %g, light %d: %lu of %lu hits not listed", off, li,
+              (unsigned long)bad, (unsigned long)hits);
+    CHECK_MSG(hits > 10000, "sphere box, offset %g, light %d: %lu hits", off, li,
+              (unsigned long)hits);
 }
 
 /* The light buffer lists a sphere by the box of its exact projection
@@ -1650,95 +1765,13 @@ static void test_lightbuf_cone_slabs(void)
    silhouette seen from the light, 1e-7 of its radius either way), finds
    it in its cell's list; over spheres of random sizes from a tenth of a
    cell to many cells, lights near and far, at the origin and moved far
-   from it (the offsets and scales of the cone bands' test), at 64 and
-   256 cells.  It fails with the box's sine 3% smaller. */
+   from it (round_run's scenes, as the cone bands'), at 64 and 256 cells.
+   It fails with the box's sine 3% smaller. */
 static void test_lightbuf_sphere_box(void)
 {
-    static const double offs[][2] = {{0, 1}, {3000, 0.01}, {-2e5, 3}};
-    size_t oi;
-    for (oi = 0; oi < sizeof offs / sizeof *offs; oi++) {
-        double off = offs[oi][0], sc = offs[oi][1];
-        char *text = (char *)malloc(65536);
-        size_t len = 0, k;
-        rtp_scene *s;
-        rtp_allocator al;
-        int li;
-        rtpi_allocator_init(&al, NULL);
-        CHECK(text != NULL);
-        if (!text)
-            return;
-        len += (size_t)snprintf(text + len, 65536 - len,
-                                "v\nfrom 0 -9 4\nat 0 0 0.5\nup 0 0 1\nangle 50\nhither 0.01\n"
-                                "resolution 8 8\nl 0 0 9\nf 0.8 0.8 0.8 1 0 0 0 1\n");
-        for (k = 0; k < 200; k++) {
-            double r = k % 3 == 0 ? 0.003 + 0.01 * rnd() : k % 3 == 1 ? 0.03 * rnd() + 0.01
-                                                                     : 0.1 + 0.4 * rnd();
-            len += (size_t)snprintf(text + len, 65536 - len, "s %.17g %.17g %.17g %.17g\n",
-                                    off + sc * 6 * (rnd() - 0.5), off + sc * 6 * (rnd() - 0.5),
-                                    off + sc * 3 * rnd(), sc * r);
-        }
-        s = load(text, len);
-        free(text);
-        CHECK(s != NULL);
-        if (!s)
-            return;
-        for (li = 0; li < 6; li++) {
-            rtpi_v3 L;
-            rtpi_lightbuf lb;
-            size_t i, hits = 0, bad = 0;
-            switch (li) {
-            case 0: L = v3(0.3, -0.2, 9); break;
-            case 1: L = v3(2e2, -1e2, 3e2); break;
-            default: L = v3(8 * (rnd() - 0.5), 8 * (rnd() - 0.5), 4 + 4 * rnd()); break;
-            }
-            L = v3(off + sc * L.x, off + sc * L.y, off + sc * L.z);
-            if (rtpi_lightbuf_build(s, L, li & 1 ? 64 : 256, &al, &lb, NULL) != RTP_OK) {
-                CHECK_MSG(0, "sphere box: build failed, light %d", li);
-                continue;
-            }
-            for (i = 0; i < s->nspheres; i++) {
-                uint32_t prim = (uint32_t)(s->ntris + i);
-                rtpi_v3 C = v3_from_f(s->spheres[i].c), w = v3_sub(C, L), e1, e2;
-                double r = fabs((double)s->spheres[i].r), D = v3_len(w);
-                int t;
-                if (!(D > 1.01 * r))
-                    continue;
-                w = v3_mul(w, 1.0 / D);
-                e1 = v3_norm(v3_cross(w, fabs(w.x) < 0.6 ? v3(1, 0, 0) : v3(0, 1, 0)));
-                e2 = v3_cross(w, e1);
-                for (t = 0; t < 200; t++) {
-                    /* a point of the silhouette's circle (centre C - w
-                       r^2 / D, radius r sqrt(1 - r^2 / D^2)), its radius
-                       1e-7 of itself either way, or within it; the ray
-                       from behind it through it */
-                    double ph = 6.283185307179586 * rnd();
-                    double rad = r * sqrt(1.0 - r * r / (D * D)) *
-                                 (t & 1 ? rnd() : 1.0 + 1e-7 * (double)(t % 3 - 1));
-                    rtpi_v3 X = v3_madd(v3_madd(v3_madd(C, w, -r * r / D), e1, rad * cos(ph)),
-                                        e2, rad * sin(ph));
-                    rtpi_v3 o = v3_madd(X, v3_sub(X, L), 0.05 + rnd());
-                    rtpi_ray ray = rtpi_shadow_ray(o, L);
-                    rtpi_hit hh;
-                    size_t cell, e;
-                    int listed = 0;
-                    if (!rtpi_intersect_prim(s, prim, &ray, &hh))
-                        continue;
-                    hits++;
-                    cell = rtpi_dc_wcell(&lb.w, lb.res, v3_mul(ray.d, -1.0));
-                    for (e = cell == RTPI_DC_ABSENT ? 0 : lb.off[cell];
-                         cell != RTPI_DC_ABSENT && e < lb.off[cell + 1]; e++)
-                        listed |= lb.cand[lb.ref[e]].prim == prim;
-                    bad += !listed;
-                }
-            }
-            CHECK_MSG(bad == 0, "sphere box, offset %g, light %d: %lu of %lu hits not listed", off,
-                      li, (unsigned long)bad, (unsigned long)hits);
-            CHECK_MSG(hits > 10000, "sphere box, offset %g, light %d: %lu hits", off, li,
-                      (unsigned long)hits);
-            rtpi_lightbuf_free(&lb, &al);
-        }
-        rtp_scene_destroy(s);
-    }
+    static const round_test t = {"sphere box", sphere_box_add, sphere_box_light,
+                                 sphere_box_check};
+    round_run(&t);
 }
 
 int main(void)
