@@ -784,9 +784,14 @@ static RTPI_FORCE_INLINE void combine_into(const rtp_scene *s, const double *cl,
        are the sums made again with it (tested as one: their sum is NaN
        where one is, or where infinities of both signs meet, which the
        rule leaves as they are).  The same test sends sums past
-       RTPI_SAMPLE_MAX there, to be held to it (their magnitudes summed: a
-       sum past it makes theirs so, NaN fails it). */
-    if (!(fabs(v[0]) + fabs(v[1]) + fabs(v[2]) <= RTPI_SAMPLE_MAX)) {
+       RTPI_SAMPLE_MAX there, to be held to it: their squares summed, as
+       one past it passes its square, and NaN fails (the pair's squares
+       are one vector operation: the magnitudes summed cost a first
+       evaluation 0.4-0.6%, balls 336.75 -> 338.86 M, the squares 338.33;
+       channels each within it whose squares sum past its square take the
+       slower way, to the same values). */
+    if (!(v[0] * v[0] + v[1] * v[1] + v[2] * v[2] <=
+          (double)RTPI_SAMPLE_MAX * RTPI_SAMPLE_MAX)) {
         combine_zero(s, cl, coeffs, rgb); /* (a tail call: no frame here) */
         return;
     }
@@ -1128,11 +1133,12 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
                     v2 = _mm_add_sd(v2, _mm_mul_sd(load1f(&cc[2]), _mm_load_sd(cli + 2)));
                 }
                 {
-                    __m128d ab = _mm_and_pd(v01, absm);
-                    sum = _mm_cvtsd_f64(_mm_add_sd(_mm_add_sd(ab, _mm_unpackhi_pd(ab, ab)),
-                                                   _mm_and_pd(v2, absm)));
+                    /* (combine_into's test, its squares in its order) */
+                    __m128d sq = _mm_mul_pd(v01, v01);
+                    sum = _mm_cvtsd_f64(_mm_add_sd(_mm_add_sd(sq, _mm_unpackhi_pd(sq, sq)),
+                                                   _mm_mul_sd(v2, v2)));
                 }
-                if (!(sum <= RTPI_SAMPLE_MAX))
+                if (!(sum <= (double)RTPI_SAMPLE_MAX * RTPI_SAMPLE_MAX))
                     combine_zero(s, cl, co, o); /* (combine_into's rule) */
                 else
                     store3f(o, v01, v2);
