@@ -128,13 +128,16 @@ static rtp_status line_string(rtpi_lex *lx, const char *what, rtpi_tok *out)
 }
 
 /* OBJ statements rtp does not draw, read past: names (o, g, usemap,
-   maplib, ...), a smoothing group's word (s: normals come from vn or the
-   face), and elements and free-form geometry (l, p, curv, surf and their
-   blocks up to `end`), whose indices and parameters are a language rtp
-   does not read.  vp, the one of numbers alone, has them checked as v's
-   (ignored_numbers). */
+   maplib, ...), render hints (lod, bevel, c_interp, ...), and free-form
+   geometry (cstype, deg, curv, surf, ... and their blocks up to `end`):
+   a language of its own, whose statements mean something only in the
+   state earlier ones set (cstype and deg give parm and the control
+   points' count), so a check of their words alone would refuse files it
+   misread; rtp draws none of it.  Checked though not drawn: s (read_smoothing),
+   l and p (read_element), whose indices are a face's, and vp, whose
+   numbers are v's (ignored_numbers). */
 static const char *const ignored_obj[] = {
-    "o", "g", "s", "l", "p", "mg", "cstype", "deg", "bmat", "step",
+    "o", "g", "mg", "cstype", "deg", "bmat", "step",
     "curv", "curv2", "surf", "parm", "trim", "hole", "scrv", "sp", "end",
     "con", "lod", "usemap", "maplib", "shadow_obj", "trace_obj", "ctech",
     "stech", "bevel", "c_interp", "d_interp", NULL};
@@ -474,34 +477,82 @@ static char *find_file(const rtp_allocator *a, const char *base, const char *nam
    says that word is an option's argument (no name follows the options).
    *bad is the index of a bad number where -o, -s or -t may take one
    ("nan", "inf", "1e999": the name began there, "cannot load image 'nan 1
-   t.png'"), else -1. */
-static int map_name_start(const rtpi_tok *tk, int n, int *unknown, int *spent, int *bad)
+   t.png'"), or of an option's argument before the last word that is not
+   what the option takes (*why: "on or off" for -blendu, -blendv, -cc and
+   -clamp; "a number" for -boost, -texres and -mm's two; the channel for
+   -imfchan; the map's shape for -type), else -1.  (The options are read
+   and not applied: rtp maps an image over uv 0..1, repeated; scenes/
+   README.md says so.  -bm, which is, is checked by mtl_map.) */
+static int map_name_start(const rtpi_tok *tk, int n, int *unknown, int *spent, int *bad,
+                          const char **why)
 {
-    static const char *const one[] = {"-blendu", "-blendv", "-bm", "-boost", "-cc",
-                                      "-clamp", "-imfchan", "-texres", "-type"};
+    /* each option of one argument: what it takes (NULL: -bm, mtl_map's),
+       and the words that are it (words[w0..w1); none: a number) */
+    static const char *const words[] = {"on",         "off",        "r",         "g",
+                                        "b",          "m",          "l",         "z",
+                                        "sphere",     "cube_top",   "cube_bottom",
+                                        "cube_front", "cube_back",  "cube_left", "cube_right"};
+    static const struct {
+        const char *opt, *why;
+        int w0, w1;
+    } one[] = {{"-blendu", "on or off", 0, 2},
+               {"-blendv", "on or off", 0, 2},
+               {"-bm", NULL, 0, 0},
+               {"-boost", "a number", 0, 0},
+               {"-cc", "on or off", 0, 2},
+               {"-clamp", "on or off", 0, 2},
+               {"-imfchan", "r, g, b, m, l or z", 2, 8},
+               {"-texres", "a number", 0, 0},
+               {"-type", "sphere, cube_top, cube_bottom, cube_front, cube_back, cube_left or "
+                         "cube_right", 8, 15}};
     int i = 0;
     *unknown = 0;
     *bad = -1;
+    *why = NULL;
     while (i < n - 1 && tk[i].s[0] == '-') {
         const rtpi_tok *o = &tk[i++];
         size_t k;
+        double d;
         if (rtpi_tok_is(o, "-o") || rtpi_tok_is(o, "-s") || rtpi_tok_is(o, "-t")) {
-            double d;
             for (k = 0; k < 3 && i < n - 1 && rtpi_tok_number(&tk[i], &d) == 0; k++)
                 i++;
             if (k < 3 && i < n - 1 && *bad < 0 &&
                 (rtpi_tok_nan_inf(&tk[i]) || rtpi_tok_number(&tk[i], &d) == -2))
                 *bad = i;
         } else if (rtpi_tok_is(o, "-mm")) {
-            i += 2;
+            /* (base and gain: numbers, where a word follows them) */
+            for (k = 0; k < 2; k++, i++)
+                if (i < n - 1 && *bad < 0 && rtpi_tok_number(&tk[i], &d) != 0) {
+                    *bad = i;
+                    *why = rtpi_tok_nan_inf(&tk[i]) || !rtpi_tok_numlike(&tk[i]) ? "a number"
+                                                                                 : NULL;
+                }
         } else {
             for (k = 0; k < sizeof one / sizeof *one; k++)
-                if (rtpi_tok_is(o, one[k]))
+                if (rtpi_tok_is(o, one[k].opt))
                     break;
-            if (k < sizeof one / sizeof *one)
-                i++;
-            else
+            if (k == sizeof one / sizeof *one) {
                 *unknown = 1;
+                continue;
+            }
+            /* the argument, where a word (the name) follows it */
+            if (i < n - 1 && *bad < 0 && one[k].why) {
+                int fits = 0, w;
+                if (one[k].w0 == one[k].w1) {
+                    int r = rtpi_tok_number(&tk[i], &d);
+                    fits = r == 0;
+                    if (r == -2 && !rtpi_tok_nan_inf(&tk[i]))
+                        fits = -1; /* (out of range: said as -o's is) */
+                } else {
+                    for (w = one[k].w0; w < one[k].w1; w++)
+                        fits |= rtpi_tok_is(&tk[i], words[w]);
+                }
+                if (fits <= 0) {
+                    *bad = i;
+                    *why = fits < 0 ? NULL : one[k].why;
+                }
+            }
+            i++;
         }
     }
     *spent = i >= n;
@@ -521,6 +572,7 @@ static rtp_status mtl_map(rtpi_lex *lx, rtp_scene *s, const char *what,
     rtp_error inner;
     rtp_status st;
     int n = 0, i, from, start, unknown, spent, bad, oom;
+    const char *why;
     while (rtpi_lex_next_inline(lx, &t)) {
         if (n == MAP_TOKENS)
             return rtpi_lex_error(lx, &t, "%s: more than %d words on the line", what,
@@ -534,11 +586,15 @@ static rtp_status mtl_map(rtpi_lex *lx, rtp_scene *s, const char *what,
        "map_Kd my tex.png" is never "tex.png"); after an option this
        reader does not know, whose arguments it cannot count, the longest
        run of the last words that names a file. */
-    start = map_name_start(tk, n, &unknown, &spent, &bad);
+    start = map_name_start(tk, n, &unknown, &spent, &bad, &why);
     if (bad >= 0) {
-        char show[48], opt[8];
+        char show[48], opt[12];
         for (i = bad - 1; i > 0 && tk[i].s[0] != '-'; i--)
             ;
+        if (why)
+            return rtpi_lex_error(lx, &tk[bad], "%s: %s takes %s, got '%s'", what,
+                                  rtpi_tok_show(&tk[i], opt, sizeof opt), why,
+                                  rtpi_tok_show(&tk[bad], show, sizeof show));
         return rtpi_lex_error(lx, &tk[bad],
                               rtpi_tok_nan_inf(&tk[bad]) ? "%s: expected number for %s, got '%s'"
                                                          : "%s: %s %s is out of range",
@@ -940,7 +996,7 @@ static rtp_status read_vertex(obj *o, int kind)
 static rtp_status corner_index(obj *o, const rtpi_tok *corner, size_t off,
                                size_t n, const char *kind, const char *kinds,
                                size_t count,
-                               uint32_t base, uint32_t *out)
+                               uint32_t base, uint32_t *out, const char *elem)
 {
     rtpi_tok t = *corner;
     long v;
@@ -949,8 +1005,8 @@ static rtp_status corner_index(obj *o, const rtpi_tok *corner, size_t off,
     t.n = n;
     t.col += (int)off;
     if (rtpi_tok_int(&t, &v) != 0)
-        return rtpi_lex_error(&o->lx, &t, "expected %s index in face, got '%s'",
-                              kind, rtpi_tok_show(&t, show, sizeof show));
+        return rtpi_lex_error(&o->lx, &t, "expected %s index in %s, got '%s'",
+                              kind, elem, rtpi_tok_show(&t, show, sizeof show));
     if (v == 0)
         return rtpi_lex_error(&o->lx, &t, "%s index 0 is invalid (OBJ indices start at 1)",
                               kind);
@@ -958,6 +1014,70 @@ static rtp_status corner_index(obj *o, const rtpi_tok *corner, size_t off,
         return rtpi_lex_error(&o->lx, &t, "%s index %ld out of range (%zu %s so far)",
                               kind, v, count, count == 1 ? kind : kinds);
     *out = base + (uint32_t)(v > 0 ? (size_t)v - 1 : count - (size_t)(-v));
+    return RTP_OK;
+}
+
+/* l (a line: vertices v or v/vt, two or more) and p (points: vertices
+   v, one or more): not drawn, as rtp traces surfaces and a line or a
+   point has no area a ray could hit, but their indices are checked as a
+   face's (a vertex that is not there, an index 0, "1//2") at the index:
+   they were read past unchecked while the same index in an f was an
+   error, and a file that holds one is malformed whatever rtp draws. */
+static rtp_status read_element(obj *o, const rtpi_tok *kw, int line)
+{
+    const char *elem = line ? "line" : "point";
+    rtpi_tok t;
+    size_t n = 0, a;
+    uint32_t idx;
+    rtp_status st;
+    while (rtpi_lex_next_inline(&o->lx, &t)) {
+        for (a = 0; a < t.n && t.s[a] != '/'; a++)
+            ;
+        if ((st = corner_index(o, &t, 0, a, "vertex", "vertices", o->np, o->base_p, &idx,
+                               elem)) != RTP_OK)
+            return st;
+        if (a < t.n) {
+            if (!line || a + 1 == t.n || memchr(t.s + a + 1, '/', t.n - a - 1)) {
+                char show[48];
+                return rtpi_lex_error(&o->lx, &t, "malformed %s vertex '%s' (%s)", elem,
+                                      rtpi_tok_show(&t, show, sizeof show),
+                                      line ? "v or v/vt" : "v alone");
+            }
+            if ((st = corner_index(o, &t, a + 1, t.n - a - 1, "texture vertex",
+                                   "texture vertices", o->nt, o->base_t, &idx, elem)) !=
+                RTP_OK)
+                return st;
+        }
+        n++;
+    }
+    if (n < (line ? 2u : 1u))
+        return rtpi_lex_error(&o->lx, kw, "%s has %zu vert%s, needs at least %d", elem, n,
+                              n == 1 ? "ex" : "ices", line ? 2 : 1);
+    return RTP_OK;
+}
+
+/* s: a smoothing group, a number (0 is none) or off (on, as some
+   exporters write, taken too), checked and not applied: normals come from
+   vn or the face itself, so a mesh without vn renders faceted whatever
+   its groups (smoothing them would average the normals of the faces that
+   share a vertex and a group: not done).  "s" alone, "s -1", "s 1.5" or
+   a second word is an error at it. */
+static rtp_status read_smoothing(obj *o, const rtpi_tok *kw)
+{
+    rtpi_tok t;
+    long v;
+    char show[48];
+    if (!rtpi_lex_next_inline(&o->lx, &t))
+        return rtpi_lex_error(&o->lx, kw, "s: expected a smoothing group (a number, or off)");
+    if (!rtpi_tok_is(&t, "off") && !rtpi_tok_is(&t, "on") &&
+        (rtpi_tok_int(&t, &v) != 0 || v < 0))
+        return rtpi_lex_error(&o->lx, &t,
+                              "s: expected a smoothing group (a number, 0 or more, or off), "
+                              "got '%s'",
+                              rtpi_tok_show(&t, show, sizeof show));
+    if (rtpi_lex_next_inline(&o->lx, &t))
+        return rtpi_lex_error(&o->lx, &t, "unexpected '%s' at the end of s",
+                              rtpi_tok_show(&t, show, sizeof show));
     return RTP_OK;
 }
 
@@ -988,16 +1108,19 @@ static rtp_status read_face(obj *o, const rtpi_tok *kw)
         c[1] = c[2] = RTPI_NONE;
         for (a = 0; a < t.n && t.s[a] != '/'; a++)
             ;
-        if ((st = corner_index(o, &t, 0, a, "vertex", "vertices", o->np, o->base_p, &c[0])) != RTP_OK)
+        if ((st = corner_index(o, &t, 0, a, "vertex", "vertices", o->np, o->base_p, &c[0],
+                                "face")) != RTP_OK)
             return st;
         if (a < t.n) {
             for (b = a + 1; b < t.n && t.s[b] != '/'; b++)
                 ;
             if (b > a + 1 && (st = corner_index(o, &t, a + 1, b - a - 1, "texture vertex",
-                                                "texture vertices", o->nt, o->base_t, &c[1])) != RTP_OK)
+                                                "texture vertices", o->nt, o->base_t, &c[1],
+                                                "face")) != RTP_OK)
                 return st;
             if (b < t.n && (st = corner_index(o, &t, b + 1, t.n - b - 1, "normal",
-                                              "normals", o->nn, o->base_n, &c[2])) != RTP_OK)
+                                              "normals", o->nn, o->base_n, &c[2],
+                                              "face")) != RTP_OK)
                 return st;
             if (b == a + 1 && b == t.n) {
                 char show[48];
@@ -1119,6 +1242,10 @@ rtp_status rtpi_read_obj_reg(rtp_scene *s, const char *text, size_t size,
             st = read_mtllib(&o);
         else if (rtpi_tok_is(&kw, "vp"))
             st = ignored_numbers(&o.lx, &kw);
+        else if (rtpi_tok_is(&kw, "l") || rtpi_tok_is(&kw, "p"))
+            st = read_element(&o, &kw, rtpi_tok_is(&kw, "l"));
+        else if (rtpi_tok_is(&kw, "s"))
+            st = read_smoothing(&o, &kw);
         else if (in_list(&kw, ignored_obj))
             rtpi_lex_skip_line(&o.lx);
         else

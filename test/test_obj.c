@@ -45,7 +45,8 @@ static void test_faces(void)
     /* that last line is not valid OBJ: test it separately below */
     const char *ok_text = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0 1.0\n"
                           "vt 0 0\nvt 1 0 0\nvt 1 1\nvt 0.5\nvn 0 0 2\n"
-                          "o a\ng b c\ns 1\nl 1 2\n"
+                          "o a\ng b c\ns 1\nl 1 2\nl 1/1 2/2 -1/-1\np 1 -1\ns off\ns 0\n"
+                          "s on\ns 12\n"
                           "f 1 2 3\nf 1/1 2/2 3/3\nf 1//1 2//1 3//1\nf 1/1/1 2/2/1 3/3/1\n"
                           "f -4 -3 -2 -1\nf -4/-4/-1 -3/-3/-1 -2/-2/-1\n";
     CHECK(load(text, "f.obj", &s, &err) == RTP_ERR_PARSE);
@@ -403,6 +404,37 @@ static void test_mtl(void)
     CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_OK);
     rtp_scene_destroy(s);
     s = NULL;
+    /* map options, read and not applied, have their arguments checked
+       where a word follows them (they were read past: "-clamp yes"
+       loaded) */
+    {
+        static const struct {
+            const char *text;
+            int col;
+            const char *msg;
+        } opts[] = {{"newmtl x\nmap_Kd -clamp yes t.ppm\n", 15, "map_Kd: -clamp takes on or off, got 'yes'"},
+                    {"newmtl x\nbump -imfchan q t.ppm\n", 15, "bump: -imfchan takes r, g, b, m, l or z, got 'q'"},
+                    {"newmtl x\nmap_Kd -boost x t.ppm\n", 15, "-boost takes a number, got 'x'"},
+                    {"newmtl x\nmap_Kd -mm 0 nan t.ppm\n", 14, "-mm takes a number, got 'nan'"},
+                    {"newmtl x\nmap_Kd -texres 1e999 t.ppm\n", 16, "-texres 1e999 is out of range"},
+                    {"newmtl x\nmap_Kd -type cube t.ppm\n", 14, "-type takes sphere, cube_top"}};
+        size_t i;
+        for (i = 0; i < sizeof opts / sizeof *opts; i++) {
+            CHECK(check_write_file(dir, "b.mtl", opts[i].text) == 0);
+            CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_PARSE && s == NULL);
+            CHECK_MSG(err.line == 2 && err.column == opts[i].col &&
+                          strstr(err.message, opts[i].msg),
+                      "option case %zu: %d:%d %s", i, err.line, err.column, err.message);
+        }
+        CHECK(check_write_file(dir, "b.mtl",
+                               "newmtl x\nmap_Kd -clamp on -blendu off -blendv on -cc off "
+                               "-boost 2 -mm 0 1 -texres 512 -imfchan l -type sphere -o 0 0 "
+                               "-s 2 2 1 -t 0 0 t.ppm\nbump -imfchan z -bm 0.5 t.ppm\n") == 0);
+        CHECK_MSG(rtp_scene_load(path, NULL, &s, &err) == RTP_OK, "%s",
+                  rtp_error_format(&err, buf, sizeof buf));
+        rtp_scene_destroy(s);
+        s = NULL;
+    }
     /* a missing mtllib is named */
     CHECK(check_write_file(dir, "b.obj", "v 0 0 0\nmtllib nothere.mtl\n") == 0);
     CHECK(rtp_scene_load(path, NULL, &s, &err) == RTP_ERR_IO);
@@ -751,6 +783,23 @@ static const bad_case bad_obj[] = {
     {"v 1 2 1e400\n", 1, 7, "v (vertex) z 1e400 is out of range"},
     /* a continued line goes on to the next; its errors name that line */
     {TRI "f 1 2 \\\n  x\n", 5, 3, "got 'x'"},
+    /* l and p, not drawn, have their indices checked as a face's (they
+       were read past: "l 1 99" loaded) */
+    {TRI "l 1 4\n", 4, 5, "vertex index 4 out of range (3 vertices so far)"},
+    {TRI "p 0\n", 4, 3, "vertex index 0 is invalid"},
+    {TRI "p 1 -4\n", 4, 5, "vertex index -4 out of range"},
+    {TRI "l 1\n", 4, 1, "line has 1 vertex, needs at least 2"},
+    {TRI "p\n", 4, 1, "point has 0 vertices, needs at least 1"},
+    {TRI "l 1/1 2/1\n", 4, 5, "texture vertex index 1 out of range (0 texture vertices so far)"},
+    {TRI "l 1//1 2\n", 4, 3, "malformed line vertex '1//1' (v or v/vt)"},
+    {TRI "l 1/ 2\n", 4, 3, "malformed line vertex '1/'"},
+    {TRI "p 1/1\n", 4, 3, "malformed point vertex '1/1' (v alone)"},
+    {TRI "l 1 x\n", 4, 5, "expected vertex index in line, got 'x'"},
+    /* s: a group number or off (read past: "s x y" loaded) */
+    {"s\n", 1, 1, "s: expected a smoothing group"},
+    {"s -1\n", 1, 3, "s: expected a smoothing group (a number, 0 or more, or off), got '-1'"},
+    {"s 1.5\n", 1, 3, "got '1.5'"},
+    {"s 1 2\n", 1, 5, "unexpected '2' at the end of s"},
 };
 
 static void test_bad_inputs(void)
