@@ -2870,10 +2870,21 @@ static int cmd_reeval(int argc, char **argv)
         free(line);
     }
     /* A stream stopped by a bad line keeps the images written before it,
-       and so the statistics of those images: a line each */
-    if (stats && (rc != 0 && (!frames || ferror(stats)) ? (stats_discard(stats), 0)
-                                                        : stats_close(stats, stats_path)))
-        rc = 1;
+       and so the statistics of those images: a line each.  Its frames are
+       written as they go (a UI shows each as it comes), so a stats file
+       that fails at its end, its rename, leaves them written, not put
+       back as a single reeval's image is (stats_settle): said, as the
+       message alone read as if nothing had been made */
+    if (stats) {
+        if (rc != 0 && (!frames || ferror(stats))) {
+            stats_discard(stats);
+        } else if (stats_close(stats, stats_path)) {
+            if (frames)
+                msg("%s: the stream's %d %s written; their statistics are not", stats_path,
+                    frames, frames == 1 ? "image stays" : "images stay");
+            rc = 1;
+        }
+    }
     stats = NULL;
 out:
     stats_discard(stats);

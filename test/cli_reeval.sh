@@ -837,6 +837,15 @@ expect_rc 0 $RTP diff "$T/pp3.pfm" "$T/pp2.pfm" --fail-above max_abs=1e-6
 printf 'ambient=0.1\nambient=0.2\nbogus=1\nambient=0.3\n' >"$T/bad.txt"
 expect_rc 1 sh -c "$RTP reeval '$T/t.rtp' --stream -i '$T/sx/g%d.pfm' --stats '$T/gs.json' <'$T/bad.txt'"
 [ "$(grep -c '"command": "reeval"' "$T/gs.json" 2>/dev/null)" = 2 ] && [ -f "$T/sx/g1.pfm" ] && [ ! -f "$T/sx/g2.pfm" ] && ok || bad "stream stopped at a bad line: stats $(cat "$T/gs.json" 2>&1)"
+# a stream whose --stats file cannot be put in place at its end (a folder
+# made there after the start): exit 1, the frames written as they went
+# stay, and the message says so (it read as if nothing had been made)
+mkdir -p "$T/sr"
+expect_rc 1 sh -c "{ echo ambient=0.1; i=0; while [ ! -f '$T/sr/f0.pfm' ] && [ \$i -lt 6000 ]; do sleep 0.01; i=\$((i + 1)); done; mkdir '$T/sr/st.json'; echo ambient=0.2; } | $RTP reeval '$T/t.rtp' --stream -i '$T/sr/f%d.pfm' --stats '$T/sr/st.json'"
+[ -f "$T/sr/f0.pfm" ] && [ -f "$T/sr/f1.pfm" ] && [ -d "$T/sr/st.json" ] &&
+    grep -q "st.json: error writing stats: Is a directory" "$T/err" &&
+    grep -q "st.json: the stream's 2 images stay written; their statistics are not" "$T/err" &&
+    ok || bad "a stream's stats failing at its rename: $(ls "$T/sr") $(cat "$T/err")"
 # a stream's frame named as its tree or its --stats file stops the stream at
 # that line, the file kept (frame 1 of t%d.png had replaced a tree t1.png:
 # a single reeval refuses it, the stream wrote over it; helper 73; .ppm
