@@ -288,10 +288,37 @@ const char *rtpi_tok_show(const rtpi_tok *t, char *buf, size_t size)
     return buf;
 }
 
+/* rtpi_tok_show for a file's name: one longer than buf cut in its middle,
+   so that its end, the file's own name, stays (an error naming a file
+   hundreds of bytes of folders deep showed the folders and lost the
+   name, "'/tmp/a/b/...'"); a third of the room for its start. */
+const char *rtpi_tok_show_path(const rtpi_tok *t, char *buf, size_t size)
+{
+    size_t head, tail, i, o = 0;
+    if (size < 8 || t->n < size)
+        return rtpi_tok_show(t, buf, size);
+    head = (size - 4) / 3;
+    tail = size - 4 - head;
+    for (i = 0; i < t->n; i++) {
+        unsigned char c = (unsigned char)t->s[i];
+        if (i == head) {
+            memcpy(buf + o, "...", 3);
+            o += 3;
+            i = t->n - tail;
+            c = (unsigned char)t->s[i];
+        }
+        buf[o++] = (c >= 0x20 && c < 0x7f) ? (char)c : '?';
+    }
+    buf[o] = '\0';
+    return buf;
+}
+
 rtp_status rtpi_lex_error(const rtpi_lex *lx, const rtpi_tok *t,
                           const char *fmt, ...)
 {
-    char msg[256];
+    /* (the message whole, as rtpi_error takes it: 256 here had cut off
+       the reason after a long name, where rtpi_error keeps its end) */
+    char msg[768];
     va_list ap;
     va_start(ap, fmt);
     vsnprintf(msg, sizeof msg, fmt, ap);
@@ -304,8 +331,10 @@ rtp_status rtpi_lex_wrap(const rtpi_lex *lx, const rtpi_tok *t,
                          rtp_status st, const rtp_error *inner,
                          const char *what)
 {
-    char show[128];
-    rtpi_tok_show(t, show, sizeof show);
+    /* (a file's name: its start and its end, room left in the message
+       for what and the inner reason) */
+    char show[96];
+    rtpi_tok_show_path(t, show, sizeof show);
     if (st == RTP_ERR_NOMEM)
         return rtpi_error(lx->err, st, lx->name, t->line, t->col,
                           "out of memory");

@@ -802,7 +802,7 @@ static rtp_status read_include(nff *c, const rtpi_tok *kw, int bezier)
 {
     const char *what = bezier ? "bezier" : "include";
     rtpi_tok t, dt;
-    char *path = NULL, *text = NULL, show[128];
+    char *path = NULL, *text = NULL, show[96];
     size_t size = 0;
     double m[12], nm[9];
     int any = 0, is_obj = 0;
@@ -816,7 +816,7 @@ static rtp_status read_include(nff *c, const rtpi_tok *kw, int bezier)
                               what, RTPI_INCLUDE_MAX);
     if ((st = read_path(c, what, &t, &path)) != RTP_OK)
         return st;
-    rtpi_tok_show(&t, show, sizeof show);
+    rtpi_tok_show_path(&t, show, sizeof show);
     if (bezier) {
         if ((st = need(c, &dt, what, "subdivisions")) != RTP_OK)
             goto done;

@@ -96,6 +96,8 @@ int rtpi_tok_int(const rtpi_tok *t, long *out);
 /* Copies the token into buf (at most size-1 bytes, non-printable bytes
    shown as '?', long tokens cut with "...") for messages.  @return buf. */
 const char *rtpi_tok_show(const rtpi_tok *t, char *buf, size_t size);
+/* rtpi_tok_show for a file's name: cut in its middle, its end kept. */
+const char *rtpi_tok_show_path(const rtpi_tok *t, char *buf, size_t size);
 
 /* Parse error at a token: file = lx->name. */
 rtp_status rtpi_lex_error(const rtpi_lex *lx, const rtpi_tok *t,

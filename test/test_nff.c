@@ -8,6 +8,7 @@
 #include <stdlib.h>
 #include <locale.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 /* ------------------------------------------------------------ helpers */
@@ -488,6 +489,91 @@ static void test_long_messages(void)
     w.after[sizeof w.after - 1] = '\0';
     rtp_error_format(&w.e, buf, sizeof buf);
     CHECK_MSG(strlen(buf) == sizeof w.e.file + 2 + sizeof w.e.message, "%zu bytes", strlen(buf));
+}
+
+/* Files hundreds of bytes of folders deep (~600 under TMPDIR), named in
+   an error's message: the name cut in its middle, its end (the file's
+   own name) kept, and the reason after it whole (the name's end and the
+   reason were cut off: "cannot load image '/tmp/.../folder_3_...':
+   texture path longer...55 bytes"). */
+static void test_long_paths(void)
+{
+    const char *dir = check_tmp_folder();
+    char deep[1024], text[2400], buf[1200], made[64][1024];
+    size_t nmade = 0, k;
+    rtp_scene *s = NULL;
+    rtp_error err;
+    struct {
+        const char *stmt, *file, *name, *reason;
+        const char *fmt;
+    } cases[] = {
+        {"include", "missing.obj", "cannot read include file '",
+         "missing.obj': cannot open: No such file or directory", "nff"},
+        {"include", "notes.txt", "include '",
+         "notes.txt': unknown file type (expected .obj or .nff)", "nff"},
+        {"texture", "missing.ppm", "cannot load image '",
+         "missing.ppm': texture path longer than 255 bytes (a tree file cannot name it): move "
+         "the image or the scene to a shorter path",
+         "nff"},
+        {"mtllib", "missing.mtl", "cannot read mtllib '",
+         "missing.mtl': cannot open: No such file or directory", "obj"},
+    };
+    if (!dir[0]) {
+        CHECK(dir[0]);
+        return;
+    }
+    snprintf(deep, sizeof deep, "%s", dir);
+    while (strlen(deep) < 600 && nmade < 64) {
+        size_t n = strlen(deep);
+        snprintf(deep + n, sizeof deep - n, "/folder_%zu_of_a_long_way_down", nmade);
+        CHECK(mkdir(deep, 0700) == 0);
+        memcpy(made[nmade++], deep, sizeof deep);
+    }
+    for (k = 0; k < sizeof cases / sizeof *cases; k++) {
+        const char *m;
+        int obj = strcmp(cases[k].fmt, "obj") == 0;
+        if (obj)
+            snprintf(text, sizeof text, "mtllib %s/%s\n", deep, cases[k].file);
+        else
+            snprintf(text, sizeof text,
+                     "l 1 2 3\nf 1 0 0 1 0 100 0 0\n%s %s/%s\ns 0 0 0 1\n", cases[k].stmt,
+                     deep, cases[k].file);
+        memset(&err, 0, sizeof err);
+        CHECK(rtp_scene_load_memory(text, strlen(text), "deep.scene", cases[k].fmt, NULL, &s,
+                                    &err) != RTP_OK);
+        m = err.message;
+        CHECK_MSG(strncmp(m, cases[k].name, strlen(cases[k].name)) == 0 &&
+                      strstr(m, "...") != NULL &&
+                      strcmp(m + strlen(m) - strlen(cases[k].reason), cases[k].reason) == 0 &&
+                      strlen(m) < sizeof err.message && err.line == (obj ? 1 : 3),
+                  "%s: '%s'", cases[k].stmt, m);
+        /* and formatted, file:line:col: message */
+        rtp_error_format(&err, buf, sizeof buf);
+        CHECK_MSG(strstr(buf, cases[k].reason) != NULL, "'%s'", buf);
+        rtp_scene_destroy(s);
+        s = NULL;
+    }
+    /* the scene itself there: the file field keeps its end, the reason
+       whole */
+    snprintf(text, sizeof text, "%s/deep.nff", deep);
+    {
+        FILE *f = fopen(text, "wb"); /* (check_write_file's path holds 512 bytes) */
+        CHECK(f != NULL);
+        if (f) {
+            fputs("l 1 2 3\nf 1 0 0 1 0 100 0 0\ns 0 0 0 nan\n", f);
+            CHECK(fclose(f) == 0);
+        }
+    }
+    memset(&err, 0, sizeof err);
+    CHECK(rtp_scene_load(text, NULL, &s, &err) == RTP_ERR_PARSE);
+    rtp_error_format(&err, buf, sizeof buf);
+    CHECK_MSG(strncmp(err.file, "...", 3) == 0 && strstr(buf, "/deep.nff:3:9: ") &&
+                  strstr(buf, "got 'nan'"),
+              "'%s'", buf);
+    rtp_scene_destroy(s);
+    remove(text);
+    while (nmade > 0)
+        CHECK(rmdir(made[--nmade]) == 0);
 }
 
 /* rtp_error_format says as much as is known: a parse error of a scene
@@ -1533,6 +1619,7 @@ int main(void)
     RUN(test_tiny_normal);
     RUN(test_names_and_keys);
     RUN(test_long_messages);
+    RUN(test_long_paths);
     RUN(test_error_format_without_file);
     RUN(test_far_light);
     RUN(test_get_shortest_subnormal);
