@@ -527,7 +527,9 @@ typedef struct rtp_eval_stats {
  *  image (12 bytes a pixel) and a plane for each colour term edited (16
  *  bytes a pixel, at most 8 kept), for the material last edited in kd
  *  or colour its planes (up to 40 bytes a pixel, 12 a sample), after a
- *  move a byte a sample (the samples it changed), and for a light moved
+ *  move a byte a sample (the samples it changed) and 24 bytes a node (its
+ *  diffuse colour product, the part of a lit node's shading that does not
+ *  depend on where the light is), and for a light moved
  *  alone again and again in a scene of 3 lights or more the sums of every
  *  other term (25 bytes a sample); opt->no_cache keeps none of it. */
 rtp_status rtp_tree_eval(rtp_tree *tree, const rtp_eval_options *opt,

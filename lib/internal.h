@@ -781,13 +781,16 @@ int rtpi_sample_eval(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t n,
    mark is not NULL, mark[k] is set to 1 for each.  rest (NULL: none):
    3 doubles a sample, rtpi_combine_rest's for this light where
    rest_ok[k] is 1 (else made there, and rest_ok[k] set), from which a
-   sample is combined with this light's term alone. */
+   sample is combined with this light's term alone.  kc (NULL: none): 3
+   doubles a node, its light-independent (w kd) c_obj where the first is
+   not all zero bits (else made there where the node is lit and reached):
+   they must be those of w, terms and the materials now. */
 unsigned long long rtpi_light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes,
                                    const uint64_t *start, size_t k0, size_t k1,
                                    const uint32_t *vis_ext, const float *nv, const double *w,
                                    size_t light, float *terms, float *coeffs, const double *cl,
                                    float *samples, int *bad, unsigned char *mark,
-                                   double *rest, unsigned char *rest_ok);
+                                   double *rest, unsigned char *rest_ok, double *kc);
 /* The light terms (n.l, highlight) of every node of material mat among a
    sample's n nodes, from the cached normals and view vectors nv, exactly
    as rtpi_sample_eval computes them: what an edit of mat's shine or ks
@@ -1109,6 +1112,10 @@ struct rtp_tree {
                               mv_light - 1 where mv_ok (tree.c: a light
                               moved again and again) */
     unsigned char *mv_ok;  /* a sample: 1 where mv_rest holds its rest */
+    double *mv_kc;         /* 3 a node: rtpi_light_redo's kc, for moves
+                              (tree.c mv_kc_check), or NULL */
+    rtpi_material *mv_kc_mats; /* the materials mv_kc was made with */
+    size_t mv_kc_nmats;    /* how many (the scene's when it was made) */
     size_t mv_light;       /* 0, or 1 + the light mv_rest is for, while the
                               other terms' coefficients and colours hold */
     unsigned char *ev_mark; /* samples + 8 bytes, then a byte a sample row,

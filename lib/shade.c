@@ -838,7 +838,7 @@ static RTPI_FORCE_INLINE unsigned long long
 light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *start, size_t k0,
            size_t k1, const uint32_t *vis_ext, const float *nv, const double *w, size_t light,
            float *terms, float *coeffs, const double *cl, float *samples, int *bad,
-           unsigned char *mark, double *rest, unsigned char *rest_ok, int with_rest,
+           unsigned char *mark, double *rest, unsigned char *rest_ok, double *kc, int with_rest,
            int one_word)
 {
     const rtp_scene *s = c->s;
@@ -961,6 +961,28 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
             memcpy(&db, &df, sizeof db);
             if (!(wb << 1) || !(db << 1))
                 continue;
+            if (kc) {
+                /* the node's kept (w kd) c_obj (light_kc): a += kd_c d
+                   (+ (w ks) s where ks > 0; elsewhere that term is +-0,
+                   which changes no sum: the sum starts at +0 and is
+                   never -0) */
+                double *kj = kc + 3 * j;
+                uint64_t k0b;
+                memcpy(&k0b, kj, sizeof k0b);
+                if (k0b) {
+                    __m128d kcxy = _mm_loadu_pd(kj), kcz = _mm_load_sd(kj + 2);
+                    d = _mm_set1_pd((double)df);
+                    if (m->ks > 0.0f) {
+                        __m128d hs = _mm_set1_pd(*wj * (double)m->ks * (double)tl[1]);
+                        a01 = _mm_add_pd(a01, _mm_add_pd(_mm_mul_pd(kcxy, d), hs));
+                        a2v = _mm_add_sd(a2v, _mm_add_sd(_mm_mul_sd(kcz, d), hs));
+                    } else {
+                        a01 = _mm_add_pd(a01, _mm_mul_pd(kcxy, d));
+                        a2v = _mm_add_sd(a2v, _mm_mul_sd(kcz, d));
+                    }
+                    continue;
+                }
+            }
             /* (kd, ks) = w (m->kd, m->ks), the two floats side by side
                (shade_kd_ks); c_obj = t colour (+ (1 - t) colour2);
                a += kd c_obj d + ks s */
@@ -985,8 +1007,16 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
                 }
                 d = _mm_set1_pd((double)df);
                 hs = _mm_mul_pd(ks, _mm_set1_pd((double)tl[1]));
-                a01 = _mm_add_pd(a01, _mm_add_pd(_mm_mul_pd(_mm_mul_pd(kd, cxy), d), hs));
-                a2v = _mm_add_sd(a2v, _mm_add_sd(_mm_mul_sd(_mm_mul_sd(kd, cz), d), hs));
+                cxy = _mm_mul_pd(kd, cxy);
+                cz = _mm_mul_sd(kd, cz);
+                /* kept where the term it leaves out is +-0 or made
+                   at each move: not where w ks is not finite (inf 0) */
+                if (kc && (m->ks > 0.0f || fabs(_mm_cvtsd_f64(ks)) <= DBL_MAX)) {
+                    _mm_storeu_pd(kc + 3 * j, cxy);
+                    _mm_store_sd(kc + 3 * j + 2, cz);
+                }
+                a01 = _mm_add_pd(a01, _mm_add_pd(_mm_mul_pd(cxy, d), hs));
+                a2v = _mm_add_sd(a2v, _mm_add_sd(_mm_mul_sd(cz, d), hs));
             }
         }
         {
@@ -1066,6 +1096,25 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
                 continue;
             d = df;
             sp = tl[1];
+            if (kc) {
+                /* the node's kept (w kd) c_obj, as in the SSE2 loop */
+                double *kj = kc + 3 * j;
+                uint64_t k0b;
+                memcpy(&k0b, kj, sizeof k0b);
+                if (k0b) {
+                    if (m->ks > 0.0f) {
+                        ks = *wj * m->ks;
+                        a0 += kj[0] * d + ks * sp;
+                        a1 += kj[1] * d + ks * sp;
+                        a2 += kj[2] * d + ks * sp;
+                    } else {
+                        a0 += kj[0] * d;
+                        a1 += kj[1] * d;
+                        a2 += kj[2] * d;
+                    }
+                    continue;
+                }
+            }
             kd = *wj * m->kd;
             ks = *wj * m->ks;
             /* obj_colour's */
@@ -1078,9 +1127,17 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
                 c1 = t[1] * (double)m->color[1];
                 c2 = t[2] * (double)m->color[2];
             }
-            a0 += kd * c0 * d + ks * sp;
-            a1 += kd * c1 * d + ks * sp;
-            a2 += kd * c2 * d + ks * sp;
+            c0 = kd * c0;
+            c1 = kd * c1;
+            c2 = kd * c2;
+            if (kc && (m->ks > 0.0f || fabs(ks) <= DBL_MAX)) {
+                kc[3 * j] = c0;
+                kc[3 * j + 1] = c1;
+                kc[3 * j + 2] = c2;
+            }
+            a0 += c0 * d + ks * sp;
+            a1 += c1 * d + ks * sp;
+            a2 += c2 * d + ks * sp;
         }
         {
             /* a coefficient the same to the bit (a node in shadow before
@@ -1193,7 +1250,7 @@ unsigned long long rtpi_light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *no
                                    const uint32_t *vis_ext, const float *nv, const double *w,
                                    size_t light, float *terms, float *coeffs, const double *cl,
                                    float *samples, int *bad, unsigned char *mark,
-                                   double *rest, unsigned char *rest_ok)
+                                   double *rest, unsigned char *rest_ok, double *kc)
 {
     /* (scenes of up to 32 lights keep their bits in the nodes: compiled
        without the parallel words there, a test a node and a register
@@ -1204,20 +1261,20 @@ unsigned long long rtpi_light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *no
         rest = NULL;
     if (!vis_ext)
         return rest ? light_redo(c, nodes, start, k0, k1, NULL, nv, w, light, terms, coeffs, cl,
-                                 samples, bad, mark, rest, rest_ok, 1, 0)
+                                 samples, bad, mark, rest, rest_ok, kc, 1, 0)
                     : light_redo(c, nodes, start, k0, k1, NULL, nv, w, light, terms, coeffs, cl,
-                                 samples, bad, mark, NULL, rest_ok, 0, 0);
+                                 samples, bad, mark, NULL, rest_ok, kc, 0, 0);
     /* (a moved light's bits, up to 32 lights: a word a node, indexed
        by the node without a product a sample) */
     if (c->vis_words == 1)
         return rest ? light_redo(c, nodes, start, k0, k1, vis_ext, nv, w, light, terms, coeffs,
-                                 cl, samples, bad, mark, rest, rest_ok, 1, 1)
+                                 cl, samples, bad, mark, rest, rest_ok, kc, 1, 1)
                     : light_redo(c, nodes, start, k0, k1, vis_ext, nv, w, light, terms, coeffs,
-                                 cl, samples, bad, mark, NULL, rest_ok, 0, 1);
+                                 cl, samples, bad, mark, NULL, rest_ok, kc, 0, 1);
     return rest ? light_redo(c, nodes, start, k0, k1, vis_ext, nv, w, light, terms, coeffs, cl,
-                             samples, bad, mark, rest, rest_ok, 1, 0)
+                             samples, bad, mark, rest, rest_ok, kc, 1, 0)
                 : light_redo(c, nodes, start, k0, k1, vis_ext, nv, w, light, terms, coeffs, cl,
-                             samples, bad, mark, NULL, rest_ok, 0, 0);
+                             samples, bad, mark, NULL, rest_ok, kc, 0, 0);
 }
 
 void rtpi_material_light_terms(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t n,

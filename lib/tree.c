@@ -45,6 +45,8 @@ void rtp_tree_destroy(rtp_tree *t)
     rtpi_free(&a, t->ev_mark);
     rtpi_free(&a, t->mv_rest);
     rtpi_free(&a, t->mv_ok);
+    rtpi_free(&a, t->mv_kc);
+    rtpi_free(&a, t->mv_kc_mats);
     rtpi_free(&a, t->ev_samples);
     rtpi_free(&a, t->ev_cl);
     rtpi_free(&a, t->pk);
@@ -1258,6 +1260,7 @@ typedef struct eval_ctx {
                                  sample it combined (t->ev_mark) */
     unsigned long long written; /* mark_row: pixels it wrote */
     double *mv_rest;          /* light_row (may be NULL): t->mv_rest */
+    double *mv_kc;            /* light_row (may be NULL): t->mv_kc */
     size_t rest_bytes;
     int pk_pack;              /* pk_img_chunk: bands in order, each band's
                                  entries right after the band before's */
@@ -1635,7 +1638,7 @@ static int light_row(void *ctx, int y)
     k0 += lo;
     n = rtpi_light_redo(e->shade, t->nodes, st, k0, k1, e->vis, t->ev_nv, t->ev_w, e->light,
                         t->ev_terms, t->ev_coeffs, e->cl, e->combine_too ? e->samples : NULL,
-                        &e->coef_bad, e->mark, e->mv_rest, t->mv_ok);
+                        &e->coef_bad, e->mark, e->mv_rest, t->mv_ok, e->mv_kc);
     if (n && e->mark) /* (the row's flag after the marks: mark_rows_at) */
         e->mark[mark_rows_at(t) + (size_t)y] = 1;
     e->combined += n;
@@ -2504,6 +2507,61 @@ static int shine_only(const rtpi_material *a, const rtpi_material *b)
     return !coeffs_changed(&x, b);
 }
 
+/* ------------------------------------------------ a moved light's kc
+   A moved light's pass sums (w kd) c_obj d (+ (w ks) s) over each lit
+   node it reaches; the product (w kd) c_obj does not depend on the light.
+   It is kept per node (t->mv_kc, 24 bytes a node: rtpi_light_redo's kc,
+   each node's made the first time a move lights it; a scene never moved
+   has none), from the nodes' path weights and texture factors and the
+   materials' kd, colours and texture: an evaluation that makes the
+   caches anew (ev_w, the terms) forgets it, and so does a move after any
+   edit of a material since it was made (mv_kc_mats, compared whole as
+   coeffs_changed does: kd, ks, kt, colours, texture, shine, bump, ka).
+   Light colours, the ambient and the background are not in it.  It is
+   taken where the caches with it fit the memory limit, as the caches
+   themselves (ev_cache_bytes); without it a move makes each product. */
+static void mv_kc_free(rtp_tree *t)
+{
+    rtpi_free(&t->alloc, t->mv_kc);
+    rtpi_free(&t->alloc, t->mv_kc_mats);
+    t->mv_kc = NULL;
+    t->mv_kc_mats = NULL;
+    t->mv_kc_nmats = 0;
+}
+
+/* The nodes' kc for a move now (NULL: none), each node's made anew where
+   the materials changed since (all zero bits: not made). */
+static double *mv_kc_check(rtp_tree *t, size_t nl, size_t ns, double limit)
+{
+    const rtp_scene *s = t->scene;
+    size_t m, n = 3 * t->nnodes + 1;
+    int same = t->mv_kc && t->mv_kc_mats && t->mv_kc_nmats == s->nmats;
+    for (m = 0; same && m < s->nmats; m++)
+        same = !coeffs_changed(&t->mv_kc_mats[m], &s->mats[m]);
+    if (same)
+        return t->mv_kc;
+    if (!t->mv_kc) {
+        if (!(ev_cache_bytes(t, nl, ns) + 24.0 * (double)t->nnodes <=
+              fmin(EV_CACHE_BYTES, limit)))
+            return NULL;
+        t->mv_kc = (double *)rtpi_calloc_array(&t->alloc, n, sizeof *t->mv_kc);
+    } else {
+        memset(t->mv_kc, 0, n * sizeof *t->mv_kc);
+    }
+    if (t->mv_kc && t->mv_kc_nmats != s->nmats) {
+        rtpi_free(&t->alloc, t->mv_kc_mats);
+        t->mv_kc_mats = (rtpi_material *)rtpi_malloc_array(&t->alloc, s->nmats + 1,
+                                                          sizeof *t->mv_kc_mats);
+    }
+    if (!t->mv_kc || !t->mv_kc_mats) {
+        mv_kc_free(t);
+        return NULL;
+    }
+    memcpy(t->mv_kc_mats, s->mats, s->nmats * sizeof *t->mv_kc_mats);
+    t->mv_kc_nmats = s->nmats;
+    return t->mv_kc;
+}
+
 /* Are light l's terms not those of where it is now (it moved since, or
    its shadows are to be decided another way: mode and res as vis_key
    makes them)? */
@@ -2738,6 +2796,7 @@ static void drop_caches(rtp_tree *t)
     rtpi_free(&t->alloc, t->mv_ok);
     t->mv_rest = NULL;
     t->mv_ok = NULL;
+    mv_kc_free(t);
     t->mv_light = 0;
     t->ev_pos = NULL;
     t->ev_mats = NULL;
@@ -4724,6 +4783,8 @@ static rtp_status eval_body(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
         build_material_lists(t, t->ev_valid ? NULL : (uint16_t *)(void *)t->ev_w) != RTP_OK)
         return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
     full = !cached || !t->ev_valid;
+    if (full && t->mv_kc) /* (ev_w and the terms made anew: mv_kc_check) */
+        t->mv_kc_nmats = (size_t)-1;
     /* the caller's image holds the last evaluation: only changes need
        writing (pk_apply) */
     sparse = opt && opt->incremental && into && t->last_pixels == into->pixels;
@@ -4789,7 +4850,7 @@ static rtp_status eval_body(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
         t->pk_term = 0;
         t->ev_samples_ok = cached;
     } else {
-        int coeffs_dirty = 0, moved_combined = 0, applied = 0;
+        int coeffs_dirty = 0, moved_combined = 0, applied = 0, kc_made = 0;
         size_t nstale, lmoved = 0;
         /* a light that moved (or whose shadows were decided another way):
            its terms and coefficients only, for every sample; where the
@@ -4843,6 +4904,27 @@ static rtp_status eval_body(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
         for (l = 0; l < nl; l++) {
             if (!light_terms_stale(t, l, kmode, kres))
                 continue;
+            if (!kc_made) {
+                /* (not where a material's samples get their weights or
+                   texture factors anew after this pass (its ks, kt or
+                   terms edited): the products made now would be of
+                   those before.  A kd or colour edit leaves both) */
+                int as_cached = restored < 0;
+                double *kc = NULL;
+                for (m = 0; as_cached && m < s->nmats; m++)
+                    as_cached = !terms_changed(&s->mats[m], &t->ev_mats[m]) &&
+                                s->mats[m].ks == t->ev_mats[m].ks &&
+                                s->mats[m].kt == t->ev_mats[m].kt && !hl_pending(t, m);
+                if (as_cached)
+                    kc = mv_kc_check(t, nl, ns,
+                                     opt && opt->memory_limit > 0.0 ? opt->memory_limit
+                                                                    : RTPI_MEMORY_LIMIT);
+                else if (t->mv_kc)
+                    t->mv_kc_nmats = (size_t)-1;
+                for (i = 0; i < nthreads; i++)
+                    e[i].mv_kc = kc;
+                kc_made = 1;
+            }
             for (i = 0; i < nthreads; i++) {
                 e[i].light = l;
                 e[i].combine_too = moved_combined;
@@ -5387,6 +5469,7 @@ static rtp_status file_band(void *user, rtp_tree *t, int y0, int y1, const rtpi_
     b.ball_in = NULL; /* (t's nodes', not the band's) */
     b.prim_nrm = NULL;
     b.cone_own = NULL;
+    b.mv_kc = NULL; /* (t's nodes', not the band's) */
     b.ny = y1 - y0;
     if (t->spd) {
         /* the row before the band (its last, kept from the band before)

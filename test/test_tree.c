@@ -4420,6 +4420,69 @@ static void test_moves_rest(void)
 }
 
 
+/* A moved light's kept (w kd) c_obj a node (t->mv_kc): made by the
+   first moves, it must be made anew after any edit of what it is made
+   from (kd, colours, a checker's colours and scale, the weights through
+   ks and kt), whether the edit is evaluated alone before the next move
+   or with it; each image equals a full trace of the scene edited alike.
+   With the kept products left over an edit, the moves after it differ
+   (kd: the red sphere 0.8 -> 0.3 in the light's term). */
+static void test_moves_kc_edits(void)
+{
+    static const struct {
+        const char *path, *key, *value;
+        int with_move; /* the move in the same evaluation as the edit */
+    } seq[] = {
+        {"scenes/spheres.nff", "mat.red.kd", "0.3", 0},
+        {"scenes/spheres.nff", "mat.red.color", "0.2,0.9,0.4", 1},
+        {"scenes/spheres.nff", "mat.mirror.ks", "0.5", 0},
+        {"scenes/spheres.nff", "mat.glass.kt", "0.4", 1},
+        {"scenes/spheres.nff", "mat.red.ks", "0.6", 1},
+        {"scenes/spheres.nff", "mat.floor.color", "0.3,0.5,0.9", 0},
+        {"scenes/spheres.nff", "ambient", "0.3,0.1,0.1", 0},
+        {"scenes/checker.nff", "mat.board.color2", "0.9,0.2,0.1", 0},
+        {"scenes/checker.nff", "mat.board.checker_scale", "0.7", 1},
+        {"scenes/checker.nff", "mat.ball.kd", "0.2", 0},
+    };
+    static const char *const pos[] = {"-3,-5,7", "-2,-6,7", "-1,-5,8", "0,-6,6"};
+    size_t i, k;
+    for (i = 0; i < sizeof seq / sizeof *seq; i++) {
+        rtp_scene *s;
+        rtp_tree *t;
+        rtp_trace_options o;
+        rtp_eval_options eo;
+        rtp_image *re;
+        char what[200];
+        if (!edit_start_on(seq[i].path, 0, &s, &t, &o, &eo, &re))
+            continue;
+        /* two moves: the nodes' products made */
+        for (k = 0; t && re && k < 2; k++) {
+            snprintf(what, sizeof what, "%s: move %zu", seq[i].path, k);
+            CHECK(rtp_tree_set(t, "light.0.pos", pos[k], NULL) == RTP_OK);
+            CHECK(rtp_scene_set(s, "light.0.pos", pos[k], NULL) == RTP_OK);
+            eval_equals_trace(t, s, &o, &eo, re, NULL, what);
+        }
+        CHECK_MSG(t && t->mv_kc != NULL, "%s: no kept products", seq[i].path);
+        if (t && re) {
+            CHECK(rtp_tree_set(t, seq[i].key, seq[i].value, NULL) == RTP_OK);
+            CHECK(rtp_scene_set(s, seq[i].key, seq[i].value, NULL) == RTP_OK);
+            if (!seq[i].with_move) {
+                snprintf(what, sizeof what, "%s=%s", seq[i].key, seq[i].value);
+                eval_equals_trace(t, s, &o, &eo, re, NULL, what);
+            }
+        }
+        for (k = 2; t && re && k < 4; k++) {
+            snprintf(what, sizeof what, "%s=%s, then move %zu", seq[i].key, seq[i].value, k);
+            CHECK(rtp_tree_set(t, "light.0.pos", pos[k], NULL) == RTP_OK);
+            CHECK(rtp_scene_set(s, "light.0.pos", pos[k], NULL) == RTP_OK);
+            eval_equals_trace(t, s, &o, &eo, re, NULL, what);
+        }
+        rtp_image_destroy(re);
+        rtp_tree_destroy(t);
+        rtp_scene_destroy(s);
+    }
+}
+
 /* light.N.pos with N the count of lights adds light N, white and on, on a
    tree (rtp_tree_set) as on a scene (rtp_scene_set), so the same key
    gives the full trace of a scene with a light added and a --stream line
@@ -7457,6 +7520,7 @@ int main(void)
     RUN(test_material_planes);
     RUN(test_moves_kept_image);
     RUN(test_moves_rest);
+    RUN(test_moves_kc_edits);
     RUN(test_key_adds_light);
     RUN(test_moves_smooth);
     RUN(test_material_q);
