@@ -710,6 +710,10 @@ typedef struct rtpi_shade_ctx {
                                 coefficient (rtpi_scene_has_ka, when the
                                 context is made for an evaluation): only
                                 then do the sums look at ka_set */
+    int no_ks;               /* no material of s has ks > 0 (made with the
+                                context for an evaluation; 0: not known):
+                                rtpi_light_redo then needs no material
+                                for a node whose kc is kept */
 } rtpi_shade_ctx;
 /* Whether some material of s has its own ambient coefficient (ka_set). */
 int rtpi_scene_has_ka(const rtp_scene *s);

@@ -4686,6 +4686,9 @@ static rtp_status eval_body(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
     shade.s = s;
     shade.one_sided = t->spd;
     shade.has_ka = rtpi_scene_has_ka(s);
+    shade.no_ks = 1;
+    for (m = 0; m < s->nmats; m++)
+        shade.no_ks &= !(s->mats[m].ks > 0.0f);
     /* (a re-trace, when there is one, is most of the time: the first 90%
        of what progress reports; the evaluation of every sample after it
        the rest) */

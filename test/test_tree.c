@@ -4432,18 +4432,26 @@ static void test_moves_kc_edits(void)
     static const struct {
         const char *path, *key, *value;
         int with_move; /* the move in the same evaluation as the edit */
+        int no_ks;     /* every material's ks 0 and a third light first
+                          (tree_s11's case: no material needed where the
+                          product is kept) */
     } seq[] = {
-        {"scenes/spheres.nff", "mat.red.kd", "0.3", 0},
-        {"scenes/spheres.nff", "mat.red.color", "0.2,0.9,0.4", 1},
-        {"scenes/spheres.nff", "mat.mirror.ks", "0.5", 0},
-        {"scenes/spheres.nff", "mat.glass.kt", "0.4", 1},
-        {"scenes/spheres.nff", "mat.red.ks", "0.6", 1},
-        {"scenes/spheres.nff", "mat.floor.color", "0.3,0.5,0.9", 0},
-        {"scenes/spheres.nff", "ambient", "0.3,0.1,0.1", 0},
-        {"scenes/checker.nff", "mat.board.color2", "0.9,0.2,0.1", 0},
-        {"scenes/checker.nff", "mat.board.checker_scale", "0.7", 1},
-        {"scenes/checker.nff", "mat.ball.kd", "0.2", 0},
+        {"scenes/spheres.nff", "mat.red.kd", "0.3", 0, 0},
+        {"scenes/spheres.nff", "mat.red.color", "0.2,0.9,0.4", 1, 0},
+        {"scenes/spheres.nff", "mat.mirror.ks", "0.5", 0, 0},
+        {"scenes/spheres.nff", "mat.glass.kt", "0.4", 1, 0},
+        {"scenes/spheres.nff", "mat.red.ks", "0.6", 1, 0},
+        {"scenes/spheres.nff", "mat.floor.color", "0.3,0.5,0.9", 0, 0},
+        {"scenes/spheres.nff", "ambient", "0.3,0.1,0.1", 0, 0},
+        {"scenes/checker.nff", "mat.board.color2", "0.9,0.2,0.1", 0, 0},
+        {"scenes/checker.nff", "mat.board.checker_scale", "0.7", 1, 0},
+        {"scenes/checker.nff", "mat.ball.kd", "0.2", 0, 0},
+        {"scenes/spheres.nff", "mat.red.kd", "0.3", 0, 1},
+        {"scenes/spheres.nff", "mat.floor.color", "0.3,0.5,0.9", 1, 1},
+        {"scenes/spheres.nff", "mat.red.ks", "0.5", 1, 1},
+        {"scenes/spheres.nff", "mat.mirror.kt", "0.3", 0, 1},
     };
+    static const char *const mats[] = {"floor", "red", "mirror", "glass"};
     static const char *const pos[] = {"-3,-5,7", "-2,-6,7", "-1,-5,8", "0,-6,6"};
     size_t i, k;
     for (i = 0; i < sizeof seq / sizeof *seq; i++) {
@@ -4455,6 +4463,17 @@ static void test_moves_kc_edits(void)
         char what[200];
         if (!edit_start_on(seq[i].path, 0, &s, &t, &o, &eo, &re))
             continue;
+        for (k = 0; seq[i].no_ks && t && k < sizeof mats / sizeof *mats; k++) {
+            snprintf(what, sizeof what, "mat.%s.ks", mats[k]);
+            CHECK(rtp_tree_set(t, what, "0", NULL) == RTP_OK);
+            CHECK(rtp_scene_set(s, what, "0", NULL) == RTP_OK);
+        }
+        if (seq[i].no_ks && t) {
+            /* a third light: the moves keep the rest of the sums, where
+               that copy of the loop runs (rtpi_light_redo) */
+            CHECK(rtp_tree_set(t, "light.2.pos", "3,-2,5", NULL) == RTP_OK);
+            CHECK(rtp_scene_set(s, "light.2.pos", "3,-2,5", NULL) == RTP_OK);
+        }
         /* two moves: the nodes' products made */
         for (k = 0; t && re && k < 2; k++) {
             snprintf(what, sizeof what, "%s: move %zu", seq[i].path, k);
