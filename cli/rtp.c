@@ -1003,6 +1003,29 @@ static int is_stdout(const char *path)
            sb.st_dev == so.st_dev && sb.st_ino == so.st_ino;
 }
 
+/* Whether two names (link targets) are one name in one folder: the
+   folders stat'ed, the final names compared, for outputs not yet made,
+   whose names alone differ (-i x.pfm --stats ./x.pfm, dir/../x.pfm: the
+   stats replaced the image, exit 0). */
+static int one_place(const char *a, const char *b)
+{
+    const char *sa = strrchr(a, '/'), *sb = strrchr(b, '/');
+    const char *na = sa ? sa + 1 : a, *nb = sb ? sb + 1 : b;
+    char da[4096], db[4096];
+    struct stat xa, xb;
+    /* (the folder: the part before the last '/', "/" for "/x", "." for "x") */
+    size_t la = !sa ? 1 : sa == a ? 1 : (size_t)(sa - a);
+    size_t lb = !sb ? 1 : sb == b ? 1 : (size_t)(sb - b);
+    if (!*na || strcmp(na, nb) != 0 || la >= sizeof da || lb >= sizeof db)
+        return 0;
+    memcpy(da, sa ? a : ".", la);
+    da[la] = '\0';
+    memcpy(db, sb ? b : ".", lb);
+    db[lb] = '\0';
+    return stat(da, &xa) == 0 && stat(db, &xb) == 0 && xa.st_dev == xb.st_dev &&
+           xa.st_ino == xb.st_ino;
+}
+
 /* Whether two outputs are one file (-o x -i x, --stats x): the last
    written would replace the other silently.  1 after a message. */
 static int one_output(const char *a, const char *b)
@@ -1019,7 +1042,8 @@ static int one_output(const char *a, const char *b)
         return 0;
     return strcmp(ta, tb) == 0 || (stat(ta, &sa) == 0 && stat(tb, &sb) == 0 &&
                                    S_ISREG(sa.st_mode) && sa.st_dev == sb.st_dev &&
-                                   sa.st_ino == sb.st_ino);
+                                   sa.st_ino == sb.st_ino) ||
+           one_place(ta, tb);
 }
 
 /* ra, rb: what each output is ("the image", "the --stats file"): two

@@ -549,6 +549,21 @@ for c in "trace $S --size 4x4 -i $T/one.pfm --stats $T/one.pfm|the image|the --s
     grep -q ": $r1 $T/one.pfm and $r2 $T/one.pfm are one file" "$T/err" && [ ! -e "$T/one.pfm" ] && ok ||
         bad "two outputs on one file, ${c%%|*}: $(cat "$T/err")"
 done
+# the same file under two names not yet made (./x, d/../x): the names
+# alone differ, so the stats replaced the image (exit 0); the folders and
+# final names compared
+mkdir -p "$T/od"
+for c in "trace $S --size 4x4 -i $T/one.pfm --stats $T/./one.pfm|the image|the --stats file" \
+         "trace $S --size 4x4 -o $T/one.pfm -i $T/od/../one.pfm|the tree|the image" \
+         "reeval $T/t.rtp -i $T/od/../one.pfm --stats $T/one.pfm|the image|the --stats file"; do
+    rm -f "$T/one.pfm"
+    r1=${c#*|}; r2=${r1#*|}; r1=${r1%%|*}
+    expect_rc 2 $RTP ${c%%|*}
+    grep -q ": $r1 .*one.pfm and $r2 .*one.pfm are one file" "$T/err" && [ ! -e "$T/one.pfm" ] && ok ||
+        bad "two outputs on one file by two names, ${c%%|*}: $(cat "$T/err")"
+done
+expect_rc 0 $RTP trace $S --size 4x4 -q -i "$T/one.pfm" --stats "$T/od/one.pfm"
+[ -f "$T/one.pfm" ] && [ -f "$T/od/one.pfm" ] && ok || bad "one name in two folders refused"
 mkdir -p "$T/dflt"
 cp $S "$T/dflt/sc.nff"
 abs=$(cd "$(dirname "$RTP")" && pwd)/$(basename "$RTP")
@@ -860,6 +875,10 @@ expect_rc 1 sh -c "printf 'ambient=0.1\nambient=0.2\nambient=0.3\n' | $RTP reeva
 grep -q '"command": "reeval"' "$T/sy/f1.pfm" && [ ! -f "$T/sy/f2.pfm" ] &&
     grep -q "<stdin>:2: --stream: the image .*f1.pfm is the --stats file" "$T/err" && ok ||
     bad "a stream's frame on its --stats file: $(cat "$T/err")"
+expect_rc 1 sh -c "printf 'ambient=0.1\nambient=0.2\nambient=0.3\n' | $RTP reeval '$T/t.rtp' --stream -i '$T/sy/g%d.pfm' --stats '$T/sy/./g1.pfm'"
+grep -q '"command": "reeval"' "$T/sy/g1.pfm" && [ ! -f "$T/sy/g2.pfm" ] &&
+    grep -q "<stdin>:2: --stream: the image .*g1.pfm is the --stats file" "$T/err" && ok ||
+    bad "a stream's frame on its --stats file by another name: $(cat "$T/err")"
 # an empty output name, before the work (it failed at the rename, naming nothing)
 expect_rc 1 $RTP trace $S --size 8x8 -o ''
 grep -q "file name is empty" "$T/err" && ok || bad "empty -o: $(cat "$T/err")"
