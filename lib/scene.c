@@ -710,15 +710,20 @@ rtp_status rtpi_camera_error(const rtp_scene *s, const char *fn, const char *wha
                       what);
 }
 
+static void put_num(char *out, size_t size, size_t *at, double v, int is_float, int first);
+
 /* The camera's numbers are geometry: |x| <= RTPI_COORD_LIMIT, as NFF's v
-   block has them (a key took 1e30, the file refused 1e19). */
+   block has them (a key took 1e30, the file refused 1e19).  The number
+   said in its shortest form that reads back (6 digits said
+   "-1e+18 is out of range (|x| <= 1e+18)" of -1.0000001e18). */
 static rtp_status want_coord(rtp_error *err, const char *key, const double *v, int n)
 {
     int i;
-    char g[32], lim[32]; /* '.' whatever the locale */
+    char g[40], lim[32]; /* '.' whatever the locale */
     for (i = 0; i < n; i++)
         if (fabs(v[i]) > RTPI_COORD_LIMIT) {
-            rtpi_fmt_g(g, sizeof g, 6, v[i]);
+            size_t at = 0;
+            put_num(g, sizeof g, &at, v[i], 0, 1);
             rtpi_fmt_g(lim, sizeof lim, 6, RTPI_COORD_LIMIT);
             return rtpi_error(err, RTP_ERR_ARGUMENT, NULL, 0, 0,
                               "%s: %s is out of range (|x| <= %s, as a scene's view)", key, g,

@@ -240,6 +240,11 @@ grep -q "camera.from: -1.1e+18 is out of range (|x| <= 1e+18" "$T/err" && ok ||
     { bad "camera key past geometry's range: message"; cat "$T/err" >&2; }
 sed 's/^from 0 -8 3/from 0 -1.1e18 3/' scenes/spheres.nff >"$T/big.nff"
 expect_rc 1 $RTP trace "$T/big.nff" --size 40x30 -i "$T/big.pfm"
+# a number just past the limit is said with the digits that tell it from
+# the limit ("-1e+18 is out of range (|x| <= 1e+18)" of -1.0000001e18)
+expect_rc 1 $RTP trace scenes/spheres.nff --size 40x30 -i "$T/big.pfm" --set camera.at=0,-1.0000001e18,3
+grep -q "camera.at: -1.0000001e+18 is out of range (|x| <= 1e+18" "$T/err" && ok ||
+    { bad "camera key just past geometry's range: message"; cat "$T/err" >&2; }
 
 # The largest side --size takes traces (the limit once counted a sample
 # row and column more than the image has)
