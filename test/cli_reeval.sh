@@ -1331,6 +1331,36 @@ for m in exact lightbuf:64 lightbuf lightbuf:1024 auto; do
     [ $n -eq 0 ] && ok || bad "quadrics_far.nff: $n of $i $m stream frames differ from full traces"
 done
 
+# The light buffer's exact box of a sphere's cone (dc_cover_sphere) is
+# taken only where every direction of the cone is its face's by a tenth
+# (|u|, |v| < 0.9): fuzz_scenes/spheres_faces.nff's spheres straddle the
+# cube's face edges and corners seen from (0, 0, 10), and reach |u| ~ 0.9,
+# from a light moved there and about it.  (Caught: the box taken up to
+# |u| 1.05, so that the next face's cells missed a sphere: every frame of
+# lightbuf:16, lightbuf:64 and auto.)
+Q=test/fuzz_scenes/spheres_faces.nff
+$RTP trace $Q --size 96x96 -q -o "$T/sf.rtp"
+acc=""
+i=0
+: >"$T/sf.txt"
+for kv in light.0.pos=0,0,10 light.0.pos=0.02,-0.03,10.05 light.0.pos=-0.05,0.04,9.9 \
+          light.1.pos=0,0,10 light.0.pos=0.1,0.1,10.3 light.0.pos=0,0,9.7; do
+    acc="$acc --set $kv"
+    echo "$kv" >>"$T/sf.txt"
+    $RTP trace $Q --size 96x96 -q $acc -i "$T/sff.$i.pfm"
+    i=$((i + 1))
+done
+for m in exact lightbuf:16 lightbuf:64 lightbuf auto; do
+    $RTP reeval "$T/sf.rtp" --stream --shadows $m -q -i "$T/sfs.$m.%d.pfm" <"$T/sf.txt"
+    n=0
+    k=0
+    while [ $k -lt $i ]; do
+        cmp -s "$T/sfs.$m.$k.pfm" "$T/sff.$k.pfm" || n=$((n + 1))
+        k=$((k + 1))
+    done
+    [ $n -eq 0 ] && ok || bad "spheres_faces.nff: $n of $i $m stream frames differ from full traces"
+done
+
 rm -rf "$T"
 echo "$pass passed, $fail failed, $skip skipped"
 [ "$fail" -eq 0 ]
