@@ -4191,10 +4191,12 @@ static int cb_apply(void *ctx, int chunk)
 
 /* Room in cb_p for n entries; 0 where there is no memory for it.  The
    chain writes most of it at once, so from a quarter MiB on it is made a
-   MiB at least, which the default allocator gives in huge pages (util.c:
-   a fresh 4 KiB page costs about 10 us on the development VM; tetra_s6's
-   ambient, 0.9 MB of room, took 182 faults and 3.4 ms where 2.2 ms had
-   done with the image-sized block before, 11 faults). */
+   MiB at least, which the default allocator gave in huge pages until
+   session 45 (util.c: a fresh 4 KiB page cost about 10 us on session
+   11's VM; tetra_s6's ambient, 0.9 MB of room, took 182 faults and
+   3.4 ms where 2.2 ms had done with the image-sized block before, 11
+   faults); now a malloc block, its room beyond what is written never
+   touched, so the rounding costs nothing. */
 static int cb_room(rtp_tree *t, size_t n)
 {
     const size_t mib = ((size_t)1 << 20) / (3 * sizeof *t->cb_p) + 1;

@@ -16,46 +16,68 @@
 #endif
 
 /* Large arrays (ray trees, evaluation caches, images) are written once
-   from start to end soon after they are made, and in a virtual machine a
-   page fault costs microseconds: tens of thousands of them were a third
-   of what recording added to a trace.  Where Linux has transparent huge
-   pages in "madvise" mode, the default allocator asks for them on blocks
-   of 1 MiB and more (a user's allocator is left as it is).  Why 1 MiB: on
-   the development VM a fresh 4 KiB page cost 10 us (2.5 ms a MiB) and a
-   fresh huge page 0.13-2.3 ms (2 MiB zeroed), so a block of 1 MiB touched
-   through costs less as one huge page, for at most 1 MiB more resident
-   memory; from 4 MiB on (session 11) the 1-4 MiB caches of an evaluation
-   (path weights, q, the planes' pixel lists) took 400-2200 faults: half
-   of a material's first kd edit on balls (7.8 -> 3.9 ms) and most of a
-   first light-colour edit.
+   from start to end soon after they are made, so what a large block
+   costs is mostly its pages' first touch, and that depends on the
+   machine.
 
-   A block realloc makes of 1 MiB or more (a growing array: the ray
-   trees while trace records them, a kd-tree's nodes while it is built)
-   is a mapping of its own, 2 MiB-aligned, whole huge pages, advised as a
-   whole, so that growing it moves its pages with mremap instead of
-   copying them.  Memory a process touches for the first time is what
-   costs on that VM (its kernel zeroes each page while the host backs it:
-   0.6-2.7 ms a MiB measured; clear_page was a sixth of recording
-   mount_s6 at 1024x1024 in perf), and a growing tree copied into fresh
-   blocks touched 116 MB for its 63.  Recording mount_s6 at 1024x1024,
-   the best of three over the best of three traces, one process each,
-   three processes of each build in turn: +5.6..+18% copied, +1.3..+1.9%
-   moved.  Blocks malloc makes stay in malloc's heap, which hands the
-   memory of blocks freed before to the next ones: made as mappings too,
-   every large cache of a first evaluation at 1024x1024 came fresh
-   (bench_reeval: 0.13-0.30 s became 0.32-0.56 s).  Every block carries a header of two
-   words before it, so that free and realloc can tell the kinds apart and
-   know the size: the mapping's length (0: malloc's) and the size asked.
-   Not under AddressSanitizer, whose checks of the heap the mappings
-   would escape (RTPI_ASAN: internal.h), nor under ThreadSanitizer,
-   which does not see mremap (RTPI_TSAN). */
-#if defined(__linux__) && defined(MADV_HUGEPAGE) && defined(MREMAP_MAYMOVE) && \
-    defined(MREMAP_FIXED) && !defined(RTPI_ASAN) && !defined(RTPI_TSAN)
-#define RTPI_HUGE_MIN ((size_t)1 << 20)
-#define RTPI_HUGE_PAGE ((size_t)2 << 20)
-/* where a block's data starts: 16 bytes in keep malloc's alignment for a
-   small block; a mapping's starts a cache line in (a large heap block's a
-   huge page in: default_malloc) */
+   Transparent huge pages (MADV_HUGEPAGE) are asked for only on the
+   blocks realloc grows (below: the ray trees while trace records them,
+   a kd-tree's nodes while it is built), not on the blocks malloc makes
+   (an evaluation's caches, the colour planes, a tree read from a file,
+   images).  Sessions 11-44 asked on every block of 1 MiB and more: on
+   session 11's VM a fresh 4 KiB page cost 10 us (2.5 ms a MiB) and a
+   fresh huge page 0.13-2.3 ms (2 MiB zeroed), and the caches of an
+   evaluation took 400-2200 faults, half of a material's first kd edit on
+   balls (7.8 -> 3.9 ms).  On session 44-45's host (KVM, Linux 6.18, THP
+   "madvise", defrag "madvise", a virtio balloon that reports free memory
+   back to the host in 2 MiB blocks: page_reporting_order 9) a fresh
+   4 KiB page costs 0.45-0.6 ms a MiB and an advised huge page 2.2-6.4 ms
+   a MiB on its first touch (a probe touching every page of 64 MiB; perf:
+   99% clear_page_erms, the guest zeroing memory the host backs again
+   page by page), 0.13 ms when the same 2 MiB come back within the
+   balloon's 2 s delay.  A huge page takes a whole free 2 MiB block,
+   which the host has taken back; small pages come first from those the
+   guest freed last, still backed.  With the guest's memory fragmented
+   (session 44: 22.7 GB of page cache) advised faults also compacted
+   memory (compact_stall 6,389).  Measured in session 45 (the seven SPD
+   scenes, builds in turn, CPU time): advised, streams of six edits on a
+   tree read from its file took 1.4x the time at 1024x1024 (sys 0.5 s
+   against 0.2) and 1.1x at 512x512, first evaluations up to 2-3x (0.7x
+   right after another process freed its huge pages), first light-colour
+   edits 0.75x (1-2 ms less), moves on the advised tree 0.93-0.98x;
+   recording and traces within 2-5%, resident peaks 5-25% more.  The
+   grown blocks keep the advice: the recorded trees, which every edit in
+   the process reads (moves, and a stream of the tree's bytes 1.5x faster
+   than in small pages), and what saved most on session 11's VM; with THP
+   "always" the system gives huge pages to every block unasked.
+
+   A block realloc makes of 1 MiB or more is a mapping of its own,
+   2 MiB-aligned, whole 2 MiB pages, so that growing it moves its pages
+   with mremap instead of copying them.  Memory a process touches for the
+   first time is what costs in a VM (its kernel zeroes each page while
+   the host backs it: 0.6-2.7 ms a MiB on session 11's VM; clear_page was
+   a sixth of recording mount_s6 at 1024x1024 in perf), and a growing
+   tree copied into fresh blocks touched 116 MB for its 63.  Recording
+   mount_s6 at 1024x1024, the best of three over the best of three
+   traces, one process each, three processes of each build in turn:
+   +5.6..+18% copied, +1.3..+1.9% moved (session 11).  Blocks malloc makes
+   stay plain malloc blocks, which glibc hands the memory of blocks freed
+   before (until session 45 they were 2 MiB-aligned inside 2 MiB more
+   than they held, in size classes an eighth apart, for the huge pages:
+   without the advice the same, a stream of 20 camera edits of balls at
+   512x512 took 113 MB resident and 40,900 faults, now 93 MB, 36,000).
+   Every block carries a header of two words before it, so that free and
+   realloc can tell the kinds apart and know the size: the mapping's
+   length (0: malloc's) and the size asked.  Not under AddressSanitizer,
+   whose checks of the heap the mappings would escape (RTPI_ASAN:
+   internal.h), nor under ThreadSanitizer, which does not see mremap
+   (RTPI_TSAN). */
+#if defined(__linux__) && defined(MREMAP_MAYMOVE) && defined(MREMAP_FIXED) && \
+    !defined(RTPI_ASAN) && !defined(RTPI_TSAN)
+#define RTPI_BIG_MIN ((size_t)1 << 20)
+#define RTPI_BIG_ALIGN ((size_t)2 << 20)
+/* where a block's data starts: 16 bytes in keep malloc's alignment; a
+   mapping's starts a cache line in */
 #define RTPI_HDR 16
 #define RTPI_BIG_HDR 64
 
@@ -69,35 +91,18 @@ static blk_hdr *hdr_of(void *p)
     return (blk_hdr *)(void *)((char *)p - RTPI_HDR);
 }
 
-/* The start of block p as malloc or mmap gave it: a mapping has its data
-   a cache line in, a large heap block (1 MiB or more) keeps its start
-   just before its header (default_malloc). */
+/* The start of block p as malloc or mmap gave it. */
 static char *base_of(void *p)
 {
-    const blk_hdr *h = hdr_of(p);
-    if (h->maplen)
-        return (char *)p - RTPI_BIG_HDR;
-    if (h->size >= RTPI_HUGE_MIN)
-        return ((char **)(void *)((char *)p - RTPI_HDR))[-1];
-    return (char *)p - RTPI_HDR;
+    return (char *)p - (hdr_of(p)->maplen ? RTPI_BIG_HDR : RTPI_HDR);
 }
 
-/* Huge pages for the 2 MiB-aligned inside of [p, p + size). */
-static void huge_advice(char *p, size_t size)
-{
-    uintptr_t a = ((uintptr_t)p + RTPI_HUGE_PAGE - 1) & ~(uintptr_t)(RTPI_HUGE_PAGE - 1);
-    uintptr_t b = ((uintptr_t)p + size) & ~(uintptr_t)(RTPI_HUGE_PAGE - 1);
-    if (b > a)
-        (void)madvise((void *)a, (size_t)(b - a), MADV_HUGEPAGE); /* advice only */
-}
-
-/* Whole huge pages for size bytes and a large block's header; 0 when too
-   large. */
+/* Whole 2 MiB for size bytes and a mapping's header; 0 when too large. */
 static size_t big_len(size_t size)
 {
-    if (size > (size_t)-1 - RTPI_BIG_HDR - RTPI_HUGE_PAGE)
+    if (size > (size_t)-1 - RTPI_BIG_HDR - RTPI_BIG_ALIGN)
         return 0;
-    return (size + RTPI_BIG_HDR + RTPI_HUGE_PAGE - 1) & ~(RTPI_HUGE_PAGE - 1);
+    return (size + RTPI_BIG_HDR + RTPI_BIG_ALIGN - 1) & ~(RTPI_BIG_ALIGN - 1);
 }
 
 /* A fresh 2 MiB-aligned mapping of len bytes (a multiple of 2 MiB),
@@ -106,18 +111,20 @@ static char *map_aligned(size_t len)
 {
     char *m, *a;
     size_t head;
-    if (len > (size_t)-1 - RTPI_HUGE_PAGE)
+    if (len > (size_t)-1 - RTPI_BIG_ALIGN)
         return NULL;
-    m = (char *)mmap(NULL, len + RTPI_HUGE_PAGE, PROT_READ | PROT_WRITE,
+    m = (char *)mmap(NULL, len + RTPI_BIG_ALIGN, PROT_READ | PROT_WRITE,
                      MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
     if (m == (char *)MAP_FAILED)
         return NULL;
-    a = (char *)(((uintptr_t)m + RTPI_HUGE_PAGE - 1) & ~(uintptr_t)(RTPI_HUGE_PAGE - 1));
+    a = (char *)(((uintptr_t)m + RTPI_BIG_ALIGN - 1) & ~(uintptr_t)(RTPI_BIG_ALIGN - 1));
     head = (size_t)(a - m);
     if (head)
         (void)munmap(m, head);
-    (void)munmap(a + len, RTPI_HUGE_PAGE - head);
+    (void)munmap(a + len, RTPI_BIG_ALIGN - head);
+#if defined(MADV_HUGEPAGE)
     (void)madvise(a, len, MADV_HUGEPAGE); /* advice only */
+#endif
     return a;
 }
 
@@ -134,63 +141,14 @@ static void *map_block(size_t size)
     return m + RTPI_BIG_HDR;
 }
 
-/* The bytes a large heap block takes: whole huge pages, and from 16 MiB
-   on classes an eighth apart (at most 12.5% more address space, touched
-   only as used).  Blocks sized by node counts (the trees, an
-   evaluation's caches) differ a little after each re-trace; of one class
-   they fit each other's room in the heap. */
-static size_t big_class(size_t size)
-{
-    size_t len = big_len(size), cls = RTPI_HUGE_PAGE;
-    if (!len)
-        return 0;
-    while (cls < len) {
-        size_t step = (cls >> 3) & ~(RTPI_HUGE_PAGE - 1);
-        if (step < RTPI_HUGE_PAGE)
-            step = RTPI_HUGE_PAGE;
-        if (cls > (size_t)-1 - step)
-            return 0;
-        cls += step;
-    }
-    return cls;
-}
-
 static void *default_malloc(void *user, size_t size)
 {
     blk_hdr *h;
     char *b;
     (void)user;
-    if (size >= RTPI_HUGE_MIN) {
-        /* aligned and rounded up to whole huge pages, so that every page
-           of the block can be one (a fresh block's first touch then costs
-           a fault per 2 MiB, not per 4 KiB).  The data starts at the
-           first huge page boundary past a small header in what malloc
-           gives (a 2 MiB and 64 bytes more than the class), the header
-           and the block's start just before it, in a small page never
-           advised: in the block's first huge page the header alone
-           zeroed 2 MiB as the block was made, used or not (a material's
-           first kd edit made four blocks and used two, tetra_s6 at 512:
-           37 faults, 2-16 ms).  Not posix_memalign: malloc's aligned
-           blocks take 2 MiB more than they hold while being found, so a
-           block freed never held the next one of its size, and re-traces
-           left the heap fragmented (a stream of 30 ior edits at 512x512
-           grew from 142 to 711 MB resident, of 60 camera edits from 94 to
-           367 MB; now 165 and 121 MB, and the camera edits took half the
-           time, their memory warm). */
-        size_t len = big_class(size);
-        char *v;
-        if (!len || len > (size_t)-1 - RTPI_HUGE_PAGE - 64 ||
-            !(v = (char *)malloc(RTPI_HUGE_PAGE + len + 64)))
-            return NULL;
-        b = (char *)(((uintptr_t)v + 64 + RTPI_HUGE_PAGE - 1) & ~(uintptr_t)(RTPI_HUGE_PAGE - 1));
-        ((char **)(void *)(b - RTPI_HDR))[-1] = v; /* (the 8 bytes before the header) */
-        huge_advice(b, len);
-        h = hdr_of(b);
-        h->maplen = 0;
-        h->size = size;
-        return b;
-    }
-    b = (char *)malloc(size + RTPI_HDR); /* (size < 1 MiB: no overflow) */
+    if (size > (size_t)-1 - RTPI_HDR)
+        return NULL;
+    b = (char *)malloc(size + RTPI_HDR);
     if (!b)
         return NULL;
     h = (blk_hdr *)(void *)b;
@@ -220,17 +178,17 @@ static void *default_realloc(void *user, void *p, size_t size)
     if (!p)
         return default_malloc(user, size);
     h = hdr_of(p);
-    if (size < RTPI_HUGE_MIN && !h->maplen && h->size < RTPI_HUGE_MIN) {
+    if (size < RTPI_BIG_MIN && !h->maplen) {
         char *b = (char *)realloc(base_of(p), size + RTPI_HDR);
         if (!b)
             return NULL;
         ((blk_hdr *)(void *)b)->size = size;
         return b + RTPI_HDR;
     }
-    if (size < RTPI_HUGE_MIN || !h->maplen) {
+    if (size < RTPI_BIG_MIN || !h->maplen) {
         /* into a block of the other kind (a heap block growing past 1 MiB
            becomes a mapping): a new block, the bytes both hold */
-        void *np = size < RTPI_HUGE_MIN ? default_malloc(user, size) : map_block(size);
+        void *np = size < RTPI_BIG_MIN ? default_malloc(user, size) : map_block(size);
         if (!np)
             return NULL;
         memcpy(np, p, h->size < size ? h->size : size);
@@ -239,7 +197,8 @@ static void *default_realloc(void *user, void *p, size_t size)
     }
     /* a mapping growing or shrinking: its pages move, none is copied, in
        place where the addresses after it are free, else to a fresh
-       aligned range (huge pages stay whole only 2 MiB-aligned) */
+       aligned range (a huge page the system gives stays whole only
+       2 MiB-aligned) */
     m = base_of(p);
     len = big_len(size);
     if (!len)
