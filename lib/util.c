@@ -175,8 +175,14 @@ static void *default_realloc(void *user, void *p, size_t size)
     blk_hdr *h;
     char *m;
     size_t len;
-    if (!p)
-        return default_malloc(user, size);
+    if (!p) {
+        /* a block made by realloc is one that grows (the recorded trees
+           start at their estimate's size): a mapping from the start where
+           it is large, so that its pages are the huge ones the growth
+           keeps; malloc's where no mapping can be had */
+        void *np = size >= RTPI_BIG_MIN ? map_block(size) : NULL;
+        return np ? np : default_malloc(user, size);
+    }
     h = hdr_of(p);
     if (size < RTPI_BIG_MIN && !h->maplen) {
         char *b = (char *)realloc(base_of(p), size + RTPI_HDR);

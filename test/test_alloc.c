@@ -1691,15 +1691,18 @@ static void test_large_block_advice(void)
 {
 #if defined(BIG_BLOCKS)
     rtp_allocator a;
-    char *p, *q, *m;
+    char *p, *q, *m, *r;
     rtpi_allocator_init(&a, NULL);
     p = (char *)rtpi_malloc(&a, (size_t)64 << 20); /* a large heap block */
     q = (char *)rtpi_malloc(&a, 1000);
     m = q ? (char *)rtpi_realloc(&a, q, (size_t)8 << 20) : NULL; /* grown: a mapping */
-    CHECK(p != NULL && m != NULL);
-    if (p && m) {
+    /* made large by realloc (the recorded trees start at their estimate) */
+    r = (char *)rtpi_realloc(&a, NULL, (size_t)8 << 20);
+    CHECK(p != NULL && m != NULL && r != NULL);
+    if (p && m && r) {
         int hp = huge_advised(p + ((size_t)32 << 20)), hm = huge_advised(m + ((size_t)4 << 20));
-        if (hp < 0 || hm < 0) {
+        int hr = huge_advised(r + ((size_t)4 << 20));
+        if (hp < 0 || hm < 0 || hr < 0) {
             printf("  (skipped: /proc/self/smaps says nothing of the blocks)\n");
         } else {
             CHECK_MSG(hp == 0, "a 64 MiB block from malloc advised for huge pages");
@@ -1708,11 +1711,14 @@ static void test_large_block_advice(void)
 #if defined(MADV_HUGEPAGE)
             if (thp_mode() > 0)
                 CHECK_MSG(hm == 1, "a block grown to 8 MiB not advised for huge pages");
+            if (thp_mode() > 0)
+                CHECK_MSG(hr == 1, "an 8 MiB block made by realloc not advised for huge pages");
 #endif
         }
     }
     rtpi_free(&a, p);
     rtpi_free(&a, m ? m : q);
+    rtpi_free(&a, r);
 #endif
 }
 
