@@ -811,6 +811,18 @@ static rtp_status read_mtl(obj *o, const char *text, size_t size, const char *na
                    rtpi_tok_is(&kw, "d") || rtpi_tok_is(&kw, "Tr")) {
             char what[8];
             rtpi_tok_show(&kw, what, sizeof what);
+            if (what[0] == 'd') {
+                /* (the standard's "d -halo F": a dissolve by the surface's
+                   angle to the eye, which rtp's one kt a material cannot
+                   hold; its number alone would be another material) */
+                rtpi_lex save = lx;
+                rtpi_tok peek;
+                if (rtpi_lex_next_inline(&save, &peek) && rtpi_tok_is(&peek, "-halo"))
+                    return rtpi_lex_error(&lx, &peek,
+                                          "d -halo (a dissolve by the surface's angle to "
+                                          "the eye) is not supported: give d a number "
+                                          "alone (opacity, 0 to 1)");
+            }
             if ((st = line_val(&lx, what, "value", &v[0], &tk)) != RTP_OK ||
                 (st = line_rest(&lx, what, 1, 0)) != RTP_OK)
                 break;
