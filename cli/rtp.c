@@ -1133,6 +1133,22 @@ static int overwrites_scene_image(const char *cmd, const rtp_scene *s, const cha
                     return 1;
                 }
         }
+    /* (and the files it includes, meshes and mtllibs: trace s.nff -o
+       mesh.obj wrote the tree over the included mesh) */
+    for (m = 0;; m++) {
+        char key[64], path[4096];
+        snprintf(key, sizeof key, "file.%zu", m);
+        rtp_status st = rtp_scene_get(s, key, path, sizeof path, NULL);
+        if (st == RTP_ERR_KEY || (st != RTP_OK && st != RTP_ERR_ARGUMENT))
+            break; /* (past the last; ARGUMENT: a path longer than path holds) */
+        for (o = 0; st == RTP_OK && o < nout; o++)
+            if (is_input(path, out[o])) {
+                msg("%s: %s is a file the scene reads (%s, %s): writing it would replace it; "
+                    "name another file",
+                    cmd, out[o], key, path);
+                return 1;
+            }
+    }
     return 0;
 }
 

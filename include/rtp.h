@@ -216,8 +216,11 @@ rtp_status rtp_scene_set(rtp_scene *scene, const char *key,
  *  mat.N.ambient_own, "1" where the material has an ambient coefficient of
  *  its own (set, kd's edits leave it), "0" where it follows kd (set
  *  "kd"; what mat.N.ambient's numbers cannot tell of one set equal to
- *  kd).  @return RTP_OK, RTP_ERR_KEY, or
- *  RTP_ERR_ARGUMENT when buf is too small (buf then ""). */
+ *  kd), and file.N, the files a loaded scene read besides its own
+ *  (include, bezier and mtllib files as resolved from its folder, in the
+ *  order read: outputs that should not replace them; RTP_ERR_KEY past
+ *  the last, and for a tree's scene, which reads none).  @return RTP_OK,
+ *  RTP_ERR_KEY, or RTP_ERR_ARGUMENT when buf is too small (buf then ""). */
 rtp_status rtp_scene_get(const rtp_scene *scene, const char *key, char *buf, size_t size,
                          rtp_error *err);
 

@@ -286,10 +286,17 @@ struct rtp_scene {
     rtpi_material *mats;  size_t nmats, cap_mats;
     rtpi_light *lights;   size_t nlights, cap_lights;
     rtpi_texture *texs;   size_t ntexs, cap_texs;
+    /* The files read besides the scene's own (include and bezier files,
+       mtllibs), as resolved from its folder, in the order read:
+       rtp_scene_get's file.N, so that a caller does not write over them
+       (`rtp trace s.nff -o mesh.obj` replaced the included mesh).  A
+       clone (a tree's scene) has none: a tree reads no file. */
+    char **files;         size_t nfiles, cap_files;
 };
 
 /* scene.c: creation and appending; each returns 0 or -1 (out of memory). */
 rtp_status rtpi_scene_create(const rtp_allocator *alloc, rtp_scene **out);
+int rtpi_scene_add_file(rtp_scene *s, const char *path);
 int rtpi_scene_add_pos(rtp_scene *s, double x, double y, double z);
 int rtpi_scene_add_nrm(rtp_scene *s, double x, double y, double z);
 int rtpi_scene_add_uv(rtp_scene *s, double u, double v);

@@ -857,6 +857,10 @@ static rtp_status read_include(nff *c, const rtpi_tok *kw, int bezier)
     }
     if (c->st)
         c->st->includes++;
+    if (rtpi_scene_add_file(c->s, path) != 0) {
+        st = nomem(c, &t);
+        goto done;
+    }
     if (bezier) {
         st = rtpi_read_bpt(c->s, text, size, path, (int)div, any ? m : NULL,
                            c->mat, c->err);

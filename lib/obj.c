@@ -874,6 +874,11 @@ static rtp_status read_one_mtl(obj *o, const rtpi_tok *t, char *path)
         rtpi_free(&o->s->alloc, path);
         return rtpi_lex_wrap(&o->lx, t, st, &inner, "cannot read mtllib");
     }
+    if (rtpi_scene_add_file(o->s, path) != 0) {
+        rtpi_free(&o->s->alloc, path);
+        rtpi_free(&o->s->alloc, text);
+        return nomem(&o->lx, t);
+    }
     /* (the registry takes path over; errors name the spelling read first) */
     if ((file = mtl_file(o, path)) < 0) {
         rtpi_free(&o->s->alloc, text);

@@ -57,6 +57,9 @@ void rtp_scene_destroy(rtp_scene *s)
         rtpi_free(&a, s->texs[i].path);
         rtpi_texture_release(&s->texs[i]);
     }
+    for (i = 0; i < s->nfiles; i++)
+        rtpi_free(&a, s->files[i]);
+    rtpi_free(&a, s->files);
     rtpi_free(&a, s->pos);
     rtpi_free(&a, s->nrm);
     rtpi_free(&a, s->uv);
@@ -75,6 +78,17 @@ void rtp_scene_destroy(rtp_scene *s)
 #define GROW(s, arr, n, cap)                                                 \
     rtpi_grow(&(s)->alloc, (void **)&(s)->arr, &(s)->cap, (s)->n + 1,        \
               sizeof *(s)->arr)
+
+int rtpi_scene_add_file(rtp_scene *s, const char *path)
+{
+    char *p = rtpi_strdup(&s->alloc, path);
+    if (!p || GROW(s, files, nfiles, cap_files)) {
+        rtpi_free(&s->alloc, p);
+        return -1;
+    }
+    s->files[s->nfiles++] = p;
+    return 0;
+}
 
 int rtpi_scene_add_pos(rtp_scene *s, double x, double y, double z)
 {
@@ -1173,6 +1187,18 @@ rtp_status rtp_scene_get(const rtp_scene *s, const char *key, char *buf, size_t 
             return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0,
                               "unknown key '%s' (camera fields: from, at, up, angle, hither)",
                               key);
+    } else if (strncmp(key, "file.", 5) == 0) {
+        /* (read only: the files the scene read besides its own) */
+        char *end;
+        unsigned long n;
+        errno = 0;
+        n = key[5] >= '0' && key[5] <= '9' ? strtoul(key + 5, &end, 10) : 0;
+        if (!(key[5] >= '0' && key[5] <= '9') || *end || errno || n >= s->nfiles)
+            return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0,
+                              "no key '%s' (the scene read %zu files besides its own: file.0 "
+                              "to file.N)",
+                              key, s->nfiles);
+        put_str(buf, size, &at, s->files[n]);
     } else if ((st = item_key(s, key, &kind, &i, &field, err)) != RTP_OK) {
         return st;
     } else {
@@ -1283,6 +1309,8 @@ rtp_status rtpi_scene_clone(const rtp_scene *s, rtp_scene **out)
     c->lights = NULL;
     c->texs = NULL;
     c->nmats = c->nlights = c->ntexs = 0;
+    c->files = NULL; /* (a tree reads no file) */
+    c->nfiles = c->cap_files = 0;
     bad |= dup_array(a, (void **)&c->pos, s->pos, s->npos * 3, sizeof *s->pos);
     bad |= dup_array(a, (void **)&c->nrm, s->nrm, s->nnrm * 3, sizeof *s->nrm);
     bad |= dup_array(a, (void **)&c->uv, s->uv, s->nuv * 2, sizeof *s->uv);

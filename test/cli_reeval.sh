@@ -1083,6 +1083,22 @@ expect_rc 1 sh -c "printf 'ambient=0.1\nmat.2.bump=$T/tx/mine1.ppm\n' |
     ok || bad "a stream's frame over a bump map a line named: $(cat "$T/err")"
 cmp -s "$T/tx/mine.ppm" "$T/tx/mine.orig" && cmp -s "$T/tx/mine1.ppm" "$T/tx/mine.orig" &&
     cmp -s "$T/tx/tex4.ppm" "$T/tx/tex4.orig" && ok || bad "an image the scene reads was written over"
+# ... and so is a file the scene includes (NFF include, OBJ mtllib):
+# `trace textured.nff -o quad.obj` wrote the tree over the included mesh,
+# exit 0, and the scene no longer loaded
+cp "$T/tx/quad.obj" "$T/tx/quad.orig"
+expect_rc 2 $RTP trace "$T/tx/textured.nff" --size 20x15 -o "$T/tx/quad.obj" -i "$T/tx/q.pfm"
+grep -q "quad.obj is a file the scene reads (file.0" "$T/err" && ok ||
+    bad "trace -o its include: $(cat "$T/err")"
+expect_rc 2 $RTP trace "$T/tx/textured.nff" --size 20x15 -i "$T/tx/q.pfm" --stats "$T/tx/./quad.obj"
+[ ! -e "$T/tx/q.pfm" ] && cmp -s "$T/tx/quad.obj" "$T/tx/quad.orig" && ok ||
+    bad "an included file was written over, or the refused trace wrote its image"
+printf 'newmtl m\nKd 1 0 0\n' > "$T/tx/m.mtl"
+printf 'mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl m\nf 1 2 3\n' > "$T/tx/m.obj"
+cp "$T/tx/m.mtl" "$T/tx/m.orig"
+expect_rc 2 $RTP trace "$T/tx/m.obj" --size 8x8 -o "$T/tx/m.mtl"
+grep -q "m.mtl is a file the scene reads" "$T/err" && cmp -s "$T/tx/m.mtl" "$T/tx/m.orig" && ok ||
+    bad "trace -o its mtllib: $(cat "$T/err")"
 
 # Lights added one by one in a stream grow the evaluation's caches in place
 # (tree.c grow_caches): a sample a new light does not reach keeps the colour

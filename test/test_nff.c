@@ -1382,6 +1382,43 @@ static void test_project_scenes(void)
     }
 }
 
+/* The files a scene read besides its own (rtp_scene_get's read-only
+   file.N: include, bezier and mtllib files), which the CLI refuses to
+   write over (trace textured.nff -o quad.obj had replaced the mesh); a
+   tree's scene reads none. */
+static void test_files_read(void)
+{
+    rtp_scene *s = NULL;
+    rtp_tree *t = NULL;
+    rtp_trace_options o;
+    rtp_error err;
+    char buf[600], small[8];
+    CHECK_MSG(rtp_scene_load("scenes/textured.nff", NULL, &s, &err) == RTP_OK, "%s",
+              rtp_error_format(&err, buf, sizeof buf));
+    if (!s)
+        return;
+    CHECK(rtp_scene_get(s, "file.0", buf, sizeof buf, &err) == RTP_OK &&
+          strcmp(buf, "scenes/quad.obj") == 0);
+    CHECK(rtp_scene_get(s, "file.1", buf, sizeof buf, &err) == RTP_ERR_KEY &&
+          strstr(err.message, "read 1 files"));
+    CHECK(rtp_scene_get(s, "file.x", buf, sizeof buf, NULL) == RTP_ERR_KEY);
+    CHECK(rtp_scene_get(s, "file.", buf, sizeof buf, NULL) == RTP_ERR_KEY);
+    CHECK(rtp_scene_get(s, "file.-0", buf, sizeof buf, NULL) == RTP_ERR_KEY);
+    CHECK(rtp_scene_get(s, "file.0x", buf, sizeof buf, NULL) == RTP_ERR_KEY);
+    CHECK(rtp_scene_get(s, "file.0", small, sizeof small, NULL) == RTP_ERR_ARGUMENT &&
+          small[0] == '\0');
+    memset(&o, 0, sizeof o);
+    o.width = o.height = 4;
+    CHECK(rtp_record(s, &o, &t, NULL, NULL, &err) == RTP_OK);
+    CHECK(t && rtp_scene_get(rtp_tree_scene(t), "file.0", buf, sizeof buf, NULL) ==
+                   RTP_ERR_KEY);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+    CHECK(rtp_scene_load("scenes/spheres.nff", NULL, &s, &err) == RTP_OK);
+    CHECK(s && rtp_scene_get(s, "file.0", buf, sizeof buf, NULL) == RTP_ERR_KEY);
+    rtp_scene_destroy(s);
+}
+
 /* The paper's scene: its patches come from ../shared. */
 static void test_teapot_scene(void)
 {
@@ -1635,6 +1672,7 @@ int main(void)
     RUN(test_mutations);
     RUN(test_numbers_whatever_the_locale);
     RUN(test_project_scenes);
+    RUN(test_files_read);
     RUN(test_teapot_scene);
     RUN(test_spd_scenes);
     RUN(test_spd_gears_triangulation);
