@@ -270,16 +270,78 @@ int rtpi_tok_int(const rtpi_tok *t, long *out)
     return 0;
 }
 
+/* The bytes of the printable UTF-8 character at s (n bytes left): 1 for
+   printable ASCII, 2 to 4 for a well-formed sequence that is not a C1
+   control (U+0080..U+009F: CSI and others reach a terminal as escapes),
+   a surrogate, overlong or past U+10FFFF; 0 for any other byte, shown
+   as '?'.  (Every byte past ASCII had been '?': a file in /home/jos\xc3\xa9
+   read "jos??" in its message.) */
+static size_t utf8_shown(const unsigned char *s, size_t n)
+{
+    unsigned char c = s[0];
+    size_t len, k;
+    unsigned lo = 0x80, hi = 0xbf;
+    if (c >= 0x20 && c < 0x7f)
+        return 1;
+    if (c >= 0xc2 && c <= 0xdf)
+        len = 2;
+    else if (c >= 0xe0 && c <= 0xef)
+        len = 3;
+    else if (c >= 0xf0 && c <= 0xf4)
+        len = 4;
+    else
+        return 0;
+    if (n < len)
+        return 0;
+    /* (the second byte's range: no overlong form, surrogate or past
+       U+10FFFF; no C1 control after 0xc2) */
+    if (c == 0xc2)
+        lo = 0xa0;
+    else if (c == 0xe0)
+        lo = 0xa0;
+    else if (c == 0xed)
+        hi = 0x9f;
+    else if (c == 0xf0)
+        lo = 0x90;
+    else if (c == 0xf4)
+        hi = 0x8f;
+    if (s[1] < lo || s[1] > hi)
+        return 0;
+    for (k = 2; k < len; k++)
+        if ((s[k] & 0xc0) != 0x80)
+            return 0;
+    return len;
+}
+
+/* Appends the shown form of t's bytes [i, end) to buf at *o, whole
+   characters while they fit below lim; @return where it stopped. */
+static size_t show_part(const rtpi_tok *t, size_t i, size_t end, char *buf, size_t *o,
+                        size_t lim)
+{
+    const unsigned char *u = (const unsigned char *)t->s;
+    while (i < end) {
+        size_t k = utf8_shown(u + i, end - i);
+        if (*o + (k ? k : 1) > lim)
+            break;
+        if (k) {
+            memcpy(buf + *o, u + i, k);
+            *o += k;
+            i += k;
+        } else {
+            buf[(*o)++] = '?';
+            i++;
+        }
+    }
+    return i;
+}
+
 const char *rtpi_tok_show(const rtpi_tok *t, char *buf, size_t size)
 {
     size_t i, n = t->n, lim = size > 4 ? size - 4 : 0;
     size_t o = 0;
     if (!size)
         return buf;
-    for (i = 0; i < n && o < lim; i++) {
-        unsigned char c = (unsigned char)t->s[i];
-        buf[o++] = (c >= 0x20 && c < 0x7f) ? (char)c : '?';
-    }
+    i = show_part(t, 0, n, buf, &o, lim);
     if (i < n && size >= 4) {
         memcpy(buf + o, "...", 3);
         o += 3;
@@ -291,24 +353,25 @@ const char *rtpi_tok_show(const rtpi_tok *t, char *buf, size_t size)
 /* rtpi_tok_show for a file's name: one longer than buf cut in its middle,
    so that its end, the file's own name, stays (an error naming a file
    hundreds of bytes of folders deep showed the folders and lost the
-   name, "'/tmp/a/b/...'"); a third of the room for its start. */
+   name, "'/tmp/a/b/...'"); a third of the room for its start.  Either
+   side of the cut whole characters. */
 const char *rtpi_tok_show_path(const rtpi_tok *t, char *buf, size_t size)
 {
-    size_t head, tail, i, o = 0;
+    size_t head, tail, from, o = 0;
+    const unsigned char *u = (const unsigned char *)t->s;
     if (size < 8 || t->n < size)
         return rtpi_tok_show(t, buf, size);
     head = (size - 4) / 3;
     tail = size - 4 - head;
-    for (i = 0; i < t->n; i++) {
-        unsigned char c = (unsigned char)t->s[i];
-        if (i == head) {
-            memcpy(buf + o, "...", 3);
-            o += 3;
-            i = t->n - tail;
-            c = (unsigned char)t->s[i];
-        }
-        buf[o++] = (c >= 0x20 && c < 0x7f) ? (char)c : '?';
-    }
+    show_part(t, 0, t->n, buf, &o, head);
+    memcpy(buf + o, "...", 3);
+    o += 3;
+    /* (the end from a character's first byte: a continuation byte there
+       would show as '?') */
+    from = t->n - tail;
+    while (from < t->n && from < t->n - tail + 3 && (u[from] & 0xc0) == 0x80)
+        from++;
+    show_part(t, from, t->n, buf, &o, size - 1);
     buf[o] = '\0';
     return buf;
 }

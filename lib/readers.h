@@ -93,8 +93,9 @@ int rtpi_tok_numlike(const rtpi_tok *t);
 int rtpi_tok_nan_inf(const rtpi_tok *t);
 /* A decimal integer with an optional sign, |v| <= 2^31-1; @return 0/-1. */
 int rtpi_tok_int(const rtpi_tok *t, long *out);
-/* Copies the token into buf (at most size-1 bytes, non-printable bytes
-   shown as '?', long tokens cut with "...") for messages.  @return buf. */
+/* Copies the token into buf (at most size-1 bytes, bytes that are not a
+   printable ASCII or UTF-8 character shown as '?', long tokens cut with
+   "..." between characters) for messages.  @return buf. */
 const char *rtpi_tok_show(const rtpi_tok *t, char *buf, size_t size);
 /* rtpi_tok_show for a file's name: cut in its middle, its end kept. */
 const char *rtpi_tok_show_path(const rtpi_tok *t, char *buf, size_t size);

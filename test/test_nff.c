@@ -496,6 +496,66 @@ static void test_long_messages(void)
    own name) kept, and the reason after it whole (the name's end and the
    reason were cut off: "cannot load image '/tmp/.../folder_3_...':
    texture path longer...55 bytes"). */
+/* A word shown in a message keeps its UTF-8 characters (a file in
+   /home/jos\xc3\xa9 was "cannot read include file 'jos??/x.obj'"), as the
+   messages' file field and rtp_error's fit do; a byte that is not a
+   printable character (control bytes, C1 controls, a broken or
+   overlong sequence) is still '?', and a cut never splits a character. */
+static void test_utf8_words(void)
+{
+    static const struct {
+        const char *word, *shown;
+    } cases[] = {
+        {"caf\xc3\xa9/x.obj", "caf\xc3\xa9/x.obj"},
+        {"\xe6\x97\xa5\xe6\x9c\xac/\xf0\x9f\x98\x80.obj",
+         "\xe6\x97\xa5\xe6\x9c\xac/\xf0\x9f\x98\x80.obj"},
+        {"a\xff\xc3.obj", "a??.obj"},             /* not UTF-8; a lead byte alone */
+        {"a\xc2\x9b[31m.obj", "a??[31m.obj"},      /* C1 CSI: a terminal's escape */
+        {"a\xc0\xaf.obj", "a??.obj"},             /* overlong '/' */
+        {"a\xed\xa0\x80.obj", "a???.obj"},       /* a UTF-16 surrogate */
+        {"a\xf4\x90\x80\x80.obj", "a????.obj"}, /* past U+10FFFF */
+    };
+    char text[600], want[300], buf[700];
+    size_t k, i;
+    rtp_scene *s = NULL;
+    rtp_error err;
+    for (k = 0; k < sizeof cases / sizeof *cases; k++) {
+        snprintf(text, sizeof text, "include /nonexistent/%s\n", cases[k].word);
+        snprintf(want, sizeof want, "'/nonexistent/%s'", cases[k].shown);
+        CHECK(load(text, "u.nff", &s, &err) != RTP_OK && !s);
+        CHECK_MSG(strstr(err.message, want) != NULL, "case %zu: %s", k, err.message);
+    }
+    /* a long name of two-byte characters, cut at its start's end and its
+       end's start on a character's first byte */
+    {
+        size_t n = (size_t)sprintf(text, "include /nonexistent/");
+        const char *m, *q;
+        for (i = 0; i < 150; i++)
+            n += (size_t)sprintf(text + n, "\xc3\xa9");
+        sprintf(text + n, ".obj\n");
+        CHECK(load(text, "u.nff", &s, &err) != RTP_OK && !s);
+        m = strchr(err.message, '\'');
+        q = m ? strstr(m, "...") : NULL;
+        CHECK_MSG(q && strstr(m, ".obj'") && !strchr(m, '?'), "%s", err.message);
+        /* (each side of the dots a whole number of characters) */
+        CHECK_MSG(q && (q - (m + 1) - (long)strlen("/nonexistent/")) % 2 == 0 &&
+                      (strstr(q, ".obj'") - (q + 3)) % 2 == 0,
+                  "%s", err.message);
+        rtp_error_format(&err, buf, sizeof buf);
+    }
+    /* a short one cut at its end (rtpi_tok_show: an unknown keyword) */
+    {
+        size_t n = 0;
+        for (i = 0; i < 40; i++)
+            n += (size_t)sprintf(text + n, "\xc3\xa9");
+        sprintf(text + n, " 1\n");
+        CHECK(load(text, "u.nff", &s, &err) == RTP_ERR_PARSE && !s);
+        CHECK_MSG(strstr(err.message, "\xc3\xa9\xc3\xa9") && !strchr(err.message, '?') &&
+                      strstr(err.message, "\xc3\xa9..."),
+                  "%s", err.message);
+    }
+}
+
 static void test_long_paths(void)
 {
     const char *dir = check_tmp_folder();
@@ -1657,6 +1717,7 @@ int main(void)
     RUN(test_names_and_keys);
     RUN(test_long_messages);
     RUN(test_long_paths);
+    RUN(test_utf8_words);
     RUN(test_error_format_without_file);
     RUN(test_far_light);
     RUN(test_get_shortest_subnormal);
