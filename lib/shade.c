@@ -830,6 +830,18 @@ static RTPI_FORCE_INLINE void store3f(float *o, __m128d v01, __m128d v2)
 }
 #endif
 
+/* A kept product (t->mv_kc) is told made by its first word's bits: the
+   array starts zeroed.  A red product of +0 (rings_s7's 420 of 841
+   materials have no red) would read as not made and be made again at
+   every move, so it is kept as -0, the same number in every sum it
+   enters: d > 0 there, so -0 d is -0, and -0 + x is x for every x, +0
+   included (round to nearest); a NaN d gives the same NaN either way. */
+static RTPI_FORCE_INLINE void kc_mark(double *kj)
+{
+    if (kj[0] == 0.0)
+        kj[0] = -0.0;
+}
+
 /* rtpi_light_redo's body; with_rest: rest is not NULL (a constant at
    each call: the loop compiled twice, the one without the kept rest
    combining inline, which in the one with it had cost balls' and rings'
@@ -1039,6 +1051,7 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
                 if (kc && (m->ks > 0.0f || fabs(_mm_cvtsd_f64(ks)) <= DBL_MAX)) {
                     _mm_storeu_pd(kc + 3 * j, cxy);
                     _mm_store_sd(kc + 3 * j + 2, cz);
+                    kc_mark(kc + 3 * j);
                 }
                 a01 = _mm_add_pd(a01, _mm_add_pd(_mm_mul_pd(cxy, d), hs));
                 a2v = _mm_add_sd(a2v, _mm_add_sd(_mm_mul_sd(cz, d), hs));
@@ -1159,6 +1172,7 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
                 kc[3 * j] = c0;
                 kc[3 * j + 1] = c1;
                 kc[3 * j + 2] = c2;
+                kc_mark(kc + 3 * j);
             }
             a0 += c0 * d + ks * sp;
             a1 += c1 * d + ks * sp;

@@ -4502,6 +4502,50 @@ static void test_moves_kc_edits(void)
     }
 }
 
+/* A kept product whose red is 0 (a material with no red: half of
+   rings_s7's) is kept as made (-0, the same in every sum), not taken for
+   "not made" and made again at every move: after two moves no lit node
+   of the red-less sphere has a product whose first word is +0 with the
+   others not, and the images still equal full traces. */
+static void test_moves_kc_no_red(void)
+{
+    static const char *const pos[] = {"-3,-5,7", "-2,-6,7", "-1,-5,8"};
+    rtp_scene *s;
+    rtp_tree *t;
+    rtp_trace_options o;
+    rtp_eval_options eo;
+    rtp_image *re;
+    size_t k, n, unmarked = 0, marked = 0;
+    char what[64];
+    if (!edit_start_on("scenes/spheres.nff", 0, &s, &t, &o, &eo, &re))
+        return;
+    CHECK(rtp_tree_set(t, "mat.red.color", "0,0.9,0.4", NULL) == RTP_OK);
+    CHECK(rtp_scene_set(s, "mat.red.color", "0,0.9,0.4", NULL) == RTP_OK);
+    for (k = 0; t && re && k < 3; k++) {
+        snprintf(what, sizeof what, "no red: move %zu", k);
+        CHECK(rtp_tree_set(t, "light.0.pos", pos[k], NULL) == RTP_OK);
+        CHECK(rtp_scene_set(s, "light.0.pos", pos[k], NULL) == RTP_OK);
+        eval_equals_trace(t, s, &o, &eo, re, NULL, what);
+        if (k == 1 && t->mv_kc) {
+            for (n = 0; n < t->nnodes; n++) {
+                const double *kj = t->mv_kc + 3 * n;
+                uint64_t b;
+                memcpy(&b, kj, sizeof b);
+                if (b == 0 && (kj[1] != 0.0 || kj[2] != 0.0))
+                    unmarked++;
+                if (kj[0] == 0.0 && b != 0 && kj[1] != 0.0)
+                    marked++;
+            }
+        }
+    }
+    CHECK_MSG(t && t->mv_kc != NULL, "no kept products");
+    CHECK_MSG(unmarked == 0, "%zu kept products with red +0 read as not made", unmarked);
+    CHECK_MSG(marked > 0, "no kept product of the red-less sphere");
+    rtp_image_destroy(re);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+}
+
 /* light.N.pos with N the count of lights adds light N, white and on, on a
    tree (rtp_tree_set) as on a scene (rtp_scene_set), so the same key
    gives the full trace of a scene with a light added and a --stream line
@@ -7540,6 +7584,7 @@ int main(void)
     RUN(test_moves_kept_image);
     RUN(test_moves_rest);
     RUN(test_moves_kc_edits);
+    RUN(test_moves_kc_no_red);
     RUN(test_key_adds_light);
     RUN(test_moves_smooth);
     RUN(test_material_q);
