@@ -56,6 +56,9 @@ void rtpi_free(const rtp_allocator *a, void *p);
 /* count*size with overflow check; NULL on overflow or failure. */
 void *rtpi_malloc_array(const rtp_allocator *a, size_t count, size_t size);
 void *rtpi_calloc_array(const rtp_allocator *a, size_t count, size_t size);
+/* Makes the pages of n bytes at p (a block from a, about to be written
+   whole) in one call where a is the default allocator (util.c). */
+void rtpi_prefault(const rtp_allocator *a, void *p, size_t n);
 /* Grows *p (of *cap elements of `size`) to hold at least `need`; doubles.
    @return 0 on success, -1 on overflow or allocation failure (*p kept). */
 int rtpi_grow(const rtp_allocator *a, void **p, size_t *cap, size_t need,

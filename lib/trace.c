@@ -988,6 +988,11 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
         st = rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
         goto done;
     }
+    /* every sample's colour, and with a tree every sample's start, is
+       written once (util.c: rtpi_prefault) */
+    rtpi_prefault(&s->alloc, samples, (size_t)sh.gx * sh.gy * 3 * sizeof(float));
+    if (tree_out)
+        rtpi_prefault(&s->alloc, sh.tstart, ((size_t)sh.gx * sh.gy + 1) * sizeof *sh.tstart);
     sh.out = samples;
     for (i = 0; i < nthreads; i++) {
         ws[i].sh = &sh;

@@ -2410,6 +2410,7 @@ static rtp_status build_material_lists(rtp_tree *t, uint16_t *mk)
                                                  sizeof *t->mat_nodes);
     if (!last || !fill || !nfill || !t->mat_start || !t->mat_nstart || !t->mat_nodes)
         goto nomem;
+    rtpi_prefault(&t->alloc, t->mat_nodes, t->nnodes * sizeof *t->mat_nodes);
     if (nm > 65536)
         mk = NULL;
     ms = t->mat_start;
@@ -2437,6 +2438,7 @@ static rtp_status build_material_lists(rtp_tree *t, uint16_t *mk)
                                                              sizeof *t->mat_samples);
     if (!samples)
         goto nomem;
+    rtpi_prefault(&t->alloc, samples, total * sizeof *samples);
     for (k = 0; k < nm; k++) {
         last[k] = 0xffffffffu;
         fill[k] = ms[k];
@@ -4774,8 +4776,16 @@ static rtp_status eval_body(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
                                                         sizeof *t->ev_mats);
         t->ev_cl = (double *)rtpi_malloc_array(&t->alloc, RTPI_COEFFS(nl), sizeof *t->ev_cl);
         if (!t->ev_terms || !t->ev_coeffs || !t->ev_nv || !t->ev_w || !t->ev_pos || !t->ev_mats ||
-            !t->ev_cl)
+            !t->ev_cl) {
             drop_caches(t), cached = 0; /* evaluate without caches */
+        } else {
+            /* the full path below writes every entry of these (ev_w
+               first lends the material lists its room) */
+            rtpi_prefault(&t->alloc, t->ev_terms, t->nnodes * RTPI_TERMS(nl) * sizeof *t->ev_terms);
+            rtpi_prefault(&t->alloc, t->ev_coeffs, ns * RTPI_COEFFS(nl) * sizeof *t->ev_coeffs);
+            rtpi_prefault(&t->alloc, t->ev_nv, t->nnodes * 6 * sizeof *t->ev_nv);
+            rtpi_prefault(&t->alloc, t->ev_w, t->nnodes * sizeof *t->ev_w);
+        }
         t->ev_valid = 0;
     }
     /* (the path weights' cache lends the lists its room where the full
