@@ -306,16 +306,16 @@ void *rtpi_malloc_array(const rtp_allocator *a, size_t count, size_t size)
    the writes reach them.  On session 46's host (KVM, 4 KiB pages) a fault
    a page cost 0.25 ms a MiB of pages the guest had freed just before
    and 0.35-0.6 of others, the populate 0.11-0.15: the trap and return a
-   page, not the zeroing, was half the cost.  mount_s6 at 512x512
-   (bench_reeval's figures): a first evaluation took 12,700 faults (50
-   MB: ev_terms, ev_coeffs, ev_nv, ev_w, the material lists), a
-   material's first kd edit 1,075 (its planes' entries, 4.9 MB) of its 5
-   ms.  Only for blocks of the default allocator (a user's may not be
-   memory of this process to populate) and only where every byte is
-   written soon: a block made and not used (the room of a light's plane,
-   a capacity grown ahead) must stay untouched (test_alloc's
-   test_large_block_untouched).  Advice only: where the kernel lacks it
-   the writes fault as before. */
+   page, not the zeroing, was half the cost (the rest: the kernel's page
+   allocation and cgroup accounting).  mount_s6 at 512x512: a first
+   evaluation took 12,741 faults (50 MB: ev_terms, ev_coeffs, ev_nv,
+   ev_w, the material lists), 17 of its 53 ms; populated, 49 ms.  Only
+   for blocks of the default allocator (a user's may not be memory of
+   this process to populate) and only where every byte is written soon:
+   a block made and not used (the room of a light's plane, the kd planes'
+   block, which holds more entries than an edit writes, a capacity grown
+   ahead) must stay untouched (test_alloc's test_large_block_untouched).
+   Advice only: where the kernel lacks it the writes fault as before. */
 #if defined(__linux__) && defined(MADV_POPULATE_WRITE)
 #define RTPI_PREFAULT_MIN ((size_t)256 << 10)
 void rtpi_prefault(const rtp_allocator *a, void *p, size_t n)
