@@ -2756,6 +2756,63 @@ static void test_moved_light_small_spd(void)
     }
 }
 
+/* A moved light's shadow queries are the full trace's shadow rays, in
+   number too (rtp_eval_stats.shadow_queries, which --stats reports): on
+   mount_s2, whose glass balls hold most nodes as back hits inside them
+   (vis_row answers those without the query, counting the ones trace
+   asks: where the turned normal faces the light), the light moved to
+   places that turn the balls' hits towards it and away, each mode. */
+static void test_moved_light_query_count(void)
+{
+    static const char *const pos[] = {"-90,-100,100", "0.3,0.2,3", "2,-3,-0.5"};
+    static const rtp_shadow_mode modes[] = {RTP_SHADOWS_EXACT, RTP_SHADOWS_LIGHTBUF,
+                                            RTP_SHADOWS_AUTO};
+    const char *dir = check_shared_scenes();
+    char path[512];
+    rtp_scene *s;
+    size_t i, k;
+    if (!dir)
+        SKIP("../shared/scenes absent: mount_s2 not checked");
+    snprintf(path, sizeof path, "%s/spd/mount_s2.nff", dir);
+    s = load(path);
+    if (!s)
+        return;
+    for (k = 0; k < sizeof modes / sizeof *modes; k++) {
+        rtp_tree *t = NULL;
+        rtp_image *re = NULL;
+        rtp_trace_options o;
+        rtp_eval_options eo;
+        memset(&o, 0, sizeof o);
+        memset(&eo, 0, sizeof eo);
+        o.width = 56;
+        o.height = 44;
+        o.spd = 1;
+        eo.shadows = modes[k];
+        eo.threads = 2;
+        CHECK(rtp_record(s, &o, &t, &re, NULL, NULL) == RTP_OK);
+        for (i = 0; t && i < sizeof pos / sizeof *pos; i++) {
+            rtp_image *full = NULL;
+            rtp_eval_stats es;
+            rtp_trace_stats ts;
+            memset(&es, 0, sizeof es);
+            memset(&ts, 0, sizeof ts);
+            CHECK(rtp_tree_set(t, "light.0.pos", pos[i], NULL) == RTP_OK &&
+                  rtp_scene_set(s, "light.0.pos", pos[i], NULL) == RTP_OK);
+            CHECK(rtp_tree_eval_into(t, &eo, re, &es, NULL) == RTP_OK);
+            CHECK(rtp_trace(s, &o, &full, &ts, NULL) == RTP_OK);
+            CHECK_MSG(re && full && same_image(re, full) && ts.shadow_rays > 0 &&
+                          es.shadow_queries == ts.shadow_rays,
+                      "mode %d light at %s: queries %llu, trace's shadow rays %llu", (int)modes[k],
+                      pos[i], es.shadow_queries, ts.shadow_rays);
+            rtp_image_destroy(full);
+        }
+        rtp_image_destroy(re);
+        rtp_tree_destroy(t);
+        CHECK(rtp_scene_set(s, "light.0.pos", "-100,-100,100", NULL) == RTP_OK);
+    }
+    rtp_scene_destroy(s);
+}
+
 /* The test scene, with options zero but for a 40x30 image; NULL (a
    check failing) when it does not load. */
 static rtp_scene *spheres_40x30(rtp_trace_options *o, rtp_eval_options *eo)
@@ -7570,6 +7627,7 @@ int main(void)
     RUN(test_shadows_auto_overlap);
     RUN(test_shadows_auto_cube_limit);
     RUN(test_moved_light_small_spd);
+    RUN(test_moved_light_query_count);
     RUN(test_edit_sequence);
     RUN(test_random_chains);
     RUN(test_one_term_edits);
