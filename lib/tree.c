@@ -2618,6 +2618,21 @@ static unsigned long long resolve_listed(const rtp_tree *t, const float *samples
     return writes;
 }
 
+/* The lowest bit set of m (m > 0). */
+#if defined(__GNUC__)
+#define mark_low(m) __builtin_ctz(m)
+#else
+static int mark_low(unsigned m)
+{
+    int i = 0;
+    while (!(m & 1u)) {
+        m >>= 1;
+        i++;
+    }
+    return i;
+}
+#endif
+
 /* 8 marks of 1 (a mark is a byte of 0 or 1), in either byte order */
 #define MARK_ALL UINT64_C(0x0101010101010101)
 
@@ -2660,6 +2675,13 @@ static int mark_row(void *ctx, int y)
         /* (rtpi_resolve_pixel's sums, with the rows' places kept) */
         const float *s0 = samples + 3 * (size_t)y * nx, *s1 = s0 + 3 * nx;
         float *out = e->pixels + 3 * (size_t)y * w;
+        /* (the marks' bytes read as a word put column x + i at byte i,
+           bits 8i up, on a little-endian host: the compiler's constant) */
+        const uint64_t one = 1;
+        unsigned char first;
+        int le;
+        memcpy(&first, &one, 1);
+        le = first == 1;
         for (x = 0; x < w; x += 8) {
             /* pixels x .. x + 7 have samples x .. x + 8 as corners */
             uint64_t a, b;
@@ -2676,6 +2698,35 @@ static int mark_row(void *ctx, int y)
                    tests and sums) */
                 pix_avg24(s0 + 3 * x, s1 + 3 * x, out + 3 * x);
                 writes += 8;
+                continue;
+            }
+            if (le) {
+                /* The pixels to write as the bits of a byte: pixel x + i
+                   where column x + i or x + i + 1 is marked in either
+                   row (byte i of a | b, shifted down a byte, column x + 8
+                   on top), the bytes' low bits gathered by the product
+                   (each byte 0 or 1: no carries), then only those pixels
+                   visited rather than a test of each (tetra: a moved light
+                   marks scattered samples, 40k of its 8-pixel groups went
+                   through the test of 8 pixels) */
+                uint64_t c = a | b;
+                unsigned m;
+                c |= c >> 8 | (uint64_t)(r0[x + 8] | r1[x + 8]) << 56;
+                if (end < x + 8)
+                    c &= ((uint64_t)1 << (8 * (end - x))) - 1u;
+                m = (unsigned)((c * UINT64_C(0x0102040810204080)) >> 56);
+                for (; m; m &= m - 1u) {
+                    const float *u, *v;
+                    float *o;
+                    q = x + (size_t)mark_low(m);
+                    u = s0 + 3 * q;
+                    v = s1 + 3 * q;
+                    o = out + 3 * q;
+                    o[0] = 0.25f * (u[0] + u[3] + v[0] + v[3]);
+                    o[1] = 0.25f * (u[1] + u[4] + v[1] + v[4]);
+                    o[2] = 0.25f * (u[2] + u[5] + v[2] + v[5]);
+                    writes++;
+                }
                 continue;
             }
             for (q = x; q < end; q++)

@@ -4386,6 +4386,68 @@ static void moves_kept_run(int spd)
     rtp_scene_destroy(s);
 }
 
+/* A light dragged by small steps over a grid of small spheres, corner
+   samples (SPD) in a region 61 pixels wide: each move changes scattered
+   samples along the shadows' edges, so mark_row's groups of 8 pixels are
+   partly marked, some only through the column after the group (pixel
+   x + 7 of a group has column x + 8 as a corner), and the last group of
+   a row is 5 pixels.  Every frame into the kept image equals a full
+   trace bit for bit, and the moves write a part of the image. */
+static void test_moves_scattered_marks(void)
+{
+    char nff[8192], *q = nff;
+    const char *end = nff + sizeof nff;
+    rtp_scene *s = NULL;
+    rtp_tree *t = NULL;
+    rtp_image *re = NULL;
+    rtp_trace_options o;
+    rtp_eval_options eo;
+    int i, j, partial = 0;
+    q += snprintf(q, (size_t)(end - q),
+                  "v\nfrom 0 -6 3\nat 0 0 0\nup 0 0 1\nangle 40\nhither 0.01\n"
+                  "b 0.1 0.1 0.2\nl 1 -2 6\n"
+                  "f 0.8 0.7 0.6 1 0 0 0 0\np 4\n-4 -4 -0.5\n4 -4 -0.5\n4 4 -0.5\n-4 4 -0.5\n"
+                  "f 0.9 0.9 0.9 0.8 0 0 0 0\n");
+    for (i = 0; i < 9; i++)
+        for (j = 0; j < 7; j++)
+            q += snprintf(q, (size_t)(end - q), "s %.3f %.3f %.3f %.3f\n", -2.4 + 0.6 * i,
+                          -1.8 + 0.6 * j, -0.2 + 0.05 * ((i + j) % 3), 0.12 + 0.02 * (i % 2));
+    CHECK(rtp_scene_load_memory(nff, strlen(nff), "scattered.nff", "nff", NULL, &s, NULL) ==
+          RTP_OK);
+    if (!s)
+        return;
+    memset(&o, 0, sizeof o);
+    memset(&eo, 0, sizeof eo);
+    o.spd = 1;
+    o.region[0] = 200;
+    o.region[1] = 220;
+    o.region[2] = 261;
+    o.region[3] = 265;
+    eo.incremental = 1;
+    eo.threads = 2;
+    CHECK(rtp_record(s, &o, &t, &re, NULL, NULL) == RTP_OK);
+    for (i = 1; t && re && i <= 12; i++) {
+        char val[64];
+        rtp_image *full = NULL;
+        rtp_eval_stats es;
+        memset(&es, 0, sizeof es);
+        snprintf(val, sizeof val, "%.3f,%.3f,6", 1.0 + 0.04 * i, -2.0 + 0.03 * i);
+        eo.shadows = i % 2 ? RTP_SHADOWS_EXACT : RTP_SHADOWS_LIGHTBUF;
+        CHECK(rtp_tree_set(t, "light.0.pos", val, NULL) == RTP_OK &&
+              rtp_scene_set(s, "light.0.pos", val, NULL) == RTP_OK);
+        CHECK(rtp_tree_eval_into(t, &eo, re, &es, NULL) == RTP_OK);
+        CHECK(rtp_trace(s, &o, &full, NULL, NULL) == RTP_OK);
+        CHECK_MSG(full && re->width == 61 && same_image(re, full), "light at %s: %llu written",
+                  val, es.written_pixels);
+        partial += es.written_pixels > 0 && es.written_pixels < 61 * 45;
+        rtp_image_destroy(full);
+    }
+    CHECK_MSG(partial >= 10, "%d moves wrote a part of the image", partial);
+    rtp_image_destroy(re);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+}
+
 static void test_moves_kept_image(void)
 {
     moves_kept_run(0);
@@ -7640,6 +7702,7 @@ int main(void)
     RUN(test_nocache_into_kept_image);
     RUN(test_material_planes);
     RUN(test_moves_kept_image);
+    RUN(test_moves_scattered_marks);
     RUN(test_moves_rest);
     RUN(test_moves_kc_edits);
     RUN(test_moves_kc_no_red);
