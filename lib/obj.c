@@ -1077,17 +1077,29 @@ static rtp_status read_element(obj *o, const rtpi_tok *kw, int line)
    exporters write, taken too), checked and not applied: normals come from
    vn or the face itself, so a mesh without vn renders faceted whatever
    its groups (smoothing them would average the normals of the faces that
-   share a vertex and a group: not done).  "s" alone, "s -1", "s 1.5" or
-   a second word is an error at it. */
+   share a vertex and a group: not done).  The number is not used, so any
+   run of digits is taken: exporters write groups as bit masks up to
+   4294967295, which rtpi_tok_int's 2^31-1 had refused as "not a number,
+   0 or more".  "s" alone, "s -1", "s 1.5" or a second word is an error
+   at it. */
+static int all_digits(const rtpi_tok *t)
+{
+    size_t i = t->n && t->s[0] == '+' ? 1 : 0;
+    if (i == t->n)
+        return 0;
+    for (; i < t->n; i++)
+        if (t->s[i] < '0' || t->s[i] > '9')
+            return 0;
+    return 1;
+}
+
 static rtp_status read_smoothing(obj *o, const rtpi_tok *kw)
 {
     rtpi_tok t;
-    long v;
     char show[48];
     if (!rtpi_lex_next_inline(&o->lx, &t))
         return rtpi_lex_error(&o->lx, kw, "s: expected a smoothing group (a number, or off)");
-    if (!rtpi_tok_is(&t, "off") && !rtpi_tok_is(&t, "on") &&
-        (rtpi_tok_int(&t, &v) != 0 || v < 0))
+    if (!rtpi_tok_is(&t, "off") && !rtpi_tok_is(&t, "on") && !all_digits(&t))
         return rtpi_lex_error(&o->lx, &t,
                               "s: expected a smoothing group (a number, 0 or more, or off), "
                               "got '%s'",

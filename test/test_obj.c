@@ -46,6 +46,7 @@ static void test_faces(void)
     const char *ok_text = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0 1.0\n"
                           "vt 0 0\nvt 1 0 0\nvt 1 1\nvt 0.5\nvn 0 0 2\n"
                           "o a\ng b c\ns 1\nl 1 2\nl 1/1 2/2 -1/-1\np 1 -1\ns off\ns 0\n"
+                          "s 4294967295\ns 99999999999999999999\ns +2\n"
                           "s on\ns 12\n"
                           "f 1 2 3\nf 1/1 2/2 3/3\nf 1//1 2//1 3//1\nf 1/1/1 2/2/1 3/3/1\n"
                           "f -4 -3 -2 -1\nf -4/-4/-1 -3/-3/-1 -2/-2/-1\n";
