@@ -22,6 +22,17 @@
 #else
 #define RTPI_FORCE_INLINE inline
 #endif
+/* Asks for the cache line `bytes` past p before a loop reads it, where
+   the loop's walk is one the hardware does not foresee in time (tree.c:
+   LQ_AHEAD, CP_AHEAD); nothing where the compiler has no such call.  The
+   address is made as an integer: it may lie past the array's end near
+   the end of a walk, where a prefetch does nothing (it never faults) but
+   a pointer made there would be undefined. */
+#if defined(__GNUC__)
+#define RTPI_PREFETCH(p, bytes) __builtin_prefetch((const void *)((uintptr_t)(p) + (bytes)))
+#else
+#define RTPI_PREFETCH(p, bytes) ((void)(p), (void)(bytes))
+#endif
 
 /* Built with AddressSanitizer: the default allocator then leaves every
    block to malloc (util.c), whose checks its own mappings would escape. */
