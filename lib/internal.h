@@ -663,6 +663,30 @@ void rtpi_cyl_entries(const rtp_scene *s, rtpi_v3 light, double scale, const rtp
 uint32_t rtpi_kd_occluder_cyls(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t skip,
                                const double *planes, const double *cones, const double *cyls,
                                double scale);
+/* The walks of rtpi_kd_occluder_planes and rtpi_kd_occluder_cyls from
+   the leaf of the ray's origin: `from` rtpi_kd_path_of(kd, ray->o)
+   (RTPI_NONE: from the root).  The same leaves in the same order, the
+   same answer (kdtree.c, "walks from the origin's own leaf"); for
+   shadow rays as rtpi_shadow_ray makes them (tmin 0, a unit direction;
+   other rays walk from the root or are not asked so). */
+uint32_t rtpi_kd_occluder_planes_from(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t skip,
+                                      const double *planes, const double *edges,
+                                      const double *cones, double scale, uint32_t from);
+uint32_t rtpi_kd_occluder_cyls_from(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t skip,
+                                    const double *planes, const double *cones,
+                                    const double *cyls, double scale, uint32_t from);
+/* Bytes rtpi_kd_paths_make would take (HUGE_VAL: it would not make
+   them). */
+double rtpi_kd_paths_bytes(rtpi_kdtree *kd);
+/* Makes every leaf's lists of ancestors, one for each octant of
+   directions (once; kept with kd, freed with it).  0, or -1 where not
+   made (out of memory, too many nodes). */
+int rtpi_kd_paths_make(rtpi_kdtree *kd);
+/* The lists of o's leaf for walks from it (rtpi_kd_occluder_planes_from),
+   or RTPI_NONE: no lists, o within 2 tol of a plane on its path or of
+   the root box's faces (tol the walk's slack, kd_axis_setup), o not
+   finite or the scene within 1e-269 of 0. */
+uint32_t rtpi_kd_path_of(const rtpi_kdtree *kd, rtpi_v3 o);
 /* rtpi_tri_edges' margin, times scale^3 (see there). */
 #define RTPI_EDGE_MARGIN 1e-9
 /* For each triangle of s (RTPI_EDGE_N doubles a triangle) and a light at
@@ -1119,6 +1143,13 @@ struct rtp_tree {
                               light), 0 not yet known, else 1 + what
                               rtpi_cone_shadows_own answers, negated
                               (vis_row) */
+    uint32_t *kd_from;     /* nnodes, made at the first exact move where
+                              the memory limit holds it with kd's leaf
+                              lists (rtpi_kd_paths_make): per node 0 not
+                              yet known, else the list of its shadow ray
+                              origin's leaf + 2 (1: none), the origin on
+                              the side its geometric normal faces
+                              (vis_from) */
     size_t nlights0;       /* lights traced; later ones were added */
 
     /* Evaluation caches (tree.c): the shading steps' results, kept so an

@@ -35,6 +35,7 @@
  */
 #include "kdtree.h"
 
+#include <float.h>
 #include <stdlib.h>
 #ifdef RTP_HAVE_THREADS
 #include <pthread.h>
@@ -172,6 +173,12 @@ struct rtpi_kdtree {
     double maxabs[3];    /* largest |coordinate| of the root box per axis */
     int has_box;         /* 0: no primitive at all */
     rtpi_kd_stats stats;
+    /* each leaf's ancestors, root first (rtpi_kd_paths_make; NULL: not
+       made): a header (the leaf, their count) and one entry each */
+    struct kd_pe *path;
+    uint32_t *path_at; /* per node: a leaf's header in path */
+    size_t path_n;     /* path's entries (kd_path_count), found once:
+                          0 not yet, (size_t)-1 none can be made */
 };
 
 /* ================================================================ build */
@@ -1098,6 +1105,8 @@ void rtpi_kd_destroy(rtpi_kdtree *kd)
     rtpi_free(&a, kd->nodes);
     rtpi_free(&a, kd->refs);
     rtpi_free(&a, kd->tri);
+    rtpi_free(&a, kd->path);
+    rtpi_free(&a, kd->path_at);
     rtpi_free(&a, kd);
 }
 
@@ -1618,6 +1627,198 @@ static RTPI_FORCE_INLINE uint32_t kd_descend(const kd_node *nodes,
     return node;
 }
 
+/* ------------------------------------ walks from the origin's own leaf
+
+   A moved light's shadow rays start at points that stay where they are
+   (a node's origin, o, depends on the light only through the side of its
+   surface the light lies on); only the light moves.  Half and more of a
+   lit ray's interior steps came before its first non-empty leaf: the
+   descent from the root to o's own leaf (helper 160, session 45: mount_s6
+   66%).  Where o lies 2 tol or more inside every plane on its leaf's path
+   and every face of the root box (tol the walk's, kd_axis_setup: a
+   function of o alone), the walk from the root is known without taking
+   it, for any direction not 0 on an axis:
+   - the root box's clip leaves t0 at 0 (tmin 0: rtpi_shadow_ray's), by
+     the argument below for a plane moved away from;
+   - an ancestor whose plane the ray moves away from: D = split - o[ax] by
+     the walk's arithmetic is 2 tol or more on o's side, so |ts| = |D|
+     |inv| rounds to at least twice the slack tol |inv| (a normal number:
+     tol >= KD_PATH_TOL and |inv| >= 1e-18), hi = ts + slack <= -slack <
+     0 = t0, and the walk takes o's side alone, pushing nothing, its
+     interval unchanged;
+   - an ancestor whose plane the ray moves towards: ts >= 0 = t0, never hi
+     < t0, so the walk goes to o's side, pushing the other child where lo
+     <= t1 and cutting t1 to hi: the same arithmetic done here, from the
+     leaf's list for the ray's octant (kd_pe), root first.
+   So the stack, t0 and t1 at o's leaf are the root walk's, bit for bit,
+   and the rest of the walk, its leaves in their order and its answer with
+   them.  The walk checks the rest itself: no direction 0 on an axis
+   (kr.par: from the root), every slack finite, |d_x| + |d_y| + |d_z| <=
+   1e18 (|inv| >= 1e-18).  Measured (callgrind, the third `exact` move,
+   512^2 SPD): see rtpi_kd_occluder_planes_from. */
+
+typedef struct kd_pe {
+    union {
+        float split;   /* an ancestor's plane (kd_node's) */
+        uint32_t leaf; /* the header's: the leaf */
+    } u;
+    /* an ancestor's: bits 4-31 its child away from the leaf, bit 3 that
+       child an empty leaf (not pushed: kd_descend's skip), bits 1-2 the
+       axis, bit 0 the leaf above the plane; the header's: its depth */
+    uint32_t code;
+} kd_pe;
+
+/* A leaf's block's header and its octants' starts (kd_path_fill) */
+#define KD_PATH_HEAD 9u
+
+/* The least tol a path is made for (its slack then normal: 1e-280 *
+   1e-18 > DBL_MIN); coordinates of 1e-269 and more. */
+#define KD_PATH_TOL 1e-280
+
+/* Entries of every leaf's lists (KD_PATH_HEAD + 4 an ancestor: each is
+   in the lists of the 4 octants whose rays move towards its plane from
+   the leaf's side); 0 where the tree has more nodes than a code names. */
+static size_t kd_path_count(const rtpi_kdtree *kd)
+{
+    uint32_t st[KD_DEPTH_CAP + 8], dp[KD_DEPTH_CAP + 8];
+    size_t total = 0;
+    int n = 0;
+    if (!kd->nnodes || kd->nnodes >= (1u << 28))
+        return 0;
+    st[n] = 0;
+    dp[n++] = 0;
+    while (n > 0) {
+        uint32_t q, d;
+        n--;
+        q = st[n];
+        d = dp[n];
+        if ((kd->nodes[q].flags & 3u) == 3u) {
+            total += KD_PATH_HEAD + 4 * (size_t)d;
+            continue;
+        }
+        if (n + 2 > KD_DEPTH_CAP + 8)
+            return 0; /* (deeper than the build makes) */
+        st[n] = kd->nodes[q].flags >> 2;
+        dp[n++] = d + 1;
+        st[n] = q + 1;
+        dp[n++] = d + 1;
+    }
+    return total;
+}
+
+/* A leaf's block: its header (u.leaf the leaf), then for each octant
+   (bit k: the ray's direction < 0 on axis k, kd_ray's neg) the start of
+   its list, from the header, in u.leaf and its length in code, then the
+   lists: the ancestors whose planes such rays move towards, root
+   first. */
+static void kd_path_fill(rtpi_kdtree *kd, uint32_t node, kd_pe *cur, uint32_t depth, size_t *k)
+{
+    const kd_node *nd = &kd->nodes[node];
+    uint32_t ax = nd->flags & 3u, above = nd->flags >> 2;
+    if (ax == 3u) {
+        kd_pe *h = kd->path + *k;
+        uint32_t oct, i, pos = KD_PATH_HEAD;
+        h->u.leaf = node;
+        h->code = depth;
+        for (oct = 0; oct < 8; oct++) {
+            h[1 + oct].u.leaf = pos;
+            for (i = 0; i < depth; i++) {
+                uint32_t c = cur[i].code;
+                if ((oct >> (c >> 1 & 3u) & 1u) == (c & 1u))
+                    h[pos++] = cur[i];
+            }
+            h[1 + oct].code = pos - h[1 + oct].u.leaf;
+        }
+        kd->path_at[node] = (uint32_t)*k;
+        *k += pos;
+        return;
+    }
+    cur[depth].u.split = nd->a.split;
+    cur[depth].code = above << 4 | (uint32_t)(kd->nodes[above].flags == 3u) << 3 | ax << 1;
+    kd_path_fill(kd, node + 1, cur, depth + 1, k);
+    cur[depth].code =
+        (node + 1) << 4 | (uint32_t)(kd->nodes[node + 1].flags == 3u) << 3 | ax << 1 | 1u;
+    kd_path_fill(kd, above, cur, depth + 1, k);
+}
+
+/* kd_path_count once a tree (a move asks it while the lists are not
+   made: a pass over the nodes each time) */
+static size_t kd_path_n(rtpi_kdtree *kd)
+{
+    if (!kd->path_n) {
+        size_t n = kd_path_count(kd);
+        kd->path_n = n ? n : (size_t)-1;
+    }
+    return kd->path_n == (size_t)-1 ? 0 : kd->path_n;
+}
+
+double rtpi_kd_paths_bytes(rtpi_kdtree *kd)
+{
+    size_t n = kd ? kd_path_n(kd) : 0;
+    return n ? (double)n * sizeof(kd_pe) + 4.0 * (double)kd->nnodes : HUGE_VAL;
+}
+
+int rtpi_kd_paths_make(rtpi_kdtree *kd)
+{
+    kd_pe cur[KD_DEPTH_CAP + 8];
+    size_t n, k = 0;
+    if (!kd)
+        return -1;
+    if (kd->path)
+        return 0;
+    n = kd_path_n(kd);
+    if (!n || n >= 0x7ffffff0u)
+        return -1;
+    kd->path = (kd_pe *)rtpi_malloc_array(&kd->alloc, n, sizeof *kd->path);
+    kd->path_at = (uint32_t *)rtpi_malloc_array(&kd->alloc, kd->nnodes, sizeof *kd->path_at);
+    if (!kd->path || !kd->path_at) {
+        rtpi_free(&kd->alloc, kd->path);
+        rtpi_free(&kd->alloc, kd->path_at);
+        kd->path = NULL;
+        kd->path_at = NULL;
+        return -1;
+    }
+    memset(kd->path_at, 0xff, kd->nnodes * sizeof *kd->path_at);
+    kd_path_fill(kd, 0, cur, 0, &k);
+    return 0;
+}
+
+uint32_t rtpi_kd_path_of(const rtpi_kdtree *kd, rtpi_v3 o)
+{
+    const kd_node *nodes = kd->nodes;
+    double p[3], tol[3];
+    uint32_t node = 0;
+    int k;
+    if (!kd->path || !kd->has_box)
+        return RTPI_NONE;
+    p[0] = o.x;
+    p[1] = o.y;
+    p[2] = o.z;
+    for (k = 0; k < 3; k++) {
+        /* kd_axis_setup's tol, by its arithmetic */
+        double ao = fabs(p[k]);
+        double m = ao > kd->maxabs[k] ? ao : kd->maxabs[k];
+        tol[k] = KD_SLACK * m;
+        if (!(ao <= DBL_MAX && tol[k] >= KD_PATH_TOL))
+            return RTPI_NONE;
+        /* inside the root box by 2 tol, as inside the planes below: the
+           walk's clip (kd_axis_setup) leaves t0 at 0 */
+        if (!(p[k] - kd->lo[k] >= 2.0 * tol[k] && kd->hi[k] - p[k] >= 2.0 * tol[k]))
+            return RTPI_NONE;
+    }
+    while ((nodes[node].flags & 3u) != 3u) {
+        uint32_t fl = nodes[node].flags, ax = fl & 3u;
+        double dd = (double)nodes[node].a.split - p[ax]; /* (kd_descend's) */
+        if (dd >= 2.0 * tol[ax])
+            node = node + 1;
+        else if (dd <= -2.0 * tol[ax])
+            node = fl >> 2;
+        else
+            return RTPI_NONE;
+    }
+    return kd->path_at[node];
+}
+
 int rtpi_kd_intersect(const rtpi_kdtree *kd, const rtpi_ray *ray,
                       rtpi_hit *hit)
 {
@@ -1803,7 +2004,8 @@ static RTPI_FORCE_INLINE int kd_cylinder_line_far(const double *q, const rtpi_co
 static RTPI_FORCE_INLINE uint32_t kd_occluder(const rtpi_kdtree *kd, const rtpi_ray *ray,
                                               uint32_t skip, int lazy, const double *pl,
                                               const double *pe, double thr, const double *pc,
-                                              int cn, const double *py, const rtpi_quad_k *qk)
+                                              int cn, const double *py, const rtpi_quad_k *qk,
+                                              const kd_pe *path)
 {
     kd_item stack[KD_DEPTH_CAP + 4];
     kd_ray kr;
@@ -1842,6 +2044,30 @@ static RTPI_FORCE_INLINE uint32_t kd_occluder(const rtpi_kdtree *kd, const rtpi_
         rtpi_wt_make(&w, ray);
     if (pe)
         rtpi_edge_o_make(&eo, &ray->o);
+    if (path && !kr.par && fabs(ray->d.x) + fabs(ray->d.y) + fabs(ray->d.z) <= 1e18 &&
+        kr.slack[0] + kr.slack[1] + kr.slack[2] <= DBL_MAX) {
+        /* from o's own leaf (rtpi_kd_path_of): the ancestors whose planes
+           the ray moves towards (its octant's list), as kd_descend steps
+           over them; a direction 0 on an axis walks from the root */
+        const kd_pe *q = path + path[1 + kr.neg].u.leaf;
+        uint32_t cnt = path[1 + kr.neg].code, i;
+        for (i = 0; i < cnt; i++) {
+            uint32_t c = q[i].code, ax = c >> 1 & 3u;
+            double tq = ((double)q[i].u.split - kr.o[ax]) * kr.inv[ax];
+            double lo = tq - kr.slack[ax], hi = tq + kr.slack[ax];
+            if (lo > t1)
+                continue;
+            if (!(c & 8u)) {
+                stack[sp].node = c >> 4;
+                stack[sp].t0 = lo > t0 ? lo : t0;
+                stack[sp].t1 = t1;
+                sp++;
+            }
+            if (hi < t1)
+                t1 = hi;
+        }
+        node = path->u.leaf;
+    }
     for (;;) {
         node = kr.par ? kd_descend(nodes, &kr, node, &t0, &t1, stack, &sp, 1, lazy ? 2 : 1)
                       : kd_descend(nodes, &kr, node, &t0, &t1, stack, &sp, 0, lazy ? 2 : 1);
@@ -1959,21 +2185,24 @@ static RTPI_FORCE_INLINE uint32_t kd_occluder(const rtpi_kdtree *kd, const rtpi_
     }
 }
 
-#define KD_OCC(lazy, pl, pe, thr, pc)                                                          \
-    (s->ncones ? kd_occluder(kd, ray, skip, lazy, pl, pe, thr, pc, 1, NULL, NULL)              \
-               : kd_occluder(kd, ray, skip, lazy, pl, pe, thr, pc, 0, NULL, NULL))
+#define KD_OCC(lazy, pl, pe, thr, pc, pa)                                                      \
+    (s->ncones ? kd_occluder(kd, ray, skip, lazy, pl, pe, thr, pc, 1, NULL, NULL, pa)          \
+               : kd_occluder(kd, ray, skip, lazy, pl, pe, thr, pc, 0, NULL, NULL, pa))
 
 uint32_t rtpi_kd_occluder(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t skip)
 {
     const rtp_scene *s = kd->scene;
     if (s->ntris < s->nspheres + s->ncones)
-        return KD_OCC(1, NULL, NULL, 0.0, NULL);
-    return KD_OCC(0, NULL, NULL, 0.0, NULL);
+        return KD_OCC(1, NULL, NULL, 0.0, NULL, NULL);
+    return KD_OCC(0, NULL, NULL, 0.0, NULL, NULL);
 }
 
-uint32_t rtpi_kd_occluder_planes(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t skip,
-                                 const double *planes, const double *edges,
-                                 const double *cones, double scale)
+/* rtpi_kd_occluder_planes, from path's leaf (NULL: the root; a constant
+   where inlined: a trace's walks carry no code of it) */
+static RTPI_FORCE_INLINE uint32_t kd_occ_planes(const rtpi_kdtree *kd, const rtpi_ray *ray,
+                                                uint32_t skip, const double *planes,
+                                                const double *edges, const double *cones,
+                                                double scale, const kd_pe *pa)
 {
     const rtp_scene *s = kd->scene;
     /* the planes' test holds for origins within the scale (lb_plane_turned in
@@ -1983,31 +2212,83 @@ uint32_t rtpi_kd_occluder_planes(const rtpi_kdtree *kd, const rtpi_ray *ray, uin
     /* (spheres and cones: lazy, as rtpi_kd_occluder; without the edges,
        whose margin's product alone made balls' move 0.7% dearer) */
     if (s->ntris < s->nspheres + s->ncones)
-        return cones ? KD_OCC(1, planes, NULL, 0.0, cones) : KD_OCC(1, NULL, NULL, 0.0, NULL);
+        return cones ? KD_OCC(1, planes, NULL, 0.0, cones, pa)
+                     : KD_OCC(1, NULL, NULL, 0.0, NULL, pa);
     if (planes && edges) {
         const double thr = RTPI_EDGE_MARGIN * scale * scale * scale; /* (rtpi_tri_edges') */
-        return cones ? KD_OCC(0, planes, edges, thr, cones)
-                     : KD_OCC(0, planes, edges, thr, NULL);
+        return cones ? KD_OCC(0, planes, edges, thr, cones, pa)
+                     : KD_OCC(0, planes, edges, thr, NULL, pa);
     }
     /* (without edges, as a trace asks: a walk of its own, with no edge
        test compiled in; one walk for both made gears' trace 1.5% dearer) */
     if (planes)
-        return cones ? KD_OCC(0, planes, NULL, 0.0, cones) : KD_OCC(0, planes, NULL, 0.0, NULL);
-    return rtpi_kd_occluder(kd, ray, skip);
+        return cones ? KD_OCC(0, planes, NULL, 0.0, cones, pa)
+                     : KD_OCC(0, planes, NULL, 0.0, NULL, pa);
+    if (!pa)
+        return rtpi_kd_occluder(kd, ray, skip);
+    if (s->ntris < s->nspheres + s->ncones)
+        return KD_OCC(1, NULL, NULL, 0.0, NULL, pa);
+    return KD_OCC(0, NULL, NULL, 0.0, NULL, pa);
 }
 
-uint32_t rtpi_kd_occluder_cyls(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t skip,
-                               const double *planes, const double *cones, const double *cyls,
-                               double scale)
+uint32_t rtpi_kd_occluder_planes(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t skip,
+                                 const double *planes, const double *edges,
+                                 const double *cones, double scale)
+{
+    return kd_occ_planes(kd, ray, skip, planes, edges, cones, scale, NULL);
+}
+
+static RTPI_FORCE_INLINE uint32_t kd_occ_cyls(const rtpi_kdtree *kd, const rtpi_ray *ray,
+                                              uint32_t skip, const double *planes,
+                                              const double *cones, const double *cyls,
+                                              double scale, const kd_pe *pa)
 {
     const rtp_scene *s = kd->scene;
     rtpi_quad_k qk;
     if (cones && cyls && s->ntris < s->nspheres + s->ncones && fabs(ray->o.x) <= scale &&
         fabs(ray->o.y) <= scale && fabs(ray->o.z) <= scale) {
         rtpi_quad_k_make(scale, &qk);
-        return kd_occluder(kd, ray, skip, 1, planes, NULL, 0.0, cones, 1, cyls, &qk);
+        return kd_occluder(kd, ray, skip, 1, planes, NULL, 0.0, cones, 1, cyls, &qk, pa);
     }
-    return rtpi_kd_occluder_planes(kd, ray, skip, planes, NULL, cones, scale);
+    return pa ? kd_occ_planes(kd, ray, skip, planes, NULL, cones, scale, pa)
+              : rtpi_kd_occluder_planes(kd, ray, skip, planes, NULL, cones, scale);
+}
+
+uint32_t rtpi_kd_occluder_cyls(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t skip,
+                               const double *planes, const double *cones, const double *cyls,
+                               double scale)
+{
+    return kd_occ_cyls(kd, ray, skip, planes, cones, cyls, scale, NULL);
+}
+
+/* (callgrind, the third `exact` move of test/instr/run.sh, 512^2 SPD, M
+   instructions, from the root -> from o's leaf: balls 381.6 -> 367.6,
+   gears 290.4 -> 283.4, mount 413.4 -> 384.6, rings 661.6 -> 609.9,
+   teapot 318.8 -> 306.2, tetra 40.5 -> 38.3; tree 199.6 -> 202.8, whose
+   origins lie in shallow leaves (4.2 ancestors a walk, 1.3 of them moved
+   away from), where the walk gains ~1 M and vis_row's look-up and the
+   query's argument cost ~3 M.  Tried: one list of a leaf's ancestors
+   with a test of the direction at each (balls 394.0, mount 417.8: the
+   test and loop cost what the steps did); one list with a mask an
+   octant (a sixth of the memory: balls 372.0, rings 619.7); the lists'
+   steps in a function of their own (tree 205.3, rings 619.6); leaves of
+   depth 6 or more only (tree 204.0).) */
+uint32_t rtpi_kd_occluder_planes_from(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t skip,
+                                      const double *planes, const double *edges,
+                                      const double *cones, double scale, uint32_t from)
+{
+    if (from == RTPI_NONE)
+        return kd_occ_planes(kd, ray, skip, planes, edges, cones, scale, NULL);
+    return kd_occ_planes(kd, ray, skip, planes, edges, cones, scale, kd->path + from);
+}
+
+uint32_t rtpi_kd_occluder_cyls_from(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t skip,
+                                    const double *planes, const double *cones,
+                                    const double *cyls, double scale, uint32_t from)
+{
+    if (from == RTPI_NONE)
+        return kd_occ_cyls(kd, ray, skip, planes, cones, cyls, scale, NULL);
+    return kd_occ_cyls(kd, ray, skip, planes, cones, cyls, scale, kd->path + from);
 }
 
 int rtpi_kd_occluded(const rtpi_kdtree *kd, const rtpi_ray *ray, uint32_t skip)

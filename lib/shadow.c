@@ -383,7 +383,8 @@ rtp_status rtpi_shadow_create_mt(const rtp_scene *s, const rtpi_kdtree *kd, rtpi
    the least asked always) */
 static RTPI_FORCE_INLINE int sh_visible(const rtpi_shadow *sh, const rtpi_v3 *pp,
                                         const rtpi_v3 *op, uint32_t prim, const rtpi_ray *r,
-                                        uint32_t *occ, int *least, int own_in, int cyl)
+                                        uint32_t *occ, int *least, int own_in, int cyl,
+                                        uint32_t from)
 {
     rtpi_ray rr;
     rtpi_dc_at at;
@@ -448,16 +449,17 @@ static RTPI_FORCE_INLINE int sh_visible(const rtpi_shadow *sh, const rtpi_v3 *pp
     if (sh->mode == RTPI_SHADOW_LIGHTBUF)
         return (*occ = rtpi_lightbuf_occluder(&sh->lb, sh->s, r, skip)) == RTPI_NONE;
     if (cyl)
-        return (*occ = rtpi_kd_occluder_cyls(sh->kd, r, skip, sh->planes, sh->cones, sh->cyls,
-                                             sh->pscale)) == RTPI_NONE;
-    return (*occ = rtpi_kd_occluder_planes(sh->kd, r, skip, sh->planes, sh->edges, sh->cones,
-                                           sh->pscale)) == RTPI_NONE;
+        return (*occ = rtpi_kd_occluder_cyls_from(sh->kd, r, skip, sh->planes, sh->cones,
+                                                  sh->cyls, sh->pscale, from)) == RTPI_NONE;
+    return (*occ = rtpi_kd_occluder_planes_from(sh->kd, r, skip, sh->planes, sh->edges,
+                                                sh->cones, sh->pscale, from)) == RTPI_NONE;
 }
 
 int rtpi_shadow_visible(const rtpi_shadow *sh, rtpi_v3 p, rtpi_v3 o, uint32_t prim)
 {
     uint32_t occ;
-    return sh_visible(sh, &p, &o, prim, NULL, &occ, NULL, RTPI_OWN_ASK, sh_cyl_walk(sh));
+    return sh_visible(sh, &p, &o, prim, NULL, &occ, NULL, RTPI_OWN_ASK, sh_cyl_walk(sh),
+                      RTPI_NONE);
 }
 
 /* Whether triangle q is in the way of r, for EXACT's cache: the walk's
@@ -727,7 +729,7 @@ static RTPI_FORCE_INLINE int sh_cached_body(const rtpi_shadow *sh, rtpi_shadow_c
             c->last = (uint32_t)hit;
             return 0;
         }
-        v = sh_visible(sh, pp, op, prim, &r, &occ, &c->least, own_in, cyl);
+        v = sh_visible(sh, pp, op, prim, &r, &occ, &c->least, own_in, cyl, c->from - 1u);
     } else if (c->last && c->last - 1u != prim && sh->mode == RTPI_SHADOW_LIGHTBUF) {
         /* A triangle: sh_visible's, with the last occluder asked by the
            light buffer first, whose test then shares the list walk's
@@ -748,7 +750,7 @@ static RTPI_FORCE_INLINE int sh_cached_body(const rtpi_shadow *sh, rtpi_shadow_c
         }
         v = occ == RTPI_NONE;
     } else {
-        v = sh_visible(sh, pp, op, prim, NULL, &occ, &c->least, own_in, cyl);
+        v = sh_visible(sh, pp, op, prim, NULL, &occ, &c->least, own_in, cyl, c->from - 1u);
     }
     /* Remembered only while queries keep meeting occluders: after a lit
        answer the next is most likely lit too, and a test would be lost. */

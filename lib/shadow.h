@@ -86,6 +86,10 @@ typedef struct rtpi_shadow_cache {
     uint32_t h1, h2;
     int gain; /* whether asking h1 and h2 pays (sh_earlier) */
     int least; /* item buffers: whether the least of 9 pays (sh_visible) */
+    /* EXACT: the next query's origin's kd leaf (rtpi_kd_path_of) + 1,
+       its walk's start; 0: the root (a zeroed cache's).  Set by the
+       caller for each query: a query leaves it as it is */
+    uint32_t from;
 } rtpi_shadow_cache;
 
 /* The query's steps for sh's mode, chosen once at sh's creation; sh's

@@ -37,6 +37,7 @@ void rtp_tree_destroy(rtp_tree *t)
     rtpi_free(&a, t->ball_in);
     rtpi_free(&a, t->prim_nrm);
     rtpi_free(&a, t->cone_own);
+    rtpi_free(&a, t->kd_from);
     rtpi_free(&a, t->tri_nrm);
     rtpi_free(&a, t->ev_terms);
     rtpi_free(&a, t->ev_coeffs);
@@ -499,6 +500,8 @@ typedef struct vis_ctx {
                                    no spheres) */
     rtpi_shadow_cache cache; /* the thread's last occluder */
     int keep_balls;          /* a ball that holds a hit goes to the cache */
+    uint32_t *kd_from;       /* t->kd_from for EXACT's walks, or NULL */
+    const rtpi_kdtree *kd;
     char pad[64];            /* the contexts lie side by side (vis_row) */
 } vis_ctx;
 
@@ -550,9 +553,29 @@ static RTPI_FORCE_INLINE int kept_normal(double *c, const rtp_scene *s, uint32_t
     return 1;
 }
 
+/* The shadow cache's `from` for node n's query from o, the origin on the
+   side of its surface the geometric normal faces (the offset's +1): the
+   leaf of o, found the first time (rtpi_kd_path_of) and kept in kf[n] as
+   its list + 2 (1: the walk cannot start there, RTPI_NONE).  A node's o
+   depends on the light only through that side (its p, normal and offset
+   stay), so the kept leaf holds for every query on that side; the other
+   side's (a smooth triangle's light behind its geometric normal) walk
+   from the root.  (Keeping the side found first instead, either one,
+   cost a compare a query: 0.3-0.6 M more on every scene.) */
+static RTPI_FORCE_INLINE uint32_t vis_from(uint32_t *kf, const rtpi_kdtree *kd, size_t n,
+                                           rtpi_v3 o)
+{
+    uint32_t v = kf[n];
+    if (!v)
+        v = kf[n] = rtpi_kd_path_of(kd, o) + 2u; /* (RTPI_NONE + 2: 1) */
+    return v - 1u;
+}
+
 /* Decides light `light` anew for every node of one row of samples, with
-   trace's own rule (rtpi_shadow_setup) and the chosen shadow query. */
-static int vis_row(void *ctx, int y)
+   trace's own rule (rtpi_shadow_setup) and the chosen shadow query.
+   kf: 1 where EXACT's walks start at the origins' leaves (t->kd_from),
+   a copy of its own: the other modes' queries pay nothing for it. */
+static RTPI_FORCE_INLINE int vis_row_body(void *ctx, int y, int kf)
 {
     vis_ctx *v = (vis_ctx *)ctx;
     rtp_tree *t = v->t;
@@ -587,6 +610,7 @@ static int vis_row(void *ctx, int y)
     const int prim_floor = v->prim_floor, keep_balls = v->keep_balls, spd = t->spd;
     const rtpi_sphere *const spheres = s->spheres;
     const rtpi_material *const mats = s->mats, *const ev_mats = t->ev_mats;
+    uint32_t *const kd_from = kf ? v->kd_from : NULL;
     for (n = (size_t)t->start[k0]; n < n1; n++) {
         const rtpi_cnode *nd = &nodes[n];
         rtpi_v3 p = v3(nd->p[0], nd->p[1], nd->p[2]), ng, ns, o, l;
@@ -594,7 +618,7 @@ static int vis_row(void *ctx, int y)
         const rtpi_tri *tr = tri_nrm && nd->prim < ntris ? &tris[nd->prim] : NULL;
         int flip = 1; /* ng and ns still to be turned over for a back face */
         int same = 1; /* ng and ns one vector (but a smooth triangle's) */
-        double dn;
+        double dn, sd; /* (sd: ng.l, whose sign is the offset's side) */
         if (tr && (tr->n[0] == RTPI_NONE || tr->n[1] == RTPI_NONE || tr->n[2] == RTPI_NONE)) {
             /* flat: ng as rtpi_surface_normals makes it */
             const double *tn = tri_nrm + 3 * (size_t)nd->prim;
@@ -682,6 +706,8 @@ static int vis_row(void *ctx, int y)
                                                ? rtpi_prim_offset_floor(s, nd->prim, off_floor)
                                                : off_floor);
                     queries++;
+                    if (kf)
+                        cache.from = vis_from(kd_from, v->kd, n, o);
                     if (i >= nspheres && cone_own) {
                         unsigned char *co = &cone_own[n];
                         if (!*co)
@@ -714,7 +740,11 @@ static int vis_row(void *ctx, int y)
         dn = v3_dot(ns, l);
         if (dn <= 0.0)
             continue;
-        o = rtpi_offset_origin(p, ng, (same ? dn : v3_dot(ng, l)) >= 0.0 ? 1.0 : -1.0,
+        /* (sd kept only where kf asks for it: the other copy as before
+           it, whose code it changed) */
+        sd = kf ? same ? dn : v3_dot(ng, l) : 0.0;
+        o = rtpi_offset_origin(p, ng,
+                               (kf ? sd : same ? dn : v3_dot(ng, l)) >= 0.0 ? 1.0 : -1.0,
                                prim_floor ? rtpi_prim_offset_floor(s, nd->prim, off_floor)
                                           : off_floor);
         queries++;
@@ -734,12 +764,32 @@ static int vis_row(void *ctx, int y)
                 cache.last = nd->prim + 1u;
             continue;
         }
+        if (kf)
+            cache.from = sd >= 0.0 ? vis_from(kd_from, v->kd, n, o) : 0u;
         if (rtpi_shadow_visible_cached(sh, &cache, &p, &o, nd->prim))
             *w |= bit;
     }
     v->queries += queries;
     v->cache = cache;
     return 0;
+}
+
+/* (the copies flattened: with two, gcc left rtpi_surface_normals and
+   others out of line, and the light buffers' moves paid 1.5%) */
+#if defined(__GNUC__)
+__attribute__((flatten))
+#endif
+static int vis_row(void *ctx, int y)
+{
+    return vis_row_body(ctx, y, 0);
+}
+
+#if defined(__GNUC__)
+__attribute__((flatten))
+#endif
+static int vis_row_kf(void *ctx, int y)
+{
+    return vis_row_body(ctx, y, 1);
 }
 
 /* t->tri_nrm where the scene has triangles (else it stays NULL); 0, or
@@ -998,9 +1048,12 @@ static int light_vis_rows(rtp_tree *t, const light_vis *lv, double off_floor, in
         vc[k].balls = lv->balls;
         memset(&vc[k].cache, 0, sizeof vc[k].cache);
         vc[k].keep_balls = lv->mode == RTP_SHADOWS_EXACT;
+        vc[k].kd_from = lv->mode == RTP_SHADOWS_EXACT ? t->kd_from : NULL;
+        vc[k].kd = t->kd;
         ctx[k] = &vc[k];
     }
-    rows = rtpi_parallel_rows_cancel(t->ny, threads, ctx, vis_row, progress, cancel, user,
+    rows = rtpi_parallel_rows_cancel(t->ny, threads, ctx, vc[0].kd_from ? vis_row_kf : vis_row,
+                                     progress, cancel, user,
                                      rtpi_trace_stack(t->max_depth));
     if (rows != 2 && st) {
         st->moved_lights++;
@@ -1023,6 +1076,8 @@ static int light_vis_rows(rtp_tree *t, const light_vis *lv, double off_floor, in
 static rtp_status update_visibility_body(rtp_tree *t, int mode, int res, int threads,
                                          double limit, int fallback, const progress_part *prog,
                                          rtp_eval_stats *st, rtp_error *err);
+
+static void kd_from_make(rtp_tree *t, size_t nl, double limit);
 
 static rtp_status update_visibility(rtp_tree *t, int mode, int res, int threads,
                                     double limit, int fallback, const progress_part *prog,
@@ -1171,6 +1226,8 @@ static rtp_status update_visibility_body(rtp_tree *t, int mode, int res, int thr
                 light_vis_free(t, &lv);
                 return rtpi_cancelled(err);
             }
+            if (lv.mode == RTP_SHADOWS_EXACT && !t->kd_from)
+                kd_from_make(t, nl, limit);
             rows = light_vis_rows(t, &lv, off_floor, prim_floor, part.fn ? progress_part_cb : NULL,
                                   part.cancel ? progress_part_cancel : NULL, &part, st);
             light_vis_free(t, &lv);
@@ -1210,6 +1267,21 @@ static double ev_cache_bytes(const rtp_tree *t, size_t nl, size_t ns)
 {
     return (double)t->nnodes * ((double)RTPI_TERMS(nl) * 4.0 + 6.0 * 4.0 + 8.0) +
            (double)ns * (double)RTPI_COEFFS(nl) * 4.0;
+}
+
+/* t->kd_from and the kd-tree's leaf lists for exact moves' walks from
+   their origins' leaves (rtpi_kd_paths_make), where they fit the memory
+   limit with the evaluation's caches (as mv_kc_check: 4 bytes a node and
+   the lists, 8 bytes an ancestor of each leaf: 0.5-1.5 MB for the SPD
+   scenes); without them every walk starts at the root (the same
+   answers). */
+static void kd_from_make(rtp_tree *t, size_t nl, double limit)
+{
+    double bytes = rtpi_kd_paths_bytes(t->kd) + 4.0 * (double)t->nnodes;
+    if (!(ev_cache_bytes(t, nl, (size_t)t->nx * t->ny) + bytes <= fmin(EV_CACHE_BYTES, limit)) ||
+        rtpi_kd_paths_make(t->kd) != 0)
+        return;
+    t->kd_from = (uint32_t *)rtpi_calloc_array(&t->alloc, t->nnodes + 1, sizeof *t->kd_from);
 }
 
 /* Float images carry 2^-24 of the magnitudes they are summed from: where
@@ -3025,12 +3097,14 @@ static rtp_status retrace_edited(rtp_tree *t, int threads, int stale, double lim
     rtpi_free(&t->alloc, t->ball_in); /* (nodes traced again) */
     rtpi_free(&t->alloc, t->prim_nrm);
     rtpi_free(&t->alloc, t->cone_own);
+    rtpi_free(&t->alloc, t->kd_from);
     free_material_lists(t);
     t->cur_vis = NULL;
     t->cur_pos = NULL;
     t->ball_in = NULL;
     t->prim_nrm = NULL;
     t->cone_own = NULL;
+    t->kd_from = NULL;
     return RTP_OK;
 }
 
@@ -5571,6 +5645,7 @@ static rtp_status file_band(void *user, rtp_tree *t, int y0, int y1, const rtpi_
     b.ball_in = NULL; /* (t's nodes', not the band's) */
     b.prim_nrm = NULL;
     b.cone_own = NULL;
+    b.kd_from = NULL;
     b.mv_kc = NULL; /* (t's nodes', not the band's) */
     b.ny = y1 - y0;
     if (t->spd) {

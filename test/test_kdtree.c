@@ -1968,6 +1968,129 @@ static void test_cyl_sure(void)
     CHECK_MSG(out[4] + o2[4] > 0, "no answer wrong without the margins: the cases miss them");
 }
 
+/* Walks from the origin's own leaf (rtpi_kd_occluder_planes_from) name
+   the walk from the root's occluder, the first met: the same leaves in
+   the same order.  Origins on the grid's split planes, and off them by
+   multiples of the walk's slack (tol = 1e-11 of the largest coordinate,
+   kd_axis_setup) on either side of the 2 tol the leaf's list asks for;
+   lights anywhere, in the origin's planes (a direction exactly 0 on one
+   or two axes), on a grid plane (a segment ending in a split plane), or
+   close by.  Among many small triangles (and, lazy = 1, spheres) a
+   changed order names another occluder. */
+static void from_case(int lazy, int *n_from, int *n_none, int *n_blocked, int *bad)
+{
+    rng g;
+    rtp_scene *s = new_scene();
+    rtpi_kdtree *kd = NULL;
+    rtp_error err;
+    int i, j;
+    g.s = g_seed ^ (lazy ? 0x7a7a : 0x7b7b);
+    for (i = 0; i < 300; i++) {
+        int ax = i % 3;
+        double x = floor(rnd(&g) * 8) / 4, y = floor(rnd(&g) * 8) / 4,
+               z = floor(rnd(&g) * 8) / 4, w = 0.25 * (1 + (i % 3));
+        uint32_t a = add_v(s, x, y, z), b, c, d;
+        if (ax == 0) {
+            b = add_v(s, x, y + w, z);
+            c = add_v(s, x, y + w, z + w);
+            d = add_v(s, x, y, z + w);
+        } else if (ax == 1) {
+            b = add_v(s, x + w, y, z);
+            c = add_v(s, x + w, y, z + w);
+            d = add_v(s, x, y, z + w);
+        } else {
+            b = add_v(s, x + w, y, z);
+            c = add_v(s, x + w, y + w, z);
+            d = add_v(s, x, y + w, z);
+        }
+        if (!lazy || i % 4 == 0) {
+            add_t(s, a, b, c);
+            add_t(s, a, c, d);
+        }
+    }
+    for (i = 0; i < (lazy ? 1500 : 900); i++) {
+        rtpi_v3 c = v3(rndr(&g, 0, 2.5), rndr(&g, 0, 2.5), rndr(&g, 0, 2.5));
+        double sz = 0.04;
+        if (lazy) {
+            add_sphere(s, c.x, c.y, c.z, sz * rnd(&g) + 0.005);
+        } else {
+            uint32_t a = add_v(s, c.x, c.y, c.z);
+            uint32_t b = add_v(s, c.x + rndr(&g, -sz, sz), c.y + rndr(&g, -sz, sz),
+                               c.z + rndr(&g, -sz, sz));
+            uint32_t d = add_v(s, c.x + rndr(&g, -sz, sz), c.y + rndr(&g, -sz, sz),
+                               c.z + rndr(&g, -sz, sz));
+            add_t(s, a, b, d);
+        }
+    }
+    CHECK(rtpi_kd_build(s, NULL, &kd, &err) == RTP_OK);
+    CHECK(kd && rtpi_kd_paths_make(kd) == 0);
+    CHECK(rtpi_kd_paths_make(kd) == 0); /* (made once) */
+    for (i = 0; kd && i < 4000; i++) {
+        static const double ms[] = {0.0, 0.5, 1.0, 1.5, 1.9, 1.99, 2.0, 2.01, 2.1, 3.0, 5.0, 50.0};
+        double o[3], tol;
+        rtpi_v3 ov;
+        uint32_t from;
+        int k, kind = i % 4;
+        for (k = 0; k < 3; k++) {
+            /* a grid plane (k/4) on some axes, or anywhere */
+            o[k] = kind == 3 || rnd(&g) < 0.3 ? rndr(&g, -0.2, 2.7) : floor(rnd(&g) * 11) / 4;
+            tol = 1e-11 * (fabs(o[k]) > 2.75 ? fabs(o[k]) : 2.75);
+            if (kind == 1 || kind == 2)
+                o[k] += (rnd(&g) < 0.5 ? -1.0 : 1.0) * tol *
+                        (kind == 1 ? ms[(size_t)(rnd(&g) * 12) % 12] : rndr(&g, 0.0, 4.0));
+        }
+        ov = v3(o[0], o[1], o[2]);
+        from = rtpi_kd_path_of(kd, ov);
+        if (from == RTPI_NONE)
+            ++*n_none;
+        else
+            ++*n_from;
+        for (j = 0; j < 8; j++) {
+            double l[3];
+            rtpi_ray r;
+            uint32_t q0, q1;
+            int kind2 = j % 4;
+            for (k = 0; k < 3; k++) {
+                l[k] = rndr(&g, -1.0, 3.5);
+                if (kind2 == 1 && (k == j % 3 || (j & 4 && k == (j + 1) % 3)))
+                    l[k] = o[k]; /* 0 on this axis */
+                else if (kind2 == 2 && k == j % 3)
+                    l[k] = floor(rnd(&g) * 11) / 4; /* ends in a grid plane */
+                else if (kind2 == 3)
+                    l[k] = o[k] + rndr(&g, -0.01, 0.01); /* close by */
+            }
+            r = rtpi_shadow_ray(ov, v3(l[0], l[1], l[2]));
+            q0 = rtpi_kd_occluder_planes(kd, &r, RTPI_NONE, NULL, NULL, NULL, 10.0);
+            q1 = rtpi_kd_occluder_planes_from(kd, &r, RTPI_NONE, NULL, NULL, NULL, 10.0, from);
+            *n_blocked += q0 != RTPI_NONE;
+            if (q0 != q1 && (*bad)++ < 5)
+                printf("  from_case %d: o %.17g %.17g %.17g, light %.17g %.17g %.17g: "
+                       "%u from the root, %u from the leaf\n",
+                       lazy, o[0], o[1], o[2], l[0], l[1], l[2], q0, q1);
+            /* (and from the root by the same entry) */
+            CHECK(rtpi_kd_occluder_planes_from(kd, &r, RTPI_NONE, NULL, NULL, NULL, 10.0,
+                                               RTPI_NONE) == q0);
+        }
+    }
+    rtpi_kd_destroy(kd);
+    rtp_scene_destroy(s);
+}
+
+static void test_kd_from(void)
+{
+    int lazy;
+    for (lazy = 0; lazy < 2; lazy++) {
+        int n_from = 0, n_none = 0, n_blocked = 0, bad = 0;
+        from_case(lazy, &n_from, &n_none, &n_blocked, &bad);
+        printf("  walks from the leaf (%s): %d origins with a list, %d without; %d of 32000 "
+               "rays blocked; %d differ\n",
+               lazy ? "spheres" : "triangles", n_from, n_none, n_blocked, bad);
+        CHECK(bad == 0);
+        /* both sides of the 2 tol margin met */
+        CHECK(n_from > 2000 && n_none > 20);
+    }
+}
+
 int main(void)
 {
     /* RTP_TEST_SEED, as test_itembuf and test_shadow take it (this one
@@ -2006,5 +2129,6 @@ int main(void)
     RUN(test_tri_edges);
     RUN(test_sphere_sure);
     RUN(test_cyl_sure);
+    RUN(test_kd_from);
     return check_report();
 }
