@@ -1150,6 +1150,10 @@ struct rtp_tree {
                               origin's leaf + 2 (1: none), the origin on
                               the side its geometric normal faces
                               (vis_from) */
+    unsigned char *kd_from_kt; /* per material, kt > 0 when kd_from's
+                              entries were found (a back hit's normal
+                              turns with it: rtpi_two_sided) */
+    size_t kd_from_nmats;
     size_t nlights0;       /* lights traced; later ones were added */
 
     /* Evaluation caches (tree.c): the shading steps' results, kept so an

@@ -38,6 +38,7 @@ void rtp_tree_destroy(rtp_tree *t)
     rtpi_free(&a, t->prim_nrm);
     rtpi_free(&a, t->cone_own);
     rtpi_free(&a, t->kd_from);
+    rtpi_free(&a, t->kd_from_kt);
     rtpi_free(&a, t->tri_nrm);
     rtpi_free(&a, t->ev_terms);
     rtpi_free(&a, t->ev_coeffs);
@@ -561,7 +562,9 @@ static RTPI_FORCE_INLINE int kept_normal(double *c, const rtp_scene *s, uint32_t
    stay), so the kept leaf holds for every query on that side; the other
    side's (a smooth triangle's light behind its geometric normal) walk
    from the root.  (Keeping the side found first instead, either one,
-   cost a compare a query: 0.3-0.6 M more on every scene.) */
+   cost a compare a query: 0.1-1.2 M more on every scene's move.)  The
+   normal's turn for a back hit, which a material's kt can change, makes
+   them anew (kd_from_make). */
 static RTPI_FORCE_INLINE uint32_t vis_from(uint32_t *kf, const rtpi_kdtree *kd, size_t n,
                                            rtpi_v3 o)
 {
@@ -1226,7 +1229,7 @@ static rtp_status update_visibility_body(rtp_tree *t, int mode, int res, int thr
                 light_vis_free(t, &lv);
                 return rtpi_cancelled(err);
             }
-            if (lv.mode == RTP_SHADOWS_EXACT && !t->kd_from)
+            if (lv.mode == RTP_SHADOWS_EXACT)
                 kd_from_make(t, nl, limit);
             rows = light_vis_rows(t, &lv, off_floor, prim_floor, part.fn ? progress_part_cb : NULL,
                                   part.cancel ? progress_part_cancel : NULL, &part, st);
@@ -1272,16 +1275,46 @@ static double ev_cache_bytes(const rtp_tree *t, size_t nl, size_t ns)
 /* t->kd_from and the kd-tree's leaf lists for exact moves' walks from
    their origins' leaves (rtpi_kd_paths_make), where they fit the memory
    limit with the evaluation's caches (as mv_kc_check: 4 bytes a node and
-   the lists, 8 bytes an ancestor of each leaf: 0.5-1.5 MB for the SPD
-   scenes); without them every walk starts at the root (the same
-   answers). */
+   the lists, 9 entries of 8 bytes a kd leaf and 4 an ancestor: 2.3-6.6
+   MB for the SPD scenes, gears_s4's 37.6); without them every walk
+   starts at the root (the same answers).  Made anew (all zero: found
+   again) where a material's kt went from or to 0 since: an SPD tree's
+   back hits then turn their normal (rtpi_two_sided), and their origins
+   move to the other side. */
 static void kd_from_make(rtp_tree *t, size_t nl, double limit)
 {
-    double bytes = rtpi_kd_paths_bytes(t->kd) + 4.0 * (double)t->nnodes;
-    if (!(ev_cache_bytes(t, nl, (size_t)t->nx * t->ny) + bytes <= fmin(EV_CACHE_BYTES, limit)) ||
-        rtpi_kd_paths_make(t->kd) != 0)
+    const rtp_scene *s = t->scene;
+    size_t m;
+    int same = t->kd_from && t->kd_from_kt && t->kd_from_nmats == s->nmats;
+    for (m = 0; same && m < s->nmats; m++)
+        same = t->kd_from_kt[m] == (s->mats[m].kt > 0.0f);
+    if (same)
         return;
-    t->kd_from = (uint32_t *)rtpi_calloc_array(&t->alloc, t->nnodes + 1, sizeof *t->kd_from);
+    if (!t->kd_from) {
+        double bytes = rtpi_kd_paths_bytes(t->kd) + 4.0 * (double)t->nnodes;
+        if (!(ev_cache_bytes(t, nl, (size_t)t->nx * t->ny) + bytes <=
+              fmin(EV_CACHE_BYTES, limit)) ||
+            rtpi_kd_paths_make(t->kd) != 0)
+            return;
+        t->kd_from =
+            (uint32_t *)rtpi_calloc_array(&t->alloc, t->nnodes + 1, sizeof *t->kd_from);
+    } else {
+        memset(t->kd_from, 0, (t->nnodes + 1) * sizeof *t->kd_from);
+    }
+    if (t->kd_from && (!t->kd_from_kt || t->kd_from_nmats != s->nmats)) {
+        rtpi_free(&t->alloc, t->kd_from_kt);
+        t->kd_from_kt = (unsigned char *)rtpi_malloc_array(&t->alloc, s->nmats + 1, 1);
+    }
+    if (!t->kd_from || !t->kd_from_kt) {
+        rtpi_free(&t->alloc, t->kd_from);
+        rtpi_free(&t->alloc, t->kd_from_kt);
+        t->kd_from = NULL;
+        t->kd_from_kt = NULL;
+        return;
+    }
+    for (m = 0; m < s->nmats; m++)
+        t->kd_from_kt[m] = s->mats[m].kt > 0.0f;
+    t->kd_from_nmats = s->nmats;
 }
 
 /* Float images carry 2^-24 of the magnitudes they are summed from: where
@@ -3098,6 +3131,7 @@ static rtp_status retrace_edited(rtp_tree *t, int threads, int stale, double lim
     rtpi_free(&t->alloc, t->prim_nrm);
     rtpi_free(&t->alloc, t->cone_own);
     rtpi_free(&t->alloc, t->kd_from);
+    rtpi_free(&t->alloc, t->kd_from_kt);
     free_material_lists(t);
     t->cur_vis = NULL;
     t->cur_pos = NULL;
@@ -3105,6 +3139,7 @@ static rtp_status retrace_edited(rtp_tree *t, int threads, int stale, double lim
     t->prim_nrm = NULL;
     t->cone_own = NULL;
     t->kd_from = NULL;
+    t->kd_from_kt = NULL;
     return RTP_OK;
 }
 
@@ -5646,6 +5681,7 @@ static rtp_status file_band(void *user, rtp_tree *t, int y0, int y1, const rtpi_
     b.prim_nrm = NULL;
     b.cone_own = NULL;
     b.kd_from = NULL;
+    b.kd_from_kt = NULL;
     b.mv_kc = NULL; /* (t's nodes', not the band's) */
     b.ny = y1 - y0;
     if (t->spd) {
