@@ -244,6 +244,16 @@ rtp_status rtpi_lightbuf_build_some(const rtp_scene *s, rtpi_v3 light, int res,
                                     double limit, double max_entries, const rtpi_poll *poll,
                                     const rtp_allocator *a,
                                     rtpi_lightbuf *lb, rtp_error *err);
+/* The same, told the shadow queries the buffer is expected to answer
+   (HUGE_VAL: unknown, many): where they are few against the triangles,
+   each triangle is listed by its box rather than its exact cells
+   (dircube.c LB_BOX_QUERIES): a cheaper build, longer lists, the same
+   answers. */
+rtp_status rtpi_lightbuf_build_q(const rtp_scene *s, rtpi_v3 light, int res,
+                                 const unsigned char *sel, unsigned char want, int threads,
+                                 double limit, double max_entries, double queries,
+                                 const rtpi_poll *poll, const rtp_allocator *a,
+                                 rtpi_lightbuf *lb, rtp_error *err);
 /* 1 when no candidate of ray's cell hits ray in [tmin, tmax]; ray must run
    towards the light (rtpi_shadow_ray). */
 int rtpi_lightbuf_visible(const rtpi_lightbuf *lb, const rtp_scene *s,

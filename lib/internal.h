@@ -1120,6 +1120,11 @@ struct rtp_tree {
                               (NaN: not computed), cur_nl lights */
     size_t cur_nl;
     int cur_mode, cur_res; /* shadow mode and resolution they came from */
+    double lb_queries;     /* the shadow queries of the last light decided
+                              by a light buffer (light_vis_rows), the
+                              next build's expectation (rtpi_lightbuf_build_q);
+                              unknown (HUGE_VAL) while lb_queries_known is 0 */
+    int lb_queries_known;
     double *tri_nrm;       /* 3 per triangle: its rtpi_tri_normal, made at
                               the first move (vis_row asks it of every
                               hit), NULL in a scene without triangles */

@@ -276,6 +276,15 @@ rtp_status rtpi_shadow_create_mt(const rtp_scene *s, const rtpi_kdtree *kd, rtpi
                                  double max_entries, const rtpi_poll *poll,
                                  const rtp_allocator *a, rtpi_shadow **out, rtp_error *err)
 {
+    return rtpi_shadow_create_q(s, kd, light, mode, res, threads, limit, max_entries, HUGE_VAL,
+                                poll, a, out, err);
+}
+
+rtp_status rtpi_shadow_create_q(const rtp_scene *s, const rtpi_kdtree *kd, rtpi_v3 light,
+                                rtpi_shadow_mode mode, int res, int threads, double limit,
+                                double max_entries, double queries, const rtpi_poll *poll,
+                                const rtp_allocator *a, rtpi_shadow **out, rtp_error *err)
+{
     rtpi_shadow *sh;
     rtp_status st = RTP_OK;
     *out = NULL;
@@ -297,8 +306,8 @@ rtp_status rtpi_shadow_create_mt(const rtp_scene *s, const rtpi_kdtree *kd, rtpi
     sh->limit = limit;
     switch (mode) {
     case RTPI_SHADOW_LIGHTBUF:
-        st = rtpi_lightbuf_build_some(s, light, res, NULL, 0, threads, limit, max_entries, poll,
-                                      a, &sh->lb, err);
+        st = rtpi_lightbuf_build_q(s, light, res, NULL, 0, threads, limit, max_entries, queries,
+                                   poll, a, &sh->lb, err);
         break;
     case RTPI_SHADOW_ITEMBUF:
     case RTPI_SHADOW_OSMESA:

@@ -64,6 +64,12 @@ rtp_status rtpi_shadow_create_mt(const rtp_scene *s, const rtpi_kdtree *kd, rtpi
                                  rtpi_shadow_mode mode, int res, int threads, double limit,
                                  double max_entries, const rtpi_poll *poll,
                                  const rtp_allocator *a, rtpi_shadow **out, rtp_error *err);
+/* The same, told the shadow queries a LIGHTBUF mode's buffer is expected
+   to answer (HUGE_VAL: unknown; rtpi_lightbuf_build_q). */
+rtp_status rtpi_shadow_create_q(const rtp_scene *s, const rtpi_kdtree *kd, rtpi_v3 light,
+                                rtpi_shadow_mode mode, int res, int threads, double limit,
+                                double max_entries, double queries, const rtpi_poll *poll,
+                                const rtp_allocator *a, rtpi_shadow **out, rtp_error *err);
 
 /* Does the recorded hit at p (a float position, as the tree keeps it) on
    primitive prim, whose shadow ray trace would start at o (p moved off the

@@ -975,7 +975,7 @@ static rtp_status light_vis_make(rtp_tree *t, size_t i, int mode, int res, int t
 {
     rtp_scene *s = t->scene;
     const double *lp = s->lights[i].pos;
-    double lb_cap;
+    double lb_cap, lb_q;
     rtp_status rs;
     memset(lv, 0, sizeof *lv);
     lv->light = i;
@@ -991,8 +991,11 @@ static rtp_status light_vis_make(rtp_tree *t, size_t i, int mode, int res, int t
     t->cube_alloc.free_fn = blk_free;
     t->cube_alloc.user = t;
     lb_cap = fallback && mode == RTP_SHADOWS_LIGHTBUF ? auto_lb_entries(t) : HUGE_VAL;
-    rs = rtpi_shadow_create_mt(s, t->kd, v3(lp[0], lp[1], lp[2]), (rtpi_shadow_mode)mode, res,
-                               threads, limit, lb_cap, poll, &t->cube_alloc, &lv->sh, err);
+    /* (the last light buffer's queries, as the next's expectation: a
+       drag's moves ask about as many each; none known at the first) */
+    lb_q = t->lb_queries_known ? t->lb_queries : HUGE_VAL;
+    rs = rtpi_shadow_create_q(s, t->kd, v3(lp[0], lp[1], lp[2]), (rtpi_shadow_mode)mode, res,
+                              threads, limit, lb_cap, lb_q, poll, &t->cube_alloc, &lv->sh, err);
     if ((rs == RTP_ERR_LIMIT || rs == RTPI_OVER_ENTRIES) && fallback &&
         mode != RTP_SHADOWS_EXACT) {
         /* AUTO: shadow rays where the lists would not fit (a mesh
@@ -1058,6 +1061,13 @@ static int light_vis_rows(rtp_tree *t, const light_vis *lv, double off_floor, in
     rows = rtpi_parallel_rows_cancel(t->ny, threads, ctx, vc[0].kd_from ? vis_row_kf : vis_row,
                                      progress, cancel, user,
                                      rtpi_trace_stack(t->max_depth));
+    if (rows != 2 && lv->mode == RTP_SHADOWS_LIGHTBUF) {
+        double q = 0.0;
+        for (k = 0; k < threads; k++)
+            q += (double)vc[k].queries;
+        t->lb_queries = q;
+        t->lb_queries_known = 1;
+    }
     if (rows != 2 && st) {
         st->moved_lights++;
         st->shadows = (rtp_shadow_mode)lv->mode;

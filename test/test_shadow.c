@@ -1774,6 +1774,114 @@ static void test_lightbuf_sphere_box(void)
     round_run(&t);
 }
 
+/* A triangle's box cover (rtpi_lightbuf_build_q with few queries
+   expected: dircube.c dc_box_tri) holds every cell of its exact cover:
+   over 300 random triangles (tiny, a few cells, many cells, slivers
+   thin one way or the other), lights near and far, the scene at the
+   origin and moved far from it (round_run's offsets and scales), at 64
+   and 256 cells, each cell's list of the box buffer holds its list of
+   the spans' buffer (both in ascending rank), and the box buffer is the
+   longer (the box taken); held to the spans' count of entries, the build
+   lists by the spans.  It fails with the box one cell narrower on either
+   side, or a row shorter, and without the spans' second build. */
+static void test_lightbuf_tri_box(void)
+{
+    static const double offs[][2] = {{0, 1}, {3000, 0.01}, {-2e5, 3}};
+    static const double lps[][3] = {{0, 0, 9}, {0.3, -0.2, 4}, {40, 25, 60}, {0, 0, 1.2}};
+    size_t oi;
+    for (oi = 0; oi < sizeof offs / sizeof *offs; oi++) {
+        double off = offs[oi][0], sc = offs[oi][1];
+        char *text = (char *)malloc(ROUND_TEXT);
+        size_t len, k;
+        rtp_scene *s;
+        rtp_allocator al;
+        int li;
+        rtpi_allocator_init(&al, NULL);
+        CHECK(text != NULL);
+        if (!text)
+            return;
+        len = (size_t)snprintf(text, ROUND_TEXT,
+                               "v\nfrom 0 -9 4\nat 0 0 0.5\nup 0 0 1\nangle 50\nhither 0.01\n"
+                               "resolution 8 8\nl 0 0 9\nf 0.8 0.8 0.8 1 0 0 0 1\np 3\n");
+        for (k = 0; k < 300; k++) {
+            /* a centre, two edge vectors of random sizes (1e-3 to 3),
+               every fifth a sliver (its second edge 1e-3 of the first) */
+            double c[3], e[2][3], sz = pow(10.0, -3.0 + 3.5 * rnd());
+            int a, b;
+            for (a = 0; a < 3; a++)
+                c[a] = a < 2 ? 6 * (rnd() - 0.5) : 3 * rnd() - 1;
+            for (b = 0; b < 2; b++)
+                for (a = 0; a < 3; a++)
+                    e[b][a] = sz * (rnd() - 0.5) * (b && k % 5 == 4 ? 1e-3 : 1.0);
+            if (k)
+                len += (size_t)snprintf(text + len, ROUND_TEXT - len, "p 3\n");
+            len += (size_t)snprintf(text + len, ROUND_TEXT - len,
+                                    "%.17g %.17g %.17g\n%.17g %.17g %.17g\n%.17g %.17g %.17g\n",
+                                    off + sc * c[0], off + sc * c[1], off + sc * c[2],
+                                    off + sc * (c[0] + e[0][0]), off + sc * (c[1] + e[0][1]),
+                                    off + sc * (c[2] + e[0][2]),
+                                    off + sc * (c[0] + e[1][0]), off + sc * (c[1] + e[1][1]),
+                                    off + sc * (c[2] + e[1][2]));
+        }
+        s = load(text, len);
+        free(text);
+        CHECK(s != NULL);
+        if (!s)
+            return;
+        for (li = 0; li < 8; li++) {
+            const double *q = lps[li / 2];
+            rtpi_v3 L = v3(off + sc * q[0], off + sc * q[1], off + sc * q[2]);
+            int res = li & 1 ? 64 : 256;
+            rtpi_lightbuf ex, bx;
+            size_t cell, missing = 0;
+            if (rtpi_lightbuf_build_q(s, L, res, NULL, 0, 1, HUGE_VAL, HUGE_VAL, HUGE_VAL, NULL,
+                                      &al, &ex, NULL) != RTP_OK) {
+                CHECK_MSG(0, "tri box: spans build failed, offset %g, light %d", off, li);
+                continue;
+            }
+            if (rtpi_lightbuf_build_q(s, L, res, NULL, 0, 1, HUGE_VAL, HUGE_VAL, 0.0, NULL, &al,
+                                      &bx, NULL) != RTP_OK) {
+                CHECK_MSG(0, "tri box: box build failed, offset %g, light %d", off, li);
+                rtpi_lightbuf_free(&ex, &al);
+                continue;
+            }
+            CHECK_MSG(ex.w.ncells == bx.w.ncells && ex.ncand == bx.ncand && ex.res == bx.res,
+                      "tri box, offset %g, light %d: other windows", off, li);
+            if (ex.w.ncells == bx.w.ncells) {
+                for (cell = 0; cell < ex.w.ncells; cell++) {
+                    uint32_t e = ex.off[cell], b = bx.off[cell];
+                    for (; e < ex.off[cell + 1]; e++) {
+                        while (b < bx.off[cell + 1] && bx.ref[b] < ex.ref[e])
+                            b++;
+                        missing += !(b < bx.off[cell + 1] && bx.ref[b] == ex.ref[e]);
+                    }
+                }
+                CHECK_MSG(bx.off[bx.w.ncells] > ex.off[ex.w.ncells],
+                          "tri box, offset %g, light %d: %lu entries, the spans' %lu", off, li,
+                          (unsigned long)bx.off[bx.w.ncells],
+                          (unsigned long)ex.off[ex.w.ncells]);
+            }
+            CHECK_MSG(missing == 0, "tri box, offset %g, light %d: %lu entries missing", off, li,
+                      (unsigned long)missing);
+            rtpi_lightbuf_free(&bx, &al);
+            /* the box past a bound on entries the spans meet: the spans */
+            if (li < 2) {
+                double cap = (double)ex.off[ex.w.ncells];
+                rtp_status st = rtpi_lightbuf_build_q(s, L, res, NULL, 0, 1, HUGE_VAL, cap, 0.0,
+                                                      NULL, &al, &bx, NULL);
+                CHECK_MSG(st == RTP_OK, "tri box, offset %g, light %d: %d within %g entries", off,
+                          li, (int)st, cap);
+                if (st == RTP_OK) {
+                    CHECK(bx.off[bx.w.ncells] == ex.off[ex.w.ncells]);
+                    rtpi_lightbuf_free(&bx, &al);
+                }
+            }
+            rtpi_lightbuf_free(&ex, &al);
+        }
+        rtp_scene_destroy(s);
+    }
+}
+
 int main(void)
 {
     const char *env = getenv("RTP_TEST_SEED");
@@ -1797,6 +1905,7 @@ int main(void)
     RUN(test_lightbuf_edges_same);
     RUN(test_lightbuf_cone_slabs);
     RUN(test_lightbuf_sphere_box);
+    RUN(test_lightbuf_tri_box);
     RUN(test_lightbuf_limit_threads);
     RUN(test_stopper_reports);
     RUN(test_osmesa);

@@ -5284,7 +5284,8 @@ static size_t idle_block_bytes(const rtp_tree *t)
    blocks warm, not more: the lists' sizes change with the light, and the
    kept blocks of sizes gone by filled every slot (gears at 128x128: 80 MB
    idle after 600 moves where one move takes 8; here 6.9 times the first
-   move's idle bytes over 60 moves, now 2.9). */
+   move's idle bytes over 60 moves, now 2.9; 2.8 times the second's since
+   the moves after the first list the triangles by their box). */
 static void test_moves_keep_few_blocks(void)
 {
     const char *dir = check_shared_scenes();
@@ -5321,13 +5322,17 @@ static void test_moves_keep_few_blocks(void)
         CHECK(rtp_tree_set(t, "light.0.pos", pos, NULL) == RTP_OK);
         CHECK(rtp_tree_eval(t, &eo, &img, NULL, NULL) == RTP_OK);
         rtp_image_destroy(img);
-        if (k == 0)
+        /* (from the second move: the first, no queries known before
+           it, lists the triangles by their spans, the others by their
+           box, 48x48 asking few queries of gears' 36,610 triangles:
+           dircube.c LB_BOX_QUERIES) */
+        if (k == 1)
             first = idle_block_bytes(t);
         if (idle_block_bytes(t) > most)
             most = idle_block_bytes(t);
     }
-    fprintf(stderr, "  idle blocks: %zu bytes after the first move, %zu at most\n", first, most);
-    CHECK_MSG(first > 0 && most <= 4 * first, "idle blocks: %zu bytes after the first move, "
+    fprintf(stderr, "  idle blocks: %zu bytes after the second move, %zu at most\n", first, most);
+    CHECK_MSG(first > 0 && most <= 4 * first, "idle blocks: %zu bytes after the second move, "
               "%zu at most over 60", first, most);
     rtp_tree_destroy(t);
     rtp_scene_destroy(s);
