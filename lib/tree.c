@@ -3497,6 +3497,17 @@ static RTPI_FORCE_INLINE void cp_put(cp_fill *f, float k0, float k1, float k2, s
     f->next = p + 1;
 }
 
+/* cp_row_spd_v and cp_row_flat ask for the coefficients of the sample
+   CP_AHEAD on (of sample row y + 1, the one the row pair reads from
+   memory; row y's came to cache as the pair before's y + 1): the walk
+   rises through ev_coeffs (balls_s4 at 512: 15.8 MB, 60 bytes a sample)
+   and the loop waited on its loads (perf: 52% of cp_plane_chunk's time
+   at the loads of a column).  A line each 64 bytes: two asked for each
+   step of two samples (120 bytes), one a sample in the loop with the
+   test.  First light colour edits, CPU medians: balls_s4 4.17 -> 3.39
+   ms, tree_s11 3.61 -> 2.62 (HISTORY session 46). */
+#define CP_AHEAD 32
+
 #ifdef PK_SSE2
 /* 1 where none of the n pixels from sa's column on has four corners
    without nodes (cp_row_spd_v's test), sample rows sa and sa + so: two
@@ -3563,17 +3574,6 @@ static RTPI_FORCE_INLINE void cp_vpx(cp_vrow *v, __m128d l01, __m128d l2, __m128
         v->in = 0;
     }
 }
-
-/* cp_row_spd_v and cp_row_flat ask for the coefficients of the sample
-   CP_AHEAD on (of sample row y + 1, the one the row pair reads from
-   memory; row y's came to cache as the pair before's y + 1): the walk
-   rises through ev_coeffs (balls_s4 at 512: 15.8 MB, 60 bytes a sample)
-   and the loop waited on its loads (perf: 52% of cp_plane_chunk's time
-   at the loads of a column).  A line each 64 bytes: two asked for each
-   step of two samples (120 bytes), one a sample in the loop with the
-   test.  First light colour edits, CPU medians: balls_s4 4.17 -> 3.39
-   ms, tree_s11 3.61 -> 2.62 (HISTORY session 46). */
-#define CP_AHEAD 32
 
 /* cp_row_spd's loop on SSE2's vectors: its n pixels from p on (sa: the
    node ranges of sample row y, sa + sbo of row y + 1), skip a constant.
