@@ -868,6 +868,38 @@ static rtp_status field_refused(rtp_error *err, const char *key, const char *fie
     return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0, "unknown key '%s' (%s)", key, fields);
 }
 
+/* The files a scene read besides its own, for a message about file.N:
+   "none", "1, file.0", "3, file.0 to file.2". */
+static const char *files_read(const rtp_scene *s, char *buf, size_t size)
+{
+    if (s->nfiles == 0)
+        snprintf(buf, size, "none");
+    else if (s->nfiles == 1)
+        snprintf(buf, size, "1, file.0");
+    else
+        snprintf(buf, size, "%zu, file.0 to file.%zu", s->nfiles, s->nfiles - 1);
+    return buf;
+}
+
+/* A file.N key given to rtp_scene_set: read only, whatever N (the scene's
+   record of what it read, rtp_scene_get's; "unknown key" for it sent a
+   caller who had just read file.0 looking for a typo, and named only
+   light, mat, camera, ambient and background) */
+static rtp_status file_key_refused(const rtp_scene *s, const char *key, rtp_error *err)
+{
+    char what[64];
+    size_t d;
+    if (digits_index(key + 5, strlen(key + 5), &d))
+        return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0,
+                          "%s is read only (file.N: the files a loaded scene read besides its "
+                          "own, not parameters; this one read %s)",
+                          key, files_read(s, what, sizeof what));
+    return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0,
+                      "unknown key '%s' (file.N, N a number, is read only: the files a loaded "
+                      "scene read besides its own; %s)",
+                      key, KEYS_THERE);
+}
+
 /* Is key light.N.pos with N the scene's count of lights (an index, as
    find_index reads one), which adds light N?  Only pos: a light's other
    fields are set once it is there. */
@@ -914,6 +946,8 @@ rtp_status rtpi_scene_set(rtp_scene *s, const char *key, const char *value,
             return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "%s: out of memory", key);
         return RTP_OK;
     }
+    if (strncmp(key, "file.", 5) == 0)
+        return file_key_refused(s, key, err);
     if ((st = item_key(s, key, &kind, &i, &field, err)) != RTP_OK)
         return st;
     if (kind == ITEM_LIGHT) {
@@ -1193,11 +1227,12 @@ rtp_status rtp_scene_get(const rtp_scene *s, const char *key, char *buf, size_t 
         unsigned long n;
         errno = 0;
         n = key[5] >= '0' && key[5] <= '9' ? strtoul(key + 5, &end, 10) : 0;
-        if (!(key[5] >= '0' && key[5] <= '9') || *end || errno || n >= s->nfiles)
+        if (!(key[5] >= '0' && key[5] <= '9') || *end || errno || n >= s->nfiles) {
+            char what[64];
             return rtpi_error(err, RTP_ERR_KEY, NULL, 0, 0,
-                              "no key '%s' (the scene read %zu files besides its own: file.0 "
-                              "to file.N)",
-                              key, s->nfiles);
+                              "no key '%s' (the files the scene read besides its own: %s)", key,
+                              files_read(s, what, sizeof what));
+        }
         put_str(buf, size, &at, s->files[n]);
     } else if ((st = item_key(s, key, &kind, &i, &field, err)) != RTP_OK) {
         return st;

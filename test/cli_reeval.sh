@@ -1099,6 +1099,13 @@ cp "$T/tx/m.mtl" "$T/tx/m.orig"
 expect_rc 2 $RTP trace "$T/tx/m.obj" --size 8x8 -o "$T/tx/m.mtl"
 grep -q "m.mtl is a file the scene reads" "$T/err" && cmp -s "$T/tx/m.mtl" "$T/tx/m.orig" && ok ||
     bad "trace -o its mtllib: $(cat "$T/err")"
+# file.N is read, not set: --set and --params said "unknown key 'file.0'"
+expect_rc 1 $RTP trace "$T/tx/textured.nff" --size 20x15 -i "$T/tx/q.pfm" --set file.0=x.obj
+grep -q "file.0 is read only (file.N: .*this one read 1, file.0)" "$T/err" && [ ! -e "$T/tx/q.pfm" ] &&
+    ok || bad "--set file.0: $(cat "$T/err")"
+printf 'file.3=x.obj\n' > "$T/tx/f.txt"
+expect_rc 1 $RTP reeval "$T/tx/t.rtp" -i "$T/tx/q.pfm" --params "$T/tx/f.txt"
+grep -q "f.txt:1:1: file.3 is read only" "$T/err" && ok || bad "--params file.3: $(cat "$T/err")"
 
 # Lights added one by one in a stream grow the evaluation's caches in place
 # (tree.c grow_caches): a sample a new light does not reach keeps the colour

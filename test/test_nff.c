@@ -1460,7 +1460,18 @@ static void test_files_read(void)
     CHECK(rtp_scene_get(s, "file.0", buf, sizeof buf, &err) == RTP_OK &&
           strcmp(buf, "scenes/quad.obj") == 0);
     CHECK(rtp_scene_get(s, "file.1", buf, sizeof buf, &err) == RTP_ERR_KEY &&
-          strstr(err.message, "read 1 files"));
+          strstr(err.message, "besides its own: 1, file.0)"));
+    /* read only, whatever N: rtp_scene_set (the CLI's --set, --params,
+       --stream) said "unknown key 'file.0'", as if it were a typo */
+    CHECK(rtp_scene_set(s, "file.0", "x.obj", &err) == RTP_ERR_KEY &&
+          strstr(err.message, "file.0 is read only") &&
+          strstr(err.message, "this one read 1, file.0)"));
+    CHECK(rtp_scene_set(s, "file.7", "x.obj", &err) == RTP_ERR_KEY &&
+          strstr(err.message, "file.7 is read only"));
+    CHECK(rtp_scene_set(s, "file.x", "x.obj", &err) == RTP_ERR_KEY &&
+          strstr(err.message, "unknown key 'file.x' (file.N, N a number, is read only"));
+    CHECK(rtp_scene_get(s, "file.0", buf, sizeof buf, &err) == RTP_OK &&
+          strcmp(buf, "scenes/quad.obj") == 0);
     CHECK(rtp_scene_get(s, "file.x", buf, sizeof buf, NULL) == RTP_ERR_KEY);
     CHECK(rtp_scene_get(s, "file.", buf, sizeof buf, NULL) == RTP_ERR_KEY);
     CHECK(rtp_scene_get(s, "file.-0", buf, sizeof buf, NULL) == RTP_ERR_KEY);
@@ -1472,6 +1483,8 @@ static void test_files_read(void)
     CHECK(rtp_record(s, &o, &t, NULL, NULL, &err) == RTP_OK);
     CHECK(t && rtp_scene_get(rtp_tree_scene(t), "file.0", buf, sizeof buf, NULL) ==
                    RTP_ERR_KEY);
+    CHECK(t && rtp_tree_set(t, "file.0", "x.obj", &err) == RTP_ERR_KEY &&
+          strstr(err.message, "file.0 is read only") && strstr(err.message, "read none)"));
     rtp_tree_destroy(t);
     rtp_scene_destroy(s);
     CHECK(rtp_scene_load("scenes/spheres.nff", NULL, &s, &err) == RTP_OK);
