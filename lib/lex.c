@@ -273,8 +273,8 @@ int rtpi_tok_int(const rtpi_tok *t, long *out)
 /* The bytes of the printable UTF-8 character at s (n bytes left): 1 for
    printable ASCII, 2 to 4 for a well-formed sequence that is not a C1
    control (U+0080..U+009F: CSI and others reach a terminal as escapes),
-   a surrogate, overlong or past U+10FFFF; 0 for any other byte, shown
-   as '?'.  (Every byte past ASCII had been '?': a file in /home/jos\xc3\xa9
+   a surrogate, overlong or past U+10FFFF, a separator or a bidirectional
+   control (below); 0 for any other byte, shown as '?'.  (Every byte past ASCII had been '?': a file in /home/jos\xc3\xa9
    read "jos??" in its message.) */
 static size_t utf8_shown(const unsigned char *s, size_t n)
 {
@@ -310,6 +310,19 @@ static size_t utf8_shown(const unsigned char *s, size_t n)
     for (k = 2; k < len; k++)
         if ((s[k] & 0xc0) != 0x80)
             return 0;
+    /* Nor the characters that move or break the text around them, not
+       printable either: the line and paragraph separators U+2028-2029
+       (a message cut in two lines), and the bidirectional marks and
+       controls U+061C, U+200E-200F, U+202A-202E, U+2066-2069, which
+       reorder the rest of the line as a terminal shows it (a name with
+       U+202E has a bidi-aware terminal show the rest reversed: the
+       "Trojan Source" trick) */
+    if (len == 2 && c == 0xd8 && s[1] == 0x9c)
+        return 0;
+    if (len == 3 && c == 0xe2 &&
+        ((s[1] == 0x80 && ((s[2] >= 0x8e && s[2] <= 0x8f) || (s[2] >= 0xa8 && s[2] <= 0xae))) ||
+         (s[1] == 0x81 && s[2] >= 0xa6 && s[2] <= 0xa9)))
+        return 0;
     return len;
 }
 

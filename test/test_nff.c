@@ -514,6 +514,18 @@ static void test_utf8_words(void)
         {"a\xc0\xaf.obj", "a??.obj"},             /* overlong '/' */
         {"a\xed\xa0\x80.obj", "a???.obj"},       /* a UTF-16 surrogate */
         {"a\xf4\x90\x80\x80.obj", "a????.obj"}, /* past U+10FFFF */
+        /* characters that move the text around them: shown raw, a right-to-
+           left override (U+202E) had the message's rest shown reversed,
+           a line separator (U+2028) broke it */
+        {"a\xe2\x80\xae" "b.obj", "a???b.obj"},     /* RIGHT-TO-LEFT OVERRIDE */
+        {"a\xe2\x80\xaa" "b.obj", "a???b.obj"},     /* LEFT-TO-RIGHT EMBEDDING */
+        {"a\xe2\x81\xa6\xe2\x81\xa9" "b.obj", "a??????b.obj"}, /* LRI, PDI */
+        {"a\xe2\x80\x8f" "b.obj", "a???b.obj"},     /* RIGHT-TO-LEFT MARK */
+        {"a\xd8\x9c" "b.obj", "a??b.obj"},           /* ARABIC LETTER MARK */
+        {"a\xe2\x80\xa8" "b\xe2\x80\xa9.obj", "a???b???.obj"}, /* separators */
+        /* (their neighbours stay: U+2027, U+202F, U+2065, U+206A, U+061B) */
+        {"\xe2\x80\xa7\xe2\x80\xaf\xe2\x81\xa5\xe2\x81\xaa\xd8\x9b.obj",
+         "\xe2\x80\xa7\xe2\x80\xaf\xe2\x81\xa5\xe2\x81\xaa\xd8\x9b.obj"},
     };
     char text[600], want[300], buf[700];
     size_t k, i;
