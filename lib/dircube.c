@@ -2152,7 +2152,7 @@ static rtp_status lb_build(const rtp_scene *s, rtpi_v3 light, int res,
         double need = 4.0 * ((double)ncells + 2.0) + (double)nc * per;
         if (!(need <= limit)) {
             char g[2][32]; /* '.' whatever the locale */
-            rtpi_fmt_g(g[0], sizeof g[0], 6, ceil(need / 1048576.0));
+            rtpi_fmt_g(g[0], sizeof g[0], 6, rtpi_mib_up(need));
             rtpi_fmt_g(g[1], sizeof g[1], 6, limit / 1048576.0);
             return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
                               "a light buffer of %d cells a face: its %zu primitives take %s MiB "
@@ -2342,7 +2342,7 @@ static rtp_status lb_build(const rtp_scene *s, rtpi_v3 light, int res,
             for (k = 0; k < np; k++)
                 rtpi_free(a, parts[k].runs);
             rtpi_lightbuf_free(lb, a);
-            rtpi_fmt_g(g[0], sizeof g[0], 6, ceil(need / 1048576.0));
+            rtpi_fmt_g(g[0], sizeof g[0], 6, rtpi_mib_up(need));
             rtpi_fmt_g(g[1], sizeof g[1], 6, limit / 1048576.0);
             return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
                               "a light buffer of %d cells a face lists %s MiB, over the memory "

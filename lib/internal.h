@@ -96,6 +96,9 @@ void rtpi_allocator_init(rtp_allocator *out, const rtp_allocator *in);
    rtpi_fmt_g is snprintf's "%.*g" writing '.' (util.c). */
 double rtpi_strtod(const char *s, char **end);
 void rtpi_fmt_g(char *out, size_t size, int prec, double v);
+/* bytes in MiB for a message that something needs them, rounded up: to
+   a whole MiB from 100 up, else to 3 significant digits (util.c) */
+double rtpi_mib_up(double bytes);
 
 rtp_status rtpi_error(rtp_error *err, rtp_status status, const char *file,
                       int line, int col, const char *fmt, ...)

@@ -4626,7 +4626,7 @@ static rtp_status shadow_mode_for(rtp_tree *t, const rtp_eval_options *opt, int 
                 mode = RTP_SHADOWS_EXACT;
             } else if (light_moved(t, l) && !(need <= lim)) {
                 char g[2][32]; /* '.' whatever the locale */
-                rtpi_fmt_g(g[0], sizeof g[0], 6, ceil(need / 1048576.0));
+                rtpi_fmt_g(g[0], sizeof g[0], 6, rtpi_mib_up(need));
                 rtpi_fmt_g(g[1], sizeof g[1], 6, lim / 1048576.0);
                 return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
                                   "a direction cube of %d cells a face takes up to %s MiB, "

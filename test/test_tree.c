@@ -2506,6 +2506,14 @@ static void test_shadows_auto_cube_limit(void)
     rs = t ? rtp_tree_eval_into(t, &eo, img, &st, &err) : RTP_ERR_ARGUMENT;
     CHECK_MSG(rs == RTP_ERR_LIMIT && strstr(err.message, "direction cube"),
               "lightbuf over the limit: status %d", (int)rs);
+    /* the figure to raise the limit to, not rounded up to a whole MiB
+       (6 x 64^2 cells of 4 bytes: 0.09375 MiB read "1 MiB") */
+    eo.shadow_res = 64;
+    rs = t ? rtp_tree_eval_into(t, &eo, img, &st, &err) : RTP_ERR_ARGUMENT;
+    CHECK_MSG(rs == RTP_ERR_LIMIT &&
+                  strstr(err.message, "takes up to 0.0938 MiB, over the memory limit of 0.0625 MiB"),
+              "lightbuf:64 over the limit: %s", rs == RTP_OK ? "ok" : err.message);
+    eo.shadow_res = 0;
     eo.shadows = RTP_SHADOWS_AUTO;
     memset(&st, 0, sizeof st);
     rs = t ? rtp_tree_eval_into(t, &eo, img, &st, &err) : RTP_ERR_ARGUMENT;
@@ -2586,7 +2594,7 @@ static void test_lightbuf_prims_limit(void)
     base = c.live;
     c.peak = c.live;
     rs = img ? rtp_tree_eval_into(t, &eo, img, NULL, &err) : RTP_ERR_ARGUMENT;
-    CHECK_MSG(rs == RTP_ERR_LIMIT && strstr(err.message, "primitives take"),
+    CHECK_MSG(rs == RTP_ERR_LIMIT && strstr(err.message, "primitives take 2.41 MiB"),
               "lightbuf: %s", rs == RTP_OK ? "ok" : err.message);
     CHECK_MSG((double)(c.peak - base) <= eo.memory_limit + 65536.0,
               "lightbuf under 1 MiB: peak %.0f bytes", (double)(c.peak - base));
