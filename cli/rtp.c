@@ -35,14 +35,30 @@ static const char *stdin_user;
 __attribute__((format(printf, 1, 2)))
 #endif
 static void msg(const char *fmt, ...);
+static void put_shown(FILE *f, const char *s);
+/* A message line on stderr, "rtp: " first, its bytes as put_shown shows
+   them (a file's name is any bytes). */
 static void msg(const char *fmt, ...)
 {
+    char small[1024], *big = NULL;
+    const char *s = small;
     va_list ap;
-    fputs("rtp: ", stderr);
+    int n;
     va_start(ap, fmt);
-    vfprintf(stderr, fmt, ap);
+    n = vsnprintf(small, sizeof small, fmt, ap);
     va_end(ap);
+    if (n < 0)
+        small[0] = '\0';
+    else if ((size_t)n >= sizeof small && (big = (char *)malloc((size_t)n + 1)) != NULL) {
+        va_start(ap, fmt);
+        vsnprintf(big, (size_t)n + 1, fmt, ap);
+        va_end(ap);
+        s = big;
+    }
+    fputs("rtp: ", stderr);
+    put_shown(stderr, s);
     fputc('\n', stderr);
+    free(big);
 }
 
 /* Bytes of the well-formed UTF-8 sequence at s (1-4), or 0. */
@@ -72,6 +88,35 @@ static int utf8_len(const unsigned char *s)
     return n;
 }
 
+/* s as a terminal is to show it, as the library's messages show a
+   scene's words (lex.c utf8_shown): well-formed UTF-8 as it is, '?' for
+   each byte of a control (C0, DEL, C1: ESC and CSI start a terminal's
+   escapes), of a line or paragraph separator or a bidirectional control
+   (which reorder or break the rest of the line), and of what is not
+   UTF-8.  A file named "\033[2J.nff" cleared the screen in its error,
+   and the library's own file field beside a word showed it raw. */
+static void put_shown(FILE *f, const char *s)
+{
+    const unsigned char *p = (const unsigned char *)s;
+    while (*p) {
+        int n = utf8_len(p), k;
+        int hide = n == 0 || (n == 1 && (*p < 0x20 || *p == 0x7f)) ||
+                   (n == 2 && ((p[0] == 0xc2 && p[1] < 0xa0) || (p[0] == 0xd8 && p[1] == 0x9c))) ||
+                   (n == 3 && p[0] == 0xe2 &&
+                    ((p[1] == 0x80 && ((p[2] >= 0x8e && p[2] <= 0x8f) ||
+                                       (p[2] >= 0xa8 && p[2] <= 0xae))) ||
+                     (p[1] == 0x81 && p[2] >= 0xa6 && p[2] <= 0xa9)));
+        if (n == 0)
+            n = 1;
+        if (hide)
+            for (k = 0; k < n; k++)
+                fputc('?', f);
+        else
+            fwrite(p, 1, (size_t)n, f);
+        p += n;
+    }
+}
+
 /* s as a JSON string: quotes, backslashes and control characters
    escaped (a scene path may hold any of them), and a byte that is not
    part of well-formed UTF-8 written as the code point of the same value
@@ -97,7 +142,7 @@ static void json_string(FILE *f, const char *s)
 static int fail_err(const rtp_error *err)
 {
     char buf[600];
-    fprintf(stderr, "rtp: %s\n", rtp_error_format(err, buf, sizeof buf));
+    msg("%s", rtp_error_format(err, buf, sizeof buf));
     return 1;
 }
 
@@ -106,7 +151,7 @@ static int fail_line(const rtp_error *err, int line)
 {
     char buf[600];
     if (line > 0)
-        fprintf(stderr, "rtp: <stdin>:%d: %s\n", line, rtp_error_format(err, buf, sizeof buf));
+        msg("<stdin>:%d: %s", line, rtp_error_format(err, buf, sizeof buf));
     else
         fail_err(err);
     return 1;
@@ -1296,13 +1341,12 @@ static int apply_kv(set_fn set, void *obj, const char *kv, const char *where, in
         rtp_error_format(&err, buf, sizeof buf);
         /* (an empty value in a line: "light.0.color= 1" is two words) */
         if (line && !eq[1])
-            fprintf(stderr,
-                    "rtp: %s:%d:%d: %s (blanks separate a line's edits: no blank after '=')\n",
-                    where, line, col, buf);
+            msg("%s:%d:%d: %s (blanks separate a line's edits: no blank after '=')", where,
+                line, col, buf);
         else if (line)
-            fprintf(stderr, "rtp: %s:%d:%d: %s\n", where, line, col, buf);
+            msg("%s:%d:%d: %s", where, line, col, buf);
         else
-            fprintf(stderr, "rtp: %s\n", buf);
+            msg("%s", buf);
         return 1;
     }
 }
@@ -1834,8 +1878,8 @@ static int cmd_trace(int argc, char **argv)
         rtp_scene_info si;
         rtp_scene_get_info(scene, &si);
         if (si.triangles + si.spheres + si.cones == 0)
-            fprintf(stderr, "rtp: warning: %s has no objects: the image is the background\n",
-                    in_name(scene_path)); /* (stdin's <stdin>, as every message names it) */
+            msg("warning: %s has no objects: the image is the background",
+                in_name(scene_path)); /* (stdin's <stdin>, as every message names it) */
     }
     progress_start(&prog, verbosity > 0 && isatty(2));
     if (verbosity > 0 && isatty(2)) {
@@ -1850,8 +1894,7 @@ static int cmd_trace(int argc, char **argv)
            stdin's named <stdin> as every message names it */
         if (!err.file[0] && err.line == 0) {
             char buf[600];
-            fprintf(stderr, "rtp: %s: %s\n", in_name(scene_path),
-                    rtp_error_format(&err, buf, sizeof buf));
+            msg("%s: %s", in_name(scene_path), rtp_error_format(&err, buf, sizeof buf));
         } else {
             fail_err(&err);
         }
@@ -2376,8 +2419,7 @@ static int reeval_report(const rtp_tree *tree, const rtp_image *img, const rtp_e
             char buf[600], where[32] = "";
             if (line > 0)
                 snprintf(where, sizeof where, "<stdin>:%d: ", line);
-            fprintf(stderr, "rtp: %s--reference: %s\n", where,
-                    rtp_error_format(&err, buf, sizeof buf));
+            msg("%s--reference: %s", where, rtp_error_format(&err, buf, sizeof buf));
             goto out;
         }
         t_ref = now_seconds() - t0;

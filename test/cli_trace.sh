@@ -371,6 +371,22 @@ if mkfifo "$T/so/f.json" 2>/dev/null; then
         ok || bad "SIGTERM on a --stats FIFO left its image: rc $r, $n, $(ls -A "$T/so")"
 fi
 
+# Messages show a file's name as the library shows a scene's words: ESC,
+# C1 (CSI), a right-to-left override and bytes that are not UTF-8 as '?',
+# UTF-8 as it is (a scene named "e<ESC>[7mX.nff" turned the terminal's
+# text inverse in its error)
+mkdir -p "$T/nm"
+n=$(printf '%s/nm/e\033[7mX\302\233\351\342\200\256Y.nff' "$T")
+printf 'bogus\n' > "$n"
+expect_rc 1 $RTP trace "$n" -i "$T/nm/x.pfm"
+LC_ALL=C grep -q 'nm/e?\[7mX??????Y\.nff:1:1: unknown keyword' "$T/err" &&
+    ! LC_ALL=C grep -q "$(printf '\033')" "$T/err" && ! LC_ALL=C grep -q "$(printf '\233')" "$T/err" &&
+    ok || bad "a name's control bytes reached the terminal: $(od -c "$T/err" | head -3)"
+# (and a --params file's name before its line and column)
+expect_rc 1 $RTP trace scenes/spheres.nff --size 8x8 --params "$n" -i "$T/nm/x.pfm"
+LC_ALL=C grep -q 'nm/e?\[7mX??????Y\.nff:1:1: ' "$T/err" && ! LC_ALL=C grep -q "$(printf '\033')" "$T/err" &&
+    ok || bad "--params named by control bytes: $(od -c "$T/err" | head -3)"
+
 rm -rf "$T"
 echo "$pass passed, $fail failed, $skip skipped"
 [ "$fail" -eq 0 ]
