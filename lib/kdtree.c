@@ -1486,7 +1486,7 @@ typedef struct kd_item {
    the shift of the sign bit by a variable 3 more, of tree_s11's 43).
    @return 0 when the ray misses the root box on this axis. */
 static RTPI_FORCE_INLINE int kd_axis_setup(const rtpi_kdtree *kd, kd_ray *kr, double d, int k,
-                                           double *a0, double *a1)
+                                           double *a0, double *a1, int in)
 {
     /* fmax without the call; a NaN origin gives maxabs, as fmax. */
     double ao = fabs(kr->o[k]);
@@ -1499,6 +1499,18 @@ static RTPI_FORCE_INLINE int kd_axis_setup(const rtpi_kdtree *kd, kd_ray *kr, do
         kr->slack[k] = 0.0;
         if (kr->o[k] < kd->lo[k] - kr->tol[k] || kr->o[k] > kd->hi[k] + kr->tol[k])
             return 0;
+    } else if (in) {
+        /* the origin 2 tol or more inside the root box (a kept leaf's,
+           rtpi_kd_path_of): the face behind it clips nothing (ta - slack
+           < 0 = tmin, the argument at kd_pe), and the face ahead is the
+           one below's tb, the same expression (its ta > tb swap), NaN
+           alike */
+        double tb;
+        kr->inv[k] = 1.0 / d;
+        kr->slack[k] = kr->tol[k] * fabs(kr->inv[k]);
+        tb = ((d < 0.0 ? kd->lo[k] : kd->hi[k]) - kr->o[k]) * kr->inv[k];
+        if (tb + kr->slack[k] < *a1)
+            *a1 = tb + kr->slack[k];
     } else {
         double ta, tb, x;
         kr->inv[k] = 1.0 / d;
@@ -1522,7 +1534,7 @@ static RTPI_FORCE_INLINE int kd_axis_setup(const rtpi_kdtree *kd, kd_ray *kr, do
 /* Prepares the ray and clips it to the root box.
    @return 0 when it misses the box or its interval is empty. */
 static RTPI_FORCE_INLINE int kd_ray_setup(const rtpi_kdtree *kd, const rtpi_ray *r, kd_ray *kr,
-                        double *t0, double *t1)
+                        double *t0, double *t1, int in)
 {
     double a0 = r->tmin, a1 = r->tmax;
     if (!kd->has_box)
@@ -1531,9 +1543,9 @@ static RTPI_FORCE_INLINE int kd_ray_setup(const rtpi_kdtree *kd, const rtpi_ray 
     kr->o[1] = r->o.y;
     kr->o[2] = r->o.z;
     kr->par = kr->neg = 0;
-    if (!kd_axis_setup(kd, kr, r->d.x, 0, &a0, &a1) ||
-        !kd_axis_setup(kd, kr, r->d.y, 1, &a0, &a1) ||
-        !kd_axis_setup(kd, kr, r->d.z, 2, &a0, &a1))
+    if (!kd_axis_setup(kd, kr, r->d.x, 0, &a0, &a1, in) ||
+        !kd_axis_setup(kd, kr, r->d.y, 1, &a0, &a1, in) ||
+        !kd_axis_setup(kd, kr, r->d.z, 2, &a0, &a1, in))
         return 0;
     *t0 = a0;
     *t1 = a1;
@@ -1838,7 +1850,7 @@ int rtpi_kd_intersect(const rtpi_kdtree *kd, const rtpi_ray *ray,
     int sp = 0, found = 0;
 
     KD_CNT(3);
-    if (!kd_ray_setup(kd, ray, &kr, &t0, &t1) || !rtpi_wt_setup(&w, ray))
+    if (!kd_ray_setup(kd, ray, &kr, &t0, &t1, 0) || !rtpi_wt_setup(&w, ray))
         return 0;
     for (;;) {
         node = kr.par ? kd_descend(nodes, &kr, node, &t0, &t1, stack, &sp, 1, 0)
@@ -2038,7 +2050,7 @@ static RTPI_FORCE_INLINE uint32_t kd_occluder(const rtpi_kdtree *kd, const rtpi_
     KD_CNT(3);
     /* (a shadow ray among spheres and cones never needs w: making it
        anyway was 2% of balls' moved-light shadow rays) */
-    if (!kd_ray_setup(kd, ray, &kr, &t0, &t1) || !rtpi_wt_valid(ray))
+    if (!kd_ray_setup(kd, ray, &kr, &t0, &t1, path != NULL) || !rtpi_wt_valid(ray))
         return RTPI_NONE;
     if (!lazy)
         rtpi_wt_make(&w, ray);
