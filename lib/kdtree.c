@@ -1517,8 +1517,9 @@ static RTPI_FORCE_INLINE int kd_axis_setup(const rtpi_kdtree *kd, kd_ray *kr, do
             return 0;
     } else if (in) {
         /* the origin 2 tol or more inside the root box (a kept leaf's,
-           rtpi_kd_path_of): the face behind it clips nothing (ta - slack
-           < 0 = tmin, the argument at kd_pe), and the face ahead is the
+           rtpi_kd_path_of of the ray's origin): the face behind it clips
+           nothing (ta - slack < 0 = tmin, the walks' contract a shadow
+           ray's tmin 0: the argument at kd_pe), and the face ahead is the
            one below's tb, the same expression (its ta > tb swap), NaN
            alike */
         double tb;
