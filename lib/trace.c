@@ -61,6 +61,7 @@ typedef struct worker {
     float *coeffs;     /* its linear coefficients */
     double *acc;
     counts n;
+    int row;           /* the row being traced (shared's direct) */
     /* Re-tracing a sample whose old tree is kept above its edited
        materials (rtpi_retrace's keep): the old sample's nodes and their
        visibility words, NULL while tracing afresh */
@@ -85,12 +86,19 @@ struct shared {
     double off_floor; /* rtpi_offset_floor of s */
     int prim_floor;   /* rtpi_offset_floor said: ask each hit's primitive */
     float *out;        /* nx*ny samples, RGB */
-    /* Recording: finished rows go into the tree's arrays in row order, so
-       each node is copied once, from its worker's row buffer (reused and
-       cache-warm) to its final place, and fresh memory is touched once.  A
-       row finished before its predecessors waits in rows[] until they are
-       in (then its buffers are freed for the next such row to reuse). */
+    /* Recording with several workers: finished rows go into the tree's
+       arrays in row order, so each node is copied once, from its
+       worker's row buffer (reused and cache-warm) to its final place, and
+       fresh memory is touched once.  A row finished before its
+       predecessors waits in rows[] until they are in (then its buffers
+       are freed for the next such row to reuse). */
     row_rec *rows;     /* per row when recording, else NULL */
+    /* Recording with one worker: its rows come in order, so it pushes
+       its nodes straight into tnodes and tvis (its own buffers are
+       those while it traces a row) and nothing is copied: the copy was
+       0.6-0.9% of recording mount_s6 at 1024x1024 (perf: memmove 5-9 ms
+       of 870), and a second 60 KiB of nodes in the cache. */
+    int direct;
     unsigned char *stashed; /* row y waits in rows[y] */
     int next_row;      /* the next row to go in */
     rtpi_cnode *tnodes;/* the tree's nodes so far, tn of them */
@@ -179,8 +187,53 @@ static int take_room(worker *w, double bytes)
     return !ok;
 }
 
+static rtp_status grow_tree(shared *sh, int y, size_t need);
+
+/* Makes room in the worker's buffers for node w->nn: the tree's arrays
+   grown when the worker writes into them (shared's direct), else its own
+   buffers.  0, or 1 with w->status set. */
+static int push_room(worker *w)
+{
+    size_t words = w->sh->shade.vis_words;
+    if (w->sh->direct) {
+        /* (one node more than pushed, as append_row grows them: a tree's
+           nodes are never NULL) */
+        rtp_status st = grow_tree(w->sh, w->row, w->nn + 2);
+        if (st != RTP_OK) {
+            w->status = st;
+            return 1;
+        }
+        w->nodes = w->sh->tnodes;
+        w->vis = w->sh->tvis;
+        w->cap = w->sh->tcap;
+        w->vis_cap = w->sh->tcap * words;
+        return 0;
+    }
+    /* (the room counts what the buffers grow to: rtpi_grow_cap's) */
+    if (w->nn + 1 > w->cap &&
+        take_room(w, (double)(rtpi_grow_cap(w->cap, w->nn + 1) - w->cap) * sizeof *w->nodes))
+        return 1;
+    if (words && (w->nn + 1) * words > w->vis_cap &&
+        take_room(w, (double)(rtpi_grow_cap(w->vis_cap, (w->nn + 1) * words) - w->vis_cap) *
+                         sizeof *w->vis))
+        return 1;
+    if (rtpi_grow(w->sh->wa, (void **)&w->nodes, &w->cap, w->nn + 1,
+                  sizeof *w->nodes)) {
+        w->status = RTP_ERR_NOMEM;
+        return 1;
+    }
+    if (words && rtpi_grow(w->sh->wa, (void **)&w->vis, &w->vis_cap,
+                           (w->nn + 1) * words, sizeof *w->vis)) {
+        w->status = RTP_ERR_NOMEM;
+        return 1;
+    }
+    return 0;
+}
+
 /* Appends a node to the current sample; returns its index within the
-   sample, or -1. */
+   sample, or -1.  (The buffers are grown out of line, only when full:
+   rtpi_grow called for every node had cost 10.9 M instructions of
+   mount_s6's 2909 M trace at 512x512 SPD, callgrind.) */
 static int32_t push_node(worker *w)
 {
     size_t words = w->sh->shade.vis_words;
@@ -190,24 +243,10 @@ static int32_t push_node(worker *w)
         w->n.capped++;
         return -1;
     }
-    /* (the room counts what the buffers grow to: rtpi_grow_cap's) */
-    if (w->nn + 1 > w->cap &&
-        take_room(w, (double)(rtpi_grow_cap(w->cap, w->nn + 1) - w->cap) * sizeof *w->nodes))
+    if ((w->nn + 1 + (size_t)w->sh->direct > w->cap ||
+         (words && (w->nn + 1) * words > w->vis_cap)) &&
+        push_room(w))
         return -1;
-    if (words && (w->nn + 1) * words > w->vis_cap &&
-        take_room(w, (double)(rtpi_grow_cap(w->vis_cap, (w->nn + 1) * words) - w->vis_cap) *
-                         sizeof *w->vis))
-        return -1;
-    if (rtpi_grow(w->sh->wa, (void **)&w->nodes, &w->cap, w->nn + 1,
-                  sizeof *w->nodes)) {
-        w->status = RTP_ERR_NOMEM;
-        return -1;
-    }
-    if (words && rtpi_grow(w->sh->wa, (void **)&w->vis, &w->vis_cap,
-                           (w->nn + 1) * words, sizeof *w->vis)) {
-        w->status = RTP_ERR_NOMEM;
-        return -1;
-    }
     if (words)
         memset(w->vis + w->nn * words, 0, words * sizeof *w->vis);
     return (int32_t)(w->nn++ - w->sample_base);
@@ -578,47 +617,12 @@ static double row_bytes(const shared *sh, size_t nn)
 static rtp_status append_row(shared *sh, int y, const rtpi_cnode *nodes, const uint32_t *vis,
                              const uint32_t *per, size_t nn)
 {
-    const rtp_allocator *a = sh->wa;
     size_t words = sh->shade.vis_words, k = (size_t)y * sh->gx, at = sh->tn;
-    size_t need = sh->tn + nn + 1;
     int x;
-    if (need > sh->tcap) {
-        /* Room for the rows to come at the rate so far, an eighth more:
-           doubling from small copied the nodes, tens of megabytes, many
-           times over and touched twice the pages (mount_s6 at
-           1024x1024: 27,000 page faults, then 14,500).  With the default
-           allocator a block past 1 MiB grows by moving its pages
-           (util.c), so this mostly saves a user's allocator the copies.
-           The arrays take from the room what they grow by (grown to
-           exactly est, not to a power of two, so that they hold no more
-           than the limit lets them): near the limit at most half of what
-           is left, so that workers still have room for their rows. */
-        size_t est = need / ((size_t)y + 1) * (size_t)sh->gy;
-        void *p;
-        est += est / 8;
-        if (est < need)
-            est = need;
-        if (sh->limited) {
-            double nb = node_bytes(sh), fits = sh->room / nb;
-            if ((double)(need - sh->tcap) > fits)
-                return RTP_ERR_LIMIT;
-            if ((double)(est - sh->tcap) > fits) {
-                double half = 0.5 * fits;
-                est = (double)(need - sh->tcap) > half ? need : sh->tcap + (size_t)half;
-            }
-            sh->room -= (double)(est - sh->tcap) * nb;
-        }
-        if (est > (size_t)-1 / sizeof *sh->tnodes ||
-            !(p = rtpi_realloc(a, sh->tnodes, est * sizeof *sh->tnodes)))
-            return RTP_ERR_NOMEM;
-        sh->tnodes = (rtpi_cnode *)p;
-        if (words) {
-            if (est > (size_t)-1 / (words * sizeof *sh->tvis) ||
-                !(p = rtpi_realloc(a, sh->tvis, est * words * sizeof *sh->tvis)))
-                return RTP_ERR_NOMEM;
-            sh->tvis = (uint32_t *)p;
-        }
-        sh->tcap = est;
+    if (sh->tn + nn + 1 > sh->tcap) {
+        rtp_status st = grow_tree(sh, y, sh->tn + nn + 1);
+        if (st != RTP_OK)
+            return st;
     }
     if (nn) /* (memcpy from a NULL buffer is undefined even for 0) */
         memcpy(sh->tnodes + sh->tn, nodes, nn * sizeof *nodes);
@@ -629,6 +633,53 @@ static rtp_status append_row(shared *sh, int y, const rtpi_cnode *nodes, const u
         at += per[x];
     }
     sh->tn = at;
+    return RTP_OK;
+}
+
+/* Grows the tree's arrays to hold need > tcap nodes, row y being the
+   last in them (append_row's, or the direct worker's row so far); the
+   caller holds sh->lock or is the one worker.  RTP_OK, RTP_ERR_NOMEM, or
+   RTP_ERR_LIMIT when the arrays cannot grow within the room. */
+static rtp_status grow_tree(shared *sh, int y, size_t need)
+{
+    const rtp_allocator *a = sh->wa;
+    size_t words = sh->shade.vis_words;
+    size_t est = need / ((size_t)y + 1) * (size_t)sh->gy;
+    void *p;
+    /* Room for the rows to come at the rate so far, an eighth more:
+       doubling from small copied the nodes, tens of megabytes, many
+       times over and touched twice the pages (mount_s6 at
+       1024x1024: 27,000 page faults, then 14,500).  With the default
+       allocator a block past 1 MiB grows by moving its pages
+       (util.c), so this mostly saves a user's allocator the copies.
+       The arrays take from the room what they grow by (grown to
+       exactly est, not to a power of two, so that they hold no more
+       than the limit lets them): near the limit at most half of what
+       is left, so that workers still have room for their rows. */
+    est += est / 8;
+    if (est < need)
+        est = need;
+    if (sh->limited) {
+        double nb = node_bytes(sh), fits = sh->room / nb;
+        if ((double)(need - sh->tcap) > fits)
+            return RTP_ERR_LIMIT;
+        if ((double)(est - sh->tcap) > fits) {
+            double half = 0.5 * fits;
+            est = (double)(need - sh->tcap) > half ? need : sh->tcap + (size_t)half;
+        }
+        sh->room -= (double)(est - sh->tcap) * nb;
+    }
+    if (est > (size_t)-1 / sizeof *sh->tnodes ||
+        !(p = rtpi_realloc(a, sh->tnodes, est * sizeof *sh->tnodes)))
+        return RTP_ERR_NOMEM;
+    sh->tnodes = (rtpi_cnode *)p;
+    if (words) {
+        if (est > (size_t)-1 / (words * sizeof *sh->tvis) ||
+            !(p = rtpi_realloc(a, sh->tvis, est * words * sizeof *sh->tvis)))
+            return RTP_ERR_NOMEM;
+        sh->tvis = (uint32_t *)p;
+    }
+    sh->tcap = est;
     return RTP_OK;
 }
 
@@ -677,6 +728,49 @@ static int commit_row(worker *w, int y)
     return st != RTP_OK;
 }
 
+/* Row y traced by the one worker of a recording (shared's direct) goes
+   straight into the tree's arrays: the worker's buffers are those while
+   it traces the row (row_begin), and the row's starts are set after
+   (row_end).  0, or 1 with w->status set. */
+static int row_begin(worker *w, int y)
+{
+    shared *sh = w->sh;
+    /* (rows come to one worker in order: rtpi_parallel_rows) */
+    if (y != sh->next_row) {
+        w->status = RTP_ERR_ARGUMENT;
+        return 1;
+    }
+    w->row = y;
+    w->nodes = sh->tnodes;
+    w->vis = sh->tvis;
+    w->nn = sh->tn;
+    w->cap = sh->tcap;
+    w->vis_cap = sh->tcap * sh->shade.vis_words;
+    return 0;
+}
+
+static int row_end(worker *w, int y)
+{
+    shared *sh = w->sh;
+    size_t k = (size_t)y * sh->gx, at = sh->tn;
+    int x;
+    /* (the arrays are the tree's again: freed once, as sh's) */
+    w->nodes = NULL;
+    w->vis = NULL;
+    w->cap = w->vis_cap = 0;
+    if (w->status == RTP_OK && sh->tn + 1 > sh->tcap) /* (rows of no nodes) */
+        w->status = grow_tree(sh, y, sh->tn + 1);
+    if (w->status != RTP_OK)
+        return 1;
+    for (x = 0; x < sh->gx; x++) {
+        sh->tstart[k + (size_t)x] = at;
+        at += w->counts[x];
+    }
+    sh->tn = at;
+    sh->next_row++;
+    return 0;
+}
+
 static int trace_row(void *ctx, int y)
 {
     worker *w = (worker *)ctx;
@@ -684,9 +778,16 @@ static int trace_row(void *ctx, int y)
     int x;
     if (w->status != RTP_OK)
         return 1;
-    w->nn = 0;
+    if (sh->direct) {
+        if (row_begin(w, y))
+            return 1;
+    } else {
+        w->nn = 0;
+    }
     for (x = 0; x < sh->gx; x++)
         trace_sample(w, x, y, sh->out + 3 * ((size_t)y * sh->gx + x));
+    if (sh->direct)
+        return row_end(w, y);
     if (w->status != RTP_OK)
         return 1;
     if (sh->rows)
@@ -975,6 +1076,7 @@ static rtp_status trace_impl(const rtp_scene *s, const rtp_trace_options *opt_in
                                                   sizeof *sh.tstart);
         if (!sh.stashed || !sh.tstart)
             rtpi_free(&s->alloc, sh.rows), sh.rows = NULL;
+        sh.direct = nthreads == 1;
     }
     lock_made = rtpi_mutex_init(&sh.lock) == 0;
     /* the image, the samples and their starts are made; the nodes take

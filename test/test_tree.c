@@ -2038,6 +2038,91 @@ static void test_allocator_one_thread_at_a_time(void)
    either holds or stops with the named error.  (The tree's array grew to
    a power of two past its estimate and the scratch went uncounted: peaks
    of 1.8-4x the limit.) */
+/* A recording with one worker pushes its nodes straight into the tree's
+   arrays (trace.c's direct rows) where workers of several copy finished
+   rows in: both must give the very same trees, with the library's
+   allocator and a caller's (whose realloc copies as the arrays grow in
+   mid-row), with > 32 lights (the visibility words grown beside the
+   nodes, some handed out again), with rows of no nodes at the top (a
+   sphere low in the image: the arrays made after them), SPD's corner
+   samples, and a region. */
+static int same_trees(const rtp_tree *a, const rtp_tree *b);
+
+static void test_one_worker_records_in_place(void)
+{
+    static const char low_nff[] =
+        "v\nfrom 0 0 0\nat 0 0 1\nup 0 1 0\nangle 60\nhither 0.01\nresolution 48 40\n"
+        "b 0.1 0.1 0.1\nl 0 5 -5\nf 0.9 0.5 0.2 0.6 0.4 10 0.3 1.4\ns 0 -2.5 6 1.5\n"
+        "f 0.5 0.5 0.5 0.8 0.5 30 0 1\ns 0.8 -3 8 1\n";
+    /* 40 lights, a glass of ks 0: under SPD its reflections are cast and
+       dropped, and the nodes handed out again must have their light
+       words cleared */
+    char many[4096];
+    size_t len = 0;
+    counted c;
+    rtp_allocator ua;
+    int k, n = 0, i;
+    len += (size_t)snprintf(many + len, sizeof many - len,
+                            "v\nfrom 0 -8 3\nat 0 0 0\nup 0 0 1\nangle 40\nhither 0.01\n"
+                            "resolution 64 48\nb 0.1 0.1 0.2\n");
+    for (i = 0; i < 40; i++)
+        len += (size_t)snprintf(many + len, sizeof many - len, "l %g %g %g 0.05 0.04 0.03\n",
+                                6.0 * cos(i * 0.157), 6.0 * sin(i * 0.157) - 2.0,
+                                4.0 + 0.05 * i);
+    snprintf(many + len, sizeof many - len,
+             "f 0.8 0.3 0.2 0.6 0.3 20 0 1\ns -1.2 0 0 1\n"
+             "f 0.9 0.9 0.9 0.1 0 60 0.6 1.5\ns 1.2 0 0.2 1\n"
+             "f 0.4 0.7 0.4 0.8 0.2 10 0 1\np 4\n-9 -9 -1\n9 -9 -1\n9 9 -1\n-9 9 -1\n");
+    ua = counted_allocator(&c);
+    for (k = 0; k < 8; k++) {
+        rtp_scene *s = NULL;
+        rtp_tree *one = NULL, *three = NULL;
+        rtp_trace_options o;
+        const rtp_allocator *a = k & 1 ? &ua : NULL;
+        const char *text = k < 4 ? many : low_nff;
+        memset(&o, 0, sizeof o);
+        CHECK(rtp_scene_load_memory(text, strlen(text), "direct.nff", "nff", a, &s, NULL) ==
+              RTP_OK);
+        if (!s)
+            continue;
+        o.spd = (k & 2) != 0 && k < 6;
+        if (k >= 6) { /* (a region from a row of no nodes; SPD's is 512x512) */
+            o.region[0] = 5;
+            o.region[1] = 3;
+            o.region[2] = 41;
+            o.region[3] = 37;
+        }
+        if (o.spd) { /* (a few SPD rows: the glass's dropped reflections) */
+            o.region[0] = 120;
+            o.region[1] = 200;
+            o.region[2] = 400;
+            o.region[3] = 280;
+        }
+        o.threads = 1;
+        CHECK(rtp_record(s, &o, &one, NULL, NULL, NULL) == RTP_OK);
+        o.threads = 3;
+        CHECK(rtp_record(s, &o, &three, NULL, NULL, NULL) == RTP_OK);
+        if (one && three) {
+            CHECK_MSG(same_trees(one, three), "case %d: %zu nodes at one thread, %zu at three",
+                      k, one->nnodes, three->nnodes);
+            CHECK(k >= 4 || one->vis_words > 0);
+            /* (the low scene's first rows hold no node) */
+            CHECK_MSG(k < 4 || (one->nnodes > 0 && one->start[2 * (size_t)one->nx] == 0),
+                      "case %d: %zu nodes, %llu in the first two rows", k, one->nnodes,
+                      (unsigned long long)one->start[2 * (size_t)one->nx]);
+            n++;
+        }
+        rtp_tree_destroy(one);
+        rtp_tree_destroy(three);
+        rtp_scene_destroy(s);
+    }
+    CHECK(c.live == 0);
+    CHECK(n == 8);
+#ifdef RTP_HAVE_THREADS
+    pthread_mutex_destroy(&c.lock);
+#endif
+}
+
 static void test_memory_limit_holds(void)
 {
     static const char top_nff[] =
@@ -7668,6 +7753,7 @@ int main(void)
     RUN(test_sample_range);
     RUN(test_identical_many_lights);
     RUN(test_many_lights_retrace);
+    RUN(test_one_worker_records_in_place);
     RUN(test_identical_teapot);
     RUN(test_identical_small_spd);
     RUN(test_class_a_edits);
