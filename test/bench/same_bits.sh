@@ -10,7 +10,9 @@
 # old/ and new/ with every output, and differ.txt listing those that
 # differ.  The work, per scene (by default the project's scenes, the stiff
 # and fuzz scenes, and ../shared's small SPD scenes s1 and s2, traced at
-# 96x96, SPD ones with --spd at 128x128): the trace's image and tree file,
+# 96x96, SPD ones with --spd at 128x128; -j1 and -j2 by turns, as a
+# recording with one worker writes its tree by another path than with
+# several): the trace's image and tree file,
 # then five five-line --streams (light 0 moved twice, light 1 moved or
 # added, light 0's colour, material 0's kd) in the shadow modes exact -j1,
 # lightbuf:256 -j1, lightbuf:64 -j2, itembuf:256 -j2 and auto -j2: 27
@@ -58,14 +60,15 @@ move() { # nff fx fy fz
 }
 
 run_side() { # root dir
-    local rtp=$1/rtp dir=$2 nff name base opts m mode j st
+    local rtp=$1/rtp dir=$2 nff name base opts m mode j st tj=1
     for nff in "${scenes[@]}"; do
+        tj=$((3 - tj))
         name=$(basename "$nff" .nff)
         base=$dir/$name
         opts=(--size 96x96)
         case $nff in */spd/*) opts=(--spd --size 128x128) ;; esac
         if ! (cd "$(dirname "$nff")" &&
-            "$rtp" trace "$(basename "$nff")" "${opts[@]}" -j2 -q -o "$base.rtp" -i "$base.pfm"); then
+            "$rtp" trace "$(basename "$nff")" "${opts[@]}" -j$tj -q -o "$base.rtp" -i "$base.pfm"); then
             echo "$name: trace failed" >>"$dir/failed.txt"
             continue
         fi
