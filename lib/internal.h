@@ -1240,6 +1240,11 @@ struct rtp_tree {
     size_t pk_nnz;
     size_t pk_cap;         /* entries pk_c's block has room for (pk_build
                               makes it as large as the planes need) */
+    size_t pk_split;       /* bands from entry pk_split on lie in pk_nz's
+                              block (entry pk_off - pk_split there); those
+                              before, in ev_samples' block, lent while the
+                              samples hold nothing (tree.c: pk_lend): 0
+                              where none is lent */
     /* colour planes (tree.c: cp_*): an image for other colours of the
        terms (background, ambient, lights) is S + sum K_d (c_d - cS_d) */
     float *cp_s;           /* pixels * 3: S, the full path's image for... */

@@ -1796,9 +1796,26 @@ static int combine_row(void *ctx, int y)
    a task: in band b, pk_c and pk_nz from entry pk_off[b] on hold pk_seg[b]
    pixels whose K is not 0, in pixel order (pk_off[b]: the band's first
    pixel, or where only the material's pixels are made, the entries of
-   the bands before: pk_img_chunk); pk holds P of the band's other
-   pixels, at their own place. */
+   the bands before: pk_img_chunk, in the samples' block as far as it
+   lends room, pk_lend, then in pk_nz's: pk_band); pk holds P of the
+   band's other pixels, at their own place. */
 #define PK_ROWS 16
+
+/* Band b's planes: entries pk_off[b] on of the block lent by the samples
+   (pk_lend) before pk_split, else of pk_nz's own block (with none of that,
+   every band lies in the lent one: those of no entries at its end). */
+static void pk_band(const rtp_tree *t, int b, float **pc, uint32_t **nz)
+{
+    size_t o = t->pk_off[b];
+    if (o < t->pk_split || !t->pk_nz) {
+        uint32_t *ln = (uint32_t *)(void *)t->ev_samples;
+        *nz = ln + o;
+        *pc = (float *)(void *)(ln + t->pk_split) + 6 * o;
+    } else {
+        *nz = t->pk_nz + (o - t->pk_split);
+        *pc = t->pk_c + 6 * (o - t->pk_split);
+    }
+}
 
 /* The rest P_s of sample k into out (3 floats): the material's diffuse
    part x q taken off the whole (q: the sample's, 0 where the material is
@@ -2244,16 +2261,21 @@ static int pk_img_chunk(void *ctx, int chunk)
     int bad = 0;
     if (y1 > t->height)
         y1 = t->height;
-    if (e->pk_pack)
-        t->pk_off[chunk] = chunk ? t->pk_off[chunk - 1] + t->pk_seg[chunk - 1] : 0;
+    if (e->pk_pack) {
+        /* after the band before; past the lent block's end where this
+           band's bound (pk_seg, pk_build's) does not fit before it */
+        size_t o = chunk ? t->pk_off[chunk - 1] + t->pk_seg[chunk - 1] : 0;
+        if (o < t->pk_split && o + t->pk_seg[chunk] > t->pk_split)
+            o = t->pk_split;
+        t->pk_off[chunk] = o;
+    }
+    pk_band(t, chunk, &pc, &nz);
     if (!spd) {
         /* a pixel of its own per sample: the band's listed samples are
            its pixels, in order, with their q as K (no map of them), made
            here for the band (made for the whole list first, they were
            12 bytes a sample more memory, fresh: mount_s6 at 1024x1024,
            8 of the 24 MB the edit touched) */
-        pc = t->pk_c + 6 * t->pk_off[chunk];
-        nz = t->pk_nz + t->pk_off[chunk];
         lo = lower_bound(e->list, e->nlist, (size_t)y0 * w);
         hi = lower_bound(e->list, e->nlist, (size_t)y1 * w);
         if (lo < hi)
@@ -2261,8 +2283,6 @@ static int pk_img_chunk(void *ctx, int chunk)
         n = pk_img_pixels(e->qgrid, e->list + lo, hi - lo, img, xo, pc, nz, bd);
         goto check;
     }
-    pc = t->pk_c + 6 * t->pk_off[chunk];
-    nz = t->pk_nz + t->pk_off[chunk];
     {
         const double xn[3] = {e->x[0], e->x[1], e->x[2]};
         const uint32_t *list = e->list;
@@ -2350,13 +2370,49 @@ check:
     return 0;
 }
 
+static int pk_run(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, int part);
+
+/* The entries of a material's planes (pk_img_chunk's) the samples' block
+   lends, 0 where it lends none.  The planes of a kd edit live as long as
+   the samples hold nothing: the edit leaves them stale (ev_samples_ok: a
+   material's P + K x changes the image, not its samples), and whatever
+   reads them next (a light moved, a shine edit, any other term) combines
+   every sample anew first, in an evaluation that drops the planes
+   (eval_body's end).  Their block is memory the first evaluation wrote,
+   already the process's: a block of the planes' own, made fresh, took a
+   page fault each 4 KiB the edit wrote (tetra_s6 at 1024x1024: 1,363, 1.9
+   of its 4.3 ms).  Not where S lives there (cp_snapshot): S holds while
+   the material's coefficients stay those before, for a colour edit once
+   the material is back. */
+static size_t pk_lend(const rtp_tree *t, const eval_ctx *e)
+{
+    size_t ns = (size_t)t->nx * t->ny;
+    if (!t->ev_samples || e->pixels == t->ev_samples || (t->cp_s_ok && t->cp_s == t->ev_samples))
+        return 0;
+    return 3 * ns * sizeof(float) / (6 * sizeof(float) + sizeof(uint32_t));
+}
+
+/* Band i of at most m entries at *off, which it then passes: the lent
+   block's entries 0 .. lend - 1 first, while the band fits there (a band
+   lies in one block), then the block of the planes' own (pk_band).  m
+   kept as pk_seg until the band is made: pk_img_chunk's bound where one
+   thread packs the bands. */
+static void pk_place(rtp_tree *t, int i, size_t m, size_t lend, size_t *off)
+{
+    if (*off < lend && *off + m > lend)
+        *off = lend;
+    t->pk_off[i] = *off;
+    t->pk_seg[i] = (uint32_t)m;
+    *off += m;
+}
+
 /* Builds the planes for the term the contexts name (with `part`, only
    where the material's samples reach: pk_img_chunk); 1 if they came out
    finite, else 0 (not to be used; out of memory for the threads' scratch
    also sets e->nomem). */
 static int pk_build(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, int part)
 {
-    int i, nb = (t->height + PK_ROWS - 1) / PK_ROWS, ok = 1;
+    int i, nb = (t->height + PK_ROWS - 1) / PK_ROWS;
     size_t off; /* the planes' entries */
     /* two sample rows' rest, or with `part` a band's q: with corner
        samples a grid of its sample rows, all 0; a pixel of its own per
@@ -2388,6 +2444,7 @@ static int pk_build(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, in
            at 1024x1024, 20% slower).  A pixel of its own per sample: the
            band's listed samples bound its entries; corner samples: the
            spans of its rows (pk_img_span). */
+        size_t lend = pk_lend(t, e), own;
         off = 0;
         if (!t->spd) {
             size_t w = (size_t)t->width, lo = 0;
@@ -2395,8 +2452,7 @@ static int pk_build(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, in
                 size_t y1 = (size_t)(i + 1) * PK_ROWS, hi;
                 hi = y1 >= (size_t)t->height ? e->nlist
                                               : lower_bound(e->list, e->nlist, y1 * w);
-                t->pk_off[i] = off;
-                off += hi - lo;
+                pk_place(t, i, hi - lo, lend, &off);
                 lo = hi;
             }
         } else {
@@ -2404,19 +2460,26 @@ static int pk_build(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, in
             bnd[1] = lower_bound(e->list, e->nlist, 0);
             bnd[2] = lower_bound(e->list, e->nlist, nx);
             for (i = 0, r = 0; i < nb; i++) {
-                t->pk_off[i] = off;
+                size_t m = 0;
                 for (; r < (size_t)(i + 1) * PK_ROWS && r < (size_t)t->height; r++) {
                     /* pixel row r: sample rows r and r + 1 */
                     bnd[0] = bnd[1];
                     bnd[1] = bnd[2];
                     bnd[2] = lower_bound(e->list, e->nlist, (r + 2) * nx);
                     if (pk_img_span(e->list, bnd, r * nx, nx, &x0, &x1))
-                        off += x1 - x0;
+                        m += x1 - x0;
                 }
+                pk_place(t, i, m, lend, &off);
             }
         }
+        t->pk_split = lend;
+        own = off > lend ? off - lend : 0;
+        if (!own)
+            return pk_run(t, e, ctx, nthreads, part);
+        off = own;
     } else {
         off = (size_t)t->width * (size_t)t->height;
+        t->pk_split = 0;
     }
     /* a block as large as these planes need (a material's alone: a block
        for every pixel, made fresh each time, cost mount_s6 at 1024x1024
@@ -2434,6 +2497,13 @@ static int pk_build(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, in
         t->pk_cap = off;
     }
     t->pk_c = (float *)(void *)(t->pk_nz + (off ? off : 1));
+    return pk_run(t, e, ctx, nthreads, part);
+}
+
+/* pk_build's bands made, the block(s) for them there. */
+static int pk_run(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, int part)
+{
+    int i, nb = (t->height + PK_ROWS - 1) / PK_ROWS, ok = 1;
     /* One thread takes the bands one after another, in order
        (rtpi_parallel_rows hands rows out one at a time, ascending): each
        band's entries then start where the band before ended (pk_img_chunk)
@@ -2476,8 +2546,9 @@ static int pk_apply_band(void *ctx, int chunk)
     const rtp_tree *t = e->t;
     size_t p = (size_t)chunk * PK_ROWS * (size_t)t->width, end = p + PK_ROWS * (size_t)t->width;
     size_t n = t->pk_seg[chunk], j = 0;
-    const float *pc = t->pk_c + 6 * t->pk_off[chunk];
-    const uint32_t *nz = t->pk_nz + t->pk_off[chunk];
+    float *pc;
+    uint32_t *nz;
+    pk_band(t, chunk, &pc, &nz);
     if (end > (size_t)t->width * t->height)
         end = (size_t)t->width * t->height;
     for (; p < end; p++)
@@ -2496,9 +2567,10 @@ static int pk_apply_listed(void *ctx, int chunk)
     eval_ctx *e = (eval_ctx *)ctx;
     const rtp_tree *t = e->t;
     size_t n = t->pk_seg[chunk], j;
-    const float *pc = t->pk_c + 6 * t->pk_off[chunk];
-    const uint32_t *nz = t->pk_nz + t->pk_off[chunk];
     const double *c = e->x;
+    float *pc;
+    uint32_t *nz;
+    pk_band(t, chunk, &pc, &nz);
     for (j = 0; j < n; j++)
         pk_pixel(pc + 6 * j, c, e->pixels + 3 * (size_t)nz[j]);
     return 0;
@@ -2968,6 +3040,7 @@ static void drop_caches(rtp_tree *t)
     t->pk_nz = NULL;
     t->pk_c = NULL;
     t->pk_cap = 0;
+    t->pk_split = 0;
     t->pk_seg = NULL;
     t->pk_off = NULL;
     t->ev_cl = NULL;
@@ -5386,6 +5459,13 @@ static rtp_status eval_body(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
     if (full && cached && opt && opt->incremental && samples != img->pixels)
         cp_ready(t, e, ctx, nthreads, cv, img->pixels);
 done:
+    /* planes the samples' block lends (pk_lend) hold through their
+       material's kd edits alone: any other evaluation may have written
+       samples over them */
+    if (t->pk_split && !matpath) {
+        t->pk_term = 0;
+        t->pk_split = 0;
+    }
     for (i = 0; i < nthreads; i++) {
         rtpi_free(&t->alloc, e[i].terms);
         rtpi_free(&t->alloc, e[i].coeffs);

@@ -4415,6 +4415,80 @@ static void test_material_planes(void)
     material_planes_run(1);
 }
 
+/* Where a material's planes lie (pk_lend): the bands that fit in the
+   samples' block, which holds nothing while kd edits follow one another,
+   and the others in a block of their own after pk_split; the floor's
+   pixels pass the samples' room, so both.  Each image equals a full
+   trace, plain and SPD, one and two threads (two: each band at its own
+   room; one: packed).  An edit of another kind drops the lent planes,
+   and where S lies in the samples (a colour edit after a move:
+   cp_snapshot) nothing is lent: the kd set back to the caches' takes S +
+   K (c - cS) then, which planes written over S made wrong. */
+static void test_material_planes_lent(void)
+{
+    int spd, nth;
+    for (spd = 0; spd < 2; spd++)
+        for (nth = 1; nth <= 2; nth++) {
+            rtp_scene *s = NULL;
+            rtp_tree *t = NULL;
+            rtp_image *re = NULL;
+            rtp_trace_options o;
+            rtp_eval_options eo;
+            int b, nb, lent = 0, own = 0;
+            if (!edit_start(spd, &s, &t, &o, &eo, &re) || !t || !re) {
+                rtp_image_destroy(re);
+                rtp_tree_destroy(t);
+                rtp_scene_destroy(s);
+                continue;
+            }
+            eo.threads = nth;
+            if (spd) {
+                /* (a region of the frame low enough for the floor to fill
+                   most of it) */
+                rtp_tree_destroy(t);
+                rtp_image_destroy(re);
+                t = NULL;
+                re = NULL;
+                o.region[0] = 180;
+                o.region[1] = 330;
+                o.region[2] = 260;
+                o.region[3] = 394;
+                CHECK(rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
+                CHECK(t && rtp_tree_eval(t, &eo, &re, NULL, NULL) == RTP_OK);
+                if (!t || !re) {
+                    rtp_image_destroy(re);
+                    rtp_tree_destroy(t);
+                    rtp_scene_destroy(s);
+                    continue;
+                }
+            }
+            CHECK(edit_equals_trace(t, s, &o, &eo, re, "mat.floor.kd", "0.5", NULL));
+            nb = (t->height + 15) / 16;
+            for (b = 0; t->pk_term && b < nb; b++)
+                if (t->pk_seg[b] > 0) {
+                    lent += t->pk_off[b] + t->pk_seg[b] <= t->pk_split;
+                    own += t->pk_off[b] >= t->pk_split;
+                }
+            CHECK_MSG(t->pk_term && t->pk_split > 0 && lent > 0 && own > 0,
+                      "spd %d, %d threads: %d bands lent, %d own (split %zu)", spd, nth, lent,
+                      own, t->pk_split);
+            CHECK(edit_equals_trace(t, s, &o, &eo, re, "mat.floor.kd", "0.3", NULL));
+            CHECK(edit_equals_trace(t, s, &o, &eo, re, "mat.floor.kd", "0.65", NULL));
+            CHECK(edit_equals_trace(t, s, &o, &eo, re, "light.key.color", "0.5,0.8,0.2", NULL));
+            CHECK_MSG(t->pk_split == 0 && t->pk_term == 0, "spd %d: planes kept", spd);
+            CHECK(edit_equals_trace(t, s, &o, &eo, re, "light.key.pos", "-3,-6,7", NULL));
+            CHECK(edit_equals_trace(t, s, &o, &eo, re, "light.fill.color", "0.3,0.3,0.6", NULL));
+            CHECK_MSG(t->cp_s_ok && t->cp_s == t->ev_samples, "spd %d: S not in the samples",
+                      spd);
+            CHECK(edit_equals_trace(t, s, &o, &eo, re, "mat.red.kd", "0.4", NULL));
+            CHECK_MSG(t->pk_term && t->pk_split == 0, "spd %d: lent over S", spd);
+            CHECK(edit_equals_trace(t, s, &o, &eo, re, "mat.red.kd", "0.8", NULL));
+            rtp_image_destroy(re);
+            rtp_tree_destroy(t);
+            rtp_scene_destroy(s);
+        }
+}
+
 /* key=value to the tree and the scene, the tree evaluated into the kept
    image re, which must then equal a full trace of the scene (1e-6); the
    evaluation's stats into *es.  `what` labels a failure. */
@@ -7800,6 +7874,7 @@ int main(void)
     RUN(test_nocache_ends_shine_chain);
     RUN(test_nocache_into_kept_image);
     RUN(test_material_planes);
+    RUN(test_material_planes_lent);
     RUN(test_moves_kept_image);
     RUN(test_moves_scattered_marks);
     RUN(test_moves_rest);
