@@ -529,10 +529,15 @@ typedef struct rtp_eval_stats {
  *  place in its material's list, 12 bytes), for colour edits a snapshot
  *  image (12 bytes a pixel) and a plane for each colour term edited (16
  *  bytes a pixel, at most 8 kept), for the material last edited in kd
- *  or colour its planes (up to 40 bytes a pixel, 12 a sample), after a
- *  move a byte a sample (the samples it changed) and 24 bytes a node (its
- *  diffuse colour product, the part of a lit node's shading that does not
- *  depend on where the light is), and for a light moved
+ *  or colour its planes (up to 40 bytes a pixel, 12 a sample; after a kd
+ *  edit as far as they fit in the samples' own block, which holds nothing
+ *  while kd edits follow one another), after a move a byte a sample (the
+ *  samples it changed) and 24 bytes a node (its diffuse colour product,
+ *  the part of a lit node's shading that does not depend on where the
+ *  light is), after an exact move 4 bytes a node (its point's kd leaf)
+ *  and with the scene's kd-tree its leaves' lists of ancestors for walks
+ *  from them (9 entries of 8 bytes a leaf and 4 an ancestor, made once
+ *  where opt->memory_limit holds them), and for a light moved
  *  alone again and again in a scene of 3 lights or more the sums of every
  *  other term (25 bytes a sample); opt->no_cache keeps none of it. */
 rtp_status rtp_tree_eval(rtp_tree *tree, const rtp_eval_options *opt,
