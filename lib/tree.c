@@ -2159,6 +2159,69 @@ static int pk_img_span(const uint32_t *list, const size_t *bnd, size_t base, siz
     return 1;
 }
 
+#ifdef PK_SSE2
+/* The running bound of pk_img_row and pk_img_list_nl on SSE2's lanes:
+   the largest |B| and |K| so far and the sum of the edited pixels (see
+   pk_img_row). */
+typedef struct pk_vb {
+    __m128 bm, km, sum;
+} pk_vb;
+
+static RTPI_FORCE_INLINE void pk_vb_start(pk_vb *v, const uint32_t *bd)
+{
+    float f[2];
+    memcpy(&f[0], &bd[0], sizeof *f);
+    memcpy(&f[1], &bd[1], sizeof *f);
+    v->bm = _mm_set1_ps(f[0]);
+    v->km = _mm_set1_ps(f[1]);
+    v->sum = _mm_setzero_ps();
+}
+
+/* A pixel whose K (k01: channels 0 and 1, k2: 2) is not 0: its planes P
+   = B - xo K and K into o, the edit P + K xn over B at px, the bound. */
+static RTPI_FORCE_INLINE void pk_vb_entry(pk_vb *v, __m128 k01, __m128 k2, float *px, float *o,
+                                          __m128d xo01, __m128d xo2, __m128d xn01,
+                                          __m128d xn2)
+{
+    const __m128 zf = _mm_setzero_ps(), absm = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff));
+    const __m128 b01 = _mm_loadl_pi(zf, (const __m64 *)(const void *)px), b2 = _mm_load_ss(px + 2);
+    const __m128d kd01 = _mm_cvtps_pd(k01), kd2 = _mm_cvtps_pd(k2);
+    const __m128 pf01 = _mm_cvtpd_ps(_mm_sub_pd(_mm_cvtps_pd(b01), _mm_mul_pd(xo01, kd01))),
+                 pf2 = _mm_cvtpd_ps(_mm_sub_pd(_mm_cvtps_pd(b2), _mm_mul_pd(xo2, kd2)));
+    __m128 o01, o2;
+    v->bm = _mm_max_ps(_mm_and_ps(_mm_movelh_ps(b01, b2), absm), v->bm);
+    v->km = _mm_max_ps(_mm_and_ps(_mm_movelh_ps(k01, k2), absm), v->km);
+    _mm_storel_pi((__m64 *)(void *)o, pf01);
+    _mm_store_ss(o + 2, pf2);
+    _mm_storel_pi((__m64 *)(void *)(o + 3), k01);
+    _mm_store_ss(o + 5, k2);
+    o01 = _mm_cvtpd_ps(_mm_add_pd(_mm_cvtps_pd(pf01), _mm_mul_pd(kd01, xn01)));
+    o2 = _mm_cvtpd_ps(_mm_add_pd(_mm_cvtps_pd(pf2), _mm_mul_pd(kd2, xn2)));
+    _mm_storel_pi((__m64 *)(void *)px, o01);
+    _mm_store_ss(px + 2, o2);
+    v->sum = _mm_add_ps(v->sum, _mm_movelh_ps(o01, o2));
+}
+
+/* The lanes' largest into bd (lane 3: 0 or what came in; abs_bits of a
+   float at or above 0 are its bits), infinite where the sum is not
+   finite. */
+static RTPI_FORCE_INLINE void pk_vb_end(const pk_vb *v, uint32_t *bd)
+{
+    float f[4];
+    _mm_storeu_ps(f, v->bm);
+    f[0] = f[1] > f[0] ? f[1] : f[0];
+    f[0] = f[2] > f[0] ? f[2] : f[0];
+    memcpy(&bd[0], &f[0], sizeof *f);
+    _mm_storeu_ps(f, v->km);
+    f[0] = f[1] > f[0] ? f[1] : f[0];
+    f[0] = f[2] > f[0] ? f[2] : f[0];
+    memcpy(&bd[1], &f[0], sizeof *f);
+    _mm_storeu_ps(f, v->sum);
+    if (!(fabsf(f[0] + f[1] + f[2]) <= FLT_MAX))
+        bd[0] = 0x7f800000u;
+}
+#endif
+
 /* pk_img_chunk's pixels of a pixel row, m of them from its column x0:
    K from the band's grid of q (ga and gb: its two sample rows from
    column x0 on), whose columns x0 .. x0 + m of the first row are put
@@ -2193,15 +2256,10 @@ static size_t pk_img_row(float *ga, const float *gb, float *px, uint32_t id, siz
        (with integer maxima by lanes, pcmpgtd: 26.40 M, 9.85 M). */
     const __m128d q4 = _mm_set1_pd(0.25), xo01 = _mm_loadu_pd(xo), xo2 = _mm_load_sd(xo + 2),
                   xn01 = _mm_loadu_pd(xn), xn2 = _mm_load_sd(xn + 2);
-    const __m128 zf = _mm_setzero_ps(),
-                 absm = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff));
-    __m128 bm, km, sum = zf;
+    const __m128 zf = _mm_setzero_ps();
+    pk_vb v;
     __m128d l01, l2;
-    float f[4];
-    memcpy(&f[0], &bd[0], sizeof *f);
-    memcpy(&f[1], &bd[1], sizeof *f);
-    bm = _mm_set1_ps(f[0]);
-    km = _mm_set1_ps(f[1]);
+    pk_vb_start(&v, bd);
     l01 = _mm_add_pd(_mm_cvtps_pd(_mm_loadl_pi(zf, (const __m64 *)(const void *)ga)),
                      _mm_cvtps_pd(_mm_loadl_pi(zf, (const __m64 *)(const void *)gb)));
     l2 = _mm_add_pd(_mm_cvtps_pd(_mm_load_ss(ga + 2)), _mm_cvtps_pd(_mm_load_ss(gb + 2)));
@@ -2217,47 +2275,17 @@ static size_t pk_img_row(float *ga, const float *gb, float *px, uint32_t id, siz
         const __m128 k01 = _mm_cvtpd_ps(_mm_mul_pd(q4, _mm_add_pd(l01, r01))),
                      k2 = _mm_cvtpd_ps(_mm_mul_pd(q4, _mm_add_pd(l2, r2))),
                      k = _mm_movelh_ps(k01, k2);
-        __m128 b01, b2, pf01, pf2, o01, o2;
-        __m128d kd01, kd2;
         l01 = r01;
         l2 = r2;
         _mm_storel_pi((__m64 *)(void *)qa, zf);
         _mm_store_ss(qa + 2, zf);
         if (!_mm_movemask_ps(_mm_cmpneq_ps(k, zf)))
             continue;
-        b01 = _mm_loadl_pi(zf, (const __m64 *)(const void *)px);
-        b2 = _mm_load_ss(px + 2);
-        bm = _mm_max_ps(_mm_and_ps(_mm_movelh_ps(b01, b2), absm), bm);
-        km = _mm_max_ps(_mm_and_ps(k, absm), km);
-        kd01 = _mm_cvtps_pd(k01);
-        kd2 = _mm_cvtps_pd(k2);
-        pf01 = _mm_cvtpd_ps(_mm_sub_pd(_mm_cvtps_pd(b01), _mm_mul_pd(xo01, kd01)));
-        pf2 = _mm_cvtpd_ps(_mm_sub_pd(_mm_cvtps_pd(b2), _mm_mul_pd(xo2, kd2)));
-        _mm_storel_pi((__m64 *)(void *)o, pf01);
-        _mm_store_ss(o + 2, pf2);
-        _mm_storel_pi((__m64 *)(void *)(o + 3), k01);
-        _mm_store_ss(o + 5, k2);
-        o01 = _mm_cvtpd_ps(_mm_add_pd(_mm_cvtps_pd(pf01), _mm_mul_pd(kd01, xn01)));
-        o2 = _mm_cvtpd_ps(_mm_add_pd(_mm_cvtps_pd(pf2), _mm_mul_pd(kd2, xn2)));
-        _mm_storel_pi((__m64 *)(void *)px, o01);
-        _mm_store_ss(px + 2, o2);
-        sum = _mm_add_ps(sum, _mm_movelh_ps(o01, o2));
+        pk_vb_entry(&v, k01, k2, px, o, xo01, xo2, xn01, xn2);
         o += 6;
         nz[n++] = id;
     }
-    /* the lanes' largest (lane 3: 0 or what came in); abs_bits of a
-       float at or above 0 are its bits */
-    _mm_storeu_ps(f, bm);
-    f[0] = f[1] > f[0] ? f[1] : f[0];
-    f[0] = f[2] > f[0] ? f[2] : f[0];
-    memcpy(&bd[0], &f[0], sizeof *f);
-    _mm_storeu_ps(f, km);
-    f[0] = f[1] > f[0] ? f[1] : f[0];
-    f[0] = f[2] > f[0] ? f[2] : f[0];
-    memcpy(&bd[1], &f[0], sizeof *f);
-    _mm_storeu_ps(f, sum);
-    if (!(fabsf(f[0] + f[1] + f[2]) <= FLT_MAX))
-        bd[0] = 0x7f800000u;
+    pk_vb_end(&v, bd);
 #else
     const double xo0 = xo[0], xo1 = xo[1], xo2 = xo[2];
     double l0 = (double)ga[0] + gb[0], l1 = (double)ga[1] + gb[1], l2 = (double)ga[2] + gb[2];
@@ -2314,19 +2342,14 @@ static RTPI_FORCE_INLINE size_t pk_img_list_nl(const eval_ctx *e, size_t i0, siz
     const __m128d a01 = _mm_loadu_pd(cv + 3), a2 = _mm_load_sd(cv + 5), c01 = _mm_loadu_pd(cv + 6),
                   c2 = _mm_load_sd(cv + 8), xo01 = _mm_loadu_pd(xo), xo2 = _mm_load_sd(xo + 2),
                   xn01 = _mm_loadu_pd(xn), xn2 = _mm_load_sd(xn + 2);
-    const __m128 zf = _mm_setzero_ps(), absm = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff));
-    __m128 bm, km, sum = zf;
-    float f[4];
-    memcpy(&f[0], &bd[0], sizeof *f);
-    memcpy(&f[1], &bd[1], sizeof *f);
-    bm = _mm_set1_ps(f[0]);
-    km = _mm_set1_ps(f[1]);
+    const __m128 zf = _mm_setzero_ps();
+    pk_vb v;
+    pk_vb_start(&v, bd);
     j += lower_bound(mn + j, jend - j, (size_t)st[list[i0]]);
     for (i = i0; i < i1; i++) {
         const size_t k = list[i], b = (size_t)st[k + 1];
-        __m128d s01 = _mm_setzero_pd(), s2 = _mm_setzero_pd(), kd01, kd2;
-        __m128 k01, k2, b01, b2, pf01, pf2, o01, o2;
-        float *px;
+        __m128d s01 = _mm_setzero_pd(), s2 = _mm_setzero_pd();
+        __m128 k01, k2;
         if (j + LQ_AHEAD < jend) {
             const size_t pf = mn[j + LQ_AHEAD];
             RTPI_PREFETCH(terms, pf * nt * sizeof *terms);
@@ -2344,39 +2367,11 @@ static RTPI_FORCE_INLINE size_t pk_img_list_nl(const eval_ctx *e, size_t i0, siz
         k2 = _mm_cvtpd_ps(s2);
         if (!_mm_movemask_ps(_mm_cmpneq_ps(_mm_movelh_ps(k01, k2), zf)))
             continue;
-        px = img + 3 * k;
-        b01 = _mm_loadl_pi(zf, (const __m64 *)(const void *)px);
-        b2 = _mm_load_ss(px + 2);
-        bm = _mm_max_ps(_mm_and_ps(_mm_movelh_ps(b01, b2), absm), bm);
-        km = _mm_max_ps(_mm_and_ps(_mm_movelh_ps(k01, k2), absm), km);
-        kd01 = _mm_cvtps_pd(k01);
-        kd2 = _mm_cvtps_pd(k2);
-        pf01 = _mm_cvtpd_ps(_mm_sub_pd(_mm_cvtps_pd(b01), _mm_mul_pd(xo01, kd01)));
-        pf2 = _mm_cvtpd_ps(_mm_sub_pd(_mm_cvtps_pd(b2), _mm_mul_pd(xo2, kd2)));
-        _mm_storel_pi((__m64 *)(void *)o, pf01);
-        _mm_store_ss(o + 2, pf2);
-        _mm_storel_pi((__m64 *)(void *)(o + 3), k01);
-        _mm_store_ss(o + 5, k2);
-        o01 = _mm_cvtpd_ps(_mm_add_pd(_mm_cvtps_pd(pf01), _mm_mul_pd(kd01, xn01)));
-        o2 = _mm_cvtpd_ps(_mm_add_pd(_mm_cvtps_pd(pf2), _mm_mul_pd(kd2, xn2)));
-        _mm_storel_pi((__m64 *)(void *)px, o01);
-        _mm_store_ss(px + 2, o2);
-        sum = _mm_add_ps(sum, _mm_movelh_ps(o01, o2));
+        pk_vb_entry(&v, k01, k2, img + 3 * k, o, xo01, xo2, xn01, xn2);
         o += 6;
         nz[n++] = (uint32_t)k;
     }
-    /* pk_img_row's bound from the lanes */
-    _mm_storeu_ps(f, bm);
-    f[0] = f[1] > f[0] ? f[1] : f[0];
-    f[0] = f[2] > f[0] ? f[2] : f[0];
-    memcpy(&bd[0], &f[0], sizeof *f);
-    _mm_storeu_ps(f, km);
-    f[0] = f[1] > f[0] ? f[1] : f[0];
-    f[0] = f[2] > f[0] ? f[2] : f[0];
-    memcpy(&bd[1], &f[0], sizeof *f);
-    _mm_storeu_ps(f, sum);
-    if (!(fabsf(f[0] + f[1] + f[2]) <= FLT_MAX))
-        bd[0] = 0x7f800000u;
+    pk_vb_end(&v, bd);
     return n;
 }
 
