@@ -1385,6 +1385,10 @@ typedef struct eval_ctx {
                                  entries right after the band before's */
     float *qgrid;             /* pk_img_chunk: a band's q (corner samples:
                                  in a grid of its rows, 0 between uses) */
+    int qk_band;              /* pk_img_chunk: the band whose first sample
+                                 row qgrid's row 0 holds (its band before's
+                                 last, kept), -1 for none */
+    size_t qk_lo, qk_hi;      /* that row's list entries */
     /* cp_plane_chunk: the terms whose planes it makes (cp_planes), and
        per term the largest |K| per channel */
     const size_t *cp_terms;
@@ -2464,10 +2468,21 @@ static int pk_img_chunk(void *ctx, int chunk)
            list after the rows, a loop of its own, cost mount_s6's first
            kd edit 1.03 M instructions of 31.4 M, two stores a column
            of the spans the less) */
-        if (bnd[0] < bnd[srows] && e->shade->s->nlights == 1)
-            pk_img_q1(e, bnd[0], bnd[srows], g, (size_t)y0 * nx);
-        else if (bnd[0] < bnd[srows])
-            listed_q_nl(e, bnd[0], bnd[srows], g, (size_t)y0 * nx, 0, e->shade->s->nlights);
+        size_t q0 = bnd[0]; /* the first entry whose q is to be summed */
+        /* The band's first sample row is the band before's last: where
+           this thread made that band, it kept that row's q in row 0 of
+           the grid (below) and it is not summed again (1/16 of q);
+           elsewhere what it kept, of another band, is put back to 0. */
+        if (e->qk_band == chunk)
+            q0 = bnd[1];
+        else
+            for (i = e->qk_lo; i < e->qk_hi; i++)
+                memset(g + 3 * (list[i] % nx), 0, 3 * sizeof *g);
+        e->qk_band = -1;
+        if (q0 < bnd[srows] && e->shade->s->nlights == 1)
+            pk_img_q1(e, q0, bnd[srows], g, (size_t)y0 * nx);
+        else if (q0 < bnd[srows])
+            listed_q_nl(e, q0, bnd[srows], g, (size_t)y0 * nx, 0, e->shade->s->nlights);
         for (y = y0, r = 0; y < y1; y++, r++) {
             float *ga = g + 3 * r * nx;
             const float *gb = ga + 3 * nx;
@@ -2480,8 +2495,23 @@ static int pk_img_chunk(void *ctx, int chunk)
             n += pk_img_row(ga + 3 * x, gb + 3 * x, e->pixels + 3 * (p + x), (uint32_t)(p + x),
                             x1 - x, xo, xn, pc + 6 * n, nz + n, acc);
         }
-        for (i = bnd[srows - 1]; i < bnd[srows]; i++)
-            memset(g + 3 * (list[i] - (size_t)y0 * nx), 0, 3 * sizeof *g);
+        if (y1 < t->height) {
+            /* the last sample row's q into row 0 for the next band (rows
+               0 .. srows - 2 are all 0 now) */
+            float *last = g + 3 * (srows - 1) * nx;
+            for (i = bnd[srows - 1]; i < bnd[srows]; i++) {
+                size_t col = 3 * (list[i] % nx);
+                memcpy(g + col, last + col, 3 * sizeof *g);
+                memset(last + col, 0, 3 * sizeof *g);
+            }
+            e->qk_band = chunk + 1;
+            e->qk_lo = bnd[srows - 1];
+            e->qk_hi = bnd[srows];
+        } else {
+            for (i = bnd[srows - 1]; i < bnd[srows]; i++)
+                memset(g + 3 * (list[i] - (size_t)y0 * nx), 0, 3 * sizeof *g);
+            e->qk_lo = e->qk_hi = 0;
+        }
         memcpy(bd, acc, sizeof acc);
     }
 check:
@@ -2699,9 +2729,19 @@ static int pk_run(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, int 
        512: 1 of 2 MiB, where the gaps took 2).  The list of pixels comes
        first in the block for that too: behind the room of the entries,
        it began a page of its own. */
-    for (i = 0; i < nthreads; i++)
+    for (i = 0; i < nthreads; i++) {
         e[i].pk_pack = part && nthreads == 1;
+        e[i].qk_band = -1;
+        e[i].qk_lo = e[i].qk_hi = 0;
+    }
     tree_rows(t, nb, nthreads, ctx, part ? pk_img_chunk : pk_build_chunk, NULL, NULL);
+    /* a row of q kept for a band another thread made (pk_img_chunk's
+       grid is all 0 between uses) */
+    for (i = 0; i < nthreads; i++) {
+        size_t j, nx = (size_t)t->nx;
+        for (j = e[i].qk_lo; j < e[i].qk_hi; j++)
+            memset(e[i].qgrid + 3 * (e[i].list[j] % nx), 0, 3 * sizeof(float));
+    }
     for (i = 0; i < nthreads; i++) {
         ok &= !e[i].nonfinite;
         e[i].nonfinite = 0;
