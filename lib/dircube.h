@@ -95,7 +95,9 @@ void rtpi_dc_windows(const rtp_scene *s, rtpi_v3 L, int res, double lim,
 
 /* The cell along a window's edge holding coordinate x; outside values and
    NaN are clamped to the edge cells.  The one mapping both the filling of
-   cells and the queries use. */
+   cells and the queries use (but the light buffer's queries, whose cell
+   may differ from it by roundings its lists' widening covers: dircube.c
+   lb_cell). */
 static inline int rtpi_dc_wcoord(double x, double x0, double dx, int res)
 {
     double t = (x - x0) / dx;
@@ -213,6 +215,8 @@ typedef struct rtpi_lightbuf {
     double ethr;
     uint32_t *rank_of;   /* with edge: each triangle's rank (RTPI_NONE: none) */
     double scale;        /* the scene's and light's largest |coordinate| */
+    double ru[6], rv[6]; /* 1 / w.du, 1 / w.dv: a query's cell (lb_cell) */
+    double top;          /* res - 1: the last cell's i and j */
     /* bytes the build's limit leaves once the lists and the speed-ups
        above are made (HUGE_VAL: no limit), for the light buffer's shadow
        query's own numbers (shadow.c, sh_lb_quadrics) */
@@ -255,7 +259,8 @@ rtp_status rtpi_lightbuf_build_q(const rtp_scene *s, rtpi_v3 light, int res,
                                  const rtpi_poll *poll, const rtp_allocator *a,
                                  rtpi_lightbuf *lb, rtp_error *err);
 /* 1 when no candidate of ray's cell hits ray in [tmin, tmax]; ray must run
-   towards the light (rtpi_shadow_ray). */
+   towards the light (rtpi_shadow_ray(o, lb->light): the cell is that of
+   its origin seen from lb->light). */
 int rtpi_lightbuf_visible(const rtpi_lightbuf *lb, const rtp_scene *s,
                           const rtpi_ray *ray);
 /* The first candidate found in the ray's way, or RTPI_NONE; candidate
