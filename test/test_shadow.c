@@ -1514,6 +1514,84 @@ static void test_lightbuf_edges_same(void)
     }
 }
 
+/* A light buffer's query finds its cell from its origin seen from the
+   light (dircube.c lb_cell: o - light, the windows' reciprocals), not by
+   rtpi_dc_wcell's arithmetic on the ray's direction: its answers are still
+   exactly those of every primitive's own test, for origins on the lines
+   from the light through the triangles' edges and vertices (to 1e-16..1e-9
+   of the way inside), where a cell a rounding off would miss a triangle
+   its list's widening does not reach (a query's cell off by 1e-4 of its
+   coordinate: dozens of answers lit where a triangle is in the way). */
+static void test_lightbuf_query_cells(void)
+{
+    static const double offs[][2] = {{0, 1}, {3000, 0.01}, {-2e5, 3}};
+    size_t oi;
+    for (oi = 0; oi < sizeof offs / sizeof *offs; oi++) {
+        double off = offs[oi][0], sc = offs[oi][1];
+        rtp_scene *s = edge_scene(off, sc);
+        rtp_allocator al;
+        int li;
+        rtpi_allocator_init(&al, NULL);
+        CHECK(s != NULL);
+        if (!s)
+            return;
+        for (li = 0; li < 6; li++) {
+            rtpi_v3 L;
+            rtpi_lightbuf lb;
+            size_t q, bad = 0, nq = 0, hits = 0;
+            switch (li) {
+            case 0: L = v3(0.3, -0.2, 9); break;
+            case 1: L = v3(2e4, -1e4, 3e4); break;
+            case 2: L = v3(0.2, 0.1, 2.5); break; /* above the fan, near */
+            case 3: L = v3(-3, 2, 0.5); break;    /* low, several faces */
+            default: L = v3(4 * (rnd() - 0.5), 4 * (rnd() - 0.5), 0.1 + 4 * rnd()); break;
+            }
+            L = v3(off + sc * L.x, off + sc * L.y, off + sc * L.z);
+            if (rtpi_lightbuf_build(s, L, li & 1 ? 64 : 512, &al, &lb, NULL) != RTP_OK) {
+                CHECK_MSG(0, "query cells: build failed, light %d", li);
+                continue;
+            }
+            for (q = 0; q < 4000; q++) {
+                uint32_t prim = (uint32_t)(rnd() * (double)s->ntris), a, k, e = RTPI_NONE;
+                double f = rnd(), g = rnd(), tiny = pow(10.0, -16 + 7 * rnd()), m;
+                rtpi_v3 pt, o;
+                rtpi_ray ray;
+                rtpi_hit h;
+                int kind = (int)(rnd() * 4);
+                if (prim >= s->ntris)
+                    continue;
+                if (f + g > 1) {
+                    f = 1 - f;
+                    g = 1 - g;
+                }
+                switch (kind) {
+                case 0: pt = tri_point(s, prim, f * (1 - tiny), tiny); break; /* by an edge */
+                case 1: pt = tri_point(s, prim, tiny, g * (1 - tiny)); break; /* by an edge */
+                case 2: pt = tri_point(s, prim, f * (1 - tiny), (1 - f) * (1 - tiny)); break;
+                default: pt = tri_point(s, prim, tiny, tiny); break;         /* by a vertex */
+                }
+                /* beyond pt from the light: the segment to the light
+                   passes through it */
+                m = 1 + (q & 1 ? 2 * rnd() : 1e-3 * rnd());
+                o = v3_add(L, v3_mul(v3_sub(pt, L), m));
+                ray = rtpi_shadow_ray(o, L);
+                for (k = 0; k < s->ntris && e == RTPI_NONE; k++)
+                    if (rtpi_intersect_prim(s, k, &ray, &h))
+                        e = k;
+                a = rtpi_lightbuf_occluder(&lb, s, &ray, RTPI_NONE);
+                bad += (a == RTPI_NONE) != (e == RTPI_NONE);
+                hits += e != RTPI_NONE;
+                nq++;
+            }
+            CHECK(nq > 1000 && hits > nq / 2);
+            CHECK_MSG(bad == 0, "query cells: offset %g, light %d: %lu of %lu answers differ",
+                      off, li, (unsigned long)bad, (unsigned long)nq);
+            rtpi_lightbuf_free(&lb, &al);
+        }
+        rtp_scene_destroy(s);
+    }
+}
+
 /* The round primitives' tests (cone bands, sphere boxes), run by
    round_run: scenes at the origin and moved far from it, small and large
    (offset, scale), each a view, a light, a material and the test's
@@ -1903,6 +1981,7 @@ int main(void)
     RUN(test_light_at_cone_tip);
     RUN(test_exact_cache_earlier);
     RUN(test_lightbuf_edges_same);
+    RUN(test_lightbuf_query_cells);
     RUN(test_lightbuf_cone_slabs);
     RUN(test_lightbuf_sphere_box);
     RUN(test_lightbuf_tri_box);
