@@ -4496,6 +4496,100 @@ static void test_material_planes_lent(void)
         }
 }
 
+/* A material's planes on images of odd shapes (helper 177's random
+   edit sequences, each image against a full trace): one pixel, a column
+   or a row of them, 3 x 200 and 200 x 3, SPD regions one pixel wide or
+   tall over bands (PK_ROWS 16) and at the frame's edges, with 1, 2 and 3
+   threads: every material's kd in turn, two other values, back to the
+   first, a light's colour or the ambient between.  Small images put the
+   bands' entries against the lent block's end (pk_lend: 3/7 of the
+   samples) at many counts.  A band let one entry past that end, in
+   pk_place (several threads' bounds) or in pk_img_chunk's packing (one
+   thread), passed every other test of test_tree and broke here: 0.064
+   off at 1x37, then the heap corrupt. */
+static void test_material_planes_shapes(void)
+{
+    static const int plain[][2] = {{1, 1}, {1, 37}, {37, 1}, {3, 200}, {200, 3}, {17, 33}};
+    static const int spd[][4] = {
+        {259, 190, 260, 227}, {180, 207, 240, 208}, {0, 0, 512, 3}, {509, 250, 512, 290},
+        {200, 15, 203, 48}, {0, 496, 40, 512}};
+    static const char *const kd[] = {"0.3", "0.7", "0.05"};
+    const size_t nplain = sizeof plain / sizeof *plain, nspd = sizeof spd / sizeof *spd;
+    size_t c;
+    int th, lent = 0;
+    /* (then regions x 0, rows y0 .. y1 - 1, of a column 1 x 37, y0 0, 4,
+       8 or 12, with one thread, which packs the bands: the first band's
+       entries meet the lent room's end, 3/7 of the samples, at each
+       count) */
+    for (c = 0; c < nplain + nspd + 4 * 35; c++)
+        for (th = 1; th <= (c < nplain + nspd ? 3 : 1); th++) {
+            rtp_scene *s = load("scenes/spheres.nff");
+            rtp_tree *t = NULL;
+            rtp_image *re = NULL;
+            rtp_trace_options o;
+            rtp_eval_options eo;
+            rtp_scene_info si;
+            char what[96], key[32], first[4][64];
+            size_t m, k;
+            if (!s) {
+                CHECK(s != NULL);
+                return;
+            }
+            edit_options(c >= nplain && c < nplain + nspd, &o, &eo);
+            if (c < nplain) {
+                o.width = plain[c][0];
+                o.height = plain[c][1];
+            } else if (c >= nplain + nspd) {
+                o.width = 1;
+                o.height = 37;
+                o.region[1] = 4 * (int)((c - nplain - nspd) / 35);
+                o.region[2] = 1;
+                o.region[3] = o.region[1] + 2 + (int)((c - nplain - nspd) % 35);
+                if (o.region[3] > 37) {
+                    rtp_scene_destroy(s);
+                    continue;
+                }
+            } else {
+                memcpy(o.region, spd[c - nplain], sizeof o.region);
+            }
+            eo.threads = th;
+            rtp_scene_get_info(s, &si);
+            CHECK(si.materials == 4);
+            for (m = 0; m < 4; m++) {
+                snprintf(key, sizeof key, "mat.%zu.kd", m);
+                CHECK(rtp_scene_get(s, key, first[m], sizeof first[m], NULL) == RTP_OK);
+            }
+            if (rtp_record(s, &o, &t, NULL, NULL, NULL) != RTP_OK ||
+                rtp_tree_eval(t, &eo, &re, NULL, NULL) != RTP_OK) {
+                CHECK(0);
+            } else {
+                for (m = 0; m < 4; m++) {
+                    snprintf(key, sizeof key, "mat.%zu.kd", m);
+                    for (k = 0; k < 4; k++) {
+                        const char *v = k < 3 ? kd[k] : first[m];
+                        snprintf(what, sizeof what, "case %zu, %d threads, %s=%s", c, th, key, v);
+                        CHECK(rtp_tree_set(t, key, v, NULL) == RTP_OK);
+                        CHECK(rtp_scene_set(s, key, v, NULL) == RTP_OK);
+                        if (!eval_equals_trace(t, s, &o, &eo, re, NULL, what))
+                            break;
+                        lent += t->pk_term && t->pk_split > 0;
+                    }
+                    snprintf(what, sizeof what, "case %zu, %d threads, colour %zu", c, th, m);
+                    CHECK(rtp_tree_set(t, m & 1 ? "ambient" : "light.key.color",
+                                       m & 1 ? "0.1,0.05,0.2" : "0.9,0.6,0.3", NULL) == RTP_OK);
+                    CHECK(rtp_scene_set(s, m & 1 ? "ambient" : "light.key.color",
+                                        m & 1 ? "0.1,0.05,0.2" : "0.9,0.6,0.3", NULL) == RTP_OK);
+                    eval_equals_trace(t, s, &o, &eo, re, NULL, what);
+                }
+            }
+            rtp_image_destroy(re);
+            rtp_tree_destroy(t);
+            rtp_scene_destroy(s);
+        }
+    /* (planes in the samples' block in most of them) */
+    CHECK_MSG(lent > 100, "%d edits with lent planes", lent);
+}
+
 /* key=value to the tree and the scene, the tree evaluated into the kept
    image re, which must then equal a full trace of the scene (1e-6); the
    evaluation's stats into *es.  `what` labels a failure. */
@@ -7882,6 +7976,7 @@ int main(void)
     RUN(test_nocache_into_kept_image);
     RUN(test_material_planes);
     RUN(test_material_planes_lent);
+    RUN(test_material_planes_shapes);
     RUN(test_moves_kept_image);
     RUN(test_moves_scattered_marks);
     RUN(test_moves_rest);
