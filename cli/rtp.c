@@ -2282,8 +2282,9 @@ static const char reeval_help[] =
     "                       exact), itembuf[:RES] (item buffer, approximate at\n"
     "                       shadow edges), osmesa[:RES] (item buffer by OSMesa);\n"
     "                       RES: direction-cube cells per face edge, 1 to 8192\n"
-    "                       (default 512; for auto, 64 to 1024 from the tree's\n"
-    "                       hits)\n"
+    "                       (default: the light buffer's 64 to 512 from the\n"
+    "                       tree's hits, --stats' shadow_res; the item\n"
+    "                       buffer's 512)\n"
     "  --stale MODE         after a bump edit, the reflected and refracted rays\n"
     "                       below changed normals: keep (the paper's way, fast,\n"
     "                       approximate; default) or retrace (exact)\n"
@@ -2493,8 +2494,9 @@ static int reeval_report(const rtp_tree *tree, const rtp_image *img, const rtp_e
         if (fb >= 0)
             fprintf(stats, ", \"file_bytes\": %lld", fb);
         if (es.moved_lights)
-            fprintf(stats, ", \"shadows\": \"%s\"",
-                    (size_t)es.shadows < N_SHADOW_MODES ? shadow_modes[es.shadows] : "?");
+            fprintf(stats, ", \"shadows\": \"%s\", \"shadow_res\": %d",
+                    (size_t)es.shadows < N_SHADOW_MODES ? shadow_modes[es.shadows] : "?",
+                    es.shadow_res);
         if (reference) {
             fprintf(stats, ", \"reference_seconds\": %.6f, \"speedup\": %.3f, ", t_ref,
                     es.seconds > 0 ? t_ref / es.seconds : 0.0);

@@ -80,11 +80,11 @@ extern "C" {
    rtp_eval_options.cancel; 0.5: rtp_tree_info.min_weight, and the calls
    rtp_tree_eval_file and rtp_tree_read_summary; light.N.pos of the next
    N adds a light; 0.5.1: the call rtp_tree_trace_opt, a call added, no
-   struct changed): a program compares rtp_version_number() with the
+   struct changed; 0.6: rtp_eval_stats.shadow_res): a program compares rtp_version_number() with the
    RTP_VERSION_NUMBER it was built with. */
 #define RTP_VERSION_MAJOR 0
-#define RTP_VERSION_MINOR 5
-#define RTP_VERSION_PATCH 1
+#define RTP_VERSION_MINOR 6
+#define RTP_VERSION_PATCH 0
 #define RTP_VERSION_NUMBER \
     (RTP_VERSION_MAJOR * 10000 + RTP_VERSION_MINOR * 100 + RTP_VERSION_PATCH)
 
@@ -404,9 +404,7 @@ typedef enum rtp_shadow_mode {
                                  a hit and a primitive, README), else
                                  shadow rays through the kd-tree (the
                                  CLI's default); shadow_res 0:
-                                 the light buffer's from the tree's hits,
-                                 256 sqrt(hits / 250,000) as a power of two,
-                                 64 to 1024 */
+                                 the light buffer's as RTP_SHADOWS_LIGHTBUF's */
 } rtp_shadow_mode;
 
 /* What becomes of the reflected and refracted subtrees below a normal a
@@ -424,9 +422,18 @@ typedef struct rtp_eval_options {
                                more than 256 are taken as 256; negative:
                                RTP_ERR_ARGUMENT */
     rtp_shadow_mode shadows;
-    int shadow_res;         /* direction-cube cells per face edge; 0: 512
-                               (RTP_SHADOWS_AUTO's light buffer: from the
-                               tree's hits); at most RTP_MAX_SHADOW_RES */
+    int shadow_res;         /* direction-cube cells per face edge, at most
+                               RTP_MAX_SHADOW_RES; 0: an item buffer's 512
+                               (the cells are its accuracy), a light
+                               buffer's (LIGHTBUF, AUTO) from the tree's
+                               hits: 256 sqrt(hits / 250,000) as a power of
+                               two, 64 to 512 (its decisions are exact at
+                               any resolution: finer cells shorten the
+                               lists a query walks and cost more to fill
+                               at each move), halved while the memory
+                               limit refuses it (LIGHTBUF; AUTO takes
+                               shadow rays); rtp_eval_stats.shadow_res
+                               says which */
     rtp_stale_mode stale;
     int no_cache;           /* 1: a one-off evaluation: keep no caches for
                                later edits (faster once, slower after) */
@@ -518,6 +525,9 @@ typedef struct rtp_eval_stats {
                                 approximate there; 0 otherwise.  An upper
                                 bound where another edit traced some of
                                 them again (they are counted still) */
+    int shadow_res;          /* the light or item buffer's cells a face
+                                edge that decided the last moved light (0:
+                                shadow rays), where moved_lights > 0 */
 } rtp_eval_stats;
 
 /** Evaluates the trees with the current parameters into a new image.  Lights

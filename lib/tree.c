@@ -891,21 +891,36 @@ static double auto_lb_entries(const rtp_tree *t)
     return entries > 262144.0 ? entries : 262144.0;
 }
 
-/* The light buffer's cells a face edge for RTP_SHADOWS_AUTO without a
-   resolution asked: the power of two nearest 256 sqrt(nodes / 250,000),
-   64 to 1024.  More queries pay for finer cells (shorter lists) at the
-   cost of a larger buffer to fill at each move.  Measured (callgrind, a
-   second move, 1 thread): the best of 32-1024 is 128 for tetra (50k
-   nodes at 512x512 SPD) and rings (443k; 256 within 2%), 256 for balls
-   (390k), teapot (229k) and tree (170k), 512 for gears (629k; 256 4%
-   more) and mount (651k; 256 within 1%), and for the Stanford bunny at
-   2048x2048 (894k, by time) 512; the rule picks those but 256 for rings.
-   The default 512 took up to 27% more (tetra; tree and rings 10%). */
-static int auto_res(const rtp_tree *t)
+/* The light buffer's cells a face edge without a resolution asked
+   (LIGHTBUF and AUTO; the item buffers keep 512, their accuracy): the
+   power of two nearest 256 sqrt(nodes / 250,000), 64 to 512.  Its
+   decisions are exact at any resolution, which trades the build (6 res^2
+   cells filled each move, the candidates' covers) against the queries
+   (shorter lists in finer cells): more queries pay for finer cells.  The
+   nodes are known before the build, at a drag's first move too; the last
+   move's queries (lb_queries) are not, and they follow the light (tetra's
+   16k at 512x512 for its 50k nodes, best at 128 all the same).  Measured
+   (callgrind, a drag's move, 1 thread; the best of 64-1024, the rule's):
+   at 512x512 SPD tetra 128 (50k nodes; 128), teapot 256 (229k; 256),
+   tree 256 (170k; 256), rings 128 (443k; 256 +1.3%), gears 192 (375k;
+   256 +0.3%), balls 384 (390k; 256 +4.5%), mount 384 (651k; 512 +0.7%);
+   at 1024x1024 tetra 128 (256 +1.2%), teapot 512, tree 256 (512 +1.6%),
+   gears 384 (512 +0.6%), balls 768 (512 +0.1%), rings 384 (512 +0.7%),
+   mount 512 (2.6M nodes; 1024, the cap until session 48, took 1.5% more
+   and 8.5% more thread time: nothing measured was best finer than 768,
+   the Stanford bunny at 2048x2048 neither, 894k nodes, 512 by time).  A
+   first move adds the same at every resolution (balls +79 M).  Thread
+   time favours coarser cells a little more (the cells' memory): 512, the
+   light buffer's default until session 48, took 12-28% more a drag's
+   move at 512x512 than the rule's (balls 41.2 ms against 36.2).  The
+   primitives matter too (rings' long cones, balls' small spheres: 443k
+   and 390k nodes, best 128 and 384), within the few percent above. */
+#define LB_DEFAULT_MAX 512
+static int lb_default_res(const rtp_tree *t)
 {
     double want = 256.0 * sqrt((double)t->nnodes / 250000.0);
     int res = 64;
-    while (res < 1024 && want > res * 1.4142135623730951) /* (nearest in log) */
+    while (res < LB_DEFAULT_MAX && want > res * 1.4142135623730951) /* (nearest in log) */
         res *= 2;
     return res;
 }
@@ -951,6 +966,8 @@ typedef struct light_vis {
     size_t light;
     int mode;                /* the mode that decides it (AUTO's fallback
                                 to shadow rays made) */
+    int res;                 /* its cube's cells a face edge (0: shadow
+                                rays) */
     int threads;
     rtpi_shadow *sh;
     unsigned char *balls;    /* rtpi_balls_around (NULL: no spheres) */
@@ -964,11 +981,18 @@ static void light_vis_free(rtp_tree *t, light_vis *lv)
     lv->balls = NULL;
 }
 
+/* light_vis_make's `fallback` bits (shadow_mode_for's *fallback_out). */
+#define LV_AUTO 1     /* AUTO asked: shadow rays where the light buffer's
+                         lists pass the memory limit or AUTO's bound on
+                         entries */
+#define LV_RES_FREE 2 /* no resolution asked (lb_default_res chose it):
+                         a light buffer whose lists pass the limit tries
+                         half the cells (fewer entries: a primitive
+                         covers fewer of them) before RTP_ERR_LIMIT */
+
 /* Light i's shadow queries by `mode` (not AUTO) at `res` cells: its
    direction cube's build (its progress and cancel through poll), or the
-   kd-tree's where shadow rays decide.  `fallback` (AUTO asked): shadow
-   rays where the light buffer's lists pass `limit` bytes or AUTO's bound
-   on entries. */
+   kd-tree's where shadow rays decide.  `fallback`: LV_ bits. */
 static rtp_status light_vis_make(rtp_tree *t, size_t i, int mode, int res, int threads,
                                  double limit, int fallback, rtpi_poll *poll, light_vis *lv,
                                  rtp_error *err)
@@ -990,13 +1014,22 @@ static rtp_status light_vis_make(rtp_tree *t, size_t i, int mode, int res, int t
     t->cube_alloc.realloc_fn = blk_realloc;
     t->cube_alloc.free_fn = blk_free;
     t->cube_alloc.user = t;
-    lb_cap = fallback && mode == RTP_SHADOWS_LIGHTBUF ? auto_lb_entries(t) : HUGE_VAL;
+    lb_cap = (fallback & LV_AUTO) && mode == RTP_SHADOWS_LIGHTBUF ? auto_lb_entries(t) : HUGE_VAL;
     /* (the last light buffer's queries, as the next's expectation: a
        drag's moves ask about as many each; none known at the first) */
     lb_q = t->lb_queries_known ? t->lb_queries : HUGE_VAL;
-    rs = rtpi_shadow_create_q(s, t->kd, v3(lp[0], lp[1], lp[2]), (rtpi_shadow_mode)mode, res,
-                              threads, limit, lb_cap, lb_q, poll, &t->cube_alloc, &lv->sh, err);
-    if ((rs == RTP_ERR_LIMIT || rs == RTPI_OVER_ENTRIES) && fallback &&
+    for (;;) {
+        rs = rtpi_shadow_create_q(s, t->kd, v3(lp[0], lp[1], lp[2]), (rtpi_shadow_mode)mode,
+                                  res, threads, limit, lb_cap, lb_q, poll, &t->cube_alloc,
+                                  &lv->sh, err);
+        /* (a resolution nobody asked refused by the limit while a
+           coarser one may fit: AUTO takes shadow rays below instead) */
+        if (rs != RTP_ERR_LIMIT || !(fallback & LV_RES_FREE) || (fallback & LV_AUTO) ||
+            mode != RTP_SHADOWS_LIGHTBUF || res <= 1)
+            break;
+        res /= 2;
+    }
+    if ((rs == RTP_ERR_LIMIT || rs == RTPI_OVER_ENTRIES) && (fallback & LV_AUTO) &&
         mode != RTP_SHADOWS_EXACT) {
         /* AUTO: shadow rays where the lists would not fit (a mesh
            seen edge on lists every triangle in a row of cells) */
@@ -1015,6 +1048,7 @@ static rtp_status light_vis_make(rtp_tree *t, size_t i, int mode, int res, int t
     if (rs != RTP_OK)
         return rs;
     lv->mode = mode;
+    lv->res = mode == RTP_SHADOWS_EXACT ? 0 : res;
     if (s->nspheres) {
         lv->balls = (unsigned char *)rtpi_malloc_array(&t->alloc, s->nspheres, 1);
         if (!lv->balls) {
@@ -1071,6 +1105,7 @@ static int light_vis_rows(rtp_tree *t, const light_vis *lv, double off_floor, in
     if (rows != 2 && st) {
         st->moved_lights++;
         st->shadows = (rtp_shadow_mode)lv->mode;
+        st->shadow_res = lv->res;
         for (k = 0; k < threads; k++)
             st->shadow_queries += vc[k].queries;
     }
@@ -1084,8 +1119,8 @@ static int light_vis_rows(rtp_tree *t, const light_vis *lv, double off_floor, in
    `mode` (not AUTO) at `res` cells.  Only lights whose position (or the
    shadow mode's key, vis_key) changed since the last call are redone.
    limit: the bytes a light buffer's lists may take; where they would take
-   more, `fallback` (the mode was AUTO) takes shadow rays for that light,
-   else RTP_ERR_LIMIT. */
+   more, `fallback` (LV_ bits) takes shadow rays for that light (AUTO) or
+   coarser cells (a resolution not asked), else RTP_ERR_LIMIT. */
 static rtp_status update_visibility_body(rtp_tree *t, int mode, int res, int threads,
                                          double limit, int fallback, const progress_part *prog,
                                          rtp_eval_stats *st, rtp_error *err);
@@ -4926,28 +4961,32 @@ static int cp_eval(rtp_tree *t, eval_ctx *e, void *const *ctx, int nthreads, con
 
 /* The shadow mode and resolution moved lights are decided by: AUTO
    resolved, shadow rays for a light too far for a cube, the cube's cells
-   against the memory limit.  *asked_auto: the mode asked was AUTO. */
+   against the memory limit.  *fallback_out: LV_ bits (AUTO asked, the
+   light buffer's resolution not asked). */
 static rtp_status shadow_mode_for(rtp_tree *t, const rtp_eval_options *opt, int *mode_out,
-                                  int *res_out, int *asked_auto_out, rtp_error *err)
+                                  int *res_out, int *fallback_out, rtp_error *err)
 {
     const rtp_scene *s = t->scene;
     size_t l;
-    int mode, res, asked_auto, cam_pending;
+    int mode, res, asked_auto, res_free, cam_pending;
     mode = opt ? (int)opt->shadows : 0;
-    res = opt && opt->shadow_res > 0 ? opt->shadow_res : RTPI_DC_DEFAULT_RES;
+    res_free = !(opt && opt->shadow_res > 0);
+    res = res_free ? RTPI_DC_DEFAULT_RES : opt->shadow_res;
     asked_auto = mode == RTP_SHADOWS_AUTO;
     if (mode == RTP_SHADOWS_AUTO) {
         size_t moving = 0;
         for (l = 0; l < s->nlights; l++)
             moving += light_moved(t, l) && s->lights[l].on;
         mode = auto_shadows(t, opt && opt->no_cache, moving);
-        if (mode == RTP_SHADOWS_LIGHTBUF && !(opt && opt->shadow_res > 0))
-            res = auto_res(t);
-        /* (lists found too long at this resolution or a coarser one:
-           update_visibility's fallback) */
-        if (mode == RTP_SHADOWS_LIGHTBUF && t->auto_long && res >= t->auto_long)
-            mode = RTP_SHADOWS_EXACT;
     }
+    /* (the item buffers keep 512: their resolution is their accuracy) */
+    res_free = res_free && mode == RTP_SHADOWS_LIGHTBUF;
+    if (res_free)
+        res = lb_default_res(t);
+    /* (lists found too long at this resolution or a coarser one:
+       update_visibility's fallback) */
+    if (asked_auto && mode == RTP_SHADOWS_LIGHTBUF && t->auto_long && res >= t->auto_long)
+        mode = RTP_SHADOWS_EXACT;
     /* A light so far that its buffer would list most primitives in every
        cell (a sun at 1e11 over a terrain of size 2: 14 times the shadow
        rays' time; 524k triangles at 1e11 took 49 s and 5.4 GB before
@@ -4981,6 +5020,12 @@ static rtp_status shadow_mode_for(rtp_tree *t, const rtp_eval_options *opt, int 
         double cells = 6.0 * (double)res * (double)res;
         double need = cells * (mode == RTP_SHADOWS_LIGHTBUF ? 4.0 : 9.0) +
                       (mode == RTP_SHADOWS_OSMESA ? cells / 6.0 * 12.0 : 0.0);
+        /* (a resolution nobody asked: the finest at most the rule's
+           whose cells fit; light_vis_make does the same for the lists) */
+        while (res_free && !asked_auto && !(need <= lim) && res > 1) {
+            res /= 2;
+            need = 6.0 * (double)res * (double)res * 4.0;
+        }
         for (l = 0; mode != RTP_SHADOWS_EXACT && !cam_pending && l < s->nlights; l++)
             if (light_moved(t, l) && !(need <= lim) && asked_auto) {
                 /* AUTO chose between two exact ways: shadow rays need no
@@ -5002,7 +5047,7 @@ static rtp_status shadow_mode_for(rtp_tree *t, const rtp_eval_options *opt, int 
     }
     *mode_out = mode;
     *res_out = res;
-    *asked_auto_out = asked_auto;
+    *fallback_out = (asked_auto ? LV_AUTO : 0) | (res_free ? LV_RES_FREE : 0);
     return RTP_OK;
 }
 
@@ -5214,7 +5259,7 @@ static rtp_status eval_body(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
     progress_part prog;
     rtp_scene *s;
     int i, nthreads = opt && opt->threads > 1 ? opt->threads : 1, any_moved = 0, full;
-    int asked_auto = 0;
+    int fallback = 0;
     int cached, mode = 0, res = 0, kmode, kres, one = 0, matpath = 0, sparse, list_combine = 0, hl_used = 0;
     int hl_apply = 0, hl_after = 0, restored = -1;
     /* the materials whose samples alone step 3 set (RESOLVE_MAX at most;
@@ -5254,7 +5299,7 @@ static rtp_status eval_body(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
         nthreads = RTPI_MAX_THREADS;
     if ((rs = opts_check(opt, err)) != RTP_OK)
         return rs;
-    if ((rs = shadow_mode_for(t, opt, &mode, &res, &asked_auto, err)) != RTP_OK)
+    if ((rs = shadow_mode_for(t, opt, &mode, &res, &fallback, err)) != RTP_OK)
         return rs;
     vis_key(mode, res, &kmode, &kres);
     memset(&shade, 0, sizeof shade);
@@ -5303,7 +5348,7 @@ static rtp_status eval_body(rtp_tree *t, const rtp_eval_options *opt, rtp_image 
         rs = update_visibility(t, mode, res, nthreads,
                                opt && opt->memory_limit > 0.0 ? opt->memory_limit
                                                               : RTPI_MEMORY_LIMIT,
-                               asked_auto, &vp, &st, err);
+                               fallback, &vp, &st, err);
         if (rs != RTP_OK)
             return rs;
         if (st.moved_lights) {
@@ -5856,6 +5901,7 @@ typedef struct file_eval {
     size_t vis_cap;       /* (words) */
     unsigned long long queries;
     int shadows;          /* the mode that decided them */
+    int shadow_res;       /* and the last one's cells (light_vis.res) */
     double shadow_s;      /* deciding them, cubes' builds included */
     rtp_status deferred;  /* the evaluation's setup failed (file_begin):
                              its error, given once the file is read */
@@ -5967,12 +6013,12 @@ static rtp_status file_setup(file_eval *f, rtp_tree *t, int can_stream, int *str
         /* as update_visibility decides them, each light's queries made
            now (a cube's build, or the kd-tree's), their rows a band at a
            time (file_band) */
-        int mode, res, asked_auto;
+        int mode, res, fallback;
         double limit = f->opt.memory_limit > 0.0 ? f->opt.memory_limit : RTPI_MEMORY_LIMIT;
         double t0s = seconds_now();
         rtp_status st;
         rtpi_poll poll;
-        if ((st = shadow_mode_for(t, &f->opt, &mode, &res, &asked_auto, err)) != RTP_OK)
+        if ((st = shadow_mode_for(t, &f->opt, &mode, &res, &fallback, err)) != RTP_OK)
             return st;
         f->lv = (light_vis *)rtpi_calloc_array(&t->alloc, nl, sizeof *f->lv);
         if (!f->lv || (!t->tri_nrm && tri_normals(t) != 0))
@@ -5990,11 +6036,12 @@ static rtp_status file_setup(file_eval *f, rtp_tree *t, int can_stream, int *str
                 continue;
             if (f->opt.cancel && f->opt.cancel(f->opt.progress_user))
                 return rtpi_cancelled(err);
-            st = light_vis_make(t, (size_t)i, mode, res, f->nthreads, limit, asked_auto, &poll,
+            st = light_vis_make(t, (size_t)i, mode, res, f->nthreads, limit, fallback, &poll,
                                 &f->lv[i], err);
             if (st != RTP_OK)
                 return st;
             f->shadows = f->lv[i].mode;
+            f->shadow_res = f->lv[i].res;
         }
         f->shadow_s = seconds_now() - t0s;
     }
@@ -6197,6 +6244,7 @@ rtp_status rtp_tree_eval_file(const char *path, const rtp_allocator *alloc,
             stats->moved_lights = f.nmoved;
             stats->shadow_queries = f.queries;
             stats->shadows = (rtp_shadow_mode)f.shadows;
+            stats->shadow_res = f.shadow_res;
             stats->shadow_seconds = f.nmoved ? f.shadow_s : 0.0;
             stats->seconds = seconds_now() - f.t0;
         }

@@ -2560,7 +2560,9 @@ out:
    fit: both ways are exact and shadow rays need no cube.  (It failed with
    RTP_ERR_LIMIT, "lower its resolution", a resolution it had chosen
    itself: a --stream under --memory-limit stopped at its first move.)
-   LIGHTBUF asked for is refused as before.  The tree (prims at 56x44)
+   LIGHTBUF at a resolution asked for is refused as before; LIGHTBUF
+   without one takes the finest at most its default's that fits (until
+   session 48 it was refused, as at 512).  The tree (prims at 56x44)
    holds over 4 hits a primitive, so AUTO's choice is the light buffer, of
    at least 64 cells a face edge: 6 x 64^2 x 4 bytes = 96 KiB over the
    64 KiB limit here. */
@@ -2585,12 +2587,13 @@ static void test_shadows_auto_cube_limit(void)
     memset(&eo, 0, sizeof eo);
     eo.memory_limit = 65536.0;
     eo.shadows = RTP_SHADOWS_LIGHTBUF;
+    eo.shadow_res = 512;
     CHECK(rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK &&
           rtp_tree_eval(t, &eo, &img, NULL, NULL) == RTP_OK);
     CHECK(t && rtp_tree_set(t, "light.0.pos", "-2,-4,6", NULL) == RTP_OK);
     rs = t ? rtp_tree_eval_into(t, &eo, img, &st, &err) : RTP_ERR_ARGUMENT;
     CHECK_MSG(rs == RTP_ERR_LIMIT && strstr(err.message, "direction cube"),
-              "lightbuf over the limit: status %d", (int)rs);
+              "lightbuf:512 over the limit: status %d", (int)rs);
     /* the figure to raise the limit to, not rounded up to a whole MiB
        (6 x 64^2 cells of 4 bytes: 0.09375 MiB read "1 MiB") */
     eo.shadow_res = 64;
@@ -2611,10 +2614,90 @@ static void test_shadows_auto_cube_limit(void)
         CHECK_MSG(0, "no image to compare");
     else
         CHECK_MSG(d.max_abs <= 1e-6, "%g from a full trace", d.max_abs);
+    /* LIGHTBUF, no resolution asked: coarser cells that fit, exact */
+    eo.shadows = RTP_SHADOWS_LIGHTBUF;
+    memset(&st, 0, sizeof st);
+    rtp_image_destroy(full);
+    full = NULL;
+    CHECK(t && rtp_tree_set(t, "light.0.pos", "3,-3,5", NULL) == RTP_OK);
+    rs = t ? rtp_tree_eval_into(t, &eo, img, &st, &err) : RTP_ERR_ARGUMENT;
+    CHECK_MSG(rs == RTP_OK, "lightbuf over the limit: %s", rs == RTP_OK ? "" : err.message);
+    CHECK_MSG(rs != RTP_OK || (st.moved_lights == 1 && st.shadows == RTP_SHADOWS_LIGHTBUF &&
+                               st.shadow_res > 0 && st.shadow_res < 64),
+              "lightbuf over the limit: %d moved, mode %d, %d cells", st.moved_lights,
+              (int)st.shadows, st.shadow_res);
+    if (rtp_scene_set(s, "light.0.pos", "3,-3,5", NULL) != RTP_OK ||
+        rtp_trace(s, &o, &full, NULL, NULL) != RTP_OK || rs != RTP_OK ||
+        rtp_image_diff(img, full, 1e-6, &d, NULL) != RTP_OK)
+        CHECK_MSG(0, "no image to compare");
+    else
+        CHECK_MSG(d.max_abs <= 1e-6, "lightbuf:%d: %g from a full trace", st.shadow_res,
+                  d.max_abs);
     rtp_image_destroy(img);
     rtp_image_destroy(full);
     rtp_tree_destroy(t);
     rtp_scene_destroy(s);
+}
+
+/* The light buffer's resolution when none is asked (shadow_res 0) comes
+   from the tree (lb_default_res): a small tree and a larger one get
+   different cells a face edge, --stats' shadow_res says which, and both
+   images are a full trace's (the decisions are exact at any
+   resolution).  A default that ignored the tree (512 until session 48)
+   gives both the same. */
+static int default_res_move(const char *path, int w, int h, double limit, int *res_out)
+{
+    rtp_scene *s = load(path);
+    rtp_tree *t = NULL;
+    rtp_image *img = NULL, *full = NULL;
+    rtp_trace_options o;
+    rtp_eval_options eo;
+    rtp_eval_stats st;
+    rtp_diff_stats d;
+    int ok = 0;
+    *res_out = -1;
+    if (!s)
+        return 0;
+    memset(&o, 0, sizeof o);
+    o.width = w;
+    o.height = h;
+    memset(&eo, 0, sizeof eo);
+    eo.shadows = RTP_SHADOWS_LIGHTBUF;
+    eo.memory_limit = limit;
+    memset(&st, 0, sizeof st);
+    if (rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK &&
+        rtp_tree_eval(t, &eo, &img, NULL, NULL) == RTP_OK &&
+        rtp_tree_set(t, "light.0.pos", "-2,-4,6", NULL) == RTP_OK &&
+        rtp_tree_eval_into(t, &eo, img, &st, NULL) == RTP_OK &&
+        rtp_scene_set(s, "light.0.pos", "-2,-4,6", NULL) == RTP_OK &&
+        rtp_trace(s, &o, &full, NULL, NULL) == RTP_OK &&
+        rtp_image_diff(img, full, 1e-6, &d, NULL) == RTP_OK) {
+        CHECK_MSG(st.moved_lights == 1 && st.shadows == RTP_SHADOWS_LIGHTBUF,
+                  "%s: %d moved, mode %d", path, st.moved_lights, (int)st.shadows);
+        CHECK_MSG(d.max_abs <= 1e-6, "%s at %dx%d, lightbuf:%d: %g from a full trace", path, w,
+                  h, st.shadow_res, d.max_abs);
+        *res_out = st.shadow_res;
+        ok = 1;
+    }
+    rtp_image_destroy(img);
+    rtp_image_destroy(full);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+    return ok;
+}
+
+static void test_lightbuf_default_res(void)
+{
+    int small, large, fit;
+    CHECK(default_res_move("scenes/prims.nff", 56, 44, 0.0, &small));
+    CHECK(default_res_move("scenes/spheres.nff", 400, 400, 0.0, &large));
+    CHECK_MSG(small > 0 && large > small, "default light buffer cells: %d and %d", small, large);
+    /* Under 0.12 MiB the 64 cells' starts fit (96 KiB) but not their
+       lists: coarser cells, as their lists are checked before they are
+       made (lightbuf:64 is refused there: test_shadows_auto_cube_limit's
+       tree, 0.1-0.15 MiB) */
+    CHECK(default_res_move("scenes/prims.nff", 56, 44, 0.12 * 1048576.0, &fit));
+    CHECK_MSG(fit > 0 && fit < small, "under the limit: %d cells (%d without)", fit, small);
 }
 
 /* A light buffer's per-primitive arrays (a candidate, its sort's scratch,
@@ -7455,6 +7538,7 @@ static void test_eval_file_setup_error_after_file(void)
     }
     memset(&eo, 0, sizeof eo);
     eo.shadows = RTP_SHADOWS_LIGHTBUF; /* (its cube: 6 MiB at 512 cells) */
+    eo.shadow_res = 512; /* (asked: the default would take fewer that fit) */
     eo.memory_limit = 1048576.0;
     memset(&fe, 0, sizeof fe);
     fe.kv = moved;
@@ -7962,6 +8046,7 @@ int main(void)
     RUN(test_shadows_auto);
     RUN(test_shadows_auto_overlap);
     RUN(test_shadows_auto_cube_limit);
+    RUN(test_lightbuf_default_res);
     RUN(test_moved_light_small_spd);
     RUN(test_moved_light_query_count);
     RUN(test_edit_sequence);
