@@ -24,8 +24,10 @@ static double now(void)
 /* Best of n runs of an evaluation after the edit, into one image kept
    across evaluations as the CLI's --stream keeps it (the first of an edit
    class may build what the others reuse: n >= 3 times the reuse). */
-static double eval_time2(rtp_tree *t, rtp_image *img, const rtp_eval_options *eo,
-                         const char *key, const char *const *values, int n, double *first)
+/* (st: the last evaluation's statistics, or NULL) */
+static double eval_time_st(rtp_tree *t, rtp_image *img, const rtp_eval_options *eo,
+                           const char *key, const char *const *values, int n, double *first,
+                           rtp_eval_stats *st)
 {
     double best = HUGE_VAL;
     int i;
@@ -34,7 +36,7 @@ static double eval_time2(rtp_tree *t, rtp_image *img, const rtp_eval_options *eo
         if (key && rtp_tree_set(t, key, values[i % 2], NULL) != RTP_OK)
             return -1.0;
         t0 = now();
-        if (rtp_tree_eval_into(t, eo, img, NULL, NULL) != RTP_OK)
+        if (rtp_tree_eval_into(t, eo, img, st, NULL) != RTP_OK)
             return -1.0;
         t0 = now() - t0;
         if (t0 < best)
@@ -43,6 +45,12 @@ static double eval_time2(rtp_tree *t, rtp_image *img, const rtp_eval_options *eo
             *first = t0;
     }
     return best;
+}
+
+static double eval_time2(rtp_tree *t, rtp_image *img, const rtp_eval_options *eo,
+                         const char *key, const char *const *values, int n, double *first)
+{
+    return eval_time_st(t, img, eo, key, values, n, first, NULL);
 }
 
 static double eval_time(rtp_tree *t, rtp_image *img, const rtp_eval_options *eo,
@@ -80,6 +88,7 @@ static void run(const char *dir, const char *name, int size)
     rtp_image *img = NULL;
     rtp_trace_options o;
     rtp_eval_options eo;
+    rtp_eval_stats lst;
     rtp_tree_info ti;
     rtp_scene_info si;
     char mkd[32], msh[32];
@@ -180,15 +189,20 @@ static void run(const char *dir, const char *name, int size)
        mode's ended at (exact, the light buffer and auto share the
        decisions of a position: a move there does nothing) */
     t_move = eval_time(t, img, &eo, "light.0.pos", mv, 4);
-    /* (the cubes at 512 cells a face, the default; the columns said 1024
-       from b1f7b90, which made 512 the default, until 2026-12) */
-    eo.shadow_res = 512;
+    /* The light buffer at its default resolution (shadow_res 0: from the
+       tree's hits, the column says which; at 512, the default then, from
+       b1f7b90 until session 48, and at 1024 before), the item buffer at
+       512 (its default), and AUTO as the CLI's default (until session 48
+       it ran at 512 here, not at its own resolution). */
+    eo.shadow_res = 0;
     eo.shadows = RTP_SHADOWS_LIGHTBUF;
-    t_lb = eval_time(t, img, &eo, "light.0.pos", mv, 4);
+    memset(&lst, 0, sizeof lst);
+    t_lb = eval_time_st(t, img, &eo, "light.0.pos", mv, 4, NULL, &lst);
     eo.shadows = RTP_SHADOWS_ITEMBUF;
+    eo.shadow_res = 512;
     t_ib = eval_time(t, img, &eo, "light.0.pos", mv, 4);
-    /* the CLI's default: the light buffer at 512 on these scenes */
     eo.shadows = RTP_SHADOWS_AUTO;
+    eo.shadow_res = 0;
     t_auto = eval_time(t, img, &eo, "light.0.pos", mv, 4);
     eo.shadows = RTP_SHADOWS_EXACT;
     t_stream = stream_time(t, &sink);
@@ -215,7 +229,7 @@ static void run(const char *dir, const char *name, int size)
     }
     printf("| %s | %d | %.3f | %+.1f%%, median %+.1f%% (%+.0f..%+.0f) | %.1f | %.4f (%.0fx) | "
            "%.4f (%.0fx) | %.4f (%.0fx) | %.4f (%.0fx) | %.4f (%.0fx) | %.4f (%.0fx) | "
-           "%.4f (%.0fx) | %.3f (%.0fx) | %.3f (%.0fx) | %.3f (%.0fx) | %.3f (%.0fx) | %.4f | "
+           "%.4f (%.0fx) | %.3f (%.0fx) | %.3f (%.0fx), %d | %.3f (%.0fx) | %.3f (%.0fx) | %.4f | "
            "%.1fx |\n",
            name, size, t_trace, 100.0 * (t_rec / t_pair - 1.0),
            100.0 * (ratio[npairs / 2] - 1.0), 100.0 * (ratio[0] - 1.0),
@@ -223,7 +237,8 @@ static void run(const char *dir, const char *name, int size)
            (double)ti.nodes / (double)ti.samples, t_first, t_trace / t_first, t_light1,
            t_trace / t_light1, t_light, t_trace / t_light, t_amb, t_trace / t_amb, t_mat1,
            t_trace / t_mat1, t_mat, t_trace / t_mat, t_shine,
-           t_trace / t_shine, t_move, t_trace / t_move, t_lb, t_trace / t_lb, t_ib,
+           t_trace / t_shine, t_move, t_trace / t_move, t_lb, t_trace / t_lb,
+           lst.shadow_res, t_ib,
            t_trace / t_ib, t_auto, t_trace / t_auto, t_stream, t_light / t_stream);
     fflush(stdout);
     if (sink == 42)
@@ -253,13 +268,15 @@ int main(void)
            "material's kd), which makes the plane(s) every further edit of it reuses (best of "
            "3 sessions); "
            "'ambient' follows the light edits (two colours then differ from the snapshot); "
+           "'lightbuf, RES' is the light buffer at its default resolution, RES cells a face "
+           "edge (shadow_res 0; 512 until session 48); "
            "'stream' reads the tree's bytes once (the floor), 'light/stream' is the light "
            "edit against it; 'recording' is what recording the trees adds to a trace: the "
            "best recording over the best trace, then the median (and range) over "
            "alternating pairs.\n\n");
     printf("| scene | size | trace s | recording | nodes/sample | first eval | light colour 1st | "
            "light colour | ambient | material kd 1st | material kd | shine | light move exact | "
-           "lightbuf:512 | itembuf:512 | auto (default) | stream s | light/stream |\n");
+           "lightbuf, RES | itembuf:512 | auto (default) | stream s | light/stream |\n");
     printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for (size = 512; size <= 1024; size *= 2) {
         if (quick && size > 512)
