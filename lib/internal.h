@@ -1136,6 +1136,12 @@ struct rtp_tree {
                               hit on a sphere whose shadow ray origin, the
                               normal turned inwards, lies in the ball
                               (rtpi_ball_holds), 2 anything else (vis_row) */
+    int ball_known;        /* ball_in found for every node (a move whose
+                              light had balls), and then */
+    unsigned char *ball_sph; /* per sphere 1 where some node on it has
+                              ball_in 1, every such node's normal kept in
+                              prim_nrm (ball_runs_known: vis_row's runs);
+                              NULL without memory */
     double *prim_nrm;      /* 3 per node, with cur_vis where the scene has
                               spheres or cones: the normal
                               rtpi_surface_normals gives at a node on a

@@ -35,6 +35,7 @@ void rtp_tree_destroy(rtp_tree *t)
     rtpi_free(&a, t->cur_vis);
     rtpi_free(&a, t->cur_pos);
     rtpi_free(&a, t->ball_in);
+    rtpi_free(&a, t->ball_sph);
     rtpi_free(&a, t->prim_nrm);
     rtpi_free(&a, t->cone_own);
     rtpi_free(&a, t->kd_from);
@@ -577,8 +578,11 @@ static RTPI_FORCE_INLINE uint32_t vis_from(uint32_t *kf, const rtpi_kdtree *kd, 
 /* Decides light `light` anew for every node of one row of samples, with
    trace's own rule (rtpi_shadow_setup) and the chosen shadow query.
    kf: 1 where EXACT's walks start at the origins' leaves (t->kd_from),
-   a copy of its own: the other modes' queries pay nothing for it. */
-static RTPI_FORCE_INLINE int vis_row_body(void *ctx, int y, int kf)
+   a copy of its own: the other modes' queries pay nothing for it.  kb: 1
+   where the runs of back hits inside balls serve (ball_runs_serve), in a
+   loop of their own, a copy too: the other trees' walks test nothing
+   more. */
+static RTPI_FORCE_INLINE int vis_row_body(void *ctx, int y, int kf, int kb)
 {
     vis_ctx *v = (vis_ctx *)ctx;
     rtp_tree *t = v->t;
@@ -592,6 +596,7 @@ static RTPI_FORCE_INLINE int vis_row_body(void *ctx, int y, int kf)
        vis_row took 16% of a move's time, against 5% on one) */
     unsigned long long queries = 0;
     rtpi_shadow_cache cache = v->cache;
+    size_t ok_si = (size_t)-1; /* the sphere last found to take a run's path */
     /* the shading normals the evaluation keeps (rounded to float) */
     const float *nv = t->ev_valid ? t->ev_nv : NULL;
     /* (NULL also where the light buffer has no balls: no sphere) */
@@ -615,162 +620,206 @@ static RTPI_FORCE_INLINE int vis_row_body(void *ctx, int y, int kf)
     const rtpi_material *const mats = s->mats, *const ev_mats = t->ev_mats;
     uint32_t *const kd_from = kf ? v->kd_from : NULL;
     for (n = (size_t)t->start[k0]; n < n1; n++) {
-        const rtpi_cnode *nd = &nodes[n];
-        rtpi_v3 p = v3(nd->p[0], nd->p[1], nd->p[2]), ng, ns, o, l;
-        uint32_t *w = &cur_vis[n * words + wi], mat;
-        const rtpi_tri *tr = tri_nrm && nd->prim < ntris ? &tris[nd->prim] : NULL;
-        int flip = 1; /* ng and ns still to be turned over for a back face */
-        int same = 1; /* ng and ns one vector (but a smooth triangle's) */
-        double dn, sd; /* (sd: ng.l, whose sign is the offset's side) */
-        if (tr && (tr->n[0] == RTPI_NONE || tr->n[1] == RTPI_NONE || tr->n[2] == RTPI_NONE)) {
-            /* flat: ng as rtpi_surface_normals makes it */
-            const double *tn = tri_nrm + 3 * (size_t)nd->prim;
-            ng = ns = v3(tn[0], tn[1], tn[2]);
-            mat = tr->mat;
-        } else if (tr && nv && mats[tr->mat].bump == RTPI_BUMP_NONE &&
-                   ev_mats[tr->mat].bump == RTPI_BUMP_NONE) {
-            /* Smooth, not bumped: the shading normal the evaluation kept,
-               turned over already (a triangle with vertex normals is
-               two-sided), instead of interpolating it again (teapot: 12%
-               of a move).  Rounded to float, it can differ from trace's
-               in its sign towards the light only where n.l is within
-               ~1e-7 |l| of 0, where the light's term is as small. */
-            const float *q = nv + 6 * n;
-            const double *tn = tri_nrm + 3 * (size_t)nd->prim;
-            double sg = nd->link & RTPI_L_BACK ? -1.0 : 1.0;
-            ng = v3(sg * tn[0], sg * tn[1], sg * tn[2]);
-            ns = v3(q[0], q[1], q[2]);
-            mat = tr->mat;
-            flip = 0;
-            same = 0;
-        } else {
-            double *pn = prim_nrm && nd->prim >= ntris ? prim_nrm + 3 * n : NULL;
-            if (ball_in && (nd->link & RTPI_L_BACK) && nd->prim - ntris < nspheres) {
-                /* A back hit on a sphere (a glass ball's inside: three
-                   quarters of mount's nodes): its shadow ray's origin does
-                   not depend on the light (the normals are one), nor then
-                   whether it lies in the ball, found once a tree (ball_in).
-                   Where it does and the light is outside (balls), the ball
-                   is in the way, whether or not the hit faces the light: the
-                   normal only for the query count (the same decisions and
-                   count as below, without the offset or the ball's test:
-                   mount_s6's moves 5% fewer instructions). */
-                size_t si = nd->prim - ntris;
-                const rtpi_sphere *sp = &spheres[si];
-                unsigned char *bi = &ball_in[n];
-                if (!*bi)
-                    *bi = ball_holds_back(v, sp, nd->prim, p) ? 1 : 2;
-                if (*bi == 1 && balls[si] &&
-                    rtpi_two_sided(s, spd, nd->prim, &mats[sp->mat])) {
-                    rtpi_v3 nn;
-                    double d;
-                    if (!pn || !kept_normal(pn, s, nd->prim, p, &nn)) {
-                        nn = rtpi_sphere_normal(sp, p);
-                        if (sp->r < 0.0f)
-                            nn = v3_mul(nn, -1.0);
+        if (kb && ball_in[n] == 1) {
+            /* A run of back hits inside balls (three quarters of mount's
+               nodes, ~3.8 a run): the ball path below, their normals
+               kept (ball_runs_known), in a loop of their own -- the
+               tests of the node's kind, its material and its normal's
+               were ~60 of its ~90 instructions a node.  A node whose ball
+               the light is inside of, or whose material is not two-sided
+               (a kt edit), or a NaN d, is left to the steps below, which
+               decide it as ever; the cache's last occluder as the path
+               below leaves it (the run's last hit facing the light). */
+            uint32_t last = 0;
+            int left = 0; /* node n left to the steps below */
+            do {
+                const rtpi_cnode *nd = &nodes[n];
+                const size_t si = nd->prim - ntris;
+                const double *c = prim_nrm + 3 * n;
+                double d;
+                if (si != ok_si) {
+                    if (!(balls[si] && rtpi_two_sided(s, spd, nd->prim, &mats[spheres[si].mat]))) {
+                        left = 1;
+                        break;
                     }
-                    /* rtpi_shadow_setup's d' = (-n).(lp - p) is this d
-                       negated exactly (each product and the sums turn
-                       sign alone): d' > 0 where d < 0, d' <= 0 where d >=
-                       0, NaN in neither -- the turned normal's three
-                       products saved (mount_s6's moves 1.48 M) */
-                    d = v3_dot(nn, v3_sub(lp, p));
-                    if (d < 0.0) {
-                        *w &= ~bit;
-                        queries++;
-                        if (keep_balls)
-                            cache.last = nd->prim + 1u;
-                        continue;
-                    }
-                    if (d >= 0.0) {
-                        *w &= ~bit;
-                        continue;
-                    }
-                    /* (NaN: as below) */
+                    ok_si = si;
                 }
-            }
-            if (pn && kept_normal(pn, s, nd->prim, p, &ng)) {
-                size_t i = nd->prim - ntris;
-                if (!(nd->link & RTPI_L_BACK)) {
-                    /* A sphere or cone seen from the front (no turn, no
-                       ball, no material to look up): the steps below.  On
-                       a cone, o is p moved along the kept normal (the
-                       side it faces) by the scene's offset, the same for
-                       every light, and so is whether o lies in the cone's
-                       solid, the query's own test (sh_own), kept too
-                       (rings_s7: 3% of a move) */
-                    *w &= ~bit;
-                    l = v3_sub(lp, p);
-                    dn = v3_dot(ng, l);
-                    if (dn <= 0.0)
-                        continue;
-                    o = rtpi_offset_origin(p, ng, dn >= 0.0 ? 1.0 : -1.0,
-                                           prim_floor
-                                               ? rtpi_prim_offset_floor(s, nd->prim, off_floor)
-                                               : off_floor);
+                /* (the path's d: the kept normal's n.(lp - p)) */
+                d = v3_dot(v3(c[0], c[1], c[2]), v3_sub(lp, v3(nd->p[0], nd->p[1], nd->p[2])));
+                if (d < 0.0) {
                     queries++;
-                    if (kf)
-                        cache.from = vis_from(kd_from, v->kd, n, o);
-                    if (i >= nspheres && cone_own) {
-                        unsigned char *co = &cone_own[n];
-                        if (!*co)
-                            *co = (unsigned char)(1 -
-                                                  rtpi_cone_shadows_own(s, i - nspheres, &o));
-                        if (rtpi_shadow_visible_own(sh, &cache, &p, &o, nd->prim, 1 - *co))
-                            *w |= bit;
-                    } else if (rtpi_shadow_visible_cached(sh, &cache, &p, &o, nd->prim)) {
-                        *w |= bit;
-                    }
-                    continue;
+                    last = nd->prim + 1u;
+                } else if (!(d >= 0.0)) {
+                    left = 1;
+                    break;
                 }
-                ns = ng;
-                mat = i < nspheres ? spheres[i].mat : s->cones[i - nspheres].mat;
-            } else {
-                mat = rtpi_surface_normals(s, nd->prim, p, &ng, &ns);
-                same = 0;
+                cur_vis[n * words + wi] &= ~bit;
+            } while (++n < n1 && ball_in[n] == 1);
+            if (keep_balls && last)
+                cache.last = last;
+            if (!left) {
+                n--; /* (the loop's n++: the node after the run) */
+                continue;
             }
         }
-        if (flip && (nd->link & RTPI_L_BACK) &&
-            rtpi_two_sided(s, spd, nd->prim, &mats[mat])) {
-            ng = v3_mul(ng, -1.0);
-            ns = v3_mul(ns, -1.0);
+        { /* (a block: without it gcc's registers cost mount_s6 0.7 M a move) */
+            const rtpi_cnode *nd = &nodes[n];
+            rtpi_v3 p = v3(nd->p[0], nd->p[1], nd->p[2]), ng, ns, o, l;
+            uint32_t *w = &cur_vis[n * words + wi], mat;
+            const rtpi_tri *tr = tri_nrm && nd->prim < ntris ? &tris[nd->prim] : NULL;
+            int flip = 1; /* ng and ns still to be turned over for a back face */
+            int same = 1; /* ng and ns one vector (but a smooth triangle's) */
+            double dn, sd; /* (sd: ng.l, whose sign is the offset's side) */
+            if (tr && (tr->n[0] == RTPI_NONE || tr->n[1] == RTPI_NONE || tr->n[2] == RTPI_NONE)) {
+                /* flat: ng as rtpi_surface_normals makes it */
+                const double *tn = tri_nrm + 3 * (size_t)nd->prim;
+                ng = ns = v3(tn[0], tn[1], tn[2]);
+                mat = tr->mat;
+            } else if (tr && nv && mats[tr->mat].bump == RTPI_BUMP_NONE &&
+                       ev_mats[tr->mat].bump == RTPI_BUMP_NONE) {
+                /* Smooth, not bumped: the shading normal the evaluation kept,
+                   turned over already (a triangle with vertex normals is
+                   two-sided), instead of interpolating it again (teapot: 12%
+                   of a move).  Rounded to float, it can differ from trace's
+                   in its sign towards the light only where n.l is within
+                   ~1e-7 |l| of 0, where the light's term is as small. */
+                const float *q = nv + 6 * n;
+                const double *tn = tri_nrm + 3 * (size_t)nd->prim;
+                double sg = nd->link & RTPI_L_BACK ? -1.0 : 1.0;
+                ng = v3(sg * tn[0], sg * tn[1], sg * tn[2]);
+                ns = v3(q[0], q[1], q[2]);
+                mat = tr->mat;
+                flip = 0;
+                same = 0;
+            } else {
+                double *pn = prim_nrm && nd->prim >= ntris ? prim_nrm + 3 * n : NULL;
+                if (ball_in && (nd->link & RTPI_L_BACK) && nd->prim - ntris < nspheres) {
+                    /* A back hit on a sphere (a glass ball's inside: three
+                       quarters of mount's nodes): its shadow ray's origin does
+                       not depend on the light (the normals are one), nor then
+                       whether it lies in the ball, found once a tree (ball_in).
+                       Where it does and the light is outside (balls), the ball
+                       is in the way, whether or not the hit faces the light: the
+                       normal only for the query count (the same decisions and
+                       count as below, without the offset or the ball's test:
+                       mount_s6's moves 5% fewer instructions). */
+                    size_t si = nd->prim - ntris;
+                    const rtpi_sphere *sp = &spheres[si];
+                    unsigned char *bi = &ball_in[n];
+                    if (!*bi)
+                        *bi = ball_holds_back(v, sp, nd->prim, p) ? 1 : 2;
+                    if (*bi == 1 && balls[si] &&
+                        rtpi_two_sided(s, spd, nd->prim, &mats[sp->mat])) {
+                        rtpi_v3 nn;
+                        double d;
+                        if (!pn || !kept_normal(pn, s, nd->prim, p, &nn)) {
+                            nn = rtpi_sphere_normal(sp, p);
+                            if (sp->r < 0.0f)
+                                nn = v3_mul(nn, -1.0);
+                        }
+                        /* rtpi_shadow_setup's d' = (-n).(lp - p) is this d
+                           negated exactly (each product and the sums turn
+                           sign alone): d' > 0 where d < 0, d' <= 0 where d >=
+                           0, NaN in neither -- the turned normal's three
+                           products saved (mount_s6's moves 1.48 M) */
+                        d = v3_dot(nn, v3_sub(lp, p));
+                        if (d < 0.0) {
+                            *w &= ~bit;
+                            queries++;
+                            if (keep_balls)
+                                cache.last = nd->prim + 1u;
+                            continue;
+                        }
+                        if (d >= 0.0) {
+                            *w &= ~bit;
+                            continue;
+                        }
+                        /* (NaN: as below) */
+                    }
+                }
+                if (pn && kept_normal(pn, s, nd->prim, p, &ng)) {
+                    size_t i = nd->prim - ntris;
+                    if (!(nd->link & RTPI_L_BACK)) {
+                        /* A sphere or cone seen from the front (no turn, no
+                           ball, no material to look up): the steps below.  On
+                           a cone, o is p moved along the kept normal (the
+                           side it faces) by the scene's offset, the same for
+                           every light, and so is whether o lies in the cone's
+                           solid, the query's own test (sh_own), kept too
+                           (rings_s7: 3% of a move) */
+                        *w &= ~bit;
+                        l = v3_sub(lp, p);
+                        dn = v3_dot(ng, l);
+                        if (dn <= 0.0)
+                            continue;
+                        o = rtpi_offset_origin(p, ng, dn >= 0.0 ? 1.0 : -1.0,
+                                               prim_floor
+                                                   ? rtpi_prim_offset_floor(s, nd->prim, off_floor)
+                                                   : off_floor);
+                        queries++;
+                        if (kf)
+                            cache.from = vis_from(kd_from, v->kd, n, o);
+                        if (i >= nspheres && cone_own) {
+                            unsigned char *co = &cone_own[n];
+                            if (!*co)
+                                *co = (unsigned char)(1 -
+                                                      rtpi_cone_shadows_own(s, i - nspheres, &o));
+                            if (rtpi_shadow_visible_own(sh, &cache, &p, &o, nd->prim, 1 - *co))
+                                *w |= bit;
+                        } else if (rtpi_shadow_visible_cached(sh, &cache, &p, &o, nd->prim)) {
+                            *w |= bit;
+                        }
+                        continue;
+                    }
+                    ns = ng;
+                    mat = i < nspheres ? spheres[i].mat : s->cones[i - nspheres].mat;
+                } else {
+                    mat = rtpi_surface_normals(s, nd->prim, p, &ng, &ns);
+                    same = 0;
+                }
+            }
+            if (flip && (nd->link & RTPI_L_BACK) &&
+                rtpi_two_sided(s, spd, nd->prim, &mats[mat])) {
+                ng = v3_mul(ng, -1.0);
+                ns = v3_mul(ns, -1.0);
+            }
+            *w &= ~bit;
+            /* rtpi_shadow_setup's arithmetic, whose second dot product, ng's,
+               is its first where ng and ns are one vector (the same bits:
+               then the side is the one the normal faces, NaN as ever) */
+            l = v3_sub(lp, p);
+            dn = v3_dot(ns, l);
+            if (dn <= 0.0)
+                continue;
+            /* (sd kept only where kf asks for it: the other copy as before
+               it, whose code it changed) */
+            sd = kf ? same ? dn : v3_dot(ng, l) : 0.0;
+            o = rtpi_offset_origin(p, ng,
+                                   (kf ? sd : same ? dn : v3_dot(ng, l)) >= 0.0 ? 1.0 : -1.0,
+                                   prim_floor ? rtpi_prim_offset_floor(s, nd->prim, off_floor)
+                                              : off_floor);
+            queries++;
+            if ((nd->link & RTPI_L_BACK) && balls && nd->prim - ntris < nspheres &&
+                balls[nd->prim - ntris] && rtpi_ball_holds(&spheres[nd->prim - ntris], o)) {
+                /* inside a ball the light is outside of: the ball is in the
+                   way (rtpi_prim_shadows_own_solid 1), which every mode
+                   answers without a test (sh_visible).  Here before the
+                   query's call and its own arithmetic (mount, whose glass
+                   balls hold three quarters of its nodes: 7% of a move), for
+                   back hits only (a front hit's o lies outside: balls' 7381
+                   spheres paid 2% for the test).  The cache as the query
+                   leaves it for shadow rays, whose next query the ball saves
+                   a walk of the kd-tree; a light buffer's is cheaper than the
+                   ball's test (mount: 1.9% of a move) */
+                if (keep_balls)
+                    cache.last = nd->prim + 1u;
+                continue;
+            }
+            if (kf)
+                cache.from = sd >= 0.0 ? vis_from(kd_from, v->kd, n, o) : 0u;
+            if (rtpi_shadow_visible_cached(sh, &cache, &p, &o, nd->prim))
+                *w |= bit;
         }
-        *w &= ~bit;
-        /* rtpi_shadow_setup's arithmetic, whose second dot product, ng's,
-           is its first where ng and ns are one vector (the same bits:
-           then the side is the one the normal faces, NaN as ever) */
-        l = v3_sub(lp, p);
-        dn = v3_dot(ns, l);
-        if (dn <= 0.0)
-            continue;
-        /* (sd kept only where kf asks for it: the other copy as before
-           it, whose code it changed) */
-        sd = kf ? same ? dn : v3_dot(ng, l) : 0.0;
-        o = rtpi_offset_origin(p, ng,
-                               (kf ? sd : same ? dn : v3_dot(ng, l)) >= 0.0 ? 1.0 : -1.0,
-                               prim_floor ? rtpi_prim_offset_floor(s, nd->prim, off_floor)
-                                          : off_floor);
-        queries++;
-        if ((nd->link & RTPI_L_BACK) && balls && nd->prim - ntris < nspheres &&
-            balls[nd->prim - ntris] && rtpi_ball_holds(&spheres[nd->prim - ntris], o)) {
-            /* inside a ball the light is outside of: the ball is in the
-               way (rtpi_prim_shadows_own_solid 1), which every mode
-               answers without a test (sh_visible).  Here before the
-               query's call and its own arithmetic (mount, whose glass
-               balls hold three quarters of its nodes: 7% of a move), for
-               back hits only (a front hit's o lies outside: balls' 7381
-               spheres paid 2% for the test).  The cache as the query
-               leaves it for shadow rays, whose next query the ball saves
-               a walk of the kd-tree; a light buffer's is cheaper than the
-               ball's test (mount: 1.9% of a move) */
-            if (keep_balls)
-                cache.last = nd->prim + 1u;
-            continue;
-        }
-        if (kf)
-            cache.from = sd >= 0.0 ? vis_from(kd_from, v->kd, n, o) : 0u;
-        if (rtpi_shadow_visible_cached(sh, &cache, &p, &o, nd->prim))
-            *w |= bit;
     }
     v->queries += queries;
     v->cache = cache;
@@ -784,7 +833,15 @@ __attribute__((flatten))
 #endif
 static int vis_row(void *ctx, int y)
 {
-    return vis_row_body(ctx, y, 0);
+    return vis_row_body(ctx, y, 0, 0);
+}
+
+#if defined(__GNUC__)
+__attribute__((flatten))
+#endif
+static int vis_row_kb(void *ctx, int y)
+{
+    return vis_row_body(ctx, y, 0, 1);
 }
 
 #if defined(__GNUC__)
@@ -792,7 +849,15 @@ __attribute__((flatten))
 #endif
 static int vis_row_kf(void *ctx, int y)
 {
-    return vis_row_body(ctx, y, 1);
+    return vis_row_body(ctx, y, 1, 0);
+}
+
+#if defined(__GNUC__)
+__attribute__((flatten))
+#endif
+static int vis_row_kf_kb(void *ctx, int y)
+{
+    return vis_row_body(ctx, y, 1, 1);
 }
 
 /* t->tri_nrm where the scene has triangles (else it stays NULL); 0, or
@@ -1060,6 +1125,47 @@ static rtp_status light_vis_make(rtp_tree *t, size_t i, int mode, int res, int t
     return RTP_OK;
 }
 
+/* t->ball_sph, after a move that found every node's ball_in (vis_row
+   finds each back hit's on a sphere where the light has balls, and keeps
+   its normal in prim_nrm on either of its paths: the runs read it as
+   kept).  Once a tree (t->ball_known); without the memory, or with no
+   ball_in 1, none (vis_row without its runs). */
+static void ball_runs_known(rtp_tree *t)
+{
+    const rtp_scene *s = t->scene;
+    size_t n;
+    int any = 0;
+    t->ball_known = 1;
+    t->ball_sph = (unsigned char *)rtpi_calloc_array(&t->alloc, s->nspheres, 1);
+    if (!t->ball_sph)
+        return;
+    for (n = 0; n < t->nnodes; n++)
+        if (t->ball_in[n] == 1) {
+            t->ball_sph[t->nodes[n].prim - s->ntris] = 1;
+            any = 1;
+        }
+    if (!any) { /* (none: no move asks the spheres) */
+        rtpi_free(&t->alloc, t->ball_sph);
+        t->ball_sph = NULL;
+    }
+}
+
+/* Whether vis_row's runs serve light lv's move: some node's ball_in 1
+   on a sphere the light is outside of, two-sided (else every run would
+   leave its nodes to the walk, in the copy that tests for them). */
+static int ball_runs_serve(const rtp_tree *t, const light_vis *lv)
+{
+    const rtp_scene *s = t->scene;
+    size_t i;
+    if (!lv->balls || !t->ball_in || !t->prim_nrm || !t->ball_sph)
+        return 0;
+    for (i = 0; i < s->nspheres; i++)
+        if (t->ball_sph[i] && lv->balls[i] &&
+            rtpi_two_sided(s, t->spd, (uint32_t)(s->ntris + i), &s->mats[s->spheres[i].mat]))
+            return 1;
+    return 0;
+}
+
 /* Decides lv's light for every node of t's sample rows into t->cur_vis
    (vis_row); st (may be NULL) counts the queries and the light.  0, 1
    out of memory, 2 cancelled (some rows decided, the rest not). */
@@ -1068,7 +1174,7 @@ static int light_vis_rows(rtp_tree *t, const light_vis *lv, double off_floor, in
                           rtp_eval_stats *st)
 {
     const double *lp = t->scene->lights[lv->light].pos;
-    int k, rows, threads = lv->threads;
+    int k, rows, kb, threads = lv->threads;
     /* (on the heap: 256 on the stack were a 37 KB frame) */
     vis_ctx *vc = (vis_ctx *)rtpi_malloc_array(&t->alloc, (size_t)threads, sizeof *vc);
     void **ctx = (void **)rtpi_malloc_array(&t->alloc, (size_t)threads, sizeof *ctx);
@@ -1092,9 +1198,15 @@ static int light_vis_rows(rtp_tree *t, const light_vis *lv, double off_floor, in
         vc[k].kd = t->kd;
         ctx[k] = &vc[k];
     }
-    rows = rtpi_parallel_rows_cancel(t->ny, threads, ctx, vc[0].kd_from ? vis_row_kf : vis_row,
-                                     progress, cancel, user,
-                                     rtpi_trace_stack(t->max_depth));
+    /* (the runs' copy where ball_in has 1s: vis_row_body's kb) */
+    kb = ball_runs_serve(t, lv);
+    rows = rtpi_parallel_rows_cancel(t->ny, threads, ctx,
+                                     vc[0].kd_from ? kb ? vis_row_kf_kb : vis_row_kf
+                                     : kb          ? vis_row_kb
+                                                   : vis_row,
+                                     progress, cancel, user, rtpi_trace_stack(t->max_depth));
+    if (rows == 0 && lv->balls && t->ball_in && t->prim_nrm && !t->ball_known)
+        ball_runs_known(t);
     if (rows != 2 && lv->mode == RTP_SHADOWS_LIGHTBUF) {
         double q = 0.0;
         for (k = 0; k < threads; k++)
@@ -3538,6 +3650,7 @@ static rtp_status retrace_edited(rtp_tree *t, int threads, int stale, double lim
     rtpi_free(&t->alloc, t->cur_vis);
     rtpi_free(&t->alloc, t->cur_pos);
     rtpi_free(&t->alloc, t->ball_in); /* (nodes traced again) */
+    rtpi_free(&t->alloc, t->ball_sph);
     rtpi_free(&t->alloc, t->prim_nrm);
     rtpi_free(&t->alloc, t->cone_own);
     rtpi_free(&t->alloc, t->kd_from);
@@ -3546,6 +3659,8 @@ static rtp_status retrace_edited(rtp_tree *t, int threads, int stale, double lim
     t->cur_vis = NULL;
     t->cur_pos = NULL;
     t->ball_in = NULL;
+    t->ball_sph = NULL;
+    t->ball_known = 0;
     t->prim_nrm = NULL;
     t->cone_own = NULL;
     t->kd_from = NULL;
@@ -6107,6 +6222,7 @@ static rtp_status file_band(void *user, rtp_tree *t, int y0, int y1, const rtpi_
     b.nodes = (rtpi_cnode *)(uintptr_t)nodes;
     b.start = (uint64_t *)(uintptr_t)start;
     b.ball_in = NULL; /* (t's nodes', not the band's) */
+    b.ball_sph = NULL;
     b.prim_nrm = NULL;
     b.cone_own = NULL;
     b.kd_from = NULL;

@@ -2937,10 +2937,15 @@ static void test_moved_light_small_spd(void)
    mount_s2, whose glass balls hold most nodes as back hits inside them
    (vis_row answers those without the query, counting the ones trace
    asks: where the turned normal faces the light), the light moved to
-   places that turn the balls' hits towards it and away, each mode. */
+   places that turn the balls' hits towards it and away, each mode.  The
+   first move puts it inside a ball (whose back hits then take the walk's
+   steps, their normals not kept by it), and a later one again (vis_row's
+   runs of such hits leave them to the walk): the moves after the first
+   take the runs, which read every such hit's normal as kept. */
 static void test_moved_light_query_count(void)
 {
-    static const char *const pos[] = {"-90,-100,100", "0.3,0.2,3", "2,-3,-0.5"};
+    static const char *const pos[] = {"-0.8,0.8,1.2", "-90,-100,100", "-0.8,0.8,1.2",
+                                      "0.3,0.2,3", "2,-3,-0.5"};
     static const rtp_shadow_mode modes[] = {RTP_SHADOWS_EXACT, RTP_SHADOWS_LIGHTBUF,
                                             RTP_SHADOWS_AUTO};
     const char *dir = check_shared_scenes();
