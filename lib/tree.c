@@ -1055,6 +1055,31 @@ static void light_vis_free(rtp_tree *t, light_vis *lv)
                          half the cells (fewer entries: a primitive
                          covers fewer of them) before RTP_ERR_LIMIT */
 
+/* The limit's error once a resolution nobody asked was halved down to
+   `res` (lb_default_res's, or coarser for the cells' starts: shadow_mode_for,
+   then down from light_vis_make's res0): it named "a light buffer of 1 cells a
+   face", which no one had asked, and told to lower that resolution
+   (--memory-limit 2 on gears_s4's tree).  The cause stays (its lists or
+   its primitives before them), the advice but that. */
+static void halved_error(int res, rtp_error *err)
+{
+    static const char lower[] = "lower its resolution, ";
+    const char *tail, *cut;
+    char m[sizeof err->message + 96];
+    int n;
+    if (!err || !err->message[0])
+        return;
+    tail = strstr(err->message, "cells a face: ");
+    tail = tail ? tail + strlen("cells a face: ") : err->message;
+    cut = strstr(tail, lower);
+    n = snprintf(m, sizeof m,
+                 "a light buffer of the default resolution, halved down to %d cell%s a face: "
+                 "%.*s%s",
+                 res, res == 1 ? "" : "s", cut ? (int)(cut - tail) : (int)strlen(tail), tail,
+                 cut ? cut + strlen(lower) : "");
+    rtpi_fit_text(err->message, sizeof err->message, m, n >= 0 && (size_t)n < sizeof m);
+}
+
 /* Light i's shadow queries by `mode` (not AUTO) at `res` cells: its
    direction cube's build (its progress and cancel through poll), or the
    kd-tree's where shadow rays decide.  `fallback`: LV_ bits. */
@@ -1065,6 +1090,7 @@ static rtp_status light_vis_make(rtp_tree *t, size_t i, int mode, int res, int t
     rtp_scene *s = t->scene;
     const double *lp = s->lights[i].pos;
     double lb_cap, lb_q;
+    int res0;
     rtp_status rs;
     memset(lv, 0, sizeof *lv);
     lv->light = i;
@@ -1083,6 +1109,7 @@ static rtp_status light_vis_make(rtp_tree *t, size_t i, int mode, int res, int t
     /* (the last light buffer's queries, as the next's expectation: a
        drag's moves ask about as many each; none known at the first) */
     lb_q = t->lb_queries_known ? t->lb_queries : HUGE_VAL;
+    res0 = res;
     for (;;) {
         rs = rtpi_shadow_create_q(s, t->kd, v3(lp[0], lp[1], lp[2]), (rtpi_shadow_mode)mode,
                                   res, threads, limit, lb_cap, lb_q, poll, &t->cube_alloc,
@@ -1094,6 +1121,9 @@ static rtp_status light_vis_make(rtp_tree *t, size_t i, int mode, int res, int t
             break;
         res /= 2;
     }
+    if (rs == RTP_ERR_LIMIT && (fallback & LV_RES_FREE) && !(fallback & LV_AUTO) &&
+        mode == RTP_SHADOWS_LIGHTBUF && res < res0)
+        halved_error(res, err);
     if ((rs == RTP_ERR_LIMIT || rs == RTPI_OVER_ENTRIES) && (fallback & LV_AUTO) &&
         mode != RTP_SHADOWS_EXACT) {
         /* AUTO: shadow rays where the lists would not fit (a mesh
@@ -5153,6 +5183,13 @@ static rtp_status shadow_mode_for(rtp_tree *t, const rtp_eval_options *opt, int 
                 char g[2][32]; /* '.' whatever the locale */
                 rtpi_fmt_g(g[0], sizeof g[0], 6, rtpi_mib_up(need));
                 rtpi_fmt_g(g[1], sizeof g[1], 6, lim / 1048576.0);
+                if (res_free) /* (halved to 1 cell: nothing to lower; halved_error) */
+                    return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
+                                      "a light buffer of the default resolution, halved down "
+                                      "to 1 cell a face: its cells take %s MiB, over the "
+                                      "memory limit of %s MiB (take --shadows exact, or raise "
+                                      "memory_limit: rtp's --memory-limit)",
+                                      g[0], g[1]);
                 return rtpi_error(err, RTP_ERR_LIMIT, NULL, 0, 0,
                                   "a direction cube of %d cells a face takes up to %s MiB, "
                                   "over the memory limit of %s MiB (lower its resolution or "

@@ -2766,6 +2766,28 @@ static void test_lightbuf_prims_limit(void)
               "lightbuf: %s", rs == RTP_OK ? "ok" : err.message);
     CHECK_MSG((double)(c.peak - base) <= eo.memory_limit + 65536.0,
               "lightbuf under 1 MiB: peak %.0f bytes", (double)(c.peak - base));
+    /* lightbuf without a resolution halves the default's down to 1
+       cell before it gives up: the error says so, and not to lower a
+       resolution no one asked (it named "a light buffer of 1 cells a
+       face" and told to lower it) */
+    eo.shadow_res = 0;
+    rs = img ? rtp_tree_eval_into(t, &eo, img, NULL, &err) : RTP_ERR_ARGUMENT;
+    CHECK_MSG(rs == RTP_ERR_LIMIT &&
+                  strstr(err.message, "a light buffer of the default resolution, halved down "
+                                      "to 1 cell a face: its 45000 primitives take ") ==
+                      err.message &&
+                  !strstr(err.message, "lower its resolution"),
+              "lightbuf, no resolution: %s", rs == RTP_OK ? "ok" : err.message);
+    /* (and where even one cell's starts pass the limit: 24 bytes) */
+    eo.memory_limit = 16.0;
+    rs = img ? rtp_tree_eval_into(t, &eo, img, NULL, &err) : RTP_ERR_ARGUMENT;
+    CHECK_MSG(rs == RTP_ERR_LIMIT &&
+                  strstr(err.message, "a light buffer of the default resolution, halved down "
+                                      "to 1 cell a face: its cells take ") == err.message &&
+                  !strstr(err.message, "lower its resolution"),
+              "lightbuf, no resolution, 16 bytes: %s", rs == RTP_OK ? "ok" : err.message);
+    eo.memory_limit = 1048576.0;
+    eo.shadow_res = 16;
     /* the item buffer's companion light buffers, refused alike, say
        they are the item buffer's (they named a light buffer of cells no
        one had asked for) */
