@@ -525,6 +525,16 @@ static inline rtpi_v3 rtpi_offset_origin(rtpi_v3 p, rtpi_v3 ng, double side, dou
     return v3_madd(p, ng, side >= 0.0 ? eps : -eps);
 }
 
+/* rtpi_offset_origin's step at p: o is p + ng times it, negated for the
+   side ng does not face (vis_row keeps it per node: it does not depend on
+   the light).  The same arithmetic as there. */
+static inline double rtpi_offset_eps(rtpi_v3 p, double floor)
+{
+    double ax = fabs(p.x), ay = fabs(p.y), az = fabs(p.z);
+    double m = ax > ay ? (ax > az ? ax : az) : (ay > az ? ay : az);
+    return 4e-7 * m + floor;
+}
+
 /* Whether prim shadows a point of its own whose shadow ray starts at o
    (rtpi_offset_origin's step off the surface, towards light L): 0 no, 1
    yes, -1 cannot tell (see intersect.c).  Where 0, shadow queries leave
@@ -1168,6 +1178,21 @@ struct rtp_tree {
                               entries were found (a back hit's normal
                               turns with it: rtpi_two_sided) */
     size_t kd_from_nmats;
+    double *vrec;          /* 4 per node, made at a move where the memory
+                              limit holds it with the evaluation's caches
+                              (vrec_make): what a moved light's query at
+                              the node takes that no light changes -- the
+                              geometric normal as turned for a back face
+                              and the offset's step off the surface
+                              (rtpi_offset_eps); step 0 not yet known,
+                              > 0 the normals one vector, < 0 (minus the
+                              step) a smooth triangle's, its shading
+                              normal the evaluation's ev_nv, NaN none
+                              (the node's full steps each move) (vis_row) */
+    unsigned char *vrec_mat; /* per material what the entries hold for
+                              (vrec_key): its two-sidedness and whether
+                              it is bumped */
+    size_t vrec_nmats;
     size_t nlights0;       /* lights traced; later ones were added */
 
     /* Evaluation caches (tree.c): the shading steps' results, kept so an

@@ -40,6 +40,8 @@ void rtp_tree_destroy(rtp_tree *t)
     rtpi_free(&a, t->cone_own);
     rtpi_free(&a, t->kd_from);
     rtpi_free(&a, t->kd_from_kt);
+    rtpi_free(&a, t->vrec);
+    rtpi_free(&a, t->vrec_mat);
     rtpi_free(&a, t->tri_nrm);
     rtpi_free(&a, t->ev_terms);
     rtpi_free(&a, t->ev_coeffs);
@@ -504,6 +506,7 @@ typedef struct vis_ctx {
     int keep_balls;          /* a ball that holds a hit goes to the cache */
     uint32_t *kd_from;       /* t->kd_from for EXACT's walks, or NULL */
     const rtpi_kdtree *kd;
+    double *vrec;            /* t->vrec where it holds for this move, or NULL */
     char pad[64];            /* the contexts lie side by side (vis_row) */
 } vis_ctx;
 
@@ -575,6 +578,16 @@ static RTPI_FORCE_INLINE uint32_t vis_from(uint32_t *kf, const rtpi_kdtree *kd, 
     return v - 1u;
 }
 
+/* Node record r (t->vrec): ng as turned and e, the offset's step (> 0
+   where ng = ns, minus it for a smooth triangle, NaN: none). */
+static RTPI_FORCE_INLINE void vrec_put(double *r, rtpi_v3 ng, double e)
+{
+    r[0] = ng.x;
+    r[1] = ng.y;
+    r[2] = ng.z;
+    r[3] = e;
+}
+
 /* Decides light `light` anew for every node of one row of samples, with
    trace's own rule (rtpi_shadow_setup) and the chosen shadow query.
    kf: 1 where EXACT's walks start at the origins' leaves (t->kd_from),
@@ -619,6 +632,7 @@ static RTPI_FORCE_INLINE int vis_row_body(void *ctx, int y, int kf, int kb)
     const rtpi_sphere *const spheres = s->spheres;
     const rtpi_material *const mats = s->mats, *const ev_mats = t->ev_mats;
     uint32_t *const kd_from = kf ? v->kd_from : NULL;
+    double *const vrec = v->vrec;
     for (n = (size_t)t->start[k0]; n < n1; n++) {
         if (kb && ball_in[n] == 1) {
             /* A run of back hits inside balls (three quarters of mount's
@@ -666,15 +680,63 @@ static RTPI_FORCE_INLINE int vis_row_body(void *ctx, int y, int kf, int kb)
             const rtpi_cnode *nd = &nodes[n];
             rtpi_v3 p = v3(nd->p[0], nd->p[1], nd->p[2]), ng, ns, o, l;
             uint32_t *w = &cur_vis[n * words + wi], mat;
-            const rtpi_tri *tr = tri_nrm && nd->prim < ntris ? &tris[nd->prim] : NULL;
+            const rtpi_tri *tr; /* (found below the record's paths: gcc took it first) */
             int flip = 1; /* ng and ns still to be turned over for a back face */
             int same = 1; /* ng and ns one vector (but a smooth triangle's) */
+            int rk = 0; /* the node's record (vrec) to make: 1 ng = ns, 2 smooth */
             double dn, sd; /* (sd: ng.l, whose sign is the offset's side) */
+            if (vrec) {
+                /* The node's record (vrec_make): the turned ng and the
+                   offset's step, which no light changes -- the node's
+                   kind, material, two-sidedness, normal and the step's
+                   arithmetic were ~60 of its ~100 instructions.  The
+                   steps below with the same numbers: o is
+                   rtpi_offset_origin's, dn and the side's sign as there */
+                const double *r = vrec + 4 * n;
+                const double e = r[3];
+                if (e > 0.0) {
+                    /* ng = ns: the side is dn's */
+                    ng = v3(r[0], r[1], r[2]);
+                    *w &= ~bit;
+                    l = v3_sub(lp, p);
+                    dn = v3_dot(ng, l);
+                    if (dn <= 0.0)
+                        continue;
+                    o = v3_madd(p, ng, dn >= 0.0 ? e : -e);
+                    queries++;
+                    if (kf)
+                        cache.from = dn >= 0.0 ? vis_from(kd_from, v->kd, n, o) : 0u;
+                    if (rtpi_shadow_visible_cached(sh, &cache, &p, &o, nd->prim))
+                        *w |= bit;
+                    continue;
+                }
+                if (e < 0.0 && nv) {
+                    /* a smooth triangle's: ns the evaluation's (as below) */
+                    const float *q = nv + 6 * n;
+                    ng = v3(r[0], r[1], r[2]);
+                    ns = v3(q[0], q[1], q[2]);
+                    *w &= ~bit;
+                    l = v3_sub(lp, p);
+                    dn = v3_dot(ns, l);
+                    if (dn <= 0.0)
+                        continue;
+                    sd = v3_dot(ng, l);
+                    o = v3_madd(p, ng, sd >= 0.0 ? -e : e);
+                    queries++;
+                    if (kf)
+                        cache.from = sd >= 0.0 ? vis_from(kd_from, v->kd, n, o) : 0u;
+                    if (rtpi_shadow_visible_cached(sh, &cache, &p, &o, nd->prim))
+                        *w |= bit;
+                    continue;
+                }
+            }
+            tr = tri_nrm && nd->prim < ntris ? &tris[nd->prim] : NULL;
             if (tr && (tr->n[0] == RTPI_NONE || tr->n[1] == RTPI_NONE || tr->n[2] == RTPI_NONE)) {
                 /* flat: ng as rtpi_surface_normals makes it */
                 const double *tn = tri_nrm + 3 * (size_t)nd->prim;
                 ng = ns = v3(tn[0], tn[1], tn[2]);
                 mat = tr->mat;
+                rk = 1;
             } else if (tr && nv && mats[tr->mat].bump == RTPI_BUMP_NONE &&
                        ev_mats[tr->mat].bump == RTPI_BUMP_NONE) {
                 /* Smooth, not bumped: the shading normal the evaluation kept,
@@ -691,6 +753,7 @@ static RTPI_FORCE_INLINE int vis_row_body(void *ctx, int y, int kf, int kb)
                 mat = tr->mat;
                 flip = 0;
                 same = 0;
+                rk = 2;
             } else {
                 double *pn = prim_nrm && nd->prim >= ntris ? prim_nrm + 3 * n : NULL;
                 if (ball_in && (nd->link & RTPI_L_BACK) && nd->prim - ntris < nspheres) {
@@ -747,6 +810,14 @@ static RTPI_FORCE_INLINE int vis_row_body(void *ctx, int y, int kf, int kb)
                            every light, and so is whether o lies in the cone's
                            solid, the query's own test (sh_own), kept too
                            (rings_s7: 3% of a move) */
+                        if (vrec && vrec[4 * n + 3] == 0.0)
+                            vrec_put(vrec + 4 * n, ng,
+                                     i < nspheres
+                                         ? rtpi_offset_eps(
+                                               p, prim_floor ? rtpi_prim_offset_floor(
+                                                                   s, nd->prim, off_floor)
+                                                             : off_floor)
+                                         : NAN); /* (a cone's own answer: its path) */
                         *w &= ~bit;
                         l = v3_sub(lp, p);
                         dn = v3_dot(ng, l);
@@ -773,6 +844,8 @@ static RTPI_FORCE_INLINE int vis_row_body(void *ctx, int y, int kf, int kb)
                     }
                     ns = ng;
                     mat = i < nspheres ? spheres[i].mat : s->cones[i - nspheres].mat;
+                    if (vrec && vrec[4 * n + 3] == 0.0)
+                        vrec_put(vrec + 4 * n, ng, NAN); /* (a back hit's ball: its path) */
                 } else {
                     mat = rtpi_surface_normals(s, nd->prim, p, &ng, &ns);
                     same = 0;
@@ -782,6 +855,11 @@ static RTPI_FORCE_INLINE int vis_row_body(void *ctx, int y, int kf, int kb)
                 rtpi_two_sided(s, spd, nd->prim, &mats[mat])) {
                 ng = v3_mul(ng, -1.0);
                 ns = v3_mul(ns, -1.0);
+            }
+            if (rk && vrec && vrec[4 * n + 3] == 0.0) {
+                double e = rtpi_offset_eps(
+                    p, prim_floor ? rtpi_prim_offset_floor(s, nd->prim, off_floor) : off_floor);
+                vrec_put(vrec + 4 * n, ng, rk == 1 ? e : -e);
             }
             *w &= ~bit;
             /* rtpi_shadow_setup's arithmetic, whose second dot product, ng's,
@@ -1226,6 +1304,7 @@ static int light_vis_rows(rtp_tree *t, const light_vis *lv, double off_floor, in
         vc[k].keep_balls = lv->mode == RTP_SHADOWS_EXACT;
         vc[k].kd_from = lv->mode == RTP_SHADOWS_EXACT ? t->kd_from : NULL;
         vc[k].kd = t->kd;
+        vc[k].vrec = t->vrec;
         ctx[k] = &vc[k];
     }
     /* (the runs' copy where ball_in has 1s: vis_row_body's kb) */
@@ -1268,6 +1347,7 @@ static rtp_status update_visibility_body(rtp_tree *t, int mode, int res, int thr
                                          rtp_eval_stats *st, rtp_error *err);
 
 static void kd_from_make(rtp_tree *t, size_t nl, double limit);
+static void vrec_make(rtp_tree *t, size_t nl, double limit);
 
 static rtp_status update_visibility(rtp_tree *t, int mode, int res, int threads,
                                     double limit, int fallback, const progress_part *prog,
@@ -1418,6 +1498,7 @@ static rtp_status update_visibility_body(rtp_tree *t, int mode, int res, int thr
             }
             if (lv.mode == RTP_SHADOWS_EXACT)
                 kd_from_make(t, nl, limit);
+            vrec_make(t, nl, limit);
             rows = light_vis_rows(t, &lv, off_floor, prim_floor, part.fn ? progress_part_cb : NULL,
                                   part.cancel ? progress_part_cancel : NULL, &part, st);
             light_vis_free(t, &lv);
@@ -1502,6 +1583,62 @@ static void kd_from_make(rtp_tree *t, size_t nl, double limit)
     for (m = 0; m < s->nmats; m++)
         t->kd_from_kt[m] = s->mats[m].kt > 0.0f;
     t->kd_from_nmats = s->nmats;
+}
+
+/* What t->vrec's entries of material m's nodes hold for: its
+   two-sidedness (an SPD tree's opaque back hits keep their normal,
+   rtpi_two_sided: kt > 0 turns it) and whether it is bumped, as the
+   materials now and the evaluation's (ev_mats, the smooth triangles'
+   ns from ev_nv only where neither is; where no evaluation holds its
+   caches the materials' alone, ev_nv then none and no smooth entry used
+   or made). */
+static unsigned char vrec_key(const rtp_tree *t, size_t m)
+{
+    const rtpi_material *mt = &t->scene->mats[m];
+    int bump = mt->bump != RTPI_BUMP_NONE;
+    int ev_bump = t->ev_valid && t->ev_mats ? t->ev_mats[m].bump != RTPI_BUMP_NONE : bump;
+    return (unsigned char)((mt->kt > 0.0f) | bump << 1 | ev_bump << 2);
+}
+
+/* t->vrec for a move: made at the first (all zero: each node's entry made
+   as vis_row meets it) where it fits the memory limit with the
+   evaluation's caches and the other per-node ones, made anew where some
+   material's vrec_key changed since (a kt edit turning back faces over,
+   a bump); without the memory, none: every node's full steps, the same
+   answers.  32 bytes a node (mount_s6 at 512x512 20.8 MB). */
+static void vrec_make(rtp_tree *t, size_t nl, double limit)
+{
+    const rtp_scene *s = t->scene;
+    size_t m, n = 4 * t->nnodes + 4;
+    int same = t->vrec && t->vrec_mat && t->vrec_nmats == s->nmats;
+    for (m = 0; same && m < s->nmats; m++)
+        same = t->vrec_mat[m] == vrec_key(t, m);
+    if (same)
+        return;
+    if (!t->vrec) {
+        double bytes = ev_cache_bytes(t, nl, (size_t)t->nx * t->ny) +
+                       32.0 * (double)t->nnodes + (t->mv_kc ? 24.0 * (double)t->nnodes : 0.0) +
+                       (t->kd_from ? 4.0 * (double)t->nnodes + rtpi_kd_paths_bytes(t->kd) : 0.0);
+        if (!t->nnodes || !(bytes <= fmin(EV_CACHE_BYTES, limit)))
+            return;
+        t->vrec = (double *)rtpi_calloc_array(&t->alloc, n, sizeof *t->vrec);
+    } else {
+        memset(t->vrec, 0, n * sizeof *t->vrec);
+    }
+    if (t->vrec && (!t->vrec_mat || t->vrec_nmats != s->nmats)) {
+        rtpi_free(&t->alloc, t->vrec_mat);
+        t->vrec_mat = (unsigned char *)rtpi_malloc_array(&t->alloc, s->nmats + 1, 1);
+    }
+    if (!t->vrec || !t->vrec_mat) {
+        rtpi_free(&t->alloc, t->vrec);
+        rtpi_free(&t->alloc, t->vrec_mat);
+        t->vrec = NULL;
+        t->vrec_mat = NULL;
+        return;
+    }
+    for (m = 0; m < s->nmats; m++)
+        t->vrec_mat[m] = vrec_key(t, m);
+    t->vrec_nmats = s->nmats;
 }
 
 /* Float images carry 2^-24 of the magnitudes they are summed from: where
@@ -3685,6 +3822,8 @@ static rtp_status retrace_edited(rtp_tree *t, int threads, int stale, double lim
     rtpi_free(&t->alloc, t->cone_own);
     rtpi_free(&t->alloc, t->kd_from);
     rtpi_free(&t->alloc, t->kd_from_kt);
+    rtpi_free(&t->alloc, t->vrec);
+    rtpi_free(&t->alloc, t->vrec_mat);
     free_material_lists(t);
     t->cur_vis = NULL;
     t->cur_pos = NULL;
@@ -3695,6 +3834,8 @@ static rtp_status retrace_edited(rtp_tree *t, int threads, int stale, double lim
     t->cone_own = NULL;
     t->kd_from = NULL;
     t->kd_from_kt = NULL;
+    t->vrec = NULL;
+    t->vrec_mat = NULL;
     return RTP_OK;
 }
 
@@ -6264,6 +6405,8 @@ static rtp_status file_band(void *user, rtp_tree *t, int y0, int y1, const rtpi_
     b.cone_own = NULL;
     b.kd_from = NULL;
     b.kd_from_kt = NULL;
+    b.vrec = NULL;
+    b.vrec_mat = NULL;
     b.mv_kc = NULL; /* (t's nodes', not the band's) */
     b.ny = y1 - y0;
     if (t->spd) {

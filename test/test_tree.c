@@ -3016,6 +3016,117 @@ static void test_moved_light_query_count(void)
     rtp_scene_destroy(s);
 }
 
+/* A moved light's per-node record (vrec: the turned geometric normal and
+   the offset's step, kept from move to move) against full traces of the
+   scene as edited between moves: teapot_s2's smooth triangles (their
+   shading normals the evaluation's) and flat ground; a bump given to
+   the teapot and taken away (its shading normal bent: the smooth
+   entries must go), the ground made transparent and opaque again (its
+   back hits two-sided and not: SPD traces them again), every move's
+   queries those of trace's shadow rays and its image the same bits; in
+   exact and lightbuf, and in exact under memory limits from 64 KiB up
+   (the record left out where it does not fit, never the move failing
+   for it: each image as without a limit). */
+static void test_moved_light_record(void)
+{
+    static const char *const step[][3] = {
+        {"-3,9.5,12", NULL, NULL},        {"-4,9,10", NULL, NULL},
+        {"2,-6,9", NULL, NULL},           {"-5,3,6", "mat.2.bump", "waves"},
+        {"-3,8,11", NULL, NULL},          {"1,-7,8", "mat.2.bump", "none"},
+        {"-4,9,10", "mat.2.kt", "0.5"},   {"2,-6,9", NULL, NULL},
+        {"-3,8,11", "mat.2.kt", "0"},     {"-5,3,6", NULL, NULL}};
+    static const rtp_shadow_mode modes[] = {RTP_SHADOWS_EXACT, RTP_SHADOWS_LIGHTBUF};
+    static const double lims[] = {40, 80, 200};
+    const char *dir = check_shared_scenes();
+    char path[512];
+    size_t i, k;
+    double lim;
+    rtp_tree_info ti;
+    if (!dir)
+        SKIP("../shared/scenes absent: teapot_s2 not checked");
+    snprintf(path, sizeof path, "%s/spd/teapot_s2.nff", dir);
+    {
+        /* (its second light left out: trace's shadow rays then light
+           0's alone, whose count the moves' must be) */
+        char line[4096];
+        int lights = 0;
+        FILE *in = fopen(path, "r"), *out;
+        snprintf(path, sizeof path, "%s/rtp_vrec_%d.nff", tmpdir(), (int)getpid());
+        out = fopen(path, "w");
+        CHECK(in && out);
+        while (in && out && fgets(line, sizeof line, in))
+            if (!(line[0] == 'l' && line[1] == ' ' && lights++))
+                fputs(line, out);
+        if (in)
+            fclose(in);
+        if (out)
+            fclose(out);
+    }
+    for (k = 0; k < 2 + 3; k++) {
+        rtp_scene *s = load(path);
+        rtp_tree *t = NULL;
+        rtp_image *re = NULL;
+        rtp_trace_options o;
+        rtp_eval_options eo;
+        int bad = 0, glass = 0;
+        if (!s)
+            return;
+        memset(&o, 0, sizeof o);
+        memset(&eo, 0, sizeof eo);
+        o.width = 40;
+        o.height = 30;
+        o.spd = 1;
+        eo.shadows = modes[k < 2 ? k : 0];
+        eo.threads = 2;
+        eo.stale = RTP_STALE_RETRACE;
+        /* (the teapot without reflections: its bump then bends no ray a
+           full trace casts below it) */
+        CHECK(rtp_scene_set(s, "mat.2.ks", "0", NULL) == RTP_OK);
+        CHECK(rtp_record(s, &o, &t, &re, NULL, NULL) == RTP_OK);
+        rtp_tree_get_info(t, &ti);
+        /* (the evaluation's caches take ~52 bytes a node, the record 32
+           more: limits on either side) */
+        lim = k < 2 ? 0.0 : (double)ti.nodes * lims[k - 2];
+        eo.memory_limit = lim;
+        for (i = 0; t && re && !bad && i < sizeof step / sizeof *step; i++) {
+            rtp_image *full = NULL;
+            rtp_eval_stats es;
+            rtp_trace_stats ts;
+            rtp_status rs;
+            memset(&es, 0, sizeof es);
+            memset(&ts, 0, sizeof ts);
+            if (step[i][1])
+                CHECK(rtp_tree_set(t, step[i][1], step[i][2], NULL) == RTP_OK &&
+                      rtp_scene_set(s, step[i][1], step[i][2], NULL) == RTP_OK);
+            CHECK(rtp_tree_set(t, "light.0.pos", step[i][0], NULL) == RTP_OK &&
+                  rtp_scene_set(s, "light.0.pos", step[i][0], NULL) == RTP_OK);
+            rs = rtp_tree_eval_into(t, &eo, re, &es, NULL);
+            if (lim && rs == RTP_ERR_LIMIT) /* (the limit's, not the record's) */
+                break;
+            CHECK(rs == RTP_OK);
+            CHECK(rtp_trace(s, &o, &full, &ts, NULL) == RTP_OK);
+            /* (a re-trace casts the shadow rays of the samples it traces
+               again itself: the move's queries are the rest's; and trace
+               counts more rays where the teapot is glass) */
+            if (step[i][1] && strcmp(step[i][1], "mat.2.kt") == 0)
+                glass = strcmp(step[i][2], "0") != 0;
+            bad = !(full && same_image(re, full) && ts.shadow_rays > 0 &&
+                    (es.retraced_samples || glass || es.shadow_queries == ts.shadow_rays));
+            CHECK_MSG(!bad,
+                      "mode %d, limit %.0f, step %zu (light at %s, %s=%s): queries %llu, "
+                      "trace's shadow rays %llu, images %s",
+                      (int)eo.shadows, lim, i, step[i][0], step[i][1] ? step[i][1] : "-",
+                      step[i][2] ? step[i][2] : "-", es.shadow_queries, ts.shadow_rays,
+                      full && same_image(re, full) ? "the same" : "differ");
+            rtp_image_destroy(full);
+        }
+        rtp_image_destroy(re);
+        rtp_tree_destroy(t);
+        rtp_scene_destroy(s);
+    }
+    remove(path);
+}
+
 /* The test scene, with options zero but for a 40x30 image; NULL (a
    check failing) when it does not load. */
 static rtp_scene *spheres_40x30(rtp_trace_options *o, rtp_eval_options *eo)
@@ -8076,6 +8187,7 @@ int main(void)
     RUN(test_lightbuf_default_res);
     RUN(test_moved_light_small_spd);
     RUN(test_moved_light_query_count);
+    RUN(test_moved_light_record);
     RUN(test_edit_sequence);
     RUN(test_random_chains);
     RUN(test_one_term_edits);
