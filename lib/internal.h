@@ -1187,8 +1187,11 @@ struct rtp_tree {
                               (rtpi_offset_eps); step 0 not yet known,
                               > 0 the normals one vector, < 0 (minus the
                               step) a smooth triangle's, its shading
-                              normal the evaluation's ev_nv, NaN none
-                              (the node's full steps each move) (vis_row) */
+                              normal the evaluation's ev_nv, or a cone's
+                              seen from the front, its own answer in
+                              cone_own; NaN none (the node's full steps
+                              each move: a back hit on a sphere); made
+                              and read only where ev_nv holds (vis_row) */
     unsigned char *vrec_mat; /* per material what the entries hold for
                               (vrec_key): its two-sidedness and whether
                               it is bumped */

@@ -710,24 +710,46 @@ static RTPI_FORCE_INLINE int vis_row_body(void *ctx, int y, int kf, int kb)
                         *w |= bit;
                     continue;
                 }
-                if (e < 0.0 && nv) {
-                    /* a smooth triangle's: ns the evaluation's (as below) */
-                    const float *q = nv + 6 * n;
-                    ng = v3(r[0], r[1], r[2]);
-                    ns = v3(q[0], q[1], q[2]);
-                    *w &= ~bit;
-                    l = v3_sub(lp, p);
-                    dn = v3_dot(ns, l);
-                    if (dn <= 0.0)
+                if (e < 0.0) {
+                    if (nd->prim < ntris) {
+                        /* a smooth triangle's: ns the evaluation's (as below) */
+                        const float *q = nv + 6 * n;
+                        ng = v3(r[0], r[1], r[2]);
+                        ns = v3(q[0], q[1], q[2]);
+                        *w &= ~bit;
+                        l = v3_sub(lp, p);
+                        dn = v3_dot(ns, l);
+                        if (dn <= 0.0)
+                            continue;
+                        sd = v3_dot(ng, l);
+                        o = v3_madd(p, ng, sd >= 0.0 ? -e : e);
+                        queries++;
+                        if (kf)
+                            cache.from = sd >= 0.0 ? vis_from(kd_from, v->kd, n, o) : 0u;
+                        if (rtpi_shadow_visible_cached(sh, &cache, &p, &o, nd->prim))
+                            *w |= bit;
                         continue;
-                    sd = v3_dot(ng, l);
-                    o = v3_madd(p, ng, sd >= 0.0 ? -e : e);
-                    queries++;
-                    if (kf)
-                        cache.from = sd >= 0.0 ? vis_from(kd_from, v->kd, n, o) : 0u;
-                    if (rtpi_shadow_visible_cached(sh, &cache, &p, &o, nd->prim))
-                        *w |= bit;
-                    continue;
+                    } else {
+                        /* a cone's seen from the front, its own answer kept
+                           (cone_own, as below) */
+                        unsigned char *co = &cone_own[n];
+                        ng = v3(r[0], r[1], r[2]);
+                        *w &= ~bit;
+                        l = v3_sub(lp, p);
+                        dn = v3_dot(ng, l);
+                        if (dn <= 0.0)
+                            continue;
+                        o = v3_madd(p, ng, dn >= 0.0 ? -e : e);
+                        queries++;
+                        if (kf)
+                            cache.from = dn >= 0.0 ? vis_from(kd_from, v->kd, n, o) : 0u;
+                        if (!*co)
+                            *co = (unsigned char)(1 - rtpi_cone_shadows_own(
+                                                          s, nd->prim - ntris - nspheres, &o));
+                        if (rtpi_shadow_visible_own(sh, &cache, &p, &o, nd->prim, 1 - *co))
+                            *w |= bit;
+                        continue;
+                    }
                 }
             }
             tr = tri_nrm && nd->prim < ntris ? &tris[nd->prim] : NULL;
@@ -810,14 +832,13 @@ static RTPI_FORCE_INLINE int vis_row_body(void *ctx, int y, int kf, int kb)
                            every light, and so is whether o lies in the cone's
                            solid, the query's own test (sh_own), kept too
                            (rings_s7: 3% of a move) */
-                        if (vrec && vrec[4 * n + 3] == 0.0)
-                            vrec_put(vrec + 4 * n, ng,
-                                     i < nspheres
-                                         ? rtpi_offset_eps(
-                                               p, prim_floor ? rtpi_prim_offset_floor(
-                                                                   s, nd->prim, off_floor)
-                                                             : off_floor)
-                                         : NAN); /* (a cone's own answer: its path) */
+                        if (vrec && vrec[4 * n + 3] == 0.0) {
+                            /* (a cone's without cone_own: its path) */
+                            double e = rtpi_offset_eps(
+                                p, prim_floor ? rtpi_prim_offset_floor(s, nd->prim, off_floor)
+                                              : off_floor);
+                            vrec_put(vrec + 4 * n, ng, i < nspheres ? e : cone_own ? -e : NAN);
+                        }
                         *w &= ~bit;
                         l = v3_sub(lp, p);
                         dn = v3_dot(ng, l);
@@ -1304,7 +1325,8 @@ static int light_vis_rows(rtp_tree *t, const light_vis *lv, double off_floor, in
         vc[k].keep_balls = lv->mode == RTP_SHADOWS_EXACT;
         vc[k].kd_from = lv->mode == RTP_SHADOWS_EXACT ? t->kd_from : NULL;
         vc[k].kd = t->kd;
-        vc[k].vrec = t->vrec;
+        /* (its smooth entries read ev_nv: made and used only with it) */
+        vc[k].vrec = t->ev_valid && t->ev_nv ? t->vrec : NULL;
         ctx[k] = &vc[k];
     }
     /* (the runs' copy where ball_in has 1s: vis_row_body's kb) */
@@ -1347,7 +1369,8 @@ static rtp_status update_visibility_body(rtp_tree *t, int mode, int res, int thr
                                          rtp_eval_stats *st, rtp_error *err);
 
 static void kd_from_make(rtp_tree *t, size_t nl, double limit);
-static void vrec_make(rtp_tree *t, size_t nl, double limit);
+static int vrec_make(rtp_tree *t, size_t nl, double limit);
+static void vrec_free(rtp_tree *t);
 
 static rtp_status update_visibility(rtp_tree *t, int mode, int res, int threads,
                                     double limit, int fallback, const progress_part *prog,
@@ -1468,7 +1491,7 @@ static rtp_status update_visibility_body(rtp_tree *t, int mode, int res, int thr
         } else {
             light_vis lv;
             rtp_status rs;
-            int rows;
+            int rows, vnew;
             /* (the caller's cancel on either side of the kd-tree's or the
                buffer's build and after each row: a moved light of a
                large mesh takes seconds) */
@@ -1498,15 +1521,19 @@ static rtp_status update_visibility_body(rtp_tree *t, int mode, int res, int thr
             }
             if (lv.mode == RTP_SHADOWS_EXACT)
                 kd_from_make(t, nl, limit);
-            vrec_make(t, nl, limit);
+            vnew = t->ev_valid && t->ev_nv && vrec_make(t, nl, limit);
             rows = light_vis_rows(t, &lv, off_floor, prim_floor, part.fn ? progress_part_cb : NULL,
                                   part.cancel ? progress_part_cancel : NULL, &part, st);
             light_vis_free(t, &lv);
             if (rows == 2) {
                 /* some rows hold the new decisions, the rest the old: the
                    light is decided anew at the next evaluation, wherever
-                   it then is (its place as nothing decided) */
+                   it then is (its place as nothing decided); a record
+                   made for this move goes with it (a cancelled move
+                   leaves no memory behind) */
                 t->cur_pos[3 * i] = NAN;
+                if (vnew)
+                    vrec_free(t);
                 return rtpi_cancelled(err);
             }
             if (rows != 0)
@@ -1585,6 +1612,14 @@ static void kd_from_make(rtp_tree *t, size_t nl, double limit)
     t->kd_from_nmats = s->nmats;
 }
 
+static void vrec_free(rtp_tree *t)
+{
+    rtpi_free(&t->alloc, t->vrec);
+    rtpi_free(&t->alloc, t->vrec_mat);
+    t->vrec = NULL;
+    t->vrec_mat = NULL;
+}
+
 /* What t->vrec's entries of material m's nodes hold for: its
    two-sidedness (an SPD tree's opaque back hits keep their normal,
    rtpi_two_sided: kt > 0 turns it) and whether it is bumped, as the
@@ -1600,27 +1635,31 @@ static unsigned char vrec_key(const rtp_tree *t, size_t m)
     return (unsigned char)((mt->kt > 0.0f) | bump << 1 | ev_bump << 2);
 }
 
-/* t->vrec for a move: made at the first (all zero: each node's entry made
-   as vis_row meets it) where it fits the memory limit with the
-   evaluation's caches and the other per-node ones, made anew where some
-   material's vrec_key changed since (a kt edit turning back faces over,
-   a bump); without the memory, none: every node's full steps, the same
-   answers.  32 bytes a node (mount_s6 at 512x512 20.8 MB). */
-static void vrec_make(rtp_tree *t, size_t nl, double limit)
+/* t->vrec for a move: made at the first whose evaluation caches are
+   there (ev_nv: a one-off move, the tree's first evaluation, makes none),
+   all zero (each node's entry made as vis_row meets it), where it fits
+   the memory limit with the evaluation's caches and the other per-node
+   ones; made anew where some material's vrec_key changed since (a bump;
+   a kt edit turning an SPD tree's back faces over, which also traces
+   them again: the re-trace frees it with the nodes); without the memory,
+   none: every node's full steps, the same answers.  32 bytes a node
+   (mount_s6 at 512x512 20.8 MB).  1 where it was made now. */
+static int vrec_make(rtp_tree *t, size_t nl, double limit)
 {
     const rtp_scene *s = t->scene;
     size_t m, n = 4 * t->nnodes + 4;
-    int same = t->vrec && t->vrec_mat && t->vrec_nmats == s->nmats;
+    int same = t->vrec && t->vrec_mat && t->vrec_nmats == s->nmats, made = 0;
     for (m = 0; same && m < s->nmats; m++)
         same = t->vrec_mat[m] == vrec_key(t, m);
     if (same)
-        return;
+        return 0;
     if (!t->vrec) {
         double bytes = ev_cache_bytes(t, nl, (size_t)t->nx * t->ny) +
                        32.0 * (double)t->nnodes + (t->mv_kc ? 24.0 * (double)t->nnodes : 0.0) +
                        (t->kd_from ? 4.0 * (double)t->nnodes + rtpi_kd_paths_bytes(t->kd) : 0.0);
         if (!t->nnodes || !(bytes <= fmin(EV_CACHE_BYTES, limit)))
-            return;
+            return 0;
+        made = 1;
         t->vrec = (double *)rtpi_calloc_array(&t->alloc, n, sizeof *t->vrec);
     } else {
         memset(t->vrec, 0, n * sizeof *t->vrec);
@@ -1630,15 +1669,13 @@ static void vrec_make(rtp_tree *t, size_t nl, double limit)
         t->vrec_mat = (unsigned char *)rtpi_malloc_array(&t->alloc, s->nmats + 1, 1);
     }
     if (!t->vrec || !t->vrec_mat) {
-        rtpi_free(&t->alloc, t->vrec);
-        rtpi_free(&t->alloc, t->vrec_mat);
-        t->vrec = NULL;
-        t->vrec_mat = NULL;
-        return;
+        vrec_free(t);
+        return 0;
     }
     for (m = 0; m < s->nmats; m++)
         t->vrec_mat[m] = vrec_key(t, m);
     t->vrec_nmats = s->nmats;
+    return made;
 }
 
 /* Float images carry 2^-24 of the magnitudes they are summed from: where
