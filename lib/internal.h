@@ -1178,20 +1178,17 @@ struct rtp_tree {
                               entries were found (a back hit's normal
                               turns with it: rtpi_two_sided) */
     size_t kd_from_nmats;
-    double *vrec;          /* 4 per node, made at a move where the memory
+    double *vrec;          /* per node, made at a move where the memory
                               limit holds it with the evaluation's caches
                               (vrec_make): what a moved light's query at
                               the node takes that no light changes -- the
-                              geometric normal as turned for a back face
-                              and the offset's step off the surface
-                              (rtpi_offset_eps); step 0 not yet known,
-                              > 0 the normals one vector, < 0 (minus the
-                              step) a smooth triangle's, its shading
-                              normal the evaluation's ev_nv, or a cone's
-                              seen from the front, its own answer in
-                              cone_own; NaN none (the node's full steps
-                              each move: a back hit on a sphere); made
-                              and read only where ev_nv holds (vis_row) */
+                              offset's step off the surface
+                              (rtpi_offset_eps), then nnodes + 1 bytes of
+                              the node's kind (VK_: which normal, turned
+                              or not; 0 not yet known), the normals read
+                              where they are kept (tri_nrm, prim_nrm,
+                              ev_nv); made and read only where ev_nv
+                              holds (vis_row) */
     unsigned char *vrec_mat; /* per material what the entries hold for
                               (vrec_key): its two-sidedness and whether
                               it is bumped */

@@ -506,7 +506,8 @@ typedef struct vis_ctx {
     int keep_balls;          /* a ball that holds a hit goes to the cache */
     uint32_t *kd_from;       /* t->kd_from for EXACT's walks, or NULL */
     const rtpi_kdtree *kd;
-    double *vrec;            /* t->vrec where it holds for this move, or NULL */
+    double *vrec;            /* t->vrec where it holds for this move, or NULL
+                                (its kinds after its nnodes + 1 steps) */
     char pad[64];            /* the contexts lie side by side (vis_row) */
 } vis_ctx;
 
@@ -578,15 +579,18 @@ static RTPI_FORCE_INLINE uint32_t vis_from(uint32_t *kf, const rtpi_kdtree *kd, 
     return v - 1u;
 }
 
-/* Node record r (t->vrec): ng as turned and e, the offset's step (> 0
-   where ng = ns, minus it for a smooth triangle, NaN: none). */
-static RTPI_FORCE_INLINE void vrec_put(double *r, rtpi_v3 ng, double e)
-{
-    r[0] = ng.x;
-    r[1] = ng.y;
-    r[2] = ng.z;
-    r[3] = e;
-}
+/* A node's kind in its record (t->vrec's bytes after the steps): 0 not
+   yet known; a flat triangle's, its normal tri_nrm's or turned over (a
+   two-sided back hit); a smooth triangle's (ng tri_nrm's turned to the
+   ray, ns ev_nv's); a sphere's or a cone's seen from the front (the
+   normal prim_nrm's; the cone's own answer cone_own's); none (a back hit
+   on a sphere: its path each move). */
+#define VK_FLAT 1
+#define VK_FLAT_TURNED 2
+#define VK_SMOOTH 3
+#define VK_SPHERE 4
+#define VK_CONE 5
+#define VK_NONE 6
 
 /* Decides light `light` anew for every node of one row of samples, with
    trace's own rule (rtpi_shadow_setup) and the chosen shadow query.
@@ -633,6 +637,7 @@ static RTPI_FORCE_INLINE int vis_row_body(void *ctx, int y, int kf, int kb)
     const rtpi_material *const mats = s->mats, *const ev_mats = t->ev_mats;
     uint32_t *const kd_from = kf ? v->kd_from : NULL;
     double *const vrec = v->vrec;
+    unsigned char *const vk = vrec ? (unsigned char *)(vrec + t->nnodes + 1) : NULL;
     for (n = (size_t)t->start[k0]; n < n1; n++) {
         if (kb && ball_in[n] == 1) {
             /* A run of back hits inside balls (three quarters of mount's
@@ -683,20 +688,27 @@ static RTPI_FORCE_INLINE int vis_row_body(void *ctx, int y, int kf, int kb)
             const rtpi_tri *tr; /* (found below the record's paths: gcc took it first) */
             int flip = 1; /* ng and ns still to be turned over for a back face */
             int same = 1; /* ng and ns one vector (but a smooth triangle's) */
-            int rk = 0; /* the node's record (vrec) to make: 1 ng = ns, 2 smooth */
+            int rk = 0; /* the node's record's kind to make (VK_) */
             double dn, sd; /* (sd: ng.l, whose sign is the offset's side) */
-            if (vrec) {
-                /* The node's record (vrec_make): the turned ng and the
-                   offset's step, which no light changes -- the node's
-                   kind, material, two-sidedness, normal and the step's
-                   arithmetic were ~60 of its ~100 instructions.  The
+            if (vk && vk[n] - 1u < VK_NONE - 1u) {
+                /* The node's record (vrec_make): its kind and the offset's
+                   step, which no light changes -- the node's kind tests,
+                   material, two-sidedness and the step's arithmetic.  The
                    steps below with the same numbers: o is
                    rtpi_offset_origin's, dn and the side's sign as there */
-                const double *r = vrec + 4 * n;
-                const double e = r[3];
-                if (e > 0.0) {
+                const unsigned kind = vk[n];
+                const double e = vrec[n];
+                if (kind != VK_SMOOTH && kind != VK_CONE) {
                     /* ng = ns: the side is dn's */
-                    ng = v3(r[0], r[1], r[2]);
+                    if (kind == VK_SPHERE) {
+                        const double *c = prim_nrm + 3 * n;
+                        ng = v3(c[0], c[1], c[2]);
+                    } else {
+                        const double *tn = tri_nrm + 3 * (size_t)nd->prim;
+                        ng = v3(tn[0], tn[1], tn[2]);
+                        if (kind == VK_FLAT_TURNED)
+                            ng = v3_mul(ng, -1.0);
+                    }
                     *w &= ~bit;
                     l = v3_sub(lp, p);
                     dn = v3_dot(ng, l);
@@ -710,46 +722,47 @@ static RTPI_FORCE_INLINE int vis_row_body(void *ctx, int y, int kf, int kb)
                         *w |= bit;
                     continue;
                 }
-                if (e < 0.0) {
-                    if (nd->prim < ntris) {
-                        /* a smooth triangle's: ns the evaluation's (as below) */
-                        const float *q = nv + 6 * n;
-                        ng = v3(r[0], r[1], r[2]);
-                        ns = v3(q[0], q[1], q[2]);
-                        *w &= ~bit;
-                        l = v3_sub(lp, p);
-                        dn = v3_dot(ns, l);
-                        if (dn <= 0.0)
-                            continue;
-                        sd = v3_dot(ng, l);
-                        o = v3_madd(p, ng, sd >= 0.0 ? -e : e);
-                        queries++;
-                        if (kf)
-                            cache.from = sd >= 0.0 ? vis_from(kd_from, v->kd, n, o) : 0u;
-                        if (rtpi_shadow_visible_cached(sh, &cache, &p, &o, nd->prim))
-                            *w |= bit;
+                if (kind == VK_SMOOTH) {
+                    /* a smooth triangle's: ns the evaluation's (as below) */
+                    const float *q = nv + 6 * n;
+                    const double *tn = tri_nrm + 3 * (size_t)nd->prim;
+                    double sg = nd->link & RTPI_L_BACK ? -1.0 : 1.0;
+                    ng = v3(sg * tn[0], sg * tn[1], sg * tn[2]);
+                    ns = v3(q[0], q[1], q[2]);
+                    *w &= ~bit;
+                    l = v3_sub(lp, p);
+                    dn = v3_dot(ns, l);
+                    if (dn <= 0.0)
                         continue;
-                    } else {
-                        /* a cone's seen from the front, its own answer kept
-                           (cone_own, as below) */
-                        unsigned char *co = &cone_own[n];
-                        ng = v3(r[0], r[1], r[2]);
-                        *w &= ~bit;
-                        l = v3_sub(lp, p);
-                        dn = v3_dot(ng, l);
-                        if (dn <= 0.0)
-                            continue;
-                        o = v3_madd(p, ng, dn >= 0.0 ? -e : e);
-                        queries++;
-                        if (kf)
-                            cache.from = dn >= 0.0 ? vis_from(kd_from, v->kd, n, o) : 0u;
-                        if (!*co)
-                            *co = (unsigned char)(1 - rtpi_cone_shadows_own(
-                                                          s, nd->prim - ntris - nspheres, &o));
-                        if (rtpi_shadow_visible_own(sh, &cache, &p, &o, nd->prim, 1 - *co))
-                            *w |= bit;
+                    sd = v3_dot(ng, l);
+                    o = v3_madd(p, ng, sd >= 0.0 ? e : -e);
+                    queries++;
+                    if (kf)
+                        cache.from = sd >= 0.0 ? vis_from(kd_from, v->kd, n, o) : 0u;
+                    if (rtpi_shadow_visible_cached(sh, &cache, &p, &o, nd->prim))
+                        *w |= bit;
+                    continue;
+                } else {
+                    /* a cone's seen from the front, its own answer kept
+                       (cone_own, as below) */
+                    unsigned char *co = &cone_own[n];
+                    const double *c = prim_nrm + 3 * n;
+                    ng = v3(c[0], c[1], c[2]);
+                    *w &= ~bit;
+                    l = v3_sub(lp, p);
+                    dn = v3_dot(ng, l);
+                    if (dn <= 0.0)
                         continue;
-                    }
+                    o = v3_madd(p, ng, dn >= 0.0 ? e : -e);
+                    queries++;
+                    if (kf)
+                        cache.from = dn >= 0.0 ? vis_from(kd_from, v->kd, n, o) : 0u;
+                    if (!*co)
+                        *co = (unsigned char)(1 - rtpi_cone_shadows_own(
+                                                      s, nd->prim - ntris - nspheres, &o));
+                    if (rtpi_shadow_visible_own(sh, &cache, &p, &o, nd->prim, 1 - *co))
+                        *w |= bit;
+                    continue;
                 }
             }
             tr = tri_nrm && nd->prim < ntris ? &tris[nd->prim] : NULL;
@@ -758,7 +771,7 @@ static RTPI_FORCE_INLINE int vis_row_body(void *ctx, int y, int kf, int kb)
                 const double *tn = tri_nrm + 3 * (size_t)nd->prim;
                 ng = ns = v3(tn[0], tn[1], tn[2]);
                 mat = tr->mat;
-                rk = 1;
+                rk = VK_FLAT;
             } else if (tr && nv && mats[tr->mat].bump == RTPI_BUMP_NONE &&
                        ev_mats[tr->mat].bump == RTPI_BUMP_NONE) {
                 /* Smooth, not bumped: the shading normal the evaluation kept,
@@ -775,7 +788,7 @@ static RTPI_FORCE_INLINE int vis_row_body(void *ctx, int y, int kf, int kb)
                 mat = tr->mat;
                 flip = 0;
                 same = 0;
-                rk = 2;
+                rk = VK_SMOOTH;
             } else {
                 double *pn = prim_nrm && nd->prim >= ntris ? prim_nrm + 3 * n : NULL;
                 if (ball_in && (nd->link & RTPI_L_BACK) && nd->prim - ntris < nspheres) {
@@ -832,12 +845,12 @@ static RTPI_FORCE_INLINE int vis_row_body(void *ctx, int y, int kf, int kb)
                            every light, and so is whether o lies in the cone's
                            solid, the query's own test (sh_own), kept too
                            (rings_s7: 3% of a move) */
-                        if (vrec && vrec[4 * n + 3] == 0.0) {
+                        if (vk && !vk[n]) {
                             /* (a cone's without cone_own: its path) */
-                            double e = rtpi_offset_eps(
+                            vrec[n] = rtpi_offset_eps(
                                 p, prim_floor ? rtpi_prim_offset_floor(s, nd->prim, off_floor)
                                               : off_floor);
-                            vrec_put(vrec + 4 * n, ng, i < nspheres ? e : cone_own ? -e : NAN);
+                            vk[n] = i < nspheres ? VK_SPHERE : cone_own ? VK_CONE : VK_NONE;
                         }
                         *w &= ~bit;
                         l = v3_sub(lp, p);
@@ -865,8 +878,8 @@ static RTPI_FORCE_INLINE int vis_row_body(void *ctx, int y, int kf, int kb)
                     }
                     ns = ng;
                     mat = i < nspheres ? spheres[i].mat : s->cones[i - nspheres].mat;
-                    if (vrec && vrec[4 * n + 3] == 0.0)
-                        vrec_put(vrec + 4 * n, ng, NAN); /* (a back hit's ball: its path) */
+                    if (vk && !vk[n])
+                        vk[n] = VK_NONE; /* (a back hit's ball: its path) */
                 } else {
                     mat = rtpi_surface_normals(s, nd->prim, p, &ng, &ns);
                     same = 0;
@@ -876,11 +889,12 @@ static RTPI_FORCE_INLINE int vis_row_body(void *ctx, int y, int kf, int kb)
                 rtpi_two_sided(s, spd, nd->prim, &mats[mat])) {
                 ng = v3_mul(ng, -1.0);
                 ns = v3_mul(ns, -1.0);
+                rk += rk == VK_FLAT; /* (VK_FLAT_TURNED) */
             }
-            if (rk && vrec && vrec[4 * n + 3] == 0.0) {
-                double e = rtpi_offset_eps(
+            if (rk && vk && !vk[n]) {
+                vrec[n] = rtpi_offset_eps(
                     p, prim_floor ? rtpi_prim_offset_floor(s, nd->prim, off_floor) : off_floor);
-                vrec_put(vrec + 4 * n, ng, rk == 1 ? e : -e);
+                vk[n] = (unsigned char)rk;
             }
             *w &= ~bit;
             /* rtpi_shadow_setup's arithmetic, whose second dot product, ng's,
@@ -1637,17 +1651,19 @@ static unsigned char vrec_key(const rtp_tree *t, size_t m)
 
 /* t->vrec for a move: made at the first whose evaluation caches are
    there (ev_nv: a one-off move, the tree's first evaluation, makes none),
-   all zero (each node's entry made as vis_row meets it), where it fits
+   every kind 0 (each node's made as vis_row meets it), where it fits
    the memory limit with the evaluation's caches and the other per-node
    ones; made anew where some material's vrec_key changed since (a bump;
    a kt edit turning an SPD tree's back faces over, which also traces
    them again: the re-trace frees it with the nodes); without the memory,
-   none: every node's full steps, the same answers.  32 bytes a node
-   (mount_s6 at 512x512 20.8 MB).  1 where it was made now. */
+   none: every node's full steps, the same answers.  9 bytes a node
+   (mount_s6 at 512x512 5.9 MB: 32, the normals in it too, saved more
+   instructions but took more time, the memory read each move).  1 where
+   it was made now. */
 static int vrec_make(rtp_tree *t, size_t nl, double limit)
 {
     const rtp_scene *s = t->scene;
-    size_t m, n = 4 * t->nnodes + 4;
+    size_t m, n = t->nnodes + 1;
     int same = t->vrec && t->vrec_mat && t->vrec_nmats == s->nmats, made = 0;
     for (m = 0; same && m < s->nmats; m++)
         same = t->vrec_mat[m] == vrec_key(t, m);
@@ -1655,15 +1671,15 @@ static int vrec_make(rtp_tree *t, size_t nl, double limit)
         return 0;
     if (!t->vrec) {
         double bytes = ev_cache_bytes(t, nl, (size_t)t->nx * t->ny) +
-                       32.0 * (double)t->nnodes + (t->mv_kc ? 24.0 * (double)t->nnodes : 0.0) +
+                       9.0 * (double)t->nnodes + (t->mv_kc ? 24.0 * (double)t->nnodes : 0.0) +
                        (t->kd_from ? 4.0 * (double)t->nnodes + rtpi_kd_paths_bytes(t->kd) : 0.0);
         if (!t->nnodes || !(bytes <= fmin(EV_CACHE_BYTES, limit)))
             return 0;
         made = 1;
-        t->vrec = (double *)rtpi_calloc_array(&t->alloc, n, sizeof *t->vrec);
-    } else {
-        memset(t->vrec, 0, n * sizeof *t->vrec);
+        t->vrec = (double *)rtpi_malloc_array(&t->alloc, n, sizeof *t->vrec + 1);
     }
+    if (t->vrec) /* (the kinds alone: a step is read only where its kind is known) */
+        memset(t->vrec + n, 0, n);
     if (t->vrec && (!t->vrec_mat || t->vrec_nmats != s->nmats)) {
         rtpi_free(&t->alloc, t->vrec_mat);
         t->vrec_mat = (unsigned char *)rtpi_malloc_array(&t->alloc, s->nmats + 1, 1);

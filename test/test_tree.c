@@ -3084,7 +3084,7 @@ static void test_moved_light_record(void)
         CHECK(rtp_scene_set(s, "mat.2.ks", "0", NULL) == RTP_OK);
         CHECK(rtp_record(s, &o, &t, &re, NULL, NULL) == RTP_OK);
         rtp_tree_get_info(t, &ti);
-        /* (the evaluation's caches take ~52 bytes a node, the record 32
+        /* (the evaluation's caches take ~52 bytes a node, the record 9
            more: limits on either side) */
         lim = k < 2 ? 0.0 : (double)ti.nodes * lims[k - 2];
         eo.memory_limit = lim;
