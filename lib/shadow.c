@@ -652,12 +652,14 @@ static RTPI_FORCE_INLINE int sh_cached_lb_body(const rtpi_shadow *sh, rtpi_shado
        cached occluder's test and the shadow ray rather than after them,
        where a branch mispredicted on those had left them to start late.
        The cell and off's load are lost where no walk follows (a cached
-       hit, the point's own primitive in the way).  (CPU ms of a
+       hit, the point's own primitive in the way).  (CPU time of a
        lightbuf move at the default resolution, 512^2 SPD, one thread,
-       paired with the base in 8 alternating rounds: balls_s4 -3.0%,
-       mount_s6 -2.5%, faster in 8 of 8 each; teapot_s12 -1.1%; the
-       cell's prefetch without the load of off -2.8, -3.7, -1.0%, the
-       first candidate's cand and cone prefetched too -3.7, -2.2, -0.7%.) */
+       against the walk's own cell, 20 alternating rounds: balls_s4
+       faster in 16, median -2.9%, mount_s6 in 17, -1.1%, teapot_s12 in
+       14, -1.8%; instructions, lightbuf:256, +1.2% (teapot) to +2.9%
+       (balls): ~50 a cell, now made for queries that do not walk too.
+       The off line's prefetch alone, or the first candidate's cand and
+       cone prefetched too, timed alike: HISTORY, helper 181.) */
     size_t cell = rtpi_lightbuf_cell(&sh->lb, v3_sub(*op, sh->lb.light));
     (void)pp;
     if (cell != RTPI_DC_ABSENT)
