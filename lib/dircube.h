@@ -224,57 +224,6 @@ typedef struct rtpi_lightbuf {
     size_t nrefs, ncand;
 } rtpi_lightbuf;
 
-/* A query's cell: that of direction q = o - light, the ray's origin seen
-   from the light, where rtpi_dc_wcell took the ray's direction -d.  The
-   same arithmetic as rtpi_dc_face and rtpi_dc_wcoord, but q is exact
-   (-(light - o), which the ray's d is rounded from, through a square
-   root and a division), the divisions by du and dv are products with
-   their reciprocals, and the clamps selects.  The cell is then made
-   without waiting on the ray's normalisation, and the list's loads
-   (off, ref, cand: each waits on the one before) start about that much
-   earlier: perf showed half of a walk's time on the cell's divisions and
-   the loads behind them.  A few roundings of u (and of t: a few 1e-16 of
-   a face coordinate) from rtpi_dc_wcell's, which the lists' widening
-   (1e-12 rad and more, lb_ang) covers as it covers those of -d: the same
-   lists, the same answers.  m = |q[a]| > 0 where a walk takes the cell:
-   its tmax > 0 makes dist = |q| > 0 (a tmax of NaN does not reach it);
-   elsewhere (q 0, NaN or infinite: u, v or t NaN, a clamp's select
-   taking 0) the cell is still one of the window's.  (lightbuf:512,
-   one thread, CPU ms of a move, medians of 6 alternating processes:
-   balls_s4 36.5 -> 32.9, mount_s6 34.7 -> 30.0, teapot_s12 28.1 -> 24.7;
-   instructions, lightbuf:256: balls 206.96 -> 205.94 M, mount 209.01 ->
-   207.81, teapot 154.19 -> 153.24.)  In the header: the shadow query
-   (shadow.c sh_cached_lb_body) makes it first and hands it to the walk
-   (rtpi_lb_occ_fn), its lists' first loads issued before the query's
-   other steps. */
-static RTPI_FORCE_INLINE size_t rtpi_lightbuf_cell(const rtpi_lightbuf *lb, rtpi_v3 q)
-{
-    double c[3], u, v, t, top = lb->top, inv;
-    int a, f, i, j, res = lb->res;
-    c[0] = q.x;
-    c[1] = q.y;
-    c[2] = q.z;
-    {
-        double ax = fabs(c[0]), ay = fabs(c[1]), az = fabs(c[2]);
-        a = ax >= ay ? (ax >= az ? 0 : 2) : (ay >= az ? 1 : 2);
-    }
-    inv = 1.0 / fabs(c[a]);
-    u = (a == 0 ? c[1] : a == 1 ? c[2] : c[0]) * inv;
-    v = (a == 0 ? c[2] : a == 1 ? c[0] : c[1]) * inv;
-    f = 2 * a + (c[a] < 0.0);
-    if (lb->w.fbase[f] == RTPI_DC_ABSENT)
-        return RTPI_DC_ABSENT;
-    t = (u - lb->w.u0[f]) * lb->ru[f];
-    t = t > 0.0 ? t : 0.0;
-    t = t < top ? t : top;
-    i = (int)t;
-    t = (v - lb->w.v0[f]) * lb->rv[f];
-    t = t > 0.0 ? t : 0.0;
-    t = t < top ? t : top;
-    j = (int)t;
-    return lb->w.fbase[f] + (size_t)j * (size_t)res + (size_t)i;
-}
-
 rtp_status rtpi_lightbuf_build(const rtp_scene *s, rtpi_v3 light, int res,
                                const rtp_allocator *a, rtpi_lightbuf *lb,
                                rtp_error *err);
@@ -335,13 +284,10 @@ uint32_t rtpi_lightbuf_occluder_first(const rtpi_lightbuf *lb, const rtp_scene *
    built): a caller asking one buffer many times calls them itself (the
    choice's loads and branches, 5 instructions a query, were 0.5% of
    mount_s6's lightbuf:256 move). */
-/* (cell: rtpi_lightbuf_cell(lb, ray->o - lb->light), which the caller
-   makes before the query's other steps: shadow.c sh_cached_lb_body) */
 typedef uint32_t (*rtpi_lb_occ_fn)(const rtpi_lightbuf *lb, const rtp_scene *s,
-                                   const rtpi_ray *ray, uint32_t skip, size_t cell);
+                                   const rtpi_ray *ray, uint32_t skip);
 typedef uint32_t (*rtpi_lb_occ_first_fn)(const rtpi_lightbuf *lb, const rtp_scene *s,
-                                         const rtpi_ray *ray, uint32_t skip, uint32_t first,
-                                         size_t cell);
+                                         const rtpi_ray *ray, uint32_t skip, uint32_t first);
 rtpi_lb_occ_fn rtpi_lightbuf_occ_fn(const rtpi_lightbuf *lb);
 rtpi_lb_occ_first_fn rtpi_lightbuf_occ_first_fn(const rtpi_lightbuf *lb);
 

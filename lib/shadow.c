@@ -645,25 +645,7 @@ static RTPI_FORCE_INLINE int sh_cached_lb_body(const rtpi_shadow *sh, rtpi_shado
     uint32_t occ, last = c->last;
     int own;
     rtpi_ray r;
-    /* The walk's cell first (its origin's, not waiting on the ray's
-       square root and division), handed to the walk, and its list's
-       start loaded and first entry prefetched: the walk's loads (off,
-       ref, cand: each waits on the one before) then run beside the
-       cached occluder's test and the shadow ray rather than after them,
-       where a branch mispredicted on those had left them to start late.
-       The cell and off's load are lost where no walk follows (a cached
-       hit, the point's own primitive in the way).  (CPU time of a
-       lightbuf move at the default resolution, 512^2 SPD, one thread,
-       against the walk's own cell, 20 alternating rounds: balls_s4
-       faster in 16, median -2.9%, mount_s6 in 17, -1.1%, teapot_s12 in
-       14, -1.8%; instructions, lightbuf:256, +1.2% (teapot) to +2.9%
-       (balls): ~50 a cell, now made for queries that do not walk too.
-       The off line's prefetch alone, or the first candidate's cand and
-       cone prefetched too, timed alike: HISTORY, helper 181.) */
-    size_t cell = rtpi_lightbuf_cell(&sh->lb, v3_sub(*op, sh->lb.light));
     (void)pp;
-    if (cell != RTPI_DC_ABSENT)
-        RTPI_PREFETCH(sh->lb.ref, sizeof(uint32_t) * (size_t)sh->lb.off[cell]);
     if (last && last - 1u != prim && last - 1u >= s->ntris) {
         /* (the cached sphere or cone, as below) */
         uint32_t q = last - 1u;
@@ -690,7 +672,7 @@ static RTPI_FORCE_INLINE int sh_cached_lb_body(const rtpi_shadow *sh, rtpi_shado
             c->last = prim + 1u;
             return 0;
         }
-        occ = sh->lb_occ(&sh->lb, s, &r, own == 0 ? prim : RTPI_NONE, cell);
+        occ = sh->lb_occ(&sh->lb, s, &r, own == 0 ? prim : RTPI_NONE);
     } else {
         own = own_in != RTPI_OWN_ASK ? own_in : sh_own(sh, prim, op);
         if (own == 1) {
@@ -699,8 +681,8 @@ static RTPI_FORCE_INLINE int sh_cached_lb_body(const rtpi_shadow *sh, rtpi_shado
             r = rtpi_shadow_ray(*op, sh->light);
             occ = last && last - 1u != prim
                       ? sh->lb_occ_first(&sh->lb, s, &r, own == 0 ? prim : RTPI_NONE,
-                                         last - 1u, cell)
-                      : sh->lb_occ(&sh->lb, s, &r, own == 0 ? prim : RTPI_NONE, cell);
+                                         last - 1u)
+                      : sh->lb_occ(&sh->lb, s, &r, own == 0 ? prim : RTPI_NONE);
         }
     }
     c->last = occ != RTPI_NONE ? occ + 1u : 0u;
