@@ -1161,12 +1161,13 @@ static void light_vis_free(rtp_tree *t, light_vis *lv)
 
 /* light_vis_make's `fallback` bits (shadow_mode_for's *fallback_out). */
 #define LV_AUTO 1     /* AUTO asked: shadow rays where the light buffer's
-                         lists pass the memory limit or AUTO's bound on
-                         entries */
+                         lists pass the memory limit (at 1 cell where
+                         LV_RES_FREE) or AUTO's bound on entries */
 #define LV_RES_FREE 2 /* no resolution asked (lb_default_res chose it):
                          a light buffer whose lists pass the limit tries
                          half the cells (fewer entries: a primitive
-                         covers fewer of them) before RTP_ERR_LIMIT */
+                         covers fewer of them) before RTP_ERR_LIMIT, or
+                         AUTO's shadow rays */
 
 /* The limit's error once a resolution nobody asked was halved down to
    `res` (lb_default_res's, or coarser for the cells' starts: shadow_mode_for,
@@ -1228,8 +1229,10 @@ static rtp_status light_vis_make(rtp_tree *t, size_t i, int mode, int res, int t
                                   res, threads, limit, lb_cap, lb_q, poll, &t->cube_alloc,
                                   &lv->sh, err);
         /* (a resolution nobody asked refused by the limit while a
-           coarser one may fit: AUTO takes shadow rays below instead) */
-        if (rs != RTP_ERR_LIMIT || !(fallback & LV_RES_FREE) || (fallback & LV_AUTO) ||
+           coarser one may fit, AUTO's too: shadow_mode_for; AUTO takes
+           shadow rays below where none does, and where the lists are
+           too long for it, RTPI_OVER_ENTRIES) */
+        if (rs != RTP_ERR_LIMIT || !(fallback & LV_RES_FREE) ||
             mode != RTP_SHADOWS_LIGHTBUF || res <= 1)
             break;
         res /= 2;
@@ -5360,8 +5363,14 @@ static rtp_status shadow_mode_for(rtp_tree *t, const rtp_eval_options *opt, int 
         double need = cells * (mode == RTP_SHADOWS_LIGHTBUF ? 4.0 : 9.0) +
                       (mode == RTP_SHADOWS_OSMESA ? cells / 6.0 * 12.0 : 0.0);
         /* (a resolution nobody asked: the finest at most the rule's
-           whose cells fit; light_vis_make does the same for the lists) */
-        while (res_free && !asked_auto && !(need <= lim) && res > 1) {
+           whose cells fit; light_vis_make does the same for the lists.
+           AUTO too: its light buffer is LIGHTBUF's, and a coarser one
+           took 0.51-0.66 of shadow rays' instructions a move where the
+           limit refused the rule's (mount_s1, balls_s1, teapot_s6 SPD
+           trees under --memory-limit 1: 128 cells against 512 and 256;
+           lightbuf:1 took 1.3x shadow rays' time on mount_s1, 0.9x on
+           balls_s1); shadow rays where none fits) */
+        while (res_free && !(need <= lim) && res > 1) {
             res /= 2;
             need = 6.0 * (double)res * (double)res * 4.0;
         }

@@ -2555,19 +2555,22 @@ out:
     free(text);
 }
 
-/* RTP_SHADOWS_AUTO under a memory limit its light buffer's cells do not
-   fit in takes shadow rays, as it does where the buffer's lists do not
-   fit: both ways are exact and shadow rays need no cube.  (It failed with
-   RTP_ERR_LIMIT, "lower its resolution", a resolution it had chosen
-   itself: a --stream under --memory-limit stopped at its first move.)
-   LIGHTBUF at a resolution asked for is refused as before; LIGHTBUF
-   without one takes the finest at most its default's that fits (until
-   session 48 it was refused, as at 512).  The tree (prims at 56x44)
-   holds over 4 hits a primitive, so AUTO's choice is the light buffer, of
-   at least 64 cells a face edge: 6 x 64^2 x 4 bytes = 96 KiB over the
-   64 KiB limit here. */
+/* RTP_SHADOWS_AUTO at a resolution asked (auto:64) under a memory limit
+   its light buffer's cells do not fit in takes shadow rays, as it does
+   where the buffer's lists do not fit: both ways are exact and shadow
+   rays need no cube.  (It failed with RTP_ERR_LIMIT, "lower its
+   resolution": a --stream under --memory-limit stopped at its first
+   move.)  LIGHTBUF at a resolution asked for is refused as before;
+   LIGHTBUF without one takes the finest at most its default's that fits
+   (until session 48 it was refused, as at 512), and so does AUTO without
+   one (until session 49 it took shadow rays, 1.25-1.5x the coarser light
+   buffer's time on three SPD trees under 1 MiB).  The tree (prims at
+   56x44) holds over 4 hits a primitive, so AUTO's choice is the light
+   buffer, of at least 64 cells a face edge: 6 x 64^2 x 4 bytes = 96 KiB
+   over the 64 KiB limit here. */
 static void test_shadows_auto_cube_limit(void)
 {
+    int k;
     rtp_scene *s = load("scenes/prims.nff");
     rtp_tree *t = NULL;
     rtp_image *img = NULL, *full = NULL;
@@ -2601,38 +2604,43 @@ static void test_shadows_auto_cube_limit(void)
     CHECK_MSG(rs == RTP_ERR_LIMIT &&
                   strstr(err.message, "takes up to 0.0938 MiB, over the memory limit of 0.0625 MiB"),
               "lightbuf:64 over the limit: %s", rs == RTP_OK ? "ok" : err.message);
-    eo.shadow_res = 0;
-    eo.shadows = RTP_SHADOWS_AUTO;
+    eo.shadows = RTP_SHADOWS_AUTO; /* (auto:64) */
     memset(&st, 0, sizeof st);
     rs = t ? rtp_tree_eval_into(t, &eo, img, &st, &err) : RTP_ERR_ARGUMENT;
-    CHECK_MSG(rs == RTP_OK, "auto over the limit: %s", rs == RTP_OK ? "" : err.message);
+    CHECK_MSG(rs == RTP_OK, "auto:64 over the limit: %s", rs == RTP_OK ? "" : err.message);
     CHECK_MSG(rs != RTP_OK || (st.moved_lights == 1 && st.shadows == RTP_SHADOWS_EXACT),
-              "auto over the limit: %d moved, mode %d", st.moved_lights, (int)st.shadows);
+              "auto:64 over the limit: %d moved, mode %d", st.moved_lights, (int)st.shadows);
     if (rtp_scene_set(s, "light.0.pos", "-2,-4,6", NULL) != RTP_OK ||
         rtp_trace(s, &o, &full, NULL, NULL) != RTP_OK || rs != RTP_OK ||
         rtp_image_diff(img, full, 1e-6, &d, NULL) != RTP_OK)
         CHECK_MSG(0, "no image to compare");
     else
         CHECK_MSG(d.max_abs <= 1e-6, "%g from a full trace", d.max_abs);
-    /* LIGHTBUF, no resolution asked: coarser cells that fit, exact */
-    eo.shadows = RTP_SHADOWS_LIGHTBUF;
-    memset(&st, 0, sizeof st);
-    rtp_image_destroy(full);
-    full = NULL;
-    CHECK(t && rtp_tree_set(t, "light.0.pos", "3,-3,5", NULL) == RTP_OK);
-    rs = t ? rtp_tree_eval_into(t, &eo, img, &st, &err) : RTP_ERR_ARGUMENT;
-    CHECK_MSG(rs == RTP_OK, "lightbuf over the limit: %s", rs == RTP_OK ? "" : err.message);
-    CHECK_MSG(rs != RTP_OK || (st.moved_lights == 1 && st.shadows == RTP_SHADOWS_LIGHTBUF &&
-                               st.shadow_res > 0 && st.shadow_res < 64),
-              "lightbuf over the limit: %d moved, mode %d, %d cells", st.moved_lights,
-              (int)st.shadows, st.shadow_res);
-    if (rtp_scene_set(s, "light.0.pos", "3,-3,5", NULL) != RTP_OK ||
-        rtp_trace(s, &o, &full, NULL, NULL) != RTP_OK || rs != RTP_OK ||
-        rtp_image_diff(img, full, 1e-6, &d, NULL) != RTP_OK)
-        CHECK_MSG(0, "no image to compare");
-    else
-        CHECK_MSG(d.max_abs <= 1e-6, "lightbuf:%d: %g from a full trace", st.shadow_res,
-                  d.max_abs);
+    /* LIGHTBUF and AUTO, no resolution asked: coarser cells that fit,
+       exact */
+    eo.shadow_res = 0;
+    for (k = 0; k < 2; k++) {
+        const char *pos = k ? "1,-2,7" : "3,-3,5";
+        eo.shadows = k ? RTP_SHADOWS_AUTO : RTP_SHADOWS_LIGHTBUF;
+        memset(&st, 0, sizeof st);
+        rtp_image_destroy(full);
+        full = NULL;
+        CHECK(t && rtp_tree_set(t, "light.0.pos", pos, NULL) == RTP_OK);
+        rs = t ? rtp_tree_eval_into(t, &eo, img, &st, &err) : RTP_ERR_ARGUMENT;
+        CHECK_MSG(rs == RTP_OK, "mode %d over the limit: %s", (int)eo.shadows,
+                  rs == RTP_OK ? "" : err.message);
+        CHECK_MSG(rs != RTP_OK || (st.moved_lights == 1 && st.shadows == RTP_SHADOWS_LIGHTBUF &&
+                                   st.shadow_res > 0 && st.shadow_res < 64),
+                  "mode %d over the limit: %d moved, mode %d, %d cells", (int)eo.shadows,
+                  st.moved_lights, (int)st.shadows, st.shadow_res);
+        if (rtp_scene_set(s, "light.0.pos", pos, NULL) != RTP_OK ||
+            rtp_trace(s, &o, &full, NULL, NULL) != RTP_OK || rs != RTP_OK ||
+            rtp_image_diff(img, full, 1e-6, &d, NULL) != RTP_OK)
+            CHECK_MSG(0, "no image to compare");
+        else
+            CHECK_MSG(d.max_abs <= 1e-6, "mode %d, lightbuf:%d: %g from a full trace",
+                      (int)eo.shadows, st.shadow_res, d.max_abs);
+    }
     rtp_image_destroy(img);
     rtp_image_destroy(full);
     rtp_tree_destroy(t);
