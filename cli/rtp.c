@@ -1093,7 +1093,9 @@ static int one_output(const char *a, const char *b)
 
 /* ra, rb: what each output is ("the image", "the --stats file"): two
    names alike said only "x and x are one file", not which options gave
-   them (the default image among them). */
+   them (the default image among them).  One line, no usage lines after
+   it: the options are well formed, their files collide (the usage said
+   nothing about that). */
 static int same_output(const char *cmd, const char *ra, const char *a, const char *rb,
                        const char *b)
 {
@@ -1105,7 +1107,8 @@ static int same_output(const char *cmd, const char *ra, const char *a, const cha
 
 /* An output that is the input file itself (a tree named t.png, whose
    default image is t.png; -i naming the scene): written, it replaced the
-   input, which cannot be had back.  1 after a message. */
+   input, which cannot be had back.  Compared by device and inode, so a
+   link or another spelling of the name is caught too. */
 static int is_input(const char *in, const char *out)
 {
     struct stat si, so;
@@ -1115,29 +1118,38 @@ static int is_input(const char *in, const char *out)
            si.st_dev == so.st_dev && si.st_ino == so.st_ino;
 }
 
-static int overwrites_input(const char *cmd, const char *in, const char *out, int dflt)
+/* The refusal of an output over an input: one line naming the option,
+   the file and what the input is ("trace: -o s.nff is the scene s.nff";
+   it said "s.nff is the input s.nff" and printed the usage after it, as
+   for options badly given, where the options were fine).  in_role: "the
+   scene", "the tree", ...; opt: the output's option ("-o", "--stats"),
+   NULL for the default image.  1 after the message (a usage error: the
+   caller returns EXIT_USAGE without the usage lines). */
+static int overwrites_input(const char *cmd, const char *in_role, const char *in,
+                            const char *opt, const char *out)
 {
     if (!is_input(in, out))
         return 0;
-    if (dflt)
-        msg("%s: the default image %s is the input itself: name the image with -i", cmd, out);
+    if (!opt)
+        msg("%s: the default image %s is %s itself: name the image with -i", cmd, out, in_role);
     else
-        msg("%s: %s is the input %s: writing it would replace it; name another file", cmd, out,
-            in);
+        msg("%s: %s %s is %s %s: writing it would replace it; name another file", cmd, opt,
+            out, in_role, in);
     return 1;
 }
 
-/* Any of the outputs out[0..nout) that is one of the inputs in[0..nin)
-   (--stats or --heatmap naming the scene, the tree, an image diff reads
-   or a params file): refused as -i naming the input is, before anything
-   is read.  1 after a message. */
-static int outputs_over_inputs(const char *cmd, const char *const *in, int nin,
-                               const char *const *out, int nout)
+/* Any of the outputs out[0..nout) (given by the options opts[0..nout))
+   that is one of the inputs in[0..nin) (--stats or --heatmap naming the
+   scene, the tree, an image diff reads or a params file): refused as -i
+   naming the input is, before anything is read.  1 after a message. */
+static int outputs_over_inputs(const char *cmd, const char *in_role, const char *const *in,
+                               int nin, const char *const *opts, const char *const *out,
+                               int nout)
 {
     int i, o;
     for (o = 0; o < nout; o++)
         for (i = 0; i < nin; i++)
-            if (overwrites_input(cmd, in[i], out[o], 0))
+            if (overwrites_input(cmd, in_role, in[i], opts[o], out[o]))
                 return 1;
     return 0;
 }
@@ -1148,8 +1160,8 @@ static int outputs_over_inputs(const char *cmd, const char *const *in, int nin,
    wrote over the scene's texture).  Known once the scene is read (and
    for a stream's frames, after each line's edits).  line: the --stream
    line (0: none).  1 after a message. */
-static int overwrites_scene_image(const char *cmd, const rtp_scene *s, const char *const *out,
-                                  int nout, int line)
+static int overwrites_scene_image(const char *cmd, const rtp_scene *s, const char *const *opts,
+                                  const char *const *out, int nout, int line)
 {
     static const char *const fields[] = {"texture", "bump"};
     rtp_scene_info si;
@@ -1172,9 +1184,9 @@ static int overwrites_scene_image(const char *cmd, const rtp_scene *s, const cha
                             "would replace it; name another file",
                             line, cmd, out[o], path, key);
                     else
-                        msg("%s: %s is the image %s that %s reads: writing it would replace "
-                            "it; name another file",
-                            cmd, out[o], path, key);
+                        msg("%s: %s%s%s is the image %s that %s reads: writing it would "
+                            "replace it; name another file",
+                            cmd, opts[o] ? opts[o] : "", opts[o] ? " " : "", out[o], path, key);
                     return 1;
                 }
         }
@@ -1188,9 +1200,9 @@ static int overwrites_scene_image(const char *cmd, const rtp_scene *s, const cha
             break; /* (past the last; ARGUMENT: a path longer than path holds) */
         for (o = 0; st == RTP_OK && o < nout; o++)
             if (is_input(path, out[o])) {
-                msg("%s: %s is a file the scene reads (%s, %s): writing it would replace it; "
-                    "name another file",
-                    cmd, out[o], key, path);
+                msg("%s: %s%s%s is a file the scene reads (%s, %s): writing it would replace "
+                    "it; name another file",
+                    cmd, opts[o] ? opts[o] : "", opts[o] ? " " : "", out[o], key, path);
                 return 1;
             }
     }
@@ -1807,8 +1819,10 @@ static int cmd_trace(int argc, char **argv)
     image_role = image_path == default_image ? "the default image" : "the image";
     if (same_output("trace", "the tree", tree_path, image_role, image_path) ||
         same_output("trace", "the tree", tree_path, "the --stats file", stats_path) ||
-        same_output("trace", image_role, image_path, "the --stats file", stats_path))
-        goto usage;
+        same_output("trace", image_role, image_path, "the --stats file", stats_path)) {
+        rc = EXIT_USAGE;
+        goto out;
+    }
     /* (the default's format is known: a scene named '' made it ".png",
        said instead of "no scene file name") */
     if (image_path && image_path != default_image && !image_name_ok(image_path))
@@ -1835,17 +1849,20 @@ static int cmd_trace(int argc, char **argv)
         opt.width = opt.height = 0;
         opt.max_depth = 5;
     }
-    if (overwrites_input("trace", scene_path, image_path, image_path == default_image) ||
-        overwrites_input("trace", scene_path, tree_path, 0) ||
-        overwrites_input("trace", scene_path, stats_path, 0))
-        goto usage;
     {
-        const char *outs[3];
+        const char *outs[3], *opts[3];
         outs[0] = tree_path;
         outs[1] = image_path;
         outs[2] = stats_path;
-        if (outputs_over_inputs("trace", (const char *const *)params, nparams, outs, 3))
-            goto usage;
+        opts[0] = "-o";
+        opts[1] = image_path == default_image ? NULL : "-i";
+        opts[2] = "--stats";
+        if (outputs_over_inputs("trace", "the scene", &scene_path, 1, opts, outs, 3) ||
+            outputs_over_inputs("trace", "the --params file", (const char *const *)params,
+                                nparams, opts, outs, 3)) {
+            rc = EXIT_USAGE;
+            goto out;
+        }
     }
 
     t0 = now_seconds();
@@ -1862,11 +1879,14 @@ static int cmd_trace(int argc, char **argv)
         if (apply_kv(set_scene, scene, sets[i], "--set", 0, 0))
             goto out;
     {
-        const char *outs[3];
+        const char *outs[3], *opts[3];
         outs[0] = tree_path;
         outs[1] = image_path;
         outs[2] = stats_path;
-        if (overwrites_scene_image("trace", scene, outs, 3, 0)) {
+        opts[0] = "-o";
+        opts[1] = image_path == default_image ? "the default image" : "-i";
+        opts[2] = "--stats";
+        if (overwrites_scene_image("trace", scene, opts, outs, 3, 0)) {
             rc = EXIT_USAGE; /* (as an output naming the scene is) */
             goto out;
         }
@@ -2140,16 +2160,19 @@ static int cmd_diff(int argc, char **argv)
     if (stdout_taken("diff", stats_path, heat, NULL))
         goto usage;
     {
-        const char *ins[2], *outs[2];
+        const char *ins[2], *outs[2], *opts[2];
         ins[0] = pa;
         ins[1] = pb;
         outs[0] = heat;
         outs[1] = stats_path;
-        if (outputs_over_inputs("diff", ins, 2, outs, 2))
-            goto usage;
+        opts[0] = "--heatmap";
+        opts[1] = "--stats";
+        if (outputs_over_inputs("diff", "the image", ins, 2, opts, outs, 2) ||
+            same_output("diff", "the heat map", heat, "the --stats file", stats_path)) {
+            rc = EXIT_USAGE;
+            goto out;
+        }
     }
-    if (same_output("diff", "the heat map", heat, "the --stats file", stats_path))
-        goto usage;
     /* outputs checked before the inputs are read, as trace's are; the
        heat map's format by its name, as -i's (x.jpg had been written a
        PNG, exit 0) */
@@ -2574,6 +2597,7 @@ typedef struct cli_edits {
     int reported; /* a message was printed (apply_kv's, with its place) */
     int usage;    /* ...and it was a usage error's (an output over an input) */
     const char *outs[2]; /* the image and --stats files */
+    const char *opts[2]; /* their options (the default image: its words) */
     double t_edits; /* when the callback was called */
 } cli_edits;
 
@@ -2599,7 +2623,7 @@ static rtp_status make_edits(void *user, rtp_tree *tree, rtp_error *err)
             c->reported = 1;
             return RTP_ERR_ARGUMENT;
         }
-    if (overwrites_scene_image("reeval", rtp_tree_scene(tree), c->outs, 2, 0)) {
+    if (overwrites_scene_image("reeval", rtp_tree_scene(tree), c->opts, c->outs, 2, 0)) {
         c->reported = c->usage = 1;
         return RTP_ERR_ARGUMENT;
     }
@@ -2747,21 +2771,23 @@ static int cmd_reeval(int argc, char **argv)
         }
         image_path = default_image;
     }
-    if (!stream && overwrites_input("reeval", tree_path, image_path, image_path == default_image))
-        goto usage;
-    if (overwrites_input("reeval", tree_path, stats_path, 0))
-        goto usage;
     {
-        const char *outs[2];
+        const char *outs[2], *opts[2];
         outs[0] = stats_path;
         outs[1] = stream ? NULL : image_path;
-        if (outputs_over_inputs("reeval", (const char *const *)params, nparams, outs, 2))
-            goto usage;
+        opts[0] = "--stats";
+        opts[1] = image_path == default_image ? NULL : "-i";
+        if (outputs_over_inputs("reeval", "the tree", &tree_path, 1, opts, outs, 2) ||
+            outputs_over_inputs("reeval", "the --params file", (const char *const *)params,
+                                nparams, opts, outs, 2) ||
+            (!stream &&
+             same_output("reeval", image_path == default_image ? "the default image" : "the image",
+                         image_path, "the --stats file", stats_path))) {
+            rc = EXIT_USAGE;
+            goto out;
+        }
     }
-    if (stdout_taken("reeval", stats_path, image_path, NULL) ||
-        (!stream && same_output("reeval",
-                                image_path == default_image ? "the default image" : "the image",
-                                image_path, "the --stats file", stats_path)))
+    if (stdout_taken("reeval", stats_path, image_path, NULL))
         goto usage;
     if (stream && strcmp(image_path, "-") != 0 && !stream_device(image_path)) {
         char probe[4096];
@@ -2807,6 +2833,8 @@ static int cmd_reeval(int argc, char **argv)
         ce.nsets = nsets;
         ce.outs[0] = image_path;
         ce.outs[1] = stats_path;
+        ce.opts[0] = image_path == default_image ? "the default image" : "-i";
+        ce.opts[1] = "--stats";
         ce.t_edits = -1.0;
         if (eo.progress == progress_cb)
             progress_start(&prog, 1);
@@ -2864,10 +2892,12 @@ static int cmd_reeval(int argc, char **argv)
         if (apply_kv(set_tree, tree, sets[i], "--set", 0, 0))
             goto out;
     {
-        const char *outs[2];
+        const char *outs[2], *opts[2];
         outs[0] = stream ? NULL : image_path; /* (a stream's frames: at each line) */
         outs[1] = stats_path;
-        if (overwrites_scene_image("reeval", rtp_tree_scene(tree), outs, 2, 0)) {
+        opts[0] = image_path == default_image ? "the default image" : "-i";
+        opts[1] = "--stats";
+        if (overwrites_scene_image("reeval", rtp_tree_scene(tree), opts, outs, 2, 0)) {
             rc = EXIT_USAGE;
             goto out;
         }
@@ -2937,8 +2967,8 @@ static int cmd_reeval(int argc, char **argv)
             }
             {
                 /* (a texture or bump image a line named, or the scene's) */
-                const char *fr = path;
-                if (overwrites_scene_image("--stream", rtp_tree_scene(tree), &fr, 1, n)) {
+                const char *fr = path, *fo = NULL;
+                if (overwrites_scene_image("--stream", rtp_tree_scene(tree), &fo, &fr, 1, n)) {
                     rc = 1;
                     break;
                 }
@@ -3132,8 +3162,9 @@ static int cmd_info(int argc, char **argv)
         usage_hint(info_help);
         return EXIT_USAGE;
     }
-    if (overwrites_input("info", tree_path, stats_path, 0) ||
-        stdin_closed_for("info", tree_path, "the tree")) {
+    if (overwrites_input("info", "the tree", tree_path, "--stats", stats_path))
+        return EXIT_USAGE; /* (one line: the options are well formed) */
+    if (stdin_closed_for("info", tree_path, "the tree")) {
         usage_hint(info_help);
         return EXIT_USAGE;
     }
@@ -3344,9 +3375,11 @@ static int cmd_merge(int argc, char **argv)
             continue; /* (no such file: its read fails) */
         memcpy(path, in[i], pl);
         path[pl] = '\0';
-        if (overwrites_input("merge", path, out_tree, 0) ||
-            overwrites_input("merge", path, out_image, 0))
-            goto usage;
+        if (overwrites_input("merge", "a part", path, "-o", out_tree) ||
+            overwrites_input("merge", "a part", path, "-i", out_image)) {
+            rc = EXIT_USAGE;
+            goto out;
+        }
         /* stdin holds one input: a second '-' (or /dev/stdin, another
            name of the pipe) read it empty ("-: empty: not an rtp tree
            file") */
@@ -3358,8 +3391,10 @@ static int cmd_merge(int argc, char **argv)
         msg("merge: only one part can come from stdin (-, or another name of it)");
         goto usage;
     }
-    if (same_output("merge", "the tree", out_tree, "the image", out_image))
-        goto usage;
+    if (same_output("merge", "the tree", out_tree, "the image", out_image)) {
+        rc = EXIT_USAGE;
+        goto out;
+    }
     if ((out_image && !image_name_ok(out_image)) || !output_ok(out_image) ||
         !output_ok(out_tree))
         goto out;

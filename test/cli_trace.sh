@@ -109,7 +109,7 @@ case $RTP in /*) rtp_abs=$RTP ;; *) rtp_abs=$here/$RTP ;; esac
 # image): a usage error, the input kept
 cp scenes/spheres.nff "$T/cwd/s.$b8"
 (cd "$T/cwd" && "$rtp_abs" trace "s.$b8" --size 8x6 -q 2>"$T/err"); rc=$?
-[ $rc -eq 2 ] && cmp -s scenes/spheres.nff "$T/cwd/s.$b8" && grep -q "is the input itself" "$T/err" &&
+[ $rc -eq 2 ] && cmp -s scenes/spheres.nff "$T/cwd/s.$b8" && grep -q "the default image s.$b8 is the scene itself" "$T/err" &&
     ok || bad "trace's default image over its scene: exit $rc, $(cat "$T/err")"
 $RTP trace scenes/spheres.nff --size 8x6 -o "$T/cwd/t.rtp" -q
 cp "$T/cwd/t.rtp" "$T/cwd/t.$b8"
@@ -137,6 +137,33 @@ expect_rc 2 $RTP diff "$T/a.pfm" "$T/cwd/a.pfm" --stats "$T/cwd/a.pfm"
 cmp -s scenes/spheres.nff "$T/cwd/s.nff" && cmp -s "$T/cwd/t.rtp" "$T/cwd/t2.rtp" &&
     cmp -s "$T/a.pfm" "$T/cwd/a.pfm" && grep -q '^light.0.on=1$' "$T/cwd/p.txt" && ok ||
     bad "an output over an input replaced it"
+# ... with one line naming the option and what the input is, no usage
+# lines after it (the options are well formed; "trace s.nff -o s.nff" said
+# "s.nff is the input s.nff" and then the usage, as for a bad option); by
+# device and inode, so a hard link to the tree is caught under its name
+one_line() { # WANT: the one line of $T/err, as a grep pattern
+    [ "$(wc -l <"$T/err")" -eq 1 ] && grep -q "$1" "$T/err" && ok ||
+        bad "want one line '$1': $(cat "$T/err")"
+}
+expect_rc 2 $RTP trace "$T/cwd/s.nff" --size 8x6 -o "$T/cwd/s.nff"
+one_line "^rtp: trace: -o .*/s.nff is the scene .*/s.nff: writing it would replace it; name another file$"
+expect_rc 2 $RTP trace "$T/cwd/s.nff" --size 8x6 -i "$T/cwd/s.pfm" --params "$T/cwd/p.txt" --stats "$T/cwd/p.txt"
+one_line "^rtp: trace: --stats .*/p.txt is the --params file .*/p.txt: "
+ln -f "$T/cwd/t2.rtp" "$T/cwd/t2link.rtp"
+expect_rc 2 $RTP reeval "$T/cwd/t2.rtp" -i "$T/cwd/t2link.rtp"
+one_line "^rtp: reeval: -i .*/t2link.rtp is the tree .*/t2.rtp: "
+expect_rc 2 $RTP info "$T/cwd/t2.rtp" --stats "$T/cwd/t2link.rtp"
+one_line "^rtp: info: --stats .*/t2link.rtp is the tree .*/t2.rtp: "
+expect_rc 2 $RTP diff "$T/cwd/a.pfm" "$T/a.pfm" --heatmap "$T/cwd/a.pfm"
+one_line "^rtp: diff: --heatmap .*/a.pfm is the image .*/a.pfm: "
+expect_rc 2 $RTP trace "$T/cwd/s.nff" --size 8x6 -o "$T/cwd/x.rtp" -i "$T/cwd/x.rtp"
+one_line "^rtp: trace: the tree .*/x.rtp and the image .*/x.rtp are one file: give each output its own$"
+(cd "$T/cwd" && "$rtp_abs" trace "s.$b8" --size 8x6 2>"$T/err")
+one_line "the default image s.$b8 is the scene itself: name the image with -i$"
+cmp -s scenes/spheres.nff "$T/cwd/s.nff" && cmp -s "$T/cwd/t.rtp" "$T/cwd/t2.rtp" &&
+    cmp -s "$T/a.pfm" "$T/cwd/a.pfm" && grep -q '^light.0.on=1$' "$T/cwd/p.txt" &&
+    [ ! -e "$T/cwd/x.rtp" ] && [ ! -e "$T/cwd/s.pfm" ] && ok ||
+    bad "an output over an input replaced it, or a refused command wrote"
 expect_rc 3 $RTP diff "$T/a.pfm" "$T/$b8" --fail-above rmse=0.001
 expect_rc 0 $RTP diff "$T/a.pfm" "$T/$b8" --fail-above rmse=100
 expect_rc 1 $RTP diff "$T/a.pfm" scenes/spheres.nff
