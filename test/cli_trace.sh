@@ -201,6 +201,13 @@ expect_rc 0 $RTP trace scenes/spheres.nff --spd --size 512x256 --depth 4 --min-w
 grep -q "warning: --spd traces 512x512 to depth 5 with no weight cut-off: --size, --depth, --min-weight ignored" \
     "$T/err" && ok || bad "--spd with other values: $(cat "$T/err")"
 cmp -s "$T/spd1.pfm" "$T/spd2.pfm" && ok || bad "--spd with other values: another image"
+# ... in either order (--size before --spd alike), and --help says so
+# (it said only "512x512": a --size beside it was overridden, which only
+# the warning and the README told)
+expect_rc 0 $RTP trace scenes/spheres.nff --size 64x64 --spd -i "$T/spd3.pfm" -q
+cmp -s "$T/spd1.pfm" "$T/spd3.pfm" && [ ! -s "$T/err" ] && ok || bad "--size 64x64 --spd -q: $(cat "$T/err")"
+$RTP trace --help | tr -s ' \n' ' ' | grep -q -- "--spd SPD .* it overrides --size, --depth and --min-weight in any order" &&
+    ok || bad "trace --help does not say --spd overrides --size"
 shared=""
 for d in ../shared/scenes ../../shared/scenes; do [ -d "$d/spd" ] && shared=$d && break; done
 if [ -n "$shared" ]; then
