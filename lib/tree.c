@@ -4751,14 +4751,19 @@ static int cp_copy_max(float *restrict dst, const float *restrict src, size_t n,
    own for S was 3 MB of fresh memory at 512x512, two huge pages the
    kernel zeroed: tetra_s6's first light-colour edit took 7 page faults,
    now 3.  0 where it cannot be made (a value beyond the float range; the
-   samples are used up all the same). */
+   samples are used up all the same), or where the colours they hold sum
+   past RTPI_COEFF_MAX (planes_in_range): S + K (c - cS) then cancels
+   digits the samples never held (an ambient of 3.4e38, then 0.9: the
+   samples hold 2^126 where K cS is 8.5e37 and more, and the pixel read
+   -2.5e38 against the full path's 1.06; fuzz_streams seed 18251). */
 static int cp_snapshot(rtp_tree *t, float *samples, const float *last, size_t nt)
 {
     size_t np = (size_t)t->width * t->height, w = (size_t)t->width, x, y;
     int c, finite;
     if (t->cp_s_ok)
         return 1;
-    if (!t->ev_samples_ok || !samples || samples != t->ev_samples)
+    if (!t->ev_samples_ok || !samples || samples != t->ev_samples ||
+        !planes_in_range(t, t->ev_cl, 3 * nt))
         return 0;
     t->ev_samples_ok = 0;
     cp_s_drop(t); /* (S in its own block no more: cp_ready's) */

@@ -1384,6 +1384,17 @@ for m in exact lightbuf:16 lightbuf:64 lightbuf auto; do
     [ $n -eq 0 ] && ok || bad "spheres_faces.nff: $n of $i $m stream frames differ from full traces"
 done
 
+# A --stream's colour edit after colours past 2^50 (RTPI_COEFF_MAX): the
+# ambient at 3.4e38 makes the samples hold 2^126, and S + K (c - cS) from
+# them gave -2.5e38 where the full trace of the next line's ambient gives
+# 1.06 (fuzz_streams seed 18251, coplanar.nff): the full path makes it
+$RTP trace scenes/stiff/coplanar.nff --size 24x24 -o "$T/huge.rtp" -q
+printf 'ambient=0,3.4e38,0\nambient=0.1311,0.8954,0.6946\n' |
+    $RTP reeval "$T/huge.rtp" --stream -q -j 1 -i "$T/huge%d.pfm"
+$RTP trace scenes/stiff/coplanar.nff --size 24x24 --set ambient=0.1311,0.8954,0.6946 -i "$T/huge_full.pfm" -q
+$RTP diff "$T/huge1.pfm" "$T/huge_full.pfm" --fail-above max_abs=1e-6 -q 2>"$T/err" && ok ||
+    bad "a stream's ambient edit after 3.4e38: $(cat "$T/err")"
+
 rm -rf "$T"
 echo "$pass passed, $fail failed, $skip skipped"
 [ "$fail" -eq 0 ]
