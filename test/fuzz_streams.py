@@ -344,7 +344,9 @@ def scenes():
 
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("--cases", type=int, default=50)
+    # (50 by default; with --minutes, as many as the minutes allow: --minutes
+    # 10 alone ran its 50 cases in a minute or two)
+    ap.add_argument("--cases", type=int, default=None)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--out", default="/tmp/fuzz_streams")
     ap.add_argument("--minutes", type=float, default=0)
@@ -364,7 +366,8 @@ def main():
     counts = {}
     nfail = 0
     nframes = 0
-    for case in range(args.cases):
+    ncases = args.cases if args.cases is not None else (10 ** 9 if args.minutes else 50)
+    for case in range(ncases):
         if t_end and time.time() > t_end:
             break
         seed = args.seed * 100003 + case
