@@ -495,18 +495,15 @@ double rtpi_offset_floor(const rtp_scene *s, int *per_prim);
    40% of its pixels). */
 double rtpi_prim_offset_floor(const rtp_scene *s, uint32_t prim, double floor);
 
-/* A ray origin for a ray leaving surface point p, moved off the surface
-   along the geometric normal ng (unit) to the side `side` (+1: the side ng
-   points to, -1: the other) by an amount that scales with |p|, so that the
-   new ray cannot hit the surface it starts on at any scale or distance
-   from the origin, yet does not skip nearby geometry; `floor`:
-   rtpi_offset_floor of the scene. */
-static inline rtpi_v3 rtpi_offset_origin(rtpi_v3 p, rtpi_v3 ng, double side, double floor)
+/* rtpi_offset_origin's step at p: o is p + ng times it, negated for the
+   side ng does not face (vis_row keeps it per node: it does not depend on
+   the light). */
+static inline double rtpi_offset_eps(rtpi_v3 p, double floor)
 {
     /* (inline, without fmax's calls: every hit and shadow query takes
        this step; a NaN p gives a NaN origin either way) */
     double ax = fabs(p.x), ay = fabs(p.y), az = fabs(p.z);
-    double m = ax > ay ? (ax > az ? ax : az) : (ay > az ? ay : az), eps;
+    double m = ax > ay ? (ax > az ? ax : az) : (ay > az ? ay : az);
     /* Hit points are rounded to float before anything leaves them (the
        ray tree stores float positions, and re-evaluation must cast the
        very rays trace cast), so p may be off its surface by half a float
@@ -521,18 +518,19 @@ static inline rtpi_v3 rtpi_offset_origin(rtpi_v3 p, rtpi_v3 ng, double side, dou
        its size (an absolute 1e-12 was 0.1% of a scene 1e-9 across, all
        of one 1e-12 across: its shadow rays started off the surface, and
        false shadows grew as the scene shrank, 26.6 dB at 1e-12). */
-    eps = 4e-7 * m + floor;
-    return v3_madd(p, ng, side >= 0.0 ? eps : -eps);
+    return 4e-7 * m + floor;
 }
 
-/* rtpi_offset_origin's step at p: o is p + ng times it, negated for the
-   side ng does not face (vis_row keeps it per node: it does not depend on
-   the light).  The same arithmetic as there. */
-static inline double rtpi_offset_eps(rtpi_v3 p, double floor)
+/* A ray origin for a ray leaving surface point p, moved off the surface
+   along the geometric normal ng (unit) to the side `side` (+1: the side ng
+   points to, -1: the other) by an amount that scales with |p|, so that the
+   new ray cannot hit the surface it starts on at any scale or distance
+   from the origin, yet does not skip nearby geometry; `floor`:
+   rtpi_offset_floor of the scene. */
+static inline rtpi_v3 rtpi_offset_origin(rtpi_v3 p, rtpi_v3 ng, double side, double floor)
 {
-    double ax = fabs(p.x), ay = fabs(p.y), az = fabs(p.z);
-    double m = ax > ay ? (ax > az ? ax : az) : (ay > az ? ay : az);
-    return 4e-7 * m + floor;
+    double eps = rtpi_offset_eps(p, floor);
+    return v3_madd(p, ng, side >= 0.0 ? eps : -eps);
 }
 
 /* Whether prim shadows a point of its own whose shadow ray starts at o
