@@ -698,72 +698,49 @@ static RTPI_FORCE_INLINE int vis_row_body(void *ctx, int y, int kf, int kb)
                    rtpi_offset_origin's, dn and the side's sign as there */
                 const unsigned kind = vk[n];
                 const double e = vrec[n];
-                if (kind != VK_SMOOTH && kind != VK_CONE) {
-                    /* ng = ns: the side is dn's */
-                    if (kind == VK_SPHERE) {
-                        const double *c = prim_nrm + 3 * n;
-                        ng = v3(c[0], c[1], c[2]);
-                    } else {
-                        const double *tn = tri_nrm + 3 * (size_t)nd->prim;
-                        ng = v3(tn[0], tn[1], tn[2]);
-                        if (kind == VK_FLAT_TURNED)
-                            ng = v3_mul(ng, -1.0);
-                    }
-                    *w &= ~bit;
-                    l = v3_sub(lp, p);
-                    dn = v3_dot(ng, l);
-                    if (dn <= 0.0)
-                        continue;
-                    o = v3_madd(p, ng, dn >= 0.0 ? e : -e);
-                    queries++;
-                    if (kf)
-                        cache.from = dn >= 0.0 ? vis_from(kd_from, v->kd, n, o) : 0u;
-                    if (rtpi_shadow_visible_cached(sh, &cache, &p, &o, nd->prim))
-                        *w |= bit;
-                    continue;
-                }
-                if (kind == VK_SMOOTH) {
-                    /* a smooth triangle's: ns the evaluation's (as below) */
-                    const float *q = nv + 6 * n;
+                if (kind >= VK_SPHERE) {
+                    const double *c = prim_nrm + 3 * n;
+                    ng = v3(c[0], c[1], c[2]);
+                } else {
                     const double *tn = tri_nrm + 3 * (size_t)nd->prim;
-                    double sg = nd->link & RTPI_L_BACK ? -1.0 : 1.0;
+                    /* (a smooth triangle's ng turned to the ray) */
+                    double sg = kind == VK_FLAT_TURNED ||
+                                        (kind == VK_SMOOTH && (nd->link & RTPI_L_BACK))
+                                    ? -1.0
+                                    : 1.0;
                     ng = v3(sg * tn[0], sg * tn[1], sg * tn[2]);
-                    ns = v3(q[0], q[1], q[2]);
-                    *w &= ~bit;
-                    l = v3_sub(lp, p);
-                    dn = v3_dot(ns, l);
+                }
+                *w &= ~bit;
+                l = v3_sub(lp, p);
+                if (kind == VK_SMOOTH) {
+                    /* ns the evaluation's (as below), the side ng's */
+                    const float *q = nv + 6 * n;
+                    dn = v3_dot(v3(q[0], q[1], q[2]), l);
                     if (dn <= 0.0)
                         continue;
                     sd = v3_dot(ng, l);
-                    o = v3_madd(p, ng, sd >= 0.0 ? e : -e);
-                    queries++;
-                    if (kf)
-                        cache.from = sd >= 0.0 ? vis_from(kd_from, v->kd, n, o) : 0u;
-                    if (rtpi_shadow_visible_cached(sh, &cache, &p, &o, nd->prim))
-                        *w |= bit;
-                    continue;
                 } else {
-                    /* a cone's seen from the front, its own answer kept
-                       (cone_own, as below) */
-                    unsigned char *co = &cone_own[n];
-                    const double *c = prim_nrm + 3 * n;
-                    ng = v3(c[0], c[1], c[2]);
-                    *w &= ~bit;
-                    l = v3_sub(lp, p);
-                    dn = v3_dot(ng, l);
+                    /* ng = ns: the side is dn's */
+                    dn = sd = v3_dot(ng, l);
                     if (dn <= 0.0)
                         continue;
-                    o = v3_madd(p, ng, dn >= 0.0 ? e : -e);
-                    queries++;
-                    if (kf)
-                        cache.from = dn >= 0.0 ? vis_from(kd_from, v->kd, n, o) : 0u;
+                }
+                o = v3_madd(p, ng, sd >= 0.0 ? e : -e);
+                queries++;
+                if (kf)
+                    cache.from = sd >= 0.0 ? vis_from(kd_from, v->kd, n, o) : 0u;
+                if (kind == VK_CONE) {
+                    /* its own answer kept (cone_own, as below) */
+                    unsigned char *co = &cone_own[n];
                     if (!*co)
                         *co = (unsigned char)(1 - rtpi_cone_shadows_own(
                                                       s, nd->prim - ntris - nspheres, &o));
                     if (rtpi_shadow_visible_own(sh, &cache, &p, &o, nd->prim, 1 - *co))
                         *w |= bit;
-                    continue;
+                } else if (rtpi_shadow_visible_cached(sh, &cache, &p, &o, nd->prim)) {
+                    *w |= bit;
                 }
+                continue;
             }
             tr = tri_nrm && nd->prim < ntris ? &tris[nd->prim] : NULL;
             if (tr && (tr->n[0] == RTPI_NONE || tr->n[1] == RTPI_NONE || tr->n[2] == RTPI_NONE)) {
