@@ -80,11 +80,13 @@ extern "C" {
    rtp_eval_options.cancel; 0.5: rtp_tree_info.min_weight, and the calls
    rtp_tree_eval_file and rtp_tree_read_summary; light.N.pos of the next
    N adds a light; 0.5.1: the call rtp_tree_trace_opt, a call added, no
-   struct changed; 0.6: rtp_eval_stats.shadow_res): a program compares rtp_version_number() with the
+   struct changed; 0.6: rtp_eval_stats.shadow_res; 0.6.1:
+   RTP_SHADOWS_AUTO without shadow_res takes coarser light buffers under
+   the memory limit before shadow rays, as RTP_SHADOWS_LIGHTBUF does): a program compares rtp_version_number() with the
    RTP_VERSION_NUMBER it was built with. */
 #define RTP_VERSION_MAJOR 0
 #define RTP_VERSION_MINOR 6
-#define RTP_VERSION_PATCH 0
+#define RTP_VERSION_PATCH 1
 #define RTP_VERSION_NUMBER \
     (RTP_VERSION_MAJOR * 10000 + RTP_VERSION_MINOR * 100 + RTP_VERSION_PATCH)
 
@@ -475,7 +477,9 @@ typedef struct rtp_eval_options {
                                they are made); 0: 16 GiB.
                                Past it: RTP_ERR_LIMIT, the tree as it was
                                (RTP_SHADOWS_AUTO takes shadow rays
-                               instead of a cube over it) */
+                               instead of a cube over it; without
+                               shadow_res a coarser light buffer first,
+                               halving its cells while they do not fit) */
     /* Asked now and then from the calling thread (with progress_user)
        while samples are traced again (class-D edits, RTP_STALE_RETRACE, a
        moved camera) and while moved lights' shadows are decided (on
