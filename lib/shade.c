@@ -851,12 +851,16 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
            size_t k1, const uint32_t *vis_ext, const float *nv, const double *w, size_t light,
            float *terms, float *coeffs, const double *cl, float *samples, int *bad,
            unsigned char *mark, double *rest, unsigned char *rest_ok, double *kc, int with_rest,
-           int one_word, int no_ks)
+           int one_word, int no_ks, size_t nlc)
 {
     const rtp_scene *s = c->s;
     const rtpi_v3 lp = light_pos(&s->lights[light]);
+    /* (nlc: the scene's lights where the call knows them (1 or 2, the
+       copies without a kept rest), else 0: the strides constants and the
+       sum's loops unrolled there) */
+    const size_t nlv = nlc ? nlc : s->nlights;
     /* (one_word: vis_ext holds a word a node, light's bit in it) */
-    const size_t nt = RTPI_TERMS(s->nlights), nc = RTPI_COEFFS(s->nlights),
+    const size_t nt = RTPI_TERMS(nlv), nc = RTPI_COEFFS(nlv),
                  wi = one_word ? 0 : light >> 5;
     const size_t vw = one_word ? 1 : c->vis_words;
     const uint32_t bit = 1u << (light & 31);
@@ -873,7 +877,7 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
     const __m128d lc01 = _mm_loadu_pd(cl + 3 * light), lc2 = _mm_load_sd(cl + 3 * light + 2);
     const __m128d cmax = _mm_set_sd(RTPI_COEFF_MAX);
     __m128d badv = _mm_setzero_pd();
-    const size_t nl = s->nlights;
+    const size_t nl = nlv;
     /* (no_ks: c->no_ks and kc, a constant in each copy: as a run-time
        test in the one loop its branch a lit node had cost the scenes with
        highlights 1.2-2.3 M a move) */
@@ -1224,9 +1228,36 @@ light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, const uint64_t *sta
                 v01 = _mm_add_pd(_mm_mul_pd(load2f(co), bg01), _mm_mul_pd(load2f(co + 3), am01));
                 v2 = _mm_add_sd(_mm_mul_sd(load1f(&co[2]), bg2),
                                 _mm_mul_sd(load1f(&co[5]), am2));
-                for (i = 0; i < nl; i++, cc += 3, cli += 3) {
+                /* the moved light's term in its place, from the
+                   coefficient as stored (f01, f2) and the light's colour
+                   widened once a call (lc01, lc2), not reloaded; with
+                   one or two lights (nlc) the other's term written out */
+                if (nlc == 2 && light == 0) {
+                    v01 = _mm_add_pd(v01, _mm_mul_pd(_mm_cvtps_pd(f01), lc01));
+                    v2 = _mm_add_sd(v2, _mm_mul_sd(_mm_cvtps_pd(f2), lc2));
+                    v01 = _mm_add_pd(v01, _mm_mul_pd(load2f(cc + 3), _mm_loadu_pd(cli + 3)));
+                    v2 = _mm_add_sd(v2, _mm_mul_sd(load1f(&cc[5]), _mm_load_sd(cli + 5)));
+                } else if (nlc == 2) {
                     v01 = _mm_add_pd(v01, _mm_mul_pd(load2f(cc), _mm_loadu_pd(cli)));
                     v2 = _mm_add_sd(v2, _mm_mul_sd(load1f(&cc[2]), _mm_load_sd(cli + 2)));
+                    v01 = _mm_add_pd(v01, _mm_mul_pd(_mm_cvtps_pd(f01), lc01));
+                    v2 = _mm_add_sd(v2, _mm_mul_sd(_mm_cvtps_pd(f2), lc2));
+                } else if (nlc == 1) {
+                    v01 = _mm_add_pd(v01, _mm_mul_pd(_mm_cvtps_pd(f01), lc01));
+                    v2 = _mm_add_sd(v2, _mm_mul_sd(_mm_cvtps_pd(f2), lc2));
+                } else {
+                    for (i = 0; i < light; i++, cc += 3, cli += 3) {
+                        v01 = _mm_add_pd(v01, _mm_mul_pd(load2f(cc), _mm_loadu_pd(cli)));
+                        v2 = _mm_add_sd(v2,
+                                        _mm_mul_sd(load1f(&cc[2]), _mm_load_sd(cli + 2)));
+                    }
+                    v01 = _mm_add_pd(v01, _mm_mul_pd(_mm_cvtps_pd(f01), lc01));
+                    v2 = _mm_add_sd(v2, _mm_mul_sd(_mm_cvtps_pd(f2), lc2));
+                    for (i++, cc += 3, cli += 3; i < nl; i++, cc += 3, cli += 3) {
+                        v01 = _mm_add_pd(v01, _mm_mul_pd(load2f(cc), _mm_loadu_pd(cli)));
+                        v2 = _mm_add_sd(v2,
+                                        _mm_mul_sd(load1f(&cc[2]), _mm_load_sd(cli + 2)));
+                    }
                 }
                 {
                     /* (combine_into's test, its squares in its order) */
@@ -1291,6 +1322,7 @@ unsigned long long rtpi_light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *no
                                    float *samples, int *bad, unsigned char *mark,
                                    double *rest, unsigned char *rest_ok, double *kc)
 {
+    const size_t s_nl = c->s->nlights;
     /* (scenes of up to 32 lights keep their bits in the nodes: compiled
        without the parallel words there, a test a node and a register
        less) */
@@ -1298,11 +1330,24 @@ unsigned long long rtpi_light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *no
        takes samples for given) */
     if (!samples)
         rest = NULL;
-    if (!vis_ext)
-        return rest ? light_redo(c, nodes, start, k0, k1, NULL, nv, w, light, terms, coeffs, cl,
-                                 samples, bad, mark, rest, rest_ok, kc, 1, 0, 0)
-                    : light_redo(c, nodes, start, k0, k1, NULL, nv, w, light, terms, coeffs, cl,
-                                 samples, bad, mark, NULL, rest_ok, kc, 0, 0, 0);
+    /* (one or two lights, so no kept rest (MV_REST_LIGHTS): copies of
+       their own, the count a constant, the colour's sum written out and
+       the strides constants; with the moved light's term from registers
+       a lightbuf move went mount 189.02 -> 186.75 M, teapot 147.66 ->
+       144.66, the copies' part of it 0.6-0.8 M) */
+    if (!vis_ext) {
+        if (rest)
+            return light_redo(c, nodes, start, k0, k1, NULL, nv, w, light, terms, coeffs, cl,
+                              samples, bad, mark, rest, rest_ok, kc, 1, 0, 0, 0);
+        if (s_nl == 1)
+            return light_redo(c, nodes, start, k0, k1, NULL, nv, w, light, terms, coeffs, cl,
+                              samples, bad, mark, NULL, rest_ok, kc, 0, 0, 0, 1);
+        if (s_nl == 2)
+            return light_redo(c, nodes, start, k0, k1, NULL, nv, w, light, terms, coeffs, cl,
+                              samples, bad, mark, NULL, rest_ok, kc, 0, 0, 0, 2);
+        return light_redo(c, nodes, start, k0, k1, NULL, nv, w, light, terms, coeffs, cl,
+                          samples, bad, mark, NULL, rest_ok, kc, 0, 0, 0, 0);
+    }
     /* (a moved light's bits, up to 32 lights: a word a node, indexed
        by the node without a product a sample) */
     /* (no material with a highlight: a copy of its own, with the kept
@@ -1310,16 +1355,24 @@ unsigned long long rtpi_light_redo(const rtpi_shade_ctx *c, const rtpi_cnode *no
        without the rest (tetra, one light) came out 28.45 -> 28.80) */
     if (c->vis_words == 1 && kc && c->no_ks && rest)
         return light_redo(c, nodes, start, k0, k1, vis_ext, nv, w, light, terms, coeffs, cl,
-                          samples, bad, mark, rest, rest_ok, kc, 1, 1, 1);
-    if (c->vis_words == 1)
-        return rest ? light_redo(c, nodes, start, k0, k1, vis_ext, nv, w, light, terms, coeffs,
-                                 cl, samples, bad, mark, rest, rest_ok, kc, 1, 1, 0)
-                    : light_redo(c, nodes, start, k0, k1, vis_ext, nv, w, light, terms, coeffs,
-                                 cl, samples, bad, mark, NULL, rest_ok, kc, 0, 1, 0);
+                          samples, bad, mark, rest, rest_ok, kc, 1, 1, 1, 0);
+    if (c->vis_words == 1) {
+        if (rest)
+            return light_redo(c, nodes, start, k0, k1, vis_ext, nv, w, light, terms, coeffs, cl,
+                              samples, bad, mark, rest, rest_ok, kc, 1, 1, 0, 0);
+        if (s_nl == 1)
+            return light_redo(c, nodes, start, k0, k1, vis_ext, nv, w, light, terms, coeffs, cl,
+                              samples, bad, mark, NULL, rest_ok, kc, 0, 1, 0, 1);
+        if (s_nl == 2)
+            return light_redo(c, nodes, start, k0, k1, vis_ext, nv, w, light, terms, coeffs, cl,
+                              samples, bad, mark, NULL, rest_ok, kc, 0, 1, 0, 2);
+        return light_redo(c, nodes, start, k0, k1, vis_ext, nv, w, light, terms, coeffs, cl,
+                          samples, bad, mark, NULL, rest_ok, kc, 0, 1, 0, 0);
+    }
     return rest ? light_redo(c, nodes, start, k0, k1, vis_ext, nv, w, light, terms, coeffs, cl,
-                             samples, bad, mark, rest, rest_ok, kc, 1, 0, 0)
+                             samples, bad, mark, rest, rest_ok, kc, 1, 0, 0, 0)
                 : light_redo(c, nodes, start, k0, k1, vis_ext, nv, w, light, terms, coeffs, cl,
-                             samples, bad, mark, NULL, rest_ok, kc, 0, 0, 0);
+                             samples, bad, mark, NULL, rest_ok, kc, 0, 0, 0, 0);
 }
 
 void rtpi_material_light_terms(const rtpi_shade_ctx *c, const rtpi_cnode *nodes, size_t n,
