@@ -13,6 +13,7 @@ typedef struct pool {
     int locking;         /* the lock was made (else one thread alone) */
     int cancelled;       /* cancel said to stop (stop is set too) */
     int reported;        /* rows done at the calling thread's last report */
+    int relayed;         /* the same for the relaying caller (-1: none yet) */
     rtpi_row_fn fn;
     void *const *ctx;
     void (*progress)(void *user, double done);
@@ -92,7 +93,11 @@ static void run(job *j)
         if (stop)
             p->stop = 1;
 #ifdef RTP_HAVE_THREADS
-        if (p->relay)
+        /* (the waiting caller woken only for a report it will make: a
+           signal a row woke it 513 times a move for nothing where no
+           progress or cancel was asked, each wake-up a context switch
+           on a core the other worker wanted) */
+        if (p->relay && (p->progress || p->cancel) && worth_report(p, done, p->relayed))
             pthread_cond_signal(&p->cv);
 #endif
         pool_unlock(p);
@@ -188,6 +193,7 @@ int rtpi_parallel_rows_cancel(int nrows, int nthreads, void *const *ctx, rtpi_ro
            waits and relays the progress. */
         pthread_t tid[RTPI_MAX_THREADS];
         int started = 0, reported = -1;
+        p.relayed = -1;
         if (pthread_cond_init(&p.cv, NULL) == 0) {
             p.relay = 1;
             for (i = 0; i < nthreads; i++)
@@ -197,7 +203,7 @@ int rtpi_parallel_rows_cancel(int nrows, int nthreads, void *const *ctx, rtpi_ro
             while (p.finished < started) {
                 if ((p.progress || p.cancel) && p.done != reported &&
                     worth_report(&p, p.done, reported)) {
-                    int d = reported = p.done;
+                    int d = reported = p.relayed = p.done;
                     pool_unlock(&p);
                     if (p.progress)
                         p.progress(p.progress_user, (double)d / p.nrows);
