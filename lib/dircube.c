@@ -1936,6 +1936,7 @@ static size_t lb_drop_faces(rtpi_lightbuf *lb, lb_fill *parts, int np, unsigned 
    the same bytes.  (A serial loop, it was 4% of gears_s4's lightbuf
    move at one thread and, at two, 7% of the move's time on one.) */
 #define LB_EDGE_CHUNK 1024
+#define LB_EDGE_THREADS 16
 
 typedef struct lb_edge_job {
     rtpi_lightbuf *lb;
@@ -1998,10 +1999,15 @@ static void lb_edges(rtpi_lightbuf *lb, const rtp_scene *s, rtpi_v3 light,
     jb.s = s;
     jb.light = light;
     nchunks = (int)((nc + LB_EDGE_CHUNK - 1) / LB_EDGE_CHUNK);
+    /* (threads from LB_EDGE_THREADS chunks a thread: below, the calling
+       thread alone, as tree.c's threads_for, a pass under a millisecond
+       there, where a worker's start costs tens of microseconds and, on
+       a busy machine, its wake-up a scheduler slice the pass then waits
+       for: tetra_s6's 4 chunks, 0.07 ms of work, took 1.0 ms of wall at
+       two threads under a load of 6; gears_s4's 36 chunks took 1.5 ms at one) */
     nt = threads < 1 ? 1 : threads > LB_MAX_THREADS ? LB_MAX_THREADS : threads;
-    if (nt > nchunks / 2)
-        nt = nchunks / 2 > 1 ? nchunks / 2 : 1; /* (two chunks a thread at least: a
-                                                    thread's start for fewer cost more) */
+    if (nt > nchunks / LB_EDGE_THREADS)
+        nt = nchunks / LB_EDGE_THREADS > 1 ? nchunks / LB_EDGE_THREADS : 1;
     for (k = 0; k < nt; k++)
         ctx[k] = &jb;
     rtpi_parallel_rows(nchunks, nt, ctx, lb_edge_chunk, NULL, NULL);
