@@ -433,8 +433,9 @@ typedef struct rtp_eval_options {
                                any resolution: finer cells shorten the
                                lists a query walks and cost more to fill
                                at each move), halved while the memory
-                               limit refuses it (LIGHTBUF; AUTO takes
-                               shadow rays); rtp_eval_stats.shadow_res
+                               limit refuses it (LIGHTBUF and AUTO;
+                               AUTO takes shadow rays where even 1 cell
+                               does not fit); rtp_eval_stats.shadow_res
                                says which */
     rtp_stale_mode stale;
     int no_cache;           /* 1: a one-off evaluation: keep no caches for
@@ -479,7 +480,10 @@ typedef struct rtp_eval_options {
                                (RTP_SHADOWS_AUTO takes shadow rays
                                instead of a cube over it; without
                                shadow_res a coarser light buffer first,
-                               halving its cells while they do not fit) */
+                               halving its cells while they do not fit;
+                               where none did down to 1 cell, the tree's
+                               later moves under as much or less take
+                               shadow rays at once) */
     /* Asked now and then from the calling thread (with progress_user)
        while samples are traced again (class-D edits, RTP_STALE_RETRACE, a
        moved camera) and while moved lights' shadows are decided (on

@@ -1334,6 +1334,12 @@ struct rtp_tree {
                                  (tree.c auto_lb_entries; 0: never): its
                                  later moves at as many or more take
                                  shadow rays at once */
+    double auto_tight;        /* RTP_SHADOWS_AUTO without a resolution
+                                 halved its light buffer down to 1 cell
+                                 and its lists still passed this memory
+                                 limit (bytes; 0: never): its later moves
+                                 under as much or less take shadow rays
+                                 at once (tree.c shadow_mode_for) */
 };
 
 /* The memory limit of a trace or re-evaluation given none: 16 GiB. */

@@ -1217,6 +1217,19 @@ static rtp_status light_vis_make(rtp_tree *t, size_t i, int mode, int res, int t
     if (rs == RTP_ERR_LIMIT && (fallback & LV_RES_FREE) && !(fallback & LV_AUTO) &&
         mode == RTP_SHADOWS_LIGHTBUF && res < res0)
         halved_error(res, err);
+    /* (AUTO's light buffer refused by the limit down to 1 cell: the next
+       moves under this limit or a lower one take shadow rays at once,
+       shadow_mode_for.  Each halving counts the lists again before the
+       limit refuses them: the bunny's 1280x1280 tree under 4 MiB, where
+       its 69k triangles' arrays fit but no light buffer's lists do,
+       counted 9 light buffers a move, 634 M instructions over the 1.1 G
+       of shadow rays', +55% a move.  Another light position may fit a
+       coarse buffer; shadow rays are as exact, and a light buffer of a
+       few cells is about as slow as they are: lightbuf:1 1.3x their
+       time on mount_s1, 0.9x on balls_s1) */
+    if (rs == RTP_ERR_LIMIT && (fallback & LV_RES_FREE) && (fallback & LV_AUTO) &&
+        mode == RTP_SHADOWS_LIGHTBUF && res <= 1 && limit > t->auto_tight)
+        t->auto_tight = limit;
     if ((rs == RTP_ERR_LIMIT || rs == RTPI_OVER_ENTRIES) && (fallback & LV_AUTO) &&
         mode != RTP_SHADOWS_EXACT) {
         /* AUTO: shadow rays where the lists would not fit (a mesh
@@ -5336,6 +5349,12 @@ static rtp_status shadow_mode_for(rtp_tree *t, const rtp_eval_options *opt, int 
     /* (lists found too long at this resolution or a coarser one:
        update_visibility's fallback) */
     if (asked_auto && mode == RTP_SHADOWS_LIGHTBUF && t->auto_long && res >= t->auto_long)
+        mode = RTP_SHADOWS_EXACT;
+    /* (no light buffer fitted this limit or a higher one down to 1 cell:
+       light_vis_make's t->auto_tight) */
+    if (asked_auto && res_free && mode == RTP_SHADOWS_LIGHTBUF && t->auto_tight > 0.0 &&
+        !((opt && opt->memory_limit > 0.0 ? opt->memory_limit : RTPI_MEMORY_LIMIT) >
+          t->auto_tight))
         mode = RTP_SHADOWS_EXACT;
     /* A light so far that its buffer would list most primitives in every
        cell (a sun at 1e11 over a terrain of size 2: 14 times the shadow

@@ -1807,7 +1807,7 @@ static const char trap_nff[] =
 /* An allocator that counts the bytes live and their peak (a realloc as
    if done in place: old and new are not both counted). */
 typedef struct {
-    size_t live, peak;
+    size_t live, peak, mallocs; /* (mallocs: blocks made, reallocs from none too) */
 #ifdef RTP_HAVE_THREADS
     pthread_mutex_t lock;
 #endif
@@ -1819,6 +1819,7 @@ static void counted_add(counted *c, size_t plus, size_t minus)
     pthread_mutex_lock(&c->lock);
 #endif
     c->live = c->live + plus - minus;
+    c->mallocs += plus && !minus;
     if (c->live > c->peak)
         c->peak = c->live;
 #ifdef RTP_HAVE_THREADS
@@ -2815,6 +2816,111 @@ static void test_lightbuf_prims_limit(void)
         CHECK_MSG(d.max_abs <= 1e-6, "auto: %g from a full trace", d.max_abs);
     else
         CHECK(0);
+    rtp_image_destroy(img);
+    rtp_image_destroy(full);
+    rtp_tree_destroy(t);
+    rtp_scene_destroy(s);
+    CHECK(c.live == 0);
+#ifdef RTP_HAVE_THREADS
+    pthread_mutex_destroy(&c.lock);
+#endif
+}
+
+/* RTP_SHADOWS_AUTO without a resolution under a memory limit where the
+   primitives' arrays fit but no light buffer's lists do, down to 1 cell:
+   the first move halves 6 times, counting the lists each time, and takes
+   shadow rays; later moves under that limit take them at once (each had
+   counted 6 light buffers again: the bunny's 1280x1280 tree under 4 MiB
+   +55% a move).  A higher limit tries the light buffer again.  Seen by
+   the blocks a move makes (the light buffers' arrays are under the tree
+   blocks' 1 MiB: each attempt's come from the allocator): the second
+   AUTO move makes no more than an EXACT move. */
+static void test_shadows_auto_tight(void)
+{
+    counted c;
+    rtp_allocator a;
+    rtp_scene *s = NULL;
+    rtp_tree *t = NULL;
+    rtp_image *img = NULL, *full = NULL;
+    rtp_trace_options o;
+    rtp_eval_options eo;
+    rtp_eval_stats st;
+    rtp_diff_stats d;
+    rtp_tree_info ti;
+    rtp_error err;
+    rtp_status rs;
+    const int n = 20;
+    size_t cap = (size_t)n * n * 120 + 512, len, m_auto = 0, m_exact = 0;
+    char *text = (char *)malloc(cap);
+    int i, j, k;
+    if (!text) {
+        CHECK(0);
+        return;
+    }
+    len = (size_t)snprintf(text, cap,
+                           "v\nfrom 0.5 -0.5 1.5 at 0.5 0.5 0 up 0 0 1 angle 50 hither 0.01\n"
+                           "resolution 128 128\nl 0.3 0.4 2\nf 0.8 0.8 0.8 1 0 0 0 0\n");
+    for (i = 0; i < n; i++)
+        for (j = 0; j < n; j++) {
+            double x = (double)i / n, y = (double)j / n, e = 1.0 / n;
+            len += (size_t)snprintf(text + len, cap - len, "pp 4\n%g %g 0 0 0 1\n%g %g 0 0 0 1\n"
+                                    "%g %g 0 0 0 1\n%g %g 0 0 0 1\n", x, y, x + e, y, x + e,
+                                    y + e, x, y + e);
+        }
+    a = counted_allocator(&c);
+    memset(&o, 0, sizeof o);
+    memset(&eo, 0, sizeof eo);
+    CHECK(rtp_scene_load_memory(text, len, "grid.nff", "nff", &a, &s, &err) == RTP_OK);
+    free(text);
+    CHECK(s && rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
+    if (!t) {
+        rtp_scene_destroy(s);
+        return;
+    }
+    /* the case is what it claims: the hits' rule says the light buffer,
+       and LIGHTBUF under the limit counts lists down to 1 cell (0.044 to
+       0.054 MiB here; 0.056 fits 2 cells) */
+    rtp_tree_get_info(t, &ti);
+    CHECK_MSG(ti.nodes >= 4 * ti.triangles, "%llu nodes, %llu triangles", ti.nodes,
+              (unsigned long long)ti.triangles);
+    eo.threads = 1;
+    eo.memory_limit = 0.05 * 1048576.0;
+    eo.shadows = RTP_SHADOWS_LIGHTBUF;
+    CHECK(rtp_tree_eval(t, &eo, &img, NULL, NULL) == RTP_OK);
+    CHECK(rtp_tree_set(t, "light.0.pos", "0.3,0.45,2", NULL) == RTP_OK);
+    rs = img ? rtp_tree_eval_into(t, &eo, img, NULL, &err) : RTP_ERR_ARGUMENT;
+    CHECK_MSG(rs == RTP_ERR_LIMIT && strstr(err.message, "halved down to 1 cell a face: "
+                                                         "counting its lists passed"),
+              "lightbuf: %s", rs == RTP_OK ? "ok" : err.message);
+    eo.shadows = RTP_SHADOWS_AUTO;
+    for (k = 0; k < 4; k++) {
+        static const char *const pos[4] = {"0.3,0.45,2", "0.35,0.45,2", "0.4,0.45,2",
+                                           "0.45,0.4,2"};
+        size_t m0 = c.mallocs;
+        eo.shadows = k == 2 ? RTP_SHADOWS_EXACT : RTP_SHADOWS_AUTO;
+        /* (the last: a limit the 2-cell buffer fits) */
+        eo.memory_limit = (k == 3 ? 0.056 : 0.05) * 1048576.0;
+        memset(&st, 0, sizeof st);
+        CHECK(rtp_tree_set(t, "light.0.pos", pos[k], NULL) == RTP_OK);
+        rs = img ? rtp_tree_eval_into(t, &eo, img, &st, &err) : RTP_ERR_ARGUMENT;
+        CHECK_MSG(rs == RTP_OK, "move %d: %s", k, rs == RTP_OK ? "" : err.message);
+        CHECK_MSG(st.moved_lights == 1 &&
+                      st.shadows == (k == 3 ? RTP_SHADOWS_LIGHTBUF : RTP_SHADOWS_EXACT),
+                  "move %d: %d moved, mode %d", k, st.moved_lights, (int)st.shadows);
+        if (k == 1)
+            m_auto = c.mallocs - m0;
+        if (k == 2)
+            m_exact = c.mallocs - m0;
+        rtp_image_destroy(full);
+        full = NULL;
+        if (rs == RTP_OK && rtp_tree_trace(t, 1, &full, NULL, NULL) == RTP_OK &&
+            rtp_image_diff(img, full, 1e-6, &d, NULL) == RTP_OK)
+            CHECK_MSG(d.max_abs <= 1e-6, "move %d: %g from a full trace", k, d.max_abs);
+        else
+            CHECK(0);
+    }
+    CHECK_MSG(m_auto <= m_exact, "auto's second move made %zu blocks, exact's %zu", m_auto,
+              m_exact);
     rtp_image_destroy(img);
     rtp_image_destroy(full);
     rtp_tree_destroy(t);
@@ -8264,6 +8370,7 @@ int main(void)
     RUN(test_trees_outgrow_limit);
     RUN(test_memory_limit_holds);
     RUN(test_lightbuf_prims_limit);
+    RUN(test_shadows_auto_tight);
     RUN(test_many_lights_cached);
 #ifdef RTP_HAVE_THREADS
     RUN(test_allocator_one_thread_at_a_time);
