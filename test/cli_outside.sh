@@ -107,7 +107,9 @@ for sig in TERM XCPU ALRM USR1 USR2 VTALRM; do
     pid=$!
     sleep 0.3
     kill -s $sig $pid
-    wait $pid
+    # (wait's stderr: dash reports the job it reaps killed, "Terminated",
+    # "CPU time limit exceeded", ..., stray lines among the results)
+    wait $pid 2>/dev/null
     rc=$?
     kill $feeder 2>/dev/null
     wait $feeder 2>/dev/null
