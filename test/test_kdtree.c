@@ -1779,7 +1779,10 @@ static void test_sphere_sure(void)
     printf("\n");
     CHECK_MSG(out[0] == 0 && o2[0] == 0, "%d, %d sure answers not rtpi_sphere_t's (seed %llu)",
               out[0], o2[0], (unsigned long long)g_seed);
-    CHECK_MSG(out[1] > 3000 && out[2] > 3000 && out[3] > 500 && o2[1] > 1000 && o2[2] > 1000,
+    /* (the counts follow the clock's seed: over seeds 1-1000 the fewest
+       were 5298 2976 13003, 1430 2249; out[2] > 3000 failed 17 seeds of
+       2000, a make test in 120: seed 1796670008 gave 2997) */
+    CHECK_MSG(out[1] > 3000 && out[2] > 2500 && out[3] > 500 && o2[1] > 1000 && o2[2] > 1000,
               "too few decided: %d %d %d, %d %d", out[1], out[2], out[3], o2[1], o2[2]);
     CHECK_MSG(out[4] + o2[4] > 0, "no answer wrong without the margins: the cases miss them");
 }
