@@ -82,11 +82,14 @@ extern "C" {
    N adds a light; 0.5.1: the call rtp_tree_trace_opt, a call added, no
    struct changed; 0.6: rtp_eval_stats.shadow_res; 0.6.1:
    RTP_SHADOWS_AUTO without shadow_res takes coarser light buffers under
-   the memory limit before shadow rays, as RTP_SHADOWS_LIGHTBUF does): a program compares rtp_version_number() with the
+   the memory limit before shadow rays, as RTP_SHADOWS_LIGHTBUF does;
+   0.6.2: RTP_SHADOWS_AUTO without shadow_res, once no light buffer fitted
+   a tree's memory limit, takes shadow rays at once on that tree's later
+   moves under that limit or a lower one): a program compares rtp_version_number() with the
    RTP_VERSION_NUMBER it was built with. */
 #define RTP_VERSION_MAJOR 0
 #define RTP_VERSION_MINOR 6
-#define RTP_VERSION_PATCH 1
+#define RTP_VERSION_PATCH 2
 #define RTP_VERSION_NUMBER \
     (RTP_VERSION_MAJOR * 10000 + RTP_VERSION_MINOR * 100 + RTP_VERSION_PATCH)
 
