@@ -1270,6 +1270,18 @@ done:
 #define LB_ANG_MAX 1e-3
 
 #define LB_MAX_THREADS 16 /* threads of a light buffer's passes */
+
+/* Threads for a pass of nchunks chunks: the caller's count within 1 ..
+   LB_MAX_THREADS, and no more than one for each `per` chunks (a pass too
+   short for a second thread is the calling thread's alone: lb_edges,
+   rtpi_itembuf_thin) */
+static int lb_chunk_threads(int threads, int nchunks, int per)
+{
+    int nt = threads < 1 ? 1 : threads > LB_MAX_THREADS ? LB_MAX_THREADS : threads;
+    if (nt > nchunks / per)
+        nt = nchunks / per > 1 ? nchunks / per : 1;
+    return nt;
+}
 #define LB_MAX_PARTS 64   /* parts of its counting pass (rows: progress and cancel between) */
 
 /* A run of cells [cell, cell + n) listing candidate `rank`: recorded by
@@ -2005,9 +2017,7 @@ static void lb_edges(rtpi_lightbuf *lb, const rtp_scene *s, rtpi_v3 light,
        a busy machine, its wake-up a scheduler slice the pass then waits
        for: tetra_s6's 4 chunks, 0.07 ms of work, took 1.0 ms of wall at
        two threads under a load of 6; gears_s4's 36 chunks took 1.5 ms at one) */
-    nt = threads < 1 ? 1 : threads > LB_MAX_THREADS ? LB_MAX_THREADS : threads;
-    if (nt > nchunks / LB_EDGE_THREADS)
-        nt = nchunks / LB_EDGE_THREADS > 1 ? nchunks / LB_EDGE_THREADS : 1;
+    nt = lb_chunk_threads(threads, nchunks, LB_EDGE_THREADS);
     for (k = 0; k < nt; k++)
         ctx[k] = &jb;
     rtpi_parallel_rows(nchunks, nt, ctx, lb_edge_chunk, NULL, NULL);
@@ -3296,9 +3306,7 @@ static void ib_thin_mt(const rtpi_itembuf *ib, const rtp_scene *s, double cells,
         if (ib->w.fbase[f] != RTPI_DC_ABSENT)
             jb.cell = fmax(jb.cell, fmax(ib->w.du[f], ib->w.dv[f]));
     nchunks = (int)((jb.n + IB_THIN_CHUNK - 1) / IB_THIN_CHUNK);
-    nt = threads < 1 ? 1 : threads > LB_MAX_THREADS ? LB_MAX_THREADS : threads;
-    if (nt > nchunks / IB_THIN_THREADS)
-        nt = nchunks / IB_THIN_THREADS > 1 ? nchunks / IB_THIN_THREADS : 1;
+    nt = lb_chunk_threads(threads, nchunks, IB_THIN_THREADS);
     for (k = 0; k < nt; k++)
         ctx[k] = &jb;
     rtpi_parallel_rows(nchunks, nt, ctx, ib_thin_chunk, NULL, NULL);

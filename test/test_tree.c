@@ -2709,6 +2709,31 @@ static void test_lightbuf_default_res(void)
     CHECK_MSG(fit > 0 && fit < small, "under the limit: %d cells (%d without)", fit, small);
 }
 
+/* An NFF scene of n x n squares (pp 4, normals up) tiling the unit square
+   on z = 0 under one light, res x res pixels; *len its length.  NULL where
+   memory runs out.  (test_lightbuf_prims_limit, test_shadows_auto_tight) */
+static char *grid_nff(int n, int res, size_t *len)
+{
+    size_t cap = (size_t)n * n * 120 + 512;
+    char *text = (char *)malloc(cap);
+    int i, j;
+    if (!text)
+        return NULL;
+    *len = (size_t)snprintf(text, cap,
+                            "v\nfrom 0.5 -0.5 1.5 at 0.5 0.5 0 up 0 0 1 angle 50 hither 0.01\n"
+                            "resolution %d %d\nl 0.3 0.4 2\nf 0.8 0.8 0.8 1 0 0 0 0\n",
+                            res, res);
+    for (i = 0; i < n; i++)
+        for (j = 0; j < n; j++) {
+            double x = (double)i / n, y = (double)j / n, e = 1.0 / n;
+            *len += (size_t)snprintf(text + *len, cap - *len,
+                                     "pp 4\n%g %g 0 0 0 1\n%g %g 0 0 0 1\n"
+                                     "%g %g 0 0 0 1\n%g %g 0 0 0 1\n",
+                                     x, y, x + e, y, x + e, y + e, x, y + e);
+        }
+    return text;
+}
+
 /* A light buffer's per-primitive arrays (a candidate, its sort's scratch,
    a triangle's plane: 56 bytes a triangle) are checked against the memory
    limit before they are made, as its cells and lists are: an 8M-triangle
@@ -2729,24 +2754,12 @@ static void test_lightbuf_prims_limit(void)
     rtp_diff_stats d;
     rtp_error err;
     rtp_status rs;
-    const int n = 150;
-    size_t cap = (size_t)n * n * 120 + 512, len, base;
-    char *text = (char *)malloc(cap);
-    int i, j;
+    size_t len = 0, base;
+    char *text = grid_nff(150, 24, &len);
     if (!text) {
         CHECK(0);
         return;
     }
-    len = (size_t)snprintf(text, cap,
-                           "v\nfrom 0.5 -0.5 1.5 at 0.5 0.5 0 up 0 0 1 angle 50 hither 0.01\n"
-                           "resolution 24 24\nl 0.3 0.4 2\nf 0.8 0.8 0.8 1 0 0 0 0\n");
-    for (i = 0; i < n; i++)
-        for (j = 0; j < n; j++) {
-            double x = (double)i / n, y = (double)j / n, e = 1.0 / n;
-            len += (size_t)snprintf(text + len, cap - len, "pp 4\n%g %g 0 0 0 1\n%g %g 0 0 0 1\n"
-                                    "%g %g 0 0 0 1\n%g %g 0 0 0 1\n", x, y, x + e, y, x + e,
-                                    y + e, x, y + e);
-        }
     a = counted_allocator(&c);
     memset(&o, 0, sizeof o);
     memset(&eo, 0, sizeof eo);
@@ -2849,24 +2862,13 @@ static void test_shadows_auto_tight(void)
     rtp_tree_info ti;
     rtp_error err;
     rtp_status rs;
-    const int n = 20;
-    size_t cap = (size_t)n * n * 120 + 512, len, m_auto = 0, m_exact = 0;
-    char *text = (char *)malloc(cap);
-    int i, j, k;
+    size_t len = 0, m_auto = 0, m_exact = 0;
+    char *text = grid_nff(20, 128, &len);
+    int k;
     if (!text) {
         CHECK(0);
         return;
     }
-    len = (size_t)snprintf(text, cap,
-                           "v\nfrom 0.5 -0.5 1.5 at 0.5 0.5 0 up 0 0 1 angle 50 hither 0.01\n"
-                           "resolution 128 128\nl 0.3 0.4 2\nf 0.8 0.8 0.8 1 0 0 0 0\n");
-    for (i = 0; i < n; i++)
-        for (j = 0; j < n; j++) {
-            double x = (double)i / n, y = (double)j / n, e = 1.0 / n;
-            len += (size_t)snprintf(text + len, cap - len, "pp 4\n%g %g 0 0 0 1\n%g %g 0 0 0 1\n"
-                                    "%g %g 0 0 0 1\n%g %g 0 0 0 1\n", x, y, x + e, y, x + e,
-                                    y + e, x, y + e);
-        }
     a = counted_allocator(&c);
     memset(&o, 0, sizeof o);
     memset(&eo, 0, sizeof eo);
