@@ -2734,6 +2734,33 @@ static char *grid_nff(int n, int res, size_t *len)
     return text;
 }
 
+/* grid_nff's scene loaded through allocator a and recorded with default
+   trace options: 1 with *s and *t, else 0 (a CHECK failed; nothing left
+   to free) */
+static int grid_tree(int n, int res, const rtp_allocator *a, rtp_scene **s, rtp_tree **t)
+{
+    rtp_trace_options o;
+    rtp_error err;
+    size_t len = 0;
+    char *text = grid_nff(n, res, &len);
+    *s = NULL;
+    *t = NULL;
+    if (!text) {
+        CHECK(0);
+        return 0;
+    }
+    memset(&o, 0, sizeof o);
+    CHECK(rtp_scene_load_memory(text, len, "grid.nff", "nff", a, s, &err) == RTP_OK);
+    free(text);
+    CHECK(*s && rtp_record(*s, &o, t, NULL, NULL, NULL) == RTP_OK);
+    if (!*t) {
+        rtp_scene_destroy(*s);
+        *s = NULL;
+        return 0;
+    }
+    return 1;
+}
+
 /* A light buffer's per-primitive arrays (a candidate, its sort's scratch,
    a triangle's plane: 56 bytes a triangle) are checked against the memory
    limit before they are made, as its cells and lists are: an 8M-triangle
@@ -2748,28 +2775,16 @@ static void test_lightbuf_prims_limit(void)
     rtp_scene *s = NULL;
     rtp_tree *t = NULL;
     rtp_image *img = NULL, *full = NULL;
-    rtp_trace_options o;
     rtp_eval_options eo;
     rtp_eval_stats st;
     rtp_diff_stats d;
     rtp_error err;
     rtp_status rs;
-    size_t len = 0, base;
-    char *text = grid_nff(150, 24, &len);
-    if (!text) {
-        CHECK(0);
-        return;
-    }
+    size_t base;
     a = counted_allocator(&c);
-    memset(&o, 0, sizeof o);
     memset(&eo, 0, sizeof eo);
-    CHECK(rtp_scene_load_memory(text, len, "grid.nff", "nff", &a, &s, &err) == RTP_OK);
-    free(text);
-    CHECK(s && rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
-    if (!t) {
-        rtp_scene_destroy(s);
+    if (!grid_tree(150, 24, &a, &s, &t))
         return;
-    }
     /* a first move by shadow rays makes what every move keeps (the
        triangles' normals, the visibility bits); the primitives' bounds
        the cubes need are the scene's: neither is the light buffer's */
@@ -2855,30 +2870,18 @@ static void test_shadows_auto_tight(void)
     rtp_scene *s = NULL;
     rtp_tree *t = NULL;
     rtp_image *img = NULL, *full = NULL;
-    rtp_trace_options o;
     rtp_eval_options eo;
     rtp_eval_stats st;
     rtp_diff_stats d;
     rtp_tree_info ti;
     rtp_error err;
     rtp_status rs;
-    size_t len = 0, m_auto = 0, m_exact = 0;
-    char *text = grid_nff(20, 128, &len);
+    size_t m_auto = 0, m_exact = 0;
     int k;
-    if (!text) {
-        CHECK(0);
-        return;
-    }
     a = counted_allocator(&c);
-    memset(&o, 0, sizeof o);
     memset(&eo, 0, sizeof eo);
-    CHECK(rtp_scene_load_memory(text, len, "grid.nff", "nff", &a, &s, &err) == RTP_OK);
-    free(text);
-    CHECK(s && rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK);
-    if (!t) {
-        rtp_scene_destroy(s);
+    if (!grid_tree(20, 128, &a, &s, &t))
         return;
-    }
     /* the case is what it claims: the hits' rule says the light buffer,
        and LIGHTBUF under the limit counts lists down to 1 cell (0.044 to
        0.054 MiB here; 0.056 fits 2 cells) */
