@@ -172,6 +172,8 @@ struct rtpi_kdtree {
     double lo[3], hi[3]; /* root box */
     double maxabs[3];    /* largest |coordinate| of the root box per axis */
     double boxabs;       /* the largest of maxabs (a kept leaf's walks) */
+    double tol_in[3];    /* KD_SLACK * maxabs: a kept leaf's walks' tol */
+    double ahead[2][3];  /* hi, lo: the face a direction's sign bit meets */
     int has_box;         /* 0: no primitive at all */
     rtpi_kd_stats stats;
     /* each leaf's ancestors, root first (rtpi_kd_paths_make; NULL: not
@@ -1363,6 +1365,9 @@ rtp_status rtpi_kd_build_mt(const rtp_scene *s, const rtp_allocator *alloc,
                 kd->hi[k] = hi[k];
                 kd->maxabs[k] = fmax(fabs(kd->lo[k]), fabs(kd->hi[k]));
                 kd->boxabs = fmax(kd->boxabs, kd->maxabs[k]);
+                kd->tol_in[k] = KD_SLACK * kd->maxabs[k];
+                kd->ahead[0][k] = kd->hi[k];
+                kd->ahead[1][k] = kd->lo[k];
             }
         } else {
             for (k = 0; k < 3; k++)
@@ -1497,7 +1502,28 @@ static RTPI_FORCE_INLINE int kd_axis_setup(const rtpi_kdtree *kd, kd_ray *kr, do
        274.8, teapot 294.8 -> 294.5, but mount 368.1 -> 368.5, tetra
        36.78 -> 36.82) */
     double ao = fabs(kr->o[k]);
-    double m = in ? kd->maxabs[k] : ao > kd->maxabs[k] ? ao : kd->maxabs[k];
+    double m;
+    if (in == 2) {
+        /* a kept leaf's walk as in (below) without the test of d against
+           0, the par bit and tol: tol_in, the same product, is > 0 there
+           (rtpi_kd_path_of refuses a tol below KD_PATH_TOL), so a 0 on
+           an axis makes inv and the slack infinite, which kd_occluder's
+           check of the slacks' sum sends to the full set-up (in 1) and
+           the walk from the root; a 0 leaves a1 as it is here (tb +
+           slack NaN or +inf).  The direction's sign bits as below. */
+        uint64_t b;
+        double tb;
+        memcpy(&b, &d, sizeof b);
+        kr->neg |= (unsigned)(b >> 63) << k;
+        kr->inv[k] = 1.0 / d;
+        kr->slack[k] = kd->tol_in[k] * fabs(kr->inv[k]);
+        /* the face ahead by the sign bit (d < 0's for every d not 0 or
+           NaN, which do not walk from here) */
+        tb = (kd->ahead[b >> 63][k] - kr->o[k]) * kr->inv[k] + kr->slack[k];
+        *a1 = tb < *a1 ? tb : *a1;
+        return 1;
+    }
+    m = in ? kd->maxabs[k] : ao > kd->maxabs[k] ? ao : kd->maxabs[k];
     kr->tol[k] = KD_SLACK * m;
     {
         /* the sign bit: d < 0 but for -0 and a NaN, whose neg no walk
@@ -1566,7 +1592,11 @@ static RTPI_FORCE_INLINE int kd_ray_setup(const rtpi_kdtree *kd, const rtpi_ray 
        299.0 -> 295.6, rings 605.7 -> 604.6, gears 277.1 -> 275.8, tetra
        37.3 -> 36.9, but tree 196.0 -> 197.1, its walk's loop compiled
        differently) */
-    if (in) {
+    if (in == 2) {
+        kd_axis_setup(kd, kr, r->d.x, 0, &a0, &a1, 2);
+        kd_axis_setup(kd, kr, r->d.y, 1, &a0, &a1, 2);
+        kd_axis_setup(kd, kr, r->d.z, 2, &a0, &a1, 2);
+    } else if (in) {
         if (!kd_axis_setup(kd, kr, r->d.x, 0, &a0, &a1, 1) ||
             !kd_axis_setup(kd, kr, r->d.y, 1, &a0, &a1, 1) ||
             !kd_axis_setup(kd, kr, r->d.z, 2, &a0, &a1, 1))
@@ -2078,14 +2108,21 @@ static RTPI_FORCE_INLINE uint32_t kd_occluder(const rtpi_kdtree *kd, const rtpi_
     KD_CNT(3);
     /* (a shadow ray among spheres and cones never needs w: making it
        anyway was 2% of balls' moved-light shadow rays) */
-    if (!kd_ray_setup(kd, ray, &kr, &t0, &t1, path != NULL) || !rtpi_wt_valid(ray))
+    if (!kd_ray_setup(kd, ray, &kr, &t0, &t1, path ? 2 : 0) || !rtpi_wt_valid(ray))
         return RTPI_NONE;
     if (!lazy)
         rtpi_wt_make(&w, ray);
     if (pe)
         rtpi_edge_o_make(&eo, &ray->o);
-    if (path && !kr.par && fabs(ray->d.x) + fabs(ray->d.y) + fabs(ray->d.z) <= 1e18 &&
-        kr.slack[0] + kr.slack[1] + kr.slack[2] <= DBL_MAX) {
+    if (path && !(fabs(ray->d.x) + fabs(ray->d.y) + fabs(ray->d.z) <= 1e18 &&
+                  kr.slack[0] + kr.slack[1] + kr.slack[2] <= DBL_MAX)) {
+        /* (a 0 on an axis among them: kd_axis_setup's in 2) the set-up
+           the walk from the root takes */
+        path = NULL;
+        if (!kd_ray_setup(kd, ray, &kr, &t0, &t1, 1))
+            return RTPI_NONE;
+    }
+    if (path) {
         /* from o's own leaf (rtpi_kd_path_of): the ancestors whose planes
            the ray moves towards (its octant's list), as kd_descend steps
            over them; a direction 0 on an axis walks from the root */
