@@ -1630,6 +1630,16 @@ static RTPI_FORCE_INLINE int kd_ray_setup(const rtpi_kdtree *kd, const rtpi_ray 
    once (teapot 375.9, mount 478.4, gears 333.2); 2 for every scene
    (teapot 374.6, gears 333.0); 1 for every scene (rings 777.4, tree
    221.1).  rtpi_kd_intersect passes 0: not measured for nearest hits.
+   Tried (session 51, the third exact move, 512^2 SPD): the step without
+   branches (the near child by a mask of the direction's sign, the far
+   entry written always and sp += a 0/1 flag, t1 and the next node by
+   selects, SSE2's for t1): callgrind's mispredictions balls 3.47 -> 2.18
+   M, teapot 2.43 -> 1.44, mount 3.35 -> 2.76, but instructions balls
+   339.1 -> 402.5 M, teapot 284.9 -> 329.2, mount 346.0 -> 382.2 and the
+   time +20% (balls, interleaved runs): the next node's load then waits
+   for the compares, where a predicted branch lets it start at once; the
+   near child alone by the mask: balls 345.7, no faster.  (gcc turns a
+   plain `a ? x : y` on doubles here back into a branch.)
    @return the leaf's index (empty only where nothing is pending). */
 static RTPI_FORCE_INLINE uint32_t kd_descend(const kd_node *nodes,
                                              const kd_ray *kr, uint32_t node,

@@ -2073,6 +2073,24 @@ static void from_case(int lazy, int *n_from, int *n_none, int *n_blocked, int *b
             /* (and from the root by the same entry) */
             CHECK(rtpi_kd_occluder_planes_from(kd, &r, RTPI_NONE, NULL, NULL, NULL, 10.0,
                                                RTPI_NONE) == q0);
+            if (kind2 == 1) {
+                /* the 0s as -0 (sign bit set: the kept leaf's set-up,
+                   kd_axis_setup's in 2, takes the face ahead by the sign
+                   bit and leaves the 0s to the full set-up) */
+                rtpi_ray rn = r;
+                if (rn.d.x == 0.0)
+                    rn.d.x = -0.0;
+                if (rn.d.y == 0.0)
+                    rn.d.y = -0.0;
+                if (rn.d.z == 0.0)
+                    rn.d.z = -0.0;
+                q1 = rtpi_kd_occluder_planes_from(kd, &rn, RTPI_NONE, NULL, NULL, NULL, 10.0,
+                                                  from);
+                if (q0 != q1 && (*bad)++ < 5)
+                    printf("  from_case %d (-0): o %.17g %.17g %.17g, light %.17g %.17g %.17g: "
+                           "%u from the root, %u from the leaf\n",
+                           lazy, o[0], o[1], o[2], l[0], l[1], l[2], q0, q1);
+            }
         }
     }
     rtpi_kd_destroy(kd);
