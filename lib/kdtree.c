@@ -1636,7 +1636,7 @@ static RTPI_FORCE_INLINE int kd_ray_setup(const rtpi_kdtree *kd, const rtpi_ray 
    selects, SSE2's for t1): callgrind's mispredictions balls 3.47 -> 2.18
    M, teapot 2.43 -> 1.44, mount 3.35 -> 2.76, but instructions balls
    339.1 -> 402.5 M, teapot 284.9 -> 329.2, mount 346.0 -> 382.2 and the
-   time +20% (balls, interleaved runs): the next node's load then waits
+   time +16% (balls, interleaved runs): the next node's load then waits
    for the compares, where a predicted branch lets it start at once; the
    near child alone by the mask: balls 345.7, no faster.  (gcc turns a
    plain `a ? x : y` on doubles here back into a branch.)
