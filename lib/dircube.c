@@ -2206,7 +2206,8 @@ static rtp_status lb_build(const rtp_scene *s, rtpi_v3 light, int res,
         int cones = nc && (s->nspheres + s->ncones) * 16 >= rtpi_scene_nprims(s);
         double per = (double)sizeof *lb->cand +
                      fmax((double)sizeof *lb->cand,
-                          (s->ntris ? 40.0 : 0.0) + (cones ? 32.0 : 0.0));
+                          (s->ntris ? 40.0 : 0.0) +
+                              (cones ? (double)sizeof *lb->cone : 0.0));
         double need = 4.0 * ((double)ncells + 2.0) + (double)nc * per;
         if (!(need <= limit)) {
             char g[2][32]; /* '.' whatever the locale */
@@ -2262,20 +2263,24 @@ static rtp_status lb_build(const rtp_scene *s, rtpi_v3 light, int res,
        triangles, as mount's four glass balls, saved less than the test's
        branch cost the triangles, 1.6%) */
     if (nc && (s->nspheres + s->ncones) * 16 >= rtpi_scene_nprims(s)) {
-        if (!(lb->cone = (double *)rtpi_malloc_array(a, 4 * nc, sizeof *lb->cone))) {
+        if (!(lb->cone = (rtpi_lb_cone *)rtpi_malloc_array(a, nc, sizeof *lb->cone))) {
             rtpi_lightbuf_free(lb, a);
             return rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0,
                               "out of memory for the light buffer");
         }
         /* (a triangle's entry never below: the round walk's scan stops
            at it by the cone test alone, lb_walk) */
-        for (i = 0; i < nc; i++)
+        for (i = 0; i < nc; i++) {
+            rtpi_lb_cone *cn = &lb->cone[i];
             if (lb->cand[i].prim >= s->ntris)
-                lb_cone(s, lb->cand[i].prim, light, S, lb->cand[i].near, lb->cone + 4 * i);
+                lb_cone(s, lb->cand[i].prim, light, S, lb->cand[i].near, cn->v);
             else {
-                lb->cone[4 * i] = lb->cone[4 * i + 1] = lb->cone[4 * i + 2] = 0.0;
-                lb->cone[4 * i + 3] = -2.0;
+                cn->v[0] = cn->v[1] = cn->v[2] = 0.0;
+                cn->v[3] = -2.0;
             }
+            cn->near = lb->cand[i].near;
+            cn->prim = lb->cand[i].prim;
+        }
     }
     /* The counting pass: every candidate projected, its runs of cells
        recorded, in parts of consecutive ranks on up to `threads` threads
@@ -2306,7 +2311,8 @@ static rtp_status lb_build(const rtp_scene *s, rtpi_v3 light, int res,
     /* the runs within the limit too, less what is made already; and no
        more runs than entries may be (a run lists a cell at least) */
     bud.room = limit - 4.0 * ((double)ncells + 2.0) -
-               (double)nc * (sizeof *lb->cand + (lb->plane ? 40.0 : 0.0) + (lb->cone ? 32.0 : 0.0));
+               (double)nc * (sizeof *lb->cand + (lb->plane ? 40.0 : 0.0) +
+                             (lb->cone ? (double)sizeof *lb->cone : 0.0));
     by_entries = bud.room > max_entries * sizeof(lb_run);
     if (by_entries)
         bud.room = max_entries * sizeof(lb_run);
@@ -2393,7 +2399,7 @@ static rtp_status lb_build(const rtp_scene *s, rtpi_v3 light, int res,
     if (!failed) {
         double need = 4.0 * ((double)total + (double)ncells) +
                       (double)nc * (sizeof *lb->cand + (lb->plane ? 40.0 : 0.0) +
-                                    (lb->cone ? 32.0 : 0.0));
+                                    (lb->cone ? (double)sizeof *lb->cone : 0.0));
         lists = need;
         if (!(need <= limit)) {
             char g[2][32]; /* '.' whatever the locale */
@@ -2633,25 +2639,24 @@ static RTPI_FORCE_INLINE uint32_t lb_walk(const rtpi_lightbuf *lb, const rtp_sce
                It stops at the first entry the loop below must see; the
                same entries in the same order. */
             const uint32_t *ref = lb->ref;
-            const rtpi_lb_cand *cand = lb->cand;
-            const double *cone = lb->cone;
+            const rtpi_lb_cone *cone = lb->cone;
             double dx = dn.x, dy = dn.y, dz = dn.z;
             for (;;) {
-                const double *cn;
+                const rtpi_lb_cone *cn;
                 rank = ref[k];
-                cd = &cand[rank];
-                if (cd->near > lim)
+                cn = &cone[rank];
+                if (cn->near > lim)
                     return RTPI_NONE; /* sorted: as the break below */
-                if (cd->prim != skip) {
+                if (cn->prim != skip) {
                     /* (a triangle's entry, 0 0 0 -2, stops it: its dot
                        product 0, or NaN, is never below -2) */
-                    cn = cone + 4 * (size_t)rank;
-                    if (!(dx * cn[0] + dy * cn[1] + dz * cn[2] < cn[3]))
+                    if (!(dx * cn->v[0] + dy * cn->v[1] + dz * cn->v[2] < cn->v[3]))
                         break;
                 }
                 if (++k == end)
                     return RTPI_NONE;
             }
+            cd = &lb->cand[rank]; /* (cn's near and prim, as cand's) */
         } else {
             rank = lb->ref[k];
             cd = &lb->cand[rank];
@@ -2830,7 +2835,8 @@ void rtpi_lightbuf_free(rtpi_lightbuf *lb, const rtp_allocator *a)
     rtpi_free(a, lb->rank_of);
     lb->off = lb->ref = lb->rank_of = NULL;
     lb->cand = NULL;
-    lb->plane = lb->cone = lb->edge = lb->slab = NULL;
+    lb->plane = lb->edge = lb->slab = NULL;
+    lb->cone = NULL;
     lb->cone_rank = NULL;
 }
 

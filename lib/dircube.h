@@ -171,6 +171,16 @@ typedef struct rtpi_lb_cand {
     uint32_t prim;
 } rtpi_lb_cand;
 
+/* A candidate's cone entry (lb_cone), with its near and prim beside it:
+   the round walk's scan reads the three from one record of a rank
+   rather than from cand's and the cone's (three instructions fewer an
+   entry: the second record's address) */
+typedef struct rtpi_lb_cone {
+    double v[4]; /* the axis, and the bound below its cosine */
+    double near; /* cand's */
+    uint32_t prim;
+} rtpi_lb_cone;
+
 typedef struct rtpi_lightbuf {
     int res;
     rtpi_v3 light;
@@ -186,14 +196,14 @@ typedef struct rtpi_lightbuf {
        on the light's side too (n.o - n.p0 > t) lets the segment miss it
        (lb_plane_turned) */
     double *plane;
-    /* by rank, 4 each, where spheres and cones are at least a sixteenth
-       of the scene's primitives (NULL elsewhere; set for those only):
+    /* by rank, where spheres and cones are at least a sixteenth of the
+       scene's primitives (NULL elsewhere; v set for those only): in v
        the unit direction from the light to the centre of a
        ball holding the candidate, and a bound below the cosine of the
        widest angle between that direction and a ray that can hit it (-2:
        no bound): a ray whose direction's cosine falls below misses it
-       (see lb_cone) */
-    double *cone;
+       (see lb_cone); near and prim as cand's */
+    rtpi_lb_cone *cone;
     /* by rank, 4 each, where made (NULL: none; a speed-up only, made
        where the buffer has cone entries and cones, and its memory fits
        within the build's limit): a cone's unit normal q of the plane

@@ -1703,8 +1703,8 @@ static void cone_slabs_check(const rtp_scene *s, const rtpi_lightbuf *lb, rtpi_v
     CHECK(s->ntris == 2);
     for (r = 0; lb->cone && r < lb->ncand; r++)
         if (lb->cand[r].prim < s->ntris)
-            CHECK(lb->cone[4 * r] == 0.0 && lb->cone[4 * r + 1] == 0.0 &&
-                  lb->cone[4 * r + 2] == 0.0 && lb->cone[4 * r + 3] == -2.0);
+            CHECK(lb->cone[r].v[0] == 0.0 && lb->cone[r].v[1] == 0.0 &&
+                  lb->cone[r].v[2] == 0.0 && lb->cone[r].v[3] == -2.0);
     for (r = 0; lb->slab && r < lb->ncand; r++) {
         uint32_t prim = lb->cand[r].prim;
         const double *q = lb->slab + 4 * r;
