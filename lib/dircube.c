@@ -2279,7 +2279,7 @@ static rtp_status lb_build(const rtp_scene *s, rtpi_v3 light, int res,
                 cn->v[3] = -2.0;
             }
             cn->near = lb->cand[i].near;
-            cn->prim = lb->cand[i].prim;
+            cn->prim = cn->skip = lb->cand[i].prim;
         }
     }
     /* The counting pass: every candidate projected, its runs of cells
@@ -2519,8 +2519,12 @@ int rtpi_lightbuf_visible(const rtpi_lightbuf *lb, const rtp_scene *s,
    one thread, CPU ms of a move, medians of 6 alternating processes:
    balls_s4 36.5 -> 32.9, mount_s6 34.7 -> 30.0, teapot_s12 28.1 -> 24.7;
    instructions, lightbuf:256: balls 206.96 -> 205.94 M, mount 209.01 ->
-   207.81, teapot 154.19 -> 153.24.) */
-static RTPI_FORCE_INLINE size_t lb_cell(const rtpi_lightbuf *lb, rtpi_v3 q)
+   207.81, teapot 154.19 -> 153.24.)  0 where the face has no cells
+   (nothing can be met in these directions), else 1 and the cell in
+   *cell: the caller branches on the face's test itself, not again on a
+   returned RTPI_DC_ABSENT (two instructions a walk: balls' lightbuf:256
+   move 192.69 -> 192.18 M). */
+static RTPI_FORCE_INLINE int lb_cell(const rtpi_lightbuf *lb, rtpi_v3 q, size_t *cell)
 {
     double c[3], u, v, t, top = lb->top, inv;
     int a, f, i, j, res = lb->res;
@@ -2536,7 +2540,7 @@ static RTPI_FORCE_INLINE size_t lb_cell(const rtpi_lightbuf *lb, rtpi_v3 q)
     v = (a == 0 ? c[2] : a == 1 ? c[0] : c[1]) * inv;
     f = 2 * a + (c[a] < 0.0);
     if (lb->w.fbase[f] == RTPI_DC_ABSENT)
-        return RTPI_DC_ABSENT;
+        return 0;
     t = (u - lb->w.u0[f]) * lb->ru[f];
     t = t > 0.0 ? t : 0.0;
     t = t < top ? t : top;
@@ -2545,7 +2549,8 @@ static RTPI_FORCE_INLINE size_t lb_cell(const rtpi_lightbuf *lb, rtpi_v3 q)
     t = t > 0.0 ? t : 0.0;
     t = t < top ? t : top;
     j = (int)t;
-    return lb->w.fbase[f] + (size_t)j * (size_t)res + (size_t)i;
+    *cell = lb->w.fbase[f] + (size_t)j * (size_t)res + (size_t)i;
+    return 1;
 }
 
 /* The watertight test's ray, made at a query's first triangle. */
@@ -2628,8 +2633,7 @@ static RTPI_FORCE_INLINE uint32_t lb_walk(const rtpi_lightbuf *lb, const rtp_sce
     size_t ntris = s->ntris;
     rtpi_hit h;
     for (; k < end; k++) {
-        uint32_t rank;
-        const rtpi_lb_cand *cd;
+        uint32_t rank, prim;
         if (round) {
             /* A round walk's usual entry, a sphere or cone its cone test
                turns away (balls: 904 k of 1.2 M entries), in a loop of
@@ -2639,15 +2643,14 @@ static RTPI_FORCE_INLINE uint32_t lb_walk(const rtpi_lightbuf *lb, const rtp_sce
                It stops at the first entry the loop below must see; the
                same entries in the same order. */
             const uint32_t *ref = lb->ref;
-            const rtpi_lb_cone *cone = lb->cone;
+            const rtpi_lb_cone *cone = lb->cone, *cn;
             double dx = dn.x, dy = dn.y, dz = dn.z;
             for (;;) {
-                const rtpi_lb_cone *cn;
                 rank = ref[k];
                 cn = &cone[rank];
                 if (cn->near > lim)
                     return RTPI_NONE; /* sorted: as the break below */
-                if (cn->prim != skip) {
+                if (cn->skip != skip) { /* (prim: rtpi_lb_cone) */
                     /* (a triangle's entry, 0 0 0 -2, stops it: its dot
                        product 0, or NaN, is never below -2) */
                     if (!(dx * cn->v[0] + dy * cn->v[1] + dz * cn->v[2] < cn->v[3]))
@@ -2656,16 +2659,18 @@ static RTPI_FORCE_INLINE uint32_t lb_walk(const rtpi_lightbuf *lb, const rtp_sce
                 if (++k == end)
                     return RTPI_NONE;
             }
-            cd = &lb->cand[rank]; /* (cn's near and prim, as cand's) */
+            prim = cn->prim; /* (cand's: the record's; cand[rank] not loaded) */
         } else {
+            const rtpi_lb_cand *cd;
             rank = lb->ref[k];
             cd = &lb->cand[rank];
             if (cd->near > lim)
                 break; /* sorted: nothing farther on can reach the segment */
-            if (cd->prim == skip)
+            prim = cd->prim;
+            if (prim == skip)
                 continue;
         }
-        if (!round || cd->prim < ntris) {
+        if (!round || prim < ntris) {
             if (pe) {
                 /* its plane's test as the exact mode's, then its edges'
                    (lb_edges): the line from the light through the origin
@@ -2675,8 +2680,8 @@ static RTPI_FORCE_INLINE uint32_t lb_walk(const rtpi_lightbuf *lb, const rtp_sce
                 int e = rtpi_edges_sure(pe + RTPI_EDGE_N * (size_t)rank, eop, lb->ethr);
                 if (e == 0)
                     continue;
-                if (e == 1 && lb_t_sure(s, cd->prim, ray))
-                    return cd->prim;
+                if (e == 1 && lb_t_sure(s, prim, ray))
+                    return prim;
             } else if (plk ? pl != NULL
                            : (plk = 1, (pl = lb_in_scale(lb, &ray->o) ? lb->plane : NULL) != NULL)) {
                 /* a triangle with the light on one side of its plane: the
@@ -2699,9 +2704,8 @@ static RTPI_FORCE_INLINE uint32_t lb_walk(const rtpi_lightbuf *lb, const rtp_sce
                     continue;
             }
         }
-        if (cd->prim < ntris ? lb_tri_hit(s, cd->prim, ray, wp)
-                             : rtpi_intersect_prim(s, cd->prim, ray, &h))
-            return cd->prim;
+        if (prim < ntris ? lb_tri_hit(s, prim, ray, wp) : rtpi_intersect_prim(s, prim, ray, &h))
+            return prim;
     }
     return RTPI_NONE;
 }
@@ -2755,8 +2759,7 @@ static RTPI_FORCE_INLINE uint32_t lb_occluder(const rtpi_lightbuf *lb, const rtp
         return RTPI_NONE;
     }
     dn = v3_mul(ray->d, -1.0);
-    cell = lb_cell(lb, v3_sub(ray->o, lb->light));
-    if (cell == RTPI_DC_ABSENT)
+    if (!lb_cell(lb, v3_sub(ray->o, lb->light), &cell))
         return RTPI_NONE; /* no primitive can be met in these directions */
     return lb_walk(lb, s, ray, skip, lb->off[cell], lb->off[cell + 1], dn,
                    kind == LB_ROUND || kind == LB_BAND, kind == LB_BAND,
