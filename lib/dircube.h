@@ -204,12 +204,12 @@ typedef struct rtpi_lightbuf {
        (lb_plane_turned) */
     double *plane;
     /* by rank, where spheres and cones are at least a sixteenth of the
-       scene's primitives (NULL elsewhere; v set for those only): in v
-       the unit direction from the light to the centre of a
-       ball holding the candidate, and a bound below the cosine of the
-       widest angle between that direction and a ray that can hit it (-2:
-       no bound): a ray whose direction's cosine falls below misses it
-       (see lb_cone); near and prim as cand's */
+       scene's primitives (NULL elsewhere): in v the unit direction from
+       the light to the centre of a ball holding the candidate, and a
+       bound below the cosine of the widest angle between that direction
+       and a ray that can hit it (-2: no bound; a triangle's 0 0 0 -2): a
+       ray whose direction's cosine falls below misses it (see lb_cone);
+       near and prim as cand's, skip a copy of prim (rtpi_lb_cone) */
     rtpi_lb_cone *cone;
     /* by rank, 4 each, where made (NULL: none; a speed-up only, made
        where the buffer has cone entries and cones, and its memory fits
