@@ -1109,12 +1109,24 @@ static int same_output(const char *cmd, const char *ra, const char *a, const cha
    default image is t.png; -i naming the scene): written, it replaced the
    input, which cannot be had back.  Compared by device and inode, so a
    link or another spelling of the name is caught too. */
+/* '-' is stdin as an input and stdout as an output: `reeval t.rtp -i -
+   >> t.rtp` appended the images to the tree, exit 0 (the tree then read
+   "bytes after END"), where -i /dev/stdout was refused; and with `>
+   t.rtp` the shell had emptied the tree before rtp began, which only
+   said "t.rtp: empty: not an rtp tree file". */
+static int std_stat(const char *path, int fd, struct stat *sb)
+{
+    if (strcmp(path, "-") != 0)
+        return stat(path, sb);
+    return std_closed[fd] ? -1 : fstat(fd, sb);
+}
+
 static int is_input(const char *in, const char *out)
 {
     struct stat si, so;
-    if (!in || !out || strcmp(in, "-") == 0 || strcmp(out, "-") == 0)
+    if (!in || !out)
         return 0;
-    return stat(in, &si) == 0 && stat(out, &so) == 0 && S_ISREG(si.st_mode) &&
+    return std_stat(in, 0, &si) == 0 && std_stat(out, 1, &so) == 0 && S_ISREG(si.st_mode) &&
            si.st_dev == so.st_dev && si.st_ino == so.st_ino;
 }
 
@@ -1128,9 +1140,18 @@ static int is_input(const char *in, const char *out)
 static int overwrites_input(const char *cmd, const char *in_role, const char *in,
                             const char *opt, const char *out)
 {
+    struct stat si;
     if (!is_input(in, out))
         return 0;
-    if (!opt)
+    if (strcmp(out, "-") == 0)
+        /* (stdout sent to the input by the shell: with > it was emptied
+           before rtp began, and the message says why it is empty) */
+        msg("%s: %s - writes to standard output, which is %s %s%s: name another file", cmd,
+            opt ? opt : "the image", in_role, strcmp(in, "-") ? in : "(standard input)",
+            std_stat(in, 0, &si) == 0 && si.st_size == 0
+                ? " (empty now: a shell's > empties its file before the command starts)"
+                : "");
+    else if (!opt)
         msg("%s: the default image %s is %s itself: name the image with -i", cmd, out, in_role);
     else
         msg("%s: %s %s is %s %s: writing it would replace it; name another file", cmd, opt,
@@ -2776,7 +2797,9 @@ static int cmd_reeval(int argc, char **argv)
     {
         const char *outs[2], *opts[2];
         outs[0] = stats_path;
-        outs[1] = stream ? NULL : image_path;
+        /* (a stream's frames are checked as their names come, but '-'
+           is one name, known now: with `> TREE` the tree read empty) */
+        outs[1] = stream && strcmp(image_path, "-") != 0 ? NULL : image_path;
         opts[0] = "--stats";
         opts[1] = image_path == default_image ? NULL : "-i";
         if (outputs_over_inputs("reeval", "the tree", &tree_path, 1, opts, outs, 2) ||

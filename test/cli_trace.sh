@@ -164,6 +164,28 @@ cmp -s scenes/spheres.nff "$T/cwd/s.nff" && cmp -s "$T/cwd/t.rtp" "$T/cwd/t2.rtp
     cmp -s "$T/a.pfm" "$T/cwd/a.pfm" && grep -q '^light.0.on=1$' "$T/cwd/p.txt" &&
     [ ! -e "$T/cwd/x.rtp" ] && [ ! -e "$T/cwd/s.pfm" ] && ok ||
     bad "an output over an input replaced it, or a refused command wrote"
+# '-' where the shell sent stdout to the input: `reeval t.rtp -i - >>
+# t.rtp` appended the image to the tree (exit 0; the tree then read
+# "bytes after END"), and with `> t.rtp` the tree, emptied by the shell,
+# read only "t.rtp: empty: not an rtp tree file"; a --stream and --stats
+# - alike, and stdin as the tree
+cp "$T/cwd/t2.rtp" "$T/cwd/t3.rtp"
+echo light.0.pos=1,2,3 | $RTP reeval "$T/cwd/t3.rtp" --stream -i - >>"$T/cwd/t3.rtp" 2>"$T/err"
+[ $? -eq 2 ] && cmp -s "$T/cwd/t2.rtp" "$T/cwd/t3.rtp" && ok || bad "reeval --stream -i - >> TREE"
+one_line "^rtp: reeval: -i - writes to standard output, which is the tree .*/t3.rtp: name another file$"
+$RTP reeval - --set light.0.pos=1,2,3 -i - <"$T/cwd/t3.rtp" >>"$T/cwd/t3.rtp" 2>"$T/err"
+[ $? -eq 2 ] && cmp -s "$T/cwd/t2.rtp" "$T/cwd/t3.rtp" && ok || bad "reeval - -i - < TREE >> TREE"
+one_line "^rtp: reeval: -i - writes to standard output, which is the tree (standard input): "
+$RTP info "$T/cwd/t3.rtp" --stats - >>"$T/cwd/t3.rtp" 2>"$T/err"
+[ $? -eq 2 ] && cmp -s "$T/cwd/t2.rtp" "$T/cwd/t3.rtp" && ok || bad "info --stats - >> TREE"
+echo light.0.pos=1,2,3 | $RTP reeval "$T/cwd/t3.rtp" --stream -i - >"$T/cwd/t3.rtp" 2>"$T/err"
+[ $? -eq 2 ] && [ ! -s "$T/cwd/t3.rtp" ] && ok || bad "reeval --stream -i - > TREE"
+one_line "^rtp: reeval: -i - writes to standard output, which is the tree .*/t3.rtp (empty now: a shell's > empties its file before the command starts): name another file$"
+cp scenes/spheres.nff "$T/cwd/s3.nff"
+$RTP trace "$T/cwd/s3.nff" --size 8x6 -i "$T/cwd/s3.pfm" -o - >>"$T/cwd/s3.nff" 2>"$T/err"
+[ $? -eq 2 ] && cmp -s scenes/spheres.nff "$T/cwd/s3.nff" && [ ! -e "$T/cwd/s3.pfm" ] && ok ||
+    bad "trace -o - >> SCENE"
+one_line "^rtp: trace: -o - writes to standard output, which is the scene .*/s3.nff: name another file$"
 expect_rc 3 $RTP diff "$T/a.pfm" "$T/$b8" --fail-above rmse=0.001
 expect_rc 0 $RTP diff "$T/a.pfm" "$T/$b8" --fail-above rmse=100
 expect_rc 1 $RTP diff "$T/a.pfm" scenes/spheres.nff
