@@ -3154,6 +3154,83 @@ static void test_moved_light_same_bits(void)
     }
 }
 
+/* The two-light copy's sum in its order, where the order shows: each
+   sample's colour is ((background + ambient) + light 0's term) + light
+   1's, in doubles rounded to float, and a double's ulp seldom moves the
+   float, so test_moved_light_same_bits does not see the other light's
+   term added before the moved one's.  Here the ambient and the light
+   colours (red) were searched for (random floats, the first evaluation's
+   coefficients of this scene at the lights' places below) until one
+   pixel's red, (11, 23), rounds to another float in the swapped order:
+   0.335777819 against 0.335777789.  Each light is moved there from
+   elsewhere, exact and through the light buffer, against a full trace's
+   bytes; and the test checks that it can see the swap: some pixel's
+   other order, made from the kept coefficients, is not the trace's (if
+   another change of the shading's arithmetic moves the coefficients, that
+   check fails: search the colours again). */
+static void test_moved_light_sum_order(void)
+{
+    static const char text[] =
+        "b 0 0 0\n"
+        "v\nfrom 0 0 10\nat 0 0 0\nup 0 1 0\nangle 40\nhither 0.1\nresolution 24 24\n"
+        "ambient 0.151222095 0.151222095 0.151222095\n"
+        "l -2 1 4 0.613374591 0.613374591 0.613374591\n"
+        "l 3 -1 5 0.657717586 0.657717586 0.657717586\n"
+        "f 0.8 0.7 0.6 0.9 0 1 0 0\n"
+        "p 4\n-6 -6 0\n6 -6 0\n6 6 0\n-6 6 0\n";
+    static const char *const from[2] = {"1,3,6", "-3,-2,7"}, *const to[2] = {"-2,1,4", "3,-1,5"};
+    static const rtp_shadow_mode modes[] = {RTP_SHADOWS_EXACT, RTP_SHADOWS_LIGHTBUF};
+    size_t m;
+    int l;
+    for (m = 0; m < sizeof modes / sizeof *modes; m++)
+        for (l = 0; l < 2; l++) {
+            rtp_scene *s = NULL;
+            rtp_tree *t = NULL;
+            rtp_image *img = NULL, *full = NULL;
+            rtp_trace_options o;
+            rtp_eval_options eo;
+            char key[32];
+            size_t p, n, swapped = 0;
+            memset(&o, 0, sizeof o);
+            memset(&eo, 0, sizeof eo);
+            eo.shadows = modes[m];
+            eo.incremental = 1;
+            snprintf(key, sizeof key, "light.%d.pos", l);
+            CHECK(rtp_scene_load_memory(text, sizeof text - 1, "order.nff", "nff", NULL, &s,
+                                        NULL) == RTP_OK);
+            if (!s)
+                return;
+            CHECK(rtp_scene_set(s, key, from[l], NULL) == RTP_OK &&
+                  rtp_record(s, &o, &t, NULL, NULL, NULL) == RTP_OK &&
+                  rtp_tree_eval(t, &eo, &img, NULL, NULL) == RTP_OK &&
+                  rtp_tree_set(t, key, to[l], NULL) == RTP_OK &&
+                  rtp_tree_eval_into(t, &eo, img, NULL, NULL) == RTP_OK &&
+                  rtp_scene_set(s, key, to[l], NULL) == RTP_OK &&
+                  rtp_trace(s, &o, &full, NULL, NULL) == RTP_OK);
+            CHECK_MSG(img && full && same_image(img, full),
+                      "light %d moved (mode %d): not the trace's bytes", l, (int)modes[m]);
+            n = img ? (size_t)img->width * img->height : 0;
+            for (p = 0; t && t->ev_valid && full && p < n; p++) {
+                const rtp_scene *ts = t->scene;
+                const float *co = t->ev_coeffs + p * RTPI_COEFFS(2);
+                int k;
+                for (k = 0; k < 3; k++) {
+                    double a = co[k] * (double)ts->background[k] +
+                               co[3 + k] * (double)ts->ambient[k];
+                    double b = co[6 + k] * (ts->lights[0].color[k] * ts->light_scale);
+                    double c = co[9 + k] * (ts->lights[1].color[k] * ts->light_scale);
+                    swapped += (float)((a + c) + b) != full->pixels[3 * p + k];
+                }
+            }
+            CHECK_MSG(swapped > 0, "light %d (mode %d): no pixel whose sum in the other order "
+                      "differs: the test no longer sees the order", l, (int)modes[m]);
+            rtp_image_destroy(img);
+            rtp_image_destroy(full);
+            rtp_tree_destroy(t);
+            rtp_scene_destroy(s);
+        }
+}
+
 /* A moved light's shadow queries are the full trace's shadow rays, in
    number too (rtp_eval_stats.shadow_queries, which --stats reports): on
    mount_s2, whose glass balls hold most nodes as back hits inside them
@@ -8388,6 +8465,7 @@ int main(void)
     RUN(test_lightbuf_default_res);
     RUN(test_moved_light_small_spd);
     RUN(test_moved_light_same_bits);
+    RUN(test_moved_light_sum_order);
     RUN(test_moved_light_query_count);
     RUN(test_moved_light_record);
     RUN(test_edit_sequence);
