@@ -1141,13 +1141,15 @@ static int overwrites_input(const char *cmd, const char *in_role, const char *in
                             const char *opt, const char *out)
 {
     struct stat si;
+    const char *in_name;
     if (!is_input(in, out))
         return 0;
+    in_name = strcmp(in, "-") ? in : "(standard input)";
     if (strcmp(out, "-") == 0)
         /* (stdout sent to the input by the shell: with > it was emptied
            before rtp began, and the message says why it is empty) */
         msg("%s: %s - writes to standard output, which is %s %s%s: name another file", cmd,
-            opt ? opt : "the image", in_role, strcmp(in, "-") ? in : "(standard input)",
+            opt ? opt : "the image", in_role, in_name,
             std_stat(in, 0, &si) == 0 && si.st_size == 0
                 ? " (empty now: a shell's > empties its file before the command starts)"
                 : "");
@@ -1155,7 +1157,7 @@ static int overwrites_input(const char *cmd, const char *in_role, const char *in
         msg("%s: the default image %s is %s itself: name the image with -i", cmd, out, in_role);
     else
         msg("%s: %s %s is %s %s: writing it would replace it; name another file", cmd, opt,
-            out, in_role, in);
+            out, in_role, in_name);
     return 1;
 }
 
