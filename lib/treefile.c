@@ -448,8 +448,10 @@ static RTPI_FORCE_INLINE size_t get_v32(const unsigned char *c, size_t avail, ui
 }
 
 /* get_v32 where 5 bytes are there: unrolled, no count of them (reading
-   the trees, most numbers). */
-static RTPI_FORCE_INLINE size_t get_v32_5(const unsigned char *c, uint32_t *v)
+   the trees, most numbers).  A number that is not one sets *bad (it is
+   taken as 5 bytes then, so that the node's next numbers are still read
+   within its PACKED_MAX: unpack_node refuses it once they are). */
+static RTPI_FORCE_INLINE size_t get_v32_5(const unsigned char *c, uint32_t *v, unsigned *bad)
 {
     uint32_t x = c[0];
     if (x < 0x80u) {
@@ -471,14 +473,70 @@ static RTPI_FORCE_INLINE size_t get_v32_5(const unsigned char *c, uint32_t *v)
         *v = x;
         return 4;
     }
-    if (c[4] > 0x0fu)
-        return (size_t)-1;
+    *bad |= c[4] > 0x0fu;
     *v = (x & 0xfffffffu) | (uint32_t)c[4] << 28;
     return 5;
 }
 
-/* Node n unpacked from c (avail bytes) against its references: the
-   bytes it took, 0 when they ran out first, (size_t)-1 when malformed. */
+/* Whether the float of bit pattern u is infinite or NaN (its exponent's
+   bits all set): isfinite without the float. */
+static RTPI_FORCE_INLINE unsigned f32_bits_nonfinite(uint32_t u)
+{
+    return (u & 0x7f800000u) == 0x7f800000u;
+}
+
+/* Node n from its numbers v (layout's: positions, primitive, light bits
+   or 0, link) against its references a and b (never NULL: where
+   node_refs gives none, a node of zeros for A, and A itself for B, make
+   the same predictions, 2A - A being A); returns 1 when a position is
+   not finite. */
+static RTPI_FORCE_INLINE unsigned node_from(const uint32_t *v, const rtpi_cnode *a,
+                                            const rtpi_cnode *b, unsigned layout, rtpi_cnode *n)
+{
+    /* (the prediction 2A - B on the bit patterns, mod 2^32) */
+    uint32_t u0 = unzigzag(v[0]) + 2u * f32_bits(a->p[0]) - f32_bits(b->p[0]);
+    uint32_t u1 = unzigzag(v[1]) + 2u * f32_bits(a->p[1]) - f32_bits(b->p[1]);
+    uint32_t u2 = unzigzag(v[2]) + 2u * f32_bits(a->p[2]) - f32_bits(b->p[2]);
+    memcpy(&n->p[0], &u0, 4);
+    memcpy(&n->p[1], &u1, 4);
+    memcpy(&n->p[2], &u2, 4);
+    n->prim = unzigzag(v[3]) + a->prim;
+    n->vis = v[4] ^ a->vis;
+    n->link = v[5] ^ a->link;
+    if (!(layout & NODE_LINK32))
+        n->link &= 0xffu;
+    return f32_bits_nonfinite(u0) | f32_bits_nonfinite(u1) | f32_bits_nonfinite(u2);
+}
+
+/* unpack_node where PACKED_MAX bytes are there (every number has its 5):
+   the numbers read one after the other, a malformed one, or a position
+   not finite, setting *bad (the node is refused once they are read);
+   returns the bytes taken. */
+static RTPI_FORCE_INLINE size_t unpack_node_30(const unsigned char *c, const rtpi_cnode *a,
+                                               const rtpi_cnode *b, unsigned layout,
+                                               rtpi_cnode *n, unsigned *bad)
+{
+    size_t at;
+    uint32_t v[6];
+    at = get_v32_5(c, &v[0], bad);
+    at += get_v32_5(c + at, &v[1], bad);
+    at += get_v32_5(c + at, &v[2], bad);
+    at += get_v32_5(c + at, &v[3], bad);
+    v[4] = 0;
+    if (layout & NODE_VIS)
+        at += get_v32_5(c + at, &v[4], bad);
+    if (layout & NODE_LINK32)
+        at += get_v32_5(c + at, &v[5], bad);
+    else
+        v[5] = c[at++];
+    *bad |= node_from(v, a, b, layout, n);
+    return at;
+}
+
+/* Node n unpacked from c (avail bytes) against its references a and b
+   (node_from's): the bytes it took, 0 when they ran out first,
+   (size_t)-1 when malformed (a number that is not one, or a position
+   not finite). */
 static RTPI_FORCE_INLINE size_t unpack_node(const unsigned char *c, size_t avail,
                                             const rtpi_cnode *a, const rtpi_cnode *b,
                                             unsigned layout, rtpi_cnode *n)
@@ -486,31 +544,28 @@ static RTPI_FORCE_INLINE size_t unpack_node(const unsigned char *c, size_t avail
     size_t at = 0, k;
     uint32_t v[6];
     int i, nv = 4 + ((layout & NODE_VIS) != 0) + ((layout & NODE_LINK32) != 0);
+    if (avail >= PACKED_MAX) {
+        unsigned bad = 0;
+        at = unpack_node_30(c, a, b, layout, n, &bad);
+        return bad ? (size_t)-1 : at;
+    }
     for (i = 0; i < nv; i++) {
-        /* (a node takes PACKED_MAX bytes at most: with as many there,
-           every number has its 5) */
-        k = avail >= PACKED_MAX ? get_v32_5(c + at, &v[i]) : get_v32(c + at, avail - at, &v[i]);
+        k = get_v32(c + at, avail - at, &v[i]);
         if (k == 0 || k == (size_t)-1)
             return k;
         at += k;
     }
-    for (i = 0; i < 3; i++) {
-        uint32_t u = unzigzag(v[i]) + pos_pred(a, b, i);
-        memcpy(&n->p[i], &u, 4);
+    if (!(layout & NODE_VIS)) {
+        if (layout & NODE_LINK32)
+            v[5] = v[4];
+        v[4] = 0;
     }
-    n->prim = unzigzag(v[3]) + (a ? a->prim : 0u);
-    i = 4;
-    n->vis = 0;
-    if (layout & NODE_VIS)
-        n->vis = v[i++] ^ (a ? a->vis : 0u);
-    if (layout & NODE_LINK32) {
-        n->link = v[i] ^ (a ? a->link : 0u);
-    } else {
+    if (!(layout & NODE_LINK32)) {
         if (at >= avail)
             return 0;
-        n->link = (c[at++] ^ (a ? a->link : 0u)) & 0xffu;
+        v[5] = c[at++];
     }
-    return at;
+    return node_from(v, a, b, layout, n) ? (size_t)-1 : at;
 }
 
 /* Format 2's geometry (tree-format.md, GEOM): each number (the 32 bits
@@ -1839,11 +1894,12 @@ static rtp_status read_bands(loader *L, rd *r, unsigned layout, uint32_t vis_mas
     size_t node_bytes = node1_bytes(layout), chunk = node1_chunk(r, node_bytes, t->nnodes);
     size_t done = 0, chunk_end = 0;
     int malformed = 0;
-    rtpi_cnode *band = NULL;
+    rtpi_cnode *band = NULL, zero; /* (zero: unpack_node's A where none) */
     /* bs: band's sample starts, the c carried samples' then the band's */
     uint64_t *bs = (uint64_t *)rtpi_malloc_array(L->a, BAND_ROWS * nx + 3, sizeof *bs);
     rtp_status st = RTP_OK;
     rowc = (uint64_t *)rtpi_malloc_array(L->a, nx, sizeof *rowc);
+    memset(&zero, 0, sizeof zero);
     if (!bs || !rowc) {
         rtpi_free(L->a, bs);
         rtpi_free(L->a, rowc);
@@ -1885,7 +1941,46 @@ static rtp_status read_bands(loader *L, rd *r, unsigned layout, uint32_t vis_mas
         }
         for (k = k0; k < kn; k++) {
             size_t li = c + (k - k0), j, n = (size_t)(bs[li + 1] - bs[li]);
-            for (j = 0; j < n; j++) {
+            /* each packed node's references (refs_in's, from the sample's
+               neighbours once, not their starts a node: A the previous
+               sample's node j while it has one, else the node before; B
+               the sample before's while both have one, else A; zero for
+               A where none; li >= 1 exactly where k >= 1, li >= 2 where
+               k >= 2: the samples before k0 that k's references may need
+               are the carried ones) */
+            const rtpi_cnode *pa = band, *pb = band;
+            size_t na = 0, nb = 0, j0 = 0;
+            if (li >= 1) {
+                pa = band + bs[li - 1];
+                na = (size_t)(bs[li] - bs[li - 1]);
+                if (li >= 2) {
+                    pb = band + bs[li - 2];
+                    nb = (size_t)(bs[li - 1] - bs[li - 2]);
+                    nb = nb < na ? nb : na;
+                }
+            }
+            /* (most samples: packed, their nodes' most bytes in the
+               window, so none is short and every error an invalid node,
+               reported once the sample's nodes are read: a node after an
+               invalid one is read within the bytes and not used) */
+            if (L->major > 1 && r->n - r->at >= n * PACKED_MAX) {
+                const unsigned char *p = r->p + r->at;
+                rtpi_cnode *nd = band + bs[li];
+                unsigned invalid = 0;
+                for (j = 0; j < n; j++, nd++) {
+                    const rtpi_cnode *ra = j < na ? pa + j : j ? nd - 1 : &zero;
+                    const rtpi_cnode *rb = j < nb ? pb + j : ra;
+                    p += unpack_node_30(p, ra, rb, layout, nd, &invalid);
+                    invalid |= (nd->prim >= nprims) | ((nd->vis & ~vis_mask) != 0);
+                }
+                if (invalid) {
+                    st = bad(L, "invalid node", NULL);
+                    goto out;
+                }
+                r->at = (size_t)(p - r->p);
+                j0 = n;
+            }
+            for (j = j0; j < n; j++) {
                 rtpi_cnode *nd = &band[bs[li] + j];
                 const rtpi_cnode *ra, *rb;
                 size_t used;
@@ -1903,16 +1998,15 @@ static rtp_status read_bands(loader *L, rd *r, unsigned layout, uint32_t vis_mas
                 } else {
                     if (r->src && r->n - r->at < PACKED_MAX)
                         (void)refill(r, PACKED_MAX); /* (fewer where the section ends) */
-                    /* (li >= 1 exactly where k >= 1, li >= 2 where k >= 2:
-                       the samples before k0 that k's references may need
-                       are the carried ones) */
-                    refs_in(band, bs, li, j, &ra, &rb);
+                    ra = j < na ? pa + j : j ? nd - 1 : &zero;
+                    rb = j < nb ? pb + j : ra;
+                    /* (unpack_node refuses a position not finite) */
                     used = unpack_node(r->p + r->at, r->n - r->at, ra, rb, layout, nd);
                 }
                 if (used == 0)
                     st = bad(L, "section too short", NULL);
-                else if (used == (size_t)-1 || !finite3(nd->p) || nd->prim >= nprims ||
-                         (nd->vis & ~vis_mask))
+                else if (used == (size_t)-1 || (L->major == 1 && !finite3(nd->p)) ||
+                         nd->prim >= nprims || (nd->vis & ~vis_mask))
                     st = bad(L, "invalid node", NULL);
                 if (st != RTP_OK)
                     goto out;
@@ -1981,6 +2075,7 @@ static rtp_status read_tree_counts(loader *L, rd *r, counts *cn)
     unsigned layout = get_u8(r);
     size_t i, nprims = rtpi_scene_nprims(s), node_bytes, chunk;
     uint32_t vis_mask;
+    rtpi_cnode zero; /* (unpack_node's A where none) */
     if (r->bad)
         return bad(L, "section too short", NULL);
     if (nsamples != (uint64_t)t->nx * (uint64_t)t->ny)
@@ -2070,20 +2165,32 @@ whole:
         return nomem(L);
     /* packed: each node's length is known once it is read, so the window
        is kept PACKED_MAX bytes ahead */
+    memset(&zero, 0, sizeof zero);
     for (k = 0; L->major > 1 && k < nsamples; k++) {
         size_t j, n = (size_t)(t->start[k + 1] - t->start[k]);
+        /* (the references as read_bands carries them) */
+        const rtpi_cnode *pa = t->nodes, *pb = t->nodes;
+        size_t na = 0, nb = 0;
+        if (k >= 1) {
+            pa = t->nodes + t->start[k - 1];
+            na = (size_t)(t->start[k] - t->start[k - 1]);
+            if (k >= 2) {
+                pb = t->nodes + t->start[k - 2];
+                nb = (size_t)(t->start[k - 1] - t->start[k - 2]);
+                nb = nb < na ? nb : na;
+            }
+        }
         for (j = 0; j < n; j++) {
             rtpi_cnode *nd = &t->nodes[t->start[k] + j];
-            const rtpi_cnode *ra, *rb;
+            const rtpi_cnode *ra = j < na ? pa + j : j ? nd - 1 : &zero;
+            const rtpi_cnode *rb = j < nb ? pb + j : ra;
             size_t used;
             if (r->src && r->n - r->at < PACKED_MAX)
                 (void)refill(r, PACKED_MAX); /* (fewer where the section ends) */
-            node_refs(t, (size_t)k, j, &ra, &rb);
             used = unpack_node(r->p + r->at, r->n - r->at, ra, rb, layout, nd);
             if (used == 0)
                 return bad(L, "section too short", NULL);
-            if (used == (size_t)-1 || !finite3(nd->p) || nd->prim >= nprims ||
-                (nd->vis & ~vis_mask))
+            if (used == (size_t)-1 || nd->prim >= nprims || (nd->vis & ~vis_mask))
                 return bad(L, "invalid node", NULL);
             r->at += used;
         }
