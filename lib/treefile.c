@@ -2195,6 +2195,21 @@ whole:
                 nb = nb < na ? nb : na;
             }
         }
+        if (r->n - r->at >= n * PACKED_MAX) { /* (read_bands' fast path) */
+            const unsigned char *p = r->p + r->at;
+            rtpi_cnode *nd = t->nodes + t->start[k];
+            unsigned invalid = 0;
+            for (j = 0; j < n; j++, nd++) {
+                const rtpi_cnode *ra = j < na ? pa + j : j ? nd - 1 : &zero;
+                const rtpi_cnode *rb = j < nb ? pb + j : ra;
+                p += unpack_node_30(p, ra, rb, layout, nd, &invalid);
+                invalid |= (nd->prim >= nprims) | ((nd->vis & ~vis_mask) != 0);
+            }
+            if (invalid)
+                return bad(L, "invalid node", NULL);
+            r->at = (size_t)(p - r->p);
+            continue;
+        }
         for (j = 0; j < n; j++) {
             rtpi_cnode *nd = &t->nodes[t->start[k] + j];
             const rtpi_cnode *ra = j < na ? pa + j : j ? nd - 1 : &zero;
