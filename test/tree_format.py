@@ -1393,7 +1393,9 @@ def long_first_node(t, b, n):
 
 def run_rtp(rtp, data, tmp):
     """(exit, stderr, image written?) of `rtp reeval FILE -i IMAGE`, and
-    `rtp info FILE`'s exit."""
+    `rtp info FILE`'s exit, and (exit, stderr) of `rtp reeval FILE
+    --stream` with no line (rtp_tree_read's whole read, which the others,
+    rtp_tree_eval_file's bands and the summary, use only past 32 lights)."""
     f = os.path.join(tmp, "craft.rtp")
     img = os.path.join(tmp, "craft.ppm")
     with open(f, "wb") as fh:
@@ -1404,8 +1406,12 @@ def run_rtp(rtp, data, tmp):
                        stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     q = subprocess.run([rtp, "info", f, "-q"], stdout=subprocess.PIPE,
                        stderr=subprocess.PIPE)
+    s = subprocess.run([rtp, "reeval", f, "--stream", "-i", os.devnull, "-q",
+                        "-j", "1"], stdin=subprocess.DEVNULL,
+                       stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     return p.returncode, p.stderr.decode(errors="replace"), \
-        os.path.exists(img), q.returncode
+        os.path.exists(img), q.returncode, \
+        (s.returncode, s.stderr.decode(errors="replace"))
 
 
 def craft(rtp, path, tmp, verbose=False):
@@ -1418,7 +1424,7 @@ def craft(rtp, path, tmp, verbose=False):
             parse(data)
         except FormatError as e:
             mine = str(e)
-        rc, err, img, irc = run_rtp(rtp, data, tmp)
+        rc, err, img, irc, (src, serr) = run_rtp(rtp, data, tmp)
         why = []
         if want is None:
             if mine is not None:
@@ -1426,6 +1432,9 @@ def craft(rtp, path, tmp, verbose=False):
             if rc != 0 or irc != 0 or not img:
                 why.append("rtp refuses it (exit %d, info %d): %s"
                            % (rc, irc, err.strip()))
+            if src != 0:
+                why.append("rtp reeval --stream refuses it (exit %d): %s"
+                           % (src, serr.strip()))
         else:
             if mine is None:
                 why.append("this reader accepts it")
@@ -1434,6 +1443,11 @@ def craft(rtp, path, tmp, verbose=False):
                            % (rc, irc, "written" if img else "none"))
             elif want.lower() not in err.lower():
                 why.append("rtp's message lacks %r: %s" % (want, err.strip()))
+            if src != 1:
+                why.append("rtp reeval --stream exit %d" % src)
+            elif want.lower() not in serr.lower():
+                why.append("rtp reeval --stream's message lacks %r: %s"
+                           % (want, serr.strip()))
         if verbose:
             print("%s %s: %s" % ("fail" if why else "ok", path, name))
         if why:
