@@ -361,6 +361,11 @@ static RTPI_FORCE_INLINE void node_refs(const rtp_tree *t, size_t k, size_t j,
 /* The most bytes a packed node takes: six 32-bit varints. */
 #define PACKED_MAX 30
 
+/* The most nodes (of a band, or of the trees) whose samples' PACKED_MAX
+   bytes a node may be asked for at once (read_bands' fast path): n *
+   PACKED_MAX within a size_t. */
+#define SAMPLE_FAST_MAX ((size_t)-1 / PACKED_MAX)
+
 static uint32_t f32_bits(float f)
 {
     uint32_t u;
@@ -1924,6 +1929,7 @@ static rtp_status read_bands(loader *L, rd *r, unsigned layout, uint32_t vis_mas
     for (y0 = 0; y0 < ny && st == RTP_OK; y0 = y1) {
         size_t k0 = y0 * nx, k, kn;
         uint64_t need_n, band_n = 0;
+        int fast; /* (the band's samples may take the fast path) */
         /* rows while the band holds at most BAND_NODES nodes (its first
            row whatever it holds) and BAND_ROWS rows, their counts after
            the carried samples' */
@@ -1943,6 +1949,7 @@ static rtp_status read_bands(loader *L, rd *r, unsigned layout, uint32_t vis_mas
         }
         kn = y1 * nx;
         need_n = bs[c + (kn - k0)];
+        fast = L->major > 1 && need_n <= SAMPLE_FAST_MAX;
         if (need_n >= cap) {
             /* (at least one more than asked: rtpi_grow's own rule; and
                a buffer even for bands of no node, whose nodes pointer
@@ -1978,7 +1985,7 @@ static rtp_status read_bands(loader *L, rd *r, unsigned layout, uint32_t vis_mas
                window, so none is short and every error an invalid node,
                reported once the sample's nodes are read: a node after an
                invalid one is read within the bytes and not used) */
-            if (L->major > 1 && r->n - r->at >= n * PACKED_MAX) {
+            if (fast && r->n - r->at >= n * PACKED_MAX) {
                 const unsigned char *p = r->p + r->at;
                 rtpi_cnode *nd = band + bs[li];
                 unsigned invalid = 0;
@@ -2091,6 +2098,7 @@ static rtp_status read_tree_counts(loader *L, rd *r, counts *cn)
     size_t i, nprims = rtpi_scene_nprims(s), node_bytes, chunk;
     uint32_t vis_mask;
     rtpi_cnode zero; /* (unpack_node's A where none) */
+    int fast; /* (the samples may take the fast path) */
     if (r->bad)
         return bad(L, "section too short", NULL);
     if (nsamples != (uint64_t)t->nx * (uint64_t)t->ny)
@@ -2181,6 +2189,7 @@ whole:
     /* packed: each node's length is known once it is read, so the window
        is kept PACKED_MAX bytes ahead */
     memset(&zero, 0, sizeof zero);
+    fast = t->nnodes <= SAMPLE_FAST_MAX;
     for (k = 0; L->major > 1 && k < nsamples; k++) {
         size_t j, n = (size_t)(t->start[k + 1] - t->start[k]);
         /* (the references as read_bands carries them) */
@@ -2195,7 +2204,7 @@ whole:
                 nb = nb < na ? nb : na;
             }
         }
-        if (r->n - r->at >= n * PACKED_MAX) { /* (read_bands' fast path) */
+        if (fast && r->n - r->at >= n * PACKED_MAX) { /* (read_bands' fast path) */
             const unsigned char *p = r->p + r->at;
             rtpi_cnode *nd = t->nodes + t->start[k];
             unsigned invalid = 0;
