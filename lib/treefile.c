@@ -538,6 +538,51 @@ static RTPI_FORCE_INLINE size_t unpack_node_30(const unsigned char *c, const rtp
     return at;
 }
 
+/* Sample k's references (refs_in's, from the sample's neighbours once,
+   not their starts a node): A the previous sample's node j while j < *na,
+   else the node before; B the sample before's while j < *nb (<= *na),
+   else A. */
+static RTPI_FORCE_INLINE void sample_refs(const rtpi_cnode *nodes, const uint64_t *start, size_t k,
+                                          const rtpi_cnode **pa, size_t *na,
+                                          const rtpi_cnode **pb, size_t *nb)
+{
+    *pa = *pb = nodes;
+    *na = *nb = 0;
+    if (k >= 1) {
+        *pa = nodes + start[k - 1];
+        *na = (size_t)(start[k] - start[k - 1]);
+        if (k >= 2) {
+            *pb = nodes + start[k - 2];
+            *nb = (size_t)(start[k - 1] - start[k - 2]);
+            *nb = *nb < *na ? *nb : *na;
+        }
+    }
+}
+
+/* A sample's n packed nodes into nd, from p where n PACKED_MAX bytes are
+   there (none is short, so every error is an invalid node: a node after
+   an invalid one is read within the bytes and not used), against the
+   references sample_refs gives (zero: A where none); returns the bytes
+   taken, 0 where a node is invalid. */
+static RTPI_FORCE_INLINE size_t unpack_sample_30(const unsigned char *p, size_t n,
+                                                 const rtpi_cnode *pa, size_t na,
+                                                 const rtpi_cnode *pb, size_t nb,
+                                                 const rtpi_cnode *zero, unsigned layout,
+                                                 size_t nprims, uint32_t vis_mask,
+                                                 rtpi_cnode *nd)
+{
+    const unsigned char *p0 = p;
+    unsigned invalid = 0;
+    size_t j;
+    for (j = 0; j < n; j++, nd++) {
+        const rtpi_cnode *ra = j < na ? pa + j : j ? nd - 1 : zero;
+        const rtpi_cnode *rb = j < nb ? pb + j : ra;
+        p += unpack_node_30(p, ra, rb, layout, nd, &invalid);
+        invalid |= (nd->prim >= nprims) | ((nd->vis & ~vis_mask) != 0);
+    }
+    return invalid ? 0 : (size_t)(p - p0);
+}
+
 /* Node n unpacked from c (avail bytes) against its references a and b
    (node_from's): the bytes it took, 0 when they ran out first,
    (size_t)-1 when malformed (a number that is not one, or a position
@@ -1963,43 +2008,23 @@ static rtp_status read_bands(loader *L, rd *r, unsigned layout, uint32_t vis_mas
         }
         for (k = k0; k < kn; k++) {
             size_t li = c + (k - k0), j, n = (size_t)(bs[li + 1] - bs[li]);
-            /* each packed node's references (refs_in's, from the sample's
-               neighbours once, not their starts a node: A the previous
-               sample's node j while it has one, else the node before; B
-               the sample before's while both have one, else A; zero for
-               A where none; li >= 1 exactly where k >= 1, li >= 2 where
-               k >= 2: the samples before k0 that k's references may need
-               are the carried ones) */
-            const rtpi_cnode *pa = band, *pb = band;
-            size_t na = 0, nb = 0, j0 = 0;
-            if (li >= 1) {
-                pa = band + bs[li - 1];
-                na = (size_t)(bs[li] - bs[li - 1]);
-                if (li >= 2) {
-                    pb = band + bs[li - 2];
-                    nb = (size_t)(bs[li - 1] - bs[li - 2]);
-                    nb = nb < na ? nb : na;
-                }
-            }
+            /* each packed node's references (sample_refs; li >= 1
+               exactly where k >= 1, li >= 2 where k >= 2: the samples
+               before k0 that k's references may need are the carried
+               ones) */
+            const rtpi_cnode *pa, *pb;
+            size_t na, nb, j0 = 0;
+            sample_refs(band, bs, li, &pa, &na, &pb, &nb);
             /* (most samples: packed, their nodes' most bytes in the
-               window, so none is short and every error an invalid node,
-               reported once the sample's nodes are read: a node after an
-               invalid one is read within the bytes and not used) */
+               window: unpack_sample_30) */
             if (fast && r->n - r->at >= n * PACKED_MAX) {
-                const unsigned char *p = r->p + r->at;
-                rtpi_cnode *nd = band + bs[li];
-                unsigned invalid = 0;
-                for (j = 0; j < n; j++, nd++) {
-                    const rtpi_cnode *ra = j < na ? pa + j : j ? nd - 1 : &zero;
-                    const rtpi_cnode *rb = j < nb ? pb + j : ra;
-                    p += unpack_node_30(p, ra, rb, layout, nd, &invalid);
-                    invalid |= (nd->prim >= nprims) | ((nd->vis & ~vis_mask) != 0);
-                }
-                if (invalid) {
+                size_t used = unpack_sample_30(r->p + r->at, n, pa, na, pb, nb, &zero, layout,
+                                               nprims, vis_mask, band + bs[li]);
+                if (!used && n) {
                     st = bad(L, "invalid node", NULL);
                     goto out;
                 }
-                r->at = (size_t)(p - r->p);
+                r->at += used;
                 j0 = n;
             }
             for (j = j0; j < n; j++) {
@@ -2193,30 +2218,15 @@ whole:
     for (k = 0; L->major > 1 && k < nsamples; k++) {
         size_t j, n = (size_t)(t->start[k + 1] - t->start[k]);
         /* (the references as read_bands carries them) */
-        const rtpi_cnode *pa = t->nodes, *pb = t->nodes;
-        size_t na = 0, nb = 0;
-        if (k >= 1) {
-            pa = t->nodes + t->start[k - 1];
-            na = (size_t)(t->start[k] - t->start[k - 1]);
-            if (k >= 2) {
-                pb = t->nodes + t->start[k - 2];
-                nb = (size_t)(t->start[k - 1] - t->start[k - 2]);
-                nb = nb < na ? nb : na;
-            }
-        }
+        const rtpi_cnode *pa, *pb;
+        size_t na, nb;
+        sample_refs(t->nodes, t->start, (size_t)k, &pa, &na, &pb, &nb);
         if (fast && r->n - r->at >= n * PACKED_MAX) { /* (read_bands' fast path) */
-            const unsigned char *p = r->p + r->at;
-            rtpi_cnode *nd = t->nodes + t->start[k];
-            unsigned invalid = 0;
-            for (j = 0; j < n; j++, nd++) {
-                const rtpi_cnode *ra = j < na ? pa + j : j ? nd - 1 : &zero;
-                const rtpi_cnode *rb = j < nb ? pb + j : ra;
-                p += unpack_node_30(p, ra, rb, layout, nd, &invalid);
-                invalid |= (nd->prim >= nprims) | ((nd->vis & ~vis_mask) != 0);
-            }
-            if (invalid)
+            size_t used = unpack_sample_30(r->p + r->at, n, pa, na, pb, nb, &zero, layout,
+                                           nprims, vis_mask, t->nodes + t->start[k]);
+            if (!used && n)
                 return bad(L, "invalid node", NULL);
-            r->at = (size_t)(p - r->p);
+            r->at += used;
             continue;
         }
         for (j = 0; j < n; j++) {
