@@ -2605,6 +2605,15 @@ static RTPI_FORCE_INLINE int lb_in_scale(const rtpi_lightbuf *lb, const rtpi_v3 
     return (am > az ? am : az) <= lb->scale;
 }
 
+/* The shadow ray of a query given its origin o alone (lb_occluder's
+   ray NULL): rtpi_shadow_ray(*o, lb->light) made into *rb the first
+   time a test asks for it, the very ray trace casts (the walk's cell,
+   planes, edges and early stop take o and tmax alone).  Most queries on
+   meshes reach no such test (one move at lightbuf:256: mount_s6 21 k of
+   221 k walks, teapot_s12 25 k of 192 k): their direction's division
+   and the ray's stores are not made. */
+#define LB_RAY(ray, rb, o) ((ray) ? (ray) : (*(rb) = rtpi_shadow_ray(*(o), lb->light), (ray) = (rb)))
+
 /* The list from entry k to end (one cell's) for the ray with direction
    -dn; `round` 0 where the buffer has no cone entries (few or no spheres
    and cones: a constant at each call, so the compiler makes the loop
@@ -2612,13 +2621,13 @@ static RTPI_FORCE_INLINE int lb_in_scale(const rtpi_lightbuf *lb, const rtpi_v3 
    inline: gcc had made it a call once lb_tri_hit came (balls' moves 5%
    more). */
 static RTPI_FORCE_INLINE uint32_t lb_walk(const rtpi_lightbuf *lb, const rtp_scene *s,
-                                          const rtpi_ray *ray, uint32_t skip, size_t k,
-                                          size_t end, rtpi_v3 dn, int round, int band,
-                                          int edges,
+                                          const rtpi_ray *ray, const rtpi_v3 *o, double tmax,
+                                          rtpi_ray *rb, uint32_t skip, size_t k, size_t end,
+                                          rtpi_v3 dn, int round, int band, int edges,
                                           const rtpi_edge_o *eop, int inscale, lb_tri_ray *wp)
 {
     /* tmax = dist (1 - 1e-9): the segment reaches no farther than dist. */
-    double lim = ray->tmax * (1.0 + 2e-9) + lb->slack;
+    double lim = tmax * (1.0 + 2e-9) + lb->slack;
     /* the planes' test holds for origins within the scale (lb_in_scale) */
     /* (with edges: inscale and eo made by the caller, lb_occluder; in a
        round walk the check is made at its first triangle, plk then 1:
@@ -2626,7 +2635,7 @@ static RTPI_FORCE_INLINE uint32_t lb_walk(const rtpi_lightbuf *lb, const rtp_sce
        meet no triangle -- tree's lightbuf:256 move 2.3 M instructions of
        its 129 M, the check made at each query) */
     const double *pl = edges ? (inscale ? lb->plane : NULL)
-                             : round ? NULL : lb_in_scale(lb, &ray->o) ? lb->plane : NULL;
+                             : round ? NULL : lb_in_scale(lb, o) ? lb->plane : NULL;
     int plk = !round || edges;
     const double *sb = band ? lb->slab : NULL;
     const double *pe = edges && pl ? lb->edge : NULL;
@@ -2680,15 +2689,15 @@ static RTPI_FORCE_INLINE uint32_t lb_walk(const rtpi_lightbuf *lb, const rtp_sce
                 int e = rtpi_edges_sure(pe + RTPI_EDGE_N * (size_t)rank, eop, lb->ethr);
                 if (e == 0)
                     continue;
-                if (e == 1 && lb_t_sure(s, prim, ray))
+                if (e == 1 && lb_t_sure(s, prim, LB_RAY(ray, rb, o)))
                     return prim;
             } else if (plk ? pl != NULL
-                           : (plk = 1, (pl = lb_in_scale(lb, &ray->o) ? lb->plane : NULL) != NULL)) {
+                           : (plk = 1, (pl = lb_in_scale(lb, o) ? lb->plane : NULL) != NULL)) {
                 /* a triangle with the light on one side of its plane: the
                    origin on that side too, the segment misses it (a floor
                    under the scene is in most cells' lists) */
                 const double *q = pl + 5 * (size_t)rank;
-                if (q[0] * ray->o.x + q[1] * ray->o.y + q[2] * ray->o.z - q[3] > q[4])
+                if (q[0] * o->x + q[1] * o->y + q[2] * o->z - q[3] > q[4])
                     continue;
             }
         } else {
@@ -2704,7 +2713,8 @@ static RTPI_FORCE_INLINE uint32_t lb_walk(const rtpi_lightbuf *lb, const rtp_sce
                     continue;
             }
         }
-        if (prim < ntris ? lb_tri_hit(s, prim, ray, wp) : rtpi_intersect_prim(s, prim, ray, &h))
+        if (prim < ntris ? lb_tri_hit(s, prim, LB_RAY(ray, rb, o), wp)
+                         : rtpi_intersect_prim(s, prim, LB_RAY(ray, rb, o), &h))
             return prim;
     }
     return RTPI_NONE;
@@ -2716,22 +2726,35 @@ static RTPI_FORCE_INLINE uint32_t lb_walk(const rtpi_lightbuf *lb, const rtp_sce
    move, 512^2 SPD: teapot 189.93 -> 189.66 M, balls 259.38 -> 258.87). */
 enum { LB_PLAIN, LB_ROUND, LB_EDGES, LB_BAND }; /* the walk lb_occluder takes (lb_walk's;
                                                    LB_BAND: LB_ROUND's with the cones' bands) */
+/* ray NULL: a query from origin o, its ray rtpi_shadow_ray(*o, lb->light)
+   made where a test asks for it (LB_RAY; for the round kinds at once:
+   their cone and band tests take its direction); else o is &ray->o. */
 static RTPI_FORCE_INLINE uint32_t lb_occluder(const rtpi_lightbuf *lb, const rtp_scene *s,
-                                              const rtpi_ray *ray, uint32_t skip,
-                                              uint32_t first, int kind)
+                                              const rtpi_ray *ray, const rtpi_v3 *o,
+                                              uint32_t skip, uint32_t first, int kind)
 {
     size_t cell, k;
-    rtpi_v3 dn;
+    rtpi_v3 dn, q = v3_sub(*o, lb->light);
     rtpi_hit h;
     lb_tri_ray w;
     rtpi_edge_o eo;
+    rtpi_ray rb;
+    double tmax;
     int inscale = 0;
     w.made = -1;
+    if (!ray && (kind == LB_ROUND || kind == LB_BAND)) {
+        rb = rtpi_shadow_ray(*o, lb->light);
+        ray = &rb;
+    }
+    /* rtpi_shadow_ray's tmax, from |q|: q = o - light is -(light - o)
+       exactly (a difference's rounding is odd: each component the same
+       magnitude, or both +0), so |q|^2 and its root are that ray's */
+    tmax = ray ? ray->tmax : rtpi_shadow_tmax(v3_len(q));
     if (kind == LB_EDGES) { /* (once for the first and the walk) */
-        double ax = fabs(ray->o.x), ay = fabs(ray->o.y), az = fabs(ray->o.z);
+        double ax = fabs(o->x), ay = fabs(o->y), az = fabs(o->z);
         double am = ax > ay ? ax : ay;
         inscale = (am > az ? am : az) <= lb->scale;
-        rtpi_edge_o_make(&eo, &ray->o);
+        rtpi_edge_o_make(&eo, o);
     }
     if (first != RTPI_NONE) {
         /* (rtpi_intersect_prim's answer without its zero-area test, as
@@ -2743,27 +2766,28 @@ static RTPI_FORCE_INLINE uint32_t lb_occluder(const rtpi_lightbuf *lb, const rtp
             lb->rank_of[first] != RTPI_NONE) {
             e = rtpi_edges_sure(lb->edge + RTPI_EDGE_N * (size_t)lb->rank_of[first], &eo,
                               lb->ethr);
-            if (e == 1 && lb_t_sure(s, first, ray))
+            if (e == 1 && lb_t_sure(s, first, LB_RAY(ray, &rb, o)))
                 return first;
         }
-        if (e != 0 && (first < s->ntris ? lb_tri_hit(s, first, ray, &w)
-                                        : rtpi_intersect_prim(s, first, ray, &h)))
+        if (e != 0 && (first < s->ntris ? lb_tri_hit(s, first, LB_RAY(ray, &rb, o), &w)
+                                        : rtpi_intersect_prim(s, first, LB_RAY(ray, &rb, o), &h)))
             return first;
     }
-    if (!(ray->tmax > 0.0)) {
+    if (!(tmax > 0.0)) {
         /* The origin is at the light: the direction means nothing; ask
            every candidate (never happens with real hits). */
+        LB_RAY(ray, &rb, o);
         for (k = 0; k < lb->ncand; k++)
             if (rtpi_intersect_prim(s, lb->cand[k].prim, ray, &h))
                 return lb->cand[k].prim;
         return RTPI_NONE;
     }
-    dn = v3_mul(ray->d, -1.0);
-    if (!lb_cell(lb, v3_sub(ray->o, lb->light), &cell))
+    dn = kind == LB_ROUND || kind == LB_BAND ? v3_mul(ray->d, -1.0) : v3(0.0, 0.0, 0.0);
+    if (!lb_cell(lb, q, &cell))
         return RTPI_NONE; /* no primitive can be met in these directions */
-    return lb_walk(lb, s, ray, skip, lb->off[cell], lb->off[cell + 1], dn,
-                   kind == LB_ROUND || kind == LB_BAND, kind == LB_BAND,
-                   kind == LB_EDGES, &eo, inscale, &w);
+    return lb_walk(lb, s, ray, o, tmax, &rb, skip, lb->off[cell], lb->off[cell + 1], dn,
+                   kind == LB_ROUND || kind == LB_BAND, kind == LB_BAND, kind == LB_EDGES, &eo,
+                   inscale, &w);
 }
 
 /* lb_occluder for each kind of buffer, out of line, the entries choosing
@@ -2780,12 +2804,23 @@ static RTPI_FORCE_INLINE uint32_t lb_occluder(const rtpi_lightbuf *lb, const rtp
     static LB_NOINLINE uint32_t name(const rtpi_lightbuf *lb, const rtp_scene *s,                  \
                                      const rtpi_ray *ray, uint32_t skip)                           \
     {                                                                                              \
-        return lb_occluder(lb, s, ray, skip, RTPI_NONE, kind);                                     \
+        return lb_occluder(lb, s, ray, &ray->o, skip, RTPI_NONE, kind);                            \
     }                                                                                              \
     static LB_NOINLINE uint32_t name##_first(const rtpi_lightbuf *lb, const rtp_scene *s,          \
                                              const rtpi_ray *ray, uint32_t skip, uint32_t first)   \
     {                                                                                              \
-        return lb_occluder(lb, s, ray, skip, first, kind);                                         \
+        return lb_occluder(lb, s, ray, &ray->o, skip, first, kind);                                \
+    }                                                                                              \
+    static LB_NOINLINE int name##_vis(const rtpi_lightbuf *lb, const rtp_scene *s,                 \
+                                      const rtpi_v3 *o, uint32_t skip, uint32_t first,             \
+                                      uint32_t *last)                                              \
+    {                                                                                              \
+        /* (two copies: the one without first keeps the edges' origin in  \
+           registers, where the test of first had it stored and loaded) */ \
+        uint32_t occ = first == RTPI_NONE ? lb_occluder(lb, s, NULL, o, skip, RTPI_NONE, kind)     \
+                                          : lb_occluder(lb, s, NULL, o, skip, first, kind);        \
+        *last = occ != RTPI_NONE ? occ + 1u : 0u;                                                  \
+        return occ == RTPI_NONE;                                                                   \
     }
 LB_OCCLUDERS(LB_PLAIN, lb_occ_plain)
 LB_OCCLUDERS(LB_ROUND, lb_occ_round)
@@ -2816,11 +2851,11 @@ rtpi_lb_occ_fn rtpi_lightbuf_occ_fn(const rtpi_lightbuf *lb)
                       : lb_occ_plain;
 }
 
-rtpi_lb_occ_first_fn rtpi_lightbuf_occ_first_fn(const rtpi_lightbuf *lb)
+rtpi_lb_vis_fn rtpi_lightbuf_vis_fn(const rtpi_lightbuf *lb)
 {
-    return lb->cone ? (lb->slab ? lb_occ_band_first : lb_occ_round_first)
-           : lb->edge ? lb_occ_edges_first
-                      : lb_occ_plain_first;
+    return lb->cone ? (lb->slab ? lb_occ_band_vis : lb_occ_round_vis)
+           : lb->edge ? lb_occ_edges_vis
+                      : lb_occ_plain_vis;
 }
 
 void rtpi_lightbuf_free(rtpi_lightbuf *lb, const rtp_allocator *a)

@@ -303,10 +303,17 @@ uint32_t rtpi_lightbuf_occluder_first(const rtpi_lightbuf *lb, const rtp_scene *
    mount_s6's lightbuf:256 move). */
 typedef uint32_t (*rtpi_lb_occ_fn)(const rtpi_lightbuf *lb, const rtp_scene *s,
                                    const rtpi_ray *ray, uint32_t skip);
-typedef uint32_t (*rtpi_lb_occ_first_fn)(const rtpi_lightbuf *lb, const rtp_scene *s,
-                                         const rtpi_ray *ray, uint32_t skip, uint32_t first);
 rtpi_lb_occ_fn rtpi_lightbuf_occ_fn(const rtpi_lightbuf *lb);
-rtpi_lb_occ_first_fn rtpi_lightbuf_occ_first_fn(const rtpi_lightbuf *lb);
+/* A shadow query from origin o whole: rtpi_lightbuf_occluder_first's
+   answer for the ray rtpi_shadow_ray(*o, lb->light), which is made only
+   where a test asks for it (most queries on meshes reach none: the cell,
+   the planes, the edges and the early stop take o and the ray's tmax
+   alone), with *last set to the occluder found + 1 (0: none, as
+   rtpi_shadow_cache.last); 1 where lit.  One call a query: the shadow
+   query's steps end in it with a jump (shadow.c sh_cached_lb_body). */
+typedef int (*rtpi_lb_vis_fn)(const rtpi_lightbuf *lb, const rtp_scene *s, const rtpi_v3 *o,
+                              uint32_t skip, uint32_t first, uint32_t *last);
+rtpi_lb_vis_fn rtpi_lightbuf_vis_fn(const rtpi_lightbuf *lb);
 
 void rtpi_lightbuf_free(rtpi_lightbuf *lb, const rtp_allocator *a);
 

@@ -28,16 +28,17 @@
    against 0.15 s at 512). */
 
 struct rtpi_shadow {
-    /* first: rtpi_shadow_visible_cached (shadow.h) calls it */
-    rtpi_shadow_cached_fn cached;
+    /* first: rtpi_shadow_visible_cached and _own (shadow.h) call them */
+    rtpi_shadow_fns fn;
     rtp_allocator alloc;
     rtpi_shadow_mode mode;
     const rtp_scene *s;
     const rtpi_kdtree *kd;
     rtpi_v3 light;
     rtpi_lightbuf lb;   /* LIGHTBUF; the thin primitives for the item buffer */
-    rtpi_lb_occ_fn lb_occ; /* LIGHTBUF: lb's query functions (rtpi_lightbuf_occ_fn) */
-    rtpi_lb_occ_first_fn lb_occ_first;
+    /* LIGHTBUF: lb's query functions (rtpi_lightbuf_occ_fn, _vis_fn) */
+    rtpi_lb_occ_fn lb_occ;
+    rtpi_lb_vis_fn lb_vis;
     rtpi_lightbuf wide; /* the other primitives, for the item buffer */
     rtpi_itembuf ib;
     unsigned char *thin; /* per primitive: 1 if in lb */
@@ -104,10 +105,16 @@ static int sh_cached(const rtpi_shadow *sh, rtpi_shadow_cache *c, const rtpi_v3 
                      const rtpi_v3 *op, uint32_t prim);
 static int sh_cached_cyl(const rtpi_shadow *sh, rtpi_shadow_cache *c, const rtpi_v3 *pp,
                          const rtpi_v3 *op, uint32_t prim);
+static int sh_own_lb(const rtpi_shadow *sh, rtpi_shadow_cache *c, const rtpi_v3 *pp,
+                     const rtpi_v3 *op, uint32_t prim, int own);
+static int sh_own_plain(const rtpi_shadow *sh, rtpi_shadow_cache *c, const rtpi_v3 *pp,
+                        const rtpi_v3 *op, uint32_t prim, int own);
+static int sh_own_cyl(const rtpi_shadow *sh, rtpi_shadow_cache *c, const rtpi_v3 *pp,
+                      const rtpi_v3 *op, uint32_t prim, int own);
 
 /* Whether EXACT's kd walks ask the cylinders' numbers (rtpi_kd_occluder_cyls):
    in scenes mostly of spheres and cones.  Chosen once, with the query's
-   function (sh->cached): a test in every query had cost the scenes of
+   function (sh->fn): a test in every query had cost the scenes of
    triangles' moves 0.3-0.5% (gears_s4 exact). */
 static int sh_cyl_walk(const rtpi_shadow *sh)
 {
@@ -343,11 +350,14 @@ rtp_status rtpi_shadow_create_q(const rtp_scene *s, const rtpi_kdtree *kd, rtpi_
     if (st == RTP_OK && sh->mode == RTPI_SHADOW_LIGHTBUF) {
         sh_lb_quadrics(sh, a);
         sh->lb_occ = rtpi_lightbuf_occ_fn(&sh->lb);
-        sh->lb_occ_first = rtpi_lightbuf_occ_first_fn(&sh->lb);
+        sh->lb_vis = rtpi_lightbuf_vis_fn(&sh->lb);
     }
-    sh->cached = sh->mode == RTPI_SHADOW_LIGHTBUF ? sh_cached_lb
-                 : sh_cyl_walk(sh)                  ? sh_cached_cyl
-                                                    : sh_cached;
+    sh->fn.cached = sh->mode == RTPI_SHADOW_LIGHTBUF ? sh_cached_lb
+                    : sh_cyl_walk(sh)                  ? sh_cached_cyl
+                                                       : sh_cached;
+    sh->fn.own = sh->mode == RTPI_SHADOW_LIGHTBUF ? sh_own_lb
+                 : sh_cyl_walk(sh)                  ? sh_own_cyl
+                                                    : sh_own_plain;
     if (st == RTP_OK && sh_balls(sh, a) != 0)
         st = rtpi_error(err, RTP_ERR_NOMEM, NULL, 0, 0, "out of memory");
     if (st != RTP_OK) {
@@ -631,26 +641,26 @@ static int sh_earlier(const rtpi_shadow *sh, rtpi_shadow_cache *c, const rtpi_ra
     return 0;
 }
 
-/* rtpi_shadow_visible_cached for a light buffer (RTPI_SHADOW_LIGHTBUF):
-   sh_cached's steps for that mode alone, in a
-   function of their own, so a query pays no saving of the registers the
-   other modes' paths take (24 instructions a query as one body: tree's
-   lightbuf:256 move 3.6 M of 129).  own_in: RTPI_OWN_ASK, or
-   rtpi_prim_shadows_own's answer the caller knows (rtpi_shadow_visible_own) */
-static RTPI_FORCE_INLINE int sh_cached_lb_body(const rtpi_shadow *sh, rtpi_shadow_cache *c,
-                                               const rtpi_v3 *pp, const rtpi_v3 *op,
-                                               uint32_t prim, int own_in)
+/* sh_cached_lb_body's other queries: a sphere or cone in the cache,
+   tested first on the ray made here, which the walk then takes; a
+   query on a sphere or cone, rtpi_prim_shadows_own asked where the
+   caller has not.  Out of line: the triangles' queries then save no
+   registers and make no frame (mount_s6: 142 k of 263 k queries a move
+   come here, its glass balls'; teapot_s12 none). */
+#if defined(__GNUC__)
+__attribute__((noinline))
+#endif
+static int sh_cached_lb_slow(const rtpi_shadow *sh, rtpi_shadow_cache *c, const rtpi_v3 *op,
+                             uint32_t prim, int own_in)
 {
     const rtp_scene *s = sh->s;
     uint32_t occ, last = c->last;
     int own;
-    rtpi_ray r;
-    (void)pp;
-    if (last && last - 1u != prim && last - 1u >= s->ntris) {
-        /* (the cached sphere or cone, as below) */
+    if (last > s->ntris && last - 1u != prim) {
+        /* (the cached sphere or cone) */
         uint32_t q = last - 1u;
         int hit;
-        r = rtpi_shadow_ray(*op, sh->light);
+        rtpi_ray r = rtpi_shadow_ray(*op, sh->light);
         if (q - s->ntris < s->nspheres) {
             hit = sh_exact_sphere(sh, q - s->ntris, &r);
         } else {
@@ -673,20 +683,45 @@ static RTPI_FORCE_INLINE int sh_cached_lb_body(const rtpi_shadow *sh, rtpi_shado
             return 0;
         }
         occ = sh->lb_occ(&sh->lb, s, &r, own == 0 ? prim : RTPI_NONE);
-    } else {
-        own = own_in != RTPI_OWN_ASK ? own_in : sh_own(sh, prim, op);
-        if (own == 1) {
-            occ = prim;
-        } else {
-            r = rtpi_shadow_ray(*op, sh->light);
-            occ = last && last - 1u != prim
-                      ? sh->lb_occ_first(&sh->lb, s, &r, own == 0 ? prim : RTPI_NONE,
-                                         last - 1u)
-                      : sh->lb_occ(&sh->lb, s, &r, own == 0 ? prim : RTPI_NONE);
-        }
+        c->last = occ != RTPI_NONE ? occ + 1u : 0u;
+        return occ == RTPI_NONE;
     }
-    c->last = occ != RTPI_NONE ? occ + 1u : 0u;
-    return occ == RTPI_NONE;
+    own = own_in != RTPI_OWN_ASK ? own_in : sh_own(sh, prim, op);
+    if (own == 1) {
+        c->last = prim + 1u;
+        return 0;
+    }
+    return sh->lb_vis(&sh->lb, s, op, own == 0 ? prim : RTPI_NONE,
+                      last && last - 1u != prim ? last - 1u : RTPI_NONE, &c->last);
+}
+
+/* rtpi_shadow_visible_cached for a light buffer (RTPI_SHADOW_LIGHTBUF):
+   sh_cached's steps for that mode alone, in a
+   function of their own, so a query pays no saving of the registers the
+   other modes' paths take (24 instructions a query as one body: tree's
+   lightbuf:256 move 3.6 M of 129).  own_in: RTPI_OWN_ASK, or
+   rtpi_prim_shadows_own's answer the caller knows (rtpi_shadow_visible_own).
+   A triangle's query (rtpi_prim_shadows_own 0: its own primitive not
+   asked) whose cache holds no sphere or cone goes straight to the light
+   buffer's (sh->lb_vis), which makes the shadow ray only where a test
+   needs it, and sets the cache: a jump, no frame.  (The ray made here
+   and the walk's call had cost ~30 instructions a query more:
+   lightbuf:256, third move, 512^2 SPD, teapot_s12 144.34 -> 140.49 M,
+   tree_s11 99.84 -> 97.28, gears_s4 239.62 -> 236.51.)  A triangle in
+   c->last was answered by this light buffer, whose lists hold hittable
+   ones only: the walk's condition on `first`. */
+static RTPI_FORCE_INLINE int sh_cached_lb_body(const rtpi_shadow *sh, rtpi_shadow_cache *c,
+                                               const rtpi_v3 *pp, const rtpi_v3 *op,
+                                               uint32_t prim, int own_in)
+{
+    const rtp_scene *s = sh->s;
+    uint32_t last = c->last;
+    (void)pp;
+    if (own_in == RTPI_OWN_ASK ? prim >= s->ntris || last > s->ntris
+                               : own_in != 0 || (last > s->ntris && last - 1u != prim))
+        return sh_cached_lb_slow(sh, c, op, prim, own_in);
+    /* (last 0: last - 1 is RTPI_NONE) */
+    return sh->lb_vis(&sh->lb, s, op, prim, last - 1u != prim ? last - 1u : RTPI_NONE, &c->last);
 }
 
 static int sh_cached_lb(const rtpi_shadow *sh, rtpi_shadow_cache *c, const rtpi_v3 *pp,
@@ -789,12 +824,22 @@ static int sh_cached_cyl(const rtpi_shadow *sh, rtpi_shadow_cache *c, const rtpi
     return sh_cached_body(sh, c, pp, op, prim, RTPI_OWN_ASK, 1);
 }
 
-int rtpi_shadow_visible_own(const rtpi_shadow *sh, rtpi_shadow_cache *c, const rtpi_v3 *pp,
-                            const rtpi_v3 *op, uint32_t prim, int own)
+static int sh_own_lb(const rtpi_shadow *sh, rtpi_shadow_cache *c, const rtpi_v3 *pp,
+                     const rtpi_v3 *op, uint32_t prim, int own)
 {
-    return sh->mode == RTPI_SHADOW_LIGHTBUF ? sh_cached_lb_body(sh, c, pp, op, prim, own)
-           : sh->cached == sh_cached_cyl ? sh_cached_body(sh, c, pp, op, prim, own, 1)
-                                         : sh_cached_body(sh, c, pp, op, prim, own, 0);
+    return sh_cached_lb_body(sh, c, pp, op, prim, own);
+}
+
+static int sh_own_plain(const rtpi_shadow *sh, rtpi_shadow_cache *c, const rtpi_v3 *pp,
+                        const rtpi_v3 *op, uint32_t prim, int own)
+{
+    return sh_cached_body(sh, c, pp, op, prim, own, 0);
+}
+
+static int sh_own_cyl(const rtpi_shadow *sh, rtpi_shadow_cache *c, const rtpi_v3 *pp,
+                      const rtpi_v3 *op, uint32_t prim, int own)
+{
+    return sh_cached_body(sh, c, pp, op, prim, own, 1);
 }
 
 void rtpi_shadow_destroy(rtpi_shadow *sh)

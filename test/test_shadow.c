@@ -1852,6 +1852,184 @@ static void test_lightbuf_sphere_box(void)
     round_run(&t);
 }
 
+/* A light buffer's query from its origin alone (rtpi_lightbuf_vis_fn,
+   dircube.c: the shadow ray made only where a test asks for it, tmax
+   from |o - light|) answers as rtpi_lightbuf_occluder_first does on
+   rtpi_shadow_ray(o, light), primitive for primitive (the cache's `last`
+   the same), for each kind of walk: the edges' (edge_scene), the
+   planes' (its buffer without edges), the spheres' (round) and the
+   cones' bands (cone_slabs_add).  Origins on the lines from the light
+   through triangles' edges and vertices (1e-16..1e-9 inside), beyond
+   them and between them and the light, as near the light as 1e-16 of
+   the way, at the light itself, and in random places; a first (the last
+   answer's occluder) and the own primitive skipped by turns; the scenes
+   at the origin, far from it, tiny (1e-9) and huge (1e7).  A ray made
+   with each component divided by the distance (not multiplied by its
+   reciprocal, as rtpi_shadow_ray does) fails it. */
+static size_t vis_origin_check(const rtp_scene *s, const rtpi_lightbuf *lb, rtpi_v3 L,
+                               size_t nq)
+{
+    rtpi_lb_vis_fn vis = rtpi_lightbuf_vis_fn(lb);
+    size_t q, bad = 0;
+    uint32_t last = 0;
+    for (q = 0; q < nq; q++) {
+        uint32_t prim = (uint32_t)(rnd() * (double)rtpi_scene_nprims(s)), skip, first, a, l2;
+        double f = rnd(), g = rnd(), tiny = pow(10.0, -16 + 7 * rnd()), m;
+        int kind = (int)(rnd() * 4), side = (int)(rnd() * 6), lit;
+        rtpi_v3 pt, o;
+        rtpi_ray ray;
+        if (prim >= rtpi_scene_nprims(s))
+            continue;
+        if (f + g > 1) {
+            f = 1 - f;
+            g = 1 - g;
+        }
+        if (prim < s->ntris) {
+            switch (kind) {
+            case 0: pt = tri_point(s, prim, f * (1 - tiny), tiny); break;
+            case 1: pt = tri_point(s, prim, tiny, g * (1 - tiny)); break;
+            case 2: pt = tri_point(s, prim, f * (1 - tiny), (1 - f) * (1 - tiny)); break;
+            default: pt = tri_point(s, prim, tiny, tiny); break;
+            }
+        } else {
+            double lo[3], hi[3];
+            rtpi_prim_bounds(s, prim, lo, hi);
+            pt = v3(lo[0] + (hi[0] - lo[0]) * rnd(), lo[1] + (hi[1] - lo[1]) * rnd(),
+                    lo[2] + (hi[2] - lo[2]) * rnd());
+        }
+        /* beyond pt, just beyond or before it, near the light, at it */
+        m = side == 0 ? 1 + 2 * rnd() : side == 1 ? 1 + tiny : side == 2 ? 1 - tiny
+            : side == 3 ? rnd() : side == 4 ? tiny : 0.0;
+        o = v3_add(L, v3_mul(v3_sub(pt, L), m));
+        if (q % 9 == 0) /* anywhere about the scene */
+            o = v3_add(pt, v3_mul(v3_sub(pt, L), rnd() - 0.5));
+        ray = rtpi_shadow_ray(o, L);
+        skip = q % 3 == 0 ? prim : RTPI_NONE;
+        first = last && last - 1u != skip && q % 4 != 1 ? last - 1u : RTPI_NONE;
+        a = rtpi_lightbuf_occluder_first(lb, s, &ray, skip, first);
+        l2 = 12345u;
+        lit = vis(lb, s, &o, skip, first, &l2);
+        bad += lit != (a == RTPI_NONE) || l2 != (a == RTPI_NONE ? 0u : a + 1u);
+        last = a == RTPI_NONE ? last : a + 1u;
+    }
+    return bad;
+}
+
+static void vis_origin_round(const rtp_scene *s, const rtpi_lightbuf *lb, rtpi_v3 L, double off,
+                             int li)
+{
+    size_t bad = vis_origin_check(s, lb, L, 3000);
+    CHECK_MSG(lb->cone != NULL, "query from the origin: no cone entries, light %d", li);
+    CHECK_MSG(bad == 0, "query from the origin (%s), offset %g, light %d: %lu of 3000 differ",
+              lb->slab ? "bands" : "round", off, li, (unsigned long)bad);
+}
+
+static void test_lightbuf_query_from_origin(void)
+{
+    static const double offs[][2] = {{0, 1}, {3000, 0.01}, {-2e5, 3}, {1e-7, 1e-9}, {0, 1e7}};
+    static const round_test rt[] = {
+        {"query from the origin", cone_slabs_add, cone_slabs_light, vis_origin_round},
+        {"query from the origin", sphere_box_add, sphere_box_light, vis_origin_round}};
+    size_t oi;
+    for (oi = 0; oi < sizeof offs / sizeof *offs; oi++) {
+        double off = offs[oi][0], sc = offs[oi][1];
+        rtp_scene *s = edge_scene(off, sc);
+        rtp_allocator al;
+        int li;
+        rtpi_allocator_init(&al, NULL);
+        CHECK(s != NULL);
+        if (!s)
+            return;
+        for (li = 0; li < 6; li++) {
+            rtpi_v3 L;
+            rtpi_lightbuf lb, pl;
+            size_t bad, badp;
+            switch (li) {
+            case 0: L = v3(0.3, -0.2, 9); break;
+            case 1: L = v3(2e4, -1e4, 3e4); break;
+            case 2: L = v3(0.2, 0.1, 2.0 + 1e-9); break; /* just above the fan */
+            case 3: L = v3(-3, 2, 0); break;             /* in the ground's plane */
+            default: L = v3(4 * (rnd() - 0.5), 4 * (rnd() - 0.5), 0.1 + 4 * rnd()); break;
+            }
+            L = v3(off + sc * L.x, off + sc * L.y, off + sc * L.z);
+            if (rtpi_lightbuf_build(s, L, li & 1 ? 64 : 256, &al, &lb, NULL) != RTP_OK) {
+                CHECK_MSG(0, "query from the origin: build failed, light %d", li);
+                continue;
+            }
+            CHECK(lb.edge != NULL && lb.cone == NULL);
+            pl = lb; /* the planes' walk */
+            pl.edge = NULL;
+            pl.rank_of = NULL;
+            bad = vis_origin_check(s, &lb, L, 4000);
+            badp = vis_origin_check(s, &pl, L, 4000);
+            CHECK_MSG(bad == 0 && badp == 0,
+                      "query from the origin: offset %g, scale %g, light %d: %lu of 4000 differ "
+                      "(edges), %lu (planes)", off, sc, li, (unsigned long)bad,
+                      (unsigned long)badp);
+            rtpi_lightbuf_free(&lb, &al);
+        }
+        rtp_scene_destroy(s);
+    }
+    round_run(&rt[0]);
+    round_run(&rt[1]);
+}
+
+/* The shadow's cached query in a light buffer (shadow.c sh_cached_lb:
+   a triangle's query whose cache holds no sphere or cone goes straight
+   to the buffer's query from the origin, the others' steps out of line)
+   answers as EXACT's uncached query, through rtpi_shadow_visible_cached
+   and rtpi_shadow_visible_own (rtpi_prim_shadows_own's answer given),
+   each point asked twice in a row (its own primitive then in the cache)
+   and the points in random order (spheres and cones in the cache by
+   turns), for every light of the first scene.  It fails where the query
+   asks its own primitive first. */
+static void test_lightbuf_cached_fast(void)
+{
+    rtp_scene *s = load(scene_text, sizeof scene_text - 1);
+    rtpi_kdtree *kd = NULL;
+    sample *sm = (sample *)malloc(4000 * sizeof *sm);
+    rtp_allocator a;
+    size_t k;
+    rtpi_allocator_init(&a, NULL);
+    CHECK(s != NULL && sm != NULL);
+    if (!s || !sm || rtpi_kd_build(s, NULL, &kd, NULL) != RTP_OK) {
+        CHECK(0);
+        rtp_scene_destroy(s);
+        free(sm);
+        return;
+    }
+    for (k = 0; k < NLIGHTS; k++) {
+        rtpi_v3 lp = v3(lights[k].pos[0], lights[k].pos[1], lights[k].pos[2]);
+        rtpi_shadow *ex = NULL, *sh = NULL;
+        rtpi_shadow_cache c = {0}, c2 = {0};
+        size_t n = make_samples(s, kd, lp, sm, 4000), j, bad = 0;
+        if (rtpi_shadow_create(s, kd, lp, RTPI_SHADOW_EXACT, 0, &a, &ex, NULL) != RTP_OK ||
+            rtpi_shadow_create(s, kd, lp, RTPI_SHADOW_LIGHTBUF, k & 1 ? 64 : 256, &a, &sh,
+                               NULL) != RTP_OK) {
+            CHECK(0);
+            rtpi_shadow_destroy(ex);
+            break;
+        }
+        for (j = 0; j < n; j++) {
+            const sample *q = &sm[j];
+            int e = rtpi_shadow_visible(ex, q->p, q->o, q->prim);
+            int own = rtpi_prim_shadows_own(s, q->prim, q->o, lp);
+            bad += rtpi_shadow_visible_cached(sh, &c, &q->p, &q->o, q->prim) != e;
+            bad += rtpi_shadow_visible_cached(sh, &c, &q->p, &q->o, q->prim) != e;
+            bad += rtpi_shadow_visible_own(sh, &c2, &q->p, &q->o, q->prim, own) != e;
+            bad += rtpi_shadow_visible_own(sh, &c2, &q->p, &q->o, q->prim, own) != e;
+        }
+        CHECK(n > 1000);
+        CHECK_MSG(bad == 0, "cached light buffer, light %s: %lu of %lu answers differ",
+                  lights[k].name, (unsigned long)bad, (unsigned long)(4 * n));
+        rtpi_shadow_destroy(ex);
+        rtpi_shadow_destroy(sh);
+    }
+    rtpi_kd_destroy(kd);
+    rtp_scene_destroy(s);
+    free(sm);
+}
+
 /* A triangle's box cover (rtpi_lightbuf_build_q with few queries
    expected: dircube.c dc_box_tri) holds every cell of its exact cover:
    over 300 random triangles (tiny, a few cells, many cells, slivers
@@ -1985,6 +2163,8 @@ int main(void)
     RUN(test_lightbuf_cone_slabs);
     RUN(test_lightbuf_sphere_box);
     RUN(test_lightbuf_tri_box);
+    RUN(test_lightbuf_query_from_origin);
+    RUN(test_lightbuf_cached_fast);
     RUN(test_lightbuf_limit_threads);
     RUN(test_stopper_reports);
     RUN(test_osmesa);
