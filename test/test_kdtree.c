@@ -1980,8 +1980,13 @@ static void test_cyl_sure(void)
    or two axes), on a grid plane (a segment ending in a split plane), or
    close by.  Among many small triangles (and, lazy = 1, spheres) a
    changed order names another occluder. */
-static void from_case(int lazy, int *n_from, int *n_none, int *n_blocked, int *bad)
+static void from_case(int lazy, double sc, double off, int *n_from, int *n_none,
+                      int *n_blocked, int *bad)
 {
+    /* (the scene, origins and lights at off + sc x: far from the
+       origin, huge or tiny; maxabs the root box's largest coordinate
+       about, the slack's scale) */
+    const double maxabs = fabs(off) + 2.75 * sc;
     rng g;
     rtp_scene *s = new_scene();
     rtpi_kdtree *kd = NULL;
@@ -1992,19 +1997,19 @@ static void from_case(int lazy, int *n_from, int *n_none, int *n_blocked, int *b
         int ax = i % 3;
         double x = floor(rnd(&g) * 8) / 4, y = floor(rnd(&g) * 8) / 4,
                z = floor(rnd(&g) * 8) / 4, w = 0.25 * (1 + (i % 3));
-        uint32_t a = add_v(s, x, y, z), b, c, d;
+        uint32_t a = add_v(s, off + sc * x, off + sc * y, off + sc * z), b, c, d;
         if (ax == 0) {
-            b = add_v(s, x, y + w, z);
-            c = add_v(s, x, y + w, z + w);
-            d = add_v(s, x, y, z + w);
+            b = add_v(s, off + sc * x, off + sc * (y + w), off + sc * z);
+            c = add_v(s, off + sc * x, off + sc * (y + w), off + sc * (z + w));
+            d = add_v(s, off + sc * x, off + sc * y, off + sc * (z + w));
         } else if (ax == 1) {
-            b = add_v(s, x + w, y, z);
-            c = add_v(s, x + w, y, z + w);
-            d = add_v(s, x, y, z + w);
+            b = add_v(s, off + sc * (x + w), off + sc * y, off + sc * z);
+            c = add_v(s, off + sc * (x + w), off + sc * y, off + sc * (z + w));
+            d = add_v(s, off + sc * x, off + sc * y, off + sc * (z + w));
         } else {
-            b = add_v(s, x + w, y, z);
-            c = add_v(s, x + w, y + w, z);
-            d = add_v(s, x, y + w, z);
+            b = add_v(s, off + sc * (x + w), off + sc * y, off + sc * z);
+            c = add_v(s, off + sc * (x + w), off + sc * (y + w), off + sc * z);
+            d = add_v(s, off + sc * x, off + sc * (y + w), off + sc * z);
         }
         if (!lazy || i % 4 == 0) {
             add_t(s, a, b, c);
@@ -2012,10 +2017,11 @@ static void from_case(int lazy, int *n_from, int *n_none, int *n_blocked, int *b
         }
     }
     for (i = 0; i < (lazy ? 1500 : 900); i++) {
-        rtpi_v3 c = v3(rndr(&g, 0, 2.5), rndr(&g, 0, 2.5), rndr(&g, 0, 2.5));
-        double sz = 0.04;
+        rtpi_v3 c = v3(off + sc * rndr(&g, 0, 2.5), off + sc * rndr(&g, 0, 2.5),
+                       off + sc * rndr(&g, 0, 2.5));
+        double sz = 0.04 * sc;
         if (lazy) {
-            add_sphere(s, c.x, c.y, c.z, sz * rnd(&g) + 0.005);
+            add_sphere(s, c.x, c.y, c.z, sz * rnd(&g) + 0.005 * sc);
         } else {
             uint32_t a = add_v(s, c.x, c.y, c.z);
             uint32_t b = add_v(s, c.x + rndr(&g, -sz, sz), c.y + rndr(&g, -sz, sz),
@@ -2036,8 +2042,9 @@ static void from_case(int lazy, int *n_from, int *n_none, int *n_blocked, int *b
         int k, kind = i % 4;
         for (k = 0; k < 3; k++) {
             /* a grid plane (k/4) on some axes, or anywhere */
-            o[k] = kind == 3 || rnd(&g) < 0.3 ? rndr(&g, -0.2, 2.7) : floor(rnd(&g) * 11) / 4;
-            tol = 1e-11 * (fabs(o[k]) > 2.75 ? fabs(o[k]) : 2.75);
+            o[k] = off + sc * (kind == 3 || rnd(&g) < 0.3 ? rndr(&g, -0.2, 2.7)
+                                                           : floor(rnd(&g) * 11) / 4);
+            tol = 1e-11 * (fabs(o[k]) > maxabs ? fabs(o[k]) : maxabs);
             if (kind == 1 || kind == 2)
                 o[k] += (rnd(&g) < 0.5 ? -1.0 : 1.0) * tol *
                         (kind == 1 ? ms[(size_t)(rnd(&g) * 12) % 12] : rndr(&g, 0.0, 4.0));
@@ -2048,21 +2055,38 @@ static void from_case(int lazy, int *n_from, int *n_none, int *n_blocked, int *b
             ++*n_none;
         else
             ++*n_from;
-        for (j = 0; j < 8; j++) {
+        for (j = 0; j < 9; j++) {
             double l[3];
             rtpi_ray r;
             uint32_t q0, q1;
             int kind2 = j % 4;
             for (k = 0; k < 3; k++) {
-                l[k] = rndr(&g, -1.0, 3.5);
+                l[k] = off + sc * rndr(&g, -1.0, 3.5);
                 if (kind2 == 1 && (k == j % 3 || (j & 4 && k == (j + 1) % 3)))
                     l[k] = o[k]; /* 0 on this axis */
                 else if (kind2 == 2 && k == j % 3)
-                    l[k] = floor(rnd(&g) * 11) / 4; /* ends in a grid plane */
+                    l[k] = off + sc * floor(rnd(&g) * 11) / 4; /* ends in a grid plane */
                 else if (kind2 == 3)
-                    l[k] = o[k] + rndr(&g, -0.01, 0.01); /* close by */
+                    l[k] = o[k] + sc * rndr(&g, -0.01, 0.01); /* close by */
             }
             r = rtpi_shadow_ray(ov, v3(l[0], l[1], l[2]));
+            if (j == 8) {
+                /* a direction not 0 on an axis but so small there that
+                   1/d is infinite or huge (subnormal, or just above),
+                   of either sign: the slack infinite or the planes'
+                   distances overflowing, the walk from the leaf's
+                   fallback and arithmetic as the root's */
+                static const double tiny[] = {4.9406564584124654e-324, 1e-310, 2.2250738585072014e-308,
+                                              1e-300, 1e-290, 3e-200};
+                double v = tiny[(size_t)(rnd(&g) * 6) % 6] * (rnd(&g) < 0.5 ? -1.0 : 1.0);
+                k = (int)(rnd(&g) * 3) % 3;
+                if (k == 0)
+                    r.d.x = v;
+                else if (k == 1)
+                    r.d.y = v;
+                else
+                    r.d.z = v;
+            }
             q0 = rtpi_kd_occluder_planes(kd, &r, RTPI_NONE, NULL, NULL, NULL, 10.0);
             q1 = rtpi_kd_occluder_planes_from(kd, &r, RTPI_NONE, NULL, NULL, NULL, 10.0, from);
             *n_blocked += q0 != RTPI_NONE;
@@ -2100,16 +2124,28 @@ static void from_case(int lazy, int *n_from, int *n_none, int *n_blocked, int *b
 static void test_kd_from(void)
 {
     int lazy;
-    for (lazy = 0; lazy < 2; lazy++) {
-        int n_from = 0, n_none = 0, n_blocked = 0, bad = 0;
-        from_case(lazy, &n_from, &n_none, &n_blocked, &bad);
-        printf("  walks from the leaf (%s): %d origins with a list, %d without; %d of 32000 "
-               "rays blocked; %d differ\n",
-               lazy ? "spheres" : "triangles", n_from, n_none, n_blocked, bad);
-        CHECK(bad == 0);
-        /* both sides of the 2 tol margin met */
-        CHECK(n_from > 2000 && n_none > 20);
-    }
+    /* (the scene at its place, then far from the origin, huge and tiny
+       within a float's range and the builder's 1e30, and spanning 0 at
+       a tiny scale) */
+    static const double place[][2] = {{1.0, 0.0}, {1.0, 3e4}, {1.0, -7e6}, {1e28, 0.0},
+                                      {1e-30, 0.0}, {1e-30, -1.25e-30}, {1e20, 1e25}};
+    size_t pi;
+    for (pi = 0; pi < sizeof place / sizeof *place; pi++)
+        for (lazy = 0; lazy < 2; lazy++) {
+            int n_from = 0, n_none = 0, n_blocked = 0, bad = 0;
+            from_case(lazy, place[pi][0], place[pi][1], &n_from, &n_none, &n_blocked, &bad);
+            printf("  walks from the leaf (%s, at %g + %g x): %d origins with a list, %d "
+                   "without; %d of 36000 rays blocked; %d differ\n",
+                   lazy ? "spheres" : "triangles", place[pi][1], place[pi][0], n_from, n_none,
+                   n_blocked, bad);
+            CHECK(bad == 0);
+            /* both sides of the 2 tol margin met (at the scene's own
+               place: far off, the float grid is coarser than 2 tol) */
+            if (pi == 0)
+                CHECK(n_from > 2000 && n_none > 20);
+            else
+                CHECK(n_from > 500);
+        }
 }
 
 int main(void)
