@@ -1195,6 +1195,20 @@ def cases(t):
             "TREE")
         ref("a node NaN", edited(t, lambda u: u["node_list"][q].__setitem__(
             0, 0x7FC00000)), "TREE")
+        # the same at the last node: its sample's bytes are fewer than 30
+        # a node (the section ends), so each reader decodes it a node at
+        # a time (unpack_node), not by the sample's fast path
+        # (unpack_sample_30) the first node takes
+        last = t["nodes"] - 1
+        ref("the last node's primitive past the list", edited(
+            t, lambda u: u["node_list"][last].__setitem__(
+                3, u["geom"]["nprims"])), "invalid node")
+        ref("the last node NaN", edited(
+            t, lambda u: u["node_list"][last].__setitem__(2, 0x7FC00000)),
+            "invalid node")
+        ref("the last node infinite", edited(
+            t, lambda u: u["node_list"][last].__setitem__(1, 0xFF800000)),
+            "invalid node")
         if 1 <= len(t["lights"]) < 32:
             ref("a bit for a light that does not exist", edited(
                 t, lambda u: u["node_list"][q].__setitem__(
