@@ -552,6 +552,17 @@ static inline int rtpi_ball_holds(const rtpi_sphere *sp, rtpi_v3 o)
     double r = fabs((double)sp->r);
     return v3_dot(oc, oc) < r * r;
 }
+/* Whether o lies outside sphere sp, as rtpi_prim_shadows_own_solid
+   decides it (the same operations), and within sqrt(2) of its radius
+   from its centre: a front hit's shadow-ray origin, which no light
+   changes.  rtpi_shadow_ball_own answers its own test then for any
+   light (vis_row keeps it per node). */
+static inline int rtpi_ball_near_outside(const rtpi_sphere *sp, rtpi_v3 o)
+{
+    rtpi_v3 oc = v3_sub(o, v3_from_f(sp->c));
+    double r = fabs((double)sp->r), d2o = v3_dot(oc, oc);
+    return d2o >= r * r && d2o <= 2.0 * (r * r);
+}
 /* rtpi_prim_shadows_own_solid for cone i (of s->cones) and shadow-ray
    origin *o: 0 where o lies outside its convex solid, else -1 (the light
    plays no part).  Inline for shadow.c's queries (rings_s7: the call with
@@ -1164,7 +1175,9 @@ struct rtp_tree {
                               (its shadow ray's origin the same for every
                               light), 0 not yet known, else 1 + what
                               rtpi_cone_shadows_own answers, negated
-                              (vis_row) */
+                              (vis_row); on a sphere (cones or spheres:
+                              allocated), 1 where the origin lies outside
+                              it near its surface, else 2 (ball_own_of) */
     uint32_t *kd_from;     /* nnodes, made at the first exact move where
                               the memory limit holds it with kd's leaf
                               lists (rtpi_kd_paths_make): per node 0 not

@@ -57,6 +57,10 @@ struct rtpi_shadow {
        rtpi_prim_shadows_own_solid derives from the light and the sphere
        alone (sh_own) */
     double *ball;
+    /* per sphere (NULL: none): sh_own's answer (0 or 1) for every origin
+       rtpi_ball_near_outside holds, else RTPI_OWN_ASK (the light in the
+       band where sh_own_sphere looks closer) */
+    unsigned char *ball_own;
 };
 
 /* rtpi_prim_shadows_own_solid for sphere i (prim) and the query's
@@ -130,15 +134,24 @@ static int sh_balls(rtpi_shadow *sh, const rtp_allocator *a)
     if (!s->nspheres)
         return 0;
     sh->ball = (double *)rtpi_malloc_array(a, 2 * s->nspheres, sizeof *sh->ball);
-    if (!sh->ball)
+    sh->ball_own = (unsigned char *)rtpi_malloc_array(a, s->nspheres, 1);
+    if (!sh->ball || !sh->ball_own)
         return -1;
     for (i = 0; i < s->nspheres; i++) {
         /* (rtpi_prim_shadows_own_solid's expressions) */
         const rtpi_sphere *sp = &s->spheres[i];
         rtpi_v3 lc = v3_sub(sh->light, v3_from_f(sp->c));
         double r = fabs((double)sp->r);
-        sh->ball[2 * i] = v3_dot(lc, lc);
-        sh->ball[2 * i + 1] = r * r;
+        double d2l = v3_dot(lc, lc), r2 = r * r, m = d2l > 2.0 * r2 ? d2l : 2.0 * r2;
+        sh->ball[2 * i] = d2l;
+        sh->ball[2 * i + 1] = r2;
+        /* An origin outside (d2o >= r2) within d2o <= 2 r2: sh_own_sphere's
+           band bound 1e-8 max(d2o, d2l, r2) is at most 1e-8 m (max exact,
+           the product's rounding monotone), so off m's band it answers
+           oin != lin (r > 0) or oin && !lin with oin 0, for every such
+           origin; NaN or within m's band: asked as ever. */
+        sh->ball_own[i] = fabs(d2l - r2) > 1e-8 * m ? (unsigned char)(sp->r > 0.0f && d2l < r2)
+                                                    : (unsigned char)RTPI_OWN_ASK;
     }
     return 0;
 }
@@ -724,6 +737,11 @@ static RTPI_FORCE_INLINE int sh_cached_lb_body(const rtpi_shadow *sh, rtpi_shado
     return sh->lb_vis(&sh->lb, s, op, prim, last - 1u != prim ? last - 1u : RTPI_NONE, &c->last);
 }
 
+const unsigned char *rtpi_shadow_ball_own(const rtpi_shadow *sh)
+{
+    return sh->ball_own;
+}
+
 static int sh_cached_lb(const rtpi_shadow *sh, rtpi_shadow_cache *c, const rtpi_v3 *pp,
                         const rtpi_v3 *op, uint32_t prim)
 {
@@ -857,6 +875,7 @@ void rtpi_shadow_destroy(rtpi_shadow *sh)
     rtpi_free(&a, sh->edges);
     rtpi_free(&a, sh->cones);
     rtpi_free(&a, sh->spheres);
+    rtpi_free(&a, sh->ball_own);
     rtpi_free(&a, sh->cyls);
     rtpi_free(&a, sh->ball);
     rtpi_free(&a, sh);

@@ -135,6 +135,14 @@ static inline int rtpi_shadow_visible_own(const rtpi_shadow *sh, rtpi_shadow_cac
     return ((const rtpi_shadow_fns *)(const void *)sh)->own(sh, c, p, o, prim, own);
 }
 
+/* Per sphere of the scene (NULL: none), for sh's light:
+   rtpi_prim_shadows_own's answer (0 or 1) for every origin o that
+   rtpi_ball_near_outside holds (a front hit's: the same for every
+   light, kept per node by vis_row), else RTPI_OWN_ASK: the sphere's
+   queries then pass it to rtpi_shadow_visible_own, and a light buffer's
+   take the triangles' path where its cache allows. */
+const unsigned char *rtpi_shadow_ball_own(const rtpi_shadow *sh);
+
 void rtpi_shadow_destroy(rtpi_shadow *sh);
 
 /* The end of rtpi_shadow_ray's segment for a light at distance dist
